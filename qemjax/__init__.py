@@ -1,0 +1,19 @@
+"""qemjax: JAX-accelerated, batched triangle-mesh simplification.
+
+Public API: `simplify`, `load`, `SimplifyResult`, `Contractions`, `Mesh`, and the `metrics` module.
+"""
+from ._api import simplify as simplify
+from ._io import Mesh as Mesh
+from ._io import load as load
+from ._result import Contractions as Contractions
+from ._result import SimplifyResult as SimplifyResult
+
+__version__ = "0.1.0"
+
+
+def __getattr__(name):  # lazy submodules: importing qemjax stays light
+    if name in ("metrics", "render"):
+        import importlib
+
+        return importlib.import_module(f"qemjax.{name}")
+    raise AttributeError(f"module 'qemjax' has no attribute {name!r}")

@@ -1,0 +1,167 @@
+"""`simplify`: the one entry point. Validates options, prepares the mesh, runs a scheduler."""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from typing import Any
+
+import numpy as np
+
+from . import _compilation
+from . import _io
+from . import _topology as topo
+from ._result import Contractions, SimplifyResult
+from ._schedulers import common, greedy, parallel
+
+METHODS = ("qem",)
+SCHEDULERS = ("parallel", "greedy")
+PLACEMENTS = ("optimal", "endpoints")
+
+# Defaults, in one place (see the docstring of `simplify` for units)
+BOUNDARY_WEIGHT = 100.0
+COND_EPS = 1e-5
+MAX_SHIFT = 2.0
+FLIP_ANGLE = 90.0
+
+
+def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]:
+    """(face target, max error) from the user's options; face target 0 means 'none'."""
+    given = [x is not None for x in (target_faces, ratio)]
+    if sum(given) > 1:
+        raise ValueError("give at most one of target_faces and ratio")
+    if not any(given) and max_error is None:
+        raise ValueError("give a target: target_faces=, ratio= or max_error=")
+    err = math.inf
+    if max_error is not None:
+        err = float(max_error)
+        if not err >= 0:
+            raise ValueError(f"max_error must be a non-negative squared distance, got {max_error}")
+    target = 0
+    if target_faces is not None:
+        if isinstance(target_faces, bool) or int(target_faces) != target_faces:
+            raise ValueError(f"target_faces must be an integer, got {target_faces!r}")
+        target = int(target_faces)
+        if target <= 0:
+            raise ValueError(f"target_faces must be at least 1, got {target}")
+    if ratio is not None:
+        r = float(ratio)
+        if not (r > 0 and math.isfinite(r)):
+            raise ValueError(f"ratio must be in (0, 1], got {ratio}")
+        target = max(1, int(round(r * m)))
+    return target, err
+
+
+def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None = None,
+             max_error: float | None = None, method: str = "qem", scheduler: str = "parallel",
+             placement: str = "optimal", boundary_weight: float = BOUNDARY_WEIGHT,
+             area_weighted: bool = True, feature_edges=None, preserve_topology: bool = True,
+             flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
+             ) -> SimplifyResult:
+    """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
+
+    mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
+        object with ``.vertices``/``.faces``. Polygons are triangulated.
+    target_faces / ratio: stop at this many faces (ratio × the cleaned input's faces). Met exactly when
+        the mesh allows it; otherwise the result has the fewest faces reachable above the target.
+    max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
+        mesh's own units* (the quadric error, e.g. ``(0.01 * diagonal)**2``). May be combined with a
+        face target; whichever is reached first stops.
+    method: ``'qem'`` (quadric error metric).
+    scheduler: ``'parallel'`` (default) — rounds of many non-interacting contractions chosen by an
+        independent-set rule; ``'greedy'`` — the paper's priority queue, one contraction at a time.
+    placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint)
+        or ``'endpoints'`` (the paper's fixed placement: best of v1, v2, midpoint).
+    boundary_weight: penalty weight of the planes through each boundary edge perpendicular to its face
+        (relative to an average face's plane; 0 disables boundary preservation).
+    area_weighted: weight each face plane by its area / the mean face area (True), or by 1 (the paper).
+    feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
+    preserve_topology: forbid contractions that break the link condition (keeps a manifold's genus and
+        boundary loops).
+    flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or
+        more (90: any sign flip or collapse to zero area); None allows flips.
+    weld: merge vertices with identical coordinates first (G&H need shared corners).
+    Returns a `SimplifyResult`. Raises ValueError for bad input or options.
+    """
+    t_start = time.perf_counter()
+    c0, s0 = _compilation.snapshot()
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
+    if scheduler not in SCHEDULERS:
+        raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS}")
+    if placement not in PLACEMENTS:
+        raise ValueError(f"unknown placement {placement!r}; choose from {PLACEMENTS}")
+    if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
+        raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
+    if flip_angle is not None and not (0 < flip_angle <= 180):
+        raise ValueError(f"flip_angle must be in (0, 180] degrees or None, got {flip_angle}")
+
+    (V, F), report = _io.prepare(mesh, weld_vertices=weld)
+    m = len(F)
+    target, err = _resolve_target(m, target_faces, ratio, max_error)
+    if target > m:
+        warnings.warn(f"target of {target} faces is not below the mesh's {m} faces: returning it unchanged",
+                      stacklevel=2)
+        target = m
+
+    lo, hi = V.min(0), V.max(0)
+    center = 0.5 * (lo + hi)
+    scale = float(np.max(hi - lo)) or 1.0
+    Vn = ((V - center) / scale).astype(common.DTYPE)
+
+    Q = common.initial_quadrics(Vn, F, area_weighted=area_weighted, boundary_weight=boundary_weight,
+                                feature_edges=feature_edges)
+    settings = common.Settings(
+        endpoints_only=placement == "endpoints", cond_eps=COND_EPS, max_shift=MAX_SHIFT,
+        cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
+        preserve_topology=preserve_topology, max_cost=err / scale**2)
+    pairs, _ = topo.edges(F, len(V))
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=m - target, unit="face", desc="simplify")
+
+        def progress_cb(faces_now, _last=[m]):
+            bar.update(_last[0] - faces_now)
+            _last[0] = faces_now
+    else:
+        progress_cb = None
+    if target < m or err < math.inf:
+        run = parallel.run if scheduler == "parallel" else greedy.run
+        Vo, Qo, Fo, alive, hist, info = run(Vn, Q, F, pairs, max(target, 1), settings, progress_cb)
+    else:
+        Vo, Qo, Fo, alive, hist, info = Vn, Q, F, np.ones(m, bool), [], {
+            "contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0, "branches": np.zeros(3, int)}
+    if bar is not None:
+        bar.close()
+
+    Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
+    vout = Vout.astype(np.float64) * scale + center
+    verr = np.maximum(Qo[ids, 9].astype(np.float64), 0.0) * scale**2
+    if hist:
+        hp = np.array([(a, b) for a, b, _, _ in hist], np.int64)
+        hx = np.array([x for _, _, x, _ in hist], np.float64) * scale + center
+        hc = np.array([c for _, _, _, c in hist], np.float64) * scale**2
+    else:
+        hp, hx, hc = np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)
+    c1, s1 = _compilation.snapshot()
+    total = time.perf_counter() - t_start
+    stats = dict(report)
+    stats.update(
+        method=method, scheduler=scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
+        vertices_in=len(V), vertices_out=len(vout), contractions=info["contractions"],
+        rejected=info["rejected"], rounds=info["rounds"],
+        branches={"solve": int(info["branches"][0]), "segment": int(info["branches"][1]),
+                  "endpoint": int(info["branches"][2])},
+        compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
+        total_s=total, scale=scale)
+    for k, v in info.items():
+        if k.endswith("_s"):
+            stats[k] = v
+    return SimplifyResult(
+        vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
+        max_error=float(info["max_cost"]) * scale**2, source_vertices=ids.astype(np.int64),
+        source_faces=fids.astype(np.int64),
+        input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc), stats=stats)

@@ -1,0 +1,162 @@
+"""Input: reading meshes, validating them and cleaning them for simplification.
+
+Everything here is numpy on the host. Cleaning is explicit and reported, never silent:
+``prepare`` welds coincident vertices (Garland–Heckbert need shared corners), drops degenerate and
+duplicate faces and unreferenced vertices, and says how many of each it removed.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any, NamedTuple
+
+import numpy as np
+
+
+class Mesh(NamedTuple):
+    """A triangle mesh as arrays: vertices (n,3) float64, faces (m,3) int64."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+
+def _triangulate(faces: np.ndarray) -> np.ndarray:
+    """Fan-triangulate (m,k) polygons, k ≥ 3, into (m·(k−2), 3) triangles."""
+    k = faces.shape[1]
+    if k == 3:
+        return faces
+    tris = [faces[:, [0, i, i + 1]] for i in range(1, k - 1)]
+    return np.stack(tris, 1).reshape(-1, 3)
+
+
+def _from_trimesh(obj) -> Mesh:
+    import trimesh
+
+    if isinstance(obj, trimesh.Scene):
+        obj = obj.to_geometry() if hasattr(obj, "to_geometry") else obj.dump(concatenate=True)
+    if not isinstance(obj, trimesh.Trimesh):
+        raise ValueError(f"expected a triangle mesh, got {type(obj).__name__}")
+    return Mesh(np.asarray(obj.vertices), np.asarray(obj.faces))
+
+
+def load(path: str | os.PathLike) -> Mesh:
+    """Read any file trimesh reads (OBJ, PLY, STL, OFF, GLB, …) as a `Mesh`.
+
+    Polygons are triangulated; vertices are kept exactly as stored (no merging, no reordering: welding is
+    a separate, explicit step of `simplify`).
+    """
+    import trimesh
+
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise ValueError(f"mesh file not found: {path}")
+    try:
+        obj = trimesh.load(path, process=False, force="mesh")
+    except Exception as exc:  # trimesh raises many kinds; name the file
+        raise ValueError(f"could not read mesh {path}: {exc}") from exc
+    return _from_trimesh(obj)
+
+
+def as_arrays(mesh: Any) -> Mesh:
+    """Accept a path, a `trimesh.Trimesh`, a ``(vertices, faces)`` pair or an object with ``.vertices``
+    and ``.faces``; validate and return float64 / int64 arrays. Raises ValueError naming the problem."""
+    if isinstance(mesh, (str, os.PathLike)):
+        mesh = load(mesh)
+    elif type(mesh).__module__.startswith("trimesh"):
+        mesh = _from_trimesh(mesh)
+    if isinstance(mesh, tuple) and len(mesh) == 2:
+        V, F = mesh
+    elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        V, F = mesh.vertices, mesh.faces
+    else:
+        raise ValueError("mesh must be a path, a trimesh.Trimesh, a (vertices, faces) pair "
+                         f"or have .vertices and .faces; got {type(mesh).__name__}")
+    V = np.asarray(V)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (n, 3), got {V.shape}")
+    if F.ndim != 2 or F.shape[1] < 3:
+        raise ValueError(f"faces must have shape (m, 3) (or (m, k≥3) polygons), got {F.shape}")
+    if V.shape[0] == 0 or F.shape[0] == 0:
+        raise ValueError(f"empty mesh: {V.shape[0]} vertices, {F.shape[0]} faces")
+    if not np.issubdtype(V.dtype, np.number) or np.iscomplexobj(V):
+        raise ValueError(f"vertices must be real numbers, got dtype {V.dtype}")
+    V = V.astype(np.float64)
+    if not np.all(np.isfinite(V)):
+        bad = np.flatnonzero(~np.all(np.isfinite(V), axis=1))
+        raise ValueError(f"vertices contain NaN or inf coordinates ({bad.size} vertices, first: {bad[0]})")
+    if not np.issubdtype(F.dtype, np.integer):
+        if np.issubdtype(F.dtype, np.floating) and np.all(np.isfinite(F)) and np.all(F == np.round(F)):
+            F = F.astype(np.int64)
+        else:
+            raise ValueError(f"face indices must be integers, got dtype {F.dtype}")
+    F = _triangulate(F.astype(np.int64))
+    lo, hi = F.min(), F.max()
+    if lo < 0 or hi >= V.shape[0]:
+        raise ValueError(f"face indices out of range: found [{lo}, {hi}] for {V.shape[0]} vertices")
+    return Mesh(V, F)
+
+
+def weld(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Merge vertices with identical coordinates. Returns (V', F', number merged).
+
+    Kept vertices stay in first-occurrence order, so a mesh without duplicates is returned unchanged.
+    """
+    order = np.lexsort(V.T[::-1])
+    Vs = V[order]
+    new = np.ones(len(V), bool)
+    new[1:] = np.any(Vs[1:] != Vs[:-1], axis=1)
+    group = np.cumsum(new) - 1
+    first = np.full(group[-1] + 1, len(V), np.int64)
+    np.minimum.at(first, group, order)  # representative = smallest original index
+    rep = np.empty(len(V), np.int64)
+    rep[order] = first[group]
+    keep = rep == np.arange(len(V))
+    if keep.all():
+        return V, F, 0
+    newidx = np.cumsum(keep) - 1
+    return V[keep], newidx[rep][F], int((~keep).sum())
+
+
+def unique_face_mask(F: np.ndarray) -> np.ndarray:
+    """(m,) bool: True for the first face of each set of faces with the same three vertices (any order)."""
+    s = np.sort(F, axis=1)
+    order = np.lexsort(s.T[::-1])  # stable: within equal keys, lower face index first
+    ss = s[order]
+    dup_sorted = np.zeros(len(F), bool)
+    dup_sorted[1:] = np.all(ss[1:] == ss[:-1], axis=1)
+    keep = np.ones(len(F), bool)
+    keep[order[dup_sorted]] = False
+    return keep
+
+
+def clean_faces(F: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Drop faces with a repeated index, then duplicates (same three vertices, any order; the first
+    one is kept). Returns (F', degenerate removed, duplicates removed)."""
+    deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    F = F[~deg]
+    keep = unique_face_mask(F)
+    return F[keep], int(deg.sum()), int((~keep).sum())
+
+
+def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Remove vertices no face uses, renumbering faces. Returns (V', F', number removed)."""
+    used = np.zeros(len(V), bool)
+    used[F.reshape(-1)] = True
+    if used.all():
+        return V, F, 0
+    newidx = np.cumsum(used) - 1
+    return V[used], newidx[F], int((~used).sum())
+
+
+def prepare(mesh: Any, *, weld_vertices: bool = True) -> tuple[Mesh, dict]:
+    """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
+    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``unreferenced_removed``."""
+    V, F = as_arrays(mesh)
+    report = {"welded": 0}
+    if weld_vertices:
+        V, F, report["welded"] = weld(V, F)
+    F, report["degenerate_removed"], report["duplicate_removed"] = clean_faces(F)
+    if len(F) == 0:
+        raise ValueError("empty mesh: every face is degenerate")
+    V, F, report["unreferenced_removed"] = drop_unreferenced(V, F)
+    return Mesh(V, F), report

@@ -1,0 +1,60 @@
+"""Normal-flip test for contractions, evaluated per face corner.
+
+A contraction moves its endpoints to x. Every surviving face around them (one that does not contain both
+endpoints) has one corner moved; the contraction is forbidden if any such face's normal turns past the
+threshold: n_before·n_after ≤ cos_max·|n_before||n_after| (default cos_max = 0: any sign flip, and a
+face collapsing to zero area, are forbidden).
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def moved_corner_flips(p, k, x, cos_max, ref=None):
+    """Does moving corner k (…) int of triangles p (…,3,3) to x (…,3) turn its normal past the
+    threshold? Returns (…) bool; a face collapsing to zero area counts as flipped when cos_max ≥ 0.
+    With ``ref`` (…,3), the new normal must also stay within the threshold of ``ref`` (the normal of the
+    input face this face continues), so that small turns cannot add up to a flip over many rounds."""
+    n0 = jnp.cross(p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :])
+    sel = (jnp.arange(3) == k[..., None])[..., None]
+    q = jnp.where(sel, x[..., None, :], p)
+    n1 = jnp.cross(q[..., 1, :] - q[..., 0, :], q[..., 2, :] - q[..., 0, :])
+    d = jnp.sum(n0 * n1, -1)
+    l1 = jnp.linalg.norm(n1, axis=-1)
+    bad = d <= cos_max * jnp.linalg.norm(n0, axis=-1) * l1
+    if ref is not None:
+        bad |= jnp.sum(ref * n1, -1) <= cos_max * jnp.linalg.norm(ref, axis=-1) * l1
+    return bad
+
+
+def corner_flips(V, F, fmask, ref, target, partner, moved, cos_max):
+    """Per-corner flip flags for faces F (M,3) (masked by fmask (M,)) with reference normals ref (M,3).
+
+    For vertex v with moved[v] true, v is moved to target[v] (N,3); partner[v] (N,) is the other endpoint
+    of v's contraction. Faces that contain the partner too disappear and are not tested.
+    Returns bad (M,3) bool: corner k of face f is moved and the move flips f.
+    """
+    p = V[F]
+    bads = []
+    for k in range(3):
+        v = F[:, k]
+        dies = jnp.any(F == partner[v][:, None], axis=1)
+        flips = moved_corner_flips(p, jnp.full(v.shape, k), target[v], cos_max, ref)
+        bads.append(moved[v] & ~dies & fmask & flips)
+    return jnp.stack(bads, 1)
+
+
+@jax.jit
+def local_flips(p, k, x, mask, ref, cos_max):
+    """Any flip among the faces p (K,3,3) (reference normals ref (K,3)) whose corner k (K,) moves to
+    x (3,), masked by mask (K,)."""
+    xs = jnp.broadcast_to(x, p.shape[:-2] + (3,))
+    return jnp.any(moved_corner_flips(p, k, xs, cos_max, ref) & mask)
+
+
+@jax.jit
+def flip_votes(V, F, fmask, ref, target, partner, moved, cos_max, acc):
+    """Accumulate into acc (N,) bool whether any face around vertex v flips when v moves to target[v]."""
+    bad = corner_flips(V, F, fmask, ref, target, partner, moved, cos_max)
+    return acc.at[F.reshape(-1)].max(bad.reshape(-1))

@@ -1,0 +1,103 @@
+"""Quadric storage and algebra.
+
+A quadric is the function Q(u) = uᵀAu + 2bᵀu + c of a point u given *relative to a frame origin p*
+(x = p + u). It is stored packed as 10 numbers ``[a00 a01 a02 a11 a12 a22 b0 b1 b2 c]``.
+
+Keeping each vertex's quadric in a frame centred on the vertex means a plane through that vertex
+contributes only to A (b = c = 0), and sums of quadrics are formed after translating by short edge
+vectors: no large terms cancel, which is what makes float32 costs trustworthy near zero.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+QSIZE = 10
+
+
+def pack(A, b, c):
+    """(…,3,3), (…,3), (…) -> (…,10)."""
+    return jnp.concatenate(
+        [A[..., 0, 0:3], A[..., 1, 1:3], A[..., 2, 2:3], b, c[..., None]], axis=-1
+    )
+
+
+def unpack(q):
+    """(…,10) -> A (…,3,3) symmetric, b (…,3), c (…)."""
+    a00, a01, a02, a11, a12, a22 = (q[..., k] for k in range(6))
+    A = jnp.stack(
+        [jnp.stack([a00, a01, a02], -1), jnp.stack([a01, a11, a12], -1), jnp.stack([a02, a12, a22], -1)],
+        -2,
+    )
+    return A, q[..., 6:9], q[..., 9]
+
+
+def plane_quadric(n, w):
+    """Quadric w·(n·u)² of a plane through the frame origin; n (…,3) unit normal, w (…) weight."""
+    A = w[..., None, None] * n[..., :, None] * n[..., None, :]
+    zeros = jnp.zeros(n.shape[:-1], n.dtype)
+    return pack(A, jnp.zeros_like(n), zeros)
+
+
+def evaluate(q, u):
+    """Q(u) for q (…,10) and u (…,3) given in q's frame. Returns (…)."""
+    A, b, c = unpack(q)
+    Au = jnp.einsum("...ij,...j->...i", A, u)
+    return jnp.sum(u * Au, -1) + 2.0 * jnp.sum(b * u, -1) + c
+
+
+def translate(q, delta):
+    """Re-express q in a frame whose origin is shifted by ``delta`` (new origin = old origin + delta).
+
+    With u = u' + delta: A' = A, b' = b + A·delta, c' = Q(delta).
+    """
+    A, b, c = unpack(q)
+    Ad = jnp.einsum("...ij,...j->...i", A, delta)
+    c2 = c + jnp.sum(delta * Ad, -1) + 2.0 * jnp.sum(b * delta, -1)
+    return pack(A, b + Ad, c2)
+
+
+def face_normals(p0, p1, p2):
+    """Unit normals (…,3), areas (…) of triangles; degenerate triangles get a zero normal."""
+    cr = jnp.cross(p1 - p0, p2 - p0)
+    nrm = jnp.linalg.norm(cr, axis=-1)
+    safe = jnp.where(nrm > 0, nrm, 1.0)
+    return cr / safe[..., None] * (nrm > 0)[..., None], 0.5 * nrm
+
+
+@jax.jit
+def vertex_quadrics(V, F, fmask, area_weighted, cedges, cnormals, cweight, cmask):
+    """Per-vertex quadrics, each in its own vertex's frame.
+
+    V (N,3) float positions; F (M,3) int faces, ``fmask`` (M,) bool marks real faces (the rest is padding).
+    ``area_weighted`` () bool: weight each face plane by area / mean area (dimensionless), else by 1.
+    Constraint edges (boundary or feature) ``cedges`` (B,2) int with the normal ``cnormals`` (B,3) of a
+    face containing them and a weight ``cweight`` (B,) (the boundary penalty; already relative), masked by
+    ``cmask``: each adds the plane through the edge perpendicular to that face, weighted by
+    cweight·|e|²/mean|e|² (area_weighted) or cweight, to both endpoints.
+    Returns (N,10) packed quadrics. Errors are squared distances in the units of V.
+    """
+    dt = V.dtype
+    p = V[F]
+    n, area = face_normals(p[:, 0], p[:, 1], p[:, 2])
+    fm = fmask.astype(dt)
+    mean_area = jnp.sum(area * fm) / jnp.maximum(jnp.sum(fm), 1.0)
+    w = jnp.where(area_weighted, area / jnp.maximum(mean_area, jnp.finfo(dt).tiny), 1.0) * fm
+    qf = plane_quadric(n, w)
+    nv = V.shape[0]
+    Q = jax.ops.segment_sum(jnp.repeat(qf, 3, axis=0), F.reshape(-1), num_segments=nv)
+
+    e = V[cedges[:, 1]] - V[cedges[:, 0]]
+    elen2 = jnp.sum(e * e, -1)
+    m = jnp.cross(e, cnormals)
+    mn = jnp.linalg.norm(m, axis=-1)
+    m = m / jnp.where(mn > 0, mn, 1.0)[:, None]
+    # mean squared edge length of the real faces, for a dimensionless boundary weight
+    ed = jnp.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], 1)
+    mean_e2 = jnp.sum(jnp.sum(ed * ed, -1) * fm[:, None]) / jnp.maximum(3.0 * jnp.sum(fm), 1.0)
+    scale = jnp.where(area_weighted, elen2 / jnp.maximum(mean_e2, jnp.finfo(dt).tiny), 1.0)
+    cw = cweight * scale * cmask.astype(dt) * (mn > 0)
+    qc = plane_quadric(m, cw)
+    Q = Q + jax.ops.segment_sum(jnp.concatenate([qc, qc]), jnp.concatenate([cedges[:, 0], cedges[:, 1]]),
+                                num_segments=nv)
+    return Q

@@ -1,0 +1,60 @@
+"""The object `simplify` returns."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+@dataclasses.dataclass
+class Contractions:
+    """Record of the contractions in the order they happened, in the cleaned input's vertex ids.
+
+    pairs (k,2) int64: (kept, removed) vertex; positions (k,3) float64: where the kept vertex went
+    (input units); costs (k,) float64: quadric cost (squared distance, input units).
+    """
+
+    pairs: np.ndarray
+    positions: np.ndarray
+    costs: np.ndarray
+
+    def __len__(self):
+        return len(self.pairs)
+
+
+@dataclasses.dataclass
+class SimplifyResult:
+    """A simplified mesh and what it cost.
+
+    vertices (k,3) float64 and faces (j,3) int64 in the input's units and orientation;
+    vertex_error (k,) float64: each output vertex's quadric error Q(v), a squared distance in input units;
+    max_error: the largest contraction cost used (squared distance, input units);
+    source_vertices (k,) int64: for each output vertex, the id (in the cleaned input) of the vertex it
+    grew from; source_faces (j,) int64: for each output face, the input face it continues (contraction
+    only re-links faces, it never creates them); input_vertices / input_faces: the cleaned input (after welding and face clean-up);
+    history: the `Contractions`; stats: counts and timings (``compile_s`` is JAX tracing + compilation
+    time inside this call, ``run_s`` the rest, ``total_s`` both).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    vertex_error: np.ndarray
+    max_error: float
+    source_vertices: np.ndarray
+    source_faces: np.ndarray
+    input_vertices: np.ndarray
+    input_faces: np.ndarray
+    history: Contractions
+    stats: dict
+
+    def to_trimesh(self):
+        """The simplified mesh as a `trimesh.Trimesh` (no processing: arrays are kept as they are)."""
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+    def summary(self) -> str:
+        s = self.stats
+        return (f"{s['faces_in']} -> {s['faces_out']} faces in {s['total_s']:.2f} s "
+                f"(compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
+                f"max error {np.sqrt(self.max_error):.3g} (rms-distance units)")

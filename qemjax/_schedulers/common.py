@@ -1,0 +1,126 @@
+"""Pieces both schedulers share: settings, padded kernel calls, initial quadrics, the output."""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import _topology as topo
+from .._kernels import placement, quadrics
+
+DTYPE = np.float32
+MIN_BUCKET = 16
+CHUNK = 1 << 16  # pair / face batches larger than this are processed in chunks of this size
+SMALL_CHUNK = 256
+
+
+def bucket(n: int, lo: int = MIN_BUCKET) -> int:
+    """Padded capacity for n items: the next power of two (at least ``lo``)."""
+    return max(lo, 1 << max(0, int(n - 1).bit_length()))
+
+
+def chunk_size(n: int) -> int:
+    """Batch shape for n rows: SMALL_CHUNK or CHUNK, so at most two shapes per kernel ever compile (the
+    small one serves the greedy scheduler's few-pair updates and the last rounds)."""
+    return SMALL_CHUNK if n <= SMALL_CHUNK else CHUNK
+
+
+def pad_rows(a: np.ndarray, size: int, fill=0) -> np.ndarray:
+    out = np.full((size,) + a.shape[1:], fill, dtype=a.dtype)
+    out[: len(a)] = a
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Numbers a scheduler needs (all internal: coordinates normalised to unit extent)."""
+
+    endpoints_only: bool
+    cond_eps: float
+    max_shift: float
+    cos_max: float
+    preserve_topology: bool
+    max_cost: float  # internal units (squared distance in normalised coordinates); inf = no limit
+
+    def kernel_args(self):
+        """Tunables as 0-d arrays: changing their values never recompiles."""
+        return (np.asarray(self.endpoints_only), np.asarray(self.cond_eps, DTYPE),
+                np.asarray(self.max_shift, DTYPE))
+
+
+class Timer:
+    """Accumulates wall time per named stage; `compile` holds first-call (trace+compile) time."""
+
+    def __init__(self):
+        self.t = {}
+
+    def add(self, name, dt):
+        self.t[name] = self.t.get(name, 0.0) + dt
+
+    def block(self, name, fn, *args):
+        t0 = time.perf_counter()
+        out = fn(*args)
+        jax.block_until_ready(out)
+        self.add(name, time.perf_counter() - t0)
+        return out
+
+
+_place_local = jax.jit(placement.place)
+
+
+def place_gathered(q1, q2, p1, p2, settings: Settings):
+    """Placement for K pairs given their quadrics / positions (numpy); pads K to a bucket so only a
+    handful of shapes are ever compiled. Returns numpy x (K,3), cost (K,), branch (K,), qsum (K,10)."""
+    K = len(q1)
+    if K == 0:
+        return (np.zeros((0, 3), DTYPE), np.zeros(0, DTYPE), np.zeros(0, np.int32),
+                np.zeros((0, 10), DTYPE))
+    outs = []
+    args = settings.kernel_args()
+    size = chunk_size(K)
+    for s in range(0, K, size):
+        n = min(size, K - s)
+        parts = [pad_rows(a[s:s + n], size) for a in (q1, q2, p1, p2)]
+        outs.append(_place_local(*parts, *args))
+    res = [[np.asarray(a) for a in o] for o in outs]
+    cat = [np.concatenate([o[k] for o in res])[:K] for k in range(4)]
+    return cat[0], cat[1], cat[2], cat[3]
+
+
+def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,
+                     feature_edges: np.ndarray | None) -> np.ndarray:
+    """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes."""
+    n = len(V)
+    be, bf = topo.boundary_edges(F, n)
+    cw = np.full(len(be), boundary_weight, DTYPE)
+    if feature_edges is not None and len(feature_edges):
+        fe, ff = topo.feature_edges_with_faces(F, n, np.asarray(feature_edges, np.int64))
+        be, bf = np.concatenate([be, fe]), np.concatenate([bf, ff])
+        cw = np.concatenate([cw, np.full(len(fe), boundary_weight, DTYPE)])
+    keep = cw > 0
+    be, bf, cw = be[keep], bf[keep], cw[keep]
+    p = V[F[bf]]
+    cn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)
+    nb, nf, nv = bucket(len(be)), bucket(len(F)), bucket(n + 1)
+    Vp = pad_rows(V.astype(DTYPE), nv)
+    Fp = pad_rows(F.astype(np.int32), nf, fill=n)  # padding faces point at a spare vertex
+    fmask = np.arange(nf) < len(F)
+    Q = quadrics.vertex_quadrics(
+        Vp, Fp, fmask, jnp.asarray(area_weighted),
+        pad_rows(be.astype(np.int32), nb, fill=n), pad_rows(cn, nb), pad_rows(cw, nb),
+        np.arange(nb) < len(be))
+    return np.asarray(Q)[:n]
+
+
+def compact_output(V: np.ndarray, F: np.ndarray, alive_faces: np.ndarray):
+    """Keep live faces and the vertices they use. Returns (V', F', kept vertex ids, kept face ids)."""
+    fids = np.flatnonzero(alive_faces)
+    F = F[fids]
+    used = np.zeros(len(V), bool)
+    used[F.reshape(-1)] = True
+    ids = np.flatnonzero(used)
+    newidx = np.cumsum(used) - 1
+    return V[ids], newidx[F], ids, fids

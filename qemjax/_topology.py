@@ -1,0 +1,146 @@
+"""Mesh connectivity on the host (numpy): edges, boundaries, and the manifold (link) tests.
+
+Sorting is done with numpy's vectorised sort on packed int64 keys: on the CPU it is an order of magnitude
+faster than sorting inside XLA, and much faster than ``np.unique``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def half_edges(F: np.ndarray) -> np.ndarray:
+    """(3m,2) directed edges of faces (m,3), in face order: (f0,f1), (f1,f2), (f2,f0) for each face."""
+    return np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
+
+
+def edge_keys(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
+    """Undirected int64 key min·n + max of vertex pairs."""
+    a = a.astype(np.int64)
+    b = b.astype(np.int64)
+    return np.minimum(a, b) * n + np.maximum(a, b)
+
+
+def unique_counts(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique values of an int64 array and their multiplicities."""
+    s = np.sort(keys)
+    if s.size == 0:
+        return s, np.zeros(0, np.int64)
+    start = np.flatnonzero(np.concatenate([[True], s[1:] != s[:-1]]))
+    counts = np.diff(np.append(start, s.size))
+    return s[start], counts
+
+
+def edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges (E,2) int64 with u < v, sorted, and how many faces contain each (E,)."""
+    he = half_edges(F)
+    keys, counts = unique_counts(edge_keys(he[:, 0], he[:, 1], n))
+    return np.stack([keys // n, keys % n], 1), counts
+
+
+def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Edges used by exactly one face: (B,2) int64 as directed in that face, and the face index (B,)."""
+    he = half_edges(F)
+    keys = edge_keys(he[:, 0], he[:, 1], n)
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
+    first = np.concatenate([[True], ks[1:] != ks[:-1]])
+    last = np.concatenate([ks[1:] != ks[:-1], [True]])
+    single = order[first & last]
+    return he[single], single // 3
+
+
+def feature_edges_with_faces(F: np.ndarray, n: int, feat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For feature edges feat (k,2), every (edge, face) incidence: edges (j,2) directed as in the face,
+    face indices (j,). Feature edges not in the mesh raise ValueError."""
+    he = half_edges(F)
+    keys = edge_keys(he[:, 0], he[:, 1], n)
+    fk = edge_keys(feat[:, 0], feat[:, 1], n)
+    hit = np.isin(keys, fk)
+    missing = ~np.isin(fk, keys)
+    if missing.any():
+        raise ValueError(f"feature_edges contains {int(missing.sum())} pairs that are not mesh edges, "
+                         f"first: {feat[np.flatnonzero(missing)[0]].tolist()}")
+    idx = np.flatnonzero(hit)
+    return he[idx], idx // 3
+
+
+def vertex_degree(E: np.ndarray, n: int) -> np.ndarray:
+    """Number of edges at each vertex (n,)."""
+    return np.bincount(E.reshape(-1), minlength=n)
+
+
+def link_ok(pairs: np.ndarray, E: np.ndarray, ecount: np.ndarray, n: int,
+            boundary_vertex: np.ndarray, degree: np.ndarray) -> np.ndarray:
+    """Manifold-preserving test for edge contractions; vectorised over pairs.
+
+    ``pairs`` (S,2) must be vertex-disjoint (each vertex in at most one pair); E (E,2)/ecount (E,) are the
+    current edges and their face counts. A pair passes when it is a manifold edge (1 or 2 faces), its
+    endpoints' common neighbours are exactly the apexes of its faces (the link condition), the contraction
+    does not pinch two boundaries together through an interior edge, and no apex of an interior edge has
+    degree 3 (which would leave two coincident faces, as in a tetrahedron).
+    Returns (S,) bool.
+    """
+    S = len(pairs)
+    if S == 0:
+        return np.zeros(0, bool)
+    a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    ekeys = E[:, 0] * n + E[:, 1]
+    pk = edge_keys(a, b, n)
+    pos = np.searchsorted(ekeys, pk)
+    pos = np.minimum(pos, len(ekeys) - 1)
+    is_edge = ekeys[pos] == pk
+    nfaces = np.where(is_edge, ecount[pos], 0)
+
+    lab = np.full(n, -1, np.int64)
+    side = np.zeros(n, np.int64)
+    lab[a], lab[b] = np.arange(S), np.arange(S)
+    side[b] = 1
+    # emit (pair, neighbour, side) for every edge leaving a labelled vertex
+    u, w = E[:, 0], E[:, 1]
+    out = []
+    for x, y in ((u, w), (w, u)):
+        m = lab[x] >= 0
+        out.append((lab[x[m]], y[m], side[x[m]]))
+    s_ = np.concatenate([o[0] for o in out])
+    c_ = np.concatenate([o[1] for o in out])
+    sd = np.concatenate([o[2] for o in out])
+    key = (s_ * n + c_) * 2 + sd
+    key = np.sort(key)
+    base = key // 2
+    both = base[1:] == base[:-1]  # a neighbour seen from side 0 and side 1
+    common_pair = base[1:][both] // n
+    common_v = base[1:][both] % n
+    ncommon = np.bincount(common_pair, minlength=S)
+
+    ok = is_edge & (nfaces >= 1) & (nfaces <= 2) & (ncommon == nfaces)
+    ok &= ~(boundary_vertex[a] & boundary_vertex[b] & (nfaces == 2))
+    interior = nfaces[common_pair] == 2
+    bad_apex = interior & (degree[common_v] <= 3)
+    ok &= np.bincount(common_pair[bad_apex], minlength=S) == 0
+    return ok
+
+
+def creates_duplicates(F: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
+    """(S,) bool: would contracting pair s (b into a) make two surviving faces coincide?
+
+    ``pairs`` (S,2) must be vertex-disjoint and at least two edges apart, so a face holds endpoints of
+    one pair at most and every face that could become a duplicate touches that pair.
+    """
+    S = len(pairs)
+    lab = np.full(n, -1, np.int64)
+    lab[pairs[:, 0]] = lab[pairs[:, 1]] = np.arange(S)
+    rep = np.arange(n)
+    rep[pairs[:, 1]] = pairs[:, 0]
+    lf = lab[F]
+    hit = np.flatnonzero((lf >= 0).any(1))
+    G = rep[F[hit]]
+    owner = lf[hit].max(1)
+    live = (G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2])
+    G, owner = np.sort(G[live], axis=1), owner[live]
+    order = np.lexsort(G.T[::-1])
+    Gs = G[order]
+    same = np.all(Gs[1:] == Gs[:-1], axis=1)
+    bad = np.zeros(S, bool)
+    bad[owner[order[1:][same]]] = True
+    bad[owner[order[:-1][same]]] = True
+    return bad

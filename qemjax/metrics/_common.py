@@ -1,0 +1,166 @@
+"""Input checking and per-mesh arrays shared by the metric modules.
+
+Everything here is plain numpy in float64: metrics are measured on the host, once per evaluation, and must be
+exact enough to compare simplifiers whose errors differ by less than float32 resolution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+# Triangles with twice-area <= _DEGENERATE_REL * (longest edge)^2 count as degenerate (numerically zero area).
+_DEGENERATE_REL = 1e-12
+
+
+def as_mesh(mesh, name: str = "mesh") -> "MeshArrays":
+    """Validate a mesh given as a `trimesh.Trimesh`, a ``(vertices, faces)`` pair, or any object with
+    ``.vertices`` and ``.faces``; return float64 vertices (n, 3) and int64 faces (m, 3).
+
+    Raises ValueError on wrong shapes, an empty mesh, non-finite coordinates, non-integer or out-of-range
+    face indices.
+    """
+    if isinstance(mesh, MeshArrays):
+        return mesh
+    if isinstance(mesh, (tuple, list)):
+        if len(mesh) != 2:
+            raise ValueError(f"{name}: a tuple mesh must be (vertices, faces), got {len(mesh)} items")
+        vertices, faces = mesh
+    elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        vertices, faces = mesh.vertices, mesh.faces
+    else:
+        raise ValueError(
+            f"{name}: expected a trimesh.Trimesh, a (vertices, faces) tuple or an object with .vertices and "
+            f".faces, got {type(mesh).__name__}"
+        )
+    v = np.asarray(vertices)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"{name}: vertices must have shape (n, 3), got {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"{name}: faces must have shape (m, 3), got {f.shape}")
+    if len(v) == 0 or len(f) == 0:
+        raise ValueError(f"{name}: empty mesh ({len(v)} vertices, {len(f)} faces)")
+    if not np.issubdtype(v.dtype, np.number) or np.iscomplexobj(v):
+        raise ValueError(f"{name}: vertices must be real numbers, got dtype {v.dtype}")
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    if not np.isfinite(v).all():
+        raise ValueError(f"{name}: vertices contain NaN or infinite values")
+    if not np.issubdtype(f.dtype, np.integer):
+        if not np.issubdtype(f.dtype, np.floating) or not np.isfinite(f).all() or (f != np.round(f)).any():
+            raise ValueError(f"{name}: faces must hold integer vertex indices, got dtype {f.dtype}")
+    f = np.ascontiguousarray(f, dtype=np.int64)
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"{name}: face indices must lie in [0, {len(v)}), got [{f.min()}, {f.max()}]")
+    return MeshArrays(v, f)
+
+
+@dataclass(frozen=True, eq=False)
+class MeshArrays:
+    """A validated mesh, with derived arrays computed once on first use.
+
+    vertices: (n, 3) float64; faces: (m, 3) int64. Lengths are in the mesh's own units.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    @cached_property
+    def corners(self) -> np.ndarray:
+        """(3, 3, m) float64: corners[k, axis, face], component-first so each row is contiguous."""
+        vt = np.ascontiguousarray(self.vertices.T)
+        return np.stack([np.take(vt, np.ascontiguousarray(self.faces[:, k]), axis=1) for k in range(3)])
+
+    @cached_property
+    def cross(self) -> np.ndarray:
+        """(3, m) float64: (b - a) x (c - a), twice the area times the unit normal (component-first)."""
+        c = self.corners
+        ab, ac = c[1] - c[0], c[2] - c[0]
+        return np.stack([ab[1] * ac[2] - ab[2] * ac[1], ab[2] * ac[0] - ab[0] * ac[2], ab[0] * ac[1] - ab[1] * ac[0]])
+
+    @cached_property
+    def double_areas(self) -> np.ndarray:
+        """(m,) float64: twice each face's area."""
+        n = self.cross
+        return np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+
+    @cached_property
+    def referenced(self) -> np.ndarray:
+        """(n,) bool: vertices used by at least one face."""
+        used = np.zeros(len(self.vertices), dtype=bool)
+        used[self.faces.ravel()] = True
+        return used
+
+    @cached_property
+    def bbox_diagonal(self) -> float:
+        """Length of the bounding-box diagonal of the referenced vertices (mesh units)."""
+        v = self.vertices[self.referenced]
+        return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+
+    @cached_property
+    def edges(self) -> "EdgeTable":
+        return EdgeTable.build(self.faces, len(self.vertices))
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeTable:
+    """Undirected edges of a triangle mesh and how its half-edges attach to them.
+
+    Half-edge h = 3 * face + k runs from faces[face, k] to faces[face, (k + 1) % 3].
+
+    lo, hi:     (E,) int64 endpoints of each undirected edge, lo < hi. Half-edges from a vertex to itself
+                (faces that repeat a vertex) belong to no edge.
+    count:      (E,) int64 number of half-edges (faces) on each edge.
+    order:      (<= 3m,) int64 half-edge ids sorted by edge; edge e owns order[start[e] : start[e] + count[e]].
+    start:      (E,) int64.
+    forward:    (3m,) bool, per half-edge: True when it runs lo -> hi.
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+    count: np.ndarray
+    order: np.ndarray
+    start: np.ndarray
+    forward: np.ndarray
+
+    @staticmethod
+    def build(faces: np.ndarray, n_vertices: int) -> "EdgeTable":
+        a = faces.ravel()
+        b = np.roll(faces, -1, axis=1).ravel()
+        lo = np.minimum(a, b)
+        hi = np.maximum(a, b)
+        key = lo * np.int64(n_vertices) + hi
+        # Half-edges of faces that repeat a vertex (a == b) join no edge.
+        proper = np.flatnonzero(a != b)
+        order = proper[np.argsort(key[proper])]
+        sorted_key = key[order]
+        first = np.ones(len(sorted_key), dtype=bool)
+        first[1:] = sorted_key[1:] != sorted_key[:-1]
+        start = np.flatnonzero(first)
+        count = np.diff(np.append(start, len(sorted_key)))
+        head = order[start]
+        return EdgeTable(lo[head], hi[head], count, order, start, a < b)
+
+    @cached_property
+    def manifold_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The two half-edges of every edge shared by exactly two faces: two (E2,) int64 arrays."""
+        s = self.start[self.count == 2]
+        return self.order[s], self.order[s + 1]
+
+    @cached_property
+    def watertight(self) -> bool:
+        """Every edge is shared by exactly two faces."""
+        return bool((self.count == 2).all())
+
+    @cached_property
+    def consistent(self) -> bool:
+        """The two faces of every two-face edge traverse it in opposite directions."""
+        h1, h2 = self.manifold_pairs
+        return bool((self.forward[h1] != self.forward[h2]).all())
+
+    @property
+    def closed(self) -> bool:
+        """Watertight and consistently oriented: the signed volume is meaningful."""
+        return self.watertight and self.consistent

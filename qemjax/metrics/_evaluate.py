@@ -1,0 +1,71 @@
+"""One call that measures everything about a simplification: a flat dict, one row of a results table."""
+
+from __future__ import annotations
+
+import time
+
+from ._common import as_mesh
+from ._distance import DEFAULT_SAMPLES, _check_samples, _summary, two_way
+from ._quality import area_volume, triangle_quality
+from ._topology import face_centroids, flipped_faces_report, target_report, topology_report
+
+_TOPOLOGY_BEFORE = ("boundary_edges", "non_manifold_edges", "components", "euler", "closed", "genus")
+
+
+def evaluate(original, simplified, *, target_faces: int | None = None, n_samples: int = DEFAULT_SAMPLES,
+             seed: int = 0) -> dict:
+    """Distances, area / volume, triangle quality and topology of a simplification, as one flat dict.
+
+    Args:
+      original, simplified: `trimesh.Trimesh`, ``(vertices, faces)`` tuples, or any objects with
+        ``.vertices`` (n, 3) and ``.faces`` (m, 3) (a qemjax result has them).
+      target_faces: the face count that was asked for (optional).
+      n_samples: area-weighted surface samples per mesh for the distances, on top of the vertices.
+      seed: sampling seed; equal inputs and seed give equal numbers.
+
+    Returns scalar values only (lengths in mesh units, angles in degrees, ``*_rel`` relative to the
+    original's bounding-box diagonal), in this order:
+      faces_before, faces_after, vertices_before, vertices_after, face_ratio (after / before);
+      target_faces, target_error (faces_after / target - 1): only with ``target_faces``;
+      surface distance (see `surface_distance`): hausdorff, mean, rms, e_gh, hausdorff_fwd, hausdorff_bwd,
+        mean_fwd, mean_bwd, each also as *_rel; n_points_fwd, n_points_bwd, bbox_diagonal;
+      area / volume (see `area_volume`): area_before, area_after, area_retention, volume_before,
+        volume_after, volume_change;
+      quality of the simplified mesh (see `triangle_quality`): min_angle_min, min_angle_mean,
+        sliver_fraction, aspect_ratio_mean, aspect_ratio_max, degenerate_faces;
+      topology of the simplified mesh (see `topology_report`): edges, boundary_edges, non_manifold_edges,
+        non_manifold_vertices, components, euler, closed, orientable, genus, flipped_faces,
+        flipped_fraction; of the original: boundary_edges_before, non_manifold_edges_before,
+        components_before, euler_before, closed_before, genus_before (genus without the non-manifold
+        vertex check, which is skipped on the original for speed);
+      time_s: wall-clock seconds this evaluation took.
+
+    Raises:
+      ValueError: malformed meshes (shapes, empty, non-finite values, bad indices) or arguments.
+    """
+    t0 = time.perf_counter()
+    o = as_mesh(original, "original")
+    s = as_mesh(simplified, "simplified")
+    n_samples = _check_samples(n_samples)
+    target = target_report(len(s.faces), target_faces) if target_faces is not None else {}
+
+    fwd, bwd, nearest = two_way(o, s, n_samples, seed, extra_bwd=face_centroids(s))
+    topo_s = topology_report(s)
+    topo_o = topology_report(o, fans=False)
+
+    row = {
+        "faces_before": len(o.faces),
+        "faces_after": len(s.faces),
+        "vertices_before": len(o.vertices),
+        "vertices_after": len(s.vertices),
+        "face_ratio": len(s.faces) / len(o.faces),
+        **target,
+        **_summary(fwd, bwd, o.bbox_diagonal),
+        **area_volume(o, s),
+        **triangle_quality(s),
+        **{k: v for k, v in topo_s.items() if k not in ("vertices", "faces")},
+        **flipped_faces_report(s, o, nearest),
+        **{f"{k}_before": topo_o[k] for k in _TOPOLOGY_BEFORE},
+    }
+    row["time_s"] = time.perf_counter() - t0
+    return row

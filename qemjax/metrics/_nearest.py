@@ -1,0 +1,321 @@
+"""Exact nearest-triangle queries for many points: a KD-tree over triangle pieces, and a sparse grid.
+
+Both are exact (they return the same distances as comparing every point with every triangle, up to float64
+rounding); they differ in cost. `nearest_triangles` picks one.
+
+KD-tree (`TriangleIndex`). Every triangle is cut into n^2 congruent pieces (regular subdivision; n = 1 for
+most triangles) so that each piece lies in a ball of radius <= R around its centroid. For a point p: the
+nearest centroid's triangle gives an upper bound U on the distance; any triangle closer than U has a piece
+with |p - centroid| < U + R, so a ball query of radius U + R returns every candidate. Candidates whose ball
+lower bound |p - centroid| - radius is not below U are dropped before the exact test. Splitting the few large
+triangles keeps R near the typical piece size.
+
+Grid (`GridIndex`). A triangle is listed in every cell whose centre lies within delta + (half cell diagonal)
+of it. A point is compared with its own cell's list only; if the best distance found is <= delta it is exact
+(the true nearest triangle is within delta of the point, hence listed in its cell). Others go to the KD-tree.
+delta is chosen from the exact distances of a small pilot sample, so that few points fall back.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ._pointtri import flat_triangles, squared_distance_cf
+
+_BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cache)
+_CHUNK = 65_536  # query points per block (bounds temporary memory)
+_K_NEAREST = 16  # centroids asked of the KD-tree per point before falling back to a ball query
+_SLACK = 1e-9  # relative padding of every exactness bound against rounding
+_PIECES_PER_FACE = 2.0  # KD-tree piece budget: <= this * faces + _MIN_PIECES
+_MIN_PIECES = 16_384
+_GRID_BUDGET = 4_000_000  # (triangle, cell) pairs enumerated while filling the grid
+_GRID_PILOT = 2_048  # points measured exactly first to choose the grid's margin delta
+_GRID_QUANTILE = 0.99  # fraction of pilot points the margin covers
+
+
+class Triangles:
+    """Triangle corners in the layout the kernel wants: a, ab = b - a, ac = c - a as (3, m) float64
+    (component-first), and flat (m,) bool (too thin for a normal: measured as three segments)."""
+
+    def __init__(self, corners: np.ndarray):
+        self.a = np.ascontiguousarray(corners[0])
+        self.ab = np.ascontiguousarray(corners[1] - corners[0])
+        self.ac = np.ascontiguousarray(corners[2] - corners[0])
+        self.flat = flat_triangles(self.ab, self.ac)
+        self.corners = corners
+
+    def __len__(self) -> int:
+        return self.a.shape[1]
+
+    def sq_dist(self, points_cf: np.ndarray, faces: np.ndarray) -> np.ndarray:
+        """Squared distances (n,) from points (3, n) to faces (n,) int64, pair by pair."""
+        out = np.empty(len(faces))
+        for s in range(0, len(faces), _BLOCK):
+            f = faces[s : s + _BLOCK]
+            out[s : s + _BLOCK] = squared_distance_cf(
+                points_cf[:, s : s + _BLOCK],
+                np.take(self.a, f, axis=1),
+                np.take(self.ab, f, axis=1),
+                np.take(self.ac, f, axis=1),
+                np.take(self.flat, f),
+            )
+        return out
+
+
+def _morton_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """Order points along a Z-curve so that consecutive queries touch nearby tree nodes (cache locality)."""
+    lo = points.min(axis=0)
+    extent = float((points.max(axis=0) - lo).max())
+    q = ((points - lo) * ((2**bits - 1) / extent if extent > 0 else 0.0)).astype(np.int64)
+    code = np.zeros(len(points), dtype=np.int64)
+    for bit in range(bits):
+        for axis in range(3):
+            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
+def _ragged_arange(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For counts (n,) int64 return owner and local, each (counts.sum(),): local runs 0..counts[i]-1 for
+    owner i."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    local = np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)
+    return owner, local
+
+
+def _segment_argmin(d2: np.ndarray, faces: np.ndarray, counts: np.ndarray):
+    """Per segment of consecutive pairs (lengths counts > 0): the minimum of d2 and a face attaining it."""
+    seg = np.cumsum(counts) - counts
+    best = np.minimum.reduceat(d2, seg)
+    owner = np.repeat(np.arange(len(counts)), counts)
+    at = np.maximum.reduceat(np.where(d2 <= best[owner], np.arange(len(d2)), -1), seg)
+    return best, faces[at]
+
+
+def _pieces(tris: Triangles, radius: np.ndarray, levels: np.ndarray):
+    """Centroids (P, 3), radii (P,) and parent faces (P,) of the regular subdivision of each face f into
+    levels[f]^2 pieces."""
+    a, ab, ac = tris.a.T, tris.ab.T, tris.ac.T
+    cents, radii, parents = [], [], []
+    for n in np.unique(levels):  # a handful of distinct levels, not a loop over faces
+        faces = np.flatnonzero(levels == n)
+        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        up = i + j <= n - 1
+        down = i + j <= n - 2
+        # Barycentric (u, v) of the piece centroids: upward piece (i, j) -> ((3i+1)/3n, (3j+1)/3n),
+        # downward piece -> ((3i+2)/3n, (3j+2)/3n).
+        u = np.concatenate([3 * i[up] + 1, 3 * i[down] + 2]) / (3.0 * n)
+        v = np.concatenate([3 * j[up] + 1, 3 * j[down] + 2]) / (3.0 * n)
+        c = a[faces, None, :] + u[None, :, None] * ab[faces, None, :] + v[None, :, None] * ac[faces, None, :]
+        cents.append(c.reshape(-1, 3))
+        # Each piece is the face scaled by 1/n (downward ones also point-reflected about their centroid), so
+        # its centroid-to-corner radius is the face's divided by n.
+        radii.append(np.repeat(radius[faces] / n, len(u)))
+        parents.append(np.repeat(faces, len(u)))
+    return np.concatenate(cents), np.concatenate(radii), np.concatenate(parents)
+
+
+class TriangleIndex:
+    """Exact closest-triangle search over one mesh with a KD-tree of triangle pieces (see module notes).
+
+    Args:
+      tris: the mesh's `Triangles`.
+    """
+
+    def __init__(self, tris: Triangles):
+        self.tris = tris
+        corners = tris.corners
+        centroid = corners.mean(axis=0)  # (3, m)
+        radius = np.sqrt(np.max([((corners[k] - centroid) ** 2).sum(axis=0) for k in range(3)], axis=0))
+        m = len(tris)
+        budget = _PIECES_PER_FACE * m + _MIN_PIECES
+        # Piece radius about as small as the budget allows (count ~ m + sum (r / R)^2), grown until it fits.
+        target = float(np.sqrt((radius**2).sum() / max(budget - m, 1.0))) or 1.0
+        while True:
+            levels = np.maximum(np.ceil(radius / target), 1).astype(np.int64)
+            if float((levels.astype(np.float64) ** 2).sum()) <= budget:
+                break
+            target *= 1.25
+        cents, radii, parents = _pieces(tris, radius, levels)
+        self.centroid = cents
+        self.piece_radius = radii * (1 + _SLACK)
+        self.max_radius = float(self.piece_radius.max())
+        self.parent = parents
+        self.tree = cKDTree(cents, balanced_tree=False)
+
+    def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact distance from each point to the mesh, and a nearest face.
+
+        Args:
+          points: (q, 3) float64.
+        Returns:
+          dist (q,) float64 in mesh units and face (q,) int64 (when several faces tie, any one of them).
+        """
+        points = np.asarray(points, dtype=np.float64)
+        dist = np.empty(len(points))
+        face = np.empty(len(points), dtype=np.int64)
+        if len(points) == 0:
+            return dist, face
+        order = _morton_order(points)
+        for s in range(0, len(points), _CHUNK):
+            idx = order[s : s + _CHUNK]
+            dist[idx], face[idx] = self._query_block(points[idx])
+        return dist, face
+
+    def _query_block(self, points: np.ndarray):
+        pts_cf = np.ascontiguousarray(points.T)
+        k = min(_K_NEAREST, len(self.parent))
+        cd, ci = self.tree.query(points, k=k, workers=-1)
+        cd, ci = cd.reshape(len(points), k), ci.reshape(len(points), k)
+        parent = self.parent[ci]
+        best2 = self.tris.sq_dist(pts_cf, parent[:, 0])
+        best_face = parent[:, 0].copy()
+        # Candidates whose bounding ball could beat the nearest centroid's face.
+        lower = cd[:, 1:] - self.piece_radius[ci[:, 1:]]
+        rows, cols = np.nonzero((lower * np.abs(lower) < best2[:, None]) & (parent[:, 1:] != parent[:, :1]))
+        self._improve(pts_cf, rows, parent[rows, cols + 1], best2, best_face)
+        # Exact where the k-th centroid lies beyond best + R; elsewhere a ball query finds every candidate.
+        ub = np.sqrt(best2)
+        redo = np.flatnonzero(cd[:, -1] < (ub + self.max_radius) * (1 + _SLACK)) if k < len(self.parent) else []
+        if len(redo):
+            lists = self.tree.query_ball_point(
+                points[redo], (ub[redo] + self.max_radius) * (1 + _SLACK), workers=-1, return_sorted=False
+            )
+            counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+            piece = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
+            rows = np.repeat(redo, counts)
+            gap = self.centroid[piece] - points[rows]
+            lower = np.sqrt(np.einsum("ij,ij->i", gap, gap)) - self.piece_radius[piece]
+            keep = lower < ub[rows]
+            self._improve(pts_cf, rows[keep], self.parent[piece[keep]], best2, best_face)
+        return np.sqrt(best2), best_face
+
+    def _improve(self, pts_cf, rows, faces, best2, best_face):
+        """Lower best2 / best_face in place with the exact distances of the (rows, faces) pairs; rows sorted."""
+        if len(rows) == 0:
+            return
+        d2 = self.tris.sq_dist(np.take(pts_cf, rows, axis=1), faces)
+        counts = np.bincount(rows, minlength=len(best2))
+        has = np.flatnonzero(counts)
+        seg_best, seg_face = _segment_argmin(d2, faces, counts[has])
+        better = seg_best < best2[has]
+        best2[has[better]] = seg_best[better]
+        best_face[has[better]] = seg_face[better]
+
+
+class GridIndex:
+    """Exact closest-triangle search for many points near a (coarser) mesh: a sparse uniform grid.
+
+    See the module notes. Points the grid cannot settle (best > delta, or an empty cell) go to `fallback`.
+
+    Args:
+      tris: the mesh's `Triangles`.
+      delta: margin (mesh units) within which the grid's answer is exact.
+      fallback: a `TriangleIndex` over the same mesh.
+    """
+
+    def __init__(self, tris: Triangles, delta: float, fallback: TriangleIndex):
+        self.tris = tris
+        self.fallback = fallback
+        self.delta = delta
+        corners = tris.corners
+        lo_t = corners.min(axis=0)  # (3, m)
+        hi_t = corners.max(axis=0)
+        edge = np.sqrt(_sq_norm(tris.ab))
+        h = max(float(np.median(edge)) / 3.0, delta / 2.0, 1e-300)
+        while True:
+            reach = delta + h * np.sqrt(3.0) / 2.0
+            origin = lo_t.min(axis=1) - reach - h
+            c0 = np.floor((lo_t - reach - origin[:, None]) / h).astype(np.int64)
+            c1 = np.floor((hi_t + reach - origin[:, None]) / h).astype(np.int64)
+            span = c1 - c0 + 1  # (3, m) cells per axis
+            total = span.prod(axis=0)
+            dims = c1.max(axis=1) + 2
+            if total.sum() <= max(_GRID_BUDGET, 8 * len(tris)) and float(np.prod(dims.astype(float))) < 2.0**62:
+                break
+            h *= 1.25
+        self.h, self.origin, self.dims = h, origin, dims
+        # Enumerate the cells of every face's box, keep those whose centre is within reach of the face.
+        owner, local = _ragged_arange(total)
+        syz = (span[1] * span[2])[owner]
+        sz = span[2][owner]
+        cell = np.stack([c0[0][owner] + local // syz, c0[1][owner] + local % syz // sz, c0[2][owner] + local % sz])
+        centre = origin[:, None] + (cell + 0.5) * h
+        d2 = tris.sq_dist(centre, owner)
+        keep = d2 <= (reach * (1 + _SLACK)) ** 2
+        key = self._key(cell[:, keep])
+        owner = owner[keep]
+        order = np.argsort(key, kind="stable")
+        key = key[order]
+        self.cell_face = owner[order]
+        first = np.ones(len(key), dtype=bool)
+        first[1:] = key[1:] != key[:-1]
+        self.cell_key = key[first]
+        self.cell_start = np.flatnonzero(first)
+        self.cell_count = np.diff(np.append(self.cell_start, len(key)))
+
+    def _key(self, cell: np.ndarray) -> np.ndarray:
+        return (cell[0] * self.dims[1] + cell[1]) * self.dims[2] + cell[2]
+
+    def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Same contract as `TriangleIndex.query`."""
+        points = np.asarray(points, dtype=np.float64)
+        dist = np.full(len(points), np.inf)
+        face = np.zeros(len(points), dtype=np.int64)
+        order = _morton_order(points)
+        for s in range(0, len(points), _CHUNK):
+            idx = order[s : s + _CHUNK]
+            dist[idx], face[idx] = self._query_block(points[idx])
+        redo = np.flatnonzero(~(dist <= self.delta))
+        if redo.size:
+            dist[redo], face[redo] = self.fallback.query(points[redo])
+        return dist, face
+
+    def _query_block(self, points: np.ndarray):
+        dist = np.full(len(points), np.inf)
+        face = np.zeros(len(points), dtype=np.int64)
+        cell = np.floor((points - self.origin) / self.h).astype(np.int64).T
+        inside = ((cell >= 0) & (cell < self.dims[:, None])).all(axis=0)
+        key = np.where(inside, self._key(cell), -1)
+        pos = np.minimum(np.searchsorted(self.cell_key, key), len(self.cell_key) - 1)
+        count = np.where(self.cell_key[pos] == key, self.cell_count[pos], 0)
+        has = np.flatnonzero(count)
+        if has.size == 0:
+            return dist, face
+        count = count[has]
+        owner, local = _ragged_arange(count)
+        cand = self.cell_face[self.cell_start[pos[has]][owner] + local]
+        d2 = self.tris.sq_dist(np.take(np.ascontiguousarray(points[has].T), owner, axis=1), cand)
+        best, best_face = _segment_argmin(d2, cand, count)
+        dist[has] = np.sqrt(best)
+        face[has] = best_face
+        return dist, face
+
+
+def _sq_norm(x: np.ndarray) -> np.ndarray:
+    return x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+
+
+def nearest_triangles(corners: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact distance from each point to a triangle mesh, and the index of a nearest triangle.
+
+    Args:
+      corners: (3, 3, m) float64 triangle corners, component-first (`MeshArrays.corners`).
+      points: (q, 3) float64.
+    Returns:
+      dist (q,) float64 in mesh units, face (q,) int64.
+
+    Uses the grid when the points far outnumber the triangles (dense points on a coarser mesh: a few
+    candidates per point and no tree walk), else the KD-tree. Both are exact.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    tris = Triangles(corners)
+    tree = TriangleIndex(tris)
+    if len(points) < 8 * len(tris) or len(points) < 8 * _GRID_PILOT:
+        return tree.query(points)
+    pilot = np.random.default_rng(0).choice(len(points), _GRID_PILOT, replace=False)
+    pilot_dist, _ = tree.query(points[pilot])
+    delta = float(np.quantile(pilot_dist, _GRID_QUANTILE))
+    return GridIndex(tris, delta, tree).query(points)

@@ -1,0 +1,180 @@
+"""Quick pictures of triangle meshes with matplotlib (an optional dependency: ``pip install matplotlib``).
+
+``render(mesh)`` draws one mesh with flat Lambert shading; ``render_pair(before, after)`` draws two side by
+side with their face counts. A mesh is a ``trimesh.Trimesh``, a ``(vertices, faces)`` pair, or any object
+with ``.vertices`` and ``.faces`` (e.g. the result of ``qemjax.simplify``).
+
+This is a convenience for notebooks and reports, not a renderer: matplotlib sorts polygons by depth (painter's
+algorithm), which costs time per face and gets some overlaps wrong. To keep it quick, meshes with more than
+``max_faces`` faces (default 60 000) are thinned for display: faces turned away from the camera are dropped
+first (invisible on a closed, consistently oriented mesh), then, if still too many, a fixed random subset
+(seed 0) is kept, which shows as speckle. The mesh itself is never changed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["render", "render_pair"]
+
+DEFAULT_VIEW = (20.0, -60.0)  # (elevation, azimuth) in degrees, matplotlib's convention
+DEFAULT_COLOR = (0.72, 0.77, 0.88)
+DEFAULT_MAX_FACES = 60_000
+AMBIENT = 0.25  # share of the colour kept on faces turned away from the light
+EDGE_COLOR = (0.1, 0.1, 0.15)
+ZOOM = 1.35
+
+
+def _pyplot():
+    try:
+        import matplotlib.pyplot as plt
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "qemjax.render needs matplotlib: pip install matplotlib (or pip install 'qemjax[plot]')"
+        ) from exc
+    return plt, Poly3DCollection
+
+
+def _as_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (n, 3) float64, faces (m, 3) int64) from a trimesh, a (V, F) pair or a .vertices/.faces object."""
+    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        V, F = mesh.vertices, mesh.faces
+    elif isinstance(mesh, (tuple, list)) and len(mesh) == 2:
+        V, F = mesh
+    else:
+        raise TypeError(f"expected a mesh, a (vertices, faces) pair, or .vertices/.faces; got {type(mesh)!r}")
+    V = np.asarray(V, dtype=np.float64).reshape(-1, 3)
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    return V, F
+
+
+def _rotate_up(V: np.ndarray, up: str) -> np.ndarray:
+    """Turn the mesh so that its ``up`` axis points along matplotlib's vertical (z) axis."""
+    if up == "z":
+        return V
+    if up == "y":  # rotate +90 degrees about x: y -> z, z -> -y
+        return np.stack([V[:, 0], -V[:, 2], V[:, 1]], axis=1)
+    if up == "x":
+        return np.stack([V[:, 1], V[:, 2], V[:, 0]], axis=1)
+    raise ValueError(f"up must be 'x', 'y' or 'z', got {up!r}")
+
+
+def _view_direction(view) -> np.ndarray:
+    """Unit vector from the scene towards the camera for matplotlib's (elev, azim) in degrees."""
+    elev, azim = np.radians(view[0]), np.radians(view[1])
+    return np.array([np.cos(elev) * np.cos(azim), np.cos(elev) * np.sin(azim), np.sin(elev)])
+
+
+def _thin(tris: np.ndarray, normals: np.ndarray, eye: np.ndarray, max_faces: int):
+    """Drop back faces, then keep a seeded random subset, until at most ``max_faces`` remain."""
+    if len(tris) <= max_faces:
+        return tris, normals
+    front = normals @ eye > 0
+    tris, normals = tris[front], normals[front]
+    if len(tris) > max_faces:
+        keep = np.sort(np.random.default_rng(0).choice(len(tris), size=max_faces, replace=False))
+        tris, normals = tris[keep], normals[keep]
+    return tris, normals
+
+
+def render(
+    mesh,
+    ax=None,
+    *,
+    view=DEFAULT_VIEW,
+    color=DEFAULT_COLOR,
+    edges: bool = False,
+    path=None,
+    up: str = "y",
+    max_faces: int = DEFAULT_MAX_FACES,
+    title: str | None = None,
+    figsize=(5, 5),
+    dpi: int = 120,
+):
+    """Draw ``mesh`` with flat shading; returns the matplotlib 3-D Axes.
+
+    Args:
+        mesh: trimesh.Trimesh, (vertices, faces) pair, or object with ``.vertices`` and ``.faces``.
+        ax: a 3-D Axes to draw into (``projection="3d"``); a new figure is made when None.
+        view: (elevation, azimuth) in degrees. The light comes from the camera, a little above and left.
+        color: RGB base colour (0..1), scaled by Lambert shading ``AMBIENT + (1 - AMBIENT) * |n . l|``
+            (two-sided, so meshes with mixed orientation still look lit).
+        edges: also draw the triangle edges (useful on small, simplified meshes).
+        path: when given, the figure is saved there; a figure made here is then closed.
+        up: the mesh's up axis ("y" for most scanned / OBJ models, "z" for CAD), shown vertically.
+        max_faces: display cap; larger meshes are thinned as the module docstring explains.
+        title: optional Axes title.
+    """
+    plt, Poly3DCollection = _pyplot()
+    V, F = _as_arrays(mesh)
+    V = _rotate_up(V, up)
+    created = ax is None
+    if created:
+        fig = plt.figure(figsize=figsize, dpi=dpi)
+        ax = fig.add_subplot(projection="3d")
+
+    tris = V[F]  # (m, 3, 3)
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    lengths = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
+
+    eye = _view_direction(view)
+    tris, normals = _thin(tris, normals, eye, max_faces)
+
+    # light from the camera, tilted up and to the left so that silhouettes and creases read
+    up_dir = np.array([0.0, 0.0, 1.0])
+    left = np.cross(up_dir, eye)
+    light = eye + 0.5 * up_dir + 0.3 * left
+    light /= np.linalg.norm(light)
+    shade = AMBIENT + (1.0 - AMBIENT) * np.abs(normals @ light)
+    rgb = np.clip(np.asarray(color, dtype=np.float64)[None, :3] * shade[:, None], 0.0, 1.0)
+
+    collection = Poly3DCollection(
+        tris,
+        facecolors=rgb,
+        # without edges, outline each face in its own colour: hides the hairline seams of antialiasing
+        edgecolors=EDGE_COLOR if edges else rgb,
+        linewidths=0.3 if edges else 0.2,
+    )
+    ax.add_collection3d(collection)
+
+    if len(V):
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        center, half = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-12)
+        ax.set_xlim(center[0] - half, center[0] + half)
+        ax.set_ylim(center[1] - half, center[1] + half)
+        ax.set_zlim(center[2] - half, center[2] + half)
+    # equal aspect (the limits above are a cube); zoom in, as the cube's corners leave a wide margin
+    ax.set_box_aspect((1, 1, 1), zoom=ZOOM)
+    ax.view_init(elev=view[0], azim=view[1])
+    ax.set_axis_off()
+    if title is not None:
+        ax.set_title(title)
+
+    if path is not None:
+        ax.figure.savefig(path, bbox_inches="tight")
+        if created:
+            plt.close(ax.figure)
+    return ax
+
+
+def render_pair(before, after, path=None, *, titles=None, figsize=(10, 5), dpi: int = 120, **kwargs):
+    """Draw two meshes side by side (titled with their face counts); returns the Figure.
+
+    ``kwargs`` go to :func:`render` (view, color, edges, up, max_faces). When ``path`` is given the figure is
+    saved there and closed.
+    """
+    plt, _ = _pyplot()
+    meshes = [_as_arrays(before), _as_arrays(after)]
+    if titles is None:
+        titles = [f"before: {len(meshes[0][1]):,} faces", f"after: {len(meshes[1][1]):,} faces"]
+    fig = plt.figure(figsize=figsize, dpi=dpi)
+    for i, (mesh, title) in enumerate(zip(meshes, titles)):
+        ax = fig.add_subplot(1, 2, i + 1, projection="3d")
+        render(mesh, ax, title=title, **kwargs)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, bbox_inches="tight")
+        plt.close(fig)
+    return fig

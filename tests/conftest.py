@@ -1,0 +1,45 @@
+"""Shared fixtures and checks. Meshes are generated in code; real meshes come from ../shared/meshes and
+tests using them skip when it is absent (a user's machine)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+
+
+def shared_mesh(name: str) -> Path:
+    p = SHARED / name
+    if not p.exists():
+        pytest.skip(f"{p} not available (../shared/meshes is only on development and CI machines)")
+    return p
+
+
+def face_normals(V, F):
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def assert_valid(result, target=None, V0=None, F0=None, allow_flips=False):
+    """Indices in range, no degenerate (index or zero-area) faces, no duplicate faces, exact count, and
+    no face whose normal opposes the nearest input face's normal (when the input is given)."""
+    V, F = result.vertices, result.faces
+    assert F.dtype == np.int64 and V.dtype == np.float64
+    assert F.min() >= 0 and F.max() < len(V)
+    assert np.all(np.isfinite(V))
+    assert not np.any((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])), "degenerate"
+    key = np.sort(F, axis=1)
+    assert len(np.unique(key, axis=0)) == len(F), "duplicate faces"
+    area2 = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    assert np.all(area2 > 0), "zero-area faces"
+    used = np.zeros(len(V), bool)
+    used[F.reshape(-1)] = True
+    assert used.all(), "unreferenced vertices"
+    if target is not None:
+        assert len(F) == target
+    if V0 is not None and not allow_flips:
+        # every output face continues an input face: it must not point against that face
+        dots = np.sum(face_normals(V, F) * face_normals(V0, F0)[result.source_faces], 1)
+        assert np.all(dots > 0), f"{np.sum(dots <= 0)} faces point against the input face they continue"

@@ -1,0 +1,63 @@
+"""Loading, welding and cleaning."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import qemjax
+from qemjax import _io, shapes
+
+
+@pytest.mark.parametrize("ext", ["obj", "ply", "stl", "off", "glb"])
+def test_load_formats(tmp_path, ext):
+    V, F = shapes.icosphere(2)
+    path = tmp_path / f"m.{ext}"
+    trimesh.Trimesh(V, F, process=False).export(path)
+    m = qemjax.load(path)
+    assert m.faces.shape == (320, 3)
+    r = qemjax.simplify(path, target_faces=100)
+    assert len(r.faces) == 100
+
+
+def test_weld_merges_coincident_vertices_and_reports():
+    V, F = shapes.icosphere(2)
+    Vs = V[F].reshape(-1, 3)  # triangle soup: every corner its own vertex
+    Fs = np.arange(len(Vs)).reshape(-1, 3)
+    (V2, F2), rep = _io.prepare((Vs, Fs))
+    assert rep["welded"] == len(Vs) - len(V)
+    assert len(V2) == len(V)
+    (V3, F3), rep3 = _io.prepare((Vs, Fs), weld_vertices=False)
+    assert rep3["welded"] == 0 and len(V3) == len(Vs)
+    r = qemjax.simplify((Vs, Fs), target_faces=100)
+    assert r.stats["welded"] == len(Vs) - len(V) and len(r.faces) == 100
+
+
+def test_degenerate_and_duplicate_faces_are_removed_and_counted():
+    V, F = shapes.icosphere(1)
+    Fbad = np.concatenate([F, [[0, 0, 1]], F[:3], F[:1, ::-1]])
+    (_, F2), rep = _io.prepare((V, Fbad))
+    assert rep["degenerate_removed"] == 1 and rep["duplicate_removed"] == 4
+    assert np.array_equal(F2, F)
+
+
+def test_polygons_are_triangulated():
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    m = _io.as_arrays((V, np.array([[0, 1, 2, 3]])))
+    assert m.faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+
+
+def test_unreferenced_vertices_dropped():
+    V, F = shapes.icosphere(1)
+    V2 = np.concatenate([V, [[5.0, 5, 5]]])
+    (V3, _), rep = _io.prepare((V2, F))
+    assert rep["unreferenced_removed"] == 1 and len(V3) == len(V)
+
+
+def test_accepts_trimesh_and_objects():
+    V, F = shapes.icosphere(2)
+    tm = trimesh.Trimesh(V, F, process=False)
+    a = qemjax.simplify(tm, target_faces=50)
+    b = qemjax.simplify(qemjax.Mesh(V, F), target_faces=50)
+    c = qemjax.simplify(a, target_faces=20)  # a result is a mesh too
+    assert np.array_equal(a.faces, b.faces) and len(c.faces) == 20

@@ -1,0 +1,220 @@
+"""Kernel checks against float64 numpy references on random inputs (kernels run under enable_x64)."""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from qemjax._kernels import flips, placement
+from qemjax._kernels import quadrics as qd
+from qemjax._schedulers.common import DTYPE, Settings, initial_quadrics, place_gathered
+
+rng = np.random.default_rng(0)
+
+
+def brute_quadric_cost(x, planes, w):
+    """Σ w (n·x + d)² for planes (k,4) = [n, d]."""
+    return np.sum(w * (planes[:, :3] @ x + planes[:, 3]) ** 2)
+
+
+def test_pack_unpack_roundtrip():
+    with jax.enable_x64(True):
+        A = rng.normal(size=(5, 3, 3))
+        A = A + np.swapaxes(A, 1, 2)
+        b, c = rng.normal(size=(5, 3)), rng.normal(size=5)
+        A2, b2, c2 = qd.unpack(qd.pack(jnp.asarray(A), jnp.asarray(b), jnp.asarray(c)))
+        np.testing.assert_allclose(A2, A, rtol=0, atol=0)
+        np.testing.assert_allclose(b2, b)
+        np.testing.assert_allclose(c2, c)
+
+
+def test_translate_and_evaluate_match_brute_force():
+    with jax.enable_x64(True):
+        n = rng.normal(size=(7, 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        p0 = rng.normal(size=3)  # frame origin
+        pts = rng.normal(size=(7, 3))  # a point on each plane
+        d = -np.sum(n * pts, 1)
+        w = rng.uniform(0.5, 2.0, 7)
+        # quadric of each plane in the frame of p0: plane n·u + (n·p0 + d)
+        A = np.einsum("k,ki,kj->ij", w, n, n)
+        dl = n @ p0 + d
+        q = qd.pack(jnp.asarray(A), jnp.asarray(np.sum(w[:, None] * dl[:, None] * n, 0)),
+                    jnp.asarray(np.sum(w * dl * dl)))
+        planes = np.concatenate([n, d[:, None]], 1)
+        for _ in range(5):
+            x = rng.normal(size=3)
+            ref = brute_quadric_cost(x, planes, w)
+            np.testing.assert_allclose(qd.evaluate(q, jnp.asarray(x - p0)), ref, rtol=1e-10)
+            shift = rng.normal(size=3)
+            q2 = qd.translate(q, jnp.asarray(shift))
+            np.testing.assert_allclose(qd.evaluate(q2, jnp.asarray(x - p0 - shift)), ref, rtol=1e-10)
+
+
+def test_vertex_quadrics_match_brute_force():
+    """Sum over incident faces of area-weighted squared plane distances, boundary planes included."""
+    from qemjax.shapes import grid
+
+    V, F = grid(4)
+    V = V + np.c_[np.zeros((len(V), 2)), 0.1 * rng.normal(size=len(V))]  # bumpy: non-trivial planes
+    Q = initial_quadrics(V.astype(DTYPE), F, area_weighted=True, boundary_weight=3.0, feature_edges=None)
+    p = V[F]
+    cr = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    area = np.linalg.norm(cr, axis=1) / 2
+    nrm = cr / (2 * area[:, None])
+    w = area / area.mean()
+    from qemjax import _topology as topo
+
+    be, bf = topo.boundary_edges(F, len(V))
+    ed = np.concatenate([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]])
+    mean_e2 = np.mean(np.sum(ed**2, 1))
+    for v in [0, 7, 12]:
+        x = V[v] + rng.normal(size=3) * 0.1
+        ref = 0.0
+        for f in np.flatnonzero((F == v).any(1)):
+            ref += w[f] * (nrm[f] @ (x - p[f, 0])) ** 2
+        for (a, b), f in zip(be, bf):
+            if v in (a, b):
+                e = V[b] - V[a]
+                m = np.cross(e, nrm[f])
+                m /= np.linalg.norm(m)
+                ref += 3.0 * (e @ e / mean_e2) * (m @ (x - V[a])) ** 2
+        got = float(qd.evaluate(jnp.asarray(Q[v], jnp.float32), jnp.asarray(x - V[v], jnp.float32)))
+        np.testing.assert_allclose(got, ref, rtol=2e-4, atol=1e-7)
+
+
+def _sphere_quadrics(center, radius, n_planes=40):
+    """Tangent planes of a sphere around a point: a well-conditioned quadric, minimum near the center."""
+    d = rng.normal(size=(n_planes, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    pts = center + radius * d
+    return d, pts
+
+
+def _quadric_in_frame(normals, points, origin, w=None):
+    w = np.ones(len(normals)) if w is None else w
+    dl = np.sum(normals * (origin - points), 1)
+    A = np.einsum("k,ki,kj->ij", w, normals, normals)
+    b = np.sum(w[:, None] * dl[:, None] * normals, 0)
+    return np.concatenate([A[0], A[1, 1:], A[2, 2:], b, [np.sum(w * dl * dl)]])
+
+
+def _place64(q1, q2, p1, p2, endpoints=False):
+    with jax.enable_x64(True):
+        out = placement.place(jnp.asarray(q1), jnp.asarray(q2), jnp.asarray(p1), jnp.asarray(p2),
+                              jnp.asarray(endpoints), jnp.asarray(1e-5), jnp.asarray(2.0))
+        return [np.asarray(o) for o in out]
+
+
+def test_solve_branch_matches_direct_solve():
+    for _ in range(10):
+        n1, pt1 = _sphere_quadrics(rng.normal(size=3) * 0.01, 0.3)
+        n2, pt2 = _sphere_quadrics(rng.normal(size=3) * 0.01, 0.3)
+        p1, p2 = rng.normal(size=3) * 0.05, rng.normal(size=3) * 0.05 + 0.1  # optimum within reach
+        q1, q2 = _quadric_in_frame(n1, pt1, p1), _quadric_in_frame(n2, pt2, p2)
+        x, cost, branch, qsum = _place64(q1, q2, p1, p2)
+        # direct float64 solve of the summed quadric in world coordinates
+        nn = np.concatenate([n1, n2])
+        pp = np.concatenate([pt1, pt2])
+        A = nn.T @ nn
+        bvec = -nn.T @ np.sum(nn * pp, 1)
+        xref = np.linalg.solve(A, -bvec)
+        planes = np.concatenate([nn, -np.sum(nn * pp, 1)[:, None]], 1)
+        assert branch == placement.SOLVE
+        np.testing.assert_allclose(x, xref, atol=1e-9)
+        np.testing.assert_allclose(cost, brute_quadric_cost(xref, planes, np.ones(len(nn))), rtol=1e-8)
+        # the merged quadric is expressed in x's frame: Q(0) = cost
+        np.testing.assert_allclose(qsum[9], cost, rtol=1e-8)
+
+
+def test_flat_patch_is_singular_and_stays_on_segment():
+    nrm = np.tile([[0.0, 0.0, 1.0]], (6, 1))
+    pts = np.c_[rng.uniform(-1, 1, (6, 2)), np.zeros(6)]
+    p1, p2 = np.array([0.0, 0.0, 0.0]), np.array([0.2, 0.1, 0.0])
+    x, cost, branch, _ = _place64(_quadric_in_frame(nrm, pts, p1), _quadric_in_frame(nrm, pts, p2), p1, p2)
+    assert branch != placement.SOLVE
+    assert cost < 1e-20
+    t = np.dot(x - p1, p2 - p1) / np.dot(p2 - p1, p2 - p1)
+    np.testing.assert_allclose(x, p1 + t * (p2 - p1), atol=1e-12)
+    assert -1e-12 <= t <= 1 + 1e-12
+
+
+def test_crease_gives_best_point_on_segment():
+    """Two planes z=0 and x=0 meet in the y axis (rank-2 quadric): the pair straddling the crease lands
+    on it, through the segment branch, at zero cost."""
+    nrm = np.array([[0.0, 0, 1]] * 3 + [[1.0, 0, 0]] * 3)
+    pts = np.zeros((6, 3))
+    p1, p2 = np.array([0.3, 0.2, 0.0]), np.array([-0.2, 0.4, 0.0])  # crosses the y axis at t = 0.6
+    x, cost, branch, _ = _place64(_quadric_in_frame(nrm, pts, p1), _quadric_in_frame(nrm, pts, p2), p1, p2)
+    assert branch == placement.SEGMENT
+    assert cost < 1e-14
+    assert abs(x[0]) < 1e-12 and abs(x[2]) < 1e-12
+    # reference: minimise along the segment by dense search
+    ts = np.linspace(0, 1, 10001)
+    seg = p1 + ts[:, None] * (p2 - p1)
+    best = seg[np.argmin(seg[:, 0] ** 2 + seg[:, 2] ** 2)]
+    np.testing.assert_allclose(x, best, atol=1e-4)
+
+
+def test_endpoints_placement_picks_best_of_three():
+    for _ in range(10):
+        n1, pt1 = _sphere_quadrics(rng.normal(size=3) * 0.1, 0.3, 10)
+        p1, p2 = rng.normal(size=3) * 0.2, rng.normal(size=3) * 0.2
+        q1, q2 = _quadric_in_frame(n1, pt1, p1), _quadric_in_frame(n1[:5], pt1[:5], p2)
+        x, cost, branch, _ = _place64(q1, q2, p1, p2, endpoints=True)
+        assert branch == placement.ENDPOINT
+        planes = np.concatenate([np.concatenate([n1, n1[:5]]),
+                                 -np.sum(np.concatenate([n1 * pt1, n1[:5] * pt1[:5]]), 1)[:, None]], 1)
+        cands = [p1, p2, 0.5 * (p1 + p2)]
+        costs = [brute_quadric_cost(c, planes, np.ones(len(planes))) for c in cands]
+        np.testing.assert_allclose(cost, min(costs), rtol=1e-9)
+        np.testing.assert_allclose(x, cands[int(np.argmin(costs))], atol=1e-12)
+
+
+def test_float32_kernel_close_to_float64():
+    n1, pt1 = _sphere_quadrics(np.zeros(3), 0.3)
+    p1, p2 = np.array([0.01, 0.0, 0.0]), np.array([0.0, 0.02, 0.0])
+    q1, q2 = _quadric_in_frame(n1, pt1, p1), _quadric_in_frame(n1, pt1, p2)
+    x64, c64, _, _ = _place64(q1, q2, p1, p2)
+    s = Settings(False, 1e-5, 2.0, 0.0, True, np.inf)
+    x32, c32, _, _ = place_gathered(q1[None].astype(DTYPE), q2[None].astype(DTYPE), p1[None].astype(DTYPE),
+                                    p2[None].astype(DTYPE), s)
+    np.testing.assert_allclose(x32[0], x64, atol=1e-5)
+    np.testing.assert_allclose(c32[0], c64, rtol=1e-3)
+
+
+def test_flip_kernel_matches_numpy_reference():
+    with jax.enable_x64(True):
+        K = 200
+        p = rng.normal(size=(K, 3, 3))
+        k = rng.integers(0, 3, K)
+        x = rng.normal(size=(K, 3))
+        got = np.asarray(flips.moved_corner_flips(jnp.asarray(p), jnp.asarray(k), jnp.asarray(x),
+                                                  jnp.asarray(0.0)))
+        q = p.copy()
+        q[np.arange(K), k] = x
+        n0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        n1 = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+        assert np.array_equal(got, np.sum(n0 * n1, 1) <= 0)
+        assert 0 < got.sum() < K  # both outcomes exercised
+
+
+def test_flip_votes_accumulate_per_vertex():
+    """Moving the centre of a fan past its rim flips faces; each moved vertex gets its own vote."""
+    ang = np.linspace(0, 2 * np.pi, 7)[:-1]
+    V = np.r_[[[0.0, 0, 0]], np.c_[np.cos(ang), np.sin(ang), np.zeros(6)]]
+    F = np.array([[0, 1 + i, 1 + (i + 1) % 6] for i in range(6)], np.int32)
+    target = V.copy()
+    target[0] = [2.0, 0.0, 0.0]
+    moved = np.zeros(7, bool)
+    moved[0] = True
+    partner = np.full(7, -1, np.int32)
+    ref = np.tile(np.float32([[0, 0, 1]]), (6, 1))
+    acc = flips.flip_votes(V.astype(np.float32), F, np.ones(6, bool), ref, target.astype(np.float32),
+                           partner, moved, np.float32(0.0), jnp.zeros(7, bool))
+    assert bool(acc[0]) and not bool(acc[1:].any())
+    target[0] = [0.1, 0.05, 0.0]
+    acc = flips.flip_votes(V.astype(np.float32), F, np.ones(6, bool), ref, target.astype(np.float32),
+                           partner, moved, np.float32(0.0), jnp.zeros(7, bool))
+    assert not bool(acc.any())
