@@ -130,6 +130,10 @@ def summary_table(df) -> str:
     cols = [c for c in SUMMARY_COLUMNS if c in df] + [c for c in ("compile_s", "status") if c in df]
     cols += [c for c in df.columns if c == "time_vs_meshoptimizer"]
     view = df[cols].copy()
+    for col in ("faces_in", "faces_out"):
+        if col in view:
+            # integers, with "-" where a skipped / failed row has none (NaN would make the column float)
+            view[col] = ["-" if isinstance(v, float) and math.isnan(v) else int(v) for v in view[col]]
     if "status" in view:
         view.loc[view["status"] == "ok", "status"] = ""
     return view.to_string(index=False, float_format=lambda x: f"{x:.3g}", na_rep="-")

@@ -19,7 +19,7 @@ pay library loading and first-call setup) and returns ``(V2, F2, call_s)``.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

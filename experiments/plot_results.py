@@ -60,8 +60,7 @@ def plot_metric_vs_ratio(df, metric: str, meshes: list[str], path: Path):
         ax.grid(True, which="both", alpha=0.3)
     for ax in axes.ravel()[len(meshes):]:
         ax.set_visible(False)
-    _legend(fig, axes)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    fig.tight_layout(rect=_legend(fig, axes))
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -86,22 +85,27 @@ def plot_time_vs_faces(df, path: Path):
         ax.grid(True, which="both", alpha=0.3)
     for ax in axes.ravel()[len(ratios):]:
         ax.set_visible(False)
-    _legend(fig, axes)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    fig.tight_layout(rect=_legend(fig, axes))
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
 def _legend(fig, axes):
+    """One legend for all panels, above them; returns the tight_layout rect that leaves room for it."""
     handles, labels = {}, []
     for ax in axes.ravel():
         for h, label in zip(*ax.get_legend_handles_labels()):
             if label not in handles:
                 handles[label] = h
                 labels.append(label)
-    if labels:
-        fig.legend([handles[label] for label in labels], labels, loc="upper center", ncol=min(len(labels), 7),
-                   fontsize=9, frameon=False)
+    if not labels:
+        return (0, 0, 1, 1)
+    width, height = fig.get_size_inches()
+    ncol = max(1, min(len(labels), int(width // 1.9)))  # ~1.9 inches per entry
+    fig.legend([handles[label] for label in labels], labels, loc="upper center", ncol=ncol, fontsize=9,
+               frameon=False)
+    legend_rows = math.ceil(len(labels) / ncol)
+    return (0, 0, 1, 1 - (0.25 * legend_rows + 0.1) / height)
 
 
 def main(argv=None):

@@ -69,50 +69,40 @@ def vertex_degree(E: np.ndarray, n: int) -> np.ndarray:
     return np.bincount(E.reshape(-1), minlength=n)
 
 
-def link_ok(pairs: np.ndarray, E: np.ndarray, ecount: np.ndarray, n: int,
+def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
             boundary_vertex: np.ndarray, degree: np.ndarray) -> np.ndarray:
     """Manifold-preserving test for edge contractions; vectorised over pairs.
 
-    ``pairs`` (S,2) must be vertex-disjoint (each vertex in at most one pair); E (E,2)/ecount (E,) are the
-    current edges and their face counts. A pair passes when it is a manifold edge (1 or 2 faces), its
-    endpoints' common neighbours are exactly the apexes of its faces (the link condition), the contraction
-    does not pinch two boundaries together through an interior edge, and no apex of an interior edge has
-    degree 3 (which would leave two coincident faces, as in a tetrahedron).
+    ``pairs`` (S,2) must be vertex-disjoint edges with ``nfaces`` (S,) faces each; E (k,2) must include
+    every edge at their endpoints (it may hold others). A pair passes when it is a manifold edge (1 or 2
+    faces), its endpoints' common neighbours are exactly the apexes of its faces (the link condition),
+    the contraction does not pinch two boundaries together through an interior edge, and no apex of an
+    interior edge has degree 3 (which would leave two coincident faces, as in a tetrahedron).
     Returns (S,) bool.
     """
     S = len(pairs)
     if S == 0:
         return np.zeros(0, bool)
     a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-    ekeys = E[:, 0] * n + E[:, 1]
-    pk = edge_keys(a, b, n)
-    pos = np.searchsorted(ekeys, pk)
-    pos = np.minimum(pos, len(ekeys) - 1)
-    is_edge = ekeys[pos] == pk
-    nfaces = np.where(is_edge, ecount[pos], 0)
-
     lab = np.full(n, -1, np.int64)
     side = np.zeros(n, np.int64)
     lab[a], lab[b] = np.arange(S), np.arange(S)
     side[b] = 1
-    # emit (pair, neighbour, side) for every edge leaving a labelled vertex
-    u, w = E[:, 0], E[:, 1]
-    out = []
-    for x, y in ((u, w), (w, u)):
+    # (pair, neighbour, side) for every edge leaving a labelled vertex
+    s_, c_, sd = [], [], []
+    for x, y in ((E[:, 0], E[:, 1]), (E[:, 1], E[:, 0])):
         m = lab[x] >= 0
-        out.append((lab[x[m]], y[m], side[x[m]]))
-    s_ = np.concatenate([o[0] for o in out])
-    c_ = np.concatenate([o[1] for o in out])
-    sd = np.concatenate([o[2] for o in out])
-    key = (s_ * n + c_) * 2 + sd
-    key = np.sort(key)
+        s_.append(lab[x[m]])
+        c_.append(y[m])
+        sd.append(side[x[m]])
+    key = np.sort((np.concatenate(s_) * n + np.concatenate(c_)) * 2 + np.concatenate(sd))
     base = key // 2
     both = base[1:] == base[:-1]  # a neighbour seen from side 0 and side 1
     common_pair = base[1:][both] // n
     common_v = base[1:][both] % n
     ncommon = np.bincount(common_pair, minlength=S)
 
-    ok = is_edge & (nfaces >= 1) & (nfaces <= 2) & (ncommon == nfaces)
+    ok = (nfaces >= 1) & (nfaces <= 2) & (ncommon == nfaces)
     ok &= ~(boundary_vertex[a] & boundary_vertex[b] & (nfaces == 2))
     interior = nfaces[common_pair] == 2
     bad_apex = interior & (degree[common_v] <= 3)
@@ -132,15 +122,20 @@ def creates_duplicates(F: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
     rep = np.arange(n)
     rep[pairs[:, 1]] = pairs[:, 0]
     lf = lab[F]
-    hit = np.flatnonzero((lf >= 0).any(1))
+    hit = np.flatnonzero((lf[:, 0] >= 0) | (lf[:, 1] >= 0) | (lf[:, 2] >= 0))
     G = rep[F[hit]]
     owner = lf[hit].max(1)
     live = (G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2])
-    G, owner = np.sort(G[live], axis=1), owner[live]
-    order = np.lexsort(G.T[::-1])
-    Gs = G[order]
-    same = np.all(Gs[1:] == Gs[:-1], axis=1)
+    G, owner = np.sort(G[live], axis=1).astype(np.uint64), owner[live]
+    h = (G[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (G[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ G[:, 2]
+    hs = np.sort(h)
+    dup_h = hs[1:][hs[1:] == hs[:-1]]
     bad = np.zeros(S, bool)
-    bad[owner[order[1:][same]]] = True
-    bad[owner[order[:-1][same]]] = True
+    if dup_h.size:  # rare: compare the few candidates exactly
+        idx = np.flatnonzero(np.isin(h, dup_h))
+        Gi = G[idx]
+        order = np.lexsort(Gi.T[::-1])
+        same = np.all(Gi[order][1:] == Gi[order][:-1], axis=1)
+        bad[owner[idx[order[1:][same]]]] = True
+        bad[owner[idx[order[:-1][same]]]] = True
     return bad

@@ -46,6 +46,12 @@ def corner_flips(V, F, fmask, ref, target, partner, moved, cos_max):
 
 
 @jax.jit
+def face_flips(p, k, x, mask, ref, cos_max):
+    """Per face: does moving corner k (K,) of triangle p (K,3,3) to x (K,3) flip it? (K,) bool."""
+    return moved_corner_flips(p, k, x, cos_max, ref) & mask
+
+
+@jax.jit
 def local_flips(p, k, x, mask, ref, cos_max):
     """Any flip among the faces p (K,3,3) (reference normals ref (K,3)) whose corner k (K,) moves to
     x (3,), masked by mask (K,)."""

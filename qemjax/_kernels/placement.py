@@ -15,10 +15,9 @@ from . import quadrics as qd
 SOLVE, SEGMENT, ENDPOINT = 0, 1, 2
 
 
-def _cofactor_solve(A, b):
-    """det(A) and adj(A)·b for batched symmetric 3×3 A."""
-    a, b_, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
-    d, e, f = A[..., 1, 1], A[..., 1, 2], A[..., 2, 2]
+def _cofactor_solve(q, b):
+    """det(A) and adj(A)·b for the symmetric 3×3 A of packed quadrics q (…,10)."""
+    a, b_, c, d, e, f = (q[..., k] for k in range(6))
     c00 = d * f - e * e
     c01 = c * e - b_ * f
     c02 = b_ * e - c * d
@@ -50,10 +49,11 @@ def place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     mid = 0.5 * (p1 + p2)
     half = 0.5 * (p2 - p1)
     q = qd.translate(q1, half) + qd.translate(q2, -half)  # both now in the midpoint's frame
-    A, b, c = qd.unpack(q)
+    b, c = q[..., 6:9], q[..., 9]
 
-    det, adjb = _cofactor_solve(A, b)
-    fro = jnp.sqrt(jnp.sum(A * A, axis=(-2, -1)))
+    det, adjb = _cofactor_solve(q, b)
+    diag, off = q[..., jnp.array([0, 3, 5])], q[..., jnp.array([1, 2, 4])]
+    fro = jnp.sqrt(jnp.sum(diag * diag, -1) + 2.0 * jnp.sum(off * off, -1))
     tiny = jnp.finfo(dt).tiny
     solvable = (det > cond_eps * fro**3) & (fro > tiny)
     u_opt = -adjb / jnp.where(solvable, det, 1.0)[..., None]
@@ -61,7 +61,7 @@ def place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     solvable = solvable & (jnp.linalg.norm(u_opt, axis=-1) <= max_shift * elen)
 
     # best point on the segment: u = s·half, s ∈ [-1, 1]
-    Ah = jnp.einsum("...ij,...j->...i", A, half)
+    Ah = qd.matvec(q, half)
     hAh = jnp.sum(half * Ah, -1)
     bh = jnp.sum(b * half, -1)
     seg_ok = hAh > cond_eps * fro * jnp.sum(half * half, -1)

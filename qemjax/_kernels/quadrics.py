@@ -34,16 +34,22 @@ def unpack(q):
 
 def plane_quadric(n, w):
     """Quadric w·(n·u)² of a plane through the frame origin; n (…,3) unit normal, w (…) weight."""
-    A = w[..., None, None] * n[..., :, None] * n[..., None, :]
-    zeros = jnp.zeros(n.shape[:-1], n.dtype)
-    return pack(A, jnp.zeros_like(n), zeros)
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    zero = jnp.zeros_like(x)
+    return w[..., None] * jnp.stack([x * x, x * y, x * z, y * y, y * z, z * z, zero, zero, zero, zero], -1)
+
+
+def matvec(q, u):
+    """A·u (…,3) for packed q (…,10), written out elementwise (a batched 3×3 dot is slow on CPU)."""
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    return jnp.stack([q[..., 0] * u0 + q[..., 1] * u1 + q[..., 2] * u2,
+                      q[..., 1] * u0 + q[..., 3] * u1 + q[..., 4] * u2,
+                      q[..., 2] * u0 + q[..., 4] * u1 + q[..., 5] * u2], -1)
 
 
 def evaluate(q, u):
     """Q(u) for q (…,10) and u (…,3) given in q's frame. Returns (…)."""
-    A, b, c = unpack(q)
-    Au = jnp.einsum("...ij,...j->...i", A, u)
-    return jnp.sum(u * Au, -1) + 2.0 * jnp.sum(b * u, -1) + c
+    return jnp.sum(u * (matvec(q, u) + 2.0 * q[..., 6:9]), -1) + q[..., 9]
 
 
 def translate(q, delta):
@@ -51,10 +57,10 @@ def translate(q, delta):
 
     With u = u' + delta: A' = A, b' = b + A·delta, c' = Q(delta).
     """
-    A, b, c = unpack(q)
-    Ad = jnp.einsum("...ij,...j->...i", A, delta)
-    c2 = c + jnp.sum(delta * Ad, -1) + 2.0 * jnp.sum(b * delta, -1)
-    return pack(A, b + Ad, c2)
+    Ad = matvec(q, delta)
+    b = q[..., 6:9]
+    c2 = q[..., 9] + jnp.sum(delta * (Ad + 2.0 * b), -1)
+    return jnp.concatenate([q[..., :6], b + Ad, c2[..., None]], -1)
 
 
 def face_normals(p0, p1, p2):

@@ -51,26 +51,91 @@ def _place(Vd, Qd, P, settings, outputs=(0, 1)):
     return [np.concatenate([np.asarray(o[k]) for o in outs])[: len(P)] for k in outputs]
 
 
-def _flip_bad(Vd, F, N0, n_cap, pairs, x, settings):
-    """(S,) bool: does contracting pairs (vertex-disjoint) to x flip any surviving face?"""
+def _flip_bad(V, F, N0, pairs, x, settings):
+    """(S,) bool: does contracting the vertex-disjoint pairs (S,2) to x (S,3) flip a surviving face?
+
+    F (M,3) must hold every face around the pairs (it may hold others), N0 (M,3) their input normals.
+    The host finds, per face, the one corner that moves; the kernel tests the faces in fixed chunks.
+    """
     S = len(pairs)
-    moved = np.zeros(n_cap, bool)
-    target = np.zeros((n_cap, 3), DTYPE)
-    partner = np.full(n_cap, -1, np.int32)
-    a, b = pairs[:, 0], pairs[:, 1]
-    moved[a] = moved[b] = True
-    target[a] = target[b] = x
-    partner[a], partner[b] = b, a
-    tf = np.flatnonzero(moved[F].any(1))
-    touched, ref = F[tf], N0[tf]
-    acc = jnp.zeros(n_cap, bool)
-    md, td, pd = jnp.asarray(moved), jnp.asarray(target), jnp.asarray(partner)
+    lab = np.full(len(V), -1, np.int64)
+    lab[pairs[:, 0]] = lab[pairs[:, 1]] = np.arange(S)
+    lf = lab[F]
+    hit = lf >= 0
+    nh = hit[:, 0].astype(np.int8) + hit[:, 1] + hit[:, 2]
+    # a face holding both endpoints disappears; others have exactly one moving corner
+    rows = np.flatnonzero(nh == 1)
+    k = np.argmax(hit[rows], axis=1)
+    owner = lf[rows, k]
+    p, ref, xs = V[F[rows]], N0[rows], x[owner]
+    bad = np.zeros(len(rows), bool)
     cos_max = np.asarray(settings.cos_max, DTYPE)
-    for (s, part), (_, rpart) in zip(_chunks(touched.astype(np.int32)), _chunks(ref)):
-        fmask = np.arange(len(part)) < len(touched) - s
-        acc = flips.flip_votes(Vd, part, fmask, rpart, td, pd, md, cos_max, acc)
-    acc = np.asarray(acc)
-    return acc[a] | acc[b] if S else np.zeros(0, bool)
+    outs = []
+    for (s, pp), (_, kk), (_, xx), (_, rr) in zip(_chunks(p), _chunks(k.astype(np.int32)), _chunks(xs),
+                                                 _chunks(ref)):
+        mask = np.arange(len(pp)) < len(rows) - s
+        outs.append(flips.face_flips(pp, kk, xx, mask, rr, cos_max))
+    if outs:
+        bad = np.concatenate([np.asarray(o) for o in outs])[: len(rows)]
+    res = np.zeros(S, bool)
+    res[owner[bad]] = True
+    return res
+
+
+def _select(E, ecount, key, cand, valid, need, n, bvert, deg, flip_bad, F, manifold):
+    """Passes of independent-set selection with validation. Returns (accepted, rejected) edge indices.
+
+    Each pass takes the candidates that hold the smallest key among all candidates touching their
+    endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
+    1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
+    """
+    free = np.ones(n, bool)
+    one = np.arange(len(E))  # edges with a free endpoint (for locking and the link test)
+    both = one  # edges with both endpoints free (for selection)
+    fsub = np.arange(len(F))  # faces with a free corner
+    accepted, rejected = [], []
+    for p in range(MAX_PASSES):
+        Eb = E[both]
+        live = cand[both]
+        if not live.any():
+            if not any(a.size for a in accepted) and valid[both].any():
+                cand = valid.copy()  # everything under the gate was invalid: widen it
+                continue
+            break
+        kl = np.where(live, key[both], NO_KEY)
+        m1 = np.full(n, NO_KEY)
+        np.minimum.at(m1, Eb[:, 0], kl)
+        np.minimum.at(m1, Eb[:, 1], kl)
+        m2 = m1.copy()
+        np.minimum.at(m2, Eb[:, 0], m1[Eb[:, 1]])
+        np.minimum.at(m2, Eb[:, 1], m1[Eb[:, 0]])
+        sel = both[live & (kl == m2[Eb[:, 0]]) & (kl == m2[Eb[:, 1]])]
+        if sel.size == 0:
+            break
+        P = E[sel]
+        Fs = F[fsub]
+        ok = ~flip_bad(P, sel, Fs, fsub)
+        ok &= ~topo.creates_duplicates(Fs, P, n)
+        if manifold:
+            ok &= topo.link_ok(P, ecount[sel], E[one], n, bvert, deg)
+        cand[sel[~ok]] = valid[sel[~ok]] = False
+        rejected.append(sel[~ok])
+        good = sel[ok]
+        accepted.append(good)
+        # lock the closed 1-rings of accepted endpoints; shrink the working sets to what is free
+        lock = np.zeros(n, bool)
+        lock[E[good].reshape(-1)] = True
+        Eo = E[one]
+        ring = lock[Eo[:, 0]] | lock[Eo[:, 1]]
+        free[Eo[ring].reshape(-1)] = False
+        f0, f1 = free[Eo[:, 0]], free[Eo[:, 1]]
+        one, both = one[f0 | f1], one[f0 & f1]
+        ff = free[F[fsub]]
+        fsub = fsub[ff[:, 0] | ff[:, 1] | ff[:, 2]]
+        if good.size * 50 < need // 2 and p > 2:
+            break
+    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64)  # noqa: E731
+    return cat(accepted), cat(rejected)
 
 
 def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
@@ -90,6 +155,7 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
     max_cost_used = 0.0
     removed_per_round = []
     invalid_keys = np.zeros(0, np.int64)  # edges found invalid whose neighbourhood has not changed since
+    prev = None  # (edge keys, targets, costs, moved vertices) of the last round
     while len(F) > target_faces:
         rounds += 1
         t0 = time.perf_counter()
@@ -101,12 +167,22 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
 
         t0 = time.perf_counter()
         Vd, Qd = jnp.asarray(V), jnp.asarray(Q)
-        x, cost = _place(Vd, Qd, E, settings)
+        ekeys = E[:, 0] * n + E[:, 1]
+        # re-cost only pairs at vertices the last round moved; the rest keep their cost and target
+        if prev is None:
+            x, cost = _place(Vd, Qd, E, settings)
+        else:
+            pkeys, px, pcost, changed = prev
+            dirty = changed[E[:, 0]] | changed[E[:, 1]]
+            pos = np.minimum(np.searchsorted(pkeys, ekeys), len(pkeys) - 1)
+            dirty |= pkeys[pos] != ekeys
+            x, cost = px[pos], pcost[pos]
+            d = np.flatnonzero(dirty)
+            x[d], cost[d] = _place(Vd, Qd, E[d], settings)
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
         need = len(F) - target_faces
-        ekeys = E[:, 0] * n + E[:, 1]
         known_bad = np.zeros(len(E), bool)
         if invalid_keys.size:
             pos = np.minimum(np.searchsorted(invalid_keys, ekeys), invalid_keys.size - 1)
@@ -119,46 +195,14 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
         k = min(max(need // 2, 1), int(valid.sum()))
         kth = np.partition(cost[valid], k - 1)[k - 1]
         key = _sort_keys(cost)
-        free = np.ones(n, bool)
-        accepted = []
-        rejected_now = []
         cand = valid & (cost <= max(GATE * kth, kth))
-        for _ in range(MAX_PASSES):
-            live = cand & free[E[:, 0]] & free[E[:, 1]]
-            if not live.any():
-                break
-            kl = np.where(live, key, NO_KEY)
-            m1 = np.full(n, NO_KEY)
-            np.minimum.at(m1, E[:, 0], kl)
-            np.minimum.at(m1, E[:, 1], kl)
-            m2 = m1.copy()
-            np.minimum.at(m2, E[:, 0], m1[E[:, 1]])
-            np.minimum.at(m2, E[:, 1], m1[E[:, 0]])
-            sel = np.flatnonzero(live & (kl == m2[E[:, 0]]) & (kl == m2[E[:, 1]]))
-            if sel.size == 0:
-                break
-            tv = time.perf_counter()
-            ok = ~_flip_bad(Vd, F, N0[fid], n_cap, E[sel], x[sel], settings)
-            ok &= ~topo.creates_duplicates(F, E[sel], n)
-            if settings.preserve_topology:
-                ok &= topo.link_ok(E[sel], E, ecount, n, bvert, deg)
-            timer.add("validity_s", time.perf_counter() - tv)
-            rejected += int((~ok).sum())
-            cand[sel[~ok]] = False
-            valid[sel[~ok]] = False
-            rejected_now.append(sel[~ok])
-            good = sel[ok]
-            accepted.append(good)
-            # lock the closed 1-rings of accepted endpoints
-            lock = np.zeros(n, bool)
-            lock[E[good].reshape(-1)] = True
-            ring = lock[E[:, 0]] | lock[E[:, 1]]
-            free[E[ring].reshape(-1)] = False
-            if good.size * 50 < need // 2 and _ > 2:
-                break
-            if not any(a.size for a in accepted) and not (cand & free[E[:, 0]] & free[E[:, 1]]).any():
-                cand = valid.copy()  # everything under the gate was invalid: widen it
-        acc = np.concatenate(accepted) if accepted else np.zeros(0, np.int64)
+        tv = time.perf_counter()
+        accepted, bad = _select(E, ecount, key, cand, valid, need, n, bvert, deg,
+                                lambda P, idx, Fs, fs: _flip_bad(V, Fs, N0[fid[fs]], P, x[idx], settings),
+                                F, settings.preserve_topology)
+        rejected += bad.size
+        rejected_now = [bad]
+        acc = accepted
         acc = acc[np.argsort(key[acc], kind="stable")]
         # exact target: take in cost order only what keeps faces >= target
         fr = np.where(ecount[acc] >= 1, ecount[acc], 0)
@@ -186,6 +230,9 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
         xs, br, qs = _place(Vd, Qd, P, settings, (0, 2, 3))
         V[a] = xs
         Q[a] = qs
+        changed = np.zeros(n, bool)
+        changed[a] = True
+        prev = (ekeys, x, cost, changed)
         branches += np.bincount(br, minlength=3)
         max_cost_used = max(max_cost_used, float(cost[acc].max()))
         history.append((a.copy(), b.copy(), xs, cost[acc].astype(np.float64)))
@@ -193,7 +240,8 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
         rep[b] = a
         touched = np.zeros(n, bool)
         touched[a] = touched[b] = True
-        touched[F[touched[F].any(1)].reshape(-1)] = True  # every vertex whose faces change
+        tf = touched[F]
+        touched[F[tf[:, 0] | tf[:, 1] | tf[:, 2]].reshape(-1)] = True  # every vertex whose faces change
         if invalid_keys.size:
             iu, iw = invalid_keys // n, invalid_keys % n
             invalid_keys = invalid_keys[~(touched[iu] | touched[iw])]

@@ -134,8 +134,15 @@ class EdgeTable:
         key = lo * np.int64(n_vertices) + hi
         # Half-edges of faces that repeat a vertex (a == b) join no edge.
         proper = np.flatnonzero(a != b)
-        order = proper[np.argsort(key[proper])]
-        sorted_key = key[order]
+        bits_h = max(int(len(a)).bit_length(), 1)
+        if int(key.max(initial=0)).bit_length() + bits_h <= 63:
+            # Sort (key, half-edge) packed in one int64: a plain sort is several times faster than argsort.
+            packed = np.sort((key[proper] << bits_h) | proper)
+            sorted_key = packed >> bits_h
+            order = packed & ((1 << bits_h) - 1)
+        else:
+            order = proper[np.argsort(key[proper])]
+            sorted_key = key[order]
         first = np.ones(len(sorted_key), dtype=bool)
         first[1:] = sorted_key[1:] != sorted_key[:-1]
         start = np.flatnonzero(first)

@@ -67,22 +67,26 @@ def _check_samples(n_samples) -> int:
     return int(n_samples)
 
 
-def two_way(o: MeshArrays, s: MeshArrays, n_samples: int, seed: int, extra_bwd=None):
+def two_way(o: MeshArrays, s: MeshArrays, n_samples: int, seed: int, extra_bwd=None, also=None):
     """Distances of original samples to the simplified surface (fwd) and of simplified samples (plus
-    extra_bwd (k, 3) points, answered separately with their nearest original faces) to the original (bwd)."""
+    extra_bwd (k, 3) points, answered separately with their nearest original faces) to the original (bwd).
+
+    also: an optional callable run meanwhile (its result is returned last). numpy and scipy release the GIL
+    in their loops, so the two directions and ``also`` overlap on several cores.
+    """
     rng_o, rng_s = (np.random.default_rng(ss) for ss in np.random.SeedSequence(seed).spawn(2))
     pts_o = sample_points(o, n_samples, rng_o)
     pts_s = sample_points(s, n_samples, rng_s)
     n_bwd = len(pts_s)
     if extra_bwd is not None:
         pts_s = np.concatenate([pts_s, extra_bwd])
-    # The two directions share nothing: numpy and scipy release the GIL in their loops, so threads overlap.
     with ThreadPoolExecutor(max_workers=2) as pool:
         fwd = pool.submit(nearest_triangles, s.corners, pts_o)
         bwd = pool.submit(nearest_triangles, o.corners, pts_s)
+        extra = also() if also is not None else None
         d_fwd, _ = fwd.result()
         d_bwd, f_bwd = bwd.result()
-    return d_fwd, d_bwd[:n_bwd], f_bwd[n_bwd:]
+    return d_fwd, d_bwd[:n_bwd], f_bwd[n_bwd:], extra
 
 
 def surface_distance(original, simplified, *, n_samples: int = DEFAULT_SAMPLES, seed: int = 0) -> dict:
@@ -108,5 +112,5 @@ def surface_distance(original, simplified, *, n_samples: int = DEFAULT_SAMPLES, 
     """
     o = as_mesh(original, "original")
     s = as_mesh(simplified, "simplified")
-    fwd, bwd, _ = two_way(o, s, _check_samples(n_samples), seed)
+    fwd, bwd, _, _ = two_way(o, s, _check_samples(n_samples), seed)
     return _summary(fwd, bwd, o.bbox_diagonal)

@@ -1,19 +1,21 @@
 """Exact nearest-triangle queries for many points: a KD-tree over triangle pieces, and a sparse grid.
 
-Both are exact (they return the same distances as comparing every point with every triangle, up to float64
-rounding); they differ in cost. `nearest_triangles` picks one.
+Both are exact (the same distances as comparing every point with every triangle, up to float64 rounding);
+they differ in cost, and `nearest_triangles` picks one.
 
 KD-tree (`TriangleIndex`). Every triangle is cut into n^2 congruent pieces (regular subdivision; n = 1 for
-most triangles) so that each piece lies in a ball of radius <= R around its centroid. For a point p: the
-nearest centroid's triangle gives an upper bound U on the distance; any triangle closer than U has a piece
-with |p - centroid| < U + R, so a ball query of radius U + R returns every candidate. Candidates whose ball
-lower bound |p - centroid| - radius is not below U are dropped before the exact test. Splitting the few large
-triangles keeps R near the typical piece size.
+most triangles) so that each piece lies in a ball of radius <= R around its centroid; a cKDTree holds the
+centroids. For a point p, the face of the nearest centroid gives an upper bound U on the distance, and any
+face closer than U has a piece centroid within U + R of p. So the k nearest centroids are enough when the
+k-th lies at least U + R away; otherwise a ball query of radius U + R lists every candidate. Candidates
+whose lower bound |p - centroid| - radius is not below U are skipped before the exact test. Splitting the
+few large triangles keeps R close to the typical piece size (otherwise one huge face would widen every ball).
 
-Grid (`GridIndex`). A triangle is listed in every cell whose centre lies within delta + (half cell diagonal)
-of it. A point is compared with its own cell's list only; if the best distance found is <= delta it is exact
-(the true nearest triangle is within delta of the point, hence listed in its cell). Others go to the KD-tree.
-delta is chosen from the exact distances of a small pilot sample, so that few points fall back.
+Grid (`GridIndex`), for many points near a coarser mesh. A face is listed in every cell whose centre lies
+within delta + (half the cell diagonal) of it. A point is compared with the faces listed in its own cell
+only: a handful, and no tree walk. If the best distance found is <= delta it is exact (the nearest face is
+then within delta of the point, hence within reach of the cell's centre, hence listed). Other points go to
+the KD-tree. delta is the 99th percentile of the exact distances of a small pilot sample.
 """
 
 from __future__ import annotations
@@ -28,8 +30,9 @@ from ._pointtri import flat_triangles, squared_distance_cf
 _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cache)
 _CHUNK = 65_536  # query points per block (bounds temporary memory)
 _K_NEAREST = 16  # centroids asked of the KD-tree per point before falling back to a ball query
+_LEAFSIZE = 16  # KD-tree leaf size (bigger builds faster, queries a little slower)
 _SLACK = 1e-9  # relative padding of every exactness bound against rounding
-_PIECES_PER_FACE = 2.0  # KD-tree piece budget: <= this * faces + _MIN_PIECES
+_PIECES_PER_FACE = 1.5  # KD-tree piece budget: <= this * faces + _MIN_PIECES
 _MIN_PIECES = 16_384
 _GRID_BUDGET = 4_000_000  # (triangle, cell) pairs enumerated while filling the grid
 _GRID_PILOT = 2_048  # points measured exactly first to choose the grid's margin delta
@@ -118,7 +121,7 @@ def _pieces(tris: Triangles, radius: np.ndarray, levels: np.ndarray):
 
 
 class TriangleIndex:
-    """Exact closest-triangle search over one mesh with a KD-tree of triangle pieces (see module notes).
+    """Exact closest-face search over one mesh with a KD-tree of face pieces (see the module notes).
 
     Args:
       tris: the mesh's `Triangles`.
@@ -143,7 +146,7 @@ class TriangleIndex:
         self.piece_radius = radii * (1 + _SLACK)
         self.max_radius = float(self.piece_radius.max())
         self.parent = parents
-        self.tree = cKDTree(cents, balanced_tree=False)
+        self.tree = cKDTree(cents, leafsize=_LEAFSIZE, balanced_tree=False, compact_nodes=False)
 
     def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exact distance from each point to the mesh, and a nearest face.
@@ -243,8 +246,16 @@ class GridIndex:
         sz = span[2][owner]
         cell = np.stack([c0[0][owner] + local // syz, c0[1][owner] + local % syz // sz, c0[2][owner] + local % sz])
         centre = origin[:, None] + (cell + 0.5) * h
-        d2 = tris.sq_dist(centre, owner)
-        keep = d2 <= (reach * (1 + _SLACK)) ** 2
+        limit = reach * (1 + _SLACK)
+        # Cheap slab test (distance to the face's plane) first, then the exact distance.
+        normal = np.cross(tris.ab, tris.ac, axis=0)
+        length = np.sqrt(_sq_norm(normal))
+        normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+        rel = centre - np.take(tris.a, owner, axis=1)
+        near = np.abs(_dot3(np.take(normal, owner, axis=1), rel)) <= limit
+        near |= np.take(tris.flat, owner)  # no reliable normal: exact test only
+        owner, cell, centre = owner[near], cell[:, near], centre[:, near]
+        keep = tris.sq_dist(centre, owner) <= limit * limit
         key = self._key(cell[:, keep])
         owner = owner[keep]
         order = np.argsort(key, kind="stable")
@@ -294,8 +305,12 @@ class GridIndex:
         return dist, face
 
 
+def _dot3(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+
+
 def _sq_norm(x: np.ndarray) -> np.ndarray:
-    return x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+    return _dot3(x, x)
 
 
 def nearest_triangles(corners: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -317,5 +332,7 @@ def nearest_triangles(corners: np.ndarray, points: np.ndarray) -> tuple[np.ndarr
         return tree.query(points)
     pilot = np.random.default_rng(0).choice(len(points), _GRID_PILOT, replace=False)
     pilot_dist, _ = tree.query(points[pilot])
-    delta = float(np.quantile(pilot_dist, _GRID_QUANTILE))
+    # A tiny floor keeps points lying on the surface (distance ~1e-17 from rounding) on the grid's side.
+    floor = 1e-9 * float(np.sqrt(_sq_norm(tris.ab)).max())
+    delta = max(float(np.quantile(pilot_dist, _GRID_QUANTILE)), floor)
     return GridIndex(tris, delta, tree).query(points)

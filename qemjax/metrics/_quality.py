@@ -86,10 +86,11 @@ def signed_volume(mesh: MeshArrays) -> float:
     NaN unless the mesh is closed (every edge in two faces, traversed in opposite directions)."""
     if not mesh.edges.closed:
         return float("nan")
-    # Relative to the mean vertex (the volume of a closed surface does not depend on the origin): keeps
-    # precision for meshes far from the origin.
-    c = mesh.corners - mesh.vertices.mean(axis=0)[None, :, None]
-    return float((c[0] * np.cross(c[1], c[2], axis=0)).sum() / 6.0)
+    # Sum of (a - r) . ((b - a) x (c - a)) / 6 over faces: a cone from r over each face. r = the mean vertex
+    # keeps precision for meshes far from the origin (a closed surface's volume does not depend on r).
+    a = mesh.corners[0] - mesh.vertices.mean(axis=0)[:, None]
+    n = mesh.cross
+    return float((a[0] * n[0] + a[1] * n[1] + a[2] * n[2]).sum() / 6.0)
 
 
 def area_volume(original, simplified) -> dict:

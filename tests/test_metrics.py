@@ -1,0 +1,481 @@
+"""Tests of qemjax.metrics: exactness against brute force, known values on hand-made meshes, input checks."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from qemjax import metrics
+from qemjax.metrics import _distance, _nearest
+
+SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+
+
+def reference_distance(p, a, b, c):
+    """Point-triangle distance by enumeration, in extended precision: the unconstrained minimiser over the
+    plane when it falls inside the triangle, else the best of the three clamped edge projections."""
+    p, a, b, c = (np.asarray(x, dtype=np.longdouble) for x in (p, a, b, c))
+    best = np.full(np.broadcast_shapes(p.shape, a.shape)[:-1], np.inf, dtype=np.longdouble)
+    for o, e in ((a, b - a), (a, c - a), (b, c - b)):
+        ee = (e * e).sum(-1)
+        t = np.clip(((p - o) * e).sum(-1) / np.where(ee > 0, ee, 1), 0, 1)
+        r = p - o - t[..., None] * e
+        best = np.minimum(best, (r * r).sum(-1))
+    ab, ac, ap = b - a, c - a, p - a
+    g11, g12, g22 = (ab * ab).sum(-1), (ab * ac).sum(-1), (ac * ac).sum(-1)
+    r1, r2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    det = g11 * g22 - g12 * g12
+    ok = det > 1e-30 * g11 * g22
+    det = np.where(ok, det, 1)
+    s, t = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
+    ok &= (s >= 0) & (t >= 0) & (s + t <= 1)
+    r = ap - s[..., None] * ab - t[..., None] * ac
+    best = np.where(ok, np.minimum(best, (r * r).sum(-1)), best)
+    return np.sqrt(best).astype(np.float64)
+
+
+def brute_force(points, vertices, faces):
+    """Distance from every point to every face, minimum per point: (q,)."""
+    tri = vertices[faces]
+    out = np.empty(len(points))
+    for s in range(0, len(points), 2048):
+        d = metrics.point_triangle_distance(points[s : s + 2048, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
+        out[s : s + 2048] = d.min(axis=1)
+    return out
+
+
+def sphere(subdivisions=2, radius=1.0, center=(0, 0, 0)):
+    m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    return np.asarray(m.vertices) + np.asarray(center, dtype=float), np.asarray(m.faces, dtype=np.int64)
+
+
+def grid(nx, ny, size=1.0):
+    """An open nx-by-ny grid of squares in z = 0, each split into two triangles."""
+    x, y = np.meshgrid(np.linspace(0, size, nx + 1), np.linspace(0, size, ny + 1), indexing="ij")
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    a = (i * (ny + 1) + j).ravel()
+    b, c, d = a + (ny + 1), a + (ny + 2), a + 1
+    return v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def scalar_row(row):
+    return {k: v for k, v in row.items() if k != "time_s"}
+
+
+def same(x, y):
+    return x == y or (isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y))
+
+
+# ------------------------------------------------------------------------------ point-triangle distance
+
+
+def random_triangles(rng, n):
+    a, b, c = rng.normal(size=(3, n, 3))
+    k = n // 4
+    # Slivers and needles of width 1e-12 .. 1e-1 relative, exactly collinear, repeated corners.
+    width = 10.0 ** rng.uniform(-12, -1, size=k)
+    c[:k] = a[:k] + rng.uniform(-0.5, 1.5, (k, 1)) * (b[:k] - a[:k]) + width[:, None] * rng.normal(size=(k, 3))
+    c[k : k + 200] = a[k : k + 200] + 0.3 * (b[k : k + 200] - a[k : k + 200])
+    b[k + 200 : k + 400] = a[k + 200 : k + 400]
+    c[k + 200 : k + 300] = a[k + 200 : k + 300]
+    return a, b, c
+
+
+def test_point_triangle_distance_matches_reference():
+    rng = np.random.default_rng(0)
+    n = 20_000
+    a, b, c = random_triangles(rng, n)
+    p = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-2, 1, size=(n, 1))
+    # Half the points close to their triangle, at distances down to 1e-9.
+    near = slice(n // 2, n)
+    w = rng.dirichlet([1, 1, 1], size=n // 2)
+    p[near] = w[:, :1] * a[near] + w[:, 1:2] * b[near] + w[:, 2:] * c[near]
+    p[near] += 10.0 ** rng.uniform(-9, 0, size=(n // 2, 1)) * rng.normal(size=(n // 2, 3))
+    got = metrics.point_triangle_distance(p, a, b, c)
+    want = reference_distance(p, a, b, c)
+    scale = np.abs(np.stack([p, a, b, c])).max(axis=(0, 2))
+    # float64 inputs carry ~1e-16 * scale of noise: relative 1e-6 above that floor.
+    np.testing.assert_array_less(np.abs(got - want), 1e-6 * want + 1e-13 * scale)
+    np.testing.assert_allclose(metrics.point_triangle_distance(p, a, b, c, squared=True), got**2, rtol=1e-12)
+
+
+def test_point_triangle_distance_against_dense_sampling():
+    rng = np.random.default_rng(1)
+    a, b, c = rng.normal(size=(3, 50, 3))
+    p = rng.normal(size=(50, 3)) * 2
+    got = metrics.point_triangle_distance(p, a, b, c)
+    u, v = np.meshgrid(np.linspace(0, 1, 401), np.linspace(0, 1, 401))
+    inside = u + v <= 1
+    u, v = u[inside], v[inside]
+    for i in range(50):
+        q = a[i] + u[:, None] * (b[i] - a[i]) + v[:, None] * (c[i] - a[i])
+        sampled = np.linalg.norm(q - p[i], axis=1).min()
+        spacing = np.linalg.norm(np.stack([b[i] - a[i], c[i] - a[i]]), axis=1).max() / 400
+        assert got[i] <= sampled + 1e-12
+        assert sampled - got[i] <= spacing
+
+
+def test_point_triangle_distance_known_values_and_broadcasting():
+    a, b, c = np.array([0.0, 0, 0]), np.array([1.0, 0, 0]), np.array([0.0, 1, 0])
+    pts = np.array([[0.2, 0.2, 3.0], [-1.0, -1.0, 0.0], [2.0, 0.0, 0.0], [0.5, -2.0, 0.0], [1.0, 1.0, 0.0]])
+    want = [3.0, math.sqrt(2), 1.0, 2.0, math.sqrt(0.5)]
+    np.testing.assert_allclose(metrics.point_triangle_distance(pts, a, b, c), want, rtol=1e-14)
+    # (5, 1, 3) points against (1, 4, 3) triangles -> (5, 4).
+    many = np.stack([a, a + 1, a + 2, a + 3])
+    out = metrics.point_triangle_distance(pts[:, None], many[None], (many + b)[None], (many + c)[None])
+    assert out.shape == (5, 4)
+    np.testing.assert_allclose(out[:, 0], want, rtol=1e-14)
+    # A fully degenerate triangle (one point) measures the distance to that point.
+    np.testing.assert_allclose(metrics.point_triangle_distance(pts, a, a, a), np.linalg.norm(pts, axis=1))
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        (np.zeros((4, 2)), np.zeros(3), np.zeros(3), np.zeros(3)),
+        (np.zeros((4, 3)), np.zeros((2, 3)), np.zeros(3), np.zeros(3)),
+        (np.full((4, 3), np.nan), np.zeros(3), np.zeros(3), np.zeros(3)),
+    ],
+)
+def test_point_triangle_distance_rejects_bad_input(args):
+    with pytest.raises(ValueError):
+        metrics.point_triangle_distance(*args)
+
+
+# -------------------------------------------------------------------------- exact nearest-triangle search
+
+
+def mixed_size_mesh():
+    """A fine sphere inside a coarse box (12 huge triangles next to 1280 small ones): exercises the
+    subdivision of large triangles into pieces."""
+    v1, f1 = sphere(3, radius=0.5)
+    box = trimesh.creation.box(extents=(2.0, 3.0, 1.5))
+    v2, f2 = np.asarray(box.vertices), np.asarray(box.faces)
+    return np.concatenate([v1, v2]), np.concatenate([f1, f2 + len(v1)])
+
+
+@pytest.fixture(scope="module")
+def mixed_size_case():
+    rng = np.random.default_rng(2)
+    v, f = mixed_size_mesh()
+    mesh = metrics._common.as_mesh((v, f))
+    # Points on, near and far from the surface, some outside the mesh's bounding box.
+    on = _distance.sample_points(mesh, 1500, rng)
+    pts = np.concatenate([on + rng.normal(scale=s, size=on.shape) for s in (0.0, 1e-3, 0.05)])
+    pts = np.concatenate([pts, rng.uniform(-4, 4, size=(300, 3))])
+    return v, f, mesh, pts, brute_force(pts, v, f)
+
+
+@pytest.mark.parametrize("structure", ["kdtree", "grid"])
+def test_nearest_triangles_exact(structure, mixed_size_case):
+    v, f, mesh, pts, want = mixed_size_case
+    tris = _nearest.Triangles(mesh.corners)
+    tree = _nearest.TriangleIndex(tris)
+    if structure == "kdtree":
+        dist, face = tree.query(pts)
+    else:
+        # A margin that most (not all) points satisfy, so that the fallback runs too.
+        index = _nearest.GridIndex(tris, delta=0.01, fallback=tree)
+        dist, face = index.query(pts)
+        assert (dist > 0.01).any() and (dist <= 0.01).mean() > 0.5
+    np.testing.assert_allclose(dist, want, rtol=1e-9, atol=1e-13)
+    # The reported face attains the distance.
+    tri = v[f[face]]
+    got = metrics.point_triangle_distance(pts, tri[:, 0], tri[:, 1], tri[:, 2])
+    np.testing.assert_allclose(got, dist, rtol=1e-12, atol=1e-15)
+
+
+def test_nearest_triangles_picks_grid_for_dense_points():
+    rng = np.random.default_rng(3)
+    v, f = sphere(2)  # 320 faces
+    noisy_v = v * (1 + 0.02 * rng.normal(size=(len(v), 1)))
+    mesh = metrics._common.as_mesh((noisy_v, f))
+    pts = _distance.sample_points(metrics._common.as_mesh((v, f)), 20_000, rng)
+    assert len(pts) >= 8 * len(f)  # the grid path
+    dist, _ = _nearest.nearest_triangles(mesh.corners, pts)
+    np.testing.assert_allclose(dist, brute_force(pts, noisy_v, f), rtol=1e-9, atol=1e-13)
+
+
+# -------------------------------------------------------------------------------------- surface distance
+
+
+def test_surface_distance_matches_brute_force():
+    rng = np.random.default_rng(4)
+    v, f = sphere(3)
+    # A coarse, perturbed stand-in for a simplification.
+    vs, fs = sphere(1)
+    vs = vs * (1 + 0.03 * rng.normal(size=(len(vs), 1)))
+    n = 2000
+    got = metrics.surface_distance((v, f), (vs, fs), n_samples=n, seed=7)
+    # Same sampling as surface_distance: the seed's two spawned streams, original first.
+    rng_o, rng_s = (np.random.default_rng(s) for s in np.random.SeedSequence(7).spawn(2))
+    po = _distance.sample_points(metrics._common.as_mesh((v, f)), n, rng_o)
+    ps = _distance.sample_points(metrics._common.as_mesh((vs, fs)), n, rng_s)
+    fwd, bwd = brute_force(po, vs, fs), brute_force(ps, v, f)
+    both = np.concatenate([fwd, bwd])
+    diag = np.linalg.norm(v.max(0) - v.min(0))
+    want = {
+        "hausdorff": both.max(),
+        "mean": both.mean(),
+        "rms": np.sqrt((both**2).mean()),
+        "e_gh": (both**2).mean(),
+        "hausdorff_fwd": fwd.max(),
+        "hausdorff_bwd": bwd.max(),
+        "mean_fwd": fwd.mean(),
+        "mean_bwd": bwd.mean(),
+    }
+    for key, value in want.items():
+        assert got[key] == pytest.approx(value, rel=1e-9), key
+        scale = diag**2 if key == "e_gh" else diag
+        assert got[key + "_rel"] == pytest.approx(value / scale, rel=1e-9), key
+    assert got["n_points_fwd"] == len(v) + n and got["n_points_bwd"] == len(vs) + n
+    assert got["bbox_diagonal"] == pytest.approx(diag)
+
+
+def test_identical_meshes_have_zero_distance():
+    v, f = sphere(3)
+    d = metrics.surface_distance((v, f), (v, f), n_samples=5000)
+    assert d["hausdorff"] < 1e-12 and d["rms"] < 1e-12
+
+
+def test_translated_plane_distance_equals_translation():
+    v, f = grid(8, 8)
+    shift = 0.0125
+    d = metrics.surface_distance((v, f), (v + [0, 0, shift], f), n_samples=5000)
+    for key in ("hausdorff", "mean", "rms", "hausdorff_fwd", "hausdorff_bwd"):
+        assert d[key] == pytest.approx(shift, rel=1e-9), key
+    assert d["e_gh"] == pytest.approx(shift**2, rel=1e-9)
+    assert d["hausdorff_rel"] == pytest.approx(shift / math.sqrt(2), rel=1e-9)
+
+
+def test_scaled_sphere_distance_is_bounded_by_radius_change():
+    # Icospheres of radius 1 and 1.1 share their vertex directions: every distance lies between the gap of
+    # the circumscribed and inscribed radii and 0.1 (sampled points are inside the outer sphere).
+    v, f = sphere(3)
+    d = metrics.surface_distance((v, f), (1.1 * v, f), n_samples=5000)
+    assert 0.09 < d["mean"] < 0.1 + 1e-9
+    assert d["hausdorff"] <= 0.1 + 1e-9
+
+
+# ------------------------------------------------------------------------------------------- topology
+
+
+def test_topology_icosphere():
+    t = metrics.topology_report(sphere(2))
+    assert t["euler"] == 2 and t["genus"] == 0 and t["closed"] and t["orientable"]
+    assert t["components"] == 1 and t["boundary_edges"] == 0
+    assert t["non_manifold_edges"] == 0 and t["non_manifold_vertices"] == 0
+    assert t["faces"] == 320 and t["edges"] == 480
+
+
+def test_topology_torus_has_genus_one():
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=24, minor_sections=12)
+    t = metrics.topology_report(torus)
+    assert t["euler"] == 0 and t["genus"] == 1 and t["closed"]
+
+
+def test_topology_open_grid_boundary():
+    t = metrics.topology_report(grid(5, 3))
+    assert t["boundary_edges"] == 2 * (5 + 3)
+    assert not t["closed"] and math.isnan(t["genus"])
+    assert t["euler"] == 1 and t["components"] == 1 and t["non_manifold_vertices"] == 0
+
+
+def test_topology_two_spheres_are_two_components():
+    v1, f1 = sphere(1)
+    v2, f2 = sphere(1, center=(5, 0, 0))
+    t = metrics.topology_report((np.concatenate([v1, v2]), np.concatenate([f1, f2 + len(v1)])))
+    assert t["components"] == 2 and t["euler"] == 4 and t["genus"] == 0
+
+
+def test_topology_non_manifold_edge_and_vertex():
+    # Three triangles on edge 0-1 (a "book" with three pages):
+    #        2
+    #   3 -- 0 -- 4        all three faces contain edge 0-1 (1 lies below 0, out of the drawing plane)
+    v = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0], [-1, 0, 0], [1, 0, 0]], dtype=float)
+    book = metrics.topology_report((v, np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4]])))
+    assert book["non_manifold_edges"] == 1 and book["boundary_edges"] == 6
+    assert book["non_manifold_vertices"] == 2  # the non-manifold edge's endpoints
+    # Bowtie: two triangles that share only vertex 0.
+    #   1       3
+    #   | \   / |
+    #   |   0   |
+    #   | /   \ |
+    #   2       4
+    v = np.array([[0, 0, 0], [-1, 1, 0], [-1, -1, 0], [1, 1, 0], [1, -1, 0]], dtype=float)
+    bowtie = metrics.topology_report((v, np.array([[0, 1, 2], [0, 4, 3]])))
+    assert bowtie["non_manifold_vertices"] == 1 and bowtie["non_manifold_edges"] == 0
+    assert bowtie["components"] == 1
+
+
+def test_topology_orientability_and_flips():
+    v, f = sphere(2)
+    flipped = f.copy()
+    flipped[:7] = flipped[:7, ::-1]
+    t = metrics.topology_report((v, flipped), original=(v, f), target_faces=300)
+    assert t["flipped_faces"] == 7 and t["flipped_fraction"] == pytest.approx(7 / 320)
+    # Inconsistently wound, but a sphere is still orientable.
+    assert t["orientable"] and t["closed"] and t["genus"] == 0
+    assert t["target_faces"] == 300 and t["target_error"] == pytest.approx(320 / 300 - 1)
+    # A Moebius strip is not orientable.
+    n = 12
+    ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    half = ang / 2
+    ring = lambda s: np.stack([np.cos(ang) * (1 + s * np.cos(half)), np.sin(ang) * (1 + s * np.cos(half)), s * np.sin(half)], 1)
+    v = np.concatenate([ring(-0.2), ring(0.2)])  # vertex i: inner, n + i: outer
+    i = np.arange(n)
+    j = (i + 1) % n
+    # The last quad joins with a half twist: inner(n-1) meets outer(0) and vice versa.
+    ji = np.where(j == 0, n + 0, j)
+    jo = np.where(j == 0, 0, n + j)
+    f = np.concatenate([np.stack([i, n + i, jo], 1), np.stack([i, jo, ji], 1)])
+    t = metrics.topology_report((v, f))
+    assert not t["orientable"] and t["boundary_edges"] > 0
+
+
+# ------------------------------------------------------------------------------- quality, area, volume
+
+
+def test_quality_equilateral_and_right_triangle():
+    eq = (np.array([[0, 0, 0], [1, 0, 0], [0.5, math.sqrt(3) / 2, 0]]), np.array([[0, 1, 2]]))
+    q = metrics.triangle_quality(eq)
+    assert q["min_angle_min"] == pytest.approx(60) and q["aspect_ratio_max"] == pytest.approx(1)
+    assert q["sliver_fraction"] == 0 and q["degenerate_faces"] == 0
+    right = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    q = metrics.triangle_quality(right)
+    assert q["min_angle_min"] == pytest.approx(45)
+    assert q["aspect_ratio_mean"] == pytest.approx((1 + math.sqrt(2)) / math.sqrt(3))
+    counts, edges = metrics.min_angle_histogram(right)
+    assert counts.sum() == 1 and counts[9] == 1 and len(edges) == 13  # bin [45, 50)
+
+
+def test_quality_sliver_and_degenerate():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.01, 0], [2, 0, 0]], dtype=float)
+    q = metrics.triangle_quality((v, np.array([[0, 1, 2], [0, 1, 3]])))
+    assert q["sliver_fraction"] == 1.0 and q["degenerate_faces"] == 1 and q["min_angle_min"] == 0
+    assert np.isfinite(q["aspect_ratio_max"])
+
+
+def test_area_volume():
+    v, f = sphere(3)
+    r = metrics.area_volume((v, f), (v, f))
+    assert r["area_retention"] == pytest.approx(1) and r["volume_change"] == pytest.approx(0, abs=1e-12)
+    assert r["volume_before"] == pytest.approx(trimesh.Trimesh(v, f).volume)
+    r = metrics.area_volume((v, f), (1.1 * v, f))
+    assert r["area_retention"] == pytest.approx(1.21) and r["volume_change"] == pytest.approx(0.331)
+    r = metrics.area_volume((v, f), grid(3, 3))
+    assert math.isnan(r["volume_after"]) and math.isnan(r["volume_change"])
+
+
+# ------------------------------------------------------------------------------------------ evaluate
+
+
+def test_evaluate_row_is_flat_deterministic_and_accepts_mesh_kinds():
+    v, f = sphere(3)
+    vs, fs = sphere(1)
+
+    class Result:  # any object with .vertices / .faces
+        vertices, faces = vs, fs
+
+    a = metrics.evaluate(trimesh.Trimesh(v, f, process=False), Result(), target_faces=80, n_samples=3000, seed=3)
+    b = metrics.evaluate((v, f), (vs, fs), target_faces=80, n_samples=3000, seed=3)
+    assert all(isinstance(x, (int, float, bool, np.bool_)) for x in a.values())
+    assert a["time_s"] > 0
+    assert scalar_row(a).keys() == scalar_row(b).keys()
+    assert all(same(a[k], b[k]) for k in scalar_row(a)), "same seed, same numbers"
+    c = metrics.evaluate((v, f), (vs, fs), target_faces=80, n_samples=3000, seed=4)
+    assert c["mean"] != a["mean"]
+    assert a["faces_after"] == 80 and a["target_error"] == 0 and a["genus"] == 0 and a["genus_before"] == 0
+    assert a["volume_change"] < 0 and a["area_retention"] < 1 and a["flipped_faces"] == 0
+    for key in ("hausdorff_rel", "rms_rel", "e_gh_rel", "min_angle_mean", "aspect_ratio_max", "components"):
+        assert key in a
+
+
+def test_evaluate_without_target_keeps_the_columns():
+    v, f = sphere(1)
+    row = metrics.evaluate((v, f), (v, f), n_samples=100)
+    assert math.isnan(row["target_faces"]) and math.isnan(row["target_error"])
+    assert row["hausdorff"] < 1e-12 and row["area_retention"] == pytest.approx(1)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        (np.zeros((4, 2)), np.array([[0, 1, 2]])),  # vertices not (n, 3)
+        (np.zeros((4, 3)), np.array([0, 1, 2])),  # faces not (m, 3)
+        (np.zeros((0, 3)), np.zeros((0, 3), dtype=int)),  # empty
+        (np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]), np.array([[0, 1, 2]])),  # non-finite
+        (np.eye(3), np.array([[0, 1, 3]])),  # index out of range
+        (np.eye(3), np.array([[0, 1, -1]])),  # negative index
+        (np.eye(3), np.array([[0, 1, 1.5]])),  # non-integer index
+        (np.eye(3),),  # not a pair
+        "mesh",  # not a mesh
+    ],
+)
+def test_bad_meshes_raise_value_error(bad):
+    good = sphere(1)
+    with pytest.raises(ValueError):
+        metrics.evaluate(bad, good)
+    with pytest.raises(ValueError):
+        metrics.topology_report(bad)
+
+
+def test_bad_arguments_raise_value_error():
+    good = sphere(1)
+    with pytest.raises(ValueError):
+        metrics.evaluate(good, good, n_samples=-1)
+    with pytest.raises(ValueError):
+        metrics.evaluate(good, good, target_faces=0)
+
+
+# ------------------------------------------------------------------------------------------ real meshes
+
+
+def shared_mesh(name):
+    path = SHARED_MESHES / name
+    if not path.exists():
+        pytest.skip(f"{path} not available (../shared/meshes exists on development and CI machines only)")
+    return trimesh.load(path, process=False, force="mesh")
+
+
+@pytest.mark.shared
+@pytest.mark.parametrize("name, genus", [("3holes.off", 3), ("fertility.off", 4), ("rocker-arm-small.off", 1)])
+def test_shared_mesh_genus(name, genus):
+    t = metrics.topology_report(shared_mesh(name))
+    assert t["closed"] and t["genus"] == genus and t["components"] == 1
+
+
+@pytest.mark.shared
+def test_shared_mesh_known_counts():
+    # The cow is watertight but pinched at one vertex (Euler 1): genus is undefined there.
+    cow = metrics.topology_report(shared_mesh("cow.obj"))
+    assert cow["closed"] and cow["non_manifold_vertices"] == 1 and cow["euler"] == 1 and math.isnan(cow["genus"])
+    # Borders as listed in shared/README.md.
+    assert metrics.topology_report(shared_mesh("stanford-bunny.obj"))["boundary_edges"] == 223
+    truck = metrics.topology_report(shared_mesh("truck.obj"))
+    assert truck["boundary_edges"] == 1388 and truck["components"] == 50
+
+
+@pytest.mark.shared
+def test_shared_mesh_evaluate_against_itself():
+    arm = shared_mesh("rocker-arm.obj")
+    row = metrics.evaluate(arm, arm, n_samples=5000)
+    assert row["hausdorff"] < 1e-12 and row["volume_change"] == pytest.approx(0, abs=1e-12)
+    assert row["flipped_faces"] == 0 and row["genus"] == row["genus_before"] == 1
+
+
+def test_nearest_triangles_single_face_and_far_points():
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    f = np.array([[0, 1, 2]])
+    pts = np.random.default_rng(5).normal(scale=3.0, size=(500, 3))
+    dist, face = _nearest.nearest_triangles(metrics._common.as_mesh((v, f)).corners, pts)
+    np.testing.assert_allclose(dist, brute_force(pts, v, f), rtol=1e-12)
+    assert (face == 0).all()
