@@ -23,6 +23,33 @@ BOUNDARY_WEIGHT = 100.0
 COND_EPS = 1e-5
 MAX_SHIFT = 2.0
 FLIP_ANGLE = 90.0
+MAX_PAIRS_PER_VERTEX = 50  # pair_threshold may add at most this many close pairs per vertex
+
+
+def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
+    """Non-edge vertex pairs (k,2) int64 closer than t (mesh units), found with scipy's KD-tree.
+
+    Raises ValueError when there would be more than MAX_PAIRS_PER_VERTEX per vertex on average (the
+    pair count grows with t³; such a t almost always means a unit mix-up).
+    """
+    if t <= 0:
+        return np.zeros((0, 2), np.int64)
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(V)
+    limit = MAX_PAIRS_PER_VERTEX * len(V)
+    # count first (cheap), so an absurd t fails fast instead of exhausting memory
+    n_close = (tree.count_neighbors(tree, t) - len(V)) // 2
+    if n_close > limit:
+        raise ValueError(f"pair_threshold={t} would make {n_close} vertex pairs (over {limit}, "
+                         f"{MAX_PAIRS_PER_VERTEX} per vertex); the mesh's bounding-box diagonal is "
+                         f"{np.linalg.norm(V.max(0) - V.min(0)):.4g}: choose a smaller threshold")
+    P = tree.query_pairs(t, output_type="ndarray").astype(np.int64)
+    P = np.sort(P, axis=1)
+    E, _ = topo.edges(F, len(V))
+    n = len(V)
+    P = P[~np.isin(P[:, 0] * n + P[:, 1], E[:, 0] * n + E[:, 1])]
+    return P[np.lexsort((P[:, 1], P[:, 0]))]
 
 
 def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]:
@@ -55,7 +82,8 @@ def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]
 def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None = None,
              max_error: float | None = None, method: str = "qem", scheduler: str = "parallel",
              placement: str = "optimal", boundary_weight: float = BOUNDARY_WEIGHT,
-             area_weighted: bool = True, feature_edges=None, preserve_topology: bool = True,
+             area_weighted: bool = True, feature_edges=None, pair_threshold: float = 0.0,
+             preserve_topology: bool | None = None,
              flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
              ) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
@@ -76,8 +104,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (relative to an average face's plane; 0 disables boundary preservation).
     area_weighted: weight each face plane by its area / the mean face area (True), or by 1 (the paper).
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
-    preserve_topology: forbid contractions that break the link condition (keeps a manifold's genus and
-        boundary loops).
+    pair_threshold: t in mesh units; besides edges, any two vertices closer than t may contract
+        (Garland–Heckbert's aggregation: separate parts can join). 0 = edge contraction only. Close pairs
+        are found with a KD-tree; more than MAX_PAIRS_PER_VERTEX per vertex is refused.
+    preserve_topology: forbid contractions that break the link condition or make faces coincide (keeps
+        a manifold's genus and boundary loops). Default: True when pair_threshold is 0, else False. With
+        False, contractions may create non-manifold edges, and coincident faces are dropped (opposite
+        ones cancel, so small parts can vanish), as in the paper.
     flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or
         more (90: any sign flip or collapse to zero area); None allows flips.
     weld: merge vertices with identical coordinates first (G&H need shared corners).
@@ -95,6 +128,14 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
     if flip_angle is not None and not (0 < flip_angle <= 180):
         raise ValueError(f"flip_angle must be in (0, 180] degrees or None, got {flip_angle}")
+
+    if not (pair_threshold >= 0 and math.isfinite(pair_threshold)):
+        raise ValueError(f"pair_threshold must be a finite distance >= 0, got {pair_threshold}")
+    if preserve_topology is None:
+        preserve_topology = pair_threshold == 0
+    elif preserve_topology and pair_threshold > 0:
+        raise ValueError("pair_threshold > 0 joins separate parts, which changes topology: "
+                         "use preserve_topology=False (the default when pair_threshold > 0)")
 
     (V, F), report = _io.prepare(mesh, weld_vertices=weld)
     m = len(F)
@@ -115,7 +156,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         endpoints_only=placement == "endpoints", cond_eps=COND_EPS, max_shift=MAX_SHIFT,
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
         preserve_topology=preserve_topology, max_cost=err / scale**2)
-    pairs, _ = topo.edges(F, len(V))
+    extra = close_pairs(V, F, pair_threshold)
 
     bar = None
     if progress:
@@ -130,7 +171,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         progress_cb = None
     if target < m or err < math.inf:
         run = parallel.run if scheduler == "parallel" else greedy.run
-        Vo, Qo, Fo, alive, hist, info = run(Vn, Q, F, pairs, max(target, 1), settings, progress_cb)
+        Vo, Qo, Fo, alive, hist, info = run(Vn, Q, F, extra, max(target, 1), settings, progress_cb)
     else:
         Vo, Qo, Fo, alive, hist, info = Vn, Q, F, np.ones(m, bool), [], {
             "contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0, "branches": np.zeros(3, int)}
@@ -151,7 +192,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     stats = dict(report)
     stats.update(
         method=method, scheduler=scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
-        vertices_in=len(V), vertices_out=len(vout), contractions=info["contractions"],
+        vertices_in=len(V), vertices_out=len(vout), close_pairs=len(extra), contractions=info["contractions"],
         rejected=info["rejected"], rounds=info["rounds"],
         branches={"solve": int(info["branches"][0]), "segment": int(info["branches"][1]),
                   "endpoint": int(info["branches"][2])},

@@ -110,11 +110,53 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     return ok
 
 
-def creates_duplicates(F: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
-    """(S,) bool: would contracting pair s (b into a) make two surviving faces coincide?
+def coincident_removals(G: np.ndarray) -> np.ndarray:
+    """Which faces of G (k,3) to drop so no two remaining faces share the same three vertices.
 
-    ``pairs`` (S,2) must be vertex-disjoint and at least two edges apart, so a face holds endpoints of
-    one pair at most and every face that could become a duplicate touches that pair.
+    Within a group of coincident faces, oppositely oriented faces cancel in pairs (together they bound
+    nothing; this is how a part contracted to a sliver vanishes), lower face index first; of what is
+    left, all of one orientation, the first face is kept. Returns (k,) bool, True = remove.
+    """
+    k = len(G)
+    if k < 2:
+        return np.zeros(k, bool)
+    S = np.sort(G, axis=1)
+    # orientation: +1 when G is an even permutation of its sorted order
+    inv = (G[:, 0] > G[:, 1]).astype(np.int8) + (G[:, 0] > G[:, 2]) + (G[:, 1] > G[:, 2])
+    pos = inv % 2 == 0
+    order = np.lexsort((np.arange(k), S[:, 2], S[:, 1], S[:, 0]))
+    Ss = S[order]
+    start = np.concatenate([[True], np.any(Ss[1:] != Ss[:-1], axis=1)])
+    gid = np.cumsum(start) - 1
+    if gid[-1] == k - 1:  # no coincident faces at all
+        return np.zeros(k, bool)
+    ps = pos[order]
+    npos = np.bincount(gid, weights=ps, minlength=gid[-1] + 1).astype(np.int64)
+    nneg = np.bincount(gid, minlength=gid[-1] + 1) - npos
+    # rank of each face among the faces of its group with the same orientation (order is by index)
+    sub = gid * 2 + ps
+    first = np.concatenate([[True], sub[1:] != sub[:-1]])
+    o2 = np.argsort(sub, kind="stable")
+    sub_sorted = sub[o2]
+    first2 = np.concatenate([[True], sub_sorted[1:] != sub_sorted[:-1]])
+    starts = np.flatnonzero(first2)
+    rank_sorted = np.arange(k) - starts[np.cumsum(first2) - 1]
+    rank = np.empty(k, np.int64)
+    rank[o2] = rank_sorted
+    del first
+    c = np.minimum(npos, nneg)[gid]
+    mine = np.where(ps, npos[gid], nneg[gid])
+    remove = (rank < c) | ((mine > c) & (rank > c))
+    out = np.zeros(k, bool)
+    out[order] = remove
+    return out
+
+
+def contraction_faces(F: np.ndarray, pairs: np.ndarray, n: int):
+    """Faces touched by contracting vertex-disjoint pairs (b into a), as they would be afterwards.
+
+    Returns (rows, G, owner): indices into F of the touched faces that survive (not degenerate), their
+    remapped corners (k,3), and the pair each belongs to.
     """
     S = len(pairs)
     lab = np.full(n, -1, np.int64)
@@ -126,16 +168,23 @@ def creates_duplicates(F: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
     G = rep[F[hit]]
     owner = lf[hit].max(1)
     live = (G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2])
-    G, owner = np.sort(G[live], axis=1).astype(np.uint64), owner[live]
-    h = (G[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (G[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ G[:, 2]
+    return hit[live], G[live], owner[live]
+
+
+def coincidence_count(F: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
+    """(S,) int: faces that contracting each pair would make coincide and drop (`coincident_removals`).
+
+    ``pairs`` must be vertex-disjoint and at least two edges apart, so a face holds endpoints of one pair
+    at most and every face that could coincide touches that pair.
+    """
+    S = len(pairs)
+    _, G, owner = contraction_faces(F, pairs, n)
+    G64 = np.sort(G, axis=1).astype(np.uint64)
+    h = (G64[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (G64[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ G64[:, 2]
     hs = np.sort(h)
     dup_h = hs[1:][hs[1:] == hs[:-1]]
-    bad = np.zeros(S, bool)
-    if dup_h.size:  # rare: compare the few candidates exactly
-        idx = np.flatnonzero(np.isin(h, dup_h))
-        Gi = G[idx]
-        order = np.lexsort(Gi.T[::-1])
-        same = np.all(Gi[order][1:] == Gi[order][:-1], axis=1)
-        bad[owner[idx[order[1:][same]]]] = True
-        bad[owner[idx[order[:-1][same]]]] = True
-    return bad
+    if dup_h.size == 0:  # the common case: no candidates at all
+        return np.zeros(S, np.int64)
+    idx = np.flatnonzero(np.isin(h, dup_h))
+    rm = coincident_removals(G[idx])
+    return np.bincount(owner[idx[rm]], minlength=S)

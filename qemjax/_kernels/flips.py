@@ -3,12 +3,14 @@
 A contraction moves its endpoints to x. Every surviving face around them (one that does not contain both
 endpoints) has one corner moved; the contraction is forbidden if any such face's normal turns past the
 threshold: n_before·n_after ≤ cos_max·|n_before||n_after| (default cos_max = 0: any sign flip, and a
-face collapsing to zero area, are forbidden).
+face collapsing to zero area or to a sliver, are forbidden).
 """
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+
+SLIVER = 1e-6  # |n|/longest² (≈ sine of the smallest angle) under which a moved face counts as collapsed
 
 
 def moved_corner_flips(p, k, x, cos_max, ref=None):
@@ -23,6 +25,10 @@ def moved_corner_flips(p, k, x, cos_max, ref=None):
     d = jnp.sum(n0 * n1, -1)
     l1 = jnp.linalg.norm(n1, axis=-1)
     bad = d <= cos_max * jnp.linalg.norm(n0, axis=-1) * l1
+    # sliver guard: float32 rounding can leave a "collinear" result a tiny positive normal
+    e = jnp.stack([q[..., 1, :] - q[..., 0, :], q[..., 2, :] - q[..., 1, :], q[..., 0, :] - q[..., 2, :]], -2)
+    longest2 = jnp.max(jnp.sum(e * e, -1), -1)
+    bad |= (l1 <= SLIVER * longest2) & (cos_max > -1.0)
     if ref is not None:
         bad |= jnp.sum(ref * n1, -1) <= cos_max * jnp.linalg.norm(ref, axis=-1) * l1
     return bad

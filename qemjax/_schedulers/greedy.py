@@ -10,15 +10,18 @@ import heapq
 
 import numpy as np
 
+from .. import _topology as topo
 from .._kernels import flips
 from .common import DTYPE, Settings, chunk_size, pad_rows, place_gathered
 
 
-def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_faces: int,
+def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int,
         settings: Settings, progress=None):
-    """Simplify in place. V (n,3) float32 normalised positions, Q (n,10) quadrics, F (m,3) int64,
-    pairs (P,2) initial valid pairs (u<v). Returns (V, Q, F, alive_faces, history, info)."""
+    """Simplify. V (n,3) float32 normalised positions, Q (n,10) quadrics, F (m,3) int64, extra_pairs
+    (k,2) non-edge pairs that may also contract (aggregation). Same return as `parallel.run`."""
     n, m = len(V), len(F)
+    E, _ = topo.edges(F, n)
+    pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
     V, Q, F = V.copy(), Q.copy(), F.copy()
     alive = np.ones(m, bool)
     vfaces = [set() for _ in range(n)]
@@ -57,12 +60,20 @@ def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
             blocked.discard((a, b))
             heapq.heappush(heap, (c, a, b, s))
 
-    push([tuple(p) for p in pairs.tolist()])
+    push(sorted({tuple(p) for p in pairs.tolist() if p[0] != p[1]}))
     faces_now = m
     history = []
     n_invalid = 0
     max_cost_used = 0.0
     branches = np.zeros(3, np.int64)
+
+    def unlink(f):
+        alive[f] = False
+        for w in F[f]:
+            vfaces[w].discard(f)
+        fa, fb, fc = F[f]
+        for u, v in ((fa, fb), (fb, fc), (fc, fa)):
+            ecount[(u, v) if u < v else (v, u)] -= 1
 
     def edge_faces(a, b):
         return vfaces[a] & vfaces[b]
@@ -118,9 +129,11 @@ def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
                 blocked.add((a, b))
                 n_invalid += 1
                 continue
-        # contract b into a; refuse if two surviving faces would coincide
-        keys_a = {tuple(sorted(F[f])) for f in vfaces[a] - shared}
-        if any(tuple(sorted(a if w == b else w for w in F[f])) in keys_a for f in vfaces[b] - shared):
+        # faces that would coincide after the contraction: forbidden in manifold mode, else dropped
+        rest = sorted((vfaces[a] | vfaces[b]) - shared)
+        G = np.array([[a if w == b else w for w in F[f]] for f in rest], np.int64).reshape(-1, 3)
+        drop = [rest[i] for i in np.flatnonzero(topo.coincident_removals(G))]
+        if drop and (settings.preserve_topology or faces_now - len(shared) - len(drop) < target_faces):
             blocked.add((a, b))
             n_invalid += 1
             continue
@@ -129,15 +142,9 @@ def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
         branches[br] += 1
         max_cost_used = max(max_cost_used, float(cost))
         history.append((a, b, x.copy(), float(cost)))
-        for f in shared:
-            alive[f] = False
-            for w in F[f]:
-                vfaces[w].discard(f)
-            fa, fb, fc = F[f]
-            for u, v in ((fa, fb), (fb, fc), (fc, fa)):
-                k = (u, v) if u < v else (v, u)
-                ecount[k] -= 1
-        faces_now -= len(shared)
+        for f in list(shared) + drop:
+            unlink(f)
+        faces_now -= len(shared) + len(drop)
         for f in list(vfaces[b]):
             fa, fb, fc = F[f]
             for u, v in ((fa, fb), (fb, fc), (fc, fa)):

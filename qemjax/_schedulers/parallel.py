@@ -82,8 +82,12 @@ def _flip_bad(V, F, N0, pairs, x, settings):
     return res
 
 
-def _select(E, ecount, key, cand, valid, need, n, bvert, deg, flip_bad, F, manifold):
-    """Passes of independent-set selection with validation. Returns (accepted, rejected) edge indices.
+def _select(E, key, cand, valid, need, n, validate, F):
+    """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices
+    and the extra faces (coincident ones) each accepted pair removes, (len(E),) int.
+
+    E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
+    graph. ``validate(pairs, idx, faces, face_idx, pairs_at_free)`` returns (ok, extra faces removed).
 
     Each pass takes the candidates that hold the smallest key among all candidates touching their
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
@@ -94,6 +98,7 @@ def _select(E, ecount, key, cand, valid, need, n, bvert, deg, flip_bad, F, manif
     both = one  # edges with both endpoints free (for selection)
     fsub = np.arange(len(F))  # faces with a free corner
     accepted, rejected = [], []
+    extra = np.zeros(len(E), np.int64)
     for p in range(MAX_PASSES):
         Eb = E[both]
         live = cand[both]
@@ -112,12 +117,8 @@ def _select(E, ecount, key, cand, valid, need, n, bvert, deg, flip_bad, F, manif
         sel = both[live & (kl == m2[Eb[:, 0]]) & (kl == m2[Eb[:, 1]])]
         if sel.size == 0:
             break
-        P = E[sel]
-        Fs = F[fsub]
-        ok = ~flip_bad(P, sel, Fs, fsub)
-        ok &= ~topo.creates_duplicates(Fs, P, n)
-        if manifold:
-            ok &= topo.link_ok(P, ecount[sel], E[one], n, bvert, deg)
+        ok, extra_sel = validate(E[sel], sel, F[fsub], fsub, E[one])
+        extra[sel] = extra_sel
         cand[sel[~ok]] = valid[sel[~ok]] = False
         rejected.append(sel[~ok])
         good = sel[ok]
@@ -135,12 +136,29 @@ def _select(E, ecount, key, cand, valid, need, n, bvert, deg, flip_bad, F, manif
         if good.size * 50 < need // 2 and p > 2:
             break
     cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64)  # noqa: E731
-    return cat(accepted), cat(rejected)
+    return cat(accepted), cat(rejected), extra
 
 
-def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
-    """Same contract as `greedy.run`."""
-    n = len(V)
+def _with_extra_pairs(E, ecount, extra_pairs, n):
+    """Candidate pairs = mesh edges ∪ extra (non-edge) pairs, sorted by key; non-edges count 0 faces."""
+    if len(extra_pairs) == 0:
+        return E, ecount
+    xk = np.unique(topo.edge_keys(extra_pairs[:, 0], extra_pairs[:, 1], n))
+    ek = E[:, 0] * n + E[:, 1]
+    xk = xk[~np.isin(xk, ek)]
+    keys = np.concatenate([ek, xk])
+    order = np.argsort(keys, kind="stable")
+    keys = keys[order]
+    return np.stack([keys // n, keys % n], 1), np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
+
+
+def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
+    """Simplify. V (n,3) float32 normalised positions, Q (n,10) quadrics, F (m,3) int64 faces,
+    extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be 0).
+    Returns (V, Q, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,)
+    marks the survivors."""
+    n, m = len(V), len(F)
+    manifold = settings.preserve_topology
     n_cap = bucket(n + 1)
     V = pad_rows(V.astype(DTYPE), n_cap)
     Q = pad_rows(Q.astype(DTYPE), n_cap)
@@ -163,6 +181,7 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
         deg = topo.vertex_degree(E, n)
         bvert = np.zeros(n, bool)
         bvert[E[ecount == 1].reshape(-1)] = True
+        E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
         timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -188,7 +207,7 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
             pos = np.minimum(np.searchsorted(invalid_keys, ekeys), invalid_keys.size - 1)
             known_bad = invalid_keys[pos] == ekeys
         valid = (cost <= settings.max_cost) & ~known_bad & (ecount <= need)
-        if settings.preserve_topology:
+        if manifold:
             valid &= (ecount >= 1) & (ecount <= 2)
         if not valid.any():
             break
@@ -196,16 +215,21 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
         kth = np.partition(cost[valid], k - 1)[k - 1]
         key = _sort_keys(cost)
         cand = valid & (cost <= max(GATE * kth, kth))
-        tv = time.perf_counter()
-        accepted, bad = _select(E, ecount, key, cand, valid, need, n, bvert, deg,
-                                lambda P, idx, Fs, fs: _flip_bad(V, Fs, N0[fid[fs]], P, x[idx], settings),
-                                F, settings.preserve_topology)
+
+        def validate(P, idx, Fs, fs, Efree):
+            ok = ~_flip_bad(V, Fs, N0[fid[fs]], P, x[idx], settings)
+            gone = topo.coincidence_count(Fs, P, n)
+            if manifold:  # no coincident faces, link condition
+                ok &= (gone == 0) & topo.link_ok(P, ecount[idx], Efree, n, bvert, deg)
+            return ok, gone
+
+        accepted, bad, extra = _select(E, key, cand, valid, need, n, validate, F)
         rejected += bad.size
         rejected_now = [bad]
         acc = accepted
         acc = acc[np.argsort(key[acc], kind="stable")]
         # exact target: take in cost order only what keeps faces >= target
-        fr = np.where(ecount[acc] >= 1, ecount[acc], 0)
+        fr = ecount[acc] + extra[acc]
         csum = np.cumsum(fr)
         if csum.size and csum[-1] > need:
             take = csum <= need
@@ -248,12 +272,24 @@ def run(V, Q, F, pairs_unused, target_faces, settings: Settings, progress=None):
         F = rep[F]
         deg_f = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
         F, fid = F[~deg_f], fid[~deg_f]
+        if not manifold:  # coincident faces left by the contractions (all touch a kept vertex)
+            merged = np.zeros(n, bool)
+            merged[a] = True
+            mf = merged[F]
+            rows = np.flatnonzero(mf[:, 0] | mf[:, 1] | mf[:, 2])
+            drop = rows[topo.coincident_removals(F[rows])]
+            keep = np.ones(len(F), bool)
+            keep[drop] = False
+            F, fid = F[keep], fid[keep]
+        if len(extra_pairs):
+            extra_pairs = rep[extra_pairs]
+            extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
         removed_per_round.append(acc.size)
         timer.add("contract_s", time.perf_counter() - t0)
         if progress is not None:
             progress(len(F))
-    alive = np.zeros(len(fid) and fid.max() + 1 or 0, bool)
-    Fout = np.zeros((len(alive), 3), F.dtype)
+    alive = np.zeros(m, bool)
+    Fout = np.zeros((m, 3), F.dtype)
     Fout[fid] = F
     alive[fid] = True
     hist = []

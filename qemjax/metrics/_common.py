@@ -15,7 +15,7 @@ import numpy as np
 _DEGENERATE_REL = 1e-12
 
 
-def as_mesh(mesh, name: str = "mesh") -> "MeshArrays":
+def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     """Validate a mesh given as a `trimesh.Trimesh`, a ``(vertices, faces)`` pair, or any object with
     ``.vertices`` and ``.faces``; return float64 vertices (n, 3) and int64 faces (m, 3).
 
@@ -48,9 +48,11 @@ def as_mesh(mesh, name: str = "mesh") -> "MeshArrays":
     v = np.ascontiguousarray(v, dtype=np.float64)
     if not np.isfinite(v).all():
         raise ValueError(f"{name}: vertices contain NaN or infinite values")
-    if not np.issubdtype(f.dtype, np.integer):
-        if not np.issubdtype(f.dtype, np.floating) or not np.isfinite(f).all() or (f != np.round(f)).any():
-            raise ValueError(f"{name}: faces must hold integer vertex indices, got dtype {f.dtype}")
+    integral = np.issubdtype(f.dtype, np.integer) or (
+        np.issubdtype(f.dtype, np.floating) and np.isfinite(f).all() and (f == np.round(f)).all()
+    )
+    if not integral:
+        raise ValueError(f"{name}: faces must hold integer vertex indices, got dtype {f.dtype}")
     f = np.ascontiguousarray(f, dtype=np.int64)
     if f.min() < 0 or f.max() >= len(v):
         raise ValueError(f"{name}: face indices must lie in [0, {len(v)}), got [{f.min()}, {f.max()}]")
@@ -100,7 +102,7 @@ class MeshArrays:
         return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
 
     @cached_property
-    def edges(self) -> "EdgeTable":
+    def edges(self) -> EdgeTable:
         return EdgeTable.build(self.faces, len(self.vertices))
 
 
@@ -126,7 +128,7 @@ class EdgeTable:
     forward: np.ndarray
 
     @staticmethod
-    def build(faces: np.ndarray, n_vertices: int) -> "EdgeTable":
+    def build(faces: np.ndarray, n_vertices: int) -> EdgeTable:
         a = faces.ravel()
         b = np.roll(faces, -1, axis=1).ravel()
         lo = np.minimum(a, b)
@@ -134,7 +136,7 @@ class EdgeTable:
         key = lo * np.int64(n_vertices) + hi
         # Half-edges of faces that repeat a vertex (a == b) join no edge.
         proper = np.flatnonzero(a != b)
-        bits_h = max(int(len(a)).bit_length(), 1)
+        bits_h = max(len(a).bit_length(), 1)
         if int(key.max(initial=0)).bit_length() + bits_h <= 63:
             # Sort (key, half-edge) packed in one int64: a plain sort is several times faster than argsort.
             packed = np.sort((key[proper] << bits_h) | proper)

@@ -7,7 +7,12 @@ import time
 from ._common import as_mesh
 from ._distance import DEFAULT_SAMPLES, _check_samples, _summary, two_way
 from ._quality import area_volume, triangle_quality
-from ._topology import face_centroids, flipped_faces_report, target_report, topology_report
+from ._topology import (
+    face_centroids,
+    flipped_faces_report,
+    target_report,
+    topology_report,
+)
 
 _TOPOLOGY_BEFORE = ("boundary_edges", "non_manifold_edges", "components", "euler", "closed", "genus")
 

@@ -30,6 +30,7 @@ from ._pointtri import flat_triangles, squared_distance_cf
 _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cache)
 _CHUNK = 65_536  # query points per block (bounds temporary memory)
 _K_NEAREST = 16  # centroids asked of the KD-tree per point before falling back to a ball query
+_BALL_BATCH = 4_000_000  # candidates per ball-query batch (bounds memory)
 _LEAFSIZE = 16  # KD-tree leaf size (bigger builds faster, queries a little slower)
 _SLACK = 1e-9  # relative padding of every exactness bound against rounding
 _PIECES_PER_FACE = 1.5  # KD-tree piece budget: <= this * faces + _MIN_PIECES
@@ -37,32 +38,33 @@ _MIN_PIECES = 16_384
 _GRID_BUDGET = 4_000_000  # (triangle, cell) pairs enumerated while filling the grid
 _GRID_PILOT = 2_048  # points measured exactly first to choose the grid's margin delta
 _GRID_QUANTILE = 0.99  # fraction of pilot points the margin covers
+_GRID_MAX_LIST = 32  # mean faces per cell above which the grid is not used
 
 
 class Triangles:
-    """Triangle corners in the layout the kernel wants: a, ab = b - a, ac = c - a as (3, m) float64
-    (component-first), and flat (m,) bool (too thin for a normal: measured as three segments)."""
+    """A mesh's faces as the kernel wants them: corners (3 corners, 3 axes, m) float64 component-first, and
+    flat (m,) bool (too thin for the barycentric solve: measured as three segments)."""
 
     def __init__(self, corners: np.ndarray):
-        self.a = np.ascontiguousarray(corners[0])
-        self.ab = np.ascontiguousarray(corners[1] - corners[0])
-        self.ac = np.ascontiguousarray(corners[2] - corners[0])
-        self.flat = flat_triangles(self.ab, self.ac)
         self.corners = corners
+        self.a = corners[0]  # (3, m), contiguous
+        self.flat = flat_triangles(corners[1] - corners[0], corners[2] - corners[0])
 
     def __len__(self) -> int:
-        return self.a.shape[1]
+        return self.corners.shape[2]
 
     def sq_dist(self, points_cf: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Squared distances (n,) from points (3, n) to faces (n,) int64, pair by pair."""
         out = np.empty(len(faces))
+        c = self.corners
         for s in range(0, len(faces), _BLOCK):
             f = faces[s : s + _BLOCK]
+            a = np.take(c[0], f, axis=1)
             out[s : s + _BLOCK] = squared_distance_cf(
                 points_cf[:, s : s + _BLOCK],
-                np.take(self.a, f, axis=1),
-                np.take(self.ab, f, axis=1),
-                np.take(self.ac, f, axis=1),
+                a,
+                np.take(c[1], f, axis=1) - a,
+                np.take(c[2], f, axis=1) - a,
                 np.take(self.flat, f),
             )
         return out
@@ -100,10 +102,13 @@ def _segment_argmin(d2: np.ndarray, faces: np.ndarray, counts: np.ndarray):
 def _pieces(tris: Triangles, radius: np.ndarray, levels: np.ndarray):
     """Centroids (P, 3), radii (P,) and parent faces (P,) of the regular subdivision of each face f into
     levels[f]^2 pieces."""
-    a, ab, ac = tris.a.T, tris.ab.T, tris.ac.T
+    c = tris.corners
     cents, radii, parents = [], [], []
     for n in np.unique(levels):  # a handful of distinct levels, not a loop over faces
         faces = np.flatnonzero(levels == n)
+        a = np.take(c[0], faces, axis=1).T  # (k, 3)
+        ab = np.take(c[1], faces, axis=1).T - a
+        ac = np.take(c[2], faces, axis=1).T - a
         i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
         up = i + j <= n - 1
         down = i + j <= n - 2
@@ -111,8 +116,8 @@ def _pieces(tris: Triangles, radius: np.ndarray, levels: np.ndarray):
         # downward piece -> ((3i+2)/3n, (3j+2)/3n).
         u = np.concatenate([3 * i[up] + 1, 3 * i[down] + 2]) / (3.0 * n)
         v = np.concatenate([3 * j[up] + 1, 3 * j[down] + 2]) / (3.0 * n)
-        c = a[faces, None, :] + u[None, :, None] * ab[faces, None, :] + v[None, :, None] * ac[faces, None, :]
-        cents.append(c.reshape(-1, 3))
+        cent = a[:, None, :] + u[None, :, None] * ab[:, None, :] + v[None, :, None] * ac[:, None, :]
+        cents.append(cent.reshape(-1, 3))
         # Each piece is the face scaled by 1/n (downward ones also point-reflected about their centroid), so
         # its centroid-to-corner radius is the face's divided by n.
         radii.append(np.repeat(radius[faces] / n, len(u)))
@@ -183,17 +188,25 @@ class TriangleIndex:
         ub = np.sqrt(best2)
         redo = np.flatnonzero(cd[:, -1] < (ub + self.max_radius) * (1 + _SLACK)) if k < len(self.parent) else []
         if len(redo):
-            lists = self.tree.query_ball_point(
-                points[redo], (ub[redo] + self.max_radius) * (1 + _SLACK), workers=-1, return_sorted=False
-            )
-            counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
-            piece = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
-            rows = np.repeat(redo, counts)
-            gap = self.centroid[piece] - points[rows]
-            lower = np.sqrt(np.einsum("ij,ij->i", gap, gap)) - self.piece_radius[piece]
-            keep = lower < ub[rows]
-            self._improve(pts_cf, rows[keep], self.parent[piece[keep]], best2, best_face)
+            radius = (ub[redo] + self.max_radius) * (1 + _SLACK)
+            # Batches of bounded size: points far from the mesh can have very many candidates.
+            sizes = self.tree.query_ball_point(points[redo], radius, workers=-1, return_length=True)
+            batch = np.cumsum(sizes) // _BALL_BATCH
+            for b in np.unique(batch):
+                sel = batch == b
+                self._ball(points, pts_cf, redo[sel], radius[sel], ub, best2, best_face)
         return np.sqrt(best2), best_face
+
+    def _ball(self, points, pts_cf, rows, radius, ub, best2, best_face):
+        """Exact answers for points[rows] (sorted): every piece within radius (>= ub + R) is a candidate."""
+        lists = self.tree.query_ball_point(points[rows], radius, workers=-1, return_sorted=False)
+        counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+        piece = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
+        rows = np.repeat(rows, counts)
+        gap = self.centroid[piece] - points[rows]
+        lower = np.sqrt(np.einsum("ij,ij->i", gap, gap)) - self.piece_radius[piece]
+        keep = lower < ub[rows]
+        self._improve(pts_cf, rows[keep], self.parent[piece[keep]], best2, best_face)
 
     def _improve(self, pts_cf, rows, faces, best2, best_face):
         """Lower best2 / best_face in place with the exact distances of the (rows, faces) pairs; rows sorted."""
@@ -226,7 +239,7 @@ class GridIndex:
         corners = tris.corners
         lo_t = corners.min(axis=0)  # (3, m)
         hi_t = corners.max(axis=0)
-        edge = np.sqrt(_sq_norm(tris.ab))
+        edge = np.sqrt(_sq_norm(corners[1] - corners[0]))
         h = max(float(np.median(edge)) / 3.0, delta / 2.0, 1e-300)
         while True:
             reach = delta + h * np.sqrt(3.0) / 2.0
@@ -248,7 +261,7 @@ class GridIndex:
         centre = origin[:, None] + (cell + 0.5) * h
         limit = reach * (1 + _SLACK)
         # Cheap slab test (distance to the face's plane) first, then the exact distance.
-        normal = np.cross(tris.ab, tris.ac, axis=0)
+        normal = np.cross(corners[1] - corners[0], corners[2] - corners[0], axis=0)
         length = np.sqrt(_sq_norm(normal))
         normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
         rel = centre - np.take(tris.a, owner, axis=1)
@@ -333,6 +346,9 @@ def nearest_triangles(corners: np.ndarray, points: np.ndarray) -> tuple[np.ndarr
     pilot = np.random.default_rng(0).choice(len(points), _GRID_PILOT, replace=False)
     pilot_dist, _ = tree.query(points[pilot])
     # A tiny floor keeps points lying on the surface (distance ~1e-17 from rounding) on the grid's side.
-    floor = 1e-9 * float(np.sqrt(_sq_norm(tris.ab)).max())
+    floor = 1e-9 * float(np.sqrt(_sq_norm(corners[1] - corners[0])).max())
     delta = max(float(np.quantile(pilot_dist, _GRID_QUANTILE)), floor)
-    return GridIndex(tris, delta, tree).query(points)
+    grid = GridIndex(tris, delta, tree)
+    if len(grid.cell_face) > _GRID_MAX_LIST * len(grid.cell_key):
+        return tree.query(points)  # points far from the mesh: lists too long for the grid to pay off
+    return grid.query(points)

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-# A triangle whose twice-area is below this fraction of its longest edge squared is treated as a polyline:
-# below it the normal's direction is less accurate (relative error ~ eps * L / width) than the triangle's
-# width is small (width / L), so the distance to its three edges is the better answer.
+# A triangle whose twice-area is below this fraction of its longest edge squared (width below ~1e-8 of its
+# length) is measured as the polyline of its three edges: there the barycentric solve loses more (~eps * L /
+# width) than treating the sliver as its edges does (at most its width).
 _FLAT_REL = 1e-8
 _BLOCK = 32_768  # pairs per kernel call
 
@@ -26,8 +26,8 @@ def point_triangle_distance(points, a, b, c, *, squared: bool = False) -> np.nda
 
     Returns:
       (...,) float64 distances (same length units as the inputs; squared units when ``squared``), with ``...``
-      the broadcast shape. Degenerate triangles (collinear or repeated corners) are measured as the union of
-      their three edges.
+      the broadcast shape. Degenerate triangles (collinear or repeated corners, or thinner than 1e-8 of their
+      length) are measured as the union of their three edges.
 
     Raises:
       ValueError: when a last axis is not 3, the shapes do not broadcast, or a value is not finite.

@@ -16,10 +16,9 @@ def _angles_deg(mesh: MeshArrays) -> np.ndarray:
     c = mesh.corners
     ab, ac, bc = c[1] - c[0], c[2] - c[0], c[2] - c[1]
     twice_area = mesh.double_areas
-    dot = lambda x, y: x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
-    at_a = np.arctan2(twice_area, dot(ab, ac))
-    at_b = np.arctan2(twice_area, -dot(ab, bc))
-    at_c = np.arctan2(twice_area, dot(ac, bc))
+    at_a = np.arctan2(twice_area, (ab * ac).sum(axis=0))
+    at_b = np.arctan2(twice_area, -(ab * bc).sum(axis=0))
+    at_c = np.arctan2(twice_area, (ac * bc).sum(axis=0))
     return np.degrees(np.stack([at_a, at_b, at_c], axis=1))
 
 

@@ -7,6 +7,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ._common import MeshArrays, as_mesh
+from ._distance import nearest_faces
 
 
 def _components(n_nodes: int, i: np.ndarray, j: np.ndarray) -> tuple[int, np.ndarray]:
@@ -36,12 +37,14 @@ def _fans_per_vertex(mesh: MeshArrays) -> np.ndarray:
     e = mesh.edges
     f = mesh.faces
     h1, h2 = e.manifold_pairs
-    corner_of = lambda h, vertex_is_start: np.where(vertex_is_start, h, 3 * (h // 3) + (h % 3 + 1) % 3)
-    # For each half-edge, the corner of its lower-index endpoint and of its upper one.
-    lo_1 = corner_of(h1, e.forward[h1])
-    hi_1 = corner_of(h1, ~e.forward[h1])
-    lo_2 = corner_of(h2, e.forward[h2])
-    hi_2 = corner_of(h2, ~e.forward[h2])
+
+    def corner(h, at_start):
+        """Corner id (3 * face + k) of half-edge h's start vertex where at_start, else of its end vertex."""
+        return np.where(at_start, h, 3 * (h // 3) + (h % 3 + 1) % 3)
+
+    # For each half-edge of a two-face edge, the corner of the edge's lower-index vertex and of its upper one.
+    lo_1, hi_1 = corner(h1, e.forward[h1]), corner(h1, ~e.forward[h1])
+    lo_2, hi_2 = corner(h2, e.forward[h2]), corner(h2, ~e.forward[h2])
     n_corners = 3 * len(f)
     n_fans, label = _components(n_corners, np.concatenate([lo_1, hi_1]), np.concatenate([lo_2, hi_2]))
     fan_vertex = np.empty(n_fans, dtype=np.int64)
@@ -121,8 +124,6 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
         "genus": (2 * n_components - euler) / 2 if genus_defined else float("nan"),
     }
     if original is not None:
-        from ._distance import nearest_faces  # local: keeps topology usable without the distance machinery
-
         o = as_mesh(original, "original")
         out.update(flipped_faces_report(m, o, nearest_faces(o, face_centroids(m))))
     if target_faces is not None:
