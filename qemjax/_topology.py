@@ -31,10 +31,11 @@ def unique_counts(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unique undirected edges (E,2) int64 with u < v, sorted, and how many faces contain each (E,)."""
+    """Unique undirected edges (E,2) with u < v (F's integer dtype), sorted, and how many faces contain
+    each (E,) int64."""
     he = half_edges(F)
     keys, counts = unique_counts(edge_keys(he[:, 0], he[:, 1], n))
-    return np.stack([keys // n, keys % n], 1), counts
+    return np.stack([keys // n, keys % n], 1).astype(F.dtype), counts
 
 
 def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -153,32 +154,32 @@ def coincident_removals(G: np.ndarray) -> np.ndarray:
 
 
 def contraction_faces(F: np.ndarray, pairs: np.ndarray, n: int):
-    """Faces touched by contracting vertex-disjoint pairs (b into a), as they would be afterwards.
+    """Surviving faces touched by contracting vertex-disjoint pairs (b into a), as they would be after.
 
-    Returns (rows, G, owner): indices into F of the touched faces that survive (not degenerate), their
-    remapped corners (k,3), and the pair each belongs to.
+    ``pairs`` (S,2) must be at least two edges apart, so a face holds endpoints of one pair at most; a
+    face holding both endpoints of its pair disappears, every other touched face has one moving corner.
+    Returns rows (k,) indices into F, corner (k,) which corner moves, owner (k,) its pair, G (k,3) the
+    faces with b replaced by a.
     """
     S = len(pairs)
-    lab = np.full(n, -1, np.int64)
-    lab[pairs[:, 0]] = lab[pairs[:, 1]] = np.arange(S)
-    rep = np.arange(n)
-    rep[pairs[:, 1]] = pairs[:, 0]
+    lab = np.full(n, -1, np.int32)
+    lab[pairs[:, 0]] = lab[pairs[:, 1]] = np.arange(S, dtype=np.int32)
     lf = lab[F]
-    hit = np.flatnonzero((lf[:, 0] >= 0) | (lf[:, 1] >= 0) | (lf[:, 2] >= 0))
-    G = rep[F[hit]]
-    owner = lf[hit].max(1)
-    live = (G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2])
-    return hit[live], G[live], owner[live]
+    h = lf >= 0
+    rows = np.flatnonzero((h[:, 0].astype(np.int8) + h[:, 1] + h[:, 2]) == 1)
+    corner = np.argmax(h[rows], axis=1)
+    owner = lf[rows, corner]
+    G = F[rows]
+    G[np.arange(len(rows)), corner] = pairs[owner, 0]
+    return rows, corner, owner, G
 
 
-def coincidence_count(F: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
-    """(S,) int: faces that contracting each pair would make coincide and drop (`coincident_removals`).
+def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
+    """(S,) int: faces that the contractions would make coincide and drop (`coincident_removals`).
 
-    ``pairs`` must be vertex-disjoint and at least two edges apart, so a face holds endpoints of one pair
-    at most and every face that could coincide touches that pair.
+    G, owner: the touched faces after contraction and their pairs, from `contraction_faces` (every face
+    that could coincide touches the pair, because pairs are two edges apart).
     """
-    S = len(pairs)
-    _, G, owner = contraction_faces(F, pairs, n)
     G64 = np.sort(G, axis=1).astype(np.uint64)
     h = (G64[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (G64[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ G64[:, 2]
     hs = np.sort(h)

@@ -51,32 +51,16 @@ def _place(Vd, Qd, P, settings, outputs=(0, 1)):
     return [np.concatenate([np.asarray(o[k]) for o in outs])[: len(P)] for k in outputs]
 
 
-def _flip_bad(V, F, N0, pairs, x, settings):
-    """(S,) bool: does contracting the vertex-disjoint pairs (S,2) to x (S,3) flip a surviving face?
-
-    F (M,3) must hold every face around the pairs (it may hold others), N0 (M,3) their input normals.
-    The host finds, per face, the one corner that moves; the kernel tests the faces in fixed chunks.
-    """
-    S = len(pairs)
-    lab = np.full(len(V), -1, np.int64)
-    lab[pairs[:, 0]] = lab[pairs[:, 1]] = np.arange(S)
-    lf = lab[F]
-    hit = lf >= 0
-    nh = hit[:, 0].astype(np.int8) + hit[:, 1] + hit[:, 2]
-    # a face holding both endpoints disappears; others have exactly one moving corner
-    rows = np.flatnonzero(nh == 1)
-    k = np.argmax(hit[rows], axis=1)
-    owner = lf[rows, k]
-    p, ref, xs = V[F[rows]], N0[rows], x[owner]
-    bad = np.zeros(len(rows), bool)
+def _flip_bad(V, F, corner, owner, N0, x, S, settings):
+    """(S,) bool: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
+    N0 (k,3): the input normals of those faces. Faces are tested in fixed chunks by the kernel."""
     cos_max = np.asarray(settings.cos_max, DTYPE)
     outs = []
-    for (s, pp), (_, kk), (_, xx), (_, rr) in zip(_chunks(p), _chunks(k.astype(np.int32)), _chunks(xs),
-                                                 _chunks(ref)):
-        mask = np.arange(len(pp)) < len(rows) - s
+    parts = zip(_chunks(V[F]), _chunks(corner.astype(np.int32)), _chunks(x[owner]), _chunks(N0))
+    for (s, pp), (_, kk), (_, xx), (_, rr) in parts:
+        mask = np.arange(len(pp)) < len(F) - s
         outs.append(flips.face_flips(pp, kk, xx, mask, rr, cos_max))
-    if outs:
-        bad = np.concatenate([np.asarray(o) for o in outs])[: len(rows)]
+    bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
     res = np.zeros(S, bool)
     res[owner[bad]] = True
     return res
@@ -144,12 +128,13 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     if len(extra_pairs) == 0:
         return E, ecount
     xk = np.unique(topo.edge_keys(extra_pairs[:, 0], extra_pairs[:, 1], n))
-    ek = E[:, 0] * n + E[:, 1]
+    ek = E[:, 0].astype(np.int64) * n + E[:, 1]
     xk = xk[~np.isin(xk, ek)]
     keys = np.concatenate([ek, xk])
     order = np.argsort(keys, kind="stable")
     keys = keys[order]
-    return np.stack([keys // n, keys % n], 1), np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
+    E = np.stack([keys // n, keys % n], 1).astype(E.dtype)
+    return E, np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
 
 
 def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
@@ -162,7 +147,8 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     n_cap = bucket(n + 1)
     V = pad_rows(V.astype(DTYPE), n_cap)
     Q = pad_rows(Q.astype(DTYPE), n_cap)
-    F = F.copy()
+    F = F.astype(np.int32)  # halves the memory traffic of every gather (n < 2**31)
+    extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
     fid = np.arange(len(F))  # input face each current face continues
     p = V[F]
     N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals, by fid
@@ -186,7 +172,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
 
         t0 = time.perf_counter()
         Vd, Qd = jnp.asarray(V), jnp.asarray(Q)
-        ekeys = E[:, 0] * n + E[:, 1]
+        ekeys = E[:, 0].astype(np.int64) * n + E[:, 1]
         # re-cost only pairs at vertices the last round moved; the rest keep their cost and target
         if prev is None:
             x, cost = _place(Vd, Qd, E, settings)
@@ -217,8 +203,9 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         cand = valid & (cost <= max(GATE * kth, kth))
 
         def validate(P, idx, Fs, fs, Efree):
-            ok = ~_flip_bad(V, Fs, N0[fid[fs]], P, x[idx], settings)
-            gone = topo.coincidence_count(Fs, P, n)
+            rows, corner, owner, G = topo.contraction_faces(Fs, P, n)
+            ok = ~_flip_bad(V, Fs[rows], corner, owner, N0[fid[fs[rows]]], x[idx], len(P), settings)
+            gone = topo.coincidence_count(G, owner, len(P))
             if manifold:  # no coincident faces, link condition
                 ok &= (gone == 0) & topo.link_ok(P, ecount[idx], Efree, n, bvert, deg)
             return ok, gone
@@ -260,7 +247,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         branches += np.bincount(br, minlength=3)
         max_cost_used = max(max_cost_used, float(cost[acc].max()))
         history.append((a.copy(), b.copy(), xs, cost[acc].astype(np.float64)))
-        rep = np.arange(n)
+        rep = np.arange(n, dtype=np.int32)
         rep[b] = a
         touched = np.zeros(n, bool)
         touched[a] = touched[b] = True
