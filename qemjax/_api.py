@@ -199,7 +199,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=scale)
     for k, v in info.items():
-        if k.endswith("_s"):
+        if k.endswith("_s") or k == "faces_per_round":
             stats[k] = v
     return SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,

@@ -22,7 +22,9 @@ from .._kernels import flips, placement
 from .common import DTYPE, Settings, Timer, bucket, chunk_size, pad_rows
 
 MAX_PASSES = 8
-GATE = 1.5  # take pairs up to GATE × the cost of the k-th cheapest, k = contractions still needed
+GATE = 1.5  # take pairs up to GATE × the cost of the k-th cheapest candidate, where
+GATE_FRACTION = 0.05  # k = min(contractions still needed, GATE_FRACTION × live pairs)
+FREE_COST = 1e-10  # costs below this (squared, unit extent) always pass the gate: flat regions
 NO_KEY = np.iinfo(np.int64).max
 
 
@@ -157,7 +159,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     branches = np.zeros(3, np.int64)
     rounds = rejected = 0
     max_cost_used = 0.0
-    removed_per_round = []
+    faces_per_round = []
     invalid_keys = np.zeros(0, np.int64)  # edges found invalid whose neighbourhood has not changed since
     prev = None  # (edge keys, targets, costs, moved vertices) of the last round
     while len(F) > target_faces:
@@ -188,6 +190,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
 
         t0 = time.perf_counter()
         need = len(F) - target_faces
+        n_alive = len(E)  # ~3× the live vertices; only the ratio matters for the gate
         known_bad = np.zeros(len(E), bool)
         if invalid_keys.size:
             pos = np.minimum(np.searchsorted(invalid_keys, ekeys), invalid_keys.size - 1)
@@ -197,17 +200,19 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             valid &= (ecount >= 1) & (ecount <= 2)
         if not valid.any():
             break
-        k = min(max(need // 2, 1), int(valid.sum()))
+        k = min(max(need // 2, 1), int(valid.sum()), max(int(GATE_FRACTION * n_alive), 1))
         kth = np.partition(cost[valid], k - 1)[k - 1]
         key = _sort_keys(cost)
-        cand = valid & (cost <= max(GATE * kth, kth))
+        cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
         def validate(P, idx, Fs, fs, Efree):
+            tv = time.perf_counter()
             rows, corner, owner, G = topo.contraction_faces(Fs, P, n)
             ok = ~_flip_bad(V, Fs[rows], corner, owner, N0[fid[fs[rows]]], x[idx], len(P), settings)
             gone = topo.coincidence_count(G, owner, len(P))
             if manifold:  # no coincident faces, link condition
                 ok &= (gone == 0) & topo.link_ok(P, ecount[idx], Efree, n, bvert, deg)
+            timer.add("validity_s", time.perf_counter() - tv)
             return ok, gone
 
         accepted, bad, extra = _select(E, key, cand, valid, need, n, validate, F)
@@ -271,7 +276,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         if len(extra_pairs):
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
-        removed_per_round.append(acc.size)
+        faces_per_round.append(len(F))
         timer.add("contract_s", time.perf_counter() - t0)
         if progress is not None:
             progress(len(F))
@@ -283,6 +288,6 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     for a, b, xs, cs in history:
         hist.extend(zip(a.tolist(), b.tolist(), xs, cs.tolist()))
     info = {"contractions": len(hist), "rejected": rejected, "rounds": rounds, "max_cost": max_cost_used,
-            "branches": branches, "removed_per_round": removed_per_round}
+            "branches": branches, "faces_per_round": faces_per_round}
     info.update(timer.t)
     return V[:n], Q[:n], Fout, alive, hist, info
