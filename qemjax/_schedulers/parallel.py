@@ -79,18 +79,34 @@ def _select(E, key, cand, valid, need, n, validate, F):
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
     1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
     """
+    def working_sets(avail, one, fsub):
+        """Pairs with an available endpoint (locking, link test), pairs with both (selection), faces
+        with an available corner (validation), narrowed from the previous sets."""
+        Eo = E[one]
+        a0, a1 = avail[Eo[:, 0]], avail[Eo[:, 1]]
+        ff = avail[F[fsub]]
+        return one[a0 | a1], one[a0 & a1], fsub[ff[:, 0] | ff[:, 1] | ff[:, 2]]
+
+    def endpoints(mask):
+        v = np.zeros(n, bool)
+        v[E[np.flatnonzero(mask)].reshape(-1)] = True
+        return v
+
     free = np.ones(n, bool)
-    one = np.arange(len(E))  # edges with a free endpoint (for locking and the link test)
-    both = one  # edges with both endpoints free (for selection)
-    fsub = np.arange(len(F))  # faces with a free corner
+    # only vertices with a candidate pair matter: the rest never select and never conflict
+    active = endpoints(cand)
+    one, both, fsub = working_sets(active, np.arange(len(E)), np.arange(len(F)))
     accepted, rejected = [], []
     extra = np.zeros(len(E), np.int64)
+    widened = False
     for p in range(MAX_PASSES):
         Eb = E[both]
         live = cand[both]
         if not live.any():
-            if not any(a.size for a in accepted) and valid[both].any():
-                cand = valid.copy()  # everything under the gate was invalid: widen it
+            if not any(a.size for a in accepted) and not widened and valid.any():
+                cand, widened = valid.copy(), True  # everything under the gate was invalid: widen it
+                active = endpoints(cand) & free
+                one, both, fsub = working_sets(active, np.arange(len(E)), np.arange(len(F)))
                 continue
             break
         kl = np.where(live, key[both], NO_KEY)
@@ -115,10 +131,7 @@ def _select(E, key, cand, valid, need, n, validate, F):
         Eo = E[one]
         ring = lock[Eo[:, 0]] | lock[Eo[:, 1]]
         free[Eo[ring].reshape(-1)] = False
-        f0, f1 = free[Eo[:, 0]], free[Eo[:, 1]]
-        one, both = one[f0 | f1], one[f0 & f1]
-        ff = free[F[fsub]]
-        fsub = fsub[ff[:, 0] | ff[:, 1] | ff[:, 2]]
+        one, both, fsub = working_sets(active & free, one, fsub)
         if good.size * 50 < need // 2 and p > 2:
             break
     cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64)  # noqa: E731
