@@ -202,6 +202,7 @@ def parse_args(argv=None):
                    help="skip qemjax-greedy on meshes with more than N faces (default 200000)")
     p.add_argument("--warm", action="store_true", help="run qemjax twice on every case, report the second")
     p.add_argument("--no-metrics", action="store_true", help="skip qemjax.metrics.evaluate")
+    p.add_argument("--no-plots", action="store_true", help="do not redraw the figures afterwards")
     p.add_argument("--append", action="store_true",
                    help="merge into an existing --out CSV (rows with the same mesh/ratio/method are replaced)")
     p.add_argument("--out", type=Path, default=RESULTS / "peers.csv")
@@ -289,6 +290,10 @@ def main(argv=None) -> int:
     print()
     print(summary_table(df))
     print(f"\nwrote {args.out} and {args.out.parent / 'machine.md'}")
+    if not args.no_plots:  # one command regenerates the table and the figures
+        import plot_results
+
+        plot_results.main(["--csv", str(args.out)])
     return 0
 
 
