@@ -192,3 +192,26 @@ def test_bad_options(sphere, kwargs, match):
 def test_bad_input(mesh, match):
     with pytest.raises(ValueError, match=match):
         qemjax.simplify(mesh, target_faces=1)
+
+
+def test_feature_edges_are_kept_like_boundaries():
+    """A line of feature edges across a flat grid survives: no output face straddles it, while the same
+    simplification without features does cross it."""
+    V, F = shapes.grid(16)
+    on_line = np.isclose(V[:, 0], 0.5)
+    from qemjax import _topology as topo
+
+    E, _ = topo.edges(F, len(V))
+    feat = E[on_line[E[:, 0]] & on_line[E[:, 1]]]
+    assert len(feat) == 16
+
+    def straddling(r):
+        x = r.vertices[r.faces][..., 0]
+        return int(np.sum((x.min(1) < 0.5 - 1e-6) & (x.max(1) > 0.5 + 1e-6)))
+
+    with_f = qemjax.simplify((V, F), target_faces=60, feature_edges=feat)
+    without = qemjax.simplify((V, F), target_faces=60)
+    assert_valid(with_f, 60, V, F)
+    assert straddling(with_f) == 0 and straddling(without) > 0
+    with pytest.raises(ValueError, match="not mesh edges"):
+        qemjax.simplify((V, F), target_faces=60, feature_edges=np.array([[0, 100]]))
