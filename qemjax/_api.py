@@ -172,21 +172,17 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     if target < m or err < math.inf:
         run = parallel.run if scheduler == "parallel" else greedy.run
         Vo, Qo, Fo, alive, hist, info = run(Vn, Q, F, extra, max(target, 1), settings, progress_cb)
-    else:
-        Vo, Qo, Fo, alive, hist, info = Vn, Q, F, np.ones(m, bool), [], {
-            "contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0, "branches": np.zeros(3, int)}
+    else:  # nothing to remove
+        Vo, Qo, Fo, alive = Vn, Q, F, np.ones(m, bool)
+        hist = (np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
+        info = {"contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0, "branches": np.zeros(3, int)}
     if bar is not None:
         bar.close()
 
     Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
     vout = Vout.astype(np.float64) * scale + center
     verr = np.maximum(Qo[ids, 9].astype(np.float64), 0.0) * scale**2
-    if hist:
-        hp = np.array([(a, b) for a, b, _, _ in hist], np.int64)
-        hx = np.array([x for _, _, x, _ in hist], np.float64) * scale + center
-        hc = np.array([c for _, _, _, c in hist], np.float64) * scale**2
-    else:
-        hp, hx, hc = np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)
+    hp, hx, hc = hist[0], hist[1].astype(np.float64) * scale + center, hist[2].astype(np.float64) * scale**2
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
     stats = dict(report)

@@ -174,6 +174,9 @@ def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
                      if (min(u, w), max(u, w)) in blocked}))
         if progress is not None:
             progress(faces_now)
+    hist = (np.array([(a, b) for a, b, _, _ in history], np.int64).reshape(-1, 2),
+            np.array([x for _, _, x, _ in history], np.float64).reshape(-1, 3),
+            np.array([c for _, _, _, c in history], np.float64))
     info = {"contractions": len(history), "rejected": n_invalid, "rounds": len(history),
             "max_cost": max_cost_used, "branches": branches}
-    return V, Q, F, alive, history, info
+    return V, Q, F, alive, hist, info

@@ -152,11 +152,19 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     return E, np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
 
 
+def _history_arrays(rounds):
+    """Per-round (kept, removed, positions, costs) -> pairs (k,2) int64, positions (k,3), costs (k,)."""
+    if not rounds:
+        return np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)
+    pairs = np.concatenate([np.stack([a, b], 1) for a, b, _, _ in rounds]).astype(np.int64)
+    return pairs, np.concatenate([x for _, _, x, _ in rounds]), np.concatenate([c for _, _, _, c in rounds])
+
+
 def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     """Simplify. V (n,3) float32 normalised positions, Q (n,10) quadrics, F (m,3) int64 faces,
     extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be 0).
     Returns (V, Q, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,)
-    marks the survivors."""
+    marks the survivors, history = (pairs (k,2), positions (k,3), costs (k,)) in contraction order."""
     n, m = len(V), len(F)
     manifold = settings.preserve_topology
     n_cap = bucket(n + 1)
@@ -297,10 +305,8 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     Fout = np.zeros((m, 3), F.dtype)
     Fout[fid] = F
     alive[fid] = True
-    hist = []
-    for a, b, xs, cs in history:
-        hist.extend(zip(a.tolist(), b.tolist(), xs, cs.tolist()))
-    info = {"contractions": len(hist), "rejected": rejected, "rounds": rounds, "max_cost": max_cost_used,
+    hist = _history_arrays(history)
+    info = {"contractions": len(hist[0]), "rejected": rejected, "rounds": rounds, "max_cost": max_cost_used,
             "branches": branches, "faces_per_round": faces_per_round}
     info.update(timer.t)
     return V[:n], Q[:n], Fout, alive, hist, info
