@@ -164,9 +164,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
 
         bar = tqdm(total=m - target, unit="face", desc="simplify")
 
-        def progress_cb(faces_now, _last=[m]):
-            bar.update(_last[0] - faces_now)
-            _last[0] = faces_now
+        last = m
+
+        def progress_cb(faces_now):
+            nonlocal last
+            bar.update(last - faces_now)
+            last = faces_now
     else:
         progress_cb = None
     if target < m or err < math.inf:

@@ -4,7 +4,6 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pytest
 
 from qemjax._kernels import flips, placement
 from qemjax._kernels import quadrics as qd

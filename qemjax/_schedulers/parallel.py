@@ -12,7 +12,9 @@ happen together. The last round takes only as many, in cost order, as the exact 
 """
 from __future__ import annotations
 
+import functools
 import time
+from types import SimpleNamespace
 
 import jax.numpy as jnp
 import numpy as np
@@ -152,6 +154,61 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     return E, np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
 
 
+def _validate(P, idx, Fs, fs, Efree, *, ctx):
+    """(ok, faces made coincident) for vertex-disjoint pairs P (indices idx into this round's pairs).
+    Fs (rows fs of the current faces) holds every face around them, Efree every pair at them."""
+    tv = time.perf_counter()
+    rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
+    N0 = ctx.N0[ctx.fid[fs[rows]]]
+    ok = ~_flip_bad(ctx.V, Fs[rows], corner, owner, N0, ctx.x[idx], len(P), ctx.settings)
+    gone = topo.coincidence_count(G, owner, len(P))
+    if ctx.settings.preserve_topology:  # no coincident faces, link condition
+        ok &= (gone == 0) & topo.link_ok(P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg)
+    ctx.timer.add("validity_s", time.perf_counter() - tv)
+    return ok, gone
+
+
+def _fits_target(removes: np.ndarray, need: int) -> np.ndarray:
+    """Mask over contractions in cost order: take them while the faces they remove (``removes``) fit in
+    ``need``, then fill what is left with later ones that still fit, so the face target is met exactly
+    when the mesh allows it."""
+    csum = np.cumsum(removes)
+    take = csum <= need
+    if take.all():
+        return take
+    left = need - (csum[take][-1] if take.any() else 0)
+    for i in np.flatnonzero(~take):  # a few at most: only the tail of the last round
+        if removes[i] <= left:
+            take[i] = True
+            left -= removes[i]
+    return take
+
+
+def _touched_vertices(F, P, n):
+    """(n,) bool: endpoints of the pairs P and every vertex sharing a face with one."""
+    t = np.zeros(n, bool)
+    t[P.reshape(-1)] = True
+    tf = t[F]
+    t[F[tf[:, 0] | tf[:, 1] | tf[:, 2]].reshape(-1)] = True
+    return t
+
+
+def _relink_faces(F, fid, kept, n, drop_coincident):
+    """After remapping F (removed vertices replaced by kept ones): drop faces with a repeated corner,
+    and with ``drop_coincident`` resolve faces that now coincide (they all touch a kept vertex)."""
+    deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    F, fid = F[~deg], fid[~deg]
+    if drop_coincident:
+        merged = np.zeros(n, bool)
+        merged[kept] = True
+        mf = merged[F]
+        rows = np.flatnonzero(mf[:, 0] | mf[:, 1] | mf[:, 2])
+        keep = np.ones(len(F), bool)
+        keep[rows[topo.coincident_removals(F[rows])]] = False
+        F, fid = F[keep], fid[keep]
+    return F, fid
+
+
 def _history_arrays(rounds):
     """Per-round (kept, removed, positions, costs) -> pairs (k,2) int64, positions (k,3), costs (k,)."""
     if not rounds:
@@ -226,38 +283,17 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         key = _sort_keys(cost)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
-        def validate(P, idx, Fs, fs, Efree):
-            tv = time.perf_counter()
-            rows, corner, owner, G = topo.contraction_faces(Fs, P, n)
-            ok = ~_flip_bad(V, Fs[rows], corner, owner, N0[fid[fs[rows]]], x[idx], len(P), settings)
-            gone = topo.coincidence_count(G, owner, len(P))
-            if manifold:  # no coincident faces, link condition
-                ok &= (gone == 0) & topo.link_ok(P, ecount[idx], Efree, n, bvert, deg)
-            timer.add("validity_s", time.perf_counter() - tv)
-            return ok, gone
-
-        accepted, bad, extra = _select(E, key, cand, valid, need, n, validate, F)
+        ctx = SimpleNamespace(V=V, N0=N0, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
+                              settings=settings, timer=timer)
+        acc, bad, extra = _select(E, key, cand, valid, need, n, functools.partial(_validate, ctx=ctx), F)
         rejected += bad.size
-        rejected_now = [bad]
-        acc = accepted
         acc = acc[np.argsort(key[acc], kind="stable")]
-        # exact target: take in cost order only what keeps faces >= target
-        fr = ecount[acc] + extra[acc]
-        csum = np.cumsum(fr)
-        if csum.size and csum[-1] > need:
-            take = csum <= need
-            rest = np.flatnonzero(~take)
-            left = need - (csum[take][-1] if take.any() else 0)
-            for i in rest:  # a few: fill the remainder with contractions that still fit
-                if fr[i] <= left:
-                    take[i] = True
-                    left -= fr[i]
-            acc = acc[take]
+        acc = acc[_fits_target(ecount[acc] + extra[acc], need)]
         timer.add("select_s", time.perf_counter() - t0)
-        bad_now = np.concatenate(rejected_now) if rejected_now else np.zeros(0, np.int64)
-        invalid_keys = np.union1d(invalid_keys, ekeys[bad_now]) if bad_now.size else invalid_keys
+        if bad.size:
+            invalid_keys = np.union1d(invalid_keys, ekeys[bad])
         if acc.size == 0:
-            if bad_now.size:
+            if bad.size:  # the invalid ones are out now: select again among the rest
                 continue
             break
 
@@ -273,27 +309,12 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         branches += np.bincount(br, minlength=3)
         max_cost_used = max(max_cost_used, float(cost[acc].max()))
         history.append((a.copy(), b.copy(), xs, cost[acc].astype(np.float64)))
+        if invalid_keys.size:  # pairs whose faces change get another chance
+            touched = _touched_vertices(F, P, n)
+            invalid_keys = invalid_keys[~(touched[invalid_keys // n] | touched[invalid_keys % n])]
         rep = np.arange(n, dtype=np.int32)
         rep[b] = a
-        touched = np.zeros(n, bool)
-        touched[a] = touched[b] = True
-        tf = touched[F]
-        touched[F[tf[:, 0] | tf[:, 1] | tf[:, 2]].reshape(-1)] = True  # every vertex whose faces change
-        if invalid_keys.size:
-            iu, iw = invalid_keys // n, invalid_keys % n
-            invalid_keys = invalid_keys[~(touched[iu] | touched[iw])]
-        F = rep[F]
-        deg_f = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-        F, fid = F[~deg_f], fid[~deg_f]
-        if not manifold:  # coincident faces left by the contractions (all touch a kept vertex)
-            merged = np.zeros(n, bool)
-            merged[a] = True
-            mf = merged[F]
-            rows = np.flatnonzero(mf[:, 0] | mf[:, 1] | mf[:, 2])
-            drop = rows[topo.coincident_removals(F[rows])]
-            keep = np.ones(len(F), bool)
-            keep[drop] = False
-            F, fid = F[keep], fid[keep]
+        F, fid = _relink_faces(rep[F], fid, a, n, drop_coincident=not manifold)
         if len(extra_pairs):
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
