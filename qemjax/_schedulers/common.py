@@ -13,8 +13,7 @@ from .._kernels import placement, quadrics
 
 DTYPE = np.float32
 MIN_BUCKET = 16
-CHUNK = 1 << 16  # pair / face batches larger than this are processed in chunks of this size
-SMALL_CHUNK = 256
+CHUNKS = (256, 4096, 1 << 16)  # batch shapes; larger batches are cut into pieces of the largest
 
 
 def bucket(n: int, lo: int = MIN_BUCKET) -> int:
@@ -23,9 +22,13 @@ def bucket(n: int, lo: int = MIN_BUCKET) -> int:
 
 
 def chunk_size(n: int) -> int:
-    """Batch shape for n rows: SMALL_CHUNK or CHUNK, so at most two shapes per kernel ever compile (the
-    small one serves the greedy scheduler's few-pair updates and the last rounds)."""
-    return SMALL_CHUNK if n <= SMALL_CHUNK else CHUNK
+    """Batch shape for n rows: the smallest of CHUNKS that holds them (else the largest), so at most
+    three shapes per kernel ever compile. The small ones serve the greedy scheduler's few-pair updates
+    and the later rounds without computing mostly padding."""
+    for size in CHUNKS:
+        if n <= size:
+            return size
+    return CHUNKS[-1]
 
 
 def pad_rows(a: np.ndarray, size: int, fill=0) -> np.ndarray:
