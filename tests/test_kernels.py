@@ -199,21 +199,22 @@ def test_flip_kernel_matches_numpy_reference():
         assert 0 < got.sum() < K  # both outcomes exercised
 
 
-def test_flip_votes_accumulate_per_vertex():
-    """Moving the centre of a fan past its rim flips faces; each moved vertex gets its own vote."""
+def test_face_flips_on_a_fan():
+    """Moving the centre of a hexagonal fan past its rim flips faces; a small move does not; moving it onto
+    a rim edge's line leaves a zero-area face, which counts as flipped (sliver guard)."""
     ang = np.linspace(0, 2 * np.pi, 7)[:-1]
-    V = np.r_[[[0.0, 0, 0]], np.c_[np.cos(ang), np.sin(ang), np.zeros(6)]]
-    F = np.array([[0, 1 + i, 1 + (i + 1) % 6] for i in range(6)], np.int32)
-    target = V.copy()
-    target[0] = [2.0, 0.0, 0.0]
-    moved = np.zeros(7, bool)
-    moved[0] = True
-    partner = np.full(7, -1, np.int32)
+    V = np.r_[[[0.0, 0, 0]], np.c_[np.cos(ang), np.sin(ang), np.zeros(6)]].astype(np.float32)
+    F = np.array([[0, 1 + i, 1 + (i + 1) % 6] for i in range(6)])
+    p = V[F]
+    k = np.zeros(6, np.int32)
     ref = np.tile(np.float32([[0, 0, 1]]), (6, 1))
-    acc = flips.flip_votes(V.astype(np.float32), F, np.ones(6, bool), ref, target.astype(np.float32),
-                           partner, moved, np.float32(0.0), jnp.zeros(7, bool))
-    assert bool(acc[0]) and not bool(acc[1:].any())
-    target[0] = [0.1, 0.05, 0.0]
-    acc = flips.flip_votes(V.astype(np.float32), F, np.ones(6, bool), ref, target.astype(np.float32),
-                           partner, moved, np.float32(0.0), jnp.zeros(7, bool))
-    assert not bool(acc.any())
+    mask = np.ones(6, bool)
+
+    def flipped(x):
+        xs = np.tile(np.float32(x), (6, 1))
+        return np.asarray(flips.face_flips(p, k, xs, mask, ref, np.float32(0.0)))
+
+    assert flipped([2.0, 0.0, 0.0]).any()
+    assert not flipped([0.1, 0.05, 0.0]).any()
+    on_rim = 0.5 * (V[1] + V[2])  # on the line of face 0's far edge
+    assert flipped(on_rim)[0]

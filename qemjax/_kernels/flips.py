@@ -34,23 +34,6 @@ def moved_corner_flips(p, k, x, cos_max, ref=None):
     return bad
 
 
-def corner_flips(V, F, fmask, ref, target, partner, moved, cos_max):
-    """Per-corner flip flags for faces F (M,3) (masked by fmask (M,)) with reference normals ref (M,3).
-
-    For vertex v with moved[v] true, v is moved to target[v] (N,3); partner[v] (N,) is the other endpoint
-    of v's contraction. Faces that contain the partner too disappear and are not tested.
-    Returns bad (M,3) bool: corner k of face f is moved and the move flips f.
-    """
-    p = V[F]
-    bads = []
-    for k in range(3):
-        v = F[:, k]
-        dies = jnp.any(F == partner[v][:, None], axis=1)
-        flips = moved_corner_flips(p, jnp.full(v.shape, k), target[v], cos_max, ref)
-        bads.append(moved[v] & ~dies & fmask & flips)
-    return jnp.stack(bads, 1)
-
-
 @jax.jit
 def face_flips(p, k, x, mask, ref, cos_max):
     """Per face: does moving corner k (K,) of triangle p (K,3,3) to x (K,3) flip it? (K,) bool."""
@@ -63,10 +46,3 @@ def local_flips(p, k, x, mask, ref, cos_max):
     x (3,), masked by mask (K,)."""
     xs = jnp.broadcast_to(x, p.shape[:-2] + (3,))
     return jnp.any(moved_corner_flips(p, k, xs, cos_max, ref) & mask)
-
-
-@jax.jit
-def flip_votes(V, F, fmask, ref, target, partner, moved, cos_max, acc):
-    """Accumulate into acc (N,) bool whether any face around vertex v flips when v moves to target[v]."""
-    bad = corner_flips(V, F, fmask, ref, target, partner, moved, cos_max)
-    return acc.at[F.reshape(-1)].max(bad.reshape(-1))

@@ -63,13 +63,6 @@ class Timer:
     def add(self, name, dt):
         self.t[name] = self.t.get(name, 0.0) + dt
 
-    def block(self, name, fn, *args):
-        t0 = time.perf_counter()
-        out = fn(*args)
-        jax.block_until_ready(out)
-        self.add(name, time.perf_counter() - t0)
-        return out
-
 
 _place_local = jax.jit(placement.place)
 
