@@ -23,35 +23,6 @@ BOUNDARY_WEIGHT = 100.0
 COND_EPS = 1e-5
 MAX_SHIFT = 2.0
 FLIP_ANGLE = 90.0
-MAX_PAIRS_PER_VERTEX = 50  # pair_threshold may add at most this many close pairs per vertex
-
-
-def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
-    """Non-edge vertex pairs (k,2) int64 closer than t (mesh units), found with scipy's KD-tree.
-
-    Raises ValueError when there would be more than MAX_PAIRS_PER_VERTEX per vertex on average (the
-    pair count grows with t³; such a t almost always means a unit mix-up).
-    """
-    if t <= 0:
-        return np.zeros((0, 2), np.int64)
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(V)
-    limit = MAX_PAIRS_PER_VERTEX * len(V)
-    # count first (cheap), so an absurd t fails fast instead of exhausting memory
-    n_close = (tree.count_neighbors(tree, t) - len(V)) // 2
-    if n_close > limit:
-        raise ValueError(f"pair_threshold={t} would make {n_close} vertex pairs (over {limit}, "
-                         f"{MAX_PAIRS_PER_VERTEX} per vertex); the mesh's bounding-box diagonal is "
-                         f"{np.linalg.norm(V.max(0) - V.min(0)):.4g}: choose a smaller threshold")
-    P = tree.query_pairs(t, output_type="ndarray").astype(np.int64)
-    P = np.sort(P, axis=1)
-    E, _ = topo.edges(F, len(V))
-    n = len(V)
-    P = P[~np.isin(P[:, 0] * n + P[:, 1], E[:, 0] * n + E[:, 1])]
-    return P[np.lexsort((P[:, 1], P[:, 0]))]
-
-
 def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]:
     """(face target, max error) from the user's options; face target 0 means 'none'."""
     given = [x is not None for x in (target_faces, ratio)]
@@ -106,7 +77,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
     pair_threshold: t in mesh units; besides edges, any two vertices closer than t may contract
         (Garland–Heckbert's aggregation: separate parts can join). 0 = edge contraction only. Close pairs
-        are found with a KD-tree; more than MAX_PAIRS_PER_VERTEX per vertex is refused.
+        are found with a KD-tree; more than topo.MAX_PAIRS_PER_VERTEX per vertex is refused.
     preserve_topology: forbid contractions that break the link condition or make faces coincide (keeps
         a manifold's genus and boundary loops). Default: True when pair_threshold is 0, else False. With
         False, contractions may create non-manifold edges, and coincident faces are dropped (opposite
@@ -156,7 +127,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         endpoints_only=placement == "endpoints", cond_eps=COND_EPS, max_shift=MAX_SHIFT,
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
         preserve_topology=preserve_topology, max_cost=err / scale**2)
-    extra = close_pairs(V, F, pair_threshold)
+    extra = topo.close_pairs(V, F, pair_threshold)
 
     bar = None
     if progress:

@@ -31,7 +31,8 @@ class SimplifyResult:
     max_error: the largest contraction cost used (squared distance, input units);
     source_vertices (k,) int64: for each output vertex, the id (in the cleaned input) of the vertex it
     grew from; source_faces (j,) int64: for each output face, the input face it continues (contraction
-    only re-links faces, it never creates them); input_vertices / input_faces: the cleaned input (after welding and face clean-up);
+    only re-links faces, it never creates them); input_vertices / input_faces: the cleaned input (after
+    welding and face clean-up);
     history: the `Contractions`; stats: counts and timings (``compile_s`` is JAX tracing + compilation
     time inside this call, ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
     times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``

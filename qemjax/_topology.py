@@ -38,6 +38,34 @@ def edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([keys // n, keys % n], 1).astype(F.dtype), counts
 
 
+MAX_PAIRS_PER_VERTEX = 50  # pair_threshold may add at most this many close pairs per vertex
+
+
+def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
+    """Non-edge vertex pairs (k,2) int64 closer than t (mesh units), found with scipy's KD-tree.
+
+    Raises ValueError when there would be more than MAX_PAIRS_PER_VERTEX per vertex on average (the
+    pair count grows with t³; such a t almost always means a unit mix-up).
+    """
+    if t <= 0:
+        return np.zeros((0, 2), np.int64)
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(V)
+    limit = MAX_PAIRS_PER_VERTEX * len(V)
+    # count first (cheap), so an absurd t fails fast instead of exhausting memory
+    n_close = (tree.count_neighbors(tree, t) - len(V)) // 2
+    if n_close > limit:
+        raise ValueError(f"pair_threshold={t} would make {n_close} vertex pairs (over {limit}, "
+                         f"{MAX_PAIRS_PER_VERTEX} per vertex); the mesh's bounding-box diagonal is "
+                         f"{np.linalg.norm(V.max(0) - V.min(0)):.4g}: choose a smaller threshold")
+    P = np.sort(tree.query_pairs(t, output_type="ndarray").astype(np.int64), axis=1)
+    n = len(V)
+    E, _ = edges(F, n)
+    P = P[~np.isin(edge_keys(P[:, 0], P[:, 1], n), edge_keys(E[:, 0], E[:, 1], n))]
+    return P[np.lexsort((P[:, 1], P[:, 0]))]
+
+
 def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Edges used by exactly one face: (B,2) int64 as directed in that face, and the face index (B,)."""
     he = half_edges(F)

@@ -9,7 +9,7 @@ import trimesh
 from conftest import assert_valid, shared_mesh
 
 import qemjax
-from qemjax import _api, shapes
+from qemjax import shapes
 from qemjax import _topology as topo
 
 SCHEDULERS = ["parallel", "greedy"]
@@ -38,13 +38,13 @@ def test_close_pairs_match_brute_force():
     V, F = shapes.icosphere(2)
     V = V + rng.normal(scale=0.05, size=V.shape)
     t = 0.5
-    got = _api.close_pairs(V, F, t)
+    got = topo.close_pairs(V, F, t)
     E, _ = topo.edges(F, len(V))
     edges = set(map(tuple, E.tolist()))
     ref = {(i, j) for i, j in itertools.combinations(range(len(V)), 2)
            if np.linalg.norm(V[i] - V[j]) <= t and (i, j) not in edges}
     assert set(map(tuple, got.tolist())) == ref and len(ref) > 0
-    assert len(_api.close_pairs(V, F, 0.0)) == 0
+    assert len(topo.close_pairs(V, F, 0.0)) == 0
 
 
 def test_threshold_that_would_explode_is_refused():

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import jax
 import jax.numpy as jnp
@@ -37,6 +36,13 @@ def pad_rows(a: np.ndarray, size: int, fill=0) -> np.ndarray:
     return out
 
 
+def chunks(arr: np.ndarray, fill=0):
+    """Split rows into equal padded pieces of a bucketed size (see `chunk_size`): yields (start, piece)."""
+    size = chunk_size(len(arr))
+    for s in range(0, max(len(arr), 1), size):
+        yield s, pad_rows(arr[s:s + size], size, fill)
+
+
 @dataclasses.dataclass(frozen=True)
 class Settings:
     """Numbers a scheduler needs (all internal: coordinates normalised to unit extent)."""
@@ -55,7 +61,7 @@ class Settings:
 
 
 class Timer:
-    """Accumulates wall time per named stage; `compile` holds first-call (trace+compile) time."""
+    """Accumulates wall time per named stage (seconds, keys like ``kernels_s``)."""
 
     def __init__(self):
         self.t = {}
@@ -74,16 +80,11 @@ def place_gathered(q1, q2, p1, p2, settings: Settings):
     if K == 0:
         return (np.zeros((0, 3), DTYPE), np.zeros(0, DTYPE), np.zeros(0, np.int32),
                 np.zeros((0, 10), DTYPE))
-    outs = []
     args = settings.kernel_args()
-    size = chunk_size(K)
-    for s in range(0, K, size):
-        n = min(size, K - s)
-        parts = [pad_rows(a[s:s + n], size) for a in (q1, q2, p1, p2)]
-        outs.append(_place_local(*parts, *args))
-    res = [[np.asarray(a) for a in o] for o in outs]
-    cat = [np.concatenate([o[k] for o in res])[:K] for k in range(4)]
-    return cat[0], cat[1], cat[2], cat[3]
+    pieces = zip(*(chunks(a) for a in (q1, q2, p1, p2)))
+    outs = [_place_local(*(part for _, part in piece), *args) for piece in pieces]
+    x, cost, branch, qsum = (np.concatenate([np.asarray(o[k]) for o in outs])[:K] for k in range(4))
+    return x, cost, branch, qsum
 
 
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,

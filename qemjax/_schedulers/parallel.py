@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import _topology as topo
 from .._kernels import flips, placement
-from .common import DTYPE, Settings, Timer, bucket, chunk_size, pad_rows
+from .common import DTYPE, Settings, Timer, bucket, chunks, pad_rows
 
 MAX_PASSES = 8
 GATE = 1.5  # take pairs up to GATE × the cost of the k-th cheapest candidate, where
@@ -41,17 +41,10 @@ def _sort_keys(cost: np.ndarray) -> np.ndarray:
     return (bits << 32) | h.astype(np.int64)
 
 
-def _chunks(arr: np.ndarray, fill=0):
-    """Split rows into equal padded pieces of a bucketed size (see `chunk_size`)."""
-    size = chunk_size(len(arr))
-    for s in range(0, max(len(arr), 1), size):
-        yield s, pad_rows(arr[s:s + size], size, fill)
-
-
 def _place(Vd, Qd, P, settings, outputs=(0, 1)):
     """Placement outputs (x, cost, branch, qsum; those named in ``outputs``) for index pairs P (K,2)."""
     args = settings.kernel_args()
-    outs = [placement.place_pairs(Vd, Qd, part, *args) for _, part in _chunks(P.astype(np.int32))]
+    outs = [placement.place_pairs(Vd, Qd, part, *args) for _, part in chunks(P.astype(np.int32))]
     return [np.concatenate([np.asarray(o[k]) for o in outs])[: len(P)] for k in outputs]
 
 
@@ -60,7 +53,7 @@ def _flip_bad(V, F, corner, owner, N0, x, S, settings):
     N0 (k,3): the input normals of those faces. Faces are tested in fixed chunks by the kernel."""
     cos_max = np.asarray(settings.cos_max, DTYPE)
     outs = []
-    parts = zip(_chunks(V[F]), _chunks(corner.astype(np.int32)), _chunks(x[owner]), _chunks(N0))
+    parts = zip(chunks(V[F]), chunks(corner.astype(np.int32)), chunks(x[owner]), chunks(N0))
     for (s, pp), (_, kk), (_, xx), (_, rr) in parts:
         mask = np.arange(len(pp)) < len(F) - s
         outs.append(flips.face_flips(pp, kk, xx, mask, rr, cos_max))
@@ -145,7 +138,7 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     if len(extra_pairs) == 0:
         return E, ecount
     xk = np.unique(topo.edge_keys(extra_pairs[:, 0], extra_pairs[:, 1], n))
-    ek = E[:, 0].astype(np.int64) * n + E[:, 1]
+    ek = topo.edge_keys(E[:, 0], E[:, 1], n)
     xk = xk[~np.isin(xk, ek)]
     keys = np.concatenate([ek, xk])
     order = np.argsort(keys, kind="stable")
@@ -252,7 +245,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
 
         t0 = time.perf_counter()
         Vd, Qd = jnp.asarray(V), jnp.asarray(Q)
-        ekeys = E[:, 0].astype(np.int64) * n + E[:, 1]
+        ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)
         # re-cost only pairs at vertices the last round moved; the rest keep their cost and target
         if prev is None:
             x, cost = _place(Vd, Qd, E, settings)
