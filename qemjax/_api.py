@@ -75,7 +75,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (relative to an average face's plane; 0 disables boundary preservation).
     area_weighted: weight each face plane by its area / the mean face area (True), or by 1 (the paper).
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
-    pair_threshold: t in mesh units; besides edges, any two vertices closer than t may contract
+    pair_threshold: t in mesh units; besides edges, any two vertices within distance t may contract
         (Garland–Heckbert's aggregation: separate parts can join). 0 = edge contraction only. Close pairs
         are found with a KD-tree; more than topo.MAX_PAIRS_PER_VERTEX per vertex is refused.
     preserve_topology: forbid contractions that break the link condition or make faces coincide (keeps

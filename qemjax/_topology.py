@@ -42,7 +42,7 @@ MAX_PAIRS_PER_VERTEX = 50  # pair_threshold may add at most this many close pair
 
 
 def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
-    """Non-edge vertex pairs (k,2) int64 closer than t (mesh units), found with scipy's KD-tree.
+    """Non-edge vertex pairs (k,2) int64 at distance <= t (mesh units), found with scipy's KD-tree.
 
     Raises ValueError when there would be more than MAX_PAIRS_PER_VERTEX per vertex on average (the
     pair count grows with t³; such a t almost always means a unit mix-up).
