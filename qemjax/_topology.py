@@ -118,13 +118,14 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     lab[a], lab[b] = np.arange(S), np.arange(S)
     side[b] = 1
     # (pair, neighbour, side) for every edge leaving a labelled vertex
-    s_, c_, sd = [], [], []
-    for x, y in ((E[:, 0], E[:, 1]), (E[:, 1], E[:, 0])):
-        m = lab[x] >= 0
-        s_.append(lab[x[m]])
-        c_.append(y[m])
-        sd.append(side[x[m]])
-    key = np.sort((np.concatenate(s_) * n + np.concatenate(c_)) * 2 + np.concatenate(sd))
+    l0, l1 = lab[E[:, 0]], lab[E[:, 1]]
+    r = np.flatnonzero((l0 >= 0) | (l1 >= 0))
+    Er, l0, l1 = E[r], l0[r], l1[r]
+    m0, m1 = l0 >= 0, l1 >= 0
+    s_ = np.concatenate([l0[m0], l1[m1]])
+    c_ = np.concatenate([Er[m0, 1], Er[m1, 0]]).astype(np.int64)
+    sd = np.concatenate([side[Er[m0, 0]], side[Er[m1, 1]]])
+    key = np.sort((s_ * n + c_) * 2 + sd)
     base = key // 2
     both = base[1:] == base[:-1]  # a neighbour seen from side 0 and side 1
     common_pair = base[1:][both] // n
@@ -217,3 +218,66 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     idx = np.flatnonzero(np.isin(h, dup_h))
     rm = coincident_removals(G[idx])
     return np.bincount(owner[idx[rm]], minlength=S)
+
+
+def contract_edges(E: np.ndarray, ecount: np.ndarray, keys: np.ndarray, a: np.ndarray, b: np.ndarray,
+                   collapsed: np.ndarray, n: int):
+    """Edges after contracting vertex-disjoint manifold pairs (b into a), updated instead of rebuilt.
+
+    E (k,2) sorted by ``keys`` (`edge_keys`), ``ecount`` faces per edge; the pairs must be two edges apart
+    and pass `link_ok`, so the only merging edges are (b,c) into (a,c) for the apexes c.
+    ``collapsed`` (j,3): the faces that vanished, already remapped (two corners equal a, one is an apex).
+    Returns (E', ecount', keys', src): the same as `edges` on the contracted faces would give, and for
+    each new edge the index of an old edge it continues (its cost is stale only if it touches an a).
+    """
+    S = len(a)
+    isb = np.zeros(n, bool)
+    isb[b] = True
+    moved = isb[E[:, 0]] | isb[E[:, 1]]
+    mi, ri = np.flatnonzero(moved), np.flatnonzero(~moved)
+    # apexes of each pair, from its vanished faces (at most two)
+    dup01 = collapsed[:, 0] == collapsed[:, 1]
+    av = np.where(dup01, collapsed[:, 0], collapsed[:, 2])
+    apex_v = np.where(dup01, collapsed[:, 2], np.where(collapsed[:, 1] == collapsed[:, 2], collapsed[:, 0],
+                                                        collapsed[:, 1]))
+    owner = np.full(n, -1, np.int64)
+    owner[a] = np.arange(S)
+    s_c = owner[av]
+    apex1 = np.full(S, -1, np.int64)
+    apex2 = np.full(S, -1, np.int64)
+    apex1[s_c] = apex_v
+    second = apex_v != apex1[s_c]
+    apex2[s_c[second]] = apex_v[second]
+    # the moved edges (b, c): the collapsed one (c = a), merging ones (c an apex), and re-keyed ones
+    e = E[mi]
+    b_first = isb[e[:, 0]]
+    bv = np.where(b_first, e[:, 0], e[:, 1]).astype(np.int64)
+    c = np.where(b_first, e[:, 1], e[:, 0]).astype(np.int64)
+    owner[b] = np.arange(S)
+    s = owner[bv]
+    to = a[s].astype(np.int64)
+    merge = (c == apex1[s]) | (c == apex2[s])
+    fresh = (c != to) & ~merge
+    rkeys, rcount = keys[ri], ecount[ri].copy()
+    mk = edge_keys(to[merge], c[merge], n)
+    at = np.searchsorted(rkeys, mk)
+    rcount[at] += ecount[mi[merge]] - 2  # (a,c) loses the vanished face and gains (b,c)'s others
+    live = rcount > 0
+    ri, rkeys, rcount = ri[live], rkeys[live], rcount[live]
+    fk = edge_keys(to[fresh], c[fresh], n)
+    order = np.argsort(fk)
+    fk, fsrc, fcount = fk[order], mi[fresh][order], ecount[mi[fresh]][order]
+    # merge the two sorted runs
+    total = len(rkeys) + len(fk)
+    is_new = np.zeros(total, bool)
+    is_new[np.searchsorted(rkeys, fk) + np.arange(len(fk))] = True
+    out_keys = np.empty(total, np.int64)
+    out_keys[is_new], out_keys[~is_new] = fk, rkeys
+    out_count = np.empty(total, ecount.dtype)
+    out_count[is_new], out_count[~is_new] = fcount, rcount
+    src = np.empty(total, np.int64)
+    src[is_new], src[~is_new] = fsrc, ri
+    Eo = np.empty((total, 2), E.dtype)
+    Eo[~is_new] = E[ri]
+    Eo[is_new, 0], Eo[is_new, 1] = fk // n, fk % n
+    return Eo, out_count, out_keys, src

@@ -218,3 +218,74 @@ def test_face_flips_on_a_fan():
     assert not flipped([0.1, 0.05, 0.0]).any()
     on_rim = 0.5 * (V[1] + V[2])  # on the line of face 0's far edge
     assert flipped(on_rim)[0]
+
+
+def _random_quadrics(k):
+    """k random positive semi-definite packed quadrics (sums of a few random planes, random frames)."""
+    out = []
+    for _ in range(k):
+        nrm = rng.normal(size=(4, 3))
+        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+        out.append(_quadric_in_frame(nrm, rng.normal(size=(4, 3)), rng.normal(size=3)))
+    return np.array(out)
+
+
+def test_indexed_placement_matches_per_pair_placement():
+    """place_pairs (gathers rows of VQ, one stacked output) equals `place` on the gathered inputs, and
+    merged_quadrics equals Q1 + Q2 re-expressed at x: Q(0) = Q1(x − p1) + Q2(x − p2)."""
+    with jax.enable_x64(True):
+        n, K = 40, 64
+        V, Q = rng.normal(size=(n, 3)), _random_quadrics(n)
+        VQ = np.concatenate([V, Q], 1)
+        P = rng.integers(0, n, (K, 2))
+        args = (np.asarray(False), np.asarray(1e-5), np.asarray(2.0))
+        out = np.asarray(placement.place_pairs(jnp.asarray(VQ), jnp.asarray(P), *args))
+        x, cost, branch, _ = (np.asarray(o) for o in placement.place(
+            Q[P[:, 0]], Q[P[:, 1]], V[P[:, 0]], V[P[:, 1]], *args))
+        np.testing.assert_allclose(out[:3].T, x, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(out[3], cost, rtol=1e-12, atol=1e-12)
+        assert np.array_equal(out[4].astype(int), branch)
+        assert len(set(branch.tolist())) > 1  # several branches exercised
+        qm = np.asarray(placement.merged_quadrics(jnp.asarray(VQ), jnp.asarray(P), jnp.asarray(x)))
+        for i in range(K):
+            a, b = P[i]
+            ref = (qd.evaluate(jnp.asarray(Q[a]), jnp.asarray(x[i] - V[a]))
+                   + qd.evaluate(jnp.asarray(Q[b]), jnp.asarray(x[i] - V[b])))
+            np.testing.assert_allclose(qm[i, 9], ref, rtol=1e-9, atol=1e-12)
+            u = rng.normal(size=3)  # and anywhere else
+            ref_u = (qd.evaluate(jnp.asarray(Q[a]), jnp.asarray(x[i] + u - V[a]))
+                     + qd.evaluate(jnp.asarray(Q[b]), jnp.asarray(x[i] + u - V[b])))
+            np.testing.assert_allclose(qd.evaluate(jnp.asarray(qm[i]), jnp.asarray(u)), ref_u, rtol=1e-9)
+
+
+def test_indexed_flips_match_numpy_reference():
+    """face_flips_at (corners and reference normals gathered in the kernel) against numpy in float64."""
+    with jax.enable_x64(True):
+        n, K = 30, 300
+        V = np.concatenate([rng.normal(size=(n, 3)), rng.normal(size=(n, 10))], 1)  # extra columns ignored
+        faces = np.array([rng.choice(n, 3, replace=False) for _ in range(K)])
+        k = rng.integers(0, 3, K)
+        x = rng.normal(size=(K, 3))
+        N0 = rng.normal(size=(50, 3))
+        fids = rng.integers(0, 50, K)
+        got = np.asarray(flips.face_flips_at(jnp.asarray(V), jnp.asarray(N0), jnp.asarray(faces),
+                                             jnp.asarray(fids), jnp.asarray(k), jnp.asarray(x), 0.0))
+        p = V[faces][:, :, :3]
+        q = p.copy()
+        q[np.arange(K), k] = x
+        n0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        n1 = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+        ref = (np.sum(n0 * n1, 1) <= 0) | (np.sum(N0[fids] * n1, 1) <= 0)
+        assert np.array_equal(got, ref)
+        assert 0 < got.sum() < K
+
+
+def test_set_rows_updates_in_place_and_drops_padding():
+    from qemjax._schedulers.common import set_rows
+
+    A = jnp.zeros((10, 4), jnp.float32)
+    idx = np.array([7, 2])
+    rows = np.arange(8, dtype=np.float32).reshape(2, 4)
+    A = np.asarray(set_rows(A, idx, rows, size=4))  # two padding rows point past the end
+    assert np.array_equal(A[[7, 2]], rows)
+    assert np.count_nonzero(A) == 7  # nothing else written (rows has one zero)

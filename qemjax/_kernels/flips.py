@@ -4,6 +4,8 @@ A contraction moves its endpoints to x. Every surviving face around them (one th
 endpoints) has one corner moved; the contraction is forbidden if any such face's normal turns past the
 threshold: n_before·n_after ≤ cos_max·|n_before||n_after| (default cos_max = 0: any sign flip, and a
 face collapsing to zero area or to a sliver, are forbidden).
+
+As in `placement`, the arithmetic runs on lists of component arrays so XLA fuses it into one loop.
 """
 from __future__ import annotations
 
@@ -13,31 +15,67 @@ import jax.numpy as jnp
 SLIVER = 1e-6  # |n|/longest² (≈ sine of the smallest angle) under which a moved face counts as collapsed
 
 
+def _sub(u, v):
+    return [u[i] - v[i] for i in range(3)]
+
+
+def _dot(u, v):
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+def _cross(u, v):
+    return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
+def _normal(p0, p1, p2):
+    return _cross(_sub(p1, p0), _sub(p2, p0))
+
+
+def _flips(p, k, x, cos_max, ref):
+    """Core on component lists: p = [p0, p1, p2] corners, each [x, y, z]; k corner index array;
+    x [x, y, z]; ref [x, y, z] or None. Returns a bool array."""
+    n0 = _normal(*p)
+    q = [[jnp.where(k == c, x[i], p[c][i]) for i in range(3)] for c in range(3)]
+    n1 = _normal(*q)
+    l1 = jnp.sqrt(_dot(n1, n1))
+    bad = _dot(n0, n1) <= cos_max * jnp.sqrt(_dot(n0, n0)) * l1
+    # sliver guard: float32 rounding can leave a "collinear" result a tiny positive normal
+    e = [_sub(q[1], q[0]), _sub(q[2], q[1]), _sub(q[0], q[2])]
+    longest2 = jnp.maximum(jnp.maximum(_dot(e[0], e[0]), _dot(e[1], e[1])), _dot(e[2], e[2]))
+    bad = bad | ((l1 <= SLIVER * longest2) & (cos_max > -1.0))
+    if ref is not None:
+        bad = bad | (_dot(ref, n1) <= cos_max * jnp.sqrt(_dot(ref, ref)) * l1)
+    return bad
+
+
 def moved_corner_flips(p, k, x, cos_max, ref=None):
     """Does moving corner k (…) int of triangles p (…,3,3) to x (…,3) turn its normal past the
     threshold? Returns (…) bool; a face collapsing to zero area counts as flipped when cos_max ≥ 0.
     With ``ref`` (…,3), the new normal must also stay within the threshold of ``ref`` (the normal of the
     input face this face continues), so that small turns cannot add up to a flip over many rounds."""
-    n0 = jnp.cross(p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :])
-    sel = (jnp.arange(3) == k[..., None])[..., None]
-    q = jnp.where(sel, x[..., None, :], p)
-    n1 = jnp.cross(q[..., 1, :] - q[..., 0, :], q[..., 2, :] - q[..., 0, :])
-    d = jnp.sum(n0 * n1, -1)
-    l1 = jnp.linalg.norm(n1, axis=-1)
-    bad = d <= cos_max * jnp.linalg.norm(n0, axis=-1) * l1
-    # sliver guard: float32 rounding can leave a "collinear" result a tiny positive normal
-    e = jnp.stack([q[..., 1, :] - q[..., 0, :], q[..., 2, :] - q[..., 1, :], q[..., 0, :] - q[..., 2, :]], -2)
-    longest2 = jnp.max(jnp.sum(e * e, -1), -1)
-    bad |= (l1 <= SLIVER * longest2) & (cos_max > -1.0)
-    if ref is not None:
-        bad |= jnp.sum(ref * n1, -1) <= cos_max * jnp.linalg.norm(ref, axis=-1) * l1
-    return bad
+    pc = [[p[..., c, i] for i in range(3)] for c in range(3)]
+    xc = [x[..., i] for i in range(3)]
+    rc = None if ref is None else [ref[..., i] for i in range(3)]
+    return _flips(pc, k, xc, cos_max, rc)
 
 
 @jax.jit
 def face_flips(p, k, x, mask, ref, cos_max):
     """Per face: does moving corner k (K,) of triangle p (K,3,3) to x (K,3) flip it? (K,) bool."""
     return moved_corner_flips(p, k, x, cos_max, ref) & mask
+
+
+@jax.jit
+def face_flips_at(V, N0, faces, fids, k, x, cos_max):
+    """`face_flips` with the inputs gathered here: faces (K,3) index rows of V (N,≥3) (columns 0-2 are
+    positions); k (K,) the moving corner, x (K,3) where it goes; the reference normal of face i is
+    N0[fids[i]]. Indices are clipped, not checked: padding rows give meaningless results to slice off.
+    Returns (K,) bool."""
+    cols = [jnp.take(V, faces[:, c], axis=0, mode="clip")[:, :3].T for c in range(3)]
+    ref = jnp.take(N0, fids, axis=0, mode="clip").T
+    cols, xt, ref = jax.lax.optimization_barrier((cols, x.T, ref))
+    p = [[cols[c][i] for i in range(3)] for c in range(3)]
+    return _flips(p, k, [xt[i] for i in range(3)], cos_max, [ref[i] for i in range(3)])
 
 
 @jax.jit

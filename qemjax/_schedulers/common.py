@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -36,9 +37,10 @@ def pad_rows(a: np.ndarray, size: int, fill=0) -> np.ndarray:
     return out
 
 
-def chunks(arr: np.ndarray, fill=0):
-    """Split rows into equal padded pieces of a bucketed size (see `chunk_size`): yields (start, piece)."""
-    size = chunk_size(len(arr))
+def chunks(arr: np.ndarray, fill=0, size: int | None = None):
+    """Split rows into equal padded pieces of a bucketed size (see `chunk_size`; or exactly ``size``):
+    yields (start, piece)."""
+    size = size or chunk_size(len(arr))
     for s in range(0, max(len(arr), 1), size):
         yield s, pad_rows(arr[s:s + size], size, fill)
 
@@ -71,6 +73,19 @@ class Timer:
 
 
 _place_local = jax.jit(placement.place)
+
+
+@functools.partial(jax.jit, donate_argnums=0)
+def _set_rows(A, idx, rows):
+    return A.at[idx].set(rows, mode="drop")
+
+
+def set_rows(A, idx: np.ndarray, rows: np.ndarray, size: int = 4096):
+    """A[idx] = rows for a device array A, updated in place (donated), in fixed-size pieces: padding
+    indices point past the end and are dropped. Returns the new A (the old handle is invalid)."""
+    for (_, ii), (_, rr) in zip(chunks(idx.astype(np.int32), fill=len(A), size=size), chunks(rows, size=size)):
+        A = _set_rows(A, ii, rr)
+    return A
 
 
 def place_gathered(q1, q2, p1, p2, settings: Settings):

@@ -1,12 +1,15 @@
 """Independent-set scheduler: many non-interacting contractions per round.
 
 A round:
-1. cost every current edge with the batched placement kernel (fixed-size chunks: one compilation);
+1. cost the current edges with the batched placement kernel (fixed-size chunks: one compilation per
+   size); only pairs at vertices the last round moved are re-costed, the rest keep their numbers;
 2. select, in passes, pairs that are the cheapest among all candidate pairs touching their endpoints'
    closed 1-rings (ties broken by pair index through an int64 key), so no two selected pairs share a
    vertex, a face or a 1-ring neighbour; validate them (flip kernel, link test); invalid ones leave the
    candidate set, valid ones lock their 1-rings, and the next pass selects among what is still free;
-3. contract the accepted set at once (vectorised remap, quadric sums, degenerate-face removal).
+3. contract the accepted set at once (vectorised remap, quadric sums, degenerate-face removal); in
+   manifold mode the sorted edge list is updated through the contractions (`topo.contract_edges`)
+   rather than rebuilt from the faces.
 Because accepted contractions are two edges apart, the validity computed for each stays true when all
 happen together. The last round takes only as many, in cost order, as the exact face target allows.
 """
@@ -21,12 +24,15 @@ import numpy as np
 
 from .. import _topology as topo
 from .._kernels import flips, placement
-from .common import DTYPE, Settings, Timer, bucket, chunks, pad_rows
+from .common import DTYPE, Settings, Timer, bucket, chunks, pad_rows, set_rows
 
 MAX_PASSES = 8
+PASS_YIELD = 0.1  # stop a round's passes once one accepts under this fraction of what the round took
 GATE = 1.5  # take pairs up to GATE × the cost of the k-th cheapest candidate, where
-GATE_FRACTION = 0.05  # k = min(contractions still needed, GATE_FRACTION × live pairs)
+GATE_FRACTION = 0.05  # k = min(contractions still needed / TAIL, GATE_FRACTION × live pairs)
+TAIL = 1  # near the target, a round takes about 1/TAIL of the contractions still needed
 FREE_COST = 1e-10  # costs below this (squared, unit extent) always pass the gate: flat regions
+MERGE_CHUNK = 4096
 NO_KEY = np.iinfo(np.int64).max
 
 
@@ -41,22 +47,28 @@ def _sort_keys(cost: np.ndarray) -> np.ndarray:
     return (bits << 32) | h.astype(np.int64)
 
 
-def _place(Vd, Qd, P, settings, outputs=(0, 1)):
-    """Placement outputs (x, cost, branch, qsum; those named in ``outputs``) for index pairs P (K,2)."""
+def _place(VQd, P, settings):
+    """Placement x (K,3), cost (K,), branch (K,) int8 for index pairs P (K,2) into device rows VQd."""
     args = settings.kernel_args()
-    outs = [placement.place_pairs(Vd, Qd, part, *args) for _, part in chunks(P.astype(np.int32))]
-    return [np.concatenate([np.asarray(o[k]) for o in outs])[: len(P)] for k in outputs]
+    outs = [placement.place_pairs(VQd, part, *args) for _, part in chunks(P.astype(np.int32))]
+    out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else np.zeros((5, 0), DTYPE)
+    return np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8)
 
 
-def _flip_bad(V, F, corner, owner, N0, x, S, settings):
+def _merged(VQd, P, x):
+    """(K,10) merged quadrics of pairs P (K,2) in the frames of their targets x (K,3). One chunk shape
+    (MERGE_CHUNK) whatever K: a few more calls in early rounds, one compilation."""
+    outs = [placement.merged_quadrics(VQd, pp, xx) for (_, pp), (_, xx)
+            in zip(chunks(P.astype(np.int32), size=MERGE_CHUNK), chunks(x, size=MERGE_CHUNK))]
+    return np.concatenate([np.asarray(o) for o in outs])[: len(P)]
+
+
+def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, settings):
     """(S,) bool: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
-    N0 (k,3): the input normals of those faces. Faces are tested in fixed chunks by the kernel."""
+    fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks."""
     cos_max = np.asarray(settings.cos_max, DTYPE)
-    outs = []
-    parts = zip(chunks(V[F]), chunks(corner.astype(np.int32)), chunks(x[owner]), chunks(N0))
-    for (s, pp), (_, kk), (_, xx), (_, rr) in parts:
-        mask = np.arange(len(pp)) < len(F) - s
-        outs.append(flips.face_flips(pp, kk, xx, mask, rr, cos_max))
+    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)), chunks(x[owner]))
+    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max) for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
     bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
     res = np.zeros(S, bool)
     res[owner[bad]] = True
@@ -74,34 +86,40 @@ def _select(E, key, cand, valid, need, n, validate, F):
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
     1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
     """
-    def working_sets(avail, one, fsub):
-        """Pairs with an available endpoint (locking, link test), pairs with both (selection), faces
-        with an available corner (validation), narrowed from the previous sets."""
-        Eo = E[one]
+    def narrow(avail, ws):
+        """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
+        (locking, link test) and their rows, which of those have both endpoints available (selection),
+        faces with an available corner (validation) and their rows."""
+        one, Eo, _, fsub, Fo = ws
         a0, a1 = avail[Eo[:, 0]], avail[Eo[:, 1]]
-        ff = avail[F[fsub]]
-        return one[a0 | a1], one[a0 & a1], fsub[ff[:, 0] | ff[:, 1] | ff[:, 2]]
+        k1 = a0 | a1
+        ff = avail[Fo]
+        kf = ff[:, 0] | ff[:, 1] | ff[:, 2]
+        return one[k1], Eo[k1], (a0 & a1)[k1], fsub[kf], Fo[kf]
 
     def endpoints(mask):
         v = np.zeros(n, bool)
         v[E[np.flatnonzero(mask)].reshape(-1)] = True
         return v
 
+    everything = (np.arange(len(E)), E, None, np.arange(len(F)), F)
     free = np.ones(n, bool)
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
-    one, both, fsub = working_sets(active, np.arange(len(E)), np.arange(len(F)))
+    ws = narrow(active, everything)
     accepted, rejected = [], []
     extra = np.zeros(len(E), np.int64)
     widened = False
+    n_acc = 0
     for p in range(MAX_PASSES):
-        Eb = E[both]
+        one, Eo, bmask, fsub, Fo = ws
+        both, Eb = one[bmask], Eo[bmask]
         live = cand[both]
         if not live.any():
             if not any(a.size for a in accepted) and not widened and valid.any():
                 cand, widened = valid.copy(), True  # everything under the gate was invalid: widen it
                 active = endpoints(cand) & free
-                one, both, fsub = working_sets(active, np.arange(len(E)), np.arange(len(F)))
+                ws = narrow(active, everything)
                 continue
             break
         kl = np.where(live, key[both], NO_KEY)
@@ -114,7 +132,7 @@ def _select(E, key, cand, valid, need, n, validate, F):
         sel = both[live & (kl == m2[Eb[:, 0]]) & (kl == m2[Eb[:, 1]])]
         if sel.size == 0:
             break
-        ok, extra_sel = validate(E[sel], sel, F[fsub], fsub, E[one])
+        ok, extra_sel = validate(E[sel], sel, Fo, fsub, Eo)
         extra[sel] = extra_sel
         cand[sel[~ok]] = valid[sel[~ok]] = False
         rejected.append(sel[~ok])
@@ -123,12 +141,12 @@ def _select(E, key, cand, valid, need, n, validate, F):
         # lock the closed 1-rings of accepted endpoints; shrink the working sets to what is free
         lock = np.zeros(n, bool)
         lock[E[good].reshape(-1)] = True
-        Eo = E[one]
         ring = lock[Eo[:, 0]] | lock[Eo[:, 1]]
         free[Eo[ring].reshape(-1)] = False
-        one, both, fsub = working_sets(active & free, one, fsub)
-        if good.size * 50 < need // 2 and p > 2:
-            break
+        ws = narrow(active & free, ws)
+        n_acc += good.size
+        if good.size < PASS_YIELD * n_acc or (good.size * 50 < need // 2 and p > 2):
+            break  # later passes would add little: leave the rest to the next round
     cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64)  # noqa: E731
     return cat(accepted), cat(rejected), extra
 
@@ -152,8 +170,8 @@ def _validate(P, idx, Fs, fs, Efree, *, ctx):
     Fs (rows fs of the current faces) holds every face around them, Efree every pair at them."""
     tv = time.perf_counter()
     rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
-    N0 = ctx.N0[ctx.fid[fs[rows]]]
-    ok = ~_flip_bad(ctx.V, Fs[rows], corner, owner, N0, ctx.x[idx], len(P), ctx.settings)
+    ok = ~_flip_bad(ctx.VQd, ctx.N0d, Fs[rows], ctx.fid[fs[rows]], corner, owner, ctx.x[idx], len(P),
+                    ctx.settings)
     gone = topo.coincidence_count(G, owner, len(P))
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
         ok &= (gone == 0) & topo.link_ok(P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg)
@@ -188,8 +206,10 @@ def _touched_vertices(F, P, n):
 
 def _relink_faces(F, fid, kept, n, drop_coincident):
     """After remapping F (removed vertices replaced by kept ones): drop faces with a repeated corner,
-    and with ``drop_coincident`` resolve faces that now coincide (they all touch a kept vertex)."""
+    and with ``drop_coincident`` resolve faces that now coincide (they all touch a kept vertex).
+    Returns F, fid and the faces that collapsed (remapped, with a repeated corner)."""
     deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    collapsed = F[deg]
     F, fid = F[~deg], fid[~deg]
     if drop_coincident:
         merged = np.zeros(n, bool)
@@ -199,7 +219,7 @@ def _relink_faces(F, fid, kept, n, drop_coincident):
         keep = np.ones(len(F), bool)
         keep[rows[topo.coincident_removals(F[rows])]] = False
         F, fid = F[keep], fid[keep]
-    return F, fid
+    return F, fid, collapsed
 
 
 def _history_arrays(rounds):
@@ -218,13 +238,15 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     n, m = len(V), len(F)
     manifold = settings.preserve_topology
     n_cap = bucket(n + 1)
-    V = pad_rows(V.astype(DTYPE), n_cap)
-    Q = pad_rows(Q.astype(DTYPE), n_cap)
+    VQ = pad_rows(np.concatenate([V, Q], 1).astype(DTYPE), n_cap)  # rows [position, quadric]
+    V = VQ[:, :3]  # views
     F = F.astype(np.int32)  # halves the memory traffic of every gather (n < 2**31)
     extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
     fid = np.arange(len(F))  # input face each current face continues
     p = V[F]
     N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals, by fid
+    N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
+    VQd = jnp.asarray(VQ)  # device copy, updated row by row
     timer = Timer()
     history = []
     branches = np.zeros(3, np.int64)
@@ -232,31 +254,37 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     max_cost_used = 0.0
     faces_per_round = []
     invalid_keys = np.zeros(0, np.int64)  # edges found invalid whose neighbourhood has not changed since
-    prev = None  # (edge keys, targets, costs, moved vertices) of the last round
+    prev = None  # (edge keys, targets, costs, branches, moved vertices) of the last round
+    # manifold mode: the edges are updated through each round's contractions instead of rebuilt
+    incremental = manifold and len(extra_pairs) == 0
+    updated = None  # (E, ecount, keys, src) after the last round's contractions, when incremental
     while len(F) > target_faces:
         rounds += 1
         t0 = time.perf_counter()
-        E, ecount = topo.edges(F, n)
-        deg = topo.vertex_degree(E, n)
+        if updated is None:
+            E, ecount = topo.edges(F, n)
+            E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
+            ekeys, src = topo.edge_keys(E[:, 0], E[:, 1], n), None
+        else:
+            E, ecount, ekeys, src = updated
+        deg = topo.vertex_degree(E[ecount > 0], n)
         bvert = np.zeros(n, bool)
         bvert[E[ecount == 1].reshape(-1)] = True
-        E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
         timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
-        Vd, Qd = jnp.asarray(V), jnp.asarray(Q)
-        ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)
         # re-cost only pairs at vertices the last round moved; the rest keep their cost and target
         if prev is None:
-            x, cost = _place(Vd, Qd, E, settings)
+            x, cost, branch = _place(VQd, E, settings)
         else:
-            pkeys, px, pcost, changed = prev
+            pkeys, px, pcost, pbranch, changed = prev
             dirty = changed[E[:, 0]] | changed[E[:, 1]]
-            pos = np.minimum(np.searchsorted(pkeys, ekeys), len(pkeys) - 1)
-            dirty |= pkeys[pos] != ekeys
-            x, cost = px[pos], pcost[pos]
+            if src is None:  # rebuilt: find each edge's predecessor by key
+                src = np.minimum(np.searchsorted(pkeys, ekeys), len(pkeys) - 1)
+                dirty |= pkeys[src] != ekeys
+            x, cost, branch = px[src], pcost[src], pbranch[src]
             d = np.flatnonzero(dirty)
-            x[d], cost[d] = _place(Vd, Qd, E[d], settings)
+            x[d], cost[d], branch[d] = _place(VQd, E[d], settings)
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -271,12 +299,12 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             valid &= (ecount >= 1) & (ecount <= 2)
         if not valid.any():
             break
-        k = min(max(need // 2, 1), int(valid.sum()), max(int(GATE_FRACTION * n_alive), 1))
+        k = min(max(need // (2 * TAIL), 1), int(valid.sum()), max(int(GATE_FRACTION * n_alive), 1))
         kth = np.partition(cost[valid], k - 1)[k - 1]
         key = _sort_keys(cost)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
-        ctx = SimpleNamespace(V=V, N0=N0, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
+        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
                               settings=settings, timer=timer)
         acc, bad, extra = _select(E, key, cand, valid, need, n, functools.partial(_validate, ctx=ctx), F)
         rejected += bad.size
@@ -287,19 +315,21 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             invalid_keys = np.union1d(invalid_keys, ekeys[bad])
         if acc.size == 0:
             if bad.size:  # the invalid ones are out now: select again among the rest
+                updated = None
                 continue
             break
 
         t0 = time.perf_counter()
         P = E[acc]
         a, b = P[:, 0], P[:, 1]
-        xs, br, qs = _place(Vd, Qd, P, settings, (0, 2, 3))
-        V[a] = xs
-        Q[a] = qs
+        xs = x[acc]
+        VQ[a, 3:] = _merged(VQd, P, xs)
+        VQ[a, :3] = xs
+        VQd = set_rows(VQd, a, VQ[a], size=MERGE_CHUNK)
         changed = np.zeros(n, bool)
         changed[a] = True
-        prev = (ekeys, x, cost, changed)
-        branches += np.bincount(br, minlength=3)
+        prev = (ekeys, x, cost, branch, changed)
+        branches += np.bincount(branch[acc], minlength=3)
         max_cost_used = max(max_cost_used, float(cost[acc].max()))
         history.append((a.copy(), b.copy(), xs, cost[acc].astype(np.float64)))
         if invalid_keys.size:  # pairs whose faces change get another chance
@@ -307,7 +337,9 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             invalid_keys = invalid_keys[~(touched[invalid_keys // n] | touched[invalid_keys % n])]
         rep = np.arange(n, dtype=np.int32)
         rep[b] = a
-        F, fid = _relink_faces(rep[F], fid, a, n, drop_coincident=not manifold)
+        F, fid, collapsed = _relink_faces(rep[F], fid, a, n, drop_coincident=not manifold)
+        if incremental:
+            updated = topo.contract_edges(E, ecount, ekeys, a, b, collapsed, n)
         if len(extra_pairs):
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
@@ -323,4 +355,4 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     info = {"contractions": len(hist[0]), "rejected": rejected, "rounds": rounds, "max_cost": max_cost_used,
             "branches": branches, "faces_per_round": faces_per_round}
     info.update(timer.t)
-    return V[:n], Q[:n], Fout, alive, hist, info
+    return VQ[:n, :3], VQ[:n, 3:], Fout, alive, hist, info

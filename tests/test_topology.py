@@ -1,0 +1,63 @@
+"""Host-side connectivity: the incremental edge update against a rebuild from the faces."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from qemjax import _topology as topo
+from qemjax import shapes
+
+rng = np.random.default_rng(7)
+
+
+def _independent_pairs(E, ecount, n, F):
+    """Random edges, two edges apart from each other, that pass the manifold (link) test."""
+    adj_lock = np.zeros(n, bool)
+    nbrs = [[] for _ in range(n)]
+    for u, v in E:
+        nbrs[u].append(v)
+        nbrs[v].append(u)
+    chosen = []
+    for i in rng.permutation(len(E))[: len(E) // 4]:
+        u, v = E[i]
+        ring = [u, v] + nbrs[u] + nbrs[v]
+        if adj_lock[ring].any():
+            continue
+        chosen.append(i)
+        adj_lock[ring] = True
+    P = E[chosen]
+    deg = topo.vertex_degree(E, n)
+    bvert = np.zeros(n, bool)
+    bvert[E[ecount == 1].reshape(-1)] = True
+    ok = topo.link_ok(P, ecount[chosen], E, n, bvert, deg)
+    rows, _, owner, G = topo.contraction_faces(F, P, n)
+    ok &= topo.coincidence_count(G, owner, len(P)) == 0
+    return P[ok]
+
+
+@pytest.mark.parametrize("mesh", [shapes.bumpy_sphere(3), shapes.grid(12, hole=True), shapes.torus()],
+                         ids=["sphere", "grid-with-hole", "torus"])
+def test_incremental_edges_match_rebuild(mesh):
+    F = np.asarray(mesh.faces, np.int64)
+    n = len(mesh.vertices)
+    E, ecount = topo.edges(F, n)
+    keys = topo.edge_keys(E[:, 0], E[:, 1], n)
+    for _ in range(6):
+        P = _independent_pairs(E, ecount, n, F)
+        assert len(P) > 0
+        a, b = P[:, 0], P[:, 1]
+        rep = np.arange(n)
+        rep[b] = a
+        Fr = rep[F]
+        deg = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 0] == Fr[:, 2])
+        E2, c2, k2, src = topo.contract_edges(E, ecount, keys, a, b, Fr[deg], n)
+        F = Fr[~deg]
+        Eref, cref = topo.edges(F, n)
+        assert np.array_equal(E2, Eref) and np.array_equal(c2, cref)
+        assert np.array_equal(k2, topo.edge_keys(Eref[:, 0], Eref[:, 1], n))
+        # each edge continues an old one: the same edge, or (b, c) for (a, c)
+        old = E[src]
+        same = (old == E2).all(1)
+        moved = ~same
+        assert np.isin(old[moved], b).any(1).all()
+        E, ecount, keys = E2, c2, k2
