@@ -120,7 +120,7 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     # (pair, neighbour, side) for every edge leaving a labelled vertex
     l0, l1 = lab[E[:, 0]], lab[E[:, 1]]
     r = np.flatnonzero((l0 >= 0) | (l1 >= 0))
-    Er, l0, l1 = E[r], l0[r], l1[r]
+    Er, l0, l1 = np.take(E, r, axis=0), l0[r], l1[r]
     m0, m1 = l0 >= 0, l1 >= 0
     s_ = np.concatenate([l0[m0], l1[m1]])
     c_ = np.concatenate([Er[m0, 1], Er[m1, 0]]).astype(np.int64)
@@ -198,7 +198,7 @@ def contraction_faces(F: np.ndarray, pairs: np.ndarray, n: int):
     rows = np.flatnonzero((h[:, 0].astype(np.int8) + h[:, 1] + h[:, 2]) == 1)
     corner = np.argmax(h[rows], axis=1)
     owner = lf[rows, corner]
-    G = F[rows]
+    G = np.take(F, rows, axis=0)
     G[np.arange(len(rows)), corner] = pairs[owner, 0]
     return rows, corner, owner, G
 
@@ -216,68 +216,61 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     if dup_h.size == 0:  # the common case: no candidates at all
         return np.zeros(S, np.int64)
     idx = np.flatnonzero(np.isin(h, dup_h))
-    rm = coincident_removals(G[idx])
+    rm = coincident_removals(np.take(G, idx, axis=0))
     return np.bincount(owner[idx[rm]], minlength=S)
 
 
-def contract_edges(E: np.ndarray, ecount: np.ndarray, keys: np.ndarray, a: np.ndarray, b: np.ndarray,
-                   collapsed: np.ndarray, n: int):
+def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarray, collapsed: np.ndarray,
+                   n: int):
     """Edges after contracting vertex-disjoint manifold pairs (b into a), updated instead of rebuilt.
 
-    E (k,2) sorted by ``keys`` (`edge_keys`), ``ecount`` faces per edge; the pairs must be two edges apart
-    and pass `link_ok`, so the only merging edges are (b,c) into (a,c) for the apexes c.
+    E (k,2) edges (u < v) with ``ecount`` faces each, in any order; the pairs must be two edges apart and
+    pass `link_ok`, so the only edges that merge are (b,c) into (a,c) for the apexes c of each pair.
     ``collapsed`` (j,3): the faces that vanished, already remapped (two corners equal a, one is an apex).
-    Returns (E', ecount', keys', src): the same as `edges` on the contracted faces would give, and for
-    each new edge the index of an old edge it continues (its cost is stale only if it touches an a).
+    Returns (E', ecount', src): the edges `edges` would build from the contracted faces (u < v, same
+    counts) in a deterministic order that is not sorted, and for each the index of the old edge it
+    continues (the same edge, or (b,c) for (a,c)); only edges at an a have a stale cost.
     """
     S = len(a)
-    isb = np.zeros(n, bool)
-    isb[b] = True
-    moved = isb[E[:, 0]] | isb[E[:, 1]]
-    mi, ri = np.flatnonzero(moved), np.flatnonzero(~moved)
     # apexes of each pair, from its vanished faces (at most two)
     dup01 = collapsed[:, 0] == collapsed[:, 1]
     av = np.where(dup01, collapsed[:, 0], collapsed[:, 2])
     apex_v = np.where(dup01, collapsed[:, 2], np.where(collapsed[:, 1] == collapsed[:, 2], collapsed[:, 0],
-                                                        collapsed[:, 1]))
-    owner = np.full(n, -1, np.int64)
-    owner[a] = np.arange(S)
-    s_c = owner[av]
-    apex1 = np.full(S, -1, np.int64)
-    apex2 = np.full(S, -1, np.int64)
-    apex1[s_c] = apex_v
-    second = apex_v != apex1[s_c]
-    apex2[s_c[second]] = apex_v[second]
-    # the moved edges (b, c): the collapsed one (c = a), merging ones (c an apex), and re-keyed ones
-    e = E[mi]
-    b_first = isb[e[:, 0]]
-    bv = np.where(b_first, e[:, 0], e[:, 1]).astype(np.int64)
-    c = np.where(b_first, e[:, 1], e[:, 0]).astype(np.int64)
-    owner[b] = np.arange(S)
-    s = owner[bv]
+                                                        collapsed[:, 1])).astype(np.int64)
+    of_a = np.full(n, -1, np.int64)
+    of_a[a] = np.arange(S)
+    s_c = of_a[av]
+    apex = np.full((S, 2), -1, np.int64)
+    apex[s_c, 0] = apex_v
+    second = apex_v != apex[s_c, 0]
+    apex[s_c[second], 1] = apex_v[second]
+    # edges at b: the contracted one (c = a) disappears, (b, apex) merge into (a, apex), the rest move
+    of_b = np.full(n, -1, np.int64)
+    of_b[b] = np.arange(S)
+    sb0, sb1 = of_b[E[:, 0]], of_b[E[:, 1]]
+    mi = np.flatnonzero((sb0 >= 0) | (sb1 >= 0))
+    b_first = sb0[mi] >= 0
+    s = np.where(b_first, sb0[mi], sb1[mi])
+    c = np.where(b_first, E[mi, 1], E[mi, 0]).astype(np.int64)
     to = a[s].astype(np.int64)
-    merge = (c == apex1[s]) | (c == apex2[s])
+    which = np.where(c == apex[s, 0], 0, np.where(c == apex[s, 1], 1, -1))
+    merge = which >= 0
     fresh = (c != to) & ~merge
-    rkeys, rcount = keys[ri], ecount[ri].copy()
-    mk = edge_keys(to[merge], c[merge], n)
-    at = np.searchsorted(rkeys, mk)
-    rcount[at] += ecount[mi[merge]] - 2  # (a,c) loses the vanished face and gains (b,c)'s others
-    live = rcount > 0
-    ri, rkeys, rcount = ri[live], rkeys[live], rcount[live]
-    fk = edge_keys(to[fresh], c[fresh], n)
-    order = np.argsort(fk)
-    fk, fsrc, fcount = fk[order], mi[fresh][order], ecount[mi[fresh]][order]
-    # merge the two sorted runs
-    total = len(rkeys) + len(fk)
-    is_new = np.zeros(total, bool)
-    is_new[np.searchsorted(rkeys, fk) + np.arange(len(fk))] = True
-    out_keys = np.empty(total, np.int64)
-    out_keys[is_new], out_keys[~is_new] = fk, rkeys
-    out_count = np.empty(total, ecount.dtype)
-    out_count[is_new], out_count[~is_new] = fcount, rcount
-    src = np.empty(total, np.int64)
-    src[is_new], src[~is_new] = fsrc, ri
-    Eo = np.empty((total, 2), E.dtype)
-    Eo[~is_new] = E[ri]
-    Eo[is_new, 0], Eo[is_new, 1] = fk // n, fk % n
-    return Eo, out_count, out_keys, src
+    # (a, apex) loses the vanished face and gains the other faces of (b, apex)
+    delta = np.zeros((S, 2), np.int64)
+    delta[s[merge], which[merge]] = ecount[mi[merge]] - 2
+    count = ecount.copy()
+    sa0, sa1 = of_a[E[:, 0]], of_a[E[:, 1]]
+    ti = np.flatnonzero((sa0 >= 0) | (sa1 >= 0))
+    ta = np.where(sa0[ti] >= 0, sa0[ti], sa1[ti])
+    other = np.where(sa0[ti] >= 0, E[ti, 1], E[ti, 0])
+    hit = np.where(other == apex[ta, 0], 0, np.where(other == apex[ta, 1], 1, -1))
+    count[ti[hit >= 0]] += delta[ta[hit >= 0], hit[hit >= 0]]
+    E2 = E.copy()
+    mf = mi[fresh]
+    E2[mf, 0] = np.minimum(to[fresh], c[fresh])
+    E2[mf, 1] = np.maximum(to[fresh], c[fresh])
+    keep = count > 0
+    keep[mi[~fresh]] = False
+    src = np.flatnonzero(keep)
+    return np.take(E2, src, axis=0), count[src], src

@@ -28,22 +28,31 @@ from .common import DTYPE, Settings, Timer, bucket, chunks, pad_rows, set_rows
 
 MAX_PASSES = 8
 PASS_YIELD = 0.1  # stop a round's passes once one accepts under this fraction of what the round took
-GATE = 1.5  # take pairs up to GATE × the cost of the k-th cheapest candidate, where
-GATE_FRACTION = 0.05  # k = min(contractions still needed / TAIL, GATE_FRACTION × live pairs)
-TAIL = 1  # near the target, a round takes about 1/TAIL of the contractions still needed
+GATE = 1.2  # take pairs up to GATE × the cost of the k-th cheapest candidate, where
+GATE_FRACTION = 0.05  # k = min(contractions still needed / (2·TAIL), GATE_FRACTION × live pairs):
+TAIL = 10  # near the target a round takes at most about 1/(2·TAIL) of what is still needed
 FREE_COST = 1e-10  # costs below this (squared, unit extent) always pass the gate: flat regions
 MERGE_CHUNK = 4096
 NO_KEY = np.iinfo(np.int64).max
+# rows of 2-D arrays: numpy's A[idx] / A[mask] are several times slower than these (measured 4-15×)
+_take = functools.partial(np.take, axis=0)
 
 
-def _sort_keys(cost: np.ndarray) -> np.ndarray:
+def _keep(A, mask):
+    return np.compress(mask, A, axis=0)
+
+
+def _sort_keys(cost: np.ndarray, salt: int = 0) -> np.ndarray:
     """Unique, monotonic int64 keys: float32 cost bits (non-negative) in the high word and a fixed
     bijective scramble of the pair index in the low word. Ties (flat regions have many exact zeros)
     are broken deterministically but in a spatially incoherent order: breaking them by raw index would
     make neighbouring pairs form long descending chains with one local minimum each."""
     bits = np.ascontiguousarray(cost, dtype=np.float32).view(np.int32).astype(np.int64)
-    h = (np.arange(len(cost), dtype=np.uint64) * np.uint64(2654435761)) & np.uint64(0xFFFFFFFF)
-    h ^= h >> np.uint64(16)  # xorshift: still a bijection on 32 bits
+    m32 = np.uint64(0xFFFFFFFF)
+    h = (np.arange(len(cost), dtype=np.uint64) + np.uint64(salt)) & m32
+    for mult, shift in ((0x85EBCA6B, 16), (0xC2B2AE35, 13), (1, 16)):  # murmur3's fmix32: a bijection
+        h ^= h >> np.uint64(shift)
+        h = (h * np.uint64(mult)) & m32
     return (bits << 32) | h.astype(np.int64)
 
 
@@ -67,15 +76,16 @@ def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, settings):
     """(S,) bool: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
     fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks."""
     cos_max = np.asarray(settings.cos_max, DTYPE)
-    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)), chunks(x[owner]))
-    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max) for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
+    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)), chunks(np.take(x, owner, axis=0)))
+    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max)
+            for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
     bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
     res = np.zeros(S, bool)
     res[owner[bad]] = True
     return res
 
 
-def _select(E, key, cand, valid, need, n, validate, F):
+def _select(E, key, cand, need, n, validate, F):
     """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices
     and the extra faces (coincident ones) each accepted pair removes, (len(E),) int.
 
@@ -95,11 +105,11 @@ def _select(E, key, cand, valid, need, n, validate, F):
         k1 = a0 | a1
         ff = avail[Fo]
         kf = ff[:, 0] | ff[:, 1] | ff[:, 2]
-        return one[k1], Eo[k1], (a0 & a1)[k1], fsub[kf], Fo[kf]
+        return one[k1], _keep(Eo, k1), (a0 & a1)[k1], fsub[kf], _keep(Fo, kf)
 
     def endpoints(mask):
         v = np.zeros(n, bool)
-        v[E[np.flatnonzero(mask)].reshape(-1)] = True
+        v[_keep(E, mask).reshape(-1)] = True
         return v
 
     everything = (np.arange(len(E)), E, None, np.arange(len(F)), F)
@@ -109,18 +119,12 @@ def _select(E, key, cand, valid, need, n, validate, F):
     ws = narrow(active, everything)
     accepted, rejected = [], []
     extra = np.zeros(len(E), np.int64)
-    widened = False
     n_acc = 0
     for p in range(MAX_PASSES):
         one, Eo, bmask, fsub, Fo = ws
-        both, Eb = one[bmask], Eo[bmask]
+        both, Eb = one[bmask], _keep(Eo, bmask)
         live = cand[both]
         if not live.any():
-            if not any(a.size for a in accepted) and not widened and valid.any():
-                cand, widened = valid.copy(), True  # everything under the gate was invalid: widen it
-                active = endpoints(cand) & free
-                ws = narrow(active, everything)
-                continue
             break
         kl = np.where(live, key[both], NO_KEY)
         m1 = np.full(n, NO_KEY)
@@ -132,17 +136,17 @@ def _select(E, key, cand, valid, need, n, validate, F):
         sel = both[live & (kl == m2[Eb[:, 0]]) & (kl == m2[Eb[:, 1]])]
         if sel.size == 0:
             break
-        ok, extra_sel = validate(E[sel], sel, Fo, fsub, Eo)
+        ok, extra_sel = validate(_take(E, sel), sel, Fo, fsub, Eo)
         extra[sel] = extra_sel
-        cand[sel[~ok]] = valid[sel[~ok]] = False
+        cand[sel[~ok]] = False
         rejected.append(sel[~ok])
         good = sel[ok]
         accepted.append(good)
         # lock the closed 1-rings of accepted endpoints; shrink the working sets to what is free
         lock = np.zeros(n, bool)
-        lock[E[good].reshape(-1)] = True
+        lock[_take(E, good).reshape(-1)] = True
         ring = lock[Eo[:, 0]] | lock[Eo[:, 1]]
-        free[Eo[ring].reshape(-1)] = False
+        free[_keep(Eo, ring).reshape(-1)] = False
         ws = narrow(active & free, ws)
         n_acc += good.size
         if good.size < PASS_YIELD * n_acc or (good.size * 50 < need // 2 and p > 2):
@@ -170,8 +174,8 @@ def _validate(P, idx, Fs, fs, Efree, *, ctx):
     Fs (rows fs of the current faces) holds every face around them, Efree every pair at them."""
     tv = time.perf_counter()
     rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
-    ok = ~_flip_bad(ctx.VQd, ctx.N0d, Fs[rows], ctx.fid[fs[rows]], corner, owner, ctx.x[idx], len(P),
-                    ctx.settings)
+    ok = ~_flip_bad(ctx.VQd, ctx.N0d, _take(Fs, rows), ctx.fid[fs[rows]], corner, owner, _take(ctx.x, idx),
+                    len(P), ctx.settings)
     gone = topo.coincidence_count(G, owner, len(P))
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
         ok &= (gone == 0) & topo.link_ok(P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg)
@@ -209,16 +213,16 @@ def _relink_faces(F, fid, kept, n, drop_coincident):
     and with ``drop_coincident`` resolve faces that now coincide (they all touch a kept vertex).
     Returns F, fid and the faces that collapsed (remapped, with a repeated corner)."""
     deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    collapsed = F[deg]
-    F, fid = F[~deg], fid[~deg]
+    collapsed = _keep(F, deg)
+    F, fid = _keep(F, ~deg), fid[~deg]
     if drop_coincident:
         merged = np.zeros(n, bool)
         merged[kept] = True
         mf = merged[F]
         rows = np.flatnonzero(mf[:, 0] | mf[:, 1] | mf[:, 2])
         keep = np.ones(len(F), bool)
-        keep[rows[topo.coincident_removals(F[rows])]] = False
-        F, fid = F[keep], fid[keep]
+        keep[rows[topo.coincident_removals(_take(F, rows))]] = False
+        F, fid = _keep(F, keep), fid[keep]
     return F, fid, collapsed
 
 
@@ -257,19 +261,20 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     prev = None  # (edge keys, targets, costs, branches, moved vertices) of the last round
     # manifold mode: the edges are updated through each round's contractions instead of rebuilt
     incremental = manifold and len(extra_pairs) == 0
-    updated = None  # (E, ecount, keys, src) after the last round's contractions, when incremental
+    updated = None  # (E, ecount, src) after the last round's contractions, when incremental
     while len(F) > target_faces:
         rounds += 1
         t0 = time.perf_counter()
         if updated is None:
             E, ecount = topo.edges(F, n)
             E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
-            ekeys, src = topo.edge_keys(E[:, 0], E[:, 1], n), None
+            src = None
         else:
-            E, ecount, ekeys, src = updated
-        deg = topo.vertex_degree(E[ecount > 0], n)
+            E, ecount, src = updated
+        ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)
+        deg = topo.vertex_degree(E if incremental else _keep(E, ecount > 0), n)
         bvert = np.zeros(n, bool)
-        bvert[E[ecount == 1].reshape(-1)] = True
+        bvert[_keep(E, ecount == 1).reshape(-1)] = True
         timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -282,9 +287,9 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             if src is None:  # rebuilt: find each edge's predecessor by key
                 src = np.minimum(np.searchsorted(pkeys, ekeys), len(pkeys) - 1)
                 dirty |= pkeys[src] != ekeys
-            x, cost, branch = px[src], pcost[src], pbranch[src]
+            x, cost, branch = _take(px, src), pcost[src], pbranch[src]
             d = np.flatnonzero(dirty)
-            x[d], cost[d], branch[d] = _place(VQd, E[d], settings)
+            x[d], cost[d], branch[d] = _place(VQd, _take(E, d), settings)
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -301,12 +306,12 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             break
         k = min(max(need // (2 * TAIL), 1), int(valid.sum()), max(int(GATE_FRACTION * n_alive), 1))
         kth = np.partition(cost[valid], k - 1)[k - 1]
-        key = _sort_keys(cost)
+        key = _sort_keys(cost, salt=rounds * 7919)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
         ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
                               settings=settings, timer=timer)
-        acc, bad, extra = _select(E, key, cand, valid, need, n, functools.partial(_validate, ctx=ctx), F)
+        acc, bad, extra = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx), F)
         rejected += bad.size
         acc = acc[np.argsort(key[acc], kind="stable")]
         acc = acc[_fits_target(ecount[acc] + extra[acc], need)]
@@ -314,18 +319,19 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         if bad.size:
             invalid_keys = np.union1d(invalid_keys, ekeys[bad])
         if acc.size == 0:
-            if bad.size:  # the invalid ones are out now: select again among the rest
-                updated = None
+            if bad.size:  # the invalid ones are out now: select again among the rest (same edges)
+                prev = (ekeys, x, cost, branch, np.zeros(n, bool))
+                updated = (E, ecount, np.arange(len(E))) if incremental else None
                 continue
             break
 
         t0 = time.perf_counter()
-        P = E[acc]
+        P = _take(E, acc)
         a, b = P[:, 0], P[:, 1]
-        xs = x[acc]
+        xs = _take(x, acc)
         VQ[a, 3:] = _merged(VQd, P, xs)
         VQ[a, :3] = xs
-        VQd = set_rows(VQd, a, VQ[a], size=MERGE_CHUNK)
+        VQd = set_rows(VQd, a, _take(VQ, a), size=MERGE_CHUNK)
         changed = np.zeros(n, bool)
         changed[a] = True
         prev = (ekeys, x, cost, branch, changed)
@@ -339,7 +345,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         rep[b] = a
         F, fid, collapsed = _relink_faces(rep[F], fid, a, n, drop_coincident=not manifold)
         if incremental:
-            updated = topo.contract_edges(E, ecount, ekeys, a, b, collapsed, n)
+            updated = topo.contract_edges(E, ecount, a, b, collapsed, n)
         if len(extra_pairs):
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
