@@ -283,7 +283,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             x, cost, branch = _place(VQd, E, settings)
         else:
             pkeys, px, pcost, pbranch, changed = prev
-            dirty = changed[E[:, 0]] | changed[E[:, 1]]
+            dirty = changed[E].any(1)
             if src is None:  # rebuilt: find each edge's predecessor by key
                 src = np.minimum(np.searchsorted(pkeys, ekeys), len(pkeys) - 1)
                 dirty |= pkeys[src] != ekeys

@@ -1,0 +1,161 @@
+"""Quality of the parallel scheduler against the greedy one (the quality reference), and its gate sweep.
+
+For every shared mesh (``meshes.py``) x ratio: ``target = max(4, round(ratio * faces_in))`` as in
+``bench_peers.py``; run ``qemjax.simplify`` with ``scheduler="greedy"`` and ``scheduler="parallel"`` and measure
+both with ``qemjax.metrics.evaluate`` (through ``bench_peers.evaluate``: default samples, seed 0). One CSV row
+per (mesh, ratio), and a markdown table with ``par vs greedy % = 100 * (rms_par / rms_greedy - 1)``; a summary
+line gives the worst percentage, how many cases are within +3 % and the parallel rounds summed over all cases.
+
+Greedy is slow and deterministic: its rows are cached in ``results/cache/greedy_rows.csv`` (git-ignored), keyed
+by mesh, ratio, target and a hash of ``GREEDY_SOURCES``, so a re-run only recomputes the parallel rows.
+
+``--set NAME=VALUE`` overrides a numeric module constant of ``qemjax._schedulers.parallel`` (GATE,
+GATE_FRACTION, FREE_COST, MAX_PASSES, ...) before anything runs; ``run`` reads them at call time. Their values
+go into every CSV row.
+
+Examples::
+
+    python experiments/parallel_vs_greedy.py
+    python experiments/parallel_vs_greedy.py --meshes cow stanford-bunny
+    python experiments/parallel_vs_greedy.py --set GATE=1.2 --set GATE_FRACTION=0.02 --out /tmp/g1.2_f0.02.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import bench_peers  # noqa: E402
+import meshes as bench_meshes  # noqa: E402
+
+RESULTS = HERE / "results"
+GREEDY_CACHE = bench_meshes.CACHE / "greedy_rows.csv"
+# globs in the qemjax package that is imported: everything the greedy scheduler runs
+GREEDY_SOURCES = ("_kernels/*.py", "_schedulers/greedy.py", "_schedulers/common.py", "_topology.py")
+TUNABLE = ("GATE", "GATE_FRACTION", "FREE_COST", "MAX_PASSES")  # always reported; --set takes any constant
+MEASURED = ("faces", "rounds", "time_s", "rms_rel", "hausdorff_rel")
+WITHIN_PCT = 3.0
+
+
+def source_hash(patterns=GREEDY_SOURCES) -> str:
+    """Hash of the greedy scheduler's sources (paths and contents), in the qemjax that is imported."""
+    import qemjax
+
+    package = Path(qemjax.__file__).parent
+    h = hashlib.sha256()
+    for path in sorted(p for pattern in patterns for p in package.glob(pattern)):
+        h.update(path.relative_to(package).as_posix().encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def apply_overrides(pairs: list[str]) -> dict:
+    """Set ``NAME=VALUE`` constants on qemjax._schedulers.parallel (cast to the constant's type); returns the
+    values of TUNABLE and of the overridden constants."""
+    from qemjax._schedulers import parallel
+
+    shown = [name for name in TUNABLE if hasattr(parallel, name)]
+    for pair in pairs:
+        name, _, value = pair.partition("=")
+        current = getattr(parallel, name, None) if name.isupper() else None
+        if not isinstance(current, (int, float)) or isinstance(current, bool) or not value:
+            raise SystemExit(f"--set expects NAME=VALUE with NAME a numeric constant such as {TUNABLE}, "
+                             f"got {pair!r}")
+        setattr(parallel, name, type(current)(float(value)))
+        shown += [name] if name not in shown else []
+    return {name: getattr(parallel, name) for name in shown}
+
+
+def measure(scheduler: str, mesh, target: int) -> dict:
+    out = bench_peers.run_qemjax(scheduler, mesh.V, mesh.F, target, repeats=1)
+    metrics = bench_peers.evaluate(mesh.V, mesh.F, out["V2"], out["F2"], target)
+    return {"faces": len(out["F2"]), "rounds": out["rounds"], "time_s": out["time_s"],
+            "rms_rel": metrics["rms_rel"], "hausdorff_rel": metrics["hausdorff_rel"]}
+
+
+def greedy_row(cache, mesh, ratio: float, target: int, key: str) -> dict:
+    """Greedy measurements from the cache, or computed and appended to it."""
+    import pandas as pd
+
+    if cache is not None:
+        hit = cache[(cache["mesh"] == mesh.name) & (cache["ratio"] == ratio) & (cache["target"] == target)
+                    & (cache["source_hash"] == key)]
+        if len(hit):
+            return hit.iloc[-1][list(MEASURED)].to_dict()
+    row = measure("greedy", mesh, target)
+    record = pd.DataFrame([{"mesh": mesh.name, "ratio": ratio, "target": target, "source_hash": key} | row])
+    GREEDY_CACHE.parent.mkdir(parents=True, exist_ok=True)
+    record.to_csv(GREEDY_CACHE, mode="a", header=not GREEDY_CACHE.exists(), index=False)
+    return row
+
+
+def markdown(df) -> str:
+    lines = ["| mesh | ratio | target | faces par/greedy | rms parallel | rms greedy | par vs greedy % | rounds |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in df.itertuples():
+        lines.append(f"| {r.mesh} | {r.ratio:g} | {r.target} | {r.faces_par}/{r.faces_greedy} | "
+                     f"{r.rms_par:.3e} | {r.rms_greedy:.3e} | {r.par_vs_greedy_pct:+.1f} | {r.rounds_par:.0f} |")
+    return "\n".join(lines)
+
+
+def summary(df, settings: dict) -> str:
+    pct = df["par_vs_greedy_pct"]
+    worst = df.loc[pct.idxmax()]
+    shown = " ".join(f"{k}={v:g}" for k, v in settings.items())
+    return (f"{shown}: worst {pct.max():+.1f} % ({worst['mesh']} @ {worst['ratio']:g}), "
+            f"{int((pct <= WITHIN_PCT).sum())}/{len(df)} within +{WITHIN_PCT:g} %, "
+            f"total parallel rounds {df['rounds_par'].sum():.0f}")
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--meshes", nargs="+", default=["all"], help="mesh names, or 'all' (every shared mesh)")
+    p.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="overrides",
+                   help=f"override a constant of qemjax._schedulers.parallel, e.g. {', '.join(TUNABLE)}")
+    p.add_argument("--out", type=Path, default=RESULTS / "parallel_vs_greedy.csv")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    import pandas as pd
+
+    args = parse_args(argv)
+    settings = apply_overrides(args.overrides)
+    names = bench_meshes.names() if args.meshes == ["all"] else list(args.meshes)
+    key = source_hash()
+    cache = pd.read_csv(GREEDY_CACHE) if GREEDY_CACHE.exists() else None
+
+    rows = []
+    for name in names:
+        mesh = bench_meshes.load(name)
+        for ratio in args.ratios:
+            target = max(4, round(ratio * mesh.n_faces))
+            greedy = greedy_row(cache, mesh, ratio, target, key)
+            par = measure("parallel", mesh, target)
+            row = {"mesh": name, "faces_in": mesh.n_faces, "ratio": ratio, "target": target}
+            row |= {f"{k.removesuffix('_rel')}_par": v for k, v in par.items()}
+            row |= {f"{k.removesuffix('_rel')}_greedy": v for k, v in greedy.items()}
+            row["par_vs_greedy_pct"] = 100 * (par["rms_rel"] / greedy["rms_rel"] - 1)
+            rows.append(row | settings)
+            print(f"{name:18s} {ratio:<5g} rms par {par['rms_rel']:.3e} greedy {greedy['rms_rel']:.3e} "
+                  f"({row['par_vs_greedy_pct']:+.1f} %), {par['rounds']:.0f} rounds", flush=True)
+
+    df = pd.DataFrame(rows)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    df.to_csv(args.out, index=False)
+    print()
+    print(markdown(df))
+    print()
+    print(summary(df, settings))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
