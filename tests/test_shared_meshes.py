@@ -23,3 +23,19 @@ def test_real_meshes_valid_at_ten_percent(name):
     # a closed mesh loses faces in pairs: an odd target is unreachable, the next count above is right
     want = r.stats["target_faces"] + (1 if closed_odd and name == "fandisk.obj" else 0)
     assert_valid(r, want, r.input_vertices, r.input_faces)
+
+
+def test_parallel_with_one_pair_per_round_is_greedy_on_rocker_arm(monkeypatch):
+    """The same equivalence on a real CAD-like mesh (720 contractions)."""
+    import numpy as np
+
+    from qemjax._schedulers import parallel
+
+    path = shared_mesh("rocker-arm-small.off")
+    g = qemjax.simplify(path, ratio=0.1, scheduler="greedy")
+    monkeypatch.setattr(parallel, "GATE", 1.0)
+    monkeypatch.setattr(parallel, "GATE_FRACTION", 1e-12)
+    monkeypatch.setattr(parallel, "FREE_COST", 0.0)
+    p = qemjax.simplify(path, ratio=0.1)
+    assert len(p.history.pairs) == len(g.history.pairs) > 500
+    assert np.array_equal(np.sort(p.history.pairs, 1), np.sort(g.history.pairs, 1))
