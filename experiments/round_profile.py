@@ -1,0 +1,66 @@
+"""Where the parallel scheduler's time goes, and how much each round removes.
+
+Runs ``qemjax.simplify`` twice on one mesh (the first call compiles; the second is reported) and prints the
+stage times from its stats (topology, kernels, selection with validation inside it, contraction, compile)
+and the fraction of faces each round removed. Appends one row per round to ``results/round_profile.csv``.
+
+    python experiments/round_profile.py --mesh armadillo-x16 --ratio 0.01
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import meshes as bench_meshes  # noqa: E402
+
+STAGES = ("topology_s", "kernels_s", "select_s", "validity_s", "contract_s")
+
+
+def main(argv=None) -> int:
+    import pandas as pd
+
+    import qemjax
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--mesh", default="armadillo-x16")
+    p.add_argument("--ratio", type=float, default=0.01)
+    p.add_argument("--out", type=Path, default=HERE / "results" / "round_profile.csv")
+    args = p.parse_args(argv)
+    mesh = bench_meshes.load(args.mesh)
+    target = max(4, round(args.ratio * mesh.n_faces))
+    cold = qemjax.simplify((mesh.V, mesh.F), target_faces=target)
+    t0 = time.perf_counter()
+    res = qemjax.simplify((mesh.V, mesh.F), target_faces=target)
+    wall = time.perf_counter() - t0
+    s = res.stats
+    faces = np.array([mesh.n_faces] + list(s["faces_per_round"]))
+    removed = 1 - faces[1:] / faces[:-1]
+    print(f"{args.mesh} -> {args.ratio:g}: {len(res.faces)} faces, {s['rounds']} rounds, warm wall {wall:.2f} s "
+          f"(run_s {s['run_s']:.2f}); cold call: {cold.stats['compilations']} compilations, "
+          f"compile_s {cold.stats['compile_s']:.2f}")
+    other = s["run_s"] - sum(s.get(k, 0.0) for k in STAGES if k != "validity_s")
+    for k in STAGES:
+        print(f"  {k:12s} {s.get(k, 0.0):6.2f} s" + ("  (inside select_s)" if k == "validity_s" else ""))
+    print(f"  {'other':12s} {other:6.2f} s  (input clean-up, quadrics, output)")
+    print("  removed per round: " + " ".join(f"{100 * r:.1f}" for r in removed) + " (% of faces)")
+    rows = pd.DataFrame({"mesh": args.mesh, "ratio": args.ratio, "round": np.arange(1, len(removed) + 1),
+                         "faces_after": faces[1:], "removed_fraction": removed})
+    for k in STAGES:
+        rows[k + "_total"] = s.get(k, 0.0)
+    rows["run_s"], rows["compile_s_cold"] = s["run_s"], cold.stats["compile_s"]
+    rows["compilations_cold"] = cold.stats["compilations"]
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    rows.to_csv(args.out, index=False)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
