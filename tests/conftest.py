@@ -17,6 +17,15 @@ def shared_mesh(name: str) -> Path:
     return p
 
 
+def one_pair_per_round(monkeypatch):
+    """Gate the parallel scheduler down to the single cheapest valid pair per round (no free pairs)."""
+    from qemjax._schedulers import parallel
+
+    monkeypatch.setattr(parallel, "GATE", 1.0)
+    monkeypatch.setattr(parallel, "GATE_FRACTION", 1e-12)
+    monkeypatch.setattr(parallel, "FREE_COST", 0.0)
+
+
 def face_normals(V, F):
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     return n / np.linalg.norm(n, axis=1, keepdims=True)

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import assert_valid, shared_mesh
+from conftest import assert_valid, one_pair_per_round, shared_mesh
 
 import qemjax
 
@@ -29,13 +29,9 @@ def test_parallel_with_one_pair_per_round_is_greedy_on_rocker_arm(monkeypatch):
     """The same equivalence on a real CAD-like mesh (720 contractions)."""
     import numpy as np
 
-    from qemjax._schedulers import parallel
-
     path = shared_mesh("rocker-arm-small.off")
     g = qemjax.simplify(path, ratio=0.1, scheduler="greedy")
-    monkeypatch.setattr(parallel, "GATE", 1.0)
-    monkeypatch.setattr(parallel, "GATE_FRACTION", 1e-12)
-    monkeypatch.setattr(parallel, "FREE_COST", 0.0)
+    one_pair_per_round(monkeypatch)
     p = qemjax.simplify(path, ratio=0.1)
     assert len(p.history.pairs) == len(g.history.pairs) > 500
     assert np.array_equal(np.sort(p.history.pairs, 1), np.sort(g.history.pairs, 1))

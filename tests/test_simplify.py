@@ -5,7 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import assert_valid
+from conftest import assert_valid, one_pair_per_round
 
 import qemjax
 from qemjax import shapes
@@ -217,22 +217,13 @@ def test_feature_edges_are_kept_like_boundaries():
         qemjax.simplify((V, F), target_faces=60, feature_edges=np.array([[0, 100]]))
 
 
-def _one_pair_per_round(monkeypatch):
-    """Gate the parallel scheduler down to the single cheapest valid pair per round."""
-    from qemjax._schedulers import parallel
-
-    monkeypatch.setattr(parallel, "GATE", 1.0)
-    monkeypatch.setattr(parallel, "GATE_FRACTION", 1e-12)
-    monkeypatch.setattr(parallel, "FREE_COST", 0.0)
-
-
 @pytest.mark.parametrize("seed", [0, 4])
 def test_parallel_with_one_pair_per_round_is_greedy(monkeypatch, seed):
     """Without cost ties (random bumps), the parallel scheduler gated to one pair per round makes the same
     contractions in the same order as the greedy queue: the two share their rules exactly."""
     mesh = shapes.bumpy_sphere(2, seed=seed)
     g = qemjax.simplify(mesh, target_faces=60, scheduler="greedy")
-    _one_pair_per_round(monkeypatch)
+    one_pair_per_round(monkeypatch)
     p = qemjax.simplify(mesh, target_faces=60)
     assert p.stats["rounds"] == len(p.history.pairs) == len(g.history.pairs)
     assert np.array_equal(np.sort(p.history.pairs, 1), np.sort(g.history.pairs, 1))

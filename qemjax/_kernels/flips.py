@@ -12,15 +12,13 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from . import quadrics as qd
+
 SLIVER = 1e-6  # |n|/longest² (≈ sine of the smallest angle) under which a moved face counts as collapsed
 
 
 def _sub(u, v):
     return [u[i] - v[i] for i in range(3)]
-
-
-def _dot(u, v):
-    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
 def _cross(u, v):
@@ -37,14 +35,14 @@ def _flips(p, k, x, cos_max, ref):
     n0 = _normal(*p)
     q = [[jnp.where(k == c, x[i], p[c][i]) for i in range(3)] for c in range(3)]
     n1 = _normal(*q)
-    l1 = jnp.sqrt(_dot(n1, n1))
-    bad = _dot(n0, n1) <= cos_max * jnp.sqrt(_dot(n0, n0)) * l1
+    l1 = jnp.sqrt(qd.dot(n1, n1))
+    bad = qd.dot(n0, n1) <= cos_max * jnp.sqrt(qd.dot(n0, n0)) * l1
     # sliver guard: float32 rounding can leave a "collinear" result a tiny positive normal
     e = [_sub(q[1], q[0]), _sub(q[2], q[1]), _sub(q[0], q[2])]
-    longest2 = jnp.maximum(jnp.maximum(_dot(e[0], e[0]), _dot(e[1], e[1])), _dot(e[2], e[2]))
+    longest2 = jnp.maximum(jnp.maximum(qd.dot(e[0], e[0]), qd.dot(e[1], e[1])), qd.dot(e[2], e[2]))
     bad = bad | ((l1 <= SLIVER * longest2) & (cos_max > -1.0))
     if ref is not None:
-        bad = bad | (_dot(ref, n1) <= cos_max * jnp.sqrt(_dot(ref, ref)) * l1)
+        bad = bad | (qd.dot(ref, n1) <= cos_max * jnp.sqrt(qd.dot(ref, ref)) * l1)
     return bad
 
 

@@ -15,38 +15,16 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from . import quadrics as qd
+
 SOLVE, SEGMENT, ENDPOINT = 0, 1, 2
-
-
-def _dot(u, v):
-    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
-
-
-def _matvec(q, u):
-    a00, a01, a02, a11, a12, a22 = q[:6]
-    return [a00 * u[0] + a01 * u[1] + a02 * u[2],
-            a01 * u[0] + a11 * u[1] + a12 * u[2],
-            a02 * u[0] + a12 * u[1] + a22 * u[2]]
-
-
-def _translate(q, d):
-    """Components of q re-expressed in the frame shifted by d (see `quadrics.translate`)."""
-    Ad = _matvec(q, d)
-    b = q[6:9]
-    c = q[9] + _dot(d, [Ad[i] + 2.0 * b[i] for i in range(3)])
-    return q[:6] + [b[i] + Ad[i] for i in range(3)] + [c]
-
-
-def _evaluate(q, u):
-    Au = _matvec(q, u)
-    return _dot(u, [Au[i] + 2.0 * q[6 + i] for i in range(3)]) + q[9]
 
 
 def _merged(q1, q2, p1, p2):
     """Midpoint, half edge vector and Q1+Q2 expressed in the midpoint's frame (component lists)."""
     half = [0.5 * (p2[i] - p1[i]) for i in range(3)]
     mid = [0.5 * (p1[i] + p2[i]) for i in range(3)]
-    t1, t2 = _translate(q1, half), _translate(q2, [-h for h in half])
+    t1, t2 = qd.translate_c(q1, half), qd.translate_c(q2, [-h for h in half])
     return mid, half, [t1[k] + t2[k] for k in range(10)]
 
 
@@ -68,13 +46,13 @@ def _place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     solvable = (det > cond_eps * fro * fro * fro) & (fro > tiny)
     inv = -1.0 / jnp.where(solvable, det, 1.0)
     u_opt = [adjb[i] * inv for i in range(3)]
-    hh = _dot(half, half)
+    hh = qd.dot(half, half)
     # |u_opt| <= max_shift·|p2 − p1| = 2·max_shift·|half|
-    solvable = solvable & (_dot(u_opt, u_opt) <= 4.0 * max_shift * max_shift * hh)
+    solvable = solvable & (qd.dot(u_opt, u_opt) <= 4.0 * max_shift * max_shift * hh)
 
     # best point on the segment: u = s·half, s ∈ [-1, 1]
-    hAh = _dot(half, _matvec(q, half))
-    bh = _dot(bv, half)
+    hAh = qd.dot(half, qd.matvec_c(q, half))
+    bh = qd.dot(bv, half)
     seg_ok = hAh > cond_eps * fro * hh
     s_seg = jnp.clip(-bh / jnp.where(seg_ok, hAh, 1.0), -1.0, 1.0)
     # endpoints and midpoint: Q(s·half) = s²·hAh + 2s·bh + c; ties prefer the midpoint, then v1
@@ -86,12 +64,8 @@ def _place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     branch = jnp.where(use_solve, SOLVE, jnp.where(use_seg, SEGMENT, ENDPOINT)).astype(jnp.int32)
     s = jnp.where(use_seg, s_seg, s_end)
     u = [jnp.where(use_solve, u_opt[i], s * half[i]) for i in range(3)]
-    cost = jnp.maximum(_evaluate(q, u), 0.0)
+    cost = jnp.maximum(qd.evaluate_c(q, u), 0.0)
     return [mid[i] + u[i] for i in range(3)], cost, branch, q, u
-
-
-def _cols(a, k):
-    return [a[..., i] for i in range(k)]
 
 
 def place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
@@ -103,9 +77,9 @@ def place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     Returns x (…,3) absolute position, cost (…) ≥ 0 (squared distance, units of p), branch (…) int32,
     qsum (…,10) the summed quadric in the frame of x.
     """
-    x, cost, branch, q, u = _place(_cols(q1, 10), _cols(q2, 10), _cols(p1, 3), _cols(p2, 3),
+    x, cost, branch, q, u = _place(qd.cols(q1, 10), qd.cols(q2, 10), qd.cols(p1, 3), qd.cols(p2, 3),
                                    endpoints_only, cond_eps, max_shift)
-    return jnp.stack(x, -1), cost, branch, jnp.stack(_translate(q, u), -1)
+    return jnp.stack(x, -1), cost, branch, jnp.stack(qd.translate_c(q, u), -1)
 
 
 def _gather_rows(VQ, pairs):
@@ -136,4 +110,4 @@ def merged_quadrics(VQ, pairs, x):
     """(K,10): Q1+Q2 of index pairs (K,2) expressed in the frame of their new positions x (K,3)."""
     q1, q2, p1, p2 = _gather_rows(VQ, pairs)
     mid, _, q = _merged(q1, q2, p1, p2)
-    return jnp.stack(_translate(q, [x[:, i] - mid[i] for i in range(3)]), -1)
+    return jnp.stack(qd.translate_c(q, [x[:, i] - mid[i] for i in range(3)]), -1)

@@ -39,17 +39,47 @@ def plane_quadric(n, w):
     return w[..., None] * jnp.stack([x * x, x * y, x * z, y * y, y * z, z * z, zero, zero, zero, zero], -1)
 
 
+def dot(u, v):
+    """u·v for 3-vectors given as lists of component arrays."""
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+def matvec_c(q, u):
+    """A·u on component lists: q (10 arrays), u (3 arrays). Written out elementwise: XLA fuses it into
+    one loop (a batched 3×3 dot or column slices of (…,10) arrays are several times slower on the CPU)."""
+    a00, a01, a02, a11, a12, a22 = q[:6]
+    return [a00 * u[0] + a01 * u[1] + a02 * u[2],
+            a01 * u[0] + a11 * u[1] + a12 * u[2],
+            a02 * u[0] + a12 * u[1] + a22 * u[2]]
+
+
+def evaluate_c(q, u):
+    """Q(u) on component lists."""
+    Au = matvec_c(q, u)
+    return dot(u, [Au[i] + 2.0 * q[6 + i] for i in range(3)]) + q[9]
+
+
+def translate_c(q, d):
+    """`translate` on component lists."""
+    Ad = matvec_c(q, d)
+    b = q[6:9]
+    c = q[9] + dot(d, [Ad[i] + 2.0 * b[i] for i in range(3)])
+    return q[:6] + [b[i] + Ad[i] for i in range(3)] + [c]
+
+
+def cols(a, k):
+    """The k components of (…,k) as a list of (…) arrays."""
+    return [a[..., i] for i in range(k)]
+
+
 def matvec(q, u):
-    """A·u (…,3) for packed q (…,10), written out elementwise (a batched 3×3 dot is slow on CPU)."""
-    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
-    return jnp.stack([q[..., 0] * u0 + q[..., 1] * u1 + q[..., 2] * u2,
-                      q[..., 1] * u0 + q[..., 3] * u1 + q[..., 4] * u2,
-                      q[..., 2] * u0 + q[..., 4] * u1 + q[..., 5] * u2], -1)
+    """A·u (…,3) for packed q (…,10)."""
+    return jnp.stack(matvec_c(cols(q, 10), cols(u, 3)), -1)
 
 
 def evaluate(q, u):
     """Q(u) for q (…,10) and u (…,3) given in q's frame. Returns (…)."""
-    return jnp.sum(u * (matvec(q, u) + 2.0 * q[..., 6:9]), -1) + q[..., 9]
+    return evaluate_c(cols(q, 10), cols(u, 3))
 
 
 def translate(q, delta):
@@ -57,10 +87,7 @@ def translate(q, delta):
 
     With u = u' + delta: A' = A, b' = b + A·delta, c' = Q(delta).
     """
-    Ad = matvec(q, delta)
-    b = q[..., 6:9]
-    c2 = q[..., 9] + jnp.sum(delta * (Ad + 2.0 * b), -1)
-    return jnp.concatenate([q[..., :6], b + Ad, c2[..., None]], -1)
+    return jnp.stack(translate_c(cols(q, 10), cols(delta, 3)), -1)
 
 
 def face_normals(p0, p1, p2):
