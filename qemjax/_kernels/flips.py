@@ -51,10 +51,9 @@ def moved_corner_flips(p, k, x, cos_max, ref=None):
     threshold? Returns (…) bool; a face collapsing to zero area counts as flipped when cos_max ≥ 0.
     With ``ref`` (…,3), the new normal must also stay within the threshold of ``ref`` (the normal of the
     input face this face continues), so that small turns cannot add up to a flip over many rounds."""
-    pc = [[p[..., c, i] for i in range(3)] for c in range(3)]
-    xc = [x[..., i] for i in range(3)]
-    rc = None if ref is None else [ref[..., i] for i in range(3)]
-    return _flips(pc, k, xc, cos_max, rc)
+    pc = [qd.cols(p[..., c, :], 3) for c in range(3)]
+    rc = None if ref is None else qd.cols(ref, 3)
+    return _flips(pc, k, qd.cols(x, 3), cos_max, rc)
 
 
 @jax.jit
