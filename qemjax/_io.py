@@ -96,11 +96,28 @@ def as_arrays(mesh: Any) -> Mesh:
     return Mesh(V, F)
 
 
+def _row_hash(U: np.ndarray) -> np.ndarray:
+    """(k,) uint64 hash of the rows of a (k,c) uint64 array (equal rows, equal hashes)."""
+    h = np.zeros(len(U), np.uint64)
+    for j, mult in enumerate((0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9)[: U.shape[1]]):
+        h ^= U[:, j] * np.uint64(mult) + (h >> np.uint64(29))
+    return h
+
+
+def _maybe_repeated(h: np.ndarray) -> bool:
+    """False when the hashes are all different, which proves the hashed rows are (a cheap test: one
+    numpy sort; equal hashes need an exact check)."""
+    hs = np.sort(h)
+    return bool(np.any(hs[1:] == hs[:-1]))
+
+
 def weld(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """Merge vertices with identical coordinates. Returns (V', F', number merged).
 
     Kept vertices stay in first-occurrence order, so a mesh without duplicates is returned unchanged.
     """
+    if not _maybe_repeated(_row_hash((V + 0.0).view(np.uint64))):  # + 0.0: -0.0 becomes 0.0
+        return V, F, 0
     order = np.lexsort(V.T[::-1])
     Vs = V[order]
     new = np.ones(len(V), bool)
@@ -120,6 +137,8 @@ def weld(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 def unique_face_mask(F: np.ndarray) -> np.ndarray:
     """(m,) bool: True for the first face of each set of faces with the same three vertices (any order)."""
     s = np.sort(F, axis=1)
+    if not _maybe_repeated(_row_hash(s.astype(np.uint64))):
+        return np.ones(len(F), bool)
     order = np.lexsort(s.T[::-1])  # stable: within equal keys, lower face index first
     ss = s[order]
     dup_sorted = np.zeros(len(F), bool)

@@ -70,8 +70,13 @@ def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Edges used by exactly one face: (B,2) int64 as directed in that face, and the face index (B,)."""
     he = half_edges(F)
     keys = edge_keys(he[:, 0], he[:, 1], n)
-    order = np.argsort(keys, kind="stable")
-    ks = keys[order]
+    bits = int(len(keys)).bit_length()
+    if n > 0 and (n * n) < (1 << (63 - bits)):  # pack the half-edge index under the key: one fast sort
+        packed = np.sort((keys << bits) | np.arange(len(keys), dtype=np.int64))
+        ks, order = packed >> bits, packed & ((1 << bits) - 1)
+    else:
+        order = np.argsort(keys, kind="stable")
+        ks = keys[order]
     first = np.concatenate([[True], ks[1:] != ks[:-1]])
     last = np.concatenate([ks[1:] != ks[:-1], [True]])
     single = order[first & last]
@@ -113,19 +118,14 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     if S == 0:
         return np.zeros(0, bool)
     a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-    lab = np.full(n, -1, np.int64)
-    side = np.zeros(n, np.int64)
-    lab[a], lab[b] = np.arange(S), np.arange(S)
-    side[b] = 1
-    # (pair, neighbour, side) for every edge leaving a labelled vertex
-    l0, l1 = lab[E[:, 0]], lab[E[:, 1]]
-    r = np.flatnonzero((l0 >= 0) | (l1 >= 0))
-    Er, l0, l1 = np.take(E, r, axis=0), l0[r], l1[r]
-    m0, m1 = l0 >= 0, l1 >= 0
-    s_ = np.concatenate([l0[m0], l1[m1]])
-    c_ = np.concatenate([Er[m0, 1], Er[m1, 0]]).astype(np.int64)
-    sd = np.concatenate([side[Er[m0, 0]], side[Er[m1, 1]]])
-    key = np.sort((s_ * n + c_) * 2 + sd)
+    lab = np.full(n, -1, np.int32)  # 2·pair + side (0 at a, 1 at b)
+    lab[a] = 2 * np.arange(S, dtype=np.int32)
+    lab[b] = lab[a] + 1
+    # (pair, neighbour, side) for every edge leaving a labelled vertex; the pair's own edge (a, b) is
+    # seen from one side only, which cannot make a common neighbour
+    _, L, c_, _ = _labelled_rows(lab, E)
+    L = L.astype(np.int64)
+    key = np.sort(((L >> 1) * n + c_) * 2 + (L & 1))
     base = key // 2
     both = base[1:] == base[:-1]  # a neighbour seen from side 0 and side 1
     common_pair = base[1:][both] // n
@@ -193,11 +193,13 @@ def contraction_faces(F: np.ndarray, pairs: np.ndarray, n: int):
     S = len(pairs)
     lab = np.full(n, -1, np.int32)
     lab[pairs[:, 0]] = lab[pairs[:, 1]] = np.arange(S, dtype=np.int32)
-    lf = lab[F]
-    h = lf >= 0
-    rows = np.flatnonzero((h[:, 0].astype(np.int8) + h[:, 1] + h[:, 2]) == 1)
-    corner = np.argmax(h[rows], axis=1)
-    owner = lf[rows, corner]
+    lf = np.take(lab, F)
+    h = (lf >= 0).view(np.int8)
+    rows = np.flatnonzero((h[:, 0] + h[:, 1] + h[:, 2]) == 1)
+    hr = np.take(h, rows, axis=0)
+    corner = hr[:, 1] + 2 * hr[:, 2]  # the one labelled corner
+    lr = np.take(lf, rows, axis=0)
+    owner = np.maximum(np.maximum(lr[:, 0], lr[:, 1]), lr[:, 2])  # the others are -1
     G = np.take(F, rows, axis=0)
     G[np.arange(len(rows)), corner] = pairs[owner, 0]
     return rows, corner, owner, G
@@ -209,8 +211,11 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     G, owner: the touched faces after contraction and their pairs, from `contraction_faces` (every face
     that could coincide touches the pair, because pairs are two edges apart).
     """
-    G64 = np.sort(G, axis=1).astype(np.uint64)
-    h = (G64[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (G64[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ G64[:, 2]
+    h = np.zeros(len(G), np.uint64)  # a symmetric hash: the same for any order of the corners
+    for j in range(3):
+        g = G[:, j].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        g ^= g >> np.uint64(29)
+        h += g * np.uint64(0xBF58476D1CE4E5B9)
     hs = np.sort(h)
     dup_h = hs[1:][hs[1:] == hs[:-1]]
     if dup_h.size == 0:  # the common case: no candidates at all
@@ -220,16 +225,30 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     return np.bincount(owner[idx[rm]], minlength=S)
 
 
+def _labelled_rows(label: np.ndarray, E: np.ndarray):
+    """Edges with an endpoint labelled (int32 label >= 0, -1 elsewhere; at most one per edge): their
+    rows, the label, the other endpoint (int64) and whether the labelled endpoint is the first."""
+    L = np.take(label.astype(np.int32, copy=False), E)  # one 2-D gather: faster than two column gathers
+    rows = np.flatnonzero(L.view(np.int64).reshape(-1) != -1)  # an unlabelled edge is two -1s: all ones
+    Lr, Er = np.take(L, rows, axis=0), np.take(E, rows, axis=0)
+    first = Lr[:, 0] >= 0
+    lab = np.where(first, Lr[:, 0], Lr[:, 1])
+    other = np.where(first, Er[:, 1], Er[:, 0]).astype(np.int64)
+    return rows, lab, other, first
+
+
 def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarray, collapsed: np.ndarray,
-                   n: int):
+                   n: int, degree: np.ndarray):
     """Edges after contracting vertex-disjoint manifold pairs (b into a), updated instead of rebuilt.
 
     E (k,2) edges (u < v) with ``ecount`` faces each, in any order; the pairs must be two edges apart and
     pass `link_ok`, so the only edges that merge are (b,c) into (a,c) for the apexes c of each pair.
     ``collapsed`` (j,3): the faces that vanished, already remapped (two corners equal a, one is an apex).
-    Returns (E', ecount', src): the edges `edges` would build from the contracted faces (u < v, same
-    counts) in a deterministic order that is not sorted, and for each the index of the old edge it
-    continues (the same edge, or (b,c) for (a,c)); only edges at an a have a stale cost.
+    ``degree`` (n,): edges at each vertex before.
+    Returns (E', ecount', keep, degree'): the edges `edges` would build from the contracted faces (u < v,
+    same counts) in a deterministic order that is not sorted, the mask of old edges they continue (E'
+    row i continues the i-th kept row: the same edge, or (b,c) for (a,c); only edges at an a have a
+    stale cost), and the degrees after.
     """
     S = len(a)
     # apexes of each pair, from its vanished faces (at most two)
@@ -237,42 +256,45 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     av = np.where(dup01, collapsed[:, 0], collapsed[:, 2])
     apex_v = np.where(dup01, collapsed[:, 2], np.where(collapsed[:, 1] == collapsed[:, 2], collapsed[:, 0],
                                                         collapsed[:, 1])).astype(np.int64)
-    of_a = np.full(n, -1, np.int32)
-    of_a[a] = np.arange(S)
-    s_c = of_a[av]
+    label = np.full(n, -1, np.int32)  # s at a_s, S + s at b_s
+    label[a] = np.arange(S, dtype=np.int32)
+    label[b] = label[a] + S
+    s_c = label[av]
     apex = np.full((S, 2), -1, np.int64)
     apex[s_c, 0] = apex_v
     second = apex_v != apex[s_c, 0]
     apex[s_c[second], 1] = apex_v[second]
-    # edges at b: the contracted one (c = a) disappears, (b, apex) merge into (a, apex), the rest move
-    of_b = np.full(n, -1, np.int32)
-    of_b[b] = np.arange(S)
-    sb = of_b[E]  # one 2-D gather: faster than two column gathers
-    sb0, sb1 = sb[:, 0], sb[:, 1]
-    mi = np.flatnonzero((sb0 >= 0) | (sb1 >= 0))
-    b_first = sb0[mi] >= 0
-    s = np.where(b_first, sb0[mi], sb1[mi])
-    c = np.where(b_first, E[mi, 1], E[mi, 0]).astype(np.int64)
+    # one scan for the edges at any endpoint; the contracted edge (a, b) itself has both labelled
+    L = np.take(label, E)
+    rows = np.flatnonzero(L.view(np.int64).reshape(-1) != -1)  # an unlabelled edge is two -1s: all ones
+    Lr, Er = np.take(L, rows, axis=0), np.take(E, rows, axis=0)
+    first = Lr[:, 0] >= 0
+    own = first & (Lr[:, 1] >= 0)
+    lab = np.where(first, Lr[:, 0], Lr[:, 1])
+    other = np.where(first, Er[:, 1], Er[:, 0]).astype(np.int64)
+    # edges at b: (b, apex) merge into (a, apex), the rest move to a
+    ib = np.flatnonzero((lab >= S) & ~own)
+    s, c = lab[ib] - S, other[ib]
     to = a[s].astype(np.int64)
     which = np.where(c == apex[s, 0], 0, np.where(c == apex[s, 1], 1, -1))
     merge = which >= 0
-    fresh = (c != to) & ~merge
     # (a, apex) loses the vanished face and gains the other faces of (b, apex)
     delta = np.zeros((S, 2), np.int64)
-    delta[s[merge], which[merge]] = ecount[mi[merge]] - 2
+    delta[s[merge], which[merge]] = ecount[rows[ib[merge]]] - 2
+    ia = np.flatnonzero((lab < S) & ~own)
+    ta, oa = lab[ia], other[ia]
+    hit = np.where(oa == apex[ta, 0], 0, np.where(oa == apex[ta, 1], 1, -1))
     count = ecount.copy()
-    sa = of_a[E]
-    sa0, sa1 = sa[:, 0], sa[:, 1]
-    ti = np.flatnonzero((sa0 >= 0) | (sa1 >= 0))
-    ta = np.where(sa0[ti] >= 0, sa0[ti], sa1[ti])
-    other = np.where(sa0[ti] >= 0, E[ti, 1], E[ti, 0])
-    hit = np.where(other == apex[ta, 0], 0, np.where(other == apex[ta, 1], 1, -1))
-    count[ti[hit >= 0]] += delta[ta[hit >= 0], hit[hit >= 0]]
+    count[rows[ia[hit >= 0]]] += delta[ta[hit >= 0], hit[hit >= 0]]
     E2 = E.copy()
-    mf = mi[fresh]
-    E2[mf, 0] = np.minimum(to[fresh], c[fresh])
-    E2[mf, 1] = np.maximum(to[fresh], c[fresh])
+    mv, to, c = rows[ib[~merge]], to[~merge], c[~merge]
+    E2[mv, 0] = np.minimum(to, c)
+    E2[mv, 1] = np.maximum(to, c)
     keep = count > 0
-    keep[mi[~fresh]] = False
-    src = np.flatnonzero(keep)
-    return np.take(E2, src, axis=0), count[src], src
+    keep[rows[own]] = False
+    keep[rows[ib[merge]]] = False
+    deg = degree.copy()  # a gains b's edges but (a, b) and one of each (a, apex), (b, apex) pair
+    deg[a] += degree[b] - 2 - (apex >= 0).sum(1)
+    deg[b] = 0
+    np.subtract.at(deg, apex_v, 1)
+    return np.compress(keep, E2, axis=0), np.compress(keep, count), keep, deg

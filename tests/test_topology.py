@@ -41,6 +41,7 @@ def test_incremental_edges_match_rebuild(mesh):
     F = np.asarray(mesh.faces, np.int64)
     n = len(mesh.vertices)
     E, ecount = topo.edges(F, n)
+    degree = topo.vertex_degree(E, n)
     for _ in range(6):
         P = _independent_pairs(E, ecount, n, F)
         assert len(P) > 0
@@ -49,11 +50,13 @@ def test_incremental_edges_match_rebuild(mesh):
         rep[b] = a
         Fr = rep[F]
         deg = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 0] == Fr[:, 2])
-        E2, c2, src = topo.contract_edges(E, ecount, a, b, Fr[deg], n)
+        E2, c2, keep, degree = topo.contract_edges(E, ecount, a, b, Fr[deg], n, degree)
+        src = np.flatnonzero(keep)
         F = Fr[~deg]
         Eref, cref = topo.edges(F, n)
         order = np.lexsort((E2[:, 1], E2[:, 0]))  # same edges and counts, in another order
         assert np.array_equal(E2[order], Eref) and np.array_equal(c2[order], cref)
+        assert np.array_equal(degree, topo.vertex_degree(Eref, n))
         assert (E2[:, 0] < E2[:, 1]).all()
         # each edge continues an old one: the same edge, or (b, c) for (a, c)
         old = E[src]

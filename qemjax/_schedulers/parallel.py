@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _topology as topo
+from .._arrays import any_at, keep_rows as _keep, take_rows as _take
 from .._kernels import flips, placement
 from .common import DTYPE, Settings, Timer, bucket, chunks, pad_rows, set_rows
 
@@ -34,60 +35,64 @@ TAIL = 10  # near the target a round takes at most about 1/(2·TAIL) of what is 
 FREE_COST = 1e-10  # costs below this (squared, unit extent) always pass the gate: flat regions
 MERGE_CHUNK = 4096
 NO_KEY = np.iinfo(np.int64).max
-# rows of 2-D arrays: numpy's A[idx] / A[mask] are several times slower than these (measured 4-15×)
-_take = functools.partial(np.take, axis=0)
-
-
-def _keep(A, mask):
-    return np.compress(mask, A, axis=0)
 
 
 def _sort_keys(cost: np.ndarray, salt: int = 0) -> np.ndarray:
     """Unique, monotonic int64 keys: float32 cost bits (non-negative) in the high word and a fixed
-    bijective scramble of the pair index in the low word. Ties (flat regions have many exact zeros)
-    are broken deterministically but in a spatially incoherent order: breaking them by raw index would
-    make neighbouring pairs form long descending chains with one local minimum each."""
+    bijective scramble of the pair index in the low word (a multiplication by an odd constant modulo
+    2³²). Ties (flat regions have many exact zeros) are broken deterministically but in a spatially
+    incoherent order: breaking them by raw index would make neighbouring pairs form long descending
+    chains with one local minimum each."""
     bits = np.ascontiguousarray(cost, dtype=np.float32).view(np.int32).astype(np.int64)
-    m32 = np.uint64(0xFFFFFFFF)
-    h = (np.arange(len(cost), dtype=np.uint64) + np.uint64(salt)) & m32
-    for mult, shift in ((0x85EBCA6B, 16), (0xC2B2AE35, 13), (1, 16)):  # murmur3's fmix32: a bijection
-        h ^= h >> np.uint64(shift)
-        h = (h * np.uint64(mult)) & m32
-    return (bits << 32) | h.astype(np.int64)
+    h = np.arange(len(cost), dtype=np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
+    bits <<= 32
+    bits |= h
+    return bits
 
 
 def _place(VQd, P, settings):
-    """Placement x (K,3), cost (K,), branch (K,) int8 for index pairs P (K,2) into device rows VQd."""
+    """Start the placement of index pairs P (K,2) into device rows VQd. Returns a function that waits
+    for it and gives x (K,3), cost (K,), branch (K,) int8: the kernel runs while the host works on."""
     args = settings.kernel_args()
     outs = [placement.place_pairs(VQd, part, *args) for _, part in chunks(P.astype(np.int32))]
-    out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else np.zeros((5, 0), DTYPE)
-    return np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8)
+
+    def result():
+        out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else np.zeros((5, 0), DTYPE)
+        return np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8)
+    return result
 
 
 def _merged(VQd, P, x):
-    """(K,10) merged quadrics of pairs P (K,2) in the frames of their targets x (K,3). One chunk shape
-    (MERGE_CHUNK) whatever K: a few more calls in early rounds, one compilation."""
+    """Start computing the (K,10) merged quadrics of pairs P (K,2) in the frames of their targets x
+    (K,3); returns a function that waits for them. One chunk shape (MERGE_CHUNK) whatever K: a few
+    more calls in early rounds, one compilation."""
     outs = [placement.merged_quadrics(VQd, pp, xx) for (_, pp), (_, xx)
             in zip(chunks(P.astype(np.int32), size=MERGE_CHUNK), chunks(x, size=MERGE_CHUNK))]
-    return np.concatenate([np.asarray(o) for o in outs])[: len(P)]
+    return lambda: np.concatenate([np.asarray(o) for o in outs])[: len(P)]
 
 
 def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, settings):
-    """(S,) bool: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
-    fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks."""
+    """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
+    fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
+    Returns a function that waits for the kernel and gives (S,) bool per pair."""
     cos_max = np.asarray(settings.cos_max, DTYPE)
-    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)), chunks(np.take(x, owner, axis=0)))
+    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
+                chunks(np.take(x, owner, axis=0)))
     outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max)
             for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
-    bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
-    res = np.zeros(S, bool)
-    res[owner[bad]] = True
-    return res
+
+    def result():
+        bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
+        res = np.zeros(S, bool)
+        res[owner[bad]] = True
+        return res
+    return result
 
 
 def _select(E, key, cand, need, n, validate, F):
-    """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices
-    and the extra faces (coincident ones) each accepted pair removes, (len(E),) int.
+    """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices,
+    the extra faces (coincident ones) each accepted pair removes, (len(E),) int, and the vertices the
+    accepted pairs lock (their endpoints' closed 1-rings through E), (n,) bool.
 
     E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
     graph. ``validate(pairs, idx, faces, face_idx, pairs_at_free)`` returns (ok, extra faces removed).
@@ -101,22 +106,23 @@ def _select(E, key, cand, need, n, validate, F):
         (locking, link test) and their rows, which of those have both endpoints available (selection),
         faces with an available corner (validation) and their rows."""
         one, Eo, _, fsub, Fo = ws
-        a0, a1 = avail[Eo[:, 0]], avail[Eo[:, 1]]
-        k1 = a0 | a1
-        ff = avail[Fo]
-        kf = ff[:, 0] | ff[:, 1] | ff[:, 2]
-        return one[k1], _keep(Eo, k1), (a0 & a1)[k1], fsub[kf], _keep(Fo, kf)
+        ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
+        k1 = ae != 0
+        kf = any_at(avail, Fo)
+        return one[k1], _keep(Eo, k1), ae[k1] == 0x0101, fsub[kf], _keep(Fo, kf)
 
     def endpoints(mask):
         v = np.zeros(n, bool)
         v[_keep(E, mask).reshape(-1)] = True
         return v
 
-    everything = (np.arange(len(E)), E, None, np.arange(len(F)), F)
     free = np.ones(n, bool)
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
-    ws = narrow(active, everything)
+    ae = np.take(active, E).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
+    k1 = np.flatnonzero(ae)
+    # the faces are narrowed after the first pass: its validation scans them anyway
+    ws = (k1, _take(E, k1), ae[k1] == 0x0101, np.arange(len(F)), F)
     accepted, rejected = [], []
     extra = np.zeros(len(E), np.int64)
     n_acc = 0
@@ -145,14 +151,13 @@ def _select(E, key, cand, need, n, validate, F):
         # lock the closed 1-rings of accepted endpoints; shrink the working sets to what is free
         lock = np.zeros(n, bool)
         lock[_take(E, good).reshape(-1)] = True
-        ring = lock[Eo[:, 0]] | lock[Eo[:, 1]]
-        free[_keep(Eo, ring).reshape(-1)] = False
+        free[_keep(Eo, any_at(lock, Eo)).reshape(-1)] = False
         ws = narrow(active & free, ws)
         n_acc += good.size
         if good.size < PASS_YIELD * n_acc or (good.size * 50 < need // 2 and p > 2):
             break  # later passes would add little: leave the rest to the next round
     cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64)  # noqa: E731
-    return cat(accepted), cat(rejected), extra
+    return cat(accepted), cat(rejected), extra, ~free
 
 
 def _with_extra_pairs(E, ecount, extra_pairs, n):
@@ -174,11 +179,13 @@ def _validate(P, idx, Fs, fs, Efree, *, ctx):
     Fs (rows fs of the current faces) holds every face around them, Efree every pair at them."""
     tv = time.perf_counter()
     rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
-    ok = ~_flip_bad(ctx.VQd, ctx.N0d, _take(Fs, rows), ctx.fid[fs[rows]], corner, owner, _take(ctx.x, idx),
-                    len(P), ctx.settings)
+    flipped = _flip_bad(ctx.VQd, ctx.N0d, _take(Fs, rows), ctx.fid[fs[rows]], corner, owner,
+                        _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
     gone = topo.coincidence_count(G, owner, len(P))
+    ok = np.ones(len(P), bool)
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
-        ok &= (gone == 0) & topo.link_ok(P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg)
+        ok = (gone == 0) & topo.link_ok(P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg)
+    ok &= ~flipped()
     ctx.timer.add("validity_s", time.perf_counter() - tv)
     return ok, gone
 
@@ -203,8 +210,7 @@ def _touched_vertices(F, P, n):
     """(n,) bool: endpoints of the pairs P and every vertex sharing a face with one."""
     t = np.zeros(n, bool)
     t[P.reshape(-1)] = True
-    tf = t[F]
-    t[F[tf[:, 0] | tf[:, 1] | tf[:, 2]].reshape(-1)] = True
+    t[_keep(F, any_at(t, F)).reshape(-1)] = True
     return t
 
 
@@ -218,8 +224,7 @@ def _relink_faces(F, fid, kept, n, drop_coincident):
     if drop_coincident:
         merged = np.zeros(n, bool)
         merged[kept] = True
-        mf = merged[F]
-        rows = np.flatnonzero(mf[:, 0] | mf[:, 1] | mf[:, 2])
+        rows = np.flatnonzero(any_at(merged, F))
         keep = np.ones(len(F), bool)
         keep[rows[topo.coincident_removals(_take(F, rows))]] = False
         F, fid = _keep(F, keep), fid[keep]
@@ -257,48 +262,57 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     rounds = rejected = 0
     max_cost_used = 0.0
     faces_per_round = []
-    invalid_keys = np.zeros(0, np.int64)  # edges found invalid whose neighbourhood has not changed since
-    prev = None  # (edge keys, targets, costs, branches, moved vertices) of the last round
+    prev = None  # (targets, costs, branches, known invalid, moved vertices, keys) of the last round's edges
     # manifold mode: the edges are updated through each round's contractions instead of rebuilt
     incremental = manifold and len(extra_pairs) == 0
-    updated = None  # (E, ecount, src) after the last round's contractions, when incremental
+    updated = None  # (E, ecount, rows kept, degree) after the last round's contractions, when incremental
     while len(F) > target_faces:
         rounds += 1
         t0 = time.perf_counter()
+        ekeys = same = None
         if updated is None:
             E, ecount = topo.edges(F, n)
             E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
-            src = None
+            deg = topo.vertex_degree(E if incremental else _keep(E, ecount > 0), n)
+            if not incremental:
+                ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)  # sorted, as E is
+            if prev is not None:  # rebuilt: find each edge's predecessor by key
+                src = np.minimum(np.searchsorted(prev[5], ekeys), len(prev[5]) - 1)
+                same = prev[5][src] == ekeys
+                follow = functools.partial(_take, indices=src)
         else:
-            E, ecount, src = updated
-        ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)
-        deg = topo.vertex_degree(E if incremental else _keep(E, ecount > 0), n)
+            E, ecount, kept, deg = updated
+            follow = functools.partial(_keep, mask=kept)
+        # start re-costing the pairs at vertices the last round moved (the rest keep their cost and
+        # target); the kernel runs while the host goes on
+        if prev is None:
+            d, pending = None, _place(VQd, E, settings)
+            known_bad = np.zeros(len(E), bool)
+        else:
+            px, pcost, pbranch, pbad, changed, _ = prev
+            dirty = any_at(changed, E)
+            if same is not None:
+                dirty |= ~same
+            d = np.flatnonzero(dirty)
+            pending = _place(VQd, _take(E, d), settings)
+            known_bad = follow(pbad)  # found invalid, and their neighbourhood has not changed since
+            if same is not None:
+                known_bad &= same
         bvert = np.zeros(n, bool)
         bvert[_keep(E, ecount == 1).reshape(-1)] = True
         timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
-        # re-cost only pairs at vertices the last round moved; the rest keep their cost and target
-        if prev is None:
-            x, cost, branch = _place(VQd, E, settings)
+        if d is None:
+            x, cost, branch = pending()
         else:
-            pkeys, px, pcost, pbranch, changed = prev
-            dirty = changed[E].any(1)
-            if src is None:  # rebuilt: find each edge's predecessor by key
-                src = np.minimum(np.searchsorted(pkeys, ekeys), len(pkeys) - 1)
-                dirty |= pkeys[src] != ekeys
-            x, cost, branch = _take(px, src), pcost[src], pbranch[src]
-            d = np.flatnonzero(dirty)
-            x[d], cost[d], branch[d] = _place(VQd, _take(E, d), settings)
+            x, cost, branch = follow(px), follow(pcost), follow(pbranch)
+            x[d], cost[d], branch[d] = pending()
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
         need = len(F) - target_faces
         n_alive = len(E)  # ~3× the live vertices; only the ratio matters for the gate
-        known_bad = np.zeros(len(E), bool)
-        if invalid_keys.size:
-            pos = np.minimum(np.searchsorted(invalid_keys, ekeys), invalid_keys.size - 1)
-            known_bad = invalid_keys[pos] == ekeys
         valid = (cost <= settings.max_cost) & ~known_bad & (ecount <= need)
         if manifold:
             valid &= (ecount >= 1) & (ecount <= 2)
@@ -311,17 +325,17 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
 
         ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
                               settings=settings, timer=timer)
-        acc, bad, extra = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx), F)
+        acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx), F)
         rejected += bad.size
+        n_sel = acc.size
         acc = acc[np.argsort(key[acc], kind="stable")]
         acc = acc[_fits_target(ecount[acc] + extra[acc], need)]
         timer.add("select_s", time.perf_counter() - t0)
-        if bad.size:
-            invalid_keys = np.union1d(invalid_keys, ekeys[bad])
+        known_bad[bad] = True
         if acc.size == 0:
             if bad.size:  # the invalid ones are out now: select again among the rest (same edges)
-                prev = (ekeys, x, cost, branch, np.zeros(n, bool))
-                updated = (E, ecount, np.arange(len(E))) if incremental else None
+                prev = (x, cost, branch, known_bad, np.zeros(n, bool), ekeys)
+                updated = (E, ecount, np.ones(len(E), bool), deg) if incremental else None
                 continue
             break
 
@@ -329,26 +343,29 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         P = _take(E, acc)
         a, b = P[:, 0], P[:, 1]
         xs = _take(x, acc)
-        VQ[a, 3:] = _merged(VQd, P, xs)
-        VQ[a, :3] = xs
-        VQd = set_rows(VQd, a, _take(VQ, a), size=MERGE_CHUNK)
+        merged = _merged(VQd, P, xs)  # runs during the host's contraction below
         changed = np.zeros(n, bool)
         changed[a] = True
-        prev = (ekeys, x, cost, branch, changed)
         branches += np.bincount(branch[acc], minlength=3)
         max_cost_used = max(max_cost_used, float(cost[acc].max()))
         history.append((a.copy(), b.copy(), xs, cost[acc].astype(np.float64)))
-        if invalid_keys.size:  # pairs whose faces change get another chance
-            touched = _touched_vertices(F, P, n)
-            invalid_keys = invalid_keys[~(touched[invalid_keys // n] | touched[invalid_keys % n])]
+        r = np.flatnonzero(known_bad)
+        if r.size:  # pairs whose faces change get another chance
+            # the 1-rings that selection locked, unless the target cut the set short
+            touched = locked if acc.size == n_sel else _touched_vertices(F, P, n)
+            known_bad[r[any_at(touched, _take(E, r))]] = False
+        prev = (x, cost, branch, known_bad, changed, ekeys)
         rep = np.arange(n, dtype=np.int32)
         rep[b] = a
-        F, fid, collapsed = _relink_faces(rep[F], fid, a, n, drop_coincident=not manifold)
+        F, fid, collapsed = _relink_faces(np.take(rep, F), fid, a, n, drop_coincident=not manifold)
         if incremental:
-            updated = topo.contract_edges(E, ecount, a, b, collapsed, n)
+            updated = topo.contract_edges(E, ecount, a, b, collapsed, n, deg)
         if len(extra_pairs):
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
+        VQ[a, 3:] = merged()
+        VQ[a, :3] = xs
+        VQd = set_rows(VQd, a, _take(VQ, a), size=MERGE_CHUNK)
         faces_per_round.append(len(F))
         timer.add("contract_s", time.perf_counter() - t0)
         if progress is not None:
