@@ -1,6 +1,7 @@
 """`simplify`: the one entry point. Validates options, prepares the mesh, runs a scheduler."""
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -121,8 +122,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     scale = float(np.max(hi - lo)) or 1.0
     Vn = ((V - center) / scale).astype(common.DTYPE)
 
+    E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     Q = common.initial_quadrics(Vn, F, area_weighted=area_weighted, boundary_weight=boundary_weight,
-                                feature_edges=feature_edges)
+                                feature_edges=feature_edges, boundary=(be, bf))
     settings = common.Settings(
         endpoints_only=placement == "endpoints", cond_eps=COND_EPS, max_shift=MAX_SHIFT,
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
@@ -144,7 +146,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     else:
         progress_cb = None
     if target < m or err < math.inf:
-        run = parallel.run if scheduler == "parallel" else greedy.run
+        run = functools.partial(parallel.run, edges=(E, ecount)) if scheduler == "parallel" else greedy.run
         Vo, Qo, Fo, alive, hist, info = run(Vn, Q, F, extra, max(target, 1), settings, progress_cb)
     else:  # nothing to remove
         Vo, Qo, Fo, alive = Vn, Q, F, np.ones(m, bool)

@@ -66,8 +66,9 @@ def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
     return P[np.lexsort((P[:, 1], P[:, 0]))]
 
 
-def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Edges used by exactly one face: (B,2) int64 as directed in that face, and the face index (B,)."""
+def edge_table(F: np.ndarray, n: int):
+    """`edges` and `boundary_edges` from one sort: (E (k,2) u < v sorted, face counts (k,), boundary
+    edges (B,2) as directed in their face, their face indices (B,))."""
     he = half_edges(F)
     keys = edge_keys(he[:, 0], he[:, 1], n)
     bits = int(len(keys)).bit_length()
@@ -77,10 +78,16 @@ def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     else:
         order = np.argsort(keys, kind="stable")
         ks = keys[order]
-    first = np.concatenate([[True], ks[1:] != ks[:-1]])
-    last = np.concatenate([ks[1:] != ks[:-1], [True]])
-    single = order[first & last]
-    return he[single], single // 3
+    start = np.flatnonzero(np.concatenate([[True], ks[1:] != ks[:-1]]))
+    counts = np.diff(np.append(start, ks.size))
+    uk = ks[start]
+    single = order[start[counts == 1]]
+    return np.stack([uk // n, uk % n], 1).astype(F.dtype), counts, he[single], single // 3
+
+
+def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Edges used by exactly one face: (B,2) int64 as directed in that face, and the face index (B,)."""
+    return edge_table(F, n)[2:]
 
 
 def feature_edges_with_faces(F: np.ndarray, n: int, feat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

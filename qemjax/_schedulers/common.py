@@ -103,10 +103,11 @@ def place_gathered(q1, q2, p1, p2, settings: Settings):
 
 
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,
-                     feature_edges: np.ndarray | None) -> np.ndarray:
-    """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes."""
+                     feature_edges: np.ndarray | None, boundary=None) -> np.ndarray:
+    """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes.
+    ``boundary``: `topo.boundary_edges` of F when the caller has it."""
     n = len(V)
-    be, bf = topo.boundary_edges(F, n)
+    be, bf = topo.boundary_edges(F, n) if boundary is None else boundary
     cw = np.full(len(be), boundary_weight, DTYPE)
     if feature_edges is not None and len(feature_edges):
         fe, ff = topo.feature_edges_with_faces(F, n, np.asarray(feature_edges, np.int64))

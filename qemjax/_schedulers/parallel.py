@@ -52,13 +52,13 @@ def _sort_keys(cost: np.ndarray, salt: int = 0) -> np.ndarray:
 
 def _place(VQd, P, settings):
     """Start the placement of index pairs P (K,2) into device rows VQd. Returns a function that waits
-    for it and gives x (K,3), cost (K,), branch (K,) int8: the kernel runs while the host works on."""
+    for it and gives (K,5) rows [x (3), cost, branch]: the kernel runs while the host works on."""
     args = settings.kernel_args()
     outs = [placement.place_pairs(VQd, part, *args) for _, part in chunks(P.astype(np.int32))]
 
     def result():
         out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else np.zeros((5, 0), DTYPE)
-        return np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8)
+        return out.T
     return result
 
 
@@ -239,9 +239,10 @@ def _history_arrays(rounds):
     return pairs, np.concatenate([x for _, _, x, _ in rounds]), np.concatenate([c for _, _, _, c in rounds])
 
 
-def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
+def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, edges=None):
     """Simplify. V (n,3) float32 normalised positions, Q (n,10) quadrics, F (m,3) int64 faces,
-    extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be 0).
+    extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be 0); ``edges``:
+    `topo.edges` of F when the caller has it.
     Returns (V, Q, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,)
     marks the survivors, history = (pairs (k,2), positions (k,3), costs (k,)) in contraction order."""
     n, m = len(V), len(F)
@@ -252,7 +253,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     F = F.astype(np.int32)  # halves the memory traffic of every gather (n < 2**31)
     extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
     fid = np.arange(len(F))  # input face each current face continues
-    p = V[F]
+    p = np.take(V, F, axis=0)
     N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals, by fid
     N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
     VQd = jnp.asarray(VQ)  # device copy, updated row by row
@@ -262,7 +263,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
     rounds = rejected = 0
     max_cost_used = 0.0
     faces_per_round = []
-    prev = None  # (targets, costs, branches, known invalid, moved vertices, keys) of the last round's edges
+    prev = None  # ([target, cost, branch] rows, known invalid, moved vertices, keys) of the last round's edges
     # manifold mode: the edges are updated through each round's contractions instead of rebuilt
     incremental = manifold and len(extra_pairs) == 0
     updated = None  # (E, ecount, rows kept, degree) after the last round's contractions, when incremental
@@ -271,14 +272,15 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         t0 = time.perf_counter()
         ekeys = same = None
         if updated is None:
-            E, ecount = topo.edges(F, n)
+            E, ecount = topo.edges(F, n) if edges is None else (edges[0].astype(F.dtype), edges[1])
+            edges = None
             E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
             deg = topo.vertex_degree(E if incremental else _keep(E, ecount > 0), n)
             if not incremental:
                 ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)  # sorted, as E is
             if prev is not None:  # rebuilt: find each edge's predecessor by key
-                src = np.minimum(np.searchsorted(prev[5], ekeys), len(prev[5]) - 1)
-                same = prev[5][src] == ekeys
+                src = np.minimum(np.searchsorted(prev[3], ekeys), len(prev[3]) - 1)
+                same = prev[3][src] == ekeys
                 follow = functools.partial(_take, indices=src)
         else:
             E, ecount, kept, deg = updated
@@ -289,7 +291,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             d, pending = None, _place(VQd, E, settings)
             known_bad = np.zeros(len(E), bool)
         else:
-            px, pcost, pbranch, pbad, changed, _ = prev
+            pplaced, pbad, changed, _ = prev
             dirty = any_at(changed, E)
             if same is not None:
                 dirty |= ~same
@@ -304,10 +306,11 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
 
         t0 = time.perf_counter()
         if d is None:
-            x, cost, branch = pending()
+            placed = np.ascontiguousarray(pending())
         else:
-            x, cost, branch = follow(px), follow(pcost), follow(pbranch)
-            x[d], cost[d], branch[d] = pending()
+            placed = follow(pplaced)  # (E,5) rows [x, cost, branch]: one gather for all
+            placed[d] = pending()
+        x, cost, branch = placed[:, :3], np.ascontiguousarray(placed[:, 3]), placed[:, 4].astype(np.int8)
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -334,7 +337,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
         known_bad[bad] = True
         if acc.size == 0:
             if bad.size:  # the invalid ones are out now: select again among the rest (same edges)
-                prev = (x, cost, branch, known_bad, np.zeros(n, bool), ekeys)
+                prev = (placed, known_bad, np.zeros(n, bool), ekeys)
                 updated = (E, ecount, np.ones(len(E), bool), deg) if incremental else None
                 continue
             break
@@ -354,7 +357,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None):
             # the 1-rings that selection locked, unless the target cut the set short
             touched = locked if acc.size == n_sel else _touched_vertices(F, P, n)
             known_bad[r[any_at(touched, _take(E, r))]] = False
-        prev = (x, cost, branch, known_bad, changed, ekeys)
+        prev = (placed, known_bad, changed, ekeys)
         rep = np.arange(n, dtype=np.int32)
         rep[b] = a
         F, fid, collapsed = _relink_faces(np.take(rep, F), fid, a, n, drop_coincident=not manifold)
