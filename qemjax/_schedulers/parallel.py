@@ -180,7 +180,7 @@ def _validate(P, idx, Fs, fs, Efree, *, ctx):
     tv = time.perf_counter()
     rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
     flipped = _flip_bad(ctx.VQd, ctx.N0d, _take(Fs, rows), ctx.fid[fs[rows]], corner, owner,
-                        _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
+                        _take(ctx.placed, idx)[:, :3], len(P), ctx.settings)  # runs while the host tests the rest
     gone = topo.coincidence_count(G, owner, len(P))
     ok = np.ones(len(P), bool)
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
@@ -310,7 +310,8 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         else:
             placed = follow(pplaced)  # (E,5) rows [x, cost, branch]: one gather for all
             placed[d] = pending()
-        x, cost, branch = placed[:, :3], np.ascontiguousarray(placed[:, 3]), placed[:, 4].astype(np.int8)
+        # (np.take on a column view would copy the whole array first: gather rows of ``placed`` instead)
+        cost, branch = np.ascontiguousarray(placed[:, 3]), placed[:, 4].astype(np.int8)
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -326,7 +327,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         key = _sort_keys(cost, salt=rounds * 7919)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
-        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
+        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, placed=placed, ecount=ecount, bvert=bvert, deg=deg, n=n,
                               settings=settings, timer=timer)
         acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx), F)
         rejected += bad.size
@@ -345,7 +346,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         t0 = time.perf_counter()
         P = _take(E, acc)
         a, b = P[:, 0], P[:, 1]
-        xs = _take(x, acc)
+        xs = _take(placed, acc)[:, :3]
         merged = _merged(VQd, P, xs)  # runs during the host's contraction below
         changed = np.zeros(n, bool)
         changed[a] = True
