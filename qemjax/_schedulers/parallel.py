@@ -4,12 +4,14 @@ A round:
 1. cost the current edges with the batched placement kernel (fixed-size chunks: one compilation per
    size); only pairs at vertices the last round moved are re-costed, the rest keep their numbers;
 2. select, in passes, pairs that are the cheapest among all candidate pairs touching their endpoints'
-   closed 1-rings (ties broken by pair index through an int64 key), so no two selected pairs share a
+   closed 1-rings (ties broken by a scramble of the pair index in an int64 key), so no two selected pairs share a
    vertex, a face or a 1-ring neighbour; validate them (flip kernel, link test); invalid ones leave the
    candidate set, valid ones lock their 1-rings, and the next pass selects among what is still free;
 3. contract the accepted set at once (vectorised remap, quadric sums, degenerate-face removal); in
-   manifold mode the sorted edge list is updated through the contractions (`topo.contract_edges`)
-   rather than rebuilt from the faces.
+   manifold mode the edge list and the vertex degrees are updated through the contractions
+   (`topo.contract_edges`) rather than rebuilt from the faces.
+Kernel calls are asynchronous: the re-costing, the flip test and the quadric merges run on JAX's
+threads while the host works on the topology, and are waited for only where their results are needed.
 Because accepted contractions are two edges apart, the validity computed for each stays true when all
 happen together. The last round takes only as many, in cost order, as the exact face target allows.
 """
@@ -52,13 +54,13 @@ def _sort_keys(cost: np.ndarray, salt: int = 0) -> np.ndarray:
 
 def _place(VQd, P, settings):
     """Start the placement of index pairs P (K,2) into device rows VQd. Returns a function that waits
-    for it and gives (K,5) rows [x (3), cost, branch]: the kernel runs while the host works on."""
+    for it and gives x (K,3), cost (K,), branch (K,) int8: the kernel runs while the host works on."""
     args = settings.kernel_args()
     outs = [placement.place_pairs(VQd, part, *args) for _, part in chunks(P.astype(np.int32))]
 
     def result():
         out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else np.zeros((5, 0), DTYPE)
-        return out.T
+        return np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8)
     return result
 
 
@@ -180,7 +182,7 @@ def _validate(P, idx, Fs, fs, Efree, *, ctx):
     tv = time.perf_counter()
     rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
     flipped = _flip_bad(ctx.VQd, ctx.N0d, _take(Fs, rows), ctx.fid[fs[rows]], corner, owner,
-                        _take(ctx.placed, idx)[:, :3], len(P), ctx.settings)  # runs while the host tests the rest
+                        _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
     gone = topo.coincidence_count(G, owner, len(P))
     ok = np.ones(len(P), bool)
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
@@ -263,7 +265,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     rounds = rejected = 0
     max_cost_used = 0.0
     faces_per_round = []
-    prev = None  # ([target, cost, branch] rows, known invalid, moved vertices, keys) of the last round's edges
+    prev = None  # (targets, costs, branches, known invalid, moved vertices, keys) of the last round's edges
     # manifold mode: the edges are updated through each round's contractions instead of rebuilt
     incremental = manifold and len(extra_pairs) == 0
     updated = None  # (E, ecount, rows kept, degree) after the last round's contractions, when incremental
@@ -279,8 +281,8 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             if not incremental:
                 ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)  # sorted, as E is
             if prev is not None:  # rebuilt: find each edge's predecessor by key
-                src = np.minimum(np.searchsorted(prev[3], ekeys), len(prev[3]) - 1)
-                same = prev[3][src] == ekeys
+                src = np.minimum(np.searchsorted(prev[5], ekeys), len(prev[5]) - 1)
+                same = prev[5][src] == ekeys
                 follow = functools.partial(_take, indices=src)
         else:
             E, ecount, kept, deg = updated
@@ -291,7 +293,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             d, pending = None, _place(VQd, E, settings)
             known_bad = np.zeros(len(E), bool)
         else:
-            pplaced, pbad, changed, _ = prev
+            px, pcost, pbranch, pbad, changed, _ = prev
             dirty = any_at(changed, E)
             if same is not None:
                 dirty |= ~same
@@ -306,12 +308,12 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
 
         t0 = time.perf_counter()
         if d is None:
-            placed = np.ascontiguousarray(pending())
+            x, cost, branch = pending()
         else:
-            placed = follow(pplaced)  # (E,5) rows [x, cost, branch]: one gather for all
-            placed[d] = pending()
-        # (np.take on a column view would copy the whole array first: gather rows of ``placed`` instead)
-        cost, branch = np.ascontiguousarray(placed[:, 3]), placed[:, 4].astype(np.int8)
+            # separate arrays, each under 32 MB at 2 M edges: glibc maps larger ones afresh every time
+            # (page faults on every round; one (E,5) array was slower to gather here)
+            x, cost, branch = follow(px), follow(pcost), follow(pbranch)
+            x[d], cost[d], branch[d] = pending()
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -327,7 +329,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         key = _sort_keys(cost, salt=rounds * 7919)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
-        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, placed=placed, ecount=ecount, bvert=bvert, deg=deg, n=n,
+        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
                               settings=settings, timer=timer)
         acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx), F)
         rejected += bad.size
@@ -338,7 +340,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         known_bad[bad] = True
         if acc.size == 0:
             if bad.size:  # the invalid ones are out now: select again among the rest (same edges)
-                prev = (placed, known_bad, np.zeros(n, bool), ekeys)
+                prev = (x, cost, branch, known_bad, np.zeros(n, bool), ekeys)
                 updated = (E, ecount, np.ones(len(E), bool), deg) if incremental else None
                 continue
             break
@@ -346,7 +348,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         t0 = time.perf_counter()
         P = _take(E, acc)
         a, b = P[:, 0], P[:, 1]
-        xs = _take(placed, acc)[:, :3]
+        xs = _take(x, acc)
         merged = _merged(VQd, P, xs)  # runs during the host's contraction below
         changed = np.zeros(n, bool)
         changed[a] = True
@@ -358,7 +360,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             # the 1-rings that selection locked, unless the target cut the set short
             touched = locked if acc.size == n_sel else _touched_vertices(F, P, n)
             known_bad[r[any_at(touched, _take(E, r))]] = False
-        prev = (placed, known_bad, changed, ekeys)
+        prev = (x, cost, branch, known_bad, changed, ekeys)
         rep = np.arange(n, dtype=np.int32)
         rep[b] = a
         F, fid, collapsed = _relink_faces(np.take(rep, F), fid, a, n, drop_coincident=not manifold)
