@@ -33,6 +33,16 @@ def test_weld_merges_coincident_vertices_and_reports():
     assert r.stats["welded"] == len(Vs) - len(V) and len(r.faces) == 100
 
 
+def test_weld_treats_negative_zero_as_zero():
+    """The hash fast path compares bits: -0.0 and 0.0 must still count as the same coordinate."""
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [-0.0, 0, -0.0], [0, 0, 1]])
+    F = np.array([[0, 1, 2], [3, 2, 4]])
+    V2, F2, merged = _io.weld(V, F)
+    assert merged == 1 and len(V2) == 4 and F2.tolist() == [[0, 1, 2], [0, 2, 3]]
+    V3, F3, none = _io.weld(V[:3], F[:1])  # nothing to merge: returned unchanged
+    assert none == 0 and np.array_equal(V3, V[:3]) and np.array_equal(F3, F[:1])
+
+
 def test_degenerate_and_duplicate_faces_are_removed_and_counted():
     V, F = shapes.icosphere(1)
     Fbad = np.concatenate([F, [[0, 0, 1]], F[:3], F[:1, ::-1]])

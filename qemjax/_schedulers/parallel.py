@@ -4,9 +4,10 @@ A round:
 1. cost the current edges with the batched placement kernel (fixed-size chunks: one compilation per
    size); only pairs at vertices the last round moved are re-costed, the rest keep their numbers;
 2. select, in passes, pairs that are the cheapest among all candidate pairs touching their endpoints'
-   closed 1-rings (ties broken by a scramble of the pair index in an int64 key), so no two selected pairs share a
-   vertex, a face or a 1-ring neighbour; validate them (flip kernel, link test); invalid ones leave the
-   candidate set, valid ones lock their 1-rings, and the next pass selects among what is still free;
+   closed 1-rings (ties broken by a scramble of the pair index in an int64 key), so no two selected
+   pairs share a vertex, a face or a 1-ring neighbour; validate them (flip kernel, link test); invalid
+   ones leave the candidate set, valid ones lock their 1-rings, and the next pass selects among what is
+   still free;
 3. contract the accepted set at once (vectorised remap, quadric sums, degenerate-face removal); in
    manifold mode the edge list and the vertex degrees are updated through the contractions
    (`topo.contract_edges`) rather than rebuilt from the faces.
@@ -59,7 +60,8 @@ def _place(VQd, P, settings):
     outs = [placement.place_pairs(VQd, part, *args) for _, part in chunks(P.astype(np.int32))]
 
     def result():
-        out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else np.zeros((5, 0), DTYPE)
+        out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else \
+            np.zeros((5, 0), DTYPE)
         return np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8)
     return result
 
