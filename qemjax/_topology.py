@@ -233,15 +233,15 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
 
 
 def _labelled_rows(label: np.ndarray, E: np.ndarray):
-    """Edges with an endpoint labelled (int32 label >= 0, -1 elsewhere; at most one per edge): their
-    rows, the label, the other endpoint (int64) and whether the labelled endpoint is the first."""
+    """Edges with a labelled endpoint (int32 label >= 0, -1 elsewhere): their rows, the label of the first
+    labelled endpoint, the other endpoint (int64), and which rows have both endpoints labelled."""
     L = np.take(label.astype(np.int32, copy=False), E)  # one 2-D gather: faster than two column gathers
     rows = np.flatnonzero(L.view(np.int64).reshape(-1) != -1)  # an unlabelled edge is two -1s: all ones
     Lr, Er = np.take(L, rows, axis=0), np.take(E, rows, axis=0)
     first = Lr[:, 0] >= 0
     lab = np.where(first, Lr[:, 0], Lr[:, 1])
     other = np.where(first, Er[:, 1], Er[:, 0]).astype(np.int64)
-    return rows, lab, other, first
+    return rows, lab, other, first & (Lr[:, 1] >= 0)
 
 
 def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarray, collapsed: np.ndarray,
@@ -272,13 +272,7 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     second = apex_v != apex[s_c, 0]
     apex[s_c[second], 1] = apex_v[second]
     # one scan for the edges at any endpoint; the contracted edge (a, b) itself has both labelled
-    L = np.take(label, E)
-    rows = np.flatnonzero(L.view(np.int64).reshape(-1) != -1)  # an unlabelled edge is two -1s: all ones
-    Lr, Er = np.take(L, rows, axis=0), np.take(E, rows, axis=0)
-    first = Lr[:, 0] >= 0
-    own = first & (Lr[:, 1] >= 0)
-    lab = np.where(first, Lr[:, 0], Lr[:, 1])
-    other = np.where(first, Er[:, 1], Er[:, 0]).astype(np.int64)
+    rows, lab, other, own = _labelled_rows(label, E)
     # edges at b: (b, apex) merge into (a, apex), the rest move to a
     ib = np.flatnonzero((lab >= S) & ~own)
     s, c = lab[ib] - S, other[ib]
