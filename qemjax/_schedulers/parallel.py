@@ -156,10 +156,11 @@ def _select(E, key, cand, need, n, validate, F):
         lock = np.zeros(n, bool)
         lock[_take(E, good).reshape(-1)] = True
         free[_keep(Eo, any_at(lock, Eo)).reshape(-1)] = False
-        ws = narrow(active & free, ws)
         n_acc += good.size
         if good.size < PASS_YIELD * n_acc or (good.size * 50 < need // 2 and p > 2):
             break  # later passes would add little: leave the rest to the next round
+        if p + 1 < MAX_PASSES:
+            ws = narrow(active & free, ws)
     cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64)  # noqa: E731
     return cat(accepted), cat(rejected), extra, ~free
 
