@@ -105,15 +105,17 @@ def _select(E, key, cand, need, n, validate, F):
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
     1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
     """
-    def narrow(avail, ws):
+    def narrow(avail, ws, faces=True):
         """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
         (locking, link test) and their rows, which of those have both endpoints available (selection),
-        faces with an available corner (validation) and their rows."""
+        faces with an available corner (validation) and their rows (kept as they are if not ``faces``)."""
         one, Eo, _, fsub, Fo = ws
         ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
         k1 = ae != 0
-        kf = any_at(avail, Fo)
-        return one[k1], _keep(Eo, k1), ae[k1] == 0x0101, fsub[kf], _keep(Fo, kf)
+        if faces:
+            kf = any_at(avail, Fo)
+            fsub, Fo = fsub[kf], _keep(Fo, kf)
+        return one[k1], _keep(Eo, k1), ae[k1] == 0x0101, fsub, Fo
 
     def endpoints(mask):
         v = np.zeros(n, bool)
@@ -123,10 +125,8 @@ def _select(E, key, cand, need, n, validate, F):
     free = np.ones(n, bool)
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
-    ae = np.take(active, E).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
-    k1 = np.flatnonzero(ae)
     # the faces are narrowed after the first pass: its validation scans them anyway
-    ws = (k1, _take(E, k1), ae[k1] == 0x0101, np.arange(len(F)), F)
+    ws = narrow(active, (np.arange(len(E)), E, None, np.arange(len(F)), F), faces=False)
     accepted, rejected = [], []
     extra = np.zeros(len(E), np.int64)
     n_acc = 0
