@@ -63,11 +63,25 @@ def run_qemjax(scheduler: str, V, F, target: int, repeats: int) -> dict:
         F2 = np.asarray(result.faces, dtype=np.int64)
         walls.append(time.perf_counter() - t0)
     stats = dict(getattr(result, "stats", {}) or {})
-    row = {"V2": V2, "F2": F2, "time_s": walls[-1], "cold_s": walls[0] if repeats > 1 else math.nan}
+    row = {"V2": V2, "F2": F2, "time_s": walls[-1], "cold_s": walls[0] if repeats > 1 else math.nan,
+           "flips_continued": continued_flips(result)}
     for key in ("compile_s", "run_s", "total_s", "rounds", "contractions"):
         value = stats.get(key, math.nan)
         row[key] = float(value) if _is_number(value) else math.nan
     return row
+
+
+def continued_flips(result) -> int:
+    """Output faces whose normal points against (dot <= 0) the input face they continue
+    (``result.source_faces``): the flip test qemjax enforces. Only qemjax records that lineage; the
+    ``flipped_faces`` metric, which every method gets, compares with the nearest input face instead."""
+    def normals(V, F):
+        V = np.asarray(V, np.float64)
+        n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    n_in = normals(result.input_vertices, result.input_faces)[np.asarray(result.source_faces)]
+    return int((np.sum(normals(result.vertices, result.faces) * n_in, axis=1) <= 0).sum())
 
 
 def run_method(method: str, V, F, target: int, repeats: int) -> dict:
