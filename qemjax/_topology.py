@@ -20,13 +20,21 @@ def edge_keys(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
     return np.minimum(a, b) * n + np.maximum(a, b)
 
 
+def key_pairs(keys: np.ndarray, n: int, dtype) -> np.ndarray:
+    """(k,2) vertex pairs (min, max) of `edge_keys` values, as ``dtype``."""
+    return np.stack([keys // n, keys % n], 1).astype(dtype)
+
+
+def _runs(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start index and length of each run of equal values in the sorted array s."""
+    start = np.flatnonzero(np.concatenate([[s.size > 0], s[1:] != s[:-1]]))
+    return start, np.diff(np.append(start, s.size))
+
+
 def unique_counts(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sorted unique values of an int64 array and their multiplicities."""
     s = np.sort(keys)
-    if s.size == 0:
-        return s, np.zeros(0, np.int64)
-    start = np.flatnonzero(np.concatenate([[True], s[1:] != s[:-1]]))
-    counts = np.diff(np.append(start, s.size))
+    start, counts = _runs(s)
     return s[start], counts
 
 
@@ -35,7 +43,7 @@ def edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     each (E,) int64."""
     he = half_edges(F)
     keys, counts = unique_counts(edge_keys(he[:, 0], he[:, 1], n))
-    return np.stack([keys // n, keys % n], 1).astype(F.dtype), counts
+    return key_pairs(keys, n, F.dtype), counts
 
 
 MAX_PAIRS_PER_VERTEX = 50  # pair_threshold may add at most this many close pairs per vertex
@@ -78,11 +86,9 @@ def edge_table(F: np.ndarray, n: int):
     else:
         order = np.argsort(keys, kind="stable")
         ks = keys[order]
-    start = np.flatnonzero(np.concatenate([[True], ks[1:] != ks[:-1]]))
-    counts = np.diff(np.append(start, ks.size))
-    uk = ks[start]
+    start, counts = _runs(ks)
     single = order[start[counts == 1]]
-    return np.stack([uk // n, uk % n], 1).astype(F.dtype), counts, he[single], single // 3
+    return key_pairs(ks[start], n, F.dtype), counts, he[single], single // 3
 
 
 def boundary_edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -175,7 +175,7 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     keys = np.concatenate([ek, xk])
     order = np.argsort(keys, kind="stable")
     keys = keys[order]
-    E = np.stack([keys // n, keys % n], 1).astype(E.dtype)
+    E = topo.key_pairs(keys, n, E.dtype)
     return E, np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
 
 
