@@ -117,7 +117,7 @@ def vertex_degree(E: np.ndarray, n: int) -> np.ndarray:
 
 
 def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
-            boundary_vertex: np.ndarray, degree: np.ndarray) -> np.ndarray:
+            boundary_vertex: np.ndarray, degree: np.ndarray, apexes: bool = False):
     """Manifold-preserving test for edge contractions; vectorised over pairs.
 
     ``pairs`` (S,2) must be vertex-disjoint edges with ``nfaces`` (S,) faces each; E (k,2) must include
@@ -125,11 +125,12 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     faces), its endpoints' common neighbours are exactly the apexes of its faces (the link condition),
     the contraction does not pinch two boundaries together through an interior edge, and no apex of an
     interior edge has degree 3 (which would leave two coincident faces, as in a tetrahedron).
-    Returns (S,) bool.
+    Returns (S,) bool; with ``apexes`` also (S,2) int64: the first two common neighbours of each pair
+    (-1 where there are fewer), which for a passing pair are exactly the apexes of its faces.
     """
     S = len(pairs)
     if S == 0:
-        return np.zeros(0, bool)
+        return (np.zeros(0, bool), np.zeros((0, 2), np.int64)) if apexes else np.zeros(0, bool)
     a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
     lab = np.full(n, -1, np.int32)  # 2·pair + side (0 at a, 1 at b)
     lab[a] = 2 * np.arange(S, dtype=np.int32)
@@ -150,7 +151,13 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     interior = nfaces[common_pair] == 2
     bad_apex = interior & (degree[common_v] <= 3)
     ok &= np.bincount(common_pair[bad_apex], minlength=S) == 0
-    return ok
+    if not apexes:
+        return ok
+    apex = np.full((S, 2), -1, np.int64)
+    rank = np.arange(len(common_pair)) - np.repeat(np.cumsum(ncommon) - ncommon, ncommon)  # sorted by pair
+    two = rank < 2
+    apex[common_pair[two], rank[two]] = common_v[two]
+    return ok, apex
 
 
 def coincident_removals(G: np.ndarray) -> np.ndarray:
@@ -250,13 +257,13 @@ def _labelled_rows(label: np.ndarray, E: np.ndarray):
     return rows, lab, other, first & (Lr[:, 1] >= 0)
 
 
-def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarray, collapsed: np.ndarray,
+def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarray, apex: np.ndarray,
                    n: int, degree: np.ndarray):
     """Edges after contracting vertex-disjoint manifold pairs (b into a), updated instead of rebuilt.
 
     E (k,2) edges (u < v) with ``ecount`` faces each, in any order; the pairs must be two edges apart and
     pass `link_ok`, so the only edges that merge are (b,c) into (a,c) for the apexes c of each pair.
-    ``collapsed`` (j,3): the faces that vanished, already remapped (two corners equal a, one is an apex).
+    ``apex`` (S,2): the apexes of each pair's faces, -1 where it has one face (from `link_ok`).
     ``degree`` (n,): edges at each vertex before.
     Returns (E', ecount', keep, degree'): the edges `edges` would build from the contracted faces (u < v,
     same counts) in a deterministic order that is not sorted, the mask of old edges they continue (E'
@@ -264,19 +271,10 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     stale cost), and the degrees after.
     """
     S = len(a)
-    # apexes of each pair, from its vanished faces (at most two)
-    dup01 = collapsed[:, 0] == collapsed[:, 1]
-    av = np.where(dup01, collapsed[:, 0], collapsed[:, 2])
-    apex_v = np.where(dup01, collapsed[:, 2], np.where(collapsed[:, 1] == collapsed[:, 2], collapsed[:, 0],
-                                                        collapsed[:, 1])).astype(np.int64)
+    apex = np.asarray(apex, np.int64)
     label = np.full(n, -1, np.int32)  # s at a_s, S + s at b_s
     label[a] = np.arange(S, dtype=np.int32)
     label[b] = label[a] + S
-    s_c = label[av]
-    apex = np.full((S, 2), -1, np.int64)
-    apex[s_c, 0] = apex_v
-    second = apex_v != apex[s_c, 0]
-    apex[s_c[second], 1] = apex_v[second]
     # one scan for the edges at any endpoint; the contracted edge (a, b) itself has both labelled
     rows, lab, other, own = _labelled_rows(label, E)
     # edges at b: (b, apex) merge into (a, apex), the rest move to a
@@ -303,5 +301,5 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     deg = degree.copy()  # a gains b's edges but (a, b) and one of each (a, apex), (b, apex) pair
     deg[a] += degree[b] - 2 - (apex >= 0).sum(1)
     deg[b] = 0
-    np.subtract.at(deg, apex_v, 1)
+    np.subtract.at(deg, apex[apex >= 0], 1)
     return np.compress(keep, E2, axis=0), np.compress(keep, count), keep, deg

@@ -29,10 +29,20 @@ def _independent_pairs(E, ecount, n, F):
     deg = topo.vertex_degree(E, n)
     bvert = np.zeros(n, bool)
     bvert[E[ecount == 1].reshape(-1)] = True
-    ok = topo.link_ok(P, ecount[chosen], E, n, bvert, deg)
+    ok, apex = topo.link_ok(P, ecount[chosen], E, n, bvert, deg, apexes=True)
+    assert np.array_equal(ok, topo.link_ok(P, ecount[chosen], E, n, bvert, deg))
     _, _, owner, G = topo.contraction_faces(F, P, n)
     ok &= topo.coincidence_count(G, owner, len(P)) == 0
-    return P[ok]
+    return P[ok], apex[ok]
+
+
+def _face_apexes(F, a, b):
+    """Sorted apexes (S,2) of each pair's faces (-1 padded), found by brute force over the faces."""
+    out = np.full((len(a), 2), -1)
+    for s, (u, v) in enumerate(zip(a, b)):
+        c = sorted(int(w) for f in F if u in f and v in f for w in f if w != u and w != v)
+        out[s, 2 - len(c):] = c
+    return out
 
 
 @pytest.mark.parametrize("mesh", [shapes.bumpy_sphere(3), shapes.grid(12, hole=True), shapes.torus()],
@@ -43,14 +53,16 @@ def test_incremental_edges_match_rebuild(mesh):
     E, ecount = topo.edges(F, n)
     degree = topo.vertex_degree(E, n)
     for _ in range(6):
-        P = _independent_pairs(E, ecount, n, F)
+        P, apex = _independent_pairs(E, ecount, n, F)
         assert len(P) > 0
         a, b = P[:, 0], P[:, 1]
+        # the link test's common neighbours are exactly the apexes of the pair's faces
+        assert np.array_equal(np.sort(apex, 1), _face_apexes(F, a, b))
         rep = np.arange(n)
         rep[b] = a
         Fr = rep[F]
         deg = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 0] == Fr[:, 2])
-        E2, c2, keep, degree = topo.contract_edges(E, ecount, a, b, Fr[deg], n, degree)
+        E2, c2, keep, degree = topo.contract_edges(E, ecount, a, b, apex, n, degree)
         src = np.flatnonzero(keep)
         F = Fr[~deg]
         Eref, cref = topo.edges(F, n)

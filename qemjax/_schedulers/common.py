@@ -16,9 +16,16 @@ MIN_BUCKET = 16
 CHUNKS = (256, 4096, 1 << 16)  # batch shapes; larger batches are cut into pieces of the largest
 
 
-def bucket(n: int, lo: int = MIN_BUCKET) -> int:
-    """Padded capacity for n items: the next power of two (at least ``lo``)."""
-    return max(lo, 1 << max(0, int(n - 1).bit_length()))
+def bucket(n: int, lo: int = MIN_BUCKET, steps: int = 1) -> int:
+    """Padded capacity for n items: the next power of two (at least ``lo``), or with ``steps`` > 1 the
+    next of ``steps`` evenly spaced sizes per octave (steps=4: ×1.25, ×1.5, ×1.75, ×2 of a power of two),
+    for arrays whose padding costs arithmetic."""
+    p = max(lo, 1 << max(0, int(n - 1).bit_length()))
+    if steps > 1 and p > lo:
+        half = p // 2
+        step = max(1, half // steps)
+        return min(p, half + -(-(n - half) // step) * step)
+    return p
 
 
 def chunk_size(n: int) -> int:
@@ -37,12 +44,31 @@ def pad_rows(a: np.ndarray, size: int, fill=0) -> np.ndarray:
     return out
 
 
+MAX_PIECES = 8  # a remainder takes up to this many pieces of a smaller shape instead of one padded larger
+
+
+def piece_sizes(n: int) -> list[int]:
+    """Shapes of the pieces that hold n rows: full pieces of the largest of CHUNKS, then the remainder
+    in up to MAX_PIECES pieces of the smallest shape that allows it (one piece at least). Only the last
+    piece is padded, by less than one piece of its shape, unless the remainder needs the largest shape."""
+    big = CHUNKS[-1]
+    out = [big] * ((n - 1) // big) if n > big else []
+    rest = n - len(out) * big
+    for i in range(len(CHUNKS) - 1, -1, -1):
+        if i == 0 or -(-rest // CHUNKS[i - 1]) > MAX_PIECES:
+            return out + [CHUNKS[i]] * max(1, -(-rest // CHUNKS[i]))
+    return out
+
+
 def chunks(arr: np.ndarray, fill=0, size: int | None = None):
-    """Split rows into equal padded pieces of a bucketed size (see `chunk_size`; or exactly ``size``):
-    yields (start, piece)."""
-    size = size or chunk_size(len(arr))
-    for s in range(0, max(len(arr), 1), size):
-        yield s, pad_rows(arr[s:s + size], size, fill)
+    """Split rows into padded pieces of the shapes CHUNKS (see `piece_sizes`; or all exactly ``size``):
+    yields (start, piece). Only the last piece holds padding."""
+    n = len(arr)
+    sizes = piece_sizes(n) if size is None else [size] * max(1, -(-n // size))
+    start = 0
+    for s in sizes:
+        yield start, pad_rows(arr[start:start + s], s, fill)
+        start += s
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,7 +143,7 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
     be, bf, cw = be[keep], bf[keep], cw[keep]
     p = V[F[bf]]
     cn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)
-    nb, nf, nv = bucket(len(be)), bucket(len(F)), bucket(n + 1)
+    nb, nf, nv = bucket(len(be)), bucket(len(F), steps=4), bucket(n + 1, steps=4)  # faces: arithmetic
     Vp = pad_rows(V.astype(DTYPE), nv)
     Fp = pad_rows(F.astype(np.int32), nf, fill=n)  # padding faces point at a spare vertex
     fmask = np.arange(nf) < len(F)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import time
+from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 
 import jax.numpy as jnp
@@ -38,6 +39,15 @@ TAIL = 10  # near the target a round takes at most about 1/(2·TAIL) of what is 
 FREE_COST = 1e-10  # costs below this (squared, unit extent) always pass the gate: flat regions
 MERGE_CHUNK = 4096
 NO_KEY = np.iinfo(np.int64).max
+_worker = None  # one host thread beside the caller's: numpy releases the GIL in its large array passes
+
+
+def _submit(fn, *args, **kw):
+    """Run fn on the worker thread; returns its future. Only read-only inputs are shared."""
+    global _worker
+    if _worker is None:
+        _worker = ThreadPoolExecutor(1, thread_name_prefix="qemjax-host")
+    return _worker.submit(fn, *args, **kw)
 
 
 def _sort_keys(cost: np.ndarray, salt: int = 0) -> np.ndarray:
@@ -181,18 +191,32 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
 
 def _validate(P, idx, Fs, fs, Efree, *, ctx):
     """(ok, faces made coincident) for vertex-disjoint pairs P (indices idx into this round's pairs).
-    Fs (rows fs of the current faces) holds every face around them, Efree every pair at them."""
+    Fs (rows fs of the current faces) holds every face around them, Efree every pair at them. In
+    manifold mode the link test runs on the worker thread, and the apexes it finds are kept in
+    ``ctx.apexes`` (for `topo.contract_edges`)."""
     tv = time.perf_counter()
+    if ctx.settings.preserve_topology:
+        link = _submit(topo.link_ok, P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg, apexes=True)
     rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
     flipped = _flip_bad(ctx.VQd, ctx.N0d, _take(Fs, rows), ctx.fid[fs[rows]], corner, owner,
                         _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
     gone = topo.coincidence_count(G, owner, len(P))
     ok = np.ones(len(P), bool)
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
-        ok = (gone == 0) & topo.link_ok(P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg)
+        linked, apex = link.result()
+        ok = (gone == 0) & linked
+        ctx.apexes.append((idx, apex))
     ok &= ~flipped()
     ctx.timer.add("validity_s", time.perf_counter() - tv)
     return ok, gone
+
+
+def _apexes_of(acc, found):
+    """(len(acc),2) apexes of the accepted pairs acc, from the (pair indices, apexes) the link tests found."""
+    idx = np.concatenate([i for i, _ in found])
+    apex = np.concatenate([x for _, x in found])
+    order = np.argsort(idx)
+    return apex[order[np.searchsorted(idx, acc, sorter=order)]]
 
 
 def _fits_target(removes: np.ndarray, need: int) -> np.ndarray:
@@ -222,9 +246,8 @@ def _touched_vertices(F, P, n):
 def _relink_faces(F, fid, kept, n, drop_coincident):
     """After remapping F (removed vertices replaced by kept ones): drop faces with a repeated corner,
     and with ``drop_coincident`` resolve faces that now coincide (they all touch a kept vertex).
-    Returns F, fid and the faces that collapsed (remapped, with a repeated corner)."""
+    Returns F, fid."""
     deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    collapsed = _keep(F, deg)
     F, fid = _keep(F, ~deg), fid[~deg]
     if drop_coincident:
         merged = np.zeros(n, bool)
@@ -233,7 +256,7 @@ def _relink_faces(F, fid, kept, n, drop_coincident):
         keep = np.ones(len(F), bool)
         keep[rows[topo.coincident_removals(_take(F, rows))]] = False
         F, fid = _keep(F, keep), fid[keep]
-    return F, fid, collapsed
+    return F, fid
 
 
 def _history_arrays(rounds):
@@ -333,7 +356,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
         ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
-                              settings=settings, timer=timer)
+                              settings=settings, timer=timer, apexes=[])
         acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx), F)
         rejected += bad.size
         n_sel = acc.size
@@ -366,15 +389,17 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         prev = (x, cost, branch, known_bad, changed, ekeys)
         rep = np.arange(n, dtype=np.int32)
         rep[b] = a
-        F, fid, collapsed = _relink_faces(np.take(rep, F), fid, a, n, drop_coincident=not manifold)
-        if incremental:
-            updated = topo.contract_edges(E, ecount, a, b, collapsed, n, deg)
+        if incremental:  # the edge update runs on the worker while this thread relinks the faces
+            edges_next = _submit(topo.contract_edges, E, ecount, a, b, _apexes_of(acc, ctx.apexes), n, deg)
+        F, fid = _relink_faces(np.take(rep, F), fid, a, n, drop_coincident=not manifold)
         if len(extra_pairs):
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
         VQ[a, 3:] = merged()
         VQ[a, :3] = xs
         VQd = set_rows(VQd, a, _take(VQ, a), size=MERGE_CHUNK)
+        if incremental:
+            updated = edges_next.result()
         faces_per_round.append(len(F))
         timer.add("contract_s", time.perf_counter() - t0)
         if progress is not None:
