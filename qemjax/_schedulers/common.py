@@ -13,7 +13,7 @@ from .._kernels import placement, quadrics
 
 DTYPE = np.float32
 MIN_BUCKET = 16
-CHUNKS = (256, 4096, 1 << 16)  # batch shapes; larger batches are cut into pieces of the largest
+CHUNKS = (256, 4096, 1 << 16)  # batch shapes; larger batches are cut into pieces (`piece_sizes`)
 
 
 def bucket(n: int, lo: int = MIN_BUCKET, steps: int = 1) -> int:
@@ -57,7 +57,6 @@ def piece_sizes(n: int) -> list[int]:
     for i in range(len(CHUNKS) - 1, -1, -1):
         if i == 0 or -(-rest // CHUNKS[i - 1]) > MAX_PIECES:
             return out + [CHUNKS[i]] * max(1, -(-rest // CHUNKS[i]))
-    return out
 
 
 def chunks(arr: np.ndarray, fill=0, size: int | None = None):
