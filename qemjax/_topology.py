@@ -202,33 +202,10 @@ def coincident_removals(G: np.ndarray) -> np.ndarray:
     return out
 
 
-def contraction_faces(F: np.ndarray, pairs: np.ndarray, n: int):
-    """Surviving faces touched by contracting vertex-disjoint pairs (b into a), as they would be after.
-
-    ``pairs`` (S,2) must be at least two edges apart, so a face holds endpoints of one pair at most; a
-    face holding both endpoints of its pair disappears, every other touched face has one moving corner.
-    Returns rows (k,) indices into F, corner (k,) which corner moves, owner (k,) its pair, G (k,3) the
-    faces with b replaced by a.
-    """
-    S = len(pairs)
-    lab = np.full(n, -1, np.int32)
-    lab[pairs[:, 0]] = lab[pairs[:, 1]] = np.arange(S, dtype=np.int32)
-    lf = np.take(lab, F)
-    h = (lf >= 0).view(np.int8)
-    rows = np.flatnonzero((h[:, 0] + h[:, 1] + h[:, 2]) == 1)
-    hr = np.take(h, rows, axis=0)
-    corner = hr[:, 1] + 2 * hr[:, 2]  # the one labelled corner
-    lr = np.take(lf, rows, axis=0)
-    owner = np.maximum(np.maximum(lr[:, 0], lr[:, 1]), lr[:, 2])  # the others are -1
-    G = np.take(F, rows, axis=0)
-    G[np.arange(len(rows)), corner] = pairs[owner, 0]
-    return rows, corner, owner, G
-
-
 def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     """(S,) int: faces that the contractions would make coincide and drop (`coincident_removals`).
 
-    G, owner: the touched faces after contraction and their pairs, from `contraction_faces` (every face
+    G, owner: the touched faces after contraction and their pairs, from `FaceLists.touched` (every face
     that could coincide touches the pair, because pairs are two edges apart).
     """
     h = np.zeros(len(G), np.uint64)  # a symmetric hash: the same for any order of the corners

@@ -1,4 +1,4 @@
-"""Host-side connectivity: the incremental edge update against a rebuild from the faces."""
+"""Host-side connectivity: the incremental edge and face updates against rebuilds from the faces."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,6 +6,7 @@ import pytest
 
 from qemjax import _topology as topo
 from qemjax import shapes
+from qemjax._incidence import FaceLists
 
 rng = np.random.default_rng(7)
 
@@ -31,7 +32,7 @@ def _independent_pairs(E, ecount, n, F):
     bvert[E[ecount == 1].reshape(-1)] = True
     ok, apex = topo.link_ok(P, ecount[chosen], E, n, bvert, deg, apexes=True)
     assert np.array_equal(ok, topo.link_ok(P, ecount[chosen], E, n, bvert, deg))
-    _, _, owner, G = topo.contraction_faces(F, P, n)
+    _, _, _, owner, G = FaceLists(F, n).touched(P)
     ok &= topo.coincidence_count(G, owner, len(P)) == 0
     return P[ok], apex[ok]
 
@@ -76,3 +77,50 @@ def test_incremental_edges_match_rebuild(mesh):
         moved = ~same
         assert np.isin(old[moved], b).any(1).all()
         E, ecount = E2, c2
+
+
+def _brute_touched(F, P):
+    """(face, corner, owner, face after) for faces holding exactly one endpoint of one pair."""
+    out = set()
+    for s, (u, v) in enumerate(P):
+        for f, face in enumerate(F):
+            if (u in face) != (v in face):
+                k = list(face).index(u if u in face else v)
+                after = list(face)
+                after[k] = u
+                out.add((f, k, s, tuple(after)))
+    return out
+
+
+@pytest.mark.parametrize("mesh", [shapes.bumpy_sphere(3), shapes.grid(12, hole=True)], ids=["sphere", "grid"])
+@pytest.mark.parametrize("pool", ["roomy", "tight"])
+def test_face_lists_follow_contractions(mesh, pool):
+    """FaceLists after rounds of contractions: the live faces equal the remapped, degenerate-free input,
+    every vertex lists exactly its live faces, and `touched` matches a brute-force search. A tight pool
+    compacts on every write."""
+    F = np.asarray(mesh.faces, np.int64)
+    n = len(mesh.vertices)
+    lists = FaceLists(F, n)
+    if pool == "tight":
+        lists.pool = lists.pool[: lists.end].copy()
+    E, ecount = topo.edges(F, n)
+    for _ in range(5):
+        P, _ = _independent_pairs(E, ecount, n, F)
+        f, before, corner, owner, after = lists.touched(P.astype(np.int32))
+        assert np.array_equal(before, lists.F[f])
+        got = {(int(a), int(k), int(s), tuple(int(x) for x in g)) for a, k, s, g in zip(f, corner, owner, after)}
+        live = np.flatnonzero(lists.alive)
+        assert got == {(int(live[i]), k, s, g) for i, k, s, g in _brute_touched(F, P)}
+        rep = np.arange(n)
+        rep[P[:, 1]] = P[:, 0]
+        Fr = rep[F]
+        deg = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 0] == Fr[:, 2])
+        dead = lists.contract(P[:, 0].astype(np.int32), P[:, 1].astype(np.int32))
+        assert np.array_equal(np.sort(dead), live[deg])
+        F = Fr[~deg]
+        assert lists.count == len(F) and np.array_equal(lists.live(), F)
+        w, fl = lists.around(np.arange(n))
+        listed = {(int(v), int(x)) for v, x in zip(w, fl)}
+        live = np.flatnonzero(lists.alive)
+        assert listed == {(int(v), int(live[i])) for i, face in enumerate(F) for v in face}
+        E, ecount = topo.edges(F, n)

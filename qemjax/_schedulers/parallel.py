@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _topology as topo
+from .._incidence import FaceLists
 from .._arrays import any_at, keep_rows as _keep, take_rows as _take
 from .._kernels import flips, placement
 from .common import DTYPE, Settings, Timer, bucket, chunks, pad_rows, set_rows
@@ -105,29 +106,26 @@ def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, settings):
     return result
 
 
-def _select(E, key, cand, need, n, validate, F):
+def _select(E, key, cand, need, n, validate):
     """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices,
     the extra faces (coincident ones) each accepted pair removes, (len(E),) int, and the vertices the
     accepted pairs lock (their endpoints' closed 1-rings through E), (n,) bool.
 
     E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
-    graph. ``validate(pairs, idx, faces, face_idx, pairs_at_free)`` returns (ok, extra faces removed).
+    graph. ``validate(pairs, idx, pairs_at_free)`` returns (ok, extra faces removed).
 
     Each pass takes the candidates that hold the smallest key among all candidates touching their
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
     1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
     """
-    def narrow(avail, ws, faces=True):
+    def narrow(avail, ws):
         """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
-        (locking, link test) and their rows, which of those have both endpoints available (selection),
-        faces with an available corner (validation) and their rows (kept as they are if not ``faces``)."""
-        one, Eo, _, fsub, Fo = ws
+        (locking, link test) and their rows, and which of those have both endpoints available
+        (selection)."""
+        one, Eo, _ = ws
         ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
         k1 = ae != 0
-        if faces:
-            kf = any_at(avail, Fo)
-            fsub, Fo = fsub[kf], _keep(Fo, kf)
-        return one[k1], _keep(Eo, k1), ae[k1] == 0x0101, fsub, Fo
+        return one[k1], _keep(Eo, k1), ae[k1] == 0x0101
 
     def endpoints(mask):
         v = np.zeros(n, bool)
@@ -137,13 +135,12 @@ def _select(E, key, cand, need, n, validate, F):
     free = np.ones(n, bool)
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
-    # the faces are narrowed after the first pass: its validation scans them anyway
-    ws = narrow(active, (np.arange(len(E)), E, None, np.arange(len(F)), F), faces=False)
+    ws = narrow(active, (np.arange(len(E)), E, None))
     accepted, rejected = [], []
     extra = np.zeros(len(E), np.int64)
     n_acc = 0
     for p in range(MAX_PASSES):
-        one, Eo, bmask, fsub, Fo = ws
+        one, Eo, bmask = ws
         both, Eb = one[bmask], _keep(Eo, bmask)
         live = cand[both]
         if not live.any():
@@ -158,7 +155,7 @@ def _select(E, key, cand, need, n, validate, F):
         sel = both[live & (kl == m2[Eb[:, 0]]) & (kl == m2[Eb[:, 1]])]
         if sel.size == 0:
             break
-        ok, extra_sel = validate(_take(E, sel), sel, Fo, fsub, Eo)
+        ok, extra_sel = validate(_take(E, sel), sel, Eo)
         extra[sel] = extra_sel
         cand[sel[~ok]] = False
         rejected.append(sel[~ok])
@@ -191,16 +188,16 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     return E, np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
 
 
-def _validate(P, idx, Fs, fs, Efree, *, ctx):
+def _validate(P, idx, Efree, *, ctx):
     """(ok, faces made coincident) for vertex-disjoint pairs P (indices idx into this round's pairs).
-    Fs (rows fs of the current faces) holds every face around them, Efree every pair at them. In
+    Efree holds every pair at them; the faces come from ``ctx.faces`` (`FaceLists`). In
     manifold mode the link test runs on the worker thread, and the apexes it finds are kept in
     ``ctx.apexes`` (for `topo.contract_edges`)."""
     tv = time.perf_counter()
     if ctx.settings.preserve_topology:
         link = _submit(topo.link_ok, P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg, apexes=True)
-    rows, corner, owner, G = topo.contraction_faces(Fs, P, ctx.n)
-    flipped = _flip_bad(ctx.VQd, ctx.N0d, _take(Fs, rows), ctx.fid[fs[rows]], corner, owner,
+    fids, before, corner, owner, G = ctx.faces.touched(P)
+    flipped = _flip_bad(ctx.VQd, ctx.N0d, before, fids, corner, owner,
                         _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
     gone = topo.coincidence_count(G, owner, len(P))
     ok = np.ones(len(P), bool)
@@ -237,28 +234,19 @@ def _fits_target(removes: np.ndarray, need: int) -> np.ndarray:
     return take
 
 
-def _touched_vertices(F, P, n):
+def _touched_vertices(faces: FaceLists, P, n):
     """(n,) bool: endpoints of the pairs P and every vertex sharing a face with one."""
     t = np.zeros(n, bool)
     t[P.reshape(-1)] = True
-    t[_keep(F, any_at(t, F)).reshape(-1)] = True
+    t[_take(faces.F, faces.around(P.reshape(-1))[1]).reshape(-1)] = True
     return t
 
 
-def _relink_faces(F, fid, kept, n, drop_coincident):
-    """After remapping F (removed vertices replaced by kept ones): drop faces with a repeated corner,
-    and with ``drop_coincident`` resolve faces that now coincide (they all touch a kept vertex).
-    Returns F, fid."""
-    deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    F, fid = _keep(F, ~deg), fid[~deg]
-    if drop_coincident:
-        merged = np.zeros(n, bool)
-        merged[kept] = True
-        rows = np.flatnonzero(any_at(merged, F))
-        keep = np.ones(len(F), bool)
-        keep[rows[topo.coincident_removals(_take(F, rows))]] = False
-        F, fid = _keep(F, keep), fid[keep]
-    return F, fid
+def _drop_coincident(faces: FaceLists, kept):
+    """Resolve faces that coincide after contractions into the vertices ``kept`` (all such faces touch
+    one), lower face index first (`topo.coincident_removals`)."""
+    f = np.unique(faces.around(kept)[1])
+    faces.remove(f[topo.coincident_removals(_take(faces.F, f))])
 
 
 def _history_arrays(rounds):
@@ -282,9 +270,9 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     V = VQ[:, :3]  # views
     F = F.astype(np.int32)  # halves the memory traffic of every gather (n < 2**31)
     extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
-    fid = np.arange(len(F))  # input face each current face continues
+    faces = FaceLists(F, n)  # rows keep their index: face i continues input face i
     p = np.take(V, F, axis=0)
-    N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals, by fid
+    N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals
     N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
     VQd = jnp.asarray(VQ)  # device copy, updated row by row
     timer = Timer()
@@ -297,12 +285,12 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     # manifold mode: the edges are updated through each round's contractions instead of rebuilt
     incremental = manifold and len(extra_pairs) == 0
     updated = None  # (E, ecount, rows kept, degree) after the last round's contractions, when incremental
-    while len(F) > target_faces:
+    while faces.count > target_faces:
         rounds += 1
         t0 = time.perf_counter()
         ekeys = same = None
         if updated is None:
-            E, ecount = topo.edges(F, n) if edges is None else (edges[0].astype(F.dtype), edges[1])
+            E, ecount = topo.edges(faces.live(), n) if edges is None else (edges[0].astype(F.dtype), edges[1])
             edges = None
             E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
             deg = topo.vertex_degree(E if incremental else _keep(E, ecount > 0), n)
@@ -345,7 +333,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
-        need = len(F) - target_faces
+        need = faces.count - target_faces
         n_alive = len(E)  # ~3× the live vertices; only the ratio matters for the gate
         valid = (cost <= settings.max_cost) & ~known_bad & (ecount <= need)
         if manifold:
@@ -357,9 +345,9 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         key = _sort_keys(cost, salt=rounds * 7919)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
-        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, fid=fid, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
+        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, faces=faces, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
                               settings=settings, timer=timer, apexes=[])
-        acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx), F)
+        acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx))
         rejected += bad.size
         n_sel = acc.size
         acc = acc[np.argsort(key[acc], kind="stable")]
@@ -386,15 +374,17 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         r = np.flatnonzero(known_bad)
         if r.size:  # pairs whose faces change get another chance
             # the 1-rings that selection locked, unless the target cut the set short
-            touched = locked if acc.size == n_sel else _touched_vertices(F, P, n)
+            touched = locked if acc.size == n_sel else _touched_vertices(faces, P, n)
             known_bad[r[any_at(touched, _take(E, r))]] = False
         prev = (x, cost, branch, known_bad, changed, ekeys)
-        rep = np.arange(n, dtype=np.int32)
-        rep[b] = a
         if incremental:  # the edge update runs on the worker while this thread relinks the faces
             edges_next = _submit(topo.contract_edges, E, ecount, a, b, _apexes_of(acc, ctx.apexes), n, deg)
-        F, fid = _relink_faces(np.take(rep, F), fid, a, n, drop_coincident=not manifold)
+        faces.contract(a, b)
+        if not manifold:
+            _drop_coincident(faces, a)
         if len(extra_pairs):
+            rep = np.arange(n, dtype=np.int32)
+            rep[b] = a
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
         VQ[a, 3:] = merged()
@@ -402,16 +392,12 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         VQd = set_rows(VQd, a, _take(VQ, a), size=MERGE_CHUNK)
         if incremental:
             updated = edges_next.result()
-        faces_per_round.append(len(F))
+        faces_per_round.append(faces.count)
         timer.add("contract_s", time.perf_counter() - t0)
         if progress is not None:
-            progress(len(F))
-    alive = np.zeros(m, bool)
-    Fout = np.zeros((m, 3), F.dtype)
-    Fout[fid] = F
-    alive[fid] = True
+            progress(faces.count)
     hist = _history_arrays(history)
     info = {"contractions": len(hist[0]), "rejected": rejected, "rounds": rounds, "max_cost": max_cost_used,
             "branches": branches, "faces_per_round": faces_per_round}
     info.update(timer.t)
-    return VQ[:n, :3], VQ[:n, 3:], Fout, alive, hist, info
+    return VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, hist, info

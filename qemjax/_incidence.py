@@ -1,0 +1,135 @@
+"""Vertex -> face incidence on the host (numpy), kept up to date through contractions.
+
+The parallel scheduler asks, every pass, for the faces around a few thousand pairs, and after every round
+re-links the faces of the removed vertices. Scanning all faces for that costs a pass over the whole mesh
+each time; these lists make both cost what they touch.
+
+Layout: each vertex's faces are one run in a pool (CSR with lazy deletion). A contraction writes the kept
+vertex's merged run at the end of the pool and abandons the old runs; a face that dies stays listed at
+its other corners, and readers skip it. When the pool is full, the live entries are compacted.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+
+
+def _exclusive_cumsum(c: np.ndarray) -> np.ndarray:
+    out = np.cumsum(c)
+    out -= c
+    return out
+
+
+class FaceLists:
+    """The faces F (m,3) of a mesh with n vertices, which of them are alive, and each vertex's faces.
+
+    Face rows never move: a face keeps its index (the input face it continues) until it dies. F must not
+    repeat a vertex within a face."""
+
+    def __init__(self, F: np.ndarray, n: int):
+        self.F = np.array(F, np.int32)
+        m = len(self.F)
+        self.alive = np.ones(m, bool)
+        self.count = m
+        # grouping corners by vertex is a counting sort, which scipy's COO -> CSR conversion does in C
+        inc = scipy.sparse.csr_matrix(
+            (np.ones(3 * m, np.int8), (self.F.reshape(-1), np.repeat(np.arange(m, dtype=np.int32), 3))),
+            shape=(n, max(m, 1)))
+        self.cnt = np.diff(inc.indptr).astype(np.int64)
+        self.off = inc.indptr[:-1].astype(np.int64)
+        self.pool = np.empty(2 * 3 * m + 64, np.int32)
+        self.end = len(inc.indices)
+        self.pool[: self.end] = inc.indices
+
+    def live(self) -> np.ndarray:
+        """(count,3) the live faces, in face order."""
+        return np.compress(self.alive, self.F, axis=0)
+
+    def around(self, verts: np.ndarray):
+        """Every live face at each of ``verts`` (k,): (positions into verts, face ids), grouped by
+        position in order (a face at two of the vertices appears twice)."""
+        lens = np.take(self.cnt, verts)
+        which = np.repeat(np.arange(len(verts)), lens)
+        pos = np.arange(len(which), dtype=np.int64)
+        pos += np.repeat(np.take(self.off, verts) - _exclusive_cumsum(lens), lens)
+        f = np.take(self.pool, pos)
+        live = np.take(self.alive, f)
+        return np.compress(live, which), np.compress(live, f)
+
+    def remove(self, faces: np.ndarray):
+        """Mark faces dead (they stay listed at their corners until those runs are rewritten)."""
+        faces = faces[self.alive[faces]]
+        self.alive[faces] = False
+        self.count -= len(np.unique(faces))
+
+    def contract(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Contract b into a for vertex-disjoint pairs whose faces are disjoint (no face holds endpoints
+        of two pairs): faces holding both endpoints die, b's other faces now use a. Returns the faces
+        that died."""
+        wa, fa = self.around(a)
+        wb, fb = self.around(b)
+        Gb = np.take(self.F, fb, axis=0)
+        a_w = np.take(a, wb).astype(np.int32)
+        dies = (Gb[:, 0] == a_w) | (Gb[:, 1] == a_w) | (Gb[:, 2] == a_w)
+        dead = fb[dies]
+        self.alive[dead] = False
+        self.count -= len(dead)
+        moved = ~dies
+        mv, wm, Gm = fb[moved], wb[moved], Gb[moved]
+        b_w = np.take(b, wm)
+        corner = np.where(Gm[:, 0] == b_w, 0, np.where(Gm[:, 1] == b_w, 1, 2))
+        self.F[mv, corner] = a_w[moved]
+        keep = np.take(self.alive, fa)
+        self._write(a, np.compress(keep, wa), np.compress(keep, fa), wm, mv)
+        self.cnt[b] = 0
+        return dead
+
+    def _write(self, verts, w1, f1, w2, f2):
+        """New runs for ``verts``: faces f1 then f2, each grouped by their position w1 / w2 in verts
+        (non-decreasing), appended at the end of the pool."""
+        S = len(verts)
+        c1, c2 = np.bincount(w1, minlength=S), np.bincount(w2, minlength=S)
+        total = c1 + c2
+        k = int(total.sum())
+        if self.end + k > len(self.pool):
+            self._compact(k)
+        start = self.end + _exclusive_cumsum(total)
+        p1 = np.arange(len(w1), dtype=np.int64) + np.take(start - _exclusive_cumsum(c1), w1)
+        p2 = np.arange(len(w2), dtype=np.int64) + np.take(start + c1 - _exclusive_cumsum(c2), w2)
+        self.pool[p1] = f1
+        self.pool[p2] = f2
+        self.off[verts] = start
+        self.cnt[verts] = total
+        self.end += k
+
+    def _compact(self, extra: int):
+        """Rewrite every run without its dead faces at the start of the pool, with room for ``extra``
+        more entries (the pool grows if the live entries and those do not fit)."""
+        verts = np.flatnonzero(self.cnt)
+        w, f = self.around(verts)
+        counts = np.bincount(w, minlength=len(verts))
+        need = len(f) + extra
+        if need > len(self.pool) // 2:  # keep room for the runs to come
+            self.pool = np.empty(max(2 * need, len(self.pool)), np.int32)
+        self.pool[: len(f)] = f
+        self.off[verts] = _exclusive_cumsum(counts)
+        self.cnt[verts] = counts
+        self.end = len(f)
+
+    def touched(self, pairs: np.ndarray):
+        """The faces around pairs (S,2) as contracting each b into its a would leave them; the pairs must
+        be vertex-disjoint and no face may hold endpoints of two pairs. Faces holding both endpoints of
+        their pair (they die) are left out. Returns face ids (k,), the faces before (k,3), the corner
+        that moves (k,), the owner pair (k,) and the faces after (k,3), b replaced by a."""
+        ends = pairs.reshape(-1)
+        w, f = self.around(ends)
+        G = np.take(self.F, f, axis=0)
+        other = np.take(ends, w ^ 1)  # the pair's other endpoint
+        keep = (G[:, 0] != other) & (G[:, 1] != other) & (G[:, 2] != other)
+        w, f, G = np.compress(keep, w), np.compress(keep, f), np.compress(keep, G, axis=0)
+        me = np.take(ends, w)
+        corner = np.where(G[:, 0] == me, 0, np.where(G[:, 1] == me, 1, 2))
+        owner = w >> 1
+        after = G.copy()
+        after[np.arange(len(G)), corner] = np.take(ends, 2 * owner)
+        return f, G, corner, owner, after
