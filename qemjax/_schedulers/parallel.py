@@ -270,11 +270,14 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     V = VQ[:, :3]  # views
     F = F.astype(np.int32)  # halves the memory traffic of every gather (n < 2**31)
     extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
+    VQd = jnp.asarray(VQ)  # device copy, updated row by row
+    first = None  # the first costing of the given edges runs while the host sets up the faces
+    if edges is not None and len(extra_pairs) == 0:
+        first = _place(VQd, edges[0], settings)
     faces = FaceLists(F, n)  # rows keep their index: face i continues input face i
     p = np.take(V, F, axis=0)
     N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals
     N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
-    VQd = jnp.asarray(VQ)  # device copy, updated row by row
     timer = Timer()
     history = []
     branches = np.zeros(3, np.int64)
@@ -306,7 +309,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         # start re-costing the pairs at vertices the last round moved (the rest keep their cost and
         # target); the kernel runs while the host goes on
         if prev is None:
-            d, pending = None, _place(VQd, E, settings)
+            d, pending = None, first or _place(VQd, E, settings)
             known_bad = np.zeros(len(E), bool)
         else:
             px, pcost, pbranch, pbad, changed, _ = prev
