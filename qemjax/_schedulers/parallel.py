@@ -41,6 +41,7 @@ GATE_FRACTION = 0.05  # k = min(contractions still needed / (2·TAIL), GATE_FRAC
 TAIL = 10  # near the target a round takes at most about 1/(2·TAIL) of what is still needed
 FREE_COST = 1e-10  # costs below this (squared, unit extent) always pass the gate: flat regions
 MERGE_CHUNK = 4096
+SPLIT_ROWS = 1 << 18  # array passes at least this long are shared with the worker thread
 NO_KEY = np.iinfo(np.int64).max
 _worker = None  # one host thread beside the caller's: numpy releases the GIL in its large array passes
 
@@ -118,11 +119,16 @@ def _select(E, key, cand, need, n, validate):
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
     1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
     """
-    def narrow(avail, ws):
+    def narrow(avail, ws, split=True):
         """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
         (locking, link test) and their rows, and which of those have both endpoints available
-        (selection)."""
+        (selection). Large sets are split between this thread and the worker (idle here)."""
         one, Eo, _ = ws
+        if split and len(Eo) >= SPLIT_ROWS:
+            h = len(Eo) // 2
+            half = _submit(narrow, avail, (one[:h], Eo[:h], None), split=False)
+            rest = narrow(avail, (one[h:], Eo[h:], None), split=False)
+            return tuple(np.concatenate(pair) for pair in zip(half.result(), rest))
         ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
         k1 = ae != 0
         return one[k1], _keep(Eo, k1), ae[k1] == 0x0101
