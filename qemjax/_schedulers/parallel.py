@@ -8,9 +8,10 @@ A round:
    pairs share a vertex, a face or a 1-ring neighbour; validate them (flip kernel, link test); invalid
    ones leave the candidate set, valid ones lock their 1-rings, and the next pass selects among what is
    still free;
-3. contract the accepted set at once (vectorised remap, quadric sums, degenerate-face removal); in
-   manifold mode the edge list and the vertex degrees are updated through the contractions
-   (`topo.contract_edges`) rather than rebuilt from the faces.
+3. contract the accepted set at once (quadric sums; the faces through the vertex->face lists of
+   `FaceLists`, which validation also reads, so neither scans the whole mesh); in manifold mode the
+   edge list and the vertex degrees are updated through the contractions (`topo.contract_edges`)
+   rather than rebuilt from the faces.
 Kernel calls are asynchronous: the re-costing, the flip test and the quadric merges run on JAX's
 threads while the host works on the topology, and are waited for only where their results are needed.
 One host worker thread runs the link test and the edge update beside the main thread's face work (numpy
