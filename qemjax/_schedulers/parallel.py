@@ -275,14 +275,13 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     n_cap = bucket(n + 1)
     VQ = pad_rows(np.concatenate([V, Q], 1).astype(DTYPE), n_cap)  # rows [position, quadric]
     V = VQ[:, :3]  # views
-    F = F.astype(np.int32)  # halves the memory traffic of every gather (n < 2**31)
     extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
     VQd = jnp.asarray(VQ)  # device copy, updated row by row
     first = None  # the first costing of the given edges runs while the host sets up the faces
     if edges is not None and len(extra_pairs) == 0:
         first = _place(VQd, edges[0], settings)
-    faces = FaceLists(F, n)  # rows keep their index: face i continues input face i
-    p = np.take(V, F, axis=0)
+    faces = FaceLists(F, n)  # int32 rows (n < 2**31) keep their index: face i continues input face i
+    p = np.take(V, faces.F, axis=0)
     N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals
     N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
     timer = Timer()
@@ -300,7 +299,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         t0 = time.perf_counter()
         ekeys = same = None
         if updated is None:
-            E, ecount = topo.edges(faces.live(), n) if edges is None else (edges[0].astype(F.dtype), edges[1])
+            E, ecount = topo.edges(faces.live(), n) if edges is None else (edges[0].astype(np.int32), edges[1])
             edges = None
             E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
             deg = topo.vertex_degree(E if incremental else _keep(E, ecount > 0), n)
