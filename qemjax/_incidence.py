@@ -121,15 +121,39 @@ class FaceLists:
         be vertex-disjoint and no face may hold endpoints of two pairs. Faces holding both endpoints of
         their pair (they die) are left out. Returns face ids (k,), the faces before (k,3), the corner
         that moves (k,), the owner pair (k,) and the faces after (k,3), b replaced by a."""
+        return self.touched_with_dead(pairs)[0]
+
+    def touched_with_dead(self, pairs: np.ndarray):
+        """`touched`, plus what `contract_touched` needs to apply the contractions without looking the
+        faces up again: (positions w into pairs.reshape(-1), faces, moving corners) of the surviving
+        faces, and (faces, owner pairs) of the faces that die (seen from b's side)."""
         ends = pairs.reshape(-1)
         w, f = self.around(ends)
         G = np.take(self.F, f, axis=0)
         other = np.take(ends, w ^ 1)  # the pair's other endpoint
         keep = (G[:, 0] != other) & (G[:, 1] != other) & (G[:, 2] != other)
+        dies = ~keep & (w & 1).astype(bool)
+        dead = (np.compress(dies, f), np.compress(dies, w) >> 1)
         w, f, G = np.compress(keep, w), np.compress(keep, f), np.compress(keep, G, axis=0)
         me = np.take(ends, w)
         corner = np.where(G[:, 0] == me, 0, np.where(G[:, 1] == me, 1, 2))
         owner = w >> 1
         after = G.copy()
         after[np.arange(len(G)), corner] = np.take(ends, 2 * owner)
-        return f, G, corner, owner, after
+        return (f, G, corner, owner, after), (w, f, corner), dead
+
+    def contract_touched(self, pairs: np.ndarray, kept, dead) -> None:
+        """`contract` for pairs (S,2) whose faces were found by `touched_with_dead` (and have not changed
+        since): ``kept`` = (w, f, corner) of the surviving faces, w non-decreasing positions into
+        pairs.reshape(-1); ``dead`` = the faces that die. The same result as `contract`, without the
+        second look-up."""
+        w, f, corner = kept
+        a, b = pairs[:, 0], pairs[:, 1]
+        self.alive[dead] = False
+        self.count -= len(dead)
+        at_b = (w & 1).astype(bool)
+        wa, wb = np.compress(~at_b, w) >> 1, np.compress(at_b, w) >> 1
+        mv = np.compress(at_b, f)
+        self.F[mv, np.compress(at_b, corner)] = np.take(a, wb).astype(np.int32)
+        self._write(a, wa, np.compress(~at_b, f), wb, mv)
+        self.cnt[b] = 0

@@ -242,10 +242,10 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     pass `link_ok`, so the only edges that merge are (b,c) into (a,c) for the apexes c of each pair.
     ``apex`` (S,2): the apexes of each pair's faces, -1 where it has one face (from `link_ok`).
     ``degree`` (n,): edges at each vertex before.
-    Returns (E', ecount', keep, degree'): the edges `edges` would build from the contracted faces (u < v,
-    same counts) in a deterministic order that is not sorted, the mask of old edges they continue (E'
-    row i continues the i-th kept row: the same edge, or (b,c) for (a,c); only edges at an a have a
-    stale cost), and the degrees after.
+    Returns (E', ecount', keep, degree', at_a): the edges `edges` would build from the contracted faces
+    (u < v, same counts) in a deterministic order that is not sorted, the mask of old edges they continue
+    (E' row i continues the i-th kept row: the same edge, or (b,c) for (a,c)), the degrees after, and
+    which rows of E' are at an a (len(E'),) bool: only those have a stale cost.
     """
     S = len(a)
     apex = np.asarray(apex, np.int64)
@@ -279,4 +279,6 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     deg[a] += degree[b] - 2 - (apex >= 0).sum(1)
     deg[b] = 0
     np.subtract.at(deg, apex[apex >= 0], 1)
-    return np.compress(keep, E2, axis=0), np.compress(keep, count), keep, deg
+    at_a = np.zeros(len(E), bool)
+    at_a[rows] = True  # every edge at an a or a b; those at a b that survive move to its a
+    return np.compress(keep, E2, axis=0), np.compress(keep, count), keep, deg, np.compress(keep, at_a)

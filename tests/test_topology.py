@@ -7,6 +7,7 @@ import pytest
 from qemjax import _topology as topo
 from qemjax import shapes
 from qemjax._incidence import FaceLists
+from qemjax._schedulers.parallel import _accepted
 
 rng = np.random.default_rng(7)
 
@@ -63,7 +64,8 @@ def test_incremental_edges_match_rebuild(mesh):
         rep[b] = a
         Fr = rep[F]
         deg = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 0] == Fr[:, 2])
-        E2, c2, keep, degree = topo.contract_edges(E, ecount, a, b, apex, n, degree)
+        E2, c2, keep, degree, at_a = topo.contract_edges(E, ecount, a, b, apex, n, degree)
+        assert np.array_equal(at_a, np.isin(E2, a).any(1))
         src = np.flatnonzero(keep)
         F = Fr[~deg]
         Eref, cref = topo.edges(F, n)
@@ -94,10 +96,12 @@ def _brute_touched(F, P):
 
 @pytest.mark.parametrize("mesh", [shapes.bumpy_sphere(3), shapes.grid(12, hole=True)], ids=["sphere", "grid"])
 @pytest.mark.parametrize("pool", ["roomy", "tight"])
-def test_face_lists_follow_contractions(mesh, pool):
+@pytest.mark.parametrize("apply", ["contract", "reuse"])
+def test_face_lists_follow_contractions(mesh, pool, apply):
     """FaceLists after rounds of contractions: the live faces equal the remapped, degenerate-free input,
     every vertex lists exactly its live faces, and `touched` matches a brute-force search. A tight pool
-    compacts on every write."""
+    compacts on every write. ``reuse``: the contractions are applied from `touched_with_dead` look-ups made
+    in two passes, of which a subset is taken (as the parallel scheduler does), not looked up again."""
     F = np.asarray(mesh.faces, np.int64)
     n = len(mesh.vertices)
     lists = FaceLists(F, n)
@@ -111,11 +115,22 @@ def test_face_lists_follow_contractions(mesh, pool):
         got = {(int(a), int(k), int(s), tuple(int(x) for x in g)) for a, k, s, g in zip(f, corner, owner, after)}
         live = np.flatnonzero(lists.alive)
         assert got == {(int(live[i]), k, s, g) for i, k, s, g in _brute_touched(F, P)}
+        if apply == "reuse":  # two look-up passes over halves of P; every third pair is left out
+            P = P.astype(np.int32)
+            halves = np.array_split(np.arange(len(P)), 2)
+            found = [(h, *lists.touched_with_dead(P[h])[1:], None) for h in halves]
+            take = np.arange(len(P)) % 3 != 1
+            pairs, kept, dead, _ = _accepted(P, found, take)
+            assert np.array_equal(pairs, P[take])
+            P = P[take]
         rep = np.arange(n)
         rep[P[:, 1]] = P[:, 0]
         Fr = rep[F]
         deg = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 0] == Fr[:, 2])
-        dead = lists.contract(P[:, 0].astype(np.int32), P[:, 1].astype(np.int32))
+        if apply == "reuse":
+            lists.contract_touched(pairs, kept, dead)
+        else:
+            dead = lists.contract(P[:, 0].astype(np.int32), P[:, 1].astype(np.int32))
         assert np.array_equal(np.sort(dead), live[deg])
         F = Fr[~deg]
         assert lists.count == len(F) and np.array_equal(lists.live(), F)

@@ -9,9 +9,9 @@ A round:
    ones leave the candidate set, valid ones lock their 1-rings, and the next pass selects among what is
    still free;
 3. contract the accepted set at once (quadric sums; the faces through the vertex->face lists of
-   `FaceLists`, which validation also reads, so neither scans the whole mesh); in manifold mode the
-   edge list and the vertex degrees are updated through the contractions (`topo.contract_edges`)
-   rather than rebuilt from the faces.
+   `FaceLists`: validation looks them up and the contraction reuses that look-up, so neither scans the
+   whole mesh); in manifold mode the edge list and the vertex degrees are updated through the
+   contractions (`topo.contract_edges`, with the apexes the link test found) rather than rebuilt.
 Kernel calls are asynchronous: the re-costing, the flip test and the quadric merges run on JAX's
 threads while the host works on the topology, and are waited for only where their results are needed.
 One host worker thread runs the link test and the edge update beside the main thread's face work (numpy
@@ -197,32 +197,50 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
 
 def _validate(P, idx, Efree, *, ctx):
     """(ok, faces made coincident) for vertex-disjoint pairs P (indices idx into this round's pairs).
-    Efree holds every pair at them; the faces come from ``ctx.faces`` (`FaceLists`). In
-    manifold mode the link test runs on the worker thread, and the apexes it finds are kept in
-    ``ctx.apexes`` (for `topo.contract_edges`)."""
+    Efree holds every pair at them; the faces come from ``ctx.faces`` (`FaceLists`). In manifold mode
+    the link test runs on the worker thread. What the contraction will need again (the faces' look-up
+    and, in manifold mode, the apexes the link test found, for `topo.contract_edges`) is appended to
+    ``ctx.found``."""
     tv = time.perf_counter()
     if ctx.settings.preserve_topology:
         link = _submit(topo.link_ok, P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg, apexes=True)
-    fids, before, corner, owner, G = ctx.faces.touched(P)
+    (fids, before, corner, owner, G), kept, dead = ctx.faces.touched_with_dead(P)
     flipped = _flip_bad(ctx.VQd, ctx.N0d, before, fids, corner, owner,
                         _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
     gone = topo.coincidence_count(G, owner, len(P))
     ok = np.ones(len(P), bool)
+    apex = None
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
         linked, apex = link.result()
         ok = (gone == 0) & linked
-        ctx.apexes.append((idx, apex))
+    ctx.found.append((idx, kept, dead, apex))
     ok &= ~flipped()
     ctx.timer.add("validity_s", time.perf_counter() - tv)
     return ok, gone
 
 
-def _apexes_of(acc, found):
-    """(len(acc),2) apexes of the accepted pairs acc, from the (pair indices, apexes) the link tests found."""
-    idx = np.concatenate([i for i, _ in found])
-    apex = np.concatenate([x for _, x in found])
-    order = np.argsort(idx)
-    return apex[order[np.searchsorted(idx, acc, sorter=order)]]
+def _accepted(E, found, take):
+    """The pairs marked in ``take`` (len(E),) bool with what validation found for them (``found``: pair
+    indices, kept faces, dead faces, apexes or None, per pass; `FaceLists.touched_with_dead`), renumbered
+    as one set in pass order: pairs (S,2), the arguments ``kept`` and ``dead`` of
+    `FaceLists.contract_touched`, and the apexes (S,2) (None outside manifold mode)."""
+    pairs, ws, fs, cs, ds, xs = [], [], [], [], [], []
+    off = 0
+    for idx, (w, f, c), (df, downer), apex in found:
+        t = take[idx]
+        pos = np.cumsum(t) - 1 + off  # each taken pair's place in the combined set
+        keep = np.take(t, w >> 1)
+        wk = np.compress(keep, w)
+        ws.append(2 * np.take(pos, wk >> 1) + (wk & 1))
+        fs.append(np.compress(keep, f))
+        cs.append(np.compress(keep, c))
+        ds.append(np.compress(np.take(t, downer), df))
+        pairs.append(_take(E, np.compress(t, idx)))
+        if apex is not None:
+            xs.append(_keep(apex, t))
+        off = pos[-1] + 1 if len(pos) else off
+    cat = np.concatenate
+    return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), cat(xs) if xs else None
 
 
 def _fits_target(removes: np.ndarray, need: int) -> np.ndarray:
@@ -293,7 +311,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     prev = None  # (targets, costs, branches, known invalid, moved vertices, keys) of the last round's edges
     # manifold mode: the edges are updated through each round's contractions instead of rebuilt
     incremental = manifold and len(extra_pairs) == 0
-    updated = None  # (E, ecount, rows kept, degree) after the last round's contractions, when incremental
+    updated = None  # (E, ecount, rows kept, degree, rows at moved vertices) after the last round, when incremental
     while faces.count > target_faces:
         rounds += 1
         t0 = time.perf_counter()
@@ -310,7 +328,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
                 same = prev[5][src] == ekeys
                 follow = functools.partial(_take, indices=src)
         else:
-            E, ecount, kept, deg = updated
+            E, ecount, kept, deg, dirty = updated
             follow = functools.partial(_keep, mask=kept)
         # start re-costing the pairs at vertices the last round moved (the rest keep their cost and
         # target); the kernel runs while the host goes on
@@ -319,7 +337,8 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             known_bad = np.zeros(len(E), bool)
         else:
             px, pcost, pbranch, pbad, changed, _ = prev
-            dirty = any_at(changed, E)
+            if updated is None:
+                dirty = any_at(changed, E)
             if same is not None:
                 dirty |= ~same
             d = np.flatnonzero(dirty)
@@ -355,7 +374,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
         ctx = SimpleNamespace(VQd=VQd, N0d=N0d, faces=faces, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
-                              settings=settings, timer=timer, apexes=[])
+                              settings=settings, timer=timer, found=[])
         acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx))
         rejected += bad.size
         n_sel = acc.size
@@ -366,7 +385,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         if acc.size == 0:
             if bad.size:  # the invalid ones are out now: select again among the rest (same edges)
                 prev = (x, cost, branch, known_bad, np.zeros(n, bool), ekeys)
-                updated = (E, ecount, np.ones(len(E), bool), deg) if incremental else None
+                updated = (E, ecount, np.ones(len(E), bool), deg, np.zeros(len(E), bool)) if incremental else None
                 continue
             break
 
@@ -386,9 +405,12 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             touched = locked if acc.size == n_sel else _touched_vertices(faces, P, n)
             known_bad[r[any_at(touched, _take(E, r))]] = False
         prev = (x, cost, branch, known_bad, changed, ekeys)
+        taken = np.zeros(len(E), bool)
+        taken[acc] = True
+        pairs, kept, dead, apex = _accepted(E, ctx.found, taken)  # in pass order, not acc's
         if incremental:  # the edge update runs on the worker while this thread relinks the faces
-            edges_next = _submit(topo.contract_edges, E, ecount, a, b, _apexes_of(acc, ctx.apexes), n, deg)
-        faces.contract(a, b)
+            edges_next = _submit(topo.contract_edges, E, ecount, pairs[:, 0], pairs[:, 1], apex, n, deg)
+        faces.contract_touched(pairs, kept, dead)
         if not manifold:
             _drop_coincident(faces, a)
         if len(extra_pairs):
