@@ -117,7 +117,7 @@ def vertex_degree(E: np.ndarray, n: int) -> np.ndarray:
 
 
 def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
-            boundary_vertex: np.ndarray, degree: np.ndarray, apexes: bool = False):
+            boundary_vertex: np.ndarray, degree: np.ndarray, apexes: bool = False, edges_at: bool = False):
     """Manifold-preserving test for edge contractions; vectorised over pairs.
 
     ``pairs`` (S,2) must be vertex-disjoint edges with ``nfaces`` (S,) faces each; E (k,2) must include
@@ -126,18 +126,21 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     the contraction does not pinch two boundaries together through an interior edge, and no apex of an
     interior edge has degree 3 (which would leave two coincident faces, as in a tetrahedron).
     Returns (S,) bool; with ``apexes`` also (S,2) int64: the first two common neighbours of each pair
-    (-1 where there are fewer), which for a passing pair are exactly the apexes of its faces.
+    (-1 where there are fewer), which for a passing pair are exactly the apexes of its faces; with
+    ``edges_at`` also the rows of E at an endpoint (k,) and the pair of each (k,) (for `contract_edges`).
     """
     S = len(pairs)
     if S == 0:
-        return (np.zeros(0, bool), np.zeros((0, 2), np.int64)) if apexes else np.zeros(0, bool)
+        out = (np.zeros(0, bool),) + ((np.zeros((0, 2), np.int64),) if apexes else ()) + \
+            ((np.zeros(0, np.int64), np.zeros(0, np.int64)) if edges_at else ())
+        return out if len(out) > 1 else out[0]
     a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
     lab = np.full(n, -1, np.int32)  # 2·pair + side (0 at a, 1 at b)
     lab[a] = 2 * np.arange(S, dtype=np.int32)
     lab[b] = lab[a] + 1
     # (pair, neighbour, side) for every edge leaving a labelled vertex; the pair's own edge (a, b) is
     # seen from one side only, which cannot make a common neighbour
-    _, L, c_, _ = _labelled_rows(lab, E)
+    rows, L, c_, _ = _labelled_rows(lab, E)
     L = L.astype(np.int64)
     key = np.sort(((L >> 1) * n + c_) * 2 + (L & 1))
     base = key // 2
@@ -151,13 +154,16 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     interior = nfaces[common_pair] == 2
     bad_apex = interior & (degree[common_v] <= 3)
     ok &= np.bincount(common_pair[bad_apex], minlength=S) == 0
-    if not apexes:
-        return ok
-    apex = np.full((S, 2), -1, np.int64)
-    rank = np.arange(len(common_pair)) - np.repeat(np.cumsum(ncommon) - ncommon, ncommon)  # sorted by pair
-    two = rank < 2
-    apex[common_pair[two], rank[two]] = common_v[two]
-    return ok, apex
+    out = (ok,)
+    if apexes:
+        apex = np.full((S, 2), -1, np.int64)
+        rank = np.arange(len(common_pair)) - np.repeat(np.cumsum(ncommon) - ncommon, ncommon)  # by pair
+        two = rank < 2
+        apex[common_pair[two], rank[two]] = common_v[two]
+        out += (apex,)
+    if edges_at:
+        out += (rows, L >> 1)
+    return out if len(out) > 1 else out[0]
 
 
 def coincident_removals(G: np.ndarray) -> np.ndarray:
@@ -222,12 +228,17 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     return np.bincount(owner[idx[rm]], minlength=S)
 
 
-def _labelled_rows(label: np.ndarray, E: np.ndarray):
+def _labelled_rows(label: np.ndarray, E: np.ndarray, rows: np.ndarray | None = None):
     """Edges with a labelled endpoint (int32 label >= 0, -1 elsewhere): their rows, the label of the first
-    labelled endpoint, the other endpoint (int64), and which rows have both endpoints labelled."""
-    L = np.take(label.astype(np.int32, copy=False), E)  # one 2-D gather: faster than two column gathers
-    rows = np.flatnonzero(L.view(np.int64).reshape(-1) != -1)  # an unlabelled edge is two -1s: all ones
-    Lr, Er = np.take(L, rows, axis=0), np.take(E, rows, axis=0)
+    labelled endpoint, the other endpoint (int64), and which rows have both endpoints labelled. ``rows``:
+    those rows when the caller knows them already (in any order), which saves the scan of E."""
+    if rows is None:
+        L = np.take(label.astype(np.int32, copy=False), E)  # one 2-D gather: faster than two column gathers
+        rows = np.flatnonzero(L.view(np.int64).reshape(-1) != -1)  # an unlabelled edge is two -1s: all ones
+        Lr, Er = np.take(L, rows, axis=0), np.take(E, rows, axis=0)
+    else:
+        Er = np.take(E, rows, axis=0)
+        Lr = np.take(label.astype(np.int32, copy=False), Er)
     first = Lr[:, 0] >= 0
     lab = np.where(first, Lr[:, 0], Lr[:, 1])
     other = np.where(first, Er[:, 1], Er[:, 0]).astype(np.int64)
@@ -235,13 +246,15 @@ def _labelled_rows(label: np.ndarray, E: np.ndarray):
 
 
 def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarray, apex: np.ndarray,
-                   n: int, degree: np.ndarray):
+                   n: int, degree: np.ndarray, rows: np.ndarray | None = None):
     """Edges after contracting vertex-disjoint manifold pairs (b into a), updated instead of rebuilt.
 
-    E (k,2) edges (u < v) with ``ecount`` faces each, in any order; the pairs must be two edges apart and
-    pass `link_ok`, so the only edges that merge are (b,c) into (a,c) for the apexes c of each pair.
+    E (k,2) edges (u < v) with ``ecount`` (>= 1) faces each, in any order; the pairs must be two edges
+    apart and pass `link_ok`, so the only edges that merge are (b,c) into (a,c) for the apexes c of each
+    pair.
     ``apex`` (S,2): the apexes of each pair's faces, -1 where it has one face (from `link_ok`).
-    ``degree`` (n,): edges at each vertex before.
+    ``degree`` (n,): edges at each vertex before. ``rows``: the rows of E at any endpoint, when known
+    (`link_ok` finds them), which saves a scan of E.
     Returns (E', ecount', keep, degree', at_a): the edges `edges` would build from the contracted faces
     (u < v, same counts) in a deterministic order that is not sorted, the mask of old edges they continue
     (E' row i continues the i-th kept row: the same edge, or (b,c) for (a,c)), the degrees after, and
@@ -252,29 +265,36 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     label = np.full(n, -1, np.int32)  # s at a_s, S + s at b_s
     label[a] = np.arange(S, dtype=np.int32)
     label[b] = label[a] + S
-    # one scan for the edges at any endpoint; the contracted edge (a, b) itself has both labelled
-    rows, lab, other, own = _labelled_rows(label, E)
+    # the edges at any endpoint; the contracted edge (a, b) itself has both labelled
+    rows, lab, other, own = _labelled_rows(label, E, rows)
     # edges at b: (b, apex) merge into (a, apex), the rest move to a
     ib = np.flatnonzero((lab >= S) & ~own)
-    s, c = lab[ib] - S, other[ib]
-    to = a[s].astype(np.int64)
-    which = np.where(c == apex[s, 0], 0, np.where(c == apex[s, 1], 1, -1))
+    s, c = np.take(lab, ib) - S, np.take(other, ib)
+    ap = np.take(apex, s, axis=0)
+    which = np.where(c == ap[:, 0], 0, np.where(c == ap[:, 1], 1, -1))
     merge = which >= 0
+    rb = np.take(rows, ib)
     # (a, apex) loses the vanished face and gains the other faces of (b, apex)
     delta = np.zeros((S, 2), np.int64)
-    delta[s[merge], which[merge]] = ecount[rows[ib[merge]]] - 2
+    rm = np.compress(merge, rb)
+    delta[np.compress(merge, s), np.compress(merge, which)] = np.take(ecount, rm) - 2
     ia = np.flatnonzero((lab < S) & ~own)
-    ta, oa = lab[ia], other[ia]
-    hit = np.where(oa == apex[ta, 0], 0, np.where(oa == apex[ta, 1], 1, -1))
+    ta, oa = np.take(lab, ia), np.take(other, ia)
+    ap = np.take(apex, ta, axis=0)
+    hit = np.where(oa == ap[:, 0], 0, np.where(oa == ap[:, 1], 1, -1))
+    h = hit >= 0
     count = ecount.copy()
-    count[rows[ia[hit >= 0]]] += delta[ta[hit >= 0], hit[hit >= 0]]
+    rh = np.compress(h, np.take(rows, ia))
+    count[rh] += delta[np.compress(h, ta), np.compress(h, hit)]
     E2 = E.copy()
-    mv, to, c = rows[ib[~merge]], to[~merge], c[~merge]
+    mv = np.compress(~merge, rb)
+    to, c = np.take(a, np.compress(~merge, s)).astype(np.int64), np.compress(~merge, c)
     E2[mv, 0] = np.minimum(to, c)
     E2[mv, 1] = np.maximum(to, c)
-    keep = count > 0
-    keep[rows[own]] = False
-    keep[rows[ib[merge]]] = False
+    keep = np.ones(len(E), bool)  # every edge has faces; only (a, apex) counts change, and may reach 0
+    keep[rh] = np.take(count, rh) > 0
+    keep[np.compress(own, rows)] = False
+    keep[rm] = False
     deg = degree.copy()  # a gains b's edges but (a, b) and one of each (a, apex), (b, apex) pair
     deg[a] += degree[b] - 2 - (apex >= 0).sum(1)
     deg[b] = 0

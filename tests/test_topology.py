@@ -31,11 +31,14 @@ def _independent_pairs(E, ecount, n, F):
     deg = topo.vertex_degree(E, n)
     bvert = np.zeros(n, bool)
     bvert[E[ecount == 1].reshape(-1)] = True
-    ok, apex = topo.link_ok(P, ecount[chosen], E, n, bvert, deg, apexes=True)
+    ok, apex, rows, pair = topo.link_ok(P, ecount[chosen], E, n, bvert, deg, apexes=True, edges_at=True)
     assert np.array_equal(ok, topo.link_ok(P, ecount[chosen], E, n, bvert, deg))
+    # the edges at the endpoints, each once, with its pair
+    assert np.array_equal(np.sort(rows), np.flatnonzero(np.isin(E, P).any(1)))
+    assert (E[rows][:, :, None] == P[pair][:, None, :]).any((1, 2)).all()
     _, _, _, owner, G = FaceLists(F, n).touched(P)
     ok &= topo.coincidence_count(G, owner, len(P)) == 0
-    return P[ok], apex[ok]
+    return P[ok], apex[ok], np.compress(ok[pair], rows)
 
 
 def _face_apexes(F, a, b):
@@ -55,7 +58,7 @@ def test_incremental_edges_match_rebuild(mesh):
     E, ecount = topo.edges(F, n)
     degree = topo.vertex_degree(E, n)
     for _ in range(6):
-        P, apex = _independent_pairs(E, ecount, n, F)
+        P, apex, rows = _independent_pairs(E, ecount, n, F)
         assert len(P) > 0
         a, b = P[:, 0], P[:, 1]
         # the link test's common neighbours are exactly the apexes of the pair's faces
@@ -64,7 +67,11 @@ def test_incremental_edges_match_rebuild(mesh):
         rep[b] = a
         Fr = rep[F]
         deg = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 0] == Fr[:, 2])
+        degree_before = degree
         E2, c2, keep, degree, at_a = topo.contract_edges(E, ecount, a, b, apex, n, degree)
+        # the same from the rows at the endpoints that the link test found (no scan of E)
+        known = topo.contract_edges(E, ecount, a, b, apex, n, degree_before, rows=rows[::-1])
+        assert all(np.array_equal(x, y) for x, y in zip(known, (E2, c2, keep, degree, at_a)))
         assert np.array_equal(at_a, np.isin(E2, a).any(1))
         src = np.flatnonzero(keep)
         F = Fr[~deg]
@@ -109,7 +116,7 @@ def test_face_lists_follow_contractions(mesh, pool, apply):
         lists.pool = lists.pool[: lists.end].copy()
     E, ecount = topo.edges(F, n)
     for _ in range(5):
-        P, _ = _independent_pairs(E, ecount, n, F)
+        P, _, _ = _independent_pairs(E, ecount, n, F)
         f, before, corner, owner, after = lists.touched(P.astype(np.int32))
         assert np.array_equal(before, lists.F[f])
         got = {(int(a), int(k), int(s), tuple(int(x) for x in g)) for a, k, s, g in zip(f, corner, owner, after)}

@@ -114,7 +114,8 @@ def _select(E, key, cand, need, n, validate):
     accepted pairs lock (their endpoints' closed 1-rings through E), (n,) bool.
 
     E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
-    graph. ``validate(pairs, idx, pairs_at_free)`` returns (ok, extra faces removed).
+    graph. ``validate(pairs, idx, rows, pairs_at_free)`` (rows: the indices of pairs_at_free in E)
+    returns (ok, extra faces removed).
 
     Each pass takes the candidates that hold the smallest key among all candidates touching their
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
@@ -162,7 +163,7 @@ def _select(E, key, cand, need, n, validate):
         sel = both[live & (kl == m2[Eb[:, 0]]) & (kl == m2[Eb[:, 1]])]
         if sel.size == 0:
             break
-        ok, extra_sel = validate(_take(E, sel), sel, Eo)
+        ok, extra_sel = validate(_take(E, sel), sel, one, Eo)
         extra[sel] = extra_sel
         cand[sel[~ok]] = False
         rejected.append(sel[~ok])
@@ -195,25 +196,27 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     return E, np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
 
 
-def _validate(P, idx, Efree, *, ctx):
+def _validate(P, idx, free_rows, Efree, *, ctx):
     """(ok, faces made coincident) for vertex-disjoint pairs P (indices idx into this round's pairs).
-    Efree holds every pair at them; the faces come from ``ctx.faces`` (`FaceLists`). In manifold mode
-    the link test runs on the worker thread. What the contraction will need again (the faces' look-up
-    and, in manifold mode, the apexes the link test found, for `topo.contract_edges`) is appended to
-    ``ctx.found``."""
+    Efree (rows free_rows of this round's pairs) holds every pair at them; the faces come from
+    ``ctx.faces`` (`FaceLists`). In manifold mode the link test runs on the worker thread. What the
+    contraction will need again (the faces' look-up and, in manifold mode, the apexes and the pairs at
+    the endpoints that the link test found, for `topo.contract_edges`) is appended to ``ctx.found``."""
     tv = time.perf_counter()
     if ctx.settings.preserve_topology:
-        link = _submit(topo.link_ok, P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg, apexes=True)
+        link = _submit(topo.link_ok, P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg, apexes=True,
+                       edges_at=True)
     (fids, before, corner, owner, G), kept, dead = ctx.faces.touched_with_dead(P)
     flipped = _flip_bad(ctx.VQd, ctx.N0d, before, fids, corner, owner,
                         _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
     gone = topo.coincidence_count(G, owner, len(P))
     ok = np.ones(len(P), bool)
-    apex = None
+    at = None
     if ctx.settings.preserve_topology:  # no coincident faces, link condition
-        linked, apex = link.result()
+        linked, apex, r, owner_r = link.result()
         ok = (gone == 0) & linked
-    ctx.found.append((idx, kept, dead, apex))
+        at = (apex, np.take(free_rows, r), owner_r)
+    ctx.found.append((idx, kept, dead, at))
     ok &= ~flipped()
     ctx.timer.add("validity_s", time.perf_counter() - tv)
     return ok, gone
@@ -221,12 +224,13 @@ def _validate(P, idx, Efree, *, ctx):
 
 def _accepted(E, found, take):
     """The pairs marked in ``take`` (len(E),) bool with what validation found for them (``found``: pair
-    indices, kept faces, dead faces, apexes or None, per pass; `FaceLists.touched_with_dead`), renumbered
-    as one set in pass order: pairs (S,2), the arguments ``kept`` and ``dead`` of
-    `FaceLists.contract_touched`, and the apexes (S,2) (None outside manifold mode)."""
-    pairs, ws, fs, cs, ds, xs = [], [], [], [], [], []
+    indices, kept faces, dead faces and, in manifold mode, (apexes, rows of E at the endpoints, their
+    pairs) per pass; `FaceLists.touched_with_dead`, `topo.link_ok`), renumbered as one set in pass
+    order: pairs (S,2), the arguments ``kept`` and ``dead`` of `FaceLists.contract_touched`, and the
+    apexes (S,2) and the rows of E at the endpoints (None outside manifold mode)."""
+    pairs, ws, fs, cs, ds, xs, rs = [], [], [], [], [], [], []
     off = 0
-    for idx, (w, f, c), (df, downer), apex in found:
+    for idx, (w, f, c), (df, downer), at in found:
         t = take[idx]
         pos = np.cumsum(t) - 1 + off  # each taken pair's place in the combined set
         keep = np.take(t, w >> 1)
@@ -236,11 +240,13 @@ def _accepted(E, found, take):
         cs.append(np.compress(keep, c))
         ds.append(np.compress(np.take(t, downer), df))
         pairs.append(_take(E, np.compress(t, idx)))
-        if apex is not None:
+        if at is not None:
+            apex, rows, owner = at
             xs.append(_keep(apex, t))
+            rs.append(np.compress(np.take(t, owner), rows))
         off = pos[-1] + 1 if len(pos) else off
     cat = np.concatenate
-    return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), cat(xs) if xs else None
+    return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
 
 
 def _fits_target(removes: np.ndarray, need: int) -> np.ndarray:
@@ -311,7 +317,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     prev = None  # (targets, costs, branches, known invalid, moved vertices, keys) of the last round's edges
     # manifold mode: the edges are updated through each round's contractions instead of rebuilt
     incremental = manifold and len(extra_pairs) == 0
-    updated = None  # (E, ecount, rows kept, degree, rows at moved vertices) after the last round, when incremental
+    updated = None  # (E, ecount, rows kept, degree, rows at moved vertices) after a round, when incremental
     while faces.count > target_faces:
         rounds += 1
         t0 = time.perf_counter()
@@ -385,7 +391,8 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         if acc.size == 0:
             if bad.size:  # the invalid ones are out now: select again among the rest (same edges)
                 prev = (x, cost, branch, known_bad, np.zeros(n, bool), ekeys)
-                updated = (E, ecount, np.ones(len(E), bool), deg, np.zeros(len(E), bool)) if incremental else None
+                if incremental:
+                    updated = (E, ecount, np.ones(len(E), bool), deg, np.zeros(len(E), bool))
                 continue
             break
 
@@ -407,9 +414,10 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         prev = (x, cost, branch, known_bad, changed, ekeys)
         taken = np.zeros(len(E), bool)
         taken[acc] = True
-        pairs, kept, dead, apex = _accepted(E, ctx.found, taken)  # in pass order, not acc's
+        pairs, kept, dead, (apex, erows) = _accepted(E, ctx.found, taken)  # in pass order, not acc's
         if incremental:  # the edge update runs on the worker while this thread relinks the faces
-            edges_next = _submit(topo.contract_edges, E, ecount, pairs[:, 0], pairs[:, 1], apex, n, deg)
+            edges_next = _submit(topo.contract_edges, E, ecount, pairs[:, 0], pairs[:, 1], apex, n, deg,
+                                 rows=erows)
         faces.contract_touched(pairs, kept, dead)
         if not manifold:
             _drop_coincident(faces, a)
