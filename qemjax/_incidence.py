@@ -66,22 +66,9 @@ class FaceLists:
         """Contract b into a for vertex-disjoint pairs whose faces are disjoint (no face holds endpoints
         of two pairs): faces holding both endpoints die, b's other faces now use a. Returns the faces
         that died."""
-        wa, fa = self.around(a)
-        wb, fb = self.around(b)
-        Gb = np.take(self.F, fb, axis=0)
-        a_w = np.take(a, wb).astype(np.int32)
-        dies = (Gb[:, 0] == a_w) | (Gb[:, 1] == a_w) | (Gb[:, 2] == a_w)
-        dead = fb[dies]
-        self.alive[dead] = False
-        self.count -= len(dead)
-        moved = ~dies
-        mv, wm, Gm = fb[moved], wb[moved], Gb[moved]
-        b_w = np.take(b, wm)
-        corner = np.where(Gm[:, 0] == b_w, 0, np.where(Gm[:, 1] == b_w, 1, 2))
-        self.F[mv, corner] = a_w[moved]
-        keep = np.take(self.alive, fa)
-        self._write(a, np.compress(keep, wa), np.compress(keep, fa), wm, mv)
-        self.cnt[b] = 0
+        pairs = np.stack([a, b], 1)
+        _, kept, (dead, _) = self.touched_with_dead(pairs)
+        self.contract_touched(pairs, kept, dead)
         return dead
 
     def _write(self, verts, w1, f1, w2, f2):
@@ -143,10 +130,9 @@ class FaceLists:
         return (f, G, corner, owner, after), (w, f, corner), dead
 
     def contract_touched(self, pairs: np.ndarray, kept, dead) -> None:
-        """`contract` for pairs (S,2) whose faces were found by `touched_with_dead` (and have not changed
-        since): ``kept`` = (w, f, corner) of the surviving faces, w non-decreasing positions into
-        pairs.reshape(-1); ``dead`` = the faces that die. The same result as `contract`, without the
-        second look-up."""
+        """`contract` for pairs (S,2) whose faces `touched_with_dead` found (and have not changed since),
+        without looking them up again: ``kept`` = (w, f, corner) of the surviving faces, w non-decreasing
+        positions into pairs.reshape(-1); ``dead`` = the faces that die."""
         w, f, corner = kept
         a, b = pairs[:, 0], pairs[:, 1]
         self.alive[dead] = False

@@ -244,7 +244,7 @@ def _accepted(E, found, take):
             apex, rows, owner = at
             xs.append(_keep(apex, t))
             rs.append(np.compress(np.take(t, owner), rows))
-        off = pos[-1] + 1 if len(pos) else off
+        off += int(t.sum())
     cat = np.concatenate
     return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
 
