@@ -12,6 +12,7 @@ import numpy as np
 from . import _compilation
 from . import _io
 from . import _topology as topo
+from ._arrays import column_bounds
 from ._result import Contractions, SimplifyResult
 from ._schedulers import common, greedy, parallel
 
@@ -117,7 +118,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                       stacklevel=2)
         target = m
 
-    lo, hi = V.min(0), V.max(0)
+    lo, hi = column_bounds(V)
     center = 0.5 * (lo + hi)
     scale = float(np.max(hi - lo)) or 1.0
     Vn = ((V - center) / scale).astype(common.DTYPE)

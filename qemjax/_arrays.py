@@ -1,7 +1,8 @@
 """Fast numpy idioms for the host-side scheduler's large index arrays (measured on 2 M edges).
 
 numpy's general fancy indexing is several times slower than these specialised calls on 2-D index arrays:
-``A[idx]`` on rows 4-15×, ``mask[E].any(1)`` 5×.
+``A[idx]`` on rows 4-15×, ``mask[E].any(1)`` 5×, ``np.sort(F, axis=1)`` on (m,3) rows 2×, ``V.min(0)`` on
+(n,3) rows 4×.
 """
 from __future__ import annotations
 
@@ -26,3 +27,17 @@ def any_at(mask: np.ndarray, idx: np.ndarray) -> np.ndarray:
     for j in range(2, idx.shape[1]):
         out |= t[:, j]
     return out
+
+
+def sorted_triples(F: np.ndarray) -> np.ndarray:
+    """np.sort(F, axis=1) for (k,3) integer rows: smallest, middle, largest by arithmetic."""
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]
+    lo = np.minimum(np.minimum(a, b), c)
+    hi = np.maximum(np.maximum(a, b), c)
+    return np.stack([lo, a + b + c - lo - hi, hi], 1)
+
+
+def column_bounds(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(V.min(0), V.max(0)) for (n,c) rows, one column at a time."""
+    return (np.array([V[:, j].min() for j in range(V.shape[1])], V.dtype),
+            np.array([V[:, j].max() for j in range(V.shape[1])], V.dtype))

@@ -11,6 +11,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ._arrays import sorted_triples
+
 
 class Mesh(NamedTuple):
     """A triangle mesh as arrays: vertices (n,3) float64, faces (m,3) int64."""
@@ -136,7 +138,7 @@ def weld(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 
 def unique_face_mask(F: np.ndarray) -> np.ndarray:
     """(m,) bool: True for the first face of each set of faces with the same three vertices (any order)."""
-    s = np.sort(F, axis=1)
+    s = sorted_triples(F)
     if not _maybe_repeated(_row_hash(s.astype(np.uint64))):
         return np.ones(len(F), bool)
     order = np.lexsort(s.T[::-1])  # stable: within equal keys, lower face index first
@@ -152,9 +154,12 @@ def clean_faces(F: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Drop faces with a repeated index, then duplicates (same three vertices, any order; the first
     one is kept). Returns (F', degenerate removed, duplicates removed)."""
     deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    F = F[~deg]
+    n_deg = int(np.count_nonzero(deg))
+    if n_deg:
+        F = F[~deg]
     keep = unique_face_mask(F)
-    return F[keep], int(deg.sum()), int((~keep).sum())
+    n_dup = len(F) - int(np.count_nonzero(keep))
+    return (F[keep] if n_dup else F), n_deg, n_dup
 
 
 def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:

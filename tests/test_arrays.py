@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qemjax._arrays import any_at, keep_rows, take_rows
+from qemjax._arrays import any_at, column_bounds, keep_rows, sorted_triples, take_rows
+from qemjax._schedulers.common import face_normals
 
 rng = np.random.default_rng(3)
 
@@ -25,3 +26,26 @@ def test_take_and_keep_rows():
     keep = rng.random(200) < 0.5
     assert np.array_equal(take_rows(A, idx), A[idx])
     assert np.array_equal(keep_rows(A, keep), A[keep])
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_sorted_triples_matches_sort(dtype):
+    F = rng.integers(0, 7, (500, 3)).astype(dtype)  # many repeated indices within rows
+    got = sorted_triples(F)
+    assert got.dtype == F.dtype and np.array_equal(got, np.sort(F, axis=1))
+
+
+def test_column_bounds_match_min_max():
+    V = rng.standard_normal((300, 3)) * [1.0, 100.0, 1e-3]
+    lo, hi = column_bounds(V)
+    assert np.array_equal(lo, V.min(0)) and np.array_equal(hi, V.max(0))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_face_normals_match_cross(dtype):
+    V = rng.standard_normal((100, 3)).astype(dtype)
+    F = rng.integers(0, 100, (400, 3))
+    p = V[F]
+    want = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    got = face_normals(V, F)
+    assert got.dtype == dtype and np.array_equal(got, want)  # the same arithmetic, bit for bit

@@ -67,12 +67,17 @@ def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     """`face_flips` with the inputs gathered here: faces (K,3) index rows of V (N,≥3) (columns 0-2 are
     positions); k (K,) the moving corner, x (K,3) where it goes; the reference normal of face i is
     N0[fids[i]]. Indices are clipped, not checked: padding rows give meaningless results to slice off.
-    Returns (K,) bool."""
-    cols = [jnp.take(V, faces[:, c], axis=0, mode="clip")[:, :3].T for c in range(3)]
-    ref = jnp.take(N0, fids, axis=0, mode="clip").T
-    cols, xt, ref = jax.lax.optimization_barrier((cols, x.T, ref))
-    p = [[cols[c][i] for i in range(3)] for c in range(3)]
-    return _flips(p, k, [xt[i] for i in range(3)], cos_max, [ref[i] for i in range(3)])
+    Returns (K,) bool.
+
+    Everything gathered is packed into one (15,K) array and materialised before the arithmetic: with the
+    gathers left apart (one per corner, as separate arrays), XLA's CPU fusion took 2.4× the CPU time
+    at 65 536 rows (measured on 2 cores; same results bit for bit)."""
+    K = faces.shape[0]
+    g = jnp.take(V, faces.reshape(-1), axis=0, mode="clip")[:, :3].reshape(K, 9)
+    ref = jnp.take(N0, fids, axis=0, mode="clip")
+    c = jax.lax.optimization_barrier(jnp.concatenate([g, ref.astype(g.dtype), x.astype(g.dtype)], 1).T)
+    p = [[c[3 * j + i] for i in range(3)] for j in range(3)]
+    return _flips(p, k, [c[12 + i] for i in range(3)], cos_max, [c[9 + i] for i in range(3)])
 
 
 @jax.jit

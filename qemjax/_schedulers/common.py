@@ -127,6 +127,15 @@ def place_gathered(q1, q2, p1, p2, settings: Settings):
     return x, cost, branch, qsum
 
 
+def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Unnormalised normals (p1 − p0) × (p2 − p0) of faces F (m,3) over positions V (n,3), in V's dtype:
+    np.cross's arithmetic on one coordinate array at a time (half the time of gathering (m,3,3) rows)."""
+    c = [np.take(V[:, i], F) for i in range(3)]  # (m,3) per coordinate
+    u = [ci[:, 1] - ci[:, 0] for ci in c]
+    w = [ci[:, 2] - ci[:, 0] for ci in c]
+    return np.stack([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]], 1)
+
+
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,
                      feature_edges: np.ndarray | None, boundary=None) -> np.ndarray:
     """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes.
@@ -140,8 +149,7 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
         cw = np.concatenate([cw, np.full(len(fe), boundary_weight, DTYPE)])
     keep = cw > 0
     be, bf, cw = be[keep], bf[keep], cw[keep]
-    p = V[F[bf]]
-    cn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)
+    cn = face_normals(V, F[bf]).astype(DTYPE)
     nb, nf, nv = bucket(len(be)), bucket(len(F), steps=4), bucket(n + 1, steps=4)  # faces: arithmetic
     Vp = pad_rows(V.astype(DTYPE), nv)
     Fp = pad_rows(F.astype(np.int32), nf, fill=n)  # padding faces point at a spare vertex

@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import _topology as topo
 from .._kernels import flips
-from .common import DTYPE, Settings, chunk_size, pad_rows, place_gathered
+from .common import DTYPE, Settings, chunk_size, face_normals, pad_rows, place_gathered
 
 
 def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int,
@@ -40,8 +40,7 @@ def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             k = (u, v) if u < v else (v, u)
             ecount[k] = ecount.get(k, 0) + 1
     cos_max = np.asarray(settings.cos_max, DTYPE)
-    p0 = V[F]
-    N0 = np.cross(p0[:, 1] - p0[:, 0], p0[:, 2] - p0[:, 0]).astype(DTYPE)  # input normals
+    N0 = face_normals(V, F).astype(DTYPE)  # input normals
 
     stamp: dict[tuple[int, int], int] = {}
     placed: dict = {}  # pair -> (position, branch, summed quadric) of its current cost

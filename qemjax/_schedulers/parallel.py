@@ -33,7 +33,7 @@ from .. import _topology as topo
 from .._incidence import FaceLists
 from .._arrays import any_at, keep_rows as _keep, take_rows as _take
 from .._kernels import flips, placement
-from .common import DTYPE, Settings, Timer, bucket, chunks, pad_rows, set_rows
+from .common import DTYPE, Settings, Timer, bucket, chunks, face_normals, pad_rows, set_rows
 
 MAX_PASSES = 8
 PASS_YIELD = 0.1  # stop a round's passes once one accepts under this fraction of what the round took
@@ -297,17 +297,19 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
     n, m = len(V), len(F)
     manifold = settings.preserve_topology
     n_cap = bucket(n + 1)
-    VQ = pad_rows(np.concatenate([V, Q], 1).astype(DTYPE), n_cap)  # rows [position, quadric]
-    V = VQ[:, :3]  # views
+    VQ = np.zeros((n_cap, 13), DTYPE)  # rows [position, quadric]
+    VQ[:n, :3], VQ[:n, 3:] = V, Q
     extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
     VQd = jnp.asarray(VQ)  # device copy, updated row by row
     first = None  # the first costing of the given edges runs while the host sets up the faces
     if edges is not None and len(extra_pairs) == 0:
         first = _place(VQd, edges[0], settings)
-    faces = FaceLists(F, n)  # int32 rows (n < 2**31) keep their index: face i continues input face i
-    p = np.take(V, faces.F, axis=0)
-    N0 = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(DTYPE)  # input normals
+    # int32 rows (n < 2**31) keep their index: face i continues input face i; built on the worker
+    # while this thread computes the input normals
+    lists = _submit(FaceLists, F, n)
+    N0 = face_normals(np.asarray(V, DTYPE), F)  # input normals
     N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
+    faces = lists.result()
     timer = Timer()
     history = []
     branches = np.zeros(3, np.int64)
