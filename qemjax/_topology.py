@@ -301,4 +301,5 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     np.subtract.at(deg, apex[apex >= 0], 1)
     at_a = np.zeros(len(E), bool)
     at_a[rows] = True  # every edge at an a or a b; those at a b that survive move to its a
-    return np.compress(keep, E2, axis=0), np.compress(keep, count), keep, deg, np.compress(keep, at_a)
+    idx = np.flatnonzero(keep)  # one index array serves the three gathers
+    return np.take(E2, idx, axis=0), np.take(count, idx), keep, deg, np.take(at_a, idx)

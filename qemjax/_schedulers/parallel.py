@@ -55,14 +55,15 @@ def _submit(fn, *args, **kw):
     return _worker.submit(fn, *args, **kw)
 
 
-def _sort_keys(cost: np.ndarray, salt: int = 0) -> np.ndarray:
-    """Unique, monotonic int64 keys: float32 cost bits (non-negative) in the high word and a fixed
-    bijective scramble of the pair index in the low word (a multiplication by an odd constant modulo
-    2³²). Ties (flat regions have many exact zeros) are broken deterministically but in a spatially
-    incoherent order: breaking them by raw index would make neighbouring pairs form long descending
-    chains with one local minimum each."""
-    bits = np.ascontiguousarray(cost, dtype=np.float32).view(np.int32).astype(np.int64)
-    h = np.arange(len(cost), dtype=np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
+def _sort_keys(cost: np.ndarray, idx: np.ndarray, salt: int = 0) -> np.ndarray:
+    """Unique, monotonic int64 keys of pairs idx: float32 cost bits (non-negative) in the high word and a
+    fixed bijective scramble of the pair index in the low word (a multiplication by an odd constant
+    modulo 2³²). Ties (flat regions have many exact zeros) are broken deterministically but in a
+    spatially incoherent order: breaking them by raw index would make neighbouring pairs form long
+    descending chains with one local minimum each. Only the pairs asked for are keyed (a round looks
+    at a small part of them)."""
+    bits = np.take(cost, idx).astype(np.float32, copy=False).view(np.int32).astype(np.int64)
+    h = idx.astype(np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
     bits <<= 32
     bits |= h
     return bits
@@ -108,14 +109,15 @@ def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, settings):
     return result
 
 
-def _select(E, key, cand, need, n, validate):
+def _select(E, key_of, cand, need, n, validate):
     """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices,
     the extra faces (coincident ones) each accepted pair removes, (len(E),) int, and the vertices the
     accepted pairs lock (their endpoints' closed 1-rings through E), (n,) bool.
 
     E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
-    graph. ``validate(pairs, idx, rows, pairs_at_free)`` (rows: the indices of pairs_at_free in E)
-    returns (ok, extra faces removed).
+    graph. ``key_of(idx)`` gives the (unique) int64 keys of pairs idx (`_sort_keys`).
+    ``validate(pairs, idx, rows, pairs_at_free)`` (rows: the indices of pairs_at_free in E) returns
+    (ok, extra faces removed).
 
     Each pass takes the candidates that hold the smallest key among all candidates touching their
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
@@ -153,7 +155,7 @@ def _select(E, key, cand, need, n, validate):
         live = cand[both]
         if not live.any():
             break
-        kl = np.where(live, key[both], NO_KEY)
+        kl = np.where(live, key_of(both), NO_KEY)
         m1 = np.full(n, NO_KEY)
         np.minimum.at(m1, Eb[:, 0], kl)
         np.minimum.at(m1, Eb[:, 1], kl)
@@ -337,7 +339,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
                 follow = functools.partial(_take, indices=src)
         else:
             E, ecount, kept, deg, dirty = updated
-            follow = functools.partial(_keep, mask=kept)
+            follow = functools.partial(_take, indices=np.flatnonzero(kept))  # several arrays: indices once
         # start re-costing the pairs at vertices the last round moved (the rest keep their cost and
         # target); the kernel runs while the host goes on
         if prev is None:
@@ -378,15 +380,15 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             break
         k = min(max(need // (2 * TAIL), 1), int(valid.sum()), max(int(GATE_FRACTION * n_alive), 1))
         kth = np.partition(cost[valid], k - 1)[k - 1]
-        key = _sort_keys(cost, salt=rounds * 7919)
+        key_of = functools.partial(_sort_keys, cost, salt=rounds * 7919)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
         ctx = SimpleNamespace(VQd=VQd, N0d=N0d, faces=faces, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
                               settings=settings, timer=timer, found=[])
-        acc, bad, extra, locked = _select(E, key, cand, need, n, functools.partial(_validate, ctx=ctx))
+        acc, bad, extra, locked = _select(E, key_of, cand, need, n, functools.partial(_validate, ctx=ctx))
         rejected += bad.size
         n_sel = acc.size
-        acc = acc[np.argsort(key[acc], kind="stable")]
+        acc = acc[np.argsort(key_of(acc), kind="stable")]
         acc = acc[_fits_target(ecount[acc] + extra[acc], need)]
         timer.add("select_s", time.perf_counter() - t0)
         known_bad[bad] = True
