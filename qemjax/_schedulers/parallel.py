@@ -135,7 +135,7 @@ def _select(E, key_of, cand, need, n, validate):
             return tuple(np.concatenate(pair) for pair in zip(half.result(), rest))
         ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
         k1 = ae != 0
-        return one[k1], _keep(Eo, k1), ae[k1] == 0x0101
+        return np.compress(k1, one), _keep(Eo, k1), np.compress(k1, ae) == 0x0101
 
     def endpoints(mask):
         v = np.zeros(n, bool)
@@ -151,7 +151,7 @@ def _select(E, key_of, cand, need, n, validate):
     n_acc = 0
     for p in range(MAX_PASSES):
         one, Eo, bmask = ws
-        both, Eb = one[bmask], _keep(Eo, bmask)
+        both, Eb = np.compress(bmask, one), _keep(Eo, bmask)
         live = cand[both]
         if not live.any():
             break
@@ -160,9 +160,9 @@ def _select(E, key_of, cand, need, n, validate):
         np.minimum.at(m1, Eb[:, 0], kl)
         np.minimum.at(m1, Eb[:, 1], kl)
         m2 = m1.copy()
-        np.minimum.at(m2, Eb[:, 0], m1[Eb[:, 1]])
-        np.minimum.at(m2, Eb[:, 1], m1[Eb[:, 0]])
-        sel = both[live & (kl == m2[Eb[:, 0]]) & (kl == m2[Eb[:, 1]])]
+        np.minimum.at(m2, Eb[:, 0], np.take(m1, Eb[:, 1]))
+        np.minimum.at(m2, Eb[:, 1], np.take(m1, Eb[:, 0]))
+        sel = np.compress(live & (kl == np.take(m2, Eb[:, 0])) & (kl == np.take(m2, Eb[:, 1])), both)
         if sel.size == 0:
             break
         ok, extra_sel = validate(_take(E, sel), sel, one, Eo)
@@ -379,7 +379,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
         if not valid.any():
             break
         k = min(max(need // (2 * TAIL), 1), int(valid.sum()), max(int(GATE_FRACTION * n_alive), 1))
-        kth = np.partition(cost[valid], k - 1)[k - 1]
+        kth = np.partition(np.compress(valid, cost), k - 1)[k - 1]
         key_of = functools.partial(_sort_keys, cost, salt=rounds * 7919)
         cand = valid & (cost <= max(GATE * kth, FREE_COST))
 
