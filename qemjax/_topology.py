@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._arrays import sorted_triples
+
 
 def half_edges(F: np.ndarray) -> np.ndarray:
     """(3m,2) directed edges of faces (m,3), in face order: (f0,f1), (f1,f2), (f2,f0) for each face."""
@@ -176,7 +178,7 @@ def coincident_removals(G: np.ndarray) -> np.ndarray:
     k = len(G)
     if k < 2:
         return np.zeros(k, bool)
-    S = np.sort(G, axis=1)
+    S = sorted_triples(G)
     # orientation: +1 when G is an even permutation of its sorted order
     inv = (G[:, 0] > G[:, 1]).astype(np.int8) + (G[:, 0] > G[:, 2]) + (G[:, 1] > G[:, 2])
     pos = inv % 2 == 0
