@@ -14,8 +14,9 @@ A round:
    contractions (`topo.contract_edges`, with the apexes the link test found) rather than rebuilt.
 Kernel calls are asynchronous: the re-costing, the flip test and the quadric merges run on JAX's
 threads while the host works on the topology, and are waited for only where their results are needed.
-One host worker thread runs the link test and the edge update beside the main thread's face work (numpy
-releases the GIL in large array passes; the process otherwise used 1.2 of 2 cores).
+One host worker thread runs the link test and the edge update beside the main thread's face work, half of
+each large narrowing pass, and the initial face lists beside the input normals (numpy releases the GIL in
+large array passes; the process otherwise used 1.2 of 2 cores).
 Because accepted contractions are two edges apart, the validity computed for each stays true when all
 happen together. The last round takes only as many, in cost order, as the exact face target allows.
 """
@@ -431,8 +432,9 @@ def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, e
             rep[b] = a
             extra_pairs = rep[extra_pairs]
             extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
-        put_rows(VQ, a, np.concatenate([xs, merged()], 1))
-        VQd = set_rows(VQd, a, _take(VQ, a), size=MERGE_CHUNK)
+        rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, quadric]
+        put_rows(VQ, a, rows)
+        VQd = set_rows(VQd, a, rows, size=MERGE_CHUNK)
         if incremental:
             updated = edges_next.result()
         faces_per_round.append(faces.count)
