@@ -1,10 +1,13 @@
 """qemjax: JAX-accelerated, batched triangle-mesh simplification.
 
-Public API: `simplify`, `load`, `SimplifyResult`, `Contractions`, `Mesh`, and the `metrics` module.
+Public API: `simplify`, `methods`, `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`, and the
+`metrics` module.
 """
+from ._api import methods as methods
 from ._api import simplify as simplify
 from ._io import Mesh as Mesh
 from ._io import load as load
+from ._options import Schedule as Schedule
 from ._result import Contractions as Contractions
 from ._result import SimplifyResult as SimplifyResult
 

@@ -10,21 +10,27 @@ from typing import Any
 import numpy as np
 
 from . import _compilation
+from . import _costs
 from . import _io
 from . import _topology as topo
 from ._arrays import column_bounds
+from ._batching import DTYPE
+from ._options import Options, Schedule
 from ._result import Contractions, SimplifyResult
-from ._schedulers import common, greedy, parallel
+from ._schedulers import common, greedy, outcome, parallel
 
-METHODS = ("qem",)
 SCHEDULERS = ("parallel", "greedy")
-PLACEMENTS = ("optimal", "endpoints")
+PLACEMENTS = _costs.qem.PLACEMENTS
 
 # Defaults, in one place (see the docstring of `simplify` for units)
 BOUNDARY_WEIGHT = 100.0
-COND_EPS = 1e-5
-MAX_SHIFT = 2.0
 FLIP_ANGLE = 90.0
+
+
+def methods() -> tuple[str, ...]:
+    """The cost models `simplify(method=...)` accepts (the registry in ``qemjax._costs``)."""
+    return _costs.methods()
+
 def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]:
     """(face target, max error) from the user's options; face target 0 means 'none'."""
     given = [x is not None for x in (target_faces, ratio)]
@@ -58,6 +64,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              area_weighted: bool = True, feature_edges=None, pair_threshold: float = 0.0,
              preserve_topology: bool | None = None,
              flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
+             regularize: float = 0.0, schedule: Schedule | None = None,
              ) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
@@ -68,7 +75,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
         mesh's own units* (the quadric error, e.g. ``(0.01 * diagonal)**2``). May be combined with a
         face target; whichever is reached first stops.
-    method: ``'qem'`` (quadric error metric).
+    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric).
     scheduler: ``'parallel'`` (default) — rounds of many non-interacting contractions chosen by an
         independent-set rule; ``'greedy'`` — the paper's priority queue, one contraction at a time.
     placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint)
@@ -87,18 +94,24 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or
         more (90: any sign flip or collapse to zero area); None allows flips.
     weld: merge vertices with identical coordinates first (G&H need shared corners).
-    Returns a `SimplifyResult`. Raises ValueError for bad input or options.
+    regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (penalises contractions that
+        create slender triangles; ``qemjax._costs.regularize``). 0 (default) leaves the method's cost as
+        it is. With λ > 0, costs, ``max_error`` and ``history.costs`` include the term (a squared length).
+    schedule: the parallel scheduler's tunables (`qemjax.Schedule`); None = the defaults.
+    Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
+    ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
+    reason but the parity of a closed mesh. Raises ValueError for bad input or options.
     """
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
     if scheduler not in SCHEDULERS:
         raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS}")
-    if placement not in PLACEMENTS:
-        raise ValueError(f"unknown placement {placement!r}; choose from {PLACEMENTS}")
-    if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
-        raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
+    model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted,
+                                      boundary_weight=boundary_weight), dict(regularize=regularize))
+    if schedule is None:
+        schedule = Schedule()
+    elif not isinstance(schedule, Schedule):
+        raise ValueError(f"schedule must be a qemjax.Schedule, got {type(schedule).__name__}")
     if flip_angle is not None and not (0 < flip_angle <= 180):
         raise ValueError(f"flip_angle must be in (0, 180] degrees or None, got {flip_angle}")
 
@@ -121,15 +134,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     lo, hi = column_bounds(V)
     center = 0.5 * (lo + hi)
     scale = float(np.max(hi - lo)) or 1.0
-    Vn = ((V - center) / scale).astype(common.DTYPE)
+    Vn = ((V - center) / scale).astype(DTYPE)
 
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
-    Q = common.initial_quadrics(Vn, F, area_weighted=area_weighted, boundary_weight=boundary_weight,
-                                feature_edges=feature_edges, boundary=(be, bf))
-    settings = common.Settings(
-        endpoints_only=placement == "endpoints", cond_eps=COND_EPS, max_shift=MAX_SHIFT,
+    S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges))
+    options = Options(
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
-        preserve_topology=preserve_topology, max_cost=err / scale**2)
+        preserve_topology=preserve_topology, max_cost=err / scale**2, schedule=schedule)
     extra = topo.close_pairs(V, F, pair_threshold)
 
     bar = None
@@ -148,17 +159,27 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         progress_cb = None
     if target < m or err < math.inf:
         run = functools.partial(parallel.run, edges=(E, ecount)) if scheduler == "parallel" else greedy.run
-        Vo, Qo, Fo, alive, hist, info = run(Vn, Q, F, extra, max(target, 1), settings, progress_cb)
+        Vo, So, Fo, alive, hist, info = run(Vn, S, F, extra, max(target, 1), model, options, progress_cb)
     else:  # nothing to remove
-        Vo, Qo, Fo, alive = Vn, Q, F, np.ones(m, bool)
+        Vo, So, Fo, alive = Vn, S, F, np.ones(m, bool)
         hist = (np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
-        info = {"contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0, "branches": np.zeros(3, int)}
+        info = {"contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0,
+                "branches": np.zeros(len(model.branches), int), "stop_reason": "unchanged", "blocked_by": {},
+                "rejected_by": outcome.count_reasons(np.zeros(0, np.int8))}
     if bar is not None:
         bar.close()
 
     Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
     vout = Vout.astype(np.float64) * scale + center
-    verr = np.maximum(Qo[ids, 9].astype(np.float64), 0.0) * scale**2
+    verr = model.vertex_error(So[ids]) * scale**2
+    stop = info["stop_reason"]
+    if target and len(Fout) > target:  # a face target was asked for and not met
+        closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
+        if outcome.parity_only(len(Fout), target, closed) and stop in ("target", "blocked"):
+            stop = "target"  # documented: a closed mesh loses faces in pairs
+        else:
+            stop = "blocked" if stop == "target" else stop
+            warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"]), stacklevel=2)
     hp, hx, hc = hist[0], hist[1].astype(np.float64) * scale + center, hist[2].astype(np.float64) * scale**2
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
@@ -167,8 +188,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         method=method, scheduler=scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
         vertices_in=len(V), vertices_out=len(vout), close_pairs=len(extra), contractions=info["contractions"],
         rejected=info["rejected"], rounds=info["rounds"],
-        branches={"solve": int(info["branches"][0]), "segment": int(info["branches"][1]),
-                  "endpoint": int(info["branches"][2])},
+        branches={name: int(c) for name, c in zip(model.branches, info["branches"])},
+        rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=scale)
     for k, v in info.items():
@@ -178,4 +199,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(info["max_cost"]) * scale**2, source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
-        input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc), stats=stats)
+        input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc), stats=stats, stop_reason=stop)
+
+
+def _above_target_message(faces: int, target: int, stop: str, blocked: dict) -> str:
+    held = ", ".join(f"{k}: {v}" for k, v in blocked.items() if v) or "no pairs left"
+    why = {"max_error": "the remaining contractions cost more than max_error",
+           "blocked": "no valid contraction is left"}.get(stop, stop)
+    return (f"stopped at {faces} faces, above the target of {target}: {why} (pairs held back by {held}); "
+            "with non-manifold input or separate parts, preserve_topology=False may reach further")

@@ -50,3 +50,12 @@ def column_bounds(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(V.min(0), V.max(0)) for (n,c) rows, one column at a time."""
     return (np.array([V[:, j].min() for j in range(V.shape[1])], V.dtype),
             np.array([V[:, j].max() for j in range(V.shape[1])], V.dtype))
+
+
+def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Unnormalised normals (p1 − p0) × (p2 − p0) of faces F (m,3) over positions V (n,3), in V's dtype:
+    np.cross's arithmetic on one coordinate array at a time (half the time of gathering (m,3,3) rows)."""
+    c = [np.take(V[:, i], F) for i in range(3)]  # (m,3) per coordinate
+    u = [ci[:, 1] - ci[:, 0] for ci in c]
+    w = [ci[:, 2] - ci[:, 0] for ci in c]
+    return np.stack([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]], 1)

@@ -33,7 +33,10 @@ class SimplifyResult:
     grew from; source_faces (j,) int64: for each output face, the input face it continues (contraction
     only re-links faces, it never creates them); input_vertices / input_faces: the cleaned input (after
     welding and face clean-up);
-    history: the `Contractions`; stats: counts and timings (``compile_s`` is JAX tracing + compilation
+    history: the `Contractions`; stop_reason: why the run stopped, one of ``"target"`` (met, or one face
+    above an odd target on a closed mesh), ``"max_error"``, ``"blocked"`` (no valid contraction left:
+    ``stats["blocked_by"]`` counts the pairs each rule held back) or ``"unchanged"`` (nothing to remove);
+    stats: counts and timings (``compile_s`` is JAX tracing + compilation
     time inside this call, ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
     times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``
     and ``faces_per_round``).
@@ -49,6 +52,7 @@ class SimplifyResult:
     input_faces: np.ndarray
     history: Contractions
     stats: dict
+    stop_reason: str = "target"
 
     def to_trimesh(self):
         """The simplified mesh as a `trimesh.Trimesh` (no processing: arrays are kept as they are)."""

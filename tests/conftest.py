@@ -17,13 +17,12 @@ def shared_mesh(name: str) -> Path:
     return p
 
 
-def one_pair_per_round(monkeypatch):
-    """Gate the parallel scheduler down to the single cheapest valid pair per round (no free pairs)."""
-    from qemjax._schedulers import parallel
+def one_pair_per_round():
+    """A schedule that gates the parallel scheduler down to the single cheapest valid pair per round (no
+    free pairs)."""
+    import qemjax
 
-    monkeypatch.setattr(parallel, "GATE", 1.0)
-    monkeypatch.setattr(parallel, "GATE_FRACTION", 1e-12)
-    monkeypatch.setattr(parallel, "FREE_COST", 0.0)
+    return qemjax.Schedule(gate=1.0, gate_fraction=1e-12, free_cost=0.0)
 
 
 def face_normals(V, F):

@@ -7,7 +7,8 @@ import numpy as np
 
 from qemjax._kernels import flips, placement
 from qemjax._kernels import quadrics as qd
-from qemjax._schedulers.common import DTYPE, Settings, initial_quadrics, place_gathered
+from qemjax._batching import DTYPE
+from qemjax._costs.qem import QEM, initial_quadrics
 
 rng = np.random.default_rng(0)
 
@@ -176,9 +177,11 @@ def test_float32_kernel_close_to_float64():
     p1, p2 = np.array([0.01, 0.0, 0.0]), np.array([0.0, 0.02, 0.0])
     q1, q2 = _quadric_in_frame(n1, pt1, p1), _quadric_in_frame(n1, pt1, p2)
     x64, c64, _, _ = _place64(q1, q2, p1, p2)
-    s = Settings(False, 1e-5, 2.0, 0.0, True, np.inf)
-    x32, c32, _, _ = place_gathered(q1[None].astype(DTYPE), q2[None].astype(DTYPE), p1[None].astype(DTYPE),
-                                    p2[None].astype(DTYPE), s)
+    params = QEM().kernel_params()
+    x32, c32, _, _ = placement.place(q1[None].astype(DTYPE), q2[None].astype(DTYPE), p1[None].astype(DTYPE),
+                                    p2[None].astype(DTYPE), params["endpoints_only"], params["cond_eps"],
+                                    params["max_shift"])
+    x32, c32 = np.asarray(x32), np.asarray(c32)
     np.testing.assert_allclose(x32[0], x64, atol=1e-5)
     np.testing.assert_allclose(c32[0], c64, rtol=1e-3)
 

@@ -1,181 +1,215 @@
 """Garland & Heckbert's algorithm as published: one priority queue of all valid pairs, contract the
-cheapest, re-cost the pairs touching the new vertex. The quality reference for the parallel scheduler.
+cheapest, re-cost the pairs whose cost changed. The quality reference for the parallel scheduler.
 
-Per contraction the host keeps exact adjacency (Python sets); the JAX kernels re-cost the touched pairs
-(placement) and test the surviving faces for flips, in small padded batches.
+It runs on the same pieces as the parallel scheduler, one contraction at a time: the faces in
+`FaceLists`, the manifold rules of `topo.link_ok` (on the pair's neighbourhood, relabelled to a few local
+ids), the coincident-face rule of `topo.coincident_removals`, the flip kernel, and the cost model's
+batched price and merge on the device rows.
 """
 from __future__ import annotations
 
 import heapq
 
+import jax.numpy as jnp
 import numpy as np
 
 from .. import _topology as topo
+from .._costs import MeshView
+from .._incidence import FaceLists
 from .._kernels import flips
-from .common import DTYPE, Settings, chunk_size, face_normals, pad_rows, place_gathered
+from . import outcome
+from .common import (DTYPE, Options, bucket, chunks, face_normals, pad_rows, set_rows, start_merge,
+                     start_price)
+
+BUDGET = 0  # code of a pair held back only because it would remove more faces than are still needed
 
 
-def run(V: np.ndarray, Q: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int,
-        settings: Settings, progress=None):
-    """Simplify. V (n,3) float32 normalised positions, Q (n,10) quadrics, F (m,3) int64, extra_pairs
-    (k,2) non-edge pairs that may also contract (aggregation). Same return as `parallel.run`."""
+def _local_link_ok(faces: FaceLists, a: int, b: int, nfaces: int) -> bool:
+    """`topo.link_ok` for the one pair (a, b), on its neighbourhood relabelled to local ids: the edges at
+    a and b with their face counts, the boundary flags of a and b, and the degrees of their neighbours,
+    all read from the live faces."""
+    _, f = faces.around(np.array([a, b]))
+    G = np.take(faces.F, np.unique(f), axis=0).astype(np.int64)
+    verts = np.unique(G)
+    loc = np.searchsorted(verts, G)  # faces in local ids
+    la, lb = np.searchsorted(verts, [a, b])
+    E, count = topo.edges(loc, len(verts))
+    at = (E == la) | (E == lb)
+    keep = at.any(1)
+    E, count = E[keep], count[keep]  # every edge at a or b, counted over all its faces
+    bvert = np.zeros(len(verts), bool)
+    bvert[E[count == 1].reshape(-1)] = True
+    # degree of each neighbour: its distinct neighbours over its own faces
+    w, f2 = faces.around(verts)
+    G2 = np.take(faces.F, f2, axis=0).astype(np.int64)
+    me = verts[w]
+    keys = np.unique(np.concatenate([w * len(faces.cnt) + G2[:, j] for j in range(3)])[
+        np.concatenate([G2[:, j] != me for j in range(3)])])
+    deg = np.bincount(keys // len(faces.cnt), minlength=len(verts))
+    ok = topo.link_ok(np.array([[la, lb]]), np.array([nfaces]), E, len(verts), bvert, deg)
+    return bool(ok[0])
+
+
+def _flips_any(VQd, N0d, before, fids, corner, x, cos_max) -> bool:
+    """Does moving the given corners of faces ``before`` (k,3) (input faces ``fids``) to x flip any?"""
+    parts = zip(chunks(before), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
+                chunks(np.broadcast_to(x, (len(fids), 3))))
+    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max) for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
+    return bool(np.concatenate([np.asarray(o) for o in outs])[: len(fids)].any())
+
+
+class _Queue:
+    """The priority queue of pairs with lazy deletion: an entry is current while its stamp is."""
+
+    def __init__(self):
+        self.heap, self.stamp, self.placed, self.blocked = [], {}, {}, {}
+
+    def push(self, pairs, priced):
+        for k, ((a, b), c) in enumerate(zip(pairs, priced.cost.tolist())):
+            s = self.stamp.get((a, b), 0) + 1
+            self.stamp[(a, b)] = s
+            self.placed[(a, b)] = (priced.x[k], int(priced.branch[k]), c)
+            self.blocked.pop((a, b), None)
+            heapq.heappush(self.heap, (c, a, b, s))
+
+    def forget(self, pair):
+        self.stamp.pop(pair, None)
+        self.placed.pop(pair, None)
+        self.blocked.pop(pair, None)
+
+
+def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
+        options: Options, progress=None):
+    """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
+    F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Same return as
+    `parallel.run`."""
     n, m = len(V), len(F)
+    manifold = options.preserve_topology
+    params = model.kernel_params()
+    faces = FaceLists(F, n)
     E, _ = topo.edges(F, n)
     pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
-    V, Q, F = V.copy(), Q.copy(), F.copy()
-    alive = np.ones(m, bool)
-    vfaces = [set() for _ in range(n)]
-    for f, (a, b, c) in enumerate(F.tolist()):
-        vfaces[a].add(f)
-        vfaces[b].add(f)
-        vfaces[c].add(f)
+    VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
+    VQ[:n, :3], VQ[:n, 3:] = V, S
+    VQd = jnp.asarray(VQ)
+    N0d = jnp.asarray(pad_rows(face_normals(np.asarray(V, DTYPE), F).astype(DTYPE), bucket(m)))
+    cos_max = np.asarray(options.cos_max, DTYPE)
     nbr = [set() for _ in range(n)]  # pair partners
     for a, b in pairs.tolist():
         nbr[a].add(b)
         nbr[b].add(a)
-    # boundary vertices for the manifold test: vertices on an edge with a single face
-    ecount: dict[tuple[int, int], int] = {}
-    for a, b, c in F.tolist():
-        for u, v in ((a, b), (b, c), (c, a)):
-            k = (u, v) if u < v else (v, u)
-            ecount[k] = ecount.get(k, 0) + 1
-    cos_max = np.asarray(settings.cos_max, DTYPE)
-    N0 = face_normals(V, F).astype(DTYPE)  # input normals
-
-    stamp: dict[tuple[int, int], int] = {}
-    placed: dict = {}  # pair -> (position, branch, summed quadric) of its current cost
-    heap: list = []
-    blocked: set = set()
+    q = _Queue()
 
     def push(plist):
-        if not plist:
-            return
-        pa = np.array(plist, np.int64)
-        x, cost, branch, qsum = place_gathered(Q[pa[:, 0]], Q[pa[:, 1]], V[pa[:, 0]], V[pa[:, 1]], settings)
-        for k, ((a, b), c) in enumerate(zip(plist, cost.tolist())):
-            s = stamp.get((a, b), 0) + 1
-            stamp[(a, b)] = s
-            placed[(a, b)] = (x[k], branch[k], qsum[k])
-            blocked.discard((a, b))
-            heapq.heappush(heap, (c, a, b, s))
+        if plist:
+            pa = np.array(plist, np.int64)
+            q.push(plist, start_price(model, VQd, pa, params, faces, n)())
 
     push(sorted({tuple(p) for p in pairs.tolist() if p[0] != p[1]}))
-    faces_now = m
     history = []
-    n_invalid = 0
+    rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
     max_cost_used = 0.0
-    branches = np.zeros(3, np.int64)
+    branches = np.zeros(len(model.branches), np.int64)
+    stop = None
 
-    def unlink(f):
-        alive[f] = False
-        for w in F[f]:
-            vfaces[w].discard(f)
-        fa, fb, fc = F[f]
-        for u, v in ((fa, fb), (fb, fc), (fc, fa)):
-            ecount[(u, v) if u < v else (v, u)] -= 1
+    def block(pair, code):
+        q.blocked[pair] = code
+        if code != BUDGET:
+            rejected_by[code] += 1
 
-    def edge_faces(a, b):
-        return vfaces[a] & vfaces[b]
-
-    def is_boundary_vertex(v):
-        for w in nbr[v]:
-            k = (v, w) if v < w else (w, v)
-            if ecount.get(k, 0) == 1:
-                return True
-        return False
-
-    def link_ok(a, b, shared):
-        k = len(shared)
-        if k == 0 or k > 2:
-            return False
-        na = {w for f in vfaces[a] for w in F[f] if w != a}
-        nb = {w for f in vfaces[b] for w in F[f] if w != b}
-        common = (na & nb) - {a, b}
-        if len(common) != k:
-            return False
-        if k == 2:
-            if is_boundary_vertex(a) and is_boundary_vertex(b):
-                return False
-            for c in common:
-                deg = len({w for f in vfaces[c] for w in F[f] if w != c})
-                if deg <= 3:
-                    return False
-        return True
-
-    while faces_now > target_faces and heap:
-        cost, a, b, s = heapq.heappop(heap)
-        if stamp.get((a, b)) != s or (a, b) in blocked:
+    while faces.count > target_faces and q.heap:
+        cost, a, b, s = heapq.heappop(q.heap)
+        if q.stamp.get((a, b)) != s or (a, b) in q.blocked:
             continue
-        if cost > settings.max_cost:
+        if cost > options.max_cost:
+            heapq.heappush(q.heap, (cost, a, b, s))  # still a pair: the stop report counts it
+            stop = "max_error"
             break
-        shared = edge_faces(a, b)
-        if faces_now - len(shared) < target_faces:
-            blocked.add((a, b))
+        P = np.array([[a, b]])
+        (fids, before, corner, owner, after), kept, (dead, _) = faces.touched_with_dead(P)
+        nshared = len(dead)
+        if faces.count - nshared < target_faces:
+            block((a, b), BUDGET)
             continue
-        if settings.preserve_topology and not link_ok(a, b, shared):
-            blocked.add((a, b))
-            n_invalid += 1
+        if manifold and not (1 <= nshared <= 2 and _local_link_ok(faces, a, b, nshared)):
+            block((a, b), outcome.TOPOLOGY)
             continue
-        x, br, qsum = placed[(a, b)]
-        around = [(f, a) for f in vfaces[a] - shared] + [(f, b) for f in vfaces[b] - shared]
-        if around:
-            K = chunk_size(len(around))
-            fi = np.array([f for f, _ in around])
-            corner = np.array([list(F[f]).index(v) for f, v in around])
-            p = pad_rows(V[F[fi]], K)
-            ok_mask = np.arange(K) < len(around)
-            if bool(flips.local_flips(p, pad_rows(corner, K), x, ok_mask, pad_rows(N0[fi], K), cos_max)):
-                blocked.add((a, b))
-                n_invalid += 1
-                continue
+        x, br, _ = q.placed[(a, b)]
+        if len(fids) and _flips_any(VQd, N0d, before, fids, corner, x, cos_max):
+            block((a, b), outcome.FLIP)
+            continue
         # faces that would coincide after the contraction: forbidden in manifold mode, else dropped
-        rest = sorted((vfaces[a] | vfaces[b]) - shared)
-        G = np.array([[a if w == b else w for w in F[f]] for f in rest], np.int64).reshape(-1, 3)
-        drop = [rest[i] for i in np.flatnonzero(topo.coincident_removals(G))]
-        if drop and (settings.preserve_topology or faces_now - len(shared) - len(drop) < target_faces):
-            blocked.add((a, b))
-            n_invalid += 1
+        order = np.argsort(fids, kind="stable")
+        drop = fids[order][topo.coincident_removals(after[order])]
+        if len(drop) and (manifold or faces.count - nshared - len(drop) < target_faces):
+            block((a, b), outcome.COINCIDENT if manifold else BUDGET)
             continue
-        V[a] = x
-        Q[a] = qsum
+        merged = start_merge(model, VQd, P, x[None], params)()
+        row = np.concatenate([x[None], merged], 1)
+        VQ[a] = row[0]
+        VQd = set_rows(VQd, np.array([a]), row, size=1)
         branches[br] += 1
         max_cost_used = max(max_cost_used, float(cost))
-        history.append((a, b, x.copy(), float(cost)))
-        for f in list(shared) + drop:
-            unlink(f)
-        faces_now -= len(shared) + len(drop)
-        for f in list(vfaces[b]):
-            fa, fb, fc = F[f]
-            for u, v in ((fa, fb), (fb, fc), (fc, fa)):
-                k = (u, v) if u < v else (v, u)
-                ecount[k] -= 1
-            F[f][F[f] == b] = a
-            fa, fb, fc = F[f]
-            for u, v in ((fa, fb), (fb, fc), (fc, fa)):
-                k = (u, v) if u < v else (v, u)
-                ecount[k] = ecount.get(k, 0) + 1
-            vfaces[a].add(f)
-        vfaces[b] = set()
+        history.append((a, b, np.array(x), float(cost)))
+        faces.contract_touched(P, kept, dead)
+        if len(drop):
+            faces.remove(drop)
         for w in nbr[b]:
             nbr[w].discard(b)
             if w != a:
                 nbr[w].add(a)
                 nbr[a].add(w)
-            stamp.pop((min(w, b), max(w, b)), None)
-            placed.pop((min(w, b), max(w, b)), None)
+            q.forget((min(w, b), max(w, b)))
         nbr[a].discard(b)
         nbr[b] = set()
-        stamp.pop((a, b), None)
-        # re-cost pairs at a; pairs around a whose validity may have changed are unblocked
-        push([(min(a, w), max(a, w)) for w in sorted(nbr[a])])
+        q.forget((a, b))
         ring = sorted(nbr[a])
-        push(sorted({(min(u, w), max(u, w)) for u in ring for w in nbr[u]
-                     if (min(u, w), max(u, w)) in blocked}))
+        if model.support == "ring" or model.refresh is not None:
+            around = np.unique(np.take(faces.F, faces.around(np.array([a]))[1], axis=0))
+            if model.refresh is not None:
+                verts = np.union1d(around, [a])
+                VQ[verts, 3:] = np.asarray(model.refresh(MeshView(faces, VQ[:n]), verts), DTYPE)
+                VQd = set_rows(VQd, verts, VQ[verts], size=16)
+            if model.support == "ring":
+                ring = sorted(set(ring) | set(around.tolist()) - {a})
+        # re-cost pairs at a (ring support: at its whole 1-ring); pairs around a whose validity may
+        # have changed are unblocked
+        push([(min(a, w), max(a, w)) for w in sorted(nbr[a])])
+        if model.support == "ring":
+            push(sorted({(min(u, w), max(u, w)) for u in ring for w in nbr[u]} - {(min(a, w), max(a, w))
+                                                                                   for w in nbr[a]}))
+        else:
+            push(sorted({(min(u, w), max(u, w)) for u in ring for w in nbr[u]
+                         if (min(u, w), max(u, w)) in q.blocked}))
         if progress is not None:
-            progress(faces_now)
+            progress(faces.count)
+    blocked = {}
+    if faces.count > target_faces:
+        stop, blocked = _stop(faces, q, nbr, options, target_faces, stop)
     hist = (np.array([(a, b) for a, b, _, _ in history], np.int64).reshape(-1, 2),
             np.array([x for _, _, x, _ in history], np.float64).reshape(-1, 3),
             np.array([c for _, _, _, c in history], np.float64))
-    info = {"contractions": len(history), "rejected": n_invalid, "rounds": len(history),
-            "max_cost": max_cost_used, "branches": branches}
-    return V, Q, F, alive, hist, info
+    info = {"contractions": len(history), "rejected": int(rejected_by.sum()), "rounds": len(history),
+            "max_cost": max_cost_used, "branches": branches, "stop_reason": stop or "target",
+            "blocked_by": blocked,
+            "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(rejected_by)), rejected_by))}
+    return VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, hist, info
+
+
+def _stop(faces: FaceLists, q: _Queue, nbr, options: Options, target: int, stop):
+    """(stop reason, blocked_by) from the pairs left in the queue (`outcome.classify`)."""
+    live = sorted(p for p in q.placed)
+    if not live:
+        return stop or "blocked", {"non_manifold": 0}
+    P = np.array(live, np.int64)
+    _, f = faces.around(P.reshape(-1))
+    w = faces.around(P.reshape(-1))[0]
+    # faces shared by both endpoints of a pair: seen once from each side
+    key = (w >> 1) * len(faces.alive) + f
+    ks, c = np.unique(key, return_counts=True)
+    removes = np.bincount(ks[c == 2] // len(faces.alive), minlength=len(P))
+    bad = np.array([q.blocked.get(p, BUDGET) for p in live], np.int8)
+    cost = np.array([q.placed[p][2] for p in live])
+    ok = (removes >= 1) & (removes <= 2) if options.preserve_topology else np.ones(len(P), bool)
+    reason, blocked = outcome.classify(faces.count, target, bad, removes, cost > options.max_cost, ok)
+    return (stop or reason), blocked

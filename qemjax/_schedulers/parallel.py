@@ -1,102 +1,79 @@
 """Independent-set scheduler: many non-interacting contractions per round.
 
-A round:
-1. cost the current edges with the batched placement kernel (fixed-size chunks: one compilation per
-   size); only pairs at vertices the last round moved are re-costed, the rest keep their numbers;
-2. select, in passes, pairs that are the cheapest among all candidate pairs touching their endpoints'
-   closed 1-rings (ties broken by a scramble of the pair index in an int64 key), so no two selected
-   pairs share a vertex, a face or a 1-ring neighbour; validate them (flip kernel, link test); invalid
-   ones leave the candidate set, valid ones lock their 1-rings, and the next pass selects among what is
+A round is five named stages over a `RoundState`:
+
+1. **update** the candidate pairs after the last round's contractions (manifold mode: through the
+   contractions, `topo.contract_edges`; otherwise rebuilt from the faces and matched by key);
+2. **cost**: price the pairs whose cost is stale with the cost model's batched kernel (fixed-size
+   chunks: one compilation per size); the rest keep their numbers. Which pairs go stale is the model's
+   ``support``: the pairs at moved vertices, or (``"ring"``) every pair in their 1-rings;
+3. **select**, in passes, pairs that are the cheapest among all candidate pairs touching their
+   endpoints' closed 1-rings (ties broken by a scramble of the pair index in an int64 key), so no two
+   selected pairs share a vertex, a face or a 1-ring neighbour;
+4. **validate** them (flip kernel, coincident faces, link test): invalid ones leave the candidate set
+   with the rule they broke, valid ones lock their 1-rings, and the next pass selects among what is
    still free;
-3. contract the accepted set at once (quadric sums; the faces through the vertex->face lists of
+5. **contract** the accepted set at once (the model's merge; the faces through the vertex->face lists of
    `FaceLists`: validation looks them up and the contraction reuses that look-up, so neither scans the
-   whole mesh); in manifold mode the edge list and the vertex degrees are updated through the
-   contractions (`topo.contract_edges`, with the apexes the link test found) rather than rebuilt.
-Kernel calls are asynchronous: the re-costing, the flip test and the quadric merges run on JAX's
-threads while the host works on the topology, and are waited for only where their results are needed.
-One host worker thread runs the link test and the edge update beside the main thread's face work, half of
-each large narrowing pass, and the initial face lists beside the input normals (numpy releases the GIL in
-large array passes; the process otherwise used 1.2 of 2 cores).
+   whole mesh).
+Kernel calls are asynchronous: the re-costing, the flip test and the merges run on JAX's threads while
+the host works on the topology, and are waited for only where their results are needed. One host worker
+thread runs the link test and the edge update beside the main thread's face work, half of each large
+narrowing pass, and the initial face lists beside the input normals (numpy releases the GIL in large
+array passes; the process otherwise used 1.2 of 2 cores).
 Because accepted contractions are two edges apart, the validity computed for each stays true when all
 happen together. The last round takes only as many, in cost order, as the exact face target allows.
 """
 from __future__ import annotations
 
-import functools
+import dataclasses
 import time
-from concurrent.futures import ThreadPoolExecutor
-from types import SimpleNamespace
 
 import jax.numpy as jnp
 import numpy as np
 
 from .. import _topology as topo
-from .._incidence import FaceLists
 from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
-from .._kernels import flips, placement
-from .common import DTYPE, Settings, Timer, bucket, chunks, face_normals, pad_rows, set_rows
+from .._costs import MeshView
+from .._incidence import FaceLists
+from .._kernels import flips
+from . import outcome
+from .common import (DTYPE, Options, Timer, bucket, chunks, face_normals, pad_rows, set_rows, start_merge,
+                     start_price)
+from .select import fits_target, independent_sets, sort_keys, submit
 
-MAX_PASSES = 8
-PASS_YIELD = 0.1  # stop a round's passes once one accepts under this fraction of what the round took
-GATE = 1.2  # take pairs up to GATE × the cost of the k-th cheapest candidate, where
-GATE_FRACTION = 0.05  # k = min(contractions still needed / (2·TAIL), GATE_FRACTION × live pairs):
-TAIL = 10  # near the target a round takes at most about 1/(2·TAIL) of what is still needed
-FREE_COST = 1e-10  # costs below this (squared, unit extent) always pass the gate: flat regions
-MERGE_CHUNK = 4096
-SPLIT_ROWS = 1 << 18  # array passes at least this long are shared with the worker thread
-NO_KEY = np.iinfo(np.int64).max
-_worker = None  # one host thread beside the caller's: numpy releases the GIL in its large array passes
+MERGE_CHUNK = 4096  # one merge shape whatever the round's size: a few more calls early, one compilation
 
 
-def _submit(fn, *args, **kw):
-    """Run fn on the worker thread; returns its future. Only read-only inputs are shared."""
-    global _worker
-    if _worker is None:
-        _worker = ThreadPoolExecutor(1, thread_name_prefix="qemjax-host")
-    return _worker.submit(fn, *args, **kw)
+@dataclasses.dataclass
+class RoundState:
+    """What a round knows of its candidate pairs; every per-pair array is aligned with ``E``.
+
+    E (P,2) pairs (mesh edges, plus close pairs with aggregation), ecount (P,) faces at each, deg (n,)
+    edges at each vertex, bvert (n,) boundary vertices, keys (P,) sorted pair keys when E was rebuilt
+    (None when it was updated in place); x (P,3), cost (P,), branch (P,) int8: the current prices;
+    bad (P,) int8: the rule a pair broke when last validated (0: not known invalid); changed (n,) bool:
+    vertices whose pairs need a new price next round; edges_next: `topo.contract_edges`' result when the
+    pairs were updated through the contractions (manifold mode)."""
+
+    E: np.ndarray
+    ecount: np.ndarray
+    deg: np.ndarray
+    bvert: np.ndarray = None
+    keys: np.ndarray | None = None
+    x: np.ndarray = None
+    cost: np.ndarray = None
+    branch: np.ndarray = None
+    bad: np.ndarray = None
+    changed: np.ndarray = None
+    edges_next: tuple | None = None
 
 
-def _sort_keys(cost: np.ndarray, idx: np.ndarray, salt: int = 0) -> np.ndarray:
-    """Unique, monotonic int64 keys of pairs idx: float32 cost bits (non-negative) in the high word and a
-    fixed bijective scramble of the pair index in the low word (a multiplication by an odd constant
-    modulo 2³²). Ties (flat regions have many exact zeros) are broken deterministically but in a
-    spatially incoherent order: breaking them by raw index would make neighbouring pairs form long
-    descending chains with one local minimum each. Only the pairs asked for are keyed (a round looks
-    at a small part of them)."""
-    bits = np.take(cost, idx).astype(np.float32, copy=False).view(np.int32).astype(np.int64)
-    h = idx.astype(np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
-    bits <<= 32
-    bits |= h
-    return bits
-
-
-def _place(VQd, P, settings):
-    """Start the placement of index pairs P (K,2) into device rows VQd. Returns a function that waits
-    for it and gives x (K,3), cost (K,), branch (K,) int8: the kernel runs while the host works on."""
-    args = settings.kernel_args()
-    outs = [placement.place_pairs(VQd, part, *args) for _, part in chunks(P.astype(np.int32))]
-
-    def result():
-        out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else \
-            np.zeros((5, 0), DTYPE)
-        return np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8)
-    return result
-
-
-def _merged(VQd, P, x):
-    """Start computing the (K,10) merged quadrics of pairs P (K,2) in the frames of their targets x
-    (K,3); returns a function that waits for them. One chunk shape (MERGE_CHUNK) whatever K: a few
-    more calls in early rounds, one compilation."""
-    outs = [placement.merged_quadrics(VQd, pp, xx) for (_, pp), (_, xx)
-            in zip(chunks(P.astype(np.int32), size=MERGE_CHUNK), chunks(x, size=MERGE_CHUNK))]
-    return lambda: np.concatenate([np.asarray(o) for o in outs])[: len(P)]
-
-
-def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, settings):
+def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
     """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
     fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
     Returns a function that waits for the kernel and gives (S,) bool per pair."""
-    cos_max = np.asarray(settings.cos_max, DTYPE)
+    cos_max = np.asarray(cos_max, DTYPE)
     parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
                 chunks(np.take(x, owner, axis=0)))
     outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max)
@@ -108,81 +85,6 @@ def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, settings):
         res[owner[bad]] = True
         return res
     return result
-
-
-def _select(E, key_of, cand, need, n, validate):
-    """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices,
-    the extra faces (coincident ones) each accepted pair removes, (len(E),) int, and the vertices the
-    accepted pairs lock (their endpoints' closed 1-rings through E), (n,) bool.
-
-    E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
-    graph. ``key_of(idx)`` gives the (unique) int64 keys of pairs idx (`_sort_keys`).
-    ``validate(pairs, idx, rows, pairs_at_free)`` (rows: the indices of pairs_at_free in E) returns
-    (ok, extra faces removed).
-
-    Each pass takes the candidates that hold the smallest key among all candidates touching their
-    endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
-    1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
-    """
-    def narrow(avail, ws, split=True):
-        """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
-        (locking, link test) and their rows, and which of those have both endpoints available
-        (selection). Large sets are split between this thread and the worker (idle here)."""
-        one, Eo, _ = ws
-        if split and len(Eo) >= SPLIT_ROWS:
-            h = len(Eo) // 2
-            half = _submit(narrow, avail, (one[:h], Eo[:h], None), split=False)
-            rest = narrow(avail, (one[h:], Eo[h:], None), split=False)
-            return tuple(np.concatenate(pair) for pair in zip(half.result(), rest))
-        ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
-        k1 = ae != 0
-        return np.compress(k1, one), _keep(Eo, k1), np.compress(k1, ae) == 0x0101
-
-    def endpoints(mask):
-        v = np.zeros(n, bool)
-        v[_keep(E, mask).reshape(-1)] = True
-        return v
-
-    free = np.ones(n, bool)
-    # only vertices with a candidate pair matter: the rest never select and never conflict
-    active = endpoints(cand)
-    ws = narrow(active, (np.arange(len(E)), E, None))
-    accepted, rejected = [], []
-    extra = np.zeros(len(E), np.int64)
-    n_acc = 0
-    for p in range(MAX_PASSES):
-        one, Eo, bmask = ws
-        both, Eb = np.compress(bmask, one), _keep(Eo, bmask)
-        live = cand[both]
-        if not live.any():
-            break
-        kl = np.where(live, key_of(both), NO_KEY)
-        m1 = np.full(n, NO_KEY)
-        np.minimum.at(m1, Eb[:, 0], kl)
-        np.minimum.at(m1, Eb[:, 1], kl)
-        m2 = m1.copy()
-        np.minimum.at(m2, Eb[:, 0], np.take(m1, Eb[:, 1]))
-        np.minimum.at(m2, Eb[:, 1], np.take(m1, Eb[:, 0]))
-        sel = np.compress(live & (kl == np.take(m2, Eb[:, 0])) & (kl == np.take(m2, Eb[:, 1])), both)
-        if sel.size == 0:
-            break
-        ok, extra_sel = validate(_take(E, sel), sel, one, Eo)
-        extra[sel] = extra_sel
-        cand[sel[~ok]] = False
-        rejected.append(sel[~ok])
-        good = sel[ok]
-        accepted.append(good)
-        # lock the closed 1-rings of accepted endpoints; shrink the working sets to what is free
-        lock = np.zeros(n, bool)
-        lock[_take(E, good).reshape(-1)] = True
-        free[_keep(Eo, any_at(lock, Eo)).reshape(-1)] = False
-        n_acc += good.size
-        if good.size < PASS_YIELD * n_acc or (good.size * 50 < need // 2 and p > 2):
-            break  # later passes would add little: leave the rest to the next round
-        if p + 1 < MAX_PASSES:
-            ws = narrow(active & free, ws)
-    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64)  # noqa: E731
-    return cat(accepted), cat(rejected), extra, ~free
 
 
 def _with_extra_pairs(E, ecount, extra_pairs, n):
@@ -199,46 +101,22 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
     return E, np.concatenate([ecount, np.zeros(len(xk), np.int64)])[order]
 
 
-def _validate(P, idx, free_rows, Efree, *, ctx):
-    """(ok, faces made coincident) for vertex-disjoint pairs P (indices idx into this round's pairs).
-    Efree (rows free_rows of this round's pairs) holds every pair at them; the faces come from
-    ``ctx.faces`` (`FaceLists`). In manifold mode the link test runs on the worker thread. What the
-    contraction will need again (the faces' look-up and, in manifold mode, the apexes and the pairs at
-    the endpoints that the link test found, for `topo.contract_edges`) is appended to ``ctx.found``."""
-    tv = time.perf_counter()
-    if ctx.settings.preserve_topology:
-        link = _submit(topo.link_ok, P, ctx.ecount[idx], Efree, ctx.n, ctx.bvert, ctx.deg, apexes=True,
-                       edges_at=True)
-    (fids, before, corner, owner, G), kept, dead = ctx.faces.touched_with_dead(P)
-    flipped = _flip_bad(ctx.VQd, ctx.N0d, before, fids, corner, owner,
-                        _take(ctx.x, idx), len(P), ctx.settings)  # runs while the host tests the rest
-    gone = topo.coincidence_count(G, owner, len(P))
-    ok = np.ones(len(P), bool)
-    at = None
-    if ctx.settings.preserve_topology:  # no coincident faces, link condition
-        linked, apex, r, owner_r = link.result()
-        ok = (gone == 0) & linked
-        at = (apex, np.take(free_rows, r), owner_r)
-    ctx.found.append((idx, kept, dead, at))
-    ok &= ~flipped()
-    ctx.timer.add("validity_s", time.perf_counter() - tv)
-    return ok, gone
-
-
 def _accepted(E, found, take):
     """The pairs marked in ``take`` (len(E),) bool with what validation found for them (``found``: pair
     indices, kept faces, dead faces and, in manifold mode, (apexes, rows of E at the endpoints, their
     pairs) per pass; `FaceLists.touched_with_dead`, `topo.link_ok`), renumbered as one set in pass
     order: pairs (S,2), the arguments ``kept`` and ``dead`` of `FaceLists.contract_touched`, and the
-    apexes (S,2) and the rows of E at the endpoints (None outside manifold mode)."""
+    apexes (S,2) and the rows of E at the endpoints (None outside manifold mode).
+
+    A kept face's position w counts endpoints (2·pair + side, side 1 at b), as `FaceLists` numbers them."""
     pairs, ws, fs, cs, ds, xs, rs = [], [], [], [], [], [], []
     off = 0
     for idx, (w, f, c), (df, downer), at in found:
         t = take[idx]
         pos = np.cumsum(t) - 1 + off  # each taken pair's place in the combined set
-        keep = np.take(t, w >> 1)
-        wk = np.compress(keep, w)
-        ws.append(2 * np.take(pos, wk >> 1) + (wk & 1))
+        pair_of, side = w >> 1, w & 1
+        keep = np.take(t, pair_of)
+        ws.append(2 * np.take(pos, np.compress(keep, pair_of)) + np.compress(keep, side))
         fs.append(np.compress(keep, f))
         cs.append(np.compress(keep, c))
         ds.append(np.compress(np.take(t, downer), df))
@@ -252,27 +130,11 @@ def _accepted(E, found, take):
     return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
 
 
-def _fits_target(removes: np.ndarray, need: int) -> np.ndarray:
-    """Mask over contractions in cost order: take them while the faces they remove (``removes``) fit in
-    ``need``, then fill what is left with later ones that still fit, so the face target is met exactly
-    when the mesh allows it."""
-    csum = np.cumsum(removes)
-    take = csum <= need
-    if take.all():
-        return take
-    left = need - (csum[take][-1] if take.any() else 0)
-    for i in np.flatnonzero(~take):  # a few at most: only the tail of the last round
-        if removes[i] <= left:
-            take[i] = True
-            left -= removes[i]
-    return take
-
-
-def _touched_vertices(faces: FaceLists, P, n):
-    """(n,) bool: endpoints of the pairs P and every vertex sharing a face with one."""
+def _ring_vertices(faces: FaceLists, verts, n):
+    """(n,) bool: ``verts`` and every vertex sharing a live face with one."""
     t = np.zeros(n, bool)
-    t[P.reshape(-1)] = True
-    t[_take(faces.F, faces.around(P.reshape(-1))[1]).reshape(-1)] = True
+    t[verts] = True
+    t[_take(faces.F, faces.around(verts)[1]).reshape(-1)] = True
     return t
 
 
@@ -291,158 +153,271 @@ def _history_arrays(rounds):
     return pairs, np.concatenate([x for _, _, x, _ in rounds]), np.concatenate([c for _, _, _, c in rounds])
 
 
-def run(V, Q, F, extra_pairs, target_faces, settings: Settings, progress=None, edges=None):
-    """Simplify. V (n,3) float32 normalised positions, Q (n,10) quadrics, F (m,3) int64 faces,
-    extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be 0); ``edges``:
-    `topo.edges` of F when the caller has it.
-    Returns (V, Q, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,)
-    marks the survivors, history = (pairs (k,2), positions (k,3), costs (k,)) in contraction order."""
-    n, m = len(V), len(F)
-    manifold = settings.preserve_topology
-    n_cap = bucket(n + 1)
-    VQ = np.zeros((n_cap, 13), DTYPE)  # rows [position, quadric]
-    VQ[:n, :3], VQ[:n, 3:] = V, Q
-    extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
-    VQd = jnp.asarray(VQ)  # device copy, updated row by row
-    first = None  # the first costing of the given edges runs while the host sets up the faces
-    if edges is not None and len(extra_pairs) == 0:
-        first = _place(VQd, edges[0], settings)
-    # int32 rows (n < 2**31) keep their index: face i continues input face i; built on the worker
-    # while this thread computes the input normals
-    lists = _submit(FaceLists, F, n)
-    N0 = face_normals(np.asarray(V, DTYPE), F)  # input normals
-    N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
-    faces = lists.result()
-    timer = Timer()
-    history = []
-    branches = np.zeros(3, np.int64)
-    rounds = rejected = 0
-    max_cost_used = 0.0
-    faces_per_round = []
-    prev = None  # (targets, costs, branches, known invalid, moved vertices, keys) of the last round's edges
-    # manifold mode: the edges are updated through each round's contractions instead of rebuilt
-    incremental = manifold and len(extra_pairs) == 0
-    updated = None  # (E, ecount, rows kept, degree, rows at moved vertices) after a round, when incremental
-    while faces.count > target_faces:
-        rounds += 1
+class _Run:
+    """One simplification: the mesh state that lives across rounds, and the stages of a round."""
+
+    def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges):
+        self.n, m = len(V), len(F)
+        self.model, self.options, self.progress = model, options, progress
+        self.params = model.kernel_params()
+        self.target = target_faces
+        self.manifold = options.preserve_topology
+        self.extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
+        # manifold mode: the pairs are updated through each round's contractions instead of rebuilt
+        self.incremental = self.manifold and len(self.extra_pairs) == 0
+        n_cap = bucket(self.n + 1)
+        self.pad = self.n  # a zero row past the last vertex: padding for ring gathers
+        self.VQ = np.zeros((n_cap, 3 + model.width), DTYPE)  # rows [position, model state]
+        self.VQ[: self.n, :3], self.VQ[: self.n, 3:] = V, S
+        self.VQd = jnp.asarray(self.VQ)  # device copy, updated row by row
+        # the first costing of the given edges runs while the host sets up the faces (unless the model
+        # needs the faces for it)
+        self.first = None
+        if edges is not None and len(self.extra_pairs) == 0 and not model.uses_ring:
+            self.first = start_price(model, self.VQd, edges[0], self.params)
+        self.edges = edges
+        # int32 rows (n < 2**31) keep their index: face i continues input face i; built on the worker
+        # while this thread computes the input normals
+        lists = submit(FaceLists, F, self.n)
+        N0 = face_normals(np.asarray(V, DTYPE), F)  # input normals
+        self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
+        self.faces = lists.result()
+        self.timer = Timer()
+        self.history = []
+        self.branches = np.zeros(len(model.branches), np.int64)
+        self.rounds = self.rejected = 0
+        self.rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
+        self.max_cost_used = 0.0
+        self.faces_per_round = []
+
+    # -- stage 1: update ---------------------------------------------------------------------------
+    def update(self, prev: RoundState | None):
+        """This round's pairs. Returns the new state (prices not yet filled), the function that carries
+        the last round's per-pair arrays over to the new pairs, which of them are stale (P,) bool, and
+        on a rebuild which of them existed before (P,) bool (else None). On the first round the last
+        three are None."""
+        n = self.n
+        if prev is None or prev.edges_next is None:
+            if self.edges is not None:
+                E, ecount = self.edges[0].astype(np.int32), self.edges[1]
+                self.edges = None
+            else:
+                E, ecount = topo.edges(self.faces.live(), n)
+            E, ecount = _with_extra_pairs(E, ecount, self.extra_pairs, n)
+            deg = topo.vertex_degree(E if self.incremental else _keep(E, ecount > 0), n)
+            keys = None if self.incremental else topo.edge_keys(E[:, 0], E[:, 1], n)  # sorted, as E is
+            st = RoundState(E, ecount, deg, keys=keys)
+            if prev is None:
+                return st, None, None, None
+            # rebuilt (never incremental here): find each pair's predecessor by key
+            src = np.minimum(np.searchsorted(prev.keys, keys), len(prev.keys) - 1)
+            same = prev.keys[src] == keys
+            return st, (lambda a: _take(a, src)), any_at(prev.changed, E) | ~same, same
+        E, ecount, kept, deg, stale = prev.edges_next
+        st = RoundState(E, ecount, deg)
+        if self.model.support == "ring":
+            stale = stale | any_at(prev.changed, E)
+        idx = np.flatnonzero(kept)  # several arrays follow: the indices once
+        return st, (lambda a: _take(a, idx)), stale, None
+
+    # -- stage 2: cost -----------------------------------------------------------------------------
+    def cost(self, st: RoundState, prev, follow, stale, same):
+        """Fill the prices of ``st``: new ones for the stale pairs (the kernel runs while the host works
+        on), the last round's for the rest, and what is known to be invalid."""
         t0 = time.perf_counter()
-        ekeys = same = None
-        if updated is None:
-            E, ecount = topo.edges(faces.live(), n) if edges is None else (edges[0].astype(np.int32), edges[1])
-            edges = None
-            E, ecount = _with_extra_pairs(E, ecount, extra_pairs, n)
-            deg = topo.vertex_degree(E if incremental else _keep(E, ecount > 0), n)
-            if not incremental:
-                ekeys = topo.edge_keys(E[:, 0], E[:, 1], n)  # sorted, as E is
-            if prev is not None:  # rebuilt: find each edge's predecessor by key
-                src = np.minimum(np.searchsorted(prev[5], ekeys), len(prev[5]) - 1)
-                same = prev[5][src] == ekeys
-                follow = functools.partial(_take, indices=src)
-        else:
-            E, ecount, kept, deg, dirty = updated
-            follow = functools.partial(_take, indices=np.flatnonzero(kept))  # several arrays: indices once
-        # start re-costing the pairs at vertices the last round moved (the rest keep their cost and
-        # target); the kernel runs while the host goes on
+        model, VQd = self.model, self.VQd
         if prev is None:
-            d, pending = None, first or _place(VQd, E, settings)
-            known_bad = np.zeros(len(E), bool)
+            pending = self.first or start_price(model, VQd, st.E, self.params, self.faces, self.pad)
+            self.first = None
+            st.bad = np.zeros(len(st.E), np.int8)
         else:
-            px, pcost, pbranch, pbad, changed, _ = prev
-            if updated is None:
-                dirty = any_at(changed, E)
+            d = np.flatnonzero(stale)
+            pending = start_price(model, VQd, _take(st.E, d), self.params, self.faces, self.pad)
+            st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
             if same is not None:
-                dirty |= ~same
-            d = np.flatnonzero(dirty)
-            pending = _place(VQd, _take(E, d), settings)
-            known_bad = follow(pbad)  # found invalid, and their neighbourhood has not changed since
-            if same is not None:
-                known_bad &= same
-        bvert = np.zeros(n, bool)
-        bvert[_keep(E, ecount == 1).reshape(-1)] = True
-        timer.add("topology_s", time.perf_counter() - t0)
+                st.bad = st.bad * same
+        st.bvert = np.zeros(self.n, bool)
+        st.bvert[_keep(st.E, st.ecount == 1).reshape(-1)] = True
+        self.timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
-        if d is None:
-            x, cost, branch = pending()
+        if prev is None:
+            st.x, st.cost, st.branch, _ = pending()
         else:
             # separate arrays, each under 32 MB at 2 M edges: glibc maps larger ones afresh every time
             # (page faults on every round; one (E,5) array was slower to gather here)
-            x, cost, branch = follow(px), follow(pcost), follow(pbranch)
-            xd, cost[d], branch[d] = pending()
-            put_rows(x, d, xd)
-        timer.add("kernels_s", time.perf_counter() - t0)
+            st.x, st.cost, st.branch = follow(prev.x), follow(prev.cost), follow(prev.branch)
+            xd, st.cost[d], st.branch[d], _ = pending()
+            put_rows(st.x, d, xd)
+        self.timer.add("kernels_s", time.perf_counter() - t0)
 
+    # -- stages 3 and 4: select and validate -------------------------------------------------------
+    def candidates(self, st: RoundState, need: int) -> np.ndarray:
+        """(P,) bool: the pairs that may contract this round (not known invalid, within max_error and
+        the face budget; manifold mode: edges with one or two faces)."""
+        valid = (st.cost <= self.options.max_cost) & (st.bad == 0) & (st.ecount <= need)
+        if self.manifold:
+            valid &= (st.ecount >= 1) & (st.ecount <= 2)
+        return valid
+
+    def select(self, st: RoundState, need: int, valid: np.ndarray):
+        """The accepted pairs in cost order, cut to the face target; records the rejected ones in
+        ``st.bad``. Returns (accepted indices, how many were selected, how many were rejected, the
+        locked vertices, what validation found for them)."""
         t0 = time.perf_counter()
-        need = faces.count - target_faces
-        n_alive = len(E)  # ~3× the live vertices; only the ratio matters for the gate
-        valid = (cost <= settings.max_cost) & ~known_bad & (ecount <= need)
-        if manifold:
-            valid &= (ecount >= 1) & (ecount <= 2)
-        if not valid.any():
-            break
-        k = min(max(need // (2 * TAIL), 1), int(valid.sum()), max(int(GATE_FRACTION * n_alive), 1))
-        kth = np.partition(np.compress(valid, cost), k - 1)[k - 1]
-        key_of = functools.partial(_sort_keys, cost, salt=rounds * 7919)
-        cand = valid & (cost <= max(GATE * kth, FREE_COST))
+        sch = self.options.schedule
+        k = min(max(need // (2 * sch.tail), 1), int(valid.sum()), max(int(sch.gate_fraction * len(st.E)), 1))
+        kth = np.partition(np.compress(valid, st.cost), k - 1)[k - 1]
+        salt = self.rounds * 7919
 
-        ctx = SimpleNamespace(VQd=VQd, N0d=N0d, faces=faces, x=x, ecount=ecount, bvert=bvert, deg=deg, n=n,
-                              settings=settings, timer=timer, found=[])
-        acc, bad, extra, locked = _select(E, key_of, cand, need, n, functools.partial(_validate, ctx=ctx))
-        rejected += bad.size
+        def key_of(idx):
+            return sort_keys(st.cost, idx, salt)
+        cand = valid & (st.cost <= max(sch.gate * kth, sch.free_cost))
+        found = []
+        acc, bad, why, extra, locked = independent_sets(
+            st.E, key_of, cand, need, self.n, lambda *a: self.validate(st, found, *a), sch)
+        self.rejected += bad.size
+        self.rejected_by += np.bincount(why, minlength=len(self.rejected_by))
         n_sel = acc.size
         acc = acc[np.argsort(key_of(acc), kind="stable")]
-        acc = acc[_fits_target(ecount[acc] + extra[acc], need)]
-        timer.add("select_s", time.perf_counter() - t0)
-        known_bad[bad] = True
-        if acc.size == 0:
-            if bad.size:  # the invalid ones are out now: select again among the rest (same edges)
-                prev = (x, cost, branch, known_bad, np.zeros(n, bool), ekeys)
-                if incremental:
-                    updated = (E, ecount, np.ones(len(E), bool), deg, np.zeros(len(E), bool))
-                continue
-            break
+        acc = acc[fits_target(st.ecount[acc] + extra[acc], need)]
+        self.timer.add("select_s", time.perf_counter() - t0)
+        st.bad[bad] = why
+        return acc, n_sel, bad.size, locked, found
 
+    def validate(self, st: RoundState, found: list, P, idx, free_rows, Efree):
+        """(rule broken per pair (0: valid), faces made coincident) for vertex-disjoint pairs P (indices
+        idx into this round's pairs). Efree (rows free_rows of this round's pairs) holds every pair at
+        them; the faces come from `FaceLists`. In manifold mode the link test runs on the worker thread.
+        What the contraction will need again (the faces' look-up and, in manifold mode, the apexes and
+        the pairs at the endpoints that the link test found, for `topo.contract_edges`) is appended to
+        ``found``."""
+        tv = time.perf_counter()
+        if self.manifold:
+            link = submit(topo.link_ok, P, st.ecount[idx], Efree, self.n, st.bvert, st.deg, apexes=True,
+                          edges_at=True)
+        (fids, before, corner, owner, G), kept, dead = self.faces.touched_with_dead(P)
+        flipped = _flip_bad(self.VQd, self.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
+                            self.options.cos_max)  # runs while the host tests the rest
+        gone = topo.coincidence_count(G, owner, len(P))
+        why = np.zeros(len(P), np.int8)
+        at = None
+        if self.manifold:  # link condition, no coincident faces
+            linked, apex, r, owner_r = link.result()
+            why[gone > 0] = outcome.COINCIDENT
+            why[~linked] = outcome.TOPOLOGY
+            at = (apex, np.take(free_rows, r), owner_r)
+        found.append((idx, kept, dead, at))
+        flip = flipped()
+        why[(why == 0) & flip] = outcome.FLIP
+        self.timer.add("validity_s", time.perf_counter() - tv)
+        return why, gone
+
+    # -- stage 5: contract -------------------------------------------------------------------------
+    def contract(self, st: RoundState, acc, n_sel, locked, found):
+        """Contract the accepted pairs together; leaves in ``st`` what the next round's update needs."""
         t0 = time.perf_counter()
-        P = _take(E, acc)
+        n, faces = self.n, self.faces
+        P = _take(st.E, acc)
         a, b = P[:, 0], P[:, 1]
-        xs = _take(x, acc)
-        merged = _merged(VQd, P, xs)  # runs during the host's contraction below
-        changed = np.zeros(n, bool)
-        changed[a] = True
-        branches += np.bincount(branch[acc], minlength=3)
-        max_cost_used = max(max_cost_used, float(cost[acc].max()))
-        history.append((a.copy(), b.copy(), xs, cost[acc].astype(np.float64)))
-        r = np.flatnonzero(known_bad)
+        xs = _take(st.x, acc)
+        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=MERGE_CHUNK)  # runs meanwhile
+        st.changed = np.zeros(n, bool)
+        st.changed[a] = True
+        self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
+        self.max_cost_used = max(self.max_cost_used, float(st.cost[acc].max()))
+        self.history.append((a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64)))
+        r = np.flatnonzero(st.bad)
         if r.size:  # pairs whose faces change get another chance
             # the 1-rings that selection locked, unless the target cut the set short
-            touched = locked if acc.size == n_sel else _touched_vertices(faces, P, n)
-            known_bad[r[any_at(touched, _take(E, r))]] = False
-        prev = (x, cost, branch, known_bad, changed, ekeys)
-        taken = np.zeros(len(E), bool)
+            touched = locked if acc.size == n_sel else _ring_vertices(faces, P.reshape(-1), n)
+            st.bad[r[any_at(touched, _take(st.E, r))]] = 0
+        taken = np.zeros(len(st.E), bool)
         taken[acc] = True
-        pairs, kept, dead, (apex, erows) = _accepted(E, ctx.found, taken)  # in pass order, not acc's
-        if incremental:  # the edge update runs on the worker while this thread relinks the faces
-            edges_next = _submit(topo.contract_edges, E, ecount, pairs[:, 0], pairs[:, 1], apex, n, deg,
-                                 rows=erows)
+        pairs, kept, dead, (apex, erows) = _accepted(st.E, found, taken)  # in pass order, not acc's
+        if self.incremental:  # the edge update runs on the worker while this thread relinks the faces
+            edges_next = submit(topo.contract_edges, st.E, st.ecount, pairs[:, 0], pairs[:, 1], apex, n,
+                                st.deg, rows=erows)
         faces.contract_touched(pairs, kept, dead)
-        if not manifold:
+        if not self.manifold:
             _drop_coincident(faces, a)
-        if len(extra_pairs):
+        if len(self.extra_pairs):
             rep = np.arange(n, dtype=np.int32)
             rep[b] = a
-            extra_pairs = rep[extra_pairs]
-            extra_pairs = extra_pairs[extra_pairs[:, 0] != extra_pairs[:, 1]]
-        rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, quadric]
-        put_rows(VQ, a, rows)
-        VQd = set_rows(VQd, a, rows, size=MERGE_CHUNK)
-        if incremental:
-            updated = edges_next.result()
-        faces_per_round.append(faces.count)
-        timer.add("contract_s", time.perf_counter() - t0)
-        if progress is not None:
-            progress(faces.count)
-    hist = _history_arrays(history)
-    info = {"contractions": len(hist[0]), "rejected": rejected, "rounds": rounds, "max_cost": max_cost_used,
-            "branches": branches, "faces_per_round": faces_per_round}
-    info.update(timer.t)
-    return VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, hist, info
+            ep = rep[self.extra_pairs]
+            self.extra_pairs = ep[ep[:, 0] != ep[:, 1]]
+        rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
+        put_rows(self.VQ, a, rows)
+        self.VQd = set_rows(self.VQd, a, rows, size=MERGE_CHUNK)
+        if self.model.support == "ring" or self.model.refresh is not None:
+            ring = _ring_vertices(faces, a, n)
+            if self.model.support == "ring":
+                st.changed = ring
+            if self.model.refresh is not None:
+                self.refresh(np.flatnonzero(ring))
+        if self.incremental:
+            st.edges_next = edges_next.result()
+        self.faces_per_round.append(faces.count)
+        self.timer.add("contract_s", time.perf_counter() - t0)
+
+    def refresh(self, verts):
+        """Recompute the model's derived state at ``verts`` (after their neighbourhood changed)."""
+        state = np.asarray(self.model.refresh(MeshView(self.faces, self.VQ[: self.n]), verts), DTYPE)
+        self.VQ[verts, 3:] = state
+        self.VQd = set_rows(self.VQd, verts, self.VQ[verts], size=MERGE_CHUNK)
+
+    # -- the loop ----------------------------------------------------------------------------------
+    def run(self):
+        prev, stop, blocked = None, "target", {}
+        while self.faces.count > self.target:
+            self.rounds += 1
+            t0 = time.perf_counter()
+            st, follow, stale, same = self.update(prev)
+            self.timer.add("topology_s", time.perf_counter() - t0)
+            self.cost(st, prev, follow, stale, same)
+            need = self.faces.count - self.target
+            valid = self.candidates(st, need)
+            if not valid.any():
+                stop, blocked = self.stop(st, need)
+                break
+            acc, n_sel, n_bad, locked, found = self.select(st, need, valid)
+            if acc.size == 0:
+                if n_bad:  # the invalid ones are out now: select again among the rest (same pairs)
+                    st.changed = np.zeros(self.n, bool)
+                    if self.incremental:
+                        st.edges_next = (st.E, st.ecount, np.ones(len(st.E), bool), st.deg,
+                                         np.zeros(len(st.E), bool))
+                    prev = st
+                    continue
+                stop, blocked = self.stop(st, need)
+                break
+            self.contract(st, acc, n_sel, locked, found)
+            prev = st
+            if self.progress is not None:
+                self.progress(self.faces.count)
+        return stop, blocked
+
+    def stop(self, st: RoundState, need: int):
+        """The stop reason and what blocked the remaining pairs (`outcome.classify`)."""
+        ok = ((st.ecount >= 1) & (st.ecount <= 2)) if self.manifold else np.ones(len(st.E), bool)
+        return outcome.classify(self.faces.count, self.target, st.bad, st.ecount,
+                                st.cost > self.options.max_cost, ok)
+
+
+def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=None, edges=None):
+    """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
+    F (m,3) int64 faces, extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be
+    0); ``edges``: `topo.edges` of F when the caller has it.
+    Returns (V, S, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,) marks
+    the survivors, history = (pairs (k,2), positions (k,3), costs (k,)) in contraction order; info holds
+    the counts, the stage times, ``stop_reason`` and ``blocked_by``."""
+    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges)
+    stop, blocked = r.run()
+    hist = _history_arrays(r.history)
+    info = {"contractions": len(hist[0]), "rejected": r.rejected, "rounds": r.rounds,
+            "max_cost": r.max_cost_used, "branches": r.branches, "faces_per_round": r.faces_per_round,
+            "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),
+            "stop_reason": stop, "blocked_by": blocked}
+    info.update(r.timer.t)
+    n = r.n
+    return r.VQ[:n, :3], r.VQ[:n, 3:], r.faces.F, r.faces.alive, hist, info

@@ -1,0 +1,109 @@
+"""Old code against new code in one process: identical outputs, and wall/CPU time alternating.
+
+The package as it was at a git revision is unpacked into a temporary folder under the name
+``qemjax_old`` (it uses relative imports only), so both versions run in the same process, in turn, on the
+same meshes; timing medians then share the machine's state. Outputs are compared by hash (vertices,
+faces, history).
+
+    python experiments/ab_compare.py --rev HEAD --meshes cow stanford-bunny --ratios 0.1 0.01   # outputs
+    python experiments/ab_compare.py --rev HEAD --meshes armadillo-x16 --ratios 0.01 --repeats 7 --time
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import importlib
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+
+def load_old(rev: str):
+    """The qemjax package at git revision ``rev``, imported as ``qemjax_old``."""
+    tmp = Path(tempfile.mkdtemp(prefix="qemjax-old-"))
+    tar = subprocess.run(["git", "-C", str(HERE.parent), "archive", rev, "qemjax"], check=True,
+                         capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(tmp)], input=tar, check=True)
+    os.rename(tmp / "qemjax", tmp / "qemjax_old")
+    sys.path.insert(0, str(tmp))
+    return importlib.import_module("qemjax_old")
+
+
+def digest(res) -> str:
+    h = hashlib.sha256()
+    for a in (res.vertices, res.faces, res.history.pairs, res.history.positions, res.history.costs):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+def cpu_time() -> float:
+    t = os.times()
+    return t.user + t.system
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rev", default="HEAD", help="the old code's git revision")
+    ap.add_argument("--meshes", nargs="+", default=["cow", "stanford-bunny"])
+    ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
+    ap.add_argument("--scheduler", default="parallel")
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--time", action="store_true", help="report medians of wall and CPU time")
+    ap.add_argument("--out", default=None, help="append rows to this CSV")
+    args = ap.parse_args()
+    import meshes as bench_meshes
+
+    import qemjax as new
+    old = load_old(args.rev)
+    rows = []
+    for name in args.meshes:
+        bm = bench_meshes.load(name)
+        V, F = bm.V, bm.F
+        for ratio in args.ratios:
+            times = {"old": [], "new": []}
+            cpus = {"old": [], "new": []}
+            hashes = {}
+            for lib in (old, new):  # warm-up: compile both
+                lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler)
+            for rep in range(args.repeats):
+                order = (("old", old), ("new", new)) if rep % 2 == 0 else (("new", new), ("old", old))
+                for tag, lib in order:
+                    c0, t0 = cpu_time(), time.perf_counter()
+                    res = lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler)
+                    times[tag].append(time.perf_counter() - t0)
+                    cpus[tag].append(cpu_time() - c0)
+                    hashes[tag] = digest(res)
+            same = hashes["old"] == hashes["new"]
+            row = dict(mesh=name, faces=len(F), ratio=ratio, scheduler=args.scheduler, rev=args.rev,
+                       identical=same, hash_old=hashes["old"], hash_new=hashes["new"], repeats=args.repeats,
+                       wall_old=statistics.median(times["old"]), wall_new=statistics.median(times["new"]),
+                       cpu_old=statistics.median(cpus["old"]), cpu_new=statistics.median(cpus["new"]))
+            rows.append(row)
+            msg = f"{name} {ratio}: {'identical' if same else 'DIFFERENT'} ({hashes['old']} / {hashes['new']})"
+            if args.time:
+                msg += (f"  wall {row['wall_old']:.3f} -> {row['wall_new']:.3f} s"
+                        f"  cpu {row['cpu_old']:.3f} -> {row['cpu_new']:.3f} s  (medians of {args.repeats})")
+            print(msg, flush=True)
+    if args.out:
+        import csv
+
+        new_file = not Path(args.out).exists()
+        with open(args.out, "a", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            if new_file:
+                w.writeheader()
+            w.writerows(rows)
+    return 0 if all(r["identical"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

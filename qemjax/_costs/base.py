@@ -1,0 +1,86 @@
+"""The cost-model interface: what a method declares so that both schedulers can run it.
+
+A cost model is a small frozen object (its fields are the method's settings) with a tiny interface:
+
+- **state**: each vertex carries ``width`` floats after its position; `init_state` computes them from
+  the cleaned mesh (QEM: the 10 numbers of a quadric). The schedulers keep one (n, 3 + width) float32
+  row per vertex, on the host and on the device.
+- **price** (jit-compiled, batched): index pairs into those rows -> one stacked (5 + len(parts), K) array:
+  the new position (rows 0-2), the cost (row 3, what selection ranks), the branch taken (row 4, an index
+  into ``branches``) and the cost parts (rows 5…) where a method combines terms. Ring models also get
+  the faces around each pair (`ring.Rings`).
+- **merge** (jit-compiled, batched): the kept vertex's new state after contracting a pair to x.
+- **refresh** (optional): derived state recomputed, after a round, for vertices whose neighbourhood
+  changed (curvature, area around a vertex); None when the state is only accumulated.
+- **support**: ``"pair"``: a contraction changes only the costs of pairs at the kept vertex;
+  ``"ring"``: also those of every pair in its 1-ring (the cost reads the faces around the pair).
+- **vertex_error**: a squared distance per vertex, in the normalised units of the run.
+
+Numeric settings reach the kernels through `kernel_params` as 0-d arrays (a pytree): a new value never
+recompiles, and a sweep can give every configuration its own.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, ClassVar, NamedTuple
+
+import numpy as np
+
+
+class MeshInput(NamedTuple):
+    """What `init_state` and `refresh` see: positions V (n,3) float32 at unit extent, faces F (m,3) int64,
+    boundary edges (B,2) directed as in their face and those faces (B,), feature edges (k,2) or None."""
+
+    V: np.ndarray
+    F: np.ndarray
+    boundary: tuple
+    feature_edges: Any
+
+
+@dataclasses.dataclass(frozen=True)
+class CostModel:
+    """Base of every cost model; subclasses are frozen dataclasses whose fields are their settings."""
+
+    name: ClassVar[str] = ""
+    width: ClassVar[int] = 0
+    support: ClassVar[str] = "pair"
+    uses_ring: ClassVar[bool] = False
+    parts: ClassVar[tuple[str, ...]] = ()
+    branches: ClassVar[tuple[str, ...]] = ("solve", "segment", "endpoint")
+
+    def init_state(self, mesh: MeshInput) -> np.ndarray:
+        """(n, width) float32 state rows."""
+        raise NotImplementedError
+
+    def kernel_params(self) -> dict:
+        """The numeric settings as 0-d arrays, by name (passed to `price` and `merge`)."""
+        return {}
+
+    def price(self, VS, pairs, params, rings=None):
+        """Device rows VS (N, 3 + width), pairs (K,2) int32 -> (5 + len(parts), K) array (see module).
+        A model whose price needs no ring also offers it as ``price_kernel(VS, pairs, params)``, a static
+        function of its arrays (settings come in ``params``), so wrappers can call it inside their own
+        jit without recompiling for new settings."""
+        raise NotImplementedError
+
+    def merge(self, VS, pairs, x, params):
+        """(K, width) state of the kept vertices after contracting pairs (K,2) to x (K,3)."""
+        raise NotImplementedError
+
+    refresh = None  # or a function (VS host rows, MeshView, verts) -> (len(verts), width) rows
+
+    def vertex_error(self, state: np.ndarray) -> np.ndarray:
+        """(k,) float64 squared distances (normalised units) from state rows (k, width)."""
+        return np.zeros(len(state))
+
+    def describe(self) -> dict:
+        """The settings, for stats: {field: value}."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+class MeshView(NamedTuple):
+    """What `CostModel.refresh` reads after a round: the live faces around vertices (`FaceLists`) and
+    the current vertex rows (n, 3 + width) float32 on the host."""
+
+    faces: Any
+    rows: np.ndarray

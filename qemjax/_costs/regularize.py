@@ -1,0 +1,95 @@
+"""Triangle-shape regularisation: a ring term added to any model's cost (``regularize=λ``).
+
+Quadric costs are blind to triangle shape, so simplified meshes collect slivers. This term charges a
+contraction for the worst triangle it creates:
+
+    cost = base cost + λ · ℓ² · max_f (1 − q_f)²,    q_f = 4√3·area_f / (sum of squared edge lengths of f)
+
+over the faces f the contraction leaves around the new vertex x (its ring, `ring.Rings`); q is 1 for an
+equilateral triangle and 0 for a degenerate one, and ℓ² is the mean squared edge length of those faces,
+so the term is a squared length like the quadric error and λ is dimensionless. The position is the base
+model's; the term changes only which contractions go first. It reads the faces around the pair, so its
+support is "ring": a contraction changes the cost of every pair in the new vertex's 1-ring.
+
+Peers have the same knob: meshoptimizer's ``Regularize`` flag, pymeshlab's quality threshold.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._batching import DTYPE
+from .base import CostModel
+
+_SQRT3_2 = 2.0 * math.sqrt(3.0)
+
+
+def shape_term(x, corners_pos, mask):
+    """One pair: x (3,) the new position, corners_pos (R,3,3) positions of ``[v, c1, c2]`` per ring face,
+    mask (R,) bool. Returns ℓ² · max (1 − q)² over the faces (x, c1, c2); 0 for an empty ring."""
+    c1, c2 = corners_pos[:, 1], corners_pos[:, 2]
+    e0, e1, e2 = c1 - x, c2 - c1, x - c2
+    l2 = jnp.sum(e0 * e0, -1) + jnp.sum(e1 * e1, -1) + jnp.sum(e2 * e2, -1)
+    twice_area = jnp.linalg.norm(jnp.cross(e0, c2 - x), axis=-1)
+    tiny = jnp.finfo(l2.dtype).tiny
+    q = jnp.where(l2 > tiny, _SQRT3_2 * twice_area / jnp.maximum(l2, tiny), 0.0)
+    bad = jnp.where(mask, (1.0 - jnp.clip(q, 0.0, 1.0)) ** 2, 0.0)
+    nf = jnp.sum(mask)
+    ell2 = jnp.sum(jnp.where(mask, l2, 0.0)) / jnp.maximum(3.0 * nf, 1.0)
+    return ell2 * jnp.max(bad)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _price(base_price, VS, pairs, params, corners, mask):
+    out = base_price(VS, pairs, params)  # (5 + parts, K)
+    pos = jnp.take(VS[:, :3], corners.reshape(-1), axis=0, mode="clip").reshape(corners.shape + (3,))
+    shape = jax.vmap(shape_term)(out[:3].T, pos, mask)
+    cost = out[3] + params["regularize"] * shape
+    return jnp.concatenate([out[:3], cost[None], out[4:5], out[3:4], shape[None]], 0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Regularized(CostModel):
+    """``base`` with the shape term above, weighted by ``regularize`` (λ ≥ 0). Cost parts: the base
+    model's cost (``"base"``) and the unweighted shape term (``"shape"``)."""
+
+    support: ClassVar[str] = "ring"
+    uses_ring: ClassVar[bool] = True
+    parts: ClassVar[tuple[str, ...]] = ("base", "shape")
+
+    base: CostModel
+    regularize: float = 0.0
+
+    def __post_init__(self):
+        if not (self.regularize >= 0 and math.isfinite(self.regularize)):
+            raise ValueError(f"regularize must be finite and >= 0, got {self.regularize}")
+        if self.base.parts:
+            raise ValueError(f"regularize cannot wrap {self.base.name!r}, which has cost parts already")
+
+    name = property(lambda self: self.base.name)
+    width = property(lambda self: self.base.width)
+    branches = property(lambda self: self.base.branches)
+
+    def init_state(self, mesh):
+        return self.base.init_state(mesh)
+
+    def kernel_params(self) -> dict:
+        return {**self.base.kernel_params(), "regularize": np.asarray(self.regularize, DTYPE)}
+
+    def price(self, VS, pairs, params, rings=None):
+        return _price(type(self.base).price_kernel, VS, pairs, params, rings.corners, rings.mask)
+
+    def merge(self, VS, pairs, x, params):
+        return self.base.merge(VS, pairs, x, params)
+
+    def vertex_error(self, state):
+        return self.base.vertex_error(state)
+
+    def describe(self) -> dict:
+        return {**self.base.describe(), "regularize": self.regularize}

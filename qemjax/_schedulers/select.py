@@ -1,0 +1,133 @@
+"""Choosing a round's contractions: unique sort keys, the independent-set passes, the exact face target.
+
+Selection works on int64 keys (float32 cost bits over a scramble of the pair index), so per-vertex minima
+need no sort and ties are broken the same way on every machine.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .._arrays import any_at, keep_rows as _keep, take_rows as _take
+from .._options import Schedule
+
+NO_KEY = np.iinfo(np.int64).max
+SPLIT_ROWS = 1 << 18  # array passes at least this long are shared with the worker thread
+_worker = None  # one host thread beside the caller's: numpy releases the GIL in its large array passes
+
+
+def submit(fn, *args, **kw):
+    """Run fn on the host worker thread; returns its future. Only read-only inputs are shared."""
+    global _worker
+    if _worker is None:
+        _worker = ThreadPoolExecutor(1, thread_name_prefix="qemjax-host")
+    return _worker.submit(fn, *args, **kw)
+
+
+def sort_keys(cost: np.ndarray, idx: np.ndarray, salt: int = 0) -> np.ndarray:
+    """Unique, monotonic int64 keys of pairs idx: float32 cost bits (non-negative) in the high word and a
+    fixed bijective scramble of the pair index in the low word (a multiplication by an odd constant
+    modulo 2³²). Ties (flat regions have many exact zeros) are broken deterministically but in a
+    spatially incoherent order: breaking them by raw index would make neighbouring pairs form long
+    descending chains with one local minimum each. Only the pairs asked for are keyed (a round looks
+    at a small part of them)."""
+    bits = np.take(cost, idx).astype(np.float32, copy=False).view(np.int32).astype(np.int64)
+    h = idx.astype(np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
+    bits <<= 32
+    bits |= h
+    return bits
+
+
+def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule):
+    """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices,
+    the reason code of each rejected one (from ``validate``), the extra faces (coincident ones) each
+    accepted pair removes, (len(E),) int, and the vertices the accepted pairs lock (their endpoints'
+    closed 1-rings through E), (n,) bool.
+
+    E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
+    graph. ``key_of(idx)`` gives the (unique) int64 keys of pairs idx (`sort_keys`).
+    ``validate(pairs, idx, rows, pairs_at_free)`` (rows: the indices of pairs_at_free in E) returns
+    (reason code per pair, 0 = valid; extra faces removed).
+
+    Each pass takes the candidates that hold the smallest key among all candidates touching their
+    endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
+    1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
+    """
+    def narrow(avail, ws, split=True):
+        """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
+        (locking, link test) and their rows, and which of those have both endpoints available
+        (selection). Large sets are split between this thread and the worker (idle here)."""
+        one, Eo, _ = ws
+        if split and len(Eo) >= SPLIT_ROWS:
+            h = len(Eo) // 2
+            half = submit(narrow, avail, (one[:h], Eo[:h], None), split=False)
+            rest = narrow(avail, (one[h:], Eo[h:], None), split=False)
+            return tuple(np.concatenate(pair) for pair in zip(half.result(), rest))
+        ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
+        k1 = ae != 0
+        return np.compress(k1, one), _keep(Eo, k1), np.compress(k1, ae) == 0x0101
+
+    def endpoints(mask):
+        v = np.zeros(n, bool)
+        v[_keep(E, mask).reshape(-1)] = True
+        return v
+
+    free = np.ones(n, bool)
+    # only vertices with a candidate pair matter: the rest never select and never conflict
+    active = endpoints(cand)
+    ws = narrow(active, (np.arange(len(E)), E, None))
+    accepted, rejected, reasons = [], [], []
+    extra = np.zeros(len(E), np.int64)
+    n_acc = 0
+    for p in range(schedule.max_passes):
+        one, Eo, bmask = ws
+        both, Eb = np.compress(bmask, one), _keep(Eo, bmask)
+        live = cand[both]
+        if not live.any():
+            break
+        kl = np.where(live, key_of(both), NO_KEY)
+        m1 = np.full(n, NO_KEY)
+        np.minimum.at(m1, Eb[:, 0], kl)
+        np.minimum.at(m1, Eb[:, 1], kl)
+        m2 = m1.copy()
+        np.minimum.at(m2, Eb[:, 0], np.take(m1, Eb[:, 1]))
+        np.minimum.at(m2, Eb[:, 1], np.take(m1, Eb[:, 0]))
+        sel = np.compress(live & (kl == np.take(m2, Eb[:, 0])) & (kl == np.take(m2, Eb[:, 1])), both)
+        if sel.size == 0:
+            break
+        why, extra_sel = validate(_take(E, sel), sel, one, Eo)
+        ok = why == 0
+        extra[sel] = extra_sel
+        cand[sel[~ok]] = False
+        rejected.append(sel[~ok])
+        reasons.append(why[~ok])
+        good = sel[ok]
+        accepted.append(good)
+        # lock the closed 1-rings of accepted endpoints; shrink the working sets to what is free
+        lock = np.zeros(n, bool)
+        lock[_take(E, good).reshape(-1)] = True
+        free[_keep(Eo, any_at(lock, Eo)).reshape(-1)] = False
+        n_acc += good.size
+        if good.size < schedule.pass_yield * n_acc or (good.size * 50 < need // 2 and p > 2):
+            break  # later passes would add little: leave the rest to the next round
+        if p + 1 < schedule.max_passes:
+            ws = narrow(active & free, ws)
+    cat = lambda xs, dt=np.int64: np.concatenate(xs) if xs else np.zeros(0, dt)  # noqa: E731
+    return cat(accepted), cat(rejected), cat(reasons, np.int8), extra, ~free
+
+
+def fits_target(removes: np.ndarray, need: int) -> np.ndarray:
+    """Mask over contractions in cost order: take them while the faces they remove (``removes``) fit in
+    ``need``, then fill what is left with later ones that still fit, so the face target is met exactly
+    when the mesh allows it."""
+    csum = np.cumsum(removes)
+    take = csum <= need
+    if take.all():
+        return take
+    left = need - (csum[take][-1] if take.any() else 0)
+    for i in np.flatnonzero(~take):  # a few at most: only the tail of the last round
+        if removes[i] <= left:
+            take[i] = True
+            left -= removes[i]
+    return take
