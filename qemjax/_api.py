@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 import time
 import warnings
 from typing import Any
@@ -13,9 +14,8 @@ from . import _compilation
 from . import _costs
 from . import _io
 from . import _topology as topo
-from ._arrays import column_bounds
-from ._batching import DTYPE
 from ._options import Options, Schedule
+from . import _units
 from ._result import Contractions, SimplifyResult
 from ._schedulers import common, greedy, outcome, parallel
 
@@ -31,6 +31,21 @@ def methods() -> tuple[str, ...]:
     """The cost models `simplify(method=...)` accepts (the registry in ``qemjax._costs``)."""
     return _costs.methods()
 
+
+def _real(name: str, x) -> float:
+    """x as a float; ValueError naming the option unless x is a real number (bools are refused)."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Real, np.floating, np.integer)):
+        raise ValueError(f"{name} must be a number, got {x!r}")
+    return float(x)
+
+
+def _flag(name: str, x) -> bool:
+    """x as a bool; ValueError naming the option unless x is True or False."""
+    if not isinstance(x, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {x!r}")
+    return bool(x)
+
+
 def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]:
     """(face target, max error) from the user's options; face target 0 means 'none'."""
     given = [x is not None for x in (target_faces, ratio)]
@@ -40,20 +55,21 @@ def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]
         raise ValueError("give a target: target_faces=, ratio= or max_error=")
     err = math.inf
     if max_error is not None:
-        err = float(max_error)
+        err = _real("max_error", max_error)
         if not err >= 0:
             raise ValueError(f"max_error must be a non-negative squared distance, got {max_error}")
     target = 0
     if target_faces is not None:
-        if isinstance(target_faces, bool) or int(target_faces) != target_faces:
+        t = _real("target_faces", target_faces)
+        if not (math.isfinite(t) and t == int(t)):
             raise ValueError(f"target_faces must be an integer, got {target_faces!r}")
-        target = int(target_faces)
+        target = int(t)
         if target <= 0:
             raise ValueError(f"target_faces must be at least 1, got {target}")
     if ratio is not None:
-        r = float(ratio)
-        if not (r > 0 and math.isfinite(r)):
-            raise ValueError(f"ratio must be in (0, 1], got {ratio}")
+        r = _real("ratio", ratio)
+        if not 0 < r <= 1:
+            raise ValueError(f"ratio must be in (0, 1] (the fraction of faces to keep), got {ratio}")
         target = max(1, int(round(r * m)))
     return target, err
 
@@ -106,6 +122,16 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     c0, s0 = _compilation.snapshot()
     if scheduler not in SCHEDULERS:
         raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS}")
+    boundary_weight = _real("boundary_weight", boundary_weight)
+    pair_threshold = _real("pair_threshold", pair_threshold)
+    flip_angle = None if flip_angle is None else _real("flip_angle", flip_angle)
+    area_weighted, weld = _flag("area_weighted", area_weighted), _flag("weld", weld)
+    progress = _flag("progress", progress)
+    if preserve_topology is not None:
+        preserve_topology = _flag("preserve_topology", preserve_topology)
+    _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
+    if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
+        raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
     model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted,
                                       boundary_weight=boundary_weight), dict(regularize=regularize))
     if schedule is None:
@@ -123,7 +149,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         raise ValueError("pair_threshold > 0 joins separate parts, which changes topology: "
                          "use preserve_topology=False (the default when pair_threshold > 0)")
 
-    (V, F), report = _io.prepare(mesh, weld_vertices=weld)
+    (V, F), report = _io.prepare(mesh, weld_vertices=weld, stacklevel=2)
+    feature_edges = _io.check_feature_edges(feature_edges, len(V))
     m = len(F)
     target, err = _resolve_target(m, target_faces, ratio, max_error)
     if target > m:
@@ -131,16 +158,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                       stacklevel=2)
         target = m
 
-    lo, hi = column_bounds(V)
-    center = 0.5 * (lo + hi)
-    scale = float(np.max(hi - lo)) or 1.0
-    Vn = ((V - center) / scale).astype(DTYPE)
+    Vn, frame = _units.normalize(V, common.DTYPE)
 
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges))
     options = Options(
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
-        preserve_topology=preserve_topology, max_cost=err / scale**2, schedule=schedule)
+        preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule)
     extra = topo.close_pairs(V, F, pair_threshold)
 
     bar = None
@@ -170,8 +194,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         bar.close()
 
     Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
-    vout = Vout.astype(np.float64) * scale + center
-    verr = model.vertex_error(So[ids]) * scale**2
+    vout = frame.positions_to_mesh(Vout)
+    verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
     stop = info["stop_reason"]
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
@@ -180,7 +204,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         else:
             stop = "blocked" if stop == "target" else stop
             warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"]), stacklevel=2)
-    hp, hx, hc = hist[0], hist[1].astype(np.float64) * scale + center, hist[2].astype(np.float64) * scale**2
+    hp, hx, hc = hist[0], frame.positions_to_mesh(hist[1]), frame.errors_to_mesh(hist[2])
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
     stats = dict(report)
@@ -191,13 +215,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         branches={name: int(c) for name, c in zip(model.branches, info["branches"])},
         rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
-        total_s=total, scale=scale)
+        total_s=total, scale=frame.scale, max_error_limit=err if math.isfinite(err) else None)
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":
             stats[k] = v
     return SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
-        max_error=float(info["max_cost"]) * scale**2, source_vertices=ids.astype(np.int64),
+        max_error=float(frame.errors_to_mesh(info["max_cost"])), source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
         input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc), stats=stats, stop_reason=stop)
 

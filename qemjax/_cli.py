@@ -1,69 +1,258 @@
-"""Command line: ``qemjax simplify IN OUT (--ratio R | --faces N | --max-error E)`` and ``qemjax demo``."""
+"""Command line: ``qemjax simplify IN OUT (--faces N | --ratio R) [--max-error E] [options]``,
+``qemjax demo [--out PATH]`` and ``qemjax --version``.
+
+The options of `qemjax.simplify` are generated from its signature (name, default, type) and its
+docstring (help), with the per-option details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
+the command line another way. Errors are one line on stderr and exit code 2; warnings are one line
+``qemjax: warning: …``. The output format and folder are checked before simplifying, and the file is
+written under a temporary name and renamed, so a failure never leaves a partial file.
+
+The command enables JAX's persistent compilation cache (`_cache.enable`); the library never does.
+"""
 from __future__ import annotations
 
 import argparse
+import inspect
+import os
+import re
 import sys
+import warnings
 
-from . import _api
+import numpy as np
+
+from . import _api, _cache
+
+# Keywords of `simplify` with how the command line takes them (argparse settings); the flag is
+# --keyword-with-dashes, the default the library's own (options not given are not passed on).
+OPTIONS = {
+    "method": dict(choices=_api.methods()),
+    "scheduler": dict(choices=_api.SCHEDULERS),
+    "placement": dict(choices=_api.PLACEMENTS),
+    "boundary_weight": dict(type=float, metavar="W"),
+    "area_weighted": dict(action=argparse.BooleanOptionalAction),
+    "feature_edges": dict(metavar="FILE", help="vertex-index pairs (k,2) constrained like boundary edges, "
+                          "read from FILE: .npy, or text with two integers per line (indices of the input "
+                          "after welding and dropping unused vertices)", shown="none"),
+    "pair_threshold": dict(type=float, metavar="T"),
+    "preserve_topology": dict(action=argparse.BooleanOptionalAction,
+                              shown="on; off with --pair-threshold > 0"),
+    "flip_angle": dict(type=str, metavar="DEG", help="forbid contractions that turn a face's normal by DEG "
+                       "degrees or more; 'none' allows flips"),
+    "weld": dict(action=argparse.BooleanOptionalAction),
+    "regularize": dict(type=float, metavar="LAMBDA"),
+}
+TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
+NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
+               "schedule": "library only: a qemjax.Schedule of the parallel scheduler's tunables"}
+FORMATS = ("obj", "ply", "stl", "off", "glb", "gltf")
+
+
+class CliError(ValueError):
+    """A problem with the command's arguments or files: printed as one line, exit code 2."""
+
+
+def _doc_help(name: str) -> str:
+    """The first sentence of ``name``'s entry in simplify's docstring ('' if absent), %-escaped."""
+    doc = inspect.getdoc(_api.simplify) or ""
+    m = re.search(rf"^(?:\w+ / )*{name}(?: / \w+)*: (.*?)(?=^\S|\Z)", doc, re.M | re.S)
+    if not m:
+        return ""
+    text = " ".join(m.group(1).split()).replace("``", "")
+    depth = 0
+    for i, ch in enumerate(text):  # cut at the first full stop outside parentheses
+        depth += (ch == "(") - (ch == ")")
+        if ch == "." and depth == 0 and (i + 1 == len(text) or text[i + 1] == " "):
+            text = text[:i]
+            break
+    return text.replace("%", "%%")
 
 
 def _add_options(p: argparse.ArgumentParser):
-    p.add_argument("--scheduler", choices=_api.SCHEDULERS, default="parallel")
-    p.add_argument("--placement", choices=_api.PLACEMENTS, default="optimal")
-    p.add_argument("--boundary-weight", type=float, default=_api.BOUNDARY_WEIGHT)
-    p.add_argument("--no-weld", action="store_true", help="do not merge coincident vertices first")
-    p.add_argument("--no-preserve-topology", action="store_true", help="allow non-manifold contractions")
+    """Every keyword of `simplify` with a default value, except the targets and NOT_EXPOSED."""
+    for name, param in inspect.signature(_api.simplify).parameters.items():
+        if name in TARGETS or name in NOT_EXPOSED:
+            continue
+        spec = dict(OPTIONS.get(name, {}))  # a keyword missing there gets settings from its default
+        if isinstance(param.default, bool):
+            spec.setdefault("action", argparse.BooleanOptionalAction)
+        elif isinstance(param.default, (int, float)) and "action" not in spec:
+            spec.setdefault("type", float)
+        if "help" not in spec:
+            spec["help"] = _doc_help(name)
+        spec["help"] += f" (default: {spec.pop('shown', param.default)})"
+        p.add_argument("--" + name.replace("_", "-"), dest=name, default=argparse.SUPPRESS, **spec)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not use the compilation cache (also: environment QEMJAX_NO_CACHE=1)")
 
 
-def _summary(name: str, res) -> str:
-    s = res.stats
-    return (f"{name}: faces {s['faces_in']} -> {s['faces_out']} (target {s['target_faces']}), "
-            f"{s['total_s']:.2f} s (compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
-            f"{s['rounds']} rounds, max error {res.max_error:.3g} (squared distance, mesh units)")
+def _ratio(text: str) -> float:
+    r = float(text)
+    if not 0 < r <= 1:
+        raise argparse.ArgumentTypeError(f"ratio must be in (0, 1] (the fraction of faces to keep), got {text}")
+    return r
 
 
-def _run(mesh, args, **target):
-    return _api.simplify(
-        mesh, scheduler=args.scheduler, placement=args.placement, boundary_weight=args.boundary_weight,
-        weld=not args.no_weld, preserve_topology=not args.no_preserve_topology,
-        progress=not args.quiet, **target)
+def _faces(text: str) -> int:
+    n = int(text)
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"the face target must be at least 1, got {text}")
+    return n
+
+
+def _max_error(text: str) -> float:
+    e = float(text)
+    if not e >= 0:
+        raise argparse.ArgumentTypeError(f"max error must be a squared distance >= 0, got {text}")
+    return e
+
+
+def _read_feature_edges(path: str) -> np.ndarray:
+    """(k,2) int64 vertex pairs from a .npy file or a text file of two integers per line."""
+    try:
+        a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=np.int64, ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise CliError(f"could not read feature edges from {path}: {exc}") from None
+    return a
+
+
+def _flip_angle(text: str):
+    if text.strip().lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise CliError(f"--flip-angle takes degrees or 'none', got {text!r}") from None
+
+
+def _simplify_kwargs(args) -> dict:
+    """The options given on the command line, as keywords of `simplify`."""
+    kw = {name: getattr(args, name) for name in inspect.signature(_api.simplify).parameters
+          if name not in NOT_EXPOSED and hasattr(args, name) and getattr(args, name) is not None}
+    if "feature_edges" in kw:
+        kw["feature_edges"] = _read_feature_edges(kw["feature_edges"])
+    if "flip_angle" in kw:
+        kw["flip_angle"] = _flip_angle(kw["flip_angle"])
+    kw["progress"] = not args.quiet
+    return kw
+
+
+def check_output(path: str) -> str:
+    """Before any work: the format of ``path`` (its extension) must be one trimesh writes for a triangle
+    mesh, and its folder must exist and take a new file. Returns the format; CliError otherwise."""
+    import trimesh
+
+    if os.path.isdir(path):
+        raise CliError(f"output {path} is a folder; give a file name")
+    ext = os.path.splitext(path)[1].lower().lstrip(".")
+    if not ext:
+        raise CliError(f"output {path} needs an extension naming its format ({', '.join(FORMATS)})")
+    try:  # the format: one triangle written to memory
+        trimesh.Trimesh(np.eye(3), [[0, 1, 2]], process=False).export(file_type=ext)
+    except Exception as exc:
+        raise CliError(f"cannot write .{ext} files ({type(exc).__name__}: {exc}); "
+                       f"use one of {', '.join(FORMATS)}") from None
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise CliError(f"cannot write {path}: folder {folder} does not exist")
+    probe = _temp_name(path, "probe")
+    try:
+        with open(probe, "xb"):
+            pass
+        os.remove(probe)
+    except OSError as exc:
+        raise CliError(f"cannot write to {folder}: {exc.strerror}") from None
+    return ext
+
+
+def _temp_name(path: str, tag: str) -> str:
+    folder, name = os.path.split(os.path.abspath(path))
+    return os.path.join(folder, f".{name}.qemjax-{tag}-{os.getpid()}{os.path.splitext(name)[1]}")
+
+
+def write(res, path: str, ext: str):
+    """Export ``res`` to ``path`` as ``ext``: written to a temporary file in the same folder, then
+    renamed over ``path``, so a failure leaves no partial file."""
+    tmp = _temp_name(path, "out")
+    try:
+        res.to_trimesh().export(tmp, file_type=ext)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"qemjax: warning: {message}", file=sys.stderr)
+
+
+def _parser() -> argparse.ArgumentParser:
+    import jax
+
+    from . import __version__
+
+    ap = argparse.ArgumentParser(prog="qemjax", description="Quadric-error mesh simplification with JAX.",
+                                 epilog="Errors (--max-error, the reported max error) are squared distances "
+                                 "in the mesh's units.")
+    ap.add_argument("--version", action="version", version=f"qemjax {__version__} (jax {jax.__version__})")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("simplify", help="simplify a mesh file")
+    s.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
+    s.add_argument("output", help=f"written as its extension says: {', '.join(FORMATS)}")
+    g = s.add_mutually_exclusive_group()
+    g.add_argument(TARGETS["ratio"], dest="ratio", type=_ratio, help="keep this fraction of the faces, in (0, 1]")
+    g.add_argument(TARGETS["target_faces"], dest="target_faces", type=_faces, metavar="N",
+                   help="target face count")
+    s.add_argument(TARGETS["max_error"], dest="max_error", type=_max_error, metavar="E",
+                   help="stop before a contraction costs more than E (squared distance, mesh units²); "
+                   "alone or with --faces/--ratio")
+    _add_options(s)
+    d = sub.add_parser("demo", help="simplify a bumpy sphere made in code (writes a file only with --out)")
+    d.add_argument("--out", "--output", dest="out", metavar="PATH", help="write the result here")
+    d.add_argument("--subdivisions", type=int, default=7, help="7: 327,680 faces; 6: 81,920 (default: 7)")
+    d.add_argument("--ratio", type=_ratio, default=0.02, help="keep this fraction of the faces (default: 0.02)")
+    _add_options(d)
+    return ap
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="qemjax", description="Quadric-error mesh simplification with JAX.")
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    s = sub.add_parser("simplify", help="simplify a mesh file")
-    s.add_argument("input")
-    s.add_argument("output", help="any format trimesh writes (.obj, .ply, .stl, .off, .glb)")
-    g = s.add_mutually_exclusive_group(required=True)
-    g.add_argument("--ratio", type=float, help="keep this fraction of the faces")
-    g.add_argument("--faces", type=int, help="target face count")
-    g.add_argument("--max-error", type=float, help="max quadric error (squared distance, mesh units)")
-    _add_options(s)
-    d = sub.add_parser("demo", help="simplify a mesh generated in code (no file needed)")
-    d.add_argument("--output", default="qemjax-demo.obj")
-    d.add_argument("--subdivisions", type=int, default=7, help="7: 327,680 faces; 6: 81,920")
-    d.add_argument("--ratio", type=float, default=0.02)
-    _add_options(d)
-    args = ap.parse_args(argv)
-
+    """Run the command; returns the exit code (0 ok, 2 bad arguments, input or output)."""
     try:
-        if args.cmd == "simplify":
-            target = {"ratio": args.ratio, "target_faces": args.faces, "max_error": args.max_error}
-            res = _run(args.input, args, **{k: v for k, v in target.items() if v is not None})
-            out, name = args.output, args.input
-        else:
-            from .shapes import bumpy_sphere
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error argparse has printed
+        return exc.code if isinstance(exc.code, int) else 2
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        try:
+            return _run(args)
+        except ValueError as exc:
+            print(f"qemjax: error: {exc}", file=sys.stderr)
+            return 2
 
-            mesh = bumpy_sphere(args.subdivisions)
-            res = _run(mesh, args, ratio=args.ratio)
-            out, name = args.output, f"bumpy sphere ({len(mesh.faces)} faces)"
-        res.to_trimesh().export(out)
-    except ValueError as exc:
-        print(f"qemjax: error: {exc}", file=sys.stderr)
-        return 2
-    print(_summary(name, res) + f" -> {out}")
+
+def _run(args) -> int:
+    if args.cmd == "simplify" and args.ratio is None and args.target_faces is None and args.max_error is None:
+        raise CliError("give a target: --faces N, --ratio R or --max-error E")
+    out = args.output if args.cmd == "simplify" else args.out
+    ext = check_output(out) if out is not None else None
+    kwargs = _simplify_kwargs(args)
+    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
+        _cache.enable()
+    if args.cmd == "simplify":
+        res = _api.simplify(args.input, **kwargs)
+        name = args.input
+    else:
+        from .shapes import bumpy_sphere
+
+        mesh = bumpy_sphere(args.subdivisions)
+        res = _api.simplify(mesh, **kwargs)
+        name = f"bumpy sphere ({len(mesh.faces)} faces)"
+    if out is not None:
+        write(res, out, ext)
+    where = f" -> {out}" if out is not None else " (not written; --out PATH saves it)"
+    print(f"{name}: {res.summary()}{where}")
     return 0
 
 

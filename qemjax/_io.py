@@ -2,16 +2,18 @@
 
 Everything here is numpy on the host. Cleaning is explicit and reported, never silent:
 ``prepare`` welds coincident vertices (Garland–Heckbert need shared corners), drops degenerate and
-duplicate faces and unreferenced vertices, and says how many of each it removed.
+duplicate faces and unreferenced vertices, and says how many of each it removed. Only positions and faces
+are kept: what else a mesh carries (UVs, a material, colours) is named in a warning and in the report.
 """
 from __future__ import annotations
 
 import os
+import warnings
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._arrays import sorted_triples
+from ._arrays import column_bounds, sorted_triples
 
 
 class Mesh(NamedTuple):
@@ -30,27 +32,66 @@ def _triangulate(faces: np.ndarray) -> np.ndarray:
     return np.stack(tris, 1).reshape(-1, 3)
 
 
-def _from_trimesh(obj) -> Mesh:
+def _is_placeholder(material) -> bool:
+    """True for the material trimesh invents for UVs that come without one (`empty_material`)."""
+    from trimesh.visual.material import SimpleMaterial, empty_material
+
+    try:
+        ref = empty_material()
+        return (type(material) is SimpleMaterial and not material.kwargs
+                and all(np.array_equal(getattr(material, k), getattr(ref, k))
+                        for k in ("ambient", "diffuse", "specular"))
+                and material.image is not None and material.image.size == ref.image.size
+                and np.array_equal(np.asarray(material.image), np.asarray(ref.image)))
+    except Exception:  # another trimesh version: call it dropped rather than stay silent
+        return False
+
+
+def dropped_attributes(obj) -> list[str]:
+    """What a `trimesh.Trimesh` carries besides positions and faces, which qemjax does not keep: any of
+    ``"uv"``, ``"material"``, ``"vertex_colors"``, ``"face_colors"`` (in that order)."""
+    visual = getattr(obj, "visual", None)
+    kind = getattr(visual, "kind", None)
+    out = []
+    if kind == "texture":
+        uv = getattr(visual, "uv", None)
+        if uv is not None and len(uv):
+            out.append("uv")
+        material = getattr(visual, "material", None)
+        if material is not None and not _is_placeholder(material):
+            out.append("material")
+    elif kind == "vertex":
+        out.append("vertex_colors")
+    elif kind == "face":
+        out.append("face_colors")
+    return out
+
+
+def _warn_dropped(dropped: list[str], what: str, stacklevel: int):
+    warnings.warn(f"{what} carries {', '.join(dropped)}, which qemjax does not keep: the result has "
+                  "positions and faces only (stats['dropped'] lists them)", stacklevel=stacklevel + 1)
+
+
+def _from_trimesh(obj) -> tuple[Mesh, list[str]]:
+    """(Mesh, `dropped_attributes`) of a `trimesh.Trimesh`, or of a `trimesh.Scene` concatenated."""
     import trimesh
 
     if isinstance(obj, trimesh.Scene):
         obj = obj.to_geometry() if hasattr(obj, "to_geometry") else obj.dump(concatenate=True)
     if not isinstance(obj, trimesh.Trimesh):
         raise ValueError(f"expected a triangle mesh, got {type(obj).__name__}")
-    return Mesh(np.asarray(obj.vertices), np.asarray(obj.faces))
+    return Mesh(np.asarray(obj.vertices), np.asarray(obj.faces)), dropped_attributes(obj)
 
 
-def load(path: str | os.PathLike) -> Mesh:
-    """Read any file trimesh reads (OBJ, PLY, STL, OFF, GLB, …) as a `Mesh`.
-
-    Polygons are triangulated; vertices are kept exactly as stored (no merging, no reordering: welding is
-    a separate, explicit step of `simplify`).
-    """
+def _read(path) -> tuple[Mesh, list[str]]:
+    """`load` without the warning: (Mesh, `dropped_attributes`)."""
     import trimesh
 
     path = os.fspath(path)
     if not os.path.exists(path):
         raise ValueError(f"mesh file not found: {path}")
+    if os.path.isdir(path):
+        raise ValueError(f"expected a mesh file, got a folder: {path}")
     try:
         obj = trimesh.load(path, process=False, force="mesh")
     except Exception as exc:  # trimesh raises many kinds; name the file
@@ -58,13 +99,42 @@ def load(path: str | os.PathLike) -> Mesh:
     return _from_trimesh(obj)
 
 
-def as_arrays(mesh: Any) -> Mesh:
-    """Accept a path, a `trimesh.Trimesh`, a ``(vertices, faces)`` pair or an object with ``.vertices``
-    and ``.faces``; validate and return float64 / int64 arrays. Raises ValueError naming the problem."""
+def load(path: str | os.PathLike) -> Mesh:
+    """Read any file trimesh reads (OBJ, PLY, STL, OFF, GLB, …) as a `Mesh`.
+
+    Polygons are triangulated; vertices are kept exactly as stored (no merging, no reordering: welding is
+    a separate, explicit step of `simplify`). Only positions and faces are read: UVs, a material or
+    colours in the file are dropped, with one warning naming them.
+    """
+    mesh, dropped = _read(path)
+    if dropped:
+        _warn_dropped(dropped, os.fspath(path), stacklevel=2)
+    return mesh
+
+
+def _array(name: str, x) -> np.ndarray:
+    """np.asarray(x); a ValueError naming ``name`` for a ragged nested list."""
+    try:
+        a = np.asarray(x)
+    except (ValueError, TypeError):
+        a = None
+    if a is None or a.dtype == object:
+        try:
+            lengths = sorted({len(row) for row in x})
+        except TypeError:
+            lengths = "of different lengths"
+        raise ValueError(f"{name} must be a rectangular array, got a ragged list (rows of lengths {lengths}); "
+                         "give faces as an (m, 3) array, or polygons with the same number of corners")
+    return a
+
+
+def _as_arrays(mesh: Any) -> tuple[Mesh, list[str]]:
+    """`as_arrays`, also returning `dropped_attributes` (empty for arrays)."""
+    dropped = []
     if isinstance(mesh, (str, os.PathLike)):
-        mesh = load(mesh)
+        mesh, dropped = _read(mesh)
     elif type(mesh).__module__.startswith("trimesh"):
-        mesh = _from_trimesh(mesh)
+        mesh, dropped = _from_trimesh(mesh)
     if isinstance(mesh, tuple) and len(mesh) == 2:
         V, F = mesh
     elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
@@ -72,8 +142,8 @@ def as_arrays(mesh: Any) -> Mesh:
     else:
         raise ValueError("mesh must be a path, a trimesh.Trimesh, a (vertices, faces) pair "
                          f"or have .vertices and .faces; got {type(mesh).__name__}")
-    V = np.asarray(V)
-    F = np.asarray(F)
+    V = _array("vertices", V)
+    F = _array("faces", F)
     if V.ndim != 2 or V.shape[1] != 3:
         raise ValueError(f"vertices must have shape (n, 3), got {V.shape}")
     if F.ndim != 2 or F.shape[1] < 3:
@@ -82,7 +152,7 @@ def as_arrays(mesh: Any) -> Mesh:
         raise ValueError(f"empty mesh: {V.shape[0]} vertices, {F.shape[0]} faces")
     if not np.issubdtype(V.dtype, np.number) or np.iscomplexobj(V):
         raise ValueError(f"vertices must be real numbers, got dtype {V.dtype}")
-    V = V.astype(np.float64)
+    V = np.ascontiguousarray(V, np.float64)
     if not np.all(np.isfinite(V)):
         bad = np.flatnonzero(~np.all(np.isfinite(V), axis=1))
         raise ValueError(f"vertices contain NaN or inf coordinates ({bad.size} vertices, first: {bad[0]})")
@@ -91,11 +161,38 @@ def as_arrays(mesh: Any) -> Mesh:
             F = F.astype(np.int64)
         else:
             raise ValueError(f"face indices must be integers, got dtype {F.dtype}")
-    F = _triangulate(F.astype(np.int64))
+    if F.dtype == np.uint64 and F.max() > np.iinfo(np.int64).max:
+        raise ValueError(f"face indices out of range: found {F.max()} for {V.shape[0]} vertices")
+    F = np.ascontiguousarray(_triangulate(F.astype(np.int64)))
     lo, hi = F.min(), F.max()
     if lo < 0 or hi >= V.shape[0]:
         raise ValueError(f"face indices out of range: found [{lo}, {hi}] for {V.shape[0]} vertices")
-    return Mesh(V, F)
+    return Mesh(V, F), dropped
+
+
+def as_arrays(mesh: Any) -> Mesh:
+    """Accept a path, a `trimesh.Trimesh`, a ``(vertices, faces)`` pair or an object with ``.vertices``
+    and ``.faces``; validate and return float64 / int64 arrays. Raises ValueError naming the problem."""
+    return _as_arrays(mesh)[0]
+
+
+def check_feature_edges(feature_edges, n: int) -> np.ndarray | None:
+    """Validate ``feature_edges`` for a cleaned mesh of n vertices: None, or a (k,2) array (or nested
+    list) of integer vertex indices in [0, n). Returns None or (k,2) int64; ValueError names the problem."""
+    if feature_edges is None:
+        return None
+    fe = _array("feature_edges", feature_edges)
+    if fe.size == 0:
+        return np.zeros((0, 2), np.int64)
+    if fe.ndim != 2 or fe.shape[1] != 2:
+        raise ValueError(f"feature_edges must have shape (k, 2) (pairs of vertex indices), got {fe.shape}")
+    if not np.issubdtype(fe.dtype, np.integer):
+        raise ValueError(f"feature_edges must be integer vertex indices, got dtype {fe.dtype}")
+    lo, hi = fe.min(), fe.max()
+    if lo < 0 or hi >= n:
+        raise ValueError(f"feature_edges indices out of range: found [{lo}, {hi}] for {n} vertices "
+                         "(indices refer to the cleaned input: after welding and dropping unused vertices)")
+    return fe.astype(np.int64)
 
 
 def _row_hash(U: np.ndarray) -> np.ndarray:
@@ -172,15 +269,39 @@ def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndar
     return V[used], newidx[F], int((~used).sum())
 
 
-def prepare(mesh: Any, *, weld_vertices: bool = True) -> tuple[Mesh, dict]:
+def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
-    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``unreferenced_removed``."""
-    V, F = as_arrays(mesh)
-    report = {"welded": 0}
+    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``unreferenced_removed`` and lists the
+    attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
+    caller ``stacklevel`` - 1 frames above prepare's caller)."""
+    (V, F), dropped = _as_arrays(mesh)
+    if dropped:
+        _warn_dropped(dropped, os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh",
+                      stacklevel=stacklevel + 1)
+    report = {"welded": 0, "dropped": dropped}
     if weld_vertices:
         V, F, report["welded"] = weld(V, F)
     F, report["degenerate_removed"], report["duplicate_removed"] = clean_faces(F)
     if len(F) == 0:
         raise ValueError("empty mesh: every face is degenerate")
     V, F, report["unreferenced_removed"] = drop_unreferenced(V, F)
+    if not has_area(V, F):
+        raise ValueError(f"the mesh has no surface: all {len(F)} faces have zero area (collinear corners)")
     return Mesh(V, F), report
+
+
+def has_area(V: np.ndarray, F: np.ndarray) -> bool:
+    """Whether any face of F (m,3) over V (n,3) has a non-zero area (usually settled by the first faces).
+    Edge vectors are divided by the bounding box's largest side first, so no scale underflows."""
+    lo, hi = column_bounds(V)
+    with np.errstate(over="ignore"):
+        s = float(np.max(hi - lo))
+    if not np.isfinite(s):  # an overflowing extent: `_units.normalize` refuses it by name
+        return True
+    if s == 0:
+        return False
+    for part in (F[:1024], F[1024:]):
+        e1, e2 = (V[part[:, 1]] - V[part[:, 0]]) / s, (V[part[:, 2]] - V[part[:, 0]]) / s
+        if np.any(np.cross(e1, e2) != 0):
+            return True
+    return False

@@ -39,7 +39,9 @@ class SimplifyResult:
     stats: counts and timings (``compile_s`` is JAX tracing + compilation
     time inside this call, ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
     times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``
-    and ``faces_per_round``).
+    and ``faces_per_round``), the targets (``target_faces``, 0 for none; ``max_error_limit``, a squared
+    distance in input units, None for none) and ``dropped``: what the input carried that the result
+    does not keep (any of "uv", "material", "vertex_colors", "face_colors").
     """
 
     vertices: np.ndarray
@@ -61,7 +63,14 @@ class SimplifyResult:
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
     def summary(self) -> str:
+        """One line: faces before -> after and the target, times, rounds and the largest contraction
+        cost, a squared distance in the mesh's units (the convention of every error qemjax reports)."""
         s = self.stats
-        return (f"{s['faces_in']} -> {s['faces_out']} faces in {s['total_s']:.2f} s "
-                f"(compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
-                f"max error {np.sqrt(self.max_error):.3g} (rms-distance units)")
+        goals = []
+        if s.get("target_faces"):
+            goals.append(f"{s['target_faces']} faces")
+        if s.get("max_error_limit") is not None:
+            goals.append(f"max error {s['max_error_limit']:.3g}")
+        return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
+                f"in {s['total_s']:.2f} s (compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
+                f"{s['rounds']} rounds, max error {self.max_error:.3g} (squared distance, mesh units²)")

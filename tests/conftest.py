@@ -25,9 +25,18 @@ def one_pair_per_round():
     return qemjax.Schedule(gate=1.0, gate_fraction=1e-12, free_cost=0.0)
 
 
+def unit_extent(V):
+    """V centred on its bounding box and divided by its largest side: float64 checks on it neither
+    underflow nor overflow, whatever the mesh's scale (1e-100 or 1e100)."""
+    lo, hi = V.min(0), V.max(0)
+    return (V - (0.5 * lo + 0.5 * hi)) / max(float(np.max(hi - lo)), np.finfo(float).tiny)
+
+
 def face_normals(V, F):
+    V = unit_extent(V)
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    return n / np.linalg.norm(n, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore"):  # a zero-area face gets a NaN normal: no dot with it passes
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 def assert_valid(result, target=None, V0=None, F0=None, allow_flips=False):
@@ -40,7 +49,8 @@ def assert_valid(result, target=None, V0=None, F0=None, allow_flips=False):
     assert not np.any((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])), "degenerate"
     key = np.sort(F, axis=1)
     assert len(np.unique(key, axis=0)) == len(F), "duplicate faces"
-    area2 = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    U = unit_extent(V)
+    area2 = np.linalg.norm(np.cross(U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]]), axis=1)
     assert np.all(area2 > 0), "zero-area faces"
     used = np.zeros(len(V), bool)
     used[F.reshape(-1)] = True

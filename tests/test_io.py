@@ -1,9 +1,12 @@
 """Loading, welding and cleaning."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import trimesh
+from conftest import shared_mesh
 
 import qemjax
 from qemjax import _io, shapes
@@ -71,3 +74,54 @@ def test_accepts_trimesh_and_objects():
     b = qemjax.simplify(qemjax.Mesh(V, F), target_faces=50)
     c = qemjax.simplify(a, target_faces=20)  # a result is a mesh too
     assert np.array_equal(a.faces, b.faces) and len(c.faces) == 20
+
+
+def _colored(kind):
+    V, F = shapes.icosphere(1)
+    if kind == "vertex":
+        return trimesh.Trimesh(V, F, vertex_colors=np.tile([255, 0, 0, 255], (len(V), 1)), process=False)
+    if kind == "face":
+        return trimesh.Trimesh(V, F, face_colors=np.tile([0, 255, 0, 255], (len(F), 1)), process=False)
+    uv = np.c_[V[:, 0] * 0.5 + 0.5, V[:, 1] * 0.5 + 0.5]
+    material = trimesh.visual.material.SimpleMaterial(diffuse=[200, 10, 10, 255])
+    return trimesh.Trimesh(V, F, visual=trimesh.visual.TextureVisuals(uv=uv, material=material), process=False)
+
+
+@pytest.mark.parametrize("kind,dropped", [("vertex", ["vertex_colors"]), ("face", ["face_colors"]),
+                                          ("texture", ["uv", "material"])])
+def test_dropped_attributes_warn_once_and_are_recorded(kind, dropped):
+    with pytest.warns(UserWarning, match="which qemjax does not keep") as record:
+        r = qemjax.simplify(_colored(kind), target_faces=40)
+    assert len(record) == 1 and ", ".join(dropped) in str(record[0].message)
+    assert r.stats["dropped"] == dropped
+
+
+def test_dropped_attributes_from_files(tmp_path):
+    """A textured GLB (UVs and a material) and a PLY with vertex colours: named in the warning."""
+    glb, ply = tmp_path / "t.glb", tmp_path / "c.ply"
+    _colored("texture").export(glb)
+    _colored("vertex").export(ply)
+    with pytest.warns(UserWarning, match=r"t\.glb carries uv, material"):
+        r = qemjax.simplify(glb, target_faces=40)
+    assert r.stats["dropped"] == ["uv", "material"]
+    with pytest.warns(UserWarning, match=r"c\.ply carries vertex_colors"):
+        m = qemjax.load(ply)
+    assert m.faces.shape == (80, 3)
+
+
+def test_plain_meshes_warn_nothing(tmp_path):
+    V, F = shapes.icosphere(1)
+    path = tmp_path / "plain.obj"
+    trimesh.Trimesh(V, F, process=False).export(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for mesh in [(V, F), trimesh.Trimesh(V, F, process=False), path]:
+            assert qemjax.simplify(mesh, target_faces=40).stats["dropped"] == []
+
+
+def test_spot_uvs_are_reported():
+    """spot.obj has vt lines (UVs) and no mtllib: trimesh's placeholder material is not reported."""
+    p = shared_mesh("spot/spot.obj")
+    with pytest.warns(UserWarning, match="spot.obj carries uv,") as record:
+        r = qemjax.simplify(p, ratio=0.5)
+    assert len(record) == 1 and r.stats["dropped"] == ["uv"]

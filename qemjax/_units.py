@@ -1,0 +1,65 @@
+"""The one place where mesh units meet the internal unit-extent frame.
+
+`simplify` computes in coordinates centred on the bounding box and divided by its largest side (the
+*extent*), so every kernel sees numbers of order one. Positions come back as ``x * scale + center``;
+squared distances (quadric errors, ``max_error``) as ``e * scale²``.
+
+Those squared distances are reported in float64, so the extent must keep ``scale²`` (and errors of a few
+hundred times it: boundary penalties) a normal float64: about 1e-150 ≤ extent ≤ 1e150. Outside that range,
+and for coordinates so large that positions just outside the box would overflow, `normalize` refuses the
+mesh with a ValueError that names the extent, rather than dividing by zero or returning NaN.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ._arrays import column_bounds
+
+MIN_EXTENT = 1e-150  # scale² ≥ 1e-300: a normal float64 (smallest 2.2e-308) with room for small errors
+MAX_EXTENT = 1e150  # scale² ≤ 1e300: room for errors up to 1e8 × scale² below float64's 1.8e308
+MAX_COORD = 1e300  # positions a few extents outside the box stay finite
+
+
+class Frame(NamedTuple):
+    """Maps between mesh units and the internal frame: center (3,) float64 (mesh units), scale float
+    (mesh units per internal unit, the bounding box's largest side)."""
+
+    center: np.ndarray
+    scale: float
+
+    def positions_to_mesh(self, x: np.ndarray) -> np.ndarray:
+        """(k,3) internal positions (any float dtype) -> (k,3) float64 in mesh units."""
+        return np.asarray(x, np.float64) * self.scale + self.center
+
+    def errors_to_mesh(self, e):
+        """Squared distances, internal -> mesh units² (float64; array or scalar)."""
+        return np.asarray(e, np.float64) * (self.scale * self.scale)
+
+    def error_to_internal(self, e: float) -> float:
+        """One squared distance, mesh units² -> internal (inf stays inf; large values may become inf,
+        which means no limit)."""
+        return float(e) / (self.scale * self.scale)
+
+
+def normalize(V: np.ndarray, dtype=np.float32) -> tuple[np.ndarray, Frame]:
+    """(n,3) finite float64 vertices in mesh units -> ((n,3) ``dtype`` coordinates centred on the
+    bounding box with largest side 1, `Frame`). Raises ValueError when the extent or the coordinates
+    cannot be represented (see the module docstring)."""
+    lo, hi = column_bounds(V)
+    big = float(max(np.max(np.abs(lo)), np.max(np.abs(hi))))
+    if big > MAX_COORD:
+        raise ValueError(f"vertex coordinates reach {big:.3g}: too large to compute in float64 "
+                         f"(limit {MAX_COORD:.0e}); rescale or translate the mesh")
+    extent = float(np.max(hi - lo))  # ≤ 2·MAX_COORD: no overflow
+    if extent == 0:
+        raise ValueError("the mesh's extent is 0: all its vertices coincide")
+    if extent < MIN_EXTENT:
+        raise ValueError(f"the mesh's extent {extent:.3g} is too small to represent squared errors in "
+                         f"float64 (minimum {MIN_EXTENT:.0e}); rescale the mesh")
+    if extent > MAX_EXTENT:
+        raise ValueError(f"the mesh's extent {extent:.3g} is too large to represent squared errors in "
+                         f"float64 (maximum {MAX_EXTENT:.0e}); rescale the mesh")
+    center = 0.5 * lo + 0.5 * hi  # (lo + hi) / 2 could overflow
+    return ((V - center) / extent).astype(dtype), Frame(center, extent)

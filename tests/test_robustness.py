@@ -1,0 +1,260 @@
+"""A corpus of malformed and awkward inputs, generated in code: each gives a ValueError whose message names
+the problem, or a valid output (indices in range, no degenerate or duplicate faces, finite coordinates,
+no face turned against the input face it continues; the target met or the result valid above it)."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import trimesh
+from conftest import assert_valid
+
+import qemjax
+from qemjax import shapes
+
+V1, F1 = shapes.icosphere(1)  # 80 faces: small, so the corpus stays quick
+TRI = (np.eye(3), np.array([[0, 1, 2]]))
+
+
+def _mobius(n=24, width=0.3):
+    """A Möbius strip of 2n triangles (non-orientable, one boundary loop)."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+
+    def ring(s):
+        r = 1 + s * np.cos(t / 2)
+        return np.c_[r * np.cos(t), r * np.sin(t), s * np.sin(t / 2)]
+
+    V = np.r_[ring(-width), ring(width)]
+    F = []
+    for i in range(n):
+        j = (i + 1) % n
+        c, d = (j, n + j) if j else (n + j, j)  # the twist: the strip comes back upside down
+        F += [[i, c, n + i], [n + i, c, d]]
+    return V, np.array(F)
+
+
+def _quads(k=4):
+    """A k×k grid of quads, (m,4) faces."""
+    x, y = np.meshgrid(np.arange(k + 1.0), np.arange(k + 1.0))
+    V = np.c_[x.ravel(), y.ravel(), np.sin(x.ravel()) * np.cos(y.ravel()) * 0.3]
+    i = np.arange(k)[:, None] * (k + 1) + np.arange(k)[None, :]
+    i = i.ravel()
+    return V, np.c_[i, i + 1, i + k + 2, i + k + 1]
+
+
+# (id, mesh, keywords, regex of the ValueError's message)
+ERRORS = [
+    ("empty", (np.zeros((0, 3)), np.zeros((0, 3), int)), {}, "empty mesh"),
+    ("no faces", (np.eye(3), np.zeros((0, 3), int)), {}, "empty mesh"),
+    ("nan coordinate", (np.array([[0.0, 0, 0], [1, 0, 0], [np.nan, 1, 0]]), [[0, 1, 2]]), {}, "NaN or inf"),
+    ("inf coordinate", (np.array([[0.0, 0, 0], [1, 0, 0], [np.inf, 1, 0]]), [[0, 1, 2]]), {}, "NaN or inf"),
+    ("-inf coordinate", (np.array([[0.0, 0, 0], [-np.inf, 0, 0], [0, 1, 0]]), [[0, 1, 2]]), {}, "NaN or inf"),
+    ("index == n", (np.eye(3), [[0, 1, 3]]), {}, r"out of range: found \[0, 3\] for 3 vertices"),
+    ("negative index", (np.eye(3), [[0, -1, 2]]), {}, "out of range"),
+    ("huge uint64 index", (np.eye(3), np.array([[0, 1, 2**63 + 5]], np.uint64)), {}, "out of range"),
+    ("float indices", (np.eye(3), [[0.5, 1, 2]]), {}, "integers"),
+    ("nan indices", (np.eye(3), [[np.nan, 1, 2]]), {}, "integers"),
+    ("bool faces", (np.eye(3), np.array([[True, False, True]])), {}, "integers"),
+    ("ragged faces", (V1, [[0, 1, 2], [0, 2, 3, 4]]), {}, r"faces must be a rectangular array.*\[3, 4\]"),
+    ("ragged vertices", ([[0.0, 0, 0], [1, 0], [0, 1, 0]], [[0, 1, 2]]), {}, "vertices must be a rectangular"),
+    ("1-D faces", (np.eye(3), np.array([0, 1, 2])), {}, r"shape \(m, 3\)"),
+    ("edges, not faces", (np.eye(3), np.array([[0, 1], [1, 2]])), {}, r"shape \(m, 3\)"),
+    ("2-D vertices", (np.zeros((3, 2)), [[0, 1, 2]]), {}, r"shape \(n, 3\)"),
+    ("string vertices", (np.array([["a", "b", "c"]] * 3), [[0, 1, 2]]), {}, "real numbers"),
+    ("complex vertices", (np.eye(3) * (1 + 1j), [[0, 1, 2]]), {}, "real numbers"),
+    ("all index-degenerate", (np.eye(3), [[0, 0, 1], [1, 2, 2]]), {}, "every face is degenerate"),
+    ("all collinear", (np.c_[np.arange(4.0), np.zeros(4), np.zeros(4)], [[0, 1, 2], [1, 2, 3]]), {},
+     "zero area"),
+    ("all coincide, no weld", (np.ones((3, 3)), [[0, 1, 2]]), {"weld": False}, "zero area"),
+    ("extent 1e-200", (V1 * 1e-200, F1), {}, r"extent 2e-200 is too small"),
+    ("extent 1e200", (V1 * 1e200, F1), {}, r"extent 2e\+200 is too large"),
+    ("coordinates near +-1e308", (np.r_[V1 * 1e-3, [[1.7e308, 0, 0], [-1.7e308, 0, 0], [0, 1, 0]]],
+                                  np.r_[F1, [[len(V1), len(V1) + 1, len(V1) + 2]]]), {}, "too large"),
+    ("offset 1e305", (V1 * 1e295 + 1e305, F1), {}, "coordinates reach 1e\\+305"),
+    ("not a mesh", 42, {}, "mesh must be"),
+    ("None", None, {}, "mesh must be"),
+    ("feature_edges (3,)", (V1, F1), {"feature_edges": np.array([0, 1, 2])}, r"shape \(k, 2\)"),
+    ("feature_edges (2,3)", (V1, F1), {"feature_edges": [[0, 1, 2], [1, 2, 3]]}, r"shape \(k, 2\)"),
+    ("feature_edges floats", (V1, F1), {"feature_edges": [[0.0, 1.0]]}, "integer"),
+    ("feature_edges out of range", (V1, F1), {"feature_edges": [[0, 999]]}, r"out of range.*\[0, 999\]"),
+    ("feature_edges negative", (V1, F1), {"feature_edges": [[-1, 2]]}, "out of range"),
+    ("feature_edges ragged", (V1, F1), {"feature_edges": [[0, 1], [2]]}, "feature_edges must be a rectangular"),
+    ("feature_edges not edges", (V1, F1), {"feature_edges": [[0, 0]]}, "not mesh edges"),
+]
+OPTION_ERRORS = [
+    ({"target_faces": -5}, "at least 1"),
+    ({"target_faces": 0}, "at least 1"),
+    ({"target_faces": True}, "target_faces must be a number"),
+    ({"target_faces": float("inf")}, "target_faces must be an integer"),
+    ({"target_faces": float("nan")}, "target_faces must be an integer"),
+    ({"target_faces": 10.5}, "target_faces must be an integer"),
+    ({"target_faces": "10"}, "target_faces must be a number"),
+    ({"ratio": 0.0}, r"ratio must be in \(0, 1\]"),
+    ({"ratio": 2.0}, r"ratio must be in \(0, 1\]"),
+    ({"ratio": -0.5}, r"ratio must be in \(0, 1\]"),
+    ({"ratio": float("nan")}, r"ratio must be in \(0, 1\]"),
+    ({"ratio": True}, "ratio must be a number"),
+    ({"max_error": float("nan")}, "max_error"),
+    ({"max_error": -1e-9}, "max_error"),
+    ({}, "give a target"),
+    ({"target_faces": 10, "ratio": 0.5}, "at most one"),
+    ({"target_faces": 10, "method": "nope"}, "unknown method"),
+    ({"target_faces": 10, "scheduler": "fast"}, "unknown scheduler"),
+    ({"target_faces": 10, "placement": "middle"}, "unknown placement"),
+    ({"target_faces": 10, "flip_angle": 0.0}, "flip_angle"),
+    ({"target_faces": 10, "flip_angle": 200.0}, "flip_angle"),
+    ({"target_faces": 10, "flip_angle": True}, "flip_angle must be a number"),
+    ({"target_faces": 10, "boundary_weight": float("inf")}, "boundary_weight"),
+    ({"target_faces": 10, "boundary_weight": -1.0}, "boundary_weight"),
+    ({"target_faces": 10, "pair_threshold": -0.1}, "pair_threshold"),
+    ({"target_faces": 10, "pair_threshold": 0.1, "preserve_topology": True}, "preserve_topology=False"),
+    ({"target_faces": 10, "weld": "no"}, "weld must be True or False"),
+    ({"target_faces": 10, "area_weighted": None}, "area_weighted must be True or False"),
+]
+
+
+@pytest.mark.parametrize("mesh,kwargs,match", [pytest.param(m, k, r, id=i) for i, m, k, r in ERRORS])
+def test_bad_mesh_gives_a_clear_error(mesh, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        qemjax.simplify(mesh, **{"target_faces": 1, **kwargs})
+
+
+@pytest.mark.parametrize("kwargs,match", [pytest.param(k, r, id=repr(k)) for k, r in OPTION_ERRORS])
+def test_bad_option_gives_a_clear_error(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        qemjax.simplify((V1, F1), **kwargs)
+
+
+def _files(tmp_path):
+    junk = tmp_path / "mesh.qqq"
+    junk.write_bytes(b"\x00\x01 not a mesh")
+    garbage_obj = tmp_path / "garbage.ply"
+    garbage_obj.write_bytes(b"ply\nformat nonsense\n")
+    return {"missing": (tmp_path / "missing.obj", "not found"), "folder": (tmp_path, "folder"),
+            "unsupported type": (junk, "could not read mesh"), "broken ply": (garbage_obj, "could not read")}
+
+
+@pytest.mark.parametrize("case", ["missing", "folder", "unsupported type", "broken ply"])
+def test_bad_file_gives_a_clear_error(tmp_path, case):
+    path, match = _files(tmp_path)[case]
+    with pytest.raises(ValueError, match=match):
+        qemjax.simplify(path, target_faces=1)
+    with pytest.raises(ValueError, match=match):
+        qemjax.simplify(str(path), target_faces=1)
+
+
+def _with_outlier(V, F, far, referenced):
+    """V, F plus a triangle at distance ``far``: part of the mesh, or its vertices left unreferenced."""
+    tri = np.array([[far, 0, 0], [far + 1, 0, 0], [far, 1, 0]])
+    n = len(V)
+    return np.r_[V, tri], (np.r_[F, [[n, n + 1, n + 2]]] if referenced else F)
+
+
+def _nonmanifold_fan():
+    """Three triangles on one edge, plus a fourth off one of them."""
+    V = np.array([[0.0, 0, 0], [0, 0, 1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [1, 1, 1]])
+    return V, np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 5, 2]])
+
+
+# (id, mesh, keywords): each must give a valid result
+VALID = [
+    ("single triangle", TRI, {"target_faces": 1}),
+    ("single triangle, ratio 0.5", TRI, {"ratio": 0.5}),
+    ("two disjoint triangles", (np.r_[np.eye(3), np.eye(3) + 5], [[0, 1, 2], [3, 4, 5]]), {"target_faces": 1}),
+    ("non-manifold fan", _nonmanifold_fan(), {"target_faces": 1}),
+    ("bowtie", (np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [-1, 0, 0], [-1, -1, 0]]), [[0, 1, 2], [0, 3, 4]]),
+     {"target_faces": 1}),
+    ("moebius strip", _mobius(), {"target_faces": 12}),
+    ("moebius strip, non-manifold mode", _mobius(), {"target_faces": 12, "preserve_topology": False}),
+    ("quads", _quads(), {"target_faces": 8}),
+    ("pentagons", (np.array([[np.cos(a), np.sin(a), 0] for a in np.linspace(0, 2 * np.pi, 5, endpoint=False)]),
+                   [[0, 1, 2, 3, 4]]), {"target_faces": 2}),
+    ("duplicated faces", (V1, np.r_[F1, F1[:5], F1[:5, ::-1]]), {"target_faces": 30}),
+    ("some index-degenerate faces", (V1, np.r_[F1, [[0, 0, 1], [2, 3, 3]]]), {"target_faces": 30}),
+    ("some zero-area faces", (np.r_[V1, [[2.0, 0, 0], [3, 0, 0], [4, 0, 0]]], np.r_[F1, [[42, 43, 44]]]),
+     {"target_faces": 30}),
+    ("unreferenced vertices", (np.r_[V1, np.random.default_rng(0).normal(size=(10, 3))], F1), {"target_faces": 30}),
+    ("far unreferenced outlier", _with_outlier(V1, F1, 1e9, referenced=False), {"target_faces": 30}),
+    ("far outlier triangle", _with_outlier(V1, F1, 1e6, referenced=True), {"target_faces": 30}),
+    ("offset 1e6", (V1 + 1e6, F1), {"target_faces": 30}),
+    ("offset 1e12", (V1 + 1e12, F1), {"target_faces": 30}),
+    ("extent 1e-100", (V1 * 1e-100, F1), {"target_faces": 30}),
+    ("extent 1e100", (V1 * 1e100, F1), {"target_faces": 30}),
+    ("extent 1e-100, max_error", (V1 * 1e-100, F1), {"max_error": 1e-203}),
+    ("integer coordinates", (np.round(V1 * 10).astype(np.int32), F1), {"target_faces": 30}),
+    ("float32 coordinates", (V1.astype(np.float32), F1), {"target_faces": 30}),
+    ("integral float indices", (V1, F1.astype(np.float64)), {"target_faces": 30}),
+    ("int16 faces", (V1, F1.astype(np.int16)), {"target_faces": 30}),
+    ("uint32 faces", (V1, F1.astype(np.uint32)), {"target_faces": 30}),
+    ("triangle soup", (V1[F1].reshape(-1, 3), np.arange(3 * len(F1)).reshape(-1, 3)), {"target_faces": 30}),
+    ("triangle soup, no weld", (V1[F1].reshape(-1, 3), np.arange(3 * len(F1)).reshape(-1, 3)),
+     {"target_faces": 60, "weld": False}),
+    ("closed sphere to 1 face", (V1, F1), {"target_faces": 1}),
+    ("closed sphere to 1 face, greedy", (V1, F1), {"target_faces": 1, "scheduler": "greedy"}),
+    ("flat grid, max_error 0", shapes.grid(6), {"max_error": 0.0}),
+    ("grid with hole, endpoints", shapes.grid(8, hole=True), {"target_faces": 20, "placement": "endpoints"}),
+    ("flips allowed", (V1, F1), {"target_faces": 20, "flip_angle": None}),
+    ("aggregation", shapes.grid(6), {"target_faces": 10, "pair_threshold": 0.3}),
+    ("empty feature_edges", (V1, F1), {"target_faces": 30, "feature_edges": np.zeros((0, 2), int)}),
+    ("feature_edges as a list", shapes.grid(6), {"target_faces": 20, "feature_edges": [[0, 1], [1, 2]]}),
+    ("numpy scalar options", (V1, F1), {"target_faces": np.int64(30), "boundary_weight": np.float32(10)}),
+]
+
+
+@pytest.mark.parametrize("mesh,kwargs", [pytest.param(m, k, id=i) for i, m, k in VALID])
+def test_awkward_mesh_gives_a_valid_result(mesh, kwargs):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = qemjax.simplify(mesh, **kwargs)
+    assert_valid(r, None, r.input_vertices, r.input_faces, allow_flips=kwargs.get("flip_angle", 90) is None)
+    target = r.stats["target_faces"]
+    assert r.stop_reason in ("target", "max_error", "blocked", "unchanged")
+    # the one warning any of these warrants: ending above a face target for a reason other than parity
+    short = bool(target) and len(r.faces) > target and r.stop_reason != "target"
+    assert [str(w.message).startswith("stopped at") for w in caught] == ([True] if short else []), \
+        [str(w.message) for w in caught]
+    assert r.stats["faces_out"] == len(r.faces)
+    assert len(r.faces) == target or len(r.faces) > target, (len(r.faces), target)
+    assert np.all(np.isfinite(r.vertex_error)) and np.isfinite(r.max_error)
+
+
+def test_target_above_the_face_count_warns_and_returns_the_mesh():
+    with pytest.warns(UserWarning, match="not below the mesh's 80 faces"):
+        r = qemjax.simplify((V1, F1), target_faces=1000)
+    assert np.array_equal(r.faces, F1)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return qemjax.simplify((V1, F1), target_faces=30)
+
+
+@pytest.mark.parametrize("convert", [
+    pytest.param(lambda V, F: (V.tolist(), F.tolist()), id="lists"),
+    pytest.param(lambda V, F: (np.asfortranarray(V), np.asfortranarray(F)), id="Fortran order"),
+    pytest.param(lambda V, F: (V, F.astype(np.int32)), id="int32 faces"),
+    pytest.param(lambda V, F: (V, F.astype(np.uint64)), id="uint64 faces"),
+    pytest.param(lambda V, F: (V[::1], F[:, :]), id="views"),
+    pytest.param(lambda V, F: trimesh.Trimesh(V, F, process=False), id="trimesh"),
+    pytest.param(lambda V, F: qemjax.Mesh(V, F), id="Mesh"),
+])
+def test_input_containers_give_the_same_result(reference, convert):
+    r = qemjax.simplify(convert(V1, F1), target_faces=30)
+    assert np.array_equal(r.faces, reference.faces) and np.array_equal(r.vertices, reference.vertices)
+
+
+@pytest.mark.parametrize("scale", [1e-100, 1e-30, 1e30, 1e100])
+def test_extreme_scales_give_the_unit_result_scaled(reference, scale):
+    """Normalisation is exact up to float64 rounding: same faces, positions × s, errors × s²."""
+    r = qemjax.simplify((V1 * scale, F1), target_faces=30)
+    assert np.array_equal(r.faces, reference.faces)
+    np.testing.assert_allclose(r.vertices / scale, reference.vertices, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(r.max_error / scale**2, reference.max_error, rtol=1e-12)
+    np.testing.assert_allclose(r.history.costs / scale**2, reference.history.costs, rtol=1e-12)
+
+
+def test_unreferenced_outlier_changes_nothing(reference):
+    r = qemjax.simplify(_with_outlier(V1, F1, 1e9, referenced=False), target_faces=30)
+    assert r.stats["unreferenced_removed"] == 3
+    assert np.array_equal(r.faces, reference.faces) and np.array_equal(r.vertices, reference.vertices)
