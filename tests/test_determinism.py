@@ -1,9 +1,9 @@
 """The same input gives the same output whatever number of cores the process may use.
 
 Runs `simplify` here and in a subprocess pinned to one core (``taskset -c 0``) and compares sha256 hashes.
-The parallel scheduler is known to differ (XLA:CPU splits the placement kernel's fusions by thread count
-and the split code contracts multiply-adds into FMAs differently; experiments/results/determinism.md): that
-case is a strict xfail, so the fix turns it into a failure that asks for the marker to go.
+XLA:CPU splits large loop fusions by thread count, and its newer fusion emitter compiles the split code with
+other FMA contractions (experiments/results/determinism.md); the kernels are therefore compiled with the
+older emitter (`qemjax._kernels.kernel`). Should that option stop working, this test fails.
 """
 from __future__ import annotations
 
@@ -36,13 +36,7 @@ def _digest(r) -> str:
                           ).hexdigest()
 
 
-@pytest.mark.parametrize("scheduler", [
-    "greedy",
-    pytest.param("parallel", marks=pytest.mark.xfail(
-        strict=True, raises=AssertionError,
-        reason="placement.place_pairs rounds differently when XLA splits it for 2+ threads; "
-        "see experiments/results/determinism.md")),
-])
+@pytest.mark.parametrize("scheduler", ["greedy", "parallel"])
 def test_same_output_on_one_core(scheduler):
     if shutil.which("taskset") is None:
         pytest.skip("taskset is not installed")
@@ -52,6 +46,6 @@ def test_same_output_on_one_core(scheduler):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     done = subprocess.run(["taskset", "-c", "0", sys.executable, "-c", CODE, scheduler], env=env,
                           capture_output=True, text=True, timeout=300)
-    if done.returncode:  # not an AssertionError: the xfail does not hide a crash
+    if done.returncode:
         pytest.fail(f"the pinned subprocess failed:\n{done.stderr}")
     assert done.stdout.strip().splitlines()[-1] == here

@@ -43,7 +43,7 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
     Q = quadrics.vertex_quadrics(
         Vp, Fp, fmask, jnp.asarray(area_weighted),
         pad_rows(be.astype(np.int32), nb, fill=n), pad_rows(cn, nb), pad_rows(cw, nb),
-        np.arange(nb) < len(be))
+        np.arange(nb) < len(be), *quadrics.mesh_means(V, F))
     return np.asarray(Q)[:n]
 
 

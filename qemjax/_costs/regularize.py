@@ -16,7 +16,6 @@ Peers have the same knob: meshoptimizer's ``Regularize`` flag, pymeshlab's quali
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from typing import ClassVar
 
@@ -25,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import DTYPE
+from .._kernels import kernel
 from .base import CostModel
 
 _SQRT3_2 = 2.0 * math.sqrt(3.0)
@@ -45,7 +45,7 @@ def shape_term(x, corners_pos, mask):
     return ell2 * jnp.max(bad)
 
 
-@functools.partial(jax.jit, static_argnums=0)
+@kernel(static_argnums=0)
 def _price(base_price, VS, pairs, params, corners, mask):
     out = base_price(VS, pairs, params)  # (5 + parts, K)
     pos = jnp.take(VS[:, :3], corners.reshape(-1), axis=0, mode="clip").reshape(corners.shape + (3,))

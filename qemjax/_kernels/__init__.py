@@ -5,3 +5,35 @@ unit extent, with every vertex quadric stored in a frame centred on that vertex 
 linear terms stay small and float32 keeps its precision where costs are tiny). Tests run them in float64
 under ``jax.enable_x64`` against numpy references.
 """
+from __future__ import annotations
+
+import functools
+
+import jax
+
+# On the CPU, XLA's newer fusion emitter compiles a loop fusion that it splits over several threads into
+# different machine code than the unsplit loop (other multiply-adds become FMAs), and it splits by the
+# number of cores the process may use: results then depend on the core count (`taskset -c 0` changed the
+# parallel scheduler's output; experiments/results/determinism.md). The older emitter gives the same
+# bits either way, and was not slower here. Set per kernel, never process-wide.
+CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
+
+def kernel(fn=None, **jit_kwargs):
+    """``jax.jit`` for qemjax's kernels: on the CPU backend with `CPU_COMPILER_OPTIONS`, so the output
+    does not depend on how many cores the process has. The backend is looked up at the first call (importing
+    qemjax stays light). Usable as ``@kernel`` or ``@kernel(static_argnums=0)``."""
+    if fn is None:
+        return functools.partial(kernel, **jit_kwargs)
+    compiled = []
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        if any(isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves((args, kwargs))):
+            return fn(*args, **kwargs)  # inside another kernel's trace: inline (options are top-level only)
+        if not compiled:
+            opts = CPU_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
+            compiled.append(jax.jit(fn, compiler_options=opts, **jit_kwargs))
+        return compiled[0](*args, **kwargs)
+    call.jitted = compiled  # the jax.jit object, once called 
+    return call

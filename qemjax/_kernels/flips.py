@@ -12,6 +12,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from . import kernel
 from . import quadrics as qd
 
 SLIVER = 1e-6  # |n|/longest² (≈ sine of the smallest angle) under which a moved face counts as collapsed
@@ -56,13 +57,13 @@ def moved_corner_flips(p, k, x, cos_max, ref=None):
     return _flips(pc, k, qd.cols(x, 3), cos_max, rc)
 
 
-@jax.jit
+@kernel
 def face_flips(p, k, x, mask, ref, cos_max):
     """Per face: does moving corner k (K,) of triangle p (K,3,3) to x (K,3) flip it? (K,) bool."""
     return moved_corner_flips(p, k, x, cos_max, ref) & mask
 
 
-@jax.jit
+@kernel
 def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     """`face_flips` with the inputs gathered here: faces (K,3) index rows of V (N,≥3) (columns 0-2 are
     positions); k (K,) the moving corner, x (K,3) where it goes; the reference normal of face i is
@@ -80,7 +81,7 @@ def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     return _flips(p, k, [c[12 + i] for i in range(3)], cos_max, [c[9 + i] for i in range(3)])
 
 
-@jax.jit
+@kernel
 def local_flips(p, k, x, mask, ref, cos_max):
     """Any flip among the faces p (K,3,3) (reference normals ref (K,3)) whose corner k (K,) moves to
     x (3,), masked by mask (K,)."""

@@ -15,6 +15,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from . import kernel
 from . import quadrics as qd
 
 SOLVE, SEGMENT, ENDPOINT = 0, 1, 2
@@ -93,7 +94,7 @@ def _gather_rows(VQ, pairs):
         [b[k] for k in range(3)]
 
 
-@jax.jit
+@kernel
 def place_pairs(VQ, pairs, endpoints_only, cond_eps, max_shift):
     """Batched placement for index pairs (K,2) into vertex rows VQ (N,13) = [position (3), quadric (10)].
 
@@ -105,7 +106,7 @@ def place_pairs(VQ, pairs, endpoints_only, cond_eps, max_shift):
     return jnp.stack(x + [cost, branch.astype(cost.dtype)], 0)
 
 
-@jax.jit
+@kernel
 def merged_quadrics(VQ, pairs, x):
     """(K,10): Q1+Q2 of index pairs (K,2) expressed in the frame of their new positions x (K,3)."""
     q1, q2, p1, p2 = _gather_rows(VQ, pairs)
