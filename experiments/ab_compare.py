@@ -27,15 +27,15 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 
-def load_old(rev: str):
-    """The qemjax package at git revision ``rev``, imported as ``qemjax_old``."""
+def load_old(rev: str, as_name: str = "qemjax_old"):
+    """The qemjax package at git revision ``rev``, imported as ``as_name``."""
     tmp = Path(tempfile.mkdtemp(prefix="qemjax-old-"))
     tar = subprocess.run(["git", "-C", str(HERE.parent), "archive", rev, "qemjax"], check=True,
                          capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(tmp)], input=tar, check=True)
-    os.rename(tmp / "qemjax", tmp / "qemjax_old")
+    os.rename(tmp / "qemjax", tmp / as_name)
     sys.path.insert(0, str(tmp))
-    return importlib.import_module("qemjax_old")
+    return importlib.import_module(as_name)
 
 
 def digest(res) -> str:
@@ -53,6 +53,7 @@ def cpu_time() -> float:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rev", default="HEAD", help="the old code's git revision")
+    ap.add_argument("--new", default=None, help="the new code's git revision (default: the working tree)")
     ap.add_argument("--meshes", nargs="+", default=["cow", "stanford-bunny"])
     ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
     ap.add_argument("--scheduler", default="parallel")
@@ -60,10 +61,16 @@ def main():
     ap.add_argument("--time", action="store_true", help="report medians of wall and CPU time")
     ap.add_argument("--out", default=None, help="append rows to this CSV")
     args = ap.parse_args()
+    import warnings
+
+    warnings.simplefilter("ignore")  # above-target warnings of the mesh/ratio cases are not the point here
     import meshes as bench_meshes
 
-    import qemjax as new
     old = load_old(args.rev)
+    if args.new:
+        new = load_old(args.new, "qemjax_new")
+    else:
+        import qemjax as new
     rows = []
     for name in args.meshes:
         bm = bench_meshes.load(name)
@@ -84,6 +91,7 @@ def main():
                     hashes[tag] = digest(res)
             same = hashes["old"] == hashes["new"]
             row = dict(mesh=name, faces=len(F), ratio=ratio, scheduler=args.scheduler, rev=args.rev,
+                       new=args.new or "working tree",
                        identical=same, hash_old=hashes["old"], hash_new=hashes["new"], repeats=args.repeats,
                        wall_old=statistics.median(times["old"]), wall_new=statistics.median(times["new"]),
                        cpu_old=statistics.median(cpus["old"]), cpu_new=statistics.median(cpus["new"]))

@@ -50,15 +50,15 @@ SUMMARY_COLUMNS = ["mesh", "faces_in", "ratio", "method", "faces_out", "time_s",
 # ----------------------------------------------------------------------------------------------- running
 
 
-def run_qemjax(scheduler: str, V, F, target: int, repeats: int) -> dict:
-    """Run qemjax.simplify ``repeats`` times; the last call is the one reported."""
+def run_qemjax(scheduler: str, V, F, target: int, repeats: int, **options) -> dict:
+    """Run qemjax.simplify ``repeats`` times (extra keywords go to it); the last call is the one reported."""
     import qemjax
 
     walls = []
     result = None
     for _ in range(repeats):
         t0 = time.perf_counter()
-        result = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler)
+        result = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler, **options)
         V2 = np.asarray(result.vertices, dtype=np.float64)
         F2 = np.asarray(result.faces, dtype=np.int64)
         walls.append(time.perf_counter() - t0)

@@ -17,15 +17,15 @@ use it.
 Greedy is slow and deterministic: its rows are cached in ``results/cache/greedy_rows.csv`` (git-ignored), keyed
 by mesh, ratio, target and a hash of ``GREEDY_SOURCES``, so a re-run only recomputes the parallel rows.
 
-``--set NAME=VALUE`` overrides a numeric module constant of ``qemjax._schedulers.parallel`` (GATE,
-GATE_FRACTION, FREE_COST, MAX_PASSES, ...) before anything runs; ``run`` reads them at call time. Their values
-go into every CSV row.
+``--set NAME=VALUE`` sets a field of the parallel scheduler's `qemjax.Schedule` (gate, gate_fraction, tail,
+free_cost, max_passes, pass_yield), passed to every parallel call. The schedule's values go into every CSV
+row.
 
 Examples::
 
     python experiments/parallel_vs_greedy.py
     python experiments/parallel_vs_greedy.py --meshes cow stanford-bunny
-    python experiments/parallel_vs_greedy.py --set GATE=1.2 --set GATE_FRACTION=0.02 --out /tmp/g1.2_f0.02.csv
+    python experiments/parallel_vs_greedy.py --set gate=1.2 --set gate_fraction=0.02 --out /tmp/g1.2_f0.02.csv
 """
 
 from __future__ import annotations
@@ -44,8 +44,8 @@ import meshes as bench_meshes  # noqa: E402
 RESULTS = HERE / "results"
 GREEDY_CACHE = bench_meshes.CACHE / "greedy_rows.csv"
 # globs in the qemjax package that is imported: everything the greedy scheduler runs
-GREEDY_SOURCES = ("_kernels/*.py", "_schedulers/greedy.py", "_schedulers/common.py", "_topology.py")
-TUNABLE = ("GATE", "GATE_FRACTION", "TAIL", "FREE_COST", "MAX_PASSES")  # always reported; --set takes any constant
+GREEDY_SOURCES = ("_kernels/*.py", "_costs/*.py", "_schedulers/greedy.py", "_schedulers/common.py",
+                  "_schedulers/outcome.py", "_incidence.py", "_batching.py", "_topology.py")
 MEASURED = ("faces", "rounds", "time_s", "rms_rel", "hausdorff_rel")
 WITHIN_PCT = 3.0
 
@@ -62,25 +62,30 @@ def source_hash(patterns=GREEDY_SOURCES) -> str:
     return h.hexdigest()[:16]
 
 
-def apply_overrides(pairs: list[str]) -> dict:
-    """Set ``NAME=VALUE`` constants on qemjax._schedulers.parallel (cast to the constant's type); returns the
-    values of TUNABLE and of the overridden constants."""
-    from qemjax._schedulers import parallel
+def apply_overrides(pairs: list[str]):
+    """A `qemjax.Schedule` with the ``NAME=VALUE`` fields set (cast to the field's type), and its fields."""
+    import dataclasses
 
-    shown = [name for name in TUNABLE if hasattr(parallel, name)]
+    import qemjax
+
+    fields = {f.name: f for f in dataclasses.fields(qemjax.Schedule)}
+    values = {}
     for pair in pairs:
         name, _, value = pair.partition("=")
-        current = getattr(parallel, name, None) if name.isupper() else None
-        if not isinstance(current, (int, float)) or isinstance(current, bool) or not value:
-            raise SystemExit(f"--set expects NAME=VALUE with NAME a numeric constant such as {TUNABLE}, "
+        if name not in fields or not value:
+            raise SystemExit(f"--set expects NAME=VALUE with NAME a field of qemjax.Schedule {tuple(fields)}, "
                              f"got {pair!r}")
-        setattr(parallel, name, type(current)(float(value)))
-        shown += [name] if name not in shown else []
-    return {name: getattr(parallel, name) for name in shown}
+        values[name] = type(getattr(qemjax.Schedule(), name))(float(value))
+    schedule = qemjax.Schedule(**values)
+    return schedule, dataclasses.asdict(schedule)
+
+
+SCHEDULE = None  # the parallel scheduler's `qemjax.Schedule` (--set)
 
 
 def measure(scheduler: str, mesh, target: int) -> dict:
-    out = bench_peers.run_qemjax(scheduler, mesh.V, mesh.F, target, repeats=1)
+    extra = {"schedule": SCHEDULE} if scheduler == "parallel" and SCHEDULE is not None else {}
+    out = bench_peers.run_qemjax(scheduler, mesh.V, mesh.F, target, repeats=1, **extra)
     metrics = bench_peers.evaluate(mesh.V, mesh.F, out["V2"], out["F2"], target)
     return {"faces": len(out["F2"]), "rounds": out["rounds"], "time_s": out["time_s"],
             "rms_rel": metrics["rms_rel"], "hausdorff_rel": metrics["hausdorff_rel"],
@@ -129,7 +134,7 @@ def parse_args(argv=None):
     p.add_argument("--meshes", nargs="+", default=["all"], help="mesh names, or 'all' (every shared mesh)")
     p.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="overrides",
-                   help=f"override a constant of qemjax._schedulers.parallel, e.g. {', '.join(TUNABLE)}")
+                   help="set a field of qemjax.Schedule for the parallel runs, e.g. gate=1.2")
     p.add_argument("--out", type=Path, default=RESULTS / "parallel_vs_greedy.csv")
     return p.parse_args(argv)
 
@@ -138,7 +143,8 @@ def main(argv=None) -> int:
     import pandas as pd
 
     args = parse_args(argv)
-    settings = apply_overrides(args.overrides)
+    global SCHEDULE
+    SCHEDULE, settings = apply_overrides(args.overrides)
     names = bench_meshes.names() if args.meshes == ["all"] else list(args.meshes)
     key = source_hash()
     cache = pd.read_csv(GREEDY_CACHE) if GREEDY_CACHE.exists() else None
