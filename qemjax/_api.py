@@ -80,7 +80,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              area_weighted: bool = True, feature_edges=None, pair_threshold: float = 0.0,
              preserve_topology: bool | None = None,
              flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
-             regularize: float = 0.0, schedule: Schedule | None = None,
+             prune: bool = False, regularize: float = 0.0, schedule: Schedule | None = None,
              ) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
@@ -110,6 +110,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or
         more (90: any sign flip or collapse to zero area); None allows flips.
     weld: merge vertices with identical coordinates first (G&H need shared corners).
+    prune: with preserve_topology, let small separate parts vanish (their last faces may contract away);
+        by default (False) every part keeps at least one face. Without preserve_topology parts may always
+        vanish (coincident faces cancel).
     regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (penalises contractions that
         create slender triangles; ``qemjax._costs.regularize``). 0 (default) leaves the method's cost as
         it is. With λ > 0, costs, ``max_error`` and ``history.costs`` include the term (a squared length).
@@ -164,8 +167,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges))
     options = Options(
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
-        preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule)
+        preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule,
+        keep_parts=not _flag("prune", prune))
     extra = topo.close_pairs(V, F, pair_threshold)
+    nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
 
     bar = None
     if progress:
@@ -195,6 +200,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
 
     Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
     vout = frame.positions_to_mesh(Vout)
+    unmoved = np.ones(len(V), bool)
+    unmoved[hist[0][:, 0]] = False  # kept vertices moved; removed ones are gone
+    same = np.flatnonzero(unmoved[ids])
+    vout[same] = V[ids[same]]  # never contracted: the input's float64 position, exactly
     verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
     stop = info["stop_reason"]
     if target and len(Fout) > target:  # a face target was asked for and not met
@@ -203,7 +212,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             stop = "target"  # documented: a closed mesh loses faces in pairs
         else:
             stop = "blocked" if stop == "target" else stop
-            warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"]), stacklevel=2)
+            warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"], nonmanifold,
+                                                preserve_topology), stacklevel=2)
     hp, hx, hc = hist[0], frame.positions_to_mesh(hist[1]), frame.errors_to_mesh(hist[2])
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
@@ -215,7 +225,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         branches={name: int(c) for name, c in zip(model.branches, info["branches"])},
         rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
-        total_s=total, scale=frame.scale, max_error_limit=err if math.isfinite(err) else None)
+        total_s=total, scale=frame.scale, non_manifold_edges_in=nonmanifold, max_error_limit=err if math.isfinite(err) else None)
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":
             stats[k] = v
@@ -226,9 +236,18 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc), stats=stats, stop_reason=stop)
 
 
-def _above_target_message(faces: int, target: int, stop: str, blocked: dict) -> str:
+def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,
+                          manifold_mode: bool) -> str:
     held = ", ".join(f"{k}: {v}" for k, v in blocked.items() if v) or "no pairs left"
     why = {"max_error": "the remaining contractions cost more than max_error",
            "blocked": "no valid contraction is left"}.get(stop, stop)
-    return (f"stopped at {faces} faces, above the target of {target}: {why} (pairs held back by {held}); "
-            "with non-manifold input or separate parts, preserve_topology=False may reach further")
+    hint = ""
+    if manifold_mode and stop == "blocked":
+        if nonmanifold:
+            hint = (f"; the input has {nonmanifold} non-manifold edges (3 or more faces), which manifold mode "
+                    "never contracts: preserve_topology=False may reach the target")
+        elif blocked.get("vanishing_part"):
+            hint = "; separate parts keep their last faces: prune=True lets small parts vanish"
+        else:
+            hint = "; preserve_topology=False may reach further (genus and boundaries may then change)"
+    return f"stopped at {faces} faces, above the target of {target}: {why} (pairs held back by {held}){hint}"

@@ -13,7 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._arrays import column_bounds, sorted_triples
+from ._arrays import face_normals, column_bounds, sorted_triples
 
 
 class Mesh(NamedTuple):
@@ -271,7 +271,8 @@ def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
-    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``unreferenced_removed`` and lists the
+    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear
+    corners), ``unreferenced_removed`` and lists the
     attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
     caller ``stacklevel`` - 1 frames above prepare's caller)."""
     (V, F), dropped = _as_arrays(mesh)
@@ -284,9 +285,18 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tu
     F, report["degenerate_removed"], report["duplicate_removed"] = clean_faces(F)
     if len(F) == 0:
         raise ValueError("empty mesh: every face is degenerate")
-    V, F, report["unreferenced_removed"] = drop_unreferenced(V, F)
     if not has_area(V, F):
         raise ValueError(f"the mesh has no surface: all {len(F)} faces have zero area (collinear corners)")
+    # faces with exactly collinear corners would survive untouched into the output: drop them too
+    lo, hi = column_bounds(V)
+    with np.errstate(over="ignore"):
+        ext = float(np.max(hi - lo))
+    U = (V - lo) / ext if np.isfinite(ext) and ext > 0 else V  # unit extent: no underflow at 1e-200
+    nz = np.any(face_normals(U, F) != 0, axis=1)
+    report["zero_area_removed"] = int(len(F) - np.count_nonzero(nz))
+    if report["zero_area_removed"]:
+        F = F[nz]
+    V, F, report["unreferenced_removed"] = drop_unreferenced(V, F)
     return Mesh(V, F), report
 
 

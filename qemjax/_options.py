@@ -54,6 +54,8 @@ class Options:
 
     cos_max: cosine of the flip angle (-2: flips allowed).
     preserve_topology: link condition and no coincident faces (manifold mode).
+    keep_parts: (manifold mode) forbid the contraction that would remove the last face of a part, so
+        separate parts survive; False lets small parts vanish (``simplify(prune=True)``).
     max_cost: largest contraction cost allowed (squared distance at unit extent; inf = no limit).
     schedule: the parallel scheduler's `Schedule`.
     """
@@ -61,4 +63,5 @@ class Options:
     cos_max: float
     preserve_topology: bool
     max_cost: float
+    keep_parts: bool = True
     schedule: Schedule = Schedule()

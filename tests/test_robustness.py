@@ -258,3 +258,70 @@ def test_unreferenced_outlier_changes_nothing(reference):
     r = qemjax.simplify(_with_outlier(V1, F1, 1e9, referenced=False), target_faces=30)
     assert r.stats["unreferenced_removed"] == 3
     assert np.array_equal(r.faces, reference.faces) and np.array_equal(r.vertices, reference.vertices)
+
+
+# -- parts, non-manifold input, precision (the issue "Robustness, determinism and the rough edges") ------
+
+def _lone_triangle_beside(V, F, offset=3.0):
+    t = np.array([[offset, 0, 0], [offset + 0.5, 0, 0], [offset, 0.5, 0]])
+    return np.concatenate([V, t]), np.concatenate([F, [[len(V), len(V) + 1, len(V) + 2]]])
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_parts_survive_in_manifold_mode_and_prune_lets_them_go(scheduler):
+    V, F = _lone_triangle_beside(*shapes.icosphere(2))
+    r = qemjax.simplify((V, F), target_faces=101, scheduler=scheduler)  # the sphere loses faces in pairs
+    assert_valid(r, 101, V, F)
+    assert np.any(np.all(np.isin(r.faces, r.source_vertices.searchsorted(np.arange(len(V) - 3, len(V)))), 1))
+    assert r.stop_reason == "target"
+    p = qemjax.simplify((V, F), target_faces=100, scheduler=scheduler, prune=True)
+    assert p.stop_reason == "target" and len(p.faces) == 100
+    assert not np.isin(np.arange(len(V) - 3, len(V)), p.source_vertices).all()  # the triangle went
+
+
+def test_separate_triangles_are_not_deleted_and_the_warning_names_prune():
+    k = 200
+    base = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    V = np.concatenate([base + [2.0 * i, 0, 0] for i in range(k)])
+    F = np.arange(3 * k).reshape(k, 3)
+    with pytest.warns(UserWarning, match="prune=True"):
+        r = qemjax.simplify((V, F), ratio=0.1)
+    assert len(r.faces) == k and r.stop_reason == "blocked"
+    assert r.stats["blocked_by"]["vanishing_part"] > 0
+    p = qemjax.simplify((V, F), ratio=0.1, prune=True)
+    assert len(p.faces) == 20 and p.stop_reason == "target"
+
+
+def _book(pages=3, n=8):
+    """``pages`` flat grids sharing one edge line (the spine): edges there have ``pages`` faces."""
+    Vs, Fs, off = [], [], 0
+    for k in range(pages):
+        V, F = shapes.grid(n)
+        ang = np.pi * k / pages
+        V = np.c_[V[:, 0], V[:, 1] * np.cos(ang), V[:, 1] * np.sin(ang)]
+        Vs.append(V)
+        Fs.append(F + off)
+        off += len(V)
+    return np.concatenate(Vs), np.concatenate(Fs)  # welding joins the spines
+
+
+def test_non_manifold_input_is_reported_and_the_warning_names_the_option():
+    V, F = _book()
+    with pytest.warns(UserWarning, match="non-manifold edges.*preserve_topology=False"):
+        r = qemjax.simplify((V, F), target_faces=12)
+    assert r.stats["non_manifold_edges_in"] > 0 and r.stop_reason == "blocked" and len(r.faces) > 12
+    assert r.stats["blocked_by"]["non_manifold"] > 0
+    q = qemjax.simplify((V, F), target_faces=12, preserve_topology=False)
+    assert len(q.faces) == 12 and q.stop_reason == "target"
+
+
+@pytest.mark.parametrize("offset", [1e6, 1e7])
+def test_vertices_never_contracted_keep_their_input_position_exactly(offset):
+    """One far-away triangle makes the unit-extent frame coarse; vertices that never moved still come back
+    bit for bit."""
+    V, F = shapes.icosphere(3)
+    V, F = _lone_triangle_beside(V, F, offset=offset)
+    r = qemjax.simplify((V, F), target_faces=1 + 1200)  # of 1 + 1280: the sphere loses faces in pairs
+    moved = np.isin(r.source_vertices, r.history.pairs[:, 0])
+    assert (~moved).sum() > 400
+    assert np.array_equal(r.vertices[~moved], r.input_vertices[r.source_vertices[~moved]])

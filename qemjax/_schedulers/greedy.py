@@ -134,6 +134,9 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         if manifold and not (1 <= nshared <= 2 and _local_link_ok(faces, a, b, nshared)):
             block((a, b), outcome.TOPOLOGY)
             continue
+        if manifold and options.keep_parts and len(fids) == 0:  # its faces are all its part has left
+            block((a, b), outcome.PART)
+            continue
         x, br, _ = q.placed[(a, b)]
         if len(fids) and _flips_any(VQd, N0d, before, fids, corner, x, cos_max):
             block((a, b), outcome.FLIP)

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-TOPOLOGY, COINCIDENT, FLIP = 1, 2, 3
-REJECT = {TOPOLOGY: "topology", COINCIDENT: "coincident", FLIP: "flip"}
+TOPOLOGY, COINCIDENT, FLIP, PART = 1, 2, 3, 4
+REJECT = {TOPOLOGY: "topology", COINCIDENT: "coincident", FLIP: "flip", PART: "vanishing_part"}
 STOPS = ("target", "max_error", "blocked", "unchanged")
 
 

@@ -305,6 +305,8 @@ class _Run:
         if self.manifold:  # link condition, no coincident faces
             linked, apex, r, owner_r = link.result()
             why[gone > 0] = outcome.COINCIDENT
+            if self.options.keep_parts:  # the pair's faces are all its part has left
+                why[np.bincount(owner, minlength=len(P)) == 0] = outcome.PART
             why[~linked] = outcome.TOPOLOGY
             at = (apex, np.take(free_rows, r), owner_r)
         found.append((idx, kept, dead, at))
