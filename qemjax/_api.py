@@ -16,6 +16,7 @@ from . import _io
 from . import _topology as topo
 from ._options import Options, Schedule
 from . import _units
+from ._arrays import face_normals
 from ._result import Contractions, SimplifyResult
 from ._schedulers import common, greedy, outcome, parallel
 
@@ -164,7 +165,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     Vn, frame = _units.normalize(V, common.DTYPE)
 
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
-    S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges))
+    area_mean, e2_mean, ext = report.pop("face_means")
+    r2 = (ext / frame.scale) ** 2  # from the clean-up's unit extent to the frame's
+    S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges, (area_mean * r2, e2_mean * r2)))
     options = Options(
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
         preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule,
@@ -204,6 +207,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     unmoved[hist[0][:, 0]] = False  # kept vertices moved; removed ones are gone
     same = np.flatnonzero(unmoved[ids])
     vout[same] = V[ids[same]]  # never contracted: the input's float64 position, exactly
+    flat = np.flatnonzero(~np.any(face_normals(vout, Fout) != 0, axis=1))
+    if flat.size:  # an input face with exactly collinear corners: keep the rounded positions there
+        w = np.unique(Fout[flat])
+        vout[w] = frame.positions_to_mesh(Vout[w])
     verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
     stop = info["stop_reason"]
     if target and len(Fout) > target:  # a face target was asked for and not met

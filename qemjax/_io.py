@@ -13,7 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._arrays import face_normals, column_bounds, sorted_triples
+from ._arrays import face_stats, column_bounds, sorted_triples
 
 
 class Mesh(NamedTuple):
@@ -271,8 +271,7 @@ def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
-    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear
-    corners), ``unreferenced_removed`` and lists the
+    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear corners), ``unreferenced_removed`` and lists the
     attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
     caller ``stacklevel`` - 1 frames above prepare's caller)."""
     (V, F), dropped = _as_arrays(mesh)
@@ -287,16 +286,18 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tu
         raise ValueError("empty mesh: every face is degenerate")
     if not has_area(V, F):
         raise ValueError(f"the mesh has no surface: all {len(F)} faces have zero area (collinear corners)")
-    # faces with exactly collinear corners would survive untouched into the output: drop them too
+    # faces with exactly collinear corners would survive untouched into the output: drop them; the same
+    # pass gives the means that scale the quadric weights, at unit extent
     lo, hi = column_bounds(V)
     with np.errstate(over="ignore"):
         ext = float(np.max(hi - lo))
-    U = (V - lo) / ext if np.isfinite(ext) and ext > 0 else V  # unit extent: no underflow at 1e-200
-    nz = np.any(face_normals(U, F) != 0, axis=1)
+    scaled = np.isfinite(ext) and ext > 0
+    nz, area_mean, e2_mean = face_stats((V - lo) / ext if scaled else V, F)
     report["zero_area_removed"] = int(len(F) - np.count_nonzero(nz))
     if report["zero_area_removed"]:
         F = F[nz]
     V, F, report["unreferenced_removed"] = drop_unreferenced(V, F)
+    report["face_means"] = (area_mean, e2_mean, ext if scaled else 1.0)  # for `simplify`, popped there
     return Mesh(V, F), report
 
 

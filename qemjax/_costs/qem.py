@@ -23,9 +23,10 @@ PLACEMENTS = ("optimal", "endpoints")
 
 
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,
-                     feature_edges: np.ndarray | None, boundary=None) -> np.ndarray:
+                     feature_edges: np.ndarray | None, boundary=None, means=None) -> np.ndarray:
     """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes.
-    ``boundary``: `topo.boundary_edges` of F when the caller has it."""
+    ``boundary``: `topo.boundary_edges` of F when the caller has it; ``means``: (mean face area, mean
+    squared edge length) when the caller has them (else `quadrics.mesh_means`)."""
     n = len(V)
     be, bf = topo.boundary_edges(F, n) if boundary is None else boundary
     cw = np.full(len(be), boundary_weight, DTYPE)
@@ -43,7 +44,8 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
     Q = quadrics.vertex_quadrics(
         Vp, Fp, fmask, jnp.asarray(area_weighted),
         pad_rows(be.astype(np.int32), nb, fill=n), pad_rows(cn, nb), pad_rows(cw, nb),
-        np.arange(nb) < len(be), *quadrics.mesh_means(V, F))
+        np.arange(nb) < len(be),
+        *(quadrics.mesh_means(V, F) if means is None else (np.asarray(m, np.float32) for m in means)))
     return np.asarray(Q)[:n]
 
 
@@ -77,7 +79,7 @@ class QEM(CostModel):
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         return initial_quadrics(mesh.V, mesh.F, area_weighted=self.area_weighted,
                                 boundary_weight=self.boundary_weight, feature_edges=mesh.feature_edges,
-                                boundary=mesh.boundary)
+                                boundary=mesh.boundary, means=mesh.means)
 
     def kernel_params(self) -> dict:
         return {"endpoints_only": np.asarray(self.placement == "endpoints"),

@@ -63,7 +63,7 @@ def face_flips(p, k, x, mask, ref, cos_max):
     return moved_corner_flips(p, k, x, cos_max, ref) & mask
 
 
-@kernel
+@jax.jit  # not `kernel`: the older emitter ran this 4× slower (30 vs 7.6 ms at 65,536 rows); see below
 def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     """`face_flips` with the inputs gathered here: faces (K,3) index rows of V (N,≥3) (columns 0-2 are
     positions); k (K,) the moving corner, x (K,3) where it goes; the reference normal of face i is
@@ -72,7 +72,11 @@ def face_flips_at(V, N0, faces, fids, k, x, cos_max):
 
     Everything gathered is packed into one (15,K) array and materialised before the arithmetic: with the
     gathers left apart (one per corner, as separate arrays), XLA's CPU fusion took 2.4× the CPU time
-    at 65 536 rows (measured on 2 cores; same results bit for bit)."""
+    at 65 536 rows (measured on 2 cores; same results bit for bit).
+
+    Its output is a sign test, so a core-count-dependent FMA contraction could change it only for a face
+    within a rounding step of the threshold; the golden cases agree on 1 and 2 cores
+    (experiments/golden.py --check under taskset -c 0)."""
     K = faces.shape[0]
     g = jnp.take(V, faces.reshape(-1), axis=0, mode="clip")[:, :3].reshape(K, 9)
     ref = jnp.take(N0, fids, axis=0, mode="clip")
