@@ -125,7 +125,9 @@ def test_history_and_result_fields(bumpy):
     k = r.stats["contractions"]
     assert len(r.history) == k == len(V) - len(r.vertices)
     assert r.history.positions.shape == (k, 3) and r.history.pairs.shape == (k, 2)
-    assert np.all(np.diff(r.history.costs[: min(k, 10)]) >= -1e-12) or True  # order within a round
+    # a round's contractions are recorded in cost order (a closed mesh: two faces per contraction)
+    first = (len(F) - r.stats["faces_per_round"][0]) // 2
+    assert first > 10 and np.all(np.diff(r.history.costs[:first]) >= 0)
     assert r.vertex_error.shape == (len(r.vertices),) and np.all(r.vertex_error >= 0)
     assert r.max_error == pytest.approx(r.history.costs.max())
     assert r.source_vertices.shape == (len(r.vertices),)
