@@ -130,7 +130,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     pair_threshold = _real("pair_threshold", pair_threshold)
     flip_angle = None if flip_angle is None else _real("flip_angle", flip_angle)
     area_weighted, weld = _flag("area_weighted", area_weighted), _flag("weld", weld)
-    progress = _flag("progress", progress)
+    progress, prune = _flag("progress", progress), _flag("prune", prune)
     if preserve_topology is not None:
         preserve_topology = _flag("preserve_topology", preserve_topology)
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
@@ -171,7 +171,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     options = Options(
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
         preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule,
-        keep_parts=not _flag("prune", prune))
+        keep_parts=not prune)
     extra = topo.close_pairs(V, F, pair_threshold)
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
 
@@ -232,7 +232,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         branches={name: int(c) for name, c in zip(model.branches, info["branches"])},
         rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
-        total_s=total, scale=frame.scale, non_manifold_edges_in=nonmanifold, max_error_limit=err if math.isfinite(err) else None)
+        total_s=total, scale=frame.scale, non_manifold_edges_in=nonmanifold,
+        max_error_limit=err if math.isfinite(err) else None)
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":
             stats[k] = v

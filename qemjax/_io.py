@@ -271,8 +271,8 @@ def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
-    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear corners), ``unreferenced_removed`` and lists the
-    attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
+    ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear
+    corners), ``unreferenced_removed`` and lists the attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
     caller ``stacklevel`` - 1 frames above prepare's caller)."""
     (V, F), dropped = _as_arrays(mesh)
     if dropped:
@@ -284,15 +284,17 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tu
     F, report["degenerate_removed"], report["duplicate_removed"] = clean_faces(F)
     if len(F) == 0:
         raise ValueError("empty mesh: every face is degenerate")
-    if not has_area(V, F):
-        raise ValueError(f"the mesh has no surface: all {len(F)} faces have zero area (collinear corners)")
     # faces with exactly collinear corners would survive untouched into the output: drop them; the same
-    # pass gives the means that scale the quadric weights, at unit extent
+    # pass gives the means that scale the quadric weights, at unit extent (divided by the bounding box's
+    # largest side, so no scale underflows; an overflowing extent is refused by name in `_units`)
     lo, hi = column_bounds(V)
     with np.errstate(over="ignore"):
         ext = float(np.max(hi - lo))
     scaled = np.isfinite(ext) and ext > 0
-    nz, area_mean, e2_mean = face_stats((V - lo) / ext if scaled else V, F)
+    with np.errstate(over="ignore", invalid="ignore"):
+        nz, area_mean, e2_mean = face_stats((V - lo) / ext if scaled else V, F)
+    if not nz.any():
+        raise ValueError(f"the mesh has no surface: all {len(F)} faces have zero area (collinear corners)")
     report["zero_area_removed"] = int(len(F) - np.count_nonzero(nz))
     if report["zero_area_removed"]:
         F = F[nz]
@@ -301,18 +303,3 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tu
     return Mesh(V, F), report
 
 
-def has_area(V: np.ndarray, F: np.ndarray) -> bool:
-    """Whether any face of F (m,3) over V (n,3) has a non-zero area (usually settled by the first faces).
-    Edge vectors are divided by the bounding box's largest side first, so no scale underflows."""
-    lo, hi = column_bounds(V)
-    with np.errstate(over="ignore"):
-        s = float(np.max(hi - lo))
-    if not np.isfinite(s):  # an overflowing extent: `_units.normalize` refuses it by name
-        return True
-    if s == 0:
-        return False
-    for part in (F[:1024], F[1024:]):
-        e1, e2 = (V[part[:, 1]] - V[part[:, 0]]) / s, (V[part[:, 2]] - V[part[:, 0]]) / s
-        if np.any(np.cross(e1, e2) != 0):
-            return True
-    return False

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _topology as topo
-from .._arrays import face_normals
+from .._arrays import face_normals, face_stats
 from .._batching import DTYPE, bucket, pad_rows
 from .._kernels import placement, quadrics
 from .base import CostModel, MeshInput
@@ -26,7 +26,7 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
                      feature_edges: np.ndarray | None, boundary=None, means=None) -> np.ndarray:
     """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes.
     ``boundary``: `topo.boundary_edges` of F when the caller has it; ``means``: (mean face area, mean
-    squared edge length) when the caller has them (else `quadrics.mesh_means`)."""
+    squared edge length) when the caller has them (else `face_stats` of V and F)."""
     n = len(V)
     be, bf = topo.boundary_edges(F, n) if boundary is None else boundary
     cw = np.full(len(be), boundary_weight, DTYPE)
@@ -45,7 +45,7 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
         Vp, Fp, fmask, jnp.asarray(area_weighted),
         pad_rows(be.astype(np.int32), nb, fill=n), pad_rows(cn, nb), pad_rows(cw, nb),
         np.arange(nb) < len(be),
-        *(quadrics.mesh_means(V, F) if means is None else (np.asarray(m, np.float32) for m in means)))
+        *(np.asarray(m, np.float32) for m in (face_stats(V, F)[1:] if means is None else means)))
     return np.asarray(Q)[:n]
 
 

@@ -15,7 +15,8 @@ import jax
 # different machine code than the unsplit loop (other multiply-adds become FMAs), and it splits by the
 # number of cores the process may use: results then depend on the core count (`taskset -c 0` changed the
 # parallel scheduler's output; experiments/results/determinism.md). The older emitter gives the same
-# bits either way, and was not slower here. Set per kernel, never process-wide.
+# bits either way, and was faster for the placement kernel here (the flip kernel, 4× slower with it, keeps
+# the default: `flips.face_flips_at`). Set per kernel, never process-wide.
 CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
@@ -35,5 +36,4 @@ def kernel(fn=None, **jit_kwargs):
             opts = CPU_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
             compiled.append(jax.jit(fn, compiler_options=opts, **jit_kwargs))
         return compiled[0](*args, **kwargs)
-    call.jitted = compiled  # the jax.jit object, once called 
     return call

@@ -83,11 +83,3 @@ def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     c = jax.lax.optimization_barrier(jnp.concatenate([g, ref.astype(g.dtype), x.astype(g.dtype)], 1).T)
     p = [[c[3 * j + i] for i in range(3)] for j in range(3)]
     return _flips(p, k, [c[12 + i] for i in range(3)], cos_max, [c[9 + i] for i in range(3)])
-
-
-@kernel
-def local_flips(p, k, x, mask, ref, cos_max):
-    """Any flip among the faces p (K,3,3) (reference normals ref (K,3)) whose corner k (K,) moves to
-    x (3,), masked by mask (K,)."""
-    xs = jnp.broadcast_to(x, p.shape[:-2] + (3,))
-    return jnp.any(moved_corner_flips(p, k, xs, cos_max, ref) & mask)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from . import kernel
 
@@ -101,20 +100,6 @@ def face_normals(p0, p1, p2):
     return cr / safe[..., None] * (nrm > 0)[..., None], 0.5 * nrm
 
 
-def mesh_means(V, F):
-    """(mean face area, mean squared edge length) of faces F (m,3) over V (n,3), on the host (numpy's
-    sums do not depend on the number of threads; accumulated in float64), as 0-d float32 arrays."""
-    c = [np.take(V[:, i], F) for i in range(3)]  # (m,3) per coordinate
-    d = [[ci[:, (j + 1) % 3] - ci[:, j] for ci in c] for j in range(3)]  # edge j as 3 coordinate arrays
-    cross = [d[0][1] * -d[2][2] + d[0][2] * d[2][1], d[0][2] * -d[2][0] + d[0][0] * d[2][2],
-             d[0][0] * -d[2][1] + d[0][1] * d[2][0]]
-    area = 0.5 * np.sqrt(cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2])
-    e2 = sum(x * x for ej in d for x in ej)
-    m = max(len(F), 1)
-    return (np.asarray(np.sum(area, dtype=np.float64) / m, np.float32),
-            np.asarray(np.sum(e2, dtype=np.float64) / (3 * m), np.float32))
-
-
 @kernel
 def vertex_quadrics(V, F, fmask, area_weighted, cedges, cnormals, cweight, cmask, mean_area, mean_e2):
     """Per-vertex quadrics, each in its own vertex's frame.
@@ -126,7 +111,7 @@ def vertex_quadrics(V, F, fmask, area_weighted, cedges, cnormals, cweight, cmask
     ``cmask``: each adds the plane through the edge perpendicular to that face, weighted by
     cweight·|e|²/mean|e|² (area_weighted) or cweight, to both endpoints.
     ``mean_area``, ``mean_e2`` (): the mean area and mean squared edge length of the real faces, computed
-    by the caller (`mesh_means`): an XLA:CPU reduction's order depends on the number of threads, and these
+    by the caller (`qemjax._arrays.face_stats`): an XLA:CPU reduction's order depends on the number of threads, and these
     two scale every weight.
     Returns (N,10) packed quadrics. Errors are squared distances in the units of V.
     """

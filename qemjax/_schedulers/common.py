@@ -1,5 +1,5 @@
-"""Pieces both schedulers share: the options, timing, and the batched calls of a cost model's kernels
-(pricing pairs, merging state), padded to fixed shapes so that a run compiles a handful of kernels."""
+"""Pieces both schedulers share: the options, timing, and the batched kernel calls (a cost model's price
+and merge, the flip test), padded to fixed shapes so that a run compiles a handful of kernels."""
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -14,6 +14,7 @@ from .._batching import chunks as chunks
 from .._batching import pad_rows as pad_rows
 from .._batching import set_rows as set_rows
 from .._costs import ring
+from .._kernels import flips
 from .._options import Options as Options
 
 RING_BLOCK = 1 << 16  # ring models gather the faces of this many pairs at a time (bounded memory)
@@ -78,6 +79,24 @@ def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: in
     outs = [model.merge(VSd, pp, xx, params) for (_, pp), (_, xx)
             in zip(chunks(P.astype(np.int32), size=size), chunks(x, size=size))]
     return lambda: np.concatenate([np.asarray(o) for o in outs])[: len(P)]
+
+
+def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
+    """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
+    fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
+    Returns a function that waits for the kernel and gives (S,) bool per pair."""
+    cos_max = np.asarray(cos_max, DTYPE)
+    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
+                chunks(np.take(x, owner, axis=0)))
+    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max)
+            for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
+
+    def result():
+        bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
+        res = np.zeros(S, bool)
+        res[owner[bad]] = True
+        return res
+    return result
 
 
 def compact_output(V: np.ndarray, F: np.ndarray, alive_faces: np.ndarray):

@@ -16,9 +16,8 @@ import numpy as np
 from .. import _topology as topo
 from .._costs import MeshView
 from .._incidence import FaceLists
-from .._kernels import flips
 from . import outcome
-from .common import (DTYPE, Options, bucket, chunks, face_normals, pad_rows, set_rows, start_merge,
+from .common import (DTYPE, Options, bucket, face_normals, pad_rows, set_rows, start_flips, start_merge,
                      start_price)
 
 BUDGET = 0  # code of a pair held back only because it would remove more faces than are still needed
@@ -48,14 +47,6 @@ def _local_link_ok(faces: FaceLists, a: int, b: int, nfaces: int) -> bool:
     deg = np.bincount(keys // len(faces.cnt), minlength=len(verts))
     ok = topo.link_ok(np.array([[la, lb]]), np.array([nfaces]), E, len(verts), bvert, deg)
     return bool(ok[0])
-
-
-def _flips_any(VQd, N0d, before, fids, corner, x, cos_max) -> bool:
-    """Does moving the given corners of faces ``before`` (k,3) (input faces ``fids``) to x flip any?"""
-    parts = zip(chunks(before), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
-                chunks(np.broadcast_to(x, (len(fids), 3))))
-    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max) for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
-    return bool(np.concatenate([np.asarray(o) for o in outs])[: len(fids)].any())
 
 
 def _tie(a: int, b: int) -> int:
@@ -100,7 +91,6 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)
     N0d = jnp.asarray(pad_rows(face_normals(np.asarray(V, DTYPE), F).astype(DTYPE), bucket(m)))
-    cos_max = np.asarray(options.cos_max, DTYPE)
     nbr = [set() for _ in range(n)]  # pair partners
     for a, b in pairs.tolist():
         nbr[a].add(b)
@@ -145,7 +135,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             block((a, b), outcome.PART)
             continue
         x, br, _ = q.placed[(a, b)]
-        if len(fids) and _flips_any(VQd, N0d, before, fids, corner, x, cos_max):
+        if len(fids) and start_flips(VQd, N0d, before, fids, corner, np.zeros(len(fids), np.int64), x[None], 1,
+                                     options.cos_max)()[0]:
             block((a, b), outcome.FLIP)
             continue
         # faces that would coincide after the contraction: forbidden in manifold mode, else dropped
@@ -195,7 +186,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             progress(faces.count)
     blocked = {}
     if faces.count > target_faces:
-        stop, blocked = _stop(faces, q, nbr, options, target_faces, stop)
+        stop, blocked = _stop(faces, q, options, target_faces, stop)
     hist = (np.array([(a, b) for a, b, _, _ in history], np.int64).reshape(-1, 2),
             np.array([x for _, _, x, _ in history], np.float64).reshape(-1, 3),
             np.array([c for _, _, _, c in history], np.float64))
@@ -206,14 +197,13 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     return VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, hist, info
 
 
-def _stop(faces: FaceLists, q: _Queue, nbr, options: Options, target: int, stop):
+def _stop(faces: FaceLists, q: _Queue, options: Options, target: int, stop):
     """(stop reason, blocked_by) from the pairs left in the queue (`outcome.classify`)."""
     live = sorted(p for p in q.placed)
     if not live:
         return stop or "blocked", {"non_manifold": 0}
     P = np.array(live, np.int64)
-    _, f = faces.around(P.reshape(-1))
-    w = faces.around(P.reshape(-1))[0]
+    w, f = faces.around(P.reshape(-1))
     # faces shared by both endpoints of a pair: seen once from each side
     key = (w >> 1) * len(faces.alive) + f
     ks, c = np.unique(key, return_counts=True)

@@ -36,9 +36,8 @@ from .. import _topology as topo
 from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
 from .._costs import MeshView
 from .._incidence import FaceLists
-from .._kernels import flips
 from . import outcome
-from .common import (DTYPE, Options, Timer, bucket, chunks, face_normals, pad_rows, set_rows, start_merge,
+from .common import (DTYPE, Options, Timer, bucket, face_normals, pad_rows, set_rows, start_flips, start_merge,
                      start_price)
 from .select import fits_target, independent_sets, sort_keys, submit
 
@@ -67,24 +66,6 @@ class RoundState:
     bad: np.ndarray = None
     changed: np.ndarray = None
     edges_next: tuple | None = None
-
-
-def _flip_bad(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
-    """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
-    fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
-    Returns a function that waits for the kernel and gives (S,) bool per pair."""
-    cos_max = np.asarray(cos_max, DTYPE)
-    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
-                chunks(np.take(x, owner, axis=0)))
-    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max)
-            for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
-
-    def result():
-        bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
-        res = np.zeros(S, bool)
-        res[owner[bad]] = True
-        return res
-    return result
 
 
 def _with_extra_pairs(E, ecount, extra_pairs, n):
@@ -297,7 +278,7 @@ class _Run:
             link = submit(topo.link_ok, P, st.ecount[idx], Efree, self.n, st.bvert, st.deg, apexes=True,
                           edges_at=True)
         (fids, before, corner, owner, G), kept, dead = self.faces.touched_with_dead(P)
-        flipped = _flip_bad(self.VQd, self.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
+        flipped = start_flips(self.VQd, self.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
                             self.options.cos_max)  # runs while the host tests the rest
         gone = topo.coincidence_count(G, owner, len(P))
         why = np.zeros(len(P), np.int8)
