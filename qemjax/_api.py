@@ -162,7 +162,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                       stacklevel=2)
         target = m
 
-    Vn, frame = _units.normalize(V, common.DTYPE)
+    extra = topo.close_pairs(V, F, pair_threshold)
+    parts = topo.parts(F, len(V), extra)
+    Vn, frame = _units.normalize(V, common.DTYPE, parts)
 
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     area_mean, e2_mean, ext = report.pop("face_means")
@@ -172,7 +174,6 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
         preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule,
         keep_parts=not prune)
-    extra = topo.close_pairs(V, F, pair_threshold)
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
 
     bar = None
@@ -202,7 +203,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         bar.close()
 
     Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
-    vout = frame.positions_to_mesh(Vout)
+    vout = frame.positions_to_mesh(Vout, ids)
     unmoved = np.ones(len(V), bool)
     unmoved[hist[0][:, 0]] = False  # kept vertices moved; removed ones are gone
     same = np.flatnonzero(unmoved[ids])
@@ -210,7 +211,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     flat = np.flatnonzero(~np.any(face_normals(vout, Fout) != 0, axis=1))
     if flat.size:  # an input face with exactly collinear corners: keep the rounded positions there
         w = np.unique(Fout[flat])
-        vout[w] = frame.positions_to_mesh(Vout[w])
+        vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
     verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
     stop = info["stop_reason"]
     if target and len(Fout) > target:  # a face target was asked for and not met
@@ -221,7 +222,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             stop = "blocked" if stop == "target" else stop
             warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"], nonmanifold,
                                                 preserve_topology), stacklevel=2)
-    hp, hx, hc = hist[0], frame.positions_to_mesh(hist[1]), frame.errors_to_mesh(hist[2])
+    hp, hx, hc = hist[0], frame.positions_to_mesh(hist[1], hist[0][:, 0]), frame.errors_to_mesh(hist[2])
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
     stats = dict(report)
@@ -232,7 +233,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         branches={name: int(c) for name, c in zip(model.branches, info["branches"])},
         rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
-        total_s=total, scale=frame.scale, non_manifold_edges_in=nonmanifold,
+        total_s=total, scale=frame.scale, parts_in=parts[0], non_manifold_edges_in=nonmanifold,
         max_error_limit=err if math.isfinite(err) else None)
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":

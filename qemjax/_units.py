@@ -1,8 +1,11 @@
 """The one place where mesh units meet the internal unit-extent frame.
 
-`simplify` computes in coordinates centred on the bounding box and divided by its largest side (the
-*extent*), so every kernel sees numbers of order one. Positions come back as ``x * scale + center``;
-squared distances (quadric errors, ``max_error``) as ``e * scale²``.
+`simplify` computes in coordinates divided by the bounding box's largest side (the *extent*), so every
+kernel sees numbers of order one, and centred on the bounding box *of each connected part*: float32 then
+keeps a part's positions to about 1e-7 of that part's own size, however far away the other parts are (one
+triangle 1e6 away no longer costs a unit sphere its precision). Positions come back as
+``x * scale + center[part]``; squared distances (quadric errors, ``max_error``) as ``e * scale²``. Within one
+connected part the float32 limit stays: detail below about 1e-7 of the part's extent is rounded.
 
 Those squared distances are reported in float64, so the extent must keep ``scale²`` (and errors of a few
 hundred times it: boundary penalties) a normal float64: about 1e-150 ≤ extent ≤ 1e150. Outside that range,
@@ -23,15 +26,24 @@ MAX_COORD = 1e300  # positions a few extents outside the box stay finite
 
 
 class Frame(NamedTuple):
-    """Maps between mesh units and the internal frame: center (3,) float64 (mesh units), scale float
-    (mesh units per internal unit, the bounding box's largest side)."""
+    """Maps between mesh units and the internal frame: centers (k,3) float64, the bounding-box centre of
+    each part (mesh units); scale float (mesh units per internal unit, the whole mesh's largest side);
+    part (n,) int64, each vertex's part (None: one part)."""
 
-    center: np.ndarray
+    centers: np.ndarray
     scale: float
+    part: np.ndarray | None = None
 
-    def positions_to_mesh(self, x: np.ndarray) -> np.ndarray:
-        """(k,3) internal positions (any float dtype) -> (k,3) float64 in mesh units."""
-        return np.asarray(x, np.float64) * self.scale + self.center
+    def positions_to_mesh(self, x: np.ndarray, verts: np.ndarray | None = None) -> np.ndarray:
+        """(k,3) internal positions (any float dtype) of the vertices ``verts`` (k,) (their input ids;
+        needed when the mesh has several parts) -> (k,3) float64 in mesh units."""
+        if self.part is None:
+            center = self.centers[0]
+        else:
+            if verts is None:
+                raise ValueError("a frame of several parts needs the vertices the positions belong to")
+            center = self.centers[self.part[verts]]
+        return np.asarray(x, np.float64) * self.scale + center
 
     def errors_to_mesh(self, e):
         """Squared distances, internal -> mesh units² (float64; array or scalar)."""
@@ -43,10 +55,12 @@ class Frame(NamedTuple):
         return float(e) / (self.scale * self.scale)
 
 
-def normalize(V: np.ndarray, dtype=np.float32) -> tuple[np.ndarray, Frame]:
-    """(n,3) finite float64 vertices in mesh units -> ((n,3) ``dtype`` coordinates centred on the
-    bounding box with largest side 1, `Frame`). Raises ValueError when the extent or the coordinates
-    cannot be represented (see the module docstring)."""
+def normalize(V: np.ndarray, dtype=np.float32, parts: tuple[int, np.ndarray] | None = None
+              ) -> tuple[np.ndarray, Frame]:
+    """(n,3) finite float64 vertices in mesh units -> ((n,3) ``dtype`` coordinates divided by the bounding
+    box's largest side and centred on the box of each part, `Frame`). ``parts``: (count, (n,) labels) as
+    `_topology.parts` gives (None: one part). Raises ValueError when the extent or the coordinates cannot
+    be represented (see the module docstring)."""
     lo, hi = column_bounds(V)
     big = float(max(np.max(np.abs(lo)), np.max(np.abs(hi))))
     if big > MAX_COORD:
@@ -61,5 +75,12 @@ def normalize(V: np.ndarray, dtype=np.float32) -> tuple[np.ndarray, Frame]:
     if extent > MAX_EXTENT:
         raise ValueError(f"the mesh's extent {extent:.3g} is too large to represent squared errors in "
                          f"float64 (maximum {MAX_EXTENT:.0e}); rescale the mesh")
-    center = 0.5 * lo + 0.5 * hi  # (lo + hi) / 2 could overflow
-    return ((V - center) / extent).astype(dtype), Frame(center, extent)
+    if parts is None or parts[0] <= 1:
+        center = 0.5 * lo + 0.5 * hi  # (lo + hi) / 2 could overflow
+        return ((V - center) / extent).astype(dtype), Frame(center[None], extent)
+    count, label = parts
+    order = np.argsort(label, kind="stable")
+    starts = np.searchsorted(label[order], np.arange(count))
+    Vs = V[order]
+    centers = 0.5 * np.minimum.reduceat(Vs, starts, axis=0) + 0.5 * np.maximum.reduceat(Vs, starts, axis=0)
+    return ((V - centers[label]) / extent).astype(dtype), Frame(centers, extent, label)

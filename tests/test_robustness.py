@@ -11,7 +11,8 @@ import trimesh
 from conftest import assert_valid
 
 import qemjax
-from qemjax import shapes
+from qemjax import _topology as topo
+from qemjax import _units, shapes
 
 V1, F1 = shapes.icosphere(1)  # 80 faces: small, so the corpus stays quick
 TRI = (np.eye(3), np.array([[0, 1, 2]]))
@@ -325,3 +326,37 @@ def test_vertices_never_contracted_keep_their_input_position_exactly(offset):
     moved = np.isin(r.source_vertices, r.history.pairs[:, 0])
     assert (~moved).sum() > 400
     assert np.array_equal(r.vertices[~moved], r.input_vertices[r.source_vertices[~moved]])
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+@pytest.mark.parametrize("offset,outlier", [(1e7, None), (0.0, 1e6), (1e7, 1e6)], ids=["offset-1e7", "outlier-1e6",
+                                                                                       "offset-and-outlier"])
+def test_moved_vertices_keep_the_precision_of_their_own_part(scheduler, offset, outlier):
+    """Each part is computed in a frame centred on itself: a far outlier or a large offset leaves a unit
+    sphere's contracted vertices as close to the sphere as when it is alone. (With one frame for the
+    whole extent, an outlier 1e6 away put them 4 % off the sphere: radii 0.962-1.046.)"""
+    V, F = shapes.icosphere(3)
+    alone = qemjax.simplify((V, F), target_faces=300, scheduler=scheduler)
+    dev_alone = np.abs(np.linalg.norm(alone.vertices, axis=1) - 1).max()
+    W, G = V + offset, F
+    if outlier is not None:
+        W, G = _with_outlier(W, F, offset + outlier, referenced=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the outlier keeps its face: one above the sphere's even target
+        r = qemjax.simplify((W, G), target_faces=300 + (outlier is not None), scheduler=scheduler)
+    assert r.stats["parts_in"] == 1 + (outlier is not None)
+    sphere = np.linalg.norm(r.vertices - offset, axis=1) < 2
+    moved = np.isin(r.source_vertices, r.history.pairs[:, 0]) & sphere
+    assert moved.sum() > 100
+    dev = np.abs(np.linalg.norm(r.vertices[moved] - offset, axis=1) - 1).max()
+    assert dev < 2 * dev_alone + 1e-6, (dev, dev_alone)
+
+
+def test_a_frame_of_several_parts_needs_vertex_ids():
+    V, F = shapes.icosphere(1)
+    W, G = _with_outlier(V, F, 1e6, referenced=True)
+    Vn, frame = _units.normalize(W, np.float32, topo.parts(G, len(W)))
+    assert len(frame.centers) == 2 and np.all(np.abs(Vn[:len(V)]) < 1e-5)  # the sphere sits at its own centre
+    np.testing.assert_allclose(frame.positions_to_mesh(Vn, np.arange(len(W))), W, rtol=0, atol=1e-6 * 1e6)
+    with pytest.raises(ValueError, match="several parts"):
+        frame.positions_to_mesh(Vn)
