@@ -191,7 +191,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     else:
         progress_cb = None
     if target < m or err < math.inf:
-        run = functools.partial(parallel.run, edges=(E, ecount)) if scheduler == "parallel" else greedy.run
+        run = functools.partial(parallel.run, edges=(E, ecount), part_scale=frame.part_scale2()) \
+            if scheduler == "parallel" else greedy.run
         Vo, So, Fo, alive, hist, info = run(Vn, S, F, extra, max(target, 1), model, options, progress_cb)
     else:  # nothing to remove
         Vo, So, Fo, alive = Vn, S, F, np.ones(m, bool)

@@ -20,7 +20,8 @@ class Schedule:
     gate: a round's candidates are the pairs costing at most gate × the cost of the k-th cheapest, where
         k = min(contractions still needed / (2·tail), gate_fraction × live pairs).
     tail: near the target a round takes at most about 1/(2·tail) of what is still needed.
-    free_cost: costs below this (squared distance at unit extent) always pass the gate (flat regions).
+    free_cost: costs below this (squared distance, with the extent of the pair's connected part as unit)
+        always pass the gate (flat regions).
     max_passes: selection passes per round; pass_yield: stop a round's passes once one accepts under this
         fraction of what the round took.
 

@@ -28,11 +28,18 @@ MAX_COORD = 1e300  # positions a few extents outside the box stay finite
 class Frame(NamedTuple):
     """Maps between mesh units and the internal frame: centers (k,3) float64, the bounding-box centre of
     each part (mesh units); scale float (mesh units per internal unit, the whole mesh's largest side);
-    part (n,) int64, each vertex's part (None: one part)."""
+    part (n,) int64, each vertex's part (None: one part); sizes (k,) float64, each part's largest side
+    over the whole mesh's (None: one part)."""
 
     centers: np.ndarray
     scale: float
     part: np.ndarray | None = None
+    sizes: np.ndarray | None = None
+
+    def part_scale2(self) -> np.ndarray | None:
+        """(n,) float64 (size of each vertex's part)², to express a squared distance given at the whole
+        mesh's extent at the extent of each part instead (None for one part)."""
+        return None if self.part is None else np.square(self.sizes)[self.part]
 
     def positions_to_mesh(self, x: np.ndarray, verts: np.ndarray | None = None) -> np.ndarray:
         """(k,3) internal positions (any float dtype) of the vertices ``verts`` (k,) (their input ids;
@@ -82,5 +89,7 @@ def normalize(V: np.ndarray, dtype=np.float32, parts: tuple[int, np.ndarray] | N
     order = np.argsort(label, kind="stable")
     starts = np.searchsorted(label[order], np.arange(count))
     Vs = V[order]
-    centers = 0.5 * np.minimum.reduceat(Vs, starts, axis=0) + 0.5 * np.maximum.reduceat(Vs, starts, axis=0)
-    return ((V - centers[label]) / extent).astype(dtype), Frame(centers, extent, label)
+    plo, phi = np.minimum.reduceat(Vs, starts, axis=0), np.maximum.reduceat(Vs, starts, axis=0)
+    centers = 0.5 * plo + 0.5 * phi
+    sizes = np.max(phi - plo, axis=1) / extent
+    return ((V - centers[label]) / extent).astype(dtype), Frame(centers, extent, label, sizes)

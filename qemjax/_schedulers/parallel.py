@@ -137,8 +137,10 @@ def _history_arrays(rounds):
 class _Run:
     """One simplification: the mesh state that lives across rounds, and the stages of a round."""
 
-    def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges):
+    def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges,
+                 part_scale=None):
         self.n, m = len(V), len(F)
+        self.part_scale = part_scale
         self.model, self.options, self.progress = model, options, progress
         self.params = model.kernel_params()
         self.target = target_faces
@@ -253,7 +255,8 @@ class _Run:
 
         def key_of(idx):
             return sort_keys(st.cost, idx, salt)
-        cand = valid & (st.cost <= max(sch.gate * kth, sch.free_cost))
+        free = sch.free_cost if self.part_scale is None else sch.free_cost * self.part_scale[st.E[:, 0]]
+        cand = valid & (st.cost <= np.maximum(sch.gate * kth, free))
         found = []
         acc, bad, why, extra, locked = independent_sets(
             st.E, key_of, cand, need, self.n, lambda *a: self.validate(st, found, *a), sch)
@@ -387,14 +390,16 @@ class _Run:
                                 st.cost > self.options.max_cost, ok)
 
 
-def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=None, edges=None):
+def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=None, edges=None,
+        part_scale=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64 faces, extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be
-    0); ``edges``: `topo.edges` of F when the caller has it.
+    0); ``edges``: `topo.edges` of F when the caller has it; ``part_scale`` (n,): (extent of each vertex's
+    part / the whole extent)², which scales ``Schedule.free_cost`` per pair (None: one part).
     Returns (V, S, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,) marks
     the survivors, history = (pairs (k,2), positions (k,3), costs (k,)) in contraction order; info holds
     the counts, the stage times, ``stop_reason`` and ``blocked_by``."""
-    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges)
+    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale)
     stop, blocked = r.run()
     hist = _history_arrays(r.history)
     info = {"contractions": len(hist[0]), "rejected": r.rejected, "rounds": r.rounds,
