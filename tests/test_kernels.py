@@ -283,6 +283,32 @@ def test_indexed_flips_match_numpy_reference():
         assert 0 < got.sum() < K
 
 
+def test_host_flip_test_agrees_with_the_kernel_in_float32():
+    """flips_host (the greedy queue's numpy twin) decides as face_flips_at does, one contraction at a
+    time, on float32 inputs that include near-threshold turns and slivers."""
+    n = 40
+    V = rng.normal(size=(n, 3)).astype(np.float32)
+    N0 = rng.normal(size=(60, 3)).astype(np.float32)
+    verdicts = []
+    for _ in range(300):
+        K = int(rng.integers(1, 9))
+        faces = np.array([rng.choice(n, 3, replace=False) for _ in range(K)])
+        k = rng.integers(0, 3, K)
+        fids = rng.integers(0, 60, K)
+        # the moving corner goes to a point near the line through the other two: turns close to 90°
+        p = V[faces]
+        o1, o2 = p[np.arange(K), (k + 1) % 3], p[np.arange(K), (k + 2) % 3]
+        x = (o1[0] + rng.normal() * (o2[0] - o1[0]) + 1e-3 * rng.normal(size=3)).astype(np.float32)
+        for cos_max in (0.0, 0.5, -2.0):
+            want = bool(np.any(np.asarray(flips.face_flips_at(
+                jnp.asarray(V), jnp.asarray(N0), jnp.asarray(faces), jnp.asarray(fids.astype(np.int32)),
+                jnp.asarray(k.astype(np.int32)), jnp.asarray(np.tile(x, (K, 1))), np.float32(cos_max)))))
+            got = flips.flips_host(V, N0, faces, fids, k, x, cos_max)
+            assert got == want, (faces, k, x, cos_max)
+            verdicts.append(got)
+    assert 0 < sum(verdicts) < len(verdicts)
+
+
 def test_set_rows_updates_in_place_and_drops_padding():
     from qemjax._schedulers.common import set_rows
 

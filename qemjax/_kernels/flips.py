@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import kernel
 from . import quadrics as qd
@@ -30,21 +31,36 @@ def _normal(p0, p1, p2):
     return _cross(_sub(p1, p0), _sub(p2, p0))
 
 
-def _flips(p, k, x, cos_max, ref):
+def _flips(p, k, x, cos_max, ref, xp=jnp):
     """Core on component lists: p = [p0, p1, p2] corners, each [x, y, z]; k corner index array;
-    x [x, y, z]; ref [x, y, z] or None. Returns a bool array."""
+    x [x, y, z]; ref [x, y, z] or None. Returns a bool array. ``xp``: jax.numpy, or numpy for the
+    host twin `flips_host` (same operations in the same order)."""
     n0 = _normal(*p)
-    q = [[jnp.where(k == c, x[i], p[c][i]) for i in range(3)] for c in range(3)]
+    q = [[xp.where(k == c, x[i], p[c][i]) for i in range(3)] for c in range(3)]
     n1 = _normal(*q)
-    l1 = jnp.sqrt(qd.dot(n1, n1))
-    bad = qd.dot(n0, n1) <= cos_max * jnp.sqrt(qd.dot(n0, n0)) * l1
+    l1 = xp.sqrt(qd.dot(n1, n1))
+    bad = qd.dot(n0, n1) <= cos_max * xp.sqrt(qd.dot(n0, n0)) * l1
     # sliver guard: float32 rounding can leave a "collinear" result a tiny positive normal
     e = [_sub(q[1], q[0]), _sub(q[2], q[1]), _sub(q[0], q[2])]
-    longest2 = jnp.maximum(jnp.maximum(qd.dot(e[0], e[0]), qd.dot(e[1], e[1])), qd.dot(e[2], e[2]))
+    longest2 = xp.maximum(xp.maximum(qd.dot(e[0], e[0]), qd.dot(e[1], e[1])), qd.dot(e[2], e[2]))
     bad = bad | ((l1 <= SLIVER * longest2) & (cos_max > -1.0))
     if ref is not None:
-        bad = bad | (qd.dot(ref, n1) <= cos_max * jnp.sqrt(qd.dot(ref, ref)) * l1)
+        bad = bad | (qd.dot(ref, n1) <= cos_max * xp.sqrt(qd.dot(ref, ref)) * l1)
     return bad
+
+
+def flips_host(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarray, k: np.ndarray,
+               x: np.ndarray, cos_max) -> bool:
+    """`face_flips_at` on the host, in numpy, for the few faces of one contraction (the greedy queue tests
+    one pair at a time, where a device call would cost more than the arithmetic): does moving corner k (K,)
+    of faces (K,3) (rows of V (N,≥3)) to x (3,) flip any of them against its own normal or its
+    reference N0[fids]? Same float32 operations as the kernel."""
+    g = V[faces, :3].astype(np.float32)  # (K,3,3)
+    p = [[g[:, j, i] for i in range(3)] for j in range(3)]
+    ref = N0[fids].astype(np.float32)
+    x = np.asarray(x, np.float32)
+    return bool(np.any(_flips(p, k, [x[i] for i in range(3)], np.float32(cos_max),
+                              [ref[:, i] for i in range(3)], np)))
 
 
 def moved_corner_flips(p, k, x, cos_max, ref=None):

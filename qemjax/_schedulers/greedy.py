@@ -1,9 +1,10 @@
 """Garland & Heckbert's algorithm as published: one priority queue of all valid pairs, contract the
 cheapest, re-cost the pairs whose cost changed. The quality reference for the parallel scheduler.
 
-It runs on the same pieces as the parallel scheduler, one contraction at a time: the faces in
-`FaceLists`, the manifold rules of `topo.link_ok` (on the pair's neighbourhood, relabelled to a few local
-ids), the coincident-face rule of `topo.coincident_removals`, the flip kernel, and the cost model's
+It runs on the same rules as the parallel scheduler, one contraction at a time: the faces in
+`FaceLists`, the manifold rules of `topo.link_ok` (as a scalar check on the pair's neighbourhood), the
+coincident-face rule of `topo.coincident_removals`, the flip test (`flips.flips_host`, the flip kernel's
+numpy twin: one contraction's few faces cost less on the host than a device call), and the cost model's
 batched price and merge on the device rows.
 """
 from __future__ import annotations
@@ -17,8 +18,8 @@ from .. import _topology as topo
 from .._costs import MeshView
 from .._incidence import FaceLists
 from . import outcome
-from .common import (DTYPE, Options, bucket, face_normals, pad_rows, set_rows, start_flips, start_merge,
-                     start_price)
+from .._kernels import flips
+from .common import DTYPE, Options, bucket, face_normals, set_rows, start_merge, start_price
 
 BUDGET = 0  # code of a pair held back only because it would remove more faces than are still needed
 
@@ -83,7 +84,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Same return as
     `parallel.run`."""
-    n, m = len(V), len(F)
+    n = len(V)
     manifold = options.preserve_topology
     params = model.kernel_params()
     faces = FaceLists(F, n)
@@ -92,7 +93,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)
-    N0d = jnp.asarray(pad_rows(face_normals(np.asarray(V, DTYPE), F).astype(DTYPE), bucket(m)))
+    N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)  # each input face's normal: the reference
     nbr = [set() for _ in range(n)]  # pair partners
     for a, b in pairs.tolist():
         nbr[a].add(b)
@@ -137,8 +138,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             block((a, b), outcome.PART)
             continue
         x, br, _ = q.placed[(a, b)]
-        if len(fids) and start_flips(VQd, N0d, before, fids, corner, np.zeros(len(fids), np.int64), x[None], 1,
-                                     options.cos_max)()[0]:
+        if len(fids) and flips.flips_host(VQ, N0, before, fids, corner, x, options.cos_max):
             block((a, b), outcome.FLIP)
             continue
         # faces that would coincide after the contraction: forbidden in manifold mode, else dropped
@@ -177,13 +177,12 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
                 ring = sorted(set(ring) | set(around.tolist()) - {a})
         # re-cost pairs at a (ring support: at its whole 1-ring); pairs around a whose validity may
         # have changed are unblocked
-        push([(min(a, w), max(a, w)) for w in sorted(nbr[a])])
+        at_a = [(min(a, w), max(a, w)) for w in sorted(nbr[a])]
         if model.support == "ring":
-            push(sorted({(min(u, w), max(u, w)) for u in ring for w in nbr[u]} - {(min(a, w), max(a, w))
-                                                                                   for w in nbr[a]}))
+            more = {(min(u, w), max(u, w)) for u in ring for w in nbr[u]} - set(at_a)
         else:
-            push(sorted({(min(u, w), max(u, w)) for u in ring for w in nbr[u]
-                         if (min(u, w), max(u, w)) in q.blocked}))
+            more = {(min(u, w), max(u, w)) for u in ring for w in nbr[u] if (min(u, w), max(u, w)) in q.blocked}
+        push(at_a + sorted(more))  # one kernel call
         if progress is not None:
             progress(faces.count)
     blocked = {}
