@@ -41,7 +41,7 @@ def main():
                 r = pkg.simplify((V, F), ratio=0.01, scheduler="greedy")
                 cpu = sum(os.times()[:2]) - c
                 print(f"{label:8s} {'bumpy' if bumpy else 'flat'} grid {n}x{n}: {len(F)} -> {len(r.faces)} faces, "
-                      f"{r.stats['rejected']} rejected, {time.perf_counter() - t:.1f} s ({cpu:.1f} s CPU), {r.stop_reason}", flush=True)
+                      f"{r.stats['rejected']} rejected, {time.perf_counter() - t:.1f} s ({cpu:.1f} s CPU), {getattr(r, 'stop_reason', '-')}", flush=True)
 
 
 if __name__ == "__main__":
