@@ -203,11 +203,11 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             last = faces_now
     else:
         progress_cb = None
+    run_target, planned = target, None
     if target < m or err < math.inf:
         run = functools.partial(parallel.run, edges=(E, ecount)) if scheduler == "parallel" else greedy.run
-        run_target = target
         if split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
-            run_target = _split.plan(run, (Vn, S, F, extra), target, model, options, split)
+            run_target, planned = _split.plan(run, (Vn, S, F, extra), target, model, options, split)
         Vo, So, Fo, alive, hist, info = run(Vn, S, F, extra, max(run_target, 1), model, options, progress_cb)
     else:  # nothing to remove
         Vo, So, Fo, alive = Vn, S, F, np.ones(m, bool)
@@ -231,6 +231,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
     if split is not None:
         vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
+        split_stats.update(planned=planned, run_target=run_target if target else None,
+                           run_stop_reason=info["stop_reason"])
+        if target and len(Fout) <= target and info["stop_reason"] == "blocked":
+            info["stop_reason"] = "target"  # splitting spent what the contractions could not reach
     stop = info["stop_reason"]
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0

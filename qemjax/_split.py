@@ -13,9 +13,12 @@ spent.
 Budget. With a face target T, the result must have exactly T faces (the paper's Table 1 gives ESQEM and
 QEM the same counts), but how many faces splitting adds is known only on a simplified mesh. So `plan`
 simplifies to T first, counts the faces its splitting would add (s), and the caller simplifies the input
-again to T − s; `split_edges` then spends exactly the budget T − (faces left): the long edges longest
-first, and if the budget is not spent when none is left (the second mesh is coarser and has its own long
-edges, usually about as many), the longest remaining edges, until the count is T. A closed mesh gains
+again to T − s, but never below T/2 (MAX_SPLIT_SHARE: QEM's anisotropic output has many long edges,
+about 20 % of the Cow's, so s reaches 60-70 % of T; without the floor the contraction would have to go
+to a third of the target, and a mesh of many small parts could be simplified to a single face and then
+split back up); `split_edges` then spends exactly the budget T − (faces left): the long edges longest
+first (some stay unsplit when the floor holds), and if the budget is not spent when none is left, the
+longest remaining edges, until the count is T. A closed mesh gains
 faces in pairs, so an odd budget on a closed mesh stops one face short (the documented parity case of
 face targets, on the other side). Without a face target, every long edge is split.
 """
@@ -26,6 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 MAX_PASSES = 64  # a pass at least halves the longest edges it splits; 64 passes is far beyond any mesh
+MAX_SPLIT_SHARE = 0.5  # splitting makes at most this fraction of the final faces (see `plan`)
 
 
 class Split(NamedTuple):
@@ -51,6 +55,12 @@ def _edges(F: np.ndarray, n: int):
     key = np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)
     uk, inv = np.unique(key, return_inverse=True)
     return np.stack([uk // n, uk % n], 1), inv, np.repeat(np.arange(m), 3), np.tile(np.arange(3), m)
+
+
+def _long(V, F, length):
+    """(E,) bool: which unique edges of F are longer than ``length``."""
+    E = _edges(np.asarray(F, np.int64), len(V))[0]
+    return np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1) > length
 
 
 def mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
@@ -147,10 +157,12 @@ def added_faces(V: np.ndarray, F: np.ndarray, factor: float) -> int:
 def plan(run, args, target: int, model, options, factor: float) -> int:
     """The face target to simplify to so that splitting can bring the count back to ``target``: runs the
     scheduler ``run`` once to ``target`` on ``args`` = (V, S, F, extra pairs) and subtracts the faces
-    splitting that result would add (at least 1 face is left to simplify to)."""
+    splitting that result would add, but keeps at least (1 − MAX_SPLIT_SHARE) × target faces.
+    Returns (the face target, the faces splitting the first result would add)."""
     V, S, F, extra = args
     Vo, _, Fo, alive, _, _ = run(V, S, F, extra, max(target, 1), model, options, None)
-    return max(target - added_faces(np.asarray(Vo, np.float64), Fo[alive], factor), 1)
+    s = added_faces(np.asarray(Vo, np.float64), Fo[alive], factor)
+    return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s
 
 
 def apply(V, F, ids, fids, verr, factor: float, target: int):
@@ -172,5 +184,6 @@ def apply(V, F, ids, fids, verr, factor: float, target: int):
         ids.append(ids[u])
         verr.append(max(verr[u], verr[v]))
     stats = {"length": sp.length, "passes": sp.passes, "faces_added": len(sp.F) - len(F),
-             "vertices_added": len(sp.edge), "simplified_to": len(F)}
+             "vertices_added": len(sp.edge), "simplified_to": len(F),
+             "long_edges_left": int(np.sum(_long(sp.V, sp.F, sp.length)))}
     return sp.V, sp.F, np.array(ids, np.int64), np.asarray(fids)[sp.face_parent], np.array(verr, np.float64), stats
