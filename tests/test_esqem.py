@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import assert_valid, shared_mesh
+from conftest import assert_valid, one_pair_per_round, shared_mesh
 
 import qemjax
 from qemjax import _costs, _split, shapes
@@ -190,6 +190,19 @@ def test_curvature_weight_changes_the_contractions_and_zero_is_qem(scheduler):
     assert not np.array_equal(strong.faces, qem.faces)
 
 
+@pytest.mark.parametrize("seed", [0, 4])
+def test_parallel_one_pair_per_round_is_greedy(seed):
+    """Gated to one pair per round, the parallel scheduler refreshes the same curvatures, takes the means
+    at the same face counts from the same candidates, and so makes greedy's contractions in greedy's order."""
+    mesh = shapes.bumpy_sphere(2, seed=seed)
+    kw = dict(target_faces=60, method="esqem", split_factor=None, curvature_weight=0.3)
+    g = qemjax.simplify(mesh, scheduler="greedy", **kw)
+    p = qemjax.simplify(mesh, schedule=one_pair_per_round(), **kw)
+    assert np.array_equal(np.sort(p.history.pairs, 1), np.sort(g.history.pairs, 1))
+    assert [f for f, _ in p.stats["reweights"]] == [f for f, _ in g.stats["reweights"]]
+    np.testing.assert_allclose(p.history.parts["rank"], g.history.parts["rank"], rtol=1e-6)
+
+
 def test_units_errors_in_squared_mesh_units_and_curvature_in_inverse():
     V, F = shapes.bumpy_sphere(3)
     a = qemjax.simplify((V, F), target_faces=400, method="esqem")
@@ -290,6 +303,9 @@ def test_esqem_meets_the_face_target_exactly_and_stays_valid(scheduler, make, ta
     assert r.stop_reason == "target"
     sp = r.stats["split"]
     assert sp["faces_added"] > 0 and sp["simplified_to"] + sp["faces_added"] == len(r.faces)
+    # the budget: simplified by what splitting the first result would add, to half the target at most
+    assert sp["planned"] > 0 and sp["run_target"] == max(target - sp["planned"], math.ceil(target / 2))
+    assert sp["simplified_to"] >= sp["run_target"]
     assert len(r.source_vertices) == len(r.vertices) and len(r.vertex_error) == len(r.vertices)
     # the history replays onto the output: every kept vertex's last position is where it is now
     last = {}
