@@ -13,6 +13,7 @@ import numpy as np
 from . import _compilation
 from . import _costs
 from . import _io
+from . import _split
 from . import _topology as topo
 from ._options import Options, Schedule
 from . import _units
@@ -82,7 +83,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              preserve_topology: bool | None = None,
              flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
              prune: bool = False, regularize: float = 0.0, schedule: Schedule | None = None,
-             ) -> SimplifyResult:
+             curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
+             split_factor: float | None = _costs.esqem.SPLIT_FACTOR) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -92,7 +94,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
         mesh's own units* (the quadric error, e.g. ``(0.01 * diagonal)**2``). May be combined with a
         face target; whichever is reached first stops.
-    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric).
+    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric) or
+        ``'esqem'`` (Zhang 2022: QEM ranked with a Gaussian-curvature term, then long edges split).
     scheduler: ``'parallel'`` (default) — rounds of many non-interacting contractions chosen by an
         independent-set rule; ``'greedy'`` — the paper's priority queue, one contraction at a time.
     placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint)
@@ -118,6 +121,14 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         create slender triangles; ``qemjax._costs.regularize``). 0 (default) leaves the method's cost as
         it is. With λ > 0, costs, ``max_error`` and ``history.costs`` include the term (a squared length).
     schedule: the parallel scheduler's tunables (`qemjax.Schedule`); None = the defaults.
+    curvature_weight: a ≥ 0 (``method='esqem'`` only): contractions are ranked by Q + w·K with
+        w = a·Q̄/K̄, so the mean curvature term is a times the mean quadric error (default 0.01, the paper's
+        "two orders of magnitude below"; ``qemjax._costs.esqem``). Errors, ``max_error`` and
+        ``history.costs`` stay the quadric error Q; K is in ``history.parts``.
+    split_factor: b > 0 or None (``method='esqem'`` only): after simplifying, split every edge longer than
+        b × the mean edge length at its midpoint (default 4/3, the paper's); None: no splitting. With a
+        face target the result still has exactly that many faces: it simplifies further first, by as many
+        faces as splitting will add (``qemjax._split``; ``stats["split"]``).
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options.
@@ -136,8 +147,11 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
         raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
-    model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted,
-                                      boundary_weight=boundary_weight), dict(regularize=regularize))
+    model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted, boundary_weight=
+                                      boundary_weight, curvature_weight=_real("curvature_weight", curvature_weight),
+                                      split_factor=split_factor if split_factor is None else
+                                      _real("split_factor", split_factor)), dict(regularize=regularize))
+    split = getattr(model, "split_factor", None)  # None: the method does not split
     if schedule is None:
         schedule = Schedule()
     elif not isinstance(schedule, Schedule):
@@ -190,10 +204,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             last = faces_now
     else:
         progress_cb = None
+    run_target, planned = target, None
     if target < m or err < math.inf:
         run = functools.partial(parallel.run, edges=(E, ecount), part_scale=frame.part_scale2()) \
             if scheduler == "parallel" else greedy.run
-        Vo, So, Fo, alive, hist, info = run(Vn, S, F, extra, max(target, 1), model, options, progress_cb)
+        if split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
+            run_target, planned = _split.plan(run, (Vn, S, F, extra), target, model, options, split)
+        Vo, So, Fo, alive, hist, info = run(Vn, S, F, extra, max(run_target, 1), model, options, progress_cb)
     else:  # nothing to remove
         Vo, So, Fo, alive = Vn, S, F, np.ones(m, bool)
         hist = (np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
@@ -214,6 +231,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         w = np.unique(Fout[flat])
         vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
     verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
+    if split is not None:
+        vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
+        split_stats.update(planned=planned, run_target=run_target if target else None,
+                           run_stop_reason=info["stop_reason"])
+        if target and len(Fout) <= target and info["stop_reason"] == "blocked":
+            info["stop_reason"] = "target"  # splitting spent what the contractions could not reach
     stop = info["stop_reason"]
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
@@ -224,6 +247,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"], nonmanifold,
                                                 preserve_topology), stacklevel=2)
     hp, hx, hc = hist[0], frame.positions_to_mesh(hist[1], hist[0][:, 0]), frame.errors_to_mesh(hist[2])
+    hparts = {}
+    if info.get("parts") is not None and len(model.part_units) == len(model.parts):  # in mesh units
+        for name, unit, col in zip(model.parts + ("rank",), model.part_units + (2,), info["parts"].T):
+            hparts[name] = np.asarray(col, np.float64) * frame.scale ** unit
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
     stats = dict(report)
@@ -239,11 +266,16 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":
             stats[k] = v
+    if info.get("reweights"):  # (faces, weights of the parts in mesh units) each time they were set
+        stats["reweights"] = [(f, [float(x) * frame.scale ** (2 - u) for x, u in zip(w, model.part_units)])
+                              for f, w in info["reweights"]]
+    if split is not None:
+        stats["split"] = split_stats
     return SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(frame.errors_to_mesh(info["max_cost"])), source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
-        input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc), stats=stats, stop_reason=stop)
+        input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc, hparts), stats=stats, stop_reason=stop)
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,

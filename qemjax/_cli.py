@@ -41,6 +41,10 @@ OPTIONS = {
     "weld": dict(action=argparse.BooleanOptionalAction),
     "regularize": dict(type=float, metavar="LAMBDA"),
     "prune": dict(action=argparse.BooleanOptionalAction),
+    "curvature_weight": dict(type=float, metavar="A"),
+    "split_factor": dict(type=str, metavar="B", help="with --method esqem, split edges longer than B × the "
+                         "mean edge length after simplifying (the face target still holds); 'none' disables",
+                         shown="4/3"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
@@ -117,6 +121,15 @@ def _read_feature_edges(path: str) -> np.ndarray:
     return a
 
 
+def _number_or_none(flag: str, text: str):
+    if text.strip().lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise CliError(f"{flag} takes a number or 'none', got {text!r}") from None
+
+
 def _flip_angle(text: str):
     if text.strip().lower() == "none":
         return None
@@ -134,6 +147,8 @@ def _simplify_kwargs(args) -> dict:
         kw["feature_edges"] = _read_feature_edges(kw["feature_edges"])
     if "flip_angle" in kw:
         kw["flip_angle"] = _flip_angle(kw["flip_angle"])
+    if "split_factor" in kw:
+        kw["split_factor"] = _number_or_none("--split-factor", kw["split_factor"])
     kw["progress"] = not args.quiet
     return kw
 

@@ -11,12 +11,16 @@ class Contractions:
     """Record of the contractions in the order they happened, in the cleaned input's vertex ids.
 
     pairs (k,2) int64: (kept, removed) vertex; positions (k,3) float64: where the kept vertex went
-    (input units); costs (k,) float64: quadric cost (squared distance, input units).
+    (input units); costs (k,) float64: quadric cost (squared distance, input units); parts: for a method
+    with cost parts, each part by name (k,) float64 in input units (``method="esqem"``: ``"quadric"``,
+    a squared distance, equal to costs; ``"curvature"``, K(e) in 1/units²), and ``"rank"``, what selection
+    ranked the pair by (esqem: Q + w·K, a squared distance); empty otherwise.
     """
 
     pairs: np.ndarray
     positions: np.ndarray
     costs: np.ndarray
+    parts: dict = dataclasses.field(default_factory=dict)
 
     def __len__(self):
         return len(self.pairs)

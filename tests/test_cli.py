@@ -186,16 +186,19 @@ def test_options_reach_simplify(src, tmp_path, monkeypatch):
     argv = ["simplify", str(src), out, "--faces", "100", "--max-error", "0.5", "--method", "qem",
             "--scheduler", "greedy", "--placement", "endpoints", "--boundary-weight", "3", "--no-area-weighted",
             "--feature-edges", str(feat), "--pair-threshold", "0.25", "--no-preserve-topology",
-            "--flip-angle", "none", "--no-weld", "--quiet"]
+            "--flip-angle", "none", "--no-weld", "--quiet", "--curvature-weight", "0.1", "--split-factor", "none"]
     assert _cli.main(argv) == 2
     kw = seen.pop()
     fe = kw.pop("feature_edges")
     assert fe.tolist() == [[0, 1], [1, 2]]
     assert kw == dict(target_faces=100, max_error=0.5, method="qem", scheduler="greedy", placement="endpoints",
                       boundary_weight=3.0, area_weighted=False, pair_threshold=0.25, preserve_topology=False,
-                      flip_angle=None, weld=False, progress=False)
+                      flip_angle=None, weld=False, progress=False, curvature_weight=0.1, split_factor=None)
     assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--flip-angle", "45"]) == 2
     assert seen.pop() == dict(ratio=0.5, flip_angle=45.0, progress=True)
+    assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--method", "esqem", "--split-factor", "1.5"]) == 2
+    assert seen.pop() == dict(ratio=0.5, method="esqem", split_factor=1.5, progress=True)
+    assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--split-factor", "big"]) == 2
     np.save(tmp_path / "feat.npy", np.array([[3, 4]]))
     assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--feature-edges",
                       str(tmp_path / "feat.npy")]) == 2

@@ -10,11 +10,13 @@ import dataclasses
 from .base import CostModel as CostModel
 from .base import MeshInput as MeshInput
 from .base import MeshView as MeshView
+from .esqem import ESQEM
 from .qem import QEM
 from .regularize import Regularized
 
 REGISTRY: dict[str, type[CostModel]] = {
     "qem": QEM,
+    "esqem": ESQEM,
 }
 TERMS = {
     "regularize": Regularized,

@@ -15,6 +15,11 @@ A cost model is a small frozen object (its fields are the method's settings) wit
 - **support**: ``"pair"``: a contraction changes only the costs of pairs at the kept vertex;
   ``"ring"``: also those of every pair in its 1-ring (the cost reads the faces around the pair).
 - **vertex_error**: a squared distance per vertex, in the normalised units of the run.
+- **rank_weights** (optional): for a model whose selection adds weighted parts to the cost, the weights
+  (p,) float64 from the parts (P,p) of the candidate pairs; the schedulers then rank pairs by
+  cost + parts @ weights (the cost alone is still what ``max_error`` and the history mean), and ask for
+  new weights whenever the face count has fallen by ``reweight_step`` since the last time. None: rank by
+  the cost. ``part_units`` gives each part's power of length, so the history reports it in mesh units.
 
 Numeric settings reach the kernels through `kernel_params` as 0-d arrays (a pytree): a new value never
 recompiles, and a sweep can give every configuration its own.
@@ -70,6 +75,9 @@ class CostModel:
         raise NotImplementedError
 
     refresh = None  # or a function (VS host rows, MeshView, verts) -> (len(verts), width) rows
+    rank_weights = None  # or a function (parts (P, p) of the candidates) -> (p,) float64 weights
+    reweight_step: ClassVar[float] = 0.05
+    part_units: ClassVar[tuple[int, ...]] = ()  # each part's power of length (empty: not reported)
 
     def vertex_error(self, state: np.ndarray) -> np.ndarray:
         """(k,) float64 squared distances (normalised units) from state rows (k, width)."""

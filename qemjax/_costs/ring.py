@@ -41,7 +41,12 @@ def gather_groups(faces, P: np.ndarray, pad: int):
     """Pairs P (K,2) grouped by ring size: yields (indices into P, Rings) per group, smallest rings first.
     Every pair appears in exactly one group."""
     owner, rot = ring_faces(faces, P)
-    K = len(P)
+    yield from group_rings(owner, rot, len(P), pad)
+
+
+def group_rings(owner: np.ndarray, rot: np.ndarray, K: int, pad: int):
+    """Rows rot (k,3) owned by items 0..K-1 (owner (k,) non-decreasing) grouped by how many rows each
+    item has: yields (item indices, Rings) per ring size, smallest first; every item is in one group."""
     counts = np.bincount(owner, minlength=K)
     start = np.cumsum(counts) - counts
     size = np.array([bucket(int(c), lo=RING_MIN) for c in np.unique(counts)]) if K else np.zeros(0, int)

@@ -61,21 +61,36 @@ def _tie(a: int, b: int) -> int:
 class _Queue:
     """The priority queue of pairs with lazy deletion: an entry is current while its stamp is.
 
-    Keys: (cost, squared length, `_tie`). Flat regions tie exactly (cost 0); taking the shortest pair
-    first decimates them evenly. Breaking those ties by index made vertices absorb their neighbours one
-    after another into fans whose slivers refused contractions (a flat 50×50 grid: 18,532 refusals; by a
+    Keys: (rank, squared length, `_tie`); the rank is the cost, or for a model with `rank_weights`
+    cost + parts @ ``weights``. Flat regions tie exactly (cost 0); taking the shortest pair first
+    decimates them evenly. Breaking those ties by index made vertices absorb their neighbours one after
+    another into fans whose slivers refused contractions (a flat 50×50 grid: 18,532 refusals; by a
     scramble alone 9,021; by length 32; `experiments/greedy_flat.py`)."""
 
     def __init__(self):
         self.heap, self.stamp, self.placed, self.blocked = [], {}, {}, {}
+        self.weights = None
+
+    def _key(self, cost, parts):
+        if self.weights is None:
+            return cost
+        return float(np.float32(cost + float(np.asarray(parts, np.float64) @ self.weights)))
 
     def push(self, pairs, priced, length2):
         for k, ((a, b), c, l2) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist())):
             s = self.stamp.get((a, b), 0) + 1
             self.stamp[(a, b)] = s
-            self.placed[(a, b)] = (priced.x[k], int(priced.branch[k]), c)
+            parts = priced.parts[:, k]
+            self.placed[(a, b)] = (priced.x[k], int(priced.branch[k]), c, parts, l2)
             self.blocked.pop((a, b), None)
-            heapq.heappush(self.heap, (c, l2, _tie(a, b), a, b, s))
+            heapq.heappush(self.heap, (self._key(c, parts), l2, _tie(a, b), a, b, s))
+
+    def reweigh(self, weights):
+        """New ranking weights: every current, unblocked entry is ranked again (the heap is rebuilt)."""
+        self.weights = weights
+        self.heap = [(self._key(c, parts), l2, _tie(a, b), a, b, self.stamp[(a, b)])
+                     for (a, b), (_, _, c, parts, l2) in self.placed.items() if (a, b) not in self.blocked]
+        heapq.heapify(self.heap)
 
     def forget(self, pair):
         self.stamp.pop(pair, None)
@@ -110,7 +125,19 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             d = VQ[pa[:, 0], :3] - VQ[pa[:, 1], :3]
             q.push(plist, start_price(model, VQd, pa, params, faces, n)(), np.einsum("ij,ij->i", d, d))
 
+    ranked = model.rank_weights is not None
+    reweights, history_parts = [], []
+
+    def reweigh():
+        """Weights from the unblocked pairs (the candidates), when the model ranks by weighted parts."""
+        live = [p[3] for key, p in q.placed.items() if key not in q.blocked]
+        w = model.rank_weights(np.array(live, np.float64).reshape(-1, len(model.parts)))
+        q.reweigh(w)
+        reweights.append((faces.count, w))
+
     push(sorted({tuple(p) for p in pairs.tolist() if p[0] != p[1]}))
+    if ranked:
+        reweigh()
     history = []
     rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
     max_cost_used = 0.0
@@ -123,11 +150,17 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             rejected_by[code] += 1
 
     while faces.count > target_faces and q.heap:
-        cost, l2, tie, a, b, s = heapq.heappop(q.heap)
+        if ranked and faces.count <= (1.0 - model.reweight_step) * reweights[-1][0]:
+            reweigh()
+        key, l2, tie, a, b, s = heapq.heappop(q.heap)
         if q.stamp.get((a, b)) != s or (a, b) in q.blocked:
             continue
+        x, br, cost, parts, _ = q.placed[(a, b)]
+        if ranked and cost > options.max_cost:  # ranked by more than the cost: others may still fit
+            block((a, b), BUDGET)
+            continue
         if cost > options.max_cost:
-            heapq.heappush(q.heap, (cost, l2, tie, a, b, s))  # still a pair: the stop report counts it
+            heapq.heappush(q.heap, (key, l2, tie, a, b, s))  # still a pair: the stop report counts it
             stop = "max_error"
             break
         P = np.array([[a, b]])
@@ -142,7 +175,6 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         if manifold and options.keep_parts and len(fids) == 0:  # its faces are all its part has left
             block((a, b), outcome.PART)
             continue
-        x, br, _ = q.placed[(a, b)]
         if len(fids) and flips.flips_host(VQ, N0, before, fids, corner, x, options.cos_max):
             block((a, b), outcome.FLIP)
             continue
@@ -159,6 +191,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         branches[br] += 1
         max_cost_used = max(max_cost_used, float(cost))
         history.append((a, b, np.array(x), float(cost)))
+        if len(model.parts):
+            history_parts.append(np.append(parts, key))
         faces.contract_touched(P, kept, dead)
         if len(drop):
             faces.remove(drop)
@@ -198,7 +232,9 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             np.array([c for _, _, _, c in history], np.float64))
     info = {"contractions": len(history), "rejected": int(rejected_by.sum()), "rounds": len(history),
             "max_cost": max_cost_used, "branches": branches, "stop_reason": stop or "target",
-            "blocked_by": blocked,
+            "blocked_by": blocked, "reweights": reweights,
+            "parts": np.array(history_parts, np.float64).reshape(-1, len(model.parts) + 1) if len(model.parts)
+            else None,
             "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(rejected_by)), rejected_by))}
     return VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, hist, info
 

@@ -51,6 +51,8 @@ class RoundState:
     E (P,2) pairs (mesh edges, plus close pairs with aggregation), ecount (P,) faces at each, deg (n,)
     edges at each vertex, bvert (n,) boundary vertices, keys (P,) sorted pair keys when E was rebuilt
     (None when it was updated in place); x (P,3), cost (P,), branch (P,) int8: the current prices;
+    parts (P,p) float32: the model's cost parts (p may be 0); key (P,): what selection ranks (the cost,
+    or for a model with `rank_weights` the cost plus its weighted parts);
     bad (P,) int8: the rule a pair broke when last validated (0: not known invalid); changed (n,) bool:
     vertices whose pairs need a new price next round; edges_next: `topo.contract_edges`' result when the
     pairs were updated through the contractions (manifold mode)."""
@@ -63,6 +65,8 @@ class RoundState:
     x: np.ndarray = None
     cost: np.ndarray = None
     branch: np.ndarray = None
+    parts: np.ndarray = None
+    key: np.ndarray = None
     bad: np.ndarray = None
     changed: np.ndarray = None
     edges_next: tuple | None = None
@@ -172,6 +176,8 @@ class _Run:
         self.rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
         self.max_cost_used = 0.0
         self.faces_per_round = []
+        self.weights, self.weighed_at, self.reweights = None, 0, []  # ranking weights (`rank`)
+        self.history_parts = []
 
     # -- stage 1: update ---------------------------------------------------------------------------
     def update(self, prev: RoundState | None):
@@ -225,14 +231,32 @@ class _Run:
 
         t0 = time.perf_counter()
         if prev is None:
-            st.x, st.cost, st.branch, _ = pending()
+            st.x, st.cost, st.branch, parts = pending()
+            st.parts = np.ascontiguousarray(parts.T)
         else:
             # separate arrays, each under 32 MB at 2 M edges: glibc maps larger ones afresh every time
             # (page faults on every round; one (E,5) array was slower to gather here)
             st.x, st.cost, st.branch = follow(prev.x), follow(prev.cost), follow(prev.branch)
-            xd, st.cost[d], st.branch[d], _ = pending()
+            xd, st.cost[d], st.branch[d], parts = pending()
             put_rows(st.x, d, xd)
+            st.parts = follow(prev.parts)
+            if len(parts):  # a model with cost parts
+                put_rows(st.parts, d, np.ascontiguousarray(parts.T))
         self.timer.add("kernels_s", time.perf_counter() - t0)
+
+    def rank(self, st: RoundState, valid: np.ndarray):
+        """Set ``st.key``: the cost, or for a model with `rank_weights` the cost plus its weighted parts,
+        with weights taken from the candidate pairs (``valid``) at the start and again whenever the face
+        count has fallen by the model's ``reweight_step`` since (then recorded in ``reweights``)."""
+        if self.model.rank_weights is None:
+            st.key = st.cost
+            return
+        count = self.faces.count
+        if self.weights is None or count <= (1.0 - self.model.reweight_step) * self.weighed_at:
+            self.weights = self.model.rank_weights(np.compress(valid, st.parts, axis=0))
+            self.weighed_at = count
+            self.reweights.append((count, self.weights))
+        st.key = (st.cost + st.parts.astype(np.float64) @ self.weights).astype(DTYPE)
 
     # -- stages 3 and 4: select and validate -------------------------------------------------------
     def candidates(self, st: RoundState, need: int) -> np.ndarray:
@@ -250,13 +274,13 @@ class _Run:
         t0 = time.perf_counter()
         sch = self.options.schedule
         k = min(max(need // (2 * sch.tail), 1), int(valid.sum()), max(int(sch.gate_fraction * len(st.E)), 1))
-        kth = np.partition(np.compress(valid, st.cost), k - 1)[k - 1]
+        kth = np.partition(np.compress(valid, st.key), k - 1)[k - 1]
         salt = self.rounds * 7919
 
         def key_of(idx):
-            return sort_keys(st.cost, idx, salt)
+            return sort_keys(st.key, idx, salt)
         free = sch.free_cost if self.part_scale is None else sch.free_cost * self.part_scale[st.E[:, 0]]
-        cand = valid & (st.cost <= np.maximum(sch.gate * kth, free))
+        cand = valid & (st.key <= np.maximum(sch.gate * kth, free))
         found = []
         acc, bad, why, extra, locked = independent_sets(
             st.E, key_of, cand, need, self.n, lambda *a: self.validate(st, found, *a), sch)
@@ -313,6 +337,8 @@ class _Run:
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
         self.max_cost_used = max(self.max_cost_used, float(st.cost[acc].max()))
         self.history.append((a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64)))
+        if st.parts.shape[1]:
+            self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
         r = np.flatnonzero(st.bad)
         if r.size:  # pairs whose faces change get another chance
             # the 1-rings that selection locked, unless the target cut the set short
@@ -363,6 +389,7 @@ class _Run:
             self.cost(st, prev, follow, stale, same)
             need = self.faces.count - self.target
             valid = self.candidates(st, need)
+            self.rank(st, valid)
             if not valid.any():
                 stop, blocked = self.stop(st, need)
                 break
@@ -405,7 +432,8 @@ def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=No
     info = {"contractions": len(hist[0]), "rejected": r.rejected, "rounds": r.rounds,
             "max_cost": r.max_cost_used, "branches": r.branches, "faces_per_round": r.faces_per_round,
             "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),
-            "stop_reason": stop, "blocked_by": blocked}
+            "stop_reason": stop, "blocked_by": blocked, "reweights": r.reweights,
+            "parts": np.concatenate(r.history_parts) if r.history_parts else None}
     info.update(r.timer.t)
     n = r.n
     return r.VQ[:n, :3], r.VQ[:n, 3:], r.faces.F, r.faces.alive, hist, info
