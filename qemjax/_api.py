@@ -81,7 +81,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              area_weighted: bool = True, feature_edges=None, pair_threshold: float = 0.0,
              preserve_topology: bool | None = None,
              flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
-             prune: bool = False, regularize: float = 0.0, schedule: Schedule | None = None,
+             prune: bool = False, regularize: float = 0.0, area_weight: float = 0.0,
+             schedule: Schedule | None = None,
              ) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
@@ -92,7 +93,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
         mesh's own units* (the quadric error, e.g. ``(0.01 * diagonal)**2``). May be combined with a
         face target; whichever is reached first stops.
-    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric).
+    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric) or ``'area'``
+        (minimum surface-area difference, Qi et al.: each pair contracts to the point of its segment that
+        changes the area least, cost = that |area change|; ``qemjax._costs.area``). With ``'area'``,
+        costs, ``max_error`` and ``history.costs`` are areas (mesh units²), ``vertex_error`` is 0, and
+        ``boundary_weight`` > 0 keeps boundary and feature vertices on their edges; ``placement`` and
+        ``area_weighted`` do not apply.
     scheduler: ``'parallel'`` (default) — rounds of many non-interacting contractions chosen by an
         independent-set rule; ``'greedy'`` — the paper's priority queue, one contraction at a time.
     placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint)
@@ -117,6 +123,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (penalises contractions that
         create slender triangles; ``qemjax._costs.regularize``). 0 (default) leaves the method's cost as
         it is. With λ > 0, costs, ``max_error`` and ``history.costs`` include the term (a squared length).
+    area_weight: λ ≥ 0, with ``method='qem'``: adds λ·ΔS²/ℓ² to the cost, ΔS the surface-area change of the
+        contraction at its placement and ℓ² the mean squared edge length around the pair (a squared
+        length; ``qemjax._costs.area_term``). 0 (default) leaves the cost as it is.
     schedule: the parallel scheduler's tunables (`qemjax.Schedule`); None = the defaults.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
@@ -137,7 +146,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
         raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
     model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted,
-                                      boundary_weight=boundary_weight), dict(regularize=regularize))
+                                      boundary_weight=boundary_weight),
+                         dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
     if schedule is None:
         schedule = Schedule()
     elif not isinstance(schedule, Schedule):

@@ -40,6 +40,7 @@ OPTIONS = {
                        "degrees or more; 'none' allows flips"),
     "weld": dict(action=argparse.BooleanOptionalAction),
     "regularize": dict(type=float, metavar="LAMBDA"),
+    "area_weight": dict(type=float, metavar="LAMBDA"),
     "prune": dict(action=argparse.BooleanOptionalAction),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}

@@ -10,14 +10,18 @@ import dataclasses
 from .base import CostModel as CostModel
 from .base import MeshInput as MeshInput
 from .base import MeshView as MeshView
+from .area import Area
+from .area_term import AreaTerm
 from .qem import QEM
 from .regularize import Regularized
 
 REGISTRY: dict[str, type[CostModel]] = {
     "qem": QEM,
+    "area": Area,
 }
 TERMS = {
     "regularize": Regularized,
+    "area_weight": AreaTerm,
 }
 
 
