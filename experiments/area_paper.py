@@ -136,11 +136,11 @@ def picture(rows_by_key, bm, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig = plt.figure(figsize=(15, 5), dpi=110)
+    fig = plt.figure(figsize=(15, 5.6), dpi=110)
     items = [("input", (bm.V, bm.F))] + list(rows_by_key.items())
     for i, (title, mesh) in enumerate(items):
         ax = fig.add_subplot(1, len(items), i + 1, projection="3d")
-        render.render(mesh, ax=ax, title=title, edges=i > 0, view=(10, -70))
+        render.render(mesh, ax=ax, title=title, edges=i > 0, view=(10, 110))
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -178,7 +178,7 @@ def main():
                 add(SMALL, "2", reduction=reduction, scheduler=scheduler, method=method)
     if not args.quick:
         for mesh in TABLE1_MESHES + (SMALL,):
-            for lam in LAMBDAS[1:]:
+            for lam in LAMBDAS:
                 add(mesh, "λ", reduction=0.9, scheduler="parallel", method="qem", area_weight=lam)
     df = pd.DataFrame(rows)
     RESULTS.mkdir(exist_ok=True)
@@ -205,8 +205,6 @@ def summary(df):
             ("λ", ["area_ratio", "retention", "hausdorff_rel", "rms_rel", "volume_error_sq"],
              ["{:.4%}", "{:.4%}", "{:.2e}", "{:.2e}", "{:.2e}"])):
         g = df[df.table == table]
-        if table == "λ":
-            g = pd_concat_base(df, g)
         if g.empty:
             continue
         print(f"\n| mesh | reduction | scheduler | method | " + " | ".join(cols) + " |")
@@ -214,15 +212,6 @@ def summary(df):
         for r in g.sort_values(["mesh", "reduction", "scheduler", "area_weight"]).to_dict("records"):
             vals = " | ".join(f.format(r[c]) for c, f in zip(cols, fmt))
             print(f"| {r['mesh']} | {100 * r['reduction']:.0f} % | {r['scheduler']} | {r['label']} | {vals} |")
-
-
-def pd_concat_base(df, g):
-    """The λ rows with their λ = 0 (plain QEM, parallel, 90 %) rows from table 1/2 beside them."""
-    import pandas as pd
-
-    base = df[(df.method == "qem") & (df.area_weight == 0) & (df.scheduler == "parallel")
-              & (df.reduction == 0.9) & df.mesh.isin(g.mesh.unique())]
-    return pd.concat([base, g])
 
 
 if __name__ == "__main__":

@@ -67,6 +67,11 @@ def _delta(s, uw):
     return before - 0.5 * jnp.sum(jnp.where(mask, _norm(u + s * w), 0.0))
 
 
+def _signed_delta(s, args):
+    uw, sign = args
+    return sign * _delta(s, uw)
+
+
 def _slope(s, uw):
     """G′(s), the rebuilt area's derivative (non-decreasing: G is convex)."""
     u, w, mask, _ = uw
@@ -93,9 +98,10 @@ def solve_pair(pa, pb, pos, moving, mask, lo, hi, tol):
     uw = (u.T, w.T, mask, before)  # (3, R): components first
     peak = _bisect(_slope, uw, lo, hi, tol)
     d_lo, d_hi, d_peak = _delta(lo, uw), _delta(hi, uw), _delta(peak, uw)
-    left = _bisect(_delta, uw, lo, peak, tol)  # ΔS rises on [lo, s*]
-    right = _bisect(lambda s, a: -_delta(s, a), uw, peak, hi, tol)  # and falls on [s*, hi]
-    s = jnp.stack([left, right, peak, lo, hi])
+    # ΔS rises on [lo, s*] and falls on [s*, hi]: both roots in one batched bisection (±ΔS, increasing)
+    sides = jax.vmap(lambda sign, a, b: _bisect(_signed_delta, (uw, sign), a, b, tol))(
+        jnp.array([1.0, -1.0], lo.dtype), jnp.stack([lo, peak]), jnp.stack([peak, hi]))
+    s = jnp.concatenate([sides, jnp.stack([peak, lo, hi])])
     d = jax.vmap(_delta, (0, None))(s, uw)
     has_root = jnp.stack([(d_lo <= 0) & (d_peak >= 0), (d_hi <= 0) & (d_peak >= 0)])
     score = jnp.where(jnp.concatenate([has_root, jnp.ones(3, bool)]), jnp.abs(d), jnp.inf)
