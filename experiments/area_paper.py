@@ -207,7 +207,7 @@ def summary(df):
         g = df[df.table == table]
         if g.empty:
             continue
-        print(f"\n| mesh | reduction | scheduler | method | " + " | ".join(cols) + " |")
+        print("\n| mesh | reduction | scheduler | method | " + " | ".join(cols) + " |")
         print("|---|---|---|---|" + "---|" * len(cols))
         for r in g.sort_values(["mesh", "reduction", "scheduler", "area_weight"]).to_dict("records"):
             vals = " | ".join(f.format(r[c]) for c, f in zip(cols, fmt))
