@@ -82,7 +82,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              area_weighted: bool = True, feature_edges=None, pair_threshold: float = 0.0,
              preserve_topology: bool | None = None,
              flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
-             prune: bool = False, regularize: float = 0.0, schedule: Schedule | None = None,
+             prune: bool = False, regularize: float = 0.0, area_weight: float = 0.0,
+             schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
              split_factor: float | None = _costs.esqem.SPLIT_FACTOR) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
@@ -94,8 +95,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
         mesh's own units* (the quadric error, e.g. ``(0.01 * diagonal)**2``). May be combined with a
         face target; whichever is reached first stops.
-    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric) or
-        ``'esqem'`` (Zhang 2022: QEM ranked with a Gaussian-curvature term, then long edges split).
+    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric),
+        ``'esqem'`` (Zhang 2022: QEM ranked with a Gaussian-curvature term, then long edges split) or
+        ``'area'`` (minimum surface-area difference, Qi et al.: each pair contracts to the point of its segment that
+        changes the area least, cost = that |area change|; ``qemjax._costs.area``). With ``'area'``,
+        costs, ``max_error`` and ``history.costs`` are areas (mesh units²), ``vertex_error`` is 0, and
+        ``boundary_weight`` > 0 keeps boundary and feature vertices on their edges; ``placement`` and
+        ``area_weighted`` do not apply.
     scheduler: ``'parallel'`` (default) — rounds of many non-interacting contractions chosen by an
         independent-set rule; ``'greedy'`` — the paper's priority queue, one contraction at a time.
     placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint)
@@ -120,6 +126,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (penalises contractions that
         create slender triangles; ``qemjax._costs.regularize``). 0 (default) leaves the method's cost as
         it is. With λ > 0, costs, ``max_error`` and ``history.costs`` include the term (a squared length).
+    area_weight: λ ≥ 0, with ``method='qem'``: adds λ·ΔS²/ℓ² to the cost, ΔS the surface-area change of the
+        contraction at its placement and ℓ² the mean squared edge length around the pair (a squared
+        length; ``qemjax._costs.area_term``). 0 (default) leaves the cost as it is.
     schedule: the parallel scheduler's tunables (`qemjax.Schedule`); None = the defaults.
     curvature_weight: a ≥ 0 (``method='esqem'`` only): contractions are ranked by Q + w·K with
         w = a·Q̄/K̄, so the mean curvature term is a times the mean quadric error (default 0.01, the paper's
@@ -150,7 +159,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted, boundary_weight=
                                       boundary_weight, curvature_weight=_real("curvature_weight", curvature_weight),
                                       split_factor=split_factor if split_factor is None else
-                                      _real("split_factor", split_factor)), dict(regularize=regularize))
+                                      _real("split_factor", split_factor)),
+                         dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
     split = getattr(model, "split_factor", None)  # None: the method does not split
     if schedule is None:
         schedule = Schedule()

@@ -40,6 +40,7 @@ OPTIONS = {
                        "degrees or more; 'none' allows flips"),
     "weld": dict(action=argparse.BooleanOptionalAction),
     "regularize": dict(type=float, metavar="LAMBDA"),
+    "area_weight": dict(type=float, metavar="LAMBDA"),
     "prune": dict(action=argparse.BooleanOptionalAction),
     "curvature_weight": dict(type=float, metavar="A"),
     "split_factor": dict(type=str, metavar="B", help="with --method esqem, split edges longer than B × the "

@@ -10,6 +10,8 @@ import dataclasses
 from .base import CostModel as CostModel
 from .base import MeshInput as MeshInput
 from .base import MeshView as MeshView
+from .area import Area
+from .area_term import AreaTerm
 from .esqem import ESQEM
 from .qem import QEM
 from .regularize import Regularized
@@ -17,9 +19,11 @@ from .regularize import Regularized
 REGISTRY: dict[str, type[CostModel]] = {
     "qem": QEM,
     "esqem": ESQEM,
+    "area": Area,
 }
 TERMS = {
     "regularize": Regularized,
+    "area_weight": AreaTerm,
 }
 
 

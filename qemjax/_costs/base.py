@@ -52,6 +52,7 @@ class CostModel:
     width: ClassVar[int] = 0
     support: ClassVar[str] = "pair"
     uses_ring: ClassVar[bool] = False
+    ring_dead: ClassVar[bool] = False  # the ring also holds the faces the contraction removes (`ring`)
     parts: ClassVar[tuple[str, ...]] = ()
     branches: ClassVar[tuple[str, ...]] = ("solve", "segment", "endpoint")
 

@@ -71,6 +71,8 @@ class Regularized(CostModel):
             raise ValueError(f"regularize must be finite and >= 0, got {self.regularize}")
         if self.base.parts:
             raise ValueError(f"regularize cannot wrap {self.base.name!r}, which has cost parts already")
+        if not hasattr(type(self.base), "price_kernel"):
+            raise ValueError(f"regularize cannot wrap {self.base.name!r}, whose price needs its ring")
 
     name = property(lambda self: self.base.name)
     width = property(lambda self: self.base.width)

@@ -8,6 +8,10 @@ vertex ids rotated so that the moving corner comes first, ``[v, c1, c2]``: befor
 Ring sizes vary (about 10 on a regular mesh, hundreds at a high-valence vertex), so pairs are grouped by
 the power of two that holds their ring (RING_MIN at least): each group is padded only to its own size,
 padding is bounded by 2×, and a run compiles one kernel per (batch shape, ring size) it meets.
+
+With ``with_dead=True`` (models whose ``ring_dead`` is set) the ring also holds the faces that hold both
+a and b, which the contraction removes, as rows ``[b, ·, ·]`` (rotated to start at b): a kernel that
+replaces both endpoints by x sees them collapse to zero area.
 """
 from __future__ import annotations
 
@@ -28,19 +32,27 @@ class Rings(NamedTuple):
     mask: np.ndarray
 
 
-def ring_faces(faces, P: np.ndarray):
+def ring_faces(faces, P: np.ndarray, with_dead: bool = False):
     """The ring faces of pairs P (K,2) (any pairs, not necessarily disjoint) from `FaceLists` ``faces``:
-    (owner pair (k,) non-decreasing, rotated corners (k,3) int32)."""
-    (_, G, corner, owner, _), _, _ = faces.touched_with_dead(P)
+    (owner pair (k,) non-decreasing, rotated corners (k,3) int32). ``with_dead``: the faces holding both
+    endpoints too, after each pair's surviving faces, rotated to start at b."""
+    (_, G, corner, owner, _), _, (dead, downer) = faces.touched_with_dead(P)
     rows = np.arange(len(G))
     rot = np.stack([G[rows, corner], G[rows, (corner + 1) % 3], G[rows, (corner + 2) % 3]], 1)
+    if with_dead and len(dead):
+        D = np.take(faces.F, dead, axis=0)
+        c = np.argmax(D == np.take(P[:, 1], downer)[:, None], axis=1)
+        r = np.arange(len(D))
+        D = np.stack([D[r, c], D[r, (c + 1) % 3], D[r, (c + 2) % 3]], 1)
+        order = np.argsort(np.concatenate([owner, downer]), kind="stable")
+        return np.concatenate([owner, downer])[order], np.concatenate([rot, D])[order].astype(np.int32)
     return owner, rot.astype(np.int32)
 
 
-def gather_groups(faces, P: np.ndarray, pad: int):
+def gather_groups(faces, P: np.ndarray, pad: int, with_dead: bool = False):
     """Pairs P (K,2) grouped by ring size: yields (indices into P, Rings) per group, smallest rings first.
-    Every pair appears in exactly one group."""
-    owner, rot = ring_faces(faces, P)
+    Every pair appears in exactly one group. ``with_dead``: see `ring_faces`."""
+    owner, rot = ring_faces(faces, P, with_dead)
     yield from group_rings(owner, rot, len(P), pad)
 
 

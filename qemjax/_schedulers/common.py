@@ -59,7 +59,7 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
     pieces = []  # (indices into P, device output)
     for b0 in range(0, len(P), RING_BLOCK):
         block = P[b0:b0 + RING_BLOCK]
-        for idx, rg in ring.gather_groups(faces, block, pad):
+        for idx, rg in ring.gather_groups(faces, block, pad, model.ring_dead):
             parts = zip(chunks(block[idx].astype(np.int32)), chunks(rg.corners, fill=pad), chunks(rg.mask))
             for (s, pp), (_, cc), (_, mm) in parts:
                 sel = idx[s:s + len(pp)]
