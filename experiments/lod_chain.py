@@ -5,7 +5,9 @@ the same vertex buffer, as its README's LOD recipe does) and meshoptimizer's sep
 Times are wall-clock medians over ``--repeats`` alternating repeats in one process, after one untimed warm
 call of each (qemjax: compilation). Quality: two-way surface distance of every level to the input
 (`qemjax.metrics.surface_distance`, rms and Hausdorff relative to the bounding-box diagonal).
-Writes ``results/lod_chain.csv`` (one row per mesh, method and level) and prints a table.
+Writes ``results/lod_chain.csv`` (one row per mesh, method and level; ``chain_*_s`` are the times of all
+levels together; qemjax methods carry the scheduler in their name unless it is the parallel one) and
+prints a table.
 
     python experiments/lod_chain.py --meshes stanford-bunny armadillo --repeats 3
 """
@@ -75,6 +77,11 @@ METHODS = {"qemjax chain": qemjax_chain, "qemjax separate": qemjax_separate,
            "meshoptimizer chain": meshopt_chain, "meshoptimizer separate": meshopt_separate}
 
 
+def _label(method, scheduler):
+    """The method's name in the table: qemjax's carry the scheduler unless it is the parallel one."""
+    return method if scheduler == "parallel" or not method.startswith("qemjax") else f"{method} ({scheduler})"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--meshes", nargs="+", default=["stanford-bunny"])
@@ -103,7 +110,7 @@ def main(argv=None):
         for k in METHODS:
             for r, (Vl, Fl) in zip(ratios, levels[k]):
                 d = qemjax.metrics.surface_distance((V, F), (Vl, Fl), n_samples=args.samples)
-                rows.append(dict(date=today, mesh=name, faces_in=len(F), method=k, ratio=r,
+                rows.append(dict(date=today, mesh=name, faces_in=len(F), method=_label(k, args.scheduler), ratio=r,
                                  target=max(1, round(r * len(F))), faces=len(Fl),
                                  chain_median_s=round(statistics.median(times[k]), 4),
                                  chain_min_s=round(min(times[k]), 4), repeats=args.repeats,
@@ -111,7 +118,8 @@ def main(argv=None):
         print(f"\n{name}: {len(F)} faces, {args.scheduler} scheduler, medians of {args.repeats}")
         print(f"{'method':24s} {'all levels s':>12s}  " + "  ".join(f"rms@{r:g}" for r in ratios))
         for k in METHODS:
-            rms = [row["rms_rel"] for row in rows if row["mesh"] == name and row["method"] == k]
+            label = _label(k, args.scheduler)
+            rms = [row["rms_rel"] for row in rows if row["mesh"] == name and row["method"] == label]
             print(f"{k:24s} {statistics.median(times[k]):12.3f}  " + "  ".join(f"{x:>8s}" for x in rms))
     out = Path(args.out)
     new = not out.exists()

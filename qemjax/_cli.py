@@ -231,7 +231,8 @@ def _parser() -> argparse.ArgumentParser:
     lod.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
     lod.add_argument("out_dir", help="folder for the levels, NAME-lod0.EXT (finest) ... (created if absent)")
     lod.add_argument("--ratios", type=_ratio, nargs="+", default=list(RATIOS), metavar="R",
-                     help=f"fractions of the faces to keep, one level each (default: {' '.join(map(str, RATIOS))})")
+                     help="fractions of the faces to keep, one level each "
+                     f"(default: {' '.join(map(str, RATIOS))})")
     lod.add_argument("--format", dest="fmt", default="obj", choices=FORMATS, help="format of the level files "
                      "(default: obj)")
     lod.add_argument("--glb", action="store_true", help="also write NAME-lods.glb, one node per level")
