@@ -1,13 +1,18 @@
 """qemjax: JAX-accelerated, batched triangle-mesh simplification.
 
-Public API: `simplify`, `methods`, `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`, and the
-`metrics` module.
+Public API: `simplify`, `methods`, `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the
+multiresolution record (`Record`, `Level`, `load_record`, `lod_chain`, `LodChain`), and the `metrics` module.
 """
 from ._api import methods as methods
 from ._api import simplify as simplify
 from ._io import Mesh as Mesh
 from ._io import load as load
+from ._lod import LodChain as LodChain
+from ._lod import lod_chain as lod_chain
 from ._options import Schedule as Schedule
+from ._record import Level as Level
+from ._record import Record as Record
+from ._record import load_record as load_record
 from ._result import Contractions as Contractions
 from ._result import SimplifyResult as SimplifyResult
 

@@ -18,6 +18,7 @@ from . import _topology as topo
 from ._options import Options, Schedule
 from . import _units
 from ._arrays import face_normals
+from ._record import Record
 from ._result import Contractions, SimplifyResult
 from ._schedulers import common, greedy, outcome, parallel
 
@@ -281,11 +282,14 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                               for f, w in info["reweights"]]
     if split is not None:
         stats["split"] = split_stats
+    history = Contractions(hp, hx, hc, hparts, info.get("history_rounds", np.zeros(0, np.int64)))
+    record = Record(V, F, history, info.get("removed_at", np.full(m, -1, np.int64)),
+                    info.get("coincident", np.zeros(m, bool)), frame, scheduler, run_target)
     return SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(frame.errors_to_mesh(info["max_cost"])), source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
-        input_vertices=V, input_faces=F, history=Contractions(hp, hx, hc, hparts), stats=stats, stop_reason=stop)
+        input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record)
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,

@@ -1,4 +1,5 @@
 """Command line: ``qemjax simplify IN OUT (--faces N | --ratio R) [--max-error E] [options]``,
+``qemjax lod IN OUT_DIR [--ratios R ...] [--format EXT] [--glb] [--record] [options]``,
 ``qemjax demo [--out PATH]`` and ``qemjax --version``.
 
 The options of `qemjax.simplify` are generated from its signature (name, default, type) and its
@@ -21,6 +22,7 @@ import warnings
 import numpy as np
 
 from . import _api, _cache
+from ._lod import RATIOS
 
 # Keywords of `simplify` with how the command line takes them (argparse settings); the flag is
 # --keyword-with-dashes, the default the library's own (options not given are not passed on).
@@ -226,6 +228,18 @@ def _parser() -> argparse.ArgumentParser:
                    help="stop before a contraction costs more than E (squared distance, mesh units²); "
                    "alone or with --faces/--ratio")
     _add_options(s)
+    lod = sub.add_parser("lod", help="levels of detail from one run: one file per level (and a .glb, a record)")
+    lod.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
+    lod.add_argument("out_dir", help="folder for the levels, NAME-lod0.EXT (finest) ... (created if absent)")
+    lod.add_argument("--ratios", type=_ratio, nargs="+", default=list(RATIOS), metavar="R",
+                     help="fractions of the faces to keep, one level each "
+                     f"(default: {' '.join(map(str, RATIOS))})")
+    lod.add_argument("--format", dest="fmt", default="obj", choices=FORMATS, help="format of the level files "
+                     "(default: obj)")
+    lod.add_argument("--glb", action="store_true", help="also write NAME-lods.glb, one node per level")
+    lod.add_argument("--record", action="store_true", help="also write NAME-record.npz, the progressive "
+                     "record every level can be replayed from (qemjax.load_record)")
+    _add_options(lod)
     d = sub.add_parser("demo", help="simplify a bumpy sphere made in code (writes a file only with --out)")
     d.add_argument("--out", "--output", dest="out", metavar="PATH", help="write the result here")
     d.add_argument("--subdivisions", type=int, default=7, help="7: 327,680 faces; 6: 81,920 (default: 7)")
@@ -249,7 +263,48 @@ def main(argv=None) -> int:
             return 2
 
 
+def _lod(args, kwargs) -> int:
+    """``qemjax lod``: one run, every level written (each file under a temporary name, then renamed)."""
+    from ._lod import lod_chain
+
+    folder = os.path.abspath(args.out_dir)
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise CliError(f"output {args.out_dir} is a file; give a folder")
+    if not os.path.isdir(os.path.dirname(folder)):
+        raise CliError(f"cannot create {args.out_dir}: folder {os.path.dirname(folder)} does not exist")
+    os.makedirs(folder, exist_ok=True)
+    stem = os.path.splitext(os.path.basename(args.input))[0]
+    paths = [os.path.join(folder, f"{stem}-lod{i}.{args.fmt}") for i in range(len(args.ratios))]
+    check_output(paths[0])
+    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
+        _cache.enable()
+    chain = lod_chain(args.input, ratios=args.ratios, **kwargs)
+    for path, level, r in zip(paths, chain.levels, chain.ratios):
+        write(level, path, args.fmt)
+        print(f"{path}: ratio {r:g}, {len(level.faces)} faces, max error {level.max_error:.3g}")
+    extra = []
+    if args.glb:
+        extra.append((os.path.join(folder, f"{stem}-lods.glb"), chain.export))
+    if args.record:
+        extra.append((os.path.join(folder, f"{stem}-record.npz"), chain.result.record.save))
+    for path, save in extra:
+        tmp = _temp_name(path, "out")
+        try:
+            save(tmp)
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+        print(path)
+    print(f"{args.input}: {chain.result.summary()}")
+    return 0
+
+
 def _run(args) -> int:
+    if args.cmd == "lod":
+        return _lod(args, _simplify_kwargs(args))
     if args.cmd == "simplify" and args.ratio is None and args.target_faces is None and args.max_error is None:
         raise CliError("give a target: --faces N, --ratio R or --max-error E")
     out = args.output if args.cmd == "simplify" else args.out

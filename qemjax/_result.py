@@ -14,13 +14,17 @@ class Contractions:
     (input units); costs (k,) float64: quadric cost (squared distance, input units); parts: for a method
     with cost parts, each part by name (k,) float64 in input units (``method="esqem"``: ``"quadric"``,
     a squared distance, equal to costs; ``"curvature"``, K(e) in 1/units²), and ``"rank"``, what selection
-    ranked the pair by (esqem: Q + w·K, a squared distance); empty otherwise.
+    ranked the pair by (esqem: Q + w·K, a squared distance); empty otherwise; rounds (k,) int64: the round
+    each contraction happened in, counted from 0 (the greedy scheduler: one contraction per round). Within
+    a round, contractions are in the order selection ranked them (cost order). The faces each removed are
+    in the result's `record` (``record.removed_at``).
     """
 
     pairs: np.ndarray
     positions: np.ndarray
     costs: np.ndarray
     parts: dict = dataclasses.field(default_factory=dict)
+    rounds: np.ndarray | None = None
 
     def __len__(self):
         return len(self.pairs)
@@ -59,6 +63,30 @@ class SimplifyResult:
     history: Contractions
     stats: dict
     stop_reason: str = "target"
+    record: object = None
+
+    @property
+    def vertex_map(self) -> np.ndarray:
+        """(n,) int64: for each input vertex (the cleaned input, as ``input_vertices``), the output vertex it
+        was contracted into; -1 for the vertices of parts that vanished. ``vertex_map[source_vertices]`` is
+        ``arange(len(vertices))``. With ESQEM's splitting the indices are those of the contraction phase's
+        vertices, which the split mesh keeps first."""
+        return self._record().vertex_map()
+
+    def replay(self, target_faces: int | None = None, *, ratio: float | None = None,
+               contractions: int | None = None):
+        """The mesh at ``target_faces`` faces (or ``ratio`` × the input's, or after the first
+        ``contractions`` contractions) rebuilt from the record of this run, without simplifying again:
+        a `qemjax.Level` (vertices, faces, source_vertices, source_faces, vertex_map, max_error). Greedy:
+        equal to ``simplify(target_faces=k, scheduler="greedy")`` when a prefix of the run has k faces;
+        parallel: the run's own mesh at round boundaries, the round's cheapest contractions first in
+        between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record`."""
+        return self._record().replay(target_faces, ratio=ratio, contractions=contractions)
+
+    def _record(self):
+        if self.record is None:
+            raise ValueError("this result carries no record")
+        return self.record
 
     def to_trimesh(self):
         """The simplified mesh as a `trimesh.Trimesh` (no processing: arrays are kept as they are)."""

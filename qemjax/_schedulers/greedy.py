@@ -139,6 +139,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     if ranked:
         reweigh()
     history = []
+    removed_at = np.full(len(F), -1, np.int64)  # the contraction that removed each face (-1: survives)
+    coincident = np.zeros(len(F), bool)  # removed as a coincident face (non-manifold mode), not degenerate
     rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
     max_cost_used = 0.0
     branches = np.zeros(len(model.branches), np.int64)
@@ -194,8 +196,11 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         if len(model.parts):
             history_parts.append(np.append(parts, key))
         faces.contract_touched(P, kept, dead)
+        removed_at[dead] = len(history) - 1
         if len(drop):
             faces.remove(drop)
+            removed_at[drop] = len(history) - 1
+            coincident[drop] = True
         for w in nbr[b]:
             nbr[w].discard(b)
             if w != a:
@@ -235,7 +240,9 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
             "blocked_by": blocked, "reweights": reweights,
             "parts": np.array(history_parts, np.float64).reshape(-1, len(model.parts) + 1) if len(model.parts)
             else None,
-            "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(rejected_by)), rejected_by))}
+            "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(rejected_by)), rejected_by)),
+            "removed_at": removed_at, "coincident": coincident,
+            "history_rounds": np.arange(len(history), dtype=np.int64)}
     return VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, hist, info
 
 

@@ -125,9 +125,46 @@ def _ring_vertices(faces: FaceLists, verts, n):
 
 def _drop_coincident(faces: FaceLists, kept):
     """Resolve faces that coincide after contractions into the vertices ``kept`` (all such faces touch
-    one), lower face index first (`topo.coincident_removals`)."""
+    one), lower face index first (`topo.coincident_removals`). Returns the faces removed."""
     f = np.unique(faces.around(kept)[1])
-    faces.remove(f[topo.coincident_removals(_take(faces.F, f))])
+    drop = f[topo.coincident_removals(_take(faces.F, f))]
+    faces.remove(drop)
+    return drop
+
+
+def _removal_steps(F, history, dead, dropped):
+    """Which contraction removed each face, from a run's per-round arrays (no per-contraction work):
+    F (m,3) the faces at the end (a removed face keeps the row it had when it went), history the
+    per-round (kept, removed, positions, costs) in record order, dead / dropped the faces each round's
+    contractions removed / its coincident faces dropped. Returns the record's ``removed_at`` (m,) int64
+    (-1: survives), ``coincident`` (m,) bool and ``rounds`` (k,) int64 (see `_record.Record`).
+
+    A face that dies in a contraction holds its removed vertex and vertices removed later or never: its
+    step is the smallest removal step of its corners. A dropped face holds the kept vertex of the one
+    contraction of its round that made it coincide (contractions of a round are two edges apart)."""
+    m = len(F)
+    removed_at, coincident = np.full(m, -1, np.int64), np.zeros(m, bool)
+    if not history:
+        return removed_at, coincident, np.zeros(0, np.int64)
+    rounds = np.repeat([r for r, _ in history], [len(h[0]) for _, h in history]).astype(np.int64)
+    a = np.concatenate([h[0] for _, h in history]).astype(np.int64)
+    b = np.concatenate([h[1] for _, h in history]).astype(np.int64)
+    n = int(max(a.max(), b.max(), F.max() if m else 0)) + 1
+    step_of = np.full(n, np.iinfo(np.int64).max)
+    step_of[b] = np.arange(len(b))
+    d = np.concatenate(dead).astype(np.int64) if dead else np.zeros(0, np.int64)
+    removed_at[d] = step_of[F[d]].min(axis=1)
+    if dropped:
+        f = np.concatenate([x for _, x in dropped]).astype(np.int64)
+        r = np.repeat([r for r, _ in dropped], [len(x) for _, x in dropped]).astype(np.int64)
+        key = rounds * n + a  # (round, kept vertex) -> step; unique, sorted by round
+        order = np.argsort(key, kind="stable")
+        ck = (r[:, None] * n + F[f]).reshape(-1)
+        at = np.minimum(np.searchsorted(key[order], ck), len(key) - 1)
+        hit = np.where(key[order][at] == ck, order[at], -1).reshape(-1, 3)
+        removed_at[f] = hit.max(axis=1)
+        coincident[f] = True
+    return removed_at, coincident, rounds
 
 
 def _history_arrays(rounds):
@@ -170,7 +207,8 @@ class _Run:
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
         self.faces = lists.result()
         self.timer = Timer()
-        self.history = []
+        self.history = []  # per round: (round, (kept, removed, positions, costs)) in record order
+        self.dead, self.dropped = [], []  # per round: faces its contractions removed; (round, coincident drops)
         self.branches = np.zeros(len(model.branches), np.int64)
         self.rounds = self.rejected = 0
         self.rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
@@ -336,7 +374,7 @@ class _Run:
         st.changed[a] = True
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
         self.max_cost_used = max(self.max_cost_used, float(st.cost[acc].max()))
-        self.history.append((a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64)))
+        self.history.append((self.rounds - 1, (a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64))))
         if st.parts.shape[1]:
             self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
         r = np.flatnonzero(st.bad)
@@ -351,8 +389,9 @@ class _Run:
             edges_next = submit(topo.contract_edges, st.E, st.ecount, pairs[:, 0], pairs[:, 1], apex, n,
                                 st.deg, rows=erows)
         faces.contract_touched(pairs, kept, dead)
+        self.dead.append(dead)
         if not self.manifold:
-            _drop_coincident(faces, a)
+            self.dropped.append((self.rounds - 1, _drop_coincident(faces, a)))
         if len(self.extra_pairs):
             rep = np.arange(n, dtype=np.int32)
             rep[b] = a
@@ -428,12 +467,14 @@ def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=No
     the counts, the stage times, ``stop_reason`` and ``blocked_by``."""
     r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale)
     stop, blocked = r.run()
-    hist = _history_arrays(r.history)
+    hist = _history_arrays([h for _, h in r.history])
+    removed_at, coincident, rounds = _removal_steps(r.faces.F, r.history, r.dead, r.dropped)
     info = {"contractions": len(hist[0]), "rejected": r.rejected, "rounds": r.rounds,
             "max_cost": r.max_cost_used, "branches": r.branches, "faces_per_round": r.faces_per_round,
             "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),
             "stop_reason": stop, "blocked_by": blocked, "reweights": r.reweights,
-            "parts": np.concatenate(r.history_parts) if r.history_parts else None}
+            "parts": np.concatenate(r.history_parts) if r.history_parts else None,
+            "removed_at": removed_at, "coincident": coincident, "history_rounds": rounds}
     info.update(r.timer.t)
     n = r.n
     return r.VQ[:n, :3], r.VQ[:n, 3:], r.faces.F, r.faces.alive, hist, info

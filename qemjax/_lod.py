@@ -1,0 +1,74 @@
+"""Level-of-detail chains: every level from one simplification run (`lod_chain`), exported as one glTF
+scene or as separate files."""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from ._api import simplify
+from ._record import Level
+from ._result import SimplifyResult
+
+RATIOS = (0.5, 0.25, 0.1, 0.01)
+
+
+@dataclasses.dataclass
+class LodChain:
+    """Levels of one mesh from one run: ``levels[i]`` (a `qemjax.Level`) keeps ``ratios[i]`` of the
+    faces; ``result`` is the run itself (`SimplifyResult`, at the smallest ratio), whose record the
+    levels are replayed from."""
+
+    levels: list[Level]
+    ratios: tuple[float, ...]
+    result: SimplifyResult
+
+    def __len__(self):
+        return len(self.levels)
+
+    def __getitem__(self, i) -> Level:
+        return self.levels[i]
+
+    def to_scene(self, name: str = "lod"):
+        """A `trimesh.Scene` with one node per level, named ``{name}0``, ``{name}1``, … (finest first), all
+        at the same place: what a glTF viewer or engine picks a level from."""
+        import trimesh
+
+        scene = trimesh.Scene()
+        for i, level in enumerate(self.levels):
+            scene.add_geometry(level.to_trimesh(), node_name=f"{name}{i}", geom_name=f"{name}{i}")
+        return scene
+
+    def export(self, path: str, name: str = "lod") -> None:
+        """Write the chain as one glTF binary (.glb) with one node per level (`to_scene`)."""
+        data = self.to_scene(name).export(file_type="glb")
+        with open(path, "wb") as f:
+            f.write(data)
+
+
+def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
+    """One simplification run down to the smallest of ``ratios`` (each in (0, 1], the fraction of faces to
+    keep; any order, levels come back in the order given), and every level replayed from its record
+    (`qemjax._record`): one run's cost instead of one per level. ``options`` are `simplify`'s keywords
+    (not its targets). With the greedy scheduler each level equals a separate ``simplify(ratio=r)`` run
+    whenever the run passes through exactly that face count; with the parallel scheduler (default) the
+    levels are the run's own intermediate meshes, not those of separate runs.
+
+    ESQEM's edge splitting happens after all contractions and is not part of the record: with
+    ``method="esqem"`` give ``split_factor=None``. When the run stops above a level's target (no valid
+    contraction left: `simplify` warns, `SimplifyResult.stop_reason` says why), that level is the run's
+    last mesh."""
+    ratios = tuple(float(r) for r in ratios)
+    if not ratios:
+        raise ValueError("give at least one ratio")
+    for r in ratios:
+        if not 0 < r <= 1:
+            raise ValueError(f"ratios must be in (0, 1] (the fraction of faces to keep), got {r}")
+    for key in ("target_faces", "ratio", "max_error"):
+        if key in options:
+            raise ValueError(f"lod_chain takes its targets from ratios=, not {key}=")
+    if options.get("method") == "esqem" and options.get("split_factor", 1.0) is not None:
+        raise ValueError("lod_chain(method='esqem') needs split_factor=None: edge splits come after all "
+                         "contractions, and the levels are replayed from the contractions")
+    res = simplify(mesh, ratio=min(ratios), **options)
+    m, last = len(res.input_faces), res.record.faces_out
+    return LodChain([res.replay(max(max(1, int(round(r * m))), last)) for r in ratios], ratios, res)

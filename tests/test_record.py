@@ -1,0 +1,252 @@
+"""The multiresolution record: replay to any face count, the vertex map, LOD chains, the .npz form."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse
+import trimesh
+from conftest import one_pair_per_round, shared_mesh
+
+import qemjax
+from qemjax import shapes
+from qemjax._schedulers import parallel
+from qemjax.metrics._pointtri import point_triangle_distance
+
+
+def same_mesh(level, res):
+    """Byte-identical vertices, faces and correspondences."""
+    assert level.vertices.tobytes() == res.vertices.tobytes()
+    assert np.array_equal(level.faces, res.faces)
+    assert np.array_equal(level.source_vertices, res.source_vertices)
+    assert np.array_equal(level.source_faces, res.source_faces)
+    assert level.max_error == res.max_error
+
+
+def reachable(record, ratio):
+    """A face count near ratio × the input's that some prefix of the record has exactly."""
+    counts = record.face_counts()
+    return int(counts[np.argmin(np.abs(counts - ratio * counts[0]))])
+
+
+@pytest.mark.shared
+@pytest.mark.parametrize("name", ["suzanne.obj", "rocker-arm-small.off"])
+def test_greedy_replay_equals_simplify(name):
+    path = shared_mesh(name)
+    res = qemjax.simplify(path, ratio=0.05, scheduler="greedy")
+    same_mesh(res.replay(contractions=len(res.history)), res)
+    for ratio in (0.5, 0.2):
+        k = reachable(res.record, ratio)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # reached exactly: no warning
+            direct = qemjax.simplify(path, target_faces=k, scheduler="greedy")
+        assert len(direct.faces) == k
+        same_mesh(res.replay(k), direct)
+
+
+def test_one_pair_per_round_replay_equals_simplify():
+    """With one pair per round the parallel scheduler's choices do not depend on the target: every prefix
+    is a run of its own."""
+    V, F = shapes.bumpy_sphere(2)
+    res = qemjax.simplify((V, F), ratio=0.1, schedule=one_pair_per_round())
+    for ratio in (0.6, 0.3):
+        k = reachable(res.record, ratio)
+        same_mesh(res.replay(k), qemjax.simplify((V, F), target_faces=k, schedule=one_pair_per_round()))
+
+
+@pytest.mark.shared
+def test_parallel_replay_is_the_run_at_round_boundaries(monkeypatch):
+    """The mesh after each round, captured inside the run, is what the record replays there."""
+    snaps = []
+
+    class Spy(parallel._Run):
+        def contract(self, *a):
+            super().contract(*a)
+            alive = self.faces.alive.copy()
+            snaps.append((alive, self.faces.F[alive].copy(), self.VQ[: self.n, :3].copy()))
+
+    monkeypatch.setattr(parallel, "_Run", Spy)
+    res = qemjax.simplify(shared_mesh("cow.obj"), ratio=0.05)
+    monkeypatch.undo()
+    rec = res.record
+    ends = np.flatnonzero(np.diff(np.append(rec.history.rounds, np.inf)) != 0) + 1  # prefix length per round
+    assert len(ends) == len(snaps) > 3
+    assert np.array_equal(rec.face_counts()[ends], res.stats["faces_per_round"])
+    for j, (alive, F, X) in zip(ends, snaps):
+        level = rec.replay(contractions=int(j))
+        assert np.array_equal(level.source_faces, np.flatnonzero(alive))
+        assert np.array_equal(level.source_vertices[level.faces], F)
+        ids = level.source_vertices
+        want = rec.frame.positions_to_mesh(X[ids], ids)  # unmoved vertices: float32-rounded here
+        assert np.abs(level.vertices - want).max() <= 1e-6 * rec.frame.scale
+    same_mesh(rec.replay(contractions=len(rec.history)), res)
+
+
+@pytest.mark.shared
+def test_parallel_replay_within_a_round_takes_the_cheapest_first():
+    V0, F0 = (lambda m: (m.vertices, m.faces))(qemjax.load(shared_mesh("cow.obj")))
+    res = qemjax.simplify((V0, F0), ratio=0.05)
+    rec = res.record
+    rounds, costs = rec.history.rounds, rec.history.costs
+    for r in np.unique(rounds):
+        c = costs[rounds == r]
+        assert np.all(np.diff(c) >= 0), "a round's contractions are recorded in cost order"
+    counts = rec.face_counts()
+    big = np.bincount(rounds).argmax()
+    inside = np.flatnonzero(rounds == big)
+    j = int(inside[len(inside) // 2])  # halfway through the largest round
+    k = int(counts[j])
+    assert counts[inside[0]] > k > counts[inside[-1] + 1]
+    level = rec.replay(k)
+    assert len(level.faces) == k and level.contractions == j and level.round == big
+    # a valid closed manifold of the input's genus, nothing degenerate or flipped
+    mesh = level.to_trimesh()
+    assert mesh.is_watertight and mesh.euler_number == trimesh.Trimesh(V0, F0, process=False).euler_number
+    assert np.all(trimesh.triangles.area(mesh.triangles) > 0)
+    n_in = trimesh.Trimesh(V0, F0, process=False).face_normals[level.source_faces]
+    assert np.all(np.einsum("ij,ij->i", mesh.face_normals, n_in) > 0)
+
+
+def _fan_distance2(points, level):
+    """(n,) squared distance from each point to the faces around its vertex in ``level``."""
+    V, F = level.vertices, level.faces
+    inc = scipy.sparse.csr_matrix((np.ones(F.size), (F.reshape(-1), np.repeat(np.arange(len(F)), 3))),
+                                  shape=(len(V), len(F)))
+    vm = level.vertex_map
+    cnt = np.diff(inc.indptr)[vm]
+    pv = np.repeat(np.arange(len(points)), cnt)
+    fs = inc.indices[np.concatenate([np.arange(inc.indptr[o], inc.indptr[o + 1]) for o in vm])]
+    d = point_triangle_distance(points[pv], V[F[fs, 0]], V[F[fs, 1]], V[F[fs, 2]], squared=True)
+    out = np.full(len(points), np.inf)
+    np.minimum.at(out, pv, d)
+    return out
+
+
+@pytest.mark.shared
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_vertex_map(scheduler):
+    res = qemjax.simplify(shared_mesh("suzanne.obj"), ratio=0.1, scheduler=scheduler)
+    vm = res.vertex_map
+    assert vm.shape == (len(res.input_vertices),) and vm.min() == 0
+    assert np.array_equal(vm[res.source_vertices], np.arange(len(res.vertices)))
+    # each input vertex lies near the faces of its output vertex, within the run's largest error
+    assert np.all(_fan_distance2(res.input_vertices, res.replay(contractions=len(res.history)))
+                  <= res.max_error)
+    level = res.replay(ratio=0.4)  # and at an intermediate level, within that level's error
+    assert np.all(_fan_distance2(res.input_vertices, level) <= level.max_error)
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_non_manifold_record_replays_coincident_removals(scheduler):
+    """Two boxes joined by aggregation: faces that coincide are dropped, and the record says which
+    contraction dropped them; a part that vanishes maps to -1."""
+    b = trimesh.creation.box(extents=(1, 1, 1))
+    s = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
+    V = np.concatenate([b.vertices, s.vertices + [2, 0, 0], b.vertices + [0, 3, 0]])
+    F = np.concatenate([b.faces, s.faces + 8, b.faces + 16]).astype(np.int64)
+    res = qemjax.simplify((V, F), target_faces=12, scheduler=scheduler, pair_threshold=0.1)
+    rec = res.record
+    assert rec.coincident.any()
+    assert np.all(rec.removed_at[rec.coincident] >= 0)
+    counts = rec.face_counts()
+    assert counts[-1] == len(res.faces)
+    same_mesh(res.replay(contractions=len(rec.history)), res)
+    assert np.all(res.vertex_map[8:16] == -1)  # the small box vanished
+    for j in range(len(rec.history) + 1):  # every prefix is a mesh of the counted size, no coincident faces
+        level = rec.replay(contractions=j)
+        assert len(level.faces) == counts[j]
+        key = np.sort(level.faces, axis=1)
+        assert len(np.unique(key, axis=0)) == len(key)
+
+
+def test_replay_rules_and_errors():
+    res = qemjax.simplify(shapes.icosphere(2), ratio=0.2)
+    rec = res.record
+    assert len(rec.replay(ratio=1.0).faces) == len(res.input_faces)
+    assert rec.replay(rec.face_counts()[0] + 10).contractions == 0
+    odd = int(rec.face_counts()[5]) - 1  # a closed mesh: the level stops one face above an odd target
+    assert len(rec.replay(odd).faces) == odd + 1
+    with pytest.raises(ValueError, match="reaches"):
+        rec.replay(len(res.faces) - 2)
+    parity = qemjax.simplify(shapes.icosphere(2), target_faces=63)  # stops at 64, as asked: no error
+    assert len(parity.replay(63).faces) == 64
+    with pytest.raises(ValueError, match="exactly one"):
+        rec.replay(10, ratio=0.5)
+    with pytest.raises(ValueError, match="ratio"):
+        rec.replay(ratio=1.5)
+
+
+def test_npz_round_trip_is_exact(tmp_path):
+    res = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.1, method="esqem", split_factor=None)
+    res.record.save(tmp_path / "a.npz")
+    res.record.save(tmp_path / "b.npz")
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    back = qemjax.load_record(tmp_path / "a.npz")
+    assert set(back.history.parts) == {"quadric", "curvature", "rank"}
+    for k in (len(res.input_faces), 1000, len(res.faces)):
+        a, b = res.replay(k), back.replay(k)
+        assert a.vertices.tobytes() == b.vertices.tobytes() and np.array_equal(a.faces, b.faces)
+    same_mesh(back.replay(len(res.faces)), res)
+    np.savez(tmp_path / "c.npz", x=np.zeros(2))
+    with pytest.raises(ValueError, match="not a qemjax record"):
+        qemjax.load_record(tmp_path / "c.npz")
+
+
+def test_esqem_split_replays_the_contraction_phase_only():
+    mesh = shapes.bumpy_sphere(4)
+    res = qemjax.simplify(mesh, target_faces=600, method="esqem")
+    phase = res.stats["split"]["simplified_to"]
+    assert res.record.faces_out == phase < len(res.faces)
+    level = res.replay(phase)
+    assert len(level.faces) == phase
+    assert np.array_equal(res.vertex_map[level.source_vertices], np.arange(len(level.vertices)))
+    assert len(res.replay(600).faces) == 600  # the contractions passed through 600 faces
+    with pytest.raises(ValueError, match="reaches"):
+        res.replay(phase - 2)
+    with pytest.raises(ValueError, match="split_factor=None"):
+        qemjax.lod_chain(mesh, method="esqem")
+
+
+def test_lod_chain_levels_and_glb(tmp_path):
+    mesh = shapes.bumpy_sphere(3)
+    m = len(mesh.faces)
+    chain = qemjax.lod_chain(mesh, ratios=[0.5, 0.25, 0.1, 0.01])
+    targets = [round(r * m) for r in (0.5, 0.25, 0.1, 0.01)]
+    assert [len(level.faces) for level in chain] == [t + t % 2 for t in targets]  # closed: even counts
+    same_mesh(chain[-1], chain.result)
+    for level, r in zip(chain, chain.ratios):
+        assert np.array_equal(level.faces, chain.result.replay(ratio=r).faces)
+    path = tmp_path / "chain.glb"
+    chain.export(path)
+    scene = trimesh.load(path)
+    assert sorted(scene.graph.nodes_geometry) == ["lod0", "lod1", "lod2", "lod3"]
+    assert sorted(len(g.faces) for g in scene.geometry.values()) == sorted(len(lv.faces) for lv in chain)
+    with pytest.raises(ValueError, match="ratios"):
+        qemjax.lod_chain(mesh, ratios=[0.5, 0])
+    with pytest.raises(ValueError, match="targets"):
+        qemjax.lod_chain(mesh, ratio=0.5)
+
+
+def test_record_of_an_unchanged_mesh():
+    res = qemjax.simplify(shapes.icosphere(1), ratio=1.0)
+    assert len(res.history) == 0 and res.record.faces_out == len(res.faces)
+    same_mesh(res.replay(ratio=1.0), res)
+    assert np.array_equal(res.vertex_map, np.arange(len(res.input_vertices)))
+
+
+def test_cli_lod_writes_levels_glb_and_record(tmp_path, capsys):
+    from qemjax._cli import main
+
+    src = tmp_path / "sphere.obj"
+    trimesh.Trimesh(*shapes.bumpy_sphere(3), process=False).export(src)
+    out = tmp_path / "levels"
+    assert main(["lod", str(src), str(out), "--ratios", "0.5", "0.1", "--glb", "--record", "--quiet",
+                 "--no-cache"]) == 0
+    rec = qemjax.load_record(out / "sphere-record.npz")
+    for i, r in enumerate((0.5, 0.1)):
+        written = trimesh.load(out / f"sphere-lod{i}.obj", process=False)
+        assert len(written.faces) == len(rec.replay(ratio=r).faces)
+    assert len(trimesh.load(out / "sphere-lods.glb").geometry) == 2
+    assert main(["lod", str(src), str(src), "--quiet", "--no-cache"]) == 2  # a file, not a folder
+    assert "is a file" in capsys.readouterr().err
