@@ -95,8 +95,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric).
     scheduler: ``'parallel'`` (default) — rounds of many non-interacting contractions chosen by an
         independent-set rule; ``'greedy'`` — the paper's priority queue, one contraction at a time.
-    placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint)
-        or ``'endpoints'`` (the paper's fixed placement: best of v1, v2, midpoint).
+    placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint),
+        ``'rank'`` (solve the well-determined directions only, the rest stay at the midpoint) or
+        ``'endpoints'`` (the paper's fixed placement: best of v1, v2, midpoint).
     boundary_weight: penalty weight of the planes through each boundary edge perpendicular to its face
         (relative to an average face's plane; 0 disables boundary preservation).
     area_weighted: weight each face plane by its area / the mean face area (True), or by 1 (the paper).

@@ -115,8 +115,21 @@ def test_units_follow_the_input_scale(bumpy):
 def test_endpoints_placement_uses_existing_points_or_midpoints():
     V, F = shapes.bumpy_sphere(3)
     r = qemjax.simplify((V, F), target_faces=200, placement="endpoints")
-    assert r.stats["branches"]["solve"] == 0 and r.stats["branches"]["segment"] == 0
+    assert r.stats["branches"]["solve"] == r.stats["branches"]["segment"] == r.stats["branches"]["truncated"] == 0
     assert_valid(r, 200, V, F)
+
+
+def test_rank_placement_truncates_on_a_flat_grid_without_recompiling():
+    """On a flat grid the quadrics are rank 1 inside and rank 2 along the border: placement='rank' takes
+    the truncated solve, keeps the result flat and valid, and switching placement compiles nothing (the
+    mode is an array, like the tunables)."""
+    V, F = shapes.grid(20)
+    base = qemjax.simplify((V, F), target_faces=60)
+    r = qemjax.simplify((V, F), target_faces=60, placement="rank")
+    assert_valid(r, 60, V, F)
+    assert r.stats["branches"]["truncated"] > 0 and base.stats["branches"]["truncated"] == 0
+    assert r.stats["compilations"] == 0
+    assert np.all(np.abs(r.vertices[:, 2]) < 1e-6)
 
 
 def test_history_and_result_fields(bumpy):

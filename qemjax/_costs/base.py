@@ -48,7 +48,7 @@ class CostModel:
     support: ClassVar[str] = "pair"
     uses_ring: ClassVar[bool] = False
     parts: ClassVar[tuple[str, ...]] = ()
-    branches: ClassVar[tuple[str, ...]] = ("solve", "segment", "endpoint")
+    branches: ClassVar[tuple[str, ...]] = ("solve", "segment", "endpoint", "truncated")
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         """(n, width) float32 state rows."""
