@@ -8,21 +8,25 @@ A peer that fails is left out of that case.
 
 A variant is ``LABEL`` or ``LABEL:key=value,...``: ``rev=REV`` runs qemjax as it was at that git revision
 (unpacked by `ab_compare.load_old`, in this process); other keys set the QEM model's fields
-(``cond_eps``, ``max_shift``, ``area_weighted``, ``boundary_weight``, ...). So the table before and after a
-change comes from one command::
+(``placement``, ``cond_eps``, ``rank_eps``, ``max_shift``, ``area_weighted``, ``area_power``,
+``boundary_weight``). So the table before and after a change comes from one command::
 
-    python experiments/rank_peers.py --variant old:rev=02a1390 --variant new
-    python experiments/rank_peers.py --variant new --variant loose:cond_eps=1e-4 --meshes cow face
+    python experiments/rank_peers.py --variant old:rev=02a1390 --variant rank:placement=rank
+    python experiments/rank_peers.py --variant new --variant loose:cond_eps=1e-9 --meshes cow face
 
 Rows go to ``results/rank_peers.csv``; the printed table (one block per variant) also to
-``results/rank_peers.txt``. ``--reuse-peers`` takes the peers' rows from the existing CSV instead of
-running them again (for quick iterations; a table to quote should come from a full run).
+``results/rank_peers.txt``. ``--reuse-peers [CSV]`` takes the peers' rows from a CSV of an earlier run
+instead of running them again (peers are deterministic; for studies of qemjax's own settings)::
+
+    python experiments/rank_peers.py --variant base --variant bw1000:boundary_weight=1000 \
+        --meshes beetle face --reuse-peers experiments/results/rank_peers.csv --out experiments/results/boundary
 """
 from __future__ import annotations
 
 import argparse
 import csv
 import dataclasses
+import inspect
 import sys
 import time
 from pathlib import Path
@@ -62,12 +66,15 @@ def variant_runner(label: str, rev: str | None, settings: dict):
     else:
         import qemjax as package
     costs = package._costs
-    if settings:  # a QEM subclass with these defaults, registered under its own name
-        fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
-        unknown = set(settings) - set(fields)
-        if unknown:
-            raise SystemExit(f"unknown QEM setting(s) {sorted(unknown)}; choose from {sorted(fields)}")
-        typed = {k: type(fields[k].default)(v) for k, v in settings.items()}
+    fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
+    unknown = set(settings) - set(fields)
+    if unknown:
+        raise SystemExit(f"unknown QEM setting(s) {sorted(unknown)}; choose from {sorted(fields)}")
+    typed = {k: type(fields[k].default)(v) for k, v in settings.items()}
+    # settings that simplify takes as keywords go there (it passes them to the model); the rest are
+    # defaults of a QEM subclass
+    keywords = {k: typed.pop(k) for k in list(typed) if k in inspect.signature(package.simplify).parameters}
+    if typed:  # a QEM subclass with these defaults, registered under its own name
         name = f"qem-{label}"
         cls = dataclasses.make_dataclass(name, [(k, type(v), dataclasses.field(default=v))
                                                 for k, v in typed.items()],
@@ -79,7 +86,7 @@ def variant_runner(label: str, rev: str | None, settings: dict):
         method = "qem"
 
     def run(V, F, target):
-        return package.simplify((V, F), target_faces=target, method=method)
+        return package.simplify((V, F), target_faces=target, method=method, **keywords)
     return run
 
 
@@ -159,7 +166,8 @@ def main(argv=None) -> int:
                     help="LABEL or LABEL:rev=REV or LABEL:key=value,... (repeatable; default: 'qemjax')")
     ap.add_argument("--meshes", nargs="+", default=None, help="shared mesh names (default: all)")
     ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
-    ap.add_argument("--reuse-peers", action="store_true", help="peers' rows from the existing CSV")
+    ap.add_argument("--reuse-peers", nargs="?", const="", default=None, metavar="CSV",
+                    help="peers' rows from this CSV (default: the --out one) instead of running them")
     ap.add_argument("--out", default=str(RESULTS / "rank_peers"), help="path without extension")
     args = ap.parse_args(argv)
     import warnings
@@ -171,8 +179,8 @@ def main(argv=None) -> int:
     if not names:
         raise SystemExit("no shared meshes (../shared/meshes is absent)")
     old_peers = {}
-    if args.reuse_peers:
-        with open(args.out + ".csv") as fh:
+    if args.reuse_peers is not None:
+        with open(args.reuse_peers or args.out + ".csv") as fh:
             for r in csv.DictReader(fh):
                 if r["method"] in bench_peers.PEERS:
                     old_peers[(r["mesh"], float(r["ratio"]), r["method"])] = r

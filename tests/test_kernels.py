@@ -120,9 +120,9 @@ def _quadric_in_frame(normals, points, origin, w=None):
 def _place64(q1, q2, p1, p2, endpoints=False, rank=False, rank_eps=1e-3):
     """Float64 placement; ``rank``: the truncated solve (placement='rank')."""
     with jax.enable_x64(True):
-        out = placement.place(jnp.asarray(q1), jnp.asarray(q2), jnp.asarray(p1), jnp.asarray(p2),
-                              jnp.asarray(endpoints), jnp.asarray(rank), jnp.asarray(1e-5),
-                              jnp.asarray(rank_eps), jnp.asarray(2.0))
+        fn, eps = (placement.place_rank, rank_eps) if rank else (placement.place, 1e-5)
+        out = fn(jnp.asarray(q1), jnp.asarray(q2), jnp.asarray(p1), jnp.asarray(p2), jnp.asarray(endpoints),
+                 jnp.asarray(eps), jnp.asarray(2.0))
         return [np.asarray(o) for o in out]
 
 
@@ -244,8 +244,8 @@ def test_float32_kernel_close_to_float64():
     x64, c64, _, _ = _place64(q1, q2, p1, p2)
     params = QEM().kernel_params()
     x32, c32, _, _ = placement.place(q1[None].astype(DTYPE), q2[None].astype(DTYPE), p1[None].astype(DTYPE),
-                                    p2[None].astype(DTYPE), params["endpoints_only"], params["rank_aware"],
-                                    params["cond_eps"], params["rank_eps"], params["max_shift"])
+                                    p2[None].astype(DTYPE), params["endpoints_only"], params["cond_eps"],
+                                    params["max_shift"])
     x32, c32 = np.asarray(x32), np.asarray(c32)
     np.testing.assert_allclose(x32[0], x64, atol=1e-5)
     np.testing.assert_allclose(c32[0], c64, rtol=1e-3)
@@ -306,10 +306,12 @@ def test_indexed_placement_matches_per_pair_placement():
         V, Q = rng.normal(size=(n, 3)), _random_quadrics(n)
         VQ = np.concatenate([V, Q], 1)
         P = rng.integers(0, n, (K, 2))
-        for rank in (True, False):  # the thresholded solve last: its x is checked below
-            args = (np.asarray(False), np.asarray(rank), np.asarray(1e-5), np.asarray(1e-3), np.asarray(2.0))
-            out = np.asarray(placement.place_pairs(jnp.asarray(VQ), jnp.asarray(P), *args))
-            x, cost, branch, _ = (np.asarray(o) for o in placement.place(
+        modes = [(placement.place_pairs_rank, placement.place_rank, 1e-3),
+                 (placement.place_pairs, placement.place, 1e-5)]  # the thresholded last: x is checked below
+        for pairs_fn, place_fn, eps in modes:
+            args = (np.asarray(False), np.asarray(eps), np.asarray(2.0))
+            out = np.asarray(pairs_fn(jnp.asarray(VQ), jnp.asarray(P), *args))
+            x, cost, branch, _ = (np.asarray(o) for o in place_fn(
                 Q[P[:, 0]], Q[P[:, 1]], V[P[:, 0]], V[P[:, 1]], *args))
             np.testing.assert_allclose(out[:3].T, x, rtol=1e-12, atol=1e-12)
             np.testing.assert_allclose(out[3], cost, rtol=1e-12, atol=1e-12)
@@ -429,10 +431,9 @@ def test_float32_placement_is_finite_on_degenerate_input():
             cases.append((q, q, np.zeros(3), np.array([d, 0.0, 0.0])))
             cases.append((q, zero, np.zeros(3), np.array([d, d, d])))
     q1, q2, p1, p2 = (np.array(c, DTYPE) for c in zip(*cases))
-    for rank in (False, True):
-        x, cost, branch, qsum = (np.asarray(o) for o in placement.place(
-            q1, q2, p1, p2, params["endpoints_only"], np.asarray(rank), params["cond_eps"], params["rank_eps"],
-            params["max_shift"]))
+    for fn, eps in ((placement.place, params["cond_eps"]), (placement.place_rank, params["rank_eps"])):
+        x, cost, branch, qsum = (np.asarray(o) for o in fn(
+            q1, q2, p1, p2, params["endpoints_only"], eps, params["max_shift"]))
         assert np.isfinite(x).all() and np.isfinite(cost).all() and np.isfinite(qsum).all()
         assert set(branch.tolist()) <= {placement.SOLVE, placement.SEGMENT, placement.ENDPOINT,
                                         placement.TRUNCATED}

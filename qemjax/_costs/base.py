@@ -60,7 +60,7 @@ class CostModel:
 
     def price(self, VS, pairs, params, rings=None):
         """Device rows VS (N, 3 + width), pairs (K,2) int32 -> (5 + len(parts), K) array (see module).
-        A model whose price needs no ring also offers it as ``price_kernel(VS, pairs, params)``, a static
+        A model whose price needs no ring also offers it as ``model.price_kernel(VS, pairs, params)``, a static
         function of its arrays (settings come in ``params``), so wrappers can call it inside their own
         jit without recompiling for new settings."""
         raise NotImplementedError

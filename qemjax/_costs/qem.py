@@ -51,6 +51,15 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
     return np.asarray(Q)[:n]
 
 
+def _price(VS, pairs, params):
+    return placement.place_pairs(VS, pairs, params["endpoints_only"], params["cond_eps"], params["max_shift"])
+
+
+def _price_rank(VS, pairs, params):
+    return placement.place_pairs_rank(VS, pairs, params["endpoints_only"], params["rank_eps"],
+                                      params["max_shift"])
+
+
 @dataclasses.dataclass(frozen=True)
 class QEM(CostModel):
     """Quadric error metric (Garland & Heckbert 1997).
@@ -94,14 +103,14 @@ class QEM(CostModel):
 
     def kernel_params(self) -> dict:
         return {"endpoints_only": np.asarray(self.placement == "endpoints"),
-                "rank_aware": np.asarray(self.placement == "rank"),
                 "cond_eps": np.asarray(self.cond_eps, DTYPE), "rank_eps": np.asarray(self.rank_eps, DTYPE),
                 "max_shift": np.asarray(self.max_shift, DTYPE)}
 
-    @staticmethod
-    def price_kernel(VS, pairs, params):
-        return placement.place_pairs(VS, pairs, params["endpoints_only"], params["rank_aware"],
-                                     params["cond_eps"], params["rank_eps"], params["max_shift"])
+    @property
+    def price_kernel(self):
+        """The price as a static function of arrays (VS, pairs, params): one kernel per placement mode
+        ('rank' is its own kernel, so the default's compiled code stays as it was)."""
+        return _price_rank if self.placement == "rank" else _price
 
     def price(self, VS, pairs, params, rings=None):
         return self.price_kernel(VS, pairs, params)

@@ -21,7 +21,8 @@ The arithmetic is written on lists of component arrays (one array per coordinate
 On the CPU this matters: XLA then fuses the whole computation into one loop over contiguous rows, while
 column slices of (K,10) arrays or several separate outputs make it recompute shared terms per output
 (measured 4-8× slower). `place_pairs` therefore returns a single stacked (5,K) array. The truncated
-solve costs more arithmetic (README, "Placement"); a `lax.cond` on the mode runs only one of the two.
+solve costs more arithmetic (README, "Placement"), so each mode is its own kernel (`place_pairs`,
+`place_pairs_rank`): the default's compiled code is the one it always was.
 """
 from __future__ import annotations
 
@@ -124,7 +125,7 @@ def _truncated_solve(q, cond_eps):
     return u, rank
 
 
-def _place_threshold(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
+def _place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     """``placement='optimal'`` on component lists: q1, q2 (10 arrays), p1, p2 (3 arrays). Returns
     (x, cost, branch, q, u) with x and u component lists, q the merged quadric in the midpoint's frame."""
     mid, half, q = _merged(q1, q2, p1, p2)
@@ -165,7 +166,7 @@ def _place_threshold(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
 
 
 def _place_rank(q1, q2, p1, p2, endpoints_only, rank_eps, max_shift):
-    """``placement='rank'``: as `_place_threshold`, with the truncated solve."""
+    """``placement='rank'``: as `_place`, with the truncated solve."""
     mid, half, q = _merged(q1, q2, p1, p2)
     bv, cc = q[6:9], q[9]
     u_opt, rank = _truncated_solve(q, rank_eps)
@@ -194,28 +195,26 @@ def _place_rank(q1, q2, p1, p2, endpoints_only, rank_eps, max_shift):
     return [mid[i] + u[i] for i in range(3)], cost, branch, q, u
 
 
-def _place(q1, q2, p1, p2, endpoints_only, rank_aware, cond_eps, rank_eps, max_shift):
-    """Core on component lists; ``rank_aware`` () bool picks the solve (a conditional, not a select:
-    only one of the two runs, and switching does not recompile)."""
-    args = (q1, q2, p1, p2, endpoints_only)
-    return jax.lax.cond(rank_aware, lambda a: _place_rank(*a, rank_eps, max_shift),
-                        lambda a: _place_threshold(*a, cond_eps, max_shift), args)
-
-
-def place(q1, q2, p1, p2, endpoints_only, rank_aware, cond_eps, rank_eps, max_shift):
+def place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     """Optimal contraction target of pairs.
 
     q1, q2 (…,10) quadrics in the frames of p1, p2 (…,3). endpoints_only (…) bool: the paper's fixed
-    placement. rank_aware () bool: the truncated solve (``placement='rank'``), else the thresholded one.
-    cond_eps (…): the thresholded solve is used when det(A) > cond_eps·‖A‖_F³ (a lower bound on
-    λmin/λmax). rank_eps (…): the truncated solve drops the eigenvalues of A at or below rank_eps·λmax
-    (those directions stay at the midpoint). max_shift (…): either solution is used when it lies within
-    max_shift·|p2−p1| of the midpoint, else the segment.
+    placement. cond_eps (…): the solve is used when det(A) > cond_eps·‖A‖_F³ (a lower bound on
+    λmin/λmax). max_shift (…): and when the solution lies within max_shift·|p2−p1| of the midpoint.
     Returns x (…,3) absolute position, cost (…) ≥ 0 (squared distance, units of p), branch (…) int32,
     qsum (…,10) the summed quadric in the frame of x.
     """
     x, cost, branch, q, u = _place(qd.cols(q1, 10), qd.cols(q2, 10), qd.cols(p1, 3), qd.cols(p2, 3),
-                                   endpoints_only, rank_aware, cond_eps, rank_eps, max_shift)
+                                   endpoints_only, cond_eps, max_shift)
+    return jnp.stack(x, -1), cost, branch, jnp.stack(qd.translate_c(q, u), -1)
+
+
+def place_rank(q1, q2, p1, p2, endpoints_only, rank_eps, max_shift):
+    """`place` with the truncated solve (``placement='rank'``): the eigenvalues of A at or below
+    rank_eps·λmax (…) are dropped, those directions stay at the midpoint; the solution is used when it
+    lies within max_shift·|p2−p1| of the midpoint, else the segment. Same returns as `place`."""
+    x, cost, branch, q, u = _place_rank(qd.cols(q1, 10), qd.cols(q2, 10), qd.cols(p1, 3), qd.cols(p2, 3),
+                                        endpoints_only, rank_eps, max_shift)
     return jnp.stack(x, -1), cost, branch, jnp.stack(qd.translate_c(q, u), -1)
 
 
@@ -231,14 +230,22 @@ def _gather_rows(VQ, pairs):
 
 
 @kernel
-def place_pairs(VQ, pairs, endpoints_only, rank_aware, cond_eps, rank_eps, max_shift):
+def place_pairs(VQ, pairs, endpoints_only, cond_eps, max_shift):
     """Batched placement for index pairs (K,2) into vertex rows VQ (N,13) = [position (3), quadric (10)].
 
     The tunables are arrays, never static. Returns one (5,K) array: x (rows 0-2), cost (row 3) and the
     branch (row 4, as a float).
     """
     q1, q2, p1, p2 = _gather_rows(VQ, pairs)
-    x, cost, branch, _, _ = _place(q1, q2, p1, p2, endpoints_only, rank_aware, cond_eps, rank_eps, max_shift)
+    x, cost, branch, _, _ = _place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift)
+    return jnp.stack(x + [cost, branch.astype(cost.dtype)], 0)
+
+
+@kernel
+def place_pairs_rank(VQ, pairs, endpoints_only, rank_eps, max_shift):
+    """`place_pairs` with the truncated solve (``placement='rank'``). Same (5,K) output."""
+    q1, q2, p1, p2 = _gather_rows(VQ, pairs)
+    x, cost, branch, _, _ = _place_rank(q1, q2, p1, p2, endpoints_only, rank_eps, max_shift)
     return jnp.stack(x + [cost, branch.astype(cost.dtype)], 0)
 
 
