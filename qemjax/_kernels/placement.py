@@ -34,8 +34,8 @@ from . import quadrics as qd
 
 SOLVE, SEGMENT, ENDPOINT, TRUNCATED = 0, 1, 2, 3
 
-# Below this (A scaled to unit Frobenius norm) an eigenvalue's cube is not formed: far under float32's
-# resolution of a unit-norm matrix, far above its underflow.
+# A spread of the eigenvalues below this (A scaled to unit Frobenius norm) counts as none (its cube is
+# not formed): far under float32's resolution of a unit-norm matrix, far above its underflow.
 _SMALL = 1e-12
 
 
@@ -79,9 +79,9 @@ def _cofactors(m):
     return adj, a * adj[0] + b * adj[1] + c * adj[2]
 
 
-def _truncated_solve(q, cond_eps):
+def _truncated_solve(q, rank_eps):
     """Minimiser u of Q(u) = uᵀAu + 2bᵀu + c over the eigen-directions of A whose eigenvalue exceeds
-    cond_eps·λ1 (the truncated pseudo-inverse: u = −Σ_kept nᵢ(nᵢ·b)/λᵢ), and how many were kept (0-3).
+    rank_eps·λ1 (the truncated pseudo-inverse: u = −Σ_kept nᵢ(nᵢ·b)/λᵢ), and how many were kept (0-3).
 
     No general eigen-solver (on the CPU the kernel's time grows with its operation count): with A scaled
     to unit Frobenius norm, λ1 comes from the trigonometric solution of the characteristic cubic, λ2 and
@@ -94,9 +94,9 @@ def _truncated_solve(q, cond_eps):
     s = 1.0 / jnp.where(nonzero, fro, 1.0)
     m = [v * s for v in q[:6]]
     bv = q[6:9]
-    adj, det = _cofactors(m)
+    det = _cofactors(m)[1]
     lam1 = _largest_eigenvalue(m)
-    tol = cond_eps * lam1
+    tol = rank_eps * lam1
     # λ2 ≥ λ3: the roots of x² − (tr A − λ1)·x + det A/λ1
     rest = m[0] + m[3] + m[5] - lam1
     prod = jnp.maximum(det, 0.0) / jnp.where(lam1 > 0, lam1, 1.0)
