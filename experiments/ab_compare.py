@@ -7,6 +7,8 @@ faces, history).
 
     python experiments/ab_compare.py --rev HEAD --meshes cow stanford-bunny --ratios 0.1 0.01   # outputs
     python experiments/ab_compare.py --rev HEAD --meshes armadillo-x16 --ratios 0.01 --repeats 7 --time
+    python experiments/ab_compare.py --rev 02a1390 --meshes armadillo-x16 --ratios 0.01 --repeats 5 --time \
+        --new-option placement=rank          # an option of the new code against the old default
 """
 from __future__ import annotations
 
@@ -60,7 +62,10 @@ def main():
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--time", action="store_true", help="report medians of wall and CPU time")
     ap.add_argument("--out", default=None, help="append rows to this CSV")
+    ap.add_argument("--new-option", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="keywords of simplify for the new code only (e.g. placement=rank)")
     args = ap.parse_args()
+    new_kw = dict(kv.split("=", 1) for kv in args.new_option)
     import warnings
 
     warnings.simplefilter("ignore")  # above-target warnings of the mesh/ratio cases are not the point here
@@ -79,19 +84,20 @@ def main():
             times = {"old": [], "new": []}
             cpus = {"old": [], "new": []}
             hashes = {}
-            for lib in (old, new):  # warm-up: compile both
-                lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler)
+            kws = {"old": {}, "new": new_kw}
+            for tag, lib in (("old", old), ("new", new)):  # warm-up: compile both
+                lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler, **kws[tag])
             for rep in range(args.repeats):
                 order = (("old", old), ("new", new)) if rep % 2 == 0 else (("new", new), ("old", old))
                 for tag, lib in order:
                     c0, t0 = cpu_time(), time.perf_counter()
-                    res = lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler)
+                    res = lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler, **kws[tag])
                     times[tag].append(time.perf_counter() - t0)
                     cpus[tag].append(cpu_time() - c0)
                     hashes[tag] = digest(res)
             same = hashes["old"] == hashes["new"]
             row = dict(mesh=name, faces=len(F), ratio=ratio, scheduler=args.scheduler, rev=args.rev,
-                       new=args.new or "working tree",
+                       new=(args.new or "working tree") + "".join(f" {k}={v}" for k, v in new_kw.items()),
                        identical=same, hash_old=hashes["old"], hash_new=hashes["new"], repeats=args.repeats,
                        wall_old=statistics.median(times["old"]), wall_new=statistics.median(times["new"]),
                        cpu_old=statistics.median(cpus["old"]), cpu_new=statistics.median(cpus["new"]))

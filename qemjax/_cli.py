@@ -32,6 +32,7 @@ OPTIONS = {
     "placement": dict(choices=_api.PLACEMENTS),
     "boundary_weight": dict(type=float, metavar="W"),
     "area_weighted": dict(action=argparse.BooleanOptionalAction),
+    "area_power": dict(type=float, metavar="P"),
     "feature_edges": dict(metavar="FILE", help="vertex-index pairs (k,2) constrained like boundary edges, "
                           "read from FILE: .npy, or text with two integers per line (indices of the input "
                           "after welding and dropping unused vertices)", shown="none"),

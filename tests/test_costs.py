@@ -273,3 +273,17 @@ def test_greedy_link_rule_matches_the_set_reference(make):
             assert got == _reference_link_ok(Fm, a, b), (a, b)
             seen.add(got)
     assert seen == {True, False}
+
+
+def test_area_power_keyword_reaches_the_model_and_one_is_the_default():
+    mesh = shapes.bumpy_sphere(2, seed=3)
+    base = qemjax.simplify(mesh, ratio=0.2)
+    same = qemjax.simplify(mesh, ratio=0.2, area_power=1.0)
+    half = qemjax.simplify(mesh, ratio=0.2, area_power=0.5)
+    assert np.array_equal(base.vertices, same.vertices) and np.array_equal(base.faces, same.faces)
+    assert half.stats["model"]["area_power"] == 0.5
+    assert not np.array_equal(base.history.pairs, half.history.pairs)
+    with pytest.raises(ValueError, match="area_power"):
+        qemjax.simplify(mesh, ratio=0.2, area_power=3.0)
+    with pytest.raises(ValueError, match="placement='rank'"):
+        qemjax.simplify(mesh, ratio=0.2, method="esqem", placement="rank")

@@ -4,6 +4,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from qemjax._kernels import flips, placement
 from qemjax._kernels import quadrics as qd
@@ -52,18 +53,21 @@ def test_translate_and_evaluate_match_brute_force():
             np.testing.assert_allclose(qd.evaluate(q2, jnp.asarray(x - p0 - shift)), ref, rtol=1e-10)
 
 
-def test_vertex_quadrics_match_brute_force():
-    """Sum over incident faces of area-weighted squared plane distances, boundary planes included."""
+@pytest.mark.parametrize("power", [1.0, 0.5])
+def test_vertex_quadrics_match_brute_force(power):
+    """Sum over incident faces of (area / mean area)^power-weighted squared plane distances, boundary
+    planes included (weighted by (|e|² / mean |e|²)^power)."""
     from qemjax.shapes import grid
 
     V, F = grid(4)
     V = V + np.c_[np.zeros((len(V), 2)), 0.1 * rng.normal(size=len(V))]  # bumpy: non-trivial planes
-    Q = initial_quadrics(V.astype(DTYPE), F, area_weighted=True, boundary_weight=3.0, feature_edges=None)
+    Q = initial_quadrics(V.astype(DTYPE), F, area_weighted=True, boundary_weight=3.0, feature_edges=None,
+                         area_power=power)
     p = V[F]
     cr = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     area = np.linalg.norm(cr, axis=1) / 2
     nrm = cr / (2 * area[:, None])
-    w = area / area.mean()
+    w = (area / area.mean()) ** power
     from qemjax import _topology as topo
 
     be, bf = topo.boundary_edges(F, len(V))
@@ -79,9 +83,22 @@ def test_vertex_quadrics_match_brute_force():
                 e = V[b] - V[a]
                 m = np.cross(e, nrm[f])
                 m /= np.linalg.norm(m)
-                ref += 3.0 * (e @ e / mean_e2) * (m @ (x - V[a])) ** 2
+                ref += 3.0 * (e @ e / mean_e2) ** power * (m @ (x - V[a])) ** 2
         got = float(qd.evaluate(jnp.asarray(Q[v], jnp.float32), jnp.asarray(x - V[v], jnp.float32)))
         np.testing.assert_allclose(got, ref, rtol=2e-4, atol=1e-7)
+
+
+def test_area_power_zero_and_one_are_the_unit_and_area_weights_exactly():
+    from qemjax.shapes import bumpy_sphere
+
+    V, F = bumpy_sphere(2)
+    V = V.astype(DTYPE)
+
+    def q(**kw):
+        return initial_quadrics(V, F, boundary_weight=3.0, feature_edges=None, **kw)
+    assert np.array_equal(q(area_weighted=True, area_power=0.0), q(area_weighted=False))
+    assert np.array_equal(q(area_weighted=True, area_power=1.0), q(area_weighted=True))
+    assert not np.array_equal(q(area_weighted=True, area_power=0.5), q(area_weighted=True))
 
 
 def _sphere_quadrics(center, radius, n_planes=40):
@@ -100,10 +117,12 @@ def _quadric_in_frame(normals, points, origin, w=None):
     return np.concatenate([A[0], A[1, 1:], A[2, 2:], b, [np.sum(w * dl * dl)]])
 
 
-def _place64(q1, q2, p1, p2, endpoints=False):
+def _place64(q1, q2, p1, p2, endpoints=False, rank=False, rank_eps=1e-3):
+    """Float64 placement; ``rank``: the truncated solve (placement='rank')."""
     with jax.enable_x64(True):
-        out = placement.place(jnp.asarray(q1), jnp.asarray(q2), jnp.asarray(p1), jnp.asarray(p2),
-                              jnp.asarray(endpoints), jnp.asarray(1e-5), jnp.asarray(2.0))
+        fn, eps = (placement.place_rank, rank_eps) if rank else (placement.place, 1e-5)
+        out = fn(jnp.asarray(q1), jnp.asarray(q2), jnp.asarray(p1), jnp.asarray(p2), jnp.asarray(endpoints),
+                 jnp.asarray(eps), jnp.asarray(2.0))
         return [np.asarray(o) for o in out]
 
 
@@ -155,6 +174,52 @@ def test_crease_gives_best_point_on_segment():
     seg = p1 + ts[:, None] * (p2 - p1)
     best = seg[np.argmin(seg[:, 0] ** 2 + seg[:, 2] ** 2)]
     np.testing.assert_allclose(x, best, atol=1e-4)
+
+
+def test_flat_patch_keeps_the_midpoint_in_the_plane():
+    """A flat patch has a rank-1 quadric: the truncated solve moves only across the plane (here not at all),
+    so the pair lands on its midpoint at zero cost."""
+    nrm = np.tile([[0.0, 0.0, 1.0]], (6, 1))
+    pts = np.c_[rng.uniform(-1, 1, (6, 2)), np.zeros(6)]
+    p1, p2 = np.array([0.0, 0.0, 0.0]), np.array([0.2, 0.1, 0.0])
+    x, cost, branch, _ = _place64(_quadric_in_frame(nrm, pts, p1), _quadric_in_frame(nrm, pts, p2), p1, p2,
+                                  rank=True)
+    assert branch == placement.TRUNCATED
+    assert cost < 1e-20
+    np.testing.assert_allclose(x, 0.5 * (p1 + p2), atol=1e-12)
+    lifted = p1 + [0, 0, 0.05], p2 + [0, 0, 0.03]  # off the plane: back onto it, straight across
+    x, cost, branch, _ = _place64(_quadric_in_frame(nrm, pts, lifted[0]), _quadric_in_frame(nrm, pts, lifted[1]),
+                                  *lifted, rank=True)
+    assert branch == placement.TRUNCATED and cost < 1e-14
+    np.testing.assert_allclose(x, [0.1, 0.05, 0.0], atol=1e-12)
+
+
+def test_crease_lands_on_the_crease_nearest_the_midpoint():
+    """Two planes z=0 and x=0 meet in the y axis (rank-2 quadric): the pair straddling the crease lands
+    on the point of the crease nearest its midpoint (the free direction keeps the midpoint's y), at zero
+    cost, off the segment (the segment's point on the crease has another y)."""
+    nrm = np.array([[0.0, 0, 1]] * 3 + [[1.0, 0, 0]] * 3)
+    pts = np.zeros((6, 3))
+    p1, p2 = np.array([0.3, 0.2, 0.0]), np.array([-0.2, 0.4, 0.0])  # crosses the y axis at t = 0.6
+    x, cost, branch, _ = _place64(_quadric_in_frame(nrm, pts, p1), _quadric_in_frame(nrm, pts, p2), p1, p2,
+                                  rank=True)
+    assert branch == placement.TRUNCATED
+    assert cost < 1e-14
+    np.testing.assert_allclose(x, [0.0, 0.3, 0.0], atol=1e-12)
+
+
+def test_far_solution_falls_back_to_the_segment():
+    """A well-conditioned quadric whose minimum lies far from a short pair: the best point on the segment."""
+    n1, pt1 = _sphere_quadrics(np.array([1.0, 1.0, 1.0]), 0.3)
+    p1, p2 = np.array([0.0, 0.0, 0.0]), np.array([0.05, 0.0, 0.0])
+    q1, q2 = _quadric_in_frame(n1, pt1, p1), _quadric_in_frame(n1, pt1, p2)
+    for rank in (False, True):
+        x, cost, branch, _ = _place64(q1, q2, p1, p2, rank=rank)
+        assert branch == placement.SEGMENT
+    planes = np.concatenate([np.concatenate([n1, n1]), -np.sum(np.concatenate([n1 * pt1] * 2), 1)[:, None]], 1)
+    ts = np.linspace(0, 1, 20001)
+    costs = [brute_quadric_cost(p1 + t * (p2 - p1), planes, np.ones(len(planes))) for t in ts]
+    np.testing.assert_allclose(x, p1 + ts[int(np.argmin(costs))] * (p2 - p1), atol=1e-4)  # both agree
 
 
 def test_endpoints_placement_picks_best_of_three():
@@ -241,14 +306,17 @@ def test_indexed_placement_matches_per_pair_placement():
         V, Q = rng.normal(size=(n, 3)), _random_quadrics(n)
         VQ = np.concatenate([V, Q], 1)
         P = rng.integers(0, n, (K, 2))
-        args = (np.asarray(False), np.asarray(1e-5), np.asarray(2.0))
-        out = np.asarray(placement.place_pairs(jnp.asarray(VQ), jnp.asarray(P), *args))
-        x, cost, branch, _ = (np.asarray(o) for o in placement.place(
-            Q[P[:, 0]], Q[P[:, 1]], V[P[:, 0]], V[P[:, 1]], *args))
-        np.testing.assert_allclose(out[:3].T, x, rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(out[3], cost, rtol=1e-12, atol=1e-12)
-        assert np.array_equal(out[4].astype(int), branch)
-        assert len(set(branch.tolist())) > 1  # several branches exercised
+        modes = [(placement.place_pairs_rank, placement.place_rank, 1e-3),
+                 (placement.place_pairs, placement.place, 1e-5)]  # the thresholded last: x is checked below
+        for pairs_fn, place_fn, eps in modes:
+            args = (np.asarray(False), np.asarray(eps), np.asarray(2.0))
+            out = np.asarray(pairs_fn(jnp.asarray(VQ), jnp.asarray(P), *args))
+            x, cost, branch, _ = (np.asarray(o) for o in place_fn(
+                Q[P[:, 0]], Q[P[:, 1]], V[P[:, 0]], V[P[:, 1]], *args))
+            np.testing.assert_allclose(out[:3].T, x, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(out[3], cost, rtol=1e-12, atol=1e-12)
+            assert np.array_equal(out[4].astype(int), branch)
+            assert len(set(branch.tolist())) > 1  # several branches exercised
         qm = np.asarray(placement.merged_quadrics(jnp.asarray(VQ), jnp.asarray(P), jnp.asarray(x)))
         for i in range(K):
             a, b = P[i]
@@ -318,3 +386,81 @@ def test_set_rows_updates_in_place_and_drops_padding():
     A = np.asarray(set_rows(A, idx, rows, size=4))  # two padding rows point past the end
     assert np.array_equal(A[[7, 2]], rows)
     assert np.count_nonzero(A) == 7  # nothing else written (rows has one zero)
+
+
+def _pinv_reference(q, mid, half, eps, max_shift):
+    """Float64 numpy reference of the rank-aware solve: (x, rank) of the truncated pseudo-inverse around the
+    midpoint, or None where its solution lies beyond max_shift·|p2 − p1|."""
+    A, b, _ = (np.asarray(t) for t in qd.unpack(jnp.asarray(q)))
+    lam, vec = np.linalg.eigh(A)
+    keep = lam > eps * lam.max()
+    u = -vec[:, keep] @ ((vec[:, keep].T @ b) / lam[keep])
+    near = np.any(np.abs(lam / (eps * lam.max()) - 1) < 0.01)  # at the threshold: either side is right
+    if u @ u > 4 * max_shift ** 2 * (half @ half):
+        return None, int(keep.sum()), near
+    return mid + u, int(keep.sum()), near
+
+
+def _low_rank_pair(rank, degenerate=False):
+    """Quadrics of planes with `rank` independent normals; when `degenerate`, nearly repeated normals and
+    one more plane of weight 1e-7 (an eigenvalue just above zero, far below the threshold)."""
+    base = rng.normal(size=(rank, 3))
+    nrm = np.concatenate([base, base + (1e-9 if degenerate else 0.0) * rng.normal(size=(rank, 3)),
+                          rng.normal(size=(1, 3))])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    w = rng.uniform(0.2, 1.0, len(nrm))
+    w[-1] = 1e-7 if degenerate else 0.0
+    pts = rng.normal(size=(len(nrm), 3)) * 0.1
+    p1 = rng.normal(size=3) * 0.1
+    p2 = p1 + rng.normal(size=3) * 0.1
+    return _quadric_in_frame(nrm, pts, p1, w), _quadric_in_frame(nrm, pts, p2, w), p1, p2
+
+
+def test_rank_aware_solve_matches_float64_pseudo_inverse():
+    """Random rank-1, rank-2, rank-3 and nearly degenerate quadrics: the kernel's point and branch equal
+    the numpy eigh-based truncated pseudo-inverse (or the segment where that lands too far away)."""
+    eps, shift = 1e-3, 2.0
+    seen, ranks = set(), set()
+    for rank in (1, 2, 3):
+        for degenerate in (False, True):
+            for _ in range(30):
+                q1, q2, p1, p2 = _low_rank_pair(rank, degenerate)
+                mid, half = 0.5 * (p1 + p2), 0.5 * (p2 - p1)
+                with jax.enable_x64(True):
+                    q = np.asarray(qd.translate(jnp.asarray(q1), jnp.asarray(half))) + \
+                        np.asarray(qd.translate(jnp.asarray(q2), jnp.asarray(-half)))
+                    x, cost, branch, _ = _place64(q1, q2, p1, p2, rank=True, rank_eps=eps)
+                    xref, kept, near = _pinv_reference(q, mid, half, eps, shift)
+                assert kept <= rank  # random normals may be nearly parallel or coplanar
+                ranks.add(kept)
+                if near:
+                    continue
+                if xref is None:
+                    assert branch in (placement.SEGMENT, placement.ENDPOINT)
+                    continue
+                assert branch == (placement.SOLVE if kept == 3 else placement.TRUNCATED)
+                seen.add(int(branch))
+                np.testing.assert_allclose(x, xref, atol=1e-9)
+    assert seen == {placement.SOLVE, placement.TRUNCATED} and ranks == {1, 2, 3}
+
+
+def test_float32_placement_is_finite_on_degenerate_input():
+    """Zero quadrics, coincident and tiny pairs, single planes and huge weights: finite output, no NaN."""
+    params = QEM().kernel_params()
+    zero = np.zeros(10)
+    plane = _quadric_in_frame(np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 3)), np.zeros(3))
+    n1, pt1 = _sphere_quadrics(np.zeros(3), 0.3)
+    sphere = _quadric_in_frame(n1, pt1, np.zeros(3))
+    cases = []
+    for q in (zero, plane, sphere, plane * 1e20, plane * 1e-30, sphere * 1e-30):
+        for d in (0.0, 1e-30, 1e-7, 0.1):
+            cases.append((q, q, np.zeros(3), np.array([d, 0.0, 0.0])))
+            cases.append((q, zero, np.zeros(3), np.array([d, d, d])))
+    q1, q2, p1, p2 = (np.array(c, DTYPE) for c in zip(*cases))
+    for fn, eps in ((placement.place, params["cond_eps"]), (placement.place_rank, params["rank_eps"])):
+        x, cost, branch, qsum = (np.asarray(o) for o in fn(
+            q1, q2, p1, p2, params["endpoints_only"], eps, params["max_shift"]))
+        assert np.isfinite(x).all() and np.isfinite(cost).all() and np.isfinite(qsum).all()
+        assert set(branch.tolist()) <= {placement.SOLVE, placement.SEGMENT, placement.ENDPOINT,
+                                        placement.TRUNCATED}
+        assert branch[0] == placement.ENDPOINT and np.array_equal(x[0], p1[0])  # zero quadric: the midpoint

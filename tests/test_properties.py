@@ -40,7 +40,7 @@ def meshes(draw):
 
 OPTIONS = st.fixed_dictionaries({}, optional={
     "scheduler": st.sampled_from(["parallel", "greedy"]),
-    "placement": st.sampled_from(["optimal", "endpoints"]),
+    "placement": st.sampled_from(["optimal", "rank", "endpoints"]),
     "area_weighted": st.booleans(),
     "boundary_weight": st.sampled_from([0.0, 1.0, 1000.0]),
     "flip_angle": st.sampled_from([30.0, 90.0, 150.0]),

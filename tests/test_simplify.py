@@ -115,8 +115,28 @@ def test_units_follow_the_input_scale(bumpy):
 def test_endpoints_placement_uses_existing_points_or_midpoints():
     V, F = shapes.bumpy_sphere(3)
     r = qemjax.simplify((V, F), target_faces=200, placement="endpoints")
-    assert r.stats["branches"]["solve"] == 0 and r.stats["branches"]["segment"] == 0
+    assert r.stats["branches"]["solve"] == r.stats["branches"]["segment"] == r.stats["branches"]["truncated"] == 0
     assert_valid(r, 200, V, F)
+
+
+def test_rank_placement_truncates_on_a_flat_grid_without_recompiling():
+    """On a flat grid the quadrics are rank 1 inside and rank 2 along the border: placement='rank' takes
+    the truncated solve and keeps the result flat and valid. The mode is its own kernel (compiled once);
+    a new rank_eps is an array and compiles nothing."""
+    V, F = shapes.grid(20)
+    base = qemjax.simplify((V, F), target_faces=60)
+    r = qemjax.simplify((V, F), target_faces=60, placement="rank")
+    assert_valid(r, 60, V, F)
+    assert r.stats["branches"]["truncated"] > 0 and base.stats["branches"]["truncated"] == 0
+    assert np.all(np.abs(r.vertices[:, 2]) < 1e-6)
+    from qemjax import _compilation
+    from qemjax._costs.qem import QEM
+
+    VS, pairs = np.zeros((64, 13), np.float32), np.zeros((256, 2), np.int32)
+    QEM(placement="rank").price(VS, pairs, QEM(placement="rank").kernel_params())
+    c0, _ = _compilation.snapshot()
+    QEM(placement="rank", rank_eps=1e-2).price(VS, pairs, QEM(placement="rank", rank_eps=1e-2).kernel_params())
+    assert _compilation.snapshot()[0] == c0
 
 
 def test_history_and_result_fields(bumpy):

@@ -54,7 +54,7 @@ class CostModel:
     uses_ring: ClassVar[bool] = False
     ring_dead: ClassVar[bool] = False  # the ring also holds the faces the contraction removes (`ring`)
     parts: ClassVar[tuple[str, ...]] = ()
-    branches: ClassVar[tuple[str, ...]] = ("solve", "segment", "endpoint")
+    branches: ClassVar[tuple[str, ...]] = ("solve", "segment", "endpoint", "truncated")
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         """(n, width) float32 state rows."""
@@ -66,7 +66,7 @@ class CostModel:
 
     def price(self, VS, pairs, params, rings=None):
         """Device rows VS (N, 3 + width), pairs (K,2) int32 -> (5 + len(parts), K) array (see module).
-        A model whose price needs no ring also offers it as ``price_kernel(VS, pairs, params)``, a static
+        A model whose price needs no ring also offers it as ``model.price_kernel(VS, pairs, params)``, a static
         function of its arrays (settings come in ``params``), so wrappers can call it inside their own
         jit without recompiling for new settings."""
         raise NotImplementedError

@@ -19,12 +19,14 @@ from .._batching import DTYPE, bucket, pad_rows
 from .._kernels import placement, quadrics
 from .base import CostModel, MeshInput
 
-PLACEMENTS = ("optimal", "endpoints")
+PLACEMENTS = ("optimal", "rank", "endpoints")
 
 
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,
-                     feature_edges: np.ndarray | None, boundary=None, means=None) -> np.ndarray:
-    """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes.
+                     feature_edges: np.ndarray | None, boundary=None, means=None,
+                     area_power: float = 1.0) -> np.ndarray:
+    """(n,10) float32 vertex quadrics (each in its vertex's frame) with boundary/feature planes; with
+    ``area_weighted`` the planes are weighted by (area / mean area)^area_power.
     ``boundary``: `topo.boundary_edges` of F when the caller has it; ``means``: (mean face area, mean
     squared edge length) when the caller has them (else `face_stats` of V and F)."""
     n = len(V)
@@ -42,23 +44,37 @@ def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, bound
     Fp = pad_rows(F.astype(np.int32), nf, fill=n)  # padding faces point at a spare vertex
     fmask = np.arange(nf) < len(F)
     Q = quadrics.vertex_quadrics(
-        Vp, Fp, fmask, jnp.asarray(area_weighted),
+        Vp, Fp, fmask, np.asarray(area_power if area_weighted else 0.0, DTYPE),
         pad_rows(be.astype(np.int32), nb, fill=n), pad_rows(cn, nb), pad_rows(cw, nb),
         np.arange(nb) < len(be),
         *(np.asarray(m, np.float32) for m in (face_stats(V, F)[1:] if means is None else means)))
     return np.asarray(Q)[:n]
 
 
+def _price(VS, pairs, params):
+    return placement.place_pairs(VS, pairs, params["endpoints_only"], params["cond_eps"], params["max_shift"])
+
+
+def _price_rank(VS, pairs, params):
+    return placement.place_pairs_rank(VS, pairs, params["endpoints_only"], params["rank_eps"],
+                                      params["max_shift"])
+
+
 @dataclasses.dataclass(frozen=True)
 class QEM(CostModel):
     """Quadric error metric (Garland & Heckbert 1997).
 
-    placement: ``'optimal'`` (solve; else the best point on the segment; else the best of the endpoints
-        and the midpoint) or ``'endpoints'`` (the paper's fixed placement).
+    placement: ``'optimal'`` (solve when well conditioned; else the best point on the segment; else the
+        best of the endpoints and the midpoint), ``'rank'`` (the truncated solve: the well-determined
+        directions of the quadric solved, the others kept at the midpoint; `_kernels.placement`) or
+        ``'endpoints'`` (the paper's fixed placement).
     area_weighted: weight each face plane by area / mean face area (else 1, the paper's choice).
+    area_power: with area_weighted, weight by (area / mean area)^area_power instead (0.5: small faces,
+        such as those at thin tips, count for more than their area; see the README's Hausdorff study).
     boundary_weight: weight of the plane through each boundary (or feature) edge perpendicular to its face.
-    cond_eps: the 3×3 solve is used when det(A) > cond_eps·‖A‖_F³.
-    max_shift: ... and when its solution lies within max_shift·|v2 − v1| of the pair's midpoint.
+    cond_eps: ``'optimal'``: the 3×3 solve is used when det(A) > cond_eps·‖A‖_F³.
+    rank_eps: ``'rank'``: eigenvalues of A at or below rank_eps·λmax are truncated.
+    max_shift: either solve is used when its solution lies within max_shift·|v2 − v1| of the midpoint.
     """
 
     name: ClassVar[str] = "qem"
@@ -66,8 +82,10 @@ class QEM(CostModel):
 
     placement: str = "optimal"
     area_weighted: bool = True
+    area_power: float = 1.0
     boundary_weight: float = 100.0
     cond_eps: float = 1e-5
+    rank_eps: float = 1e-4
     max_shift: float = 2.0
 
     def __post_init__(self):
@@ -75,20 +93,24 @@ class QEM(CostModel):
             raise ValueError(f"unknown placement {self.placement!r}; choose from {PLACEMENTS}")
         if not (self.boundary_weight >= 0 and np.isfinite(self.boundary_weight)):
             raise ValueError(f"boundary_weight must be finite and >= 0, got {self.boundary_weight}")
+        if not 0 <= self.area_power <= 2:
+            raise ValueError(f"area_power must be in [0, 2], got {self.area_power}")
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         return initial_quadrics(mesh.V, mesh.F, area_weighted=self.area_weighted,
                                 boundary_weight=self.boundary_weight, feature_edges=mesh.feature_edges,
-                                boundary=mesh.boundary, means=mesh.means)
+                                boundary=mesh.boundary, means=mesh.means, area_power=self.area_power)
 
     def kernel_params(self) -> dict:
         return {"endpoints_only": np.asarray(self.placement == "endpoints"),
-                "cond_eps": np.asarray(self.cond_eps, DTYPE), "max_shift": np.asarray(self.max_shift, DTYPE)}
+                "cond_eps": np.asarray(self.cond_eps, DTYPE), "rank_eps": np.asarray(self.rank_eps, DTYPE),
+                "max_shift": np.asarray(self.max_shift, DTYPE)}
 
-    @staticmethod
-    def price_kernel(VS, pairs, params):
-        return placement.place_pairs(VS, pairs, params["endpoints_only"], params["cond_eps"],
-                                     params["max_shift"])
+    @property
+    def price_kernel(self):
+        """The price as a static function of arrays (VS, pairs, params): one kernel per placement mode
+        ('rank' is its own kernel, so the default's compiled code stays as it was)."""
+        return _price_rank if self.placement == "rank" else _price
 
     def price(self, VS, pairs, params, rings=None):
         return self.price_kernel(VS, pairs, params)

@@ -1,0 +1,221 @@
+"""Rank qemjax against the best peer on every shared mesh: rms and Hausdorff over the best peer's, per case.
+
+For each shared mesh (welded, `meshes.load`) and ratio (10 % and 1 % by default): ``target = max(4,
+round(ratio * faces))``; every peer of `peers.PEERS` and every qemjax variant simplify to it; the two-way
+distances come from ``qemjax.metrics.surface_distance`` (relative to the bounding-box diagonal, seed 0).
+"Best peer" is taken per metric: the lowest rms among the peers, and separately the lowest Hausdorff.
+A peer that fails is left out of that case.
+
+A variant is ``LABEL`` or ``LABEL:key=value,...``: ``rev=REV`` runs qemjax as it was at that git revision
+(unpacked by `ab_compare.load_old`, in this process); other keys set the QEM model's fields
+(``placement``, ``cond_eps``, ``rank_eps``, ``max_shift``, ``area_weighted``, ``area_power``,
+``boundary_weight``). So the table before and after a change comes from one command::
+
+    python experiments/rank_peers.py --variant old:rev=02a1390 --variant rank:placement=rank
+    python experiments/rank_peers.py --variant new --variant loose:cond_eps=1e-9 --meshes cow face
+
+Rows go to ``results/rank_peers.csv``; the printed table (one block per variant) also to
+``results/rank_peers.txt``. ``--reuse-peers [CSV]`` takes the peers' rows from a CSV of an earlier run
+instead of running them again (peers are deterministic; for studies of qemjax's own settings)::
+
+    python experiments/rank_peers.py --variant base --variant bw1000:boundary_weight=1000 \
+        --meshes beetle face --reuse-peers experiments/results/rank_peers.csv --out experiments/results/boundary
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import inspect
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import meshes as bench_meshes  # noqa: E402
+import peers as bench_peers  # noqa: E402
+
+RESULTS = HERE / "results"
+COLUMNS = ["mesh", "faces_in", "ratio", "target", "method", "faces_out", "rms_rel", "hausdorff_rel", "time_s",
+           "branches", "status"]
+
+
+def parse_variant(spec: str) -> tuple[str, str | None, dict]:
+    """'LABEL[:k=v,...]' -> (label, rev or None, QEM field settings)."""
+    label, _, rest = spec.partition(":")
+    rev, settings = None, {}
+    for item in filter(None, rest.split(",")):
+        key, _, value = item.partition("=")
+        if key == "rev":
+            rev = value
+        else:
+            settings[key] = {"true": True, "false": False}.get(value.lower(), value)
+    return label, rev, settings
+
+
+def variant_runner(label: str, rev: str | None, settings: dict):
+    """A function (V, F, target) -> result of ``simplify`` for one variant."""
+    if rev is not None:
+        import ab_compare
+
+        package = ab_compare.load_old(rev, as_name=f"qemjax_{label.replace('-', '_')}")
+    else:
+        import qemjax as package
+    costs = package._costs
+    fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
+    unknown = set(settings) - set(fields)
+    if unknown:
+        raise SystemExit(f"unknown QEM setting(s) {sorted(unknown)}; choose from {sorted(fields)}")
+    typed = {k: type(fields[k].default)(v) for k, v in settings.items()}
+    # settings that simplify takes as keywords go there (it passes them to the model); the rest are
+    # defaults of a QEM subclass
+    keywords = {k: typed.pop(k) for k in list(typed) if k in inspect.signature(package.simplify).parameters}
+    if typed:  # a QEM subclass with these defaults, registered under its own name
+        name = f"qem-{label}"
+        cls = dataclasses.make_dataclass(name, [(k, type(v), dataclasses.field(default=v))
+                                                for k, v in typed.items()],
+                                         bases=(costs.QEM,), frozen=True, namespace={"name": name})
+        if name not in costs.REGISTRY:
+            costs.register(cls)
+        method = name
+    else:
+        method = "qem"
+
+    def run(V, F, target):
+        return package.simplify((V, F), target_faces=target, method=method, **keywords)
+    return run
+
+
+def distances(V, F, V2, F2) -> dict:
+    from qemjax.metrics import surface_distance
+
+    d = surface_distance((V, F), (V2, F2), seed=0)
+    return {"rms_rel": d["rms_rel"], "hausdorff_rel": d["hausdorff_rel"]}
+
+
+def run_peers(mesh, ratio, target) -> list[dict]:
+    rows = []
+    for peer in bench_peers.PEERS:
+        row = dict(mesh=mesh.name, faces_in=mesh.n_faces, ratio=ratio, target=target, method=peer)
+        try:
+            V2, F2, secs = bench_peers.run_peer(peer, mesh.V, mesh.F, target)
+            row.update(faces_out=len(F2), time_s=secs, status="ok", **distances(mesh.V, mesh.F, V2, F2))
+        except Exception as exc:  # a peer that fails on a mesh is left out of the case
+            row.update(status=f"error: {type(exc).__name__}: {exc}"[:120])
+        rows.append(row)
+    return rows
+
+
+def ranks(rows: list[dict], labels: list[str]) -> str:
+    """Per variant: per case rms and Hausdorff over the best peer's, and the counts."""
+    out = []
+    cases = sorted({(r["mesh"], float(r["ratio"])) for r in rows}, key=lambda c: (-c[1], c[0]))
+    for label in labels:
+        lines = [f"## {label}", "",
+                 "| mesh | ratio | rms | best peer rms | rms ratio | Hausdorff | best peer Hausdorff | H ratio |",
+                 "|---|---|---|---|---|---|---|---|"]
+        n = n_rms = n_h = 0
+        rr, hr = [], []
+        for mesh, ratio in cases:
+            here = [r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio and r["status"] == "ok"]
+            own = [r for r in here if r["method"] == f"qemjax-{label}"]
+            peers = [r for r in here if r["method"] in bench_peers.PEERS]
+            if not own or not peers:
+                continue
+            o = own[0]
+            best_r = min(peers, key=lambda r: float(r["rms_rel"]))
+            best_h = min(peers, key=lambda r: float(r["hausdorff_rel"]))
+            a = float(o["rms_rel"]) / float(best_r["rms_rel"])
+            b = float(o["hausdorff_rel"]) / float(best_h["hausdorff_rel"])
+            n, n_rms, n_h = n + 1, n_rms + (a <= 1), n_h + (b <= 1)
+            rr.append(a)
+            hr.append(b)
+            lines.append(f"| {mesh} | {ratio:g} | {float(o['rms_rel']):.3e} | {float(best_r['rms_rel']):.3e} "
+                         f"({best_r['method']}) | {a:.3f} | {float(o['hausdorff_rel']):.3e} | "
+                         f"{float(best_h['hausdorff_rel']):.3e} ({best_h['method']}) | {b:.3f} |")
+        if n:
+            lines += ["", f"{label}: rms <= best peer in {n_rms}/{n} cases; Hausdorff <= best peer in {n_h}/{n}; "
+                      f"rms ratio median {np.median(rr):.3f}, max {max(rr):.3f}; "
+                      f"Hausdorff ratio median {np.median(hr):.3f}, max {max(hr):.3f}", ""]
+        out.append("\n".join(lines))
+    if len(labels) > 1 and cases:  # each variant against the first, per case
+        base = labels[0]
+        for label in labels[1:]:
+            ch = []
+            for mesh, ratio in cases:
+                pick = {r["method"]: r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio
+                        and r["status"] == "ok"}
+                if f"qemjax-{base}" in pick and f"qemjax-{label}" in pick:
+                    ch.append((float(pick[f"qemjax-{label}"]["rms_rel"]) / float(pick[f"qemjax-{base}"]["rms_rel"]),
+                               mesh, ratio))
+            if ch:
+                worst = max(ch)
+                out.append(f"{label} rms / {base} rms: median {np.median([c[0] for c in ch]):.3f}, "
+                           f"worst {worst[0]:.3f} ({worst[1]} @ {worst[2]:g}); "
+                           f"{sum(c[0] > 1.03 for c in ch)} of {len(ch)} cases more than 3 % worse\n")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--variant", action="append", default=None,
+                    help="LABEL or LABEL:rev=REV or LABEL:key=value,... (repeatable; default: 'qemjax')")
+    ap.add_argument("--meshes", nargs="+", default=None, help="shared mesh names (default: all)")
+    ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
+    ap.add_argument("--reuse-peers", nargs="?", const="", default=None, metavar="CSV",
+                    help="peers' rows from this CSV (default: the --out one) instead of running them")
+    ap.add_argument("--out", default=str(RESULTS / "rank_peers"), help="path without extension")
+    args = ap.parse_args(argv)
+    import warnings
+
+    warnings.simplefilter("ignore")
+    variants = [parse_variant(s) for s in (args.variant or ["qemjax"])]
+    runners = {label: variant_runner(label, rev, settings) for label, rev, settings in variants}
+    names = args.meshes or list(bench_meshes.shared_files())
+    if not names:
+        raise SystemExit("no shared meshes (../shared/meshes is absent)")
+    old_peers = {}
+    if args.reuse_peers is not None:
+        with open(args.reuse_peers or args.out + ".csv") as fh:
+            for r in csv.DictReader(fh):
+                if r["method"] in bench_peers.PEERS:
+                    old_peers[(r["mesh"], float(r["ratio"]), r["method"])] = r
+    rows = []
+    for name in names:
+        mesh = bench_meshes.load(name)
+        for ratio in args.ratios:
+            target = max(4, int(round(ratio * mesh.n_faces)))
+            cached = [old_peers.get((name, ratio, p)) for p in bench_peers.PEERS]
+            rows += cached if all(cached) else run_peers(mesh, ratio, target)
+            for label, run in runners.items():
+                t0 = time.perf_counter()
+                res = run(mesh.V, mesh.F, target)
+                secs = time.perf_counter() - t0
+                V2, F2 = np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64)
+                rows.append(dict(mesh=name, faces_in=mesh.n_faces, ratio=ratio, target=target,
+                                 method=f"qemjax-{label}", faces_out=len(F2), time_s=secs, status="ok",
+                                 branches=" ".join(f"{k}={v}" for k, v in res.stats["branches"].items()),
+                                 **distances(mesh.V, mesh.F, V2, F2)))
+            print(f"{name} @ {ratio:g}: " + ", ".join(
+                f"{r['method']} {float(r['rms_rel']):.3e}/{float(r['hausdorff_rel']):.3e}"
+                for r in rows if r["mesh"] == name and float(r["ratio"]) == ratio and r["status"] == "ok"),
+                flush=True)
+    table = ranks(rows, [v[0] for v in variants])
+    print(table)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    with open(args.out + ".csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    cmd = "python experiments/rank_peers.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    Path(args.out + ".txt").write_text(f"# {cmd}\n# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}\n\n"
+                                       + table + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
