@@ -37,33 +37,34 @@ def _h(a) -> str:
 
 def child(subdivisions: int, ratio: float) -> dict:
     """The hashes of every stage, in this process."""
+    import jax
     import jax.numpy as jnp
     import numpy as np
 
     import qemjax
     from qemjax import _io, _topology as topo, _units, shapes
-    from qemjax._kernels import placement
-    from qemjax._schedulers import common
+    from qemjax._batching import bucket, chunk_size, chunks
+    from qemjax._costs.qem import QEM, initial_quadrics
+    from qemjax._kernels import CPU_COMPILER_OPTIONS, placement
 
     mesh = shapes.bumpy_sphere(subdivisions)
     (V, F), _ = _io.prepare(mesh)
     Vn, _ = _units.normalize(V)
     E, _, be, bf = topo.edge_table(F, len(V))
-    Q = common.initial_quadrics(Vn, F, area_weighted=True, boundary_weight=100.0, feature_edges=None,
-                                boundary=(be, bf))
+    Q = initial_quadrics(Vn, F, area_weighted=True, boundary_weight=100.0, feature_edges=None,
+                         boundary=(be, bf))
     out = {"cores": len(os.sched_getaffinity(0)), "quadrics": _h(Q)}
     n = len(V)
-    VQ = np.zeros((common.bucket(n + 1), 13), np.float32)
+    VQ = np.zeros((bucket(n + 1), 13), np.float32)
     VQ[:n, :3], VQ[:n, 3:] = Vn, Q
-    args = common.Settings(False, 1e-5, 2.0, 0.0, True, np.inf).kernel_args()
+    p = QEM().kernel_params()
+    args = (p["endpoints_only"], p["cond_eps"], p["max_shift"])
     P = E.astype(np.int32)
-    x = common.place_gathered(Q[P[:, 0]], Q[P[:, 1]], Vn[P[:, 0]], Vn[P[:, 1]], common.Settings(
-        False, 1e-5, 2.0, 0.0, True, np.inf))[0]
-    out["place"] = _h(x)
-    xs = [np.asarray(placement.place_pairs(jnp.asarray(VQ), part, *args)) for _, part in common.chunks(P)]
+    xs = [np.asarray(placement.place_pairs(jnp.asarray(VQ), part, *args)) for _, part in chunks(P)]
     out["place_pairs"] = _h(np.concatenate(xs, 1)[:3, : len(P)])
-    size = common.chunk_size(len(P))
-    hlo = placement.place_pairs.lower(jnp.asarray(VQ), np.zeros((size, 2), np.int32), *args).compile().as_text()
+    size = chunk_size(len(P))
+    jitted = jax.jit(placement.place_pairs.__wrapped__, compiler_options=CPU_COMPILER_OPTIONS)
+    hlo = jitted.lower(jnp.asarray(VQ), np.zeros((size, 2), np.int32), *args).compile().as_text()
     out["partitions"] = hlo.count("outer_dimension_partitions")
     for scheduler in ("parallel", "greedy"):
         r = qemjax.simplify(mesh, ratio=ratio, scheduler=scheduler)
