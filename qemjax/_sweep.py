@@ -228,6 +228,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
 
     table = read_table(out) if out is not None else pd.DataFrame()
     rows = {}
+    if len(table) and "cell" not in table:
+        raise ValueError(f"{os.fspath(out)} exists but is not a sweep table (no 'cell' column)")
     if len(table):
         ok = table[table["error"].fillna("") == ""] if "error" in table else table
         rows = {r["cell"]: r for r in ok.to_dict("records")}

@@ -180,6 +180,14 @@ def test_validation(grid, targets, kw, message):
         qemjax.sweep(shapes.icosphere(1), grid, targets, progress=False, **kw)
 
 
+def test_out_that_is_not_a_sweep_table(tmp_path):
+    out = tmp_path / "other.csv"
+    out.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="not a sweep table"):
+        qemjax.sweep(shapes.icosphere(1), {}, [0.5], out=out, progress=False)
+    assert out.read_text() == "a,b\n1,2\n"  # left as it was
+
+
 def test_duplicate_names():
     with pytest.raises(ValueError, match="same name"):
         qemjax.sweep(["a/cow.obj", "b/cow.obj"], {}, [0.5], progress=False)
