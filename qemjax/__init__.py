@@ -1,7 +1,7 @@
 """qemjax: JAX-accelerated, batched triangle-mesh simplification.
 
 Public API: `simplify`, `methods`, `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the
-multiresolution record (`Record`, `Level`, `load_record`, `lod_chain`, `LodChain`), and the `metrics` module.
+multiresolution record (`Record`, `Level`, `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`), and the `metrics` module.
 """
 from ._api import methods as methods
 from ._api import simplify as simplify
@@ -15,6 +15,7 @@ from ._record import Record as Record
 from ._record import load_record as load_record
 from ._result import Contractions as Contractions
 from ._result import SimplifyResult as SimplifyResult
+from ._sweep import sweep as sweep
 
 __version__ = "0.1.0"
 

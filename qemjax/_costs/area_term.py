@@ -78,7 +78,7 @@ class AreaTerm(CostModel):
         return {**self.base.kernel_params(), "area_weight": np.asarray(self.area_weight, DTYPE)}
 
     def price(self, VS, pairs, params, rings=None):
-        return _price(type(self.base).price_kernel, VS, pairs, params, rings.corners, rings.mask)
+        return _price(self.base.price_kernel, VS, pairs, params, rings.corners, rings.mask)
 
     def merge(self, VS, pairs, x, params):
         return self.base.merge(VS, pairs, x, params)
