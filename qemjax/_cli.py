@@ -134,15 +134,6 @@ def _number_or_none(flag: str, text: str):
         raise CliError(f"{flag} takes a number or 'none', got {text!r}") from None
 
 
-def _flip_angle(text: str):
-    if text.strip().lower() == "none":
-        return None
-    try:
-        return float(text)
-    except ValueError:
-        raise CliError(f"--flip-angle takes degrees or 'none', got {text!r}") from None
-
-
 def _simplify_kwargs(args) -> dict:
     """The options given on the command line, as keywords of `simplify`."""
     kw = {name: getattr(args, name) for name in inspect.signature(_api.simplify).parameters
@@ -150,7 +141,7 @@ def _simplify_kwargs(args) -> dict:
     if "feature_edges" in kw:
         kw["feature_edges"] = _read_feature_edges(kw["feature_edges"])
     if "flip_angle" in kw:
-        kw["flip_angle"] = _flip_angle(kw["flip_angle"])
+        kw["flip_angle"] = _number_or_none("--flip-angle", kw["flip_angle"])
     if "split_factor" in kw:
         kw["split_factor"] = _number_or_none("--split-factor", kw["split_factor"])
     kw["progress"] = not args.quiet

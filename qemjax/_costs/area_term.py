@@ -21,7 +21,7 @@ import numpy as np
 from .._batching import DTYPE
 from .._kernels import kernel
 from .area import ring_positions
-from .base import CostModel
+from .base import Term
 
 
 def area_change(x, pos, moving, mask):
@@ -48,7 +48,7 @@ def _price(base_price, VS, pairs, params, corners, mask):
 
 
 @dataclasses.dataclass(frozen=True)
-class AreaTerm(CostModel):
+class AreaTerm(Term):
     """``base`` with λ·ΔS²/ℓ² added, λ = ``area_weight`` ≥ 0. Cost parts: the base model's cost
     (``"base"``) and the signed area change ΔS (``"area"``, normalised units²)."""
 
@@ -57,7 +57,6 @@ class AreaTerm(CostModel):
     ring_dead: ClassVar[bool] = True
     parts: ClassVar[tuple[str, ...]] = ("base", "area")
 
-    base: CostModel
     area_weight: float = 0.0
 
     def __post_init__(self):
@@ -67,24 +66,11 @@ class AreaTerm(CostModel):
             raise ValueError(f"area_weight cannot wrap {self.base.name!r}: it adds to a pair model without "
                              "cost parts (method='qem')")
 
-    name = property(lambda self: self.base.name)
-    width = property(lambda self: self.base.width)
-    branches = property(lambda self: self.base.branches)
-
-    def init_state(self, mesh):
-        return self.base.init_state(mesh)
-
     def kernel_params(self) -> dict:
         return {**self.base.kernel_params(), "area_weight": np.asarray(self.area_weight, DTYPE)}
 
     def price(self, VS, pairs, params, rings=None):
         return _price(self.base.price_kernel, VS, pairs, params, rings.corners, rings.mask)
-
-    def merge(self, VS, pairs, x, params):
-        return self.base.merge(VS, pairs, x, params)
-
-    def vertex_error(self, state):
-        return self.base.vertex_error(state)
 
     def describe(self) -> dict:
         return {**self.base.describe(), "area_weight": self.area_weight}

@@ -95,3 +95,25 @@ class MeshView(NamedTuple):
 
     faces: Any
     rows: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class Term(CostModel):
+    """A term added to another model's cost (`TERMS`: ``regularize``, ``area_weight``): it prices with its
+    own kernel and takes the vertex state, the merge, the branches and the error from ``base``."""
+
+    base: CostModel
+
+    name = property(lambda self: self.base.name)
+    width = property(lambda self: self.base.width)
+    branches = property(lambda self: self.base.branches)
+
+    def init_state(self, mesh):
+        return self.base.init_state(mesh)
+
+    def merge(self, VS, pairs, x, params):
+        return self.base.merge(VS, pairs, x, params)
+
+    def vertex_error(self, state):
+        return self.base.vertex_error(state)
+

@@ -25,7 +25,7 @@ import numpy as np
 
 from .._batching import DTYPE
 from .._kernels import kernel
-from .base import CostModel
+from .base import Term
 
 _SQRT3_2 = 2.0 * math.sqrt(3.0)
 
@@ -55,7 +55,7 @@ def _price(base_price, VS, pairs, params, corners, mask):
 
 
 @dataclasses.dataclass(frozen=True)
-class Regularized(CostModel):
+class Regularized(Term):
     """``base`` with the shape term above, weighted by ``regularize`` (λ ≥ 0). Cost parts: the base
     model's cost (``"base"``) and the unweighted shape term (``"shape"``)."""
 
@@ -63,7 +63,6 @@ class Regularized(CostModel):
     uses_ring: ClassVar[bool] = True
     parts: ClassVar[tuple[str, ...]] = ("base", "shape")
 
-    base: CostModel
     regularize: float = 0.0
 
     def __post_init__(self):
@@ -74,24 +73,11 @@ class Regularized(CostModel):
         if not hasattr(type(self.base), "price_kernel"):
             raise ValueError(f"regularize cannot wrap {self.base.name!r}, whose price needs its ring")
 
-    name = property(lambda self: self.base.name)
-    width = property(lambda self: self.base.width)
-    branches = property(lambda self: self.base.branches)
-
-    def init_state(self, mesh):
-        return self.base.init_state(mesh)
-
     def kernel_params(self) -> dict:
         return {**self.base.kernel_params(), "regularize": np.asarray(self.regularize, DTYPE)}
 
     def price(self, VS, pairs, params, rings=None):
         return _price(self.base.price_kernel, VS, pairs, params, rings.corners, rings.mask)
-
-    def merge(self, VS, pairs, x, params):
-        return self.base.merge(VS, pairs, x, params)
-
-    def vertex_error(self, state):
-        return self.base.vertex_error(state)
 
     def describe(self) -> dict:
         return {**self.base.describe(), "regularize": self.regularize}
