@@ -181,18 +181,23 @@ def _temp_name(path: str, tag: str) -> str:
     return os.path.join(folder, f".{name}.qemjax-{tag}-{os.getpid()}{os.path.splitext(name)[1]}")
 
 
-def write(res, path: str, ext: str):
-    """Export ``res`` to ``path`` as ``ext``: written to a temporary file in the same folder, then
-    renamed over ``path``, so a failure leaves no partial file."""
+def _atomic(path: str, save) -> None:
+    """``save(tmp)`` to a temporary file in the folder of ``path``, then rename it over ``path``, so a
+    failure leaves no partial file."""
     tmp = _temp_name(path, "out")
     try:
-        res.to_trimesh().export(tmp, file_type=ext)
+        save(tmp)
         os.replace(tmp, path)
     except OSError as exc:
         raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+
+
+def write(res, path: str, ext: str):
+    """Export ``res`` to ``path`` as ``ext`` (atomically: `_atomic`)."""
+    _atomic(path, lambda tmp: res.to_trimesh().export(tmp, file_type=ext))
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
@@ -280,15 +285,7 @@ def _lod(args, kwargs) -> int:
     if args.record:
         extra.append((os.path.join(folder, f"{stem}-record.npz"), chain.result.record.save))
     for path, save in extra:
-        tmp = _temp_name(path, "out")
-        try:
-            save(tmp)
-            os.replace(tmp, path)
-        except OSError as exc:
-            raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
+        _atomic(path, save)
         print(path)
     print(f"{args.input}: {chain.result.summary()}")
     return 0
