@@ -19,8 +19,8 @@ to a third of the target, and a mesh of many small parts could be simplified to 
 split back up); `split_edges` then spends exactly the budget T − (faces left): the long edges longest
 first (some stay unsplit when the floor holds), and if the budget is not spent when none is left, the
 longest remaining edges, until the count is T. A closed mesh gains
-faces in pairs, so an odd budget on a closed mesh stops one face short (the documented parity case of
-face targets, on the other side). Without a face target, every long edge is split.
+faces in pairs, so an odd budget on a closed mesh is rounded up (`apply`): the result ends one face above
+T, the documented parity case of face targets. Without a face target, every long edge is split.
 """
 from __future__ import annotations
 
@@ -154,7 +154,7 @@ def added_faces(V: np.ndarray, F: np.ndarray, factor: float) -> int:
     return len(split_edges(V, F, factor).F) - len(F)
 
 
-def plan(run, args, target: int, model, options, factor: float) -> int:
+def plan(run, args, target: int, model, options, factor: float) -> tuple[int, int]:
     """The face target to simplify to so that splitting can bring the count back to ``target``: runs the
     scheduler ``run`` once to ``target`` on ``args`` = (V, S, F, extra pairs) and subtracts the faces
     splitting that result would add, but keeps at least (1 − MAX_SPLIT_SHARE) × target faces.
