@@ -1,12 +1,14 @@
 """`simplify`: the one entry point. Validates options, prepares the mesh, runs a scheduler."""
 from __future__ import annotations
 
+import dataclasses
 import functools
+import inspect
 import math
 import numbers
 import time
 import warnings
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -20,7 +22,7 @@ from . import _units
 from ._arrays import face_normals
 from ._record import Record
 from ._result import Contractions, SimplifyResult
-from ._schedulers import common, greedy, outcome, parallel
+from ._schedulers import batched, common, greedy, outcome, parallel
 
 SCHEDULERS = ("parallel", "greedy")
 PLACEMENTS = _costs.qem.PLACEMENTS
@@ -149,6 +151,157 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     """
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
+    setup = _setup(method=method, scheduler=scheduler, placement=placement, boundary_weight=boundary_weight,
+                   area_weighted=area_weighted, area_power=area_power, pair_threshold=pair_threshold,
+                   preserve_topology=preserve_topology, flip_angle=flip_angle, weld=weld, progress=progress,
+                   prune=prune, regularize=regularize, area_weight=area_weight, schedule=schedule,
+                   curvature_weight=curvature_weight, split_factor=split_factor)
+    _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
+    geo = _geometry(mesh, setup.weld, setup.pair_threshold, stacklevel=3)
+    job = _job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3)
+    return _finish(job, _run(job), t_start, c0, s0, stacklevel=3)
+
+
+
+def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> list:
+    """`simplify` of one mesh under many configurations: ``[simplify(mesh, **c) for c in configs]``, with
+    equal results (vertices, faces, history, stop reason: bit for bit), computed together.
+
+    The mesh is read and cleaned once per ``weld`` / ``pair_threshold``. Configurations that can share
+    rounds (the parallel scheduler, no aggregation, a model with per-pair kernel settings: QEM with any
+    placement, boundary weight, area weighting, ``regularize`` or ``area_weight`` value; the same flip
+    angle, topology mode and `Schedule`) are run as one disjoint union of copies
+    (`_schedulers.batched`), each copy with its own target, ``max_error``, vertex state and settings; the
+    rest run alone. ``progress`` is not offered here (a sweep shows its own bar).
+    A batched result's ``stats["batch"]`` gives the batch's size and wall time; its ``total_s``, ``run_s``
+    and ``compile_s`` are its share (the batch's / its size), and its stage times are the batch's.
+    errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
+    list is that exception instead.
+    """
+    t_start = time.perf_counter()
+    c0, s0 = _compilation.snapshot()
+    defaults = {k: p.default for k, p in inspect.signature(simplify).parameters.items() if k != "mesh"}
+    geos, jobs, out = {}, [], [None] * len(configs)
+    for i, cfg in enumerate(configs):
+        try:
+            unknown = sorted(set(cfg) - set(defaults) | ({"progress"} & set(cfg)))
+            if unknown:
+                raise ValueError(f"simplify_batch: unknown or unsupported keywords {unknown}")
+            kw = {**defaults, **cfg}
+            setup = _setup(**{k: kw[k] for k in _SETUP_KEYS})
+            _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
+            gk = (setup.weld, setup.pair_threshold)
+            if gk not in geos:
+                geos[gk] = _geometry(mesh, setup.weld, setup.pair_threshold, stacklevel=3)
+            jobs.append((i, _job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
+                                 kw["max_error"], stacklevel=3)))
+        except ValueError as exc:
+            if not errors:
+                raise
+            out[i] = exc
+    groups: dict = {}
+    for i, job in jobs:
+        groups.setdefault(_batch_key(job), []).append((i, job))
+    prep = time.perf_counter() - t_start
+    for key, members in groups.items():
+        if key is None or len(members) == 1:
+            for i, job in members:
+                t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
+                out[i] = _finish(job, _run(job), t0 - prep / len(jobs), c1, s1, stacklevel=3)
+            continue
+        t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
+        first = members[0][1]
+        g = first.geo
+        ran = batched.run(g.Vn, [j.S for _, j in members], g.F, [max(j.target, 1) for _, j in members],
+                          [j.options.max_cost for _, j in members], first.setup.model,
+                          [j.setup.model.kernel_params() for _, j in members], first.options, g.edges[:2],
+                          g.frame.part_scale2())
+        wall = time.perf_counter() - t0 + prep * len(members) / len(jobs)
+        c2, s2 = _compilation.snapshot()
+        share = wall / len(members)
+        for (i, job), r in zip(members, ran):
+            res = _finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=3,
+                          batch={"size": len(members), "total_s": wall, "compilations": c2 - c1})
+            comp = min(s2 - s1, wall) / len(members)
+            res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
+            out[i] = res
+    return out
+
+
+def _batch_key(job: "Job"):
+    """Jobs with equal keys can run as copies of one batch (`_schedulers.batched`); None: run alone."""
+    s, model = job.setup, job.setup.model
+    if s.scheduler != "parallel" or len(job.geo.extra) or not batched.batchable(model) or not (
+            job.target < len(job.geo.F) or job.err < math.inf):
+        return None
+    return (id(job.geo), _model_key(model), tuple(sorted(model.kernel_params())), s.cos_max,
+            s.preserve_topology, s.prune, s.schedule)
+
+
+def _model_key(model):
+    """What decides a model's compiled kernels: its class (and a term's base), and the price function."""
+    base = getattr(model, "base", None)
+    return (type(model), getattr(model, "price_kernel", None), None if base is None else _model_key(base))
+
+@dataclasses.dataclass(frozen=True)
+class Setup:
+    """A run's options, checked and resolved before the mesh is read (`_setup`)."""
+
+    method: str
+    scheduler: str
+    model: Any
+    schedule: Schedule
+    cos_max: float
+    pair_threshold: float
+    preserve_topology: bool | None
+    weld: bool
+    prune: bool
+    progress: bool
+
+    @property
+    def split(self):
+        return getattr(self.model, "split_factor", None)  # None: the method does not split
+
+
+class Geometry(NamedTuple):
+    """The cleaned mesh and what depends on it alone (shared by every run of one mesh with the same
+    ``weld`` and ``pair_threshold``): V (n,3) float64, F (m,3), the clean-up report (without
+    ``face_means``), the face means, close pairs, parts, normalised positions and their frame, the edge
+    table (E, ecount, boundary edges, their faces) and the count of non-manifold edges."""
+
+    V: np.ndarray
+    F: np.ndarray
+    report: dict
+    face_means: tuple
+    extra: np.ndarray
+    parts: tuple
+    Vn: np.ndarray
+    frame: _units.Frame
+    edges: tuple
+    nonmanifold: int
+
+
+class Job(NamedTuple):
+    """One run, ready: its `Setup` and `Geometry`, the face target and max error, the model's vertex
+    state S and the scheduler's `Options`."""
+
+    setup: Setup
+    geo: Geometry
+    target: int
+    err: float
+    S: np.ndarray
+    options: Options
+
+
+_SETUP_KEYS = ("method", "scheduler", "placement", "boundary_weight", "area_weighted", "area_power",
+               "pair_threshold", "preserve_topology", "flip_angle", "weld", "progress", "prune", "regularize",
+               "area_weight", "schedule", "curvature_weight", "split_factor")
+
+
+def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area_power, pair_threshold,
+           preserve_topology, flip_angle, weld, progress, prune, regularize, area_weight, schedule,
+           curvature_weight, split_factor) -> Setup:
+    """Check every option that does not need the mesh; ValueError naming the bad one."""
     if scheduler not in SCHEDULERS:
         raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS}")
     boundary_weight = _real("boundary_weight", boundary_weight)
@@ -158,7 +311,6 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     progress, prune = _flag("progress", progress), _flag("prune", prune)
     if preserve_topology is not None:
         preserve_topology = _flag("preserve_topology", preserve_topology)
-    _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
         raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
     model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted,
@@ -167,7 +319,6 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                                       split_factor=split_factor if split_factor is None else
                                       _real("split_factor", split_factor)),
                          dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
-    split = getattr(model, "split_factor", None)  # None: the method does not split
     if schedule is None:
         schedule = Schedule()
     elif not isinstance(schedule, Schedule):
@@ -182,32 +333,62 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     elif preserve_topology and pair_threshold > 0:
         raise ValueError("pair_threshold > 0 joins separate parts, which changes topology: "
                          "use preserve_topology=False (the default when pair_threshold > 0)")
+    cos_max = -2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle)))
+    return Setup(method, scheduler, model, schedule, cos_max, pair_threshold, preserve_topology, weld, prune,
+                 progress)
 
-    (V, F), report = _io.prepare(mesh, weld_vertices=weld, stacklevel=2)
-    feature_edges = _io.check_feature_edges(feature_edges, len(V))
-    m = len(F)
-    target, err = _resolve_target(m, target_faces, ratio, max_error)
-    if target > m:
-        warnings.warn(f"target of {target} faces is not below the mesh's {m} faces: returning it unchanged",
-                      stacklevel=2)
-        target = m
 
+def _geometry(mesh, weld: bool, pair_threshold: float, stacklevel: int) -> Geometry:
+    """Read and clean ``mesh`` and compute what depends on the mesh alone (`Geometry`)."""
+    (V, F), report = _io.prepare(mesh, weld_vertices=weld, stacklevel=stacklevel)
+    face_means = report.pop("face_means")
     extra = topo.close_pairs(V, F, pair_threshold)
     parts = topo.parts(F, len(V), extra)
     Vn, frame = _units.normalize(V, common.DTYPE, parts)
-
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
-    area_mean, e2_mean, ext = report.pop("face_means")
-    r2 = (ext / frame.scale) ** 2  # from the clean-up's unit extent to the frame's
-    S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges, (area_mean * r2, e2_mean * r2)))
-    options = Options(
-        cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
-        preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule,
-        keep_parts=not prune)
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
+    return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold)
 
+
+def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int) -> Job:
+    """The face target, the model's initial vertex state and the scheduler's options for one run."""
+    feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
+    m = len(geo.F)
+    target, err = _resolve_target(m, target_faces, ratio, max_error)
+    if target > m:
+        warnings.warn(f"target of {target} faces is not below the mesh's {m} faces: returning it unchanged",
+                      stacklevel=stacklevel)
+        target = m
+    area_mean, e2_mean, ext = geo.face_means
+    r2 = (ext / geo.frame.scale) ** 2  # from the clean-up's unit extent to the frame's
+    E, ecount, be, bf = geo.edges
+    S = setup.model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges,
+                                                (area_mean * r2, e2_mean * r2)))
+    options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
+                      max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
+                      keep_parts=not setup.prune)
+    return Job(setup, geo, target, err, S, options)
+
+
+def _unchanged(job: Job):
+    """A run's outputs when there is nothing to remove (`_run`'s form)."""
+    g = job.geo
+    hist = (np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
+    info = {"contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0,
+            "branches": np.zeros(len(job.setup.model.branches), int), "stop_reason": "unchanged",
+            "blocked_by": {}, "rejected_by": outcome.count_reasons(np.zeros(0, np.int8))}
+    return (g.Vn, job.S, g.F, np.ones(len(g.F), bool), hist, info), None, None
+
+
+def _run(job: Job):
+    """Run the scheduler. Returns (the scheduler's outputs (V, S, F, alive, history, info), the face target
+    the run aimed at, the faces splitting was planned to add (None without splitting))."""
+    setup, g, model, options, target = job.setup, job.geo, job.setup.model, job.options, job.target
+    m = len(g.F)
+    if not (target < m or job.err < math.inf):
+        return _unchanged(job)
     bar = None
-    if progress:
+    if setup.progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=m - target, unit="face", desc="simplify")
@@ -221,21 +402,27 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     else:
         progress_cb = None
     run_target, planned = target, None
-    if target < m or err < math.inf:
-        run = functools.partial(parallel.run, edges=(E, ecount), part_scale=frame.part_scale2()) \
-            if scheduler == "parallel" else greedy.run
-        if split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
-            run_target, planned = _split.plan(run, (Vn, S, F, extra), target, model, options, split)
-        Vo, So, Fo, alive, hist, info = run(Vn, S, F, extra, max(run_target, 1), model, options, progress_cb)
-    else:  # nothing to remove
-        Vo, So, Fo, alive = Vn, S, F, np.ones(m, bool)
-        hist = (np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
-        info = {"contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0,
-                "branches": np.zeros(len(model.branches), int), "stop_reason": "unchanged", "blocked_by": {},
-                "rejected_by": outcome.count_reasons(np.zeros(0, np.int8))}
+    run = functools.partial(parallel.run, edges=g.edges[:2], part_scale=g.frame.part_scale2()) \
+        if setup.scheduler == "parallel" else greedy.run
+    if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
+        run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options, setup.split)
+    out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
     if bar is not None:
         bar.close()
+    return out, run_target, planned
 
+
+def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict | None = None
+            ) -> SimplifyResult:
+    """The `SimplifyResult` of a run: compact output in mesh units, splitting, the stop reason (and a
+    warning when it ends above the target), history, record and stats. ``batch``: for a run that went
+    through `simplify_batch`, what stats say of the batch."""
+    setup, g, model, target, err = job.setup, job.geo, job.setup.model, job.target, job.err
+    (Vo, So, Fo, alive, hist, info), run_target, planned = ran
+    if run_target is None:
+        run_target = target
+    V, F, frame, split = g.V, g.F, g.frame, setup.split
+    m = len(F)
     Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
     vout = frame.positions_to_mesh(Vout, ids)
     unmoved = np.ones(len(V), bool)
@@ -260,8 +447,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             stop = "target"  # documented: a closed mesh loses faces in pairs
         else:
             stop = "blocked" if stop == "target" else stop
-            warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"], nonmanifold,
-                                                preserve_topology), stacklevel=2)
+            warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"], g.nonmanifold,
+                                                setup.preserve_topology), stacklevel=stacklevel)
     hp, hx, hc = hist[0], frame.positions_to_mesh(hist[1], hist[0][:, 0]), frame.errors_to_mesh(hist[2])
     hparts = {}
     if info.get("parts") is not None and len(model.part_units) == len(model.parts):  # in mesh units
@@ -269,15 +456,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             hparts[name] = np.asarray(col, np.float64) * frame.scale ** unit
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
-    stats = dict(report)
+    stats = dict(g.report)
     stats.update(
-        method=method, scheduler=scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
-        vertices_in=len(V), vertices_out=len(vout), close_pairs=len(extra), contractions=info["contractions"],
+        method=setup.method, scheduler=setup.scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
+        vertices_in=len(V), vertices_out=len(vout), close_pairs=len(g.extra), contractions=info["contractions"],
         rejected=info["rejected"], rounds=info["rounds"],
         branches={name: int(c) for name, c in zip(model.branches, info["branches"])},
         rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
-        total_s=total, scale=frame.scale, parts_in=parts[0], non_manifold_edges_in=nonmanifold,
+        total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
         max_error_limit=err if math.isfinite(err) else None)
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":
@@ -287,9 +474,11 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                               for f, w in info["reweights"]]
     if split is not None:
         stats["split"] = split_stats
+    if batch is not None:
+        stats["batch"] = batch
     history = Contractions(hp, hx, hc, hparts, info.get("history_rounds", np.zeros(0, np.int64)))
     record = Record(V, F, history, info.get("removed_at", np.full(m, -1, np.int64)),
-                    info.get("coincident", np.zeros(m, bool)), frame, scheduler, run_target)
+                    info.get("coincident", np.zeros(m, bool)), frame, setup.scheduler, run_target)
     return SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(frame.errors_to_mesh(info["max_cost"])), source_vertices=ids.astype(np.int64),

@@ -1,8 +1,10 @@
 """Parameter sweeps: meshes × a grid of `simplify` keywords × targets, one table row per cell.
 
 A pipeline of small stages: name and load the meshes (once each), cross the grid into cells, drop the
-cells already in ``out`` (resume), run the rest in process or on an executor, write the table after each
-cell. Every cell is one plain `simplify` call, so its mesh is the one `simplify` gives alone.
+cells already in ``out`` (resume), run the rest in batches (in process or on an executor), write the table
+after each batch. A batch is cells of one mesh run by `simplify_batch`: the configurations that can share
+rounds run as one disjoint union of copies, the rest alone; either way each cell's mesh is the one
+`simplify` gives alone (tested).
 """
 from __future__ import annotations
 
@@ -12,7 +14,6 @@ import hashlib
 import inspect
 import itertools
 import json
-import math
 import numbers
 import os
 import time
@@ -22,13 +23,15 @@ from typing import Any
 import numpy as np
 
 from . import _io
-from ._api import simplify
+from ._api import simplify, simplify_batch
 from ._options import Schedule
 
 # keywords a grid may not vary: the target is `targets`, progress is the sweep's own, feature edges are
 # per-mesh index arrays (not a scalar setting)
 _NOT_IN_GRID = ("mesh", "target_faces", "ratio", "progress", "feature_edges")
 GRID_KEYS = tuple(k for k in inspect.signature(simplify).parameters if k not in _NOT_IN_GRID)
+BATCH_FACES = 4_000_000  # a batch holds at most this many faces in all (its copies' memory)
+EXECUTOR_BATCH = 8  # cells per task on an executor, by default
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
@@ -126,26 +129,62 @@ def result_hash(res) -> str:
 
 
 def run_cell(mesh, cell: Cell, metrics) -> dict:
-    """One row: parameters, counts, stop reason, timings, output hash, metrics (``metrics``: False, or a
-    dict of `qemjax.metrics.evaluate` keywords). A failing `simplify` gives a row with ``error`` set."""
-    row = {"cell": cell.key, "mesh": cell.mesh, **{k: _plain(v) for k, v in cell.params},
-           "target": cell.target, "error": ""}
+    """One row, from `simplify` alone (see `row`). A failing `simplify` gives a row with ``error`` set."""
     t0 = time.perf_counter()
     try:
         res = simplify(mesh, **cell.kwargs())
     except Exception as exc:  # one bad combination must not stop a sweep: the row says why
-        row["error"] = f"{type(exc).__name__}: {exc}"
-        return row
+        res = exc
+    return row(mesh, cell, res, metrics, time.perf_counter() - t0)
+
+
+def run_cells(mesh, cells: list[Cell], metrics) -> list[dict]:
+    """The rows of cells of one mesh, computed together by `simplify_batch` (each result equals
+    `simplify`'s alone). If the batch fails as a whole, each cell runs alone, so the rows say which
+    configuration fails and why."""
+    if len(cells) == 1:
+        return [run_cell(mesh, cells[0], metrics)]
+    t0 = time.perf_counter()
+    try:
+        results = simplify_batch(mesh, [c.kwargs() for c in cells], errors=True)
+    except Exception:  # noqa: BLE001 - rerun alone: the failing cell's row will carry its error
+        return [run_cell(mesh, c, metrics) for c in cells]
+    share = (time.perf_counter() - t0) / len(cells)
+    return [row(mesh, c, r, metrics, share) for c, r in zip(cells, results)]
+
+
+def row(mesh, cell: Cell, res, metrics, seconds: float) -> dict:
+    """A cell's row: parameters, counts, stop reason, timings, output hash, metrics (``metrics``: False, or
+    a dict of `qemjax.metrics.evaluate` keywords); ``res`` is the `SimplifyResult` or the exception
+    `simplify` raised (then only ``error`` is set). ``seconds``: the cell's share of the run's wall time."""
+    out = {"cell": cell.key, "mesh": cell.mesh, **{k: _plain(v) for k, v in cell.params},
+           "target": cell.target, "error": ""}
+    if isinstance(res, Exception):
+        out["error"] = f"{type(res).__name__}: {res}"
+        return out
     s = res.stats
-    row.update(faces_in=s["faces_in"], faces_out=s["faces_out"], target_faces=s["target_faces"],
+    out.update(faces_in=s["faces_in"], faces_out=s["faces_out"], target_faces=s["target_faces"],
                stop_reason=res.stop_reason, rounds=s["rounds"], compile_s=s["compile_s"],
-               run_s=s["run_s"], total_s=s["total_s"], result_sha256=result_hash(res))
+               run_s=s["run_s"], total_s=s["total_s"], batch_size=s.get("batch", {}).get("size", 1),
+               result_sha256=result_hash(res))
+    t0 = time.perf_counter()
     if metrics is not False:
         from .metrics import evaluate
 
-        row.update(evaluate(mesh, res, target_faces=s["target_faces"], **metrics))
-    row["cell_s"] = time.perf_counter() - t0
-    return row
+        out.update(evaluate(mesh, res, target_faces=s["target_faces"], **metrics))
+    out["cell_s"] = seconds + time.perf_counter() - t0
+    return out
+
+
+def batches(cells: list[Cell], faces: dict, size: int | None) -> list[list[Cell]]:
+    """Cells grouped by mesh (in order) and cut into batches of at most ``size`` cells (None: as many as
+    `BATCH_FACES` allows, with ``faces`` the face count of each mesh)."""
+    out = []
+    for name in dict.fromkeys(c.mesh for c in cells):
+        mine = [c for c in cells if c.mesh == name]
+        k = size or max(1, BATCH_FACES // max(faces[name], 1))
+        out += [mine[i:i + k] for i in range(0, len(mine), k)]
+    return out
 
 
 def _format(out) -> str:
@@ -188,7 +227,8 @@ def _submitter(executor):
                      f"{type(executor).__name__}")
 
 
-def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True):
+def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True,
+          batch_size: int | None = None):
     """Run every (mesh, grid configuration, target) cell with `qemjax.simplify`; a pandas DataFrame, one
     row per cell.
 
@@ -200,17 +240,22 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     metrics: True: every column of `qemjax.metrics.evaluate` (original = the mesh as given); a dict:
         the same with these keywords to `evaluate` (e.g. ``{"n_samples": 10_000}``); False: none.
     executor: None (in this process, in order), a `concurrent.futures.Executor` or a
-        `dask.distributed.Client`: one task per cell.
-    out: a ``.parquet`` or ``.csv`` path, rewritten after each finished cell. Cells whose key is already
+        `dask.distributed.Client`: one task per batch.
+    out: a ``.parquet`` or ``.csv`` path, rewritten after each finished batch. Cells whose key is already
         there without an error are not run again (an interrupted sweep resumes); rows of other cells in
         the file are kept.
     progress: a tqdm bar counting cells.
+    batch_size: at most this many cells of one mesh per batch (`simplify_batch`: configurations that can
+        share rounds run together, as one disjoint union of copies); None: in process, as many as
+        `BATCH_FACES` faces allow; on an executor, `EXECUTOR_BATCH`. 1: every cell alone.
 
     Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key,
     ``target`` (as given), ``error`` (empty, or why `simplify` raised), ``faces_in``, ``faces_out``,
     ``target_faces``, ``stop_reason``, ``rounds``, ``compile_s``, ``run_s``, ``total_s``,
-    ``result_sha256`` (of the output vertices and faces), the metrics, ``cell_s`` (wall time of the
-    cell). Rows come in cell order (mesh, then grid, last key fastest, then target), however the
+    ``batch_size`` (the copies its run shared rounds with, itself included; 1: alone),
+    ``result_sha256`` (of the output vertices and faces), the metrics, ``cell_s`` (the cell's share of
+    its batch's wall time, plus its metrics). A batched cell's ``total_s`` / ``run_s`` / ``compile_s``
+    are its share of the batch's. Rows come in cell order (mesh, then grid, last key fastest, then target), however the
     cells finished. Raises ValueError for unknown grid keys, bad targets or a bad ``out``/``executor``.
     """
     import pandas as pd
@@ -218,6 +263,9 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     configs, targets = expand_grid(grid), check_targets(targets)
     if out is not None:
         _format(out)
+    if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, numbers.Integral)
+                                   or batch_size < 1):
+        raise ValueError(f"batch_size must be an int >= 1 or None, got {batch_size!r}")
     metrics = {} if metrics is True else dict(metrics) if isinstance(metrics, dict) else False
     submit = None if executor is None else _submitter(executor)
     named = name_meshes(meshes)
@@ -242,22 +290,26 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     bar = tqdm(total=len(cells), initial=len(cells) - len(todo), unit="cell", desc="sweep", disable=not progress)
     done = []
 
-    def finish(row):
+    def finish(batch_rows):
         nonlocal table
-        rows[row["cell"]] = row
-        done.append(row)
-        bar.update(1)
+        for r in batch_rows:
+            rows[r["cell"]] = r
+        done.extend(batch_rows)
+        bar.update(len(batch_rows))
         if out is not None:
-            new = pd.DataFrame([row])
+            new = pd.DataFrame(batch_rows)
             table = pd.concat([table, new], ignore_index=True) if len(table) else new
             write_table(table, out)
 
+    faces = {name: len(loaded[name][1]) for name in loaded}
+    size = batch_size if batch_size is not None or submit is None else EXECUTOR_BATCH
+    work = batches(todo, faces, size)
     try:
         if submit is None:
-            for c in todo:
-                finish(run_cell(loaded[c.mesh], c, metrics))
+            for b in work:
+                finish(run_cells(loaded[b[0].mesh], b, metrics))
         else:
-            futures = [submit(run_cell, loaded[c.mesh], c, metrics) for c in todo]
+            futures = [submit(run_cells, loaded[b[0].mesh], b, metrics) for b in work]
             for f in concurrent.futures.as_completed(futures):
                 finish(f.result())
     finally:

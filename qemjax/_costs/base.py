@@ -14,6 +14,8 @@ A cost model is a small frozen object (its fields are the method's settings) wit
   changed (curvature, area around a vertex); None when the state is only accumulated.
 - **support**: ``"pair"``: a contraction changes only the costs of pairs at the kept vertex;
   ``"ring"``: also those of every pair in its 1-ring (the cost reads the faces around the pair).
+- **per_pair_params**: its kernels accept every param as a (K,) array (one value per pair) as well as a
+  0-d one, with the same results; `simplify_batch` then runs configurations of one mesh in shared rounds.
 - **vertex_error**: a squared distance per vertex, in the normalised units of the run.
 - **rank_weights** (optional): for a model whose selection adds weighted parts to the cost, the weights
   (p,) float64 from the parts (P,p) of the candidate pairs; the schedulers then rank pairs by
@@ -55,6 +57,7 @@ class CostModel:
     ring_dead: ClassVar[bool] = False  # the ring also holds the faces the contraction removes (`ring`)
     parts: ClassVar[tuple[str, ...]] = ()
     branches: ClassVar[tuple[str, ...]] = ("solve", "segment", "endpoint", "truncated")
+    per_pair_params: ClassVar[bool] = False  # its kernels also take each param as a (K,) array, one per pair
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         """(n, width) float32 state rows."""
@@ -105,6 +108,8 @@ class Term(CostModel):
     base: CostModel
 
     name = property(lambda self: self.base.name)
+    per_pair_params = property(lambda self: self.base.per_pair_params and type(self).own_per_pair)
+    own_per_pair: ClassVar[bool] = True  # the term's own kernel takes per-pair params
     width = property(lambda self: self.base.width)
     branches = property(lambda self: self.base.branches)
 

@@ -79,6 +79,7 @@ class QEM(CostModel):
 
     name: ClassVar[str] = "qem"
     width: ClassVar[int] = quadrics.QSIZE
+    per_pair_params: ClassVar[bool] = True
 
     placement: str = "optimal"
     area_weighted: bool = True

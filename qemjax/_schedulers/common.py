@@ -39,6 +39,23 @@ class Priced(NamedTuple):
     parts: np.ndarray
 
 
+class PerCopy(NamedTuple):
+    """Kernel params of a batched run (`batched`): ``values`` name -> (C,) array, one value per copy, and
+    ``copy`` (n,) int32, each vertex's copy. A kernel gets them per pair, as (K,) arrays."""
+
+    values: dict
+    copy: np.ndarray
+
+    def at(self, pairs: np.ndarray) -> dict:
+        c = np.take(self.copy, pairs[:, 0], mode="clip")
+        return {k: np.take(v, c) for k, v in self.values.items()}
+
+
+def _params(params, pairs: np.ndarray) -> dict:
+    """The params for a kernel call on ``pairs``: as given, or a `PerCopy`'s per pair."""
+    return params.at(pairs) if isinstance(params, PerCopy) else params
+
+
 def _unpack(out: np.ndarray) -> Priced:
     return Priced(np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8), out[5:])
 
@@ -49,7 +66,7 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
     need the `FaceLists` ``faces`` and a ``pad`` vertex row (zeros) for ring padding."""
     rows = 5 + len(model.parts)
     if not model.uses_ring:
-        outs = [model.price(VSd, part, params) for _, part in chunks(P.astype(np.int32))]
+        outs = [model.price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
 
         def result():
             out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else \
@@ -63,7 +80,7 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
             parts = zip(chunks(block[idx].astype(np.int32)), chunks(rg.corners, fill=pad), chunks(rg.mask))
             for (s, pp), (_, cc), (_, mm) in parts:
                 sel = idx[s:s + len(pp)]
-                pieces.append((b0 + sel, model.price(VSd, pp, params, ring.Rings(cc, mm))))
+                pieces.append((b0 + sel, model.price(VSd, pp, _params(params, pp), ring.Rings(cc, mm))))
 
     def ring_result():
         out = np.zeros((rows, len(P)), DTYPE)
@@ -76,7 +93,7 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
 def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: int | None = None):
     """Start computing the (K, width) state of the kept vertices of pairs P (K,2) contracted to x (K,3);
     returns a function that waits for it. ``size``: one fixed piece shape (else `chunks`' shapes)."""
-    outs = [model.merge(VSd, pp, xx, params) for (_, pp), (_, xx)
+    outs = [model.merge(VSd, pp, xx, _params(params, pp)) for (_, pp), (_, xx)
             in zip(chunks(P.astype(np.int32), size=size), chunks(x, size=size))]
     return lambda: np.concatenate([np.asarray(o) for o in outs])[: len(P)]
 

@@ -179,11 +179,11 @@ class _Run:
     """One simplification: the mesh state that lives across rounds, and the stages of a round."""
 
     def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges,
-                 part_scale=None):
+                 part_scale=None, params=None):
         self.n, m = len(V), len(F)
         self.part_scale = part_scale
         self.model, self.options, self.progress = model, options, progress
-        self.params = model.kernel_params()
+        self.params = model.kernel_params() if params is None else params
         self.target = target_faces
         self.manifold = options.preserve_topology
         self.extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
@@ -380,8 +380,7 @@ class _Run:
         r = np.flatnonzero(st.bad)
         if r.size:  # pairs whose faces change get another chance
             # the 1-rings that selection locked, unless the target cut the set short
-            touched = locked if acc.size == n_sel else _ring_vertices(faces, P.reshape(-1), n)
-            st.bad[r[any_at(touched, _take(st.E, r))]] = 0
+            st.bad[r[any_at(self.touched(locked, acc, n_sel, P), _take(st.E, r))]] = 0
         taken = np.zeros(len(st.E), bool)
         taken[acc] = True
         pairs, kept, dead, (apex, erows) = _accepted(st.E, found, taken)  # in pass order, not acc's
@@ -410,6 +409,11 @@ class _Run:
             st.edges_next = edges_next.result()
         self.faces_per_round.append(faces.count)
         self.timer.add("contract_s", time.perf_counter() - t0)
+
+    def touched(self, locked, acc, n_sel, P):
+        """(n,) bool: the vertices around this round's contractions P (rows ``acc``): the 1-rings that
+        selection locked, unless the target cut the set short (then the rings of what contracted)."""
+        return locked if acc.size == n_sel else _ring_vertices(self.faces, P.reshape(-1), self.n)
 
     def refresh(self, verts):
         """Recompute the model's derived state at ``verts`` (after their neighbourhood changed)."""

@@ -25,21 +25,23 @@ def submit(fn, *args, **kw):
     return _worker.submit(fn, *args, **kw)
 
 
-def sort_keys(cost: np.ndarray, idx: np.ndarray, salt: int = 0) -> np.ndarray:
+def sort_keys(cost: np.ndarray, idx: np.ndarray, salt: int = 0, offset: np.ndarray | None = None) -> np.ndarray:
     """Unique, monotonic int64 keys of pairs idx: float32 cost bits (non-negative) in the high word and a
     fixed bijective scramble of the pair index in the low word (a multiplication by an odd constant
     modulo 2³²). Ties (flat regions have many exact zeros) are broken deterministically but in a
     spatially incoherent order: breaking them by raw index would make neighbouring pairs form long
     descending chains with one local minimum each. Only the pairs asked for are keyed (a round looks
-    at a small part of them)."""
+    at a small part of them). ``offset`` (P,): scramble ``idx - offset[idx]`` instead, each pair's index
+    within its copy in a batched run (`batched`), so a copy breaks ties as it does alone."""
     bits = np.take(cost, idx).astype(np.float32, copy=False).view(np.int32).astype(np.int64)
-    h = idx.astype(np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
+    local = idx if offset is None else idx - np.take(offset, idx)
+    h = local.astype(np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
     bits <<= 32
     bits |= h
     return bits
 
 
-def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule):
+def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, groups=None):
     """Passes of independent-set selection with validation. Returns (accepted, rejected) pair indices,
     the reason code of each rejected one (from ``validate``), the extra faces (coincident ones) each
     accepted pair removes, (len(E),) int, and the vertices the accepted pairs lock (their endpoints'
@@ -74,6 +76,8 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule):
         return v
 
     free = np.ones(n, bool)
+    if groups is not None:
+        groups = (groups[0], groups[1], np.zeros(len(groups[1]), np.int64))  # + accepted so far per copy
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
     ws = narrow(active, (np.arange(len(E)), E, None))
@@ -108,13 +112,34 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule):
         lock = np.zeros(n, bool)
         lock[_take(E, good).reshape(-1)] = True
         free[_keep(Eo, any_at(lock, Eo)).reshape(-1)] = False
-        n_acc += good.size
-        if good.size < schedule.pass_yield * n_acc or (good.size * 50 < need // 2 and p > 2):
-            break  # later passes would add little: leave the rest to the next round
+        if groups is None:
+            n_acc += good.size
+            if good.size < schedule.pass_yield * n_acc or (good.size * 50 < need // 2 and p > 2):
+                break  # later passes would add little: leave the rest to the next round
+        else:
+            stay = _copies_staying(groups, sel, good, E, p, schedule)
+            if stay is None:
+                break
+            active &= stay
         if p + 1 < schedule.max_passes:
             ws = narrow(active & free, ws)
     cat = lambda xs, dt=np.int64: np.concatenate(xs) if xs else np.zeros(0, dt)  # noqa: E731
     return cat(accepted), cat(rejected), cat(reasons, np.int8), extra, ~free
+
+
+def _copies_staying(groups, sel, good, E, p, schedule):
+    """A batched run's pass rule (see `independent_sets`): (n,) bool, the vertices of the copies that go on
+    to the next pass (a copy that selected nothing this pass is done), or None when none does. Updates the
+    per-copy accepted counts in ``groups``."""
+    vcopy, need, n_acc = groups
+    C = len(need)
+    g = np.bincount(np.take(vcopy, np.take(E[:, 0], good)), minlength=C)
+    tried = np.bincount(np.take(vcopy, np.take(E[:, 0], sel)), minlength=C) > 0
+    n_acc += g
+    done = ~tried | (g < schedule.pass_yield * n_acc) | ((g * 50 < need // 2) & (p > 2))
+    if done.all():
+        return None
+    return np.take(~done, vcopy)
 
 
 def fits_target(removes: np.ndarray, need: int) -> np.ndarray:

@@ -1,0 +1,268 @@
+"""Many runs of one mesh in the same rounds: the parallel scheduler on a disjoint union of copies.
+
+A sweep's configurations of one mesh differ in their vertex state (quadrics built with another boundary
+weight or area weighting), their numeric kernel settings (passed per pair, `common.PerCopy`: never a
+new compilation), their face target and their ``max_error``. Copy c holds vertices c·n … c·n + n − 1 and
+faces c·m … c·m + m − 1, so every stage of a round runs once for all copies, on arrays C times longer, and
+the fixed cost of a round (kernel launches, hundreds of small numpy calls) is paid once instead of C
+times.
+
+Each copy makes exactly the choices it makes alone (`simplify_batch` results equal `simplify`'s, bit for
+bit; tested): everything a round decides globally in `parallel._Run` is decided per copy here:
+
+- the face budget (``need``) and ``max_error`` of the candidates;
+- the gate (the k-th cheapest candidate of the copy);
+- the tie-breaking scramble (a pair's index within its copy: `select.sort_keys` ``offset``);
+- when a copy leaves the selection passes (`select.independent_sets` ``groups``);
+- the exact face target (`select.fits_target` on the copy's accepted pairs);
+- which rejected pairs get another chance (`touched`);
+- when and why a copy stops (its own `outcome.classify`).
+
+Copies never share a vertex, a face or a pair, and E stays grouped by copy (rebuilt edges are sorted by
+key; updated ones only lose rows), so a copy's pairs are one slice of each round's arrays.
+Not batched (run alone by `simplify_batch`): the greedy scheduler, non-edge pairs (aggregation), models
+that refresh state or rank by weighted parts, and splitting (ESQEM).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import outcome
+from .common import Options, PerCopy
+from .parallel import RoundState, _Run, _history_arrays, _removal_steps, _ring_vertices
+from .select import fits_target, independent_sets, sort_keys
+
+
+def batchable(model) -> bool:
+    """Whether runs of ``model`` can share rounds: its kernels take per-pair settings
+    (`CostModel.per_pair_params`) and it neither refreshes state, ranks by weighted parts nor splits."""
+    return (model.per_pair_params and model.refresh is None and model.rank_weights is None
+            and getattr(model, "split_factor", None) is None)
+
+
+class _Batch(_Run):
+    """C copies of one mesh in one `parallel._Run`, with the per-copy decisions of the module docstring."""
+
+    def __init__(self, V, states, F, targets, max_costs, model, params, options: Options, edges, part_scale):
+        C, n, m = len(states), len(V), len(F)
+        self.C, self.n1, self.m1 = C, n, m
+        off = np.arange(C)
+        Vu = np.tile(np.asarray(V), (C, 1))
+        Fu = (F[None] + (off * n)[:, None, None]).reshape(-1, 3)
+        E, ecount = edges
+        Eu = (E[None].astype(np.int64) + (off * n)[:, None, None]).reshape(-1, 2).astype(E.dtype)
+        scale = None if part_scale is None else np.tile(part_scale, C)
+        self.vcopy = np.repeat(off, n).astype(np.int32)
+        stacked = {k: np.stack([np.asarray(p[k]) for p in params]) for k in params[0]}
+        super().__init__(Vu, np.concatenate(states), Fu, np.zeros((0, 2), np.int32), int(np.sum(targets)), model,
+                         options, None, (Eu, np.tile(ecount, C)), scale, PerCopy(stacked, self.vcopy))
+        self.targets = np.asarray(targets, np.int64)
+        self.max_costs = np.asarray(max_costs, np.float64)
+        self.active = np.ones(C, bool)
+        self.stops = [None] * C  # (stop reason, blocked_by) per copy
+        self.copy_rounds = np.zeros(C, np.int64)
+        self.copy_branches = np.zeros((C, len(model.branches)), np.int64)
+        self.copy_rejected = np.zeros((C, len(outcome.REJECT) + 1), np.int64)
+        self.copy_max_cost = np.zeros(C)
+        self.copy_faces = []  # per round that contracted: (which copies contracted, every copy's face count)
+
+    # -- per-copy views ----------------------------------------------------------------------------
+    def counts(self) -> np.ndarray:
+        """(C,) live faces of each copy."""
+        return self.faces.alive[: self.C * self.m1].reshape(self.C, self.m1).sum(1)
+
+    def pair_copies(self, st: RoundState):
+        """(each pair's copy (P,), each copy's first pair (C + 1,)): E is grouped by copy."""
+        cp = np.take(self.vcopy, st.E[:, 0])
+        starts = np.searchsorted(cp, np.arange(self.C + 1))
+        return cp, starts
+
+    def _end(self, c: int, st: RoundState, cp_slice: slice, need: int):
+        """Copy c stops in this round (no valid pair, or nothing it selected was valid)."""
+        s = cp_slice
+        ok = ((st.ecount[s] >= 1) & (st.ecount[s] <= 2)) if self.manifold else np.ones(s.stop - s.start, bool)
+        self.stops[c] = outcome.classify(need + int(self.targets[c]), int(self.targets[c]), st.bad[s],
+                                         st.ecount[s], st.cost[s] > self.max_costs[c], ok)
+        self.active[c] = False
+        self.copy_rounds[c] = self.rounds
+
+    # -- stages ------------------------------------------------------------------------------------
+    def select_batch(self, st: RoundState, need: np.ndarray, valid: np.ndarray, cp, starts):
+        """`_Run.select` per copy: the gate, the passes and the face target of each copy its own. Returns
+        (accepted indices, per copy: selected, rejected; the locked vertices, what validation found)."""
+        t0 = time.perf_counter()
+        sch = self.options.schedule
+        thresh = np.zeros(self.C, np.float32)
+        for c in np.flatnonzero(self.active):
+            s = slice(starts[c], starts[c + 1])
+            vk = np.compress(valid[s], st.key[s])
+            k = min(max(int(need[c]) // (2 * sch.tail), 1), len(vk), max(int(sch.gate_fraction * (s.stop - s.start)), 1))
+            thresh[c] = np.partition(vk, k - 1)[k - 1]
+        salt = self.rounds * 7919
+        offset = np.take(starts, cp)
+
+        def key_of(idx):
+            return sort_keys(st.key, idx, salt, offset)
+        free = sch.free_cost if self.part_scale is None else sch.free_cost * self.part_scale[st.E[:, 0]]
+        cand = valid & (st.key <= np.maximum(sch.gate * np.take(thresh, cp), free))
+        found = []
+        acc, bad, why, extra, locked = independent_sets(
+            st.E, key_of, cand, 0, self.n, lambda *a: self.validate(st, found, *a), sch,
+            groups=(self.vcopy, need))
+        self.rejected += bad.size
+        self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
+                                          minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
+        n_bad = np.bincount(np.take(cp, bad), minlength=self.C)
+        acc = acc[np.argsort(key_of(acc), kind="stable")]
+        ca = np.take(cp, acc)
+        n_sel = np.bincount(ca, minlength=self.C)
+        take = np.zeros(acc.size, bool)
+        order = np.argsort(ca, kind="stable")
+        bounds = np.searchsorted(ca[order], np.arange(self.C + 1))
+        for c in np.flatnonzero(n_sel):
+            idx = order[bounds[c]:bounds[c + 1]]
+            take[idx] = fits_target(st.ecount[acc[idx]] + extra[acc[idx]], int(need[c]))
+        acc = acc[take]
+        self.timer.add("select_s", time.perf_counter() - t0)
+        st.bad[bad] = why
+        return acc, n_sel, n_bad, locked, found
+
+    def touched(self, locked, acc, n_sel, P):
+        """Per copy: the locked 1-rings, or the rings of what contracted where the target cut it short."""
+        cut = np.bincount(np.take(self.vcopy, P[:, 0]), minlength=self.C) != n_sel
+        if not cut.any():
+            return locked
+        mine = np.take(cut, np.take(self.vcopy, P[:, 0]))
+        return (locked & ~np.take(cut, self.vcopy)) | _ring_vertices(self.faces, P[mine].reshape(-1),
+                                                                    self.n)
+
+    def contract_batch(self, st: RoundState, acc, n_sel, locked, found, cp):
+        ca = np.take(cp, acc)
+        nb = self.copy_branches.shape[1]
+        self.copy_branches += np.bincount(ca.astype(np.int64) * nb + st.branch[acc],
+                                          minlength=self.copy_branches.size).reshape(self.copy_branches.shape)
+        np.maximum.at(self.copy_max_cost, ca, st.cost[acc].astype(np.float64))
+        self.contract(st, acc, n_sel, locked, found)
+
+    def candidates_batch(self, st: RoundState, need: np.ndarray, cp) -> np.ndarray:
+        valid = (st.cost <= np.take(self.max_costs, cp)) & (st.bad == 0) & (st.ecount <= np.take(need, cp))
+        valid &= np.take(self.active, cp)
+        if self.manifold:
+            valid &= (st.ecount >= 1) & (st.ecount <= 2)
+        return valid
+
+    # -- the loop ----------------------------------------------------------------------------------
+    def run(self):
+        prev = None
+        while True:
+            counts = self.counts()
+            reached = self.active & (counts <= self.targets)
+            for c in np.flatnonzero(reached):
+                self.stops[c] = ("target", {})
+                self.copy_rounds[c] = self.rounds
+            self.active &= ~reached
+            if not self.active.any():
+                break
+            self.rounds += 1
+            t0 = time.perf_counter()
+            st, follow, stale, same = self.update(prev)
+            self.timer.add("topology_s", time.perf_counter() - t0)
+            self.cost(st, prev, follow, stale, same)
+            cp, starts = self.pair_copies(st)
+            need = counts - self.targets
+            valid = self.candidates_batch(st, need, cp)
+            st.key = st.cost
+            has = np.bincount(np.take(cp, np.flatnonzero(valid)), minlength=self.C) > 0
+            for c in np.flatnonzero(self.active & ~has):
+                self._end(c, st, slice(starts[c], starts[c + 1]), int(need[c]))
+            if not self.active.any():
+                break
+            acc, n_sel, n_bad, locked, found = self.select_batch(st, need, valid, cp, starts)
+            n_acc = np.bincount(np.take(cp, acc), minlength=self.C)
+            for c in np.flatnonzero(self.active & (n_acc == 0) & (n_bad == 0)):
+                self._end(c, st, slice(starts[c], starts[c + 1]), int(need[c]))
+            if acc.size == 0:  # the invalid ones are out now: select again among the rest (same pairs)
+                st.changed = np.zeros(self.n, bool)
+                if self.incremental:
+                    st.edges_next = (st.E, st.ecount, np.ones(len(st.E), bool), st.deg, np.zeros(len(st.E), bool))
+                prev = st
+                if not self.active.any():
+                    break
+                continue
+            self.contract_batch(st, acc, n_sel, locked, found, cp)
+            self.copy_faces.append((n_acc > 0, self.counts()))
+            prev = st
+
+    # -- per-copy outputs --------------------------------------------------------------------------
+    def outputs(self):
+        """Each copy's result in `parallel.run`'s form (V, S, F, alive, history, info)."""
+        n, m, C = self.n1, self.m1, self.C
+        hist = _by_copy(self.history, n, C, lambda h: h[0])
+        parts = [None] * C
+        if self.history_parts:
+            cop = np.concatenate([a for _, (a, _, _, _) in self.history]) // n
+            allp = np.concatenate(self.history_parts)
+            parts = [allp[cop == c] for c in range(C)]
+        dead = np.concatenate(self.dead) if self.dead else np.zeros(0, np.int64)
+        dead_c = _split_sorted(np.sort(dead), m, C)
+        dropped = _by_copy(self.dropped, m, C, lambda d: d)
+        out = []
+        for c in range(C):
+            lo, hi = c * n, (c + 1) * n
+            hc = [(r, (a - lo, b - lo, x, cost)) for r, (a, b, x, cost) in hist[c]]
+            F = self.faces.F[c * m:(c + 1) * m] - lo
+            removed_at, coincident, rounds = _removal_steps(F, hc, [dead_c[c] - c * m],
+                                                            [(r, d - c * m) for r, d in dropped[c]])
+            stop, blocked = self.stops[c]
+            info = {"contractions": sum(len(h[0]) for _, h in hc),
+                    "rejected": int(self.copy_rejected[c, 1:].sum()), "rounds": int(self.copy_rounds[c]),
+                    "max_cost": float(self.copy_max_cost[c]), "branches": self.copy_branches[c].copy(),
+                    "faces_per_round": [int(f[c]) for took, f in self.copy_faces if took[c]],
+                    "rejected_by": outcome.count_reasons(np.repeat(np.arange(self.copy_rejected.shape[1]),
+                                                                   self.copy_rejected[c])),
+                    "stop_reason": stop, "blocked_by": blocked, "reweights": [],
+                    "parts": parts[c] if parts[c] is not None and len(parts[c]) else None,
+                    "removed_at": removed_at, "coincident": coincident, "history_rounds": rounds}
+            info.update(self.timer.t)
+            out.append((self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[c * m:(c + 1) * m],
+                        _history_arrays([h for _, h in hc]), info))
+        return out
+
+
+def _split_sorted(x: np.ndarray, size: int, C: int) -> list:
+    """Sorted ids x split into C lists by block (id // size)."""
+    return np.split(x, np.searchsorted(x, np.arange(1, C) * size))
+
+
+def _by_copy(entries, size: int, C: int, first) -> list:
+    """Per-round entries [(round, arrays)] (``first(arrays)``: the ids whose block id // size is the copy;
+    every array of an entry is indexed alike) -> for each copy its own [(round, arrays)], rounds in order,
+    rows in their order, entries it has no rows in left out."""
+    out = [[] for _ in range(C)]
+    for r, arrs in entries:
+        ids = first(arrs)
+        if not len(ids):
+            continue
+        cop = ids // size
+        order = np.argsort(cop, kind="stable")
+        bounds = np.searchsorted(cop[order], np.arange(C + 1))
+        for c in np.flatnonzero(np.diff(bounds)):
+            sel = order[bounds[c]:bounds[c + 1]]
+            out[c].append((r, tuple(a[sel] for a in arrs) if isinstance(arrs, tuple) else arrs[sel]))
+    return out
+
+
+def run(V, states, F, targets, max_costs, model, params, options: Options, edges, part_scale=None):
+    """Simplify C copies of one mesh together. V (n,3) float32 normalised positions, states: C (n, width)
+    vertex states, F (m,3), targets (C,) face targets, max_costs (C,) internal max errors, model: the
+    cost model (its kernels; each copy's numbers are in ``params``: C `CostModel.kernel_params` dicts),
+    options: shared by every copy (its ``max_cost`` unused), edges: `topo.edges` of F, part_scale: as
+    `parallel.run`. Returns C tuples in `parallel.run`'s form."""
+    if not len(states):
+        return []
+    b = _Batch(V, states, F, targets, max_costs, model, params, options, edges, part_scale)
+    b.run()
+    return b.outputs()
+

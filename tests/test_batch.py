@@ -1,0 +1,127 @@
+"""simplify_batch: configurations of one mesh in shared rounds give exactly what `simplify` gives alone."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import _compilation, shapes
+from qemjax._api import simplify_batch
+from qemjax._schedulers import batched
+
+MESHES = {
+    "sheet": lambda: shapes.grid(10, hole=True),  # boundaries: boundary_weight matters
+    "bumpy": lambda: shapes.bumpy_sphere(2),
+}
+
+CONFIGS = [
+    dict(ratio=0.2),
+    dict(ratio=0.2, boundary_weight=0.5),
+    dict(ratio=0.2, area_weighted=False),
+    dict(ratio=0.2, placement="endpoints"),
+    dict(ratio=0.5),
+    dict(target_faces=37),
+    dict(ratio=0.05, max_error=1e-5),
+    dict(ratio=0.2, regularize=0.05),
+    dict(ratio=0.2, regularize=0.3, boundary_weight=2.0),
+    dict(ratio=0.2, area_weight=0.5),
+    dict(ratio=0.2, area_weight=2.0),
+    dict(ratio=0.2, placement="rank"),
+    dict(ratio=0.2, placement="rank", area_power=0.5),
+    dict(ratio=0.2, flip_angle=None),  # another flip angle: another batch
+    dict(ratio=0.2, preserve_topology=False),  # faces rebuilt each round, coincident faces dropped
+    dict(ratio=0.3, preserve_topology=False, boundary_weight=1.0),
+    dict(ratio=0.2, scheduler="greedy"),  # not batchable: runs alone
+    dict(ratio=0.2, method="esqem"),  # refreshes state and splits: runs alone
+]
+
+
+def same(a, b) -> list[str]:
+    """The fields where two results differ (empty: equal bit for bit)."""
+    diff = []
+    for name in ("vertices", "faces", "vertex_error", "source_vertices", "source_faces"):
+        if not np.array_equal(getattr(a, name), getattr(b, name)):
+            diff.append(name)
+    for name in ("pairs", "positions", "costs", "rounds"):
+        if not np.array_equal(getattr(a.history, name), getattr(b.history, name)):
+            diff.append("history." + name)
+    if a.history.parts.keys() != b.history.parts.keys() or any(
+            not np.array_equal(a.history.parts[k], b.history.parts[k]) for k in a.history.parts):
+        diff.append("history.parts")
+    for name in ("removed_at", "coincident"):
+        if not np.array_equal(getattr(a.record, name), getattr(b.record, name)):
+            diff.append("record." + name)
+    if a.stop_reason != b.stop_reason or a.max_error != b.max_error:
+        diff.append("stop/max_error")
+    for k in ("rounds", "contractions", "rejected", "rejected_by", "blocked_by", "branches", "faces_per_round",
+              "faces_out", "target_faces"):
+        if a.stats.get(k) != b.stats.get(k):
+            diff.append("stats." + k)
+    return diff
+
+
+@pytest.fixture(scope="module", params=sorted(MESHES))
+def case(request):
+    mesh = MESHES[request.param]()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        together = simplify_batch(mesh, CONFIGS)
+        alone = [qemjax.simplify(mesh, **c) for c in CONFIGS]
+    return mesh, together, alone
+
+
+def test_every_configuration_equals_simplify_alone(case):
+    _, together, alone = case
+    for cfg, a, b in zip(CONFIGS, together, alone):
+        assert same(a, b) == [], cfg
+
+
+def test_configurations_really_shared_rounds(case):
+    _, together, alone = case
+    sizes = [r.stats.get("batch", {}).get("size", 1) for r in together]
+    # plain QEM (any placement but rank: one kernel), regularize, area_weight, rank, no flip test,
+    # non-manifold mode; greedy and esqem run alone
+    assert sizes == [7] * 7 + [2] * 6 + [1] + [2] * 2 + [1, 1]
+    # and the configurations differ: the batch did not compute one answer for all
+    assert len({r.vertices.tobytes() for r in together[:13]}) >= 10
+
+
+def test_results_of_a_batch_are_independent_of_its_company():
+    mesh = shapes.icosphere(3)
+    lone = simplify_batch(mesh, [dict(ratio=0.3, boundary_weight=3.0)] * 2)
+    mixed = simplify_batch(mesh, [dict(ratio=0.1), dict(ratio=0.3, boundary_weight=3.0), dict(target_faces=500)])
+    assert same(lone[0], mixed[1]) == [] and same(lone[1], mixed[1]) == []
+
+
+def test_new_settings_in_a_batch_compile_nothing():
+    mesh = shapes.icosphere(3)
+    simplify_batch(mesh, [dict(ratio=0.2, regularize=0.1, boundary_weight=1.0), dict(ratio=0.3, regularize=0.2)])
+    c0, _ = _compilation.snapshot()
+    out = simplify_batch(mesh, [dict(ratio=0.2, regularize=0.7, boundary_weight=9.0),
+                                dict(ratio=0.3, regularize=0.05)])
+    assert _compilation.snapshot()[0] == c0
+    assert out[0].stats["batch"]["size"] == 2
+
+
+def test_bad_configurations_raise_or_are_returned():
+    mesh = shapes.icosphere(2)
+    with pytest.raises(ValueError, match="boundary_weight"):
+        simplify_batch(mesh, [dict(ratio=0.5), dict(ratio=0.5, boundary_weight=-1.0)])
+    with pytest.raises(ValueError, match="progress"):
+        simplify_batch(mesh, [dict(ratio=0.5, progress=True)])
+    with pytest.raises(ValueError, match="unknown"):
+        simplify_batch(mesh, [dict(ratio=0.5, colour="red")])
+    out = simplify_batch(mesh, [dict(ratio=0.5), dict(ratio=2.0), dict(ratio=0.4)], errors=True)
+    assert isinstance(out[1], ValueError) and "ratio" in str(out[1])
+    assert same(out[0], qemjax.simplify(mesh, ratio=0.5)) == []
+    assert out[0].stats["batch"]["size"] == 2
+
+
+def test_batchable_models():
+    from qemjax._costs import ESQEM, QEM, Area, AreaTerm, Regularized
+
+    assert batched.batchable(QEM()) and batched.batchable(Regularized(QEM(), 0.1))
+    assert batched.batchable(AreaTerm(QEM(), 0.5))
+    assert not batched.batchable(ESQEM()) and not batched.batchable(Area())
