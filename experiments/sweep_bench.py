@@ -1,18 +1,23 @@
-"""64 configurations of one mesh → 10 %: `qemjax.sweep` against looping `simplify`, meshoptimizer and
-pymeshlab over the same cells, as a multiple of one warm configuration's time (issue 19's goal: ≤ 8×).
+"""Many configurations → 10 %: `qemjax.sweep` (batched: `simplify_batch`) against the same sweep with every
+cell alone, looping `simplify`, meshoptimizer and pymeshlab over the same cells, as a multiple of one warm
+configuration's time (issue 19's goal: 64 configurations of the cow in ≤ 8×).
 
-Everything is warm: one untimed sweep first compiles every kernel the grid needs. `qemjax.sweep` reads
-the mesh once and runs each cell as one `simplify` call (no batched union of configurations yet); the
-`simplify` loop is the naive one, from the path each time. The peers have no such parameters: each of the
-64 cells is their default call to the same face target. Metrics are off (timing only). Each repeat runs every method, in alternating order. Appends to
-``results/sweep_bench.csv``.
+Everything is warm: untimed sweeps first compile every kernel the grid needs. The `simplify` loop is the
+naive one, from the path each time. The peers have no such parameters: each cell is their default call
+to the same face target. Metrics are off (timing only). Wall and CPU time (this process) are both
+recorded: on a shared machine the CPU time moves less. Each repeat runs every method, in alternating
+order. ``--meshes small``: the 8 small shared meshes of SMALL in one sweep (8 × 8 = 64 cells); the
+baseline is then one warm default configuration per mesh, averaged. Appends to ``results/sweep_batch.csv`` (``results/sweep_bench.csv``: the
+first measurements, before batching, in an older layout).
 
-    python experiments/sweep_bench.py --meshes cow --repeats 3
+    python experiments/sweep_bench.py --meshes cow --grid qem --repeats 3
+    python experiments/sweep_bench.py --meshes cow stanford-bunny small --repeats 3
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import os
 import statistics
 import sys
 import time
@@ -29,83 +34,119 @@ from qemjax import _io  # noqa: E402
 from qemjax._sweep import expand_grid  # noqa: E402
 
 RESULTS = HERE / "results"
-GRID = {"regularize": [0.0, 0.01, 0.03, 0.1], "boundary_weight": [0.5, 1.0, 2.0, 4.0],
-        "placement": ["optimal", "endpoints"], "area_weighted": [True, False]}  # 4 × 4 × 2 × 2 = 64
-FIELDS = ("date", "mesh", "faces_in", "ratio", "configs", "method", "repeats", "median_s", "per_config_s",
-          "vs_one_warm", "times_s")
+GRIDS = {
+    # the first grid measured: 3/4 of its cells pay the ring term of `regularize` (per-pair work a batch
+    # cannot share); two batches (with and without the term)
+    "issue": {"regularize": [0.0, 0.01, 0.03, 0.1], "boundary_weight": [0.5, 1.0, 2.0, 4.0],
+              "placement": ["optimal", "endpoints"], "area_weighted": [True, False]},
+    # QEM settings only: one batch of 64 copies
+    "qem": {"boundary_weight": [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 100.0], "placement": ["optimal", "endpoints"],
+            "area_weighted": [True, False], "area_power": [1.0, 0.5]},
+    # 8 configurations, for the batch of many small meshes (8 meshes x 8 = 64 cells)
+    "small": {"boundary_weight": [1.0, 100.0], "placement": ["optimal", "endpoints"], "area_weighted": [True, False]},
+}
+SMALL = ("cow", "fandisk", "max-planck-10k", "rocker-arm-small", "suzanne", "teapot", "3holes", "beetle")
+FIELDS = ("date", "mesh", "faces_in", "ratio", "grid", "configs", "method", "repeats", "median_s", "per_config_s",
+          "vs_one_warm", "median_cpu_s", "cpu_vs_one_warm", "load_avg", "times_s")
 
 
-def bench(name: str, ratio: float, repeats: int) -> list[dict]:
-    path = bench_meshes.shared_files()[name]
-    configs = expand_grid(GRID)
-    (V, F), _ = _io.prepare(qemjax.load(path))  # the peers get the cleaned input
-    warm = qemjax.sweep(path, GRID, [ratio], metrics=False, progress=False)  # compiles every kernel
-    target = int(warm["target_faces"].iloc[0])
-    mesh = qemjax.load(path)
+def _clock(fn):
+    w, c = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - w, time.process_time() - c
+
+
+def bench(names: list[str], ratio: float, repeats: int, grid_name: str) -> list[dict]:
+    files = bench_meshes.shared_files()
+    paths = {n: files[n] for n in names}
+    grid = GRIDS[grid_name]
+    configs = expand_grid(grid)
+    cleaned = {n: _io.prepare(qemjax.load(p))[0] for n, p in paths.items()}  # the peers get the cleaned input
+    meshes = {n: qemjax.load(p) for n, p in paths.items()}
+    warm = qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False)  # compiles every kernel
+    qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, batch_size=1)
+    targets = {n: int(warm.loc[warm["mesh"] == n, "target_faces"].iloc[0]) for n in names}
+    cells = len(configs) * len(names)
 
     def loop_simplify():
-        for params in configs:
-            qemjax.simplify(path, ratio=ratio, **dict(params))
+        for n in names:
+            for params in configs:
+                qemjax.simplify(paths[n], ratio=ratio, **dict(params))
 
     def loop_peer(peer):
-        return lambda: [peers.run_peer(peer, V, F, target) for _ in configs]
+        return lambda: [peers.run_peer(peer, *cleaned[n], targets[n]) for n in names for _ in configs]
+
+    inside = []  # Σ simplify total_s within each timed sweep: the rest is the sweep's own overhead
+
+    def timed_sweep(**kw):
+        def go():
+            df = qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, **kw)
+            if not kw:
+                inside.append(float(df["total_s"].sum()))
+        return go
 
     methods = {
-        "one warm config (default simplify)": lambda: qemjax.simplify(mesh, ratio=ratio),
-        "qemjax.sweep": lambda: qemjax.sweep(path, GRID, [ratio], metrics=False, progress=False),
+        # the baseline: one warm default configuration of each mesh, averaged over the meshes
+        "one warm config (default simplify)": lambda: [qemjax.simplify(meshes[n], ratio=ratio) for n in names],
+        "qemjax.sweep (batched)": timed_sweep(),
+        "qemjax.sweep batch_size=1 (cells alone)": timed_sweep(batch_size=1),
         "loop simplify": loop_simplify,
         "loop meshoptimizer": loop_peer("meshoptimizer"),
         "loop pymeshlab": loop_peer("pymeshlab"),
-        "load (once per mesh)": lambda: qemjax.load(path),
-        "load + clean (once per mesh)": lambda: _io.prepare(qemjax.load(path)),
+        "load + clean (once per mesh)": lambda: [_io.prepare(qemjax.load(p)) for p in paths.values()],
     }
-    peers.run_peer("meshoptimizer", V, F, target)  # warm-ups
-    peers.run_peer("pymeshlab", V, F, target)
-    inside = []  # Σ simplify total_s within each timed sweep: the rest is the sweep's own overhead
-
-    def timed_sweep():
-        df = qemjax.sweep(path, GRID, [ratio], metrics=False, progress=False)
-        inside.append(float(df["total_s"].sum()))
-
-    methods["qemjax.sweep"] = timed_sweep
+    for n in names:  # warm-ups
+        peers.run_peer("meshoptimizer", *cleaned[n], targets[n])
+        peers.run_peer("pymeshlab", *cleaned[n], targets[n])
     times = {method: [] for method in methods}
     for rep in range(repeats):  # alternate the order: drift on a shared machine hits every method alike
         for method in (list(methods) if rep % 2 == 0 else list(methods)[::-1]):
-            t0 = time.perf_counter()
-            methods[method]()
-            times[method].append(time.perf_counter() - t0)
-    times["sum of simplify total_s in the sweep"] = inside
-    one = statistics.median(times["one warm config (default simplify)"])
+            times[method].append(_clock(methods[method]))
+    one = statistics.median(t[0] for t in times["one warm config (default simplify)"]) / len(names)
+    one_cpu = statistics.median(t[1] for t in times["one warm config (default simplify)"]) / len(names)
+    times["sum of simplify total_s in the sweep"] = [(t, float("nan")) for t in inside]
     rows = []
+    load = os.getloadavg()[0]
     for method, ts in times.items():
-        med = statistics.median(ts)
-        n = 1 if method.startswith(("one", "load")) else len(configs)  # the rest cover the 64 cells
-        rows.append(dict(date=time.strftime("%Y-%m-%d"), mesh=name, faces_in=len(F), ratio=ratio,
+        med = statistics.median(t[0] for t in ts)
+        cpu = statistics.median(t[1] for t in ts)
+        n = len(names) if method.startswith(("one", "load")) else cells  # the rest cover every cell
+        per_mesh = len(names) if n == len(names) else 1  # the baseline and load rows: per mesh
+        rows.append(dict(date=time.strftime("%Y-%m-%d"), mesh="+".join(names),
+                         faces_in=sum(len(c[1]) for c in cleaned.values()), ratio=ratio, grid=grid_name,
                          configs=n, method=method, repeats=len(ts), median_s=round(med, 4),
-                         per_config_s=round(med / n, 4), vs_one_warm=round(med / one, 2),
-                         times_s=" ".join(f"{t:.3f}" for t in ts)))
+                         per_config_s=round(med / n, 4), vs_one_warm=round(med / per_mesh / one, 2),
+                         median_cpu_s=round(cpu, 4), cpu_vs_one_warm=round(cpu / per_mesh / one_cpu, 2),
+                         load_avg=round(load, 2), times_s=" ".join(f"{w:.3f}/{c:.3f}" for w, c in ts)))
     return rows
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--meshes", nargs="+", default=["cow"])
+    p.add_argument("--meshes", nargs="+", default=["cow"],
+                   help="shared mesh names, each benchmarked on its own; 'small': the 8 meshes of SMALL together")
+    p.add_argument("--grid", choices=sorted(GRIDS), default=None,
+                   help="default: 'issue' for one mesh, 'small' for the small-mesh batch")
     p.add_argument("--ratio", type=float, default=0.1)
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--out", type=Path, default=RESULTS / "sweep_bench.csv")
+    p.add_argument("--out", type=Path, default=RESULTS / "sweep_batch.csv")
     args = p.parse_args(argv)
     for name in args.meshes:
-        rows = bench(name, args.ratio, args.repeats)
+        names = list(SMALL) if name == "small" else [name]
+        grid = args.grid or ("small" if name == "small" else "issue")
+        rows = bench(names, args.ratio, args.repeats, grid)
         new = not args.out.exists()
         with open(args.out, "a", newline="") as f:
             w = csv.DictWriter(f, FIELDS)
             if new:
                 w.writeheader()
             w.writerows(rows)
-        print(f"\n{name} ({rows[0]['faces_in']} faces) -> {args.ratio:g}, {len(expand_grid(GRID))} configurations")
-        print(f"{'method':40s} {'median s':>9s} {'per config':>11s} {'x one warm':>11s}")
+        print(f"\n{rows[0]['mesh']} ({rows[0]['faces_in']} faces) -> {args.ratio:g}, grid {grid!r}: "
+              f"{len(expand_grid(GRIDS[grid]))} configurations per mesh; load average {rows[0]['load_avg']}")
+        print(f"{'method':42s} {'median s':>9s} {'per cell':>9s} {'x one warm':>11s} {'cpu s':>8s} {'cpu x one':>10s}")
         for r in rows:
-            print(f"{r['method']:40s} {r['median_s']:9.3f} {r['per_config_s']:11.4f} {r['vs_one_warm']:11.1f}")
+            print(f"{r['method']:42s} {r['median_s']:9.3f} {r['per_config_s']:9.4f} {r['vs_one_warm']:11.1f} "
+                  f"{r['median_cpu_s']:8.3f} {r['cpu_vs_one_warm']:10.1f}")
     return 0
 
 
