@@ -165,24 +165,29 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
 
 def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> list:
     """`simplify` of one mesh under many configurations: ``[simplify(mesh, **c) for c in configs]``, with
-    equal results (vertices, faces, history, stop reason: bit for bit), computed together.
+    equal results, computed together (`simplify_cells`)."""
+    return simplify_cells([(mesh, c) for c in configs], errors=errors)
 
-    The mesh is read and cleaned once per ``weld`` / ``pair_threshold``. Configurations that can share
-    rounds (the parallel scheduler, no aggregation, a model with per-pair kernel settings: QEM with any
-    placement, boundary weight, area weighting, ``regularize`` or ``area_weight`` value; the same flip
-    angle, topology mode and `Schedule`) are run as one disjoint union of copies
-    (`_schedulers.batched`), each copy with its own target, ``max_error``, vertex state and settings; the
-    rest run alone. ``progress`` is not offered here (a sweep shows its own bar).
+
+def simplify_cells(cells: list, *, errors: bool = False) -> list:
+    """`simplify` of many (mesh, configuration) cells: ``[simplify(m, **c) for m, c in cells]``, with equal
+    results (vertices, faces, history, stop reason: bit for bit), computed together.
+
+    Each mesh (by identity) is read and cleaned once per ``weld`` / ``pair_threshold``. Cells that can
+    share rounds (the parallel scheduler, no aggregation, a model with per-pair kernel settings: QEM with
+    any placement, boundary weight, area weighting, ``regularize`` or ``area_weight`` value; the same flip
+    angle, topology mode and `Schedule`), of one mesh or of several, run as one disjoint union of copies
+    (`_schedulers.batched`), each with its own target, ``max_error``, vertex state and settings; the rest
+    run alone. ``progress`` is not offered here (a sweep shows its own bar).
     A batched result's ``stats["batch"]`` gives the batch's size and wall time; its ``total_s``, ``run_s``
     and ``compile_s`` are its share (the batch's / its size), and its stage times are the batch's.
     errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
     list is that exception instead.
     """
     t_start = time.perf_counter()
-    c0, s0 = _compilation.snapshot()
     defaults = {k: p.default for k, p in inspect.signature(simplify).parameters.items() if k != "mesh"}
-    geos, jobs, out = {}, [], [None] * len(configs)
-    for i, cfg in enumerate(configs):
+    geos, jobs, out = {}, [], [None] * len(cells)
+    for i, (mesh, cfg) in enumerate(cells):
         try:
             unknown = sorted(set(cfg) - set(defaults) | ({"progress"} & set(cfg)))
             if unknown:
@@ -190,11 +195,11 @@ def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> l
             kw = {**defaults, **cfg}
             setup = _setup(**{k: kw[k] for k in _SETUP_KEYS})
             _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
-            gk = (setup.weld, setup.pair_threshold)
+            gk = (id(mesh), setup.weld, setup.pair_threshold)
             if gk not in geos:
-                geos[gk] = _geometry(mesh, setup.weld, setup.pair_threshold, stacklevel=3)
+                geos[gk] = _geometry(mesh, setup.weld, setup.pair_threshold, stacklevel=4)
             jobs.append((i, _job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
-                                 kw["max_error"], stacklevel=3)))
+                                 kw["max_error"], stacklevel=4)))
         except ValueError as exc:
             if not errors:
                 raise
@@ -202,27 +207,25 @@ def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> l
     groups: dict = {}
     for i, job in jobs:
         groups.setdefault(_batch_key(job), []).append((i, job))
-    prep = time.perf_counter() - t_start
+    prep = (time.perf_counter() - t_start) / max(len(jobs), 1)  # reading and cleaning, per run
     for key, members in groups.items():
         if key is None or len(members) == 1:
             for i, job in members:
                 t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
-                out[i] = _finish(job, _run(job), t0 - prep / len(jobs), c1, s1, stacklevel=3)
+                out[i] = _finish(job, _run(job), t0 - prep, c1, s1, stacklevel=4)
             continue
         t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
-        first = members[0][1]
-        g = first.geo
-        ran = batched.run(g.Vn, [j.S for _, j in members], g.F, [max(j.target, 1) for _, j in members],
-                          [j.options.max_cost for _, j in members], first.setup.model,
-                          [j.setup.model.kernel_params() for _, j in members], first.options, g.edges[:2],
-                          g.frame.part_scale2())
-        wall = time.perf_counter() - t0 + prep * len(members) / len(jobs)
+        js = [j for _, j in members]
+        ran = batched.run([j.geo.Vn for j in js], [j.S for j in js], [j.geo.F for j in js],
+                          [max(j.target, 1) for j in js], [j.options.max_cost for j in js], js[0].setup.model,
+                          [j.setup.model.kernel_params() for j in js], js[0].options, [j.geo.edges[:2] for j in js],
+                          [j.geo.frame.part_scale2() for j in js])
+        wall = time.perf_counter() - t0 + prep * len(members)
         c2, s2 = _compilation.snapshot()
-        share = wall / len(members)
+        share, comp = wall / len(members), min(s2 - s1, wall) / len(members)
         for (i, job), r in zip(members, ran):
-            res = _finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=3,
+            res = _finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=4,
                           batch={"size": len(members), "total_s": wall, "compilations": c2 - c1})
-            comp = min(s2 - s1, wall) / len(members)
             res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
             out[i] = res
     return out
@@ -234,7 +237,7 @@ def _batch_key(job: "Job"):
     if s.scheduler != "parallel" or len(job.geo.extra) or not batched.batchable(model) or not (
             job.target < len(job.geo.F) or job.err < math.inf):
         return None
-    return (id(job.geo), _model_key(model), tuple(sorted(model.kernel_params())), s.cos_max,
+    return (_model_key(model), tuple(sorted(model.kernel_params())), s.cos_max,
             s.preserve_topology, s.prune, s.schedule)
 
 

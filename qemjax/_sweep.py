@@ -2,8 +2,8 @@
 
 A pipeline of small stages: name and load the meshes (once each), cross the grid into cells, drop the
 cells already in ``out`` (resume), run the rest in batches (in process or on an executor), write the table
-after each batch. A batch is cells of one mesh run by `simplify_batch`: the configurations that can share
-rounds run as one disjoint union of copies, the rest alone; either way each cell's mesh is the one
+after each batch. A batch of cells runs through `simplify_cells`: the cells that can share rounds (of
+one mesh or several) run as one disjoint union of copies, the rest alone; either way each cell's mesh is the one
 `simplify` gives alone (tested).
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from . import _io
-from ._api import simplify, simplify_batch
+from ._api import simplify, simplify_cells
 from ._options import Schedule
 
 # keywords a grid may not vary: the target is `targets`, progress is the sweep's own, feature edges are
@@ -138,19 +138,19 @@ def run_cell(mesh, cell: Cell, metrics) -> dict:
     return row(mesh, cell, res, metrics, time.perf_counter() - t0)
 
 
-def run_cells(mesh, cells: list[Cell], metrics) -> list[dict]:
-    """The rows of cells of one mesh, computed together by `simplify_batch` (each result equals
-    `simplify`'s alone). If the batch fails as a whole, each cell runs alone, so the rows say which
-    configuration fails and why."""
-    if len(cells) == 1:
-        return [run_cell(mesh, cells[0], metrics)]
+def run_cells(items: list, metrics) -> list[dict]:
+    """The rows of cells, items = [(mesh, `Cell`)], computed together by `simplify_cells` (each result
+    equals `simplify`'s alone; cells of several meshes may share rounds). If the batch fails as a whole,
+    each cell runs alone, so the rows say which configuration fails and why."""
+    if len(items) == 1:
+        return [run_cell(*items[0], metrics)]
     t0 = time.perf_counter()
     try:
-        results = simplify_batch(mesh, [c.kwargs() for c in cells], errors=True)
+        results = simplify_cells([(mesh, c.kwargs()) for mesh, c in items], errors=True)
     except Exception:  # noqa: BLE001 - rerun alone: the failing cell's row will carry its error
-        return [run_cell(mesh, c, metrics) for c in cells]
-    share = (time.perf_counter() - t0) / len(cells)
-    return [row(mesh, c, r, metrics, share) for c, r in zip(cells, results)]
+        return [run_cell(mesh, c, metrics) for mesh, c in items]
+    share = (time.perf_counter() - t0) / len(items)
+    return [row(mesh, c, r, metrics, share) for (mesh, c), r in zip(items, results)]
 
 
 def row(mesh, cell: Cell, res, metrics, seconds: float) -> dict:
@@ -177,14 +177,18 @@ def row(mesh, cell: Cell, res, metrics, seconds: float) -> dict:
 
 
 def batches(cells: list[Cell], faces: dict, size: int | None) -> list[list[Cell]]:
-    """Cells grouped by mesh (in order) and cut into batches of at most ``size`` cells (None: as many as
-    `BATCH_FACES` allows, with ``faces`` the face count of each mesh)."""
-    out = []
-    for name in dict.fromkeys(c.mesh for c in cells):
-        mine = [c for c in cells if c.mesh == name]
-        k = size or max(1, BATCH_FACES // max(faces[name], 1))
-        out += [mine[i:i + k] for i in range(0, len(mine), k)]
-    return out
+    """Cells, in order, cut into batches of at most ``size`` cells (None: as many as `BATCH_FACES` faces
+    allow, with ``faces`` the face count of each mesh by name; a larger mesh is a batch of one)."""
+    out, cur, total = [], [], 0
+    for c in cells:
+        f = faces[c.mesh]
+        full = len(cur) >= size if size else cur and total + f > BATCH_FACES
+        if full:
+            out.append(cur)
+            cur, total = [], 0
+        cur.append(c)
+        total += f
+    return out + ([cur] if cur else [])
 
 
 def _format(out) -> str:
@@ -245,8 +249,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         there without an error are not run again (an interrupted sweep resumes); rows of other cells in
         the file are kept.
     progress: a tqdm bar counting cells.
-    batch_size: at most this many cells of one mesh per batch (`simplify_batch`: configurations that can
-        share rounds run together, as one disjoint union of copies); None: in process, as many as
+    batch_size: at most this many cells per batch (`simplify_cells`: cells that can share rounds, of one
+        mesh or several, run together as one disjoint union of copies); None: in process, as many as
         `BATCH_FACES` faces allow; on an executor, `EXECUTOR_BATCH`. 1: every cell alone.
 
     Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key,
@@ -307,9 +311,9 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     try:
         if submit is None:
             for b in work:
-                finish(run_cells(loaded[b[0].mesh], b, metrics))
+                finish(run_cells([(loaded[c.mesh], c) for c in b], metrics))
         else:
-            futures = [submit(run_cells, loaded[b[0].mesh], b, metrics) for b in work]
+            futures = [submit(run_cells, [(loaded[c.mesh], c) for c in b], metrics) for b in work]
             for f in concurrent.futures.as_completed(futures):
                 finish(f.result())
     finally:

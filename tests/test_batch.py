@@ -8,7 +8,7 @@ import pytest
 
 import qemjax
 from qemjax import _compilation, shapes
-from qemjax._api import simplify_batch
+from qemjax._api import simplify_batch, simplify_cells
 from qemjax._schedulers import batched
 
 MESHES = {
@@ -125,3 +125,20 @@ def test_batchable_models():
     assert batched.batchable(QEM()) and batched.batchable(Regularized(QEM(), 0.1))
     assert batched.batchable(AreaTerm(QEM(), 0.5))
     assert not batched.batchable(ESQEM()) and not batched.batchable(Area())
+
+
+def two_spheres():
+    """One mesh of two parts of different sizes (per-part frames and free costs)."""
+    a, b = shapes.icosphere(2), shapes.icosphere(3, radius=0.01)
+    V = np.concatenate([a.vertices, b.vertices + [3.0, 0, 0]])
+    return V, np.concatenate([a.faces, b.faces + len(a.vertices)])
+
+
+def test_cells_of_several_meshes_share_rounds():
+    meshes = [shapes.icosphere(3), shapes.grid(9, hole=True), two_spheres(), shapes.torus(n_major=24, n_minor=12)]
+    cells = [(m, dict(ratio=r, boundary_weight=w)) for m in meshes for r, w in ((0.2, 100.0), (0.4, 1.0))]
+    together = simplify_cells(cells)
+    assert {r.stats["batch"]["size"] for r in together} == {len(cells)}
+    for (m, cfg), a in zip(cells, together):
+        assert same(a, qemjax.simplify(m, **cfg)) == [], cfg
+    assert together[4].stats["parts_in"] == 2

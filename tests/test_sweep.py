@@ -63,18 +63,18 @@ def test_resume_runs_only_missing_cells(meshes, reference, tmp_path, monkeypatch
         pytest.importorskip("pyarrow")
     out = tmp_path / f"sweep{ext}"
     calls = []
-    real, real_batch = sw.simplify, sw.simplify_batch
+    real, real_batch = sw.simplify, sw.simplify_cells
 
     def counting(mesh, **kw):
         calls.append(kw)
         return real(mesh, **kw)
 
-    def counting_batch(mesh, configs, **kw):
-        calls.extend(configs)
-        return real_batch(mesh, configs, **kw)
+    def counting_batch(cells, **kw):
+        calls.extend(cells)
+        return real_batch(cells, **kw)
 
     monkeypatch.setattr(sw, "simplify", counting)
-    monkeypatch.setattr(sw, "simplify_batch", counting_batch)
+    monkeypatch.setattr(sw, "simplify_cells", counting_batch)
     first = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, out=out, progress=False)
     assert len(calls) == len(reference)
     assert list(first["result_sha256"]) == list(reference["result_sha256"])
@@ -103,8 +103,8 @@ def test_resume_reruns_exactly_the_dropped_cells(meshes, tmp_path, monkeypatch):
     sw.write_table(keep, out)
     ran = []
     real = sw.run_cells
-    monkeypatch.setattr(sw, "run_cells", lambda mesh, cells, metrics: ran.extend(c.key for c in cells) or
-                        real(mesh, cells, metrics))
+    monkeypatch.setattr(sw, "run_cells", lambda items, metrics: ran.extend(c.key for _, c in items) or
+                        real(items, metrics))
     qemjax.sweep(meshes, grid, [0.5], metrics=False, out=out, progress=False)
     assert ran == [sw.Cell("sphere", (("regularize", 0.1),), 0.5).key]
 

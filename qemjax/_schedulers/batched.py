@@ -43,21 +43,28 @@ def batchable(model) -> bool:
 
 
 class _Batch(_Run):
-    """C copies of one mesh in one `parallel._Run`, with the per-copy decisions of the module docstring."""
+    """C copies (of one mesh or of several) in one `parallel._Run`, with the per-copy decisions of the
+    module docstring. Copy c holds vertices voff[c] … voff[c+1] − 1 and faces foff[c] … foff[c+1] − 1."""
 
-    def __init__(self, V, states, F, targets, max_costs, model, params, options: Options, edges, part_scale):
-        C, n, m = len(states), len(V), len(F)
-        self.C, self.n1, self.m1 = C, n, m
-        off = np.arange(C)
-        Vu = np.tile(np.asarray(V), (C, 1))
-        Fu = (F[None] + (off * n)[:, None, None]).reshape(-1, 3)
-        E, ecount = edges
-        Eu = (E[None].astype(np.int64) + (off * n)[:, None, None]).reshape(-1, 2).astype(E.dtype)
-        scale = None if part_scale is None else np.tile(part_scale, C)
-        self.vcopy = np.repeat(off, n).astype(np.int32)
+    def __init__(self, Vs, states, Fs, targets, max_costs, model, params, options: Options, edges, part_scales):
+        C = len(states)
+        self.C = C
+        self.voff = np.concatenate([[0], np.cumsum([len(V) for V in Vs])]).astype(np.int64)
+        self.foff = np.concatenate([[0], np.cumsum([len(F) for F in Fs])]).astype(np.int64)
+        Fu = np.concatenate([F + o for F, o in zip(Fs, self.voff)])
+        Eu = np.concatenate([(E.astype(np.int64) + o).astype(E.dtype) for (E, _), o in zip(edges, self.voff)])
+        # Schedule.free_cost per vertex, as each copy compares it alone: at its parts' scale, or (one part)
+        # as float32 (a Python float against the float32 gate)
+        free = options.schedule.free_cost
+        self.free_v = None
+        if any(ps is not None for ps in part_scales):
+            self.free_v = np.concatenate([np.full(len(V), float(np.float32(free))) if ps is None else free * ps
+                                          for V, ps in zip(Vs, part_scales)])
+        self.vcopy = np.repeat(np.arange(C), np.diff(self.voff)).astype(np.int32)
         stacked = {k: np.stack([np.asarray(p[k]) for p in params]) for k in params[0]}
-        super().__init__(Vu, np.concatenate(states), Fu, np.zeros((0, 2), np.int32), int(np.sum(targets)), model,
-                         options, None, (Eu, np.tile(ecount, C)), scale, PerCopy(stacked, self.vcopy))
+        super().__init__(np.concatenate(Vs), np.concatenate(states), Fu, np.zeros((0, 2), np.int32),
+                         int(np.sum(targets)), model, options, None,
+                         (Eu, np.concatenate([ec for _, ec in edges])), None, PerCopy(stacked, self.vcopy))
         self.targets = np.asarray(targets, np.int64)
         self.max_costs = np.asarray(max_costs, np.float64)
         self.active = np.ones(C, bool)
@@ -71,7 +78,7 @@ class _Batch(_Run):
     # -- per-copy views ----------------------------------------------------------------------------
     def counts(self) -> np.ndarray:
         """(C,) live faces of each copy."""
-        return self.faces.alive[: self.C * self.m1].reshape(self.C, self.m1).sum(1)
+        return np.add.reduceat(self.faces.alive[: self.foff[-1]].astype(np.int64), self.foff[:-1])
 
     def pair_copies(self, st: RoundState):
         """(each pair's copy (P,), each copy's first pair (C + 1,)): E is grouped by copy."""
@@ -79,9 +86,8 @@ class _Batch(_Run):
         starts = np.searchsorted(cp, np.arange(self.C + 1))
         return cp, starts
 
-    def _end(self, c: int, st: RoundState, cp_slice: slice, need: int):
-        """Copy c stops in this round (no valid pair, or nothing it selected was valid)."""
-        s = cp_slice
+    def _end(self, c: int, st: RoundState, s: slice, need: int):
+        """Copy c stops in this round (no valid pair, or nothing it selected was valid); s: its pairs."""
         ok = ((st.ecount[s] >= 1) & (st.ecount[s] <= 2)) if self.manifold else np.ones(s.stop - s.start, bool)
         self.stops[c] = outcome.classify(need + int(self.targets[c]), int(self.targets[c]), st.bad[s],
                                          st.ecount[s], st.cost[s] > self.max_costs[c], ok)
@@ -105,7 +111,7 @@ class _Batch(_Run):
 
         def key_of(idx):
             return sort_keys(st.key, idx, salt, offset)
-        free = sch.free_cost if self.part_scale is None else sch.free_cost * self.part_scale[st.E[:, 0]]
+        free = sch.free_cost if self.free_v is None else np.take(self.free_v, st.E[:, 0])
         cand = valid & (st.key <= np.maximum(sch.gate * np.take(thresh, cp), free))
         found = []
         acc, bad, why, extra, locked = independent_sets(
@@ -198,23 +204,24 @@ class _Batch(_Run):
     # -- per-copy outputs --------------------------------------------------------------------------
     def outputs(self):
         """Each copy's result in `parallel.run`'s form (V, S, F, alive, history, info)."""
-        n, m, C = self.n1, self.m1, self.C
-        hist = _by_copy(self.history, n, C, lambda h: h[0])
+        voff, foff, C = self.voff, self.foff, self.C
+        hist = _by_copy(self.history, voff, lambda h: h[0])
         parts = [None] * C
         if self.history_parts:
-            cop = np.concatenate([a for _, (a, _, _, _) in self.history]) // n
+            cop = np.searchsorted(voff, np.concatenate([a for _, (a, _, _, _) in self.history]), "right") - 1
             allp = np.concatenate(self.history_parts)
             parts = [allp[cop == c] for c in range(C)]
         dead = np.concatenate(self.dead) if self.dead else np.zeros(0, np.int64)
-        dead_c = _split_sorted(np.sort(dead), m, C)
-        dropped = _by_copy(self.dropped, m, C, lambda d: d)
+        dead = np.sort(dead)
+        dead_c = np.split(dead, np.searchsorted(dead, foff[1:-1]))
+        dropped = _by_copy(self.dropped, foff, lambda d: d)
         out = []
         for c in range(C):
-            lo, hi = c * n, (c + 1) * n
+            lo, hi, f0, f1 = voff[c], voff[c + 1], foff[c], foff[c + 1]
             hc = [(r, (a - lo, b - lo, x, cost)) for r, (a, b, x, cost) in hist[c]]
-            F = self.faces.F[c * m:(c + 1) * m] - lo
-            removed_at, coincident, rounds = _removal_steps(F, hc, [dead_c[c] - c * m],
-                                                            [(r, d - c * m) for r, d in dropped[c]])
+            F = self.faces.F[f0:f1] - lo
+            removed_at, coincident, rounds = _removal_steps(F, hc, [dead_c[c] - f0],
+                                                            [(r, d - f0) for r, d in dropped[c]])
             stop, blocked = self.stops[c]
             info = {"contractions": sum(len(h[0]) for _, h in hc),
                     "rejected": int(self.copy_rejected[c, 1:].sum()), "rounds": int(self.copy_rounds[c]),
@@ -226,26 +233,22 @@ class _Batch(_Run):
                     "parts": parts[c] if parts[c] is not None and len(parts[c]) else None,
                     "removed_at": removed_at, "coincident": coincident, "history_rounds": rounds}
             info.update(self.timer.t)
-            out.append((self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[c * m:(c + 1) * m],
+            out.append((self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[f0:f1],
                         _history_arrays([h for _, h in hc]), info))
         return out
 
 
-def _split_sorted(x: np.ndarray, size: int, C: int) -> list:
-    """Sorted ids x split into C lists by block (id // size)."""
-    return np.split(x, np.searchsorted(x, np.arange(1, C) * size))
-
-
-def _by_copy(entries, size: int, C: int, first) -> list:
-    """Per-round entries [(round, arrays)] (``first(arrays)``: the ids whose block id // size is the copy;
-    every array of an entry is indexed alike) -> for each copy its own [(round, arrays)], rounds in order,
-    rows in their order, entries it has no rows in left out."""
+def _by_copy(entries, offsets: np.ndarray, first) -> list:
+    """Per-round entries [(round, arrays)] (``first(arrays)``: ids, in copy c when offsets[c] <= id <
+    offsets[c+1]; every array of an entry is indexed alike) -> for each copy its own [(round, arrays)],
+    rounds in order, rows in their order, entries it has no rows in left out."""
+    C = len(offsets) - 1
     out = [[] for _ in range(C)]
     for r, arrs in entries:
         ids = first(arrs)
         if not len(ids):
             continue
-        cop = ids // size
+        cop = np.searchsorted(offsets, ids, "right") - 1
         order = np.argsort(cop, kind="stable")
         bounds = np.searchsorted(cop[order], np.arange(C + 1))
         for c in np.flatnonzero(np.diff(bounds)):
@@ -254,15 +257,15 @@ def _by_copy(entries, size: int, C: int, first) -> list:
     return out
 
 
-def run(V, states, F, targets, max_costs, model, params, options: Options, edges, part_scale=None):
-    """Simplify C copies of one mesh together. V (n,3) float32 normalised positions, states: C (n, width)
-    vertex states, F (m,3), targets (C,) face targets, max_costs (C,) internal max errors, model: the
-    cost model (its kernels; each copy's numbers are in ``params``: C `CostModel.kernel_params` dicts),
-    options: shared by every copy (its ``max_cost`` unused), edges: `topo.edges` of F, part_scale: as
-    `parallel.run`. Returns C tuples in `parallel.run`'s form."""
+def run(Vs, states, Fs, targets, max_costs, model, params, options: Options, edges, part_scales):
+    """Simplify C meshes (copies of one, or several) together. Per copy: Vs (n_c,3) float32 normalised
+    positions, states (n_c, width) vertex states, Fs (m_c,3) faces, targets face targets, max_costs
+    internal max errors, params its `CostModel.kernel_params` (the numbers; the kernels are ``model``'s),
+    edges `topo.edges` of its faces, part_scales as `parallel.run`'s ``part_scale`` (None: one part).
+    ``options`` are shared by every copy (its ``max_cost`` unused). Returns C tuples in `parallel.run`'s
+    form."""
     if not len(states):
         return []
-    b = _Batch(V, states, F, targets, max_costs, model, params, options, edges, part_scale)
+    b = _Batch(Vs, states, Fs, targets, max_costs, model, params, options, edges, part_scales)
     b.run()
     return b.outputs()
-
