@@ -1,10 +1,12 @@
 """qemjax: JAX-accelerated, batched triangle-mesh simplification.
 
-Public API: `simplify`, `methods`, `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the
+Public API: `simplify` (and `simplify_batch` / `simplify_cells`: many runs in shared rounds), `methods`, `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the
 multiresolution record (`Record`, `Level`, `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`), and the `metrics` module.
 """
 from ._api import methods as methods
 from ._api import simplify as simplify
+from ._api import simplify_batch as simplify_batch
+from ._api import simplify_cells as simplify_cells
 from ._io import Mesh as Mesh
 from ._io import load as load
 from ._lod import LodChain as LodChain

@@ -8,7 +8,7 @@ import pytest
 
 import qemjax
 from qemjax import _compilation, shapes
-from qemjax._api import simplify_batch, simplify_cells
+from qemjax import simplify_batch, simplify_cells
 from qemjax._schedulers import batched
 
 MESHES = {
