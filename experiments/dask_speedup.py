@@ -4,7 +4,8 @@ One sweep (2 shared meshes × 4 configurations × 3 targets = 24 cells, metrics 
 a `LocalCluster(n_workers=N, threads_per_worker=1, processes=True)` for each N in ``--workers``, and in
 this process without an executor. Each mode runs the sweep once cold (every worker process compiles its
 own JAX kernels) and then ``--repeats`` times warm, on the same cluster; the warm median is the number to
-compare. The machine's load average is recorded before and after each mode: other work on the machine
+compare. ``--ship arrays`` sends the mesh arrays with every cell's task, as `qemjax.sweep` did before it
+scattered each mesh to the workers once (``--ship scatter``, the default). The machine's load average is recorded before and after each mode: other work on the machine
 takes cores from the workers, so read the ratio next to it. On a 2-core machine the ideal is 2×.
 
 Appends to ``results/dask_speedup.csv`` and prints the ratios.
@@ -33,7 +34,7 @@ RESULTS = HERE / "results"
 GRID = {"boundary_weight": [1.0, 100.0], "regularize": [0.0, 0.1]}
 TARGETS = [0.1, 0.05, 0.02]
 METRICS = {"n_samples": 20_000}
-FIELDS = ("date", "mode", "workers", "cells", "cold_s", "warm_median_s", "warm_times_s", "speedup_vs_1",
+FIELDS = ("date", "mode", "workers", "ship", "cells", "cold_s", "warm_median_s", "warm_times_s", "speedup_vs_1",
           "vs_in_process", "load_before", "load_after", "cpus")
 
 
@@ -67,8 +68,13 @@ def main(argv=None) -> int:
     ap.add_argument("--meshes", nargs="+", default=["cow", "homer"])
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--repeats", type=int, default=3, help="warm runs per mode (default 3)")
+    ap.add_argument("--ship", choices=["scatter", "arrays"], default="scatter",
+                    help="scatter: each mesh is scattered to every worker once (qemjax.sweep's way since "
+                    "_sweep._ship); arrays: the mesh arrays go with every cell's task (the way before)")
     ap.add_argument("--out", default=str(RESULTS / "dask_speedup.csv"))
     args = ap.parse_args(argv)
+    if args.ship == "arrays":
+        qemjax._sweep._ship = lambda executor, loaded: loaded
 
     files = bench_meshes.shared_files()
     paths = {name: str(files[name]) for name in args.meshes}
@@ -79,6 +85,7 @@ def main(argv=None) -> int:
         with make() as executor:
             cold, warm, cells = measure(paths, executor, args.repeats)
         rows.append(dict(date=time.strftime("%Y-%m-%d %H:%M"), mode=mode, workers=n, cells=cells,
+                         ship=args.ship if n else "",
                          cold_s=round(cold, 3), warm_median_s=round(statistics.median(warm), 3),
                          warm_times_s=" ".join(f"{t:.3f}" for t in warm), load_before=load_before,
                          load_after=os.getloadavg()[0], cpus=os.cpu_count()))
@@ -93,12 +100,11 @@ def main(argv=None) -> int:
         print(f"dask {r['workers']} workers: {r['speedup_vs_1']}x one worker, {r['vs_in_process']}x in process (warm)")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    new = not out.exists()
-    with open(out, "a", newline="") as f:
-        w = csv.DictWriter(f, FIELDS)
-        if new:
-            w.writeheader()
-        w.writerows(rows)
+    old = list(csv.DictReader(open(out))) if out.exists() else []  # rows of earlier runs, older columns kept
+    with open(out, "w", newline="") as f:
+        w = csv.DictWriter(f, FIELDS, restval="")
+        w.writeheader()
+        w.writerows(old + rows)
     print(f"appended {len(rows)} rows to {out}")
     return 0
 

@@ -188,6 +188,14 @@ def _submitter(executor):
                      f"{type(executor).__name__}")
 
 
+def _ship(executor, loaded: dict) -> dict:
+    """What each cell's task gets as its mesh: the arrays, or with a dask Client a future of them,
+    scattered to every worker once, so a mesh crosses the network once per worker, not once per cell."""
+    if type(executor).__module__.startswith("distributed") and hasattr(executor, "scatter"):
+        return {name: executor.scatter([arrays], broadcast=True, hash=False)[0] for name, arrays in loaded.items()}
+    return loaded
+
+
 def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True):
     """Run every (mesh, grid configuration, target) cell with `qemjax.simplify`; a pandas DataFrame, one
     row per cell.
@@ -257,7 +265,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
             for c in todo:
                 finish(run_cell(loaded[c.mesh], c, metrics))
         else:
-            futures = [submit(run_cell, loaded[c.mesh], c, metrics) for c in todo]
+            shipped = _ship(executor, loaded)
+            futures = [submit(run_cell, shipped[c.mesh], c, metrics) for c in todo]
             for f in concurrent.futures.as_completed(futures):
                 finish(f.result())
     finally:
