@@ -1,7 +1,8 @@
 """qemjax: JAX-accelerated, batched triangle-mesh simplification.
 
-Public API: `simplify` (and `simplify_batch` / `simplify_cells`: many runs in shared rounds), `methods`, `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the
-multiresolution record (`Record`, `Level`, `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`), and the `metrics` module.
+Public API: `simplify` (and `simplify_batch` / `simplify_cells`: many runs in shared rounds), `methods`,
+`Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the multiresolution record (`Record`, `Level`,
+`load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` module.
 """
 from ._api import methods as methods
 from ._api import simplify as simplify
@@ -12,6 +13,7 @@ from ._io import load as load
 from ._lod import LodChain as LodChain
 from ._lod import lod_chain as lod_chain
 from ._options import Schedule as Schedule
+from ._pareto import pareto_front as pareto_front
 from ._record import Level as Level
 from ._record import Record as Record
 from ._record import load_record as load_record

@@ -1,6 +1,6 @@
 """Command line: ``qemjax simplify IN OUT (--faces N | --ratio R) [--max-error E] [options]``,
 ``qemjax lod IN OUT_DIR [--ratios R ...] [--format EXT] [--glb] [--record] [options]``,
-``qemjax demo [--out PATH]`` and ``qemjax --version``.
+``qemjax sweep CONFIG [--out PATH]``, ``qemjax demo [--out PATH]`` and ``qemjax --version``.
 
 The options of `qemjax.simplify` are generated from its signature (name, default, type) and its
 docstring (help), with the per-option details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
@@ -237,6 +237,15 @@ def _parser() -> argparse.ArgumentParser:
     lod.add_argument("--record", action="store_true", help="also write NAME-record.npz, the progressive "
                      "record every level can be replayed from (qemjax.load_record)")
     _add_options(lod)
+    sw = sub.add_parser("sweep", help="a parameter sweep described in a TOML (or YAML) file; writes its table",
+                        description="Run qemjax.sweep as CONFIG describes: meshes, grid, targets, out (default: "
+                        "CONFIG's name with .parquet), metrics, executor. See the README's 'Parameter sweeps'.")
+    sw.add_argument("config", help="a .toml file (.yaml/.yml with pyyaml installed)")
+    sw.add_argument("--out", help="write the table here instead of the config's out (.parquet or .csv; a "
+                    "table already there is resumed)")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.add_argument("--no-cache", action="store_true",
+                    help="do not use the compilation cache (also: environment QEMJAX_NO_CACHE=1)")
     d = sub.add_parser("demo", help="simplify a bumpy sphere made in code (writes a file only with --out)")
     d.add_argument("--out", "--output", dest="out", metavar="PATH", help="write the result here")
     d.add_argument("--subdivisions", type=int, default=7, help="7: 327,680 faces; 6: 81,920 (default: 7)")
@@ -291,7 +300,22 @@ def _lod(args, kwargs) -> int:
     return 0
 
 
+def _sweep(args) -> int:
+    """``qemjax sweep CONFIG``: the whole config is checked before anything runs."""
+    from . import _sweep_config
+
+    config = _sweep_config.load(args.config, out=args.out)
+    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
+        _cache.enable()
+    df = _sweep_config.run(config, progress=not args.quiet)
+    failed = int((df["error"].fillna("") != "").sum())
+    print(f"{args.config}: {len(df)} cells ({failed} failed) -> {config.out}")
+    return 0
+
+
 def _run(args) -> int:
+    if args.cmd == "sweep":
+        return _sweep(args)
     if args.cmd == "lod":
         return _lod(args, _simplify_kwargs(args))
     if args.cmd == "simplify" and args.ratio is None and args.target_faces is None and args.max_error is None:

@@ -231,6 +231,14 @@ def _submitter(executor):
                      f"{type(executor).__name__}")
 
 
+def _ship(executor, loaded: dict) -> dict:
+    """What each cell's task gets as its mesh: the arrays, or with a dask Client a future of them,
+    scattered to every worker once, so a mesh crosses the network once per worker, not once per cell."""
+    if type(executor).__module__.startswith("distributed") and hasattr(executor, "scatter"):
+        return {name: executor.scatter([arrays], broadcast=True, hash=False)[0] for name, arrays in loaded.items()}
+    return loaded
+
+
 def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True,
           batch_size: int | None = None):
     """Run every (mesh, grid configuration, target) cell with `qemjax.simplify`; a pandas DataFrame, one
@@ -313,7 +321,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
             for b in work:
                 finish(run_cells([(loaded[c.mesh], c) for c in b], metrics))
         else:
-            futures = [submit(run_cells, [(loaded[c.mesh], c) for c in b], metrics) for b in work]
+            shipped = _ship(executor, loaded)
+            futures = [submit(run_cells, [(shipped[c.mesh], c) for c in b], metrics) for b in work]
             for f in concurrent.futures.as_completed(futures):
                 finish(f.result())
     finally:

@@ -234,3 +234,127 @@ def test_fresh_process_fills_the_compilation_cache(src, tmp_path):
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert len(list((tmp_path / "cache").iterdir())) >= 3  # one entry per compiled kernel shape
+
+
+# ---- qemjax sweep CONFIG ------------------------------------------------------------------------------
+
+SWEEP_TOML = """
+meshes = ["sheet.ply", "ball.ply"]
+targets = [0.5, 60]
+out = "table.parquet"
+[grid]
+boundary_weight = [0, 1.0]
+split_factor = ["none"]
+[metrics]
+n_samples = 500
+"""
+SWEEP_YAML = """
+meshes: [sheet.ply, ball.ply]
+targets: [0.5, 60]
+out: table.parquet
+grid: {boundary_weight: [0, 1.0], split_factor: [null]}
+metrics: {n_samples: 500}
+"""
+TIMES = ["compile_s", "run_s", "total_s", "cell_s", "time_s"]  # wall times differ between two runs
+
+
+@pytest.fixture
+def sweep_dir(tmp_path):
+    for name, mesh in [("sheet", shapes.grid(6, hole=True)), ("ball", shapes.icosphere(2))]:
+        trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(tmp_path / f"{name}.ply")
+    return tmp_path
+
+
+@pytest.mark.parametrize("name,text", [("sweep.toml", SWEEP_TOML), ("sweep.yaml", SWEEP_YAML)])
+def test_sweep_command_writes_the_sweep_table(sweep_dir, name, text, capsys):
+    import pandas as pd
+
+    if name.endswith(".yaml"):
+        pytest.importorskip("yaml")
+    (sweep_dir / name).write_text(text)
+    assert _cli.main(["sweep", str(sweep_dir / name), "--quiet"]) == 0
+    assert f"8 cells (0 failed) -> {sweep_dir / 'table.parquet'}" in capsys.readouterr().out
+    got = pd.read_parquet(sweep_dir / "table.parquet")
+    paths = [str(sweep_dir / "sheet.ply"), str(sweep_dir / "ball.ply")]
+    want = qemjax.sweep(paths, {"boundary_weight": [0.0, 1.0], "split_factor": [None]}, [0.5, 60],
+                        metrics={"n_samples": 500}, progress=False)
+    assert len(got) == 8 and got["result_sha256"].nunique() > 4
+    pd.testing.assert_frame_equal(got.drop(columns=TIMES), want.drop(columns=TIMES), check_dtype=False)
+
+
+def _boom(*args, **kwargs):
+    raise AssertionError("the sweep ran")
+
+
+@pytest.mark.parametrize("text,match", [
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\nmesh = 1', "unknown key 'mesh'"),
+    ("targets = [0.5]", "'meshes' is missing"),
+    ('meshes = ["sheet.ply"]', "'targets' is missing"),
+    ('meshes = ["nope.ply"]\ntargets = [0.5]', "mesh file not found: "),
+    ("meshes = 3\ntargets = [0.5]", "meshes must be a path"),
+    ('meshes = ["sheet.ply"]\ntargets = [1.5]', "bad target 1.5"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\ngrid = 2', "grid must be a table"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nboundary_weight = ["high"]',
+     "grid.boundary_weight: expected a number, got 'high'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nweld = [1]', "grid.weld: expected true/false, got 1"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nmethod = ["qme"]', "grid.method: unknown value 'qme'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nratio = [0.1]', "targets go in 'targets'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nregularize = []', "grid.regularize is empty"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\nout = "t.xlsx"', "out must end in one of"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\nout = "no/such/t.csv"', "does not exist"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\nmetrics = "yes"', "metrics must be true, false or a table"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[metrics]\nsamples = 5', "unknown metrics key 'samples'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 0', "executor.workers must be an integer"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = "2"', "executor.workers must be an integer"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 2\nscheduler = "slurm"',
+     "executor.scheduler must be one of process, dask"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 2\naddress = "tcp://h:8786"',
+     "takes no workers"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nthreads = 2', "unknown executor key 'threads'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5\n', "not valid TOML"),
+])
+def test_sweep_command_bad_config(sweep_dir, monkeypatch, capsys, text, match):
+    monkeypatch.setattr(qemjax._sweep, "sweep", _boom)
+    (sweep_dir / "bad.toml").write_text(text)
+    assert _cli.main(["sweep", str(sweep_dir / "bad.toml"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("qemjax: error: bad.toml: ") and err.count("\n") == 1, err
+    assert match in err, err
+
+
+def test_sweep_command_bad_files(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(qemjax._sweep, "sweep", _boom)
+    assert _cli.main(["sweep", str(tmp_path / "missing.toml")]) == 2
+    assert "config file not found" in capsys.readouterr().err
+    (tmp_path / "c.json").write_text("{}")
+    assert _cli.main(["sweep", str(tmp_path / "c.json")]) == 2
+    assert "a config must be .toml, .yaml or .yml" in capsys.readouterr().err
+    (tmp_path / "c.yaml").write_text("meshes: [a.ply]\n")
+    monkeypatch.setitem(sys.modules, "yaml", None)  # as if pyyaml were not installed
+    assert _cli.main(["sweep", str(tmp_path / "c.yaml")]) == 2
+    assert "needs pyyaml (pip install pyyaml)" in capsys.readouterr().err
+
+
+def test_sweep_config_executors(sweep_dir):
+    """workers = N is a spawn process pool of N (not started here: nothing is submitted)."""
+    from qemjax import _sweep_config
+
+    (sweep_dir / "c.toml").write_text('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 3')
+    config = _sweep_config.load(sweep_dir / "c.toml", out=str(sweep_dir / "x.csv"))
+    assert config.out == str(sweep_dir / "x.csv") and config.executor == {"workers": 3}
+    with _sweep_config.executor(config.executor) as pool:
+        assert pool._max_workers == 3 and pool._mp_context.get_start_method() == "spawn"
+    with _sweep_config.executor({}) as none:
+        assert none is None
+
+
+def test_sweep_example_config_is_valid():
+    """The README's example file passes the checks (it needs ../shared/meshes)."""
+    from qemjax import _sweep_config
+
+    example = ROOT / "experiments" / "sweep_example.toml"
+    if not (ROOT.parent / "shared" / "meshes" / "cow.obj").exists():
+        pytest.skip("../shared/meshes is absent")
+    config = _sweep_config.load(example)
+    assert set(config.meshes) == {"cow", "fandisk"} and config.grid["split_factor"] == [None, 1.3333333]
+    assert config.out.endswith("sweep_example.parquet")

@@ -154,8 +154,11 @@ def test_dask_local_cluster_matches_in_process(meshes, reference):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        scattered, scatter = [], client.scatter
+        client.scatter = lambda data, **kw: scattered.append(len(data[0].faces)) or scatter(data, **kw)
         df = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, executor=client, progress=False)
     assert list(df["result_sha256"]) == list(reference["result_sha256"])
+    assert scattered == [len(m.faces) for m in meshes.values()]  # each mesh once, not once per cell
 
 
 def test_mesh_names(tmp_path):

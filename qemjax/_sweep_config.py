@@ -1,0 +1,253 @@
+"""``qemjax sweep CONFIG``: a sweep described in a TOML file (or YAML, with pyyaml installed).
+
+Everything is checked before any mesh is simplified or any worker started: unknown keys, missing files,
+wrong types and bad targets raise ValueError with one line naming the file and the key. Relative paths
+(meshes, out) are relative to the config file's folder. See the README's "Parameter sweeps".
+"""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import inspect
+import numbers
+import os
+from pathlib import Path
+from typing import Any
+
+from . import _api, _sweep
+from ._api import simplify
+
+KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
+EXECUTOR_KEYS = ("workers", "scheduler", "address")
+SCHEDULERS = ("process", "dask")  # a local process pool, or a Dask cluster (local, or at `address`)
+METRICS_KEYS = ("n_samples", "seed")  # keywords of qemjax.metrics.evaluate a config may set
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepConfig:
+    meshes: dict[str, str]  # name → path
+    grid: dict[str, list]
+    targets: list
+    out: str
+    metrics: bool | dict
+    executor: dict  # a subset of EXECUTOR_KEYS; empty: in this process
+
+
+def read(path) -> dict:
+    """The raw table of a .toml, .yaml or .yml file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"config file not found: {path}")
+    ext = path.suffix.lower()
+    if ext == ".toml":
+        import tomllib
+
+        try:
+            return tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path.name}: not valid TOML: {exc}") from None
+    if ext in (".yaml", ".yml"):
+        try:
+            import yaml
+        except ImportError:
+            raise ValueError(f"{path.name}: reading a YAML config needs pyyaml (pip install pyyaml); "
+                             "or write it as .toml") from None
+        try:
+            raw = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path.name}: not valid YAML: {' '.join(str(exc).split())}") from None
+        if not isinstance(raw, dict):
+            raise ValueError(f"{path.name}: the file must be a mapping of {', '.join(KEYS)}")
+        return raw
+    raise ValueError(f"{path.name}: a config must be .toml, .yaml or .yml, got {ext or 'no extension'!r}")
+
+
+def load(path, out: str | None = None) -> SweepConfig:
+    """Read and check the config at ``path``; ``out`` (e.g. from the command line) overrides its ``out``."""
+    path = Path(path)
+    raw = read(path)
+    where = path.name
+
+    def fail(msg):
+        raise ValueError(f"{where}: {msg}")
+
+    unknown = [k for k in raw if k not in KEYS]
+    if unknown:
+        fail(f"unknown key {unknown[0]!r}; a sweep config has {', '.join(KEYS)}")
+    for key in ("meshes", "targets"):
+        if key not in raw:
+            fail(f"'{key}' is missing")
+    folder = path.resolve().parent
+    meshes = _meshes(raw["meshes"], folder, fail)
+    grid = _grid(raw.get("grid", {}), fail)
+    try:
+        _sweep.expand_grid(grid)
+        targets = _sweep.check_targets(raw["targets"])
+    except ValueError as exc:
+        fail(str(exc))
+    if out is None:  # the config's own out is relative to its folder; --out to the shell's
+        out = raw.get("out", path.with_suffix(".parquet").name)
+        if not isinstance(out, str):
+            fail(f"out must be a file name (string), got {out!r}")
+        out = os.fspath(folder / out)
+    _check_out(out, fail)
+    return SweepConfig(meshes, grid, targets, out, _metrics(raw.get("metrics", True), fail),
+                       _executor(raw.get("executor", {}), fail))
+
+
+def _meshes(value, folder: Path, fail) -> dict[str, str]:
+    if isinstance(value, str):
+        value = [value]
+    if isinstance(value, list):
+        if not all(isinstance(v, str) for v in value):
+            fail(f"meshes must be file paths (strings), got {value!r}")
+        paths = [os.fspath(folder / v) for v in value]
+        try:
+            named = _sweep.name_meshes(paths)
+        except ValueError as exc:
+            fail(str(exc))
+    elif isinstance(value, dict):
+        if not all(isinstance(v, str) for v in value.values()):
+            fail("meshes must map names to file paths (strings)")
+        named = {str(k): os.fspath(folder / v) for k, v in value.items()}
+    else:
+        fail(f"meshes must be a path, a list of paths or a table name = path, got {type(value).__name__}")
+    if not named:
+        fail("meshes is empty")
+    for name, p in named.items():
+        if not Path(p).is_file():
+            fail(f"mesh file not found: {p}")
+    return named
+
+
+_CHOICES = {"method": _api.methods, "scheduler": lambda: _api.SCHEDULERS, "placement": lambda: _api.PLACEMENTS}
+
+
+def _allowed(key: str) -> set[str]:
+    """The type names a grid key takes, from simplify's annotation (e.g. 'float | None')."""
+    ann = inspect.signature(simplify).parameters[key].annotation
+    return {t.strip() for t in str(ann).split("|")}
+
+
+def _check_value(key: str, v, fail):
+    """One grid value, checked against simplify's annotation; the string 'none' is None where allowed."""
+    allowed = _allowed(key)
+    if (v is None or isinstance(v, str) and v.strip().lower() == "none") and "None" in allowed:
+        return None  # YAML's null, or "none" (TOML has no null)
+    if "Schedule" in allowed:
+        fail(f"grid.{key}: a Schedule cannot be given in a config file; use qemjax.sweep from Python")
+    if "bool" in allowed and isinstance(v, bool):
+        return v
+    if "float" in allowed and isinstance(v, numbers.Real) and not isinstance(v, bool):
+        return float(v)
+    if "str" in allowed and isinstance(v, str):
+        if key in _CHOICES and v not in _CHOICES[key]():
+            fail(f"grid.{key}: unknown value {v!r}; one of {', '.join(_CHOICES[key]())}")
+        return v
+    kinds = " or ".join(sorted(t.replace("None", "'none'").replace("float", "a number")
+                               .replace("bool", "true/false").replace("str", "a string") for t in allowed))
+    fail(f"grid.{key}: expected {kinds}, got {v!r}")
+
+
+def _grid(value, fail) -> dict[str, list]:
+    if not isinstance(value, dict):
+        fail(f"grid must be a table of simplify keywords = lists of values, got {type(value).__name__}")
+    unknown = [k for k in value if k not in _sweep.GRID_KEYS]
+    if unknown:
+        fail(f"unknown grid key {unknown[0]!r}; a grid may vary {', '.join(_sweep.GRID_KEYS)}"
+             + ("; targets go in 'targets'" if unknown[0] in ("ratio", "target_faces") else ""))
+    grid = {}
+    for key, values in value.items():
+        values = values if isinstance(values, list) else [values]
+        if not values:
+            fail(f"grid.{key} is empty")
+        grid[key] = [_check_value(key, v, fail) for v in values]
+    return grid
+
+
+def _metrics(value, fail) -> bool | dict:
+    if isinstance(value, bool):
+        return value
+    if not isinstance(value, dict):
+        fail(f"metrics must be true, false or a table of {', '.join(METRICS_KEYS)}, got {value!r}")
+    for k, v in value.items():
+        if k not in METRICS_KEYS:
+            fail(f"unknown metrics key {k!r}; metrics may set {', '.join(METRICS_KEYS)}")
+        if isinstance(v, bool) or not isinstance(v, int) or v < (1 if k == "n_samples" else 0):
+            fail(f"metrics.{k} must be an integer >= {1 if k == 'n_samples' else 0}, got {v!r}")
+    return dict(value)
+
+
+def _executor(value, fail) -> dict:
+    if not isinstance(value, dict):
+        fail(f"executor must be a table of {', '.join(EXECUTOR_KEYS)}, got {type(value).__name__}")
+    for k in value:
+        if k not in EXECUTOR_KEYS:
+            fail(f"unknown executor key {k!r}; executor may set {', '.join(EXECUTOR_KEYS)}")
+    workers, scheduler, address = value.get("workers"), value.get("scheduler"), value.get("address")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        fail(f"executor.workers must be an integer >= 1, got {workers!r}")
+    if scheduler is not None and scheduler not in SCHEDULERS:
+        fail(f"executor.scheduler must be one of {', '.join(SCHEDULERS)}, got {scheduler!r}")
+    if address is not None:
+        if not isinstance(address, str):
+            fail(f"executor.address must be a string such as 'tcp://scheduler:8786', got {address!r}")
+        if workers is not None or scheduler == "process":
+            fail("executor.address connects to a running Dask cluster: it takes no workers or "
+                 "scheduler = 'process'")
+    elif value and workers is None:
+        fail("executor needs workers (a local pool) or address (a Dask cluster)")
+    if scheduler == "dask" or address is not None:
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            fail("executor: a Dask scheduler needs dask.distributed (pip install 'qemjax[dask]')")
+    return dict(value)
+
+
+def _check_out(out: str, fail):
+    try:
+        fmt = _sweep._format(out)
+    except ValueError as exc:
+        fail(str(exc))
+    folder = Path(out).resolve().parent
+    if not folder.is_dir():
+        fail(f"cannot write {out}: folder {folder} does not exist")
+    if fmt == "parquet":
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            fail(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), or give a .csv out")
+
+
+@contextlib.contextmanager
+def executor(settings: dict):
+    """The executor the settings describe (None: in this process), shut down on exit."""
+    if not settings:
+        yield None
+    elif "address" in settings:
+        from distributed import Client
+
+        with Client(settings["address"]) as client:
+            yield client
+    elif settings.get("scheduler") == "dask":
+        from distributed import Client, LocalCluster
+
+        with LocalCluster(n_workers=settings["workers"], threads_per_worker=1, processes=True) as cluster, \
+                Client(cluster) as client:
+            yield client
+    else:
+        import concurrent.futures
+        import multiprocessing
+
+        # spawn: JAX's threads do not survive fork
+        with concurrent.futures.ProcessPoolExecutor(settings["workers"],
+                                                    mp_context=multiprocessing.get_context("spawn")) as pool:
+            yield pool
+
+
+def run(config: SweepConfig, progress: bool = True) -> Any:
+    """Run the sweep the config describes; the DataFrame (also written to ``config.out``)."""
+    with executor(config.executor) as ex:
+        return _sweep.sweep(config.meshes, config.grid, config.targets, metrics=config.metrics, executor=ex,
+                            out=config.out, progress=progress)
