@@ -186,7 +186,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     """
     t_start = time.perf_counter()
     defaults = {k: p.default for k, p in inspect.signature(simplify).parameters.items() if k != "mesh"}
-    geos, jobs, out = {}, [], [None] * len(cells)
+    geos, states, jobs, out = {}, {}, [], [None] * len(cells)
     for i, (mesh, cfg) in enumerate(cells):
         try:
             unknown = sorted(set(cfg) - set(defaults) | ({"progress"} & set(cfg)))
@@ -199,7 +199,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
             if gk not in geos:
                 geos[gk] = _geometry(mesh, setup.weld, setup.pair_threshold, stacklevel=4)
             jobs.append((i, _job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
-                                 kw["max_error"], stacklevel=4)))
+                                 kw["max_error"], stacklevel=4, states=states)))
         except ValueError as exc:
             if not errors:
                 raise
@@ -353,8 +353,10 @@ def _geometry(mesh, weld: bool, pair_threshold: float, stacklevel: int) -> Geome
     return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold)
 
 
-def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int) -> Job:
-    """The face target, the model's initial vertex state and the scheduler's options for one run."""
+def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
+         states: dict | None = None) -> Job:
+    """The face target, the model's initial vertex state and the scheduler's options for one run.
+    ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch."""
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
     m = len(geo.F)
     target, err = _resolve_target(m, target_faces, ratio, max_error)
@@ -365,8 +367,14 @@ def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_er
     area_mean, e2_mean, ext = geo.face_means
     r2 = (ext / geo.frame.scale) ** 2  # from the clean-up's unit extent to the frame's
     E, ecount, be, bf = geo.edges
-    S = setup.model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges,
-                                                (area_mean * r2, e2_mean * r2)))
+    key = None if states is None else (id(geo), setup.model.state_key(),
+                                       None if feature_edges is None else feature_edges.tobytes())
+    S = None if key is None else states.get(key)
+    if S is None:
+        S = setup.model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges,
+                                                    (area_mean * r2, e2_mean * r2)))
+        if key is not None:
+            states[key] = S
     options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
                       max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
                       keep_parts=not setup.prune)

@@ -67,6 +67,10 @@ class CostModel:
         """The numeric settings as 0-d arrays, by name (passed to `price` and `merge`)."""
         return {}
 
+    def state_key(self):
+        """Models with equal keys compute equal `init_state` on one mesh (a batch computes it once)."""
+        return self
+
     def price(self, VS, pairs, params, rings=None):
         """Device rows VS (N, 3 + width), pairs (K,2) int32 -> (5 + len(parts), K) array (see module).
         A model whose price needs no ring also offers it as ``model.price_kernel(VS, pairs, params)``, a static
@@ -115,6 +119,9 @@ class Term(CostModel):
 
     def init_state(self, mesh):
         return self.base.init_state(mesh)
+
+    def state_key(self):
+        return self.base.state_key()
 
     def merge(self, VS, pairs, x, params):
         return self.base.merge(VS, pairs, x, params)

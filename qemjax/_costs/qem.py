@@ -102,6 +102,11 @@ class QEM(CostModel):
                                 boundary_weight=self.boundary_weight, feature_edges=mesh.feature_edges,
                                 boundary=mesh.boundary, means=mesh.means, area_power=self.area_power)
 
+    def state_key(self):
+        if type(self) is not QEM:  # a subclass may build more state
+            return self
+        return (QEM, self.area_weighted, self.area_power, self.boundary_weight)
+
     def kernel_params(self) -> dict:
         return {"endpoints_only": np.asarray(self.placement == "endpoints"),
                 "cond_eps": np.asarray(self.cond_eps, DTYPE), "rank_eps": np.asarray(self.rank_eps, DTYPE),
