@@ -17,6 +17,7 @@ from . import _split
 from . import _topology as topo
 from ._options import Options, Schedule
 from . import _units
+from . import _wedges
 from ._arrays import face_normals
 from ._record import Record
 from ._result import Contractions, SimplifyResult
@@ -86,7 +87,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              prune: bool = False, regularize: float = 0.0, area_weight: float = 0.0,
              schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
-             split_factor: float | None = _costs.esqem.SPLIT_FACTOR) -> SimplifyResult:
+             split_factor: float | None = _costs.esqem.SPLIT_FACTOR, attributes="auto",
+             texture=None) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -143,6 +145,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         b × the mean edge length at its midpoint (default 4/3, the paper's); None: no splitting. With a
         face target the result still has exactly that many faces: it simplifies further first, by as many
         faces as splitting will add (``qemjax._split``; ``stats["split"]``).
+    attributes: which appearance attributes to carry through (per-corner wedges, seams kept: README,
+        "Appearance attributes"; ``qemjax._wedges``): ``'auto'`` (all the input carries: UVs and their
+        material, vertex colours, stored normals), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these,
+        or None (positions only; what is dropped is named in a warning). Kept ones come back as
+        ``res.uv`` / ``res.colors`` / ``res.normals``; a contraction that would move a seam vertex off its
+        seam or merge wedges of different charts is refused (``stats['rejected_by']['seam']``), so seams
+        can hold a mesh above its target. Only ``method='qem'`` keeps attributes (others warn and drop).
+    texture: a path or PIL image: the texture of the UVs (for a file that names no material, e.g. an OBJ
+        without mtllib); the result's material then holds it.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options.
@@ -183,7 +194,14 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         raise ValueError("pair_threshold > 0 joins separate parts, which changes topology: "
                          "use preserve_topology=False (the default when pair_threshold > 0)")
 
-    (V, F), report = _io.prepare(mesh, weld_vertices=weld, stacklevel=2)
+    (V, F), report = _io.prepare(mesh, weld_vertices=weld, stacklevel=2, attributes=attributes,
+                                 texture=texture)
+    attrs = report.pop("attributes")
+    if attrs is not None and (method != "qem" or split is not None):
+        warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
+        _wedges.warn_unsupported(warn, method, stacklevel=2)
+        report["dropped"] = report["dropped"] + warn
+        attrs = None
     feature_edges = _io.check_feature_edges(feature_edges, len(V))
     m = len(F)
     target, err = _resolve_target(m, target_faces, ratio, max_error)
@@ -221,9 +239,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     else:
         progress_cb = None
     run_target, planned = target, None
+    tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(V), F)
     if target < m or err < math.inf:
         run = functools.partial(parallel.run, edges=(E, ecount), part_scale=frame.part_scale2()) \
             if scheduler == "parallel" else greedy.run
+        if tracker is not None:
+            run = functools.partial(run, wedges=tracker)
         if split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
             run_target, planned = _split.plan(run, (Vn, S, F, extra), target, model, options, split)
         Vo, So, Fo, alive, hist, info = run(Vn, S, F, extra, max(run_target, 1), model, options, progress_cb)
@@ -247,6 +268,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         w = np.unique(Fout[flat])
         vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
     verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
+    appearance = {}
+    if tracker is not None:
+        wf, wv, wval = _wedges.output(tracker.C, tracker.val, Fout, fids, ids)
+        vals = attrs.split(wval)
+        if "normal" in vals:
+            nn = np.linalg.norm(vals["normal"], axis=1, keepdims=True)
+            vals["normal"] = vals["normal"] / np.where(nn > 0, nn, 1.0)
+        appearance = dict(uv=vals.get("uv"), colors=vals.get("color"), normals=vals.get("normal"),
+                          wedge_faces=wf, wedge_vertex=wv, material=attrs.material)
     if split is not None:
         vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
         split_stats.update(planned=planned, run_target=run_target if target else None,
@@ -279,6 +309,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=frame.scale, parts_in=parts[0], non_manifold_edges_in=nonmanifold,
         max_error_limit=err if math.isfinite(err) else None)
+    if tracker is not None:
+        stats.update(attributes=list(attrs.values), seam_vertices_in=tracker.seam_in)
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":
             stats[k] = v
@@ -294,7 +326,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(frame.errors_to_mesh(info["max_cost"])), source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
-        input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record)
+        input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record,
+        **appearance)
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,
@@ -311,4 +344,7 @@ def _above_target_message(faces: int, target: int, stop: str, blocked: dict, non
             hint = "; separate parts keep their last faces: prune=True lets small parts vanish"
         else:
             hint = "; preserve_topology=False may reach further (genus and boundaries may then change)"
+    if blocked.get("seam"):
+        hint += ("; UV seams / colour discontinuities are kept where they are and hold pairs back: "
+                 "attributes=None (positions only) may reach further")
     return f"stopped at {faces} faces, above the target of {target}: {why} (pairs held back by {held}){hint}"
