@@ -276,7 +276,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             nn = np.linalg.norm(vals["normal"], axis=1, keepdims=True)
             vals["normal"] = vals["normal"] / np.where(nn > 0, nn, 1.0)
         appearance = dict(uv=vals.get("uv"), colors=vals.get("color"), normals=vals.get("normal"),
-                          wedge_faces=wf, wedge_vertex=wv, material=attrs.material)
+                          wedge_faces=wf, wedge_vertex=wv, material=attrs.material,
+                          input_wedge_faces=attrs.corners)
     if split is not None:
         vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
         split_stats.update(planned=planned, run_target=run_target if target else None,

@@ -56,7 +56,8 @@ class SimplifyResult:
     uv (w,2), colors (w,4) RGBA in [0, 1], normals (w,3) unit; wedge_vertex (w,) int64: each wedge's
     vertex (index into ``vertices``); wedge_faces (j,3) int64: each face corner's wedge (faces[i, k] ==
     wedge_vertex[wedge_faces[i, k]]); material: the trimesh material of the UVs (with its texture image)
-    or None. `to_trimesh` splits vertices by wedge, as OBJ, glTF and trimesh store them.
+    or None; input_wedge_faces (m,3): the cleaned input's corner wedges (its own ids; for
+    `qemjax.metrics.seam_report`). `to_trimesh` splits vertices by wedge, as OBJ, glTF and trimesh store them.
     """
 
     vertices: np.ndarray
@@ -77,6 +78,7 @@ class SimplifyResult:
     wedge_faces: np.ndarray | None = None
     wedge_vertex: np.ndarray | None = None
     material: object = None
+    input_wedge_faces: np.ndarray | None = None
 
     @property
     def vertex_map(self) -> np.ndarray:
