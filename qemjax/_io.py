@@ -99,7 +99,15 @@ def _read_trimesh(path):
     if os.path.isdir(path):
         raise ValueError(f"expected a mesh file, got a folder: {path}")
     try:
-        obj = trimesh.load(path, process=False, force="mesh")
+        obj = trimesh.load(path, process=False)
+        if isinstance(obj, trimesh.Scene) and len(obj.geometry) == 1:
+            # one geometry placed without a transform: itself (concatenating a scene drops stored normals)
+            name = next(iter(obj.geometry))
+            nodes = obj.graph.geometry_nodes.get(name, [])
+            if len(nodes) == 1 and np.array_equal(obj.graph.get(nodes[0])[0], np.eye(4)):
+                obj = obj.geometry[name]
+        if not isinstance(obj, trimesh.Trimesh):
+            obj = trimesh.load(path, process=False, force="mesh")
     except Exception as exc:  # trimesh raises many kinds; name the file
         raise ValueError(f"could not read mesh {path}: {exc}") from exc
     return _as_trimesh(obj)

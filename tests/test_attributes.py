@@ -1,0 +1,179 @@
+"""Appearance attributes: wedges loaded, carried through both schedulers, seams held, written out."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import trimesh
+
+import qemjax
+from qemjax import _wedges, metrics, shapes
+
+from conftest import shared_mesh
+
+
+def atlas_sphere(subdivisions: int = 3):
+    """A bumpy sphere cube-mapped into a 3×2 UV atlas: each face's chart is the dominant axis of its
+    normal (6 charts, seams between them); vertices split per chart, as trimesh loads an OBJ."""
+    V, F = shapes.bumpy_sphere(subdivisions, amplitude=0.05)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    ax = np.argmax(np.abs(n), axis=1)
+    chart = 2 * ax + (n[np.arange(len(F)), ax] < 0)
+    key = F * 6 + chart[:, None]  # one split vertex per (vertex, chart)
+    uniq, inv = np.unique(key.reshape(-1), return_inverse=True)
+    v, c = uniq // 6, uniq % 6
+    keep = [[1, 2], [1, 2], [0, 2], [0, 2], [0, 1], [0, 1]]
+    proj = np.array([V[vi, keep[ci]] for vi, ci in zip(v, c)])  # (u, 2) in [-1.1, 1.1]
+    tile = np.stack([c % 3, c // 3], 1).astype(float)
+    uv = (tile + 0.5 + 0.4 * proj / 1.1) / np.array([3.0, 2.0])
+    mesh = trimesh.Trimesh(V[v], inv.reshape(-1, 3), process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv), validate=False)
+    return mesh, chart
+
+
+def _linear_uv_grid(n=24):
+    V, F = shapes.grid(n)
+    V = V.copy()
+    V[:, 2] = 0.05 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
+    uv = np.c_[0.3 + 0.5 * V[:, 0] - 0.2 * V[:, 1], 0.1 + 0.7 * V[:, 1] + 0.1 * V[:, 0]]
+    return trimesh.Trimesh(V, F, process=False, visual=trimesh.visual.TextureVisuals(uv=uv))
+
+
+def _uv_tile(uv):
+    return np.floor(uv * np.array([3.0, 2.0])).astype(int) @ np.array([1, 3])
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_seams_hold(scheduler):
+    """No output face spans two charts, every chart survives, each wedge's UV stays in its chart's tile,
+    and a vertex with two or more wedges sits exactly where an input seam vertex was."""
+    mesh, _ = atlas_sphere(3)
+    r = qemjax.simplify(mesh, ratio=0.1, scheduler=scheduler)
+    assert r.uv is not None and r.stats["seam_vertices_in"] > 50
+    rep = metrics.seam_report(r)
+    assert rep["mixed_charts"] == 0 and rep["charts_out"] == rep["charts_in"] == 6
+    assert r.stats["rejected_by"]["seam"] > 0  # the rule did refuse contractions
+    tile = _uv_tile(r.uv)  # each output face's corners in one tile, the tile of its input face's chart
+    assert np.all(tile[r.wedge_faces] == tile[r.wedge_faces][:, :1])
+    assert np.all(r.faces == r.wedge_vertex[r.wedge_faces])
+    multi = np.bincount(r.wedge_vertex, minlength=len(r.vertices)) > 1
+    Vin = r.input_vertices
+    win = np.zeros(len(Vin), int)
+    np.add.at(win, np.unique(np.c_[r.input_faces.reshape(-1), r.input_wedge_faces.reshape(-1)], axis=0)[:, 0], 1)
+    seam_in = {tuple(p) for p in Vin[win > 1]}
+    assert multi.sum() > 10 and all(tuple(p) in seam_in for p in r.vertices[multi])
+
+
+def test_seam_test_can_fail(monkeypatch):
+    """With the seam rule switched off the same run welds charts together: `seam_report` sees it."""
+    monkeypatch.setattr(_wedges.Tracker, "constrain", lambda self, faces, VQ, P, x, c: np.zeros(len(P), bool))
+    monkeypatch.setattr(_wedges.Tracker, "allowed", lambda self, *a: True)
+
+    def merge_anyway(self, faces, VQ, a, b, x):  # every b corner takes a's first wedge
+        fa, _, _, wa = self._corners(faces, a)
+        fb, _, kb, _ = self._corners(faces, b)
+        self.C[fb, kb] = wa[0]
+    monkeypatch.setattr(_wedges.Tracker, "contract", merge_anyway)
+    mesh, _ = atlas_sphere(3)
+    r = qemjax.simplify(mesh, ratio=0.1)
+    assert metrics.seam_report(r)["mixed_charts"] > 0
+
+
+@pytest.mark.parametrize("scheduler,placement,tol", [("parallel", "endpoints", 1e-6), ("greedy", "endpoints", 1e-6),
+                                                     ("parallel", "optimal", 2e-4)])
+def test_uv_interpolated_along_contractions(scheduler, placement, tol):
+    """One chart whose UV is an affine function of x, y: every output UV is that function of its vertex.
+    Interpolation along each contraction keeps an affine field exact when the placement lies on the
+    segment ('endpoints': ends or midpoint); optimal placements off the segment take the UV of their
+    projection on it, close (the z bumps are small)."""
+    mesh = _linear_uv_grid()
+    r = qemjax.simplify(mesh, ratio=0.1, scheduler=scheduler, placement=placement)
+    P = r.vertices[r.wedge_vertex]
+    want = np.c_[0.3 + 0.5 * P[:, 0] - 0.2 * P[:, 1], 0.1 + 0.7 * P[:, 1] + 0.1 * P[:, 0]]
+    assert np.abs(r.uv - want).max() < tol
+    # a shifted copy deviates by exactly the shift; the simplification by ~0 (the z bumps are small)
+    assert metrics.attribute_deviation(mesh, r)["uv_dev_p95"] < 2e-3
+    shifted = mesh.copy()
+    shifted.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv + [0.06, -0.08])
+    dev = metrics.attribute_deviation(mesh, shifted, n_samples=2000)
+    assert dev["uv_dev_rms"] == pytest.approx(0.1, abs=1e-9) and dev["uv_dev_max"] == pytest.approx(0.1, abs=1e-9)
+
+
+def test_closest_barycentric_matches_point_triangle_distance():
+    """float64 reference: the point the barycentric coordinates give is at the exact distance."""
+    rng = np.random.default_rng(1)
+    a, b, c = rng.normal(size=(3, 500, 3))
+    p = rng.normal(size=(500, 3)) * 2
+    w = metrics._appearance.closest_barycentric(p, a, b, c)
+    assert np.all(w >= -1e-12) and np.allclose(w.sum(1), 1)
+    q = w[:, :1] * a + w[:, 1:2] * b + w[:, 2:] * c
+    d = metrics.point_triangle_distance(p, a, b, c)
+    assert np.allclose(np.linalg.norm(p - q, axis=1), d, rtol=1e-9, atol=1e-12)
+
+
+def test_vertex_colours_and_normals_kept(tmp_path):
+    """A PLY with vertex colours and an OBJ with normals: kept, written back, colours as ColorVisuals."""
+    V, F = shapes.icosphere(3)
+    col = np.c_[(V * 0.5 + 0.5) * 255, np.full(len(V), 255)].astype(np.uint8)
+    ply = tmp_path / "c.ply"
+    trimesh.Trimesh(V, F, vertex_colors=col, process=False).export(ply)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = qemjax.simplify(ply, ratio=0.2)
+    assert r.colors is not None and r.uv is None and r.stats["dropped"] == []
+    P = r.vertices[r.wedge_vertex]  # colour linear in position, interpolated along the surface: close
+    assert np.abs(r.colors[:, :3] - (P / np.linalg.norm(P, axis=1, keepdims=True) * 0.5 + 0.5)).max() < 0.1
+    tm = r.to_trimesh()
+    assert tm.visual.kind == "vertex" and len(tm.vertices) == len(r.vertices)  # one chart: no splits
+    obj = tmp_path / "n.obj"
+    trimesh.Trimesh(V, F, vertex_normals=V, process=False).export(obj, include_normals=True)
+    r = qemjax.simplify(obj, ratio=0.2, attributes="normal")
+    assert r.normals is not None and np.allclose(np.linalg.norm(r.normals, axis=1), 1)
+    Pn = r.vertices[r.wedge_vertex]
+    assert np.min(np.einsum("ij,ij->i", r.normals, Pn / np.linalg.norm(Pn, axis=1, keepdims=True))) > 0.95
+
+
+def test_attribute_options_are_checked(tmp_path):
+    mesh, _ = atlas_sphere(2)
+    with pytest.raises(ValueError, match="attributes must be"):
+        qemjax.simplify(mesh, ratio=0.5, attributes="texture")
+    with pytest.raises(ValueError, match="carries no color"):
+        qemjax.simplify(mesh, ratio=0.5, attributes="color")
+    with pytest.raises(ValueError, match="texture= needs UVs"):
+        qemjax.simplify(shapes.icosphere(2), ratio=0.5, texture=tmp_path / "x.png")
+    with pytest.raises(ValueError, match="could not read texture"):
+        qemjax.simplify(mesh, ratio=0.5, texture=tmp_path / "missing.png")
+    with pytest.warns(UserWarning, match="does not keep appearance attributes"):
+        r = qemjax.simplify(mesh, ratio=0.5, method="area")
+    assert r.uv is None and "uv" in r.stats["dropped"]
+    with pytest.warns(UserWarning, match="which qemjax does not keep"):
+        r = qemjax.simplify(mesh, ratio=0.5, attributes=None)
+    assert r.uv is None and r.stats["dropped"] == ["uv"]
+
+
+def test_seams_hold_a_mesh_above_its_target():
+    """Six charts cannot go below their seam skeleton: the run stops above a tiny target with a warning
+    that names the seams and suggests attributes=None."""
+    mesh, _ = atlas_sphere(2)
+    with pytest.warns(UserWarning, match="seam"):
+        r = qemjax.simplify(mesh, target_faces=8)
+    assert r.stop_reason == "blocked" and len(r.faces) > 8 and r.stats["blocked_by"]["seam"] > 0
+
+
+def test_spot_writes_textured_obj_and_glb(tmp_path):
+    """spot -> 10 %: an OBJ (with MTL and texture) and a GLB that reload with UVs and the image."""
+    from qemjax import _cli
+
+    src = shared_mesh("spot/spot.obj")
+    tex = src.parent / "spot_texture.png"
+    for name in ("spot10.obj", "spot10.glb"):
+        assert _cli.main(["simplify", str(src), str(tmp_path / name), "--ratio", "0.1", "--texture", str(tex),
+                          "--quiet"]) == 0
+        m = trimesh.load(tmp_path / name, process=False, force="mesh")
+        assert len(m.faces) == 586 and m.visual.kind == "texture" and len(m.visual.uv) == len(m.vertices)
+        mat = m.visual.material
+        img = getattr(mat, "image", None) or getattr(mat, "baseColorTexture", None)
+        assert img is not None and img.size == (1024, 1024)
+    assert (tmp_path / "spot10.mtl").exists() and (tmp_path / "spot10.png").exists()
+    assert "map_Kd spot10.png" in (tmp_path / "spot10.mtl").read_text()
