@@ -88,7 +88,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
              split_factor: float | None = _costs.esqem.SPLIT_FACTOR, attributes="auto",
-             texture=None) -> SimplifyResult:
+             attribute_weights=1.0, texture=None) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -152,6 +152,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         ``res.uv`` / ``res.colors`` / ``res.normals``; a contraction that would move a seam vertex off its
         seam or merge wedges of different charts is refused (``stats['rejected_by']['seam']``), so seams
         can hold a mesh above its target. Only ``method='qem'`` keeps attributes (others warn and drop).
+    attribute_weights: w ≥ 0, one number or {kind: w} (kinds not named: 1): the weight of each kept
+        attribute in the cost (Hoppe 1999's generalised quadric over position × attributes,
+        ``qemjax._costs.attributes``; UVs in texture units, colours in [0, 1], normals unit: a cost adds
+        w²·(attribute deviation)² to the squared distance at unit extent). The placement then solves
+        position and attributes together. 0: the cost is positions only and attributes are interpolated
+        along each contraction.
     texture: a path or PIL image: the texture of the UVs (for a file that names no material, e.g. an OBJ
         without mtllib); the result's material then holds it.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
@@ -172,12 +178,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
         raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
-    model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted,
-                                      area_power=_real("area_power", area_power), boundary_weight=
-                                      boundary_weight, curvature_weight=_real("curvature_weight", curvature_weight),
-                                      split_factor=split_factor if split_factor is None else
-                                      _real("split_factor", split_factor)),
-                         dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
+    settings = dict(placement=placement, area_weighted=area_weighted,
+                    area_power=_real("area_power", area_power), boundary_weight=boundary_weight,
+                    curvature_weight=_real("curvature_weight", curvature_weight),
+                    split_factor=split_factor if split_factor is None else _real("split_factor", split_factor))
+    terms = dict(regularize=regularize, area_weight=_real("area_weight", area_weight))
+    model = _costs.build(method, settings, terms)
+    kind_weights = _wedges.check_weights(attribute_weights)
     split = getattr(model, "split_factor", None)  # None: the method does not split
     if schedule is None:
         schedule = Schedule()
@@ -202,6 +209,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         _wedges.warn_unsupported(warn, method, stacklevel=2)
         report["dropped"] = report["dropped"] + warn
         attrs = None
+    corner_values = None
+    if attrs is not None:
+        channel_weights = _wedges.channel_weights(attrs, kind_weights)
+        if np.any(channel_weights > 0):  # the cost model over positions and attributes (`_costs.attributes`)
+            if placement == "rank":
+                raise ValueError("placement='rank' does not take attribute quadrics: use attribute_weights=0 "
+                                 "(attributes interpolated) or placement='optimal'")
+            model = _costs.build(method, settings, terms, weights=np.maximum(channel_weights, 1e-30))
+            corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(V))
     m = len(F)
     target, err = _resolve_target(m, target_faces, ratio, max_error)
@@ -217,7 +233,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     area_mean, e2_mean, ext = report.pop("face_means")
     r2 = (ext / frame.scale) ** 2  # from the clean-up's unit extent to the frame's
-    S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges, (area_mean * r2, e2_mean * r2)))
+    S = model.init_state(_costs.MeshInput(Vn, F, (be, bf), feature_edges, (area_mean * r2, e2_mean * r2),
+                                          corner_values))
     options = Options(
         cos_max=-2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle))),
         preserve_topology=preserve_topology, max_cost=frame.error_to_internal(err), schedule=schedule,
@@ -239,7 +256,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     else:
         progress_cb = None
     run_target, planned = target, None
-    tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(V), F)
+    tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(V), F, model,
+                                                         None if corner_values is None else channel_weights > 0)
     if target < m or err < math.inf:
         run = functools.partial(parallel.run, edges=(E, ecount), part_scale=frame.part_scale2()) \
             if scheduler == "parallel" else greedy.run

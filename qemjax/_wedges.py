@@ -111,6 +111,26 @@ def build(values: dict, rep_of_corner: np.ndarray, corner_src: np.ndarray) -> At
     return a
 
 
+def check_weights(weights) -> dict:
+    """{kind: weight} from ``attribute_weights`` (a number for every kind, or a dict); ValueError names
+    a bad one."""
+    items = weights.items() if isinstance(weights, dict) else [(k, weights) for k in KINDS]
+    out = {k: 1.0 for k in KINDS}
+    for k, w in items:
+        if k not in KINDS:
+            raise ValueError(f"attribute_weights: unknown kind {k!r}; choose from {KINDS}")
+        if isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating)) \
+                or not (np.isfinite(w) and w >= 0):
+            raise ValueError(f"attribute_weights must be finite numbers >= 0, got {w!r} for {k}")
+        out[k] = float(w)
+    return out
+
+
+def channel_weights(attrs: Attributes, kind_weights: dict) -> np.ndarray:
+    """(Σk,) the weight of each channel of ``attrs.matrix()``."""
+    return np.concatenate([np.full(SIZES[k], kind_weights[k]) for k in KINDS if k in attrs.values])
+
+
 def load_texture(texture):
     """A trimesh SimpleMaterial holding ``texture`` (a path or a PIL image); ValueError naming the file."""
     from PIL import Image
@@ -132,9 +152,15 @@ class Tracker:
     `constrain` prices pairs touching seams at their allowed endpoint, `allowed` is the validity rule and
     `contract` updates the corners (and, between single-wedge vertices, the kept wedge's value)."""
 
-    def __init__(self, corners: np.ndarray, values: np.ndarray, n: int, F: np.ndarray):
+    def __init__(self, corners: np.ndarray, values: np.ndarray, n: int, F: np.ndarray, model=None,
+                 solved=None):
         self.C = np.array(corners, np.int64)
         self.val = np.array(values, np.float64)
+        # the model's cost at a point (attribute quadrics: `_costs.attributes`), and its optimal attributes
+        # for the channels marked in ``solved`` (the rest are interpolated)
+        self.cost_at = getattr(model, "cost_at", None)
+        self.attributes_at = getattr(model, "attributes_at", None) if solved is not None else None
+        self.solved = solved
         # seam candidates: vertices with two or more wedges (a flag that may stay set after faces die,
         # which only sends a pair through the exact per-pair test)
         cnt = np.zeros(n, np.int64)
@@ -186,7 +212,8 @@ class Tracker:
             best = None
             for ok, v in ((ba, a), (ab, b)):
                 if ok is not None:
-                    c = _quadric(VQ[a], VQ[v, :3]) + _quadric(VQ[b], VQ[v, :3])
+                    c = (self.cost_at(VQ[a], VQ[b], VQ[v, :3]) if self.cost_at is not None
+                         else _quadric(VQ[a], VQ[v, :3]) + _quadric(VQ[b], VQ[v, :3]))
                     if best is None or c < best[0]:
                         best = (c, v)
             if best is None:
@@ -205,7 +232,10 @@ class Tracker:
             pa, pb = VQ[a, :3].astype(np.float64), VQ[b, :3].astype(np.float64)
             d = pb - pa
             t = float(np.clip(np.dot(np.asarray(x, np.float64) - pa, d) / max(np.dot(d, d), 1e-300), 0, 1))
-            self.val[wa] = (1 - t) * self.val[wa] + t * self.val[wbv]
+            val = (1 - t) * self.val[wa] + t * self.val[wbv]
+            if self.attributes_at is not None:  # the attribute quadric's optimum at x
+                val = np.where(self.solved, self.attributes_at(VQ[a], VQ[b], x), val)
+            self.val[wa] = val
             self.C[fb, kb] = wa
             return
         x = np.asarray(x, VQ.dtype)

@@ -129,6 +129,12 @@ def _place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     """``placement='optimal'`` on component lists: q1, q2 (10 arrays), p1, p2 (3 arrays). Returns
     (x, cost, branch, q, u) with x and u component lists, q the merged quadric in the midpoint's frame."""
     mid, half, q = _merged(q1, q2, p1, p2)
+    return place_merged(mid, half, q, endpoints_only, cond_eps, max_shift)
+
+
+def place_merged(mid, half, q, endpoints_only, cond_eps, max_shift):
+    """`_place` for a quadric q already merged in the midpoint's frame (component lists; mid, half: the
+    midpoint and half the edge vector). The attribute model (`_costs.attributes`) places with it."""
     a, b_, c, d, e, f = q[:6]
     bv, cc = q[6:9], q[9]
     # det(A) and adj(A)·b by cofactors
