@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import warnings
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import trimesh
@@ -177,3 +179,108 @@ def test_spot_writes_textured_obj_and_glb(tmp_path):
         assert img is not None and img.size == (1024, 1024)
     assert (tmp_path / "spot10.mtl").exists() and (tmp_path / "spot10.png").exists()
     assert "map_Kd spot10.png" in (tmp_path / "spot10.mtl").read_text()
+
+
+# -- the attribute cost model (`_costs.attributes`) -------------------------------------------------------
+
+def _random_patch(seed=3, m=3):
+    rng = np.random.default_rng(seed)
+    V, F = shapes.grid(4)
+    V = V + rng.normal(scale=0.05, size=V.shape)
+    S = rng.random((len(F), 3, m))
+    w = rng.random(len(F)) + 0.5
+    return V, F, S, w
+
+
+def test_attribute_state_matches_face_sum_float64():
+    """float64 reference: the stored state (11 + 4m floats per vertex) evaluates, at any (p, s), to the
+    sum over the vertex's faces of w·[(n·(p − p0))² + Σ_j (g_j·p + d_j − s_j)²], the fields fitted through
+    the corners; and the reduced quadric equals that minimised over s."""
+    from qemjax._costs import attributes as at
+
+    V, F, S, w = _random_patch()
+    m = S.shape[2]
+    st = at.attribute_state(V, F, S, w)
+    P = V[F]
+    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    g, d = at.face_fields(P, S)
+    assert np.allclose(np.einsum("fji,fki->fkj", g, P) + d[:, None, :], S)  # through the corner values
+    assert np.allclose(np.einsum("fji,fi->fj", g, n), 0)  # in the face's plane
+    rng = np.random.default_rng(0)
+    for v in (0, 7, 12):
+        faces = np.flatnonzero(np.any(F == v, axis=1))
+        row = np.r_[V[v], st[v]]
+        row[3:13] += 0  # the geometric plane part is added by the model (QEM's init); here: planes by hand
+        A = sum(w[f] * np.outer(n[f], n[f]) for f in faces)
+        row[3:9] += [A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2]]
+        for _ in range(3):
+            p, s = V[v] + rng.normal(scale=0.2, size=3), rng.random(m)
+            want = sum(w[f] * ((n[f] @ (p - P[f, 0])) ** 2 + np.sum((g[f] @ p + d[f] - s) ** 2)) for f in faces)
+            u = p - V[v]
+            q = row[3:]
+            Am = np.array([[q[0], q[1], q[2]], [q[1], q[3], q[4]], [q[2], q[4], q[5]]])
+            G = q[11:].reshape(m, 4)
+            got = u @ Am @ u + 2 * q[6:9] @ u + q[9] + q[10] * s @ s - 2 * s @ (G[:, :3] @ u + G[:, 3])
+            assert got == pytest.approx(want, rel=1e-10, abs=1e-12)
+            smin = (G[:, :3] @ u + G[:, 3]) / q[10]
+            want_min = sum(w[f] * ((n[f] @ (p - P[f, 0])) ** 2 + np.sum((g[f] @ p + d[f] - smin) ** 2))
+                           for f in faces)
+            assert at.solve_host(np.r_[V[v], q], np.r_[V[v], 0 * q], p, m)[0] == pytest.approx(want_min, rel=1e-9)
+
+
+def test_attribute_kernels_match_numpy_float64():
+    """The jitted price and merge against the float64 numpy twin (`solve_host`, `_np_translate`): the
+    price's cost is the reduced quadric at its x, a solve-branch x is its stationary point, and the
+    merged state is the two states summed in x's frame."""
+    from qemjax._costs import attributes as at
+
+    V, F, S, w = _random_patch(5, 2)
+    m = 2
+    st = at.attribute_state(V, F, S, w)
+    E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1), axis=0)
+    VS = np.c_[V, st]
+    with jax.enable_x64(True):
+        out = np.asarray(at.price_pairs(m, jnp.asarray(VS), jnp.asarray(E), jnp.asarray(False),
+                                        jnp.asarray(1e-9), jnp.asarray(2.0)))
+        x = out[:3].T
+        merged = np.asarray(at.merge_pairs(m, jnp.asarray(VS), jnp.asarray(E), jnp.asarray(x)))
+    for k, (a, b) in enumerate(E):
+        cost, s = at.solve_host(VS[a], VS[b], x[k], m)
+        assert out[3, k] == pytest.approx(cost, rel=1e-8, abs=1e-12)
+        want = at._np_translate(VS[a, 3:], x[k] - V[a], m) + at._np_translate(VS[b, 3:], x[k] - V[b], m)
+        assert np.allclose(merged[k], want, rtol=1e-9, atol=1e-12)
+        if out[4, k] == 0:  # solved: the reduced quadric's gradient vanishes at x
+            eps = 1e-6
+            grad = [(at.solve_host(VS[a], VS[b], x[k] + e, m)[0] - at.solve_host(VS[a], VS[b], x[k] - e, m)[0])
+                    / (2 * eps) for e in np.eye(3) * eps]
+            assert np.abs(grad).max() < 1e-5
+
+
+def test_attribute_weights_do_not_recompile_and_matter():
+    """A new weight is a new value in the state, not a new kernel; the weight changes the result (UV
+    deviation falls, at some geometric error) and 0 gives the positions-only cost."""
+    mesh, _ = atlas_sphere(3)
+    r1 = qemjax.simplify(mesh, ratio=0.2, attribute_weights=1.0)
+    r2 = qemjax.simplify(mesh, ratio=0.2, attribute_weights=3.0)
+    assert r2.stats["compilations"] == 0
+    r0 = qemjax.simplify(mesh, ratio=0.2, attribute_weights=0)
+    assert r0.stats["model"].get("channels") is None and r1.stats["model"]["channels"] == 2
+    assert not np.array_equal(r1.vertices, r2.vertices)
+    with pytest.raises(ValueError, match="attribute_weights"):
+        qemjax.simplify(mesh, ratio=0.2, attribute_weights=-1)
+    with pytest.raises(ValueError, match="unknown kind"):
+        qemjax.simplify(mesh, ratio=0.2, attribute_weights={"texture": 1})
+
+
+def test_colour_term_lowers_colour_error():
+    """A sphere coloured by a sharp pattern: with the colour term, the colour deviation is lower than
+    with positions-only costs (interpolated colours)."""
+    V, F = shapes.icosphere(4)
+    col = np.c_[0.5 + 0.5 * np.sign(np.sin(6 * V[:, 0]) * np.sin(6 * V[:, 1])), 0.5 + 0.5 * V[:, 2], 0.2 * np.ones(len(V)), np.ones(len(V))]
+    mesh = trimesh.Trimesh(V, F, vertex_colors=(col * 255).astype(np.uint8), process=False)
+    dev = {}
+    for w in (0.0, 1.0):
+        r = qemjax.simplify(mesh, ratio=0.1, attribute_weights=w)
+        dev[w] = metrics.attribute_deviation(mesh, r, kind="color")["color_dev_mean"]
+    assert dev[1.0] < 0.9 * dev[0.0], dev
