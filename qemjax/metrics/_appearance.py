@@ -187,3 +187,41 @@ def seam_report(result, input_wedge_faces: np.ndarray | None = None) -> dict:
     mixed = np.flatnonzero(per_out > 1)
     return {"charts_in": int(len(np.unique(cin))), "charts_out": int(len(np.unique(cout))),
             "mixed_charts": int(len(mixed)), "seam_faces_out": int(np.isin(cout, mixed).sum())}
+
+
+def _uv_charts_of_mesh(mesh):
+    """(welded faces, per-face chart ids, corner UVs (m,3,2)) of a mesh carrying UVs (`corner_values`)."""
+    V, F, C = corner_values(mesh, "uv")
+    if getattr(mesh, "wedge_faces", None) is not None:
+        return F, charts(F, mesh.wedge_faces), C
+    _, wid = np.unique(V, axis=0, return_inverse=True)
+    return wid.reshape(-1)[F], charts(wid.reshape(-1)[F], F), C
+
+
+def uv_chart_integrity(original, simplified, *, eps: float = 1e-6, chunk: int = 256) -> dict:
+    """Seam integrity of any simplifier's textured output, from UVs alone: each output face's three corner
+    UVs and its UV centroid are located in the original's UV atlas (the input triangle containing each, with
+    ``eps`` slack); a face whose four points share no input chart spans a seam (or left the atlas).
+    Returns charts_in, charts_out (output faces joined across edges whose corners share UVs),
+    faces_spanning (count) and spanning_fraction."""
+    if corner_values(original, "uv") is None or corner_values(simplified, "uv") is None:
+        raise ValueError("both meshes must carry UVs")
+    _, cin, Cin = _uv_charts_of_mesh(original)
+    Fs, cout, Cs = _uv_charts_of_mesh(simplified)
+    q = np.concatenate([Cs, Cs.mean(axis=1, keepdims=True)], 1).reshape(-1, 2)  # (4m, 2)
+    a, b, c = Cin[:, 0], Cin[:, 1], Cin[:, 2]
+    v0, v1 = b - a, c - a
+    den = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
+    ok = np.abs(den) > 1e-300
+    sets = []
+    for s in range(0, len(q), chunk):
+        p = q[s:s + chunk, None, :] - a[None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = (p[..., 0] * v1[:, 1] - p[..., 1] * v1[:, 0]) / den
+            v = (v0[:, 0] * p[..., 1] - v0[:, 1] * p[..., 0]) / den
+        inside = ok & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps)
+        sets += [set(cin[np.flatnonzero(row)].tolist()) for row in inside]
+    per_face = [sets[4 * i:4 * i + 4] for i in range(len(Fs))]
+    spanning = sum(1 for pts in per_face if not set.intersection(*pts))
+    return {"charts_in": int(len(np.unique(cin))), "charts_out": int(len(np.unique(cout))),
+            "faces_spanning": int(spanning), "spanning_fraction": spanning / max(len(Fs), 1)}
