@@ -88,7 +88,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
              split_factor: float | None = _costs.esqem.SPLIT_FACTOR, attributes="auto",
-             attribute_weights=1.0, texture=None) -> SimplifyResult:
+             attribute_weights=None, texture=None) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -152,8 +152,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         ``res.uv`` / ``res.colors`` / ``res.normals``; a contraction that would move a seam vertex off its
         seam or merge wedges of different charts is refused (``stats['rejected_by']['seam']``), so seams
         can hold a mesh above its target. Only ``method='qem'`` keeps attributes (others warn and drop).
-    attribute_weights: w ≥ 0, one number or {kind: w} (kinds not named: 1): the weight of each kept
-        attribute in the cost (Hoppe 1999's generalised quadric over position × attributes,
+    attribute_weights: w ≥ 0, one number for every kind or {kind: w} (kinds not named keep their default);
+        None: ``{'uv': 0.3, 'color': 0.03, 'normal': 0.1}`` (README, "Appearance attributes": measured on
+        spot, normals' not). The weight of each kept attribute in the cost (Hoppe 1999's generalised quadric over position × attributes,
         ``qemjax._costs.attributes``; UVs in texture units, colours in [0, 1], normals unit: a cost adds
         w²·(attribute deviation)² to the squared distance at unit extent). The placement then solves
         position and attributes together. 0: the cost is positions only and attributes are interpolated

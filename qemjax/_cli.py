@@ -51,6 +51,9 @@ OPTIONS = {
                          shown="4/3"),
     "attributes": dict(type=str, metavar="KINDS", help="appearance attributes to keep, seams held: 'auto' "
                        "(all the input carries), 'none', or a comma list of uv, color, normal"),
+    "attribute_weights": dict(type=str, metavar="W", help="weight of the attributes in the cost: one number, "
+                              "or kind=W pairs separated by commas (uv=0.3,color=0.03); 0: positions-only cost, "
+                              "attributes interpolated", shown="uv=0.3,color=0.03,normal=0.1"),
     "texture": dict(metavar="IMAGE", help="the texture image of the input's UVs (for an OBJ without mtllib); "
                     "written beside an OBJ output and packed into a GLB", shown="none"),
 }
@@ -148,12 +151,24 @@ def _simplify_kwargs(args) -> dict:
         kw["flip_angle"] = _number_or_none("--flip-angle", kw["flip_angle"])
     if "split_factor" in kw:
         kw["split_factor"] = _number_or_none("--split-factor", kw["split_factor"])
+    if "attribute_weights" in kw:
+        kw["attribute_weights"] = _attribute_weights(kw["attribute_weights"])
     if "attributes" in kw:
         text = kw["attributes"].strip().lower()
         kw["attributes"] = None if text == "none" else "auto" if text == "auto" else \
             tuple(k.strip() for k in text.split(",") if k.strip())
     kw["progress"] = not args.quiet
     return kw
+
+
+def _attribute_weights(text: str):
+    """'0.5' -> 0.5; 'uv=0.3,color=0.1' -> {'uv': 0.3, 'color': 0.1}; CliError otherwise."""
+    try:
+        if "=" not in text:
+            return float(text)
+        return {k.strip(): float(v) for k, v in (item.split("=") for item in text.split(",") if item.strip())}
+    except ValueError:
+        raise CliError(f"--attribute-weights: expected a number or kind=W pairs, got {text!r}") from None
 
 
 def check_output(path: str) -> str:

@@ -146,12 +146,14 @@ def attribute_state(V: np.ndarray, F: np.ndarray, S: np.ndarray, w: np.ndarray) 
 
 
 def _np_translate(st: np.ndarray, d: np.ndarray, m: int) -> np.ndarray:
-    A = np.array([[st[0], st[1], st[2]], [st[1], st[3], st[4]], [st[2], st[4], st[5]]])
+    """A state (11 + 4m,) re-expressed in a frame moved by d (3,), float64 numpy."""
+    A = st[[0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(3, 3)
+    Ad = A @ d
     out = st.copy()
-    out[6:9] = st[6:9] + A @ d
-    out[9] = st[9] + d @ (A @ d + 2 * st[6:9])
-    for j in range(m):
-        out[14 + 4 * j] = st[14 + 4 * j] + st[11 + 4 * j: 14 + 4 * j] @ d
+    out[6:9] += Ad
+    out[9] += d @ (Ad + 2 * st[6:9])
+    G = st[11:].reshape(m, 4)
+    out[14::4] += G[:, :3] @ d
     return out
 
 
