@@ -43,13 +43,13 @@ def run_qemjax(path, target, image, **kw):
     return (r.to_trimesh() if r.uv is not None else trimesh.Trimesh(r.vertices, r.faces, process=False)), dt, r
 
 
-def run_pymeshlab(path, target, image):
+def run_pymeshlab(path, target, image, **kw):
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
     ms.load_new_mesh(str(path))
     t = time.perf_counter()
-    ms.meshing_decimation_quadric_edge_collapse_with_texture(targetfacenum=target)
+    ms.meshing_decimation_quadric_edge_collapse_with_texture(targetfacenum=target, **kw)
     dt = time.perf_counter() - t
     m = ms.current_mesh()
     V, F, W = m.vertex_matrix(), m.face_matrix(), m.wedge_tex_coord_matrix()
@@ -138,16 +138,25 @@ def main():
     warnings.simplefilter("ignore")
     for ratio in RATIOS:
         target = int(round(ratio * m))
-        runs = [("qemjax uv (w=1)", lambda: run_qemjax(path, target, image)),
+        runs = [("qemjax uv (default w=0.3)", lambda: run_qemjax(path, target, image)),
+                ("qemjax uv (w=1)", lambda: run_qemjax(path, target, image, attribute_weights=1.0)),
                 ("qemjax uv (w=0, interpolated)", lambda: run_qemjax(path, target, image, attribute_weights=0)),
                 ("qemjax no attributes", lambda: run_qemjax(path, target, None, attributes=None)),
                 ("pymeshlab with texture", lambda: run_pymeshlab(path, target, image)),
+                ("pymeshlab with texture, preserveboundary",
+                 lambda: run_pymeshlab(path, target, image, preserveboundary=True)),
                 ("meshoptimizer with attributes", lambda: run_meshopt(orig, target, image))]
         for name, fn in runs:
             out, dt, res = fn()
             rows.append(row(name, ratio, orig, out, dt, res))
             print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
             shown[(name, ratio)] = out
+    # the UV weight at 10 %: UV deviation against geometric error
+    target = int(round(0.1 * m))
+    for w in (0.03, 0.1, 3.0):
+        out, dt, res = run_qemjax(path, target, image, attribute_weights=w)
+        rows.append(row(f"qemjax uv (w={w:g})", 0.1, orig, out, dt, res))
+        print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
     import csv
 
     keys = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
@@ -160,7 +169,7 @@ def main():
     cmesh = baked_colours(orig, image)
     crow = []
     for ratio in RATIOS:
-        for w in (0.0, 1.0):
+        for w in (0.0, 0.03, 0.1, 0.3, 1.0):
             t = time.perf_counter()
             r = qemjax.simplify(cmesh, ratio=ratio, attribute_weights=w)
             dt = time.perf_counter() - t
@@ -193,7 +202,7 @@ def main():
     import matplotlib.pyplot as plt
 
     panels = [("input", orig)] + [(f"{n}\n{r:g}", shown[(n, r)]) for r in RATIOS
-                                  for n in ("qemjax uv (w=1)", "pymeshlab with texture", "meshoptimizer with attributes")]
+                                  for n in ("qemjax uv (default w=0.3)", "pymeshlab with texture", "meshoptimizer with attributes")]
     fig = plt.figure(figsize=(4 * 4, 8), dpi=110)
     for i, (title, mesh) in enumerate(panels):
         ax = fig.add_subplot(2, 4, i + 1, projection="3d")
@@ -204,7 +213,7 @@ def main():
     plt.close(fig)
     fig = plt.figure(figsize=(12, 4), dpi=110)
     for i, (title, mesh) in enumerate([("baked colours", cmesh), ("2 %, colour weight 0", shown[("colour", 0.02, 0.0)]),
-                                       ("2 %, colour weight 1", shown[("colour", 0.02, 1.0)])]):
+                                       ("2 %, colour weight 0.3", shown[("colour", 0.02, 0.3)])]):
         ax = fig.add_subplot(1, 3, i + 1, projection="3d")
         if hasattr(mesh, "wedge_faces"):
             fc = mesh.colors[mesh.wedge_faces].mean(1)[:, :3]
