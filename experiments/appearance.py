@@ -211,10 +211,11 @@ def main():
     fig.tight_layout()
     fig.savefig(OUT / "appearance_spot.png", bbox_inches="tight")
     plt.close(fig)
-    fig = plt.figure(figsize=(12, 4), dpi=110)
-    for i, (title, mesh) in enumerate([("baked colours", cmesh), ("2 %, colour weight 0", shown[("colour", 0.02, 0.0)]),
-                                       ("2 %, colour weight 0.3", shown[("colour", 0.02, 0.3)])]):
-        ax = fig.add_subplot(1, 3, i + 1, projection="3d")
+    fig = plt.figure(figsize=(16, 4), dpi=110)
+    for i, (title, mesh) in enumerate([("baked colours", cmesh), ("10 %, colour weight 0", shown[("colour", 0.1, 0.0)]),
+                                       ("10 %, colour weight 0.03 (default)", shown[("colour", 0.1, 0.03)]),
+                                       ("10 %, colour weight 0.3", shown[("colour", 0.1, 0.3)])]):
+        ax = fig.add_subplot(1, 4, i + 1, projection="3d")
         if hasattr(mesh, "wedge_faces"):
             fc = mesh.colors[mesh.wedge_faces].mean(1)[:, :3]
         else:

@@ -214,9 +214,6 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     if attrs is not None:
         channel_weights = _wedges.channel_weights(attrs, kind_weights)
         if np.any(channel_weights > 0):  # the cost model over positions and attributes (`_costs.attributes`)
-            if placement == "rank":
-                raise ValueError("placement='rank' does not take attribute quadrics: use attribute_weights=0 "
-                                 "(attributes interpolated) or placement='optimal'")
             model = _costs.build(method, settings, terms, weights=np.maximum(channel_weights, 1e-30))
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(V))

@@ -244,7 +244,7 @@ def test_attribute_kernels_match_numpy_float64():
     E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1), axis=0)
     VS = np.c_[V, st]
     with jax.enable_x64(True):
-        out = np.asarray(at.price_pairs(m, jnp.asarray(VS), jnp.asarray(E), jnp.asarray(False),
+        out = np.asarray(at.price_pairs(m, False, jnp.asarray(VS), jnp.asarray(E), jnp.asarray(False),
                                         jnp.asarray(1e-9), jnp.asarray(2.0)))
         x = out[:3].T
         merged = np.asarray(at.merge_pairs(m, jnp.asarray(VS), jnp.asarray(E), jnp.asarray(x)))
@@ -287,3 +287,13 @@ def test_colour_term_lowers_colour_error():
         r = qemjax.simplify(mesh, ratio=0.1, attribute_weights=w)
         dev[w] = metrics.attribute_deviation(mesh, r, kind="color")["color_dev_mean"]
     assert dev[1.0] < 0.9 * dev[0.0], dev
+
+
+def test_attribute_model_with_rank_placement_and_terms():
+    """placement='rank' and the terms (regularize, area_weight) wrap the attribute model; repeated calls
+    compile nothing new (the terms take its price as a static argument: one object per shape)."""
+    mesh, _ = atlas_sphere(2)
+    for kw in (dict(placement="rank"), dict(regularize=0.1), dict(area_weight=10.0)):
+        r = qemjax.simplify(mesh, ratio=0.3, **kw)
+        assert r.uv is not None and metrics.seam_report(r)["mixed_charts"] == 0
+        assert qemjax.simplify(mesh, ratio=0.3, **kw).stats["compilations"] == 0, kw

@@ -87,14 +87,31 @@ def _merged(VS, pairs, m):
     return mid, half, [x + y for x, y in zip(t1, t2)]
 
 
-@kernel(static_argnums=0)
-def price_pairs(m, VS, pairs, endpoints_only, cond_eps, max_shift):
+@kernel(static_argnums=(0, 1))
+def price_pairs(m, rank, VS, pairs, endpoints_only, eps, max_shift):
     """(5,K) [x, cost, branch] of pairs with attribute states (width 11 + 4m): QEM's placement on the
-    reduced quadric of the summed states (module docstring)."""
+    reduced quadric of the summed states (module docstring); ``rank``: the truncated solve
+    (``placement='rank'``, eps = rank_eps), else the thresholded one (eps = cond_eps)."""
     mid, half, st = _merged(VS, pairs, m)
-    x, cost, branch, _, _ = placement.place_merged(mid, half, reduce_c(st, m), endpoints_only, cond_eps,
-                                                   max_shift)
+    place = placement.place_rank_merged if rank else placement.place_merged
+    x, cost, branch, _, _ = place(mid, half, reduce_c(st, m), endpoints_only, eps, max_shift)
     return jnp.stack(x + [cost, branch.astype(cost.dtype)], 0)
+
+
+_PRICE_FNS = {}
+
+
+def price_function(m: int, rank: bool):
+    """The price as a static function of (VS, pairs, params), one object per (m, rank): terms
+    (`regularize`, `area_weight`) pass it to their jit as a static argument, so it must not be new on each
+    call."""
+    key = (int(m), bool(rank))
+    if key not in _PRICE_FNS:
+        def fn(VS, pairs, params):
+            return price_pairs(key[0], key[1], VS, pairs, params["endpoints_only"],
+                               params["rank_eps"] if key[1] else params["cond_eps"], params["max_shift"])
+        _PRICE_FNS[key] = fn
+    return _PRICE_FNS[key]
 
 
 @kernel(static_argnums=0)
@@ -183,8 +200,6 @@ class AttributeQEM(QEM):
 
     def __post_init__(self):
         super().__post_init__()
-        if self.placement == "rank":
-            raise ValueError("attribute quadrics place with 'optimal' or 'endpoints'")
         if self.channels < 1 or len(self.weights) != self.channels:
             raise ValueError(f"need one weight per channel, got {len(self.weights)} for {self.channels}")
 
@@ -204,13 +219,12 @@ class AttributeQEM(QEM):
         st[:, :10] += q
         return st.astype(DTYPE)
 
-    def price(self, VS, pairs, params, rings=None):
-        return price_pairs(self.channels, VS, pairs, params["endpoints_only"], params["cond_eps"],
-                           params["max_shift"])
-
     @property
     def price_kernel(self):
-        return lambda VS, pairs, params: self.price(VS, pairs, params)
+        return price_function(self.channels, self.placement == "rank")
+
+    def price(self, VS, pairs, params, rings=None):
+        return self.price_kernel(VS, pairs, params)
 
     def merge(self, VS, pairs, x, params):
         return merge_pairs(self.channels, VS, pairs, x)

@@ -174,6 +174,11 @@ def place_merged(mid, half, q, endpoints_only, cond_eps, max_shift):
 def _place_rank(q1, q2, p1, p2, endpoints_only, rank_eps, max_shift):
     """``placement='rank'``: as `_place`, with the truncated solve."""
     mid, half, q = _merged(q1, q2, p1, p2)
+    return place_rank_merged(mid, half, q, endpoints_only, rank_eps, max_shift)
+
+
+def place_rank_merged(mid, half, q, endpoints_only, rank_eps, max_shift):
+    """`_place_rank` for a quadric q already merged in the midpoint's frame (as `place_merged`)."""
     bv, cc = q[6:9], q[9]
     u_opt, rank = _truncated_solve(q, rank_eps)
     full = rank == 3
