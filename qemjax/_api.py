@@ -217,6 +217,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
             model = _costs.build(method, settings, terms, weights=np.maximum(channel_weights, 1e-30))
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(V))
+    if attrs is not None:  # seams are constrained like boundaries: feature-edge planes along them
+        seams = _wedges.seam_edges(F, attrs.corners)
+        if len(seams):
+            feature_edges = seams if feature_edges is None else np.concatenate([feature_edges, seams])
     m = len(F)
     target, err = _resolve_target(m, target_faces, ratio, max_error)
     if target > m:

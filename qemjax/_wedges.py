@@ -268,6 +268,22 @@ class Tracker:
             self.contract(faces, VQ, a, b, x)
 
 
+def seam_edges(F: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """(k,2) the edges of faces F (m,3) whose faces name different wedges (corners C (m,3)) at either
+    endpoint: the seams, which `simplify` constrains like boundary edges (feature-edge planes)."""
+    u, v = F[:, [0, 1, 2]].reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+    wu, wv = C[:, [0, 1, 2]].reshape(-1), C[:, [1, 2, 0]].reshape(-1)
+    swap = u > v
+    lo, hi = np.where(swap, v, u), np.where(swap, u, v)
+    wlo, whi = np.where(swap, wv, wu), np.where(swap, wu, wv)
+    order = np.lexsort((whi, wlo, hi, lo))
+    lo, hi, wlo, whi = lo[order], hi[order], wlo[order], whi[order]
+    same_edge = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    differ = same_edge & ((wlo[1:] != wlo[:-1]) | (whi[1:] != whi[:-1]))
+    E = np.stack([lo[1:][differ], hi[1:][differ]], 1)
+    return np.unique(E, axis=0) if len(E) else np.zeros((0, 2), np.int64)
+
+
 def _one_to_one(src: np.ndarray, dst: np.ndarray, need: np.ndarray):
     """{src wedge: dst wedge} from corresponding corner wedges when it is a function, one to one, and
     covers every wedge in ``need``; else None."""

@@ -297,3 +297,20 @@ def test_attribute_model_with_rank_placement_and_terms():
         r = qemjax.simplify(mesh, ratio=0.3, **kw)
         assert r.uv is not None and metrics.seam_report(r)["mixed_charts"] == 0
         assert qemjax.simplify(mesh, ratio=0.3, **kw).stats["compilations"] == 0, kw
+
+
+def test_seam_edges_are_the_chart_borders():
+    """`_wedges.seam_edges` (constrained like boundaries) finds exactly the edges between two charts."""
+    mesh, chart = atlas_sphere(2)
+    from qemjax import _io
+
+    (V, F), rep = _io.prepare(mesh, attributes="auto")
+    E = _wedges.seam_edges(F, rep["attributes"].corners)
+    he = np.c_[F[:, [0, 1, 2]].reshape(-1), F[:, [1, 2, 0]].reshape(-1)]
+    key = np.sort(he, 1) @ np.array([len(V), 1])
+    fc = np.repeat(chart, 3)
+    border = set()
+    for k in np.unique(key):
+        if len(set(fc[key == k])) > 1:
+            border.add(int(k))
+    assert len(E) > 20 and set((E @ np.array([len(V), 1])).tolist()) == border
