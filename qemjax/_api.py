@@ -283,8 +283,6 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     unmoved[hist[0][:, 0]] = False  # kept vertices moved; removed ones are gone
     same = np.flatnonzero(unmoved[ids])
     vout[same] = V[ids[same]]  # never contracted: the input's float64 position, exactly
-    if tracker is not None:  # seam vertices sit where an input vertex was: its float64 position, exactly
-        _wedges.restore_positions(vout, Vout, Vn, V)
     flat = np.flatnonzero(~np.any(face_normals(vout, Fout) != 0, axis=1))
     if flat.size:  # an input face with exactly collinear corners: keep the rounded positions there
         w = np.unique(Fout[flat])

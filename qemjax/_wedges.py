@@ -318,19 +318,6 @@ def output(C: np.ndarray, values: np.ndarray, F: np.ndarray, fids: np.ndarray, i
     return inv.reshape(-1, 3).astype(np.int64), wv, values[wid]
 
 
-def restore_positions(vout: np.ndarray, Vrun: np.ndarray, Vn: np.ndarray, V: np.ndarray) -> None:
-    """Seam contractions place the kept vertex exactly at an endpoint (in the run's float32 frame): give
-    every output vertex whose run position equals an input vertex's its float64 input position (in place;
-    Vrun (k,3) the output vertices' run positions, Vn / V the input's run and input positions)."""
-    item = np.dtype((np.void, Vn.dtype.itemsize * 3))
-    keys_in = np.ascontiguousarray(Vn).view(item).reshape(-1)
-    keys_out = np.ascontiguousarray(Vrun, Vn.dtype).view(item).reshape(-1)
-    order = np.argsort(keys_in, kind="stable")
-    at = np.minimum(np.searchsorted(keys_in[order], keys_out), len(order) - 1)
-    hit = keys_in[order][at] == keys_out
-    vout[hit] = V[order[at][hit]]
-
-
 def warn_unsupported(kinds, method: str, stacklevel: int):
     warnings.warn(f"method={method!r} does not keep appearance attributes ({', '.join(kinds)}): the result "
                   "has positions and faces only (method='qem' keeps them)", stacklevel=stacklevel + 1)

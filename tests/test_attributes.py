@@ -49,7 +49,7 @@ def _uv_tile(uv):
 @pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
 def test_seams_hold(scheduler):
     """No output face spans two charts, every chart survives, each wedge's UV stays in its chart's tile,
-    and a vertex with two or more wedges sits exactly where an input seam vertex was."""
+    and a vertex with two or more wedges sits where an input seam vertex was."""
     mesh, _ = atlas_sphere(3)
     r = qemjax.simplify(mesh, ratio=0.1, scheduler=scheduler)
     assert r.uv is not None and r.stats["seam_vertices_in"] > 50
@@ -63,8 +63,10 @@ def test_seams_hold(scheduler):
     Vin = r.input_vertices
     win = np.zeros(len(Vin), int)
     np.add.at(win, np.unique(np.c_[r.input_faces.reshape(-1), r.input_wedge_faces.reshape(-1)], axis=0)[:, 0], 1)
-    seam_in = {tuple(p) for p in Vin[win > 1]}
-    assert multi.sum() > 10 and all(tuple(p) in seam_in for p in r.vertices[multi])
+    # (at the run's float32 resolution: seam vertices keep their run position, which replay reproduces)
+    seam_in = Vin[win > 1]
+    gap = np.min(np.linalg.norm(r.vertices[multi][:, None] - seam_in[None], axis=2), axis=1)
+    assert multi.sum() > 10 and gap.max() < 1e-6
 
 
 def test_seam_test_can_fail(monkeypatch):
