@@ -138,7 +138,7 @@ def main():
     warnings.simplefilter("ignore")
     for ratio in RATIOS:
         target = int(round(ratio * m))
-        runs = [("qemjax uv (default w=0.3)", lambda: run_qemjax(path, target, image)),
+        runs = [("qemjax uv (default w=0.03)", lambda: run_qemjax(path, target, image)),
                 ("qemjax uv (w=1)", lambda: run_qemjax(path, target, image, attribute_weights=1.0)),
                 ("qemjax uv (w=0, interpolated)", lambda: run_qemjax(path, target, image, attribute_weights=0)),
                 ("qemjax no attributes", lambda: run_qemjax(path, target, None, attributes=None)),
@@ -153,7 +153,7 @@ def main():
             shown[(name, ratio)] = out
     # the UV weight at 10 %: UV deviation against geometric error
     target = int(round(0.1 * m))
-    for w in (0.03, 0.1, 3.0):
+    for w in (0.1, 0.3, 3.0):
         out, dt, res = run_qemjax(path, target, image, attribute_weights=w)
         rows.append(row(f"qemjax uv (w={w:g})", 0.1, orig, out, dt, res))
         print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
@@ -202,7 +202,7 @@ def main():
     import matplotlib.pyplot as plt
 
     panels = [("input", orig)] + [(f"{n}\n{r:g}", shown[(n, r)]) for r in RATIOS
-                                  for n in ("qemjax uv (default w=0.3)", "pymeshlab with texture", "meshoptimizer with attributes")]
+                                  for n in ("qemjax uv (default w=0.03)", "pymeshlab with texture", "meshoptimizer with attributes")]
     fig = plt.figure(figsize=(4 * 4, 8), dpi=110)
     for i, (title, mesh) in enumerate(panels):
         ax = fig.add_subplot(2, 4, i + 1, projection="3d")

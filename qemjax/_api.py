@@ -153,7 +153,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         seam or merge wedges of different charts is refused (``stats['rejected_by']['seam']``), so seams
         can hold a mesh above its target. Only ``method='qem'`` keeps attributes (others warn and drop).
     attribute_weights: w ≥ 0, one number for every kind or {kind: w} (kinds not named keep their default);
-        None: ``{'uv': 0.3, 'color': 0.03, 'normal': 0.1}`` (README, "Appearance attributes": measured on
+        None: ``{'uv': 0.03, 'color': 0.03, 'normal': 0.03}`` (README, "Appearance attributes": measured on
         spot, normals' not). The weight of each kept attribute in the cost (Hoppe 1999's generalised quadric over position × attributes,
         ``qemjax._costs.attributes``; UVs in texture units, colours in [0, 1], normals unit: a cost adds
         w²·(attribute deviation)² to the squared distance at unit extent). The placement then solves
