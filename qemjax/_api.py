@@ -19,6 +19,7 @@ from . import _split
 from . import _topology as topo
 from ._options import Options, Schedule
 from . import _units
+from . import _wedges
 from ._arrays import face_normals
 from ._record import Record
 from ._result import Contractions, SimplifyResult
@@ -88,7 +89,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              prune: bool = False, regularize: float = 0.0, area_weight: float = 0.0,
              schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
-             split_factor: float | None = _costs.esqem.SPLIT_FACTOR) -> SimplifyResult:
+             split_factor: float | None = _costs.esqem.SPLIT_FACTOR, attributes="auto",
+             attribute_weights=None, texture=None) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -145,6 +147,22 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         b × the mean edge length at its midpoint (default 4/3, the paper's); None: no splitting. With a
         face target the result still has exactly that many faces: it simplifies further first, by as many
         faces as splitting will add (``qemjax._split``; ``stats["split"]``).
+    attributes: which appearance attributes to carry through (per-corner wedges, seams kept: README,
+        "Appearance attributes"; ``qemjax._wedges``): ``'auto'`` (all the input carries: UVs and their
+        material, vertex colours, stored normals), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these,
+        or None (positions only; what is dropped is named in a warning). Kept ones come back as
+        ``res.uv`` / ``res.colors`` / ``res.normals``; a contraction that would move a seam vertex off its
+        seam or merge wedges of different charts is refused (``stats['rejected_by']['seam']``), so seams
+        can hold a mesh above its target. Only ``method='qem'`` keeps attributes (others warn and drop).
+    attribute_weights: w ≥ 0, one number for every kind or {kind: w} (kinds not named keep their default);
+        None: ``{'uv': 0.03, 'color': 0.03, 'normal': 0.03}`` (README, "Appearance attributes": measured on
+        spot, normals' not). The weight of each kept attribute in the cost (Hoppe 1999's generalised
+        quadric over position × attributes, ``qemjax._costs.attributes``; UVs in texture units, colours in
+        [0, 1], normals unit: a cost adds w²·(attribute deviation)² to the squared distance at unit
+        extent). The placement then solves position and attributes together. 0: the cost is positions
+        only and attributes are interpolated along each contraction.
+    texture: a path or PIL image: the texture of the UVs (for a file that names no material, e.g. an OBJ
+        without mtllib); the result's material then holds it.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options.
@@ -155,9 +173,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                    area_weighted=area_weighted, area_power=area_power, pair_threshold=pair_threshold,
                    preserve_topology=preserve_topology, flip_angle=flip_angle, weld=weld, progress=progress,
                    prune=prune, regularize=regularize, area_weight=area_weight, schedule=schedule,
-                   curvature_weight=curvature_weight, split_factor=split_factor)
+                   curvature_weight=curvature_weight, split_factor=split_factor, attributes=attributes,
+                   attribute_weights=attribute_weights, texture=texture)
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
-    geo = _geometry(mesh, setup.weld, setup.pair_threshold, stacklevel=3)
+    geo = _geometry(mesh, setup, stacklevel=3)
     job = _job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3)
     return _finish(job, _run(job), t_start, c0, s0, stacklevel=3)
 
@@ -195,9 +214,9 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
             kw = {**defaults, **cfg}
             setup = _setup(**{k: kw[k] for k in _SETUP_KEYS})
             _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
-            gk = (id(mesh), setup.weld, setup.pair_threshold)
+            gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
-                geos[gk] = _geometry(mesh, setup.weld, setup.pair_threshold, stacklevel=4)
+                geos[gk] = _geometry(mesh, setup, stacklevel=4)
             jobs.append((i, _job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
                                  kw["max_error"], stacklevel=4, states=states)))
         except ValueError as exc:
@@ -217,8 +236,8 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
         js = [j for _, j in members]
         ran = batched.run([j.geo.Vn for j in js], [j.S for j in js], [j.geo.F for j in js],
-                          [max(j.target, 1) for j in js], [j.options.max_cost for j in js], js[0].setup.model,
-                          [j.setup.model.kernel_params() for j in js], js[0].options, [j.geo.edges[:2] for j in js],
+                          [max(j.target, 1) for j in js], [j.options.max_cost for j in js], js[0].model,
+                          [j.model.kernel_params() for j in js], js[0].options, [j.geo.edges[:2] for j in js],
                           [j.geo.frame.part_scale2() for j in js])
         wall = time.perf_counter() - t0 + prep * len(members)
         c2, s2 = _compilation.snapshot()
@@ -233,8 +252,8 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
 
 def _batch_key(job: "Job"):
     """Jobs with equal keys can run as copies of one batch (`_schedulers.batched`); None: run alone."""
-    s, model = job.setup, job.setup.model
-    if s.scheduler != "parallel" or len(job.geo.extra) or not batched.batchable(model) or not (
+    s, model = job.setup, job.model
+    if s.scheduler != "parallel" or len(job.geo.extra) or job.tracker is not None or not batched.batchable(model) or not (
             job.target < len(job.geo.F) or job.err < math.inf):
         return None
     return (_model_key(model), tuple(sorted(model.kernel_params())), s.cos_max,
@@ -260,6 +279,11 @@ class Setup:
     weld: bool
     prune: bool
     progress: bool
+    settings: dict = dataclasses.field(default_factory=dict)  # what built the model (`_costs.build`)
+    terms: dict = dataclasses.field(default_factory=dict)
+    attributes: Any = "auto"
+    kind_weights: Any = None  # `_wedges.check_weights` of attribute_weights
+    texture: Any = None
 
     @property
     def split(self):
@@ -268,9 +292,10 @@ class Setup:
 
 class Geometry(NamedTuple):
     """The cleaned mesh and what depends on it alone (shared by every run of one mesh with the same
-    ``weld`` and ``pair_threshold``): V (n,3) float64, F (m,3), the clean-up report (without
-    ``face_means``), the face means, close pairs, parts, normalised positions and their frame, the edge
-    table (E, ecount, boundary edges, their faces) and the count of non-manifold edges."""
+    ``weld``, ``pair_threshold``, ``attributes`` and ``texture``): V (n,3) float64, F (m,3), the clean-up
+    report (without ``face_means`` and ``attributes``), the face means, close pairs, parts, normalised
+    positions and their frame, the edge table (E, ecount, boundary edges, their faces), the count of
+    non-manifold edges and the kept attributes (`_wedges`, or None)."""
 
     V: np.ndarray
     F: np.ndarray
@@ -282,11 +307,13 @@ class Geometry(NamedTuple):
     frame: _units.Frame
     edges: tuple
     nonmanifold: int
+    attrs: Any = None
 
 
 class Job(NamedTuple):
     """One run, ready: its `Setup` and `Geometry`, the face target and max error, the model's vertex
-    state S and the scheduler's `Options`."""
+    state S and the scheduler's `Options`; the model (the setup's, or the attribute model), the report
+    (the geometry's, plus what this run drops), the attributes it keeps and their seam `Tracker`."""
 
     setup: Setup
     geo: Geometry
@@ -294,16 +321,21 @@ class Job(NamedTuple):
     err: float
     S: np.ndarray
     options: Options
+    model: Any
+    report: dict
+    attrs: Any = None
+    tracker: Any = None
 
 
 _SETUP_KEYS = ("method", "scheduler", "placement", "boundary_weight", "area_weighted", "area_power",
                "pair_threshold", "preserve_topology", "flip_angle", "weld", "progress", "prune", "regularize",
-               "area_weight", "schedule", "curvature_weight", "split_factor")
+               "area_weight", "schedule", "curvature_weight", "split_factor", "attributes", "attribute_weights",
+               "texture")
 
 
 def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area_power, pair_threshold,
            preserve_topology, flip_angle, weld, progress, prune, regularize, area_weight, schedule,
-           curvature_weight, split_factor) -> Setup:
+           curvature_weight, split_factor, attributes="auto", attribute_weights=None, texture=None) -> Setup:
     """Check every option that does not need the mesh; ValueError naming the bad one."""
     if scheduler not in SCHEDULERS:
         raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS}")
@@ -316,12 +348,13 @@ def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area
         preserve_topology = _flag("preserve_topology", preserve_topology)
     if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
         raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
-    model = _costs.build(method, dict(placement=placement, area_weighted=area_weighted,
-                                      area_power=_real("area_power", area_power), boundary_weight=
-                                      boundary_weight, curvature_weight=_real("curvature_weight", curvature_weight),
-                                      split_factor=split_factor if split_factor is None else
-                                      _real("split_factor", split_factor)),
-                         dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
+    settings = dict(placement=placement, area_weighted=area_weighted,
+                    area_power=_real("area_power", area_power), boundary_weight=boundary_weight,
+                    curvature_weight=_real("curvature_weight", curvature_weight),
+                    split_factor=split_factor if split_factor is None else _real("split_factor", split_factor))
+    terms = dict(regularize=regularize, area_weight=_real("area_weight", area_weight))
+    model = _costs.build(method, settings, terms)
+    kind_weights = _wedges.check_weights(attribute_weights)
     if schedule is None:
         schedule = Schedule()
     elif not isinstance(schedule, Schedule):
@@ -338,26 +371,45 @@ def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area
                          "use preserve_topology=False (the default when pair_threshold > 0)")
     cos_max = -2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle)))
     return Setup(method, scheduler, model, schedule, cos_max, pair_threshold, preserve_topology, weld, prune,
-                 progress)
+                 progress, settings, terms, attributes, kind_weights, texture)
 
 
-def _geometry(mesh, weld: bool, pair_threshold: float, stacklevel: int) -> Geometry:
+def _geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
     """Read and clean ``mesh`` and compute what depends on the mesh alone (`Geometry`)."""
-    (V, F), report = _io.prepare(mesh, weld_vertices=weld, stacklevel=stacklevel)
+    (V, F), report = _io.prepare(mesh, weld_vertices=setup.weld, stacklevel=stacklevel,
+                                 attributes=setup.attributes, texture=setup.texture)
     face_means = report.pop("face_means")
-    extra = topo.close_pairs(V, F, pair_threshold)
+    attrs = report.pop("attributes")
+    extra = topo.close_pairs(V, F, setup.pair_threshold)
     parts = topo.parts(F, len(V), extra)
     Vn, frame = _units.normalize(V, common.DTYPE, parts)
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
-    return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold)
+    return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs)
 
 
 def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
          states: dict | None = None) -> Job:
     """The face target, the model's initial vertex state and the scheduler's options for one run.
     ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch."""
+    model, report, attrs = setup.model, dict(geo.report), geo.attrs
+    if attrs is not None and (setup.method != "qem" or setup.split is not None):
+        warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
+        _wedges.warn_unsupported(warn, setup.method, stacklevel=stacklevel)
+        report["dropped"] = report["dropped"] + warn
+        attrs = None
+    corner_values = channel_weights = None
+    if attrs is not None:
+        channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
+        if np.any(channel_weights > 0):  # the cost model over positions and attributes (`_costs.attributes`)
+            model = _costs.build(setup.method, setup.settings, setup.terms,
+                                 weights=np.maximum(channel_weights, 1e-30))
+            corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
+    if attrs is not None:  # seams are constrained like boundaries: feature-edge planes along them
+        seams = _wedges.seam_edges(geo.F, attrs.corners)
+        if len(seams):
+            feature_edges = seams if feature_edges is None else np.concatenate([feature_edges, seams])
     m = len(geo.F)
     target, err = _resolve_target(m, target_faces, ratio, max_error)
     if target > m:
@@ -367,18 +419,20 @@ def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_er
     area_mean, e2_mean, ext = geo.face_means
     r2 = (ext / geo.frame.scale) ** 2  # from the clean-up's unit extent to the frame's
     E, ecount, be, bf = geo.edges
-    key = None if states is None else (id(geo), setup.model.state_key(),
-                                       None if feature_edges is None else feature_edges.tobytes())
+    key = None if states is None or attrs is not None else (
+        id(geo), model.state_key(), None if feature_edges is None else feature_edges.tobytes())
     S = None if key is None else states.get(key)
     if S is None:
-        S = setup.model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges,
-                                                    (area_mean * r2, e2_mean * r2)))
+        S = model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges,
+                                              (area_mean * r2, e2_mean * r2), corner_values))
         if key is not None:
             states[key] = S
     options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
                       max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
                       keep_parts=not setup.prune)
-    return Job(setup, geo, target, err, S, options)
+    tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(geo.V), geo.F, model,
+                                                         None if corner_values is None else channel_weights > 0)
+    return Job(setup, geo, target, err, S, options, model, report, attrs, tracker)
 
 
 def _unchanged(job: Job):
@@ -386,7 +440,7 @@ def _unchanged(job: Job):
     g = job.geo
     hist = (np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
     info = {"contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0,
-            "branches": np.zeros(len(job.setup.model.branches), int), "stop_reason": "unchanged",
+            "branches": np.zeros(len(job.model.branches), int), "stop_reason": "unchanged",
             "blocked_by": {}, "rejected_by": outcome.count_reasons(np.zeros(0, np.int8))}
     return (g.Vn, job.S, g.F, np.ones(len(g.F), bool), hist, info), None, None
 
@@ -394,7 +448,7 @@ def _unchanged(job: Job):
 def _run(job: Job):
     """Run the scheduler. Returns (the scheduler's outputs (V, S, F, alive, history, info), the face target
     the run aimed at, the faces splitting was planned to add (None without splitting))."""
-    setup, g, model, options, target = job.setup, job.geo, job.setup.model, job.options, job.target
+    setup, g, model, options, target = job.setup, job.geo, job.model, job.options, job.target
     m = len(g.F)
     if not (target < m or job.err < math.inf):
         return _unchanged(job)
@@ -415,6 +469,8 @@ def _run(job: Job):
     run_target, planned = target, None
     run = functools.partial(parallel.run, edges=g.edges[:2], part_scale=g.frame.part_scale2()) \
         if setup.scheduler == "parallel" else greedy.run
+    if job.tracker is not None:
+        run = functools.partial(run, wedges=job.tracker)
     if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
         run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options, setup.split)
     out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
@@ -428,7 +484,7 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
     """The `SimplifyResult` of a run: compact output in mesh units, splitting, the stop reason (and a
     warning when it ends above the target), history, record and stats. ``batch``: for a run that went
     through `simplify_batch`, what stats say of the batch."""
-    setup, g, model, target, err = job.setup, job.geo, job.setup.model, job.target, job.err
+    setup, g, model, target, err = job.setup, job.geo, job.model, job.target, job.err
     (Vo, So, Fo, alive, hist, info), run_target, planned = ran
     if run_target is None:
         run_target = target
@@ -445,6 +501,17 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
         w = np.unique(Fout[flat])
         vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
     verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
+    appearance = {}
+    if job.tracker is not None:
+        attrs = job.attrs
+        wf, wv, wval = _wedges.output(job.tracker.C, job.tracker.val, Fout, fids, ids)
+        vals = attrs.split(wval)
+        if "normal" in vals:
+            nn = np.linalg.norm(vals["normal"], axis=1, keepdims=True)
+            vals["normal"] = vals["normal"] / np.where(nn > 0, nn, 1.0)
+        appearance = dict(uv=vals.get("uv"), colors=vals.get("color"), normals=vals.get("normal"),
+                          wedge_faces=wf, wedge_vertex=wv, material=attrs.material,
+                          input_wedge_faces=attrs.corners)
     if split is not None:
         vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
         split_stats.update(planned=planned, run_target=run_target if target else None,
@@ -467,7 +534,7 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
             hparts[name] = np.asarray(col, np.float64) * frame.scale ** unit
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
-    stats = dict(g.report)
+    stats = dict(job.report)
     stats.update(
         method=setup.method, scheduler=setup.scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
         vertices_in=len(V), vertices_out=len(vout), close_pairs=len(g.extra), contractions=info["contractions"],
@@ -477,6 +544,8 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
         max_error_limit=err if math.isfinite(err) else None)
+    if job.tracker is not None:
+        stats.update(attributes=list(job.attrs.values), seam_vertices_in=job.tracker.seam_in)
     for k, v in info.items():
         if k.endswith("_s") or k == "faces_per_round":
             stats[k] = v
@@ -494,7 +563,8 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(frame.errors_to_mesh(info["max_cost"])), source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
-        input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record)
+        input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record,
+        **appearance)
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,
@@ -511,4 +581,7 @@ def _above_target_message(faces: int, target: int, stop: str, blocked: dict, non
             hint = "; separate parts keep their last faces: prune=True lets small parts vanish"
         else:
             hint = "; preserve_topology=False may reach further (genus and boundaries may then change)"
+    if blocked.get("seam"):
+        hint += ("; UV seams / colour discontinuities are kept where they are and hold pairs back: "
+                 "attributes=None (positions only) may reach further")
     return f"stopped at {faces} faces, above the target of {target}: {why} (pairs held back by {held}){hint}"

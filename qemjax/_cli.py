@@ -49,6 +49,13 @@ OPTIONS = {
     "split_factor": dict(type=str, metavar="B", help="with --method esqem, split edges longer than B × the "
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),
+    "attributes": dict(type=str, metavar="KINDS", help="appearance attributes to keep, seams held: 'auto' "
+                       "(all the input carries), 'none', or a comma list of uv, color, normal"),
+    "attribute_weights": dict(type=str, metavar="W", help="weight of the attributes in the cost: one number, "
+                              "or kind=W pairs separated by commas (uv=0.1,color=0.03); 0: positions-only cost, "
+                              "attributes interpolated", shown="0.03 for each kind"),
+    "texture": dict(metavar="IMAGE", help="the texture image of the input's UVs (for an OBJ without mtllib); "
+                    "written beside an OBJ output and packed into a GLB", shown="none"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
@@ -144,8 +151,24 @@ def _simplify_kwargs(args) -> dict:
         kw["flip_angle"] = _number_or_none("--flip-angle", kw["flip_angle"])
     if "split_factor" in kw:
         kw["split_factor"] = _number_or_none("--split-factor", kw["split_factor"])
+    if "attribute_weights" in kw:
+        kw["attribute_weights"] = _attribute_weights(kw["attribute_weights"])
+    if "attributes" in kw:
+        text = kw["attributes"].strip().lower()
+        kw["attributes"] = None if text == "none" else "auto" if text == "auto" else \
+            tuple(k.strip() for k in text.split(",") if k.strip())
     kw["progress"] = not args.quiet
     return kw
+
+
+def _attribute_weights(text: str):
+    """'0.5' -> 0.5; 'uv=0.3,color=0.1' -> {'uv': 0.3, 'color': 0.1}; CliError otherwise."""
+    try:
+        if "=" not in text:
+            return float(text)
+        return {k.strip(): float(v) for k, v in (item.split("=") for item in text.split(",") if item.strip())}
+    except ValueError:
+        raise CliError(f"--attribute-weights: expected a number or kind=W pairs, got {text!r}") from None
 
 
 def check_output(path: str) -> str:
@@ -196,8 +219,33 @@ def _atomic(path: str, save) -> None:
 
 
 def write(res, path: str, ext: str):
-    """Export ``res`` to ``path`` as ``ext`` (atomically: `_atomic`)."""
-    _atomic(path, lambda tmp: res.to_trimesh().export(tmp, file_type=ext))
+    """Export ``res`` to ``path`` as ``ext`` (atomically: `_atomic`). A result with UVs written as OBJ also
+    gets its material file (``<stem>.mtl``) and texture image beside it (each written atomically, the OBJ
+    last); GLB packs them in."""
+    mesh = res.to_trimesh()
+    if ext == "obj" and getattr(res, "uv", None) is not None:
+        from trimesh.exchange.obj import export_obj
+
+        stem = os.path.splitext(os.path.basename(path))[0]
+        if mesh.visual.material is not None:  # the image is written as <stem>.png, beside <stem>.mtl
+            mesh.visual.material = mesh.visual.material.copy()
+            mesh.visual.material.name = stem
+        text, files = export_obj(mesh, include_texture=True, return_texture=True, mtl_name=f"{stem}.mtl")
+        folder = os.path.dirname(os.path.abspath(path))
+        for name, data in files.items():
+            target = os.path.join(folder, os.path.basename(name))
+
+            def save(tmp, data=data):
+                with open(tmp, "wb") as f:
+                    f.write(data)
+            _atomic(target, save)
+
+        def save_obj(tmp):
+            with open(tmp, "w") as f:
+                f.write(text)
+        _atomic(path, save_obj)
+        return
+    _atomic(path, lambda tmp: mesh.export(tmp, file_type=ext))
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

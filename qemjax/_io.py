@@ -72,19 +72,25 @@ def _warn_dropped(dropped: list[str], what: str, stacklevel: int):
                   "positions and faces only (stats['dropped'] lists them)", stacklevel=stacklevel + 1)
 
 
-def _from_trimesh(obj) -> tuple[Mesh, list[str]]:
-    """(Mesh, `dropped_attributes`) of a `trimesh.Trimesh`, or of a `trimesh.Scene` concatenated."""
+def _as_trimesh(obj):
+    """A `trimesh.Trimesh`, or a `trimesh.Scene` concatenated into one."""
     import trimesh
 
     if isinstance(obj, trimesh.Scene):
         obj = obj.to_geometry() if hasattr(obj, "to_geometry") else obj.dump(concatenate=True)
     if not isinstance(obj, trimesh.Trimesh):
         raise ValueError(f"expected a triangle mesh, got {type(obj).__name__}")
+    return obj
+
+
+def _from_trimesh(obj) -> tuple[Mesh, list[str]]:
+    """(Mesh, `dropped_attributes`) of a `trimesh.Trimesh`, or of a `trimesh.Scene` concatenated."""
+    obj = _as_trimesh(obj)
     return Mesh(np.asarray(obj.vertices), np.asarray(obj.faces)), dropped_attributes(obj)
 
 
-def _read(path) -> tuple[Mesh, list[str]]:
-    """`load` without the warning: (Mesh, `dropped_attributes`)."""
+def _read_trimesh(path):
+    """The `trimesh.Trimesh` in a file (no processing); ValueError naming the file."""
     import trimesh
 
     path = os.fspath(path)
@@ -93,10 +99,23 @@ def _read(path) -> tuple[Mesh, list[str]]:
     if os.path.isdir(path):
         raise ValueError(f"expected a mesh file, got a folder: {path}")
     try:
-        obj = trimesh.load(path, process=False, force="mesh")
+        obj = trimesh.load(path, process=False)
+        if isinstance(obj, trimesh.Scene) and len(obj.geometry) == 1:
+            # one geometry placed without a transform: itself (concatenating a scene drops stored normals)
+            name = next(iter(obj.geometry))
+            nodes = obj.graph.geometry_nodes.get(name, [])
+            if len(nodes) == 1 and np.array_equal(obj.graph.get(nodes[0])[0], np.eye(4)):
+                obj = obj.geometry[name]
+        if not isinstance(obj, trimesh.Trimesh):
+            obj = trimesh.load(path, process=False, force="mesh")
     except Exception as exc:  # trimesh raises many kinds; name the file
         raise ValueError(f"could not read mesh {path}: {exc}") from exc
-    return _from_trimesh(obj)
+    return _as_trimesh(obj)
+
+
+def _read(path) -> tuple[Mesh, list[str]]:
+    """`load` without the warning: (Mesh, `dropped_attributes`)."""
+    return _from_trimesh(_read_trimesh(path))
 
 
 def load(path: str | os.PathLike) -> Mesh:
@@ -128,13 +147,16 @@ def _array(name: str, x) -> np.ndarray:
     return a
 
 
-def _as_arrays(mesh: Any) -> tuple[Mesh, list[str]]:
-    """`as_arrays`, also returning `dropped_attributes` (empty for arrays)."""
-    dropped = []
+def _as_arrays(mesh: Any, keep_trimesh: bool = False):
+    """`as_arrays`, also returning `dropped_attributes` (empty for arrays); with ``keep_trimesh`` also the
+    `trimesh.Trimesh` read (None for arrays), whose attributes `prepare` may keep."""
+    dropped, tm = [], None
     if isinstance(mesh, (str, os.PathLike)):
-        mesh, dropped = _read(mesh)
+        tm = _read_trimesh(mesh)
     elif type(mesh).__module__.startswith("trimesh"):
-        mesh, dropped = _from_trimesh(mesh)
+        tm = _as_trimesh(mesh)
+    if tm is not None:
+        mesh, dropped = _from_trimesh(tm)
     if isinstance(mesh, tuple) and len(mesh) == 2:
         V, F = mesh
     elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
@@ -167,6 +189,8 @@ def _as_arrays(mesh: Any) -> tuple[Mesh, list[str]]:
     lo, hi = F.min(), F.max()
     if lo < 0 or hi >= V.shape[0]:
         raise ValueError(f"face indices out of range: found [{lo}, {hi}] for {V.shape[0]} vertices")
+    if keep_trimesh:
+        return Mesh(V, F), dropped, tm
     return Mesh(V, F), dropped
 
 
@@ -247,15 +271,19 @@ def unique_face_mask(F: np.ndarray) -> np.ndarray:
     return keep
 
 
-def clean_faces(F: np.ndarray) -> tuple[np.ndarray, int, int]:
+def clean_faces(F: np.ndarray, rows: np.ndarray | None = None):
     """Drop faces with a repeated index, then duplicates (same three vertices, any order; the first
-    one is kept). Returns (F', degenerate removed, duplicates removed)."""
+    one is kept). Returns (F', degenerate removed, duplicates removed); given ``rows`` (m,…) aligned with
+    F, also those rows of the kept faces (a fourth value)."""
     deg = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
     n_deg = int(np.count_nonzero(deg))
     if n_deg:
         F = F[~deg]
+        rows = None if rows is None else rows[~deg]
     keep = unique_face_mask(F)
     n_dup = len(F) - int(np.count_nonzero(keep))
+    if rows is not None:
+        return (F[keep] if n_dup else F), n_deg, n_dup, (rows[keep] if n_dup else rows)
     return (F[keep] if n_dup else F), n_deg, n_dup
 
 
@@ -269,19 +297,45 @@ def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndar
     return V[used], newidx[F], int((~used).sum())
 
 
-def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tuple[Mesh, dict]:
+_KEPT_NAMES = {"uv": ("uv",), "color": ("vertex_colors",)}
+
+
+def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attributes=None,
+            texture=None) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
     ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear
     corners), ``unreferenced_removed`` and lists the attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
-    caller ``stacklevel`` - 1 frames above prepare's caller)."""
-    (V, F), dropped = _as_arrays(mesh)
+    caller ``stacklevel`` - 1 frames above prepare's caller).
+
+    attributes: which appearance attributes to keep (`_wedges.select`: 'auto', None, a kind or a tuple);
+    kept ones come as ``report["attributes"]``, an `_wedges.Attributes` aligned with the cleaned faces
+    (None when nothing is kept). texture: a path or PIL image to use as the material's texture."""
+    from . import _wedges
+
+    (V, F), dropped, tm = _as_arrays(mesh, keep_trimesh=True)
+    available, material = _wedges.from_trimesh(tm) if tm is not None else ({}, None)
+    kept, _ = _wedges.select(available, attributes)
+    if texture is not None:
+        if "uv" not in kept:
+            raise ValueError("texture= needs UVs: the mesh carries none (or attributes= does not keep them)")
+        material = _wedges.load_texture(texture)
+    if kept:
+        names = {n for k in kept for n in _KEPT_NAMES.get(k, ())}
+        if "uv" in kept and material is not None:
+            names.add("material")
+        dropped = [d for d in dropped if d not in names]
     if dropped:
         _warn_dropped(dropped, os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh",
                       stacklevel=stacklevel + 1)
     report = {"welded": 0, "dropped": dropped}
+    src = np.arange(len(F) * 3, dtype=np.int64).reshape(-1, 3) if kept else None  # corner ids
+    F0 = F
     if weld_vertices:
         V, F, report["welded"] = weld(V, F)
-    F, report["degenerate_removed"], report["duplicate_removed"] = clean_faces(F)
+    if kept:
+        F, report["degenerate_removed"], report["duplicate_removed"], src = clean_faces(F, src)
+    else:
+        F, report["degenerate_removed"], report["duplicate_removed"] = clean_faces(F)
     if len(F) == 0:
         raise ValueError("empty mesh: every face is degenerate")
     # faces with exactly collinear corners would survive untouched into the output: drop them; the same
@@ -298,7 +352,13 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1) -> tu
     report["zero_area_removed"] = int(len(F) - np.count_nonzero(nz))
     if report["zero_area_removed"]:
         F = F[nz]
+        src = None if src is None else src[nz]
     V, F, report["unreferenced_removed"] = drop_unreferenced(V, F)
+    report["attributes"] = None
+    if kept:  # wedges: the source vertex of each kept corner, split by value at each welded vertex
+        a = _wedges.build(kept, F, F0.reshape(-1)[src])
+        a.material = material if "uv" in kept else None
+        report["attributes"] = a
     report["face_means"] = (area_mean, e2_mean, ext if scaled else 1.0)  # for `simplify`, popped there
     return Mesh(V, F), report
 

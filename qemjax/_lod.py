@@ -56,7 +56,12 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     ESQEM's edge splitting happens after all contractions and is not part of the record: with
     ``method="esqem"`` give ``split_factor=None``. When the run stops above a level's target (no valid
     contraction left: `simplify` warns, `SimplifyResult.stop_reason` says why), that level is the run's
-    last mesh."""
+    last mesh.
+
+    Levels carry positions and faces only: the record replays contractions, not the wedges of appearance
+    attributes, so ``attributes`` defaults to None here (what the input carries is named in a warning).
+    """
+    options.setdefault("attributes", None)
     ratios = tuple(float(r) for r in ratios)
     if not ratios:
         raise ValueError("give at least one ratio")

@@ -50,6 +50,14 @@ class SimplifyResult:
     and ``faces_per_round``), the targets (``target_faces``, 0 for none; ``max_error_limit``, a squared
     distance in input units, None for none) and ``dropped``: what the input carried that the result
     does not keep (any of "uv", "material", "vertex_colors", "face_colors").
+
+    Appearance attributes (``simplify(attributes=...)``; None when the input carries none or they were not
+    kept) are per wedge, a distinct attribute value at a vertex (a vertex on a UV seam has one per chart):
+    uv (w,2), colors (w,4) RGBA in [0, 1], normals (w,3) unit; wedge_vertex (w,) int64: each wedge's
+    vertex (index into ``vertices``); wedge_faces (j,3) int64: each face corner's wedge (faces[i, k] ==
+    wedge_vertex[wedge_faces[i, k]]); material: the trimesh material of the UVs (with its texture image)
+    or None; input_wedge_faces (m,3): the cleaned input's corner wedges (its own ids; for
+    `qemjax.metrics.seam_report`). `to_trimesh` splits vertices by wedge, as OBJ, glTF and trimesh store them.
     """
 
     vertices: np.ndarray
@@ -64,6 +72,13 @@ class SimplifyResult:
     stats: dict
     stop_reason: str = "target"
     record: object = None
+    uv: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    wedge_faces: np.ndarray | None = None
+    wedge_vertex: np.ndarray | None = None
+    material: object = None
+    input_wedge_faces: np.ndarray | None = None
 
     @property
     def vertex_map(self) -> np.ndarray:
@@ -89,10 +104,23 @@ class SimplifyResult:
         return self.record
 
     def to_trimesh(self):
-        """The simplified mesh as a `trimesh.Trimesh` (no processing: arrays are kept as they are)."""
+        """The simplified mesh as a `trimesh.Trimesh` (no processing: arrays are kept as they are). With
+        appearance attributes, its vertices are the wedges (split at seams, faces = ``wedge_faces``) and its
+        visual carries them: `TextureVisuals` (UVs and the material with its image) or `ColorVisuals`
+        (vertex colours); stored normals become its vertex normals."""
         import trimesh
 
-        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+        if self.wedge_faces is None:
+            return trimesh.Trimesh(self.vertices, self.faces, process=False)
+        kw = {}
+        if self.normals is not None:
+            kw["vertex_normals"] = self.normals
+        if self.uv is not None:
+            kw["visual"] = trimesh.visual.TextureVisuals(uv=self.uv, material=self.material)
+        elif self.colors is not None:
+            kw["visual"] = trimesh.visual.ColorVisuals(
+                vertex_colors=np.clip(np.round(self.colors * 255), 0, 255).astype(np.uint8))
+        return trimesh.Trimesh(self.vertices[self.wedge_vertex], self.wedge_faces, process=False, **kw)
 
     def summary(self) -> str:
         """One line: faces before -> after and the target, times, rounds and the largest contraction

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["render", "render_pair"]
+__all__ = ["face_texture_colors", "render", "render_pair"]
 
 DEFAULT_VIEW = (20.0, -60.0)  # (elevation, azimuth) in degrees, matplotlib's convention
 DEFAULT_COLOR = (0.72, 0.77, 0.88)
@@ -66,16 +66,19 @@ def _view_direction(view) -> np.ndarray:
     return np.array([np.cos(elev) * np.cos(azim), np.cos(elev) * np.sin(azim), np.sin(elev)])
 
 
-def _thin(tris: np.ndarray, normals: np.ndarray, eye: np.ndarray, max_faces: int):
-    """Drop back faces, then keep a seeded random subset, until at most ``max_faces`` remain."""
+def _thin(tris: np.ndarray, normals: np.ndarray, eye: np.ndarray, max_faces: int, colors=None):
+    """Drop back faces, then keep a seeded random subset, until at most ``max_faces`` remain (per-face
+    ``colors`` (m,3), when given, are thinned alike and returned third)."""
     if len(tris) <= max_faces:
-        return tris, normals
+        return (tris, normals) if colors is None else (tris, normals, colors)
     front = normals @ eye > 0
     tris, normals = tris[front], normals[front]
+    colors = None if colors is None else colors[front]
     if len(tris) > max_faces:
         keep = np.sort(np.random.default_rng(0).choice(len(tris), size=max_faces, replace=False))
         tris, normals = tris[keep], normals[keep]
-    return tris, normals
+        colors = None if colors is None else colors[keep]
+    return (tris, normals) if colors is None else (tris, normals, colors)
 
 
 def render(
@@ -98,7 +101,8 @@ def render(
         mesh: trimesh.Trimesh, (vertices, faces) pair, or object with ``.vertices`` and ``.faces``.
         ax: a 3-D Axes to draw into (``projection="3d"``); a new figure is made when None.
         view: (elevation, azimuth) in degrees. The light comes from the camera, a little above and left.
-        color: RGB base colour (0..1), scaled by Lambert shading ``AMBIENT + (1 - AMBIENT) * |n . l|``
+        color: RGB base colour (0..1), or one per face (m, 3) (e.g. a texture sampled at each face's
+            UVs: `face_texture_colors`), scaled by Lambert shading ``AMBIENT + (1 - AMBIENT) * |n . l|``
             (two-sided, so meshes with mixed orientation still look lit).
         edges: also draw the triangle edges (useful on small, simplified meshes).
         path: when given, the figure is saved there; a figure made here is then closed.
@@ -120,7 +124,14 @@ def render(
     normals = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
 
     eye = _view_direction(view)
-    tris, normals = _thin(tris, normals, eye, max_faces)
+    base = np.asarray(color, dtype=np.float64)
+    if base.ndim == 2:
+        if base.shape[0] != len(F):
+            raise ValueError(f"color: {base.shape[0]} per-face colours for {len(F)} faces")
+        tris, normals, base = _thin(tris, normals, eye, max_faces, base[:, :3])
+    else:
+        tris, normals = _thin(tris, normals, eye, max_faces)
+        base = base[None, :3]
 
     # light from the camera, tilted up and to the left so that silhouettes and creases read
     up_dir = np.array([0.0, 0.0, 1.0])
@@ -128,7 +139,7 @@ def render(
     light = eye + 0.5 * up_dir + 0.3 * left
     light /= np.linalg.norm(light)
     shade = AMBIENT + (1.0 - AMBIENT) * np.abs(normals @ light)
-    rgb = np.clip(np.asarray(color, dtype=np.float64)[None, :3] * shade[:, None], 0.0, 1.0)
+    rgb = np.clip(base * shade[:, None], 0.0, 1.0)
 
     collection = Poly3DCollection(
         tris,
@@ -159,6 +170,28 @@ def render(
     return ax
 
 
+def face_texture_colors(mesh, image=None) -> np.ndarray:
+    """(m, 3) RGB in [0, 1] per face: the texture sampled (nearest texel) at each face's UV centroid, for
+    `render`'s per-face ``color``. ``mesh``: a qemjax result with UVs (``uv``, ``wedge_faces``,
+    ``material``) or a trimesh with `TextureVisuals`; ``image``: a PIL image (default: the material's)."""
+    if getattr(mesh, "wedge_faces", None) is not None:
+        uv, corners, material = mesh.uv, np.asarray(mesh.wedge_faces), mesh.material
+    else:
+        uv, corners, material = mesh.visual.uv, np.asarray(mesh.faces), getattr(mesh.visual, "material", None)
+    if uv is None:
+        raise ValueError("the mesh carries no UVs")
+    if image is None:
+        image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
+    if image is None:
+        raise ValueError("no texture image: give image=")
+    tex = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+    h, w = tex.shape[:2]
+    c = np.asarray(uv, np.float64)[corners].mean(axis=1)
+    x = np.clip((c[:, 0] % 1.0) * w, 0, w - 1).astype(int)
+    y = np.clip((1.0 - c[:, 1] % 1.0) * h, 0, h - 1).astype(int)  # v points up, image rows down
+    return tex[y, x]
+
+
 def render_pair(before, after, path=None, *, titles=None, figsize=(10, 5), dpi: int = 120, **kwargs):
     """Draw two meshes side by side (titled with their face counts); returns the Figure.
 
@@ -167,11 +200,14 @@ def render_pair(before, after, path=None, *, titles=None, figsize=(10, 5), dpi: 
     """
     plt, _ = _pyplot()
     meshes = [_as_arrays(before), _as_arrays(after)]
+    colors = kwargs.pop("colors", None)  # optional (before, after) per-face colours
     if titles is None:
         titles = [f"before: {len(meshes[0][1]):,} faces", f"after: {len(meshes[1][1]):,} faces"]
     fig = plt.figure(figsize=figsize, dpi=dpi)
     for i, (mesh, title) in enumerate(zip(meshes, titles)):
         ax = fig.add_subplot(1, 2, i + 1, projection="3d")
+        if colors is not None:
+            kwargs["color"] = colors[i]
         render(mesh, ax, title=title, **kwargs)
     fig.tight_layout()
     if path is not None:

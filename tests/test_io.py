@@ -90,23 +90,42 @@ def _colored(kind):
 @pytest.mark.parametrize("kind,dropped", [("vertex", ["vertex_colors"]), ("face", ["face_colors"]),
                                           ("texture", ["uv", "material"])])
 def test_dropped_attributes_warn_once_and_are_recorded(kind, dropped):
+    """attributes=None keeps positions only: what the mesh carried is named once."""
     with pytest.warns(UserWarning, match="which qemjax does not keep") as record:
-        r = qemjax.simplify(_colored(kind), target_faces=40)
+        r = qemjax.simplify(_colored(kind), target_faces=40, attributes=None)
     assert len(record) == 1 and ", ".join(dropped) in str(record[0].message)
-    assert r.stats["dropped"] == dropped
+    assert r.stats["dropped"] == dropped and r.uv is None and r.colors is None
+
+
+@pytest.mark.parametrize("kind,kept", [("vertex", "colors"), ("texture", "uv")])
+def test_attributes_kept_by_default(kind, kept):
+    """By default UVs (with their material) and vertex colours are kept, without a warning; face colours
+    are still dropped with one."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = qemjax.simplify(_colored(kind), target_faces=40)
+    assert getattr(r, kept) is not None and r.stats["dropped"] == []
+    if kind == "texture":
+        assert np.array_equal(r.material.diffuse, [200, 10, 10, 255])
+        assert r.to_trimesh().visual.kind == "texture"
+    with pytest.warns(UserWarning, match="face_colors"):
+        qemjax.simplify(_colored("face"), target_faces=40)
 
 
 def test_dropped_attributes_from_files(tmp_path):
-    """A textured GLB (UVs and a material) and a PLY with vertex colours: named in the warning."""
+    """A textured GLB (UVs and a material) and a PLY with vertex colours: named in the warning when not
+    kept (attributes=None, and `load`, which reads positions and faces only); kept by default."""
     glb, ply = tmp_path / "t.glb", tmp_path / "c.ply"
     _colored("texture").export(glb)
     _colored("vertex").export(ply)
     with pytest.warns(UserWarning, match=r"t\.glb carries uv, material"):
-        r = qemjax.simplify(glb, target_faces=40)
+        r = qemjax.simplify(glb, target_faces=40, attributes=None)
     assert r.stats["dropped"] == ["uv", "material"]
     with pytest.warns(UserWarning, match=r"c\.ply carries vertex_colors"):
         m = qemjax.load(ply)
     assert m.faces.shape == (80, 3)
+    assert qemjax.simplify(glb, target_faces=40).uv is not None
+    assert qemjax.simplify(ply, target_faces=40).colors is not None
 
 
 def test_plain_meshes_warn_nothing(tmp_path):
@@ -120,8 +139,13 @@ def test_plain_meshes_warn_nothing(tmp_path):
 
 
 def test_spot_uvs_are_reported():
-    """spot.obj has vt lines (UVs) and no mtllib: trimesh's placeholder material is not reported."""
+    """spot.obj has vt lines (UVs) and no mtllib: trimesh's placeholder material is not reported; the UVs
+    are kept by default and named in the warning with attributes=None."""
     p = shared_mesh("spot/spot.obj")
     with pytest.warns(UserWarning, match="spot.obj carries uv,") as record:
-        r = qemjax.simplify(p, ratio=0.5)
+        r = qemjax.simplify(p, ratio=0.5, attributes=None)
     assert len(record) == 1 and r.stats["dropped"] == ["uv"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = qemjax.simplify(p, ratio=0.5)
+    assert r.stats["dropped"] == [] and r.uv is not None and r.material is None

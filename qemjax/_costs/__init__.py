@@ -11,6 +11,7 @@ from .base import CostModel as CostModel
 from .base import MeshInput as MeshInput
 from .base import MeshView as MeshView
 from .area import Area
+from .attributes import AttributeQEM
 from .area_term import AreaTerm
 from .esqem import ESQEM
 from .qem import QEM
@@ -40,12 +41,23 @@ def register(cls: type[CostModel]) -> type[CostModel]:
     return cls
 
 
-def build(method: str, settings: dict, terms: dict) -> CostModel:
+# a method's model over appearance attributes, built when `simplify` keeps attributes with a weight > 0
+WITH_ATTRIBUTES: dict[str, type[CostModel]] = {"qem": AttributeQEM}
+
+
+def build(method: str, settings: dict, terms: dict, weights=None) -> CostModel:
     """The model for ``method`` with the settings it has fields for (others are not its business), wrapped
-    by each term of TERMS whose value in ``terms`` is non-zero."""
+    by each term of TERMS whose value in ``terms`` is non-zero. ``weights``: per attribute channel (m,),
+    for the method's model over appearance attributes (`WITH_ATTRIBUTES`); None: positions only."""
     if method not in REGISTRY:
         raise ValueError(f"unknown method {method!r}; choose from {methods()}")
     cls = REGISTRY[method]
+    if weights is not None:
+        if method not in WITH_ATTRIBUTES:
+            raise ValueError(f"method {method!r} has no cost model over attributes; "
+                             f"choose from {tuple(WITH_ATTRIBUTES)}")
+        cls = WITH_ATTRIBUTES[method]
+        settings = dict(settings, channels=len(weights), weights=tuple(float(w) for w in weights))
     fields = {f.name for f in dataclasses.fields(cls)}
     model = cls(**{k: v for k, v in settings.items() if k in fields})
     for key, value in terms.items():

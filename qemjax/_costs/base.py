@@ -37,13 +37,15 @@ import numpy as np
 class MeshInput(NamedTuple):
     """What `init_state` and `refresh` see: positions V (n,3) float32 at unit extent, faces F (m,3) int64,
     boundary edges (B,2) directed as in their face and those faces (B,), feature edges (k,2) or None, and
-    (mean face area, mean squared edge length) at unit extent, summed on the host (or None)."""
+    (mean face area, mean squared edge length) at unit extent, summed on the host (or None), and the
+    attribute values at each face corner (m,3,k) for a model over appearance attributes (else None)."""
 
     V: np.ndarray
     F: np.ndarray
     boundary: tuple
     feature_edges: Any
     means: Any = None
+    attributes: Any = None
 
 
 @dataclasses.dataclass(frozen=True)

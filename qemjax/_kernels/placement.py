@@ -129,6 +129,12 @@ def _place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
     """``placement='optimal'`` on component lists: q1, q2 (10 arrays), p1, p2 (3 arrays). Returns
     (x, cost, branch, q, u) with x and u component lists, q the merged quadric in the midpoint's frame."""
     mid, half, q = _merged(q1, q2, p1, p2)
+    return place_merged(mid, half, q, endpoints_only, cond_eps, max_shift)
+
+
+def place_merged(mid, half, q, endpoints_only, cond_eps, max_shift):
+    """`_place` for a quadric q already merged in the midpoint's frame (component lists; mid, half: the
+    midpoint and half the edge vector). The attribute model (`_costs.attributes`) places with it."""
     a, b_, c, d, e, f = q[:6]
     bv, cc = q[6:9], q[9]
     # det(A) and adj(A)·b by cofactors
@@ -168,6 +174,11 @@ def _place(q1, q2, p1, p2, endpoints_only, cond_eps, max_shift):
 def _place_rank(q1, q2, p1, p2, endpoints_only, rank_eps, max_shift):
     """``placement='rank'``: as `_place`, with the truncated solve."""
     mid, half, q = _merged(q1, q2, p1, p2)
+    return place_rank_merged(mid, half, q, endpoints_only, rank_eps, max_shift)
+
+
+def place_rank_merged(mid, half, q, endpoints_only, rank_eps, max_shift):
+    """`_place_rank` for a quadric q already merged in the midpoint's frame (as `place_merged`)."""
     bv, cc = q[6:9], q[9]
     u_opt, rank = _truncated_solve(q, rank_eps)
     full = rank == 3

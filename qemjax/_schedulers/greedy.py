@@ -99,10 +99,10 @@ class _Queue:
 
 
 def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
-        options: Options, progress=None):
+        options: Options, progress=None, wedges=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Same return as
-    `parallel.run`."""
+    `parallel.run` (``wedges``: as there)."""
     n = len(V)
     manifold = options.preserve_topology
     params = model.kernel_params()
@@ -123,7 +123,11 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         if plist:
             pa = np.array(plist, np.int64)
             d = VQ[pa[:, 0], :3] - VQ[pa[:, 1], :3]
-            q.push(plist, start_price(model, VQd, pa, params, faces, n)(), np.einsum("ij,ij->i", d, d))
+            priced = start_price(model, VQd, pa, params, faces, n)()
+            if wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
+                priced = priced._replace(x=priced.x.copy(), cost=priced.cost.copy())
+                wedges.constrain(faces, VQ, pa, priced.x, priced.cost)  # refused ones: at the pop
+            q.push(plist, priced, np.einsum("ij,ij->i", d, d))
 
     ranked = model.rank_weights is not None
     reweights, history_parts = [], []
@@ -177,6 +181,9 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         if manifold and options.keep_parts and len(fids) == 0:  # its faces are all its part has left
             block((a, b), outcome.PART)
             continue
+        if wedges is not None and not wedges.allowed(faces, VQ, a, b, x):
+            block((a, b), outcome.SEAM)
+            continue
         if len(fids) and flips.flips_host(VQ, N0, before, fids, corner, x, options.cos_max):
             block((a, b), outcome.FLIP)
             continue
@@ -186,6 +193,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         if len(drop) and (manifold or faces.count - nshared - len(drop) < target_faces):
             block((a, b), outcome.COINCIDENT if manifold else BUDGET)
             continue
+        if wedges is not None:  # the corners' wedges, before the vertex moves and the faces relink
+            wedges.contract(faces, VQ, a, b, x)
         merged = start_merge(model, VQd, P, x[None], params)()
         row = np.concatenate([x[None], merged], 1)
         VQ[a] = row[0]

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-TOPOLOGY, COINCIDENT, FLIP, PART = 1, 2, 3, 4
-REJECT = {TOPOLOGY: "topology", COINCIDENT: "coincident", FLIP: "flip", PART: "vanishing_part"}
+TOPOLOGY, COINCIDENT, FLIP, PART, SEAM = 1, 2, 3, 4, 5
+REJECT = {TOPOLOGY: "topology", COINCIDENT: "coincident", FLIP: "flip", PART: "vanishing_part",
+          SEAM: "seam"}  # seam: would move a seam vertex off its seam or merge wedges (`_wedges`)
 STOPS = ("target", "max_error", "blocked", "unchanged")
 
 

@@ -179,8 +179,9 @@ class _Run:
     """One simplification: the mesh state that lives across rounds, and the stages of a round."""
 
     def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges,
-                 part_scale=None, params=None):
+                 part_scale=None, params=None, wedges=None):
         self.n, m = len(V), len(F)
+        self.wedges = wedges  # a `_wedges.Tracker` when attributes are kept (else None)
         self.part_scale = part_scale
         self.model, self.options, self.progress = model, options, progress
         self.params = model.kernel_params() if params is None else params
@@ -280,6 +281,12 @@ class _Run:
             st.parts = follow(prev.parts)
             if len(parts):  # a model with cost parts
                 put_rows(st.parts, d, np.ascontiguousarray(parts.T))
+        if self.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
+            d = np.arange(len(st.E)) if prev is None else d
+            x, c = st.x[d], st.cost[d].copy()
+            seam = self.wedges.constrain(self.faces, self.VQ, _take(st.E, d), x, c)
+            st.x[d], st.cost[d] = x, c
+            st.bad[d[seam]] = outcome.SEAM
         self.timer.add("kernels_s", time.perf_counter() - t0)
 
     def rank(self, st: RoundState, valid: np.ndarray):
@@ -355,6 +362,12 @@ class _Run:
                 why[np.bincount(owner, minlength=len(P)) == 0] = outcome.PART
             why[~linked] = outcome.TOPOLOGY
             at = (apex, np.take(free_rows, r), owner_r)
+        if self.wedges is not None:
+            xs = _take(st.x, idx)
+            seam = np.take(self.wedges.multi, P[:, 0]) | np.take(self.wedges.multi, P[:, 1])
+            for i in np.flatnonzero((why == 0) & seam):  # the others are always allowed
+                if not self.wedges.allowed(self.faces, self.VQ, int(P[i, 0]), int(P[i, 1]), xs[i]):
+                    why[i] = outcome.SEAM
         found.append((idx, kept, dead, at))
         flip = flipped()
         why[(why == 0) & flip] = outcome.FLIP
@@ -387,6 +400,8 @@ class _Run:
         if self.incremental:  # the edge update runs on the worker while this thread relinks the faces
             edges_next = submit(topo.contract_edges, st.E, st.ecount, pairs[:, 0], pairs[:, 1], apex, n,
                                 st.deg, rows=erows)
+        if self.wedges is not None:  # the corners' wedges, before the faces are relinked
+            self.wedges.contract_many(faces, self.VQ, P, xs)
         faces.contract_touched(pairs, kept, dead)
         self.dead.append(dead)
         if not self.manifold:
@@ -461,15 +476,16 @@ class _Run:
 
 
 def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=None, edges=None,
-        part_scale=None):
+        part_scale=None, wedges=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64 faces, extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be
     0); ``edges``: `topo.edges` of F when the caller has it; ``part_scale`` (n,): (extent of each vertex's
     part / the whole extent)², which scales ``Schedule.free_cost`` per pair (None: one part).
     Returns (V, S, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,) marks
     the survivors, history = (pairs (k,2), positions (k,3), costs (k,)) in contraction order; info holds
-    the counts, the stage times, ``stop_reason`` and ``blocked_by``."""
-    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale)
+    the counts, the stage times, ``stop_reason`` and ``blocked_by``. ``wedges``: a `_wedges.Tracker`
+    (attributes kept: the seam rule applies and its corners are updated), or None."""
+    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges)
     stop, blocked = r.run()
     hist = _history_arrays([h for _, h in r.history])
     removed_at, coincident, rounds = _removal_steps(r.faces.F, r.history, r.dead, r.dropped)

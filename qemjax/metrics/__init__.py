@@ -9,6 +9,10 @@ smaller than float32 noise). Meshes may be `trimesh.Trimesh`, ``(vertices, faces
     >>> row["hausdorff_rel"], row["rms_rel"], row["genus"], row["time_s"]
 """
 
+from ._appearance import attribute_deviation as attribute_deviation
+from ._appearance import charts as charts
+from ._appearance import seam_report as seam_report
+from ._appearance import uv_chart_integrity as uv_chart_integrity
 from ._distance import surface_distance as surface_distance
 from ._evaluate import evaluate as evaluate
 from ._pointtri import point_triangle_distance as point_triangle_distance
@@ -19,6 +23,10 @@ from ._topology import topology_report as topology_report
 
 __all__ = [
     "area_volume",
+    "attribute_deviation",
+    "charts",
+    "seam_report",
+    "uv_chart_integrity",
     "evaluate",
     "min_angle_histogram",
     "point_triangle_distance",

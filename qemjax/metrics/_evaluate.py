@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+from ._appearance import KINDS, attribute_deviation, corner_values
 from ._common import as_mesh
 from ._distance import DEFAULT_SAMPLES, _check_samples, _summary, two_way
 from ._quality import area_volume, triangle_quality
@@ -43,6 +44,8 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         flipped_fraction; of the original: boundary_edges_before, non_manifold_edges_before,
         components_before, euler_before, closed_before, genus_before (genus without the non-manifold
         vertex check, which is skipped on the original for speed);
+      appearance, only when both meshes carry it (see `attribute_deviation`): uv_dev_rms, uv_dev_mean,
+        uv_dev_p95, uv_dev_max (texture-space deviation, UV units) and likewise color_dev_*;
       time_s: wall-clock seconds this evaluation took.
 
     Raises:
@@ -78,5 +81,9 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         **flipped_faces_report(s, o, nearest),
         **{f"{k}_before": topo_o[k] for k in _TOPOLOGY_BEFORE},
     }
+    for kind in KINDS:
+        if corner_values(original, kind) is not None and corner_values(simplified, kind) is not None:
+            row.update(attribute_deviation(original, simplified, kind=kind, n_samples=min(n_samples, 20_000),
+                                           seed=seed))
     row["time_s"] = time.perf_counter() - t0
     return row

@@ -1,0 +1,227 @@
+"""Appearance metrics: texture-space (UV) and colour deviation, and seam (chart) integrity.
+
+Meshes here carry per-corner attributes: a qemjax result (``uv`` / ``colors`` with ``wedge_faces``) or a
+`trimesh.Trimesh` whose visual holds UVs or vertex colours (its vertices split at seams, as trimesh loads
+OBJ and glTF files).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import as_mesh
+from ._nearest import nearest_triangles
+from ._topology import _components
+
+KINDS = ("uv", "color")
+
+
+def corner_values(mesh, kind: str):
+    """(vertices (n,3), faces (m,3), values (m,3,k)) of ``kind`` ('uv' or 'color', RGBA in [0, 1]) per face
+    corner, or None when the mesh does not carry it."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    wf = getattr(mesh, "wedge_faces", None)
+    if wf is not None:  # a qemjax result
+        vals = mesh.uv if kind == "uv" else mesh.colors
+        if vals is None:
+            return None
+        return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces), np.asarray(vals, np.float64)[wf]
+    visual = getattr(mesh, "visual", None)
+    if visual is None:
+        return None
+    if kind == "uv":
+        uv = getattr(visual, "uv", None) if getattr(visual, "kind", None) == "texture" else None
+        if uv is None or len(uv) != len(mesh.vertices):
+            return None
+        vals = np.asarray(uv, np.float64)
+    else:
+        if getattr(visual, "kind", None) != "vertex":
+            return None
+        vals = np.asarray(visual.vertex_colors, np.float64) / 255.0
+    F = np.asarray(mesh.faces)
+    return np.asarray(mesh.vertices, np.float64), F, vals[F]
+
+
+def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(q,3) barycentric coordinates of the point of each triangle (a, b, c: (q,3)) closest to p (q,3)
+    (Ericson, Real-Time Collision Detection, 5.1.5; degenerate triangles fall back to a vertex)."""
+    ab, ac, ap = b - a, c - a, p - a
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)  # noqa: E731
+    d1, d2 = dot(ab, ap), dot(ac, ap)
+    bp, cp = p - b, p - c
+    d3, d4 = dot(ab, bp), dot(ac, bp)
+    d5, d6 = dot(ab, cp), dot(ac, cp)
+    vc = d1 * d4 - d3 * d2
+    vb = d5 * d2 - d1 * d6
+    va = d3 * d6 - d5 * d4
+    q = len(p)
+    out = np.zeros((q, 3))
+    done = np.zeros(q, bool)
+
+    def put(mask, w):
+        nonlocal done
+        m = mask & ~done
+        out[m] = w[m] if w.ndim == 2 else w
+        done |= m
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        put((d1 <= 0) & (d2 <= 0), np.array([1.0, 0, 0]))
+        put((d3 >= 0) & (d4 <= d3), np.array([0, 1.0, 0]))
+        put((d6 >= 0) & (d5 <= d6), np.array([0, 0, 1.0]))
+        t = d1 / (d1 - d3)
+        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - t, t, 0 * t], 1))
+        t = d2 / (d2 - d6)
+        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - t, 0 * t, t], 1))
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([0 * t, 1 - t, t], 1))
+        den = va + vb + vc
+        v, w = vb / den, vc / den
+        inside = np.stack([1 - v - w, v, w], 1)
+    inside[~np.all(np.isfinite(inside), axis=1)] = [1.0, 0, 0]
+    put(np.ones(q, bool), inside)
+    return out
+
+
+def _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, tol):
+    """For samples with a deviation above ``tol``: the smallest deviation over the input faces that share a
+    (welded) vertex with the nearest one and lie within twice its distance (+1e-9 of the extent). Near a
+    seam the nearest input point may sit in the chart across it, whose UVs are elsewhere in the texture;
+    an equally near point on the sample's own side is the fair comparison. Returns the new deviations."""
+    bad = np.flatnonzero(d > tol)
+    if bad.size == 0:
+        return d
+    _, wid = np.unique(Vo, axis=0, return_inverse=True)
+    wid = wid.reshape(-1)
+    Fw = wid[Fo]
+    order = np.argsort(Fw.reshape(-1), kind="stable")
+    vf = order // 3  # faces by welded vertex
+    starts = np.searchsorted(Fw.reshape(-1)[order], np.arange(wid.max() + 2))
+    ext = float(np.max(np.ptp(Vo, axis=0)))
+    out = d.copy()
+    for i in bad:
+        cand = np.unique(np.concatenate([vf[starts[v]:starts[v + 1]] for v in Fw[fo[i]]]))
+        c = Vo[Fo[cand]]
+        p = np.repeat(pts[i][None], len(cand), 0)
+        wb = closest_barycentric(p, c[:, 0], c[:, 1], c[:, 2])
+        q = np.einsum("qk,qkj->qj", wb, c)
+        dd = np.linalg.norm(q - p, axis=1)
+        ok = dd <= 2 * dist[i] + 1e-9 * ext
+        if ok.any():
+            vals = np.einsum("qk,qkj->qj", wb[ok], Co[cand[ok]])
+            out[i] = min(d[i], float(np.min(np.linalg.norm(vals - val_s[i], axis=1))))
+    return out
+
+
+def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: int = 20_000,
+                        seed: int = 0, seam_tolerant: bool = True) -> dict:
+    """Texture-space (or colour) deviation of a simplification: sample points uniformly (by area) on the
+    simplified surface, interpolate its ``kind`` there, and compare with the original's value
+    interpolated at the nearest point of the original surface. Returns ``{kind}_dev_rms``, ``_mean``,
+    ``_p95`` and ``_max`` (UV units, where the texture is the unit square; colours: Euclidean RGBA
+    distance with channels in [0, 1]). ``seam_tolerant``: a sample whose nearest input point lies across
+    a seam is compared with the nearest point on the other side when that is within twice the distance
+    (`_seam_tolerant`; without it a sample a hair across a UV seam reads a deviation of up to the
+    texture's width). ValueError when either mesh lacks ``kind``."""
+    o, s = corner_values(original, kind), corner_values(simplified, kind)
+    if o is None or s is None:
+        raise ValueError(f"both meshes must carry {kind} (original: {o is not None}, simplified: {s is not None})")
+    Vs, Fs, Cs = s
+    Vo, Fo, Co = o
+    rng = np.random.default_rng(seed)
+    cs = Vs[Fs]  # (m,3,3)
+    area = np.linalg.norm(np.cross(cs[:, 1] - cs[:, 0], cs[:, 2] - cs[:, 0]), axis=1)
+    cum = np.cumsum(area)
+    face = np.minimum(np.searchsorted(cum, rng.random(n_samples) * cum[-1], side="right"), len(cum) - 1)
+    u, v = rng.random((2, n_samples))
+    fold = u + v > 1
+    u[fold], v[fold] = 1 - u[fold], 1 - v[fold]
+    w = np.stack([1 - u - v, u, v], 1)
+    pts = np.einsum("qk,qkj->qj", w, cs[face])
+    val_s = np.einsum("qk,qkj->qj", w, Cs[face])
+    mo = as_mesh((Vo, Fo), "original")
+    dist, fo = nearest_triangles(mo.corners, pts)
+    co = Vo[Fo[fo]]
+    wo = closest_barycentric(pts, co[:, 0], co[:, 1], co[:, 2])
+    val_o = np.einsum("qk,qkj->qj", wo, Co[fo])
+    d = np.linalg.norm(val_s - val_o, axis=1)
+    if seam_tolerant:
+        d = _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, 0.05 if kind == "uv" else 0.1)
+    return {f"{kind}_dev_rms": float(np.sqrt(np.mean(d * d))), f"{kind}_dev_mean": float(d.mean()),
+            f"{kind}_dev_p95": float(np.quantile(d, 0.95)), f"{kind}_dev_max": float(d.max())}
+
+
+def charts(faces: np.ndarray, wedge_faces: np.ndarray) -> np.ndarray:
+    """(m,) int64 chart id of each face: faces are in one chart when they share an edge whose two
+    endpoints have the same wedges in both (so a UV seam or colour discontinuity separates charts)."""
+    F, W = np.asarray(faces, np.int64), np.asarray(wedge_faces, np.int64)
+    m = len(F)
+    k0, k1 = [0, 1, 2], [1, 2, 0]
+    u, v = F[:, k0].reshape(-1), F[:, k1].reshape(-1)
+    wu, wv = W[:, k0].reshape(-1), W[:, k1].reshape(-1)
+    swap = u > v
+    lo, hi = np.where(swap, v, u), np.where(swap, u, v)
+    wlo, whi = np.where(swap, wv, wu), np.where(swap, wu, wv)
+    key = np.stack([lo, hi, wlo, whi], 1)
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    fid = np.repeat(np.arange(m), 3)
+    order = np.argsort(inv, kind="stable")
+    same = inv[order][1:] == inv[order][:-1]
+    i, j = fid[order][1:][same], fid[order][:-1][same]
+    return _components(m, i, j)[1].astype(np.int64)
+
+
+def seam_report(result, input_wedge_faces: np.ndarray | None = None) -> dict:
+    """Whether a qemjax result kept its UV / colour charts: each output face continues an input face
+    (``source_faces``); an output chart whose faces come from two or more input charts has a face that
+    spans a seam. Returns charts_in, charts_out, mixed_charts (output charts spanning input charts:
+    0 means the seams held) and seam_faces_out (faces in those charts)."""
+    wf_in = getattr(result, "input_wedge_faces", None) if input_wedge_faces is None else input_wedge_faces
+    if result.wedge_faces is None or wf_in is None:
+        raise ValueError("seam_report needs a result with attributes (wedge_faces and input_wedge_faces)")
+    cin = charts(result.input_faces, wf_in)
+    cout = charts(result.faces, result.wedge_faces)
+    src = cin[result.source_faces]
+    pairs = np.unique(np.stack([cout, src], 1), axis=0)
+    per_out = np.bincount(pairs[:, 0], minlength=int(cout.max()) + 1 if len(cout) else 0)
+    mixed = np.flatnonzero(per_out > 1)
+    return {"charts_in": int(len(np.unique(cin))), "charts_out": int(len(np.unique(cout))),
+            "mixed_charts": int(len(mixed)), "seam_faces_out": int(np.isin(cout, mixed).sum())}
+
+
+def _uv_charts_of_mesh(mesh):
+    """(welded faces, per-face chart ids, corner UVs (m,3,2)) of a mesh carrying UVs (`corner_values`)."""
+    V, F, C = corner_values(mesh, "uv")
+    if getattr(mesh, "wedge_faces", None) is not None:
+        return F, charts(F, mesh.wedge_faces), C
+    _, wid = np.unique(V, axis=0, return_inverse=True)
+    return wid.reshape(-1)[F], charts(wid.reshape(-1)[F], F), C
+
+
+def uv_chart_integrity(original, simplified, *, eps: float = 1e-6, chunk: int = 256) -> dict:
+    """Seam integrity of any simplifier's textured output, from UVs alone: each output face's three corner
+    UVs and its UV centroid are located in the original's UV atlas (the input triangle containing each, with
+    ``eps`` slack); a face whose four points share no input chart spans a seam (or left the atlas).
+    Returns charts_in, charts_out (output faces joined across edges whose corners share UVs),
+    faces_spanning (count) and spanning_fraction."""
+    if corner_values(original, "uv") is None or corner_values(simplified, "uv") is None:
+        raise ValueError("both meshes must carry UVs")
+    _, cin, Cin = _uv_charts_of_mesh(original)
+    Fs, cout, Cs = _uv_charts_of_mesh(simplified)
+    q = np.concatenate([Cs, Cs.mean(axis=1, keepdims=True)], 1).reshape(-1, 2)  # (4m, 2)
+    a, b, c = Cin[:, 0], Cin[:, 1], Cin[:, 2]
+    v0, v1 = b - a, c - a
+    den = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
+    ok = np.abs(den) > 1e-300
+    sets = []
+    for s in range(0, len(q), chunk):
+        p = q[s:s + chunk, None, :] - a[None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = (p[..., 0] * v1[:, 1] - p[..., 1] * v1[:, 0]) / den
+            v = (v0[:, 0] * p[..., 1] - v0[:, 1] * p[..., 0]) / den
+        inside = ok & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps)
+        sets += [set(cin[np.flatnonzero(row)].tolist()) for row in inside]
+    per_face = [sets[4 * i:4 * i + 4] for i in range(len(Fs))]
+    spanning = sum(1 for pts in per_face if not set.intersection(*pts))
+    return {"charts_in": int(len(np.unique(cin))), "charts_out": int(len(np.unique(cout))),
+            "faces_spanning": int(spanning), "spanning_fraction": spanning / max(len(Fs), 1)}
