@@ -86,7 +86,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              prune: bool = False, regularize: float = 0.0, area_weight: float = 0.0,
              schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
-             split_factor: float | None = _costs.esqem.SPLIT_FACTOR) -> SimplifyResult:
+             split_factor: float | None = _costs.esqem.SPLIT_FACTOR, memoryless: bool = False,
+             volume_weight: float = 0.0) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -143,6 +144,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         b × the mean edge length at its midpoint (default 4/3, the paper's); None: no splitting. With a
         face target the result still has exactly that many faces: it simplifies further first, by as many
         faces as splitting will add (``qemjax._split``; ``stats["split"]``).
+    memoryless: with ``method='qem'``, rebuild the quadrics around each contraction from the current faces
+        (plus boundary planes) instead of summing the merged vertices' quadrics (Lindstrom & Turk 1998's
+        memoryless quadrics; ``qemjax._costs.memoryless``). Costs then measure each contraction's change
+        of the current surface: ``max_error`` bounds that, and ``vertex_error`` is 0. Not with
+        ``feature_edges``, ``regularize`` or ``area_weight``. README, "Placement and the ranking against
+        peers", has its ranks.
+    volume_weight: λ ≥ 0, with ``memoryless=True``: add λ·(the contraction's volume change / the mean
+        face area)² to its quadric before placing (Lindstrom & Turk's volume preservation as a penalty;
+        a squared length). 0 (default) adds nothing.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options.
@@ -155,6 +165,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     pair_threshold = _real("pair_threshold", pair_threshold)
     flip_angle = None if flip_angle is None else _real("flip_angle", flip_angle)
     area_weighted, weld = _flag("area_weighted", area_weighted), _flag("weld", weld)
+    memoryless = _flag("memoryless", memoryless)
     progress, prune = _flag("progress", progress), _flag("prune", prune)
     if preserve_topology is not None:
         preserve_topology = _flag("preserve_topology", preserve_topology)
@@ -165,8 +176,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                                       area_power=_real("area_power", area_power), boundary_weight=
                                       boundary_weight, curvature_weight=_real("curvature_weight", curvature_weight),
                                       split_factor=split_factor if split_factor is None else
-                                      _real("split_factor", split_factor)),
+                                      _real("split_factor", split_factor), memoryless=memoryless,
+                                      volume_weight=_real("volume_weight", volume_weight)),
                          dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
+    if (memoryless or volume_weight) and not getattr(model, "memoryless", False):
+        raise ValueError(f"memoryless=True (and volume_weight, which needs it) works with method='qem' only, "
+                         f"not with {method!r} or with regularize / area_weight")
     split = getattr(model, "split_factor", None)  # None: the method does not split
     if schedule is None:
         schedule = Schedule()
