@@ -49,6 +49,8 @@ OPTIONS = {
     "split_factor": dict(type=str, metavar="B", help="with --method esqem, split edges longer than B × the "
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),
+    "memoryless": dict(action=argparse.BooleanOptionalAction),
+    "volume_weight": dict(type=float, metavar="LAMBDA"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
