@@ -87,7 +87,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
              split_factor: float | None = _costs.esqem.SPLIT_FACTOR, memoryless: bool = False,
-             volume_weight: float = 0.0) -> SimplifyResult:
+             volume_weight: float = 0.0, memory_weight: float = 0.0) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -147,12 +147,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     memoryless: with ``method='qem'``, rebuild the quadrics around each contraction from the current faces
         (plus boundary planes) instead of summing the merged vertices' quadrics (Lindstrom & Turk 1998's
         memoryless quadrics; ``qemjax._costs.memoryless``). Costs then measure each contraction's change
-        of the current surface: ``max_error`` bounds that, and ``vertex_error`` is 0. Not with
+        of the current surface: ``max_error`` bounds that; ``vertex_error`` stays the summed quadric's
+        error (kept alongside, see ``memory_weight``). Not with
         ``feature_edges``, ``regularize`` or ``area_weight``. README, "Placement and the ranking against
         peers", has its ranks.
     volume_weight: λ ≥ 0, with ``memoryless=True``: add λ·(the contraction's volume change / the mean
         face area)² to its quadric before placing (Lindstrom & Turk's volume preservation as a penalty;
         a squared length). 0 (default) adds nothing.
+    memory_weight: μ ≥ 0, with ``memoryless=True``: price each pair with the rebuilt quadrics plus μ times
+        the summed (Garland–Heckbert) ones, which the run keeps alongside. 0 (default): memoryless alone.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options.
@@ -177,10 +180,11 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                                       boundary_weight, curvature_weight=_real("curvature_weight", curvature_weight),
                                       split_factor=split_factor if split_factor is None else
                                       _real("split_factor", split_factor), memoryless=memoryless,
-                                      volume_weight=_real("volume_weight", volume_weight)),
+                                      volume_weight=_real("volume_weight", volume_weight),
+                                      memory_weight=_real("memory_weight", memory_weight)),
                          dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
-    if (memoryless or volume_weight) and not getattr(model, "memoryless", False):
-        raise ValueError(f"memoryless=True (and volume_weight, which needs it) works with method='qem' only, "
+    if (memoryless or volume_weight or memory_weight) and not getattr(model, "memoryless", False):
+        raise ValueError(f"memoryless=True (and volume_weight, memory_weight, which need it) works with method='qem' only, "
                          f"not with {method!r} or with regularize / area_weight")
     split = getattr(model, "split_factor", None)  # None: the method does not split
     if schedule is None:

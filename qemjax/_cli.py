@@ -51,6 +51,7 @@ OPTIONS = {
                          shown="4/3"),
     "memoryless": dict(action=argparse.BooleanOptionalAction),
     "volume_weight": dict(type=float, metavar="LAMBDA"),
+    "memory_weight": dict(type=float, metavar="MU"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",

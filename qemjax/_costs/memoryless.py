@@ -12,7 +12,12 @@ Weights are those of the initial quadrics (`quadrics.vertex_quadrics`): each fac
 (area / mean area)^p (p = ``area_power``; p = 0 without ``area_weighted``), each boundary plane by
 ``boundary_weight``·(|e|² / mean |e|²)^p, with the means of the *input* (at unit extent) so that weights
 rebuilt late in a run compare with those built early. The two means ride along in two extra state
-columns (constant per run), which is why a memoryless QEM row is 12 floats wide instead of 10.
+columns (constant per run).
+
+Memory (``memory_weight`` μ ≥ 0): each vertex also keeps the Garland–Heckbert quadric (the history, summed
+by `merge` as QEM does), and a pair is priced with Q_current + μ·Q_history. μ = 0 is the memoryless cost
+alone; μ > 0 adds back a share of the distance to the input's planes, which bounds how far thin parts can
+drift (a purely memoryless run measures each step against the current surface only).
 
 Volume (``volume_weight`` λ ≥ 0, Lindstrom & Turk's volume preservation as a penalty): each vertex also
 carries g(v) = Σ ½(c1 − v)×(c2 − v) over the live faces [v, c1, c2] around it (their area-weighted
@@ -23,10 +28,11 @@ merged quadric before placing: a squared length, like the quadric's costs. λ = 
 
 The rebuild runs on the host in float64 numpy (`current_quadrics`), for the vertices the schedulers name
 after each round (parallel) or contraction (greedy): one batched pass over the live faces around them.
-A memoryless row is [position (3), quadric (10), g (3), input mean face area, input mean squared edge
-length] (`GCOLS`, `MCOLS`): 15 floats of state instead of QEM's 10. The quadric's stored error (its constant term) is 0 at a vertex after a rebuild: with memoryless
-quadrics, ``vertex_error`` is not a distance to the input, and ``max_error`` bounds each contraction's
-own cost.
+A memoryless row is [position (3), history quadric (10), current quadric (10), g (3), input mean face
+area, input mean squared edge length] (`CCOLS`, `GCOLS`, `MCOLS`): 25 floats of state instead of QEM's 10.
+The history quadric sits where QEM keeps its quadric, so `vertex_error` is still the summed quadric's
+error at the vertex (a squared distance to the input's planes); ``max_error`` bounds the cost that
+ranks (Q_current + μ·Q_history + the volume term).
 """
 from __future__ import annotations
 
@@ -39,9 +45,10 @@ from .._incidence import FaceLists
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 
-WIDTH = 15  # state floats of a memoryless row (after the position)
-GCOLS = (13, 14, 15)  # columns of g(v) in a vertex row [position, quadric, g, means]
-MCOLS = (16, 17)  # columns of the input's mean face area and mean squared edge length
+WIDTH = 25  # state floats of a memoryless row (after the position)
+CCOLS = 13  # first column of the current quadric in a vertex row [position, history, current, g, means]
+GCOLS = (23, 24, 25)  # columns of g(v)
+MCOLS = (26, 27)  # columns of the input's mean face area and mean squared edge length
 
 
 def _power(r: np.ndarray, p: float) -> np.ndarray:
@@ -107,34 +114,39 @@ def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area
     return np.concatenate([A, np.zeros((k, 4)), g], 1)
 
 
-def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means) -> np.ndarray:
-    """(k, WIDTH) float32 state rows of ``verts``: `current_quadrics` with the model's weights, then the
-    two input means."""
+def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means, history=None) -> np.ndarray:
+    """(k, WIDTH) float32 state rows of ``verts``: the history quadrics (k,10) (None: the current ones, as
+    at the start), `current_quadrics` with the model's weights, then the two input means."""
     verts = np.asarray(verts, np.int64)
     q = current_quadrics(P, faces, verts, area_power=float(model.area_power) if model.area_weighted else 0.0,
                          boundary_weight=float(model.boundary_weight), mean_area=float(means[0]),
                          mean_e2=float(means[1]))
-    return np.concatenate([q, np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))], 1).astype(DTYPE)
+    hist = q[:, :10] if history is None else np.asarray(history, np.float64)
+    return np.concatenate([hist, q, np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))],
+                          1).astype(DTYPE)
 
 
 def refresh_rows(model, view, verts) -> np.ndarray:
-    """`CostModel.refresh` of a memoryless QEM model: the rebuilt state rows of ``verts`` (the two input
-    means do not change)."""
+    """`CostModel.refresh` of a memoryless QEM model: the state rows of ``verts`` with the current quadric
+    and g rebuilt (the history quadric and the input means are kept)."""
     verts = np.asarray(verts, np.int64)
     if len(verts) == 0:
         return np.zeros((0, WIDTH), DTYPE)
     means = view.rows[verts[0], MCOLS[0]:MCOLS[1] + 1]
-    return state_rows(model, view.rows[:, :3], view.faces, verts, means)
+    return state_rows(model, view.rows[:, :3], view.faces, verts, means, history=view.rows[verts, 3:CCOLS])
 
 
 # -- the kernels ---------------------------------------------------------------------------------------
 
-def _with_volume(VS, pairs, volume_weight):
-    """Component lists (q1, q2, p1, p2) as `placement._gather_rows`, with λ·s(x)² (module docstring)
-    added to q1 (in v1's frame: s = G·u + g2·(p1 − p2), u = x − p1, G = g1 + g2)."""
+def _with_volume(VS, pairs, volume_weight, memory_weight):
+    """Component lists (q1, q2, p1, p2) as `placement._gather_rows`: each the current quadric plus μ times
+    the history, and λ·s(x)² (module docstring) added to q1 (in v1's frame: s = G·u + g2·(p1 − p2),
+    u = x − p1, G = g1 + g2)."""
     a = jnp.take(VS, pairs[:, 0], axis=0, mode="clip").T
     b = jnp.take(VS, pairs[:, 1], axis=0, mode="clip").T
-    q1, q2 = [a[3 + k] for k in range(10)], [b[3 + k] for k in range(10)]
+    mu = memory_weight
+    q1 = [a[CCOLS + k] + mu * a[3 + k] for k in range(10)]
+    q2 = [b[CCOLS + k] + mu * b[3 + k] for k in range(10)]
     p1, p2 = [a[k] for k in range(3)], [b[k] for k in range(3)]
     g1, g2 = [a[c] for c in GCOLS], [b[c] for c in GCOLS]
     ma = jnp.maximum(a[MCOLS[0]], jnp.finfo(a.dtype).tiny)
@@ -149,7 +161,7 @@ def _with_volume(VS, pairs, volume_weight):
 @kernel
 def price_optimal(VS, pairs, params):
     """`placement.place_pairs` for memoryless rows with the volume term: (5,K)."""
-    q1, q2, p1, p2 = _with_volume(VS, pairs, params["volume_weight"])
+    q1, q2, p1, p2 = _with_volume(VS, pairs, params["volume_weight"], params["memory_weight"])
     x, cost, branch, _, _ = placement._place(q1, q2, p1, p2, params["endpoints_only"], params["cond_eps"],
                                              params["max_shift"])
     return jnp.stack(x + [cost, branch.astype(cost.dtype)], 0)
@@ -158,7 +170,7 @@ def price_optimal(VS, pairs, params):
 @kernel
 def price_rank(VS, pairs, params):
     """`placement.place_pairs_rank` for memoryless rows with the volume term: (5,K)."""
-    q1, q2, p1, p2 = _with_volume(VS, pairs, params["volume_weight"])
+    q1, q2, p1, p2 = _with_volume(VS, pairs, params["volume_weight"], params["memory_weight"])
     x, cost, branch, _, _ = placement._place_rank(q1, q2, p1, p2, params["endpoints_only"],
                                                   params["rank_eps"], params["max_shift"])
     return jnp.stack(x + [cost, branch.astype(cost.dtype)], 0)
@@ -166,6 +178,7 @@ def price_rank(VS, pairs, params):
 
 @kernel
 def merge(VS, pairs, x):
-    """Q1 + Q2 at x (`refresh` replaces it at once) and the kept vertex's g and input means."""
+    """The history quadrics summed at x (QEM's merge: they sit in QEM's columns), then the kept vertex's
+    current quadric, g and input means (`refresh` rebuilds the first two at once)."""
     q = placement.merged_quadrics(VS, pairs, x)
-    return jnp.concatenate([q, jnp.take(VS[:, GCOLS[0]:MCOLS[1] + 1], pairs[:, 0], axis=0)], 1)
+    return jnp.concatenate([q, jnp.take(VS[:, CCOLS:MCOLS[1] + 1], pairs[:, 0], axis=0)], 1)

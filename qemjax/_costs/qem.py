@@ -7,8 +7,8 @@ quadric of the kept vertex, so only the pairs at it need a new price).
 
 With ``memoryless=True`` (`memoryless`): the quadrics of the vertices around each contraction are rebuilt
 from the current faces (`refresh`), so a contraction changes the quadrics of the kept vertex's whole
-1-ring: support ring, and five more state columns (`memoryless`); ``volume_weight`` adds Lindstrom &
-Turk's volume preservation as a penalty.
+1-ring: support ring, and 15 more state columns (`memoryless`); ``volume_weight`` adds Lindstrom &
+Turk's volume preservation as a penalty, ``memory_weight`` a share of the summed (history) quadric.
 """
 from __future__ import annotations
 
@@ -83,9 +83,10 @@ class QEM(CostModel):
     rank_eps: ``'rank'``: eigenvalues of A at or below rank_eps·λmax are truncated.
     max_shift: either solve is used when its solution lies within max_shift·|v2 − v1| of the midpoint.
     memoryless: rebuild the quadrics around each contraction from the current faces instead of summing
-        them (Lindstrom & Turk 1998; `memoryless`). Support becomes ring and the state 15 floats wide.
+        them (Lindstrom & Turk 1998; `memoryless`). Support becomes ring and the state 25 floats wide.
     volume_weight: λ ≥ 0, memoryless only: add λ·(volume change / mean face area)² to each pair's quadric
         before placing (`memoryless`); 0 adds nothing.
+    memory_weight: μ ≥ 0, memoryless only: price with Q_current + μ·Q_summed (0: memoryless alone).
     """
 
     name: ClassVar[str] = "qem"
@@ -99,6 +100,7 @@ class QEM(CostModel):
     max_shift: float = 2.0
     memoryless: bool = False
     volume_weight: float = 0.0
+    memory_weight: float = 0.0
 
     # the memoryless mode's differences, as properties (ESQEM overrides all three as class attributes)
     width = property(lambda self: ml.WIDTH if self.memoryless else quadrics.QSIZE)
@@ -116,8 +118,11 @@ class QEM(CostModel):
             raise ValueError(f"memoryless must be True or False, got {self.memoryless!r}")
         if not (self.volume_weight >= 0 and np.isfinite(self.volume_weight)):
             raise ValueError(f"volume_weight must be finite and >= 0, got {self.volume_weight}")
-        if self.volume_weight and not self.memoryless:
-            raise ValueError("volume_weight > 0 needs memoryless=True (the term reads the current faces)")
+        if not (self.memory_weight >= 0 and np.isfinite(self.memory_weight)):
+            raise ValueError(f"memory_weight must be finite and >= 0, got {self.memory_weight}")
+        if (self.volume_weight or self.memory_weight) and not self.memoryless:
+            raise ValueError("volume_weight or memory_weight > 0 needs memoryless=True (they weight terms of "
+                             "the memoryless cost)")
         if self.placement not in PLACEMENTS:
             raise ValueError(f"unknown placement {self.placement!r}; choose from {PLACEMENTS}")
         if not (self.boundary_weight >= 0 and np.isfinite(self.boundary_weight)):
@@ -143,6 +148,7 @@ class QEM(CostModel):
                   "max_shift": np.asarray(self.max_shift, DTYPE)}
         if self.memoryless:
             params["volume_weight"] = np.asarray(self.volume_weight, DTYPE)
+            params["memory_weight"] = np.asarray(self.memory_weight, DTYPE)
         return params
 
     @property
