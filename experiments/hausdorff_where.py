@@ -24,6 +24,8 @@ side holds the maximum: ``fwd`` original → simplified, ``bwd`` simplified → 
 
     python experiments/hausdorff_where.py
     python experiments/hausdorff_where.py --meshes cow beetle --ratios 0.1 --top 50
+    python experiments/hausdorff_where.py --option memoryless=true,memory_weight=0.3 \
+        --out experiments/results/hausdorff_where_mem03      # qemjax with these simplify keywords
 """
 from __future__ import annotations
 
@@ -47,6 +49,16 @@ RESULTS = HERE / "results"
 CLASSES = ("boundary", "crease", "thin", "elsewhere")
 CREASE_DEG = 60.0
 N_SAMPLES = 100_000
+
+
+def _value(text: str):
+    """An --option value: true/false as a bool, a number as a float, else the text."""
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def best_peers(path: Path) -> dict:
@@ -174,8 +186,11 @@ def main(argv=None) -> int:
     ap.add_argument("--top", type=int, default=100, help="samples with the largest distance to class")
     ap.add_argument("--peers-csv", default=str(RESULTS / "rank_peers.csv"),
                     help="rank_peers CSV naming the best peer (lowest Hausdorff) per case")
+    ap.add_argument("--option", default="", metavar="K=V,...",
+                    help="simplify keywords for qemjax (true/false: bools, numbers: floats)")
     ap.add_argument("--out", default=str(RESULTS / "hausdorff_where"), help="path without extension")
     args = ap.parse_args(argv)
+    options = {k: _value(v) for k, v in (kv.split("=", 1) for kv in filter(None, args.option.split(",")))}
     warnings.simplefilter("ignore")
     import qemjax
 
@@ -191,7 +206,7 @@ def main(argv=None) -> int:
         for ratio in args.ratios:
             target = max(4, int(round(ratio * mesh.n_faces)))
             peer = best.get((name, ratio))
-            res = qemjax.simplify((mesh.V, mesh.F), target_faces=target)
+            res = qemjax.simplify((mesh.V, mesh.F), target_faces=target, **options)
             outs = [("qemjax", np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64))]
             if peer is not None:
                 V2, F2, _ = bench_peers.run_peer(peer, mesh.V, mesh.F, target)
