@@ -174,7 +174,8 @@ def classify(V, F, V2, F2, feats, top: int) -> dict:
     diag = o.bbox_diagonal
     frac = {c: float(np.mean(flags[:, k])) for k, c in enumerate(CLASSES)}
     return dict(hausdorff_rel=float(d.max() / diag), side="bwd" if side[idx[0]] else "fwd",
-                top1="+".join(c for k, c in enumerate(CLASSES) if flags[0, k]), r_rel=r / diag, top1_thick_rel=float(thick[0] / diag),
+                top1="+".join(c for k, c in enumerate(CLASSES) if flags[0, k]), r_rel=r / diag,
+                top1_thick_rel=float(thick[0] / diag),
                 top1_boundary_rel=float(d_b[0] / diag), top1_crease_rel=float(d_c[0] / diag),
                 top_d_min_rel=float(d[idx[-1]] / diag), **{f"frac_{c}": frac[c] for c in CLASSES})
 
@@ -240,7 +241,7 @@ def flag_counts(rows: list[dict]) -> str:
 
 def report(rows: list[dict], top: int) -> str:
     lines = [f"| mesh | ratio | method | H (rel) | H / qemjax H | side | r (rel) | top-1 flags | top-{top} with flag: "
-             + " / ".join(CLASSES) + " |", "|---|---|---|---|---|---|---|---|---|"]  # fractions: flags (several may hold)
+             + " / ".join(CLASSES) + " |", "|---|---|---|---|---|---|---|---|---|"]  # a sample may have several
     own = {(r["mesh"], r["ratio"]): r for r in rows if r["role"] == "qemjax"}
     for r in rows:
         h0 = own[(r["mesh"], r["ratio"])]["hausdorff_rel"]

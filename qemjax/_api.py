@@ -148,9 +148,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (plus boundary planes) instead of summing the merged vertices' quadrics (Lindstrom & Turk 1998's
         memoryless quadrics; ``qemjax._costs.memoryless``). Costs then measure each contraction's change
         of the current surface: ``max_error`` bounds that; ``vertex_error`` stays the summed quadric's
-        error (kept alongside, see ``memory_weight``). Not with
-        ``feature_edges``, ``regularize`` or ``area_weight``. README, "Placement and the ranking against
-        peers", has its ranks.
+        error (kept alongside, see ``memory_weight``). Not with ``feature_edges``, ``regularize`` or
+        ``area_weight``. README, "Placement and the ranking against peers", has its ranks.
     volume_weight: λ ≥ 0, with ``memoryless=True``: add λ·(the contraction's volume change / the mean
         face area)² to its quadric before placing (Lindstrom & Turk's volume preservation as a penalty;
         a squared length). 0 (default) adds nothing.
@@ -184,8 +183,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                                       memory_weight=_real("memory_weight", memory_weight)),
                          dict(regularize=regularize, area_weight=_real("area_weight", area_weight)))
     if (memoryless or volume_weight or memory_weight) and not getattr(model, "memoryless", False):
-        raise ValueError(f"memoryless=True (and volume_weight, memory_weight, which need it) works with method='qem' only, "
-                         f"not with {method!r} or with regularize / area_weight")
+        raise ValueError("memoryless=True (and volume_weight, memory_weight, which need it) works with "
+                         f"method='qem' only, not with {method!r} or with regularize / area_weight")
     split = getattr(model, "split_factor", None)  # None: the method does not split
     if schedule is None:
         schedule = Schedule()

@@ -36,9 +36,8 @@ ranks (Q_current + μ·Q_history + the volume term).
 """
 from __future__ import annotations
 
-import numpy as np
-
 import jax.numpy as jnp
+import numpy as np
 
 from .._batching import DTYPE
 from .._incidence import FaceLists

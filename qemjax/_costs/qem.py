@@ -20,8 +20,8 @@ import numpy as np
 
 from .. import _topology as topo
 from .._arrays import face_normals, face_stats
-from .._incidence import FaceLists
 from .._batching import DTYPE, bucket, pad_rows
+from .._incidence import FaceLists
 from .._kernels import placement, quadrics
 from . import memoryless as ml
 from .base import CostModel, MeshInput
