@@ -9,6 +9,7 @@ faces, history).
     python experiments/ab_compare.py --rev HEAD --meshes armadillo-x16 --ratios 0.01 --repeats 7 --time
     python experiments/ab_compare.py --rev 02a1390 --meshes armadillo-x16 --ratios 0.01 --repeats 5 --time \
         --new-option placement=rank          # an option of the new code against the old default
+    (--new-option values: true/false are bools, numbers floats, anything else a string)
 """
 from __future__ import annotations
 
@@ -27,6 +28,16 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+
+
+def _value(text: str):
+    """A --new-option value: true/false as a bool, a number as a float, else the text."""
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def load_old(rev: str, as_name: str = "qemjax_old"):
@@ -65,7 +76,7 @@ def main():
     ap.add_argument("--new-option", nargs="*", default=[], metavar="KEY=VALUE",
                     help="keywords of simplify for the new code only (e.g. placement=rank)")
     args = ap.parse_args()
-    new_kw = dict(kv.split("=", 1) for kv in args.new_option)
+    new_kw = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.new_option)}
     import warnings
 
     warnings.simplefilter("ignore")  # above-target warnings of the mesh/ratio cases are not the point here

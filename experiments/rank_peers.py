@@ -20,6 +20,9 @@ instead of running them again (peers are deterministic; for studies of qemjax's 
 
     python experiments/rank_peers.py --variant base --variant bw1000:boundary_weight=1000 \
         --meshes beetle face --reuse-peers experiments/results/rank_peers.csv --out experiments/results/boundary
+
+``--summarize CSV`` prints the tables of an earlier run again (with the per-ratio counts and the
+Hausdorff comparison, added after some runs were written) without running anything.
 """
 from __future__ import annotations
 
@@ -120,6 +123,7 @@ def ranks(rows: list[dict], labels: list[str]) -> str:
                  "|---|---|---|---|---|---|---|---|"]
         n = n_rms = n_h = 0
         rr, hr = [], []
+        by_ratio = {}  # ratio -> [cases, rms <= best, H <= best]
         for mesh, ratio in cases:
             here = [r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio and r["status"] == "ok"]
             own = [r for r in here if r["method"] == f"qemjax-{label}"]
@@ -132,6 +136,8 @@ def ranks(rows: list[dict], labels: list[str]) -> str:
             a = float(o["rms_rel"]) / float(best_r["rms_rel"])
             b = float(o["hausdorff_rel"]) / float(best_h["hausdorff_rel"])
             n, n_rms, n_h = n + 1, n_rms + (a <= 1), n_h + (b <= 1)
+            c = by_ratio.setdefault(ratio, [0, 0, 0])
+            c[0], c[1], c[2] = c[0] + 1, c[1] + (a <= 1), c[2] + (b <= 1)
             rr.append(a)
             hr.append(b)
             lines.append(f"| {mesh} | {ratio:g} | {float(o['rms_rel']):.3e} | {float(best_r['rms_rel']):.3e} "
@@ -141,6 +147,9 @@ def ranks(rows: list[dict], labels: list[str]) -> str:
             lines += ["", f"{label}: rms <= best peer in {n_rms}/{n} cases; Hausdorff <= best peer in {n_h}/{n}; "
                       f"rms ratio median {np.median(rr):.3f}, max {max(rr):.3f}; "
                       f"Hausdorff ratio median {np.median(hr):.3f}, max {max(hr):.3f}", ""]
+            lines += [f"{label} per ratio: " + "; ".join(f"{ratio:g}: rms {c[1]}/{c[0]}, Hausdorff {c[2]}/{c[0]}"
+                                                        for ratio, c in sorted(by_ratio.items(), reverse=True)),
+                      ""]
         out.append("\n".join(lines))
     if len(labels) > 1 and cases:  # each variant against the first, per case
         base = labels[0]
@@ -151,12 +160,21 @@ def ranks(rows: list[dict], labels: list[str]) -> str:
                         and r["status"] == "ok"}
                 if f"qemjax-{base}" in pick and f"qemjax-{label}" in pick:
                     ch.append((float(pick[f"qemjax-{label}"]["rms_rel"]) / float(pick[f"qemjax-{base}"]["rms_rel"]),
-                               mesh, ratio))
+                               mesh, ratio,
+                               float(pick[f"qemjax-{label}"]["hausdorff_rel"])
+                               / float(pick[f"qemjax-{base}"]["hausdorff_rel"])))
             if ch:
                 worst = max(ch)
                 out.append(f"{label} rms / {base} rms: median {np.median([c[0] for c in ch]):.3f}, "
                            f"worst {worst[0]:.3f} ({worst[1]} @ {worst[2]:g}); "
                            f"{sum(c[0] > 1.03 for c in ch)} of {len(ch)} cases more than 3 % worse\n")
+                h_worse = [c for c in ch if c[3] > 1.03]
+                out.append(f"{label} Hausdorff / {base} Hausdorff: median {np.median([c[3] for c in ch]):.3f}; "
+                           f"{len(h_worse)} of {len(ch)} cases more than 3 % worse"
+                           + "".join(f"; at {ratio:g}: {sum(c[2] == ratio for c in h_worse)}"
+                                     for ratio in sorted({c[2] for c in ch}, reverse=True))
+                           + "; rms more than 3 % worse: "
+                           + (", ".join(f"{c[1]} @ {c[2]:g}" for c in ch if c[0] > 1.03) or "none") + "\n")
     return "\n".join(out)
 
 
@@ -169,7 +187,16 @@ def main(argv=None) -> int:
     ap.add_argument("--reuse-peers", nargs="?", const="", default=None, metavar="CSV",
                     help="peers' rows from this CSV (default: the --out one) instead of running them")
     ap.add_argument("--out", default=str(RESULTS / "rank_peers"), help="path without extension")
+    ap.add_argument("--summarize", default=None, metavar="CSV",
+                    help="only print the tables of an earlier run's CSV (its qemjax variants, in order; the "
+                         "first is the one the others are compared with); runs and writes nothing")
     args = ap.parse_args(argv)
+    if args.summarize:
+        with open(args.summarize) as fh:
+            old = list(csv.DictReader(fh))
+        labels = list(dict.fromkeys(r["method"][len("qemjax-"):] for r in old if r["method"].startswith("qemjax-")))
+        print(ranks(old, labels))
+        return 0
     import warnings
 
     warnings.simplefilter("ignore")

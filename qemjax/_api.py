@@ -90,7 +90,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              schedule: Schedule | None = None,
              curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
              split_factor: float | None = _costs.esqem.SPLIT_FACTOR, attributes="auto",
-             attribute_weights=None, texture=None) -> SimplifyResult:
+             attribute_weights=None, texture=None, memoryless: bool = False, volume_weight: float = 0.0,
+             memory_weight: float = 0.0) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -163,6 +164,18 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         only and attributes are interpolated along each contraction.
     texture: a path or PIL image: the texture of the UVs (for a file that names no material, e.g. an OBJ
         without mtllib); the result's material then holds it.
+    memoryless: with ``method='qem'``, rebuild the quadrics around each contraction from the current faces
+        (plus boundary planes) instead of summing the merged vertices' quadrics (Lindstrom & Turk 1998's
+        memoryless quadrics; ``qemjax._costs.memoryless``). Costs then measure each contraction's change
+        of the current surface: ``max_error`` bounds that; ``vertex_error`` stays the summed quadric's
+        error (kept alongside, see ``memory_weight``). Not with ``feature_edges``, ``regularize`` or
+        ``area_weight``; attributes are dropped with a warning. README, "Placement and the ranking
+        against peers", has its ranks.
+    volume_weight: λ ≥ 0, with ``memoryless=True``: add λ·(the contraction's volume change / the mean
+        face area)² to its quadric before placing (Lindstrom & Turk's volume preservation as a penalty;
+        a squared length). 0 (default) adds nothing.
+    memory_weight: μ ≥ 0, with ``memoryless=True``: price each pair with the rebuilt quadrics plus μ times
+        the summed (Garland–Heckbert) ones, which the run keeps alongside. 0 (default): memoryless alone.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options.
@@ -174,7 +187,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
                    preserve_topology=preserve_topology, flip_angle=flip_angle, weld=weld, progress=progress,
                    prune=prune, regularize=regularize, area_weight=area_weight, schedule=schedule,
                    curvature_weight=curvature_weight, split_factor=split_factor, attributes=attributes,
-                   attribute_weights=attribute_weights, texture=texture)
+                   attribute_weights=attribute_weights, texture=texture, memoryless=memoryless,
+                   volume_weight=volume_weight, memory_weight=memory_weight)
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     geo = _geometry(mesh, setup, stacklevel=3)
     job = _job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3)
@@ -330,12 +344,13 @@ class Job(NamedTuple):
 _SETUP_KEYS = ("method", "scheduler", "placement", "boundary_weight", "area_weighted", "area_power",
                "pair_threshold", "preserve_topology", "flip_angle", "weld", "progress", "prune", "regularize",
                "area_weight", "schedule", "curvature_weight", "split_factor", "attributes", "attribute_weights",
-               "texture")
+               "texture", "memoryless", "volume_weight", "memory_weight")
 
 
 def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area_power, pair_threshold,
            preserve_topology, flip_angle, weld, progress, prune, regularize, area_weight, schedule,
-           curvature_weight, split_factor, attributes="auto", attribute_weights=None, texture=None) -> Setup:
+           curvature_weight, split_factor, attributes="auto", attribute_weights=None, texture=None,
+           memoryless=False, volume_weight=0.0, memory_weight=0.0) -> Setup:
     """Check every option that does not need the mesh; ValueError naming the bad one."""
     if scheduler not in SCHEDULERS:
         raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS}")
@@ -344,6 +359,7 @@ def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area
     flip_angle = None if flip_angle is None else _real("flip_angle", flip_angle)
     area_weighted, weld = _flag("area_weighted", area_weighted), _flag("weld", weld)
     progress, prune = _flag("progress", progress), _flag("prune", prune)
+    memoryless = _flag("memoryless", memoryless)
     if preserve_topology is not None:
         preserve_topology = _flag("preserve_topology", preserve_topology)
     if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
@@ -351,9 +367,14 @@ def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area
     settings = dict(placement=placement, area_weighted=area_weighted,
                     area_power=_real("area_power", area_power), boundary_weight=boundary_weight,
                     curvature_weight=_real("curvature_weight", curvature_weight),
-                    split_factor=split_factor if split_factor is None else _real("split_factor", split_factor))
+                    split_factor=split_factor if split_factor is None else _real("split_factor", split_factor),
+                    memoryless=memoryless, volume_weight=_real("volume_weight", volume_weight),
+                    memory_weight=_real("memory_weight", memory_weight))
     terms = dict(regularize=regularize, area_weight=_real("area_weight", area_weight))
     model = _costs.build(method, settings, terms)
+    if (memoryless or volume_weight or memory_weight) and not getattr(model, "memoryless", False):
+        raise ValueError("memoryless=True (and volume_weight, memory_weight, which need it) works with "
+                         f"method='qem' only, not with {method!r} or with regularize / area_weight")
     kind_weights = _wedges.check_weights(attribute_weights)
     if schedule is None:
         schedule = Schedule()
@@ -393,9 +414,11 @@ def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_er
     """The face target, the model's initial vertex state and the scheduler's options for one run.
     ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch."""
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
-    if attrs is not None and (setup.method != "qem" or setup.split is not None):
+    if attrs is not None and (setup.method != "qem" or setup.split is not None or
+                              getattr(model, "memoryless", False)):
         warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
-        _wedges.warn_unsupported(warn, setup.method, stacklevel=stacklevel)
+        what = "memoryless=True" if getattr(model, "memoryless", False) else f"method={setup.method!r}"
+        _wedges.warn_unsupported(warn, what, stacklevel=stacklevel)
         report["dropped"] = report["dropped"] + warn
         attrs = None
     corner_values = channel_weights = None

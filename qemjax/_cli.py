@@ -56,6 +56,9 @@ OPTIONS = {
                               "attributes interpolated", shown="0.03 for each kind"),
     "texture": dict(metavar="IMAGE", help="the texture image of the input's UVs (for an OBJ without mtllib); "
                     "written beside an OBJ output and packed into a GLB", shown="none"),
+    "memoryless": dict(action=argparse.BooleanOptionalAction),
+    "volume_weight": dict(type=float, metavar="LAMBDA"),
+    "memory_weight": dict(type=float, metavar="MU"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",

@@ -318,6 +318,7 @@ def output(C: np.ndarray, values: np.ndarray, F: np.ndarray, fids: np.ndarray, i
     return inv.reshape(-1, 3).astype(np.int64), wv, values[wid]
 
 
-def warn_unsupported(kinds, method: str, stacklevel: int):
-    warnings.warn(f"method={method!r} does not keep appearance attributes ({', '.join(kinds)}): the result "
+def warn_unsupported(kinds, what: str, stacklevel: int):
+    """Warn that ``what`` (e.g. "method='esqem'") drops the attributes ``kinds``."""
+    warnings.warn(f"{what} does not keep appearance attributes ({', '.join(kinds)}): the result "
                   "has positions and faces only (method='qem' keeps them)", stacklevel=stacklevel + 1)

@@ -198,6 +198,8 @@ def test_options_reach_simplify(src, tmp_path, monkeypatch):
     assert seen.pop() == dict(ratio=0.5, flip_angle=45.0, progress=True)
     assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--method", "esqem", "--split-factor", "1.5"]) == 2
     assert seen.pop() == dict(ratio=0.5, method="esqem", split_factor=1.5, progress=True)
+    assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--memoryless", "--volume-weight", "0.5"]) == 2
+    assert seen.pop() == dict(ratio=0.5, memoryless=True, volume_weight=0.5, progress=True)
     assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--split-factor", "big"]) == 2
     np.save(tmp_path / "feat.npy", np.array([[3, 4]]))
     assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--feature-edges",

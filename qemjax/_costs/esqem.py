@@ -161,6 +161,8 @@ class ESQEM(QEM):
         super().__post_init__()
         if self.placement == "rank":
             raise ValueError("method='esqem' places with 'optimal' or 'endpoints'; placement='rank' is QEM's only")
+        if self.memoryless:
+            raise ValueError("memoryless=True works with method='qem' only (ESQEM's refresh keeps its own state)")
         if not (self.curvature_weight >= 0 and math.isfinite(self.curvature_weight)):
             raise ValueError(f"curvature_weight must be finite and >= 0, got {self.curvature_weight}")
         if self.split_factor is not None and not (self.split_factor > 0 and math.isfinite(self.split_factor)):

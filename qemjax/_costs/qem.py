@@ -4,6 +4,11 @@ State: each vertex's quadric (10 floats, in a frame centred on the vertex: `_ker
 Price: the optimal placement with its fall-backs (`_kernels.placement`, hand-fused for the CPU).
 Merge: Q1 + Q2 re-expressed at the new position. Support: pair (a contraction changes only the
 quadric of the kept vertex, so only the pairs at it need a new price).
+
+With ``memoryless=True`` (`memoryless`): the quadrics of the vertices around each contraction are rebuilt
+from the current faces (`refresh`), so a contraction changes the quadrics of the kept vertex's whole
+1-ring: support ring, and 15 more state columns (`memoryless`); ``volume_weight`` adds Lindstrom &
+Turk's volume preservation as a penalty, ``memory_weight`` a share of the summed (history) quadric.
 """
 from __future__ import annotations
 
@@ -16,7 +21,9 @@ import numpy as np
 from .. import _topology as topo
 from .._arrays import face_normals, face_stats
 from .._batching import DTYPE, bucket, pad_rows
+from .._incidence import FaceLists
 from .._kernels import placement, quadrics
+from . import memoryless as ml
 from .base import CostModel, MeshInput
 
 PLACEMENTS = ("optimal", "rank", "endpoints")
@@ -75,11 +82,15 @@ class QEM(CostModel):
     cond_eps: ``'optimal'``: the 3×3 solve is used when det(A) > cond_eps·‖A‖_F³.
     rank_eps: ``'rank'``: eigenvalues of A at or below rank_eps·λmax are truncated.
     max_shift: either solve is used when its solution lies within max_shift·|v2 − v1| of the midpoint.
+    memoryless: rebuild the quadrics around each contraction from the current faces instead of summing
+        them (Lindstrom & Turk 1998; `memoryless`). Support becomes ring and the state 25 floats wide.
+    volume_weight: λ ≥ 0, memoryless only: add λ·(volume change / mean face area)² to each pair's quadric
+        before placing (`memoryless`); 0 adds nothing.
+    memory_weight: μ ≥ 0, memoryless only: price with Q_current + μ·Q_summed (0: memoryless alone).
     """
 
     name: ClassVar[str] = "qem"
-    width: ClassVar[int] = quadrics.QSIZE
-    per_pair_params: ClassVar[bool] = True
+    per_pair_params: ClassVar[bool] = True  # memoryless runs refresh, so they are not batched anyway
 
     placement: str = "optimal"
     area_weighted: bool = True
@@ -88,8 +99,31 @@ class QEM(CostModel):
     cond_eps: float = 1e-5
     rank_eps: float = 1e-4
     max_shift: float = 2.0
+    memoryless: bool = False
+    volume_weight: float = 0.0
+    memory_weight: float = 0.0
+
+    # the memoryless mode's differences, as properties (ESQEM overrides all three as class attributes)
+    width = property(lambda self: ml.WIDTH if self.memoryless else quadrics.QSIZE)
+    support = property(lambda self: "ring" if self.memoryless else "pair")
+
+    @property
+    def refresh(self):
+        """memoryless: (MeshView, verts) -> the rebuilt state rows (`memoryless.refresh_rows`); else None."""
+        if not self.memoryless:
+            return None
+        return lambda view, verts: ml.refresh_rows(self, view, verts)
 
     def __post_init__(self):
+        if not isinstance(self.memoryless, (bool, np.bool_)):
+            raise ValueError(f"memoryless must be True or False, got {self.memoryless!r}")
+        if not (self.volume_weight >= 0 and np.isfinite(self.volume_weight)):
+            raise ValueError(f"volume_weight must be finite and >= 0, got {self.volume_weight}")
+        if not (self.memory_weight >= 0 and np.isfinite(self.memory_weight)):
+            raise ValueError(f"memory_weight must be finite and >= 0, got {self.memory_weight}")
+        if (self.volume_weight or self.memory_weight) and not self.memoryless:
+            raise ValueError("volume_weight or memory_weight > 0 needs memoryless=True (they weight terms of "
+                             "the memoryless cost)")
         if self.placement not in PLACEMENTS:
             raise ValueError(f"unknown placement {self.placement!r}; choose from {PLACEMENTS}")
         if not (self.boundary_weight >= 0 and np.isfinite(self.boundary_weight)):
@@ -98,30 +132,46 @@ class QEM(CostModel):
             raise ValueError(f"area_power must be in [0, 2], got {self.area_power}")
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
+        if self.memoryless and mesh.feature_edges is not None and len(mesh.feature_edges):
+            raise ValueError("memoryless=True does not track feature edges through contractions; "
+                             "leave feature_edges unset or use memoryless=False")
+        if self.memoryless:  # the same rebuild as after each contraction, for every vertex
+            means = face_stats(mesh.V, mesh.F)[1:] if mesh.means is None else mesh.means
+            n = len(mesh.V)
+            return ml.state_rows(self, mesh.V, FaceLists(mesh.F, n), np.arange(n), means)
         return initial_quadrics(mesh.V, mesh.F, area_weighted=self.area_weighted,
                                 boundary_weight=self.boundary_weight, feature_edges=mesh.feature_edges,
                                 boundary=mesh.boundary, means=mesh.means, area_power=self.area_power)
 
     def state_key(self):
-        if type(self) is not QEM:  # a subclass may build more state
+        if type(self) is not QEM or self.memoryless:  # a subclass, or the memoryless rows, hold more state
             return self
         return (QEM, self.area_weighted, self.area_power, self.boundary_weight)
 
     def kernel_params(self) -> dict:
-        return {"endpoints_only": np.asarray(self.placement == "endpoints"),
-                "cond_eps": np.asarray(self.cond_eps, DTYPE), "rank_eps": np.asarray(self.rank_eps, DTYPE),
-                "max_shift": np.asarray(self.max_shift, DTYPE)}
+        params = {"endpoints_only": np.asarray(self.placement == "endpoints"),
+                  "cond_eps": np.asarray(self.cond_eps, DTYPE), "rank_eps": np.asarray(self.rank_eps, DTYPE),
+                  "max_shift": np.asarray(self.max_shift, DTYPE)}
+        if self.memoryless:
+            params["volume_weight"] = np.asarray(self.volume_weight, DTYPE)
+            params["memory_weight"] = np.asarray(self.memory_weight, DTYPE)
+        return params
 
     @property
     def price_kernel(self):
         """The price as a static function of arrays (VS, pairs, params): one kernel per placement mode
-        ('rank' is its own kernel, so the default's compiled code stays as it was)."""
+        ('rank' is its own kernel, so the default's compiled code stays as it was; memoryless rows have
+        their own pair with the volume term)."""
+        if self.memoryless:
+            return ml.price_rank if self.placement == "rank" else ml.price_optimal
         return _price_rank if self.placement == "rank" else _price
 
     def price(self, VS, pairs, params, rings=None):
         return self.price_kernel(VS, pairs, params)
 
     def merge(self, VS, pairs, x, params):
+        if self.memoryless:
+            return ml.merge(VS, pairs, x)
         return placement.merged_quadrics(VS, pairs, x)
 
     def vertex_error(self, state: np.ndarray) -> np.ndarray:
