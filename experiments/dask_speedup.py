@@ -34,7 +34,7 @@ RESULTS = HERE / "results"
 GRID = {"boundary_weight": [1.0, 100.0], "regularize": [0.0, 0.1]}
 TARGETS = [0.1, 0.05, 0.02]
 METRICS = {"n_samples": 20_000}
-FIELDS = ("date", "mode", "workers", "ship", "cells", "cold_s", "warm_median_s", "warm_times_s", "speedup_vs_1",
+FIELDS = ("date", "mode", "workers", "ship", "batch_size", "cells", "cold_s", "warm_median_s", "warm_times_s", "speedup_vs_1",
           "vs_in_process", "load_before", "load_after", "cpus")
 
 
@@ -52,12 +52,13 @@ def in_process():
     yield None
 
 
-def measure(paths: dict, executor, repeats: int) -> tuple[float, list[float], int]:
+def measure(paths: dict, executor, repeats: int, batch_size=None) -> tuple[float, list[float], int]:
     """Seconds of the cold sweep and of each warm one; the number of cells."""
     times = []
     for _ in range(1 + repeats):
         t0 = time.perf_counter()
-        df = qemjax.sweep(paths, GRID, TARGETS, metrics=METRICS, executor=executor, progress=False)
+        df = qemjax.sweep(paths, GRID, TARGETS, metrics=METRICS, executor=executor, progress=False,
+                          batch_size=batch_size)
         times.append(time.perf_counter() - t0)
         assert (df["error"] == "").all(), df["error"].unique()
     return times[0], times[1:], len(df)
@@ -71,6 +72,9 @@ def main(argv=None) -> int:
     ap.add_argument("--ship", choices=["scatter", "arrays"], default="scatter",
                     help="scatter: each mesh is scattered to every worker once (qemjax.sweep's way since "
                     "_sweep._ship); arrays: the mesh arrays go with every cell's task (the way before)")
+    ap.add_argument("--batch-size", type=int, default=None,
+                    help="qemjax.sweep's batch_size (default: its own: EXECUTOR_BATCH cells per task, "
+                    "BATCH_FACES in process); 1: one cell per task, as before batching")
     ap.add_argument("--out", default=str(RESULTS / "dask_speedup.csv"))
     args = ap.parse_args(argv)
     if args.ship == "arrays":
@@ -83,9 +87,9 @@ def main(argv=None) -> int:
     for mode, n, make in modes:
         load_before = os.getloadavg()[0]
         with make() as executor:
-            cold, warm, cells = measure(paths, executor, args.repeats)
+            cold, warm, cells = measure(paths, executor, args.repeats, args.batch_size)
         rows.append(dict(date=time.strftime("%Y-%m-%d %H:%M"), mode=mode, workers=n, cells=cells,
-                         ship=args.ship if n else "",
+                         ship=args.ship if n else "", batch_size=args.batch_size or "default",
                          cold_s=round(cold, 3), warm_median_s=round(statistics.median(warm), 3),
                          warm_times_s=" ".join(f"{t:.3f}" for t in warm), load_before=load_before,
                          load_after=os.getloadavg()[0], cpus=os.cpu_count()))

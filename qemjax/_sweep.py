@@ -31,7 +31,7 @@ from ._options import Schedule
 _NOT_IN_GRID = ("mesh", "target_faces", "ratio", "progress", "feature_edges")
 GRID_KEYS = tuple(k for k in inspect.signature(simplify).parameters if k not in _NOT_IN_GRID)
 BATCH_FACES = 4_000_000  # a batch holds at most this many faces in all (its copies' memory)
-EXECUTOR_BATCH = 4  # cells per task on an executor, by default (small: the tasks still spread over the workers)
+EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
