@@ -44,21 +44,12 @@ sys.path.insert(0, str(HERE))
 
 import meshes as bench_meshes  # noqa: E402
 import peers as bench_peers  # noqa: E402
+from ab_compare import _value  # noqa: E402  (an option value: bool, number or text)
 
 RESULTS = HERE / "results"
 CLASSES = ("boundary", "crease", "thin", "elsewhere")
 CREASE_DEG = 60.0
 N_SAMPLES = 100_000
-
-
-def _value(text: str):
-    """An --option value: true/false as a bool, a number as a float, else the text."""
-    if text.lower() in ("true", "false"):
-        return text.lower() == "true"
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 def best_peers(path: Path) -> dict:
