@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
-import time
 import warnings
 from collections import Counter
 from pathlib import Path
@@ -45,6 +44,7 @@ sys.path.insert(0, str(HERE))
 import meshes as bench_meshes  # noqa: E402
 import peers as bench_peers  # noqa: E402
 from ab_compare import _value  # noqa: E402  (an option value: bool, number or text)
+from rank_peers import save_run  # noqa: E402
 
 RESULTS = HERE / "results"
 CLASSES = ("boundary", "crease", "thin", "elsewhere")
@@ -213,14 +213,7 @@ def main(argv=None) -> int:
                       f"{row['top1']}; " + " ".join(f"{c} {row['frac_' + c]:.2f}" for c in CLASSES), flush=True)
     text = report(rows, args.top)
     print(text)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    with open(args.out + ".csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    cmd = "python experiments/hausdorff_where.py " + " ".join(sys.argv[1:] if argv is None else argv)
-    Path(args.out + ".txt").write_text(f"# {cmd}\n# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}\n\n"
-                                       + text + "\n")
+    save_run(args.out, rows, list(rows[0]), text, "hausdorff_where.py", argv)
     return 0
 
 

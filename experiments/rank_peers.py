@@ -233,15 +233,21 @@ def main(argv=None) -> int:
                 flush=True)
     table = ranks(rows, [v[0] for v in variants])
     print(table)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    with open(args.out + ".csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, COLUMNS, extrasaction="ignore")
+    save_run(args.out, rows, COLUMNS, table, "rank_peers.py", argv)
+    return 0
+
+
+def save_run(out: str, rows: list[dict], fields, text: str, script: str, argv) -> None:
+    """``out``.csv (the rows, in ``fields``) and ``out``.txt (the printed ``text`` under the command line
+    of ``experiments/script`` and the date)."""
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    with open(out + ".csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fields, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    cmd = "python experiments/rank_peers.py " + " ".join(sys.argv[1:] if argv is None else argv)
-    Path(args.out + ".txt").write_text(f"# {cmd}\n# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}\n\n"
-                                       + table + "\n")
-    return 0
+    cmd = f"python experiments/{script} " + " ".join(sys.argv[1:] if argv is None else argv)
+    Path(out + ".txt").write_text(f"# {cmd}\n# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}\n\n"
+                                  + text + "\n")
 
 
 if __name__ == "__main__":

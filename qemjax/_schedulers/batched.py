@@ -32,7 +32,7 @@ import numpy as np
 from . import outcome
 from .common import Options, PerCopy
 from .parallel import RoundState, _Run, _history_arrays, _removal_steps, _ring_vertices
-from .select import fits_target, independent_sets, sort_keys
+from .select import fits_target, gate_rank, independent_sets, sort_keys
 
 
 def batchable(model) -> bool:
@@ -104,7 +104,7 @@ class _Batch(_Run):
         for c in np.flatnonzero(self.active):
             s = slice(starts[c], starts[c + 1])
             vk = np.compress(valid[s], st.key[s])
-            k = min(max(int(need[c]) // (2 * sch.tail), 1), len(vk), max(int(sch.gate_fraction * (s.stop - s.start)), 1))
+            k = gate_rank(int(need[c]), len(vk), s.stop - s.start, sch)
             thresh[c] = np.partition(vk, k - 1)[k - 1]
         salt = self.rounds * 7919
         offset = np.take(starts, cp)

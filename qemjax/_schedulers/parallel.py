@@ -39,7 +39,7 @@ from .._incidence import FaceLists
 from . import outcome
 from .common import (DTYPE, Options, Timer, bucket, face_normals, pad_rows, set_rows, start_flips, start_merge,
                      start_price)
-from .select import fits_target, independent_sets, sort_keys, submit
+from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
 MERGE_CHUNK = 4096  # one merge shape whatever the round's size: a few more calls early, one compilation
 
@@ -318,7 +318,7 @@ class _Run:
         locked vertices, what validation found for them)."""
         t0 = time.perf_counter()
         sch = self.options.schedule
-        k = min(max(need // (2 * sch.tail), 1), int(valid.sum()), max(int(sch.gate_fraction * len(st.E)), 1))
+        k = gate_rank(need, int(valid.sum()), len(st.E), sch)
         kth = np.partition(np.compress(valid, st.key), k - 1)[k - 1]
         salt = self.rounds * 7919
 

@@ -142,6 +142,13 @@ def _copies_staying(groups, sel, good, E, p, schedule):
     return np.take(~done, vcopy)
 
 
+def gate_rank(need: int, n_valid: int, n_pairs: int, schedule: Schedule) -> int:
+    """k of a round's gate (`Schedule.gate`): the candidates cost at most gate × the k-th cheapest valid
+    pair's cost, k = min(what is still needed / (2·tail), the valid pairs, gate_fraction × the pairs),
+    at least 1."""
+    return min(max(need // (2 * schedule.tail), 1), n_valid, max(int(schedule.gate_fraction * n_pairs), 1))
+
+
 def fits_target(removes: np.ndarray, need: int) -> np.ndarray:
     """Mask over contractions in cost order: take them while the faces they remove (``removes``) fit in
     ``need``, then fill what is left with later ones that still fit, so the face target is met exactly
