@@ -117,7 +117,6 @@ class _Batch(_Run):
         acc, bad, why, extra, locked = independent_sets(
             st.E, key_of, cand, 0, self.n, lambda *a: self.validate(st, found, *a), sch,
             groups=(self.vcopy, need))
-        self.rejected += bad.size
         self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
                                           minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
         n_bad = np.bincount(np.take(cp, bad), minlength=self.C)
@@ -153,11 +152,9 @@ class _Batch(_Run):
         self.contract(st, acc, n_sel, locked, found)
 
     def candidates_batch(self, st: RoundState, need: np.ndarray, cp) -> np.ndarray:
-        valid = (st.cost <= np.take(self.max_costs, cp)) & (st.bad == 0) & (st.ecount <= np.take(need, cp))
-        valid &= np.take(self.active, cp)
-        if self.manifold:
-            valid &= (st.ecount >= 1) & (st.ecount <= 2)
-        return valid
+        """`_Run.candidates` with each copy's face budget and max_error, among the active copies."""
+        valid = self.candidates(st, np.take(need, cp), np.take(self.max_costs, cp))
+        return valid & np.take(self.active, cp)
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self):

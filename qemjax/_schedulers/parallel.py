@@ -304,10 +304,12 @@ class _Run:
         st.key = (st.cost + st.parts.astype(np.float64) @ self.weights).astype(DTYPE)
 
     # -- stages 3 and 4: select and validate -------------------------------------------------------
-    def candidates(self, st: RoundState, need: int) -> np.ndarray:
+    def candidates(self, st: RoundState, need, max_cost=None) -> np.ndarray:
         """(P,) bool: the pairs that may contract this round (not known invalid, within max_error and
-        the face budget; manifold mode: edges with one or two faces)."""
-        valid = (st.cost <= self.options.max_cost) & (st.bad == 0) & (st.ecount <= need)
+        the face budget; manifold mode: edges with one or two faces). ``need`` and ``max_cost`` may be
+        given per pair (a batch's copies); max_cost None: the options'."""
+        limit = self.options.max_cost if max_cost is None else max_cost
+        valid = (st.cost <= limit) & (st.bad == 0) & (st.ecount <= need)
         if self.manifold:
             valid &= (st.ecount >= 1) & (st.ecount <= 2)
         return valid
