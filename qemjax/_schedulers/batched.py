@@ -29,9 +29,11 @@ import time
 
 import numpy as np
 
+from .._arrays import face_normals, keep_rows as _keep
+from .._batching import DTYPE
 from . import outcome
 from .common import Options, PerCopy
-from .parallel import RoundState, _Run, _history_arrays, _removal_steps, _ring_vertices
+from .parallel import RoundState, _Run, _history_arrays, _history_columns, _removal_steps, _ring_vertices
 from .select import fits_target, gate_rank, independent_sets, sort_keys
 
 
@@ -62,9 +64,14 @@ class _Batch(_Run):
                                           for V, ps in zip(Vs, part_scales)])
         self.vcopy = np.repeat(np.arange(C), np.diff(self.voff)).astype(np.int32)
         stacked = {k: np.stack([np.asarray(p[k]) for p in params]) for k in params[0]}
+        normals = {}  # the input normals of each mesh once (copies of one mesh share V and F)
+        for V, F in zip(Vs, Fs):
+            if (id(V), id(F)) not in normals:
+                normals[id(V), id(F)] = face_normals(np.asarray(V, DTYPE), F)
         super().__init__(np.concatenate(Vs), np.concatenate(states), Fu, np.zeros((0, 2), np.int32),
                          int(np.sum(targets)), model, options, None,
-                         (Eu, np.concatenate([ec for _, ec in edges])), None, PerCopy(stacked, self.vcopy))
+                         (Eu, np.concatenate([ec for _, ec in edges])), None, PerCopy(stacked, self.vcopy),
+                         normals=np.concatenate([normals[id(V), id(F)] for V, F in zip(Vs, Fs)]))
         self.targets = np.asarray(targets, np.int64)
         self.max_costs = np.asarray(max_costs, np.float64)
         self.active = np.ones(C, bool)
@@ -78,7 +85,7 @@ class _Batch(_Run):
     # -- per-copy views ----------------------------------------------------------------------------
     def counts(self) -> np.ndarray:
         """(C,) live faces of each copy."""
-        return np.add.reduceat(self.faces.alive[: self.foff[-1]].astype(np.int64), self.foff[:-1])
+        return np.add.reduceat(self.faces.alive[: self.foff[-1]], self.foff[:-1], dtype=np.int64)
 
     def pair_copies(self, st: RoundState):
         """(each pair's copy (P,), each copy's first pair (C + 1,)): E is grouped by copy."""
@@ -94,18 +101,33 @@ class _Batch(_Run):
         self.active[c] = False
         self.copy_rounds[c] = self.rounds
 
+    def _without_stopped(self, edges_next):
+        """The next round's pairs (`topo.contract_edges`' (E', ecount', keep, degree', stale')) without
+        those of copies that have stopped: they are never candidates again, and every per-pair pass of
+        the rounds left would carry them. Order is kept, so each copy's pairs and their indices within
+        it are unchanged."""
+        E, ecount, keep, deg, stale = edges_next
+        mine = np.take(self.active, np.take(self.vcopy, E[:, 0]))
+        if mine.all():
+            return edges_next
+        rows = np.flatnonzero(keep)
+        keep = np.zeros(len(keep), bool)
+        keep[np.compress(mine, rows)] = True
+        return _keep(E, mine), np.compress(mine, ecount), keep, deg, np.compress(mine, stale)
+
     # -- stages ------------------------------------------------------------------------------------
-    def select_batch(self, st: RoundState, need: np.ndarray, valid: np.ndarray, cp, starts):
-        """`_Run.select` per copy: the gate, the passes and the face target of each copy its own. Returns
-        (accepted indices, per copy: selected, rejected; the locked vertices, what validation found)."""
+    def select_batch(self, st: RoundState, need: np.ndarray, valid: np.ndarray, n_valid: np.ndarray, cp, starts):
+        """`_Run.select` per copy: the gate, the passes and the face target of each copy its own (n_valid:
+        each copy's valid pairs). Returns (accepted indices, per copy: selected, rejected; the locked
+        vertices, what validation found)."""
         t0 = time.perf_counter()
         sch = self.options.schedule
         thresh = np.zeros(self.C, np.float32)
+        vkeys = np.compress(valid, st.key)  # grouped by copy, as E
+        vstart = np.concatenate([[0], np.cumsum(n_valid)])
         for c in np.flatnonzero(self.active):
-            s = slice(starts[c], starts[c + 1])
-            vk = np.compress(valid[s], st.key[s])
-            k = gate_rank(int(need[c]), len(vk), s.stop - s.start, sch)
-            thresh[c] = np.partition(vk, k - 1)[k - 1]
+            k = gate_rank(int(need[c]), int(n_valid[c]), int(starts[c + 1] - starts[c]), sch)
+            thresh[c] = np.partition(vkeys[vstart[c]:vstart[c + 1]], k - 1)[k - 1]
         salt = self.rounds * 7919
         offset = np.take(starts, cp)
 
@@ -116,20 +138,14 @@ class _Batch(_Run):
         found = []
         acc, bad, why, extra, locked = independent_sets(
             st.E, key_of, cand, 0, self.n, lambda *a: self.validate(st, found, *a), sch,
-            groups=(self.vcopy, need))
+            groups=(self.vcopy, need, cp))
         self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
                                           minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
         n_bad = np.bincount(np.take(cp, bad), minlength=self.C)
         acc = acc[np.argsort(key_of(acc), kind="stable")]
         ca = np.take(cp, acc)
         n_sel = np.bincount(ca, minlength=self.C)
-        take = np.zeros(acc.size, bool)
-        order = np.argsort(ca, kind="stable")
-        bounds = np.searchsorted(ca[order], np.arange(self.C + 1))
-        for c in np.flatnonzero(n_sel):
-            idx = order[bounds[c]:bounds[c + 1]]
-            take[idx] = fits_target(st.ecount[acc[idx]] + extra[acc[idx]], int(need[c]))
-        acc = acc[take]
+        acc = acc[_fits_targets(ca, st.ecount[acc] + extra[acc], need, self.C)]
         self.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why
         return acc, n_sel, n_bad, locked, found
@@ -152,9 +168,16 @@ class _Batch(_Run):
         self.contract(st, acc, n_sel, locked, found)
 
     def candidates_batch(self, st: RoundState, need: np.ndarray, cp) -> np.ndarray:
-        """`_Run.candidates` with each copy's face budget and max_error, among the active copies."""
-        valid = self.candidates(st, np.take(need, cp), np.take(self.max_costs, cp))
-        return valid & np.take(self.active, cp)
+        """`_Run.candidates` with each copy's face budget and max_error, among the active copies. A
+        setting that is the same for every active copy (or, for the budget, above every pair's face
+        count) is passed as one number: the same test without a per-pair gather."""
+        act = self.active
+        big = st.ecount.max(initial=0)
+        budget = int(need[act].min()) if np.all(need[act] >= big) else np.take(need, cp)
+        mc = self.max_costs[act]
+        limit = mc[0] if np.all(mc == mc[0]) else np.take(self.max_costs, cp)
+        valid = self.candidates(st, budget, limit)
+        return valid if act.all() else valid & np.take(act, cp)
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self):
@@ -170,6 +193,8 @@ class _Batch(_Run):
                 break
             self.rounds += 1
             t0 = time.perf_counter()
+            if prev is not None and prev.edges_next is not None:
+                prev.edges_next = self._without_stopped(prev.edges_next)
             st, follow, stale, same = self.update(prev)
             self.timer.add("topology_s", time.perf_counter() - t0)
             self.cost(st, prev, follow, stale, same)
@@ -177,12 +202,12 @@ class _Batch(_Run):
             need = counts - self.targets
             valid = self.candidates_batch(st, need, cp)
             st.key = st.cost
-            has = np.bincount(np.take(cp, np.flatnonzero(valid)), minlength=self.C) > 0
-            for c in np.flatnonzero(self.active & ~has):
+            n_valid = _segment_sums(valid, starts)
+            for c in np.flatnonzero(self.active & (n_valid == 0)):
                 self._end(c, st, slice(starts[c], starts[c + 1]), int(need[c]))
             if not self.active.any():
                 break
-            acc, n_sel, n_bad, locked, found = self.select_batch(st, need, valid, cp, starts)
+            acc, n_sel, n_bad, locked, found = self.select_batch(st, need, valid, n_valid, cp, starts)
             n_acc = np.bincount(np.take(cp, acc), minlength=self.C)
             for c in np.flatnonzero(self.active & (n_acc == 0) & (n_bad == 0)):
                 self._end(c, st, slice(starts[c], starts[c + 1]), int(need[c]))
@@ -202,12 +227,14 @@ class _Batch(_Run):
     def outputs(self):
         """Each copy's result in `parallel.run`'s form (V, S, F, alive, history, info)."""
         voff, foff, C = self.voff, self.foff, self.C
-        hist = _by_copy(self.history, voff, lambda h: h[0])
+        # every contraction once, then each copy's rows (record order within a copy is kept)
+        rounds, a, b, x, cost = _history_columns(self.history)
+        order = np.argsort(np.take(self.vcopy, a), kind="stable")
+        bounds = np.searchsorted(np.take(self.vcopy, np.take(a, order)), np.arange(C + 1))
         parts = [None] * C
         if self.history_parts:
-            cop = np.searchsorted(voff, np.concatenate([a for _, (a, _, _, _) in self.history]), "right") - 1
             allp = np.concatenate(self.history_parts)
-            parts = [allp[cop == c] for c in range(C)]
+            parts = [np.take(allp, order[bounds[c]:bounds[c + 1]], axis=0) for c in range(C)]
         dead = np.concatenate(self.dead) if self.dead else np.zeros(0, np.int64)
         dead = np.sort(dead)
         dead_c = np.split(dead, np.searchsorted(dead, foff[1:-1]))
@@ -215,12 +242,13 @@ class _Batch(_Run):
         out = []
         for c in range(C):
             lo, hi, f0, f1 = voff[c], voff[c + 1], foff[c], foff[c + 1]
-            hc = [(r, (a - lo, b - lo, x, cost)) for r, (a, b, x, cost) in hist[c]]
+            mine = order[bounds[c]:bounds[c + 1]]
+            ac, bc = np.take(a, mine) - lo, np.take(b, mine) - lo
             F = self.faces.F[f0:f1] - lo
-            removed_at, coincident, rounds = _removal_steps(F, hc, [dead_c[c] - f0],
-                                                            [(r, d - f0) for r, d in dropped[c]])
+            removed_at, coincident, rc = _removal_steps(F, np.take(rounds, mine), ac, bc, [dead_c[c] - f0],
+                                                        [(r, d - f0) for r, d in dropped[c]])
             stop, blocked = self.stops[c]
-            info = {"contractions": sum(len(h[0]) for _, h in hc),
+            info = {"contractions": len(mine),
                     "rejected": int(self.copy_rejected[c, 1:].sum()), "rounds": int(self.copy_rounds[c]),
                     "max_cost": float(self.copy_max_cost[c]), "branches": self.copy_branches[c].copy(),
                     "faces_per_round": [int(f[c]) for took, f in self.copy_faces if took[c]],
@@ -228,11 +256,34 @@ class _Batch(_Run):
                                                                    self.copy_rejected[c])),
                     "stop_reason": stop, "blocked_by": blocked, "reweights": [],
                     "parts": parts[c] if parts[c] is not None and len(parts[c]) else None,
-                    "removed_at": removed_at, "coincident": coincident, "history_rounds": rounds}
+                    "removed_at": removed_at, "coincident": coincident, "history_rounds": rc}
             info.update(self.timer.t)
             out.append((self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[f0:f1],
-                        _history_arrays([h for _, h in hc]), info))
+                        _history_arrays(*(_history_columns([])[1:] if not len(mine) else
+                                          (ac, bc, np.take(x, mine, axis=0), np.take(cost, mine)))), info))
         return out
+
+
+def _segment_sums(mask: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(C,) int64: the True entries of ``mask`` in each segment starts[c] … starts[c+1] − 1."""
+    csum = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
+    return np.diff(np.take(csum, starts))
+
+
+def _fits_targets(ca: np.ndarray, removes: np.ndarray, need: np.ndarray, C: int) -> np.ndarray:
+    """`select.fits_target` per copy: mask over accepted pairs in cost order (``ca`` their copies,
+    ``removes`` the faces each removes) taking, in each copy, what fits its ``need``. A copy whose
+    accepted pairs all fit takes them all (the common case: one cumulative sum for every copy); the
+    others go through `fits_target`."""
+    order = np.argsort(ca, kind="stable")
+    r = np.take(removes, order)
+    bounds = np.searchsorted(np.take(ca, order), np.arange(C + 1))
+    total = np.diff(np.concatenate([[0], np.cumsum(r)])[bounds])
+    take = np.ones(len(ca), bool)
+    for c in np.flatnonzero(total > need):
+        idx = order[bounds[c]:bounds[c + 1]]
+        take[idx] = fits_target(r[bounds[c]:bounds[c + 1]], int(need[c]))
+    return take
 
 
 def _by_copy(entries, offsets: np.ndarray, first) -> list:

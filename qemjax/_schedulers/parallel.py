@@ -132,10 +132,11 @@ def _drop_coincident(faces: FaceLists, kept):
     return drop
 
 
-def _removal_steps(F, history, dead, dropped):
+def _removal_steps(F, rounds, a, b, dead, dropped):
     """Which contraction removed each face, from a run's per-round arrays (no per-contraction work):
-    F (m,3) the faces at the end (a removed face keeps the row it had when it went), history the
-    per-round (kept, removed, positions, costs) in record order, dead / dropped the faces each round's
+    F (m,3) the faces at the end (a removed face keeps the row it had when it went), rounds, a, b the
+    round, kept and removed vertex of each contraction in record order (`_history_columns`), dead /
+    dropped the faces each round's
     contractions removed / its coincident faces dropped. Returns the record's ``removed_at`` (m,) int64
     (-1: survives), ``coincident`` (m,) bool and ``rounds`` (k,) int64 (see `_record.Record`).
 
@@ -144,16 +145,14 @@ def _removal_steps(F, history, dead, dropped):
     contraction of its round that made it coincide (contractions of a round are two edges apart)."""
     m = len(F)
     removed_at, coincident = np.full(m, -1, np.int64), np.zeros(m, bool)
-    if not history:
-        return removed_at, coincident, np.zeros(0, np.int64)
-    rounds = np.repeat([r for r, _ in history], [len(h[0]) for _, h in history]).astype(np.int64)
-    a = np.concatenate([h[0] for _, h in history]).astype(np.int64)
-    b = np.concatenate([h[1] for _, h in history]).astype(np.int64)
+    if not len(a):
+        return removed_at, coincident, rounds
     n = int(max(a.max(), b.max(), F.max() if m else 0)) + 1
     step_of = np.full(n, np.iinfo(np.int64).max)
     step_of[b] = np.arange(len(b))
     d = np.concatenate(dead).astype(np.int64) if dead else np.zeros(0, np.int64)
-    removed_at[d] = step_of[F[d]].min(axis=1)
+    s = np.take(step_of, np.take(F, d, axis=0))
+    removed_at[d] = np.minimum(np.minimum(s[:, 0], s[:, 1]), s[:, 2])  # .min(axis=1), without the slow reduction
     if dropped:
         f = np.concatenate([x for _, x in dropped]).astype(np.int64)
         r = np.repeat([r for r, _ in dropped], [len(x) for _, x in dropped]).astype(np.int64)
@@ -167,19 +166,27 @@ def _removal_steps(F, history, dead, dropped):
     return removed_at, coincident, rounds
 
 
-def _history_arrays(rounds):
-    """Per-round (kept, removed, positions, costs) -> pairs (k,2) int64, positions (k,3), costs (k,)."""
-    if not rounds:
-        return np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)
-    pairs = np.concatenate([np.stack([a, b], 1) for a, b, _, _ in rounds]).astype(np.int64)
-    return pairs, np.concatenate([x for _, _, x, _ in rounds]), np.concatenate([c for _, _, _, c in rounds])
+def _history_columns(history):
+    """A run's per-round [(round, (kept, removed, positions, costs))] -> each contraction's round, kept
+    and removed vertex (k,) int64, position (k,3) and cost (k,), in record order."""
+    if not history:
+        return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)),
+                np.zeros(0))
+    rounds = np.repeat([r for r, _ in history], [len(h[0]) for _, h in history]).astype(np.int64)
+    cols = [np.concatenate([h[i] for _, h in history]) for i in range(4)]
+    return rounds, cols[0].astype(np.int64), cols[1].astype(np.int64), cols[2], cols[3]
+
+
+def _history_arrays(a, b, x, cost):
+    """The record's history: pairs (k,2) int64, positions (k,3), costs (k,)."""
+    return np.stack([a, b], 1), x, cost
 
 
 class _Run:
     """One simplification: the mesh state that lives across rounds, and the stages of a round."""
 
     def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges,
-                 part_scale=None, params=None, wedges=None):
+                 part_scale=None, params=None, wedges=None, normals=None):
         self.n, m = len(V), len(F)
         self.wedges = wedges  # a `_wedges.Tracker` when attributes are kept (else None)
         self.part_scale = part_scale
@@ -204,7 +211,7 @@ class _Run:
         # int32 rows (n < 2**31) keep their index: face i continues input face i; built on the worker
         # while this thread computes the input normals
         lists = submit(FaceLists, F, self.n)
-        N0 = face_normals(np.asarray(V, DTYPE), F)  # input normals
+        N0 = face_normals(np.asarray(V, DTYPE), F) if normals is None else normals  # input normals
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
         self.faces = lists.result()
         self.timer = Timer()
@@ -489,8 +496,9 @@ def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=No
     (attributes kept: the seam rule applies and its corners are updated), or None."""
     r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges)
     stop, blocked = r.run()
-    hist = _history_arrays([h for _, h in r.history])
-    removed_at, coincident, rounds = _removal_steps(r.faces.F, r.history, r.dead, r.dropped)
+    rounds, a, b, x, cost = _history_columns(r.history)
+    hist = _history_arrays(a, b, x, cost)
+    removed_at, coincident, rounds = _removal_steps(r.faces.F, rounds, a, b, r.dead, r.dropped)
     info = {"contractions": len(hist[0]), "rejected": r.rejected, "rounds": r.rounds,
             "max_cost": r.max_cost_used, "branches": r.branches, "faces_per_round": r.faces_per_round,
             "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),

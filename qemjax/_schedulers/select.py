@@ -77,7 +77,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
 
     free = np.ones(n, bool)
     if groups is not None:
-        groups = (groups[0], groups[1], np.zeros(len(groups[1]), np.int64))  # + accepted so far per copy
+        groups = (*groups, np.zeros(len(groups[1]), np.int64))  # + accepted so far per copy
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
     ws = narrow(active, (np.arange(len(E)), E, None))
@@ -131,10 +131,10 @@ def _copies_staying(groups, sel, good, E, p, schedule):
     """A batched run's pass rule (see `independent_sets`): (n,) bool, the vertices of the copies that go on
     to the next pass (a copy that selected nothing this pass is done), or None when none does. Updates the
     per-copy accepted counts in ``groups``."""
-    vcopy, need, n_acc = groups
+    vcopy, need, cp, n_acc = groups
     C = len(need)
-    g = np.bincount(np.take(vcopy, np.take(E[:, 0], good)), minlength=C)
-    tried = np.bincount(np.take(vcopy, np.take(E[:, 0], sel)), minlength=C) > 0
+    g = np.bincount(np.take(cp, good), minlength=C)
+    tried = np.bincount(np.take(cp, sel), minlength=C) > 0
     n_acc += g
     done = ~tried | (g < schedule.pass_yield * n_acc) | ((g * 50 < need // 2) & (p > 2))
     if done.all():
