@@ -75,6 +75,7 @@ class _Batch(_Run):
         self.targets = np.asarray(targets, np.int64)
         self.max_costs = np.asarray(max_costs, np.float64)
         self.active = np.ones(C, bool)
+        self.n_in_rounds = C  # copies whose pairs the rounds still carry (`_without_stopped`)
         self.stops = [None] * C  # (stop reason, blocked_by) per copy
         self.copy_rounds = np.zeros(C, np.int64)
         self.copy_branches = np.zeros((C, len(model.branches)), np.int64)
@@ -108,8 +109,6 @@ class _Batch(_Run):
         it are unchanged."""
         E, ecount, keep, deg, stale = edges_next
         mine = np.take(self.active, np.take(self.vcopy, E[:, 0]))
-        if mine.all():
-            return edges_next
         rows = np.flatnonzero(keep)
         keep = np.zeros(len(keep), bool)
         keep[np.compress(mine, rows)] = True
@@ -193,8 +192,9 @@ class _Batch(_Run):
                 break
             self.rounds += 1
             t0 = time.perf_counter()
-            if prev is not None and prev.edges_next is not None:
+            if prev is not None and prev.edges_next is not None and self.active.sum() < self.n_in_rounds:
                 prev.edges_next = self._without_stopped(prev.edges_next)
+                self.n_in_rounds = int(self.active.sum())
             st, follow, stale, same = self.update(prev)
             self.timer.add("topology_s", time.perf_counter() - t0)
             self.cost(st, prev, follow, stale, same)
