@@ -9,7 +9,7 @@ import pytest
 import qemjax
 from qemjax import _compilation, shapes
 from qemjax import simplify_batch, simplify_cells
-from qemjax._schedulers import batched
+from qemjax._schedulers import batched, select
 
 MESHES = {
     "sheet": lambda: shapes.grid(10, hole=True),  # boundaries: boundary_weight matters
@@ -86,6 +86,30 @@ def test_configurations_really_shared_rounds(case):
     assert sizes == [7] * 7 + [2] * 6 + [1] + [2] * 2 + [1, 1]
     # and the configurations differ: the batch did not compute one answer for all
     assert len({r.vertices.tobytes() for r in together[:13]}) >= 10
+
+
+def test_copies_stop_in_different_rounds(case):
+    """The batch of 7 stops its copies at several rounds: the rounds after the first stop run without the
+    stopped copies' pairs (`_Batch._without_stopped`), and the equality test above covers them."""
+    _, together, _ = case
+    assert len({r.stats["rounds"] for r in together[:7]}) >= 3
+
+
+def test_per_copy_face_targets_and_sums_match_the_one_copy_rules():
+    rng = np.random.default_rng(5)
+    C = 6
+    for _ in range(50):
+        ca = rng.integers(0, C, 40)
+        removes = rng.integers(1, 4, 40)
+        need = rng.integers(0, 30, C)
+        take = batched._fits_targets(ca, removes, need, C)
+        for c in range(C):
+            mine = np.flatnonzero(ca == c)
+            assert np.array_equal(take[mine], select.fits_target(removes[mine], int(need[c])))
+        mask = rng.random(40) < 0.5
+        starts = np.array([0, 0, 7, 7, 20, 33, 40])
+        assert np.array_equal(batched._segment_sums(mask, starts),
+                              [mask[a:b].sum() for a, b in zip(starts[:-1], starts[1:])])
 
 
 def test_results_of_a_batch_are_independent_of_its_company():
