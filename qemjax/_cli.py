@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from . import _api, _cache
+from . import _api, _cache, _presets
 from ._lod import RATIOS
 
 # Keywords of `simplify` with how the command line takes them (argparse settings); the flag is
@@ -59,6 +59,7 @@ OPTIONS = {
     "memoryless": dict(action=argparse.BooleanOptionalAction),
     "volume_weight": dict(type=float, metavar="LAMBDA"),
     "memory_weight": dict(type=float, metavar="MU"),
+    "preset": dict(choices=tuple(_presets.PRESETS), shown="none"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
