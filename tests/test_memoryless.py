@@ -29,11 +29,9 @@ def random_mesh(seed: int):
     return V, F
 
 
-def reference_rows(V, F, alive, verts, *, area_power, boundary_weight, mean_area, mean_e2, boundary_power=None):
+def reference_rows(V, F, alive, verts, *, area_power, boundary_weight, mean_area, mean_e2):
     """Float64, one vertex and one face at a time: each vertex's quadric as a function (a list of weighted
-    planes n·(x − v) = 0 with unit n), and g(v). Boundary edges: edges in one live face of the whole mesh,
-    weighted by boundary_weight·(|e|²/mean_e2)^boundary_power (None: area_power)."""
-    bp = area_power if boundary_power is None else boundary_power
+    planes n·(x − v) = 0 with unit n), and g(v). Boundary edges: edges in one live face of the whole mesh."""
     live = F[alive]
     count = {}
     for f in live:
@@ -59,7 +57,7 @@ def reference_rows(V, F, alive, verts, *, area_power, boundary_weight, mean_area
                 if boundary_weight > 0 and count[tuple(sorted((int(v), int(other))))] == 1:
                     e = V[other] - a
                     m = np.cross(e, n)
-                    planes.append((m / np.linalg.norm(m), boundary_weight * (e @ e / mean_e2) ** bp))
+                    planes.append((m / np.linalg.norm(m), boundary_weight * (e @ e / mean_e2) ** area_power))
         out.append((planes, g))
     return out
 
@@ -71,13 +69,10 @@ def evaluate_packed(q, u):
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-@pytest.mark.parametrize("area_power,boundary_weight,boundary_power", [
-    (1.0, 100.0, -1.0), (0.0, 1.0, -1.0), (0.5, 0.0, -1.0), (2.0, 10.0, -1.0), (0.75, 100.0, 0.25),
-    (1.0, 10.0, 0.0)])
-def test_refresh_matches_a_float64_reference(seed, area_power, boundary_weight, boundary_power):
+@pytest.mark.parametrize("area_power,boundary_weight", [(1.0, 100.0), (0.0, 1.0), (0.5, 0.0), (2.0, 10.0)])
+def test_refresh_matches_a_float64_reference(seed, area_power, boundary_weight):
     """After faces die, `refresh` rebuilds the quadric of each vertex from its live faces: its value at
-    random points equals the weighted squared distances to the reference's planes, and g matches. A
-    boundary_power >= 0 replaces area_power in the boundary planes' weights only."""
+    random points equals the weighted squared distances to the reference's planes, and g matches."""
     V, F = random_mesh(seed)
     rng = np.random.default_rng(100 + seed)
     faces = FaceLists(F, len(V))
@@ -86,8 +81,7 @@ def test_refresh_matches_a_float64_reference(seed, area_power, boundary_weight, 
     alive = np.ones(len(F), bool)
     alive[dead] = False
     mean_area, mean_e2 = 0.003, 0.005
-    model = QEM(memoryless=True, area_power=area_power, boundary_weight=boundary_weight,
-                boundary_power=boundary_power)
+    model = QEM(memoryless=True, area_power=area_power, boundary_weight=boundary_weight)
     rows = np.zeros((len(V), 3 + ml.WIDTH), np.float32)
     rows[:, :3] = V
     rows[:, 3:13] = rng.random((len(V), 10))  # history quadrics: kept as they are
@@ -99,8 +93,7 @@ def test_refresh_matches_a_float64_reference(seed, area_power, boundary_weight, 
     np.testing.assert_array_equal(got[:, :10], rows[verts, 3:13])
     np.testing.assert_allclose(got[:, 23:], np.tile([mean_area, mean_e2], (60, 1)), rtol=1e-6)
     ref = reference_rows(rows[:, :3].astype(np.float64), F, alive, verts, area_power=area_power,
-                         boundary_weight=boundary_weight, mean_area=mean_area, mean_e2=mean_e2,
-                         boundary_power=None if boundary_power < 0 else boundary_power)
+                         boundary_weight=boundary_weight, mean_area=mean_area, mean_e2=mean_e2)
     for row, (planes, g) in zip(got, ref):
         np.testing.assert_allclose(row[20:23], g, rtol=1e-5, atol=1e-9)
         for _ in range(3):
@@ -269,15 +262,3 @@ def test_default_model_is_unchanged():
     assert "volume_weight" not in m.kernel_params() and "memory_weight" not in m.kernel_params()
     q = QEM(memoryless=True)
     assert q.width == ml.WIDTH and q.support == "ring" and q.refresh is not None
-
-
-def test_boundary_power_is_checked_and_memoryless_only():
-    """boundary_power weights the rebuilt boundary planes only: it needs memoryless=True, must be <= 2, and
-    a negative value (the default) means area_power (0 without area_weighted)."""
-    with pytest.raises(ValueError, match="needs memoryless"):
-        QEM(boundary_power=0.25)
-    with pytest.raises(ValueError, match="boundary_power must be"):
-        QEM(memoryless=True, boundary_power=3.0)
-    assert QEM(memoryless=True, area_power=0.75).memoryless_boundary_power == 0.75
-    assert QEM(memoryless=True, area_weighted=False).memoryless_boundary_power == 0.0
-    assert QEM(memoryless=True, area_power=0.75, boundary_power=0.25).memoryless_boundary_power == 0.25

@@ -66,15 +66,12 @@ def _planes(n: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area_power: float,
-                     boundary_weight: float, mean_area: float, mean_e2: float,
-                     boundary_power: float | None = None) -> np.ndarray:
+                     boundary_weight: float, mean_area: float, mean_e2: float) -> np.ndarray:
     """(k,13) float64: the quadrics (10) of ``verts`` (k,), each in its vertex's frame (so b = c = 0), from
     the live faces around it (positions P (n,3)): the plane of each face weighted by
     (area / mean_area)^area_power, and for each boundary edge at the vertex (an edge in one live face only)
-    the plane through it perpendicular to that face, weighted by boundary_weight·(|e|² / mean_e2)^bp with
-    bp = boundary_power (None: area_power) (none when boundary_weight is 0); then g(v) (3): the sum of
-    ½(c1 − v)×(c2 − v) over those faces."""
-    bp = area_power if boundary_power is None else boundary_power
+    the plane through it perpendicular to that face, weighted by boundary_weight·(|e|² / mean_e2)^area_power
+    (none when boundary_weight is 0); then g(v) (3): the sum of ½(c1 − v)×(c2 − v) over those faces."""
     verts = np.asarray(verts, np.int64)
     k = len(verts)
     A = np.zeros((k, 6))
@@ -108,7 +105,7 @@ def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area
                 mn = np.linalg.norm(mm, axis=1)
                 mm = mm / np.where(mn > 0, mn, 1.0)[:, None]
                 wb = boundary_weight * _power(np.sum(e * e, 1) / max(mean_e2, np.finfo(np.float64).tiny),
-                                              bp) * (mn > 0)
+                                              area_power) * (mn > 0)
                 contrib.append((w[s], _planes(mm, wb)))
         for owner, q in contrib:
             for i in range(6):
@@ -122,7 +119,7 @@ def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means,
     verts = np.asarray(verts, np.int64)
     q = current_quadrics(P, faces, verts, area_power=float(model.area_power) if model.area_weighted else 0.0,
                          boundary_weight=float(model.boundary_weight), mean_area=float(means[0]),
-                         mean_e2=float(means[1]), boundary_power=model.memoryless_boundary_power)
+                         mean_e2=float(means[1]))
     hist = q[:, :10] if history is None else np.asarray(history, np.float64)
     return np.concatenate([hist, q, np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))],
                           1).astype(DTYPE)

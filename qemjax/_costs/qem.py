@@ -87,11 +87,6 @@ class QEM(CostModel):
     volume_weight: λ ≥ 0, memoryless only: add λ·(volume change / mean face area)² to each pair's quadric
         before placing (`memoryless`); 0 adds nothing.
     memory_weight: μ ≥ 0, memoryless only: price with Q_current + μ·Q_summed (0: memoryless alone).
-    boundary_power: memoryless only: weight each rebuilt boundary plane by
-        boundary_weight·(|e|²/mean |e|²)^boundary_power; negative (default): area_power, as the face planes.
-        A summed quadric's boundary planes add up along a line while its face planes add up over an area,
-        so as the mesh coarsens its boundary share falls like mean |e| / |e|; a rebuilt quadric keeps it
-        constant when both use area_power. area_power − 0.5 matches the summed quadric's share.
     """
 
     name: ClassVar[str] = "qem"
@@ -107,19 +102,10 @@ class QEM(CostModel):
     memoryless: bool = False
     volume_weight: float = 0.0
     memory_weight: float = 0.0
-    boundary_power: float = -1.0
 
     # the memoryless mode's differences, as properties (ESQEM overrides all three as class attributes)
     width = property(lambda self: ml.WIDTH if self.memoryless else quadrics.QSIZE)
     support = property(lambda self: "ring" if self.memoryless else "pair")
-
-    @property
-    def memoryless_boundary_power(self) -> float:
-        """The exponent of |e|²/mean |e|² in a rebuilt boundary plane's weight: ``boundary_power``, or the
-        face planes' (area_power; 0 without area_weighted) when it is negative."""
-        if self.boundary_power >= 0:
-            return float(self.boundary_power)
-        return float(self.area_power) if self.area_weighted else 0.0
 
     @property
     def refresh(self):
@@ -135,10 +121,6 @@ class QEM(CostModel):
             raise ValueError(f"volume_weight must be finite and >= 0, got {self.volume_weight}")
         if not (self.memory_weight >= 0 and np.isfinite(self.memory_weight)):
             raise ValueError(f"memory_weight must be finite and >= 0, got {self.memory_weight}")
-        if not (np.isfinite(self.boundary_power) and self.boundary_power <= 2):
-            raise ValueError(f"boundary_power must be <= 2 (negative: area_power), got {self.boundary_power}")
-        if self.boundary_power >= 0 and not self.memoryless:
-            raise ValueError("boundary_power >= 0 needs memoryless=True (it weights the rebuilt boundary planes)")
         if (self.volume_weight or self.memory_weight) and not self.memoryless:
             raise ValueError("volume_weight or memory_weight > 0 needs memoryless=True (they weight terms of "
                              "the memoryless cost)")
