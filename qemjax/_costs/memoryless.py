@@ -117,16 +117,10 @@ def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means,
     """(k, WIDTH) float32 state rows of ``verts``: the history quadrics (k,10) (None: the current ones, as
     at the start), `current_quadrics` with the model's weights, then the two input means."""
     verts = np.asarray(verts, np.int64)
-    ap = float(model.area_power) if model.area_weighted else 0.0
-    q = current_quadrics(P, faces, verts, area_power=ap, boundary_weight=model.rebuilt_boundary_weight,
-                         mean_area=float(means[0]), mean_e2=float(means[1]))
-    if history is not None:
-        hist = np.asarray(history, np.float64)
-    elif model.rebuilt_boundary_weight == model.boundary_weight:
-        hist = q[:, :10]
-    else:  # the history starts as the default's quadrics, with boundary_weight
-        hist = current_quadrics(P, faces, verts, area_power=ap, boundary_weight=float(model.boundary_weight),
-                                mean_area=float(means[0]), mean_e2=float(means[1]))[:, :10]
+    q = current_quadrics(P, faces, verts, area_power=float(model.area_power) if model.area_weighted else 0.0,
+                         boundary_weight=float(model.boundary_weight), mean_area=float(means[0]),
+                         mean_e2=float(means[1]))
+    hist = q[:, :10] if history is None else np.asarray(history, np.float64)
     return np.concatenate([hist, q, np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))],
                           1).astype(DTYPE)
 

@@ -102,17 +102,10 @@ class QEM(CostModel):
     memoryless: bool = False
     volume_weight: float = 0.0
     memory_weight: float = 0.0
-    current_boundary_weight: float = -1.0
 
     # the memoryless mode's differences, as properties (ESQEM overrides all three as class attributes)
     width = property(lambda self: ml.WIDTH if self.memoryless else quadrics.QSIZE)
     support = property(lambda self: "ring" if self.memoryless else "pair")
-
-    @property
-    def rebuilt_boundary_weight(self) -> float:
-        """The weight of the boundary planes in a rebuilt (current) quadric: current_boundary_weight, or
-        boundary_weight when that is negative."""
-        return float(self.boundary_weight if self.current_boundary_weight < 0 else self.current_boundary_weight)
 
     @property
     def refresh(self):
