@@ -121,11 +121,6 @@ def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means,
                          boundary_weight=float(model.boundary_weight), mean_area=float(means[0]),
                          mean_e2=float(means[1]))
     hist = q[:, :10] if history is None else np.asarray(history, np.float64)
-    beta, mu = float(model.boundary_memory), float(model.memory_weight)
-    if history is None and beta >= 0 and mu > 0:  # the history's boundary share scaled by β/μ (priced β)
-        qf = current_quadrics(P, faces, verts, area_power=float(model.area_power) if model.area_weighted
-                              else 0.0, boundary_weight=0.0, mean_area=float(means[0]), mean_e2=float(means[1]))
-        hist = qf[:, :10] + (beta / mu) * (q[:, :10] - qf[:, :10])
     return np.concatenate([hist, q, np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))],
                           1).astype(DTYPE)
 

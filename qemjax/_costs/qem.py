@@ -102,7 +102,6 @@ class QEM(CostModel):
     memoryless: bool = False
     volume_weight: float = 0.0
     memory_weight: float = 0.0
-    boundary_memory: float = -1.0  # experiment: price the history's boundary planes with β, its faces with μ
 
     # the memoryless mode's differences, as properties (ESQEM overrides all three as class attributes)
     width = property(lambda self: ml.WIDTH if self.memoryless else quadrics.QSIZE)
