@@ -21,6 +21,12 @@ instead of running them again (peers are deterministic; for studies of qemjax's 
     python experiments/rank_peers.py --variant base --variant bw1000:boundary_weight=1000 \
         --meshes beetle face --reuse-peers experiments/results/rank_peers.csv --out experiments/results/boundary
 
+Equal face counts: where a variant and the first one (the base) stop at different face counts (the
+target cannot be reached, e.g. on meshes with many open parts), the one that went further runs again with
+the other's face count as its target (row status ``matched to qemjax-OTHER``). The peer tables use the
+runs as they stopped; the "variant / base" comparison prints both ratios, ``raw`` (as they stopped) and
+``matched`` (at equal face counts), and counts the cases more than 3 % worse both ways.
+
 ``--summarize CSV`` prints the tables of an earlier run again (with the per-ratio counts and the
 Hausdorff comparison, added after some runs were written) without running anything.
 """
@@ -152,30 +158,90 @@ def ranks(rows: list[dict], labels: list[str]) -> str:
                       ""]
         out.append("\n".join(lines))
     if len(labels) > 1 and cases:  # each variant against the first, per case
-        base = labels[0]
         for label in labels[1:]:
-            ch = []
-            for mesh, ratio in cases:
-                pick = {r["method"]: r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio
-                        and r["status"] == "ok"}
-                if f"qemjax-{base}" in pick and f"qemjax-{label}" in pick:
-                    ch.append((float(pick[f"qemjax-{label}"]["rms_rel"]) / float(pick[f"qemjax-{base}"]["rms_rel"]),
-                               mesh, ratio,
-                               float(pick[f"qemjax-{label}"]["hausdorff_rel"])
-                               / float(pick[f"qemjax-{base}"]["hausdorff_rel"])))
-            if ch:
-                worst = max(ch)
-                out.append(f"{label} rms / {base} rms: median {np.median([c[0] for c in ch]):.3f}, "
-                           f"worst {worst[0]:.3f} ({worst[1]} @ {worst[2]:g}); "
-                           f"{sum(c[0] > 1.03 for c in ch)} of {len(ch)} cases more than 3 % worse\n")
-                h_worse = [c for c in ch if c[3] > 1.03]
-                out.append(f"{label} Hausdorff / {base} Hausdorff: median {np.median([c[3] for c in ch]):.3f}; "
-                           f"{len(h_worse)} of {len(ch)} cases more than 3 % worse"
-                           + "".join(f"; at {ratio:g}: {sum(c[2] == ratio for c in h_worse)}"
-                                     for ratio in sorted({c[2] for c in ch}, reverse=True))
-                           + "; rms more than 3 % worse: "
-                           + (", ".join(f"{c[1]} @ {c[2]:g}" for c in ch if c[0] > 1.03) or "none") + "\n")
+            out.append(against_base(rows, cases, labels[0], label))
     return "\n".join(out)
+
+
+def against_base(rows: list[dict], cases, base: str, label: str) -> str:
+    """``label`` against ``base`` per case: rms and Hausdorff ratios, raw (each run as it stopped) and
+    matched (where the two stopped at different face counts, the one that went further is replaced by its
+    `matched_runs` row at the other's face count; a CSV without such rows gives matched == raw)."""
+    ch = []  # (raw rms ratio, mesh, ratio, raw H ratio, matched rms ratio, matched H ratio, faces note)
+    for mesh, ratio in cases:
+        here = [r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio]
+        ok = {r["method"]: r for r in here if r["status"] == "ok"}
+        v, b = ok.get(f"qemjax-{label}"), ok.get(f"qemjax-{base}")
+        if v is None or b is None:
+            continue
+        mv = next((r for r in here if r["method"] == f"qemjax-{label}"
+                   and r["status"] == f"matched to qemjax-{base}"), v)
+        mb = next((r for r in here if r["method"] == f"qemjax-{base}"
+                   and r["status"] == f"matched to qemjax-{label}"), b)
+        note = "" if mv is v and mb is b else (f"{label} {v['faces_out']} -> {mv['faces_out']} faces, "
+                                                f"{base} {b['faces_out']} -> {mb['faces_out']}")
+        ch.append((_ratio(v, b, "rms_rel"), mesh, ratio, _ratio(v, b, "hausdorff_rel"),
+                   _ratio(mv, mb, "rms_rel"), _ratio(mv, mb, "hausdorff_rel"), note))
+    if not ch:
+        return ""
+    worst = max(ch)
+    lines = [f"{label} rms / {base} rms: median {np.median([c[0] for c in ch]):.3f}, "
+             f"worst {worst[0]:.3f} ({worst[1]} @ {worst[2]:g}); "
+             f"{sum(c[0] > 1.03 for c in ch)} of {len(ch)} cases more than 3 % worse\n"]
+    h_worse = [c for c in ch if c[3] > 1.03]
+    lines.append(f"{label} Hausdorff / {base} Hausdorff: median {np.median([c[3] for c in ch]):.3f}; "
+                 f"{len(h_worse)} of {len(ch)} cases more than 3 % worse"
+                 + "".join(f"; at {ratio:g}: {sum(c[2] == ratio for c in h_worse)}"
+                           for ratio in sorted({c[2] for c in ch}, reverse=True))
+                 + "; rms more than 3 % worse: "
+                 + (", ".join(f"{c[1]} @ {c[2]:g}" for c in ch if c[0] > 1.03) or "none") + "\n")
+    matched = [c for c in ch if c[6]]
+    lines.append(f"{label} / {base} at equal face counts (matched; {len(matched)} cases re-run where the two "
+                 f"stopped at different face counts):")
+    lines += [f"- {c[1]} @ {c[2]:g}: {c[6]}; rms ratio raw {c[0]:.3f}, matched {c[4]:.3f}; "
+              f"Hausdorff ratio raw {c[3]:.3f}, matched {c[5]:.3f}" for c in matched]
+    lines.append(f"{label} rms / {base} rms, more than 3 % worse: raw {sum(c[0] > 1.03 for c in ch)} of "
+                 f"{len(ch)} (" + (", ".join(f"{c[1]} @ {c[2]:g}" for c in ch if c[0] > 1.03) or "none")
+                 + f"); matched {sum(c[4] > 1.03 for c in ch)} of {len(ch)} ("
+                 + (", ".join(f"{c[1]} @ {c[2]:g} {c[4]:.3f}" for c in ch if c[4] > 1.03) or "none") + ")")
+    lines.append(f"{label} Hausdorff / {base} Hausdorff, more than 3 % worse: raw {len(h_worse)} of {len(ch)}; "
+                 f"matched {sum(c[5] > 1.03 for c in ch)} of {len(ch)}\n")
+    return "\n".join(lines)
+
+
+def _ratio(a: dict, b: dict, key: str) -> float:
+    return float(a[key]) / float(b[key])
+
+
+def run_variant(run, label: str, mesh, ratio: float, target: int, status: str = "ok") -> dict:
+    """One qemjax variant on one case: its CSV row (faces, distances, time)."""
+    t0 = time.perf_counter()
+    res = run(mesh.V, mesh.F, target)
+    secs = time.perf_counter() - t0
+    V2, F2 = np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64)
+    return dict(mesh=mesh.name, faces_in=mesh.n_faces, ratio=ratio, target=target, method=f"qemjax-{label}",
+                faces_out=len(F2), time_s=secs, status=status,
+                branches=" ".join(f"{k}={v}" for k, v in res.stats["branches"].items()),
+                **distances(mesh.V, mesh.F, V2, F2))
+
+
+def matched_runs(runners: dict, own: dict, mesh, ratio: float) -> list[dict]:
+    """Where a variant and the first (base) one stop at different face counts (the target could not be
+    reached), the one that went further (fewer faces, so a larger error for the same model) runs again
+    with the other's face count as its target. Comparing the two at unequal face counts would charge the
+    further one for faces the other kept. The new row's status is ``matched to qemjax-OTHER``; the
+    tables (`ranks`) use only ``ok`` rows, except the "variant / base" comparison, which reports both."""
+    labels = list(runners)
+    out = []
+    for label in labels[1:]:
+        pair = (labels[0], label)
+        a, b = (own[x] for x in pair)
+        if a["faces_out"] == b["faces_out"]:
+            continue
+        further, other = pair if a["faces_out"] < b["faces_out"] else pair[::-1]
+        out.append(run_variant(runners[further], further, mesh, ratio, own[other]["faces_out"],
+                               status=f"matched to qemjax-{other}"))
+    return out
 
 
 def main(argv=None) -> int:
@@ -218,19 +284,16 @@ def main(argv=None) -> int:
             target = max(4, int(round(ratio * mesh.n_faces)))
             cached = [old_peers.get((name, ratio, p)) for p in bench_peers.PEERS]
             rows += cached if all(cached) else run_peers(mesh, ratio, target)
-            for label, run in runners.items():
-                t0 = time.perf_counter()
-                res = run(mesh.V, mesh.F, target)
-                secs = time.perf_counter() - t0
-                V2, F2 = np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64)
-                rows.append(dict(mesh=name, faces_in=mesh.n_faces, ratio=ratio, target=target,
-                                 method=f"qemjax-{label}", faces_out=len(F2), time_s=secs, status="ok",
-                                 branches=" ".join(f"{k}={v}" for k, v in res.stats["branches"].items()),
-                                 **distances(mesh.V, mesh.F, V2, F2)))
+            own = {label: run_variant(run, label, mesh, ratio, target) for label, run in runners.items()}
+            rows += own.values()
+            rows += matched_runs(runners, own, mesh, ratio)
             print(f"{name} @ {ratio:g}: " + ", ".join(
                 f"{r['method']} {float(r['rms_rel']):.3e}/{float(r['hausdorff_rel']):.3e}"
-                for r in rows if r["mesh"] == name and float(r["ratio"]) == ratio and r["status"] == "ok"),
-                flush=True)
+                for r in rows if r["mesh"] == name and float(r["ratio"]) == ratio and r["status"] == "ok")
+                + "".join(f"; {r['method']} {r['status']} at {r['faces_out']} faces "
+                          f"{float(r['rms_rel']):.3e}/{float(r['hausdorff_rel']):.3e}"
+                          for r in rows if r["mesh"] == name and float(r["ratio"]) == ratio
+                          and r["status"].startswith("matched")), flush=True)
     table = ranks(rows, [v[0] for v in variants])
     print(table)
     save_run(args.out, rows, COLUMNS, table, "rank_peers.py", argv)
