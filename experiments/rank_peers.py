@@ -9,7 +9,8 @@ A peer that fails is left out of that case.
 A variant is ``LABEL`` or ``LABEL:key=value,...``: ``rev=REV`` runs qemjax as it was at that git revision
 (unpacked by `ab_compare.load_old`, in this process); other keys set the QEM model's fields
 (``placement``, ``cond_eps``, ``rank_eps``, ``max_shift``, ``area_weighted``, ``area_power``,
-``boundary_weight``). So the table before and after a change comes from one command::
+``boundary_weight``), and ``preset=NAME`` passes ``simplify(preset=NAME)``. So the table before and
+after a change comes from one command::
 
     python experiments/rank_peers.py --variant old:rev=02a1390 --variant rank:placement=rank
     python experiments/rank_peers.py --variant new --variant loose:cond_eps=1e-9 --meshes cow face
@@ -76,13 +77,16 @@ def variant_runner(label: str, rev: str | None, settings: dict):
         import qemjax as package
     costs = package._costs
     fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
+    preset = settings.pop("preset", None)  # a simplify(preset=...) name
     unknown = set(settings) - set(fields)
     if unknown:
-        raise SystemExit(f"unknown QEM setting(s) {sorted(unknown)}; choose from {sorted(fields)}")
+        raise SystemExit(f"unknown QEM setting(s) {sorted(unknown)}; choose from {sorted(fields)} or preset")
     typed = {k: type(fields[k].default)(v) for k, v in settings.items()}
     # settings that simplify takes as keywords go there (it passes them to the model); the rest are
     # defaults of a QEM subclass
     keywords = {k: typed.pop(k) for k in list(typed) if k in inspect.signature(package.simplify).parameters}
+    if preset is not None:
+        keywords["preset"] = preset
     if typed:  # a QEM subclass with these defaults, registered under its own name
         name = f"qem-{label}"
         cls = dataclasses.make_dataclass(name, [(k, type(v), dataclasses.field(default=v))
