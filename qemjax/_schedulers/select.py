@@ -77,7 +77,8 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
 
     free = np.ones(n, bool)
     if groups is not None:
-        groups = (*groups, np.zeros(len(groups[1]), np.int64))  # + accepted so far per copy
+        # + accepted so far per copy, and which copies have left the passes (none yet)
+        groups = (*groups, np.zeros(len(groups[1]), np.int64), np.zeros(len(groups[1]), bool))
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
     ws = narrow(active, (np.arange(len(E)), E, None))
@@ -129,9 +130,10 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
 
 def _copies_staying(groups, sel, good, E, p, schedule):
     """A batched run's pass rule (see `independent_sets`): (n,) bool, the vertices of the copies that go on
-    to the next pass (a copy that selected nothing this pass is done), or None when none does. Updates the
-    per-copy accepted counts in ``groups``."""
-    vcopy, need, cp, n_acc = groups
+    to the next pass (a copy that selected nothing this pass is done), True when they are the same as
+    after the last pass, or None when none goes on. Updates the per-copy accepted counts and the copies
+    that have left in ``groups``."""
+    vcopy, need, cp, n_acc, out = groups
     C = len(need)
     g = np.bincount(np.take(cp, good), minlength=C)
     tried = np.bincount(np.take(cp, sel), minlength=C) > 0
@@ -139,6 +141,9 @@ def _copies_staying(groups, sel, good, E, p, schedule):
     done = ~tried | (g < schedule.pass_yield * n_acc) | ((g * 50 < need // 2) & (p > 2))
     if done.all():
         return None
+    if not (done & ~out).any():  # no copy left the passes now: the vertex mask stays as it is
+        return True
+    out |= done
     return np.take(~done, vcopy)
 
 
