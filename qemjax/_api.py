@@ -179,8 +179,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         the summed (Garland–Heckbert) ones, which the run keeps alongside. 0 (default): memoryless alone.
     preset: a named set of the options above (`qemjax._presets`), filling those left at their defaults
         (a keyword given with another value wins): ``'accurate'`` = memoryless with ``memory_weight=0.3``,
-        ``placement='rank'`` (looser limits), ``area_power=0.6``, ``boundary_weight=10``: the lowest rms
-        and Hausdorff distance against the peers on most shared meshes, at about 3× the time. None
+        ``placement='rank'`` (looser limits), ``area_power=0.6``, ``boundary_weight=10``: rms and Hausdorff
+        distance at or below the best peer's on most shared meshes, at about 3× the time. None
         (default): the options as given.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any

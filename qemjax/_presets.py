@@ -7,8 +7,8 @@ wins over the preset. A preset may also set fields of the cost model that `simpl
 ``"accurate"``: Lindstrom–Turk-style memoryless quadrics with 0.3 of the summed (Garland–Heckbert) ones,
 the rank-aware placement with loose limits, face planes weighted by (area / mean area)^0.6 and boundary
 planes at weight 10. On the 17 shared meshes at 10 % and 1 % against meshoptimizer, fast-simplification,
-pyfqmr, pymeshlab and libigl it gives the lowest rms in 28 of 34 cases and the lowest Hausdorff distance
-in 21 (the default: 9 and 9), at about 3× the CPU time (README, "Placement and the ranking against
+pyfqmr, pymeshlab and libigl its rms is at or below the best peer's in 28 of 34 cases and its Hausdorff
+distance in 21 (the default: 9 and 9), at about 3× the CPU time (README, "Placement and the ranking against
 peers"; ``experiments/rank_peers.py``). It was chosen on those same cases.
 """
 from __future__ import annotations
