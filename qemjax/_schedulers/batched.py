@@ -259,8 +259,7 @@ class _Batch(_Run):
                     "removed_at": removed_at, "coincident": coincident, "history_rounds": rc}
             info.update(self.timer.t)
             out.append((self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[f0:f1],
-                        _history_arrays(*(_history_columns([])[1:] if not len(mine) else
-                                          (ac, bc, np.take(x, mine, axis=0), np.take(cost, mine)))), info))
+                        _history_arrays(ac, bc, np.take(x, mine, axis=0), np.take(cost, mine)), info))
         return out
 
 

@@ -178,7 +178,9 @@ def _history_columns(history):
 
 
 def _history_arrays(a, b, x, cost):
-    """The record's history: pairs (k,2) int64, positions (k,3), costs (k,)."""
+    """The record's history: pairs (k,2) int64, positions (k,3), costs (k,) (float64 empties when k = 0)."""
+    if not len(a):
+        return np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)
     return np.stack([a, b], 1), x, cost
 
 
