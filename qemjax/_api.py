@@ -181,7 +181,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (a keyword given with another value wins): ``'accurate'`` = memoryless with ``memory_weight=0.3``,
         ``placement='rank'`` (looser limits), ``area_power=0.6``, ``boundary_weight=10``: rms and Hausdorff
         distance at or below the best peer's on most shared meshes, at about 3× the time. None
-        (default): the options as given.
+        (default): the options as given. A keyword passed with its default value counts as not given.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options.

@@ -1,7 +1,8 @@
 """Named settings of `simplify` (``preset=``): a measured combination of options under one word.
 
 A preset fills the keywords that a call leaves at their defaults; a keyword given with another value
-wins over the preset. A preset may also set fields of the cost model that `simplify` has no keyword for
+wins over the preset (one passed with its default value cannot be told from an omitted one, so the
+preset's value is used). A preset may also set fields of the cost model that `simplify` has no keyword for
 (``model``): the placement's tunables ``rank_eps`` and ``max_shift``.
 
 ``"accurate"``: Lindstrom–Turk-style memoryless quadrics with 0.3 of the summed (Garland–Heckbert) ones,
