@@ -224,14 +224,13 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     list is that exception instead.
     """
     t_start = time.perf_counter()
-    defaults = _DEFAULTS
     geos, states, jobs, out = {}, {}, [], [None] * len(cells)
     for i, (mesh, cfg) in enumerate(cells):
         try:
-            unknown = sorted(set(cfg) - set(defaults) | ({"progress"} & set(cfg)))
+            unknown = sorted(set(cfg) - set(_DEFAULTS) | ({"progress"} & set(cfg)))
             if unknown:
                 raise ValueError(f"simplify_batch: unknown or unsupported keywords {unknown}")
-            kw = {**defaults, **cfg}
+            kw = {**_DEFAULTS, **cfg}
             setup = _setup_with_preset(kw["preset"], {k: kw[k] for k in _SETUP_KEYS})
             _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
@@ -284,6 +283,7 @@ def _model_key(model):
     """What decides a model's compiled kernels: its class (and a term's base), and the price function."""
     base = getattr(model, "base", None)
     return (type(model), getattr(model, "price_kernel", None), None if base is None else _model_key(base))
+
 
 @dataclasses.dataclass(frozen=True)
 class Setup:

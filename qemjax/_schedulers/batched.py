@@ -229,8 +229,7 @@ class _Batch(_Run):
         voff, foff, C = self.voff, self.foff, self.C
         # every contraction once, then each copy's rows (record order within a copy is kept)
         rounds, a, b, x, cost = _history_columns(self.history)
-        order = np.argsort(np.take(self.vcopy, a), kind="stable")
-        bounds = np.searchsorted(np.take(self.vcopy, np.take(a, order)), np.arange(C + 1))
+        order, bounds = _grouped(np.take(self.vcopy, a), C)
         parts = [None] * C
         if self.history_parts:
             allp = np.concatenate(self.history_parts)
@@ -263,6 +262,13 @@ class _Batch(_Run):
         return out
 
 
+def _grouped(copy: np.ndarray, C: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows grouped by their copy (k,): (order (k,), a stable sort by copy, so rows keep their order
+    within a copy; bounds (C + 1,): copy c's rows are order[bounds[c]:bounds[c + 1]])."""
+    order = np.argsort(copy, kind="stable")
+    return order, np.searchsorted(np.take(copy, order), np.arange(C + 1))
+
+
 def _segment_sums(mask: np.ndarray, starts: np.ndarray) -> np.ndarray:
     """(C,) int64: the True entries of ``mask`` in each segment starts[c] … starts[c+1] − 1."""
     csum = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
@@ -274,9 +280,8 @@ def _fits_targets(ca: np.ndarray, removes: np.ndarray, need: np.ndarray, C: int)
     ``removes`` the faces each removes) taking, in each copy, what fits its ``need``. A copy whose
     accepted pairs all fit takes them all (the common case: one cumulative sum for every copy); the
     others go through `fits_target`."""
-    order = np.argsort(ca, kind="stable")
+    order, bounds = _grouped(ca, C)
     r = np.take(removes, order)
-    bounds = np.searchsorted(np.take(ca, order), np.arange(C + 1))
     total = np.diff(np.concatenate([[0], np.cumsum(r)])[bounds])
     take = np.ones(len(ca), bool)
     for c in np.flatnonzero(total > need):
@@ -295,9 +300,7 @@ def _by_copy(entries, offsets: np.ndarray, first) -> list:
         ids = first(arrs)
         if not len(ids):
             continue
-        cop = np.searchsorted(offsets, ids, "right") - 1
-        order = np.argsort(cop, kind="stable")
-        bounds = np.searchsorted(cop[order], np.arange(C + 1))
+        order, bounds = _grouped(np.searchsorted(offsets, ids, "right") - 1, C)
         for c in np.flatnonzero(np.diff(bounds)):
             sel = order[bounds[c]:bounds[c + 1]]
             out[c].append((r, tuple(a[sel] for a in arrs) if isinstance(arrs, tuple) else arrs[sel]))

@@ -136,8 +136,7 @@ def _removal_steps(F, rounds, a, b, dead, dropped):
     """Which contraction removed each face, from a run's per-round arrays (no per-contraction work):
     F (m,3) the faces at the end (a removed face keeps the row it had when it went), rounds, a, b the
     round, kept and removed vertex of each contraction in record order (`_history_columns`), dead /
-    dropped the faces each round's
-    contractions removed / its coincident faces dropped. Returns the record's ``removed_at`` (m,) int64
+    dropped the faces each round's contractions removed / its coincident faces dropped. Returns the record's ``removed_at`` (m,) int64
     (-1: survives), ``coincident`` (m,) bool and ``rounds`` (k,) int64 (see `_record.Record`).
 
     A face that dies in a contraction holds its removed vertex and vertices removed later or never: its

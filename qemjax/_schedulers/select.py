@@ -118,7 +118,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
             if good.size < schedule.pass_yield * n_acc or (good.size * 50 < need // 2 and p > 2):
                 break  # later passes would add little: leave the rest to the next round
         else:
-            stay = _copies_staying(groups, sel, good, E, p, schedule)
+            stay = _copies_staying(groups, sel, good, p, schedule)
             if stay is None:
                 break
             active &= stay
@@ -128,7 +128,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
     return cat(accepted), cat(rejected), cat(reasons, np.int8), extra, ~free
 
 
-def _copies_staying(groups, sel, good, E, p, schedule):
+def _copies_staying(groups, sel, good, p, schedule):
     """A batched run's pass rule (see `independent_sets`): (n,) bool, the vertices of the copies that go on
     to the next pass (a copy that selected nothing this pass is done), True when they are the same as
     after the last pass, or None when none goes on. Updates the per-copy accepted counts and the copies
