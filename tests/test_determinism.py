@@ -49,3 +49,19 @@ def test_same_output_on_one_core(scheduler):
     if done.returncode:
         pytest.fail(f"the pinned subprocess failed:\n{done.stderr}")
     assert done.stdout.strip().splitlines()[-1] == here
+
+
+def test_small_host_work_runs_on_the_calling_thread():
+    """`select.submit`: work under INLINE_ROWS runs here (a done future, errors raised by result()),
+    larger work on the worker thread; either way the caller sees the same future."""
+    import threading
+
+    from qemjax._schedulers import select
+    here = threading.get_ident()
+    small = select.submit(threading.get_ident, size=select.INLINE_ROWS - 1)
+    assert small.done() and small.result() == here
+    assert select.submit(threading.get_ident, size=select.INLINE_ROWS).result() != here
+    assert select.submit(threading.get_ident).result() != here  # no size: always the worker
+    bad = select.submit(int, "not a number", size=0)
+    with pytest.raises(ValueError):
+        bad.result()

@@ -211,7 +211,7 @@ class _Run:
         self.edges = edges
         # int32 rows (n < 2**31) keep their index: face i continues input face i; built on the worker
         # while this thread computes the input normals
-        lists = submit(FaceLists, F, self.n)
+        lists = submit(FaceLists, F, self.n, size=m)
         N0 = face_normals(np.asarray(V, DTYPE), F) if normals is None else normals  # input normals
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
         self.faces = lists.result()
@@ -358,7 +358,7 @@ class _Run:
         tv = time.perf_counter()
         if self.manifold:
             link = submit(topo.link_ok, P, st.ecount[idx], Efree, self.n, st.bvert, st.deg, apexes=True,
-                          edges_at=True)
+                          edges_at=True, size=len(Efree))
         (fids, before, corner, owner, G), kept, dead = self.faces.touched_with_dead(P)
         flipped = start_flips(self.VQd, self.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
                             self.options.cos_max)  # runs while the host tests the rest
@@ -409,7 +409,7 @@ class _Run:
         pairs, kept, dead, (apex, erows) = _accepted(st.E, found, taken)  # in pass order, not acc's
         if self.incremental:  # the edge update runs on the worker while this thread relinks the faces
             edges_next = submit(topo.contract_edges, st.E, st.ecount, pairs[:, 0], pairs[:, 1], apex, n,
-                                st.deg, rows=erows)
+                                st.deg, rows=erows, size=len(st.E))
         if self.wedges is not None:  # the corners' wedges, before the faces are relinked
             self.wedges.contract_many(faces, self.VQ, P, xs)
         faces.contract_touched(pairs, kept, dead)

@@ -5,7 +5,7 @@ need no sort and ties are broken the same way on every machine.
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -14,12 +14,23 @@ from .._options import Schedule
 
 NO_KEY = np.iinfo(np.int64).max
 SPLIT_ROWS = 1 << 18  # array passes at least this long are shared with the worker thread
+# work on fewer rows than this runs on the calling thread: waking the worker on another core costs more
+# than the little it would overlap (experiments/inline_rows.py)
+INLINE_ROWS = 1 << 15
 _worker = None  # one host thread beside the caller's: numpy releases the GIL in its large array passes
 
 
-def submit(fn, *args, **kw):
-    """Run fn on the host worker thread; returns its future. Only read-only inputs are shared."""
+def submit(fn, *args, size: int | None = None, **kw):
+    """Run fn on the host worker thread; returns its future. Only read-only inputs are shared.
+    ``size``: the rows the work passes over; under `INLINE_ROWS` it runs here and now (the future is done)."""
     global _worker
+    if size is not None and size < INLINE_ROWS:
+        done = Future()
+        try:
+            done.set_result(fn(*args, **kw))
+        except Exception as exc:  # raised by result(), as from the worker
+            done.set_exception(exc)
+        return done
     if _worker is None:
         _worker = ThreadPoolExecutor(1, thread_name_prefix="qemjax-host")
     return _worker.submit(fn, *args, **kw)
