@@ -20,7 +20,9 @@ Kernel calls are asynchronous: the re-costing, the flip test and the merges run 
 the host works on the topology, and are waited for only where their results are needed. One host worker
 thread runs the link test and the edge update beside the main thread's face work, half of each large
 narrowing pass, and the initial face lists beside the input normals (numpy releases the GIL in large
-array passes; the process otherwise used 1.2 of 2 cores).
+array passes; the process otherwise used 1.2 of 2 cores). Work on fewer than `select.INLINE_ROWS` rows
+runs on the main thread instead: on a small mesh, waking the worker on the other core costs more than it
+overlaps.
 Because accepted contractions are two edges apart, the validity computed for each stays true when all
 happen together. The last round takes only as many, in cost order, as the exact face target allows.
 """
