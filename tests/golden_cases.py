@@ -7,9 +7,10 @@ the keywords of `qemjax.simplify`. Its digest is sha256 over res.vertices, res.f
 res.history.positions and res.history.costs, each preceded by its name, dtype and shape, so a change of any
 value, dtype, shape or of the contraction order changes it.
 
-Hashes hold for the machine they were made on (same library versions, same number of usable CPUs: with one
-core, e.g. ``taskset -c 0``, the parallel scheduler picks different contractions part-way (cow: from the
-1,064th of 2,612) and 44 of the 47 parallel-scheduler hashes differ; greedy's do not). The file records both.
+Hashes hold for the library versions they were made with. They used to depend on the number of usable
+CPUs too (XLA's CPU fusion emitter split loops by core count); since the kernels compile with
+`_kernels.CPU_COMPILER_OPTIONS` they do not: ``taskset -c 1 python experiments/golden.py --check`` gives
+57/57 OK against hashes made with 2 CPUs (2026-11-24). The file still records the CPU count.
 """
 from __future__ import annotations
 
