@@ -213,7 +213,9 @@ def against_base(rows: list[dict], cases, base: str, label: str) -> str:
     lines.append(f"{label} rms / {base} rms, more than 3 % worse: raw {sum(c[0] > 1.03 for c in ch)} of "
                  f"{len(ch)} (" + (", ".join(f"{c[1]} @ {c[2]:g}" for c in ch if c[0] > 1.03) or "none")
                  + f"); matched {sum(c[4] > 1.03 for c in ch)} of {len(ch)} ("
-                 + (", ".join(f"{c[1]} @ {c[2]:g} {c[4]:.3f}" for c in ch if c[4] > 1.03) or "none") + ")")
+                 + (", ".join(f"{c[1]} @ {c[2]:g} {c[4]:.3f}" for c in ch if c[4] > 1.03) or "none") + ")"
+                 + f"; matched rms ratio median {np.median([c[4] for c in ch]):.3f}, worst "
+                 + "{0[4]:.3f} ({0[1]} @ {0[2]:g})".format(max(ch, key=lambda c: c[4])))
     lines.append(f"{label} Hausdorff / {base} Hausdorff, more than 3 % worse: raw {len(h_worse)} of {len(ch)}; "
                  f"matched {sum(c[5] > 1.03 for c in ch)} of {len(ch)}\n")
     return "\n".join(lines)
