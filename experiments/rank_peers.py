@@ -9,7 +9,8 @@ A peer that fails is left out of that case.
 A variant is ``LABEL`` or ``LABEL:key=value,...``: ``rev=REV`` runs qemjax as it was at that git revision
 (unpacked by `ab_compare.load_old`, in this process); other keys set the QEM model's fields
 (``placement``, ``cond_eps``, ``rank_eps``, ``max_shift``, ``area_weighted``, ``area_power``,
-``boundary_weight``), and ``preset=NAME`` passes ``simplify(preset=NAME)``. So the table before and
+``boundary_weight``), other numeric keywords of ``simplify`` (``refit``) are passed to it, and
+``preset=NAME`` passes ``simplify(preset=NAME)``. So the table before and
 after a change comes from one command::
 
     python experiments/rank_peers.py --variant old:rev=02a1390 --variant rank:placement=rank
@@ -78,6 +79,10 @@ def variant_runner(label: str, rev: str | None, settings: dict):
     costs = package._costs
     fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
     preset = settings.pop("preset", None)  # a simplify(preset=...) name
+    params = inspect.signature(package.simplify).parameters
+    # simplify keywords that are not QEM fields (e.g. refit), typed by their defaults
+    extra = {k: type(params[k].default)(settings.pop(k)) for k in list(settings)
+             if k not in fields and k in params and isinstance(params[k].default, (bool, int, float))}
     unknown = set(settings) - set(fields)
     if unknown:
         raise SystemExit(f"unknown QEM setting(s) {sorted(unknown)}; choose from {sorted(fields)} or preset")
@@ -85,6 +90,7 @@ def variant_runner(label: str, rev: str | None, settings: dict):
     # settings that simplify takes as keywords go there (it passes them to the model); the rest are
     # defaults of a QEM subclass
     keywords = {k: typed.pop(k) for k in list(typed) if k in inspect.signature(package.simplify).parameters}
+    keywords.update(extra)
     if preset is not None:
         keywords["preset"] = preset
     if typed:  # a QEM subclass with these defaults, registered under its own name
@@ -207,7 +213,9 @@ def against_base(rows: list[dict], cases, base: str, label: str) -> str:
     lines.append(f"{label} rms / {base} rms, more than 3 % worse: raw {sum(c[0] > 1.03 for c in ch)} of "
                  f"{len(ch)} (" + (", ".join(f"{c[1]} @ {c[2]:g}" for c in ch if c[0] > 1.03) or "none")
                  + f"); matched {sum(c[4] > 1.03 for c in ch)} of {len(ch)} ("
-                 + (", ".join(f"{c[1]} @ {c[2]:g} {c[4]:.3f}" for c in ch if c[4] > 1.03) or "none") + ")")
+                 + (", ".join(f"{c[1]} @ {c[2]:g} {c[4]:.3f}" for c in ch if c[4] > 1.03) or "none") + ")"
+                 + f"; matched rms ratio median {np.median([c[4] for c in ch]):.3f}, worst "
+                 + "{0[4]:.3f} ({0[1]} @ {0[2]:g})".format(max(ch, key=lambda c: c[4])))
     lines.append(f"{label} Hausdorff / {base} Hausdorff, more than 3 % worse: raw {len(h_worse)} of {len(ch)}; "
                  f"matched {sum(c[5] > 1.03 for c in ch)} of {len(ch)}\n")
     return "\n".join(lines)

@@ -59,6 +59,7 @@ OPTIONS = {
     "memoryless": dict(action=argparse.BooleanOptionalAction),
     "volume_weight": dict(type=float, metavar="LAMBDA"),
     "memory_weight": dict(type=float, metavar="MU"),
+    "refit": dict(type=int, metavar="N"),
     "preset": dict(choices=tuple(_presets.PRESETS), shown="none"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}

@@ -1,0 +1,156 @@
+"""Re-fit the simplified mesh's vertex positions to the input surface (``simplify(refit=N)``).
+
+A contraction places its vertex once, from the quadrics it has then (summed, rebuilt or blended); later
+contractions around it change the surface it belongs to but never move it again. At very coarse outputs
+(a few dozen faces) those early placements are far from the best positions for the final connectivity,
+whatever the quadric. This post-pass is the continuous step of Hoppe et al. 1993 ("Mesh optimization",
+E_dist with the connectivity fixed):
+
+1. the input is sampled at every vertex (weight: a third of the area of its faces) and every face's
+   centroid (weight: its area), the weights scaled to mean 1;
+2. each sample is attached to its nearest point on the output (`metrics._nearest`), as barycentric
+   coordinates b of an output face, among the faces of its own part (the input's connected parts, joined
+   as aggregation joins them; an output face belongs to the part of the input face it continues): a
+   sample of one part must not pull another part that happens to lie nearer (the truck's 50 parts did);
+3. the positions X minimise Σ_i w_i·|b_i·X − p_i|² + λ·Σ_v |x_v − x_v⁰|² (a sparse linear least-squares
+   problem, the same for the three coordinates): the samples' squared distances to the output surface,
+   with a small damping λ = DAMPING · Σw / (vertices) towards the current positions x⁰, which holds a
+   vertex that no sample sees and keeps the system definite;
+4. a face whose normal the new positions turn by the flip angle or more (``cos_max``, as the contractions'
+   rule) has the moves of its vertices halved, up to HALVINGS times, then undone (back to the position
+   before this round), repeated until no face turns.
+
+Steps 2-4 run ``rounds`` times (the attachment changes as the surface moves). Faces, connectivity and
+everything but the positions stay as they are.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
+HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
+
+
+def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points (q,3), weights (q,), mean 1, parts (q,)): the input's vertices (a third of their faces' area
+    each) and face centroids (their area), with the part of each (``part``: a label per input vertex);
+    samples of zero weight are left out."""
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    wv = np.bincount(F.ravel(), weights=np.repeat(area / 3, 3), minlength=len(V))
+    P = np.concatenate([V, V[F].mean(1)])
+    w = np.concatenate([wv, area])
+    lab = np.concatenate([part, part[F[:, 0]]])
+    keep = w > 0
+    if not keep.any():
+        return P[:0], w[:0], lab[:0]
+    return P[keep], w[keep] / w[keep].mean(), lab[keep]
+
+
+def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spart: np.ndarray):
+    """For each sample, a nearest output face among those of its part (-1: its part has none)."""
+    from .metrics._nearest import nearest_triangles
+
+    f = np.full(len(P), -1, np.int64)
+    order = np.argsort(gpart, kind="stable")
+    starts = np.searchsorted(gpart[order], np.unique(gpart))
+    for faces in np.split(order, starts[1:]):
+        mine = np.flatnonzero(spart == gpart[faces[0]])
+        if len(mine):
+            corners = np.ascontiguousarray(np.transpose(X[G[faces]], (1, 2, 0)))
+            f[mine] = faces[nearest_triangles(corners, P[mine])[1]]
+    return f
+
+
+def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(q,3) barycentric coordinates of the point of triangle (a, b, c) nearest to p, row by row (Ericson,
+    Real-Time Collision Detection 5.1.5: vertex, edge or interior region)."""
+    ab, ac = b - a, c - a
+    d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
+    d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
+    d5, d6 = np.einsum("ij,ij->i", ab, p - c), np.einsum("ij,ij->i", ac, p - c)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    q = len(p)
+    out = np.zeros((q, 3))
+    done = np.zeros(q, bool)
+
+    def put(mask, u, v, w):
+        m = mask & ~done
+        out[m] = np.stack([u, v, w], 1)[m]
+        done[m] = True
+
+    one, zero = np.ones(q), np.zeros(q)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        put((d1 <= 0) & (d2 <= 0), one, zero, zero)
+        put((d3 >= 0) & (d4 <= d3), zero, one, zero)
+        put((d6 >= 0) & (d5 <= d6), zero, zero, one)
+        t = np.nan_to_num(d1 / (d1 - d3))
+        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), 1 - t, t, zero)
+        t = np.nan_to_num(d2 / (d2 - d6))
+        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), 1 - t, zero, t)
+        t = np.nan_to_num((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+        put((va <= 0) & (d4 >= d3) & (d5 >= d6), zero, 1 - t, t)
+        den = va + vb + vc
+        den = np.where(den != 0, den, 1.0)
+        v, w = vb / den, vc / den
+        put(np.ones(q, bool), 1 - v - w, v, w)
+    return out
+
+
+def _normals(X: np.ndarray, G: np.ndarray) -> np.ndarray:
+    return np.cross(X[G[:, 1]] - X[G[:, 0]], X[G[:, 2]] - X[G[:, 0]])
+
+
+def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
+    """Faces whose normal turned by the flip angle or more (cos ≤ cos_max), or that lost all area."""
+    l0, l1 = np.linalg.norm(n0, axis=1), np.linalg.norm(n1, axis=1)
+    cos = np.einsum("ij,ij->i", n0, n1) / np.where(l0 * l1 > 0, l0 * l1, 1.0)
+    return ((l1 == 0) & (l0 > 0)) | ((l0 > 0) & (cos <= cos_max))
+
+
+def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
+          part: np.ndarray | None = None, source_faces: np.ndarray | None = None) -> np.ndarray:
+    """Positions X (k,3) of the output faces G (j,3) re-fitted to the input (V, F) in ``rounds`` rounds
+    (module docstring); float64, the input's units. ``part``: a part label per input vertex and
+    ``source_faces``: the input face each output face continues (None: one part). X is returned unchanged
+    (a copy) when there is nothing to fit."""
+    X = np.array(X, np.float64)
+    G = np.asarray(G, np.int64)
+    V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    if part is None or source_faces is None:
+        part, gpart = np.zeros(len(V), np.int64), np.zeros(len(G), np.int64)
+    else:
+        part = np.asarray(part, np.int64)
+        gpart = part[F[np.asarray(source_faces, np.int64), 0]]
+    P, w, spart = samples(V, F, part)
+    k = len(X)
+    if rounds <= 0 or len(G) == 0 or len(P) == 0:
+        return X
+    lam = DAMPING * w.sum() / k
+    for _ in range(rounds):
+        f = _attach(X, G, gpart, P, spart)
+        seen = f >= 0
+        Ps, sw, f = P[seen], np.sqrt(w[seen]), f[seen]
+        rows = np.repeat(np.arange(len(Ps)), 3)
+        tri = G[f]
+        B = closest_barycentric(Ps, X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
+        A = sp.csr_matrix(((B * sw[:, None]).ravel(), (rows, tri.ravel())), shape=(len(Ps), k))
+        N = (A.T @ A + lam * sp.identity(k, format="csr")).tocsc()
+        rhs = A.T @ (Ps * sw[:, None]) + lam * X
+        solve = spla.factorized(N)
+        Y = np.stack([solve(np.ascontiguousarray(rhs[:, i])) for i in range(3)], 1)
+        if not np.all(np.isfinite(Y)):
+            break
+        n0 = _normals(X, G)
+        cut = np.zeros(k, np.int64)  # times each vertex's move was halved (HALVINGS + 1: undone)
+        while True:  # each pass only shortens moves, and an undone one stays undone: it ends
+            bad = _turned(n0, _normals(Y, G), cos_max)
+            new = np.unique(G[bad])
+            new = new[cut[new] <= HALVINGS]
+            if len(new) == 0:
+                break
+            cut[new] += 1
+            Y[new] = np.where((cut[new] > HALVINGS)[:, None], X[new], 0.5 * (X[new] + Y[new]))
+        X = Y
+    return X

@@ -1,0 +1,82 @@
+"""``simplify(refit=N)`` (`qemjax._refit`): the output's positions re-fitted to the input surface lower the
+distance to it, change nothing but the positions, never turn a face by the flip angle, and bad values are
+refused."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_valid
+
+import qemjax
+from qemjax import _refit, shapes
+from qemjax.metrics import point_triangle_distance, surface_distance
+
+
+@pytest.fixture(scope="module")
+def bumpy():
+    return shapes.bumpy_sphere(4)
+
+
+def test_closest_barycentric_gives_the_exact_distance():
+    rng = np.random.default_rng(0)
+    p, a, b, c = (rng.normal(size=(2000, 3)) for _ in range(4))
+    c[:200] = a[:200] + 1e-3 * rng.normal(size=(200, 3))  # thin triangles too
+    B = _refit.closest_barycentric(p, a, b, c)
+    assert np.all(B >= -1e-12) and np.allclose(B.sum(1), 1.0)
+    x = B[:, :1] * a + B[:, 1:2] * b + B[:, 2:] * c
+    np.testing.assert_allclose(np.linalg.norm(p - x, axis=1), point_triangle_distance(p, a, b, c),
+                               rtol=1e-7, atol=1e-9)
+
+
+@pytest.mark.parametrize("target", [24, 200])
+def test_refit_lowers_the_distance_and_keeps_the_connectivity(bumpy, target):
+    plain = qemjax.simplify(bumpy, target_faces=target)
+    fit = qemjax.simplify(bumpy, target_faces=target, refit=3)
+    assert np.array_equal(fit.faces, plain.faces) and np.array_equal(fit.source_vertices, plain.source_vertices)
+    assert np.array_equal(fit.history.positions, plain.history.positions)
+    assert np.array_equal(fit.vertex_error, plain.vertex_error)
+    assert not np.array_equal(fit.vertices, plain.vertices)
+    assert fit.stats["refit"] == 3 and plain.stats["refit"] == 0
+    assert_valid(fit, target, *bumpy)
+    d0, d1 = surface_distance(bumpy, (plain.vertices, plain.faces)), surface_distance(bumpy, (fit.vertices, fit.faces))
+    assert d1["rms"] < 0.9 * d0["rms"]
+
+
+def _turn(X0, X1, G):
+    """Degrees each face's normal turns from positions X0 to X1."""
+    n0, n1 = _refit._normals(X0, G), _refit._normals(X1, G)
+    cos = np.einsum("ij,ij->i", n0, n1) / (np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1))
+    return np.degrees(np.arccos(np.clip(cos, -1, 1)))
+
+
+def test_refit_never_turns_a_face_by_the_flip_angle(bumpy):
+    r = qemjax.simplify(bumpy, target_faces=24)
+    free = _refit.refit(*bumpy, r.vertices, r.faces, 1, cos_max=-2.0)  # no limit
+    assert np.count_nonzero(_turn(r.vertices, free, r.faces) >= 3.0) > 0  # so the limit below binds
+    held = _refit.refit(*bumpy, r.vertices, r.faces, 1, cos_max=float(np.cos(np.radians(3.0))))
+    assert np.all(_turn(r.vertices, held, r.faces) < 3.0)
+    assert not np.array_equal(held, r.vertices)  # halved moves, not all undone
+
+
+def test_samples_attach_to_faces_of_their_own_part():
+    """A sample lying on a face of another part is attached to its own part's nearest face (the truck's
+    parts pulled each other), and a sample of a part without faces to none."""
+    X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]], float)
+    G = np.array([[0, 1, 2], [3, 4, 5]])
+    P = np.array([[0.2, 0.2, 0.0], [0.2, 0.2, 0.95], [0.2, 0.2, 0.5]])
+    f = _refit._attach(X, G, np.array([0, 1]), P, np.array([1, 0, 2]))
+    assert list(f) == [1, 0, -1]
+
+
+def test_refit_zero_is_the_plain_run_and_bad_values_are_refused(bumpy):
+    a, b = qemjax.simplify(bumpy, ratio=0.1), qemjax.simplify(bumpy, ratio=0.1, refit=0)
+    assert np.array_equal(a.vertices, b.vertices)
+    for bad in (-1, 1.5, True, "3"):
+        with pytest.raises(ValueError, match="refit"):
+            qemjax.simplify(bumpy, ratio=0.1, refit=bad)
+
+
+def test_refit_in_a_batch_equals_simplify(bumpy):
+    alone = qemjax.simplify(bumpy, ratio=0.05, refit=2)
+    both = qemjax.simplify_batch(bumpy, [dict(ratio=0.05, refit=2), dict(ratio=0.05)])
+    assert np.array_equal(both[0].vertices, alone.vertices) and np.array_equal(both[0].faces, alone.faces)
