@@ -183,12 +183,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         area-weighted, attached to their nearest output points, then the positions' linear least squares;
         a move that turns a face by ``flip_angle`` or more is undone; ``qemjax._refit``). It lowers the
         distance to the input most where the placements of early contractions no longer suit the final
-        mesh (very coarse outputs). Only positions change; ``vertex_error`` and ``history`` keep the values
-        of the contractions. 0 (default): none.
+        mesh (very coarse outputs). Only positions change; ``vertex_error``, ``history`` and the record
+        (`replay`) keep the values of the contractions. 0 (default): none.
     preset: a named set of the options above (`qemjax._presets`), filling those left at their defaults
         (a keyword given with another value wins): ``'accurate'`` = memoryless with ``memory_weight=0.3``,
         ``placement='rank'`` (looser limits), ``area_power=0.6``, ``boundary_weight=10``, ``refit=1``: rms
-        and Hausdorff distance at or below the best peer's on most shared meshes, at about 3× the time. None
+        and Hausdorff distance at or below the best peer's on most shared meshes, at 1.3–6.5× the time. None
         (default): the options as given. A keyword passed with its default value counts as not given.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any

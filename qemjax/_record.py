@@ -18,7 +18,9 @@ round's cheapest contractions first. A parallel run with another face target cho
 first round on (selection gates on the faces still to remove), so it is not a replay of this one.
 
 ESQEM's edge splits (``split_factor``) come after all contractions and are not in the record: a replay covers
-the contraction phase only, down to the face count the contractions reached (`Record.faces_out`).
+the contraction phase only, down to the face count the contractions reached (`Record.faces_out`). Likewise
+``refit`` (`qemjax._refit`) moves the output's vertices after the contractions: a replay gives the
+positions the contractions chose, so its last level is the result before the re-fit.
 
 Progressive form: `Record.save` writes an ``.npz`` (byte-identical for the same record), `load_record`
 reads it back; a notebook or another tool can replay from it without qemjax's run.

@@ -80,3 +80,12 @@ def test_refit_in_a_batch_equals_simplify(bumpy):
     alone = qemjax.simplify(bumpy, ratio=0.05, refit=2)
     both = qemjax.simplify_batch(bumpy, [dict(ratio=0.05, refit=2), dict(ratio=0.05)])
     assert np.array_equal(both[0].vertices, alone.vertices) and np.array_equal(both[0].faces, alone.faces)
+
+
+def test_the_record_keeps_the_contractions_positions(bumpy):
+    """A replay rebuilds the contraction phase: its last level is the run without the re-fit."""
+    plain = qemjax.simplify(bumpy, target_faces=200)
+    fit = qemjax.simplify(bumpy, target_faces=200, refit=1)
+    last = fit.replay(contractions=len(fit.history.pairs))
+    assert np.array_equal(last.faces, fit.faces)
+    assert np.array_equal(last.vertices, plain.vertices) and not np.array_equal(last.vertices, fit.vertices)
