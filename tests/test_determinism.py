@@ -8,6 +8,7 @@ older emitter (`qemjax._kernels.kernel`). Should that option stop working, this 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -22,11 +23,11 @@ from qemjax import shapes
 
 ROOT = Path(__file__).resolve().parents[1]
 CODE = """
-import hashlib, sys
+import hashlib, json, sys
 import numpy as np
 import qemjax
 from qemjax import shapes
-r = qemjax.simplify(shapes.bumpy_sphere(4), ratio=0.1, scheduler=sys.argv[1])
+r = qemjax.simplify(shapes.bumpy_sphere(4), ratio=0.1, **json.loads(sys.argv[1]))
 print(hashlib.sha256(r.vertices.tobytes() + r.faces.tobytes()).hexdigest())
 """
 
@@ -36,15 +37,17 @@ def _digest(r) -> str:
                           ).hexdigest()
 
 
-@pytest.mark.parametrize("scheduler", ["greedy", "parallel"])
-def test_same_output_on_one_core(scheduler):
+@pytest.mark.parametrize("kwargs", [dict(scheduler="greedy"), dict(scheduler="parallel"), dict(preset="accurate")],
+                         ids=["greedy", "parallel", "accurate"])
+def test_same_output_on_one_core(kwargs):
+    """The accurate preset covers the memoryless rebuild, the rank placement and the re-fit's solve."""
     if shutil.which("taskset") is None:
         pytest.skip("taskset is not installed")
     if not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2:
         pytest.skip("this process already runs on one core: nothing to compare")
-    here = _digest(qemjax.simplify(shapes.bumpy_sphere(4), ratio=0.1, scheduler=scheduler))
+    here = _digest(qemjax.simplify(shapes.bumpy_sphere(4), ratio=0.1, **kwargs))
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run(["taskset", "-c", "0", sys.executable, "-c", CODE, scheduler], env=env,
+    done = subprocess.run(["taskset", "-c", "0", sys.executable, "-c", CODE, json.dumps(kwargs)], env=env,
                           capture_output=True, text=True, timeout=300)
     if done.returncode:
         pytest.fail(f"the pinned subprocess failed:\n{done.stderr}")
