@@ -181,7 +181,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     refit: N ≥ 0 rounds of re-fitting the output's vertex positions to the input surface after simplifying
         (Hoppe et al. 1993's continuous step, connectivity fixed: the input's vertices and face centroids,
         area-weighted, attached to their nearest output points, then the positions' linear least squares;
-        a move that turns a face by ``flip_angle`` or more is undone; ``qemjax._refit``). It lowers the
+        a move that turns a face by ``flip_angle`` or more is halved, then undone; ``qemjax._refit``). It lowers the
         distance to the input most where the placements of early contractions no longer suit the final
         mesh (very coarse outputs). Only positions change; ``vertex_error``, ``history`` and the record
         (`replay`) keep the values of the contractions. 0 (default): none.

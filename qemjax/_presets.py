@@ -11,8 +11,8 @@ planes at weight 10, then one round of re-fitting the positions to the input (``
 the 17 shared meshes at 10 % and 1 % against meshoptimizer, fast-simplification, pyfqmr, pymeshlab and
 libigl its rms is at or below the best peer's in 32 of 34 cases and its Hausdorff distance in 27 (the
 default: 9 and 9), and its rms is below the default's in every case at equal face counts, at 1.3–6.5× the
-default's time (``experiments/refit_time.py``; README, "Placement and the ranking against peers"; ``experiments/rank_peers.py``). It was
-chosen on those same cases (the number of re-fit rounds among 1, 2, 3 and 5).
+default's time (``experiments/rank_peers.py``, ``experiments/refit_time.py``; README, "Placement and the
+ranking against peers"). It was chosen on those same cases (the number of re-fit rounds among 1, 2, 3, 5).
 """
 from __future__ import annotations
 
