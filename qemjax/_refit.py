@@ -29,6 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ._arrays import face_normals
+
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
 HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
 
@@ -37,7 +39,7 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
     """(points (q,3), weights (q,), mean 1, parts (q,)): the input's vertices (a third of their faces' area
     each) and face centroids (their area), with the part of each (``part``: a label per input vertex);
     samples of zero weight are left out."""
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = 0.5 * np.linalg.norm(face_normals(V, F), axis=1)
     wv = np.bincount(F.ravel(), weights=np.repeat(area / 3, 3), minlength=len(V))
     P = np.concatenate([V, V[F].mean(1)])
     w = np.concatenate([wv, area])
@@ -98,10 +100,6 @@ def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
     return out
 
 
-def _normals(X: np.ndarray, G: np.ndarray) -> np.ndarray:
-    return np.cross(X[G[:, 1]] - X[G[:, 0]], X[G[:, 2]] - X[G[:, 0]])
-
-
 def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
     """Faces whose normal turned by the flip angle or more (cos ≤ cos_max), or that lost all area."""
     l0, l1 = np.linalg.norm(n0, axis=1), np.linalg.norm(n1, axis=1)
@@ -142,10 +140,10 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
         Y = np.stack([solve(np.ascontiguousarray(rhs[:, i])) for i in range(3)], 1)
         if not np.all(np.isfinite(Y)):
             break
-        n0 = _normals(X, G)
+        n0 = face_normals(X, G)
         cut = np.zeros(k, np.int64)  # times each vertex's move was halved (HALVINGS + 1: undone)
         while True:  # each pass only shortens moves, and an undone one stays undone: it ends
-            bad = _turned(n0, _normals(Y, G), cos_max)
+            bad = _turned(n0, face_normals(Y, G), cos_max)
             new = np.unique(G[bad])
             new = new[cut[new] <= HALVINGS]
             if len(new) == 0:

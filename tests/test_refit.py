@@ -9,6 +9,7 @@ from conftest import assert_valid
 
 import qemjax
 from qemjax import _refit, shapes
+from qemjax._arrays import face_normals
 from qemjax.metrics import point_triangle_distance, surface_distance
 
 
@@ -44,7 +45,7 @@ def test_refit_lowers_the_distance_and_keeps_the_connectivity(bumpy, target):
 
 def _turn(X0, X1, G):
     """Degrees each face's normal turns from positions X0 to X1."""
-    n0, n1 = _refit._normals(X0, G), _refit._normals(X1, G)
+    n0, n1 = face_normals(X0, G), face_normals(X1, G)
     cos = np.einsum("ij,ij->i", n0, n1) / (np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1))
     return np.degrees(np.arccos(np.clip(cos, -1, 1)))
 

@@ -269,9 +269,10 @@ def _grouped(copy: np.ndarray, C: int) -> tuple[np.ndarray, np.ndarray]:
     return order, np.searchsorted(np.take(copy, order), np.arange(C + 1))
 
 
-def _segment_sums(mask: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """(C,) int64: the True entries of ``mask`` in each segment starts[c] … starts[c+1] − 1."""
-    csum = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
+def _segment_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(C,) int64: the sum of ``values`` (integers or bools: the True entries) in each segment
+    starts[c] … starts[c+1] − 1."""
+    csum = np.concatenate([[0], np.cumsum(values, dtype=np.int64)])
     return np.diff(np.take(csum, starts))
 
 
@@ -282,7 +283,7 @@ def _fits_targets(ca: np.ndarray, removes: np.ndarray, need: np.ndarray, C: int)
     others go through `fits_target`."""
     order, bounds = _grouped(ca, C)
     r = np.take(removes, order)
-    total = np.diff(np.concatenate([[0], np.cumsum(r)])[bounds])
+    total = _segment_sums(r, bounds)
     take = np.ones(len(ca), bool)
     for c in np.flatnonzero(total > need):
         idx = order[bounds[c]:bounds[c + 1]]
