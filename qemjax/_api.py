@@ -1,8 +1,10 @@
 """`simplify`: the one entry point. Validates options, prepares the mesh, runs a scheduler."""
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
+import hashlib
 import inspect
 import math
 import numbers
@@ -225,9 +227,13 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     any placement, boundary weight, area weighting, ``regularize`` or ``area_weight`` value; the same flip
     angle, topology mode and `Schedule`), of one mesh or of several, run as one disjoint union of copies
     (`_schedulers.batched`), each with its own target, ``max_error``, vertex state and settings; the rest
-    run alone. ``progress`` is not offered here (a sweep shows its own bar).
-    A batched result's ``stats["batch"]`` gives the batch's size and wall time; its ``total_s``, ``run_s``
-    and ``compile_s`` are its share (the batch's / its size), and its stage times are the batch's.
+    run alone. Cells of a batch that would run exactly alike (`_same_runs`: the same mesh, vertex state,
+    kernel settings, target and max error, e.g. every ``boundary_weight`` of a closed mesh) run once, and
+    each gets its own copy of the result. ``progress`` is not offered here (a sweep shows its own bar).
+    A batched result's ``stats["batch"]`` gives the batch's ``size`` (cells), ``copies`` (distinct runs in
+    its rounds), ``same_run`` (the cells this cell's run served, itself included) and wall time; its
+    ``total_s``, ``run_s`` and ``compile_s`` are its share (the batch's / its size), and its stage times
+    are the batch's.
     errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
     list is that exception instead.
     """
@@ -261,7 +267,8 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
                 out[i] = _finish(job, _run(job), t0 - prep, c1, s1, stacklevel=4)
             continue
         t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
-        js = [j for _, j in members]
+        which, firsts = _same_runs([j for _, j in members])
+        js = [members[k][1] for k in firsts]  # one copy per distinct run
         ran = batched.run([j.geo.Vn for j in js], [j.S for j in js], [j.geo.F for j in js],
                           [max(j.target, 1) for j in js], [j.options.max_cost for j in js], js[0].model,
                           [j.model.kernel_params() for j in js], js[0].options, [j.geo.edges[:2] for j in js],
@@ -269,12 +276,35 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         wall = time.perf_counter() - t0 + prep * len(members)
         c2, s2 = _compilation.snapshot()
         share, comp = wall / len(members), min(s2 - s1, wall) / len(members)
-        for (i, job), r in zip(members, ran):
+        served = np.bincount(which, minlength=len(js))
+        for k, (i, job) in enumerate(members):
+            r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
             res = _finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=4,
-                          batch={"size": len(members), "total_s": wall, "compilations": c2 - c1})
+                          batch={"size": len(members), "copies": len(js), "same_run": int(served[which[k]]),
+                                 "total_s": wall, "compilations": c2 - c1})
             res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
             out[i] = res
     return out
+
+
+def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
+    """Which jobs of one batch would run exactly alike: the same geometry, vertex state (by value: on a
+    closed mesh every ``boundary_weight`` gives the same quadrics, without area weighting every
+    ``area_power``), kernel settings, face target and max error. Returns (each job's run (k,) int, the first
+    job of each run); such jobs run once (`simplify_cells`)."""
+    which, firsts, seen = np.zeros(len(jobs), np.int64), [], {}
+    for k, job in enumerate(jobs):
+        S = np.ascontiguousarray(job.S)
+        params = sorted((name, np.asarray(v).dtype.str, np.asarray(v).tobytes())
+                        for name, v in job.model.kernel_params().items())
+        key = (id(job.geo), S.shape, S.dtype.str, hashlib.blake2b(S.tobytes(), digest_size=16).digest(),
+               tuple(params), max(job.target, 1), job.options.max_cost)
+        run = seen.get(key)
+        if run is None or not np.array_equal(jobs[firsts[run]].S, S):  # (equal digests: compare the values)
+            run = seen.setdefault(key, len(firsts)) if run is None else len(firsts)
+            firsts.append(k)
+        which[k] = run
+    return which, firsts
 
 
 def _batch_key(job: "Job"):

@@ -166,6 +166,7 @@ def row(mesh, cell: Cell, res, metrics, seconds: float) -> dict:
     out.update(faces_in=s["faces_in"], faces_out=s["faces_out"], target_faces=s["target_faces"],
                stop_reason=res.stop_reason, rounds=s["rounds"], compile_s=s["compile_s"],
                run_s=s["run_s"], total_s=s["total_s"], batch_size=s.get("batch", {}).get("size", 1),
+               same_run=s.get("batch", {}).get("same_run", 1),
                result_sha256=result_hash(res))
     t0 = time.perf_counter()
     if metrics is not False:
@@ -264,7 +265,9 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key,
     ``target`` (as given), ``error`` (empty, or why `simplify` raised), ``faces_in``, ``faces_out``,
     ``target_faces``, ``stop_reason``, ``rounds``, ``compile_s``, ``run_s``, ``total_s``,
-    ``batch_size`` (the copies its run shared rounds with, itself included; 1: alone),
+    ``batch_size`` (the cells its run shared rounds with, itself included; 1: alone), ``same_run`` (the
+    cells that got the very same run, itself included: cells whose settings make no difference on this
+    mesh, such as ``boundary_weight`` on a closed one, run once),
     ``result_sha256`` (of the output vertices and faces), the metrics, ``cell_s`` (the cell's share of
     its batch's wall time, plus its metrics). A batched cell's ``total_s`` / ``run_s`` / ``compile_s``
     are its share of the batch's. Rows come in cell order (mesh, then grid, last key fastest, then target), however the

@@ -166,3 +166,24 @@ def test_cells_of_several_meshes_share_rounds():
     for (m, cfg), a in zip(cells, together):
         assert same(a, qemjax.simplify(m, **cfg)) == [], cfg
     assert together[4].stats["parts_in"] == 2
+
+
+def test_cells_that_would_run_alike_run_once():
+    """On a closed mesh boundary_weight changes nothing, nor does area_power without area weighting: those
+    cells run once and each gets its own copy, equal to `simplify` alone; the others still differ."""
+    mesh = shapes.icosphere(3)
+    configs = [dict(ratio=0.2, boundary_weight=w) for w in (0.5, 1.0, 8.0)] + [
+        dict(ratio=0.2, area_weighted=False, area_power=p) for p in (1.0, 0.5)] + [dict(ratio=0.3)]
+    out = simplify_batch(mesh, configs)
+    assert [r.stats["batch"]["same_run"] for r in out] == [3, 3, 3, 2, 2, 1]
+    assert {r.stats["batch"]["copies"] for r in out} == {3} and {r.stats["batch"]["size"] for r in out} == {6}
+    for cfg, r in zip(configs, out):
+        assert same(r, qemjax.simplify(mesh, **cfg)) == [], cfg
+    assert out[0].vertices is not out[1].vertices and out[0].history.pairs is not out[1].history.pairs
+    out[0].vertices[:] = 0  # a copy: changing one result leaves the others as they were
+    assert same(out[1], qemjax.simplify(mesh, **configs[1])) == []
+    assert not np.array_equal(out[3].vertices, out[5].vertices)
+    # with boundaries, boundary_weight matters: no cells merge
+    sheet = shapes.grid(10, hole=True)
+    on_sheet = simplify_batch(sheet, configs[:3])
+    assert [r.stats["batch"]["same_run"] for r in on_sheet] == [1, 1, 1]

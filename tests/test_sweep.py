@@ -44,6 +44,9 @@ def test_every_cell_equals_simplify_alone(meshes, reference):
     # the boundary weight changes the sheet's result: the grid really reached simplify
     sheet = reference[(reference["mesh"] == "sheet") & (reference["target"] == 60)]
     assert sheet["result_sha256"].nunique() == 4
+    # on the closed sphere it changes nothing: the parallel cells of each target ran once, for both rows
+    par = reference[reference["scheduler"] == "parallel"]
+    assert list(par["same_run"]) == [1, 1, 1, 1, 2, 2, 2, 2]
 
 
 def test_rows_in_cell_order_with_stable_keys(reference):
