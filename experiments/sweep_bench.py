@@ -9,10 +9,15 @@ recorded: on a shared machine the CPU time moves less. Each repeat runs every me
 order; the baseline (one warm configuration) is, in each repeat, the median of 5 runs. ``--meshes small``: the 8 small shared meshes of SMALL in one sweep (8 × 8 = 64 cells); the
 baseline is then one warm default configuration per mesh, averaged. For one mesh, the design's bound is
 also timed: one `simplify` of a single mesh made of as many disjoint copies as there are configurations
-(what a batch computes, without any per-copy bookkeeping). Appends to ``results/sweep_batch.csv`` (``results/sweep_bench.csv``: the
+(what a batch computes, without any per-copy bookkeeping). Cells that would run exactly alike run once
+(`simplify_cells`); the header gives the distinct results and runs (``--grid distinct``: 64 configurations
+that all differ on the cow). ``--pool N`` adds the sweep on N warm worker processes (a
+`ProcessPoolExecutor` as ``executor=``, the cells cut into N batches; the workers' start and first
+compilations are not timed; its CPU time is this process's only, not the workers'). Appends to ``results/sweep_batch.csv`` (``results/sweep_bench.csv``: the
 first measurements, before batching, in an older layout).
 
     python experiments/sweep_bench.py --meshes cow --grid qem --repeats 3
+    python experiments/sweep_bench.py --meshes cow --grid distinct --repeats 3 --pool 2
     python experiments/sweep_bench.py --meshes cow stanford-bunny small --repeats 3
 """
 from __future__ import annotations
@@ -47,12 +52,15 @@ GRIDS = {
     # QEM settings only: one batch of 64 copies
     "qem": {"boundary_weight": [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 100.0], "placement": ["optimal", "endpoints"],
             "area_weighted": [True, False], "area_power": [1.0, 0.5]},
+    # 64 configurations that all give different meshes of the cow (on a closed mesh the 'qem' grid's
+    # boundary weights change nothing, nor does area_power without area weighting: 6 distinct results)
+    "distinct": {"area_power": [round(2 * (i + 1) / 32, 4) for i in range(32)], "placement": ["optimal", "endpoints"]},
     # 8 configurations, for the batch of many small meshes (8 meshes x 8 = 64 cells)
     "small": {"boundary_weight": [1.0, 100.0], "placement": ["optimal", "endpoints"], "area_weighted": [True, False]},
 }
 SMALL = ("cow", "fandisk", "max-planck-10k", "rocker-arm-small", "suzanne", "teapot", "3holes", "beetle")
 FIELDS = ("date", "mesh", "faces_in", "ratio", "grid", "configs", "method", "repeats", "median_s", "per_config_s",
-          "vs_one_warm", "median_cpu_s", "cpu_vs_one_warm", "load_avg", "times_s")
+          "vs_one_warm", "median_cpu_s", "cpu_vs_one_warm", "load_avg", "times_s", "distinct_results", "runs")
 
 
 def _clock(fn):
@@ -61,7 +69,7 @@ def _clock(fn):
     return time.perf_counter() - w, time.process_time() - c
 
 
-def bench(names: list[str], ratio: float, repeats: int, grid_name: str) -> list[dict]:
+def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: int = 0) -> list[dict]:
     files = bench_meshes.shared_files()
     paths = {n: files[n] for n in names}
     grid = GRIDS[grid_name]
@@ -71,6 +79,8 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str) -> list[
     warm = qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False)  # compiles every kernel
     qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, batch_size=1)
     targets = {n: int(warm.loc[warm["mesh"] == n, "target_faces"].iloc[0]) for n in names}
+    # distinct output meshes, and distinct runs (cells that would run alike run once: `simplify_cells`)
+    distinct, runs = warm["result_sha256"].nunique(), int((1 / warm["same_run"]).sum().round())
     cells = len(configs) * len(names)
 
     def loop_simplify():
@@ -104,6 +114,18 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str) -> list[
         "loop pymeshlab": loop_peer("pymeshlab"),
         "load + clean (once per mesh)": lambda: [_io.prepare(qemjax.load(p)) for p in paths.values()],
     }
+    if pool:  # the same sweep on warm worker processes, one batch of cells / pool cells each
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        workers = ProcessPoolExecutor(pool, mp_context=multiprocessing.get_context("spawn"))
+        per = -(-cells // pool)
+        pooled = lambda: qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False,  # noqa: E731
+                                      executor=workers, batch_size=per)
+        for _ in range(2):  # every worker compiles (which worker takes which batch is up to the pool)
+            if not pooled()["result_sha256"].equals(warm["result_sha256"]):
+                raise AssertionError("the pooled sweep differs from the in-process one")
+        methods[f"qemjax.sweep, {pool} worker processes, {per} cells each"] = pooled
     if len(names) == 1:  # the design's bound: one run of a mesh made of len(configs) disjoint copies
         V0, F0 = cleaned[names[0]]
         shift = (V0.max(0) - V0.min(0)) * [1.5, 0, 0]
@@ -119,6 +141,8 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str) -> list[
         for method in (list(methods) if rep % 2 == 0 else list(methods)[::-1]):
             fn = methods[method]
             times[method].append(fn() if fn is one_warm else _clock(fn))
+    if pool:
+        workers.shutdown()
     one = statistics.median(t[0] for t in times["one warm config (default simplify)"]) / len(names)
     one_cpu = statistics.median(t[1] for t in times["one warm config (default simplify)"]) / len(names)
     times["sum of simplify total_s in the sweep"] = [(t, float("nan")) for t in inside]
@@ -134,7 +158,8 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str) -> list[
                          configs=n, method=method, repeats=len(ts), median_s=round(med, 4),
                          per_config_s=round(med / n, 4), vs_one_warm=round(med / per_mesh / one, 2),
                          median_cpu_s=round(cpu, 4), cpu_vs_one_warm=round(cpu / per_mesh / one_cpu, 2),
-                         load_avg=round(load, 2), times_s=" ".join(f"{w:.3f}/{c:.3f}" for w, c in ts)))
+                         load_avg=round(load, 2), times_s=" ".join(f"{w:.3f}/{c:.3f}" for w, c in ts),
+                         distinct_results=distinct, runs=runs))
     return rows
 
 
@@ -146,13 +171,15 @@ def main(argv=None) -> int:
                    help="default: 'issue' for one mesh, 'small' for the small-mesh batch")
     p.add_argument("--ratio", type=float, default=0.1)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--pool", type=int, default=0,
+                   help="also time the sweep on this many warm worker processes (executor=, one batch each)")
     p.add_argument("--out", type=Path, default=RESULTS / "sweep_batch.csv")
     args = p.parse_args(argv)
     warnings.filterwarnings("ignore", "stopped at")  # cells that stop short (3holes): the table has their rows
     for name in args.meshes:
         names = list(SMALL) if name == "small" else [name]
         grid = args.grid or ("small" if name == "small" else "issue")
-        rows = bench(names, args.ratio, args.repeats, grid)
+        rows = bench(names, args.ratio, args.repeats, grid, args.pool)
         new = not args.out.exists()
         with open(args.out, "a", newline="") as f:
             w = csv.DictWriter(f, FIELDS)
@@ -160,7 +187,8 @@ def main(argv=None) -> int:
                 w.writeheader()
             w.writerows(rows)
         print(f"\n{rows[0]['mesh']} ({rows[0]['faces_in']} faces) -> {args.ratio:g}, grid {grid!r}: "
-              f"{len(expand_grid(GRIDS[grid]))} configurations per mesh; load average {rows[0]['load_avg']}")
+              f"{len(expand_grid(GRIDS[grid]))} configurations per mesh, {rows[0]['distinct_results']} distinct "
+              f"results, {rows[0]['runs']} runs (cells that run alike run once); load average {rows[0]['load_avg']}")
         print(f"{'method':42s} {'median s':>9s} {'per cell':>9s} {'x one warm':>11s} {'cpu s':>8s} {'cpu x one':>10s}")
         for r in rows:
             print(f"{r['method']:42s} {r['median_s']:9.3f} {r['per_config_s']:9.4f} {r['vs_one_warm']:11.1f} "
