@@ -5,6 +5,12 @@ stage times from its stats (topology, kernels, selection with validation inside 
 and the fraction of faces each round removed. Appends one row per round to ``results/round_profile.csv``.
 
     python experiments/round_profile.py --mesh armadillo-x16 --ratio 0.01
+
+``--grid NAME`` profiles a batch instead: `simplify_batch` of sweep_bench's grid NAME on the mesh (warm, the
+median of ``--repeats`` by wall time), with the batch's stage times as shares of its wall time, beside
+one warm default `simplify`'s; prints only (no CSV).
+
+    python experiments/round_profile.py --mesh cow --ratio 0.1 --grid distinct --repeats 5
 """
 from __future__ import annotations
 
@@ -32,8 +38,12 @@ def main(argv=None) -> int:
     p.add_argument("--mesh", default="armadillo-x16")
     p.add_argument("--ratio", type=float, default=0.01)
     p.add_argument("--out", type=Path, default=HERE / "results" / "round_profile.csv")
+    p.add_argument("--grid", default=None, help="profile a batch of this sweep_bench grid instead")
+    p.add_argument("--repeats", type=int, default=5)
     args = p.parse_args(argv)
     mesh = bench_meshes.load(args.mesh)
+    if args.grid:
+        return batch_profile(mesh, args.mesh, args.ratio, args.grid, args.repeats)
     target = max(4, round(args.ratio * mesh.n_faces))
     cold = qemjax.simplify((mesh.V, mesh.F), target_faces=target)
     t0 = time.perf_counter()
@@ -59,6 +69,37 @@ def main(argv=None) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows.to_csv(args.out, index=False)
     print(f"wrote {args.out}")
+    return 0
+
+
+def batch_profile(mesh, name: str, ratio: float, grid: str, repeats: int) -> int:
+    """Stage times of a warm batch (the median run of ``repeats``) and of one warm default run."""
+    import qemjax
+    from qemjax._sweep import expand_grid
+    from sweep_bench import GRIDS
+
+    configs = [dict(c, ratio=ratio) for c in expand_grid(GRIDS[grid])]
+    qemjax.simplify_batch((mesh.V, mesh.F), configs)
+    qemjax.simplify((mesh.V, mesh.F), ratio=ratio)
+    runs = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        one = qemjax.simplify((mesh.V, mesh.F), ratio=ratio)
+        t1 = time.perf_counter()
+        out = qemjax.simplify_batch((mesh.V, mesh.F), configs)
+        runs.append((time.perf_counter() - t1, out[0].stats, t1 - t0, one.stats))
+    wall, s, wall1, s1 = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
+    b = s["batch"]
+    print(f"{name} -> {ratio:g}, grid {grid!r}: {b['size']} cells, {b['copies']} copies in the rounds, "
+          f"{max(r.stats['rounds'] for r in out)} rounds; batch {wall:.3f} s, one default run {wall1:.3f} s "
+          f"({wall / wall1:.1f}x); median of {repeats}")
+    print(f"  {'stage':12s} {'batch s':>8s} {'share':>6s} {'one run s':>10s} {'share':>6s}")
+    for k in STAGES:
+        print(f"  {k:12s} {s.get(k, 0.0):8.3f} {s.get(k, 0.0) / wall:6.1%} {s1.get(k, 0.0):10.3f} "
+              f"{s1.get(k, 0.0) / wall1:6.1%}" + ("  (inside select_s)" if k == "validity_s" else ""))
+    rest, rest1 = (w - sum(st.get(k, 0.0) for k in STAGES if k != "validity_s") for w, st in ((wall, s), (wall1, s1)))
+    print(f"  {'other':12s} {rest:8.3f} {rest / wall:6.1%} {rest1:10.3f} {rest1 / wall1:6.1%}  "
+          "(set-up, quadrics, outputs, results)")
     return 0
 
 
