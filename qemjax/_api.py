@@ -300,8 +300,11 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
         key = (id(job.geo), S.shape, S.dtype.str, hashlib.blake2b(S.tobytes(), digest_size=16).digest(),
                tuple(params), max(job.target, 1), job.options.max_cost)
         run = seen.get(key)
-        if run is None or not np.array_equal(jobs[firsts[run]].S, S):  # (equal digests: compare the values)
-            run = seen.setdefault(key, len(firsts)) if run is None else len(firsts)
+        if run is not None and not np.array_equal(jobs[firsts[run]].S, S):
+            run = None  # equal digests of different states: a run of its own
+        if run is None:
+            run = len(firsts)
+            seen.setdefault(key, run)
             firsts.append(k)
         which[k] = run
     return which, firsts
