@@ -1,7 +1,7 @@
 """A/B of the batched path: `simplify_batch` of 64 QEM configurations of the cow (sweep_bench's grid
 'qem', or ``--grid distinct``: since bbf71cf the 'qem' grid's cells that run alike run once, 6 runs for
-the cow's 64 cells, so compare the batching itself across that revision on 'distinct') at an old git revision against the working tree, in one process, interleaved, with the outputs
-checked equal. Prints the fastest wall and CPU time of each over the repeats (on a shared machine the
+the cow's 64 cells, so compare the batching itself across that revision on 'distinct') at an old git
+revision against the working tree, in one process, interleaved, with the outputs checked equal. Prints the fastest wall and CPU time of each over the repeats (on a shared machine the
 minimum moves least) and each against one warm `simplify` of the cow.
 
     taskset -c 1 python experiments/batch_ab.py --rev 9f0d9de --repeats 9

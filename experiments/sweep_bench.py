@@ -13,8 +13,9 @@ also timed: one `simplify` of a single mesh made of as many disjoint copies as t
 (`simplify_cells`); the header gives the distinct results and runs (``--grid distinct``: 64 configurations
 that all differ on the cow). ``--pool N`` adds the sweep on N warm worker processes (a
 `ProcessPoolExecutor` as ``executor=``, the cells cut into N batches; the workers' start and first
-compilations are not timed; its CPU time is this process's only, not the workers'). Appends to ``results/sweep_batch.csv`` (``results/sweep_bench.csv``: the
-first measurements, before batching, in an older layout).
+compilations are not timed; its CPU time is this process's only, not the workers'). Appends to
+``results/sweep_batch.csv`` (``results/sweep_bench.csv``: the first measurements, before batching, in an
+older layout).
 
     python experiments/sweep_bench.py --meshes cow --grid qem --repeats 3
     python experiments/sweep_bench.py --meshes cow --grid distinct --repeats 3 --pool 2
