@@ -464,3 +464,27 @@ def test_float32_placement_is_finite_on_degenerate_input():
         assert set(branch.tolist()) <= {placement.SOLVE, placement.SEGMENT, placement.ENDPOINT,
                                         placement.TRUNCATED}
         assert branch[0] == placement.ENDPOINT and np.array_equal(x[0], p1[0])  # zero quadric: the midpoint
+
+
+def test_fixed_order_arithmetic_matches_float64_and_ignores_the_batch():
+    """`_kernels.fixed`: float64 references on random inputs, and the same bits for a row whatever the
+    number of rows it is computed among (what keeps `simplify_batch` equal to `simplify` alone)."""
+    import jax
+    from qemjax._kernels import fixed
+    from qemjax._costs.regularize import shape_term
+
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(2, 50, 3))
+    v = rng.normal(size=(50, 13))
+    with jax.enable_x64(True):
+        np.testing.assert_allclose(np.asarray(fixed.dot3(a, b)), np.einsum("ij,ij->i", a, b), rtol=1e-14)
+        np.testing.assert_allclose(np.asarray(fixed.cross3(a, b)), np.cross(a, b), rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(np.asarray(fixed.norm3(a)), np.linalg.norm(a, axis=1), rtol=1e-14)
+        np.testing.assert_allclose(np.asarray(fixed.tree_sum(v)), v.sum(1), rtol=1e-12, atol=1e-14)
+    x = rng.normal(size=(300, 3)).astype(np.float32)
+    c = rng.normal(size=(300, 16, 3, 3)).astype(np.float32)
+    m = rng.random((300, 16)) < 0.6
+    f = jax.jit(jax.vmap(shape_term))
+    full = np.asarray(f(x, c, m))
+    for k in (1, 7, 37, 128, 257):
+        assert np.array_equal(np.asarray(f(x[:k], c[:k], m[:k])), full[:k]), k

@@ -20,6 +20,7 @@ import numpy as np
 
 from .._batching import DTYPE
 from .._kernels import kernel
+from .._kernels.fixed import cross3, dot3, norm3, tree_sum
 from .area import ring_positions
 from .base import Term
 
@@ -28,17 +29,19 @@ def area_change(x, pos, moving, mask):
     """One pair: ΔS (area before − after) when the endpoints (``moving`` corners of the ring faces pos
     (R,3,3)) go to x (3,), and the mean squared edge length ℓ² of the faces before."""
     def twice_areas(p):
-        return jnp.linalg.norm(jnp.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=-1)
+        return norm3(cross3(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))  # fixed order: `_kernels.fixed`
     after = jnp.where(moving[..., None], x, pos)
-    delta = 0.5 * jnp.sum(jnp.where(mask, twice_areas(pos) - twice_areas(after), 0.0))
-    e2 = sum(jnp.sum((pos[:, i] - pos[:, (i + 1) % 3]) ** 2, -1) for i in range(3))
-    ell2 = jnp.sum(jnp.where(mask, e2, 0.0)) / jnp.maximum(3.0 * jnp.sum(mask), 1.0)
+    delta = 0.5 * tree_sum(jnp.where(mask, twice_areas(pos) - twice_areas(after), 0.0))
+    d = [pos[:, i] - pos[:, (i + 1) % 3] for i in range(3)]
+    e2 = dot3(d[0], d[0]) + dot3(d[1], d[1]) + dot3(d[2], d[2])
+    ell2 = tree_sum(jnp.where(mask, e2, 0.0)) / jnp.maximum(3.0 * jnp.sum(mask), 1.0)
     return delta, ell2
 
 
 @kernel(static_argnums=0)
 def _price(base_price, VS, pairs, params, corners, mask):
     out = base_price(VS, pairs, params)  # (5, K)
+    out = jax.lax.optimization_barrier(out)  # no fusion across: the same bits with per-pair params
     pos, moving = ring_positions(VS, pairs, corners)
     delta, ell2 = jax.vmap(area_change)(out[:3].T, pos, moving, mask)
     tiny = jnp.finfo(ell2.dtype).tiny

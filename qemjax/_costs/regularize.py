@@ -25,6 +25,7 @@ import numpy as np
 
 from .._batching import DTYPE
 from .._kernels import kernel
+from .._kernels.fixed import cross3, dot3, norm3, tree_sum
 from .base import Term
 
 _SQRT3_2 = 2.0 * math.sqrt(3.0)
@@ -35,19 +36,20 @@ def shape_term(x, corners_pos, mask):
     mask (R,) bool. Returns ℓ² · max (1 − q)² over the faces (x, c1, c2); 0 for an empty ring."""
     c1, c2 = corners_pos[:, 1], corners_pos[:, 2]
     e0, e1, e2 = c1 - x, c2 - c1, x - c2
-    l2 = jnp.sum(e0 * e0, -1) + jnp.sum(e1 * e1, -1) + jnp.sum(e2 * e2, -1)
-    twice_area = jnp.linalg.norm(jnp.cross(e0, c2 - x), axis=-1)
+    l2 = dot3(e0, e0) + dot3(e1, e1) + dot3(e2, e2)  # fixed order: `_kernels.fixed`
+    twice_area = norm3(cross3(e0, c2 - x))
     tiny = jnp.finfo(l2.dtype).tiny
     q = jnp.where(l2 > tiny, _SQRT3_2 * twice_area / jnp.maximum(l2, tiny), 0.0)
     bad = jnp.where(mask, (1.0 - jnp.clip(q, 0.0, 1.0)) ** 2, 0.0)
     nf = jnp.sum(mask)
-    ell2 = jnp.sum(jnp.where(mask, l2, 0.0)) / jnp.maximum(3.0 * nf, 1.0)
+    ell2 = tree_sum(jnp.where(mask, l2, 0.0)) / jnp.maximum(3.0 * nf, 1.0)
     return ell2 * jnp.max(bad)
 
 
 @kernel(static_argnums=0)
 def _price(base_price, VS, pairs, params, corners, mask):
     out = base_price(VS, pairs, params)  # (5 + parts, K)
+    out = jax.lax.optimization_barrier(out)  # no fusion across: the same bits with per-pair params
     pos = jnp.take(VS[:, :3], corners.reshape(-1), axis=0, mode="clip").reshape(corners.shape + (3,))
     shape = jax.vmap(shape_term)(out[:3].T, pos, mask)
     cost = out[3] + params["regularize"] * shape
