@@ -487,7 +487,7 @@ def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_er
                                  weights=np.maximum(channel_weights, 1e-30))
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
-    if attrs is not None:  # seams are constrained like boundaries: feature-edge planes along them
+    if attrs is not None and attrs.has_seams():  # seams are constrained like boundaries: feature-edge planes
         seams = _wedges.seam_edges(geo.F, attrs.corners)
         if len(seams):
             feature_edges = seams if feature_edges is None else np.concatenate([feature_edges, seams])

@@ -313,25 +313,40 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     from . import _wedges
 
     (V, F), dropped, tm = _as_arrays(mesh, keep_trimesh=True)
-    available, material = _wedges.from_trimesh(tm) if tm is not None else ({}, None)
+    notes = {}
+    available, material = _wedges.from_trimesh(tm, notes) if tm is not None else ({}, None)
     kept, _ = _wedges.select(available, attributes)
     if texture is not None:
         if "uv" not in kept:
             raise ValueError("texture= needs UVs: the mesh carries none (or attributes= does not keep them)")
         material = _wedges.load_texture(texture)
+    report = {"welded": 0}
+    F0 = F
+    if weld_vertices:
+        V, F, report["welded"] = weld(V, F)
+    name = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh"
+    if attributes == "auto" and kept:  # kinds with seams are kept only when asked for (`_wedges.AUTO_RULE`)
+        seamed = {k: c for k in kept if (c := _wedges.seam_vertex_count(kept[k], F, F0))
+                  and not (k == "uv" and texture is not None)}
+        if seamed:
+            kept = {k: v for k, v in kept.items() if k not in seamed}
+            extra = ["material"] if "uv" in seamed and material is not None else []
+            names = [_wedges.DROPPED_NAME[k] for k in seamed] + extra
+            others = [d for d in dropped if d not in names]
+            dropped = others + names
+            _wedges.warn_seamed(seamed, others, name, stacklevel=stacklevel + 1)
+            report["not_kept_seams"] = list(seamed)
     if kept:
         names = {n for k in kept for n in _KEPT_NAMES.get(k, ())}
         if "uv" in kept and material is not None:
             names.add("material")
         dropped = [d for d in dropped if d not in names]
-    if dropped:
-        _warn_dropped(dropped, os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh",
-                      stacklevel=stacklevel + 1)
-    report = {"welded": 0, "dropped": dropped}
+    if dropped and not report.get("not_kept_seams"):
+        _warn_dropped(dropped, name, stacklevel=stacklevel + 1)
+    report["dropped"] = dropped
+    if "normal" in kept:
+        report["normals_recomputed"] = notes.get("normals_recomputed", 0)
     src = np.arange(len(F) * 3, dtype=np.int64).reshape(-1, 3) if kept else None  # corner ids
-    F0 = F
-    if weld_vertices:
-        V, F, report["welded"] = weld(V, F)
     if kept:
         F, report["degenerate_removed"], report["duplicate_removed"], src = clean_faces(F, src)
     else:

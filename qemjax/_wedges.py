@@ -41,6 +41,11 @@ class Attributes:
     values: dict
     material: object = None
 
+    def has_seams(self) -> bool:
+        """Whether some vertex has two or more wedges (a seam: a UV chart border, a colour discontinuity,
+        a hard normal edge)."""
+        return bool(len(self.wedge_vertex)) and int(np.bincount(self.wedge_vertex).max()) > 1
+
     def matrix(self) -> np.ndarray:
         """(w, Σk) the values side by side, in KINDS order."""
         return np.concatenate([self.values[k] for k in KINDS if k in self.values], 1)
@@ -54,9 +59,36 @@ class Attributes:
         return out
 
 
-def from_trimesh(obj) -> tuple[dict, object]:
+def unit_normals(N: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int]:
+    """Stored normals N (n,3) as unit vectors, and how many had to be recomputed.
+
+    Exporters store normals at any length (MeshLab / VCG write area-weighted sums, lengths 0.05 to 13 on
+    one scan), and a normal is a direction: each is divided by its length. Those of zero (or non-finite)
+    length are recomputed from the faces, as the area-weighted mean of the face normals at the vertex (V
+    (n,3), F (m,3)); a vertex in no face, or whose faces have no area, gets (0, 0, 1)."""
+    N = np.asarray(N, np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        length = np.sqrt(np.sum(N * N, axis=1))
+    bad = ~(np.isfinite(length) & (length > np.finfo(np.float64).tiny))
+    out = np.where(bad[:, None], 0.0, N) / np.where(bad, 1.0, length)[:, None]
+    if bad.any():
+        P = np.asarray(V, np.float64)[F]
+        cross = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])  # twice the area, along the normal
+        acc = np.zeros((len(N), 3))
+        for k in range(3):
+            np.add.at(acc, F[:, k], cross)
+        acc = acc[bad]
+        la = np.linalg.norm(acc, axis=1)
+        fallback = np.array([0.0, 0.0, 1.0])
+        out[bad] = np.where((la > 0)[:, None], acc / np.where(la > 0, la, 1.0)[:, None], fallback)
+    return out, int(np.count_nonzero(bad))
+
+
+def from_trimesh(obj, report: dict | None = None) -> tuple[dict, object]:
     """({kind: (n,k) per-vertex values}, material or None) of a `trimesh.Trimesh` (its vertices are split
-    where the attributes differ, as trimesh loads them). Normals only when the file stored them."""
+    where the attributes differ, as trimesh loads them). Normals only when the file stored them, as unit
+    vectors (`unit_normals`); ``report``, when given, gets ``normals_recomputed``: how many stored normals
+    had zero length and were recomputed from the faces."""
     from ._io import _is_placeholder
 
     visual = getattr(obj, "visual", None)
@@ -74,8 +106,39 @@ def from_trimesh(obj) -> tuple[dict, object]:
     cache = getattr(getattr(obj, "_cache", None), "cache", {})
     vn = cache.get("vertex_normals") if hasattr(cache, "get") else None
     if vn is not None and len(vn) == len(obj.vertices):
-        vals["normal"] = np.asarray(vn, np.float64)
+        vals["normal"], fixed = unit_normals(vn, obj.vertices, np.asarray(obj.faces, np.int64))
+        if report is not None:
+            report["normals_recomputed"] = fixed
     return vals, material
+
+
+# What attributes='auto' keeps (measured: `python experiments/attribute_defaults.py`, README "Appearance
+# attributes"): each kind whose values are continuous over the welded mesh. A kind with seams (UV chart
+# borders, colour discontinuities, hard normal edges) holds its seam vertices in place, which cost up to
+# 2.1x the geometric rms and 3-15x the time of attributes=None there: it is kept only when asked for.
+AUTO_RULE = "kinds without seams"
+DROPPED_NAME = {"uv": "uv", "color": "vertex_colors", "normal": "normals"}
+
+
+def seam_vertex_count(values: np.ndarray, F: np.ndarray, F_src: np.ndarray) -> int:
+    """How many welded vertices carry two or more different values of one attribute kind: values (n0,k)
+    per source vertex, F (m,3) the welded faces, F_src (m,3) the same corners' source vertices."""
+    key = np.concatenate([F.reshape(-1, 1).astype(np.float64), np.asarray(values, np.float64)[F_src.reshape(-1)]], 1)
+    uniq, _ = _unique_rows(key)
+    per_vertex = np.bincount(uniq[:, 0].astype(np.int64))
+    return int(np.count_nonzero(per_vertex > 1))
+
+
+def warn_seamed(seamed: dict, others: list, what: str, stacklevel: int):
+    """One warning: the kinds in ``seamed`` ({kind: seam vertices}) are not kept by attributes='auto'."""
+    kinds = tuple(seamed)
+    arg = repr(kinds[0]) if len(kinds) == 1 else repr(kinds)
+    cli = ",".join(kinds)
+    seams = ", ".join(f"{k}: {c} seam vertices" for k, c in seamed.items())
+    also = f"; also not kept: {', '.join(others)}" if others else ""
+    warnings.warn(f"{what}: {', '.join(kinds)} not kept by default ({seams}): seams hold their vertices in "
+                  f"place, which costs geometry and time (README, 'Appearance attributes'); "
+                  f"attributes={arg} (CLI: --attributes {cli}) keeps them{also}", stacklevel=stacklevel + 1)
 
 
 def select(available: dict, attributes) -> tuple[dict, list]:
@@ -104,11 +167,25 @@ def build(values: dict, rep_of_corner: np.ndarray, corner_src: np.ndarray) -> At
     M = np.concatenate([values[k] for k in KINDS if k in values], 1)
     src = corner_src.reshape(-1)
     key = np.concatenate([rep_of_corner.reshape(-1, 1).astype(np.float64), M[src]], 1)
-    uniq, inv = np.unique(key, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
+    uniq, inv = _unique_rows(key)
     a = Attributes(inv.reshape(-1, 3).astype(np.int64), uniq[:, 0].astype(np.int64), {k: values[k] for k in values})
     a.values = a.split(uniq[:, 1:].copy())
     return a
+
+
+def _unique_rows(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the distinct rows of key (k,c) in lexicographic order, each row's index among them): what
+    ``np.unique(key, axis=0, return_inverse=True)`` gives, by one lexsort (several times faster)."""
+    if len(key) == 0:
+        return key[:0], np.zeros(0, np.int64)
+    order = np.lexsort(key.T[::-1])
+    ks = key[order]
+    new = np.ones(len(ks), bool)
+    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    group = np.cumsum(new) - 1
+    inv = np.empty(len(key), np.int64)
+    inv[order] = group
+    return ks[new], inv
 
 
 # default weights per kind (experiments/appearance.py on spot at 10 %, seams constrained: uv 0.03 gave the
@@ -168,13 +245,14 @@ class Tracker:
         # for the channels marked in ``solved`` (the rest are interpolated)
         self.cost_at = getattr(model, "cost_at", None)
         self.attributes_at = getattr(model, "attributes_at", None) if solved is not None else None
+        self.attributes_at_many = getattr(model, "attributes_at_many", None) if solved is not None else None
         self.solved = solved
         # seam candidates: vertices with two or more wedges (a flag that may stay set after faces die,
         # which only sends a pair through the exact per-pair test)
-        cnt = np.zeros(n, np.int64)
-        pv = np.unique(np.stack([F.reshape(-1), self.C.reshape(-1)], 1), axis=0)
-        np.add.at(cnt, pv[:, 0], 1)
-        self.multi = cnt > 1
+        used = np.unique(self.C)  # each wedge belongs to one vertex: count the wedges in use per vertex
+        vertex_of = np.zeros(len(self.val), np.int64)
+        vertex_of[self.C.reshape(-1)] = np.asarray(F).reshape(-1)
+        self.multi = np.bincount(vertex_of[used], minlength=n) > 1
         self.seam_in = int(np.count_nonzero(self.multi))  # vertices on a seam in the input
 
     # -- per pair -------------------------------------------------------------------------------------
@@ -263,9 +341,51 @@ class Tracker:
         self.multi[a] = True  # conservative: the exact test decides
 
     def contract_many(self, faces, VQ, P, X) -> None:
-        """`contract` for vertex-disjoint pairs P (K,2) at X (K,3) (a round's: 1-rings apart)."""
-        for (a, b), x in zip(np.asarray(P).tolist(), np.asarray(X)):
+        """`contract` for vertex-disjoint pairs P (K,2) at X (K,3) (a round's: 1-rings apart). Pairs of
+        single-wedge vertices (most of them: every pair away from seams) are done together in numpy
+        (`_contract_free`); the others one by one."""
+        P, X = np.asarray(P), np.asarray(X)
+        if len(P) == 0:
+            return
+        free = ~(self.multi[P[:, 0]] | self.multi[P[:, 1]])
+        free[free] = self._contract_free(faces, VQ, P[free], X[free])
+        for (a, b), x in zip(P[~free].tolist(), X[~free]):
             self.contract(faces, VQ, a, b, x)
+
+    def _contract_free(self, faces, VQ, P, X) -> np.ndarray:
+        """`contract` for pairs P (K,2) of single-wedge vertices, 1-rings apart, at X (K,3): a's wedge
+        takes the value interpolated at the placement's projection on the segment (or the attribute
+        quadric's optimum for solved channels) and every corner of b names it. Returns (K,) bool: the
+        pairs done here (a pair with no live face at a or b is left to `contract`)."""
+        a, b = P[:, 0].astype(np.int64), P[:, 1].astype(np.int64)
+        which_a, fa = faces.around(a)
+        which_b, fb = faces.around(b)
+        has_a = np.bincount(which_a, minlength=len(P)) > 0
+        has_b = np.bincount(which_b, minlength=len(P)) > 0
+        done = has_a & has_b
+        first_a = np.searchsorted(which_a, np.arange(len(P)))  # each pair's first face at a
+        first_b = np.searchsorted(which_b, np.arange(len(P)))
+        ka = np.argmax(np.take(faces.F, fa, axis=0) == a[which_a, None], axis=1)
+        kb = np.argmax(np.take(faces.F, fb, axis=0) == b[which_b, None], axis=1)
+        wa_all, wb_all = self.C[fa, ka], self.C[fb, kb]
+        idx = np.flatnonzero(done)
+        wa, wbv = wa_all[first_a[idx]], wb_all[first_b[idx]]
+        pa, pb = VQ[a[idx], :3].astype(np.float64), VQ[b[idx], :3].astype(np.float64)
+        x = X[idx].astype(np.float64)
+        d, u = pb - pa, x - pa
+        dd = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+        ud = u[:, 0] * d[:, 0] + u[:, 1] * d[:, 1] + u[:, 2] * d[:, 2]
+        t = np.clip(ud / np.maximum(dd, 1e-300), 0, 1)[:, None]
+        val = (1 - t) * self.val[wa] + t * self.val[wbv]
+        if self.attributes_at is not None and len(idx):  # the attribute quadric's optimum at x
+            many = getattr(self, "attributes_at_many", None)
+            opt = (many(VQ[a[idx]], VQ[b[idx]], x) if many is not None else
+                   np.stack([self.attributes_at(VQ[i], VQ[j], y) for i, j, y in zip(a[idx], b[idx], x)]))
+            val = np.where(self.solved, opt, val)
+        self.val[wa] = val
+        sel = done[which_b]  # b's corners of the pairs done here now name a's wedge
+        self.C[fb[sel], kb[sel]] = np.repeat(wa, np.bincount(which_b[sel], minlength=len(P))[idx])
+        return done
 
 
 def seam_edges(F: np.ndarray, C: np.ndarray) -> np.ndarray:

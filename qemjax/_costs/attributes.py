@@ -145,21 +145,20 @@ def attribute_state(V: np.ndarray, F: np.ndarray, S: np.ndarray, w: np.ndarray) 
     its position quadric: V (n,3), F (f,3), corner values S (f,3,m), face weights w (f,)."""
     n, m = len(V), S.shape[2]
     g, d = face_fields(V[F], S)
-    extra = np.zeros((n, 1 + 4 * m))
-    qa = np.zeros((n, 10))
     gg = np.einsum("fji,fjk->fik", g, g)  # Σ_j g gᵀ per face
     packed = gg[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
+    cols = []  # per corner k (k-major, as the faces' corners are summed): the columns to scatter
     for k in range(3):
-        v = F[:, k]
         s = S[:, k]  # the field's value at the corner: D in the corner's frame
-        np.add.at(extra[:, 0], v, w)
+        c = [w[:, None] * packed, w[:, None] * np.einsum("fj,fji->fi", s, g), (w * np.sum(s * s, 1))[:, None],
+             w[:, None]]
         for j in range(m):
-            np.add.at(extra[:, 1 + 4 * j: 4 + 4 * j], v, w[:, None] * g[:, j])
-            np.add.at(extra[:, 4 + 4 * j], v, w * s[:, j])
-        np.add.at(qa[:, :6], v, w[:, None] * packed)
-        np.add.at(qa[:, 6:9], v, w[:, None] * np.einsum("fj,fji->fi", s, g))
-        np.add.at(qa[:, 9], v, w * np.sum(s * s, 1))
-    return np.concatenate([qa, extra], 1)
+            c += [w[:, None] * g[:, j], (w * s[:, j])[:, None]]
+        cols.append(np.concatenate(c, 1))
+    X = np.concatenate(cols)  # (3f, 10 + 1 + 4m)
+    idx = F.T.reshape(-1)
+    # bincount adds in index order, so each sum is the corners' in k-major order, as a loop would
+    return np.stack([np.bincount(idx, X[:, c], minlength=n) for c in range(X.shape[1])], 1)
 
 
 def _np_translate(st: np.ndarray, d: np.ndarray, m: int) -> np.ndarray:
@@ -172,6 +171,21 @@ def _np_translate(st: np.ndarray, d: np.ndarray, m: int) -> np.ndarray:
     G = st[11:].reshape(m, 4)
     out[14::4] += G[:, :3] @ d
     return out
+
+
+def optimal_attributes(rows_a: np.ndarray, rows_b: np.ndarray, X: np.ndarray, m: int) -> np.ndarray:
+    """(K,m) the optimal (weighted) attribute values at X (K,3) of K pairs' summed states, rows (K, 3 + 11
+    + 4m) [position, state] each in its vertex's frame: s_j = Σ (D_j + G_j·(x − p)) / Σ α, float64 on
+    the host (0 where α is 0)."""
+    num = np.zeros((len(X), m))
+    alpha = np.zeros(len(X))
+    for rows in (rows_a, rows_b):
+        r = np.asarray(rows, np.float64)
+        d = np.asarray(X, np.float64) - r[:, :3]
+        G = r[:, 14:].reshape(len(r), m, 4)
+        num += G[:, :, 3] + (G[:, :, 0] * d[:, None, 0] + G[:, :, 1] * d[:, None, 1] + G[:, :, 2] * d[:, None, 2])
+        alpha += r[:, 13]
+    return np.where(alpha[:, None] > 0, num / np.where(alpha > 0, alpha, 1.0)[:, None], 0.0)
 
 
 def solve_host(row_a: np.ndarray, row_b: np.ndarray, x: np.ndarray, m: int):
@@ -244,3 +258,7 @@ class AttributeQEM(QEM):
     def attributes_at(self, row_a, row_b, x) -> np.ndarray:
         """(m,) the optimal attribute values at x, unweighted."""
         return solve_host(row_a, row_b, x, self.channels)[1] / np.asarray(self.weights, np.float64)
+
+    def attributes_at_many(self, rows_a, rows_b, X) -> np.ndarray:
+        """(K,m) `attributes_at` for K pairs at once: rows (K, 3 + width), X (K,3)."""
+        return optimal_attributes(rows_a, rows_b, X, self.channels) / np.asarray(self.weights, np.float64)
