@@ -491,6 +491,7 @@ def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_er
         seams = _wedges.seam_edges(geo.F, attrs.corners)
         if len(seams):
             feature_edges = seams if feature_edges is None else np.concatenate([feature_edges, seams])
+        report.update(seams_in=_wedges.seam_count(seams), seam_edges_in=len(seams))
     m = len(geo.F)
     target, err = _resolve_target(m, target_faces, ratio, max_error)
     if target > m:
@@ -554,9 +555,11 @@ def _run(job: Job):
         run = functools.partial(run, wedges=job.tracker)
     if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
         run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options, setup.split)
-    out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
-    if bar is not None:
-        bar.close()
+    try:
+        out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
+    finally:  # an interrupted run also ends its bar's line
+        if bar is not None:
+            bar.close()
     return out, run_target, planned
 
 
@@ -626,7 +629,7 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
         rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
-        max_error_limit=err if math.isfinite(err) else None, refit=setup.refit)
+        max_error_limit=err if math.isfinite(err) else None, refit=setup.refit, error_unit=model.error_unit)
     if job.tracker is not None:
         stats.update(attributes=list(job.attrs.values), seam_vertices_in=job.tracker.seam_in)
     for k, v in info.items():

@@ -4,9 +4,11 @@
 
 The options of `qemjax.simplify` are generated from its signature (name, default, type) and its
 docstring (help), with the per-option details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
-the command line another way. Errors are one line on stderr and exit code 2; warnings are one line
-``qemjax: warning: …``. The output format and folder are checked before simplifying, and the file is
-written under a temporary name and renamed, so a failure never leaves a partial file.
+the command line another way. Errors are one line on stderr and exit code 2 (argparse's with one hint
+line naming the --help to read); warnings are one line ``qemjax: warning: …``; Ctrl-C prints ``qemjax:
+interrupted`` and exits with 130. The output format and folder are checked before simplifying, and the
+file is written under a temporary name and renamed, so a failure never leaves a partial file. Below the
+summary line, indented lines name what clean-up removed and the appearance attributes kept.
 
 The command enables JAX's persistent compilation cache (`_cache.enable`); the library never does.
 """
@@ -66,10 +68,24 @@ TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-er
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
                "schedule": "library only: a qemjax.Schedule of the parallel scheduler's tunables"}
 FORMATS = ("obj", "ply", "stl", "off", "glb", "gltf")
+# options of `simplify` that `qemjax lod` refuses (hidden from its --help): its levels carry positions only
+LOD_REFUSED = ("attributes", "attribute_weights", "texture")
 
 
 class CliError(ValueError):
     """A problem with the command's arguments or files: printed as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with short errors: ``qemjax: error: …`` and one hint line naming the --help to read
+    (``hint``: the command whose help that is; set by `main` for errors argparse reports at the top)."""
+
+    hint: str | None = None
+
+    def error(self, message):
+        print(f"qemjax: error: {' '.join(message.split())}", file=sys.stderr)
+        print(f"see '{self.hint or self.prog} --help'", file=sys.stderr)
+        raise SystemExit(2)
 
 
 def _doc_help(name: str) -> str:
@@ -88,8 +104,9 @@ def _doc_help(name: str) -> str:
     return text.replace("%", "%%")
 
 
-def _add_options(p: argparse.ArgumentParser):
-    """Every keyword of `simplify` with a default value, except the targets and NOT_EXPOSED."""
+def _add_options(p: argparse.ArgumentParser, hidden=()):
+    """Every keyword of `simplify` with a default value, except the targets and NOT_EXPOSED; those in
+    ``hidden`` are parsed but left out of the help (the command refuses them with its reason)."""
     for name, param in inspect.signature(_api.simplify).parameters.items():
         if name in TARGETS or name in NOT_EXPOSED:
             continue
@@ -101,30 +118,40 @@ def _add_options(p: argparse.ArgumentParser):
         if "help" not in spec:
             spec["help"] = _doc_help(name)
         spec["help"] += f" (default: {spec.pop('shown', param.default)})"
+        if name in hidden:
+            spec["help"] = argparse.SUPPRESS
         p.add_argument("--" + name.replace("_", "-"), dest=name, default=argparse.SUPPRESS, **spec)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-cache", action="store_true",
                    help="do not use the compilation cache (also: environment QEMJAX_NO_CACHE=1)")
 
 
+def _parse(kind, text: str, what: str):
+    """``kind(text)``, or argparse's error naming ``what`` (not the function's name)."""
+    try:
+        return kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+
+
 def _ratio(text: str) -> float:
-    r = float(text)
+    r = _parse(float, text, "a ratio in (0, 1]")
     if not 0 < r <= 1:
         raise argparse.ArgumentTypeError(f"ratio must be in (0, 1] (the fraction of faces to keep), got {text}")
     return r
 
 
 def _faces(text: str) -> int:
-    n = int(text)
+    n = _parse(int, text, "a whole number of faces")
     if n < 1:
         raise argparse.ArgumentTypeError(f"the face target must be at least 1, got {text}")
     return n
 
 
 def _max_error(text: str) -> float:
-    e = float(text)
+    e = _parse(float, text, "a number >= 0")
     if not e >= 0:
-        raise argparse.ArgumentTypeError(f"max error must be a squared distance >= 0, got {text}")
+        raise argparse.ArgumentTypeError(f"max error must be >= 0 (in the method's error unit), got {text}")
     return e
 
 
@@ -226,16 +253,20 @@ def _atomic(path: str, save) -> None:
 def write(res, path: str, ext: str):
     """Export ``res`` to ``path`` as ``ext`` (atomically: `_atomic`). A result with UVs written as OBJ also
     gets its material file (``<stem>.mtl``) and texture image beside it (each written atomically, the OBJ
-    last); GLB packs them in."""
+    last); GLB packs them in. UVs that came without a material are written without one (``vt`` lines, no
+    mtl, no image)."""
     mesh = res.to_trimesh()
     if ext == "obj" and getattr(res, "uv", None) is not None:
         from trimesh.exchange.obj import export_obj
 
         stem = os.path.splitext(os.path.basename(path))[0]
-        if mesh.visual.material is not None:  # the image is written as <stem>.png, beside <stem>.mtl
-            mesh.visual.material = mesh.visual.material.copy()
-            mesh.visual.material.name = stem
+        mesh.visual.material = mesh.visual.material.copy()  # the image is written as <stem>.png
+        mesh.visual.material.name = stem
         text, files = export_obj(mesh, include_texture=True, return_texture=True, mtl_name=f"{stem}.mtl")
+        if res.material is None:  # trimesh writes vt lines only with a material: drop its mtl again
+            text = "".join(line for line in text.splitlines(keepends=True)
+                           if not line.startswith(("mtllib ", "usemtl ")))
+            files = {}
         folder = os.path.dirname(os.path.abspath(path))
         for name, data in files.items():
             target = os.path.join(folder, os.path.basename(name))
@@ -262,9 +293,10 @@ def _parser() -> argparse.ArgumentParser:
 
     from . import __version__
 
-    ap = argparse.ArgumentParser(prog="qemjax", description="Quadric-error mesh simplification with JAX.",
-                                 epilog="Errors (--max-error, the reported max error) are squared distances "
-                                 "in the mesh's units.")
+    ap = _Parser(prog="qemjax", description="Quadric-error mesh simplification with JAX.",
+                 epilog="Errors (--max-error, the reported max error) are squared distances in the mesh's "
+                 "units (mesh units²); with --method area, surface-area changes (also mesh units²). The "
+                 "summary names the unit of each run.")
     ap.add_argument("--version", action="version", version=f"qemjax {__version__} (jax {jax.__version__})")
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("simplify", help="simplify a mesh file")
@@ -275,8 +307,8 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument(TARGETS["target_faces"], dest="target_faces", type=_faces, metavar="N",
                    help="target face count")
     s.add_argument(TARGETS["max_error"], dest="max_error", type=_max_error, metavar="E",
-                   help="stop before a contraction costs more than E (squared distance, mesh units²); "
-                   "alone or with --faces/--ratio")
+                   help="stop before a contraction costs more than E (squared distance, mesh units²; "
+                   "--method area: surface-area change, mesh units²); alone or with --faces/--ratio")
     _add_options(s)
     lod = sub.add_parser("lod", help="levels of detail from one run: one file per level (and a .glb, a record)")
     lod.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
@@ -286,10 +318,11 @@ def _parser() -> argparse.ArgumentParser:
                      f"(default: {' '.join(map(str, RATIOS))})")
     lod.add_argument("--format", dest="fmt", default="obj", choices=FORMATS, help="format of the level files "
                      "(default: obj)")
-    lod.add_argument("--glb", action="store_true", help="also write NAME-lods.glb, one node per level")
+    lod.add_argument("--glb", action="store_true", help="also write NAME-lods.glb, one node per level, side "
+                     "by side along x (1.2 × the mesh's x-extent apart, level 0 at the origin)")
     lod.add_argument("--record", action="store_true", help="also write NAME-record.npz, the progressive "
                      "record every level can be replayed from (qemjax.load_record)")
-    _add_options(lod)
+    _add_options(lod, hidden=LOD_REFUSED)
     sw = sub.add_parser("sweep", help="a parameter sweep described in a TOML (or YAML) file; writes its table",
                         description="Run qemjax.sweep as CONFIG describes: meshes, grid, targets, out (default: "
                         "CONFIG's name with .parquet), metrics, executor. See the README's 'Parameter sweeps'.")
@@ -304,14 +337,27 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--subdivisions", type=int, default=7, help="7: 327,680 faces; 6: 81,920 (default: 7)")
     d.add_argument("--ratio", type=_ratio, default=0.02, help="keep this fraction of the faces (default: 0.02)")
     _add_options(d)
+    ap.commands = tuple(sub.choices)
     return ap
 
 
 def main(argv=None) -> int:
-    """Run the command; returns the exit code (0 ok, 2 bad arguments, input or output)."""
+    """Run the command; returns the exit code (0 ok, 2 bad arguments, input or output, 130 interrupted:
+    one line, and no partial output, since files are written under a temporary name and renamed)."""
     try:
-        args = _parser().parse_args(argv)
-    except SystemExit as exc:  # --help, --version, or a usage error argparse has printed
+        return _main(sys.argv[1:] if argv is None else list(argv))
+    except KeyboardInterrupt:
+        print("qemjax: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list) -> int:
+    ap = _parser()
+    cmd = next((a for a in argv if not a.startswith("-")), None)
+    ap.hint = f"qemjax {cmd}" if cmd in ap.commands else None  # argparse reports stray options at the top
+    try:
+        args = ap.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error _Parser has printed
         return exc.code if isinstance(exc.code, int) else 2
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning
@@ -326,6 +372,10 @@ def _lod(args, kwargs) -> int:
     """``qemjax lod``: one run, every level written (each file under a temporary name, then renamed)."""
     from ._lod import lod_chain
 
+    refused = ["--" + name.replace("_", "-") for name in LOD_REFUSED if kwargs.get(name) is not None]
+    if refused:
+        raise CliError(f"qemjax lod keeps positions only: its levels are replayed from contractions "
+                       f"({', '.join(refused)} given); use qemjax simplify --texture for a textured result")
     folder = os.path.abspath(args.out_dir)
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise CliError(f"output {args.out_dir} is a file; give a folder")
@@ -350,6 +400,7 @@ def _lod(args, kwargs) -> int:
         _atomic(path, save)
         print(path)
     print(f"{args.input}: {chain.result.summary()}")
+    _print_details(chain.result, "the ratios")
     return 0
 
 
@@ -391,7 +442,61 @@ def _run(args) -> int:
         write(res, out, ext)
     where = f" -> {out}" if out is not None else " (not written; --out PATH saves it)"
     print(f"{name}: {res.summary()}{where}")
+    _print_details(res, "the ratio" if getattr(args, "ratio", None) else None)
     return 0
+
+
+def _print_details(res, target: str | None) -> None:
+    """Below the summary, indented: what clean-up removed (`cleanup_note`) and the attributes kept
+    (`attributes_note`), each when there is something to say."""
+    for line in (cleanup_note(res.stats, target), attributes_note(res.stats)):
+        if line:
+            print(f"  {line}")
+
+
+def _count(n: int, one: str, many: str | None = None) -> str:
+    return f"{n} {one}" if n == 1 else f"{n} {many or one + 's'}"
+
+
+def cleanup_note(stats: dict, target: str | None = "the ratio") -> str:
+    """What the input's clean-up (`qemjax._io.prepare`) removed, and that ``target`` (a ratio's name, or
+    None) counted from the faces left: 'clean-up: 724 duplicate faces removed; the ratio applied to the
+    1510 faces left (of 2234 read)'. '' when it removed nothing."""
+    faces = {"duplicate": stats.get("duplicate_removed", 0), "degenerate": stats.get("degenerate_removed", 0),
+             "zero-area": stats.get("zero_area_removed", 0)}
+    parts = [_count(n, f"{what} face") + " removed" for what, n in faces.items() if n]
+    welded = " welded" + (" (their attribute values kept as wedges)" if stats.get("attributes") else "")
+    for key, what, done in (("welded", "coincident", welded), ("unreferenced_removed", "unused", " removed")):
+        if stats.get(key):
+            parts.append(_count(stats[key], what + " vertex", what + " vertices") + done)
+    if not parts:
+        return ""
+    note = "clean-up: " + ", ".join(parts)
+    if any(faces.values()):
+        read = stats["faces_in"] + sum(faces.values())
+        left = f"{stats['faces_in']} faces left (of {read} read)"
+        note += f"; {target} applied to the {left}" if target else f"; {left}"
+    return note
+
+
+def attributes_note(stats: dict) -> str:
+    """The appearance attributes kept and the seams they hold, or those dropped: 'kept uv: 13 seams (412
+    seam edges, 380 seam vertices) constrained like boundaries, 1203 contractions refused there'. ''
+    when the input carried none."""
+    parts = []
+    if stats.get("attributes"):
+        seams = stats.get("seams_in", 0)
+        note = f"kept {', '.join(stats['attributes'])}: " + (_count(seams, "seam") if seams else "no seams")
+        if seams:
+            note += (f" ({stats.get('seam_edges_in', 0)} seam edges, {stats.get('seam_vertices_in', 0)} seam "
+                     "vertices) constrained like boundaries")
+        refused = stats.get("rejected_by", {}).get("seam", 0)
+        if refused:
+            note += f", {_count(refused, 'contraction')} refused there"
+        parts.append(note)
+    if stats.get("dropped"):
+        parts.append(f"dropped {', '.join(stats['dropped'])}")
+    return "; ".join(parts)
 
 
 if __name__ == "__main__":

@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+import numpy as np
+
 from ._api import simplify
 from ._record import Level
 from ._result import SimplifyResult
@@ -28,19 +30,27 @@ class LodChain:
     def __getitem__(self, i) -> Level:
         return self.levels[i]
 
-    def to_scene(self, name: str = "lod"):
-        """A `trimesh.Scene` with one node per level, named ``{name}0``, ``{name}1``, … (finest first), all
-        at the same place: what a glTF viewer or engine picks a level from."""
+    def to_scene(self, name: str = "lod", spacing: float | None = None):
+        """A `trimesh.Scene` with one node per level, named ``{name}0``, ``{name}1``, … (finest first), side
+        by side along x: node i is translated by i × ``spacing`` (level 0 at the origin; the geometry
+        itself is the level's, unmoved). ``spacing`` None: 1.2 × the largest x-extent of the levels'
+        bounding boxes (so they do not overlap); 0: every level at the same place, as an engine picking a
+        level would place them."""
         import trimesh
 
+        if spacing is None:
+            spacing = 1.2 * max((np.ptp(lv.vertices[:, 0]) for lv in self.levels if len(lv.vertices)), default=0)
         scene = trimesh.Scene()
         for i, level in enumerate(self.levels):
-            scene.add_geometry(level.to_trimesh(), node_name=f"{name}{i}", geom_name=f"{name}{i}")
+            move = np.eye(4)
+            move[0, 3] = i * spacing
+            scene.add_geometry(level.to_trimesh(), node_name=f"{name}{i}", geom_name=f"{name}{i}", transform=move)
         return scene
 
-    def export(self, path: str, name: str = "lod") -> None:
-        """Write the chain as one glTF binary (.glb) with one node per level (`to_scene`)."""
-        data = self.to_scene(name).export(file_type="glb")
+    def export(self, path: str, name: str = "lod", spacing: float | None = None) -> None:
+        """Write the chain as one glTF binary (.glb) with one node per level, side by side along x
+        (`to_scene`: 1.2 × the x-extent apart, level 0 at the origin; ``spacing=0`` stacks them)."""
+        data = self.to_scene(name, spacing).export(file_type="glb")
         with open(path, "wb") as f:
             f.write(data)
 
@@ -59,8 +69,12 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     last mesh.
 
     Levels carry positions and faces only: the record replays contractions, not the wedges of appearance
-    attributes, so ``attributes`` defaults to None here (what the input carries is named in a warning).
+    attributes, so ``attributes`` defaults to None here (what the input carries is named in a warning)
+    and ``texture`` is refused.
     """
+    if options.get("texture") is not None:
+        raise ValueError("lod_chain keeps positions only: its levels are replayed from contractions; use "
+                         "simplify(texture=...) for a textured result")
     options.setdefault("attributes", None)
     ratios = tuple(float(r) for r in ratios)
     if not ratios:

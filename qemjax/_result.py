@@ -49,7 +49,10 @@ class SimplifyResult:
     times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``
     and ``faces_per_round``), the targets (``target_faces``, 0 for none; ``max_error_limit``, a squared
     distance in input units, None for none) and ``dropped``: what the input carried that the result
-    does not keep (any of "uv", "material", "vertex_colors", "face_colors").
+    does not keep (any of "uv", "material", "vertex_colors", "face_colors"); ``error_unit``: what
+    ``max_error`` and the history's costs measure (the cost model's `error_unit`); with attributes kept,
+    ``attributes`` (their kinds) and the input's seams: ``seams_in`` (connected pieces), ``seam_edges_in``
+    and ``seam_vertices_in``.
 
     Appearance attributes (``simplify(attributes=...)``; None when the input carries none or they were not
     kept) are per wedge, a distinct attribute value at a vertex (a vertex on a UV seam has one per chart):
@@ -107,7 +110,8 @@ class SimplifyResult:
         """The simplified mesh as a `trimesh.Trimesh` (no processing: arrays are kept as they are). With
         appearance attributes, its vertices are the wedges (split at seams, faces = ``wedge_faces``) and its
         visual carries them: `TextureVisuals` (UVs and the material with its image) or `ColorVisuals`
-        (vertex colours); stored normals become its vertex normals."""
+        (vertex colours); stored normals become its vertex normals. UVs without a material get a bare
+        `PBRMaterial` (no image), not trimesh's made-up grey placeholder texture."""
         import trimesh
 
         if self.wedge_faces is None:
@@ -116,7 +120,8 @@ class SimplifyResult:
         if self.normals is not None:
             kw["vertex_normals"] = self.normals
         if self.uv is not None:
-            kw["visual"] = trimesh.visual.TextureVisuals(uv=self.uv, material=self.material)
+            material = trimesh.visual.material.PBRMaterial() if self.material is None else self.material
+            kw["visual"] = trimesh.visual.TextureVisuals(uv=self.uv, material=material)
         elif self.colors is not None:
             kw["visual"] = trimesh.visual.ColorVisuals(
                 vertex_colors=np.clip(np.round(self.colors * 255), 0, 255).astype(np.uint8))
@@ -124,7 +129,8 @@ class SimplifyResult:
 
     def summary(self) -> str:
         """One line: faces before -> after and the target, times, rounds and the largest contraction
-        cost, a squared distance in the mesh's units (the convention of every error qemjax reports)."""
+        cost with what it measures (``stats["error_unit"]``, the cost model's `error_unit`: a squared
+        distance in mesh units² for qem and esqem, a surface-area change for ``method="area"``)."""
         s = self.stats
         goals = []
         if s.get("target_faces"):
@@ -133,4 +139,5 @@ class SimplifyResult:
             goals.append(f"max error {s['max_error_limit']:.3g}")
         return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
                 f"in {s['total_s']:.2f} s (compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
-                f"{s['rounds']} rounds, max error {self.max_error:.3g} (squared distance, mesh units²)")
+                f"{s['rounds']} rounds, max error {self.max_error:.3g} "
+                f"({s.get('error_unit', 'squared distance, mesh units²')})")

@@ -404,6 +404,19 @@ def seam_edges(F: np.ndarray, C: np.ndarray) -> np.ndarray:
     return np.unique(E, axis=0) if len(E) else np.zeros((0, 2), np.int64)
 
 
+def seam_count(E: np.ndarray) -> int:
+    """The number of seams: connected pieces of the seam edges E (k,2) (`seam_edges`)."""
+    if not len(E):
+        return 0
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    ids, E = np.unique(E, return_inverse=True)
+    E = E.reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(len(ids), len(ids)))
+    return int(connected_components(graph, directed=False)[0])
+
+
 def _one_to_one(src: np.ndarray, dst: np.ndarray, need: np.ndarray):
     """{src wedge: dst wedge} from corresponding corner wedges when it is a function, one to one, and
     covers every wedge in ``need``; else None."""

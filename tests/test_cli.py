@@ -360,3 +360,193 @@ def test_sweep_example_config_is_valid():
     config = _sweep_config.load(example)
     assert set(config.meshes) == {"cow", "fandisk"} and config.grid["split_factor"] == [None, 1.3333333]
     assert config.out.endswith("sweep_example.parquet")
+
+
+# ---- rough edges: one-line errors, Ctrl-C, units, clean-up and attributes in the summary, lod -------
+
+@pytest.mark.parametrize("argv,match", [
+    (["simplify", "IN", "OUT", "--ratio", "0"], "argument --ratio: ratio must be in (0, 1]"),
+    (["simplify", "IN", "OUT", "--faces", "-5"], "argument --faces: the face target must be at least 1"),
+    (["simplify", "IN", "OUT", "--faces", "2.5"], "argument --faces: expected a whole number of faces"),
+    (["simplify", "IN", "OUT", "--method", "foo"], "argument --method: invalid choice: 'foo'"),
+    (["simplify", "IN", "OUT", "--ratio", "0.5", "--bogus"], "unrecognized arguments: --bogus"),
+    (["simplify", "IN", "OUT", "--ratio", "0.5", "--faces", "3"], "not allowed with argument --ratio"),
+    (["lod", "IN", "OUT", "--ratios", "x"], "argument --ratios: expected a ratio in (0, 1], got 'x'"),
+    (["demo", "--subdivisions", "x"], "argument --subdivisions: invalid int value: 'x'"),
+    (["sweep"], "the following arguments are required: config"),
+    (["frob"], "invalid choice: 'frob'"),
+    (["simplify", "IN", "OUT"], "give a target"),  # a validation error after parsing: one line
+])
+def test_usage_errors_are_one_line(src, tmp_path, capsys, monkeypatch, argv, match):
+    """No usage block: 'qemjax: error: …' and at most one hint line, exit code 2."""
+    _no_simplify(monkeypatch)
+    argv = [str(src) if a == "IN" else str(tmp_path / "o.obj") if a == "OUT" else a for a in argv]
+    assert _cli.main(argv) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert 1 <= len(lines) <= 2 and lines[0].startswith("qemjax: error: ") and match in lines[0], captured.err
+    assert "usage:" not in captured.err and captured.out == ""
+    if len(lines) == 2:
+        cmd = argv[0] if argv[0] in ("simplify", "lod", "sweep", "demo") else None
+        assert lines[1] == f"see 'qemjax {cmd} --help'" if cmd else lines[1] == "see 'qemjax --help'"
+
+
+def _interrupt(cmd, env, folder, timeout=300):
+    """Run ``cmd``, send SIGINT once the progress bar shows (the run has started); (rc, stderr), rc None
+    when the run finished before the signal."""
+    import signal
+    import threading
+    import time
+
+    p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    err = bytearray()
+    reader = threading.Thread(target=lambda: [err.extend(b) for b in iter(lambda: p.stderr.read1(4096), b"")])
+    reader.start()
+    end = time.monotonic() + timeout
+    while b"simplify" not in err and p.poll() is None and time.monotonic() < end:
+        time.sleep(0.02)
+    finished = p.poll() is not None
+    if not finished:
+        p.send_signal(signal.SIGINT)
+    try:
+        rc = p.wait(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+        reader.join()
+    return (None if finished else rc), err.decode()
+
+
+def test_ctrl_c_is_one_line_and_leaves_no_file(tmp_path):
+    """SIGINT during a run: 'qemjax: interrupted', exit code 130, no output and no temporary file."""
+    V, F = shapes.bumpy_sphere(7)  # 327,680 faces: seconds of work after the bar appears
+    src = tmp_path / "big.obj"
+    trimesh.Trimesh(V, F, process=False).export(src)
+    env = dict(os.environ, PYTHONPATH=str(ROOT), QEMJAX_NO_CACHE="1")
+    for scheduler in ("parallel", "greedy"):  # greedy is far slower, should the parallel run win the race
+        cmd = [sys.executable, "-m", "qemjax._cli", "simplify", str(src), str(tmp_path / "out.obj"),
+               "--ratio", "0.01", "--scheduler", scheduler]
+        rc, err = _interrupt(cmd, env, tmp_path)
+        if rc is not None:
+            break
+        (tmp_path / "out.obj").unlink()
+    else:
+        pytest.skip("both runs finished before SIGINT could be sent")
+    assert rc == 130, err
+    assert err.endswith("qemjax: interrupted\n") and err.count("\n") <= 2 and "Traceback" not in err, err
+    assert [p.name for p in tmp_path.iterdir()] == ["big.obj"]
+
+
+def test_summary_names_each_methods_unit(src, tmp_path, capsys):
+    """max error is a squared distance for qem/esqem, an area change for --method area."""
+    from qemjax import _costs
+
+    assert _costs.build("qem", {}, {}).error_unit == "squared distance, mesh units²"
+    assert _costs.build("esqem", {}, {}).error_unit == "squared distance, mesh units²"
+    assert _costs.build("area", {}, {}).error_unit == "surface-area change, mesh units²"
+    assert _costs.build("qem", {}, {}, weights=[1.0, 1.0]).error_unit == \
+        "squared distance plus weighted attribute deviation, mesh units²"
+    assert _costs.build("qem", {}, {"regularize": 0.5}).error_unit == \
+        "squared distance plus λ·shape term, mesh units²"
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--faces", "600", "--method", "area",
+                      "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "(surface-area change, mesh units²)" in out and "squared distance" not in out
+
+
+def test_cleanup_is_named_in_the_summary(tmp_path, capsys):
+    V, F = shapes.bumpy_sphere(3)  # 1280 faces, plus 300 reversed and 100 exact copies
+    path = tmp_path / "dup.ply"
+    trimesh.Trimesh(V, np.concatenate([F, F[:300, ::-1], F[:100]]), process=False).export(path)
+    assert _cli.main(["simplify", str(path), str(tmp_path / "o.ply"), "--ratio", "0.5", "--quiet"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "1280 -> 640 faces (target 640 faces)" in lines[0]
+    assert lines[1] == "  clean-up: 400 duplicate faces removed; the ratio applied to the 1280 faces left " \
+                       "(of 1680 read)"
+    trimesh.Trimesh(V, F, process=False).export(path)  # clean: nothing to say
+    assert _cli.main(["simplify", str(path), str(tmp_path / "o.ply"), "--ratio", "0.5", "--quiet"]) == 0
+    assert "clean-up" not in capsys.readouterr().out
+
+
+def _uv_grid_obj(path, n=12, material=None):
+    """An n×n grid OBJ with UVs and no material, written as text: two charts split by a seam down the
+    middle column (its n+1 vertices have two UVs each: n seam edges, one seam)."""
+    lines = [f"mtllib {material}", "usemtl m"] if material else []
+    lines += [f"v {i / n} {j / n} {0.03 * ((i * 7 + j * 3) % 5)}" for j in range(n + 1) for i in range(n + 1)]
+    lines += [f"vt {0.5 * i / n} {j / n}" for j in range(n + 1) for i in range(n + 1)]  # left chart
+    lines += [f"vt {0.55 + 0.5 * i / n} {j / n}" for j in range(n + 1) for i in range(n + 1)]  # right chart
+    h = n // 2
+    for j in range(n):
+        for i in range(n):
+            v = [j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i]
+            t = [x + (0 if i < h else (n + 1) ** 2) + 1 for x in v]
+            v = [x + 1 for x in v]
+            lines.append(" ".join(["f"] + [f"{v[k]}/{t[k]}" for k in (0, 1, 2)]))
+            lines.append(" ".join(["f"] + [f"{v[k]}/{t[k]}" for k in (0, 2, 3)]))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_summary_names_the_attributes_kept(tmp_path, capsys):
+    src = _uv_grid_obj(tmp_path / "grid.obj")
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio", "0.5", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "  kept uv: 1 seam (12 seam edges, 13 seam vertices) constrained like boundaries" in out, out
+    assert "(squared distance plus weighted attribute deviation, mesh units²)" in out
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio", "0.5", "--quiet",
+                      "--attributes", "none"]) == 0
+    captured = capsys.readouterr()
+    assert "  dropped uv" in captured.out and "kept" not in captured.out
+
+
+def test_uvs_without_material_get_no_made_up_image(tmp_path, capsys):
+    """UVs are written (vt lines, TEXCOORD_0), but no image, mtl or glTF texture the input did not have."""
+    import json
+    import struct
+
+    src = _uv_grid_obj(tmp_path / "grid.obj")
+    out = tmp_path / "out"
+    out.mkdir()
+    assert _cli.main(["simplify", str(src), str(out / "o.obj"), "--ratio", "0.5", "--quiet"]) == 0
+    assert _cli.main(["simplify", str(src), str(out / "o.glb"), "--ratio", "0.5", "--quiet"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["o.glb", "o.obj"]
+    text = (out / "o.obj").read_text()
+    assert "\nvt " in text and "mtllib" not in text and "usemtl" not in text
+    again = trimesh.load(out / "o.obj", process=False, force="mesh")
+    assert again.visual.uv is not None and len(again.visual.uv) == len(again.vertices)
+    data = (out / "o.glb").read_bytes()
+    gltf = json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
+    assert "images" not in gltf and "TEXCOORD_0" in gltf["meshes"][0]["primitives"][0]["attributes"]
+
+
+def test_lod_refuses_texture_with_the_real_reason(tmp_path, capsys, monkeypatch):
+    src = _uv_grid_obj(tmp_path / "grid.obj")  # it does carry UVs: the reason is the levels'
+    _no_simplify(monkeypatch)
+    for flags in (["--texture", str(tmp_path / "t.png")], ["--attributes", "uv"]):
+        assert _cli.main(["lod", str(src), str(tmp_path / "lods"), *flags, "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "qemjax lod keeps positions only: its levels are replayed from " \
+            "contractions" in err and "use qemjax simplify --texture for a textured result" in err, err
+    assert not (tmp_path / "lods").exists()
+    assert _cli.main(["lod", "--help"]) == 0
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "--texture" not in help_text and "--attribute" not in help_text
+    assert "side by side along x" in help_text
+    with pytest.raises(ValueError, match="lod_chain keeps positions only"):
+        qemjax.lod_chain(shapes.icosphere(2), texture=str(tmp_path / "t.png"))
+
+
+def test_lod_glb_levels_side_by_side(src, tmp_path, capsys):
+    """Node i translated by i × 1.2 × the x-extent; each geometry the level's own, unmoved."""
+    assert _cli.main(["lod", str(src), str(tmp_path / "lods"), "--ratios", "0.5", "0.1", "--glb", "--quiet"]) == 0
+    chain = qemjax.lod_chain(src, ratios=[0.5, 0.1])
+    scene = trimesh.load(tmp_path / "lods" / "in-lods.glb", process=False)
+    spacing = 1.2 * max(np.ptp(level.vertices[:, 0]) for level in chain)
+    assert spacing > 0
+    for i, level in enumerate(chain):
+        move, geom = scene.graph[f"lod{i}"]
+        assert np.allclose(move, np.eye(4) + np.pad([[i * spacing], [0], [0]], ((0, 1), (3, 0))), atol=1e-6)
+        mesh = scene.geometry[geom]
+        assert np.allclose(mesh.vertices, level.vertices, atol=1e-6) and np.array_equal(mesh.faces, level.faces)
+    stacked = chain.to_scene(spacing=0)
+    assert all(np.array_equal(stacked.graph[f"lod{i}"][0], np.eye(4)) for i in range(2))

@@ -217,6 +217,7 @@ class Area(CostModel):
     uses_ring: ClassVar[bool] = True
     ring_dead: ClassVar[bool] = True
     branches: ClassVar[tuple[str, ...]] = ("root", "peak", "end", "pinned")
+    error_measure: ClassVar[str] = "surface-area change"
 
     boundary_weight: float = 100.0
     tol: float = TOL

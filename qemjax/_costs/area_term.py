@@ -59,6 +59,7 @@ class AreaTerm(Term):
     uses_ring: ClassVar[bool] = True
     ring_dead: ClassVar[bool] = True
     parts: ClassVar[tuple[str, ...]] = ("base", "area")
+    added: ClassVar[str] = "λ·area term"
 
     area_weight: float = 0.0
 

@@ -207,6 +207,7 @@ class AttributeQEM(QEM):
     of attribute scalars, in `_wedges.KINDS` order) and ``weights`` (m,) each channel's weight."""
 
     name: ClassVar[str] = "qem"  # `simplify(method='qem')` with attributes kept
+    error_measure: ClassVar[str] = "squared distance plus weighted attribute deviation"
     channels: int = 0
     weights: tuple = ()
 

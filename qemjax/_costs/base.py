@@ -88,6 +88,14 @@ class CostModel:
     rank_weights = None  # or a function (parts (P, p) of the candidates) -> (p,) float64 weights
     reweight_step: ClassVar[float] = 0.05
     part_units: ClassVar[tuple[int, ...]] = ()  # each part's power of length (empty: not reported)
+    # what a contraction's cost (row 3: ``max_error``, ``history.costs``) measures, for summaries; every
+    # model's cost is in mesh units² (`_units.Frame.errors_to_mesh`)
+    error_measure: ClassVar[str] = "squared distance"
+
+    @property
+    def error_unit(self) -> str:
+        """The cost's measure and unit, as the summary prints it: ``"squared distance, mesh units²"``."""
+        return f"{self.error_measure}, mesh units²"
 
     def vertex_error(self, state: np.ndarray) -> np.ndarray:
         """(k,) float64 squared distances (normalised units) from state rows (k, width)."""
@@ -118,6 +126,8 @@ class Term(CostModel):
     own_per_pair: ClassVar[bool] = True  # the term's own kernel takes per-pair params
     width = property(lambda self: self.base.width)
     branches = property(lambda self: self.base.branches)
+    added: ClassVar[str] = ""  # what the term adds to the base's cost, for `error_measure`
+    error_measure = property(lambda self: f"{self.base.error_measure} plus {self.added}")
 
     def init_state(self, mesh):
         return self.base.init_state(mesh)

@@ -108,6 +108,15 @@ class QEM(CostModel):
     support = property(lambda self: "ring" if self.memoryless else "pair")
 
     @property
+    def error_measure(self) -> str:
+        """What a cost is: a squared distance (memoryless: to the current faces, plus the weighted terms)."""
+        if not self.memoryless:
+            return "squared distance"
+        return "squared distance to the current faces" + "".join(
+            f" plus {t}" for t, w in (("μ·summed quadric", self.memory_weight),
+                                      ("λ·volume term", self.volume_weight)) if w)
+
+    @property
     def refresh(self):
         """memoryless: (MeshView, verts) -> the rebuilt state rows (`memoryless.refresh_rows`); else None."""
         if not self.memoryless:

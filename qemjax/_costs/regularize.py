@@ -64,6 +64,7 @@ class Regularized(Term):
     support: ClassVar[str] = "ring"
     uses_ring: ClassVar[bool] = True
     parts: ClassVar[tuple[str, ...]] = ("base", "shape")
+    added: ClassVar[str] = "λ·shape term"
 
     regularize: float = 0.0
 
