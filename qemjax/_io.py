@@ -13,6 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from . import _io_files
 from ._arrays import face_stats, column_bounds, sorted_triples
 
 
@@ -73,11 +74,14 @@ def _warn_dropped(dropped: list[str], what: str, stacklevel: int):
 
 
 def _as_trimesh(obj):
-    """A `trimesh.Trimesh`, or a `trimesh.Scene` concatenated into one."""
+    """A `trimesh.Trimesh`, or a `trimesh.Scene` concatenated into one; ValueError for anything else
+    (a point cloud named as one, with its number of points)."""
     import trimesh
 
     if isinstance(obj, trimesh.Scene):
-        obj = obj.to_geometry() if hasattr(obj, "to_geometry") else obj.dump(concatenate=True)
+        obj = _io_files.concatenated(obj)
+    if isinstance(obj, trimesh.PointCloud):
+        raise ValueError(f"expected a triangle mesh, got a point cloud ({len(obj.vertices)} points)")
     if not isinstance(obj, trimesh.Trimesh):
         raise ValueError(f"expected a triangle mesh, got {type(obj).__name__}")
     return obj
@@ -90,27 +94,14 @@ def _from_trimesh(obj) -> tuple[Mesh, list[str]]:
 
 
 def _read_trimesh(path):
-    """The `trimesh.Trimesh` in a file (no processing); ValueError naming the file."""
-    import trimesh
-
+    """The `trimesh.Trimesh` in a file (no processing); ValueError naming the file and, for a file that
+    cannot be read, what is wrong with it in words about the file (`_io_files.read`)."""
     path = os.fspath(path)
     if not os.path.exists(path):
         raise ValueError(f"mesh file not found: {path}")
     if os.path.isdir(path):
         raise ValueError(f"expected a mesh file, got a folder: {path}")
-    try:
-        obj = trimesh.load(path, process=False)
-        if isinstance(obj, trimesh.Scene) and len(obj.geometry) == 1:
-            # one geometry placed without a transform: itself (concatenating a scene drops stored normals)
-            name = next(iter(obj.geometry))
-            nodes = obj.graph.geometry_nodes.get(name, [])
-            if len(nodes) == 1 and np.array_equal(obj.graph.get(nodes[0])[0], np.eye(4)):
-                obj = obj.geometry[name]
-        if not isinstance(obj, trimesh.Trimesh):
-            obj = trimesh.load(path, process=False, force="mesh")
-    except Exception as exc:  # trimesh raises many kinds; name the file
-        raise ValueError(f"could not read mesh {path}: {exc}") from exc
-    return _as_trimesh(obj)
+    return _as_trimesh(_io_files.read(path))
 
 
 def _read(path) -> tuple[Mesh, list[str]]:

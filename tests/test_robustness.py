@@ -133,7 +133,8 @@ def _files(tmp_path):
     garbage_obj = tmp_path / "garbage.ply"
     garbage_obj.write_bytes(b"ply\nformat nonsense\n")
     return {"missing": (tmp_path / "missing.obj", "not found"), "folder": (tmp_path, "folder"),
-            "unsupported type": (junk, "could not read mesh"), "broken ply": (garbage_obj, "could not read")}
+            "unsupported type": (junk, r"could not read .*mesh\.qqq: '\.qqq' is not a mesh format"),
+            "broken ply": (garbage_obj, r"could not read .*garbage\.ply: .*not valid PLY: 'format nonsense'")}
 
 
 @pytest.mark.parametrize("case", ["missing", "folder", "unsupported type", "broken ply"])

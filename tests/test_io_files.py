@@ -1,0 +1,324 @@
+"""Reading mesh files: damaged files give one line in words about the file, point clouds are named,
+text in Latin-1 is read, PLY triangle strips are read. Every file is generated here, in tmp_path."""
+from __future__ import annotations
+
+import contextlib
+import re
+import signal
+import struct
+
+import numpy as np
+import pytest
+import trimesh
+
+import qemjax
+from qemjax import _io, _io_strips, _wedges, shapes
+
+INTERNALS = ("broadcast", "index", "out of bounds", "list index", "chunk", "could not be read to its end",
+             "traceback", "codec", "charset", "module", "unpack", "inhomogeneous", "expecting value")
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float):
+    """TimeoutError when the block runs longer than ``seconds`` (SIGALRM; no limit where there is none)."""
+    if not hasattr(signal, "setitimer"):
+        yield
+        return
+
+    def stop(*_):
+        raise TimeoutError(f"still reading after {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, stop)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def _sources(tmp_path) -> dict:
+    """name -> bytes of one small mesh (icosphere(1): 42 vertices, 80 faces) in each format read."""
+    V, F = shapes.icosphere(1)
+    tm = trimesh.Trimesh(V, F, process=False)
+    out = {}
+    for name, kw in [("m.obj", {}), ("a.ply", {"encoding": "ascii"}), ("b.ply", {}), ("b.stl", {}),
+                     ("a.stl", {"file_type": "stl_ascii"}), ("m.off", {}), ("m.glb", {})]:
+        path = tmp_path / name
+        tm.export(path, **kw)
+        out[name] = path.read_bytes()
+    return out
+
+
+def _reason(path) -> str:
+    """The reason `qemjax.load` gives for ``path``, checked to be one line ``could not read <path>: …``."""
+    with pytest.raises(ValueError) as info:
+        qemjax.load(path)
+    msg = str(info.value)
+    assert msg.startswith(f"could not read {path}: ") and "\n" not in msg, msg
+    return msg[len(f"could not read {path}: "):]
+
+
+def test_sources_load(tmp_path):
+    for name, data in _sources(tmp_path).items():
+        assert qemjax.load(tmp_path / name).faces.shape == (80, 3), name
+
+
+def test_damaged_files_give_one_line_in_words(tmp_path):
+    """40 files cut short, with bytes flipped, or replaced by text (fixed seed): reading each either
+    gives a mesh (a cut OBJ can still be a smaller valid one) or one ValueError line in words about
+    the file, without a library's internals, and never hangs."""
+    rng = np.random.default_rng(7)
+    sources = _sources(tmp_path)
+    names = sorted(sources)
+    failed = 0
+    for i in range(40):
+        name = names[i % len(names)]
+        data = bytearray(sources[name])
+        how = ("cut", "flip", "text")[i % 3]
+        if how == "cut":
+            data = data[: rng.integers(0, len(data))]
+        elif how == "flip":
+            for _ in range(rng.integers(1, 6)):
+                data[rng.integers(len(data))] = rng.integers(256)
+        else:
+            data = b"this is a note about the model\nnot a mesh at all\n" * int(rng.integers(1, 4))
+        path = tmp_path / f"{i:02d}_{how}_{name}"
+        path.write_bytes(bytes(data))
+        try:
+            with time_limit(20):
+                mesh = qemjax.load(path)
+        except ValueError as exc:
+            msg = str(exc)
+            assert msg.startswith(f"could not read {path}: ") and "\n" not in msg, msg
+            assert not [w for w in INTERNALS if w in msg.lower()], msg
+            failed += 1
+            continue
+        assert how != "text", f"{path} read as a mesh"
+        assert mesh.faces.ndim == 2 and mesh.faces.shape[1] == 3 and len(mesh.faces)
+        assert mesh.faces.min() >= 0 and mesh.faces.max() < len(mesh.vertices)
+    assert failed >= 25  # most damage is found, not only the text
+
+
+def _obj(lines: str) -> bytes:
+    return ("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + lines).encode()
+
+
+def _ascii_ply(faces: str, n_faces: int, extra: str = "") -> bytes:
+    head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+    if n_faces >= 0:
+        head += f"element face {n_faces}\nproperty list uchar int vertex_indices\n"
+    return (head + "end_header\n0 0 0\n1 0 0\n0 1 0\n" + faces + extra).encode()
+
+
+def test_reasons_name_what_is_wrong(tmp_path):
+    src = _sources(tmp_path)
+    glb = src["m.glb"]
+    cases = {
+        "cut.obj": (src["m.obj"][: src["m.obj"].index(b"\nv ", 500) + 4],
+                    r"the file ends in the middle of a vertex line \(line \d+: 'v -?0?'\)"),
+        "face.obj": (_obj("f 1 2"), r"the file ends in the middle of a face line \(line 4: 'f 1 2'\)"),
+        "far.obj": (_obj("f 1 2 7\n"),
+                    "the face on line 4 refers to vertex 7, but the file holds only 3 vertices"),
+        "text.ply": (b"hello\nworld\n", r"not a PLY file \(its first line is not 'ply'\)"),
+        "fmt.ply": (b"ply\nformat nonsense 1.0\nend_header\n", "unknown PLY format 'nonsense'"),
+        "cut.ply": (src["b.ply"][:400],
+                    r"truncated binary PLY: the header declares 42 vertices and 80 faces, which take at least "
+                    r"584 bytes, but the file holds \d+ bytes of data"),
+        "cut_ascii.ply": (src["a.ply"][:700], r"the header declares 42 vertices and 80 faces \(122 lines of "
+                          r"data\), but the file holds \d+: it is truncated or damaged"),
+        "far.ply": (_ascii_ply("3 0 1 9\n", 1), r"a face refers to vertex 9, but the file holds 3 vertices"),
+        "cut.stl": (src["b.stl"][:84 + 50 * 12 + 7], "truncated binary STL: header says 80 triangles, "
+                    "file holds 12"),
+        "text.stl": (b"just some words\n" * 10, "not an STL file"),
+        "cut_ascii.stl": (src["a.stl"][: src["a.stl"].index(b"\n", 3000) + 1],
+                          "truncated ASCII STL: it ends without an 'endsolid' line"),
+        "cut.glb": (glb[:1000], f"truncated GLB: header says {len(glb)} bytes, file holds 1000"),
+        "text.glb": (b"{}", r"not a GLB file \(it does not start with 'glTF'\)"),
+        "text.off": (b"hello\n1 2 3\n", r"not an OFF file \(its first line is not 'OFF'\)"),
+        "far.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n",
+                    "the face on line 6 refers to vertex 9, but the file holds only 3 vertices"),
+        "cut.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n",
+                    "truncated OFF: the header declares 3 vertices and 1 faces"),
+        "empty.obj": (b"", "the file is empty"),
+        "words.obj": (b"hello\n", r"it holds no vertices and no faces \(it is empty, or not an OBJ file\)"),
+        "mesh.qqq": (b"\x00\x01", "'.qqq' is not a mesh format qemjax reads"),
+    }
+    for name, (data, match) in cases.items():
+        (tmp_path / name).write_bytes(data)
+        reason = _reason(tmp_path / name)
+        assert not [w for w in INTERNALS if w in reason.lower()], reason
+        assert re.match(match, reason), (name, reason)
+    with pytest.raises(ValueError, match=r"^could not read .*cut\.ply: truncated binary PLY"):
+        qemjax.simplify(tmp_path / "cut.ply", ratio=0.5)  # simplify reads through the same path
+
+
+def test_point_clouds_are_named(tmp_path):
+    """A file of points without faces, and a trimesh PointCloud object, are called point clouds."""
+    cases = {"p.ply": _ascii_ply("", -1), "p0.ply": _ascii_ply("", 0), "p.obj": _obj(""),
+             "p.off": b"OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n"}
+    for name, data in cases.items():
+        (tmp_path / name).write_bytes(data)
+        assert _reason(tmp_path / name) == "it holds a point cloud (3 points, no faces), not a triangle mesh"
+        with pytest.raises(ValueError, match="could not read .*point cloud"):
+            qemjax.simplify(tmp_path / name, ratio=0.5)
+    cloud = trimesh.PointCloud(np.random.default_rng(0).random((5, 3)))
+    for call in (lambda: qemjax.simplify(cloud, ratio=0.5), lambda: _io.as_arrays(cloud),
+                 lambda: qemjax.simplify(trimesh.Scene([cloud]), ratio=0.5)):
+        with pytest.raises(ValueError, match=r"^expected a triangle mesh, got a point cloud \(5 points\)$"):
+            call()
+
+
+LATIN_OBJ = """# mod\u00e8le export\u00e9
+mtllib m.mtl
+o mod\u00e8le
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 2 0
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+vt 0 1
+vn 0 0 1
+g t\u00eate
+usemtl mat\u00e9riau
+f 1/1/1 2/2/1 3/3/1
+f 1/1/1 3/3/1 4/4/1
+f 4/4/1 3/3/1 5/5/1
+"""
+
+
+def test_latin1_obj_is_read_with_its_uvs_normals_and_material(tmp_path):
+    """One non-UTF-8 byte used to stop the read (trimesh's fallback needs an optional package)."""
+    path = tmp_path / "latin.obj"
+    path.write_bytes(LATIN_OBJ.encode("latin-1"))
+    (tmp_path / "m.mtl").write_bytes("newmtl mat\u00e9riau\nKd 0.2 0.4 0.6\n".encode("latin-1"))
+    tm = _io._read_trimesh(path)
+    assert tm.vertices.shape == (5, 3) and tm.faces.shape == (3, 3)
+    values, material = _wedges.from_trimesh(tm)
+    assert sorted(values) == ["normal", "uv"]
+    assert np.allclose(values["normal"], [0, 0, 1])
+    assert material is not None and np.array_equal(material.diffuse, [51, 102, 153, 255])
+    with pytest.warns(UserWarning, match="carries uv, material"):
+        assert qemjax.load(path).faces.shape == (3, 3)
+
+
+def test_latin1_comments_in_other_text_formats(tmp_path):
+    src = _sources(tmp_path)
+    word = "mod\u00e8le".encode("latin-1")
+    edits = {"a.ply": src["a.ply"].replace(b"1.0\n", b"1.0\ncomment " + word + b"\n", 1),
+             "b.ply": src["b.ply"].replace(b"1.0\n", b"1.0\ncomment " + word + b"\n", 1),
+             "m.off": src["m.off"].replace(b"OFF\n", b"OFF\n# " + word + b"\n", 1),
+             "a.stl": b"solid " + word + src["a.stl"][src["a.stl"].index(b"\n"):]}
+    for name, data in edits.items():
+        assert data != src[name]
+        (tmp_path / ("latin_" + name)).write_bytes(data)
+        assert qemjax.load(tmp_path / ("latin_" + name)).faces.shape == (80, 3), name
+
+
+# ---- triangle strips ----------------------------------------------------------------------------------
+
+def _stripify(F: np.ndarray) -> list:
+    """Greedy strips covering the oriented triangles F: triangle i of a strip s is (s[i], s[i+1], s[i+2]),
+    first two swapped for odd i (the convention the reader follows)."""
+    by_edge = {}
+    for f, (a, b, c) in enumerate(F):
+        for e in ((a, b), (b, c), (c, a)):
+            by_edge[e] = (f, (set((a, b, c)) - set(e)).pop())
+    used, strips = np.zeros(len(F), bool), []
+    for f in range(len(F)):
+        if used[f]:
+            continue
+        used[f] = True
+        s = [int(v) for v in F[f]]
+        while True:
+            i = len(s) - 2  # the number of the triangle to add
+            edge = (s[-2], s[-1]) if i % 2 == 0 else (s[-1], s[-2])
+            nxt = by_edge.get(edge)
+            if nxt is None or used[nxt[0]]:
+                break
+            used[nxt[0]] = True
+            s.append(int(nxt[1]))
+        strips.append(s)
+    return strips
+
+
+def _joined(strips: list) -> list:
+    """One sequence: strips joined alternately by a -1 restart and by degenerate triangles (repeating the
+    last vertex of one strip and the first of the next, once or twice to keep the next one's parity)."""
+    out, start = list(strips[0]), 0  # start: where the current strip sequence began
+    for k, s in enumerate(strips[1:]):
+        if k % 2 == 0:
+            out += [-1]
+            start = len(out)
+            out += s
+        else:
+            pad = 1 if (len(out) - start) % 2 == 0 else 2
+            out += [out[-1]] + [s[0]] * pad + s
+    return out
+
+
+def _strip_ply(V: np.ndarray, rows: list, fmt: str, count: str, item: str) -> bytes:
+    """A PLY with vertices (x, y, z and two extra properties to step over) and an element tristrips."""
+    head = (f"ply\nformat {fmt} 1.0\ncomment strips\nelement vertex {len(V)}\nproperty float x\n"
+            f"property float y\nproperty float z\nproperty uchar flag\nproperty double confidence\n"
+            f"element tristrips {len(rows)}\nproperty list {count} {item} vertex_indices\nend_header\n")
+    if fmt == "ascii":
+        body = "".join(f"{x} {y} {z} 7 0.5\n" for x, y, z in V)
+        body += "".join(f"{len(r)} " + " ".join(str(v) for v in r) + "\n" for r in rows)
+        return (head + body).encode()
+    o = "<" if fmt == "binary_little_endian" else ">"
+    code = {"uchar": "B", "int": "i", "uint": "I"}
+    vdt = np.dtype([("x", o + "f4"), ("y", o + "f4"), ("z", o + "f4"), ("flag", "u1"), ("c", o + "f8")])
+    verts = np.zeros(len(V), vdt)
+    verts["x"], verts["y"], verts["z"], verts["flag"], verts["c"] = V[:, 0], V[:, 1], V[:, 2], 7, 0.5
+    body = verts.tobytes()
+    for r in rows:
+        r = [v % 2 ** 32 if item == "uint" else v for v in r]
+        body += struct.pack(o + code[count], len(r)) + struct.pack(o + code[item] * len(r), *r)
+    return head.encode() + body
+
+
+def _oriented(F) -> set:
+    """Triangles as a set, each rotated to start at its smallest vertex (orientation kept)."""
+    out = set()
+    for t in np.asarray(F).tolist():
+        k = t.index(min(t))
+        out.add(tuple(t[k:] + t[:k]))
+    return out
+
+
+def test_strip_triangles_by_hand():
+    got = _io_strips.strip_triangles(np.array([0, 1, 2, 3, 4, -1, 5, 6, 7, 7, 8, 8, 9, 10]))
+    # 5 6 7 7 8 8 9 10: the joins (7 7, 8 8) are dropped; (8, 9, 10) is the strip's sixth triangle: swapped
+    assert got.tolist() == [[0, 1, 2], [2, 1, 3], [2, 3, 4], [5, 6, 7], [9, 8, 10]]
+
+
+@pytest.mark.parametrize("fmt,count,item", [("ascii", "int", "int"), ("binary_little_endian", "int", "int"),
+                                            ("binary_little_endian", "uchar", "uint"),
+                                            ("binary_big_endian", "int", "uint"), ("ascii", "uchar", "int")])
+def test_tristrip_ply_is_read(tmp_path, fmt, count, item):
+    V, F = shapes.grid(4)
+    strips = _stripify(F)
+    assert len(strips) > 2 and max(len(s) for s in strips) > 4  # odd triangles and joins both happen
+    seq = _joined(strips)
+    rows = [seq] if count == "int" else [s for s in strips]  # uchar counts: one strip per row
+    path = tmp_path / "strips.ply"
+    path.write_bytes(_strip_ply(V, rows, fmt, count, item))
+    m = qemjax.load(path)
+    assert np.allclose(m.vertices, V.astype(np.float32))
+    assert len(m.faces) == len(F) and _oriented(m.faces) == _oriented(F)
+    r = qemjax.simplify(path, ratio=0.5)
+    assert 0 < len(r.faces) < len(F)
+
+
+def test_bad_tristrips_are_named(tmp_path):
+    V, F = shapes.grid(2)
+    path = tmp_path / "bad.ply"
+    path.write_bytes(_strip_ply(V, [[0, 1, 99]], "ascii", "int", "int"))
+    assert _reason(path).startswith("the PLY tristrips refer to vertex 99, but the file holds 9 vertices")
+    path.write_bytes(_strip_ply(V, [[0, 1, 2, 3]], "binary_little_endian", "int", "int")[:-6])
+    assert _reason(path).startswith("truncated binary PLY")
