@@ -494,9 +494,26 @@ def attributes_note(stats: dict) -> str:
         if refused:
             note += f", {_count(refused, 'contraction')} refused there"
         parts.append(note)
-    if stats.get("dropped"):
-        parts.append(f"dropped {', '.join(stats['dropped'])}")
+    if stats.get("normals_recomputed"):
+        parts.append(f"{_count(stats['normals_recomputed'], 'stored normal')} of zero length recomputed from the "
+                     "faces")
+    if stats.get("not_kept_seams"):
+        kinds = stats["not_kept_seams"]
+        parts.append(f"not kept by default, for their seams: {', '.join(kinds)} (--attributes {','.join(kinds)} "
+                     "keeps them)")
+    dropped = [d for d in stats.get("dropped", []) if d not in
+               {"uv", "vertex_colors", "normals", "material"} & set(_not_kept_names(stats))]
+    if dropped:
+        parts.append(f"dropped {', '.join(dropped)}")
     return "; ".join(parts)
+
+
+def _not_kept_names(stats: dict) -> list[str]:
+    """The names in stats['dropped'] that `attributes_note` already gives as not kept for their seams."""
+    from ._wedges import DROPPED_NAME
+
+    names = [DROPPED_NAME[k] for k in stats.get("not_kept_seams", [])]
+    return names + (["material"] if "uv" in stats.get("not_kept_seams", []) else [])
 
 
 if __name__ == "__main__":
