@@ -2,7 +2,8 @@
 
 Public API: `simplify` (and `simplify_batch` / `simplify_cells`: many runs in shared rounds), `methods`,
 `Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the multiresolution record (`Record`, `Level`,
-`load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` module.
+`load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` and
+`shapes` (meshes made in code, `shapes.write_examples`) modules.
 """
 from ._api import methods as methods
 from ._api import simplify as simplify
@@ -25,7 +26,7 @@ __version__ = "0.1.0"
 
 
 def __getattr__(name):  # lazy submodules: importing qemjax stays light
-    if name in ("metrics", "render"):
+    if name in ("metrics", "render", "shapes"):
         import importlib
 
         return importlib.import_module(f"qemjax.{name}")

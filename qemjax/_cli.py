@@ -1,6 +1,7 @@
 """Command line: ``qemjax simplify IN OUT (--faces N | --ratio R) [--max-error E] [options]``,
 ``qemjax lod IN OUT_DIR [--ratios R ...] [--format EXT] [--glb] [--record] [options]``,
-``qemjax sweep CONFIG [--out PATH]``, ``qemjax demo [--out PATH]`` and ``qemjax --version``.
+``qemjax sweep CONFIG [--out PATH]``, ``qemjax demo [--out PATH]``, ``qemjax examples [FOLDER]`` and
+``qemjax --version``.
 
 The options of `qemjax.simplify` are generated from its signature (name, default, type) and its
 docstring (help), with the per-option details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
@@ -337,6 +338,12 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--subdivisions", type=int, default=7, help="7: 327,680 faces; 6: 81,920 (default: 7)")
     d.add_argument("--ratio", type=_ratio, default=0.02, help="keep this fraction of the faces (default: 0.02)")
     _add_options(d)
+    ex = sub.add_parser("examples", help="write small example files made in code (bumpy.obj, bumpy.ply, "
+                        "creases.txt, textured.obj, textured.png)",
+                        description="Write the example files the README uses, made in code: a bumpy sphere "
+                        "(bumpy.obj, bumpy.ply), feature edges on it (creases.txt), and a UV-mapped copy with "
+                        "6 charts (textured.obj, no mtllib) and its texture (textured.png).")
+    ex.add_argument("folder", nargs="?", default=".", help="where to write them (created if absent; default: .)")
     ap.commands = tuple(sub.choices)
     return ap
 
@@ -417,7 +424,20 @@ def _sweep(args) -> int:
     return 0
 
 
+def _examples(args) -> int:
+    """``qemjax examples [FOLDER]``: the README's example files, made in code."""
+    from .shapes import write_examples
+
+    if os.path.exists(args.folder) and not os.path.isdir(args.folder):
+        raise CliError(f"{args.folder} is a file; give a folder")
+    for path in write_examples(args.folder):
+        print(path)
+    return 0
+
+
 def _run(args) -> int:
+    if args.cmd == "examples":
+        return _examples(args)
     if args.cmd == "sweep":
         return _sweep(args)
     if args.cmd == "lod":

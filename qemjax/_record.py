@@ -112,8 +112,10 @@ class Record:
         if target_faces < counts[-1]:
             if 0 < self.target_faces <= target_faces:
                 return len(self.history)
-            raise ValueError(f"the record reaches {counts[-1]} faces, not {target_faces}: replay cannot go "
-                             "below the face count the contractions reached (simplify further to record more)")
+            raise ValueError(f"replay reaches the levels between the input ({counts[0]} faces) and this "
+                             f"result ({counts[-1]} faces), not {target_faces}; for fewer faces, simplify "
+                             f"further: qemjax.simplify(..., target_faces={target_faces}), or "
+                             "qemjax.lod_chain(..., ratios=[...]) for every level from one run")
         j = int(np.argmax(counts <= target_faces))  # the first prefix at or below the target
         if j and counts[j] < target_faces:  # it jumped past the target: the level before
             j -= 1

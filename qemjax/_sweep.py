@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _io
+from . import _io, shapes
 from ._api import simplify, simplify_cells
 from ._options import Schedule
 
@@ -64,16 +64,41 @@ def _plain(value):
     return value
 
 
+def _shape(value):
+    """The `shapes.ShapeSpec` a mesh input names (``"shapes.torus"``, ``"shapes.bumpy_sphere(subdivisions=4)"``),
+    or None for anything else (a file of that name is a file). ValueError for an unknown shape."""
+    if isinstance(value, str) and shapes.is_spec(value) and not Path(value).is_file():
+        return shapes.parse_spec(value)
+    return None
+
+
+def _name(value, i: int) -> str:
+    spec = _shape(value)
+    if spec is not None:
+        return spec.name
+    return Path(value).stem if isinstance(value, (str, os.PathLike)) else f"mesh{i}"
+
+
+def load_mesh(value):
+    """A mesh input as arrays (`_io.as_arrays`): a shape named as text is made in code."""
+    spec = _shape(value)
+    return _io.as_arrays(spec.build() if spec is not None else value)
+
+
 def name_meshes(meshes) -> dict[str, Any]:
-    """name → mesh input: a path (named by its stem), a list of paths or meshes, a dict name → mesh, or
-    one mesh (``(V, F)``, `Mesh`, trimesh). Unnamed meshes are ``mesh0``, ``mesh1``, …"""
+    """name → mesh input: a path (named by its stem), a shape made in code (``"shapes.NAME"`` or
+    ``"shapes.NAME(key=value, ...)"``, named NAME), a list of these or of meshes, a dict name → mesh, or
+    one mesh (``(V, F)``, `Mesh`, trimesh). Unnamed meshes are ``mesh0``, ``mesh1``, … Unknown shapes
+    raise ValueError."""
     if isinstance(meshes, dict):
         named = {str(k): v for k, v in meshes.items()}
+        for v in named.values():
+            _shape(v)  # an unknown shape fails here, before anything runs
     else:
         single = isinstance(meshes, (str, os.PathLike)) or hasattr(meshes, "vertices") or (
             isinstance(meshes, tuple) and len(meshes) == 2 and not isinstance(meshes[0], (str, os.PathLike)))
         items = [meshes] if single else list(meshes)
-        names = [Path(m).stem if isinstance(m, (str, os.PathLike)) else f"mesh{i}" for i, m in enumerate(items)]
+        names = [_name(m, i) for i, m in enumerate(items)]
         if len(set(names)) != len(names):
             dup = sorted({n for n in names if names.count(n) > 1})
             raise ValueError(f"two meshes have the same name {dup}: pass a dict name → mesh")
@@ -199,23 +224,57 @@ def _format(out) -> str:
     return FORMATS[ext]
 
 
+def _check_writable(out) -> str:
+    """The format of ``out``; ValueError when it is Parquet and pyarrow is missing (before anything runs)."""
+    fmt = _format(out)
+    if fmt == "parquet":
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            raise ValueError(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), "
+                             "or give a .csv out") from None
+    return fmt
+
+
+def target_column(values):
+    """The ``target`` column as given: ints (face counts) stay ints beside floats (ratios). A target
+    >= 1 is always a face count and < 1 a ratio (`check_targets`), so the type follows from the value,
+    also when a file stored the column as float (Parquet: one type per column; CSV read back)."""
+    import pandas as pd
+
+    vals = [v if isinstance(v, str) else int(v) if v >= 1 else float(v) for v in values]
+    kinds = {type(v) for v in vals}
+    dtype = "int64" if kinds == {int} else "float64" if kinds == {float} else object
+    return pd.Series(vals, dtype=dtype)
+
+
+def _typed(df):
+    if "target" in df and len(df):
+        df = df.copy()
+        df["target"] = target_column(df["target"]).to_numpy()
+    return df
+
+
 def read_table(out):
-    """The table at ``out`` (Parquet or CSV by extension); an empty DataFrame when it does not exist."""
+    """The table at ``out`` (Parquet or CSV by extension), its ``target`` column as given (`target_column`);
+    an empty DataFrame when it does not exist."""
     import pandas as pd
 
     if not Path(out).exists():
         return pd.DataFrame()
     if _format(out) == "csv":
-        return pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str})
-    return pd.read_parquet(out)
+        return _typed(pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str}))
+    _check_writable(out)
+    return _typed(pd.read_parquet(out))
 
 
 def write_table(df, out) -> None:
     """Write ``df`` to a temporary file next to ``out``, then rename: an interruption never leaves a
-    partial table."""
+    partial table. CSV keeps integer targets as integers ("424"); Parquet stores a column of ratios and
+    face counts as float64 (`read_table` gives them back as ints)."""
     tmp = Path(out).with_name(f".{Path(out).name}.tmp")
     if _format(out) == "csv":
-        df.to_csv(tmp, index=False)
+        _typed(df).to_csv(tmp, index=False)
     else:
         df.to_parquet(tmp, index=False)
     os.replace(tmp, out)
@@ -246,7 +305,10 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     row per cell.
 
     meshes: a path, a list of paths or meshes, a dict name → mesh, or one mesh (``(V, F)``, `Mesh`);
-        paths are named by their stem, other meshes ``mesh0``, ``mesh1``, … Each is read once.
+        a mesh made in code may be named as text, ``"shapes.torus"`` or
+        ``"shapes.bumpy_sphere(subdivisions=4)"`` (`qemjax.shapes.parse_spec`: keyword arguments with
+        literal values, never evaluated). Paths are named by their stem, shapes by their name, other
+        meshes ``mesh0``, ``mesh1``, … Each is read (or made) once.
     grid: `simplify` keywords → lists of values, crossed (e.g. ``{"method": ["qem", "esqem"],
         "regularize": [0, 0.1]}``).
     targets: ratios (floats in (0, 1)) and/or face counts (ints).
@@ -254,16 +316,17 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         the same with these keywords to `evaluate` (e.g. ``{"n_samples": 10_000}``); False: none.
     executor: None (in this process, in order), a `concurrent.futures.Executor` or a
         `dask.distributed.Client`: one task per batch.
-    out: a ``.parquet`` or ``.csv`` path, rewritten after each finished batch. Cells whose key is already
-        there without an error are not run again (an interrupted sweep resumes); rows of other cells in
-        the file are kept.
+    out: a ``.parquet`` (needs pyarrow: ``pip install 'qemjax[sweep]'``) or ``.csv`` path, rewritten
+        after each finished batch, in row order (the rows of other grids already in the file first).
+        Cells whose key is already there without an error are not run again (an interrupted sweep
+        resumes); rows of other cells in the file are kept.
     progress: a tqdm bar counting cells.
     batch_size: at most this many cells per batch (`simplify_cells`: cells that can share rounds, of one
         mesh or several, run together as one disjoint union of copies); None: in process, as many as
         `BATCH_FACES` faces allow; on an executor, `EXECUTOR_BATCH`. 1: every cell alone.
 
     Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key,
-    ``target`` (as given), ``error`` (empty, or why `simplify` raised), ``faces_in``, ``faces_out``,
+    ``target`` (as given: face counts stay ints beside ratios), ``error`` (empty, or why `simplify` raised), ``faces_in``, ``faces_out``,
     ``target_faces``, ``stop_reason``, ``rounds``, ``compile_s``, ``run_s``, ``total_s``,
     ``batch_size`` (the cells its run shared rounds with, itself included; 1: alone), ``same_run`` (the
     cells that got the very same run, itself included: cells whose settings make no difference on this
@@ -277,7 +340,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
 
     configs, targets = expand_grid(grid), check_targets(targets)
     if out is not None:
-        _format(out)
+        _check_writable(out)
     if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, numbers.Integral)
                                    or batch_size < 1):
         raise ValueError(f"batch_size must be an int >= 1 or None, got {batch_size!r}")
@@ -298,23 +361,28 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         rows = {r["cell"]: r for r in ok.to_dict("records")}
         table = table[~table["cell"].isin(set(keys) - set(rows))]  # failed rows of this grid are re-run
     todo = [c for c in cells if c.key not in rows]
-    loaded = {name: _io.as_arrays(named[name]) for name in dict.fromkeys(c.mesh for c in todo)}
+    loaded = {name: load_mesh(named[name]) for name in dict.fromkeys(c.mesh for c in todo)}
+    others = table[~table["cell"].isin(set(keys))] if len(table) else table  # rows of other grids: kept
 
     from tqdm.auto import tqdm
 
     bar = tqdm(total=len(cells), initial=len(cells) - len(todo), unit="cell", desc="sweep", disable=not progress)
     done = []
 
+    def frame(records):
+        df = pd.DataFrame(records)
+        if len(df):
+            df["target"] = target_column(df["target"]).to_numpy()
+        return df
+
     def finish(batch_rows):
-        nonlocal table
         for r in batch_rows:
             rows[r["cell"]] = r
         done.extend(batch_rows)
         bar.update(len(batch_rows))
-        if out is not None:
-            new = pd.DataFrame(batch_rows)
-            table = pd.concat([table, new], ignore_index=True) if len(table) else new
-            write_table(table, out)
+        if out is not None:  # the rows of other grids first, then this grid's in cell order
+            ours = frame([rows[k] for k in keys if k in rows])
+            write_table(pd.concat([others, ours], ignore_index=True) if len(others) else ours, out)
 
     faces = {name: len(loaded[name][1]) for name in loaded}
     size = batch_size if batch_size is not None or submit is None else EXECUTOR_BATCH
@@ -330,6 +398,6 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
                 finish(f.result())
     finally:
         bar.close()
-    df = pd.DataFrame([rows[k] for k in keys])
+    df = frame([rows[k] for k in keys])
     front = [*_FIRST, *grid, "target"]
     return df[front + [c for c in df.columns if c not in front]]

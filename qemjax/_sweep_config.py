@@ -1,8 +1,9 @@
 """``qemjax sweep CONFIG``: a sweep described in a TOML file (or YAML, with pyyaml installed).
 
 Everything is checked before any mesh is simplified or any worker started: unknown keys, missing files,
-wrong types and bad targets raise ValueError with one line naming the file and the key. Relative paths
-(meshes, out) are relative to the config file's folder. See the README's "Parameter sweeps".
+unknown shapes, wrong types and bad targets raise ValueError with one line naming the file and the key.
+Relative paths (meshes, out) are relative to the config file's folder; a mesh may also be a shape made in
+code (``"shapes.torus"``, ``"shapes.bumpy_sphere(subdivisions=4)"`` or ``{shape = "torus", n_major = 32}``). See the README's "Parameter sweeps".
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from . import _api, _sweep
+from . import _api, _sweep, shapes
 from ._api import simplify
 
 KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
@@ -25,7 +26,7 @@ METRICS_KEYS = ("n_samples", "seed")  # keywords of qemjax.metrics.evaluate a co
 
 @dataclasses.dataclass(frozen=True)
 class SweepConfig:
-    meshes: dict[str, str]  # name → path
+    meshes: dict[str, str]  # name → path, or a shape's text ("shapes.torus(n_major=32)")
     grid: dict[str, list]
     targets: list
     out: str
@@ -95,28 +96,37 @@ def load(path, out: str | None = None) -> SweepConfig:
                        _executor(raw.get("executor", {}), fail))
 
 
+def _mesh(value, folder: Path, fail) -> str:
+    """One mesh entry: a path (relative to the config's folder) or a shape made in code, as text
+    (``"shapes.bumpy_sphere(subdivisions=4)"``) or a table (``{shape = "bumpy_sphere", subdivisions = 4}``);
+    returns the absolute path or the shape's canonical text."""
+    if shapes.is_spec(value) and not (isinstance(value, str) and (folder / value).is_file()):
+        try:
+            return str(shapes.parse_spec(value))
+        except ValueError as exc:
+            fail(f"meshes: {exc}")
+    if not isinstance(value, str):
+        fail(f"meshes must be file paths or shapes (strings such as \"shapes.torus\"), got {value!r}")
+    path = os.fspath(folder / value)
+    if not Path(path).is_file():
+        fail(f"mesh file not found: {path}")
+    return path
+
+
 def _meshes(value, folder: Path, fail) -> dict[str, str]:
     if isinstance(value, str):
         value = [value]
     if isinstance(value, list):
-        if not all(isinstance(v, str) for v in value):
-            fail(f"meshes must be file paths (strings), got {value!r}")
-        paths = [os.fspath(folder / v) for v in value]
         try:
-            named = _sweep.name_meshes(paths)
+            named = _sweep.name_meshes([_mesh(v, folder, fail) for v in value])
         except ValueError as exc:
             fail(str(exc))
     elif isinstance(value, dict):
-        if not all(isinstance(v, str) for v in value.values()):
-            fail("meshes must map names to file paths (strings)")
-        named = {str(k): os.fspath(folder / v) for k, v in value.items()}
+        named = {str(k): _mesh(v, folder, fail) for k, v in value.items()}
     else:
         fail(f"meshes must be a path, a list of paths or a table name = path, got {type(value).__name__}")
     if not named:
         fail("meshes is empty")
-    for name, p in named.items():
-        if not Path(p).is_file():
-            fail(f"mesh file not found: {p}")
     return named
 
 

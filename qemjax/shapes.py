@@ -1,12 +1,24 @@
-"""Meshes generated in code (no files needed): for tests, the demo and experiments.
+"""Meshes generated in code (no files needed): for tests, the demo, experiments and sweeps.
 
-Every function returns a `Mesh` (vertices (n,3) float64, faces (m,3) int64), consistently oriented.
+Every generator (`SHAPES`) returns a `Mesh` (vertices (n,3) float64, faces (m,3) int64), consistently
+oriented. A sweep (or its config file) names them as text, ``"shapes.torus"`` or
+``"shapes.bumpy_sphere(subdivisions=4)"`` (`parse_spec`: a name from `SHAPES` and keyword arguments with
+literal values, never evaluated as code). `write_examples` writes the small example files the README uses.
 """
 from __future__ import annotations
+
+import ast
+import dataclasses
+import inspect
+import os
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ._io import Mesh
+
+SHAPES = ("bumpy_sphere", "icosphere", "torus", "cube", "grid")  # the generators a spec may name
 
 
 def icosphere(subdivisions: int = 3, radius: float = 1.0) -> Mesh:
@@ -75,3 +87,188 @@ def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) 
     r = 1.0 + amplitude * np.sum(np.exp(8.0 * (V @ dirs.T - 1.0)) * rng.uniform(-1, 1, 12), 1)
     r += 0.25 * amplitude * np.sin(9 * V[:, 0]) * np.sin(7 * V[:, 1]) * np.sin(8 * V[:, 2])
     return Mesh(V * r[:, None], F)
+
+
+# -- shapes named as text (sweeps, config files) ------------------------------------------------------
+
+PREFIX = "shapes."
+
+
+@dataclasses.dataclass(frozen=True)
+class ShapeSpec:
+    """A generator of `SHAPES` and its keyword arguments: ``build()`` makes the mesh; ``str()`` is the
+    canonical text ``shapes.NAME(key=value, ...)``, which `parse_spec` reads back."""
+
+    name: str
+    kwargs: tuple[tuple[str, Any], ...] = ()
+
+    def build(self) -> Mesh:
+        return globals()[self.name](**dict(self.kwargs))
+
+    def __str__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.kwargs)
+        return f"{PREFIX}{self.name}({args})" if args else f"{PREFIX}{self.name}"
+
+
+def is_spec(value) -> bool:
+    """True for text that names a shape (``"shapes.…"``) and for a table with a ``shape`` key."""
+    if isinstance(value, dict):
+        return "shape" in value
+    return isinstance(value, str) and value.strip().startswith(PREFIX)
+
+
+def _literal(node, text):
+    if isinstance(node, ast.Name) and node.id.lower() in ("true", "false"):  # TOML spells them lower-case
+        return node.id.lower() == "true"
+    try:
+        return ast.literal_eval(node)
+    except ValueError:
+        raise ValueError(f"bad shape {text!r}: keyword values must be numbers, strings or true/false, "
+                         f"got {ast.unparse(node)!r}") from None
+
+
+def _unknown(name) -> ValueError:
+    return ValueError(f"unknown shape {name!r}; qemjax.shapes makes {', '.join(PREFIX + n for n in SHAPES)}")
+
+
+def parse_spec(value) -> ShapeSpec:
+    """A `ShapeSpec` from ``"shapes.NAME"``, ``"shapes.NAME(key=value, ...)"`` (keyword arguments only,
+    values as literals: numbers, strings, true/false) or a table ``{"shape": "NAME", key: value, ...}``.
+    Checked against the generator's signature and default types; ValueError (one line) otherwise. Nothing
+    is evaluated as code."""
+    if isinstance(value, dict):
+        kwargs = {k: v for k, v in value.items() if k != "shape"}
+        name = value.get("shape")
+        if not isinstance(name, str):
+            raise ValueError(f"a shape table needs shape = one of {', '.join(SHAPES)}, got {name!r}")
+        name = name.strip().removeprefix(PREFIX)
+        text = f"{PREFIX}{name}"
+    else:
+        text = str(value).strip()
+        try:
+            node = ast.parse(text, mode="eval").body
+        except SyntaxError:
+            raise ValueError(f"bad shape {text!r}: write shapes.NAME or shapes.NAME(key=value, ...)") from None
+        call = node if isinstance(node, ast.Call) else None
+        func = call.func if call else node
+        if not (isinstance(func, ast.Attribute) and isinstance(func.value, ast.Name)
+                and func.value.id == PREFIX[:-1]):
+            raise ValueError(f"bad shape {text!r}: write shapes.NAME or shapes.NAME(key=value, ...)")
+        name = func.attr
+        if call and (call.args or any(k.arg is None for k in call.keywords)):
+            raise ValueError(f"bad shape {text!r}: give keyword arguments, e.g. shapes.{name}(key=value)")
+        kwargs = {k.arg: _literal(k.value, text) for k in call.keywords} if call else {}
+    if name not in SHAPES:
+        raise _unknown(text if not isinstance(value, dict) else name)
+    params = inspect.signature(globals()[name]).parameters
+    for k, v in kwargs.items():
+        if k not in params:
+            raise ValueError(f"{text}: unknown keyword {k!r}; shapes.{name} takes {', '.join(params)}")
+        default = params[k].default
+        ok = (isinstance(v, bool) if isinstance(default, bool) else
+              isinstance(v, int) and not isinstance(v, bool) if isinstance(default, int) else
+              isinstance(v, (int, float)) and not isinstance(v, bool) if isinstance(default, float) else True)
+        if not ok:
+            raise ValueError(f"{text}: {k} must be {type(default).__name__}, got {v!r}")
+    return ShapeSpec(name, tuple((k, kwargs[k]) for k in params if k in kwargs))
+
+
+# -- example files ------------------------------------------------------------------------------------
+
+EXAMPLES = ("bumpy.obj", "bumpy.ply", "creases.txt", "textured.obj", "textured.png")
+
+
+def _atlas(V: np.ndarray, F: np.ndarray):
+    """A cube map of a sphere-like mesh into a 3×2 UV atlas: each face's chart is the dominant axis (and
+    sign) of its normal, 6 charts with seams between them. Returns (uv (t,2), uv index per corner (m,3))."""
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    ax = np.argmax(np.abs(n), axis=1)
+    chart = 2 * ax + (n[np.arange(len(F)), ax] < 0)
+    key = F * 6 + chart[:, None]  # one UV per (vertex, chart)
+    uniq, inv = np.unique(key.reshape(-1), return_inverse=True)
+    v, c = uniq // 6, uniq % 6
+    keep = np.array([[1, 2], [1, 2], [0, 2], [0, 2], [0, 1], [0, 1]])
+    proj = np.take_along_axis(V[v], keep[c], axis=1)
+    proj = proj / max(float(np.abs(proj).max()), 1e-12)  # in [-1, 1]
+    tile = np.stack([c % 3, c // 3], 1).astype(float)
+    uv = (tile + 0.5 + 0.45 * proj) / np.array([3.0, 2.0])
+    return uv, inv.reshape(-1, 3)
+
+
+def _checkerboard(width: int = 384, height: int = 256, squares: int = 8) -> np.ndarray:
+    """(height, width, 3) uint8: a 3×2 atlas of tiles, each a checkerboard in its own hue."""
+    hues = np.array([[230, 80, 60], [60, 170, 80], [70, 110, 220], [230, 190, 50], [160, 80, 200],
+                     [50, 190, 200]], float)
+    y, x = np.mgrid[0:height, 0:width]
+    tw, th = width // 3, height // 2
+    tile = np.minimum(x // tw, 2) + 3 * np.minimum(y // th, 1)
+    tile = np.where(tile < 6, tile, 5)
+    check = ((x * squares // tw) + (y * squares // th)) % 2
+    img = hues[tile] * np.where(check, 1.0, 0.55)[..., None]
+    return np.flipud(img).astype(np.uint8)  # row 0 is the top of the image: v = 1
+
+
+def _meridian(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(k,2) the edges of the shortest edge path from the highest vertex to the lowest: a feature line."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    e = np.unique(np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    w = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1)
+    g = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(V), len(V))).tocsr()
+    top, bottom = int(np.argmax(V[:, 2])), int(np.argmin(V[:, 2]))
+    _, pred = dijkstra(g, directed=False, indices=top, return_predecessors=True)
+    path = [bottom]
+    while path[-1] != top:
+        path.append(int(pred[path[-1]]))
+    return np.array(path[::-1])[np.arange(len(path) - 1)[:, None] + [0, 1]]
+
+
+def _write(path: Path, text: str) -> Path:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+    return path
+
+
+def write_examples(folder=".", subdivisions: int = 4) -> list[Path]:
+    """Write small example files made in code into ``folder`` (created if absent) and return their paths:
+
+    - ``bumpy.obj`` and ``bumpy.ply``: `bumpy_sphere` (``subdivisions=4``: 5,120 faces), positions only;
+    - ``creases.txt``: vertex-index pairs of bumpy.obj along a meridian (for ``feature_edges`` /
+      ``--feature-edges``);
+    - ``textured.obj``: the same sphere with ``vt`` lines and no ``mtllib`` (so give ``texture=``): a cube
+      map into a 3×2 UV atlas, 6 charts with seams between them;
+    - ``textured.png``: its texture, a checkerboard per chart.
+
+    Existing files of these names are replaced."""
+    from PIL import Image
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    V, F = bumpy_sphere(subdivisions)
+    num = lambda a: "\n".join(" ".join(f"{x:.9g}" for x in row) for row in a)  # noqa: E731
+    ints = lambda a: "\n".join(" ".join(str(int(x)) for x in row) for row in a)  # noqa: E731
+    head = f"# qemjax example: shapes.bumpy_sphere(subdivisions={subdivisions}), {len(F)} faces\n"
+    out = [_write(folder / "bumpy.obj", head + "\n".join(["\n".join("v " + r for r in num(V).split("\n")),
+                                                          "\n".join("f " + r for r in ints(F + 1).split("\n"))])
+                  + "\n")]
+    ply = ["ply", "format ascii 1.0", f"comment {head[2:-1]}", f"element vertex {len(V)}", "property float64 x",
+           "property float64 y", "property float64 z", f"element face {len(F)}",
+           "property list uint8 int32 vertex_indices", "end_header", num(V),
+           "\n".join("3 " + r for r in ints(F).split("\n"))]
+    out.append(_write(folder / "bumpy.ply", "\n".join(ply) + "\n"))
+    out.append(_write(folder / "creases.txt", "# vertex-index pairs of bumpy.obj along a meridian: "
+                      "feature edges\n" + ints(_meridian(V, F)) + "\n"))
+    uv, T = _atlas(V, F)
+    faces = "\n".join(f"f {a}/{ta} {b}/{tb} {c}/{tc}" for (a, b, c), (ta, tb, tc) in zip(F + 1, T + 1))
+    obj = ["# qemjax example: a bumpy sphere with a 3x2 UV atlas (6 charts, seams between them); no mtllib: "
+           "its texture is textured.png (texture=)", "\n".join("v " + r for r in num(V).split("\n")),
+           "\n".join("vt " + r for r in num(uv).split("\n")), faces]
+    out.append(_write(folder / "textured.obj", "\n".join(obj) + "\n"))
+    png = folder / "textured.png"
+    tmp = png.with_name(".textured.png.tmp")
+    Image.fromarray(_checkerboard()).save(tmp, format="PNG")
+    os.replace(tmp, png)
+    out.append(png)
+    return out

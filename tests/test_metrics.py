@@ -479,3 +479,36 @@ def test_nearest_triangles_single_face_and_far_points():
     dist, face = _nearest.nearest_triangles(metrics._common.as_mesh((v, f)).corners, pts)
     np.testing.assert_allclose(dist, brute_force(pts, v, f), rtol=1e-12)
     assert (face == 0).all()
+
+
+@pytest.fixture(scope="module")
+def examples(tmp_path_factory):
+    from qemjax import shapes
+
+    folder = tmp_path_factory.mktemp("examples")
+    shapes.write_examples(folder, subdivisions=3)
+    return folder
+
+
+def test_attribute_deviation_takes_what_simplify_takes(examples):
+    """The original as a path (read as simplify reads it: UVs kept) or a trimesh, the simplified mesh as a
+    result; a qemjax.load Mesh carries positions only, and the error says what to pass instead."""
+    import qemjax
+
+    path = examples / "textured.obj"
+    res = qemjax.simplify(path, ratio=0.25, texture=examples / "textured.png", progress=False)
+    by_path = metrics.attribute_deviation(path, res, n_samples=3000)
+    by_str = metrics.attribute_deviation(str(path), res, n_samples=3000)
+    by_trimesh = metrics.attribute_deviation(trimesh.load(path, process=False), res, n_samples=3000)
+    assert by_path == by_str == by_trimesh
+    assert 0 < by_path["uv_dev_rms"] < 0.01  # seams held: no sample reads a value from another chart
+    assert metrics.attribute_deviation(path, path, n_samples=1000)["uv_dev_max"] < 1e-9
+    with pytest.warns(UserWarning, match="carries uv, which qemjax does not keep"):
+        m = qemjax.load(path)
+        plain = qemjax.simplify(path, ratio=0.25, attributes=None, progress=False)
+    with pytest.raises(ValueError, match="original .Mesh. carries no uv: qemjax.load meshes .* pass the file's path"):
+        metrics.attribute_deviation(m, res)
+    with pytest.raises(ValueError, match="the simplified carries no uv"):
+        metrics.attribute_deviation(path, plain)
+    with pytest.raises(ValueError, match="the original carries no uv"):
+        metrics.attribute_deviation(examples / "bumpy.obj", res)

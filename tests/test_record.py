@@ -167,8 +167,13 @@ def test_replay_rules_and_errors():
     assert rec.replay(rec.face_counts()[0] + 10).contractions == 0
     odd = int(rec.face_counts()[5]) - 1  # a closed mesh: the level stops one face above an odd target
     assert len(rec.replay(odd).faces) == odd + 1
-    with pytest.raises(ValueError, match="reaches"):
+    with pytest.raises(ValueError, match="reaches") as err:
         rec.replay(len(res.faces) - 2)
+    k = len(res.faces) - 2  # the message says which levels replay reaches, and how to get a coarser one
+    assert str(err.value) == (f"replay reaches the levels between the input ({len(res.input_faces)} faces) and "
+                              f"this result ({len(res.faces)} faces), not {k}; for fewer faces, simplify further: "
+                              f"qemjax.simplify(..., target_faces={k}), or qemjax.lod_chain(..., ratios=[...]) "
+                              "for every level from one run")
     parity = qemjax.simplify(shapes.icosphere(2), target_faces=63)  # stops at 64, as asked: no error
     assert len(parity.replay(63).faces) == 64
     with pytest.raises(ValueError, match="exactly one"):

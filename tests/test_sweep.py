@@ -2,8 +2,11 @@
 from __future__ import annotations
 
 import concurrent.futures
+import csv
 import hashlib
+import importlib.util
 import multiprocessing
+import re
 
 import numpy as np
 import pytest
@@ -203,3 +206,107 @@ def test_out_that_is_not_a_sweep_table(tmp_path):
 def test_duplicate_names():
     with pytest.raises(ValueError, match="same name"):
         qemjax.sweep(["a/cow.obj", "b/cow.obj"], {}, [0.5], progress=False)
+
+
+# ---- row order and target types (the config's order; face counts stay ints) ---------------------------
+
+def test_rows_keep_the_order_and_types_of_the_targets(meshes, tmp_path):
+    """Rows by mesh, then grid cell, then target in the order given (not sorted); an int face count stays
+    an int beside ratios, in the DataFrame, in a CSV's text, and read back from CSV and Parquet."""
+    targets = [0.5, 60, 0.25]
+    grid = {"boundary_weight": [1.0, 0.0]}
+    df = qemjax.sweep(meshes, grid, targets, metrics=False, out=tmp_path / "s.csv", progress=False)
+    want = [(m, bw, t) for m in meshes for bw in grid["boundary_weight"] for t in targets]
+    assert list(zip(df["mesh"], df["boundary_weight"], df["target"])) == want
+    assert [type(t) for t in df["target"][:3]] == [float, int, float]
+    assert "60.0" not in df.to_string() and "60.00" not in df.to_string()
+    with open(tmp_path / "s.csv", newline="") as f:
+        assert [r["target"] for r in csv.DictReader(f)][:3] == ["0.5", "60", "0.25"]  # the file's text
+    back = sw.read_table(tmp_path / "s.csv")
+    assert list(back["cell"]) == list(df["cell"]) and list(back["target"]) == list(df["target"])
+    assert [type(t) for t in back["target"][:3]] == [float, int, float]
+    if importlib.util.find_spec("pyarrow"):
+        pq = qemjax.sweep(meshes, grid, targets, metrics=False, out=tmp_path / "s.parquet", progress=False)
+        back = sw.read_table(tmp_path / "s.parquet")
+        assert list(back["cell"]) == list(pq["cell"]) == list(df["cell"])
+        assert [type(t) for t in back["target"][:3]] == [float, int, float]
+    # all face counts: an int column; all ratios: a float column
+    assert str(qemjax.sweep(meshes["sphere"], {}, [60, 40], metrics=False, progress=False)["target"].dtype) == "int64"
+    assert str(qemjax.sweep(meshes["sphere"], {}, [0.5], metrics=False, progress=False)["target"].dtype) == "float64"
+
+
+def test_written_table_is_in_row_order_with_an_executor_and_on_resume(meshes, tmp_path):
+    """Cells that finish out of order (an executor) or rows already in the file (resume) are written in
+    row order; rows of another grid already in the file stay, before them."""
+    out = tmp_path / "s.csv"
+    other = qemjax.sweep(meshes["sphere"], {"regularize": [0.1]}, [0.5], metrics=False, out=out, progress=False)
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        df = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, executor=pool, out=out, progress=False)
+    table = sw.read_table(out)
+    assert list(table["cell"]) == list(other["cell"]) + list(df["cell"])
+    drop = table["cell"].iloc[[2, 5]].tolist()
+    sw.write_table(table[~table["cell"].isin(drop)], out)
+    again = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, out=out, progress=False)
+    assert list(sw.read_table(out)["cell"]) == list(other["cell"]) + list(again["cell"])
+    assert list(again["cell"]) == list(df["cell"])
+
+
+def test_parquet_without_pyarrow_names_the_extra(monkeypatch, tmp_path):
+    monkeypatch.setitem(__import__("sys").modules, "pyarrow", None)  # import pyarrow now fails
+    with pytest.raises(ValueError, match=r"needs pyarrow \(pip install 'qemjax\[sweep\]'\)"):
+        qemjax.sweep(shapes.icosphere(1), {}, [0.5], out=tmp_path / "s.parquet", progress=False)
+    assert not (tmp_path / "s.parquet").exists()
+
+
+# ---- meshes named as shapes made in code ---------------------------------------------------------------
+
+def test_shapes_named_as_text():
+    spec = shapes.parse_spec("shapes.bumpy_sphere(subdivisions=2, amplitude=0.05)")
+    assert spec == shapes.ShapeSpec("bumpy_sphere", (("subdivisions", 2), ("amplitude", 0.05)))
+    assert shapes.parse_spec(str(spec)) == spec
+    assert shapes.parse_spec("shapes.torus") == shapes.ShapeSpec("torus")
+    assert shapes.parse_spec("shapes.grid(n=4, hole=true)").kwargs == (("n", 4), ("hole", True))
+    assert shapes.parse_spec({"shape": "torus", "n_major": 12}) == shapes.parse_spec("shapes.torus(n_major=12)")
+    V, F = spec.build()
+    assert np.array_equal(F, shapes.bumpy_sphere(2, amplitude=0.05).faces)
+    for bad, message in [("shapes.sphere", "unknown shape 'shapes.sphere'; qemjax.shapes makes shapes.bumpy"),
+                         ("shapes.torus(3)", "give keyword arguments"),
+                         ("shapes.torus(radius=2)", "unknown keyword 'radius'"),
+                         ("shapes.torus(n_major=2.5)", "n_major must be int"),
+                         ("shapes.torus(n_major=__import__('os'))", "must be numbers, strings or true/false"),
+                         ("shapes.torus(", "write shapes.NAME"),
+                         ("os.system('x')", "write shapes.NAME")]:
+        with pytest.raises(ValueError, match=re.escape(message)):
+            shapes.parse_spec(bad)
+
+
+def test_sweep_takes_shapes_named_as_text():
+    df = qemjax.sweep(["shapes.icosphere(subdivisions=2)", "shapes.torus(n_major=12, n_minor=6)"], {}, [0.5],
+                      metrics=False, progress=False)
+    assert list(df["mesh"]) == ["icosphere", "torus"]
+    assert list(df["faces_in"]) == [320, 144]
+    assert df["result_sha256"][0] == own_hash(qemjax.simplify(shapes.icosphere(2), ratio=0.5))
+    named = qemjax.sweep({"ball": "shapes.icosphere(subdivisions=2)"}, {}, [0.5], metrics=False, progress=False)
+    assert named["mesh"].item() == "ball" and named["result_sha256"].item() == df["result_sha256"][0]
+    with pytest.raises(ValueError, match="unknown shape 'shapes.ball'"):
+        qemjax.sweep(["shapes.ball"], {}, [0.5], progress=False)
+
+
+def test_config_file_with_shapes(tmp_path):
+    from qemjax import _sweep_config
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('meshes = ["shapes.icosphere(subdivisions=2)", "shapes.torus"]\ntargets = [0.5, 40]\n'
+                   'out = "t.csv"\n[grid]\nboundary_weight = [1.0]\n')
+    config = _sweep_config.load(cfg)
+    assert config.meshes == {"icosphere": "shapes.icosphere(subdivisions=2)", "torus": "shapes.torus"}
+    cfg.write_text('targets = [0.5]\n[meshes]\nball = {shape = "icosphere", subdivisions = 1}\n')
+    assert _sweep_config.load(cfg).meshes == {"ball": "shapes.icosphere(subdivisions=1)"}
+    for meshes, message in [('["shapes.sphere"]', "s.toml: meshes: unknown shape 'shapes.sphere'"),
+                            ('["shapes.torus(n_major=true)"]', "s.toml: meshes: shapes.torus(n_major=true): "
+                             "n_major must be int"),
+                            ('["cow.obj"]', "s.toml: mesh file not found")]:
+        cfg.write_text(f"meshes = {meshes}\ntargets = [0.5]\n")
+        with pytest.raises(ValueError, match=re.escape(message)):
+            _sweep_config.load(cfg)
+

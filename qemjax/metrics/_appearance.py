@@ -1,8 +1,9 @@
 """Appearance metrics: texture-space (UV) and colour deviation, and seam (chart) integrity.
 
-Meshes here carry per-corner attributes: a qemjax result (``uv`` / ``colors`` with ``wedge_faces``) or a
+Meshes here carry per-corner attributes: a qemjax result (``uv`` / ``colors`` with ``wedge_faces``), a
 `trimesh.Trimesh` whose visual holds UVs or vertex colours (its vertices split at seams, as trimesh loads
-OBJ and glTF files).
+OBJ and glTF files), or a file path, read as `qemjax.simplify` reads it (``_io._read_trimesh`` and
+``_wedges.from_trimesh``). `qemjax.load` meshes and ``(vertices, faces)`` arrays carry positions only.
 """
 from __future__ import annotations
 
@@ -26,20 +27,39 @@ def corner_values(mesh, kind: str):
         if vals is None:
             return None
         return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces), np.asarray(vals, np.float64)[wf]
-    visual = getattr(mesh, "visual", None)
-    if visual is None:
+    tm = _as_trimesh(mesh)
+    if tm is None:
         return None
-    if kind == "uv":
-        uv = getattr(visual, "uv", None) if getattr(visual, "kind", None) == "texture" else None
-        if uv is None or len(uv) != len(mesh.vertices):
-            return None
-        vals = np.asarray(uv, np.float64)
-    else:
-        if getattr(visual, "kind", None) != "vertex":
-            return None
-        vals = np.asarray(visual.vertex_colors, np.float64) / 255.0
-    F = np.asarray(mesh.faces)
-    return np.asarray(mesh.vertices, np.float64), F, vals[F]
+    from .._wedges import from_trimesh
+
+    vals = from_trimesh(tm)[0].get(kind)  # as simplify reads them
+    if vals is None:
+        return None
+    F = np.asarray(tm.faces, np.int64)
+    return np.asarray(tm.vertices, np.float64), F, vals[F]
+
+
+def _as_trimesh(mesh):
+    """The `trimesh.Trimesh` of a path (read as `simplify` reads it) or of a trimesh mesh or scene; None
+    for anything else (arrays, a `qemjax.Mesh`: positions only)."""
+    import os
+
+    from .. import _io
+
+    if isinstance(mesh, (str, os.PathLike)):
+        return _io._read_trimesh(mesh)
+    if type(mesh).__module__.startswith("trimesh"):
+        return _io._as_trimesh(mesh)
+    return None
+
+
+def _missing(mesh, name: str, kind: str) -> str:
+    import os
+
+    if isinstance(mesh, (str, os.PathLike)) or hasattr(mesh, "visual") or hasattr(mesh, "wedge_faces"):
+        return f"{name} carries no {kind}"
+    return (f"{name} ({type(mesh).__name__}) carries no {kind}: qemjax.load meshes and (vertices, faces) "
+            "arrays hold positions only; pass the file's path or a trimesh.Trimesh")
 
 
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -121,10 +141,13 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
     distance with channels in [0, 1]). ``seam_tolerant``: a sample whose nearest input point lies across
     a seam is compared with the nearest point on the other side when that is within twice the distance
     (`_seam_tolerant`; without it a sample a hair across a UV seam reads a deviation of up to the
-    texture's width). ValueError when either mesh lacks ``kind``."""
+    texture's width). Each mesh is what `qemjax.simplify` accepts and keeps attributes of: a path (read
+    as simplify reads it), a `trimesh.Trimesh`, or a result (`SimplifyResult`). ValueError when either
+    lacks ``kind``."""
     o, s = corner_values(original, kind), corner_values(simplified, kind)
-    if o is None or s is None:
-        raise ValueError(f"both meshes must carry {kind} (original: {o is not None}, simplified: {s is not None})")
+    for mesh, vals, name in ((original, o, "original"), (simplified, s, "simplified")):
+        if vals is None:
+            raise ValueError(f"both meshes must carry {kind}: the {_missing(mesh, name, kind)}")
     Vs, Fs, Cs = s
     Vo, Fo, Co = o
     rng = np.random.default_rng(seed)
