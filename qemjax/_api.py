@@ -153,15 +153,17 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         face target the result still has exactly that many faces: it simplifies further first, by as many
         faces as splitting will add (``qemjax._split``; ``stats["split"]``).
     attributes: which appearance attributes to carry through (per-corner wedges, seams kept: README,
-        "Appearance attributes"; ``qemjax._wedges``): ``'auto'`` (all the input carries: UVs and their
-        material, vertex colours, stored normals), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these,
+        "Appearance attributes"; ``qemjax._wedges``): ``'auto'`` (each kind the input carries without
+        seams: UVs and their material, vertex colours, stored normals, normalised to unit length; a kind
+        with seams, which hold vertices in place, only when asked for by name, or UVs when ``texture`` is
+        given: one warning names them), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these,
         or None (positions only; what is dropped is named in a warning). Kept ones come back as
         ``res.uv`` / ``res.colors`` / ``res.normals``; a contraction that would move a seam vertex off its
         seam or merge wedges of different charts is refused (``stats['rejected_by']['seam']``), so seams
         can hold a mesh above its target. Only ``method='qem'`` keeps attributes (others warn and drop).
     attribute_weights: w ≥ 0, one number for every kind or {kind: w} (kinds not named keep their default);
-        None: ``{'uv': 0.03, 'color': 0.03, 'normal': 0.03}`` (README, "Appearance attributes": measured on
-        spot, normals' not). The weight of each kept attribute in the cost (Hoppe 1999's generalised
+        None: ``{'uv': 0.03, 'color': 0.0, 'normal': 0.0}`` (README, "Appearance attributes": chosen by
+        ``experiments/attribute_defaults.py``). The weight of each kept attribute in the cost (Hoppe 1999's generalised
         quadric over position × attributes, ``qemjax._costs.attributes``; UVs in texture units, colours in
         [0, 1], normals unit: a cost adds w²·(attribute deviation)² to the squared distance at unit
         extent). The placement then solves position and attributes together. 0: the cost is positions

@@ -53,10 +53,11 @@ OPTIONS = {
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),
     "attributes": dict(type=str, metavar="KINDS", help="appearance attributes to keep, seams held: 'auto' "
-                       "(all the input carries), 'none', or a comma list of uv, color, normal"),
+                       "(the kinds the input carries without seams; UVs too with --texture), 'none', or a comma "
+                       "list of uv, color, normal"),
     "attribute_weights": dict(type=str, metavar="W", help="weight of the attributes in the cost: one number, "
                               "or kind=W pairs separated by commas (uv=0.1,color=0.03); 0: positions-only cost, "
-                              "attributes interpolated", shown="0.03 for each kind"),
+                              "attributes interpolated", shown="uv=0.03,color=0,normal=0"),
     "texture": dict(metavar="IMAGE", help="the texture image of the input's UVs (for an OBJ without mtllib); "
                     "written beside an OBJ output and packed into a GLB", shown="none"),
     "memoryless": dict(action=argparse.BooleanOptionalAction),

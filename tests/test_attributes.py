@@ -51,7 +51,7 @@ def test_seams_hold(scheduler):
     """No output face spans two charts, every chart survives, each wedge's UV stays in its chart's tile,
     and a vertex with two or more wedges sits where an input seam vertex was."""
     mesh, _ = atlas_sphere(3)
-    r = qemjax.simplify(mesh, ratio=0.1, scheduler=scheduler)
+    r = qemjax.simplify(mesh, ratio=0.1, scheduler=scheduler, attributes="uv")  # seams: kept when asked
     assert r.uv is not None and r.stats["seam_vertices_in"] > 50
     rep = metrics.seam_report(r)
     assert rep["mixed_charts"] == 0 and rep["charts_out"] == rep["charts_in"] == 6
@@ -80,7 +80,7 @@ def test_seam_test_can_fail(monkeypatch):
         self.C[fb, kb] = wa[0]
     monkeypatch.setattr(_wedges.Tracker, "contract", merge_anyway)
     mesh, _ = atlas_sphere(3)
-    r = qemjax.simplify(mesh, ratio=0.1)
+    r = qemjax.simplify(mesh, ratio=0.1, attributes="uv")
     assert metrics.seam_report(r)["mixed_charts"] > 0
 
 
@@ -152,7 +152,7 @@ def test_attribute_options_are_checked(tmp_path):
     with pytest.raises(ValueError, match="could not read texture"):
         qemjax.simplify(mesh, ratio=0.5, texture=tmp_path / "missing.png")
     with pytest.warns(UserWarning, match="does not keep appearance attributes"):
-        r = qemjax.simplify(mesh, ratio=0.5, method="area")
+        r = qemjax.simplify(mesh, ratio=0.5, method="area", attributes="uv")
     assert r.uv is None and "uv" in r.stats["dropped"]
     with pytest.warns(UserWarning, match="which qemjax does not keep"):
         r = qemjax.simplify(mesh, ratio=0.5, attributes=None)
@@ -164,7 +164,7 @@ def test_seams_hold_a_mesh_above_its_target():
     that names the seams and suggests attributes=None."""
     mesh, _ = atlas_sphere(2)
     with pytest.warns(UserWarning, match="seam"):
-        r = qemjax.simplify(mesh, target_faces=8)
+        r = qemjax.simplify(mesh, target_faces=8, attributes="uv")
     assert r.stop_reason == "blocked" and len(r.faces) > 8 and r.stats["blocked_by"]["seam"] > 0
 
 
@@ -266,10 +266,10 @@ def test_attribute_weights_do_not_recompile_and_matter():
     """A new weight is a new value in the state, not a new kernel; the weight changes the result (UV
     deviation falls, at some geometric error) and 0 gives the positions-only cost."""
     mesh, _ = atlas_sphere(3)
-    r1 = qemjax.simplify(mesh, ratio=0.2, attribute_weights=1.0)
-    r2 = qemjax.simplify(mesh, ratio=0.2, attribute_weights={"uv": 3.0})
+    r1 = qemjax.simplify(mesh, ratio=0.2, attributes="uv", attribute_weights=1.0)
+    r2 = qemjax.simplify(mesh, ratio=0.2, attributes="uv", attribute_weights={"uv": 3.0})
     assert r2.stats["compilations"] == 0
-    r0 = qemjax.simplify(mesh, ratio=0.2, attribute_weights=0)
+    r0 = qemjax.simplify(mesh, ratio=0.2, attributes="uv", attribute_weights=0)
     assert r0.stats["model"].get("channels") is None and r1.stats["model"]["channels"] == 2
     assert not np.array_equal(r1.vertices, r2.vertices)
     with pytest.raises(ValueError, match="attribute_weights"):
@@ -296,9 +296,9 @@ def test_attribute_model_with_rank_placement_and_terms():
     compile nothing new (the terms take its price as a static argument: one object per shape)."""
     mesh, _ = atlas_sphere(2)
     for kw in (dict(placement="rank"), dict(regularize=0.1), dict(area_weight=10.0)):
-        r = qemjax.simplify(mesh, ratio=0.3, **kw)
+        r = qemjax.simplify(mesh, ratio=0.3, attributes="uv", **kw)
         assert r.uv is not None and metrics.seam_report(r)["mixed_charts"] == 0
-        assert qemjax.simplify(mesh, ratio=0.3, **kw).stats["compilations"] == 0, kw
+        assert qemjax.simplify(mesh, ratio=0.3, attributes="uv", **kw).stats["compilations"] == 0, kw
 
 
 def test_seam_edges_are_the_chart_borders():
@@ -306,7 +306,7 @@ def test_seam_edges_are_the_chart_borders():
     mesh, chart = atlas_sphere(2)
     from qemjax import _io
 
-    (V, F), rep = _io.prepare(mesh, attributes="auto")
+    (V, F), rep = _io.prepare(mesh, attributes="uv")
     E = _wedges.seam_edges(F, rep["attributes"].corners)
     he = np.c_[F[:, [0, 1, 2]].reshape(-1), F[:, [1, 2, 0]].reshape(-1)]
     key = np.sort(he, 1) @ np.array([len(V), 1])
