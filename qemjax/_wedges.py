@@ -120,13 +120,20 @@ AUTO_RULE = "kinds without seams"
 DROPPED_NAME = {"uv": "uv", "color": "vertex_colors", "normal": "normals"}
 
 
+def _differs_from_first(rep: np.ndarray, vals: np.ndarray) -> np.ndarray:
+    """(k,) bool: corners whose values vals (k,c) differ from those of the first corner of their welded
+    vertex rep (k,). A vertex has two or more distinct values exactly when one of its corners does."""
+    first = np.full(int(rep.max()) + 1 if len(rep) else 0, -1, np.int64)
+    first[rep[::-1]] = np.arange(len(rep) - 1, -1, -1)  # the last write of each vertex is its first corner
+    return np.any(vals != vals[first[rep]], axis=1)
+
+
 def seam_vertex_count(values: np.ndarray, F: np.ndarray, F_src: np.ndarray) -> int:
     """How many welded vertices carry two or more different values of one attribute kind: values (n0,k)
     per source vertex, F (m,3) the welded faces, F_src (m,3) the same corners' source vertices."""
-    key = np.concatenate([F.reshape(-1, 1).astype(np.float64), np.asarray(values, np.float64)[F_src.reshape(-1)]], 1)
-    uniq, _ = _unique_rows(key)
-    per_vertex = np.bincount(uniq[:, 0].astype(np.int64))
-    return int(np.count_nonzero(per_vertex > 1))
+    rep = F.reshape(-1)
+    differs = _differs_from_first(rep, np.asarray(values, np.float64)[F_src.reshape(-1)])
+    return int(np.unique(rep[differs]).size)
 
 
 def warn_seamed(seamed: dict, others: list, what: str, stacklevel: int):
@@ -166,7 +173,18 @@ def build(values: dict, rep_of_corner: np.ndarray, corner_src: np.ndarray) -> At
     (m,3) its welded vertex. Corners with the same welded vertex and equal values share a wedge."""
     M = np.concatenate([values[k] for k in KINDS if k in values], 1)
     src = corner_src.reshape(-1)
-    key = np.concatenate([rep_of_corner.reshape(-1, 1).astype(np.float64), M[src]], 1)
+    rep = rep_of_corner.reshape(-1).astype(np.int64)
+    vals = M[src]
+    n = int(rep.max()) + 1 if len(rep) else 0
+    if not _differs_from_first(rep, vals).any() and np.bincount(rep, minlength=n).all():
+        # no seams and every vertex used: one wedge per vertex, numbered as the vertices (what sorting
+        # the (vertex, values) rows would give, without the sort)
+        first = np.empty(n, np.int64)
+        first[rep[::-1]] = np.arange(len(rep) - 1, -1, -1)
+        a = Attributes(rep.reshape(-1, 3), np.arange(n, dtype=np.int64), {k: values[k] for k in values})
+        a.values = a.split(vals[first].copy())
+        return a
+    key = np.concatenate([rep.reshape(-1, 1).astype(np.float64), vals], 1)
     uniq, inv = _unique_rows(key)
     a = Attributes(inv.reshape(-1, 3).astype(np.int64), uniq[:, 0].astype(np.int64), {k: values[k] for k in values})
     a.values = a.split(uniq[:, 1:].copy())

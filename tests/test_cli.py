@@ -491,6 +491,10 @@ def _uv_grid_obj(path, n=12, material=None):
 def test_summary_names_the_attributes_kept(tmp_path, capsys):
     src = _uv_grid_obj(tmp_path / "grid.obj")
     assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio", "0.5", "--quiet"]) == 0
+    out = capsys.readouterr().out  # the default leaves seamed UVs out, and says how to keep them
+    assert "  not kept by default, for their seams: uv (--attributes uv keeps them)" in out, out
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio", "0.5", "--quiet",
+                      "--attributes", "uv"]) == 0
     out = capsys.readouterr().out
     assert "  kept uv: 1 seam (12 seam edges, 13 seam vertices) constrained like boundaries" in out, out
     assert "(squared distance plus weighted attribute deviation, mesh units²)" in out
@@ -508,8 +512,9 @@ def test_uvs_without_material_get_no_made_up_image(tmp_path, capsys):
     src = _uv_grid_obj(tmp_path / "grid.obj")
     out = tmp_path / "out"
     out.mkdir()
-    assert _cli.main(["simplify", str(src), str(out / "o.obj"), "--ratio", "0.5", "--quiet"]) == 0
-    assert _cli.main(["simplify", str(src), str(out / "o.glb"), "--ratio", "0.5", "--quiet"]) == 0
+    keep = ["--attributes", "uv"]  # seamed UVs: kept when asked for
+    assert _cli.main(["simplify", str(src), str(out / "o.obj"), "--ratio", "0.5", "--quiet", *keep]) == 0
+    assert _cli.main(["simplify", str(src), str(out / "o.glb"), "--ratio", "0.5", "--quiet", *keep]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["o.glb", "o.obj"]
     text = (out / "o.obj").read_text()
     assert "\nvt " in text and "mtllib" not in text and "usemtl" not in text

@@ -139,13 +139,17 @@ def test_plain_meshes_warn_nothing(tmp_path):
 
 
 def test_spot_uvs_are_reported():
-    """spot.obj has vt lines (UVs) and no mtllib: trimesh's placeholder material is not reported; the UVs
-    are kept by default and named in the warning with attributes=None."""
+    """spot.obj has vt lines (UVs, 13 charts) and no mtllib: trimesh's placeholder material is not
+    reported; the UVs are named in the warning with attributes=None, left out by default for their seams
+    (one warning saying how to keep them), and kept when asked for."""
     p = shared_mesh("spot/spot.obj")
     with pytest.warns(UserWarning, match="spot.obj carries uv,") as record:
         r = qemjax.simplify(p, ratio=0.5, attributes=None)
     assert len(record) == 1 and r.stats["dropped"] == ["uv"]
+    with pytest.warns(UserWarning, match="uv not kept by default .*attributes='uv'") as record:
+        r = qemjax.simplify(p, ratio=0.5)
+    assert len(record) == 1 and r.stats["dropped"] == ["uv"] and r.uv is None
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        r = qemjax.simplify(p, ratio=0.5)
+        r = qemjax.simplify(p, ratio=0.5, attributes="uv")
     assert r.stats["dropped"] == [] and r.uv is not None and r.material is None
