@@ -34,6 +34,7 @@ from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_pr
 from .greedy import BUDGET, _Queue, _stop, _tie
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
+BLOCKED_SCAN = 64  # up to this many blocked pairs, find those around a vertex among them (else among its pairs)
 _MISSING = object()
 _HEAP = object()
 
@@ -187,8 +188,24 @@ class _Batches:
     def push_all(self, pairs):
         plist = sorted({tuple(p) for p in pairs.tolist() if p[0] != p[1]})
         if plist:
-            priced, l2 = self.price(plist)
-            self.q.push(plist, priced, l2)
+            self.push(plist, *self.price(plist))
+
+    def push(self, plist, priced, l2):
+        """`greedy._Queue.push` (same entries), heapifying when it adds more entries than the queue has."""
+        q = self.q
+        xs, parts, branch = priced.x, priced.parts.T, priced.branch.tolist()
+        entries = []
+        for k, (p, c, d) in enumerate(zip(plist, priced.cost.tolist(), l2.tolist())):
+            s = q.stamp[p] = next(q.stamps)
+            q.placed[p] = (xs[k], branch[k], c, parts[k], d)
+            q.blocked.pop(p, None)
+            entries.append((q._key(c, parts[k]), d, _tie(*p), p[0], p[1], s))
+        if len(entries) > len(q.heap):
+            q.heap.extend(entries)
+            heapq.heapify(q.heap)
+        else:
+            for e in entries:
+                heapq.heappush(q.heap, e)
 
     # one pop ---------------------------------------------------------------------------------------
 
@@ -247,32 +264,34 @@ class _Batches:
         j.put(mesh.count, "faces", mesh.count["faces"] - len(dead) - len(drop))
         j.row(self.VQ, a)
         self.VQ[a, :3] = x
-        # pair partners: b's become a's, pairs at b are gone
-        nb = mesh.nbr[b]
+        # pair partners: b's become a's; pairs at b are gone (forgotten by the queue when the step stands)
+        step, nb = len(self.steps), mesh.nbr[b]
         for w in nb:
             if w != a:
                 j.put(mesh.nbr, w, (mesh.nbr[w] - {b}) | {a})
-            self.forget((min(w, b), max(w, b)))
+            self.gone[(w, b) if w < b else (b, w)] = step
         j.put(mesh.nbr, a, (mesh.nbr[a] | nb) - {a, b})
         j.put(mesh.nbr, b, frozenset())
-        # the pairs at a need new prices (held out of the queue until the batch's device call); blocked
-        # pairs around a may have become valid: back in the queue at their stored price
-        at_a = {(min(a, w), max(a, w)) for w in mesh.nbr[a]}
+        # the pairs at a need new prices: held out of the queue until the batch's device call
+        ring = mesh.nbr[a]
+        at_a = sorted((a, w) if a < w else (w, a) for w in ring)
         for p in at_a:
-            j.put(q.stamp, p, -1)  # no entry of the queue matches: its old entries are skipped
-            j.drop(q.blocked, p)
-        for u in mesh.nbr[a]:
-            for w in mesh.nbr[u]:
-                p = (min(u, w), max(u, w))
-                if p in q.blocked and p not in at_a:
+            self.held[p] = step
+            if p in q.blocked:
+                j.drop(q.blocked, p)
+        # blocked pairs around a may have become valid: back in the queue at their stored price
+        if q.blocked:
+            if len(q.blocked) <= BLOCKED_SCAN:
+                back = [p for p in q.blocked if p[0] in ring or p[1] in ring]
+            else:
+                back = {(u, w) if u < w else (w, u) for u in ring for w in mesh.nbr[u]}
+                back = [p for p in back if p in q.blocked]
+            for p in back:
+                if p not in self.gone:
                     self.unblock(p)
-        return at_a, mesh.nbr[a] | {a}
-
-    def forget(self, p):
-        j, q = self.journal, self.q
-        j.drop(q.stamp, p)
-        j.drop(q.placed, p)
-        j.drop(q.blocked, p)
+        self.stale_verts |= ring
+        self.stale_verts.add(a)
+        return at_a
 
     def unblock(self, p):
         """Back in the queue at its stored price (its vertices' rows are those it was priced with)."""
@@ -286,35 +305,37 @@ class _Batches:
     # a batch ---------------------------------------------------------------------------------------
 
     def speculate(self):
-        """Pop and apply up to ``depth`` steps on the host. Returns (steps, stale pairs with the index of
-        the step that staled them)."""
+        """Pop and apply up to ``depth`` steps on the host (into ``steps``). Pairs the steps stale are
+        ``held`` out of the queue, pairs they remove are ``gone``: {pair: step index} each."""
         q, mesh, j, opt = self.q, self.mesh, self.journal, self.options
-        steps, stale, stale_verts = [], [], set()
-        while mesh.count["faces"] > self.target and q.heap and len(steps) < self.depth:
-            entry = q.heap[0]
+        steps, held, gone, stale_verts = self.steps, self.held, self.gone, self.stale_verts
+        heap, stamp, heappop = q.heap, q.stamp, heapq.heappop
+        while mesh.count["faces"] > self.target and heap and len(steps) < self.depth:
+            entry = heap[0]
             key, l2, tie, a, b, s = entry
-            if q.stamp.get((a, b)) != s or (a, b) in q.blocked:
-                j.popped(heapq.heappop(q.heap))
+            p = (a, b)
+            if stamp.get(p) != s or p in q.blocked:  # an old entry: never current again
+                heappop(heap)
                 continue
-            x, br, cost, parts, _ = q.placed[(a, b)]
+            if p in held or p in gone:  # current again if this batch's step is undone
+                j.popped(heappop(heap))
+                continue
+            x, br, cost, parts, _ = q.placed[p]
             if cost > opt.max_cost:  # left in the queue: the stop report counts it
                 steps.append(_Step(entry[:5], STOP, len(j.log)))
                 break
             if a in stale_verts or b in stale_verts:  # reads or changes a row this batch changes
                 break
             mark = len(j.log)
-            j.popped(heapq.heappop(q.heap))
+            j.popped(heappop(heap))
             code, faces = self.check(a, b, x)
             if code is not None:
-                j.put(q.blocked, (a, b), code)
+                j.put(q.blocked, p, code)
                 steps.append(_Step(entry[:5], BLOCK, mark, code=code))
                 continue
-            at_a, verts = self.contract(a, b, x, faces)
-            stale += [(p, len(steps)) for p in sorted(at_a)]
-            stale_verts |= verts
+            self.contract(a, b, x, faces)
             steps.append(_Step(entry[:5], CONTRACT, mark, x=x, branch=br, cost=cost, parts=parts,
                                faces_left=mesh.count["faces"], dead=faces[0], drop=faces[3]))
-        return steps, stale
 
     def merge(self, steps):
         """The kept vertices' new states (one device call), on the host and device rows."""
@@ -337,7 +358,9 @@ class _Batches:
         return len(steps)
 
     def batch(self):
-        steps, stale = self.speculate()
+        self.steps, self.held, self.gone, self.stale_verts = [], {}, {}, set()
+        self.speculate()
+        steps, stale = self.steps, list(self.held.items())
         contracted = [s for s in steps if s.kind == CONTRACT]
         if contracted:
             self.merge(contracted)
@@ -366,11 +389,14 @@ class _Batches:
 
     def commit(self, steps, stale, priced, l2):
         q = self.q
+        for p, i in self.gone.items():
+            if i < len(steps):
+                q.forget(p)
         keep = [k for k, (_, i) in enumerate(stale) if i < len(steps)]
         if keep:
             sub = priced._replace(x=priced.x[keep], cost=priced.cost[keep], branch=priced.branch[keep],
                                   parts=priced.parts[:, keep])
-            q.push([stale[k][0] for k in keep], sub, l2[keep])
+            self.push([stale[k][0] for k in keep], sub, l2[keep])
         for s in steps:
             if s.kind == BLOCK:
                 if s.code != BUDGET:
