@@ -57,6 +57,13 @@ def flips_host(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarra
     reference N0[fids]? Same float32 operations as the kernel (`_flips`), each rounded alike, on (K,3)
     blocks rather than component lists: a few dozen numpy calls instead of a hundred, same bits
     (tests/test_kernels.py compares the two)."""
+    return bool(flips_host_faces(V, N0, faces, fids, k, x, cos_max).any())
+
+
+def flips_host_faces(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarray, k: np.ndarray,
+                     x: np.ndarray, cos_max) -> np.ndarray:
+    """`flips_host` per face: (K,) bool. x: (3,), or (K,3) where each face's corner goes (the faces of
+    several contractions tested in one pass)."""
     g = V[faces, :3].astype(np.float32)  # (K,3,3)
     cos_max = np.float32(cos_max)
     q = g.copy()
@@ -75,7 +82,7 @@ def flips_host(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarra
     longest2 = np.maximum(np.maximum(de0, de1), de2)
     bad |= (l1 <= SLIVER * longest2) & (cos_max > -1.0)
     bad |= dr1 <= cos_max * np.sqrt(drr) * l1
-    return bool(bad.any())
+    return bad
 
 
 def _cross3(u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ each vertex.
 from __future__ import annotations
 
 import heapq
-from collections import Counter
+from collections import Counter, deque
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -34,6 +34,7 @@ from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_pr
 from .greedy import BUDGET, _Queue, _stop, _tie
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
+PREFETCH = 32  # queue entries fetched ahead at a time, their flip tests done together
 BLOCKED_SCAN = 64  # up to this many blocked pairs, find those around a vertex among them (else among its pairs)
 _MISSING = object()
 _HEAP = object()
@@ -209,9 +210,9 @@ class _Batches:
 
     # one pop ---------------------------------------------------------------------------------------
 
-    def check(self, a: int, b: int, x):
+    def check(self, a: int, b: int, x, flipped=None):
         """The first rule contracting b into a at x breaks (or None), and the faces it would change:
-        (code, (dead, kept at a, kept at b, drop))."""
+        (code, (dead, kept at a, kept at b, drop)). ``flipped``: the flip test's answer when known."""
         mesh, opt, manifold = self.mesh, self.options, self.options.preserve_topology
         A, B = mesh.at[a], mesh.at[b]
         dead = A & B
@@ -225,14 +226,32 @@ class _Batches:
         if manifold and opt.keep_parts and not (ka or kb):  # its faces are all its part has left
             return outcome.PART, None
         if ka or kb:
-            G = np.array([mesh.tri[f] for f in ka + kb], np.int64)
-            corner = np.array([mesh.tri[f].index(a) for f in ka] + [mesh.tri[f].index(b) for f in kb])
-            if flips.flips_host(self.VQ, self.N0, G, np.array(ka + kb), corner, x, opt.cos_max):
+            if flipped is None:
+                flipped = self.flip_tests([(a, b, x, ka, kb)])[0]
+            if flipped:
                 return outcome.FLIP, None
         drop = self.coincident_drop(a, b, ka, kb)
         if drop and (manifold or left - len(drop) < self.target):
             return (outcome.COINCIDENT if manifold else BUDGET), None
         return None, (sorted(dead), ka, kb, drop)
+
+    def flip_tests(self, tests) -> list[bool]:
+        """`flips.flips_host` for several contractions at once, one numpy pass over all their faces:
+        tests = [(a, b, x, faces kept at a, faces kept at b)]. Returns one bool per test."""
+        tri, rows, corner, X, owner = self.mesh.tri, [], [], [], []
+        for i, (a, b, x, ka, kb) in enumerate(tests):
+            for v, kept in ((a, ka), (b, kb)):
+                for f in kept:
+                    rows.append(f)
+                    corner.append(tri[f].index(v))
+                    X.append(x)
+                    owner.append(i)
+        if not rows:
+            return [False] * len(tests)
+        G = np.array([tri[f] for f in rows], np.int64)
+        bad = flips.flips_host_faces(self.VQ, self.N0, G, np.array(rows), np.array(corner), np.array(X),
+                                     self.options.cos_max)
+        return np.bincount(np.array(owner), weights=bad, minlength=len(tests)).astype(bool).tolist()
 
     def coincident_drop(self, a, b, ka, kb) -> list:
         """Faces the contraction would make coincide and drop (`topo.coincident_removals`, faces in index
@@ -304,22 +323,81 @@ class _Batches:
 
     # a batch ---------------------------------------------------------------------------------------
 
+    def live(self, entry) -> bool:
+        """Whether a queue entry is current; pops and forgets one that is not (journaled when undoing
+        this batch's steps could make it current again)."""
+        key, l2, tie, a, b, s = entry
+        p = (a, b)
+        q = self.q
+        if q.stamp.get(p) != s or p in q.blocked:  # an old entry: never current again
+            return False
+        if p in self.held or p in self.gone:  # current again if this batch's step is undone
+            self.journal.popped(entry)
+            return False
+        return True
+
+    def prefetch(self):
+        """Move the queue's next PREFETCH live entries to ``ahead``, with their flip tests from one numpy
+        pass, the vertices those read, and the contraction count then (a test stays right while no
+        contraction since has moved or removed one of those vertices)."""
+        heap, mesh, new = self.q.heap, self.mesh, []
+        while heap and len(new) < PREFETCH:
+            entry = heapq.heappop(heap)
+            if self.live(entry):
+                new.append(entry)
+        tests, reads = [], []
+        for entry in new:
+            a, b = entry[3], entry[4]
+            A, B = mesh.at[a], mesh.at[b]
+            dead = A & B
+            tests.append((a, b, self.q.placed[(a, b)][0], sorted(A - dead), sorted(B - dead)))
+            reads.append(mesh.corners(A | B) | {a, b})
+        for entry, flipped, r in zip(new, self.flip_tests(tests), reads):
+            self.ahead.append((entry, flipped, r, self.contracted))
+
+    def next_entry(self):
+        """The next live entry, from ``ahead`` or the queue, whichever ranks first (an unblocked pair can
+        enter the queue before what was fetched ahead), and its flip test if known; (None, None) if none.
+        Not removed yet."""
+        heap, ahead = self.q.heap, self.ahead
+        while True:
+            while heap and not self.live(heap[0]):
+                heapq.heappop(heap)
+            if not ahead:
+                if not heap:
+                    return None, None
+                self.prefetch()
+                continue
+            entry, flipped, reads, since = ahead[0]
+            if not self.live(entry):
+                ahead.popleft()
+                continue
+            if heap and heap[0] < entry:
+                return heap[0], None
+            moved = self.moved
+            if any(moved.get(v, -1) >= since for v in reads):
+                flipped = None  # a contraction since changed what the test read
+            return entry, flipped
+
+    def take(self, entry):
+        """Remove ``entry`` (the one `next_entry` gave) from where it is, journaled."""
+        if self.ahead and self.ahead[0][0] is entry:
+            self.ahead.popleft()
+        else:
+            heapq.heappop(self.q.heap)
+        self.journal.popped(entry)
+
     def speculate(self):
         """Pop and apply up to ``depth`` steps on the host (into ``steps``). Pairs the steps stale are
         ``held`` out of the queue, pairs they remove are ``gone``: {pair: step index} each."""
         q, mesh, j, opt = self.q, self.mesh, self.journal, self.options
-        steps, held, gone, stale_verts = self.steps, self.held, self.gone, self.stale_verts
-        heap, stamp, heappop = q.heap, q.stamp, heapq.heappop
-        while mesh.count["faces"] > self.target and heap and len(steps) < self.depth:
-            entry = heap[0]
-            key, l2, tie, a, b, s = entry
+        steps, stale_verts = self.steps, self.stale_verts
+        while mesh.count["faces"] > self.target and len(steps) < self.depth:
+            entry, flipped = self.next_entry()
+            if entry is None:
+                break
+            a, b = entry[3], entry[4]
             p = (a, b)
-            if stamp.get(p) != s or p in q.blocked:  # an old entry: never current again
-                heappop(heap)
-                continue
-            if p in held or p in gone:  # current again if this batch's step is undone
-                j.popped(heappop(heap))
-                continue
             x, br, cost, parts, _ = q.placed[p]
             if cost > opt.max_cost:  # left in the queue: the stop report counts it
                 steps.append(_Step(entry[:5], STOP, len(j.log)))
@@ -327,15 +405,20 @@ class _Batches:
             if a in stale_verts or b in stale_verts:  # reads or changes a row this batch changes
                 break
             mark = len(j.log)
-            j.popped(heappop(heap))
-            code, faces = self.check(a, b, x)
+            self.take(entry)
+            code, faces = self.check(a, b, x, flipped)
             if code is not None:
                 j.put(q.blocked, p, code)
                 steps.append(_Step(entry[:5], BLOCK, mark, code=code))
                 continue
             self.contract(a, b, x, faces)
+            self.contracted += 1
+            self.moved[a] = self.moved[b] = self.contracted
             steps.append(_Step(entry[:5], CONTRACT, mark, x=x, branch=br, cost=cost, parts=parts,
                                faces_left=mesh.count["faces"], dead=faces[0], drop=faces[3]))
+        for entry, *_ in self.ahead:  # fetched but not taken: back in the queue (never journaled)
+            heapq.heappush(q.heap, entry)
+        self.ahead.clear()
 
     def merge(self, steps):
         """The kept vertices' new states (one device call), on the host and device rows."""
@@ -359,6 +442,7 @@ class _Batches:
 
     def batch(self):
         self.steps, self.held, self.gone, self.stale_verts = [], {}, {}, set()
+        self.ahead, self.moved, self.contracted = deque(), {}, 0
         self.speculate()
         steps, stale = self.steps, list(self.held.items())
         contracted = [s for s in steps if s.kind == CONTRACT]
