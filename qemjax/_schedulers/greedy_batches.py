@@ -20,7 +20,7 @@ each vertex.
 from __future__ import annotations
 
 import heapq
-from collections import Counter, deque
+from collections import deque
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -44,6 +44,13 @@ def eligible(model, wedges) -> bool:
     """Whether a run can use this module: a pair's price reads only its two vertices' rows."""
     return (wedges is None and model.support == "pair" and model.refresh is None and not model.uses_ring
             and model.rank_weights is None)
+
+
+def _ties(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """`greedy._tie` of many pairs (exact in uint64: the products stay below 2**64 for any vertex index
+    below 2**32)."""
+    a, b = a.astype(np.uint64), b.astype(np.uint64)
+    return ((a * np.uint64(0x9E3779B1)) ^ (b * np.uint64(0x85EBCA77))) & np.uint64(0xFFFFFFFF)
 
 
 class _Journal:
@@ -123,8 +130,12 @@ class _Mesh:
 
     def on_boundary(self, v: int) -> bool:
         """Whether v has an edge with one face: a neighbour seen in only one of v's faces."""
-        seen = Counter(c for f in self.at[v] for c in self.tri[f] if c != v)
-        return 1 in seen.values()
+        once, twice = set(), set()
+        for f in self.at[v]:
+            for c in self.tri[f]:
+                if c != v:
+                    (twice if c in once else once).add(c)
+        return len(once) > len(twice)
 
     def link_ok(self, a: int, b: int, nshared: int) -> bool:
         """`greedy._link_ok` on these sets (same rule, same answers)."""
@@ -192,15 +203,21 @@ class _Batches:
             self.push(plist, *self.price(plist))
 
     def push(self, plist, priced, l2):
-        """`greedy._Queue.push` (same entries), heapifying when it adds more entries than the queue has."""
+        """`greedy._Queue.push` (same entries, same stamps in order), heapifying when it adds more entries
+        than the queue holds (the first push: every pair)."""
         q = self.q
-        xs, parts, branch = priced.x, priced.parts.T, priced.branch.tolist()
-        entries = []
-        for k, (p, c, d) in enumerate(zip(plist, priced.cost.tolist(), l2.tolist())):
-            s = q.stamp[p] = next(q.stamps)
-            q.placed[p] = (xs[k], branch[k], c, parts[k], d)
-            q.blocked.pop(p, None)
-            entries.append((q._key(c, parts[k]), d, _tie(*p), p[0], p[1], s))
+        costs, l2s, parts = priced.cost.tolist(), l2.tolist(), list(priced.parts.T)
+        P = np.array(plist, np.int64).reshape(-1, 2)
+        a, b = P[:, 0].tolist(), P[:, 1].tolist()
+        ties = _ties(P[:, 0], P[:, 1]).tolist()
+        stamps = [next(q.stamps) for _ in plist]
+        q.stamp.update(zip(plist, stamps))
+        q.placed.update(zip(plist, zip(list(priced.x), priced.branch.tolist(), costs, parts, l2s)))
+        if q.blocked:
+            for p in plist:
+                q.blocked.pop(p, None)
+        keys = costs if q.weights is None else [q._key(c, w) for c, w in zip(costs, parts)]
+        entries = list(zip(keys, l2s, ties, a, b, stamps))
         if len(entries) > len(q.heap):
             q.heap.extend(entries)
             heapq.heapify(q.heap)
@@ -336,12 +353,12 @@ class _Batches:
             return False
         return True
 
-    def prefetch(self):
-        """Move the queue's next PREFETCH live entries to ``ahead``, with their flip tests from one numpy
+    def prefetch(self, want: int):
+        """Move the queue's next ``want`` live entries to ``ahead``, with their flip tests from one numpy
         pass, the vertices those read, and the contraction count then (a test stays right while no
         contraction since has moved or removed one of those vertices)."""
         heap, mesh, new = self.q.heap, self.mesh, []
-        while heap and len(new) < PREFETCH:
+        while heap and len(new) < want:
             entry = heapq.heappop(heap)
             if self.live(entry):
                 new.append(entry)
@@ -366,7 +383,7 @@ class _Batches:
             if not ahead:
                 if not heap:
                     return None, None
-                self.prefetch()
+                self.prefetch(min(PREFETCH, max(1, self.depth - len(self.steps))))
                 continue
             entry, flipped, reads, since = ahead[0]
             if not self.live(entry):
