@@ -357,10 +357,10 @@ class _Batches:
         """Move the queue's next ``want`` live entries to ``ahead``, with their flip tests from one numpy
         pass, the vertices those read, and the contraction count then (a test stays right while no
         contraction since has moved or removed one of those vertices)."""
-        heap, mesh, new = self.q.heap, self.mesh, []
+        heap, stamp, mesh, new = self.q.heap, self.q.stamp, self.mesh, []
         while heap and len(new) < want:
             entry = heapq.heappop(heap)
-            if self.live(entry):
+            if stamp.get((entry[3], entry[4])) == entry[5] and self.live(entry):  # (most are old: cheap test first)
                 new.append(entry)
         tests, reads = [], []
         for entry in new:
@@ -376,9 +376,9 @@ class _Batches:
         """The next live entry, from ``ahead`` or the queue, whichever ranks first (an unblocked pair can
         enter the queue before what was fetched ahead), and its flip test if known; (None, None) if none.
         Not removed yet."""
-        heap, ahead = self.q.heap, self.ahead
+        heap, stamp, ahead = self.q.heap, self.q.stamp, self.ahead
         while True:
-            while heap and not self.live(heap[0]):
+            while heap and not (stamp.get((heap[0][3], heap[0][4])) == heap[0][5] and self.live(heap[0])):
                 heapq.heappop(heap)
             if not ahead:
                 if not heap:
