@@ -6,6 +6,11 @@ It runs on the same rules as the parallel scheduler, one contraction at a time: 
 coincident-face rule of `topo.coincident_removals`, the flip test (`flips.flips_host`, the flip kernel's
 numpy twin: one contraction's few faces cost less on the host than a device call), and the cost model's
 batched price and merge on the device rows.
+
+Models whose price reads only the pair's two rows (`greedy_batches.eligible`: QEM without memoryless or
+attributes) run the same queue in verified speculative batches (`greedy_batches`): one merge and one
+price call per few dozen contractions instead of per contraction, with the same contractions in the same
+order. The others run the loop below, one contraction and one device round trip at a time.
 """
 from __future__ import annotations
 

@@ -9,7 +9,11 @@ stands if no stale pair held out before it ranks before it (with the queue's own
 The first step that fails and all after it are undone (a journal of every host change) and run again
 from the queue with the new prices in it. A step that would change a vertex whose state a stale pair
 reads waits for the next batch, so each stale pair has one price per batch, computed from the rows the
-step that staled it left.
+step that staled it left. (A pair's price and merge do not depend on which other pairs share their
+kernel call: the kernels are elementwise over pairs, and the outputs match bit for bit.)
+
+Queue entries are fetched a few dozen ahead and their flip tests run in one numpy pass; a test is used
+when its pair comes up unless a contraction since has moved or removed a vertex it read.
 
 For models with pair support, no refresh, no wedges and no ranking weights (`eligible`): a blocked pair
 that becomes a candidate again keeps its stored price, which is what re-pricing it would give (its two
@@ -32,6 +36,7 @@ from .._kernels import flips
 from . import outcome
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
 from .greedy import BUDGET, _Queue, _stop, _tie
+
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
 PREFETCH = 32  # queue entries fetched ahead at a time, their flip tests done together
