@@ -84,13 +84,16 @@ def test_eligible_models():
                          ids=["grid-with-hole", "torus"])
 def test_host_link_rule_matches_the_facelists_one(make):
     V, F = make()
-    F = np.asarray(F, np.int64)
-    E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1), axis=0)
-    faces, mesh = FaceLists(F, len(V)), greedy_batches._Mesh(F, len(V), E)
+    # the input, and coarser versions with irregular valence (and degree-3 vertices)
+    meshes = [(V, F)] + [(r.vertices, r.faces) for r in (qemjax.simplify((V, F), ratio=t) for t in (0.4, 0.1))]
     seen = set()
-    for a, b in E.tolist():
-        nshared = len(mesh.at[a] & mesh.at[b])
-        got = mesh.link_ok(a, b, nshared)
-        assert got == greedy._link_ok(faces, a, b, nshared), (a, b)
-        seen.add(got)
+    for Vm, Fm in meshes:
+        Fm = np.asarray(Fm, np.int64)
+        E = np.unique(np.sort(np.concatenate([Fm[:, [0, 1]], Fm[:, [1, 2]], Fm[:, [2, 0]]]), 1), axis=0)
+        faces, mesh = FaceLists(Fm, len(Vm)), greedy_batches._Mesh(Fm, len(Vm), E)
+        for a, b in E.tolist():
+            nshared = len(mesh.at[a] & mesh.at[b])
+            got = mesh.link_ok(a, b, nshared)
+            assert got == greedy._link_ok(faces, a, b, nshared), (a, b)
+            seen.add(got)
     assert seen == {True, False}
