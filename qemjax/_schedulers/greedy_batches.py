@@ -64,10 +64,15 @@ class _Journal:
     def __init__(self, heap):
         self.log, self.heap = [], heap
 
-    def put(self, c, k, v):
-        """c[k] = v for a list or dict c, remembering the old value."""
-        self.log.append((c, k, c.get(k, _MISSING) if isinstance(c, dict) else c[k]))
+    def put(self, c: list, k: int, v):
+        """c[k] = v, remembering the old value."""
+        self.log.append((c, k, c[k]))
         c[k] = v
+
+    def put_d(self, d: dict, k, v):
+        """d[k] = v, remembering the old value (or its absence)."""
+        self.log.append((d, k, d.get(k, _MISSING)))
+        d[k] = v
 
     def drop(self, d: dict, k):
         if k in d:
@@ -207,21 +212,26 @@ class _Batches:
         if plist:
             self.push(plist, *self.price(plist))
 
+    def keys(self, plist, priced, l2):
+        """The queue keys of priced pairs: lists (rank, squared length, tie, a, b)."""
+        q = self.q
+        costs = priced.cost.tolist()
+        P = np.array(plist, np.int64).reshape(-1, 2)
+        keys = costs if q.weights is None else [q._key(c, w) for c, w in zip(costs, priced.parts.T)]
+        return keys, l2.tolist(), _ties(P[:, 0], P[:, 1]).tolist(), P[:, 0].tolist(), P[:, 1].tolist()
+
     def push(self, plist, priced, l2):
         """`greedy._Queue.push` (same entries, same stamps in order), heapifying when it adds more entries
         than the queue holds (the first push: every pair)."""
         q = self.q
-        costs, l2s, parts = priced.cost.tolist(), l2.tolist(), list(priced.parts.T)
-        P = np.array(plist, np.int64).reshape(-1, 2)
-        a, b = P[:, 0].tolist(), P[:, 1].tolist()
-        ties = _ties(P[:, 0], P[:, 1]).tolist()
+        keys, l2s, ties, a, b = self.keys(plist, priced, l2)
         stamps = [next(q.stamps) for _ in plist]
         q.stamp.update(zip(plist, stamps))
-        q.placed.update(zip(plist, zip(list(priced.x), priced.branch.tolist(), costs, parts, l2s)))
+        q.placed.update(zip(plist, zip(list(priced.x), priced.branch.tolist(), priced.cost.tolist(),
+                                       list(priced.parts.T), l2s)))
         if q.blocked:
             for p in plist:
                 q.blocked.pop(p, None)
-        keys = costs if q.weights is None else [q._key(c, w) for c, w in zip(costs, parts)]
         entries = list(zip(keys, l2s, ties, a, b, stamps))
         if len(entries) > len(q.heap):
             q.heap.extend(entries)
@@ -302,14 +312,15 @@ class _Batches:
             j.put(mesh.alive, f, False)
             for c in mesh.tri[f]:
                 j.put(mesh.at, c, mesh.at[c] - {f})
-        j.put(mesh.count, "faces", mesh.count["faces"] - len(dead) - len(drop))
+        j.put_d(mesh.count, "faces", mesh.count["faces"] - len(dead) - len(drop))
         j.row(self.VQ, a)
         self.VQ[a, :3] = x
         # pair partners: b's become a's; pairs at b are gone (forgotten by the queue when the step stands)
         step, nb = len(self.steps), mesh.nbr[b]
+        nbr, put = mesh.nbr, j.put
         for w in nb:
             if w != a:
-                j.put(mesh.nbr, w, (mesh.nbr[w] - {b}) | {a})
+                put(nbr, w, (nbr[w] - {b}) | {a})
             self.gone[(w, b) if w < b else (b, w)] = step
         j.put(mesh.nbr, a, (mesh.nbr[a] | nb) - {a, b})
         j.put(mesh.nbr, b, frozenset())
@@ -340,7 +351,7 @@ class _Batches:
         _, _, c, parts, l2 = q.placed[p]
         self.journal.drop(q.blocked, p)
         s = next(q.stamps)
-        self.journal.put(q.stamp, p, s)
+        self.journal.put_d(q.stamp, p, s)
         heapq.heappush(q.heap, (q._key(c, parts), l2, _tie(*p), p[0], p[1], s))
 
     # a batch ---------------------------------------------------------------------------------------
@@ -430,7 +441,7 @@ class _Batches:
             self.take(entry)
             code, faces = self.check(a, b, x, flipped)
             if code is not None:
-                j.put(q.blocked, p, code)
+                j.put_d(q.blocked, p, code)
                 steps.append(_Step(entry[:5], BLOCK, mark, code=code))
                 continue
             self.contract(a, b, x, faces)
@@ -474,8 +485,7 @@ class _Batches:
         order = []
         if stale:
             priced, l2 = self.price([p for p, _ in stale])
-            order = [(self.q._key(c, priced.parts[:, k]), d, _tie(*p), p[0], p[1])
-                     for k, ((p, _), c, d) in enumerate(zip(stale, priced.cost.tolist(), l2.tolist()))]
+            order = list(zip(*self.keys([p for p, _ in stale], priced, l2)))
         ok = self.first_wrong(steps, stale, order)
         self.batches += 1
         if ok < len(steps):
