@@ -488,3 +488,27 @@ def test_fixed_order_arithmetic_matches_float64_and_ignores_the_batch():
     full = np.asarray(f(x, c, m))
     for k in (1, 7, 37, 128, 257):
         assert np.array_equal(np.asarray(f(x[:k], c[:k], m[:k])), full[:k]), k
+
+
+def test_flips_host_blocks_match_the_component_twin():
+    """`flips.flips_host` (numpy on (K,3) blocks, several contractions per pass in the greedy queue) gives
+    the answers of `_flips` on component lists, face by face, near the thresholds too."""
+    rng = np.random.default_rng(5)
+    for t in range(400):
+        V = rng.normal(size=(12, 3)).astype(np.float32)
+        if t % 3 == 0:
+            V[:, 2] = 0  # planar: moves in the plane, collapses and slivers
+        if t % 5 == 0:
+            V = np.round(V * 4) / 4
+        K = int(rng.integers(1, 8))
+        F = np.array([rng.choice(12, 3, replace=False) for _ in range(K)])
+        k = rng.integers(0, 3, K)
+        x = V[rng.integers(12)] + (0 if t % 4 == 0 else rng.normal(size=3) * 10.0 ** rng.integers(-7, 0))
+        N0 = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32) if t % 2 else \
+            rng.normal(size=(K, 3)).astype(np.float32)
+        cos_max = [0.0, -2.0, 0.7071067811865476, -0.5][t % 4]
+        per_face = flips.flips_host_faces(V, N0, F, np.arange(K), k, x.astype(np.float32), cos_max)
+        for i in range(K):
+            one = flips.flips_host_reference(V, N0, F[i:i + 1], np.arange(K)[i:i + 1], k[i:i + 1],
+                                             x.astype(np.float32), cos_max)
+            assert bool(per_face[i]) == one, (t, i)

@@ -6,10 +6,16 @@ It runs on the same rules as the parallel scheduler, one contraction at a time: 
 coincident-face rule of `topo.coincident_removals`, the flip test (`flips.flips_host`, the flip kernel's
 numpy twin: one contraction's few faces cost less on the host than a device call), and the cost model's
 batched price and merge on the device rows.
+
+Models whose price reads only the pair's two rows (`greedy_batches.eligible`: QEM without memoryless or
+attributes) run the same queue in verified speculative batches (`greedy_batches`): one merge and one
+price call per few dozen contractions instead of per contraction, with the same contractions in the same
+order. The others run the loop below, one contraction and one device round trip at a time.
 """
 from __future__ import annotations
 
 import heapq
+import itertools
 
 import jax.numpy as jnp
 import numpy as np
@@ -70,6 +76,8 @@ class _Queue:
     def __init__(self):
         self.heap, self.stamp, self.placed, self.blocked = [], {}, {}, {}
         self.weights = None
+        # stamps from one counter, never reused: an entry whose stamp a rollback restored stays unique
+        self.stamps = itertools.count(1)
 
     def _key(self, cost, parts):
         if self.weights is None:
@@ -78,8 +86,7 @@ class _Queue:
 
     def push(self, pairs, priced, length2):
         for k, ((a, b), c, l2) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist())):
-            s = self.stamp.get((a, b), 0) + 1
-            self.stamp[(a, b)] = s
+            s = self.stamp[(a, b)] = next(self.stamps)
             parts = priced.parts[:, k]
             self.placed[(a, b)] = (priced.x[k], int(priced.branch[k]), c, parts, l2)
             self.blocked.pop((a, b), None)
@@ -109,6 +116,10 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     faces = FaceLists(F, n)
     E, _ = topo.edges(F, n)
     pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
+    from . import greedy_batches  # imports this module
+
+    if greedy_batches.eligible(model, wedges):  # the same run, contracted in verified batches
+        return greedy_batches.run(V, S, F, pairs, target_faces, model, options, progress)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)

@@ -1,0 +1,85 @@
+"""Warm wall time of the greedy scheduler (``scheduler="greedy"``) and a hash of its output, per mesh; with
+``--rev``, the package at that git revision runs in the same process, alternating with the working tree's,
+so both see the same machine state (and the hashes show whether the outputs are the same).
+
+    python experiments/greedy_speed.py                          # cow and stanford-bunny -> 10 %
+    python experiments/greedy_speed.py --rev a9c2f4d --repeats 3
+
+The hash is sha256 over the output vertices, faces, history pairs, positions and costs, and the run's stop
+reason, contraction count and rejections by rule. Meshes come from ../shared/meshes (absent ones skip).
+Each version simplifies each mesh once first (compilation, caches), outside the timings.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent), str(HERE)]  # this checkout's qemjax
+
+import qemjax  # noqa: E402
+from ab_compare import load_old  # noqa: E402
+
+SHARED = HERE.parent.parent / "shared" / "meshes"
+
+
+def digest(res) -> str:
+    h = hashlib.sha256()
+    for name, a in (("vertices", res.vertices), ("faces", res.faces), ("pairs", res.history.pairs),
+                    ("positions", res.history.positions), ("costs", res.history.costs)):
+        a = np.ascontiguousarray(a)
+        h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    h.update(repr((res.stop_reason, res.stats["contractions"], sorted(res.stats["rejected_by"].items()))).encode())
+    return h.hexdigest()[:16]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--meshes", nargs="+", default=["cow.obj", "stanford-bunny.obj"])
+    ap.add_argument("--ratio", type=float, default=0.1)
+    ap.add_argument("--repeats", type=int, default=3, help="timed runs per mesh and version (median reported)")
+    ap.add_argument("--rev", default=None, help="also run the package at this git revision")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    versions = [("new", qemjax)] + ([(args.rev, load_old(args.rev))] if args.rev else [])
+    print(f"qemjax from {Path(qemjax.__file__).parent}; ratio {args.ratio}, {args.repeats} warm runs each")
+    for mesh in args.meshes:
+        path = SHARED / mesh
+        if not path.exists():
+            print(f"SKIP {mesh} ({path} absent)")
+            continue
+        times = {label: [] for label, _ in versions}
+        hashes = {}
+        for label, pkg in versions:  # warm-up: compilation and file caches
+            res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
+            hashes[label] = digest(res)
+            faces = (len(res.faces), res.stats["contractions"])
+        for _ in range(args.repeats):
+            for label, pkg in versions:
+                t = time.perf_counter()
+                res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
+                times[label].append(time.perf_counter() - t)
+                if digest(res) != hashes[label]:
+                    print(f"  {label}: output changed between runs ({hashes[label]} -> {digest(res)})")
+        for label, _ in versions:
+            t = times[label]
+            print(f"{mesh:20s} {label:8s} warm median {statistics.median(t):6.2f} s  (min {min(t):.2f}, "
+                  f"max {max(t):.2f})  faces {faces[0]}, contractions {faces[1]}  sha256 {hashes[label]}",
+                  flush=True)
+        if len(versions) == 2:
+            (a, ta), (b, tb) = [(k, statistics.median(v)) for k, v in times.items()]
+            same = "same output" if hashes[a] == hashes[b] else "OUTPUTS DIFFER"
+            print(f"{'':20s} {b} / {a}: {tb / ta:.1f}x  ({same})", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
