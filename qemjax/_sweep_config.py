@@ -134,20 +134,29 @@ _CHOICES = {"method": _api.methods, "scheduler": lambda: _api.SCHEDULERS, "place
 
 
 def _allowed(key: str) -> set[str]:
-    """The type names a grid key takes, from simplify's annotation (e.g. 'float | None')."""
+    """The type names a grid key takes, from simplify's annotation (e.g. 'float | None'); {'any'} for a
+    keyword without one (``attributes``, ``attribute_weights``: simplify checks their values)."""
     ann = inspect.signature(simplify).parameters[key].annotation
+    if ann is inspect.Parameter.empty:
+        return {"any"}
     return {t.strip() for t in str(ann).split("|")}
 
 
 def _check_value(key: str, v, fail):
     """One grid value, checked against simplify's annotation; the string 'none' is None where allowed."""
     allowed = _allowed(key)
+    if allowed == {"any"}:  # as written; 'none' is None, a list a tuple (attributes=["uv", "color"])
+        if isinstance(v, str) and v.strip().lower() == "none":
+            return None
+        return tuple(v) if isinstance(v, list) else v
     if (v is None or isinstance(v, str) and v.strip().lower() == "none") and "None" in allowed:
         return None  # YAML's null, or "none" (TOML has no null)
     if "Schedule" in allowed:
         fail(f"grid.{key}: a Schedule cannot be given in a config file; use qemjax.sweep from Python")
     if "bool" in allowed and isinstance(v, bool):
         return v
+    if "int" in allowed and isinstance(v, numbers.Integral) and not isinstance(v, bool):
+        return int(v)
     if "float" in allowed and isinstance(v, numbers.Real) and not isinstance(v, bool):
         return float(v)
     if "str" in allowed and isinstance(v, str):
@@ -155,7 +164,8 @@ def _check_value(key: str, v, fail):
             fail(f"grid.{key}: unknown value {v!r}; one of {', '.join(_CHOICES[key]())}")
         return v
     kinds = " or ".join(sorted(t.replace("None", "'none'").replace("float", "a number")
-                               .replace("bool", "true/false").replace("str", "a string") for t in allowed))
+                               .replace("bool", "true/false").replace("str", "a string")
+                               .replace("int", "a whole number") for t in allowed))
     fail(f"grid.{key}: expected {kinds}, got {v!r}")
 
 

@@ -310,3 +310,25 @@ def test_config_file_with_shapes(tmp_path):
         with pytest.raises(ValueError, match=re.escape(message)):
             _sweep_config.load(cfg)
 
+
+
+def test_config_grid_takes_integers_and_untyped_keywords(tmp_path):
+    """`grid.refit = [0, 1]` (an int keyword) and `grid.attributes = ["auto", "none"]` (a keyword without
+    an annotation) are read as the Python sweep takes them, and run (issue 31's two config failures)."""
+    from qemjax import _sweep_config
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('meshes = ["shapes.icosphere(subdivisions=2)"]\ntargets = [0.5]\nout = "t.csv"\n'
+                   '[metrics]\nn_samples = 500\n'
+                   '[grid]\nrefit = [0, 1]\nattributes = ["auto", "none", ["uv"]]\n')
+    config = _sweep_config.load(cfg)
+    assert config.grid["refit"] == [0, 1] and all(type(v) is int for v in config.grid["refit"])
+    assert config.grid["attributes"] == ["auto", None, ("uv",)]
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\n[grid]\nrefit = [0.5]\n')
+    with pytest.raises(ValueError, match=r"grid.refit: expected a whole number, got 0.5"):
+        _sweep_config.load(cfg)
+    cfg.write_text('meshes = ["shapes.icosphere(subdivisions=2)"]\ntargets = [0.5]\nout = "t.csv"\n'
+                   'metrics = false\n[grid]\nrefit = [0, 1]\nattributes = ["auto", "none"]\n')
+    config = _sweep_config.load(cfg)
+    df = qemjax.sweep(config.meshes, config.grid, config.targets, metrics=False, progress=False)
+    assert len(df) == 4 and sorted(df["refit"].tolist()) == [0, 0, 1, 1]
