@@ -14,6 +14,7 @@ from .area import Area
 from .attributes import AttributeQEM
 from .area_term import AreaTerm
 from .esqem import ESQEM
+from .line import LineQEM
 from .qem import QEM
 from .regularize import Regularized
 
@@ -21,6 +22,7 @@ REGISTRY: dict[str, type[CostModel]] = {
     "qem": QEM,
     "esqem": ESQEM,
     "area": Area,
+    "line": LineQEM,
 }
 TERMS = {
     "regularize": Regularized,
