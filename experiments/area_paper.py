@@ -83,7 +83,7 @@ def kernel_throughput(out_csv):
     groups = list(ring.gather_groups(fl, E, len(Vn), with_dead=True))
     idx, rg = max(groups, key=lambda g: len(g[0]))  # the common ring size
     rows = []
-    params = area.Area().kernel_params()
+    params = area.AreaDifference().kernel_params()
     qem = _costs.QEM()
     VQ = np.zeros((len(Vn) + 1, 13), np.float32)
     VQ[: len(Vn), :3] = Vn
@@ -103,7 +103,7 @@ def kernel_throughput(out_csv):
             rows.append(dict(kernel=name, batch=K, ring=rg.corners.shape[1], seconds=dt, pairs_per_s=K / dt))
             print(f"{name:14s} batch {K:6d} ring {rg.corners.shape[1]}: {K / dt:12,.0f} pairs/s", flush=True)
     # share of a run
-    orig = area.Area.price
+    orig = area.AreaDifference.price
     spent = [0.0]
 
     def timed(self, *a, **k):
@@ -114,12 +114,12 @@ def kernel_throughput(out_csv):
         return out
     for scheduler in ("parallel", "greedy"):
         qemjax.simplify((bm.V, bm.F), ratio=0.1, method="area", scheduler=scheduler)  # compile first
-        area.Area.price = timed
+        area.AreaDifference.price = timed
         spent[0] = 0.0
         try:
             r = qemjax.simplify((bm.V, bm.F), ratio=0.1, method="area", scheduler=scheduler)
         finally:
-            area.Area.price = orig
+            area.AreaDifference.price = orig
         share = spent[0] / r.stats["total_s"]
         rows.append(dict(kernel=f"area share of a {scheduler} run", batch=np.nan, ring=np.nan,
                          seconds=spent[0], pairs_per_s=np.nan, run_s=r.stats["total_s"], share=share))

@@ -10,7 +10,8 @@ A variant is ``LABEL`` or ``LABEL:key=value,...``: ``rev=REV`` runs qemjax as it
 (unpacked by `ab_compare.load_old`, in this process); other keys set the QEM model's fields
 (``placement``, ``cond_eps``, ``rank_eps``, ``max_shift``, ``area_weighted``, ``area_power``,
 ``boundary_weight``), other numeric keywords of ``simplify`` (``refit``) are passed to it, and
-``preset=NAME`` passes ``simplify(preset=NAME)``. So the table before and
+``preset=NAME`` passes ``simplify(preset=NAME)``; ``method=NAME`` runs another registered method (its
+QEM fields set as above). ``--warm`` times each qemjax run after an untimed one. So the table before and
 after a change comes from one command::
 
     python experiments/rank_peers.py --variant old:rev=02a1390 --variant rank:placement=rank
@@ -77,8 +78,23 @@ def variant_runner(label: str, rev: str | None, settings: dict):
     else:
         import qemjax as package
     costs = package._costs
-    fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
     preset = settings.pop("preset", None)  # a simplify(preset=...) name
+    base_method = settings.pop("method", "qem")  # a registered method (its fields: the QEM ones it shares)
+    if hasattr(package, "_flat"):  # every setting of a method, Topology or Attributes by its name
+        table = package._flat.options()
+        unknown = set(settings) - set(table)
+        if unknown:
+            raise SystemExit(f"unknown setting(s) {sorted(unknown)}; choose from {sorted(table)} or preset")
+        keywords = {k: v if isinstance(v, bool) or v is None
+                    else (None if str(v).lower() == "none" else float(v)) if table[k].default is None
+                    else type(table[k].default)(v) for k, v in settings.items()}
+        method = preset or base_method
+
+        def run_flat(V, F, target):
+            return package.simplify((V, F), target_faces=target, method=method, **keywords)
+        return run_flat
+    # an older revision: its flat keywords, and QEM fields without a keyword as a registered subclass
+    fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
     params = inspect.signature(package.simplify).parameters
     # simplify keywords that are not QEM fields (e.g. refit), typed by their defaults
     extra = {k: type(params[k].default)(settings.pop(k)) for k in list(settings)
@@ -97,12 +113,13 @@ def variant_runner(label: str, rev: str | None, settings: dict):
         name = f"qem-{label}"
         cls = dataclasses.make_dataclass(name, [(k, type(v), dataclasses.field(default=v))
                                                 for k, v in typed.items()],
-                                         bases=(costs.QEM,), frozen=True, namespace={"name": name})
+                                         bases=(costs.REGISTRY[base_method],), frozen=True,
+                                         namespace={"name": name})
         if name not in costs.REGISTRY:
             costs.register(cls)
         method = name
     else:
-        method = "qem"
+        method = base_method
 
     def run(V, F, target):
         return package.simplify((V, F), target_faces=target, method=method, **keywords)
@@ -127,6 +144,40 @@ def run_peers(mesh, ratio, target) -> list[dict]:
             row.update(status=f"error: {type(exc).__name__}: {exc}"[:120])
         rows.append(row)
     return rows
+
+
+def summary(rows: list[dict], cases, labels: list[str]) -> str:
+    """One line per variant: cases at or below the best peer (rms, Hausdorff) and its time over the first
+    variant's (same run: median over the cases, and on the bunny and the armadillo at each ratio)."""
+    def row_of(mesh, ratio, label):
+        return next((r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio and r["status"] == "ok"
+                     and r["method"] == f"qemjax-{label}"), None)
+
+    named = [(m, q) for m, q in cases if m in ("stanford-bunny", "armadillo")]
+    head = ("| variant | rms <= best peer | Hausdorff <= best peer | time / " + labels[0] + " (median) |"
+            + "".join(f" time / {labels[0]}, {m} @ {q:g} |" for m, q in named))
+    lines = ["## Summary", "", head, "|" + "---|" * (4 + len(named))]
+    for label in labels:
+        n = n_r = n_h = 0
+        times = []
+        for mesh, ratio in cases:
+            here = [r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio and r["status"] == "ok"]
+            peers = [r for r in here if r["method"] in bench_peers.PEERS]
+            o, b = row_of(mesh, ratio, label), row_of(mesh, ratio, labels[0])
+            if o is None or not peers:
+                continue
+            n += 1
+            n_r += float(o["rms_rel"]) <= min(float(r["rms_rel"]) for r in peers)
+            n_h += float(o["hausdorff_rel"]) <= min(float(r["hausdorff_rel"]) for r in peers)
+            if b is not None:
+                times.append(float(o["time_s"]) / float(b["time_s"]))
+        at = []
+        for m, q in named:
+            o, b = row_of(m, q, label), row_of(m, q, labels[0])
+            at.append(f"{float(o['time_s']) / float(b['time_s']):.2f}" if o and b else "-")
+        lines.append(f"| {label} | {n_r}/{n} | {n_h}/{n} | {np.median(times) if times else float('nan'):.2f} |"
+                     + "".join(f" {x} |" for x in at))
+    return "\n".join(lines) + "\n"
 
 
 def ranks(rows: list[dict], labels: list[str]) -> str:
@@ -167,6 +218,8 @@ def ranks(rows: list[dict], labels: list[str]) -> str:
                                                         for ratio, c in sorted(by_ratio.items(), reverse=True)),
                       ""]
         out.append("\n".join(lines))
+    if len(labels) > 1 and cases:
+        out.append(summary(rows, cases, labels))
     if len(labels) > 1 and cases:  # each variant against the first, per case
         for label in labels[1:]:
             out.append(against_base(rows, cases, labels[0], label))
@@ -225,8 +278,13 @@ def _ratio(a: dict, b: dict, key: str) -> float:
     return float(a[key]) / float(b[key])
 
 
+WARM = False  # --warm: time a second call (the first compiles what the case needs)
+
+
 def run_variant(run, label: str, mesh, ratio: float, target: int, status: str = "ok") -> dict:
-    """One qemjax variant on one case: its CSV row (faces, distances, time)."""
+    """One qemjax variant on one case: its CSV row (faces, distances, time; warm with ``--warm``)."""
+    if WARM:
+        run(mesh.V, mesh.F, target)
     t0 = time.perf_counter()
     res = run(mesh.V, mesh.F, target)
     secs = time.perf_counter() - t0
@@ -268,7 +326,11 @@ def main(argv=None) -> int:
     ap.add_argument("--summarize", default=None, metavar="CSV",
                     help="only print the tables of an earlier run's CSV (its qemjax variants, in order; the "
                          "first is the one the others are compared with); runs and writes nothing")
+    ap.add_argument("--warm", action="store_true",
+                    help="time each qemjax run warm (one untimed call first; peers have nothing to compile)")
     args = ap.parse_args(argv)
+    global WARM
+    WARM = args.warm
     if args.summarize:
         with open(args.summarize) as fh:
             old = list(csv.DictReader(fh))

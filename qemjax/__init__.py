@@ -1,11 +1,18 @@
 """qemjax: JAX-accelerated, batched triangle-mesh simplification.
 
-Public API: `simplify` (and `simplify_batch` / `simplify_cells`: many runs in shared rounds), `methods`,
-`Schedule`, `load`, `SimplifyResult`, `Contractions`, `Mesh`; the multiresolution record (`Record`, `Level`,
+Public API: `simplify` (and `simplify_batch` / `simplify_cells`: many runs in shared rounds); the methods
+as frozen settings objects (`QEM`, `ESQEM`, `AreaDifference`, `LineQEM`, their base `Method`,
+`register_method`, `methods`), the run's other settings (`Topology`, `Attributes`, `Schedule`); `load`, `SimplifyResult`, `Contractions`, `Mesh`; the multiresolution record (`Record`, `Level`,
 `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` and
 `shapes` (meshes made in code, `shapes.write_examples`) modules.
 """
 from ._api import methods as methods
+from ._costs import register as register_method
+from ._costs.area import AreaDifference as AreaDifference
+from ._costs.base import Method as Method
+from ._costs.esqem import ESQEM as ESQEM
+from ._costs.line import LineQEM as LineQEM
+from ._costs.qem import QEM as QEM
 from ._api import simplify as simplify
 from ._api import simplify_batch as simplify_batch
 from ._api import simplify_cells as simplify_cells
@@ -13,7 +20,9 @@ from ._io import Mesh as Mesh
 from ._io import load as load
 from ._lod import LodChain as LodChain
 from ._lod import lod_chain as lod_chain
+from ._options import Attributes as Attributes
 from ._options import Schedule as Schedule
+from ._options import Topology as Topology
 from ._pareto import pareto_front as pareto_front
 from ._record import Level as Level
 from ._record import Record as Record

@@ -17,11 +17,11 @@ import numpy as np
 from . import _compilation
 from . import _costs
 from . import _io
-from . import _presets
 from . import _refit
 from . import _split
 from . import _topology as topo
-from ._options import Options, Schedule
+from . import _flat
+from ._options import Attributes, Options, Schedule, Topology
 from . import _units
 from . import _wedges
 from ._arrays import face_normals
@@ -29,12 +29,8 @@ from ._record import Record
 from ._result import Contractions, SimplifyResult
 from ._schedulers import batched, common, greedy, outcome, parallel
 
-SCHEDULERS = ("parallel", "greedy")
+SCHEDULERS = _flat.SCHEDULERS
 PLACEMENTS = _costs.qem.PLACEMENTS
-
-# Defaults, in one place (see the docstring of `simplify` for units)
-BOUNDARY_WEIGHT = 100.0
-FLIP_ANGLE = 90.0
 
 
 def methods() -> tuple[str, ...]:
@@ -85,17 +81,9 @@ def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]
 
 
 def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None = None,
-             max_error: float | None = None, method: str = "qem", scheduler: str = "parallel",
-             placement: str = "optimal", boundary_weight: float = BOUNDARY_WEIGHT,
-             area_weighted: bool = True, area_power: float = 1.0, feature_edges=None, pair_threshold: float = 0.0,
-             preserve_topology: bool | None = None,
-             flip_angle: float | None = FLIP_ANGLE, weld: bool = True, progress: bool = False,
-             prune: bool = False, regularize: float = 0.0, area_weight: float = 0.0,
-             schedule: Schedule | None = None,
-             curvature_weight: float = _costs.esqem.CURVATURE_WEIGHT,
-             split_factor: float | None = _costs.esqem.SPLIT_FACTOR, attributes="auto",
-             attribute_weights=None, texture=None, memoryless: bool = False, volume_weight: float = 0.0,
-             memory_weight: float = 0.0, refit: int = 0, preset: str | None = None) -> SimplifyResult:
+             max_error: float | None = None, method: Any = "qem", scheduler: Any = "parallel",
+             topology: Topology | None = None, attributes: Any = "auto", feature_edges=None,
+             progress: bool = False, **settings) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -103,110 +91,45 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     target_faces / ratio: stop at this many faces (ratio × the cleaned input's faces). Met exactly when
         the mesh allows it; otherwise the result has the fewest faces reachable above the target.
     max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
-        mesh's own units* (the quadric error, e.g. ``(0.01 * diagonal)**2``). May be combined with a
-        face target; whichever is reached first stops.
-    method: a registered cost model (`qemjax.methods()`): ``'qem'`` (quadric error metric),
-        ``'esqem'`` (Zhang 2022: QEM ranked with a Gaussian-curvature term, then long edges split) or
-        ``'area'`` (minimum surface-area difference, Qi et al.: each pair contracts to the point of its segment that
-        changes the area least, cost = that |area change|; ``qemjax._costs.area``). With ``'area'``,
-        costs, ``max_error`` and ``history.costs`` are areas (mesh units²), ``vertex_error`` is 0, and
-        ``boundary_weight`` > 0 keeps boundary and feature vertices on their edges; ``placement`` and
-        ``area_weighted`` do not apply.
-    scheduler: ``'parallel'`` (default) — rounds of many non-interacting contractions chosen by an
-        independent-set rule; ``'greedy'`` — the paper's priority queue, one contraction at a time.
-    placement: ``'optimal'`` (solve; else best point on the segment; else best of endpoints/midpoint),
-        ``'rank'`` (solve the well-determined directions only, the rest stay at the midpoint) or
-        ``'endpoints'`` (the paper's fixed placement: best of v1, v2, midpoint).
-    boundary_weight: penalty weight of the planes through each boundary edge perpendicular to its face
-        (relative to an average face's plane; 0 disables boundary preservation).
-    area_weighted: weight each face plane by its area / the mean face area (True), or by 1 (the paper).
-    area_power: with area_weighted, weight by (area / mean area)^area_power (QEM and ESQEM; 1: the area
-        itself; 0.5 lowers the Hausdorff distance on thin parts at some rms: README, "Placement and the
-        ranking against peers").
-    feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
-    pair_threshold: t in mesh units; besides edges, any two vertices within distance t may contract
-        (Garland–Heckbert's aggregation: separate parts can join). 0 = edge contraction only. Close pairs
-        are found with a KD-tree; more than topo.MAX_PAIRS_PER_VERTEX per vertex is refused.
-    preserve_topology: forbid contractions that break the link condition or make faces coincide (keeps
-        a manifold's genus and boundary loops). Default: True when pair_threshold is 0, else False. With
-        False, contractions may create non-manifold edges, and coincident faces are dropped (opposite
-        ones cancel, so small parts can vanish), as in the paper.
-    flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or
-        more (90: any sign flip or collapse to zero area); None allows flips.
-    weld: merge vertices with identical coordinates first (G&H need shared corners).
-    prune: with preserve_topology, let small separate parts vanish (their last faces may contract away);
-        by default (False) every part keeps at least one face. Without preserve_topology parts may always
-        vanish (coincident faces cancel).
-    regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (penalises contractions that
-        create slender triangles; ``qemjax._costs.regularize``). 0 (default) leaves the method's cost as
-        it is. With λ > 0, costs, ``max_error`` and ``history.costs`` include the term (a squared length).
-    area_weight: λ ≥ 0, with ``method='qem'``: adds λ·ΔS²/ℓ² to the cost, ΔS the surface-area change of the
-        contraction at its placement and ℓ² the mean squared edge length around the pair (a squared
-        length; ``qemjax._costs.area_term``). 0 (default) leaves the cost as it is.
-    schedule: the parallel scheduler's tunables (`qemjax.Schedule`); None = the defaults.
-    curvature_weight: a ≥ 0 (``method='esqem'`` only): contractions are ranked by Q + w·K with
-        w = a·Q̄/K̄, so the mean curvature term is a times the mean quadric error (default 0.01, the paper's
-        "two orders of magnitude below"; ``qemjax._costs.esqem``). Errors, ``max_error`` and
-        ``history.costs`` stay the quadric error Q; K is in ``history.parts``.
-    split_factor: b > 0 or None (``method='esqem'`` only): after simplifying, split every edge longer than
-        b × the mean edge length at its midpoint (default 4/3, the paper's); None: no splitting. With a
-        face target the result still has exactly that many faces: it simplifies further first, by as many
-        faces as splitting will add (``qemjax._split``; ``stats["split"]``).
+        mesh's own units* for the quadric methods (the quadric error, e.g. ``(0.01 * diagonal)**2``; the
+        method's ``error_unit`` says what it is). May be combined with a face target; whichever is reached
+        first stops.
+    method: the cost model and all its settings, as an object (``qemjax.QEM(boundary_weight=10)``,
+        ``qemjax.ESQEM(curvature_weight=0.1)``, ``qemjax.AreaDifference()``, ``qemjax.LineQEM()``, a
+        preset such as ``qemjax.QEM.accurate()``, or a class registered with `qemjax.register_method`), or
+        its name (`qemjax.methods()`: ``'qem'``, ``'esqem'``, ``'area'``, ``'line'``, ``'classic'``,
+        ``'accurate'``), which means the object with its defaults. Each class's docstring lists its
+        settings; every method also has ``regularize``, ``area_weight`` and ``refit`` (`_costs.base.Method`).
+    scheduler: ``'parallel'`` (default): rounds of many non-interacting contractions chosen by an
+        independent-set rule; a `qemjax.Schedule`: the parallel scheduler with those tunables;
+        ``'greedy'``: the paper's priority queue, one contraction at a time.
+    topology: a `qemjax.Topology`: topology preservation, pruning of small parts, aggregation of close
+        pairs (``pair_threshold``), the flip angle and welding (None: its defaults).
     attributes: which appearance attributes to carry through (per-corner wedges, seams kept: README,
         "Appearance attributes"; ``qemjax._wedges``): ``'auto'`` (each kind the input carries without
         seams: UVs and their material, vertex colours, stored normals, normalised to unit length; a kind
-        with seams, which hold vertices in place, only when asked for by name, or UVs when ``texture`` is
-        given: one warning names them), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these,
-        or None (positions only; what is dropped is named in a warning). Kept ones come back as
-        ``res.uv`` / ``res.colors`` / ``res.normals``; a contraction that would move a seam vertex off its
-        seam or merge wedges of different charts is refused (``stats['rejected_by']['seam']``), so seams
-        can hold a mesh above its target. Only ``method='qem'`` keeps attributes (others warn and drop).
-    attribute_weights: w ≥ 0, one number for every kind or {kind: w} (kinds not named keep their default);
-        None: ``{'uv': 0.03, 'color': 0.0, 'normal': 0.0}`` (README, "Appearance attributes": chosen by
-        ``experiments/attribute_defaults.py``). The weight of each kept attribute in the cost (Hoppe 1999's generalised
-        quadric over position × attributes, ``qemjax._costs.attributes``; UVs in texture units, colours in
-        [0, 1], normals unit: a cost adds w²·(attribute deviation)² to the squared distance at unit
-        extent). The placement then solves position and attributes together. 0: the cost is positions
-        only and attributes are interpolated along each contraction.
-    texture: a path or PIL image: the texture of the UVs (for a file that names no material, e.g. an OBJ
-        without mtllib); the result's material then holds it.
-    memoryless: with ``method='qem'``, rebuild the quadrics around each contraction from the current faces
-        (plus boundary planes) instead of summing the merged vertices' quadrics (Lindstrom & Turk 1998's
-        memoryless quadrics; ``qemjax._costs.memoryless``). Costs then measure each contraction's change
-        of the current surface: ``max_error`` bounds that; ``vertex_error`` stays the summed quadric's
-        error (kept alongside, see ``memory_weight``). Not with ``feature_edges``, ``regularize`` or
-        ``area_weight``; attributes are dropped with a warning. README, "Placement and the ranking
-        against peers", has its ranks.
-    volume_weight: λ ≥ 0, with ``memoryless=True``: add λ·(the contraction's volume change / the mean
-        face area)² to its quadric before placing (Lindstrom & Turk's volume preservation as a penalty;
-        a squared length). 0 (default) adds nothing.
-    memory_weight: μ ≥ 0, with ``memoryless=True``: price each pair with the rebuilt quadrics plus μ times
-        the summed (Garland–Heckbert) ones, which the run keeps alongside. 0 (default): memoryless alone.
-    refit: N ≥ 0 rounds of re-fitting the output's vertex positions to the input surface after simplifying
-        (Hoppe et al. 1993's continuous step, connectivity fixed: the input's vertices and face centroids,
-        area-weighted, attached to their nearest output points, then the positions' linear least squares;
-        a move that turns a face by ``flip_angle`` or more is halved, then undone; ``qemjax._refit``). It lowers the
-        distance to the input most where the placements of early contractions no longer suit the final
-        mesh (very coarse outputs). Only positions change; ``vertex_error``, ``history`` and the record
-        (`replay`) keep the values of the contractions. 0 (default): none.
-    preset: a named set of the options above (`qemjax._presets`), filling those left at their defaults
-        (a keyword given with another value wins): ``'accurate'`` = memoryless with ``memory_weight=0.3``,
-        ``placement='rank'`` (looser limits), ``area_power=0.6``, ``boundary_weight=10``, ``refit=1``: rms
-        and Hausdorff distance at or below the best peer's on most shared meshes, at 1.3–6.5× the time. None
-        (default): the options as given. A keyword passed with its default value counts as not given.
+        with seams, which hold vertices in place, only when asked for by name, or UVs when a texture is
+        given: one warning names them), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, None
+        (positions only; what is dropped is named in a warning), or a `qemjax.Attributes` that also sets
+        their weights in the cost and the texture. Kept ones come back as ``res.uv`` / ``res.colors`` /
+        ``res.normals``; a contraction that would move a seam vertex off its seam or merge wedges of
+        different charts is refused (``stats['rejected_by']['seam']``). Only `qemjax.QEM` keeps attributes
+        (others warn and drop).
+    feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
+    progress: show a progress bar (tqdm).
+    settings: any field of the method, `Topology` or `Attributes` by its name (``boundary_weight=10``,
+        ``flip_angle=None``, ``attribute_weights=0.1``) or dotted (``**{"method.refit": 0}``); each
+        replaces that field of the object given (so ``method="accurate", refit=0`` is the preset without
+        its re-fit). ``preset=NAME`` is ``method=NAME``. README, "Settings as objects", lists where each
+        of the flat keywords of qemjax 0.1 lives.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
-    reason but the parity of a closed mesh. Raises ValueError for bad input or options.
+    reason but the parity of a closed mesh. Raises ValueError for bad input or options, TypeError for an
+    unknown setting.
     """
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
-    setup = _setup_with_preset(preset, dict(
-        method=method, scheduler=scheduler, placement=placement, boundary_weight=boundary_weight,
-        area_weighted=area_weighted, area_power=area_power, pair_threshold=pair_threshold,
-        preserve_topology=preserve_topology, flip_angle=flip_angle, weld=weld, progress=progress, prune=prune,
-        regularize=regularize, area_weight=area_weight, schedule=schedule, curvature_weight=curvature_weight,
-        split_factor=split_factor, attributes=attributes, attribute_weights=attribute_weights, texture=texture,
-        memoryless=memoryless, volume_weight=volume_weight, memory_weight=memory_weight, refit=refit))
+    setup = _setup(method, scheduler, topology, attributes, progress, settings)
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     geo = _geometry(mesh, setup, stacklevel=3)
     job = _job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3)
@@ -243,11 +166,14 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     geos, states, jobs, out = {}, {}, [], [None] * len(cells)
     for i, (mesh, cfg) in enumerate(cells):
         try:
-            unknown = sorted(set(cfg) - set(_DEFAULTS) | ({"progress"} & set(cfg)))
-            if unknown:
-                raise ValueError(f"simplify_batch: unknown or unsupported keywords {unknown}")
-            kw = {**_DEFAULTS, **cfg}
-            setup = _setup_with_preset(kw["preset"], {k: kw[k] for k in _SETUP_KEYS})
+            if "progress" in cfg:
+                raise ValueError("simplify_batch: progress is not offered here (a sweep shows its own bar)")
+            kw = {**_RUN_DEFAULTS, **{k: v for k, v in cfg.items() if k in _RUN_DEFAULTS}}
+            try:
+                setup = _setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False,
+                               {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS})
+            except TypeError as exc:
+                raise ValueError(f"simplify_batch: {exc}") from None
             _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
@@ -330,24 +256,28 @@ def _model_key(model):
 
 @dataclasses.dataclass(frozen=True)
 class Setup:
-    """A run's options, checked and resolved before the mesh is read (`_setup`)."""
+    """A run's settings, checked and resolved before the mesh is read (`_setup`): the method object and
+    its name, the scheduler and its `Schedule`, the model it prices with (`_costs.build`), `Topology`,
+    `Attributes` (with the checked weights per kind) and whether to show progress."""
 
+    method_obj: Any
     method: str
     scheduler: str
-    model: Any
     schedule: Schedule
-    cos_max: float
-    pair_threshold: float
-    preserve_topology: bool | None
-    weld: bool
-    prune: bool
+    model: Any
+    topology: Topology
+    attribute_options: Attributes
+    kind_weights: Any
     progress: bool
-    settings: dict = dataclasses.field(default_factory=dict)  # what built the model (`_costs.build`)
-    terms: dict = dataclasses.field(default_factory=dict)
-    attributes: Any = "auto"
-    kind_weights: Any = None  # `_wedges.check_weights` of attribute_weights
-    texture: Any = None
-    refit: int = 0  # rounds of `_refit.refit` after simplifying
+
+    cos_max = property(lambda self: self.topology.cos_max)
+    pair_threshold = property(lambda self: float(self.topology.pair_threshold))
+    preserve_topology = property(lambda self: self.topology.manifold)
+    weld = property(lambda self: self.topology.weld)
+    prune = property(lambda self: self.topology.prune)
+    attributes = property(lambda self: self.attribute_options.attributes)
+    texture = property(lambda self: self.attribute_options.texture)
+    refit = property(lambda self: int(self.method_obj.refit))
 
     @property
     def split(self):
@@ -391,68 +321,20 @@ class Job(NamedTuple):
     tracker: Any = None
 
 
-_DEFAULTS = {k: p.default for k, p in inspect.signature(simplify).parameters.items() if k != "mesh"}
-_SETUP_KEYS = ("method", "scheduler", "placement", "boundary_weight", "area_weighted", "area_power",
-               "pair_threshold", "preserve_topology", "flip_angle", "weld", "progress", "prune", "regularize",
-               "area_weight", "schedule", "curvature_weight", "split_factor", "attributes", "attribute_weights",
-               "texture", "memoryless", "volume_weight", "memory_weight", "refit")
+_RUN_DEFAULTS = {k: p.default for k, p in inspect.signature(simplify).parameters.items()
+                 if p.kind is p.KEYWORD_ONLY and k != "progress"}
 
 
-def _setup_with_preset(preset, kw: dict) -> Setup:
-    """`_setup` of the keywords ``kw`` (_SETUP_KEYS) with ``preset`` applied (`_presets.apply`)."""
-    kw, fields = _presets.apply(preset, kw, _DEFAULTS)
-    return _setup(**kw, model_fields=fields)
-
-
-def _setup(*, method, scheduler, placement, boundary_weight, area_weighted, area_power, pair_threshold,
-           preserve_topology, flip_angle, weld, progress, prune, regularize, area_weight, schedule,
-           curvature_weight, split_factor, attributes="auto", attribute_weights=None, texture=None,
-           memoryless=False, volume_weight=0.0, memory_weight=0.0, refit=0, model_fields=None) -> Setup:
-    """Check every option that does not need the mesh; ValueError naming the bad one. ``model_fields``:
-    settings of the cost model that have no keyword (a preset's)."""
-    if scheduler not in SCHEDULERS:
-        raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS}")
-    boundary_weight = _real("boundary_weight", boundary_weight)
-    pair_threshold = _real("pair_threshold", pair_threshold)
-    flip_angle = None if flip_angle is None else _real("flip_angle", flip_angle)
-    area_weighted, weld = _flag("area_weighted", area_weighted), _flag("weld", weld)
-    progress, prune = _flag("progress", progress), _flag("prune", prune)
-    memoryless = _flag("memoryless", memoryless)
-    if preserve_topology is not None:
-        preserve_topology = _flag("preserve_topology", preserve_topology)
-    if not (boundary_weight >= 0 and math.isfinite(boundary_weight)):
-        raise ValueError(f"boundary_weight must be finite and >= 0, got {boundary_weight}")
-    settings = dict(placement=placement, area_weighted=area_weighted,
-                    area_power=_real("area_power", area_power), boundary_weight=boundary_weight,
-                    curvature_weight=_real("curvature_weight", curvature_weight),
-                    split_factor=split_factor if split_factor is None else _real("split_factor", split_factor),
-                    memoryless=memoryless, volume_weight=_real("volume_weight", volume_weight),
-                    memory_weight=_real("memory_weight", memory_weight), **(model_fields or {}))
-    terms = dict(regularize=regularize, area_weight=_real("area_weight", area_weight))
-    model = _costs.build(method, settings, terms)
-    if (memoryless or volume_weight or memory_weight) and not getattr(model, "memoryless", False):
-        raise ValueError("memoryless=True (and volume_weight, memory_weight, which need it) works with "
-                         f"method='qem' only, not with {method!r} or with regularize / area_weight")
-    kind_weights = _wedges.check_weights(attribute_weights)
-    if schedule is None:
-        schedule = Schedule()
-    elif not isinstance(schedule, Schedule):
-        raise ValueError(f"schedule must be a qemjax.Schedule, got {type(schedule).__name__}")
-    if flip_angle is not None and not (0 < flip_angle <= 180):
-        raise ValueError(f"flip_angle must be in (0, 180] degrees or None, got {flip_angle}")
-
-    if not (pair_threshold >= 0 and math.isfinite(pair_threshold)):
-        raise ValueError(f"pair_threshold must be a finite distance >= 0, got {pair_threshold}")
-    if preserve_topology is None:
-        preserve_topology = pair_threshold == 0
-    elif preserve_topology and pair_threshold > 0:
-        raise ValueError("pair_threshold > 0 joins separate parts, which changes topology: "
-                         "use preserve_topology=False (the default when pair_threshold > 0)")
-    if isinstance(refit, (bool, np.bool_)) or not isinstance(refit, (int, np.integer)) or refit < 0:
-        raise ValueError(f"refit must be an integer >= 0 (rounds), got {refit!r}")
-    cos_max = -2.0 if flip_angle is None else float(np.cos(np.radians(flip_angle)))
-    return Setup(method, scheduler, model, schedule, cos_max, pair_threshold, preserve_topology, weld, prune,
-                 progress, settings, terms, attributes, kind_weights, texture, int(refit))
+def _setup(method, scheduler, topology, attributes, progress, settings: dict) -> Setup:
+    """Check every setting that does not need the mesh (`_flat.apply` folds settings given by name into
+    the objects); ValueError naming the bad one, TypeError for an unknown name."""
+    settings = dict(settings)
+    sched_name, schedule = _flat.scheduler_of(scheduler, settings.pop("schedule", None))
+    method_obj, topology, attrs = _flat.apply(method, topology, attributes, settings)
+    model = _costs.build(method_obj)
+    kind_weights = _wedges.check_weights(attrs.attribute_weights)
+    return Setup(method_obj, _costs.name_of(method_obj), sched_name, schedule, model, topology, attrs,
+                 kind_weights, _flag("progress", progress))
 
 
 def _geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
@@ -485,8 +367,7 @@ def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_er
     if attrs is not None:
         channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
         if np.any(channel_weights > 0):  # the cost model over positions and attributes (`_costs.attributes`)
-            model = _costs.build(setup.method, setup.settings, setup.terms,
-                                 weights=np.maximum(channel_weights, 1e-30))
+            model = _costs.build(setup.method_obj, weights=np.maximum(channel_weights, 1e-30))
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
     if attrs is not None and attrs.has_seams():  # seams are constrained like boundaries: feature-edge planes

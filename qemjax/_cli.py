@@ -3,8 +3,9 @@
 ``qemjax sweep CONFIG [--out PATH]``, ``qemjax demo [--out PATH]``, ``qemjax examples [FOLDER]`` and
 ``qemjax --version``.
 
-The options of `qemjax.simplify` are generated from its signature (name, default, type) and its
-docstring (help), with the per-option details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
+The options are generated from `qemjax.simplify`'s run keywords and from the fields of the methods,
+`Topology` and `Attributes` (`_flat.options`: names, real types, defaults), with help from their
+docstrings and the presentation details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
 the command line another way. Errors are one line on stderr and exit code 2 (argparse's with one hint
 line naming the --help to read); warnings are one line ``qemjax: warning: …``; Ctrl-C prints ``qemjax:
 interrupted`` and exits with 130. The output format and folder are checked before simplifying, and the
@@ -20,55 +21,49 @@ import inspect
 import os
 import re
 import sys
+import typing
 import warnings
 
 import numpy as np
 
-from . import _api, _cache, _presets
+from . import _api, _cache, _costs, _flat
 from ._lod import RATIOS
 
-# Keywords of `simplify` with how the command line takes them (argparse settings); the flag is
-# --keyword-with-dashes, the default the library's own (options not given are not passed on).
+# How the command line shows some options (choices, metavar, help beyond the docstrings, the default as
+# shown). Which options exist and their types come from `simplify`'s run keywords and from the fields of
+# the methods, `Topology` and `Attributes` (`_flat.options`): a field added to a method is an option here
+# with no edit. The flag is --name-with-dashes; options not given are not passed on.
 OPTIONS = {
-    "method": dict(choices=_api.methods()),
-    "scheduler": dict(choices=_api.SCHEDULERS),
-    "placement": dict(choices=_api.PLACEMENTS),
-    "boundary_weight": dict(type=float, metavar="W"),
-    "area_weighted": dict(action=argparse.BooleanOptionalAction),
-    "area_power": dict(type=float, metavar="P"),
+    "method": dict(choices=_api.methods,  # called: methods registered later are included
+                   help="the cost model by name (qemjax.methods()); its settings are the options below "
+                        "(--boundary-weight, --curvature-weight, ...): each given one replaces that field"),
+    "scheduler": dict(choices=lambda: _api.SCHEDULERS,
+                      help="'parallel': rounds of many non-interacting contractions; 'greedy': the "
+                           "paper's priority queue, one contraction at a time"),
+    "placement": dict(choices=lambda: _api.PLACEMENTS),
     "feature_edges": dict(metavar="FILE", help="vertex-index pairs (k,2) constrained like boundary edges, "
                           "read from FILE: .npy, or text with two integers per line (indices of the input "
                           "after welding and dropping unused vertices)", shown="none"),
-    "pair_threshold": dict(type=float, metavar="T"),
-    "preserve_topology": dict(action=argparse.BooleanOptionalAction,
-                              shown="on; off with --pair-threshold > 0"),
-    "flip_angle": dict(type=str, metavar="DEG", help="forbid contractions that turn a face's normal by DEG "
+    "preserve_topology": dict(shown="on; off with --pair-threshold > 0"),
+    "flip_angle": dict(metavar="DEG", help="forbid contractions that turn a face's normal by DEG "
                        "degrees or more; 'none' allows flips"),
-    "weld": dict(action=argparse.BooleanOptionalAction),
-    "regularize": dict(type=float, metavar="LAMBDA"),
-    "area_weight": dict(type=float, metavar="LAMBDA"),
-    "prune": dict(action=argparse.BooleanOptionalAction),
-    "curvature_weight": dict(type=float, metavar="A"),
-    "split_factor": dict(type=str, metavar="B", help="with --method esqem, split edges longer than B × the "
+    "split_factor": dict(metavar="B", help="with --method esqem, split edges longer than B × the "
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),
-    "attributes": dict(type=str, metavar="KINDS", help="appearance attributes to keep, seams held: 'auto' "
+    "attributes": dict(metavar="KINDS", help="appearance attributes to keep, seams held: 'auto' "
                        "(the kinds the input carries without seams; UVs too with --texture), 'none', or a comma "
                        "list of uv, color, normal"),
-    "attribute_weights": dict(type=str, metavar="W", help="weight of the attributes in the cost: one number, "
+    "attribute_weights": dict(metavar="W", help="weight of the attributes in the cost: one number, "
                               "or kind=W pairs separated by commas (uv=0.1,color=0.03); 0: positions-only cost, "
                               "attributes interpolated", shown="uv=0.03,color=0,normal=0"),
     "texture": dict(metavar="IMAGE", help="the texture image of the input's UVs (for an OBJ without mtllib); "
                     "written beside an OBJ output and packed into a GLB", shown="none"),
-    "memoryless": dict(action=argparse.BooleanOptionalAction),
-    "volume_weight": dict(type=float, metavar="LAMBDA"),
-    "memory_weight": dict(type=float, metavar="MU"),
-    "refit": dict(type=int, metavar="N"),
-    "preset": dict(choices=tuple(_presets.PRESETS), shown="none"),
+    "preset": dict(choices=lambda: tuple(_costs.PRESETS), shown="none",
+                   help="a named method configuration (the same as --method NAME)"),
 }
 TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
-               "schedule": "library only: a qemjax.Schedule of the parallel scheduler's tunables"}
+               "topology": "its fields are options of their own (--flip-angle, --weld, ...)"}
 FORMATS = ("obj", "ply", "stl", "off", "glb", "gltf")
 # options of `simplify` that `qemjax lod` refuses (hidden from its --help): its levels carry positions only
 LOD_REFUSED = ("attributes", "attribute_weights", "texture")
@@ -92,7 +87,8 @@ class _Parser(argparse.ArgumentParser):
 
 def _doc_help(name: str) -> str:
     """The first sentence of ``name``'s entry in simplify's docstring ('' if absent), %-escaped."""
-    doc = inspect.getdoc(_api.simplify) or ""
+    doc = "\n".join(inspect.getdoc(x) or "" for x in (_api.simplify, *_flat.GROUPS.values(),
+                                                       *_costs.REGISTRY.values(), _costs.base.Method))
     m = re.search(rf"^(?:\w+ / )*{name}(?: / \w+)*: (.*?)(?=^\S|\Z)", doc, re.M | re.S)
     if not m:
         return ""
@@ -106,20 +102,41 @@ def _doc_help(name: str) -> str:
     return text.replace("%", "%%")
 
 
+def _cli_options() -> dict:
+    """name → (type, default) of every option: `simplify`'s run keywords but the targets and NOT_EXPOSED,
+    then every setting of `_flat.options` (the fields' real types), then ``preset``."""
+    run = {name: (object if name in ("method", "scheduler", "attributes", "feature_edges") else bool, p.default)
+           for name, p in inspect.signature(_api.simplify).parameters.items()
+           if p.kind is p.KEYWORD_ONLY and name not in TARGETS and name not in NOT_EXPOSED}
+    flat = {name: (o.type, o.default) for name, o in _flat.options().items() if name not in run}
+    return {**run, **flat, "preset": (object, None)}
+
+
+def _kind(hint):
+    """(base type, whether None is allowed) of a field's type: ``float | None`` -> (float, True)."""
+    args = typing.get_args(hint)
+    if args and type(None) in args:
+        rest = [a for a in args if a is not type(None)]
+        return (rest[0] if len(rest) == 1 else object), True
+    return hint, False
+
+
 def _add_options(p: argparse.ArgumentParser, hidden=()):
-    """Every keyword of `simplify` with a default value, except the targets and NOT_EXPOSED; those in
-    ``hidden`` are parsed but left out of the help (the command refuses them with its reason)."""
-    for name, param in inspect.signature(_api.simplify).parameters.items():
-        if name in TARGETS or name in NOT_EXPOSED:
-            continue
-        spec = dict(OPTIONS.get(name, {}))  # a keyword missing there gets settings from its default
-        if isinstance(param.default, bool):
-            spec.setdefault("action", argparse.BooleanOptionalAction)
-        elif isinstance(param.default, (int, float)) and "action" not in spec:
-            spec.setdefault("type", float)
+    """Every option of `_cli_options`; those in ``hidden`` are parsed but left out of the help (the
+    command refuses them with its reason). Booleans are --x / --no-x; numbers that may be None take 'none'."""
+    for name, (hint, default) in _cli_options().items():
+        spec = dict(OPTIONS.get(name, {}))
+        if callable(spec.get("choices")):
+            spec["choices"] = spec["choices"]()
+        kind, optional = _kind(hint)
+        if kind is bool:
+            spec["action"] = argparse.BooleanOptionalAction
+        elif kind in (int, float) and not optional:
+            spec.setdefault("type", kind)
+            spec.setdefault("metavar", "N" if kind is int else "X")
         if "help" not in spec:
             spec["help"] = _doc_help(name)
-        spec["help"] += f" (default: {spec.pop('shown', param.default)})"
+        spec["help"] += f" (default: {spec.pop('shown', default)})"
         if name in hidden:
             spec["help"] = argparse.SUPPRESS
         p.add_argument("--" + name.replace("_", "-"), dest=name, default=argparse.SUPPRESS, **spec)
@@ -176,15 +193,17 @@ def _number_or_none(flag: str, text: str):
 
 
 def _simplify_kwargs(args) -> dict:
-    """The options given on the command line, as keywords of `simplify`."""
-    kw = {name: getattr(args, name) for name in inspect.signature(_api.simplify).parameters
-          if name not in NOT_EXPOSED and hasattr(args, name) and getattr(args, name) is not None}
+    """The options given on the command line, as keywords of `simplify` (settings by their flat names)."""
+    kw = {name: getattr(args, name) for name in TARGETS if getattr(args, name, None) is not None}
+    for name, (hint, _) in _cli_options().items():
+        if not hasattr(args, name) or getattr(args, name) is None:
+            continue
+        value, (kind, optional) = getattr(args, name), _kind(hint)
+        if optional and kind in (int, float):
+            value = _number_or_none("--" + name.replace("_", "-"), value)
+        kw[name] = value
     if "feature_edges" in kw:
         kw["feature_edges"] = _read_feature_edges(kw["feature_edges"])
-    if "flip_angle" in kw:
-        kw["flip_angle"] = _number_or_none("--flip-angle", kw["flip_angle"])
-    if "split_factor" in kw:
-        kw["split_factor"] = _number_or_none("--split-factor", kw["split_factor"])
     if "attribute_weights" in kw:
         kw["attribute_weights"] = _attribute_weights(kw["attribute_weights"])
     if "attributes" in kw:

@@ -49,6 +49,85 @@ class Schedule:
                 raise ValueError(f"Schedule.{name} must be a positive integer, got {v!r}")
 
 
+def _number(owner: str, name: str, x) -> float:
+    """x as a float; ValueError naming ``owner.name`` unless x is a real number (bools are refused)."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{owner}.{name} must be a number, got {x!r}")
+    return float(x)
+
+
+def _bool(owner: str, name: str, x) -> None:
+    if not isinstance(x, (bool, np.bool_)):
+        raise ValueError(f"{owner}.{name} must be True or False, got {x!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Topology:
+    """What a run may do to the mesh's topology, and how the input is cleaned (``simplify(topology=...)``).
+
+    preserve_topology: forbid contractions that break the link condition or make faces coincide (keeps a
+        manifold's genus and boundary loops). None (default): True when pair_threshold is 0, else False.
+        With False, contractions may create non-manifold edges, and coincident faces are dropped
+        (opposite ones cancel, so small parts can vanish), as in Garland & Heckbert's paper.
+    prune: with preserve_topology, let small separate parts vanish (their last faces may contract away);
+        False (default): every part keeps at least one face.
+    pair_threshold: t in mesh units; besides edges, any two vertices within distance t may contract
+        (Garland–Heckbert's aggregation: separate parts can join). 0 = edge contraction only.
+    flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or more
+        (90: any sign flip or collapse to zero area); None allows flips.
+    weld: merge vertices with identical coordinates first (G&H need shared corners).
+    """
+
+    preserve_topology: bool | None = None
+    prune: bool = False
+    pair_threshold: float = 0.0
+    flip_angle: float | None = 90.0
+    weld: bool = True
+
+    def __post_init__(self):
+        _bool("Topology", "prune", self.prune)
+        _bool("Topology", "weld", self.weld)
+        if self.preserve_topology is not None:
+            _bool("Topology", "preserve_topology", self.preserve_topology)
+        t = _number("Topology", "pair_threshold", self.pair_threshold)
+        if not (t >= 0 and np.isfinite(t)):
+            raise ValueError(f"pair_threshold must be a finite distance >= 0, got {self.pair_threshold}")
+        if self.preserve_topology and t > 0:
+            raise ValueError("pair_threshold > 0 joins separate parts, which changes topology: "
+                             "use preserve_topology=False (the default when pair_threshold > 0)")
+        if self.flip_angle is not None:
+            a = _number("Topology", "flip_angle", self.flip_angle)
+            if not 0 < a <= 180:
+                raise ValueError(f"flip_angle must be in (0, 180] degrees or None, got {self.flip_angle}")
+
+    @property
+    def manifold(self) -> bool:
+        """preserve_topology as the run applies it (None resolved)."""
+        return self.pair_threshold == 0 if self.preserve_topology is None else bool(self.preserve_topology)
+
+    @property
+    def cos_max(self) -> float:
+        """The cosine of the flip angle (-2: flips allowed)."""
+        return -2.0 if self.flip_angle is None else float(np.cos(np.radians(self.flip_angle)))
+
+
+@dataclasses.dataclass(frozen=True)
+class Attributes:
+    """Which appearance attributes a run carries through, and how they weigh (``simplify(attributes=...)``;
+    README, "Appearance attributes").
+
+    attributes: ``'auto'`` (each kind the input carries without seams; a seamed kind only when named),
+        ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, or None (positions only).
+    attribute_weights: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
+        (``qemjax._wedges.DEFAULT_WEIGHTS``).
+    texture: a path or PIL image: the texture of the UVs (for a file that names no material).
+    """
+
+    attributes: object = "auto"
+    attribute_weights: object = None
+    texture: object = None
+
+
 @dataclasses.dataclass(frozen=True)
 class Options:
     """Resolved options of one run, in internal units (coordinates normalised to unit extent).

@@ -22,14 +22,23 @@ from typing import Any
 
 import numpy as np
 
-from . import _io, shapes
+from . import _costs, _flat, _io, shapes
+from ._costs.base import Method
 from ._api import simplify, simplify_cells
-from ._options import Schedule
+from ._options import Attributes, Schedule, Topology
 
-# keywords a grid may not vary: the target is `targets`, progress is the sweep's own, feature edges are
-# per-mesh index arrays (not a scalar setting)
-_NOT_IN_GRID = ("mesh", "target_faces", "ratio", "progress", "feature_edges")
-GRID_KEYS = tuple(k for k in inspect.signature(simplify).parameters if k not in _NOT_IN_GRID)
+# a grid varies the run keywords of `simplify` and every setting by its flat or dotted name
+# (`_flat.grid_keys`); not the target (that is `targets`), progress (the sweep's own) or feature edges
+# (per-mesh index arrays, not a setting)
+
+
+def is_grid_key(key: str) -> bool:
+    """Whether a grid may vary ``key``: a run keyword, a setting's flat name or a dotted field name."""
+    try:
+        _flat.key_type(key)
+    except KeyError:
+        return False
+    return True
 BATCH_FACES = 4_000_000  # a batch holds at most this many faces in all (its copies' memory)
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
@@ -56,8 +65,11 @@ class Cell:
 
 
 def _plain(value):
-    """A grid value as JSON/table data: Schedules (frozen dataclasses) by their repr."""
-    if isinstance(value, Schedule):
+    """A grid value as JSON/table data: a method object by its label (``esqem(curvature_weight=0.1)``),
+    Schedules, Topology and Attributes objects (frozen dataclasses) by their repr."""
+    if isinstance(value, Method):
+        return value.label()
+    if isinstance(value, (Schedule, Topology, Attributes)):
         return repr(value)
     if isinstance(value, np.generic):
         return value.item()
@@ -110,20 +122,51 @@ def name_meshes(meshes) -> dict[str, Any]:
 
 def expand_grid(grid: dict) -> list[tuple[tuple[str, Any], ...]]:
     """The cross product of ``grid`` (keyword → list of values; a non-list value is one value), in
-    order: the last key varies fastest. Unknown keywords raise ValueError naming them."""
+    order: the last key varies fastest; a method setting is left out of the cells whose method does not
+    have it (`_applicable`), and cells that are then alike are kept once. Unknown keywords raise
+    ValueError naming them."""
     if not isinstance(grid, dict):
         raise ValueError(f"grid must be a dict of simplify keywords → lists of values, got {type(grid).__name__}")
-    unknown = [k for k in grid if k not in GRID_KEYS]
+    unknown = [k for k in grid if not is_grid_key(k)]
     if unknown:
         why = "; targets go in `targets`" if set(unknown) & {"target_faces", "ratio"} else ""
-        raise ValueError(f"unknown grid keys {unknown}{why}; a grid may vary {list(GRID_KEYS)}")
+        raise ValueError(f"unknown grid keys {unknown}{why}; a grid may vary {list(_flat.grid_keys())} "
+                         "or a field by its dotted name ('method.curvature_weight')")
     axes = []
     for k, values in grid.items():
         values = list(values) if isinstance(values, (list, tuple, range, np.ndarray)) else [values]
         if not values:
             raise ValueError(f"grid[{k!r}] is empty")
         axes.append([(k, v) for v in values])
-    return [tuple(combo) for combo in itertools.product(*axes)]
+    out, seen = [], set()
+    for combo in itertools.product(*axes):
+        combo = _applicable(combo)
+        key = json.dumps([(k, _plain(v)) for k, v in combo], default=repr)
+        if key not in seen:  # crossing a method without a setting with that setting's values: once
+            seen.add(key)
+            out.append(combo)
+    return out
+
+
+def _applicable(combo: tuple) -> tuple:
+    """A cell's parameters without the method settings its method does not have (a grid that crosses
+    ``method = ["qem", "esqem"]`` with ``split_factor`` gives the qem cells no split factor: NaN in the
+    table, and one cell instead of one per value). Settings the method has, and the rest, stay."""
+    params = dict(combo)
+    table = _flat.options()
+    try:
+        method = _costs.resolve(params.get("method", params.get("preset") or "qem"))
+    except ValueError:
+        return combo  # simplify reports the bad method, per cell
+    have = {f.name for f in dataclasses.fields(method)}
+
+    def applies(key: str) -> bool:
+        group, dot, field = key.partition(".")
+        if dot:
+            return group != "method" or field in have
+        return key not in table or table[key].group != "method" or key in have
+
+    return tuple((k, v) for k, v in combo if applies(k))
 
 
 def check_targets(targets) -> list[float | int]:

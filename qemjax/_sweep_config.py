@@ -12,10 +12,11 @@ import dataclasses
 import inspect
 import numbers
 import os
+import typing
 from pathlib import Path
 from typing import Any
 
-from . import _api, _sweep, shapes
+from . import _api, _flat, _sweep, shapes
 from ._api import simplify
 
 KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
@@ -134,12 +135,14 @@ _CHOICES = {"method": _api.methods, "scheduler": lambda: _api.SCHEDULERS, "place
 
 
 def _allowed(key: str) -> set[str]:
-    """The type names a grid key takes, from simplify's annotation (e.g. 'float | None'); {'any'} for a
-    keyword without one (``attributes``, ``attribute_weights``: simplify checks their values)."""
-    ann = inspect.signature(simplify).parameters[key].annotation
-    if ann is inspect.Parameter.empty:
+    """The type names a grid key takes, from the real type of what it sets (`_flat.key_type`: e.g.
+    {'float', 'None'}); {'any'} for a key whose values simplify checks itself (``attributes``)."""
+    hint = _flat.key_type(key)
+    if hint is Any or hint is object:
         return {"any"}
-    return {t.strip() for t in str(ann).split("|")}
+    args = typing.get_args(hint) or (hint,)
+    return {"None" if a is type(None) else "any" if a in (Any, object) else getattr(a, "__name__", str(a))
+            for a in args}
 
 
 def _check_value(key: str, v, fail):
@@ -151,8 +154,13 @@ def _check_value(key: str, v, fail):
         return tuple(v) if isinstance(v, list) else v
     if (v is None or isinstance(v, str) and v.strip().lower() == "none") and "None" in allowed:
         return None  # YAML's null, or "none" (TOML has no null)
-    if "Schedule" in allowed:
-        fail(f"grid.{key}: a Schedule cannot be given in a config file; use qemjax.sweep from Python")
+    if "Schedule" in allowed or "Topology" in allowed:
+        fail(f"grid.{key}: a {key} object cannot be given in a config file; vary its fields by name "
+             f"(grid.flip_angle, grid.\"topology.weld\") or use qemjax.sweep from Python")
+    if "any" in allowed:
+        if isinstance(v, str) and v.strip().lower() == "none":
+            return None
+        return tuple(v) if isinstance(v, list) else v
     if "bool" in allowed and isinstance(v, bool):
         return v
     if "int" in allowed and isinstance(v, numbers.Integral) and not isinstance(v, bool):
@@ -172,9 +180,10 @@ def _check_value(key: str, v, fail):
 def _grid(value, fail) -> dict[str, list]:
     if not isinstance(value, dict):
         fail(f"grid must be a table of simplify keywords = lists of values, got {type(value).__name__}")
-    unknown = [k for k in value if k not in _sweep.GRID_KEYS]
+    unknown = [k for k in value if not _sweep.is_grid_key(k)]
     if unknown:
-        fail(f"unknown grid key {unknown[0]!r}; a grid may vary {', '.join(_sweep.GRID_KEYS)}"
+        fail(f"unknown grid key {unknown[0]!r}; a grid may vary {', '.join(_flat.grid_keys())} "
+             "(or a field by its dotted name: \"method.curvature_weight\")"
              + ("; targets go in 'targets'" if unknown[0] in ("ratio", "target_faces") else ""))
     grid = {}
     for key, values in value.items():

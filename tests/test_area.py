@@ -143,7 +143,7 @@ def test_float32_kernel_on_a_mesh_matches_float64_and_the_wide_ring_path():
         out = np.asarray(area._price(VS, P, params, rg.corners, rg.mask))
         wide = ring.Rings(np.concatenate([rg.corners, np.full((len(P), 200, 3), len(V), np.int32)], 1),
                           np.concatenate([rg.mask, np.zeros((len(P), 200), bool)], 1))
-        host = area.Area().price(VS, P, params, wide)  # R > RING_CAP: the host path
+        host = area.AreaDifference().price(VS, P, params, wide)  # R > RING_CAP: the host path
         assert isinstance(host, np.ndarray)
         for k in range(len(P)):
             c = rg.corners[k][rg.mask[k]]
@@ -215,7 +215,7 @@ def test_area_weight_reorders_and_never_recompiles():
     VS = np.concatenate([VS[:, :3], np.zeros((len(VS), 10), np.float32)], 1)  # zero quadrics: Q = 0
     costs = []
     for lam in (10.0, 1000.0, 3.0):
-        model = _costs.build("qem", {}, {"area_weight": lam})
+        model = _costs.build(_costs.QEM(area_weight=lam))
         c0 = _compilation.snapshot()[0]
         costs.append(common.start_price(model, jnp.asarray(VS), E, model.kernel_params(), fl, len(V))().cost)
         if lam != 10.0:

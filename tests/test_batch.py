@@ -144,11 +144,11 @@ def test_bad_configurations_raise_or_are_returned():
 
 
 def test_batchable_models():
-    from qemjax._costs import ESQEM, QEM, Area, AreaTerm, Regularized
+    from qemjax._costs import ESQEM, QEM, AreaDifference, AreaTerm, Regularized
 
     assert batched.batchable(QEM()) and batched.batchable(Regularized(QEM(), 0.1))
     assert batched.batchable(AreaTerm(QEM(), 0.5))
-    assert not batched.batchable(ESQEM()) and not batched.batchable(Area())
+    assert not batched.batchable(ESQEM()) and not batched.batchable(AreaDifference())
 
 
 def two_spheres():

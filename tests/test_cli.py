@@ -159,15 +159,20 @@ def _simplify_actions():
     return {a.dest: a for a in sub.choices["simplify"]._actions}
 
 
-def test_every_simplify_keyword_is_reachable_or_listed():
-    """Each keyword of qemjax.simplify is an option of `qemjax simplify`, or named in NOT_EXPOSED."""
-    keywords = set(inspect.signature(qemjax.simplify).parameters)
-    deliberate = set(_cli.OPTIONS) | set(_cli.TARGETS) | set(_cli.NOT_EXPOSED)
-    assert keywords == deliberate, f"not in the CLI tables: {keywords - deliberate}; stale: {deliberate - keywords}"
+def test_every_simplify_keyword_and_setting_is_reachable_or_listed():
+    """Each run keyword of qemjax.simplify and each field of the methods, Topology and Attributes is an
+    option of `qemjax simplify` (with help), or named in NOT_EXPOSED."""
+    import inspect as _inspect
+
+    from qemjax import _flat
+
+    params = _inspect.signature(qemjax.simplify).parameters
+    keywords = {k for k, p in params.items() if p.kind is not p.VAR_KEYWORD}
     actions = _simplify_actions()
-    for name in set(_cli.OPTIONS) | set(_cli.TARGETS):
+    for name in (keywords | set(_flat.options())) - set(_cli.NOT_EXPOSED):
         assert name in actions, f"--{name.replace('_', '-')} missing"
         assert actions[name].help, f"--{name.replace('_', '-')} has no help"
+    assert set(_cli.OPTIONS) <= set(actions), f"stale OPTIONS: {set(_cli.OPTIONS) - set(actions)}"
 
 
 def test_options_reach_simplify(src, tmp_path, monkeypatch):
@@ -246,7 +251,7 @@ targets = [0.5, 60]
 out = "table.parquet"
 [grid]
 boundary_weight = [0, 1.0]
-split_factor = ["none"]
+flip_angle = ["none"]
 [metrics]
 n_samples = 500
 """
@@ -254,7 +259,7 @@ SWEEP_YAML = """
 meshes: [sheet.ply, ball.ply]
 targets: [0.5, 60]
 out: table.parquet
-grid: {boundary_weight: [0, 1.0], split_factor: [null]}
+grid: {boundary_weight: [0, 1.0], flip_angle: [null]}
 metrics: {n_samples: 500}
 """
 TIMES = ["compile_s", "run_s", "total_s", "cell_s", "time_s"]  # wall times differ between two runs
@@ -278,7 +283,7 @@ def test_sweep_command_writes_the_sweep_table(sweep_dir, name, text, capsys):
     assert f"8 cells (0 failed) -> {sweep_dir / 'table.parquet'}" in capsys.readouterr().out
     got = pd.read_parquet(sweep_dir / "table.parquet")
     paths = [str(sweep_dir / "sheet.ply"), str(sweep_dir / "ball.ply")]
-    want = qemjax.sweep(paths, {"boundary_weight": [0.0, 1.0], "split_factor": [None]}, [0.5, 60],
+    want = qemjax.sweep(paths, {"boundary_weight": [0.0, 1.0], "flip_angle": [None]}, [0.5, 60],
                         metrics={"n_samples": 500}, progress=False)
     assert len(got) == 8 and got["result_sha256"].nunique() > 4
     pd.testing.assert_frame_equal(got.drop(columns=TIMES), want.drop(columns=TIMES), check_dtype=False)
@@ -442,12 +447,12 @@ def test_summary_names_each_methods_unit(src, tmp_path, capsys):
     """max error is a squared distance for qem/esqem, an area change for --method area."""
     from qemjax import _costs
 
-    assert _costs.build("qem", {}, {}).error_unit == "squared distance, mesh units²"
-    assert _costs.build("esqem", {}, {}).error_unit == "squared distance, mesh units²"
-    assert _costs.build("area", {}, {}).error_unit == "surface-area change, mesh units²"
-    assert _costs.build("qem", {}, {}, weights=[1.0, 1.0]).error_unit == \
+    assert _costs.build(_costs.QEM()).error_unit == "squared distance, mesh units²"
+    assert _costs.build(_costs.ESQEM()).error_unit == "squared distance, mesh units²"
+    assert _costs.build(_costs.AreaDifference()).error_unit == "surface-area change, mesh units²"
+    assert _costs.build(_costs.QEM(), weights=[1.0, 1.0]).error_unit == \
         "squared distance plus weighted attribute deviation, mesh units²"
-    assert _costs.build("qem", {}, {"regularize": 0.5}).error_unit == \
+    assert _costs.build(_costs.QEM(regularize=0.5)).error_unit == \
         "squared distance plus λ·shape term, mesh units²"
     assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--faces", "600", "--method", "area",
                       "--quiet"]) == 0

@@ -35,7 +35,7 @@ def _simplify(*args, **kw):
 # -- registry and options ------------------------------------------------------------------------------
 
 def test_methods_come_from_the_registry():
-    assert qemjax.methods() == tuple(_costs.REGISTRY) and "qem" in qemjax.methods()
+    assert qemjax.methods() == tuple(_costs.REGISTRY) + tuple(_costs.PRESETS) and "qem" in qemjax.methods()
     with pytest.raises(ValueError, match="unknown method 'nope'.*qem"):
         qemjax.simplify(shapes.icosphere(1), ratio=0.5, method="nope")
 

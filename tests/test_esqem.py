@@ -328,8 +328,9 @@ def test_split_factor_none_skips_splitting_and_qem_never_splits():
     mesh = shapes.bumpy_sphere(3)
     r = qemjax.simplify(mesh, target_faces=400, method="esqem", split_factor=None)
     assert "split" not in r.stats and len(r.faces) == 400
-    q = qemjax.simplify(mesh, target_faces=400, split_factor=2.0)  # not a QEM setting
-    assert "split" not in q.stats
+    assert "split" not in qemjax.simplify(mesh, target_faces=400).stats
+    with pytest.raises(ValueError, match="split_factor is not a setting of method 'qem'"):
+        qemjax.simplify(mesh, target_faces=400, split_factor=2.0)
 
 
 def test_bad_esqem_options():

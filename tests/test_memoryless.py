@@ -244,7 +244,7 @@ def test_new_numbers_do_not_recompile():
     (dict(volume_weight=1.0), "needs memoryless=True"),
     (dict(memory_weight=1.0), "needs memoryless=True"),
     (dict(memoryless=True, memory_weight=-0.5), "memory_weight must be finite"),
-    (dict(memoryless=True, method="area"), "method='qem' only"),
+    (dict(memoryless=True, method="area"), "memoryless is not a setting of method 'area'"),
     (dict(memoryless=True, method="esqem"), "method='qem' only"),
     (dict(memoryless=True, regularize=0.5), "method='qem' only"),
     (dict(memoryless=True, feature_edges=np.array([[0, 1]])), "feature"),

@@ -92,7 +92,10 @@ def test_toml_block_is_the_example_config():
 
 def test_python_blocks_run(tmp_path, monkeypatch, env):
     monkeypatch.chdir(tmp_path)
+    from qemjax import _costs
+
     namespace: dict = {"__name__": "__readme__"}
+    registered = dict(_costs.REGISTRY)  # a block registers a method: undone after
     try:
         for start, code in blocks("python"):
             if GLOBAL_JAX in code:
@@ -100,8 +103,11 @@ def test_python_blocks_run(tmp_path, monkeypatch, env):
                                       text=True, timeout=300)
                 assert done.returncode == 0, f"README.md line {start}:\n{done.stderr[-3000:]}"
                 continue
-            exec(compile("\n" * (start - 1) + code, str(README), "exec"), namespace)  # noqa: S102
+            # dont_inherit: run as a user's script (without this file's __future__ imports)
+            exec(compile("\n" * (start - 1) + code, str(README), "exec", dont_inherit=True), namespace)  # noqa: S102
     finally:
+        _costs.REGISTRY.clear()
+        _costs.REGISTRY.update(registered)
         for value in list(namespace.values()):  # a Dask client the blocks started: close it and its cluster
             if type(value).__module__.startswith("distributed") and hasattr(value, "close"):
                 cluster = getattr(value, "cluster", None)

@@ -1,7 +1,9 @@
 """Cost models, one module each, and the registry `simplify(method=...)` dispatches through.
 
-A new method is one module (a `CostModel` subclass) plus one line in REGISTRY. TERMS are wrappers that
-add a term to whichever model runs, switched on by their keyword of `simplify` (a non-zero value).
+A method is a frozen dataclass (`base.Method`) whose fields are all its settings; `simplify(method=...)`
+takes the object or its registered name. A new method is one module (a `Method` subclass) plus one call
+of `register` (``qemjax.register_method``). TERMS are wrappers that add a term to whichever method runs,
+switched on by the method's field of that name (a non-zero value).
 """
 from __future__ import annotations
 
@@ -10,7 +12,8 @@ import dataclasses
 from .base import CostModel as CostModel
 from .base import MeshInput as MeshInput
 from .base import MeshView as MeshView
-from .area import Area
+from .base import Method as Method
+from .area import AreaDifference
 from .attributes import AttributeQEM
 from .area_term import AreaTerm
 from .esqem import ESQEM
@@ -18,11 +21,16 @@ from .line import LineQEM
 from .qem import QEM
 from .regularize import Regularized
 
-REGISTRY: dict[str, type[CostModel]] = {
+REGISTRY: dict[str, type[Method]] = {
     "qem": QEM,
     "esqem": ESQEM,
-    "area": Area,
+    "area": AreaDifference,
     "line": LineQEM,
+}
+# named configurations of a method: ``method="accurate"`` is ``QEM.accurate()``
+PRESETS = {
+    "classic": QEM.classic,
+    "accurate": QEM.accurate,
 }
 TERMS = {
     "regularize": Regularized,
@@ -31,40 +39,67 @@ TERMS = {
 
 
 def methods() -> tuple[str, ...]:
-    """The names `simplify(method=...)` accepts."""
-    return tuple(REGISTRY)
+    """The names `simplify(method=...)` accepts: the registered methods, then the presets."""
+    return tuple(REGISTRY) + tuple(PRESETS)
 
 
-def register(cls: type[CostModel]) -> type[CostModel]:
-    """Add a model class under its ``name`` (usable as a class decorator). Refuses to replace one."""
-    if not cls.name or cls.name in REGISTRY:
-        raise ValueError(f"a cost model needs a new, non-empty name; got {cls.name!r}")
-    REGISTRY[cls.name] = cls
+def register(name, cls: type[Method] | None = None):
+    """Register a method class under ``name`` (``register(cls)`` or ``@register`` use ``cls.name``), so
+    ``simplify(method=name)`` means ``cls()``; its fields become sweep keys, config keys and command-line
+    options. Refuses a name already taken and a class that is not a frozen dataclass `Method`."""
+    if cls is None and isinstance(name, type):
+        name, cls = name.name, name
+    if not isinstance(cls, type) or not issubclass(cls, Method) or not dataclasses.is_dataclass(cls) \
+            or not cls.__dataclass_params__.frozen:
+        raise ValueError(f"a method must be a frozen dataclass subclass of qemjax.QEM (or another method), "
+                         f"got {cls!r}")
+    if not isinstance(name, str) or not name or name in REGISTRY or name in PRESETS:
+        raise ValueError(f"a method needs a new, non-empty name; got {name!r} (taken: {methods()})")
+    REGISTRY[name] = cls
     return cls
 
 
+def resolve(method) -> Method:
+    """The method object for ``method``: a name of `methods` (its defaults) or a method object (as is)."""
+    if isinstance(method, Method):
+        return method
+    if isinstance(method, str):
+        if method in REGISTRY:
+            return REGISTRY[method]()
+        if method in PRESETS:
+            return PRESETS[method]()
+    if isinstance(method, type) and issubclass(method, Method):
+        return method()
+    raise ValueError(f"unknown method {method!r}; choose from {methods()} or pass a method object "
+                     "such as qemjax.QEM(...)")
+
+
+def name_of(method: Method) -> str:
+    """The name a method object runs under: its class's registered name (a subclass made in a script and
+    not registered runs under its parent's)."""
+    for name, cls in REGISTRY.items():
+        if type(method) is cls:
+            return name
+    return method.name
+
+
 # a method's model over appearance attributes, built when `simplify` keeps attributes with a weight > 0
-WITH_ATTRIBUTES: dict[str, type[CostModel]] = {"qem": AttributeQEM}
+WITH_ATTRIBUTES: dict[type, type[CostModel]] = {QEM: AttributeQEM}
 
 
-def build(method: str, settings: dict, terms: dict, weights=None) -> CostModel:
-    """The model for ``method`` with the settings it has fields for (others are not its business), wrapped
-    by each term of TERMS whose value in ``terms`` is non-zero. ``weights``: per attribute channel (m,),
-    for the method's model over appearance attributes (`WITH_ATTRIBUTES`); None: positions only."""
-    if method not in REGISTRY:
-        raise ValueError(f"unknown method {method!r}; choose from {methods()}")
-    cls = REGISTRY[method]
+def build(method: Method, weights=None) -> CostModel:
+    """The cost model a run prices with: ``method`` itself, over appearance attributes when ``weights``
+    (per attribute channel (m,)) is given (`WITH_ATTRIBUTES`), wrapped by each term of TERMS whose field
+    is non-zero."""
+    model = method
     if weights is not None:
-        if method not in WITH_ATTRIBUTES:
-            raise ValueError(f"method {method!r} has no cost model over attributes; "
-                             f"choose from {tuple(WITH_ATTRIBUTES)}")
-        cls = WITH_ATTRIBUTES[method]
-        settings = dict(settings, channels=len(weights), weights=tuple(float(w) for w in weights))
-    fields = {f.name for f in dataclasses.fields(cls)}
-    model = cls(**{k: v for k, v in settings.items() if k in fields})
-    for key, value in terms.items():
-        if key not in TERMS:
-            raise ValueError(f"unknown term {key!r}; choose from {tuple(TERMS)}")
+        if type(method) not in WITH_ATTRIBUTES:
+            raise ValueError(f"method {method.name!r} has no cost model over attributes; use qemjax.QEM")
+        fields = {f.name: getattr(method, f.name) for f in dataclasses.fields(method)}
+        model = WITH_ATTRIBUTES[type(method)](**fields, channels=len(weights),
+                                               weights=tuple(float(w) for w in weights))
+    for key, term in TERMS.items():
+        value = getattr(method, key)
         if value:
-            model = TERMS[key](model, value)
+            model = term(model, value)
     return model

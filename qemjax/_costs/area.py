@@ -37,7 +37,7 @@ import optimistix as optx
 from .. import _topology as topo
 from .._batching import DTYPE
 from .._kernels import kernel
-from .base import CostModel, MeshInput
+from .base import MeshInput, Method
 
 RING_CAP = 128  # wider rings (valence ~60 and up) take the host path
 MAX_STEPS = 48  # bisection halvings at most (2⁻⁴⁸: float64 tests); TOL stops float32 runs near 20
@@ -206,7 +206,7 @@ def _price_host(VS, pairs, corners, mask):
 # -- the model -----------------------------------------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True)
-class Area(CostModel):
+class AreaDifference(Method):
     """Minimum surface-area difference (see the module). State: one flag per vertex, 1 on a boundary or
     feature edge (when ``boundary_weight`` > 0), else 0; merged by max. ``tol``: the bisection's
     tolerance on s. `vertex_error` is 0: the method measures areas, not distances to the input."""
@@ -223,6 +223,7 @@ class Area(CostModel):
     tol: float = TOL
 
     def __post_init__(self):
+        super().__post_init__()
         if not (self.boundary_weight >= 0 and math.isfinite(self.boundary_weight)):
             raise ValueError(f"boundary_weight must be finite and >= 0, got {self.boundary_weight}")
         if not (0 < self.tol < 1):

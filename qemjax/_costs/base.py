@@ -29,6 +29,8 @@ recompiles, and a sweep can give every configuration its own.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import typing
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
@@ -104,6 +106,88 @@ class CostModel:
     def describe(self) -> dict:
         """The settings, for stats: {field: value}."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+@dataclasses.dataclass(frozen=True)
+class Method(CostModel):
+    """A cost model as a user chooses it (``simplify(method=...)``; `qemjax.QEM`, `qemjax.ESQEM`, ...): its
+    fields are every setting of the method, with their defaults. Besides the model's own settings, every
+    method has three keyword-only fields that act around its cost:
+
+    regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (`regularize`; 0: none).
+    area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none).
+    refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._refit`).
+
+    A new method is a frozen dataclass subclass of a method (or of this class) with fields of its own,
+    registered with `qemjax.register_method`; nothing else needs editing.
+    """
+
+    regularize: float = dataclasses.field(default=0.0, kw_only=True)
+    area_weight: float = dataclasses.field(default=0.0, kw_only=True)
+    refit: int = dataclasses.field(default=0, kw_only=True)
+
+    def __post_init__(self):
+        _check_types(self)
+        for name in ("regularize", "area_weight"):
+            x = getattr(self, name)
+            if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)):
+                raise ValueError(f"{name} must be a number, got {x!r}")
+            if not (x >= 0 and np.isfinite(x)):
+                raise ValueError(f"{name} must be finite and >= 0, got {x!r}")
+        r = self.refit
+        if isinstance(r, (bool, np.bool_)) or not isinstance(r, (int, np.integer)) or r < 0:
+            raise ValueError(f"refit must be an integer >= 0 (rounds), got {r!r}")
+
+    def changed(self) -> dict:
+        """{field: value} of the fields that differ from the class's defaults (for tables and labels)."""
+        out = {}
+        for f in dataclasses.fields(self):
+            default = f.default if f.default is not dataclasses.MISSING else None
+            value = getattr(self, f.name)
+            if not (type(value) is type(default) and value == default):
+                out[f.name] = value
+        return out
+
+    def label(self) -> str:
+        """The method's name and its changed fields: ``"esqem(curvature_weight=0.1)"``."""
+        changed = self.changed()
+        return self.name + ("(" + ", ".join(f"{k}={v!r}" for k, v in changed.items()) + ")" if changed else "")
+
+
+@functools.lru_cache(maxsize=None)
+def _hints(cls) -> tuple:
+    """(name, base type, None allowed) of each field of a method class with a plain type (bool, int,
+    float, str; ``X | None``), from its real annotations."""
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        hint = hints.get(f.name)
+        args = typing.get_args(hint)
+        optional = type(None) in args
+        base = [a for a in args if a is not type(None)] if args else [hint]
+        if len(base) == 1 and base[0] in (bool, int, float, str):
+            out.append((f.name, base[0], optional))
+    return tuple(out)
+
+
+def _check_types(method) -> None:
+    """Each field of a plain type holds a value of it (ValueError naming the field); a whole number given
+    for a float field is stored as a float, so equal settings are equal objects."""
+    for name, kind, optional in _hints(type(method)):
+        x = getattr(method, name)
+        if x is None and optional:
+            continue
+        if kind is bool:
+            if not isinstance(x, (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {x!r}")
+        elif kind in (int, float):
+            if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)):
+                raise ValueError(f"{name} must be a number, got {x!r}")
+            if kind is int and float(x) != int(x):
+                raise ValueError(f"{name} must be a whole number, got {x!r}")
+            object.__setattr__(method, name, kind(x))
+        elif not isinstance(x, str):
+            raise ValueError(f"{name} must be a string, got {x!r}")
 
 
 class MeshView(NamedTuple):

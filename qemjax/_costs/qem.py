@@ -24,7 +24,7 @@ from .._batching import DTYPE, bucket, pad_rows
 from .._incidence import FaceLists
 from .._kernels import placement, quadrics
 from . import memoryless as ml
-from .base import CostModel, MeshInput
+from .base import MeshInput, Method
 
 PLACEMENTS = ("optimal", "rank", "endpoints")
 
@@ -68,7 +68,7 @@ def _price_rank(VS, pairs, params):
 
 
 @dataclasses.dataclass(frozen=True)
-class QEM(CostModel):
+class QEM(Method):
     """Quadric error metric (Garland & Heckbert 1997).
 
     placement: ``'optimal'`` (solve when well conditioned; else the best point on the segment; else the
@@ -124,6 +124,7 @@ class QEM(CostModel):
         return lambda view, verts: ml.refresh_rows(self, view, verts)
 
     def __post_init__(self):
+        super().__post_init__()
         if not isinstance(self.memoryless, (bool, np.bool_)):
             raise ValueError(f"memoryless must be True or False, got {self.memoryless!r}")
         if not (self.volume_weight >= 0 and np.isfinite(self.volume_weight)):
@@ -133,12 +134,33 @@ class QEM(CostModel):
         if (self.volume_weight or self.memory_weight) and not self.memoryless:
             raise ValueError("volume_weight or memory_weight > 0 needs memoryless=True (they weight terms of "
                              "the memoryless cost)")
+        if self.memoryless and (self.regularize or self.area_weight):
+            raise ValueError("memoryless=True works with method='qem' only, without regularize and "
+                             "area_weight (their terms price the summed quadrics' placement)")
         if self.placement not in PLACEMENTS:
             raise ValueError(f"unknown placement {self.placement!r}; choose from {PLACEMENTS}")
         if not (self.boundary_weight >= 0 and np.isfinite(self.boundary_weight)):
             raise ValueError(f"boundary_weight must be finite and >= 0, got {self.boundary_weight}")
         if not 0 <= self.area_power <= 2:
             raise ValueError(f"area_power must be in [0, 2], got {self.area_power}")
+
+    @classmethod
+    def classic(cls) -> "QEM":
+        """Garland & Heckbert's summed quadrics with this package's defaults until its default is chosen
+        again (area-weighted planes, boundary planes at weight 100, the optimal placement): ``QEM()``."""
+        return cls()
+
+    @classmethod
+    def accurate(cls) -> "QEM":
+        """Lindstrom–Turk-style memoryless quadrics with 0.3 of the summed (Garland–Heckbert) ones, the
+        rank-aware placement with loose limits (``rank_eps=1e-3``, ``max_shift=0.5``), face planes weighted
+        by (area / mean area)^0.6, boundary planes at weight 10, then one round of re-fitting the positions
+        to the input (``refit=1``). Chosen on the shared meshes against meshoptimizer, fast-simplification,
+        pyfqmr, pymeshlab and libigl (``experiments/rank_peers.py``; README, "Placement and the ranking
+        against peers"); it costs 1.3–6.5× the default's time. ``method="accurate"`` names it, and
+        ``dataclasses.replace(QEM.accurate(), refit=0)`` is it without the re-fit."""
+        return cls(memoryless=True, memory_weight=0.3, placement="rank", area_power=0.6, boundary_weight=10.0,
+                   rank_eps=1e-3, max_shift=0.5, refit=1)
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         if self.memoryless and mesh.feature_edges is not None and len(mesh.feature_edges):

@@ -1,0 +1,164 @@
+"""Every setting under one flat name, read from the dataclass fields that hold it.
+
+A run's settings live in three frozen objects: the method (`qemjax.QEM`, `qemjax.ESQEM`, ... : every field of
+a registered class, `_costs.REGISTRY`), `Topology` and `Attributes`. Each field also has a flat name, its
+own (``boundary_weight``, ``flip_angle``, ``attribute_weights``), and a dotted one (``method.boundary_weight``,
+``topology.flip_angle``). The command line's options, a sweep's grid and config keys, and the flat keywords
+that `simplify` still accepts all come from here, typed by the fields' real types (`typing.get_type_hints`),
+so a field added to a method is an option everywhere with no other edit.
+"""
+from __future__ import annotations
+
+import dataclasses
+import typing
+from typing import Any
+
+from . import _costs
+from ._options import Attributes, Schedule, Topology
+
+GROUPS = {"topology": Topology, "attributes": Attributes}  # and "method": the registered classes
+SCHEDULERS = ("parallel", "greedy")
+
+
+@dataclasses.dataclass(frozen=True)
+class Option:
+    """One setting: its flat name, the object that holds it (``"method"``, ``"topology"``, ``"attributes"``),
+    its type (the field's resolved annotation), its default (the first owner's) and, for a method's field,
+    the names of the methods that have it."""
+
+    name: str
+    group: str
+    type: Any
+    default: Any
+    owners: tuple[str, ...] = ()
+
+
+def _fields(cls) -> list[tuple[dataclasses.Field, Any]]:
+    hints = typing.get_type_hints(cls)
+    return [(f, hints.get(f.name, Any)) for f in dataclasses.fields(cls) if f.init]
+
+
+def options() -> dict[str, Option]:
+    """flat name → `Option`, for every field of `Topology`, `Attributes` and every registered method
+    (computed on each call: a method registered later is included)."""
+    out: dict[str, Option] = {}
+    for group, cls in GROUPS.items():
+        for f, hint in _fields(cls):
+            out[f.name] = Option(f.name, group, hint, f.default)
+    for name, cls in _costs.REGISTRY.items():
+        for f, hint in _fields(cls):
+            old = out.get(f.name)
+            if old is None:
+                out[f.name] = Option(f.name, "method", hint, f.default, (name,))
+            elif old.group == "method":
+                out[f.name] = dataclasses.replace(old, owners=old.owners + (name,))
+            else:  # a method field that shadows a run setting could not be given flat
+                raise ValueError(f"method {name!r} has a field {f.name!r}, which is a {old.group} setting")
+    return out
+
+
+def scheduler_of(scheduler, schedule=None) -> tuple[str, Schedule]:
+    """(scheduler name, the parallel scheduler's `Schedule`) from ``scheduler`` ('parallel', 'greedy' or
+    a `Schedule`: the parallel scheduler with those tunables) and the old ``schedule`` keyword."""
+    if isinstance(scheduler, Schedule):
+        if schedule is not None:
+            raise ValueError("give the Schedule once: scheduler=qemjax.Schedule(...)")
+        return "parallel", scheduler
+    if scheduler not in SCHEDULERS:
+        raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS} or a qemjax.Schedule")
+    if schedule is None:
+        schedule = Schedule()
+    elif not isinstance(schedule, Schedule):
+        raise ValueError(f"schedule must be a qemjax.Schedule, got {type(schedule).__name__}")
+    return scheduler, schedule
+
+
+def apply(method, topology, attributes, flat: dict) -> tuple:
+    """(method object, `Topology`, `Attributes`) for a call's ``method``, ``topology``, ``attributes`` and
+    its settings given by flat or dotted name (``flat``; ``preset=NAME`` picks the named method). A setting
+    given by name replaces the object's field, so ``method="accurate", refit=0`` is the accurate preset
+    without its re-fit. TypeError for an unknown name; ValueError for a setting the method does not have."""
+    table = options()
+    given: dict[str, dict] = {"method": {}, "topology": {}, "attributes": {}}
+    flat = dict(flat)
+    preset = flat.pop("preset", None)
+    for key, value in flat.items():
+        group, dot, field = key.partition(".")
+        if dot and group in given:
+            given[group][field] = value
+        elif not dot and key in table:
+            given[table[key].group][key] = value
+        else:
+            raise TypeError(f"unknown setting {key!r}: simplify takes the method's settings as fields of "
+                            f"the method (method=qemjax.QEM(boundary_weight=10)), or by name: "
+                            f"{sorted(table)}")
+    if preset is not None:
+        if not (isinstance(method, str) and method == "qem"):
+            raise ValueError(f"preset={preset!r} names a method: give it as method={preset!r} alone")
+        if preset not in _costs.PRESETS:
+            raise ValueError(f"unknown preset {preset!r}; choose from {tuple(_costs.PRESETS)}")
+        method = preset
+    m = _costs.resolve(method)
+    if given["method"]:
+        names = {f.name for f in dataclasses.fields(m)}
+        foreign = sorted(set(given["method"]) - names)
+        if foreign:
+            owners = {k: table[k].owners if k in table else () for k in foreign}
+            raise ValueError("; ".join(f"{k} is not a setting of method {m.name!r}"
+                                       + (f" (it is one of {', '.join(owners[k])})" if owners[k] else "")
+                                       for k in foreign))
+        m = dataclasses.replace(m, **given["method"])
+    for group, cls in GROUPS.items():
+        unknown = sorted(set(given[group]) - set(field_names(group)))
+        if unknown:
+            raise TypeError(f"unknown {group} setting(s) {unknown}; qemjax.{cls.__name__} has "
+                            f"{list(field_names(group))}")
+    if topology is None:
+        topology = Topology()
+    elif not isinstance(topology, Topology):
+        raise ValueError(f"topology must be a qemjax.Topology, got {type(topology).__name__}")
+    if given["topology"]:
+        topology = dataclasses.replace(topology, **given["topology"])
+    if not isinstance(attributes, Attributes):
+        attributes = Attributes(attributes=attributes)
+    if given["attributes"]:
+        attributes = dataclasses.replace(attributes, **given["attributes"])
+    return m, topology, attributes
+
+
+def field_names(group: str, obj=None) -> tuple[str, ...]:
+    """The fields of a group's object (``obj``'s, for a method)."""
+    if group == "method":
+        return tuple(f.name for f in dataclasses.fields(obj))
+    return tuple(f.name for f in dataclasses.fields(GROUPS[group]))
+
+
+RUN_TYPES = {"method": str, "scheduler": str, "topology": Topology, "attributes": Any,
+             "max_error": typing.Optional[float], "preset": str, "schedule": Schedule}
+
+
+def grid_keys() -> tuple[str, ...]:
+    """The keys a sweep's grid (and a config file's) may vary by name: the run keywords of `simplify`
+    (but the target, progress and feature edges), then every setting's flat name. Dotted names
+    (``method.curvature_weight``) are valid too (`key_type`)."""
+    return tuple(RUN_TYPES) + tuple(k for k in options() if k not in RUN_TYPES)
+
+
+def key_type(key: str):
+    """The real type of a grid key: a run keyword's, a setting's field type by flat name, or by dotted
+    name (``method.X``: X's type in the methods that have it; ``topology.X``, ``attributes.X``). KeyError
+    for a key that names nothing."""
+    if key in RUN_TYPES:
+        return RUN_TYPES[key]
+    group, dot, field = key.partition(".")
+    table = options()
+    if not dot:
+        return table[key].type
+    if group == "method" and field in table and table[field].group == "method":
+        return table[field].type
+    if group in GROUPS:
+        hints = dict(_fields(GROUPS[group]))
+        for f, hint in _fields(GROUPS[group]):
+            if f.name == field:
+                return hint
+    raise KeyError(key)
