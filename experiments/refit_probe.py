@@ -92,7 +92,7 @@ def refit(V, F, X, G, iters=3, damping=1e-3, bwd=0.0, power=0.0):
     """Output positions X (k,3) of faces G re-fitted to the input (V, F) (module docstring). bwd: weight of
     the other direction (points on the output's faces to their nearest input points; its total weight is
     bwd times the forward samples'); power: IRLS, each residual weighted by (r / rms)^power."""
-    from qemjax.metrics._nearest import nearest_triangles
+    from qemjax._nearest import nearest_triangles
 
     P, w = samples(V, F)
     X = np.array(X, np.float64)

@@ -157,7 +157,6 @@ def key_type(key: str):
     if group == "method" and field in table and table[field].group == "method":
         return table[field].type
     if group in GROUPS:
-        hints = dict(_fields(GROUPS[group]))
         for f, hint in _fields(GROUPS[group]):
             if f.name == field:
                 return hint

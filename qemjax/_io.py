@@ -13,7 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import _io_files
+from . import _io_files, _wedges
 from ._arrays import face_stats, column_bounds, sorted_triples
 
 
@@ -33,21 +33,6 @@ def _triangulate(faces: np.ndarray) -> np.ndarray:
     return np.stack(tris, 1).reshape(-1, 3)
 
 
-def _is_placeholder(material) -> bool:
-    """True for the material trimesh invents for UVs that come without one (`empty_material`)."""
-    from trimesh.visual.material import SimpleMaterial, empty_material
-
-    try:
-        ref = empty_material()
-        return (type(material) is SimpleMaterial and not material.kwargs
-                and all(np.array_equal(getattr(material, k), getattr(ref, k))
-                        for k in ("ambient", "diffuse", "specular"))
-                and material.image is not None and material.image.size == ref.image.size
-                and np.array_equal(np.asarray(material.image), np.asarray(ref.image)))
-    except Exception:  # another trimesh version: call it dropped rather than stay silent
-        return False
-
-
 def dropped_attributes(obj) -> list[str]:
     """What a `trimesh.Trimesh` carries besides positions and faces, which qemjax does not keep: any of
     ``"uv"``, ``"material"``, ``"vertex_colors"``, ``"face_colors"`` (in that order)."""
@@ -59,7 +44,7 @@ def dropped_attributes(obj) -> list[str]:
         if uv is not None and len(uv):
             out.append("uv")
         material = getattr(visual, "material", None)
-        if material is not None and not _is_placeholder(material):
+        if material is not None and not _wedges.is_placeholder(material):
             out.append("material")
     elif kind == "vertex":
         out.append("vertex_colors")
@@ -301,7 +286,6 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     attributes: which appearance attributes to keep (`_wedges.select`: 'auto', None, a kind or a tuple);
     kept ones come as ``report["attributes"]``, an `_wedges.Attributes` aligned with the cleaned faces
     (None when nothing is kept). texture: a path or PIL image to use as the material's texture."""
-    from . import _wedges
 
     (V, F), dropped, tm = _as_arrays(mesh, keep_trimesh=True)
     notes = {}

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import inspect
 import numbers
 import os
 import typing
@@ -17,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 from . import _api, _flat, _sweep, shapes
-from ._api import simplify
 
 KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
 EXECUTOR_KEYS = ("workers", "scheduler", "address")
@@ -146,7 +144,7 @@ def _allowed(key: str) -> set[str]:
 
 
 def _check_value(key: str, v, fail):
-    """One grid value, checked against simplify's annotation; the string 'none' is None where allowed."""
+    """One grid value, checked against the real type of what it sets; the string 'none' is None where allowed."""
     allowed = _allowed(key)
     if allowed == {"any"}:  # as written; 'none' is None, a list a tuple (attributes=["uv", "color"])
         if isinstance(v, str) and v.strip().lower() == "none":

@@ -84,13 +84,26 @@ def unit_normals(N: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.ndarra
     return out, int(np.count_nonzero(bad))
 
 
+def is_placeholder(material) -> bool:
+    """True for the material trimesh invents for UVs that come without one (`empty_material`)."""
+    from trimesh.visual.material import SimpleMaterial, empty_material
+
+    try:
+        ref = empty_material()
+        return (type(material) is SimpleMaterial and not material.kwargs
+                and all(np.array_equal(getattr(material, k), getattr(ref, k))
+                        for k in ("ambient", "diffuse", "specular"))
+                and material.image is not None and material.image.size == ref.image.size
+                and np.array_equal(np.asarray(material.image), np.asarray(ref.image)))
+    except Exception:  # another trimesh version: call it dropped rather than stay silent
+        return False
+
+
 def from_trimesh(obj, report: dict | None = None) -> tuple[dict, object]:
     """({kind: (n,k) per-vertex values}, material or None) of a `trimesh.Trimesh` (its vertices are split
     where the attributes differ, as trimesh loads them). Normals only when the file stored them, as unit
     vectors (`unit_normals`); ``report``, when given, gets ``normals_recomputed``: how many stored normals
     had zero length and were recomputed from the faces."""
-    from ._io import _is_placeholder
-
     visual = getattr(obj, "visual", None)
     kind = getattr(visual, "kind", None)
     vals, material = {}, None
@@ -99,7 +112,7 @@ def from_trimesh(obj, report: dict | None = None) -> tuple[dict, object]:
         if uv is not None and len(uv) == len(obj.vertices):
             vals["uv"] = np.asarray(uv, np.float64)
         m = getattr(visual, "material", None)
-        if m is not None and not _is_placeholder(m):
+        if m is not None and not is_placeholder(m):
             material = m
     elif kind == "vertex":
         vals["color"] = np.asarray(visual.vertex_colors, np.float64) / 255.0

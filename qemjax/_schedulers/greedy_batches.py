@@ -35,7 +35,8 @@ from .._incidence import FaceLists
 from .._kernels import flips
 from . import outcome
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
-from .greedy import BUDGET, _Queue, _stop, _tie
+from .outcome import BUDGET
+from .queue import Queue as _Queue, stop_report as _stop, tie as _tie
 
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
@@ -52,7 +53,7 @@ def eligible(model, wedges) -> bool:
 
 
 def _ties(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """`greedy._tie` of many pairs (exact in uint64: the products stay below 2**64 for any vertex index
+    """`queue.tie` of many pairs (exact in uint64: the products stay below 2**64 for any vertex index
     below 2**32)."""
     a, b = a.astype(np.uint64), b.astype(np.uint64)
     return ((a * np.uint64(0x9E3779B1)) ^ (b * np.uint64(0x85EBCA77))) & np.uint64(0xFFFFFFFF)
@@ -163,7 +164,7 @@ class _Mesh:
         return True
 
     def output(self, n: int) -> FaceLists:
-        """The faces as a `FaceLists` (what the run returns and `greedy._stop` reads)."""
+        """The faces as a `FaceLists` (what the run returns and `queue.stop_report` reads)."""
         faces = FaceLists(np.array(self.tri, np.int32).reshape(-1, 3), n)
         faces.alive = np.array(self.alive, bool)
         faces.count = self.count["faces"]
@@ -221,7 +222,7 @@ class _Batches:
         return keys, l2.tolist(), _ties(P[:, 0], P[:, 1]).tolist(), P[:, 0].tolist(), P[:, 1].tolist()
 
     def push(self, plist, priced, l2):
-        """`greedy._Queue.push` (same entries, same stamps in order), heapifying when it adds more entries
+        """`queue.Queue.push` (same entries, same stamps in order), heapifying when it adds more entries
         than the queue holds (the first push: every pair)."""
         q = self.q
         keys, l2s, ties, a, b = self.keys(plist, priced, l2)

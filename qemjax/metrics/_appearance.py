@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import as_mesh
-from ._nearest import nearest_triangles
+from .._nearest import nearest_triangles
 from ._topology import _components
 
 KINDS = ("uv", "color")

@@ -1,0 +1,79 @@
+"""The greedy scheduler's priority queue (`Queue`, lazy deletion), its tie-break (`tie`) and the stop
+report from what is left in it (`stop_report`): shared by the one-at-a-time loop (`greedy`) and the verified
+batches (`greedy_batches`)."""
+from __future__ import annotations
+
+import heapq
+import itertools
+
+import numpy as np
+
+from .._incidence import FaceLists
+from . import outcome
+from .common import Options
+from .outcome import BUDGET
+
+
+def tie(a: int, b: int) -> int:
+    """A fixed scramble of the pair (a, b): the last key of the queue, after the cost and the pair's
+    length (see `Queue`)."""
+    return ((a * 0x9E3779B1) ^ (b * 0x85EBCA77)) & 0xFFFFFFFF
+
+
+class Queue:
+    """The priority queue of pairs with lazy deletion: an entry is current while its stamp is.
+
+    Keys: (rank, squared length, `_tie`); the rank is the cost, or for a model with `rank_weights`
+    cost + parts @ ``weights``. Flat regions tie exactly (cost 0); taking the shortest pair first
+    decimates them evenly. Breaking those ties by a scramble (or by index) alone made vertices absorb their
+    neighbours into fans whose slivers then refused contractions (a flat 50×50 grid: 9,021 refusals with
+    the scramble alone, 32 by length; `experiments/greedy_flat.py 50 --rev 4da4023`)."""
+
+    def __init__(self):
+        self.heap, self.stamp, self.placed, self.blocked = [], {}, {}, {}
+        self.weights = None
+        # stamps from one counter, never reused: an entry whose stamp a rollback restored stays unique
+        self.stamps = itertools.count(1)
+
+    def _key(self, cost, parts):
+        if self.weights is None:
+            return cost
+        return float(np.float32(cost + float(np.asarray(parts, np.float64) @ self.weights)))
+
+    def push(self, pairs, priced, length2):
+        for k, ((a, b), c, l2) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist())):
+            s = self.stamp[(a, b)] = next(self.stamps)
+            parts = priced.parts[:, k]
+            self.placed[(a, b)] = (priced.x[k], int(priced.branch[k]), c, parts, l2)
+            self.blocked.pop((a, b), None)
+            heapq.heappush(self.heap, (self._key(c, parts), l2, tie(a, b), a, b, s))
+
+    def reweigh(self, weights):
+        """New ranking weights: every current, unblocked entry is ranked again (the heap is rebuilt)."""
+        self.weights = weights
+        self.heap = [(self._key(c, parts), l2, tie(a, b), a, b, self.stamp[(a, b)])
+                     for (a, b), (_, _, c, parts, l2) in self.placed.items() if (a, b) not in self.blocked]
+        heapq.heapify(self.heap)
+
+    def forget(self, pair):
+        self.stamp.pop(pair, None)
+        self.placed.pop(pair, None)
+        self.blocked.pop(pair, None)
+
+
+def stop_report(faces: FaceLists, q: Queue, options: Options, target: int, stop):
+    """(stop reason, blocked_by) from the pairs left in the queue (`outcome.classify`)."""
+    live = sorted(p for p in q.placed)
+    if not live:
+        return stop or "blocked", {"non_manifold": 0}
+    P = np.array(live, np.int64)
+    w, f = faces.around(P.reshape(-1))
+    # faces shared by both endpoints of a pair: seen once from each side
+    key = (w >> 1) * len(faces.alive) + f
+    ks, c = np.unique(key, return_counts=True)
+    removes = np.bincount(ks[c == 2] // len(faces.alive), minlength=len(P))
+    bad = np.array([q.blocked.get(p, BUDGET) for p in live], np.int8)
+    cost = np.array([q.placed[p][2] for p in live])
+    ok = (removes >= 1) & (removes <= 2) if options.preserve_topology else np.ones(len(P), bool)
+    reason, blocked = outcome.classify(faces.count, target, bad, removes, cost > options.max_cost, ok)
+    return (stop or reason), blocked
