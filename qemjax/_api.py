@@ -27,9 +27,9 @@ from . import _wedges
 from ._arrays import face_normals
 from ._record import Record
 from ._result import Contractions, SimplifyResult
-from ._schedulers import batched, common, greedy, outcome, parallel
+from . import _schedulers
+from ._schedulers import batched, common, outcome
 
-SCHEDULERS = _flat.SCHEDULERS
 PLACEMENTS = _costs.qem.PLACEMENTS
 
 
@@ -403,16 +403,12 @@ def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_er
 def _unchanged(job: Job):
     """A run's outputs when there is nothing to remove (`_run`'s form)."""
     g = job.geo
-    hist = (np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
-    info = {"contractions": 0, "rejected": 0, "rounds": 0, "max_cost": 0.0,
-            "branches": np.zeros(len(job.model.branches), int), "stop_reason": "unchanged",
-            "blocked_by": {}, "rejected_by": outcome.count_reasons(np.zeros(0, np.int8))}
-    return (g.Vn, job.S, g.F, np.ones(len(g.F), bool), hist, info), None, None
+    return outcome.Outcome.unchanged(g.Vn, job.S, g.F, len(job.model.branches)), None, None
 
 
 def _run(job: Job):
-    """Run the scheduler. Returns (the scheduler's outputs (V, S, F, alive, history, info), the face target
-    the run aimed at, the faces splitting was planned to add (None without splitting))."""
+    """Run the scheduler. Returns (its `outcome.Outcome`, the face target the run aimed at, the faces
+    splitting was planned to add (None without splitting))."""
     setup, g, model, options, target = job.setup, job.geo, job.model, job.options, job.target
     m = len(g.F)
     if not (target < m or job.err < math.inf):
@@ -432,10 +428,8 @@ def _run(job: Job):
     else:
         progress_cb = None
     run_target, planned = target, None
-    run = functools.partial(parallel.run, edges=g.edges[:2], part_scale=g.frame.part_scale2()) \
-        if setup.scheduler == "parallel" else greedy.run
-    if job.tracker is not None:
-        run = functools.partial(run, wedges=job.tracker)
+    run = functools.partial(_schedulers.get(setup.scheduler), edges=g.edges[:2],
+                            part_scale=g.frame.part_scale2(), wedges=job.tracker)
     if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
         run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options, setup.split)
     try:
@@ -452,22 +446,22 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
     warning when it ends above the target), history, record and stats. ``batch``: for a run that went
     through `simplify_batch`, what stats say of the batch."""
     setup, g, model, target, err = job.setup, job.geo, job.model, job.target, job.err
-    (Vo, So, Fo, alive, hist, info), run_target, planned = ran
+    out, run_target, planned = ran
     if run_target is None:
         run_target = target
     V, F, frame, split = g.V, g.F, g.frame, setup.split
     m = len(F)
-    Vout, Fout, ids, fids = common.compact_output(Vo, Fo, alive)
+    Vout, Fout, ids, fids = common.compact_output(out.positions, out.faces, out.alive)
     vout = frame.positions_to_mesh(Vout, ids)
     unmoved = np.ones(len(V), bool)
-    unmoved[hist[0][:, 0]] = False  # kept vertices moved; removed ones are gone
+    unmoved[out.history.pairs[:, 0]] = False  # kept vertices moved; removed ones are gone
     same = np.flatnonzero(unmoved[ids])
     vout[same] = V[ids[same]]  # never contracted: the input's float64 position, exactly
     flat = np.flatnonzero(~np.any(face_normals(vout, Fout) != 0, axis=1))
     if flat.size:  # an input face with exactly collinear corners: keep the rounded positions there
         w = np.unique(Fout[flat])
         vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
-    verr = frame.errors_to_mesh(model.vertex_error(So[ids]))
+    verr = frame.errors_to_mesh(model.vertex_error(out.states[ids]))
     appearance = {}
     if job.tracker is not None:
         attrs = job.attrs
@@ -482,55 +476,58 @@ def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict 
     if split is not None:
         vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
         split_stats.update(planned=planned, run_target=run_target if target else None,
-                           run_stop_reason=info["stop_reason"])
-        if target and len(Fout) <= target and info["stop_reason"] == "blocked":
-            info["stop_reason"] = "target"  # splitting spent what the contractions could not reach
+                           run_stop_reason=out.stop_reason)
+        if target and len(Fout) <= target and out.stop_reason == "blocked":
+            out = dataclasses.replace(out, stop_reason="target")  # splitting spent what contractions could not reach
     if setup.refit and len(Fout) < m:
         vout = _refit.refit(V, F, vout, Fout, setup.refit, setup.cos_max, g.parts[1], fids)
-    stop = info["stop_reason"]
+    stop = out.stop_reason
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
         if outcome.parity_only(len(Fout), target, closed) and stop in ("target", "blocked"):
             stop = "target"  # documented: a closed mesh loses faces in pairs
         else:
             stop = "blocked" if stop == "target" else stop
-            warnings.warn(_above_target_message(len(Fout), target, stop, info["blocked_by"], g.nonmanifold,
+            warnings.warn(_above_target_message(len(Fout), target, stop, out.blocked_by, g.nonmanifold,
                                                 setup.preserve_topology), stacklevel=stacklevel)
-    hp, hx, hc = hist[0], frame.positions_to_mesh(hist[1], hist[0][:, 0]), frame.errors_to_mesh(hist[2])
+    h = out.history
+    hp, hx, hc = h.pairs, frame.positions_to_mesh(h.positions, h.pairs[:, 0]), frame.errors_to_mesh(h.costs)
     hparts = {}
-    if info.get("parts") is not None and len(model.part_units) == len(model.parts):  # in mesh units
-        for name, unit, col in zip(model.parts + ("rank",), model.part_units + (2,), info["parts"].T):
+    if out.parts is not None and len(model.part_units) == len(model.parts):  # in mesh units
+        for name, unit, col in zip(model.parts + ("rank",), model.part_units + (2,), out.parts.T):
             hparts[name] = np.asarray(col, np.float64) * frame.scale ** unit
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
     stats = dict(job.report)
     stats.update(
         method=setup.method, scheduler=setup.scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
-        vertices_in=len(V), vertices_out=len(vout), close_pairs=len(g.extra), contractions=info["contractions"],
-        rejected=info["rejected"], rounds=info["rounds"],
-        branches={name: int(c) for name, c in zip(model.branches, info["branches"])},
-        rejected_by=info["rejected_by"], blocked_by=info["blocked_by"], model=model.describe(),
+        vertices_in=len(V), vertices_out=len(vout), close_pairs=len(g.extra), contractions=out.contractions,
+        rejected=out.rejected, rounds=out.rounds,
+        branches={name: int(c) for name, c in zip(model.branches, out.branches)},
+        rejected_by=out.rejected_by, blocked_by=out.blocked_by, model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
         max_error_limit=err if math.isfinite(err) else None, refit=setup.refit, error_unit=model.error_unit)
     if job.tracker is not None:
         stats.update(attributes=list(job.attrs.values), seam_vertices_in=job.tracker.seam_in)
-    for k, v in info.items():
-        if k.endswith("_s") or k == "faces_per_round":
-            stats[k] = v
-    if info.get("reweights"):  # (faces, weights of the parts in mesh units) each time they were set
+    stats.update(out.stage_times)
+    if out.faces_per_round is not None:
+        stats["faces_per_round"] = out.faces_per_round
+    if out.reweights:  # (faces, weights of the parts in mesh units) each time they were set
         stats["reweights"] = [(f, [float(x) * frame.scale ** (2 - u) for x, u in zip(w, model.part_units)])
-                              for f, w in info["reweights"]]
+                              for f, w in out.reweights]
     if split is not None:
         stats["split"] = split_stats
     if batch is not None:
         stats["batch"] = batch
-    history = Contractions(hp, hx, hc, hparts, info.get("history_rounds", np.zeros(0, np.int64)))
-    record = Record(V, F, history, info.get("removed_at", np.full(m, -1, np.int64)),
-                    info.get("coincident", np.zeros(m, bool)), frame, setup.scheduler, run_target)
+    history = Contractions(hp, hx, hc, hparts,
+                           np.zeros(0, np.int64) if out.history_rounds is None else out.history_rounds)
+    record = Record(V, F, history, np.full(m, -1, np.int64) if out.removed_at is None else out.removed_at,
+                    np.zeros(m, bool) if out.coincident is None else out.coincident, frame, setup.scheduler,
+                    run_target)
     return SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
-        max_error=float(frame.errors_to_mesh(info["max_cost"])), source_vertices=ids.astype(np.int64),
+        max_error=float(frame.errors_to_mesh(out.worst_cost)), source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
         input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record,
         **appearance)

@@ -26,7 +26,7 @@ import warnings
 
 import numpy as np
 
-from . import _api, _cache, _costs, _flat
+from . import _api, _cache, _costs, _flat, _schedulers
 from ._lod import RATIOS
 
 # How the command line shows some options (choices, metavar, help beyond the docstrings, the default as
@@ -37,7 +37,7 @@ OPTIONS = {
     "method": dict(choices=_api.methods,  # called: methods registered later are included
                    help="the cost model by name (qemjax.methods()); its settings are the options below "
                         "(--boundary-weight, --curvature-weight, ...): each given one replaces that field"),
-    "scheduler": dict(choices=lambda: _api.SCHEDULERS,
+    "scheduler": dict(choices=_schedulers.names,
                       help="'parallel': rounds of many non-interacting contractions; 'greedy': the "
                            "paper's priority queue, one contraction at a time"),
     "placement": dict(choices=lambda: _api.PLACEMENTS),

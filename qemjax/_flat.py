@@ -13,11 +13,10 @@ import dataclasses
 import typing
 from typing import Any
 
-from . import _costs
+from . import _costs, _schedulers
 from ._options import Attributes, Schedule, Topology
 
 GROUPS = {"topology": Topology, "attributes": Attributes}  # and "method": the registered classes
-SCHEDULERS = ("parallel", "greedy")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,8 +63,9 @@ def scheduler_of(scheduler, schedule=None) -> tuple[str, Schedule]:
         if schedule is not None:
             raise ValueError("give the Schedule once: scheduler=qemjax.Schedule(...)")
         return "parallel", scheduler
-    if scheduler not in SCHEDULERS:
-        raise ValueError(f"unknown scheduler {scheduler!r}; choose from {SCHEDULERS} or a qemjax.Schedule")
+    if scheduler not in _schedulers.names():
+        raise ValueError(f"unknown scheduler {scheduler!r}; choose from {_schedulers.names()} or a "
+                         "qemjax.Schedule")
     if schedule is None:
         schedule = Schedule()
     elif not isinstance(schedule, Schedule):

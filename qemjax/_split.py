@@ -160,8 +160,8 @@ def plan(run, args, target: int, model, options, factor: float) -> tuple[int, in
     splitting that result would add, but keeps at least (1 − MAX_SPLIT_SHARE) × target faces.
     Returns (the face target, the faces splitting the first result would add)."""
     V, S, F, extra = args
-    Vo, _, Fo, alive, _, _ = run(V, S, F, extra, max(target, 1), model, options, None)
-    s = added_faces(np.asarray(Vo, np.float64), Fo[alive], factor)
+    out = run(V, S, F, extra, max(target, 1), model, options, None)
+    s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor)
     return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s
 
 

@@ -15,7 +15,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from . import _api, _flat, _sweep, shapes
+from . import _api, _flat, _schedulers, _sweep, shapes
 
 KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
 EXECUTOR_KEYS = ("workers", "scheduler", "address")
@@ -129,7 +129,7 @@ def _meshes(value, folder: Path, fail) -> dict[str, str]:
     return named
 
 
-_CHOICES = {"method": _api.methods, "scheduler": lambda: _api.SCHEDULERS, "placement": lambda: _api.PLACEMENTS}
+_CHOICES = {"method": _api.methods, "scheduler": _schedulers.names, "placement": lambda: _api.PLACEMENTS}
 
 
 def _allowed(key: str) -> set[str]:

@@ -225,7 +225,7 @@ class _Batch(_Run):
 
     # -- per-copy outputs --------------------------------------------------------------------------
     def outputs(self):
-        """Each copy's result in `parallel.run`'s form (V, S, F, alive, history, info)."""
+        """Each copy's `outcome.Outcome`."""
         voff, foff, C = self.voff, self.foff, self.C
         # every contraction once, then each copy's rows (record order within a copy is kept)
         rounds, a, b, x, cost = _history_columns(self.history)
@@ -247,18 +247,17 @@ class _Batch(_Run):
             removed_at, coincident, rc = _removal_steps(F, np.take(rounds, mine), ac, bc, [dead_c[c] - f0],
                                                         [(r, d - f0) for r, d in dropped[c]])
             stop, blocked = self.stops[c]
-            info = {"contractions": len(mine),
-                    "rejected": int(self.copy_rejected[c, 1:].sum()), "rounds": int(self.copy_rounds[c]),
-                    "max_cost": float(self.copy_max_cost[c]), "branches": self.copy_branches[c].copy(),
-                    "faces_per_round": [int(f[c]) for took, f in self.copy_faces if took[c]],
-                    "rejected_by": outcome.count_reasons(np.repeat(np.arange(self.copy_rejected.shape[1]),
-                                                                   self.copy_rejected[c])),
-                    "stop_reason": stop, "blocked_by": blocked, "reweights": [],
-                    "parts": parts[c] if parts[c] is not None and len(parts[c]) else None,
-                    "removed_at": removed_at, "coincident": coincident, "history_rounds": rc}
-            info.update(self.timer.t)
-            out.append((self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[f0:f1],
-                        _history_arrays(ac, bc, np.take(x, mine, axis=0), np.take(cost, mine)), info))
+            out.append(outcome.Outcome(
+                self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[f0:f1],
+                outcome.History(*_history_arrays(ac, bc, np.take(x, mine, axis=0), np.take(cost, mine))),
+                stop, blocked, outcome.count_reasons(np.repeat(np.arange(self.copy_rejected.shape[1]),
+                                                               self.copy_rejected[c])),
+                rejected=int(self.copy_rejected[c, 1:].sum()), rounds=int(self.copy_rounds[c]),
+                worst_cost=float(self.copy_max_cost[c]), branches=self.copy_branches[c].copy(),
+                stage_times=outcome.stage_times(self.timer.t),
+                faces_per_round=[int(f[c]) for took, f in self.copy_faces if took[c]],
+                parts=parts[c] if parts[c] is not None and len(parts[c]) else None,
+                history_rounds=rc, removed_at=removed_at, coincident=coincident))
         return out
 
 

@@ -59,10 +59,11 @@ def _on_boundary(ring: np.ndarray, v: int) -> bool:
 
 
 def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
-        options: Options, progress=None, wedges=None):
+        options: Options, progress=None, wedges=None, edges=None, part_scale=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
-    F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Same return as
-    `parallel.run` (``wedges``: as there)."""
+    F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Returns the
+    `outcome.Outcome` (``wedges``: as in `parallel.run`; ``edges`` and ``part_scale``, which the parallel
+    scheduler uses, are not needed by the queue)."""
     n = len(V)
     manifold = options.preserve_topology
     params = model.kernel_params()
@@ -205,15 +206,11 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     blocked = {}
     if faces.count > target_faces:
         stop, blocked = _stop(faces, q, options, target_faces, stop)
-    hist = (np.array([(a, b) for a, b, _, _ in history], np.int64).reshape(-1, 2),
-            np.array([x for _, _, x, _ in history], np.float64).reshape(-1, 3),
-            np.array([c for _, _, _, c in history], np.float64))
-    info = {"contractions": len(history), "rejected": int(rejected_by.sum()), "rounds": len(history),
-            "max_cost": max_cost_used, "branches": branches, "stop_reason": stop or "target",
-            "blocked_by": blocked, "reweights": reweights,
-            "parts": np.array(history_parts, np.float64).reshape(-1, len(model.parts) + 1) if len(model.parts)
-            else None,
-            "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(rejected_by)), rejected_by)),
-            "removed_at": removed_at, "coincident": coincident,
-            "history_rounds": np.arange(len(history), dtype=np.int64)}
-    return VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, hist, info
+    nparts = len(model.parts)
+    return outcome.Outcome(
+        VQ[:n, :3], VQ[:n, 3:], faces.F, faces.alive, outcome.History.of(history), stop or "target", blocked,
+        outcome.count_reasons(np.repeat(np.arange(len(rejected_by)), rejected_by)),
+        rejected=int(rejected_by.sum()), rounds=len(history), worst_cost=max_cost_used, branches=branches,
+        parts=np.array(history_parts, np.float64).reshape(-1, nparts + 1) if nparts else None,
+        reweights=reweights, history_rounds=np.arange(len(history), dtype=np.int64), removed_at=removed_at,
+        coincident=coincident)

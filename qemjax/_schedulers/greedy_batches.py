@@ -553,15 +553,12 @@ def run(V, S, F, pairs, target_faces, model, options, progress):
     stop, blocked = r.stop, {}
     if faces.count > target_faces:
         stop, blocked = _stop(faces, r.q, options, target_faces, stop)
-    hist = (np.array([(a, b) for a, b, _, _ in r.history], np.int64).reshape(-1, 2),
-            np.array([x for _, _, x, _ in r.history], np.float64).reshape(-1, 3),
-            np.array([c for _, _, _, c in r.history], np.float64))
     nparts = len(model.parts)
-    info = {"contractions": len(r.history), "rejected": int(r.rejected_by.sum()), "rounds": len(r.history),
-            "max_cost": r.max_cost_used, "branches": r.branches, "stop_reason": stop or "target",
-            "blocked_by": blocked, "reweights": [],
-            "parts": np.array(r.history_parts, np.float64).reshape(-1, nparts + 1) if nparts else None,
-            "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),
-            "removed_at": r.removed_at, "coincident": r.coincident,
-            "history_rounds": np.arange(len(r.history), dtype=np.int64)}
-    return r.VQ[:len(V), :3], r.VQ[:len(V), 3:], faces.F, faces.alive, hist, info
+    return outcome.Outcome(
+        r.VQ[:len(V), :3], r.VQ[:len(V), 3:], faces.F, faces.alive, outcome.History.of(r.history),
+        stop or "target", blocked,
+        outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),
+        rejected=int(r.rejected_by.sum()), rounds=len(r.history), worst_cost=r.max_cost_used,
+        branches=r.branches, parts=np.array(r.history_parts, np.float64).reshape(-1, nparts + 1) if nparts else None,
+        history_rounds=np.arange(len(r.history), dtype=np.int64), removed_at=r.removed_at,
+        coincident=r.coincident)

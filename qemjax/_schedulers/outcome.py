@@ -1,4 +1,5 @@
-"""Why contractions are refused and why a run stopped: the codes both schedulers report.
+"""What a scheduler returns (`Outcome`, the contract every scheduler keeps), why contractions are refused and
+why a run stopped: the codes every scheduler reports.
 
 A pair found invalid carries the first rule it broke (``REJECT``); a run ends with one of ``STOPS``:
 
@@ -9,6 +10,9 @@ A pair found invalid carries the first rule it broke (``REJECT``); a run ends wi
 - ``"unchanged"``: nothing was asked to be removed (the target is not below the input's faces).
 """
 from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -49,3 +53,85 @@ def parity_only(faces_left: int, target: int, closed: bool) -> bool:
     """True for the documented case: a closed mesh one face above the target (every edge contraction
     there removes two faces, so none fits)."""
     return closed and faces_left == target + 1
+
+
+class History(NamedTuple):
+    """The contractions in order: kept and removed vertex (k,2) int64, the kept vertex's new position
+    (k,3) float64 (normalised units) and each contraction's cost (k,) float64."""
+
+    pairs: np.ndarray
+    positions: np.ndarray
+    costs: np.ndarray
+
+    @classmethod
+    def empty(cls) -> "History":
+        return cls(np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0))
+
+    @classmethod
+    def of(cls, steps: list) -> "History":
+        """From one (kept, removed, position, cost) entry per contraction (the greedy schedulers')."""
+        return cls(np.array([(a, b) for a, b, _, _ in steps], np.int64).reshape(-1, 2),
+                   np.array([x for _, _, x, _ in steps], np.float64).reshape(-1, 3),
+                   np.array([c for _, _, _, c in steps], np.float64))
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """What every scheduler returns (the contract; `qemjax._schedulers`), in the run's normalised units.
+
+    positions (n,3) float32 and states (n, width): every vertex's row at the end (removed ones keep
+    their last); faces (m,3) int64: the input faces re-linked; alive (m,) bool: the survivors; history:
+    the contractions (`History`); stop_reason: one of STOPS; blocked_by: what held back the pairs left
+    (`classify`; empty when the target was met); rejected_by: pairs refused during the run, per rule
+    (`count_reasons`); rejected: how many refusals; rounds: rounds (parallel) or contractions (greedy);
+    worst_cost: the largest cost of a contraction taken (the limit is ``Options.max_cost``); branches:
+    contractions per placement branch (the model's ``branches``); stage_times: seconds per stage
+    (``*_s``); faces_per_round, parts (k, p+1): the cost parts and the ranking key of each contraction
+    (or None), reweights: (faces, weights) each time a model's rank weights were set; history_rounds
+    (k,): each contraction's round; removed_at (m,): the contraction that removed each face (-1: none),
+    coincident (m,) bool: faces dropped as coincident (`_record`)."""
+
+    positions: np.ndarray
+    states: np.ndarray
+    faces: np.ndarray
+    alive: np.ndarray
+    history: History
+    stop_reason: str
+    blocked_by: dict
+    rejected_by: dict
+    rejected: int = 0
+    rounds: int = 0
+    worst_cost: float = 0.0
+    branches: np.ndarray = None
+    stage_times: dict = dataclasses.field(default_factory=dict)
+    faces_per_round: list | None = None
+    parts: np.ndarray | None = None
+    reweights: list = dataclasses.field(default_factory=list)
+    history_rounds: np.ndarray | None = None
+    removed_at: np.ndarray | None = None
+    coincident: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.stop_reason not in STOPS:
+            raise ValueError(f"a scheduler stopped with {self.stop_reason!r}, not one of {STOPS}")
+        if len(self.alive) != len(self.faces) or len(self.positions) != len(self.states):
+            raise ValueError("a scheduler's outcome is inconsistent: faces and alive, or positions and "
+                             "states, differ in length")
+        h = self.history
+        if not len(h.pairs) == len(h.positions) == len(h.costs):
+            raise ValueError("a scheduler's history columns differ in length")
+
+    @property
+    def contractions(self) -> int:
+        return len(self.history.pairs)
+
+    @classmethod
+    def unchanged(cls, positions, states, faces, branches: int) -> "Outcome":
+        """The outcome of a run with nothing to remove."""
+        return cls(positions, states, faces, np.ones(len(faces), bool), History.empty(), "unchanged", {},
+                   count_reasons(np.zeros(0, np.int8)), branches=np.zeros(branches, int))
+
+
+def stage_times(timer: dict) -> dict:
+    """The ``*_s`` entries of a scheduler's timer."""
+    return {k: v for k, v in timer.items() if k.endswith("_s")}

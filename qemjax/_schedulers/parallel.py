@@ -493,21 +493,17 @@ def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=No
     F (m,3) int64 faces, extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be
     0); ``edges``: `topo.edges` of F when the caller has it; ``part_scale`` (n,): (extent of each vertex's
     part / the whole extent)², which scales ``Schedule.free_cost`` per pair (None: one part).
-    Returns (V, S, F, alive, history, info): F (m,3) rows are the input faces re-linked, alive (m,) marks
-    the survivors, history = (pairs (k,2), positions (k,3), costs (k,)) in contraction order; info holds
-    the counts, the stage times, ``stop_reason`` and ``blocked_by``. ``wedges``: a `_wedges.Tracker`
+    Returns the `outcome.Outcome` (the schedulers' contract). ``wedges``: a `_wedges.Tracker`
     (attributes kept: the seam rule applies and its corners are updated), or None."""
     r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges)
     stop, blocked = r.run()
     rounds, a, b, x, cost = _history_columns(r.history)
     hist = _history_arrays(a, b, x, cost)
     removed_at, coincident, rounds = _removal_steps(r.faces.F, rounds, a, b, r.dead, r.dropped)
-    info = {"contractions": len(hist[0]), "rejected": r.rejected, "rounds": r.rounds,
-            "max_cost": r.max_cost_used, "branches": r.branches, "faces_per_round": r.faces_per_round,
-            "rejected_by": outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),
-            "stop_reason": stop, "blocked_by": blocked, "reweights": r.reweights,
-            "parts": np.concatenate(r.history_parts) if r.history_parts else None,
-            "removed_at": removed_at, "coincident": coincident, "history_rounds": rounds}
-    info.update(r.timer.t)
     n = r.n
-    return r.VQ[:n, :3], r.VQ[:n, 3:], r.faces.F, r.faces.alive, hist, info
+    return outcome.Outcome(
+        r.VQ[:n, :3], r.VQ[:n, 3:], r.faces.F, r.faces.alive, outcome.History(*hist), stop, blocked,
+        outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)), rejected=r.rejected,
+        rounds=r.rounds, worst_cost=r.max_cost_used, branches=r.branches, stage_times=outcome.stage_times(r.timer.t),
+        faces_per_round=r.faces_per_round, parts=np.concatenate(r.history_parts) if r.history_parts else None,
+        reweights=r.reweights, history_rounds=rounds, removed_at=removed_at, coincident=coincident)

@@ -1,0 +1,109 @@
+"""The schedulers' contract (`qemjax._schedulers`): every scheduler returns an `Outcome`, and a scheduler
+registered from outside runs through `simplify` with nothing else edited."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import _schedulers, shapes
+from qemjax._schedulers import outcome
+
+
+def _capture(monkeypatch, name):
+    """Wrap scheduler ``name`` so the outcomes it returns are kept (in a list)."""
+    seen, run = [], _schedulers.get(name)
+
+    def wrapped(*args, **kwargs):
+        out = run(*args, **kwargs)
+        seen.append((out, args[6]))  # the outcome and the Options
+        return out
+
+    monkeypatch.setitem(_schedulers._REGISTRY, name, wrapped)
+    return seen
+
+
+def _consistent(out: outcome.Outcome, options, res):
+    assert isinstance(out, outcome.Outcome) and out.stop_reason in outcome.STOPS
+    assert out.contractions == len(out.history.pairs) == len(out.history.costs) == res.stats["contractions"]
+    assert int(out.alive.sum()) == len(res.faces) and len(out.faces) == len(out.alive)
+    assert out.worst_cost == (float(np.max(out.history.costs)) if out.contractions else 0.0)
+    assert out.worst_cost <= options.max_cost
+    assert sum(out.rejected_by.values()) == out.rejected
+    assert int(np.sum(out.branches)) == out.contractions
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+@pytest.mark.parametrize("method", ["qem", "esqem", "area"])
+def test_every_scheduler_returns_a_consistent_outcome(monkeypatch, scheduler, method):
+    seen = _capture(monkeypatch, scheduler)
+    mesh = shapes.bumpy_sphere(2)
+    res = qemjax.simplify(mesh, target_faces=200, method=method, scheduler=scheduler, split_factor=None) \
+        if method == "esqem" else qemjax.simplify(mesh, target_faces=200, method=method, scheduler=scheduler)
+    assert len(seen) == 1
+    _consistent(*seen[0], res)
+    assert res.stop_reason == seen[0][0].stop_reason == "target"
+
+
+def test_a_limit_and_the_observed_worst_cost_differ(monkeypatch):
+    mesh = shapes.bumpy_sphere(2)
+    full = qemjax.simplify(mesh, target_faces=100)
+    seen = _capture(monkeypatch, "parallel")
+    res = qemjax.simplify(mesh, max_error=full.max_error / 50)
+    out, options = seen[0]
+    _consistent(out, options, res)
+    assert res.stop_reason == out.stop_reason == "max_error" and out.worst_cost <= options.max_cost
+
+
+def test_batched_copies_return_outcomes(monkeypatch):
+    from qemjax._schedulers import batched
+
+    seen, run = [], batched.run
+
+    def wrapped(*args, **kwargs):
+        outs = run(*args, **kwargs)
+        seen.extend(outs)
+        return outs
+
+    monkeypatch.setattr(batched, "run", wrapped)
+    mesh = shapes.bumpy_sphere(2)
+    res = qemjax.simplify_batch(mesh, [dict(target_faces=300), dict(target_faces=200, boundary_weight=1.0)])
+    assert len(seen) == 2 and all(isinstance(o, outcome.Outcome) for o in seen)
+    for out, r in zip(seen, res):
+        assert int(out.alive.sum()) == len(r.faces) and out.contractions == r.stats["contractions"]
+
+
+def test_the_outcome_checks_itself():
+    V, F = shapes.icosphere(1)
+    ok = outcome.Outcome.unchanged(V.astype(np.float32), np.zeros((len(V), 10), np.float32), F, 4)
+    assert ok.stop_reason == "unchanged" and ok.contractions == 0
+    with pytest.raises(ValueError, match="not one of"):
+        outcome.Outcome(ok.positions, ok.states, F, ok.alive, ok.history, "tired", {}, {})
+    with pytest.raises(ValueError, match="differ in length"):
+        outcome.Outcome(ok.positions, ok.states, F, ok.alive[:-1], ok.history, "target", {}, {})
+
+
+def test_a_scheduler_registered_from_outside_runs_through_simplify():
+    """One function keeping the contract and one call: here a scheduler that contracts nothing."""
+
+    def idle(V, S, F, extra_pairs, target_faces, model, options, progress=None, **_):
+        return outcome.Outcome(V, S, F, np.ones(len(F), bool), outcome.History.empty(), "blocked", {"idle": 1},
+                               outcome.count_reasons(np.zeros(0, np.int8)), branches=np.zeros(len(model.branches)))
+
+    _schedulers.register("idle", idle)
+    try:
+        V, F = shapes.icosphere(2)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = qemjax.simplify((V, F), ratio=0.5, scheduler="idle")
+        assert res.stop_reason == "blocked" and len(res.faces) == len(F)
+        assert res.stats["scheduler"] == "idle" and res.stats["blocked_by"] == {"idle": 1}
+        assert any("stopped at" in str(w.message) for w in caught)
+        with pytest.raises(ValueError, match="new, non-empty name"):
+            _schedulers.register("idle", idle)
+    finally:
+        del _schedulers._REGISTRY["idle"]
+    with pytest.raises(ValueError, match="unknown scheduler 'idle'"):
+        qemjax.simplify(shapes.icosphere(1), ratio=0.5, scheduler="idle")
