@@ -10,6 +10,7 @@ so a field added to a method is an option everywhere with no other edit.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import typing
 from typing import Any
 
@@ -39,12 +40,17 @@ def _fields(cls) -> list[tuple[dataclasses.Field, Any]]:
 
 def options() -> dict[str, Option]:
     """flat name → `Option`, for every field of `Topology`, `Attributes` and every registered method
-    (computed on each call: a method registered later is included)."""
+    (a method registered later is included: the table is cached per state of the registry)."""
+    return dict(_options(tuple(_costs.REGISTRY.items())))
+
+
+@functools.lru_cache(maxsize=16)
+def _options(registry: tuple) -> dict[str, Option]:
     out: dict[str, Option] = {}
     for group, cls in GROUPS.items():
         for f, hint in _fields(cls):
             out[f.name] = Option(f.name, group, hint, f.default)
-    for name, cls in _costs.REGISTRY.items():
+    for name, cls in registry:
         for f, hint in _fields(cls):
             old = out.get(f.name)
             if old is None:
@@ -78,10 +84,10 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
     its settings given by flat or dotted name (``flat``; ``preset=NAME`` picks the named method). A setting
     given by name replaces the object's field, so ``method="accurate", refit=0`` is the accurate preset
     without its re-fit. TypeError for an unknown name; ValueError for a setting the method does not have."""
-    table = options()
     given: dict[str, dict] = {"method": {}, "topology": {}, "attributes": {}}
     flat = dict(flat)
     preset = flat.pop("preset", None)
+    table = options() if flat else {}
     for key, value in flat.items():
         group, dot, field = key.partition(".")
         if dot and group in given:
