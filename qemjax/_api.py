@@ -1,34 +1,23 @@
-"""`simplify`: the one entry point. Validates options, prepares the mesh, runs a scheduler."""
+"""`simplify`: the one entry point, and `simplify_cells` / `simplify_batch` for many runs: they drive the
+stages of a run (`_stages`: setup, geometry, job, run, finish), batching the runs that can share rounds."""
 from __future__ import annotations
 
 import copy
-import dataclasses
-import functools
 import hashlib
 import inspect
 import math
-import numbers
 import time
-import warnings
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
 from . import _compilation
 from . import _costs
-from . import _io
-from . import _refit
-from . import _split
-from . import _topology as topo
-from . import _flat
-from ._options import Attributes, Options, Schedule, Topology
-from . import _units
-from . import _wedges
-from ._arrays import face_normals
-from ._record import Record
-from ._result import Contractions, SimplifyResult
-from . import _schedulers
-from ._schedulers import batched, common, outcome
+from ._options import Topology
+from ._result import SimplifyResult
+from ._schedulers import batched
+from . import _stages as stages
+from ._stages import Job, _resolve_target
 
 PLACEMENTS = _costs.qem.PLACEMENTS
 
@@ -36,48 +25,6 @@ PLACEMENTS = _costs.qem.PLACEMENTS
 def methods() -> tuple[str, ...]:
     """The cost models `simplify(method=...)` accepts (the registry in ``qemjax._costs``)."""
     return _costs.methods()
-
-
-def _real(name: str, x) -> float:
-    """x as a float; ValueError naming the option unless x is a real number (bools are refused)."""
-    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Real, np.floating, np.integer)):
-        raise ValueError(f"{name} must be a number, got {x!r}")
-    return float(x)
-
-
-def _flag(name: str, x) -> bool:
-    """x as a bool; ValueError naming the option unless x is True or False."""
-    if not isinstance(x, (bool, np.bool_)):
-        raise ValueError(f"{name} must be True or False, got {x!r}")
-    return bool(x)
-
-
-def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]:
-    """(face target, max error) from the user's options; face target 0 means 'none'."""
-    given = [x is not None for x in (target_faces, ratio)]
-    if sum(given) > 1:
-        raise ValueError("give at most one of target_faces and ratio")
-    if not any(given) and max_error is None:
-        raise ValueError("give a target: target_faces=, ratio= or max_error=")
-    err = math.inf
-    if max_error is not None:
-        err = _real("max_error", max_error)
-        if not err >= 0:
-            raise ValueError(f"max_error must be a non-negative squared distance, got {max_error}")
-    target = 0
-    if target_faces is not None:
-        t = _real("target_faces", target_faces)
-        if not (math.isfinite(t) and t == int(t)):
-            raise ValueError(f"target_faces must be an integer, got {target_faces!r}")
-        target = int(t)
-        if target <= 0:
-            raise ValueError(f"target_faces must be at least 1, got {target}")
-    if ratio is not None:
-        r = _real("ratio", ratio)
-        if not 0 < r <= 1:
-            raise ValueError(f"ratio must be in (0, 1] (the fraction of faces to keep), got {ratio}")
-        target = max(1, int(round(r * m)))
-    return target, err
 
 
 def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None = None,
@@ -129,11 +76,11 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     """
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
-    setup = _setup(method, scheduler, topology, attributes, progress, settings)
+    setup = stages.setup(method, scheduler, topology, attributes, progress, settings)
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
-    geo = _geometry(mesh, setup, stacklevel=3)
-    job = _job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3)
-    return _finish(job, _run(job), t_start, c0, s0, stacklevel=3)
+    geo = stages.geometry(mesh, setup, stacklevel=3)
+    job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3)
+    return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
 
 
 
@@ -170,15 +117,15 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
                 raise ValueError("simplify_batch: progress is not offered here (a sweep shows its own bar)")
             kw = {**_RUN_DEFAULTS, **{k: v for k, v in cfg.items() if k in _RUN_DEFAULTS}}
             try:
-                setup = _setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False,
+                setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False,
                                {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS})
             except TypeError as exc:
                 raise ValueError(f"simplify_batch: {exc}") from None
             _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
-                geos[gk] = _geometry(mesh, setup, stacklevel=4)
-            jobs.append((i, _job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
+                geos[gk] = stages.geometry(mesh, setup, stacklevel=4)
+            jobs.append((i, stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
                                  kw["max_error"], stacklevel=4, states=states)))
         except ValueError as exc:
             if not errors:
@@ -192,7 +139,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         if key is None or len(members) == 1:
             for i, job in members:
                 t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
-                out[i] = _finish(job, _run(job), t0 - prep, c1, s1, stacklevel=4)
+                out[i] = stages.finish(job, stages.run(job), t0 - prep, c1, s1, stacklevel=4)
             continue
         t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
         which, firsts = _same_runs([j for _, j in members])
@@ -207,7 +154,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         served = np.bincount(which, minlength=len(js))
         for k, (i, job) in enumerate(members):
             r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
-            res = _finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=4,
+            res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=4,
                           batch={"size": len(members), "copies": len(js), "same_run": int(served[which[k]]),
                                  "total_s": wall, "compilations": c2 - c1})
             res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
@@ -254,300 +201,7 @@ def _model_key(model):
     return (type(model), getattr(model, "price_kernel", None), None if base is None else _model_key(base))
 
 
-@dataclasses.dataclass(frozen=True)
-class Setup:
-    """A run's settings, checked and resolved before the mesh is read (`_setup`): the method object and
-    its name, the scheduler and its `Schedule`, the model it prices with (`_costs.build`), `Topology`,
-    `Attributes` (with the checked weights per kind) and whether to show progress."""
-
-    method_obj: Any
-    method: str
-    scheduler: str
-    schedule: Schedule
-    model: Any
-    topology: Topology
-    attribute_options: Attributes
-    kind_weights: Any
-    progress: bool
-
-    cos_max = property(lambda self: self.topology.cos_max)
-    pair_threshold = property(lambda self: float(self.topology.pair_threshold))
-    preserve_topology = property(lambda self: self.topology.manifold)
-    weld = property(lambda self: self.topology.weld)
-    prune = property(lambda self: self.topology.prune)
-    attributes = property(lambda self: self.attribute_options.attributes)
-    texture = property(lambda self: self.attribute_options.texture)
-    refit = property(lambda self: int(self.method_obj.refit))
-
-    @property
-    def split(self):
-        return getattr(self.model, "split_factor", None)  # None: the method does not split
-
-
-class Geometry(NamedTuple):
-    """The cleaned mesh and what depends on it alone (shared by every run of one mesh with the same
-    ``weld``, ``pair_threshold``, ``attributes`` and ``texture``): V (n,3) float64, F (m,3), the clean-up
-    report (without ``face_means`` and ``attributes``), the face means, close pairs, parts, normalised
-    positions and their frame, the edge table (E, ecount, boundary edges, their faces), the count of
-    non-manifold edges and the kept attributes (`_wedges`, or None)."""
-
-    V: np.ndarray
-    F: np.ndarray
-    report: dict
-    face_means: tuple
-    extra: np.ndarray
-    parts: tuple
-    Vn: np.ndarray
-    frame: _units.Frame
-    edges: tuple
-    nonmanifold: int
-    attrs: Any = None
-
-
-class Job(NamedTuple):
-    """One run, ready: its `Setup` and `Geometry`, the face target and max error, the model's vertex
-    state S and the scheduler's `Options`; the model (the setup's, or the attribute model), the report
-    (the geometry's, plus what this run drops), the attributes it keeps and their seam `Tracker`."""
-
-    setup: Setup
-    geo: Geometry
-    target: int
-    err: float
-    S: np.ndarray
-    options: Options
-    model: Any
-    report: dict
-    attrs: Any = None
-    tracker: Any = None
-
-
 _RUN_DEFAULTS = {k: p.default for k, p in inspect.signature(simplify).parameters.items()
                  if p.kind is p.KEYWORD_ONLY and k != "progress"}
 
 
-def _setup(method, scheduler, topology, attributes, progress, settings: dict) -> Setup:
-    """Check every setting that does not need the mesh (`_flat.apply` folds settings given by name into
-    the objects); ValueError naming the bad one, TypeError for an unknown name."""
-    settings = dict(settings)
-    sched_name, schedule = _flat.scheduler_of(scheduler, settings.pop("schedule", None))
-    method_obj, topology, attrs = _flat.apply(method, topology, attributes, settings)
-    model = _costs.build(method_obj)
-    kind_weights = _wedges.check_weights(attrs.attribute_weights)
-    return Setup(method_obj, _costs.name_of(method_obj), sched_name, schedule, model, topology, attrs,
-                 kind_weights, _flag("progress", progress))
-
-
-def _geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
-    """Read and clean ``mesh`` and compute what depends on the mesh alone (`Geometry`)."""
-    (V, F), report = _io.prepare(mesh, weld_vertices=setup.weld, stacklevel=stacklevel,
-                                 attributes=setup.attributes, texture=setup.texture)
-    face_means = report.pop("face_means")
-    attrs = report.pop("attributes")
-    extra = topo.close_pairs(V, F, setup.pair_threshold)
-    parts = topo.parts(F, len(V), extra)
-    Vn, frame = _units.normalize(V, common.DTYPE, parts)
-    E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
-    nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
-    return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs)
-
-
-def _job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
-         states: dict | None = None) -> Job:
-    """The face target, the model's initial vertex state and the scheduler's options for one run.
-    ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch."""
-    model, report, attrs = setup.model, dict(geo.report), geo.attrs
-    if attrs is not None and (setup.method != "qem" or setup.split is not None or
-                              getattr(model, "memoryless", False)):
-        warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
-        what = "memoryless=True" if getattr(model, "memoryless", False) else f"method={setup.method!r}"
-        _wedges.warn_unsupported(warn, what, stacklevel=stacklevel)
-        report["dropped"] = report["dropped"] + warn
-        attrs = None
-    corner_values = channel_weights = None
-    if attrs is not None:
-        channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
-        if np.any(channel_weights > 0):  # the cost model over positions and attributes (`_costs.attributes`)
-            model = _costs.build(setup.method_obj, weights=np.maximum(channel_weights, 1e-30))
-            corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
-    feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
-    if attrs is not None and attrs.has_seams():  # seams are constrained like boundaries: feature-edge planes
-        seams = _wedges.seam_edges(geo.F, attrs.corners)
-        if len(seams):
-            feature_edges = seams if feature_edges is None else np.concatenate([feature_edges, seams])
-        report.update(seams_in=_wedges.seam_count(seams), seam_edges_in=len(seams))
-    m = len(geo.F)
-    target, err = _resolve_target(m, target_faces, ratio, max_error)
-    if target > m:
-        warnings.warn(f"target of {target} faces is not below the mesh's {m} faces: returning it unchanged",
-                      stacklevel=stacklevel)
-        target = m
-    area_mean, e2_mean, ext = geo.face_means
-    r2 = (ext / geo.frame.scale) ** 2  # from the clean-up's unit extent to the frame's
-    E, ecount, be, bf = geo.edges
-    key = None if states is None or attrs is not None else (
-        id(geo), model.state_key(), None if feature_edges is None else feature_edges.tobytes())
-    S = None if key is None else states.get(key)
-    if S is None:
-        S = model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges,
-                                              (area_mean * r2, e2_mean * r2), corner_values))
-        if key is not None:
-            states[key] = S
-    options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
-                      max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
-                      keep_parts=not setup.prune)
-    tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(geo.V), geo.F, model,
-                                                         None if corner_values is None else channel_weights > 0)
-    return Job(setup, geo, target, err, S, options, model, report, attrs, tracker)
-
-
-def _unchanged(job: Job):
-    """A run's outputs when there is nothing to remove (`_run`'s form)."""
-    g = job.geo
-    return outcome.Outcome.unchanged(g.Vn, job.S, g.F, len(job.model.branches)), None, None
-
-
-def _run(job: Job):
-    """Run the scheduler. Returns (its `outcome.Outcome`, the face target the run aimed at, the faces
-    splitting was planned to add (None without splitting))."""
-    setup, g, model, options, target = job.setup, job.geo, job.model, job.options, job.target
-    m = len(g.F)
-    if not (target < m or job.err < math.inf):
-        return _unchanged(job)
-    bar = None
-    if setup.progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=m - target, unit="face", desc="simplify")
-
-        last = m
-
-        def progress_cb(faces_now):
-            nonlocal last
-            bar.update(last - faces_now)
-            last = faces_now
-    else:
-        progress_cb = None
-    run_target, planned = target, None
-    run = functools.partial(_schedulers.get(setup.scheduler), edges=g.edges[:2],
-                            part_scale=g.frame.part_scale2(), wedges=job.tracker)
-    if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
-        run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options, setup.split)
-    try:
-        out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
-    finally:  # an interrupted run also ends its bar's line
-        if bar is not None:
-            bar.close()
-    return out, run_target, planned
-
-
-def _finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict | None = None
-            ) -> SimplifyResult:
-    """The `SimplifyResult` of a run: compact output in mesh units, splitting, the stop reason (and a
-    warning when it ends above the target), history, record and stats. ``batch``: for a run that went
-    through `simplify_batch`, what stats say of the batch."""
-    setup, g, model, target, err = job.setup, job.geo, job.model, job.target, job.err
-    out, run_target, planned = ran
-    if run_target is None:
-        run_target = target
-    V, F, frame, split = g.V, g.F, g.frame, setup.split
-    m = len(F)
-    Vout, Fout, ids, fids = common.compact_output(out.positions, out.faces, out.alive)
-    vout = frame.positions_to_mesh(Vout, ids)
-    unmoved = np.ones(len(V), bool)
-    unmoved[out.history.pairs[:, 0]] = False  # kept vertices moved; removed ones are gone
-    same = np.flatnonzero(unmoved[ids])
-    vout[same] = V[ids[same]]  # never contracted: the input's float64 position, exactly
-    flat = np.flatnonzero(~np.any(face_normals(vout, Fout) != 0, axis=1))
-    if flat.size:  # an input face with exactly collinear corners: keep the rounded positions there
-        w = np.unique(Fout[flat])
-        vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
-    verr = frame.errors_to_mesh(model.vertex_error(out.states[ids]))
-    appearance = {}
-    if job.tracker is not None:
-        attrs = job.attrs
-        wf, wv, wval = _wedges.output(job.tracker.C, job.tracker.val, Fout, fids, ids)
-        vals = attrs.split(wval)
-        if "normal" in vals:
-            nn = np.linalg.norm(vals["normal"], axis=1, keepdims=True)
-            vals["normal"] = vals["normal"] / np.where(nn > 0, nn, 1.0)
-        appearance = dict(uv=vals.get("uv"), colors=vals.get("color"), normals=vals.get("normal"),
-                          wedge_faces=wf, wedge_vertex=wv, material=attrs.material,
-                          input_wedge_faces=attrs.corners)
-    if split is not None:
-        vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
-        split_stats.update(planned=planned, run_target=run_target if target else None,
-                           run_stop_reason=out.stop_reason)
-        if target and len(Fout) <= target and out.stop_reason == "blocked":
-            out = dataclasses.replace(out, stop_reason="target")  # splitting spent what contractions could not reach
-    if setup.refit and len(Fout) < m:
-        vout = _refit.refit(V, F, vout, Fout, setup.refit, setup.cos_max, g.parts[1], fids)
-    stop = out.stop_reason
-    if target and len(Fout) > target:  # a face target was asked for and not met
-        closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
-        if outcome.parity_only(len(Fout), target, closed) and stop in ("target", "blocked"):
-            stop = "target"  # documented: a closed mesh loses faces in pairs
-        else:
-            stop = "blocked" if stop == "target" else stop
-            warnings.warn(_above_target_message(len(Fout), target, stop, out.blocked_by, g.nonmanifold,
-                                                setup.preserve_topology), stacklevel=stacklevel)
-    h = out.history
-    hp, hx, hc = h.pairs, frame.positions_to_mesh(h.positions, h.pairs[:, 0]), frame.errors_to_mesh(h.costs)
-    hparts = {}
-    if out.parts is not None and len(model.part_units) == len(model.parts):  # in mesh units
-        for name, unit, col in zip(model.parts + ("rank",), model.part_units + (2,), out.parts.T):
-            hparts[name] = np.asarray(col, np.float64) * frame.scale ** unit
-    c1, s1 = _compilation.snapshot()
-    total = time.perf_counter() - t_start
-    stats = dict(job.report)
-    stats.update(
-        method=setup.method, scheduler=setup.scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
-        vertices_in=len(V), vertices_out=len(vout), close_pairs=len(g.extra), contractions=out.contractions,
-        rejected=out.rejected, rounds=out.rounds,
-        branches={name: int(c) for name, c in zip(model.branches, out.branches)},
-        rejected_by=out.rejected_by, blocked_by=out.blocked_by, model=model.describe(),
-        compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
-        total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
-        max_error_limit=err if math.isfinite(err) else None, refit=setup.refit, error_unit=model.error_unit)
-    if job.tracker is not None:
-        stats.update(attributes=list(job.attrs.values), seam_vertices_in=job.tracker.seam_in)
-    stats.update(out.stage_times)
-    if out.faces_per_round is not None:
-        stats["faces_per_round"] = out.faces_per_round
-    if out.reweights:  # (faces, weights of the parts in mesh units) each time they were set
-        stats["reweights"] = [(f, [float(x) * frame.scale ** (2 - u) for x, u in zip(w, model.part_units)])
-                              for f, w in out.reweights]
-    if split is not None:
-        stats["split"] = split_stats
-    if batch is not None:
-        stats["batch"] = batch
-    history = Contractions(hp, hx, hc, hparts,
-                           np.zeros(0, np.int64) if out.history_rounds is None else out.history_rounds)
-    record = Record(V, F, history, np.full(m, -1, np.int64) if out.removed_at is None else out.removed_at,
-                    np.zeros(m, bool) if out.coincident is None else out.coincident, frame, setup.scheduler,
-                    run_target)
-    return SimplifyResult(
-        vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
-        max_error=float(frame.errors_to_mesh(out.worst_cost)), source_vertices=ids.astype(np.int64),
-        source_faces=fids.astype(np.int64),
-        input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record,
-        **appearance)
-
-
-def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,
-                          manifold_mode: bool) -> str:
-    held = ", ".join(f"{k}: {v}" for k, v in blocked.items() if v) or "no pairs left"
-    why = {"max_error": "the remaining contractions cost more than max_error",
-           "blocked": "no valid contraction is left"}.get(stop, stop)
-    hint = ""
-    if manifold_mode and stop == "blocked":
-        if nonmanifold:
-            hint = (f"; the input has {nonmanifold} non-manifold edges (3 or more faces), which manifold mode "
-                    "never contracts: preserve_topology=False may reach the target")
-        elif blocked.get("vanishing_part"):
-            hint = "; separate parts keep their last faces: prune=True lets small parts vanish"
-        else:
-            hint = "; preserve_topology=False may reach further (genus and boundaries may then change)"
-    if blocked.get("seam"):
-        hint += ("; UV seams / colour discontinuities are kept where they are and hold pairs back: "
-                 "attributes=None (positions only) may reach further")
-    return f"stopped at {faces} faces, above the target of {target}: {why} (pairs held back by {held}){hint}"

@@ -15,7 +15,7 @@ target, the cost model (`qemjax._costs`: it prices and merges), the rules every 
 (`common.Options`: flip angle, topology mode, the cost limit ``max_cost``, the parallel `Schedule`), a
 progress callback (faces left), the seam tracker of kept attributes (or None) and, when the caller has
 them, the edge table and the per-part scale. It returns an `outcome.Outcome` (positions, states, faces,
-alive mask, history, stop reason, blocked_by and counts; built by the scheduler, read by `_api._finish`
+alive mask, history, stop reason, blocked_by and counts; built by the scheduler, read by `_stages.finish`
 only). A new scheduler is one module with such a ``run`` and one `register` call; `simplify(scheduler=NAME)`
 then runs it.
 """
