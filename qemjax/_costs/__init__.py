@@ -15,6 +15,7 @@ from .attributes import AttributeQEM
 from .area_term import AreaTerm
 from .esqem import ESQEM
 from .line import LineQEM
+from .probabilistic import ProbabilisticQEM
 from .qem import QEM
 from .regularize import Regularized
 
@@ -23,6 +24,7 @@ REGISTRY: dict[str, type[CostModel]] = {
     "esqem": ESQEM,
     "area": Area,
     "line": LineQEM,
+    "probabilistic": ProbabilisticQEM,
 }
 TERMS = {
     "regularize": Regularized,
