@@ -18,6 +18,7 @@ from .attributes import AttributeQEM
 from .area_term import AreaTerm
 from .esqem import ESQEM
 from .line import LineQEM
+from .probabilistic import ProbabilisticQEM
 from .qem import QEM
 from .regularize import Regularized
 
@@ -26,6 +27,7 @@ REGISTRY: dict[str, type[Method]] = {
     "esqem": ESQEM,
     "area": AreaDifference,
     "line": LineQEM,
+    "probabilistic": ProbabilisticQEM,
 }
 # named configurations of a method: ``method="accurate"`` is ``QEM.accurate()``
 PRESETS = {
