@@ -1,7 +1,8 @@
 """qemjax: JAX-accelerated, batched triangle-mesh simplification.
 
 Public API: `simplify` (and `simplify_batch` / `simplify_cells`: many runs in shared rounds); the methods
-as frozen settings objects (`QEM`, `ESQEM`, `AreaDifference`, `LineQEM`, their base `Method`,
+as frozen settings objects (`QEM`, `ESQEM`, `AreaDifference`, `LineQEM`, `ProbabilisticQEM`, their base
+`Method`,
 `register_method`, `methods`), the run's other settings (`Topology`, `Attributes`, `Schedule`); `load`, `SimplifyResult`, `Contractions`, `Mesh`; the multiresolution record (`Record`, `Level`,
 `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` and
 `shapes` (meshes made in code, `shapes.write_examples`) modules.
@@ -12,6 +13,7 @@ from ._costs.area import AreaDifference as AreaDifference
 from ._costs.base import Method as Method
 from ._costs.esqem import ESQEM as ESQEM
 from ._costs.line import LineQEM as LineQEM
+from ._costs.probabilistic import ProbabilisticQEM as ProbabilisticQEM
 from ._costs.qem import QEM as QEM
 from ._api import simplify as simplify
 from ._api import simplify_batch as simplify_batch
