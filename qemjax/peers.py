@@ -237,7 +237,7 @@ class PeerResult:
 def simplify(name: str, mesh, target_faces: int) -> PeerResult:
     """Simplify ``mesh`` (``(V, F)``, a `qemjax.Mesh`, trimesh or anything with ``.vertices``/``.faces``)
     with peer ``name`` to ``target_faces`` faces (a peer may stop elsewhere: ``stats["faces_out"]``).
-    Raises ValueError for an unknown or uninstalled peer."""
+    Raises ValueError for an unknown or uninstalled peer, or an empty output."""
     _require(name)
     if isinstance(mesh, tuple):
         V, F = mesh
@@ -247,6 +247,8 @@ def simplify(name: str, mesh, target_faces: int) -> PeerResult:
     F = np.asarray(F, dtype=np.int64)
     t0 = time.perf_counter()
     V2, F2, call_s = run_peer(name, V, F, int(target_faces))
+    if len(F2) == 0:
+        raise ValueError(f"peer {name!r} returned an empty mesh (target {int(target_faces)} of {len(F)} faces)")
     stats = {"faces_in": int(len(F)), "faces_out": int(len(F2)), "target_faces": int(target_faces),
              "rounds": float("nan"), "compile_s": 0.0, "run_s": call_s, "total_s": call_s,
              "wall_s": time.perf_counter() - t0}
