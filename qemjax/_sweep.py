@@ -41,6 +41,7 @@ def is_grid_key(key: str) -> bool:
 BATCH_FACES = 4_000_000  # a batch holds at most this many faces in all (its copies' memory)
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
+_PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
 
@@ -195,11 +196,30 @@ def result_hash(res) -> str:
     return h.hexdigest()
 
 
+def _peer(cell: Cell) -> str | None:
+    """The peer a cell's ``method`` names (`qemjax.peers.PEERS`), else None."""
+    method = dict(cell.params).get("method")
+    return method if isinstance(method, str) and method in _PEER_NAMES else None
+
+
+def _simplify_cell(mesh, cell: Cell):
+    """The single dispatch point: a peer's `qemjax.peers.simplify` (the target resolved as `simplify`
+    does; the cell's other grid keys do not apply: NaN in its row), else `simplify`."""
+    name = _peer(cell)
+    if name is None:
+        return simplify(mesh, **cell.kwargs())
+    from . import peers
+
+    m = len(mesh[1])
+    target = max(1, int(round(cell.target * m))) if isinstance(cell.target, float) else cell.target
+    return peers.simplify(name, mesh, target)
+
+
 def run_cell(mesh, cell: Cell, metrics) -> dict:
     """One row, from `simplify` alone (see `row`). A failing `simplify` gives a row with ``error`` set."""
     t0 = time.perf_counter()
     try:
-        res = simplify(mesh, **cell.kwargs())
+        res = _simplify_cell(mesh, cell)
     except Exception as exc:  # one bad combination must not stop a sweep: the row says why
         res = exc
     return row(mesh, cell, res, metrics, time.perf_counter() - t0)
@@ -209,8 +229,8 @@ def run_cells(items: list, metrics) -> list[dict]:
     """The rows of cells, items = [(mesh, `Cell`)], computed together by `simplify_cells` (each result
     equals `simplify`'s alone; cells of several meshes may share rounds). If the batch fails as a whole,
     each cell runs alone, so the rows say which configuration fails and why."""
-    if len(items) == 1:
-        return [run_cell(*items[0], metrics)]
+    if len(items) == 1 or any(_peer(c) for _, c in items):  # peers run alone (`qemjax.peers`)
+        return [run_cell(mesh, c, metrics) for mesh, c in items]
     t0 = time.perf_counter()
     try:
         results = simplify_cells([(mesh, c.kwargs()) for mesh, c in items], errors=True)
@@ -224,7 +244,9 @@ def row(mesh, cell: Cell, res, metrics, seconds: float) -> dict:
     """A cell's row: parameters, counts, stop reason, timings, output hash, metrics (``metrics``: False, or
     a dict of `qemjax.metrics.evaluate` keywords); ``res`` is the `SimplifyResult` or the exception
     `simplify` raised (then only ``error`` is set). ``seconds``: the cell's share of the run's wall time."""
-    out = {"cell": cell.key, "mesh": cell.mesh, **{k: _plain(v) for k, v in cell.params},
+    peer = _peer(cell)  # a peer's row: the grid keys other than method do not apply (NaN)
+    out = {"cell": cell.key, "mesh": cell.mesh,
+           **{k: _plain(v) if peer is None or k == "method" else float("nan") for k, v in cell.params},
            "target": cell.target, "error": ""}
     if isinstance(res, Exception):
         out["error"] = f"{type(res).__name__}: {res}"
@@ -352,7 +374,12 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         literal values, never evaluated). Paths are named by their stem, shapes by their name, other
         meshes ``mesh0``, ``mesh1``, … Each is read (or made) once.
     grid: `simplify` keywords → lists of values, crossed (e.g. ``{"method": ["qem", "esqem"],
-        "regularize": [0, 0.1]}``).
+        "regularize": [0, 0.1]}``). A ``method`` that names a peer (``"meshoptimizer"``, ``"pymeshlab"``,
+        ``"fast-simplification"``, ``"libigl"``, ``"pyfqmr"``: `qemjax.peers`, ``pip install
+        'qemjax[bench]'``) runs that peer for the cell, warm, alone, with the same metrics; the other grid
+        keys do not apply to it (NaN in its row; its cells still cross them, so keep them out of such a grid
+        or read them as repeats), ``stop_reason`` is ``"peer"``, ``rounds`` NaN, ``compile_s`` 0,
+        ``run_s`` = ``total_s`` = the peer call's time. A missing peer package: the row's ``error`` says so.
     targets: ratios (floats in (0, 1)) and/or face counts (ints).
     metrics: True: every column of `qemjax.metrics.evaluate` (original = the mesh as given); a dict:
         the same with these keywords to `evaluate` (e.g. ``{"n_samples": 10_000}``); False: none.

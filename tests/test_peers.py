@@ -1,0 +1,52 @@
+"""Peers (`qemjax.peers`) as methods of `qemjax.sweep`: same cells, same columns, same metric function."""
+import builtins
+
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import peers
+from qemjax.metrics import evaluate
+
+MESH = {"sphere": qemjax.shapes.bumpy_sphere(subdivisions=3)}
+
+
+@pytest.mark.parametrize("name", list(peers.PEERS))
+def test_peer_in_a_sweep_beside_qemjax(name):
+    pytest.importorskip(peers._MODULES[name])
+    df = qemjax.sweep(MESH, {"method": ["qem", name], "boundary_weight": [1000.0]}, [0.1], progress=False)
+    qem, peer = df.iloc[0], df.iloc[1]
+    assert list(df["method"]) == ["qem", name] and (df["error"] == "").all()
+    # same columns, every metric set for both
+    assert qem.index.equals(peer.index)
+    assert np.isfinite(peer["rms_rel"]) and np.isfinite(peer["hausdorff_rel"]) and peer["run_s"] > 0
+    assert peer["stop_reason"] == "peer" and np.isnan(peer["boundary_weight"]) and qem["boundary_weight"] == 1000.0
+    assert abs(peer["faces_out"] - qem["target_faces"]) <= 0.05 * qem["target_faces"]
+    # the peer's output measured by the same function as qemjax's
+    res = peers.simplify(name, qemjax._io.as_arrays(MESH["sphere"]), int(peer["target_faces"]))
+    direct = evaluate(qemjax._io.as_arrays(MESH["sphere"]), res, target_faces=int(peer["target_faces"]))
+    assert peer["rms_rel"] == pytest.approx(direct["rms_rel"], rel=1e-12)
+    assert peer["hausdorff_rel"] == pytest.approx(direct["hausdorff_rel"], rel=1e-12)
+    F = res.faces
+    assert F.min() >= 0 and F.max() < len(res.vertices) and len(res.faces) == peer["faces_out"]
+
+
+def test_missing_peer_is_a_one_line_error_naming_the_extra(monkeypatch):
+    real = builtins.__import__
+
+    def fake(name, *args, **kwargs):
+        if name.split(".")[0] == "pymeshlab":
+            raise ImportError("No module named 'pymeshlab'")
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", fake)
+    monkeypatch.setattr(peers.importlib, "import_module", lambda n: fake(n))
+    assert "pymeshlab" not in peers.available()
+    V, F = qemjax._io.as_arrays(MESH["sphere"])
+    with pytest.raises(ValueError, match=r"pip install 'qemjax\[bench\]'") as err:
+        peers.simplify("pymeshlab", (V, F), 100)
+    assert "\n" not in str(err.value) and "pymeshlab" in str(err.value)
+    df = qemjax.sweep(MESH, {"method": ["pymeshlab"]}, [0.1], progress=False, metrics=False)
+    assert "qemjax[bench]" in df["error"].iloc[0]
+    with pytest.raises(ValueError, match="unknown peer"):
+        peers.simplify("nope", (V, F), 100)
