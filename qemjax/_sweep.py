@@ -149,10 +149,12 @@ def expand_grid(grid: dict) -> list[tuple[tuple[str, Any], ...]]:
 
 
 def _applicable(combo: tuple) -> tuple:
-    """A cell's parameters without the method settings its method does not have (a grid that crosses
+    """A cell's parameters without the method settings its method does not have (a peer: none; a grid that crosses
     ``method = ["qem", "esqem"]`` with ``split_factor`` gives the qem cells no split factor: NaN in the
     table, and one cell instead of one per value). Settings the method has, and the rest, stay."""
     params = dict(combo)
+    if isinstance(params.get("method"), str) and params["method"] in _PEER_NAMES:
+        return (("method", params["method"]),)  # a peer: no setting of qemjax's applies
     table = _flat.options()
     try:
         method = _costs.resolve(params.get("method", params.get("preset") or "qem"))
@@ -377,8 +379,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         "regularize": [0, 0.1]}``). A ``method`` that names a peer (``"meshoptimizer"``, ``"pymeshlab"``,
         ``"fast-simplification"``, ``"libigl"``, ``"pyfqmr"``: `qemjax.peers`, ``pip install
         'qemjax[bench]'``) runs that peer for the cell, warm, alone, with the same metrics; the other grid
-        keys do not apply to it (NaN in its row; its cells still cross them, so keep them out of such a grid
-        or read them as repeats), ``stop_reason`` is ``"peer"``, ``rounds`` NaN, ``compile_s`` 0,
+        keys do not apply to it (NaN in its row; one cell per peer, mesh and target, however many values
+        they have), ``stop_reason`` is ``"peer"``, ``rounds`` NaN, ``compile_s`` 0,
         ``run_s`` = ``total_s`` = the peer call's time. A missing peer package: the row's ``error`` says so.
     targets: ratios (floats in (0, 1)) and/or face counts (ints).
     metrics: True: every column of `qemjax.metrics.evaluate` (original = the mesh as given); a dict:

@@ -108,6 +108,9 @@ def test_a_grid_crossing_methods_leaves_out_the_settings_a_method_lacks(ball):
     cells = _sweep.expand_grid(grid)
     assert cells == [(("method", "qem"),), (("method", "esqem"), ("split_factor", None)),
                      (("method", "esqem"), ("split_factor", 1.5))]
+    peers = _sweep.expand_grid({"method": ["qem", "meshoptimizer"], "boundary_weight": [1.0, 1000.0]})
+    assert peers == [(("method", "qem"), ("boundary_weight", 1.0)), (("method", "qem"), ("boundary_weight", 1000.0)),
+                     (("method", "meshoptimizer"),)]  # a peer: once, no qemjax setting applies
 
 
 # -- one source of truth: every field of every method round-trips through the CLI and a config file --
