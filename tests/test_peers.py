@@ -50,3 +50,10 @@ def test_missing_peer_is_a_one_line_error_naming_the_extra(monkeypatch):
     assert "qemjax[bench]" in df["error"].iloc[0]
     with pytest.raises(ValueError, match="unknown peer"):
         peers.simplify("nope", (V, F), 100)
+
+
+def test_the_sweeps_peer_names_are_the_peers():
+    """`_sweep` names the peers without importing `qemjax.peers` (lazy); the two lists must agree."""
+    from qemjax import _sweep
+
+    assert sorted(_sweep._PEER_NAMES) == sorted(peers.PEERS)
