@@ -26,7 +26,6 @@ compiling and padding ever wider kernels.
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import ClassVar
 
 import jax
@@ -37,7 +36,7 @@ import optimistix as optx
 from .. import _topology as topo
 from .._batching import DTYPE
 from .._kernels import kernel
-from .base import MeshInput, Method
+from .base import MeshInput, Method, require_nonnegative
 
 RING_CAP = 128  # wider rings (valence ~60 and up) take the host path
 MAX_STEPS = 48  # bisection halvings at most (2⁻⁴⁸: float64 tests); TOL stops float32 runs near 20
@@ -224,8 +223,7 @@ class AreaDifference(Method):
 
     def __post_init__(self):
         super().__post_init__()
-        if not (self.boundary_weight >= 0 and math.isfinite(self.boundary_weight)):
-            raise ValueError(f"boundary_weight must be finite and >= 0, got {self.boundary_weight}")
+        require_nonnegative(self, "boundary_weight")
         if not (0 < self.tol < 1):
             raise ValueError(f"tol must be in (0, 1), got {self.tol}")
 

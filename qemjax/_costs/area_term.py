@@ -11,7 +11,6 @@ same at any mesh resolution. The term changes only which contractions go first, 
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import ClassVar
 
 import jax
@@ -22,7 +21,7 @@ from .._batching import DTYPE
 from .._kernels import kernel
 from .._kernels.fixed import cross3, dot3, norm3, tree_sum
 from .area import ring_positions
-from .base import Term
+from .base import Term, require_nonnegative
 
 
 def area_change(x, pos, moving, mask):
@@ -64,8 +63,7 @@ class AreaTerm(Term):
     area_weight: float = 0.0
 
     def __post_init__(self):
-        if not (self.area_weight >= 0 and math.isfinite(self.area_weight)):
-            raise ValueError(f"area_weight must be finite and >= 0, got {self.area_weight}")
+        require_nonnegative(self, "area_weight")
         if self.base.parts or self.base.uses_ring or not hasattr(type(self.base), "price_kernel"):
             raise ValueError(f"area_weight cannot wrap {self.base.name!r}: it adds to a pair model without "
                              "cost parts (method='qem')")

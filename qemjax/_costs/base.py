@@ -128,15 +128,9 @@ class Method(CostModel):
 
     def __post_init__(self):
         _check_types(self)
-        for name in ("regularize", "area_weight"):
-            x = getattr(self, name)
-            if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)):
-                raise ValueError(f"{name} must be a number, got {x!r}")
-            if not (x >= 0 and np.isfinite(x)):
-                raise ValueError(f"{name} must be finite and >= 0, got {x!r}")
-        r = self.refit
-        if isinstance(r, (bool, np.bool_)) or not isinstance(r, (int, np.integer)) or r < 0:
-            raise ValueError(f"refit must be an integer >= 0 (rounds), got {r!r}")
+        require_nonnegative(self, "regularize", "area_weight")
+        if self.refit < 0:
+            raise ValueError(f"refit must be an integer >= 0 (rounds), got {self.refit!r}")
 
     def changed(self) -> dict:
         """{field: value} of the fields that differ from the class's defaults (for tables and labels)."""
@@ -168,6 +162,15 @@ def _hints(cls) -> tuple:
         if len(base) == 1 and base[0] in (bool, int, float, str):
             out.append((f.name, base[0], optional))
     return tuple(out)
+
+
+def require_nonnegative(model, *names: str) -> None:
+    """ValueError naming the first of the fields ``names`` of ``model`` that is not finite and >= 0 (a
+    method's field types are checked before, by `_check_types`)."""
+    for name in names:
+        x = getattr(model, name)
+        if not (x >= 0 and np.isfinite(x)):
+            raise ValueError(f"{name} must be finite and >= 0, got {x!r}")
 
 
 def _check_types(method) -> None:

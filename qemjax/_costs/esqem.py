@@ -49,7 +49,7 @@ from .._batching import DTYPE, chunks
 from .._incidence import FaceLists
 from .._kernels import kernel, placement
 from . import ring
-from .base import MeshInput
+from .base import MeshInput, require_nonnegative
 from .qem import QEM
 
 CURVATURE_WEIGHT = 0.01  # a: the mean curvature term is 1 % of the mean quadric error (the paper's "two
@@ -153,6 +153,8 @@ class ESQEM(QEM):
     parts: ClassVar[tuple[str, ...]] = ("quadric", "curvature")
     part_units: ClassVar[tuple[int, ...]] = (2, -2)  # powers of length: squared distance, 1/length²
 
+    memoryless_refused: ClassVar[str] = "ESQEM's refresh keeps its own state"
+
     curvature_weight: float = CURVATURE_WEIGHT
     split_factor: float | None = SPLIT_FACTOR
     reweight_step: float = REWEIGHT_STEP
@@ -161,10 +163,7 @@ class ESQEM(QEM):
         super().__post_init__()
         if self.placement == "rank":
             raise ValueError("method='esqem' places with 'optimal' or 'endpoints'; placement='rank' is QEM's only")
-        if self.memoryless:
-            raise ValueError("memoryless=True works with method='qem' only (ESQEM's refresh keeps its own state)")
-        if not (self.curvature_weight >= 0 and math.isfinite(self.curvature_weight)):
-            raise ValueError(f"curvature_weight must be finite and >= 0, got {self.curvature_weight}")
+        require_nonnegative(self, "curvature_weight")
         if self.split_factor is not None and not (self.split_factor > 0 and math.isfinite(self.split_factor)):
             raise ValueError(f"split_factor must be a finite number > 0 or None, got {self.split_factor}")
         if not 0 < self.reweight_step <= 1:

@@ -23,7 +23,7 @@ from typing import ClassVar
 import numpy as np
 
 from .._batching import DTYPE
-from .base import MeshInput
+from .base import MeshInput, require_nonnegative
 from .qem import QEM
 
 
@@ -53,6 +53,7 @@ class LineQEM(QEM):
     """
 
     name: ClassVar[str] = "line"
+    memoryless_refused: ClassVar[str] = "method='line' sums its quadrics"
 
     line_weight: float = 0.001
 
@@ -62,10 +63,7 @@ class LineQEM(QEM):
 
     def __post_init__(self):
         super().__post_init__()
-        if not (self.line_weight >= 0 and np.isfinite(self.line_weight)):
-            raise ValueError(f"line_weight must be finite and >= 0, got {self.line_weight}")
-        if self.memoryless:
-            raise ValueError("method='line' sums its quadrics: memoryless=True works with method='qem' only")
+        require_nonnegative(self, "line_weight")
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         Q = super().init_state(mesh).astype(np.float64)

@@ -35,7 +35,7 @@ import numpy as np
 
 from .._arrays import face_stats
 from .._batching import DTYPE
-from .base import MeshInput
+from .base import MeshInput, require_nonnegative
 from .qem import QEM
 
 
@@ -79,6 +79,7 @@ class ProbabilisticQEM(QEM):
     """
 
     name: ClassVar[str] = "probabilistic"
+    memoryless_refused: ClassVar[str] = "method='probabilistic' sums its quadrics"
 
     sigma_normal: float = 0.1
     sigma_position: float = 0.0
@@ -89,13 +90,7 @@ class ProbabilisticQEM(QEM):
 
     def __post_init__(self):
         super().__post_init__()
-        for key in ("sigma_normal", "sigma_position"):
-            value = getattr(self, key)
-            if not (isinstance(value, (int, float, np.floating, np.integer)) and np.isfinite(value) and value >= 0):
-                raise ValueError(f"{key} must be finite and >= 0, got {value!r}")
-        if self.memoryless:
-            raise ValueError("method='probabilistic' sums its quadrics: memoryless=True works with method='qem' "
-                             "only")
+        require_nonnegative(self, "sigma_normal", "sigma_position")
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         Q = super().init_state(mesh)

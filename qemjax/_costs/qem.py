@@ -24,7 +24,7 @@ from .._batching import DTYPE, bucket, pad_rows
 from .._incidence import FaceLists
 from .._kernels import placement, quadrics
 from . import memoryless as ml
-from .base import MeshInput, Method
+from .base import MeshInput, Method, require_nonnegative
 
 PLACEMENTS = ("optimal", "rank", "endpoints")
 
@@ -91,6 +91,7 @@ class QEM(Method):
 
     name: ClassVar[str] = "qem"
     per_pair_params: ClassVar[bool] = True  # memoryless runs refresh, so they are not batched anyway
+    memoryless_refused: ClassVar[str] = ""  # a subclass that cannot run memoryless: why (the error says it)
 
     placement: str = "optimal"
     area_weighted: bool = True
@@ -125,12 +126,9 @@ class QEM(Method):
 
     def __post_init__(self):
         super().__post_init__()
-        if not isinstance(self.memoryless, (bool, np.bool_)):
-            raise ValueError(f"memoryless must be True or False, got {self.memoryless!r}")
-        if not (self.volume_weight >= 0 and np.isfinite(self.volume_weight)):
-            raise ValueError(f"volume_weight must be finite and >= 0, got {self.volume_weight}")
-        if not (self.memory_weight >= 0 and np.isfinite(self.memory_weight)):
-            raise ValueError(f"memory_weight must be finite and >= 0, got {self.memory_weight}")
+        require_nonnegative(self, "volume_weight", "memory_weight", "boundary_weight")
+        if self.memoryless and self.memoryless_refused:
+            raise ValueError(f"memoryless=True works with method='qem' only ({self.memoryless_refused})")
         if (self.volume_weight or self.memory_weight) and not self.memoryless:
             raise ValueError("volume_weight or memory_weight > 0 needs memoryless=True (they weight terms of "
                              "the memoryless cost)")
@@ -139,8 +137,6 @@ class QEM(Method):
                              "area_weight (their terms price the summed quadrics' placement)")
         if self.placement not in PLACEMENTS:
             raise ValueError(f"unknown placement {self.placement!r}; choose from {PLACEMENTS}")
-        if not (self.boundary_weight >= 0 and np.isfinite(self.boundary_weight)):
-            raise ValueError(f"boundary_weight must be finite and >= 0, got {self.boundary_weight}")
         if not 0 <= self.area_power <= 2:
             raise ValueError(f"area_power must be in [0, 2], got {self.area_power}")
 

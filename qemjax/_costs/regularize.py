@@ -26,7 +26,7 @@ import numpy as np
 from .._batching import DTYPE
 from .._kernels import kernel
 from .._kernels.fixed import cross3, dot3, norm3, tree_sum
-from .base import Term
+from .base import Term, require_nonnegative
 
 _SQRT3_2 = 2.0 * math.sqrt(3.0)
 
@@ -69,8 +69,7 @@ class Regularized(Term):
     regularize: float = 0.0
 
     def __post_init__(self):
-        if not (self.regularize >= 0 and math.isfinite(self.regularize)):
-            raise ValueError(f"regularize must be finite and >= 0, got {self.regularize}")
+        require_nonnegative(self, "regularize")
         if self.base.parts:
             raise ValueError(f"regularize cannot wrap {self.base.name!r}, which has cost parts already")
         if not hasattr(type(self.base), "price_kernel"):
