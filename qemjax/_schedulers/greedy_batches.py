@@ -7,10 +7,20 @@ popping and contracting on the host, with the pairs whose price is out of date (
 queue, then merges and re-prices all of them in one device call each, and checks the order: a step
 stands if no stale pair held out before it ranks before it (with the queue's own keys, ties included).
 The first step that fails and all after it are undone (a journal of every host change) and run again
-from the queue with the new prices in it. A step that would change a vertex whose state a stale pair
-reads waits for the next batch, so each stale pair has one price per batch, computed from the rows the
-step that staled it left. (A pair's price and merge do not depend on which other pairs share their
-kernel call: the kernels are elementwise over pairs, and the outputs match bit for bit.)
+from the queue with the new prices in it.
+
+A pair is stale over an *interval* of steps: from the step that changed one of its vertices to the next
+step that changes one again (or removes the pair), or to the end of the batch. Each interval has its own
+price, from the rows as they were then: a kept vertex's new row goes to a scratch row of its own (past
+the mesh's rows), so one price call reads each interval's versions of its two rows, and the order check
+compares each step with the intervals open at it. A popped pair never has a vertex merged earlier in the
+batch (every pair at a kept vertex is stale), so all of a batch's merges read the rows the batch started
+from: one merge call. (A pair's price and merge do not depend on which rows or pairs share their kernel
+call: the kernels gather rows and are elementwise over pairs, and the outputs match bit for bit.)
+
+The queue is a heap of Python ints, one per entry, that order as the keys (cost, squared length, tie,
+a, b) then a stamp (`_entries`): an int compares in one step where a tuple compares field by field.
+Pairs are ints a << 32 | b in every dict.
 
 Queue entries are fetched a few dozen ahead and their flip tests run in one numpy pass; a test is used
 when its pair comes up unless a contraction since has moved or removed a vertex it read.
@@ -25,6 +35,7 @@ from __future__ import annotations
 
 import heapq
 from collections import deque
+from types import SimpleNamespace
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -36,12 +47,16 @@ from .._kernels import flips
 from . import outcome
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
 from .outcome import BUDGET
-from .queue import Queue as _Queue, stop_report as _stop, tie as _tie
+from .queue import stop_report as _stop
 
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
 PREFETCH = 32  # queue entries fetched ahead at a time, their flip tests done together
 BLOCKED_SCAN = 64  # up to this many blocked pairs, find those around a vertex among them (else among its pairs)
+STAMP_BITS = 40  # an entry's lowest bits: its stamp (unique per push, never reused)
+_STAMP = (1 << STAMP_BITS) - 1
+_PAIR = (1 << 64) - 1
+_M32 = 0xFFFFFFFF
 _MISSING = object()
 _HEAP = object()
 
@@ -59,47 +74,35 @@ def _ties(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return ((a * np.uint64(0x9E3779B1)) ^ (b * np.uint64(0x85EBCA77))) & np.uint64(0xFFFFFFFF)
 
 
-class _Journal:
-    """Undo log of host changes during a batch: (container, key, old value) per change."""
+def ordered_bits(v: np.ndarray) -> np.ndarray:
+    """float32 values -> uint64 in the same order (-0.0 as 0.0, equal floats equal ints; a NaN ranks
+    after +inf, where a tuple of floats has no order at all)."""
+    u = (np.asarray(v, np.float32) + np.float32(0.0)).view(np.uint32).astype(np.uint64)
+    return np.where(u >> np.uint64(31), ~u & np.uint64(_M32), u | np.uint64(0x80000000))
 
-    def __init__(self, heap):
-        self.log, self.heap = [], heap
 
-    def put(self, c: list, k: int, v):
-        """c[k] = v, remembering the old value."""
-        self.log.append((c, k, c[k]))
-        c[k] = v
+def _entries(P: np.ndarray, cost: np.ndarray, l2: np.ndarray) -> list:
+    """Queue keys of pairs P (K,2) as ints without stamps: (cost, squared length, `queue.tie`, a, b) from
+    the highest bits down, the stamp's bits left zero. Ints compare as the tuples of `queue.Queue` do."""
+    hi = (ordered_bits(cost) << np.uint64(32)) | ordered_bits(l2)
+    pk = (P[:, 0].astype(np.uint64) << np.uint64(32)) | P[:, 1].astype(np.uint64)
+    s = STAMP_BITS
+    return [(h << (s + 96)) | (t << (s + 64)) | (p << s)
+            for h, t, p in zip(hi.tolist(), _ties(P[:, 0], P[:, 1]).tolist(), pk.tolist())]
 
-    def put_d(self, d: dict, k, v):
-        """d[k] = v, remembering the old value (or its absence)."""
-        self.log.append((d, k, d.get(k, _MISSING)))
-        d[k] = v
 
-    def drop(self, d: dict, k):
-        if k in d:
-            self.log.append((d, k, d.pop(k)))
-
-    def row(self, A: np.ndarray, i: int):
-        self.log.append((A, i, A[i].copy()))
-
-    def popped(self, entry):
-        self.log.append((_HEAP, None, entry))
-
-    def undo(self, mark: int):
-        for c, k, old in reversed(self.log[mark:]):
-            if c is _HEAP:
-                heapq.heappush(self.heap, old)
-            elif old is _MISSING:
-                del c[k]
-            else:
-                c[k] = old
-        del self.log[mark:]
+def entry_pair(e: int) -> tuple[int, int]:
+    """(a, b) of a queue entry."""
+    return (e >> (STAMP_BITS + 32)) & _M32, (e >> STAMP_BITS) & _M32
 
 
 class _Step(NamedTuple):
-    """One pop of a batch: its queue tuple (key, l2, tie, a, b), kind, journal mark, what it changed."""
+    """One pop of a batch: its queue order (the entry without its stamp), pair, kind, journal mark, what
+    it changed."""
 
-    order: tuple
+    order: int
+    a: int
+    b: int
     kind: str
     mark: int
     code: int = 0  # BLOCK: the rule it broke
@@ -176,19 +179,23 @@ def _moved(t: tuple, b: int, a: int) -> tuple:
 
 
 class _Batches:
-    """The run's state and its batch loop (`run`)."""
+    """The run's state and its batch loop (`run`). Queue: ``heap`` of int entries, ``cur`` {pair: its
+    current entry}, ``placed`` {pair: (x, branch, cost, parts, entry without stamp)}, ``blocked``
+    {pair: rule}; pairs are ints a << 32 | b."""
 
     def __init__(self, V, S, F, pairs, target, model, options, progress):
         n = len(V)
         self.n, self.target, self.model, self.options, self.progress = n, target, model, options, progress
         self.params = model.kernel_params()
-        self.VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
+        self.scratch = n + 1  # a batch's merged rows go to rows scratch.. (row n stays zero)
+        self.VQ = np.zeros((bucket(n + 1 + MAX_BATCH), 3 + model.width), DTYPE)
         self.VQ[:n, :3], self.VQ[:n, 3:] = V, S
         self.VQd = jnp.asarray(self.VQ)
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)  # each input face's normal
         self.mesh = _Mesh(F, n, pairs)
-        self.q = _Queue()
-        self.journal = _Journal(self.q.heap)
+        self.heap, self.cur, self.placed, self.blocked = [], {}, {}, {}
+        self.stamp = 0
+        self.log = []  # the journal: (container, key, old value or _MISSING); (_HEAP, None, entry) per pop
         self.history, self.history_parts = [], []
         self.removed_at = np.full(len(F), -1, np.int64)
         self.coincident = np.zeros(len(F), bool)
@@ -199,54 +206,54 @@ class _Batches:
         self.depth = FIRST_BATCH
         self.batches = self.failed = 0
 
-    # pricing ---------------------------------------------------------------------------------------
+    @property
+    def q(self):
+        """The queue as `queue.stop_report` reads it: placed and blocked keyed by (a, b)."""
+        pair = lambda p: (p >> 32, p & _M32)  # noqa: E731
+        return SimpleNamespace(placed={pair(p): v for p, v in self.placed.items()},
+                               blocked={pair(p): c for p, c in self.blocked.items()})
 
-    def price(self, plist):
-        """Prices of pairs ``plist`` (list of (a, b)) from the device rows, with their squared lengths."""
-        pa = np.array(plist, np.int64).reshape(-1, 2)
-        d = self.VQ[pa[:, 0], :3] - self.VQ[pa[:, 1], :3]
-        priced = start_price(self.model, self.VQd, pa, self.params, None, self.n)()
-        return priced, np.einsum("ij,ij->i", d, d)
+    # pricing ---------------------------------------------------------------------------------------
 
     def push_all(self, pairs):
         plist = sorted({tuple(p) for p in pairs.tolist() if p[0] != p[1]})
         if plist:
-            self.push(plist, *self.price(plist))
+            P = np.array(plist, np.int64).reshape(-1, 2)
+            d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
+            priced = start_price(self.model, self.VQd, P, self.params, None, self.n)()
+            self.push(P, priced, np.einsum("ij,ij->i", d, d))
 
-    def keys(self, plist, priced, l2):
-        """The queue keys of priced pairs: lists (rank, squared length, tie, a, b)."""
-        q = self.q
-        costs = priced.cost.tolist()
-        P = np.array(plist, np.int64).reshape(-1, 2)
-        keys = costs if q.weights is None else [q._key(c, w) for c, w in zip(costs, priced.parts.T)]
-        return keys, l2.tolist(), _ties(P[:, 0], P[:, 1]).tolist(), P[:, 0].tolist(), P[:, 1].tolist()
-
-    def push(self, plist, priced, l2):
-        """`queue.Queue.push` (same entries, same stamps in order), heapifying when it adds more entries
-        than the queue holds (the first push: every pair)."""
-        q = self.q
-        keys, l2s, ties, a, b = self.keys(plist, priced, l2)
-        stamps = [next(q.stamps) for _ in plist]
-        q.stamp.update(zip(plist, stamps))
-        q.placed.update(zip(plist, zip(list(priced.x), priced.branch.tolist(), priced.cost.tolist(),
-                                       list(priced.parts.T), l2s)))
-        if q.blocked:
-            for p in plist:
-                q.blocked.pop(p, None)
-        entries = list(zip(keys, l2s, ties, a, b, stamps))
-        if len(entries) > len(q.heap):
-            q.heap.extend(entries)
-            heapq.heapify(q.heap)
+    def push(self, P, priced, l2):
+        """Into the queue: pairs P (K,2) with their prices (stamps in order, as `queue.Queue.push`),
+        heapifying when it adds more entries than the queue holds (the first push: every pair)."""
+        keys = _entries(P, priced.cost, l2)
+        s0 = self.stamp
+        self.stamp += len(keys)
+        entries = [k | (s0 + i + 1) for i, k in enumerate(keys)]
+        pks = [k >> STAMP_BITS & _PAIR for k in keys]
+        self.cur.update(zip(pks, entries))
+        self.placed.update(zip(pks, zip(list(priced.x), priced.branch.tolist(), priced.cost.tolist(),
+                                        list(priced.parts.T), keys)))
+        blocked = self.blocked
+        if blocked:
+            for p in pks:
+                blocked.pop(p, None)
+        heap = self.heap
+        if len(entries) > len(heap):
+            heap.extend(entries)
+            heapq.heapify(heap)
         else:
+            push = heapq.heappush
             for e in entries:
-                heapq.heappush(q.heap, e)
+                push(heap, e)
 
     # one pop ---------------------------------------------------------------------------------------
 
     def check(self, a: int, b: int, x, flipped=None):
         """The first rule contracting b into a at x breaks (or None), and the faces it would change:
         (code, (dead, kept at a, kept at b, drop)). ``flipped``: the flip test's answer when known."""
-        mesh, opt, manifold = self.mesh, self.options, self.options.preserve_topology
+        mesh, opt = self.mesh, self.options
+        manifold = opt.preserve_topology
         A, B = mesh.at[a], mesh.at[b]
         dead = A & B
         nshared = len(dead)
@@ -277,8 +284,8 @@ class _Batches:
                 for f in kept:
                     rows.append(f)
                     corner.append(tri[f].index(v))
-                    X.append(x)
-                    owner.append(i)
+                X.extend([x] * len(kept))
+                owner.extend([i] * len(kept))
         if not rows:
             return [False] * len(tests)
         G = np.array([tri[f] for f in rows], np.int64)
@@ -289,84 +296,123 @@ class _Batches:
     def coincident_drop(self, a, b, ka, kb) -> list:
         """Faces the contraction would make coincide and drop (`topo.coincident_removals`, faces in index
         order): none unless two faces around the pair end with the same three corners."""
-        fids = sorted(ka + kb)
-        after = [self.mesh.tri[f] if f in ka else _moved(self.mesh.tri[f], b, a) for f in fids]
-        if len({tuple(sorted(t)) for t in after}) == len(after):
+        tri = self.mesh.tri
+        seen = {tuple(sorted(tri[f])) for f in ka}
+        seen.update(tuple(sorted(_moved(tri[f], b, a))) for f in kb)
+        if len(seen) == len(ka) + len(kb):
             return []
+        ka_set = set(ka)
+        fids = sorted(ka + kb)
+        after = [tri[f] if f in ka_set else _moved(tri[f], b, a) for f in fids]
         gone = topo.coincident_removals(np.array(after, np.int64).reshape(-1, 3))
         return [f for f, g in zip(fids, gone) if g]
 
-    def contract(self, a: int, b: int, x, faces) -> tuple[set, set]:
-        """Contract b into a at x on the host (journaled). Returns (pairs to re-price, their vertices)."""
-        mesh, j, q = self.mesh, self.journal, self.q
+    def contract(self, a: int, b: int, x, faces):
+        """Contract b into a at x on the host (journaled); its pairs at b are gone, those at a stale."""
+        mesh, log, step = self.mesh, self.log, len(self.steps)
+        at, tri, alive, nbr = mesh.at, mesh.tri, mesh.alive, mesh.nbr
         dead, ka, kb, drop = faces
         for f in dead:
-            j.put(mesh.alive, f, False)
-            for c in mesh.tri[f]:
+            log.append((alive, f, True))
+            alive[f] = False
+            for c in tri[f]:
                 if c != a and c != b:
-                    j.put(mesh.at, c, mesh.at[c] - {f})
+                    log.append((at, c, at[c]))
+                    at[c] = at[c] - {f}
         for f in kb:
-            j.put(mesh.tri, f, _moved(mesh.tri[f], b, a))
-        j.put(mesh.at, a, frozenset(ka) | frozenset(kb))
-        j.put(mesh.at, b, frozenset())
+            t = tri[f]
+            log.append((tri, f, t))
+            tri[f] = (a if t[0] == b else t[0], a if t[1] == b else t[1], a if t[2] == b else t[2])
+        log.append((at, a, at[a]))
+        at[a] = frozenset(ka) | frozenset(kb)
+        log.append((at, b, at[b]))
+        at[b] = frozenset()
         for f in drop:
-            j.put(mesh.alive, f, False)
-            for c in mesh.tri[f]:
-                j.put(mesh.at, c, mesh.at[c] - {f})
-        j.put_d(mesh.count, "faces", mesh.count["faces"] - len(dead) - len(drop))
-        j.row(self.VQ, a)
-        self.VQ[a, :3] = x
-        # pair partners: b's become a's; pairs at b are gone (forgotten by the queue when the step stands)
-        step, nb = len(self.steps), mesh.nbr[b]
-        nbr, put = mesh.nbr, j.put
+            log.append((alive, f, True))
+            alive[f] = False
+            for c in tri[f]:
+                log.append((at, c, at[c]))
+                at[c] = at[c] - {f}
+        count = mesh.count
+        log.append((count, "faces", count["faces"]))
+        count["faces"] -= len(dead) + len(drop)
+        VQ = self.VQ
+        old = VQ[a].copy()
+        log.append((VQ, a, old))
+        self.orig[a] = old
+        VQ[a, :3] = x
+        slot = self.scratch + self.contracted  # a's row from now on (this batch): its scratch row
+        VQ[slot, :3] = x
+        ver = self.ver
+        ver[a] = slot
+        # pair partners: b's become a's; pairs at b are gone, each's stale interval (if any) ends here
+        held, gone, intervals = self.held, self.gone, self.intervals
+        nb = nbr[b]
+        B = b
         for w in nb:
             if w != a:
-                put(nbr, w, (nbr[w] - {b}) | {a})
-            self.gone[(w, b) if w < b else (b, w)] = step
-        j.put(mesh.nbr, a, (mesh.nbr[a] | nb) - {a, b})
-        j.put(mesh.nbr, b, frozenset())
-        # the pairs at a need new prices: held out of the queue until the batch's device call
-        ring = mesh.nbr[a]
-        at_a = sorted((a, w) if a < w else (w, a) for w in ring)
-        for p in at_a:
-            self.held[p] = step
-            if p in q.blocked:
-                j.drop(q.blocked, p)
-        # blocked pairs around a may have become valid: back in the queue at their stored price
-        if q.blocked:
-            if len(q.blocked) <= BLOCKED_SCAN:
-                back = [p for p in q.blocked if p[0] in ring or p[1] in ring]
+                log.append((nbr, w, nbr[w]))
+                nbr[w] = (nbr[w] - {b}) | {a}
+            p = (w << 32 | B) if w < B else (B << 32 | w)
+            gone[p] = step
+            i = held.pop(p, None)
+            if i is not None:
+                intervals[i][2] = step
+        log.append((nbr, a, nbr[a]))
+        ring = nbr[a] = (nbr[a] | nb) - {a, b}
+        log.append((nbr, b, nb))
+        nbr[b] = frozenset()
+        # the pairs at a need new prices: held out of the queue, a new stale interval each
+        blocked = self.blocked
+        for w in ring:
+            if a < w:
+                p, va, vb = a << 32 | w, slot, ver.get(w, w)
             else:
-                back = {(u, w) if u < w else (w, u) for u in ring for w in mesh.nbr[u]}
-                back = [p for p in back if p in q.blocked]
+                p, va, vb = w << 32 | a, ver.get(w, w), slot
+            i = held.get(p)
+            if i is not None:
+                intervals[i][2] = step
+            held[p] = len(intervals)
+            intervals.append([p, step, None, va, vb])
+            if p in blocked:
+                log.append((blocked, p, blocked.pop(p)))
+        # blocked pairs around a may have become valid: back in the queue at their stored price
+        if blocked:
+            if len(blocked) <= BLOCKED_SCAN:
+                back = [p for p in blocked if (p >> 32) in ring or (p & _M32) in ring]
+            else:
+                back = set()
+                for u in ring:
+                    for w in nbr[u]:
+                        p = (u << 32 | w) if u < w else (w << 32 | u)
+                        if p in blocked:
+                            back.add(p)
+                back = list(back)
             for p in back:
-                if p not in self.gone:
+                if p not in gone:
                     self.unblock(p)
-        self.stale_verts |= ring
-        self.stale_verts.add(a)
-        return at_a
 
     def unblock(self, p):
         """Back in the queue at its stored price (its vertices' rows are those it was priced with)."""
-        q = self.q
-        _, _, c, parts, l2 = q.placed[p]
-        self.journal.drop(q.blocked, p)
-        s = next(q.stamps)
-        self.journal.put_d(q.stamp, p, s)
-        heapq.heappush(q.heap, (q._key(c, parts), l2, _tie(*p), p[0], p[1], s))
+        log = self.log
+        log.append((self.blocked, p, self.blocked.pop(p)))
+        self.stamp += 1
+        e = self.placed[p][4] | self.stamp
+        cur = self.cur
+        log.append((cur, p, cur.get(p, _MISSING)))
+        cur[p] = e
+        heapq.heappush(self.heap, e)
 
     # a batch ---------------------------------------------------------------------------------------
 
-    def live(self, entry) -> bool:
+    def live(self, e) -> bool:
         """Whether a queue entry is current; pops and forgets one that is not (journaled when undoing
         this batch's steps could make it current again)."""
-        key, l2, tie, a, b, s = entry
-        p = (a, b)
-        q = self.q
-        if q.stamp.get(p) != s or p in q.blocked:  # an old entry: never current again
+        p = (e >> STAMP_BITS) & _PAIR
+        if self.cur.get(p) != e or p in self.blocked:  # an old entry: never current again
             return False
         if p in self.held or p in self.gone:  # current again if this batch's step is undone
-            self.journal.popped(entry)
+            self.log.append((_HEAP, None, e))
             return False
         return True
 
@@ -374,28 +420,37 @@ class _Batches:
         """Move the queue's next ``want`` live entries to ``ahead``, with their flip tests from one numpy
         pass, the vertices those read, and the contraction count then (a test stays right while no
         contraction since has moved or removed one of those vertices)."""
-        heap, stamp, mesh, new = self.q.heap, self.q.stamp, self.mesh, []
+        heap, cur, mesh, new = self.heap, self.cur, self.mesh, []
+        pop, live = heapq.heappop, self.live
         while heap and len(new) < want:
-            entry = heapq.heappop(heap)
-            if stamp.get((entry[3], entry[4])) == entry[5] and self.live(entry):  # (most are old: cheap test first)
-                new.append(entry)
+            e = pop(heap)
+            if cur.get((e >> STAMP_BITS) & _PAIR) == e and live(e):  # (most are old: cheap test first)
+                new.append(e)
         tests, reads = [], []
-        for entry in new:
-            a, b = entry[3], entry[4]
-            A, B = mesh.at[a], mesh.at[b]
+        at, placed, corners = mesh.at, self.placed, mesh.corners
+        for e in new:
+            p = (e >> STAMP_BITS) & _PAIR
+            a, b = p >> 32, p & _M32
+            A, B = at[a], at[b]
             dead = A & B
-            tests.append((a, b, self.q.placed[(a, b)][0], sorted(A - dead), sorted(B - dead)))
-            reads.append(mesh.corners(A | B) | {a, b})
-        for entry, flipped, r in zip(new, self.flip_tests(tests), reads):
-            self.ahead.append((entry, flipped, r, self.contracted))
+            tests.append((a, b, placed[p][0], sorted(A - dead), sorted(B - dead)))
+            r = corners(A | B)
+            r.add(a)
+            r.add(b)
+            reads.append(r)
+        for e, flipped, r in zip(new, self.flip_tests(tests), reads):
+            self.ahead.append((e, flipped, r, self.contracted))
 
     def next_entry(self):
         """The next live entry, from ``ahead`` or the queue, whichever ranks first (an unblocked pair can
         enter the queue before what was fetched ahead), and its flip test if known; (None, None) if none.
         Not removed yet."""
-        heap, stamp, ahead = self.q.heap, self.q.stamp, self.ahead
+        heap, cur, ahead, live = self.heap, self.cur, self.ahead, self.live
         while True:
-            while heap and not (stamp.get((heap[0][3], heap[0][4])) == heap[0][5] and self.live(heap[0])):
+            while heap:
+                e = heap[0]
+                if cur.get((e >> STAMP_BITS) & _PAIR) == e and live(e):
+                    break
                 heapq.heappop(heap)
             if not ahead:
                 if not heap:
@@ -403,117 +458,147 @@ class _Batches:
                 self.prefetch(min(PREFETCH, max(1, self.depth - len(self.steps))))
                 continue
             entry, flipped, reads, since = ahead[0]
-            if not self.live(entry):
+            if not live(entry):
                 ahead.popleft()
                 continue
             if heap and heap[0] < entry:
                 return heap[0], None
-            moved = self.moved
-            if any(moved.get(v, -1) >= since for v in reads):
-                flipped = None  # a contraction since changed what the test read
+            if since != self.contracted:
+                moved = self.moved
+                if any(moved.get(v, -1) >= since for v in reads):
+                    flipped = None  # a contraction since changed what the test read
             return entry, flipped
-
-    def take(self, entry):
-        """Remove ``entry`` (the one `next_entry` gave) from where it is, journaled."""
-        if self.ahead and self.ahead[0][0] is entry:
-            self.ahead.popleft()
-        else:
-            heapq.heappop(self.q.heap)
-        self.journal.popped(entry)
 
     def speculate(self):
         """Pop and apply up to ``depth`` steps on the host (into ``steps``). Pairs the steps stale are
         ``held`` out of the queue, pairs they remove are ``gone``: {pair: step index} each."""
-        q, mesh, j, opt = self.q, self.mesh, self.journal, self.options
-        steps, stale_verts = self.steps, self.stale_verts
-        while mesh.count["faces"] > self.target and len(steps) < self.depth:
-            entry, flipped = self.next_entry()
-            if entry is None:
+        mesh, log, opt, placed, steps = self.mesh, self.log, self.options, self.placed, self.steps
+        count, ahead = mesh.count, self.ahead
+        while count["faces"] > self.target and len(steps) < self.depth:
+            e, flipped = self.next_entry()
+            if e is None:
                 break
-            a, b = entry[3], entry[4]
-            p = (a, b)
-            x, br, cost, parts, _ = q.placed[p]
+            order = e >> STAMP_BITS
+            p = order & _PAIR
+            a, b = p >> 32, p & _M32
+            x, br, cost, parts, _ = placed[p]
             if cost > opt.max_cost:  # left in the queue: the stop report counts it
-                steps.append(_Step(entry[:5], STOP, len(j.log)))
+                steps.append(_Step(order, a, b, STOP, len(log)))
                 break
-            if a in stale_verts or b in stale_verts:  # reads or changes a row this batch changes
-                break
-            mark = len(j.log)
-            self.take(entry)
+            mark = len(log)
+            if ahead and ahead[0][0] is e:
+                ahead.popleft()
+            else:
+                heapq.heappop(self.heap)
+            log.append((_HEAP, None, e))
             code, faces = self.check(a, b, x, flipped)
             if code is not None:
-                j.put_d(q.blocked, p, code)
-                steps.append(_Step(entry[:5], BLOCK, mark, code=code))
+                log.append((self.blocked, p, _MISSING))
+                self.blocked[p] = code
+                steps.append(_Step(order, a, b, BLOCK, mark, code=code))
                 continue
             self.contract(a, b, x, faces)
             self.contracted += 1
             self.moved[a] = self.moved[b] = self.contracted
-            steps.append(_Step(entry[:5], CONTRACT, mark, x=x, branch=br, cost=cost, parts=parts,
-                               faces_left=mesh.count["faces"], dead=faces[0], drop=faces[3]))
-        for entry, *_ in self.ahead:  # fetched but not taken: back in the queue (never journaled)
-            heapq.heappush(q.heap, entry)
-        self.ahead.clear()
+            steps.append(_Step(order, a, b, CONTRACT, mark, x=x, branch=br, cost=cost, parts=parts,
+                               faces_left=count["faces"], dead=faces[0], drop=faces[3]))
+        for entry, *_ in ahead:  # fetched but not taken: back in the queue (never journaled)
+            heapq.heappush(self.heap, entry)
+        ahead.clear()
 
-    def merge(self, steps):
-        """The kept vertices' new states (one device call), on the host and device rows."""
-        P = np.array([s.order[3:5] for s in steps], np.int64)
-        X = np.array([s.x for s in steps], DTYPE)
-        merged = start_merge(self.model, self.VQd, P, X, self.params)()
-        self.VQ[P[:, 0], 3:] = merged
-        self.VQd = set_rows(self.VQd, P[:, 0], self.VQ[P[:, 0]], size=256)
+    def price_intervals(self, rows):
+        """Prices and queue keys of the stale intervals, each from its own versions of its two rows:
+        the device rows with the batch's merged ``rows`` in the scratch rows."""
+        iv = self.intervals
+        ids = np.array([(i[3], i[4]) for i in iv], np.int64).reshape(-1, 2)
+        VQd = set_rows(self.VQd, self.scratch + np.arange(len(rows)), rows, size=MAX_BATCH) if len(rows) \
+            else self.VQd
+        priced = start_price(self.model, VQd, ids, self.params, None, self.n)()
+        pos = self.VQ[ids.reshape(-1), :3]  # host scratch rows hold the merged positions
+        if self.orig:  # rows a later step of the batch changed: the positions from before
+            first = ids.reshape(-1)
+            for k in np.flatnonzero(np.isin(first, np.fromiter(self.orig, np.int64, len(self.orig)))).tolist():
+                pos[k] = self.orig[int(first[k])][:3]
+        pos = pos.reshape(-1, 2, 3)
+        d = np.ascontiguousarray(pos[:, 0]) - np.ascontiguousarray(pos[:, 1])
+        l2 = np.einsum("ij,ij->i", d, d)
+        P = np.array([(i[0] >> 32, i[0] & _M32) for i in iv], np.int64).reshape(-1, 2)
+        return VQd, priced, l2, P, [k >> STAMP_BITS for k in _entries(P, priced.cost, l2)]
 
-    def first_wrong(self, steps, stale, order) -> int:
-        """Index of the first step that a stale pair held out before it would have preceded."""
-        best, i = None, 0
-        for k, step in enumerate(steps):
-            while i < len(stale) and stale[i][1] < k:
-                if best is None or order[i] < best:
-                    best = order[i]
+    def first_wrong(self, orders, keys) -> int:
+        """Index of the first step that a stale interval open at it (begun before it, not ended before
+        it) would have preceded."""
+        iv, h, i, inf = self.intervals, [], 0, len(orders)
+        for k, o in enumerate(orders):
+            while i < len(iv) and iv[i][1] < k:
+                end = iv[i][2]
+                heapq.heappush(h, (keys[i], inf if end is None else end))
                 i += 1
-            if best is not None and best < step.order:
+            while h and h[0][1] < k:
+                heapq.heappop(h)
+            if h and h[0][0] < o:
                 return k
-        return len(steps)
+        return len(orders)
 
     def batch(self):
-        self.steps, self.held, self.gone, self.stale_verts = [], {}, {}, set()
-        self.ahead, self.moved, self.contracted = deque(), {}, 0
+        self.steps, self.held, self.gone, self.intervals = [], {}, {}, []
+        self.ahead, self.moved, self.contracted, self.ver, self.orig = deque(), {}, 0, {}, {}
         self.speculate()
-        steps, stale = self.steps, list(self.held.items())
+        steps = self.steps
         contracted = [s for s in steps if s.kind == CONTRACT]
+        rows = np.zeros((0, self.VQ.shape[1]), DTYPE)
         if contracted:
-            self.merge(contracted)
-        priced = l2 = None
-        order = []
-        if stale:
-            priced, l2 = self.price([p for p, _ in stale])
-            order = list(zip(*self.keys([p for p, _ in stale], priced, l2)))
-        ok = self.first_wrong(steps, stale, order)
+            P = np.array([(s.a, s.b) for s in contracted], np.int64)
+            X = np.array([s.x for s in contracted], DTYPE)
+            merged = start_merge(self.model, self.VQd, P, X, self.params)()
+            rows = np.concatenate([X, merged], 1)
+        VQd, priced, l2, P, keys = self.VQd, None, None, None, []
+        if self.intervals:
+            VQd, priced, l2, P, keys = self.price_intervals(rows)
+        ok = self.first_wrong([s.order for s in steps], keys)
         self.batches += 1
         if ok < len(steps):
             self.failed += 1
             self.depth = max(1, self.depth // 2)
-            self.undo(steps[ok:])
+            self.undo(steps[ok].mark)
         elif len(steps) == self.depth:
             self.depth = min(MAX_BATCH, 2 * self.depth)
-        self.journal.log.clear()
-        self.commit(steps[:ok], stale, priced, l2)
+        self.log.clear()
+        m = sum(1 for s in steps[:ok] if s.kind == CONTRACT)  # the merged rows of the steps that stand
+        if m:
+            kept = np.array([s.a for s in contracted[:m]], np.int64)
+            self.VQ[kept, 3:] = rows[:m, 3:]
+            VQd = set_rows(VQd, kept, rows[:m], size=MAX_BATCH)
+        self.VQd = VQd
+        self.commit(steps[:ok], ok, priced, l2, P)
 
-    def undo(self, steps):
-        self.journal.undo(steps[0].mark)
-        back = np.array([s.order[3] for s in steps if s.kind == CONTRACT], np.int64)
-        if len(back):  # the device rows of the kept vertices, as the journal restored the host's
-            self.VQd = set_rows(self.VQd, back, self.VQ[back], size=256)
+    def undo(self, mark: int):
+        heap, push = self.heap, heapq.heappush
+        for c, k, old in reversed(self.log[mark:]):
+            if c is _HEAP:
+                push(heap, old)
+            elif old is _MISSING:
+                del c[k]
+            else:
+                c[k] = old
+        del self.log[mark:]
 
-    def commit(self, steps, stale, priced, l2):
-        q = self.q
-        for p, i in self.gone.items():
-            if i < len(steps):
-                q.forget(p)
-        keep = [k for k, (_, i) in enumerate(stale) if i < len(steps)]
-        if keep:
+    def commit(self, steps, ok, priced, l2, P):
+        cur, placed, blocked = self.cur, self.placed, self.blocked
+        gone = {p for p, i in self.gone.items() if i < ok}
+        for p in gone:
+            cur.pop(p, None)
+            placed.pop(p, None)
+            blocked.pop(p, None)
+        last = {}  # each pair's last interval that began in a step that stands
+        for k, (p, start, *_) in enumerate(self.intervals):
+            if start < ok and p not in gone:
+                last[p] = k
+        if last:
+            keep = np.fromiter(last.values(), np.int64, len(last))
             sub = priced._replace(x=priced.x[keep], cost=priced.cost[keep], branch=priced.branch[keep],
                                   parts=priced.parts[:, keep])
-            self.push([stale[k][0] for k in keep], sub, l2[keep])
+            self.push(P[keep], sub, l2[keep])
         for s in steps:
             if s.kind == BLOCK:
                 if s.code != BUDGET:
@@ -524,12 +609,11 @@ class _Batches:
                 self.record(s)
 
     def record(self, s: _Step):
-        a, b = s.order[3:5]
         self.branches[s.branch] += 1
         self.max_cost_used = max(self.max_cost_used, float(s.cost))
-        self.history.append((a, b, np.array(s.x), float(s.cost)))
+        self.history.append((s.a, s.b, np.array(s.x), float(s.cost)))
         if len(self.model.parts):
-            self.history_parts.append(np.append(s.parts, s.order[0]))
+            self.history_parts.append(np.append(s.parts, self.placed_key(s)))
         step = len(self.history) - 1
         self.removed_at[list(s.dead)] = step
         if s.drop:
@@ -538,8 +622,13 @@ class _Batches:
         if self.progress is not None:
             self.progress(s.faces_left)
 
+    @staticmethod
+    def placed_key(s: _Step) -> float:
+        """The rank the step was taken at (with no ranking weights: its cost)."""
+        return s.cost
+
     def loop(self):
-        while self.stop is None and self.mesh.count["faces"] > self.target and self.q.heap:
+        while self.stop is None and self.mesh.count["faces"] > self.target and self.heap:
             self.batch()
 
 
