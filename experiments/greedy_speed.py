@@ -7,7 +7,8 @@ so both see the same machine state (and the hashes show whether the outputs are 
 
 The hash is sha256 over the output vertices, faces, history pairs, positions and costs, and the run's stop
 reason, contraction count and rejections by rule. Meshes come from ../shared/meshes (absent ones skip).
-Each version simplifies each mesh once first (compilation, caches), outside the timings.
+Each version simplifies each mesh once first (compilation, caches), outside the timings. Wall and process
+CPU time are both reported (medians): on a shared machine the CPU time is the steadier of the two.
 """
 from __future__ import annotations
 
@@ -57,6 +58,7 @@ def main() -> int:
             print(f"SKIP {mesh} ({path} absent)")
             continue
         times = {label: [] for label, _ in versions}
+        cpus = {label: [] for label, _ in versions}
         hashes = {}
         for label, pkg in versions:  # warm-up: compilation and file caches
             res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
@@ -64,20 +66,23 @@ def main() -> int:
             faces = (len(res.faces), res.stats["contractions"])
         for _ in range(args.repeats):
             for label, pkg in versions:
-                t = time.perf_counter()
+                t, c = time.perf_counter(), time.process_time()
                 res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
                 times[label].append(time.perf_counter() - t)
+                cpus[label].append(time.process_time() - c)
                 if digest(res) != hashes[label]:
                     print(f"  {label}: output changed between runs ({hashes[label]} -> {digest(res)})")
         for label, _ in versions:
             t = times[label]
             print(f"{mesh:20s} {label:8s} warm median {statistics.median(t):6.2f} s  (min {min(t):.2f}, "
-                  f"max {max(t):.2f})  faces {faces[0]}, contractions {faces[1]}  sha256 {hashes[label]}",
+                  f"max {max(t):.2f})  cpu {statistics.median(cpus[label]):6.2f} s  faces {faces[0]}, "
+                  f"contractions {faces[1]}  sha256 {hashes[label]}",
                   flush=True)
         if len(versions) == 2:
             (a, ta), (b, tb) = [(k, statistics.median(v)) for k, v in times.items()]
+            ca, cb = (statistics.median(cpus[k]) for k in (a, b))
             same = "same output" if hashes[a] == hashes[b] else "OUTPUTS DIFFER"
-            print(f"{'':20s} {b} / {a}: {tb / ta:.1f}x  ({same})", flush=True)
+            print(f"{'':20s} {b} / {a}: wall {tb / ta:.1f}x, cpu {cb / ca:.1f}x  ({same})", flush=True)
     return 0
 
 

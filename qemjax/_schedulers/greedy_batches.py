@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import heapq
 from collections import deque
+from itertools import chain, repeat
 from types import SimpleNamespace
 from typing import NamedTuple
 
@@ -52,7 +53,6 @@ from .queue import stop_report as _stop
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
 PREFETCH = 32  # queue entries fetched ahead at a time, their flip tests done together
-BLOCKED_SCAN = 64  # up to this many blocked pairs, find those around a vertex among them (else among its pairs)
 STAMP_BITS = 40  # an entry's lowest bits: its stamp (unique per push, never reused)
 _STAMP = (1 << STAMP_BITS) - 1
 _PAIR = (1 << 64) - 1
@@ -137,10 +137,7 @@ class _Mesh:
         self.nbr = [frozenset(s) for s in nbr]
 
     def corners(self, faces) -> set:
-        out = set()
-        for f in faces:
-            out.update(self.tri[f])
-        return out
+        return set(chain.from_iterable(map(self.tri.__getitem__, faces)))
 
     def on_boundary(self, v: int) -> bool:
         """Whether v has an edge with one face: a neighbour seen in only one of v's faces."""
@@ -178,10 +175,57 @@ def _moved(t: tuple, b: int, a: int) -> tuple:
     return (a if t[0] == b else t[0], a if t[1] == b else t[1], a if t[2] == b else t[2])
 
 
+class _Blocked(dict):
+    """{pair: rule} of the blocked pairs, and ``at`` {vertex: how many blocked pairs it is in}, kept
+    through every change (the journal's undo included), so that finding the blocked pairs around a vertex
+    looks only at vertices that have some."""
+
+    def __init__(self):
+        super().__init__()
+        self.at = {}
+
+    def _count(self, p, d):
+        at = self.at
+        for v in (p >> 32, p & _M32):
+            c = at.get(v, 0) + d
+            if c:
+                at[v] = c
+            else:
+                del at[v]
+
+    def __setitem__(self, p, code):
+        if p not in self:
+            self._count(p, 1)
+        super().__setitem__(p, code)
+
+    def __delitem__(self, p):
+        super().__delitem__(p)
+        self._count(p, -1)
+
+    def pop(self, p, *default):
+        if p in self:
+            self._count(p, -1)
+            return super().pop(p)
+        if default:
+            return default[0]
+        raise KeyError(p)
+
+
+class _Prices:
+    """One push's prices, kept as arrays and lists (a pair's entry in ``placed`` is (this, its index)):
+    x (K,3) float32, branch, cost and queue keys (without stamps) as lists, parts (p,K)."""
+
+    __slots__ = ("x", "branch", "cost", "parts", "keys")
+
+    def __init__(self, priced, keys):
+        self.x, self.branch, self.cost, self.parts = priced.x, priced.branch.tolist(), priced.cost.tolist(), priced.parts
+        self.keys = keys
+
+
 class _Batches:
     """The run's state and its batch loop (`run`). Queue: ``heap`` of int entries, ``cur`` {pair: its
     current entry}, ``placed`` {pair: (x, branch, cost, parts, entry without stamp)}, ``blocked``
-    {pair: rule}; pairs are ints a << 32 | b."""
+    {pair: rule}; pairs are ints a << 32 | b."""  # placed: {pair: (_Prices, index)}
 
     def __init__(self, V, S, F, pairs, target, model, options, progress):
         n = len(V)
@@ -193,7 +237,7 @@ class _Batches:
         self.VQd = jnp.asarray(self.VQ)
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)  # each input face's normal
         self.mesh = _Mesh(F, n, pairs)
-        self.heap, self.cur, self.placed, self.blocked = [], {}, {}, {}
+        self.heap, self.cur, self.placed, self.blocked = [], {}, {}, _Blocked()
         self.stamp = 0
         self.log = []  # the journal: (container, key, old value or _MISSING); (_HEAP, None, entry) per pop
         self.history, self.history_parts = [], []
@@ -210,7 +254,7 @@ class _Batches:
     def q(self):
         """The queue as `queue.stop_report` reads it: placed and blocked keyed by (a, b)."""
         pair = lambda p: (p >> 32, p & _M32)  # noqa: E731
-        return SimpleNamespace(placed={pair(p): v for p, v in self.placed.items()},
+        return SimpleNamespace(placed={pair(p): (None, None, blk.cost[k]) for p, (blk, k) in self.placed.items()},
                                blocked={pair(p): c for p, c in self.blocked.items()})
 
     # pricing ---------------------------------------------------------------------------------------
@@ -229,15 +273,16 @@ class _Batches:
         keys = _entries(P, priced.cost, l2)
         s0 = self.stamp
         self.stamp += len(keys)
-        entries = [k | (s0 + i + 1) for i, k in enumerate(keys)]
-        pks = [k >> STAMP_BITS & _PAIR for k in keys]
+        entries = [k | s for k, s in zip(keys, range(s0 + 1, s0 + 1 + len(keys)))]
+        pks = ((P[:, 0] << 32) | P[:, 1]).tolist()
         self.cur.update(zip(pks, entries))
-        self.placed.update(zip(pks, zip(list(priced.x), priced.branch.tolist(), priced.cost.tolist(),
-                                        list(priced.parts.T), keys)))
+        blk = _Prices(priced, keys)
+        self.placed.update(zip(pks, zip(repeat(blk), range(len(keys)))))
         blocked = self.blocked
         if blocked:
             for p in pks:
-                blocked.pop(p, None)
+                if p in blocked:
+                    blocked.pop(p)
         heap = self.heap
         if len(entries) > len(heap):
             heap.extend(entries)
@@ -262,7 +307,7 @@ class _Batches:
             return BUDGET, None
         if manifold and not mesh.link_ok(a, b, nshared):
             return outcome.TOPOLOGY, None
-        ka, kb = sorted(A - dead), sorted(B - dead)
+        ka, kb = A - dead, B - dead
         if manifold and opt.keep_parts and not (ka or kb):  # its faces are all its part has left
             return outcome.PART, None
         if ka or kb:
@@ -273,25 +318,28 @@ class _Batches:
         drop = self.coincident_drop(a, b, ka, kb)
         if drop and (manifold or left - len(drop) < self.target):
             return (outcome.COINCIDENT if manifold else BUDGET), None
-        return None, (sorted(dead), ka, kb, drop)
+        return None, (dead, ka, kb, drop)
 
     def flip_tests(self, tests) -> list[bool]:
         """`flips.flips_host` for several contractions at once, one numpy pass over all their faces:
         tests = [(a, b, x, faces kept at a, faces kept at b)]. Returns one bool per test."""
-        tri, rows, corner, X, owner = self.mesh.tri, [], [], [], []
-        for i, (a, b, x, ka, kb) in enumerate(tests):
-            for v, kept in ((a, ka), (b, kb)):
-                for f in kept:
-                    rows.append(f)
-                    corner.append(tri[f].index(v))
-                X.extend([x] * len(kept))
-                owner.extend([i] * len(kept))
+        tri, rows, verts, counts, X = self.mesh.tri, [], [], [], []
+        for a, b, x, ka, kb in tests:
+            rows.extend(ka)
+            rows.extend(kb)
+            verts += (a, b)
+            counts += (len(ka), len(kb))
+            X.append(x)
         if not rows:
             return [False] * len(tests)
         G = np.array([tri[f] for f in rows], np.int64)
-        bad = flips.flips_host_faces(self.VQ, self.N0, G, np.array(rows), np.array(corner), np.array(X),
-                                     self.options.cos_max)
-        return np.bincount(np.array(owner), weights=bad, minlength=len(tests)).astype(bool).tolist()
+        counts = np.array(counts).reshape(-1, 2)
+        per_test = counts.sum(1)
+        corner = np.argmax(G == np.repeat(np.array(verts), counts.reshape(-1))[:, None], axis=1)
+        owner = np.repeat(np.arange(len(tests)), per_test)
+        bad = flips.flips_host_faces(self.VQ, self.N0, G, np.array(rows), corner,
+                                     np.repeat(np.array(X, DTYPE), per_test, axis=0), self.options.cos_max)
+        return np.bincount(owner, weights=bad, minlength=len(tests)).astype(bool).tolist()
 
     def coincident_drop(self, a, b, ka, kb) -> list:
         """Faces the contraction would make coincide and drop (`topo.coincident_removals`, faces in index
@@ -301,9 +349,8 @@ class _Batches:
         seen.update(tuple(sorted(_moved(tri[f], b, a))) for f in kb)
         if len(seen) == len(ka) + len(kb):
             return []
-        ka_set = set(ka)
-        fids = sorted(ka + kb)
-        after = [tri[f] if f in ka_set else _moved(tri[f], b, a) for f in fids]
+        fids = sorted(ka | kb)
+        after = [tri[f] if f in ka else _moved(tri[f], b, a) for f in fids]
         gone = topo.coincident_removals(np.array(after, np.int64).reshape(-1, 3))
         return [f for f, g in zip(fids, gone) if g]
 
@@ -324,7 +371,7 @@ class _Batches:
             log.append((tri, f, t))
             tri[f] = (a if t[0] == b else t[0], a if t[1] == b else t[1], a if t[2] == b else t[2])
         log.append((at, a, at[a]))
-        at[a] = frozenset(ka) | frozenset(kb)
+        at[a] = ka | kb
         log.append((at, b, at[b]))
         at[b] = frozenset()
         for f in drop:
@@ -377,27 +424,22 @@ class _Batches:
             if p in blocked:
                 log.append((blocked, p, blocked.pop(p)))
         # blocked pairs around a may have become valid: back in the queue at their stored price
-        if blocked:
-            if len(blocked) <= BLOCKED_SCAN:
-                back = [p for p in blocked if (p >> 32) in ring or (p & _M32) in ring]
-            else:
-                back = set()
-                for u in ring:
+        bat = blocked.at
+        if bat:
+            for u in ring:
+                if u in bat:
                     for w in nbr[u]:
                         p = (u << 32 | w) if u < w else (w << 32 | u)
-                        if p in blocked:
-                            back.add(p)
-                back = list(back)
-            for p in back:
-                if p not in gone:
-                    self.unblock(p)
+                        if p in blocked and p not in gone:
+                            self.unblock(p)
 
     def unblock(self, p):
         """Back in the queue at its stored price (its vertices' rows are those it was priced with)."""
         log = self.log
         log.append((self.blocked, p, self.blocked.pop(p)))
         self.stamp += 1
-        e = self.placed[p][4] | self.stamp
+        blk, k = self.placed[p]
+        e = blk.keys[k] | self.stamp
         cur = self.cur
         log.append((cur, p, cur.get(p, _MISSING)))
         cur[p] = e
@@ -427,19 +469,18 @@ class _Batches:
             if cur.get((e >> STAMP_BITS) & _PAIR) == e and live(e):  # (most are old: cheap test first)
                 new.append(e)
         tests, reads = [], []
-        at, placed, corners = mesh.at, self.placed, mesh.corners
+        at, placed, nbr = mesh.at, self.placed, mesh.nbr
         for e in new:
             p = (e >> STAMP_BITS) & _PAIR
             a, b = p >> 32, p & _M32
             A, B = at[a], at[b]
             dead = A & B
-            tests.append((a, b, placed[p][0], sorted(A - dead), sorted(B - dead)))
-            r = corners(A | B)
-            r.add(a)
-            r.add(b)
-            reads.append(r)
+            blk, k = placed[p]
+            tests.append((a, b, blk.x[k], A - dead, B - dead))
+            reads.append(nbr[a] | nbr[b])  # the corners of a's and b's faces, and perhaps more
+        self.moved = set()  # vertices moved or removed since (ahead is empty when this runs)
         for e, flipped, r in zip(new, self.flip_tests(tests), reads):
-            self.ahead.append((e, flipped, r, self.contracted))
+            self.ahead.append((e, flipped, r))
 
     def next_entry(self):
         """The next live entry, from ``ahead`` or the queue, whichever ranks first (an unblocked pair can
@@ -457,16 +498,14 @@ class _Batches:
                     return None, None
                 self.prefetch(min(PREFETCH, max(1, self.depth - len(self.steps))))
                 continue
-            entry, flipped, reads, since = ahead[0]
+            entry, flipped, reads = ahead[0]
             if not live(entry):
                 ahead.popleft()
                 continue
             if heap and heap[0] < entry:
                 return heap[0], None
-            if since != self.contracted:
-                moved = self.moved
-                if any(moved.get(v, -1) >= since for v in reads):
-                    flipped = None  # a contraction since changed what the test read
+            if not reads.isdisjoint(self.moved):
+                flipped = None  # a contraction since changed what the test read
             return entry, flipped
 
     def speculate(self):
@@ -481,7 +520,8 @@ class _Batches:
             order = e >> STAMP_BITS
             p = order & _PAIR
             a, b = p >> 32, p & _M32
-            x, br, cost, parts, _ = placed[p]
+            blk, k = placed[p]
+            cost = blk.cost[k]
             if cost > opt.max_cost:  # left in the queue: the stop report counts it
                 steps.append(_Step(order, a, b, STOP, len(log)))
                 break
@@ -491,6 +531,7 @@ class _Batches:
             else:
                 heapq.heappop(self.heap)
             log.append((_HEAP, None, e))
+            x = blk.x[k]
             code, faces = self.check(a, b, x, flipped)
             if code is not None:
                 log.append((self.blocked, p, _MISSING))
@@ -499,8 +540,8 @@ class _Batches:
                 continue
             self.contract(a, b, x, faces)
             self.contracted += 1
-            self.moved[a] = self.moved[b] = self.contracted
-            steps.append(_Step(order, a, b, CONTRACT, mark, x=x, branch=br, cost=cost, parts=parts,
+            self.moved.update((a, b))
+            steps.append(_Step(order, a, b, CONTRACT, mark, x=x, branch=blk.branch[k], cost=cost, parts=blk.parts[:, k],
                                faces_left=count["faces"], dead=faces[0], drop=faces[3]))
         for entry, *_ in ahead:  # fetched but not taken: back in the queue (never journaled)
             heapq.heappush(self.heap, entry)
@@ -542,7 +583,7 @@ class _Batches:
 
     def batch(self):
         self.steps, self.held, self.gone, self.intervals = [], {}, {}, []
-        self.ahead, self.moved, self.contracted, self.ver, self.orig = deque(), {}, 0, {}, {}
+        self.ahead, self.moved, self.contracted, self.ver, self.orig = deque(), set(), 0, {}, {}
         self.speculate()
         steps = self.steps
         contracted = [s for s in steps if s.kind == CONTRACT]
