@@ -24,7 +24,7 @@ from .._costs import MeshView
 from .._incidence import FaceLists
 from . import outcome
 from .._kernels import flips
-from .common import DTYPE, Options, bucket, face_normals, set_rows, start_merge, start_price
+from .common import DTYPE, Options, bucket, face_normals, gc_paused, set_rows, start_merge, start_price
 from .outcome import BUDGET
 from .queue import Queue as _Queue, stop_report as _stop
 
@@ -60,6 +60,13 @@ def _on_boundary(ring: np.ndarray, v: int) -> bool:
 
 def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
         options: Options, progress=None, wedges=None, edges=None, part_scale=None):
+    """`_run` with Python's garbage collector paused (`common.gc_paused`)."""
+    with gc_paused():
+        return _run(V, S, F, extra_pairs, target_faces, model, options, progress, wedges)
+
+
+def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
+         options: Options, progress=None, wedges=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Returns the
     `outcome.Outcome` (``wedges``: as in `parallel.run`; ``edges`` and ``part_scale``, which the parallel
