@@ -34,7 +34,7 @@ each vertex.
 from __future__ import annotations
 
 import heapq
-from collections import deque
+from collections import Counter, deque
 from itertools import chain, repeat
 from types import SimpleNamespace
 from typing import NamedTuple
@@ -52,7 +52,7 @@ from .queue import stop_report as _stop
 
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
-PREFETCH = 32  # queue entries fetched ahead at a time, their flip tests done together
+PREFETCH = 64  # queue entries fetched ahead at a time, their flip tests done together
 STAMP_BITS = 40  # an entry's lowest bits: its stamp (unique per push, never reused)
 _STAMP = (1 << STAMP_BITS) - 1
 _PAIR = (1 << 64) - 1
@@ -139,24 +139,22 @@ class _Mesh:
     def corners(self, faces) -> set:
         return set(chain.from_iterable(map(self.tri.__getitem__, faces)))
 
-    def on_boundary(self, v: int) -> bool:
-        """Whether v has an edge with one face: a neighbour seen in only one of v's faces."""
-        once, twice = set(), set()
-        for f in self.at[v]:
-            for c in self.tri[f]:
-                if c != v:
-                    (twice if c in once else once).add(c)
-        return len(once) > len(twice)
-
     def link_ok(self, a: int, b: int, nshared: int) -> bool:
-        """`greedy._link_ok` on these sets (same rule, same answers)."""
+        """`greedy._link_ok` on these sets (same rule, same answers). The corners of a's faces are counted
+        (one C loop), which gives both its neighbours and whether it is on a boundary (a neighbour
+        counted once)."""
         if not 1 <= nshared <= 2:
             return False
-        common = (self.corners(self.at[a]) & self.corners(self.at[b])) - {a, b}
+        tri, at = self.tri, self.at
+        ca = Counter(chain.from_iterable(map(tri.__getitem__, at[a])))
+        cb = Counter(chain.from_iterable(map(tri.__getitem__, at[b])))
+        common = (ca.keys() & cb.keys()) - {a, b}
         if len(common) != nshared:
             return False
         if nshared == 2:
-            if self.on_boundary(a) and self.on_boundary(b):
+            ca.pop(a, None)
+            cb.pop(b, None)
+            if 1 in ca.values() and 1 in cb.values():  # both on a boundary
                 return False
             for c in common:
                 if len(self.corners(self.at[c])) - 1 <= 3:
@@ -267,10 +265,11 @@ class _Batches:
             priced = start_price(self.model, self.VQd, P, self.params, None, self.n)()
             self.push(P, priced, np.einsum("ij,ij->i", d, d))
 
-    def push(self, P, priced, l2):
+    def push(self, P, priced, l2, keys=None):
         """Into the queue: pairs P (K,2) with their prices (stamps in order, as `queue.Queue.push`),
-        heapifying when it adds more entries than the queue holds (the first push: every pair)."""
-        keys = _entries(P, priced.cost, l2)
+        heapifying when it adds more entries than the queue holds (the first push: every pair).
+        ``keys``: their `_entries`, when known."""
+        keys = _entries(P, priced.cost, l2) if keys is None else keys
         s0 = self.stamp
         self.stamp += len(keys)
         entries = [k | s for k, s in zip(keys, range(s0 + 1, s0 + 1 + len(keys)))]
@@ -564,7 +563,7 @@ class _Batches:
         d = np.ascontiguousarray(pos[:, 0]) - np.ascontiguousarray(pos[:, 1])
         l2 = np.einsum("ij,ij->i", d, d)
         P = np.array([(i[0] >> 32, i[0] & _M32) for i in iv], np.int64).reshape(-1, 2)
-        return VQd, priced, l2, P, [k >> STAMP_BITS for k in _entries(P, priced.cost, l2)]
+        return VQd, priced, l2, P, _entries(P, priced.cost, l2)
 
     def first_wrong(self, orders, keys) -> int:
         """Index of the first step that a stale interval open at it (begun before it, not ended before
@@ -596,7 +595,7 @@ class _Batches:
         VQd, priced, l2, P, keys = self.VQd, None, None, None, []
         if self.intervals:
             VQd, priced, l2, P, keys = self.price_intervals(rows)
-        ok = self.first_wrong([s.order for s in steps], keys)
+        ok = self.first_wrong([s.order for s in steps], [k >> STAMP_BITS for k in keys])
         self.batches += 1
         if ok < len(steps):
             self.failed += 1
@@ -611,7 +610,7 @@ class _Batches:
             self.VQ[kept, 3:] = rows[:m, 3:]
             VQd = set_rows(VQd, kept, rows[:m], size=MAX_BATCH)
         self.VQd = VQd
-        self.commit(steps[:ok], ok, priced, l2, P)
+        self.commit(steps[:ok], ok, priced, l2, P, keys)
 
     def undo(self, mark: int):
         heap, push = self.heap, heapq.heappush
@@ -624,13 +623,14 @@ class _Batches:
                 c[k] = old
         del self.log[mark:]
 
-    def commit(self, steps, ok, priced, l2, P):
+    def commit(self, steps, ok, priced, l2, P, keys):
         cur, placed, blocked = self.cur, self.placed, self.blocked
         gone = {p for p, i in self.gone.items() if i < ok}
         for p in gone:
             cur.pop(p, None)
             placed.pop(p, None)
-            blocked.pop(p, None)
+            if p in blocked:
+                del blocked[p]
         last = {}  # each pair's last interval that began in a step that stands
         for k, (p, start, *_) in enumerate(self.intervals):
             if start < ok and p not in gone:
@@ -639,34 +639,40 @@ class _Batches:
             keep = np.fromiter(last.values(), np.int64, len(last))
             sub = priced._replace(x=priced.x[keep], cost=priced.cost[keep], branch=priced.branch[keep],
                                   parts=priced.parts[:, keep])
-            self.push(P[keep], sub, l2[keep])
+            self.push(P[keep], sub, l2[keep], [keys[k] for k in last.values()])
+        self.record([s for s in steps if s.kind == CONTRACT])
         for s in steps:
             if s.kind == BLOCK:
                 if s.code != BUDGET:
                     self.rejected_by[s.code] += 1
             elif s.kind == STOP:
                 self.stop = "max_error"
-            else:
-                self.record(s)
 
-    def record(self, s: _Step):
-        self.branches[s.branch] += 1
-        self.max_cost_used = max(self.max_cost_used, float(s.cost))
-        self.history.append((s.a, s.b, np.array(s.x), float(s.cost)))
-        if len(self.model.parts):
-            self.history_parts.append(np.append(s.parts, self.placed_key(s)))
-        step = len(self.history) - 1
-        self.removed_at[list(s.dead)] = step
-        if s.drop:
-            self.removed_at[list(s.drop)] = step
-            self.coincident[list(s.drop)] = True
-        if self.progress is not None:
-            self.progress(s.faces_left)
-
-    @staticmethod
-    def placed_key(s: _Step) -> float:
-        """The rank the step was taken at (with no ranking weights: its cost)."""
-        return s.cost
+    def record(self, steps):
+        """The history of contraction steps that stand, in order."""
+        history, progress, parts = self.history, self.progress, len(self.model.parts)
+        faces, at, drops, drop_at, branches = [], [], [], [], []
+        for s in steps:
+            step = len(history)
+            history.append((s.a, s.b, s.x, s.cost))  # (x: a row of its price block; History copies it)
+            branches.append(s.branch)
+            if s.cost > self.max_cost_used:
+                self.max_cost_used = s.cost
+            if parts:  # with the rank it was taken at (with no ranking weights: its cost)
+                self.history_parts.append(np.append(s.parts, s.cost))
+            faces.extend(s.dead)
+            at.extend([step] * len(s.dead))
+            if s.drop:
+                drops.extend(s.drop)
+                drop_at.extend([step] * len(s.drop))
+            if progress is not None:
+                progress(s.faces_left)
+        if steps:
+            self.removed_at[faces] = at
+            self.branches += np.bincount(np.array(branches, np.int64), minlength=len(self.branches))
+        if drops:
+            self.removed_at[drops] = drop_at
+            self.coincident[drops] = True
 
     def loop(self):
         while self.stop is None and self.mesh.count["faces"] > self.target and self.heap:
