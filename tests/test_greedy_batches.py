@@ -97,3 +97,80 @@ def test_host_link_rule_matches_the_facelists_one(make):
             assert got == greedy._link_ok(faces, a, b, nshared), (a, b)
             seen.add(got)
     assert seen == {True, False}
+
+
+def test_queue_entries_order_as_the_tuples():
+    """The int entries (`greedy_batches._entries` plus a stamp) sort, and come off a heap, in the order of
+    the one-at-a-time queue's tuples (cost, squared length, tie, a, b, stamp): ties in cost and length,
+    zeros of both signs, negative and infinite costs, equal entries but for the stamp."""
+    import heapq
+
+    from qemjax._schedulers.queue import tie
+
+    rng = np.random.default_rng(0)
+    k = 4000
+    P = np.sort(rng.integers(0, 300, (k, 2)), axis=1)
+    cost = rng.choice(np.array([0.0, -0.0, 1e-30, 2.5e-7, 3.0, -1e-8, np.inf], np.float32), k)
+    cost[: k // 2] = rng.random(k // 2).astype(np.float32) * np.float32(1e-6)
+    l2 = rng.choice(np.array([0.0, 1e-4, 2e-4, 0.5], np.float32), k)
+    P[k - 50:] = P[:50]  # repeated pairs: same pair, other stamp (and sometimes the same price)
+    cost[k - 25:], l2[k - 25:] = cost[:25], l2[:25]
+    stamps = rng.permutation(k) + 1
+    ints = [e | int(s) for e, s in zip(greedy_batches._entries(P, cost, l2), stamps)]
+    tuples = [(float(c), float(d), tie(a, b), a, b, int(s)) for (a, b), c, d, s in zip(P.tolist(), cost, l2, stamps)]
+    by_int = sorted(range(k), key=ints.__getitem__)
+    by_tuple = sorted(range(k), key=tuples.__getitem__)
+    assert by_int == by_tuple
+    hi, ht = list(ints), list(tuples)
+    heapq.heapify(hi)
+    heapq.heapify(ht)
+    out_i = [greedy_batches.entry_pair(heapq.heappop(hi)) for _ in range(k)]
+    out_t = [heapq.heappop(ht)[3:5] for _ in range(k)]
+    assert out_i == out_t
+
+
+def _edges(F):
+    F = np.asarray(F, np.int64)
+    return np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1), axis=0)
+
+
+# a tent on edge (0, 1): faces (0, 2, 3) and (1, 3, 2) coincide once 1 goes into 0; vertex 4 gives 2 and 3
+# a fourth neighbour, so the link rule holds there and the coincident-face rule decides
+TENT = np.array([[0, 1, 2], [1, 0, 3], [0, 2, 3], [1, 3, 2], [2, 4, 3]])
+
+
+@pytest.mark.parametrize("make", [lambda: shapes.grid(7, hole=True), lambda: shapes.torus(1.0, 0.35, 10, 6),
+                                  lambda: (np.zeros((5, 3)), TENT)], ids=["grid-with-hole", "torus", "tent"])
+def test_simple_mesh_shortcuts_match_the_general_rules(make):
+    """On a `simple` mesh (no repeated corners or faces) the link rule's degree test and the coincident
+    faces test take shortcuts: the same answers as the general rules, for every edge."""
+    V, F = make()
+    meshes = [(V, F)]
+    if len(F) > 10:  # coarser versions too, with irregular valence and degree-3 vertices
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            meshes += [(r.vertices, r.faces) for r in (qemjax.simplify((V, F), ratio=t) for t in (0.4, 0.1))]
+    seen = set()
+    for Vm, Fm in meshes:
+        E = _edges(Fm)
+        mesh = greedy_batches._Mesh(np.asarray(Fm, np.int64), len(Vm), E)
+        assert mesh.simple
+        for a, b in E.tolist():
+            dead = mesh.at[a] & mesh.at[b]
+            common = mesh.link_common(a, b, len(dead))
+            mesh.simple = False
+            assert (mesh.link_common(a, b, len(dead)) is None) == (common is None), (a, b)
+            mesh.simple = True
+            if common is not None:
+                ka, kb = mesh.at[a] - dead, mesh.at[b] - dead
+                got = mesh.coincide(a, b, ka, kb, common)
+                assert got == bool(mesh.coincident_drop(a, b, ka, kb)), (a, b)
+                seen.add(got)
+    assert seen == ({True, False} if len(F) == len(TENT) else {False})  # the tent has a coinciding contraction
+
+
+def test_simple_means_no_repeated_corners_or_faces():
+    E = _edges(TENT)
+    assert greedy_batches._Mesh(TENT, 5, E).simple
+    assert not greedy_batches._Mesh(np.concatenate([TENT, TENT[[2]][:, [1, 2, 0]]]), 5, E).simple  # a face twice
+    assert not greedy_batches._Mesh(np.concatenate([TENT, [[2, 2, 4]]]), 5, E).simple  # a repeated corner

@@ -34,7 +34,7 @@ each vertex.
 from __future__ import annotations
 
 import heapq
-from collections import Counter, deque
+from collections import _count_elements, deque  # (the C loop behind Counter)
 from itertools import chain, repeat
 from types import SimpleNamespace
 from typing import NamedTuple
@@ -135,31 +135,65 @@ class _Mesh:
             nbr[a].add(b)
             nbr[b].add(a)
         self.nbr = [frozenset(s) for s in nbr]
+        # no face with a repeated corner, no two faces with the same corners: in manifold mode it stays so
+        # (a contraction removes the faces with both endpoints, and one that would make two faces coincide
+        # is refused), and the rules below take shortcuts that rely on it
+        Fs = np.sort(np.asarray(F).reshape(-1, 3), axis=1)
+        self.simple = bool(np.all(Fs[:, 0] != Fs[:, 1]) and np.all(Fs[:, 1] != Fs[:, 2])
+                           and len(np.unique(Fs, axis=0)) == len(Fs))
 
     def corners(self, faces) -> set:
         return set(chain.from_iterable(map(self.tri.__getitem__, faces)))
 
     def link_ok(self, a: int, b: int, nshared: int) -> bool:
-        """`greedy._link_ok` on these sets (same rule, same answers). The corners of a's faces are counted
-        (one C loop), which gives both its neighbours and whether it is on a boundary (a neighbour
-        counted once)."""
+        """`greedy._link_ok` on these sets (same rule, same answers)."""
+        return self.link_common(a, b, nshared) is not None
+
+    def link_common(self, a: int, b: int, nshared: int):
+        """`link_ok`, giving the common neighbours of a and b (the apexes of their faces) when it holds,
+        else None. The corners of a's faces are counted (one C loop), which gives both its neighbours and
+        whether it is on a boundary (a neighbour counted once)."""
         if not 1 <= nshared <= 2:
-            return False
+            return None
         tri, at = self.tri, self.at
-        ca = Counter(chain.from_iterable(map(tri.__getitem__, at[a])))
-        cb = Counter(chain.from_iterable(map(tri.__getitem__, at[b])))
+        ca, cb = {}, {}
+        _count_elements(ca, chain.from_iterable(map(tri.__getitem__, at[a])))
+        _count_elements(cb, chain.from_iterable(map(tri.__getitem__, at[b])))
         common = (ca.keys() & cb.keys()) - {a, b}
         if len(common) != nshared:
-            return False
+            return None
         if nshared == 2:
-            ca.pop(a, None)
-            cb.pop(b, None)
+            del ca[a], cb[b]
             if 1 in ca.values() and 1 in cb.values():  # both on a boundary
-                return False
+                return None
             for c in common:
-                if len(self.corners(self.at[c])) - 1 <= 3:
-                    return False
-        return True
+                # k distinct faces at c need k <= C(d, 2) of its d neighbours: 4 faces or more, 4 or more
+                if (len(at[c]) <= 3 or not self.simple) and len(self.corners(at[c])) - 1 <= 3:
+                    return None
+        return common
+
+    def coincident_drop(self, a, b, ka, kb) -> list:
+        """Faces the contraction would make coincide and drop (`topo.coincident_removals`, faces in index
+        order): none unless two faces around the pair end with the same three corners."""
+        tri = self.tri
+        seen = {tuple(sorted(tri[f])) for f in ka}
+        seen.update(tuple(sorted(_moved(tri[f], b, a))) for f in kb)
+        if len(seen) == len(ka) + len(kb):
+            return []
+        fids = sorted(ka | kb)
+        after = [tri[f] if f in ka else _moved(tri[f], b, a) for f in fids]
+        gone = topo.coincident_removals(np.array(after, np.int64).reshape(-1, 3))
+        return [f for f, g in zip(fids, gone) if g]
+
+    def coincide(self, a, b, ka, kb, common) -> bool:
+        """Whether contracting b into a would make two faces coincide (`coincident_drop` is not empty),
+        on a `simple` mesh where the link rule holds (``common``: its common neighbours): only faces
+        (a, u, w) and (b, u, w) can, u and w then both common neighbours."""
+        if len(common) != 2:
+            return False
+        u, w = common
+        uw = self.at[u] & self.at[w]
+        return not uw.isdisjoint(ka) and not uw.isdisjoint(kb)
 
     def output(self, n: int) -> FaceLists:
         """The faces as a `FaceLists` (what the run returns and `queue.stop_report` reads)."""
@@ -304,8 +338,10 @@ class _Batches:
         left = mesh.count["faces"] - nshared
         if left < self.target:
             return BUDGET, None
-        if manifold and not mesh.link_ok(a, b, nshared):
-            return outcome.TOPOLOGY, None
+        if manifold:
+            common = mesh.link_common(a, b, nshared)
+            if common is None:
+                return outcome.TOPOLOGY, None
         ka, kb = A - dead, B - dead
         if manifold and opt.keep_parts and not (ka or kb):  # its faces are all its part has left
             return outcome.PART, None
@@ -314,7 +350,11 @@ class _Batches:
                 flipped = self.flip_tests([(a, b, x, ka, kb)])[0]
             if flipped:
                 return outcome.FLIP, None
-        drop = self.coincident_drop(a, b, ka, kb)
+        if manifold and mesh.simple:
+            if mesh.coincide(a, b, ka, kb, common):
+                return outcome.COINCIDENT, None
+            return None, (dead, ka, kb, [])
+        drop = mesh.coincident_drop(a, b, ka, kb)
         if drop and (manifold or left - len(drop) < self.target):
             return (outcome.COINCIDENT if manifold else BUDGET), None
         return None, (dead, ka, kb, drop)
@@ -331,7 +371,7 @@ class _Batches:
             X.append(x)
         if not rows:
             return [False] * len(tests)
-        G = np.array([tri[f] for f in rows], np.int64)
+        G = np.fromiter(chain.from_iterable(map(tri.__getitem__, rows)), np.int64, 3 * len(rows)).reshape(-1, 3)
         counts = np.array(counts).reshape(-1, 2)
         per_test = counts.sum(1)
         corner = np.argmax(G == np.repeat(np.array(verts), counts.reshape(-1))[:, None], axis=1)
@@ -339,19 +379,6 @@ class _Batches:
         bad = flips.flips_host_faces(self.VQ, self.N0, G, np.array(rows), corner,
                                      np.repeat(np.array(X, DTYPE), per_test, axis=0), self.options.cos_max)
         return np.bincount(owner, weights=bad, minlength=len(tests)).astype(bool).tolist()
-
-    def coincident_drop(self, a, b, ka, kb) -> list:
-        """Faces the contraction would make coincide and drop (`topo.coincident_removals`, faces in index
-        order): none unless two faces around the pair end with the same three corners."""
-        tri = self.mesh.tri
-        seen = {tuple(sorted(tri[f])) for f in ka}
-        seen.update(tuple(sorted(_moved(tri[f], b, a))) for f in kb)
-        if len(seen) == len(ka) + len(kb):
-            return []
-        fids = sorted(ka | kb)
-        after = [tri[f] if f in ka else _moved(tri[f], b, a) for f in fids]
-        gone = topo.coincident_removals(np.array(after, np.int64).reshape(-1, 3))
-        return [f for f, g in zip(fids, gone) if g]
 
     def contract(self, a: int, b: int, x, faces):
         """Contract b into a at x on the host (journaled); its pairs at b are gone, those at a stale."""
