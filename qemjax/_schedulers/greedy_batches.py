@@ -33,6 +33,7 @@ each vertex.
 """
 from __future__ import annotations
 
+import bisect
 import heapq
 from collections import _count_elements, deque  # (the C loop behind Counter)
 from itertools import chain, repeat
@@ -57,6 +58,7 @@ STAMP_BITS = 40  # an entry's lowest bits: its stamp (unique per push, never reu
 _STAMP = (1 << STAMP_BITS) - 1
 _PAIR = (1 << 64) - 1
 _M32 = 0xFFFFFFFF
+OPEN = 1 << 62  # the end of a stale interval still open when the batch ends
 _MISSING = object()
 _HEAP = object()
 
@@ -419,18 +421,19 @@ class _Batches:
         ver = self.ver
         ver[a] = slot
         # pair partners: b's become a's; pairs at b are gone, each's stale interval (if any) ends here
-        held, gone, intervals = self.held, self.gone, self.intervals
+        held, gone, iv = self.held, self.gone, self.iv
         nb = nbr[b]
-        B = b
+        B, just_b, a_for_b = b, frozenset((b,)), frozenset((a, b))
         for w in nb:
             if w != a:
-                log.append((nbr, w, nbr[w]))
-                nbr[w] = (nbr[w] - {b}) | {a}
+                nw = nbr[w]
+                log.append((nbr, w, nw))
+                nbr[w] = nw - just_b if a in nw else nw ^ a_for_b  # (b is one of w's partners)
             p = (w << 32 | B) if w < B else (B << 32 | w)
             gone[p] = step
             i = held.pop(p, None)
             if i is not None:
-                intervals[i][2] = step
+                iv.end[i] = step
         log.append((nbr, a, nbr[a]))
         ring = nbr[a] = (nbr[a] | nb) - {a, b}
         log.append((nbr, b, nb))
@@ -444,9 +447,12 @@ class _Batches:
                 p, va, vb = w << 32 | a, ver.get(w, w), slot
             i = held.get(p)
             if i is not None:
-                intervals[i][2] = step
-            held[p] = len(intervals)
-            intervals.append([p, step, None, va, vb])
+                iv.end[i] = step
+            held[p] = len(iv.pair)
+            iv.pair.append(p)
+            iv.start.append(step)
+            iv.end.append(OPEN)
+            iv.rows += (va, vb)
             if p in blocked:
                 log.append((blocked, p, blocked.pop(p)))
         # blocked pairs around a may have become valid: back in the queue at their stored price
@@ -576,8 +582,8 @@ class _Batches:
     def price_intervals(self, rows):
         """Prices and queue keys of the stale intervals, each from its own versions of its two rows:
         the device rows with the batch's merged ``rows`` in the scratch rows."""
-        iv = self.intervals
-        ids = np.array([(i[3], i[4]) for i in iv], np.int64).reshape(-1, 2)
+        iv = self.iv
+        ids = np.array(iv.rows, np.int64).reshape(-1, 2)
         VQd = set_rows(self.VQd, self.scratch + np.arange(len(rows)), rows, size=MAX_BATCH) if len(rows) \
             else self.VQd
         priced = start_price(self.model, VQd, ids, self.params, None, self.n)()
@@ -589,17 +595,17 @@ class _Batches:
         pos = pos.reshape(-1, 2, 3)
         d = np.ascontiguousarray(pos[:, 0]) - np.ascontiguousarray(pos[:, 1])
         l2 = np.einsum("ij,ij->i", d, d)
-        P = np.array([(i[0] >> 32, i[0] & _M32) for i in iv], np.int64).reshape(-1, 2)
+        pk = np.array(iv.pair, np.int64)
+        P = np.stack([pk >> 32, pk & _M32], 1)
         return VQd, priced, l2, P, _entries(P, priced.cost, l2)
 
     def first_wrong(self, orders, keys) -> int:
         """Index of the first step that a stale interval open at it (begun before it, not ended before
         it) would have preceded."""
-        iv, h, i, inf = self.intervals, [], 0, len(orders)
+        start, end, h, i = self.iv.start, self.iv.end, [], 0
         for k, o in enumerate(orders):
-            while i < len(iv) and iv[i][1] < k:
-                end = iv[i][2]
-                heapq.heappush(h, (keys[i], inf if end is None else end))
+            while i < len(start) and start[i] < k:
+                heapq.heappush(h, (keys[i], end[i]))
                 i += 1
             while h and h[0][1] < k:
                 heapq.heappop(h)
@@ -608,7 +614,7 @@ class _Batches:
         return len(orders)
 
     def batch(self):
-        self.steps, self.held, self.gone, self.intervals = [], {}, {}, []
+        self.steps, self.held, self.gone, self.iv = [], {}, {}, SimpleNamespace(pair=[], start=[], end=[], rows=[])
         self.ahead, self.moved, self.contracted, self.ver, self.orig = deque(), set(), 0, {}, {}
         self.speculate()
         steps = self.steps
@@ -620,7 +626,7 @@ class _Batches:
             merged = start_merge(self.model, self.VQd, P, X, self.params)()
             rows = np.concatenate([X, merged], 1)
         VQd, priced, l2, P, keys = self.VQd, None, None, None, []
-        if self.intervals:
+        if self.iv.pair:
             VQd, priced, l2, P, keys = self.price_intervals(rows)
         ok = self.first_wrong([s.order for s in steps], [k >> STAMP_BITS for k in keys])
         self.batches += 1
@@ -652,16 +658,17 @@ class _Batches:
 
     def commit(self, steps, ok, priced, l2, P, keys):
         cur, placed, blocked = self.cur, self.placed, self.blocked
-        gone = {p for p, i in self.gone.items() if i < ok}
+        gone = self.gone.keys() if ok == len(self.steps) else {p for p, i in self.gone.items() if i < ok}
         for p in gone:
             cur.pop(p, None)
             placed.pop(p, None)
             if p in blocked:
                 del blocked[p]
-        last = {}  # each pair's last interval that began in a step that stands
-        for k, (p, start, *_) in enumerate(self.intervals):
-            if start < ok and p not in gone:
-                last[p] = k
+        # each pair's last interval that began in a step that stands (intervals are in order of start)
+        cut = bisect.bisect_left(self.iv.start, ok)
+        last = dict(zip(self.iv.pair[:cut], range(cut)))
+        for p in gone:
+            last.pop(p, None)
         if last:
             keep = np.fromiter(last.values(), np.int64, len(last))
             sub = priced._replace(x=priced.x[keep], cost=priced.cost[keep], branch=priced.branch[keep],
