@@ -294,9 +294,9 @@ class _Batches:
     # pricing ---------------------------------------------------------------------------------------
 
     def push_all(self, pairs):
-        plist = sorted({tuple(p) for p in pairs.tolist() if p[0] != p[1]})
-        if plist:
-            P = np.array(plist, np.int64).reshape(-1, 2)
+        P = np.unique(np.asarray(pairs, np.int64).reshape(-1, 2), axis=0)  # rows in order, as sorted tuples
+        P = P[P[:, 0] != P[:, 1]]
+        if len(P):
             d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
             priced = start_price(self.model, self.VQd, P, self.params, None, self.n)()
             self.push(P, priced, np.einsum("ij,ij->i", d, d))
