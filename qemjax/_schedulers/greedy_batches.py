@@ -58,6 +58,7 @@ STAMP_BITS = 40  # an entry's lowest bits: its stamp (unique per push, never reu
 _STAMP = (1 << STAMP_BITS) - 1
 _PAIR = (1 << 64) - 1
 _M32 = 0xFFFFFFFF
+REBUILD = 2  # the queue is rebuilt from its current entries when it holds this many times as many entries
 OPEN = 1 << 62  # the end of a stale interval still open when the batch ends
 _MISSING = object()
 _HEAP = object()
@@ -614,6 +615,10 @@ class _Batches:
         return len(orders)
 
     def batch(self):
+        if len(self.heap) > REBUILD * len(self.cur) + PREFETCH:  # mostly old entries: keep the current ones
+            blocked = self.blocked
+            self.heap = [e for p, e in self.cur.items() if p not in blocked]
+            heapq.heapify(self.heap)
         self.steps, self.held, self.gone, self.iv = [], {}, {}, SimpleNamespace(pair=[], start=[], end=[], rows=[])
         self.ahead, self.moved, self.contracted, self.ver, self.orig = deque(), set(), 0, {}, {}
         self.speculate()
