@@ -244,6 +244,11 @@ class AreaDifference(Method):
             return _price_host(VS, pairs, rings.corners, rings.mask)
         return _price(VS, pairs, params, rings.corners, rings.mask)
 
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        from . import at_kept
+
+        return at_kept.area(VS, pairs, params, rings.corners, rings.mask)
+
     def merge(self, VS, pairs, x, params):
         return _merge(VS, pairs)
 
