@@ -222,6 +222,28 @@ def vanishing(locks: RunLocks, P: np.ndarray, kept_faces: np.ndarray) -> np.ndar
     return (kept_faces == 0) & (np.take(locks.locked, P[:, 0]) | np.take(locks.locked, P[:, 1]))
 
 
+def strands(locks: RunLocks, faces, P: np.ndarray, dead) -> np.ndarray:
+    """(K,) bool: pairs P whose dying faces (``dead``: (faces, owner pair), `FaceLists.touched_with_dead`)
+    are all the faces a locked third vertex has (an "ear" vertex of a boundary: it would leave the mesh)."""
+    out = np.zeros(len(P), bool)
+    df, owner = dead
+    if len(df) == 0:
+        return out
+    G = np.take(faces.F, df, axis=0)
+    rows, cols = np.nonzero(np.take(locks.locked, G))
+    if rows.size == 0:
+        return out
+    c, own = G[rows, cols].astype(np.int64), np.take(owner, rows)
+    third = (c != np.take(P[:, 0], own)) & (c != np.take(P[:, 1], own))
+    c, own = c[third], own[third]
+    if c.size == 0:
+        return out
+    cu, inv, cnt = np.unique(c, return_inverse=True, return_counts=True)
+    total = np.bincount(faces.around(cu)[0], minlength=len(cu))
+    out[own[(cnt >= total)[inv]]] = True
+    return out
+
+
 def carry(weights, a: np.ndarray, b: np.ndarray) -> None:
     """The kept vertices ``a`` take the larger weight of theirs and the removed ``b``'s (in place)."""
     if weights is not None:

@@ -155,7 +155,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
         if manifold and options.keep_parts and len(fids) == 0:  # its faces are all its part has left
             block((a, b), outcome.PART)
             continue
-        if locks is not None and len(fids) == 0 and (locks.locked[a] or locks.locked[b]):
+        if locks is not None and ((len(fids) == 0 and (locks.locked[a] or locks.locked[b])) or
+                                  _locks.strands(locks, faces, P, (dead, np.zeros(len(dead), np.int64)))[0]):
             block((a, b), outcome.LOCKED)  # a locked vertex never leaves the mesh with its last faces
             continue
         if wedges is not None and not wedges.allowed(faces, VQ, a, b, x):

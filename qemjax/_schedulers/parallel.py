@@ -390,8 +390,10 @@ class _Run:
                 why[np.bincount(owner, minlength=len(P)) == 0] = outcome.PART
             why[~linked] = outcome.TOPOLOGY
             at = (apex, np.take(free_rows, r), owner_r)
-        if self.locks is not None:  # a locked vertex never leaves the mesh with its part's last faces
-            why[(why == 0) & _locks.vanishing(self.locks, P, np.bincount(owner, minlength=len(P)))] = outcome.LOCKED
+        if self.locks is not None:  # a locked vertex never leaves the mesh (its part's or its own last faces)
+            gone_locked = _locks.vanishing(self.locks, P, np.bincount(owner, minlength=len(P))) | \
+                _locks.strands(self.locks, self.faces, P, dead)
+            why[(why == 0) & gone_locked] = outcome.LOCKED
         if self.wedges is not None:
             xs = _take(st.x, idx)
             seam = np.take(self.wedges.multi, P[:, 0]) | np.take(self.wedges.multi, P[:, 1])
