@@ -249,5 +249,3 @@ def carry(weights, a: np.ndarray, b: np.ndarray) -> None:
     if weights is not None:
         weights[a] = np.maximum(np.take(weights, a), np.take(weights, b))
 
-
-LOCKED = outcome.LOCKED

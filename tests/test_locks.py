@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import trimesh
 
 import qemjax
 from qemjax import shapes
@@ -254,3 +255,35 @@ def test_area_price_at_kept_matches_numpy_in_float64():
         def area(p):
             return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
         np.testing.assert_allclose(d, abs(area(ring) - area(after)), rtol=1e-10, atol=1e-12)
+
+
+def test_attributes_kept_with_locks(tmp_path):
+    """The attribute model prices a locked pair on the host (`cost_at`); indices are the file's vertices."""
+    path = [p for p in shapes.write_examples(tmp_path, subdivisions=2) if p.name == "textured.obj"][0]
+    V = np.asarray(qemjax.load(str(path)).vertices)
+    lk = np.arange(0, len(V), 23)
+    for scheduler in SCHEDULERS:
+        res = qemjax.simplify(str(path), ratio=0.3, attributes="uv", locked=lk, scheduler=scheduler)
+        assert res.uv is not None and res.stop_reason == "target"
+        out = {tuple(r) for r in res.vertices.tolist()}
+        assert all(tuple(V[i]) in out for i in lk)
+
+
+def test_cli_reads_locks_and_weights(tmp_path, capsys):
+    from qemjax import _cli
+
+    V, F = _mesh()
+    src = tmp_path / "m.obj"
+    trimesh.Trimesh(V, F, process=False).export(src)
+    n = len(qemjax.load(str(src)).vertices)
+    np.savetxt(tmp_path / "locked.txt", np.arange(0, n, 10), fmt="%d")
+    np.save(tmp_path / "w.npy", np.linspace(0.5, 2.0, n))
+    args = ["simplify", str(src), str(tmp_path / "out.obj"), "--ratio", "0.2", "--quiet"]
+    assert _cli.main(args + ["--locked", str(tmp_path / "locked.txt"), "--vertex-weights",
+                             str(tmp_path / "w.npy")]) == 0
+    out = {tuple(r) for r in np.asarray(qemjax.load(str(tmp_path / "out.obj")).vertices).tolist()}
+    Vin = np.asarray(qemjax.load(str(src)).vertices)
+    assert all(tuple(Vin[i]) in out for i in range(0, n, 10))
+    np.savetxt(tmp_path / "bad.txt", [n + 3], fmt="%d")
+    assert _cli.main(args + ["--locked", str(tmp_path / "bad.txt")]) == 2
+    assert "out of range" in capsys.readouterr().err
