@@ -27,7 +27,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._schedulers import outcome
 from ._units import Frame
 
 KEYS = ("locked", "vertex_weights")  # the per-vertex settings `simplify` takes through its **settings
