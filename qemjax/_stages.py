@@ -206,6 +206,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
     if lk is not None and feature_edges is not None:
+        if len(feature_edges):  # checked as given: an error names the user's indices, not the run's
+            topo.feature_edges_with_faces(lk.geo.F, len(lk.geo.V), feature_edges)
         feature_edges = lk.inv[feature_edges]
     if attrs is not None and attrs.has_seams():  # seams are constrained like boundaries: feature-edge planes
         seams = _wedges.seam_edges(geo.F, attrs.corners)

@@ -287,3 +287,30 @@ def test_cli_reads_locks_and_weights(tmp_path, capsys):
     np.savetxt(tmp_path / "bad.txt", [n + 3], fmt="%d")
     assert _cli.main(args + ["--locked", str(tmp_path / "bad.txt")]) == 2
     assert "out of range" in capsys.readouterr().err
+
+
+def _two_spheres():
+    a, b = shapes.icosphere(2), shapes.icosphere(2)
+    V = np.vstack([a.vertices, np.asarray(b.vertices) + [2.05, 0, 0]])
+    return V, np.vstack([a.faces, np.asarray(b.faces) + len(a.vertices)])
+
+
+def test_greedy_ranked_model_ends_when_a_reweight_leaves_only_blocked_pairs():
+    """ESQEM ranks by weighted parts and rebuilds its queue from the unblocked pairs; with locks (blocked
+    pairs) the rebuilt queue can be empty: the run then stops instead of popping an empty heap."""
+    V, F = _two_spheres()
+    lk = np.arange(0, len(V), 13)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = qemjax.simplify((V, F), ratio=0.1, scheduler="greedy", method="esqem", locked=lk,
+                              vertex_weights=np.linspace(0.1, 3, len(V)))
+    out = {tuple(r) for r in res.vertices.tolist()}
+    assert all(tuple(V[i]) in out for i in lk)
+
+
+def test_feature_edges_with_locks_are_checked_as_given():
+    V, F = _two_spheres()
+    with pytest.raises(ValueError, match=r"not mesh edges, first: \[0, 11\]"):
+        qemjax.simplify((V, F), ratio=0.1, locked=np.arange(0, len(V), 13), feature_edges=[[0, 11]])
+    res = qemjax.simplify((V, F), ratio=0.1, locked=np.arange(0, len(V), 13), feature_edges=F[:3, :2])
+    assert res.stop_reason == "target"

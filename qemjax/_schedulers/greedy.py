@@ -132,6 +132,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, ta
     while faces.count > target_faces and q.heap:
         if ranked and faces.count <= (1.0 - model.reweight_step) * reweights[-1][0]:
             reweigh()
+            if not q.heap:  # every pair left is blocked (the rebuilt heap holds only unblocked ones)
+                break
         key, l2, tie, a, b, s = heapq.heappop(q.heap)
         if q.stamp.get((a, b)) != s or (a, b) in q.blocked:
             continue
