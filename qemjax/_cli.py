@@ -185,6 +185,15 @@ def _read_feature_edges(path: str) -> np.ndarray:
     return a
 
 
+def _read_vector(path: str, kind, flag: str) -> np.ndarray:
+    """(k,) values from a .npy file or a text file of one value per line (``kind``: the text's type)."""
+    try:
+        a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=kind, ndmin=1)
+    except (OSError, ValueError) as exc:
+        raise CliError(f"could not read {flag} from {path}: {exc}") from None
+    return a.reshape(-1) if a.ndim == 2 and 1 in a.shape else a
+
+
 def _number_or_none(flag: str, text: str):
     if text.strip().lower() == "none":
         return None
@@ -206,6 +215,9 @@ def _simplify_kwargs(args) -> dict:
         kw[name] = value
     if "feature_edges" in kw:
         kw["feature_edges"] = _read_feature_edges(kw["feature_edges"])
+    for name, kind in (("locked", np.int64), ("vertex_weights", np.float64)):
+        if getattr(args, name, None) is not None:
+            kw[name] = _read_vector(getattr(args, name), kind, "--" + name.replace("_", "-"))
     if "attribute_weights" in kw:
         kw["attribute_weights"] = _attribute_weights(kw["attribute_weights"])
     if "attributes" in kw:
@@ -333,6 +345,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="stop before a contraction costs more than E (squared distance, mesh units²; "
                    "--method area: surface-area change, mesh units²); alone or with --faces/--ratio")
     _add_options(s)
+    s.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
+                   "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
+                   "integer per line)")
+    s.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0) "
+                   "per input vertex (.npy or text, one number per line): each pair's cost is multiplied by "
+                   "the larger weight of its vertices, so heavy regions keep more detail")
     lod = sub.add_parser("lod", help="levels of detail from one run: one file per level (and a .glb, a record)")
     lod.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
     lod.add_argument("out_dir", help="folder for the levels, NAME-lod0.EXT (finest) ... (created if absent)")

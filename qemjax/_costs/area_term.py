@@ -74,5 +74,9 @@ class AreaTerm(Term):
     def price(self, VS, pairs, params, rings=None):
         return _price(self.base.price_kernel, VS, pairs, params, rings.corners, rings.mask)
 
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        """The term at the kept vertex, added to the base's price there (`at_kept`)."""
+        return _price(self.base.at_kept_kernel, VS, pairs, params, rings.corners, rings.mask)
+
     def describe(self) -> dict:
         return {**self.base.describe(), "area_weight": self.area_weight}

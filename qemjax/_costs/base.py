@@ -86,6 +86,17 @@ class CostModel:
         """(K, width) state of the kept vertices after contracting pairs (K,2) to x (K,3)."""
         raise NotImplementedError
 
+    # a static function (VS, pairs, params) -> `price`'s rows with each pair placed at its kept vertex
+    # (`at_kept`), for a model whose price needs no ring; None: the model offers no such price
+    at_kept_kernel = None
+
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        """`price`'s rows for pairs (K,2) contracted onto their kept vertex (``pairs[:, 0]``), where it stands:
+        what a locked vertex allows (`at_kept`, `qemjax._schedulers.locks`)."""
+        if self.at_kept_kernel is None:
+            raise NotImplementedError(f"method {self.name!r} cannot price a contraction at a fixed position")
+        return self.at_kept_kernel(VS, pairs, params)
+
     refresh = None  # or a function (VS host rows, MeshView, verts) -> (len(verts), width) rows
     rank_weights = None  # or a function (parts (P, p) of the candidates) -> (p,) float64 weights
     reweight_step: ClassVar[float] = 0.05

@@ -48,7 +48,7 @@ import numpy as np
 from .._kernels.batching import DTYPE, chunks
 from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
-from . import ring
+from . import at_kept, ring
 from .base import MeshInput, require_nonnegative
 from .qem import QEM
 
@@ -91,6 +91,16 @@ def edge_curvature(k1, a1, k2, a2):
 @kernel
 def _price(VS, pairs, endpoints_only, cond_eps, max_shift):
     out = placement.place_pairs(VS, pairs, endpoints_only, cond_eps, max_shift)  # (5,K), inlined
+    a = jnp.take(VS, pairs[:, 0], axis=0, mode="clip")
+    b = jnp.take(VS, pairs[:, 1], axis=0, mode="clip")
+    ke = edge_curvature(a[:, KCOL], a[:, ACOL], b[:, KCOL], b[:, ACOL])
+    return jnp.concatenate([out, out[3:4], ke[None]], 0)
+
+
+@kernel
+def _price_at_kept(VS, pairs):
+    """`_price`'s rows with each pair at its kept vertex (`at_kept`): parts [Q, K] as `_price` gives them."""
+    out = at_kept.qem(VS, pairs, None)
     a = jnp.take(VS, pairs[:, 0], axis=0, mode="clip")
     b = jnp.take(VS, pairs[:, 1], axis=0, mode="clip")
     ke = edge_curvature(a[:, KCOL], a[:, ACOL], b[:, KCOL], b[:, ACOL])
@@ -176,6 +186,9 @@ class ESQEM(QEM):
 
     def price(self, VS, pairs, params, rings=None):
         return _price(VS, pairs, params["endpoints_only"], params["cond_eps"], params["max_shift"])
+
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        return _price_at_kept(VS, pairs)
 
     def merge(self, VS, pairs, x, params):
         q = super().merge(VS, pairs, x, params)

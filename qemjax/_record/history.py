@@ -88,6 +88,7 @@ class Record:
     frame: Frame
     scheduler: str = "parallel"
     target_faces: int = 0
+    locked: np.ndarray | None = None  # (n,) bool: locked input vertices (None: none), kept exactly
 
     # -- what the record says ----------------------------------------------------------------------
     def faces_removed(self) -> np.ndarray:
@@ -173,6 +174,8 @@ class Record:
         if flat.size:  # as `simplify`: an exactly flat face keeps the rounded internal positions
             w = np.unique(faces[flat])
             w = w[~moved[w]]
+            if self.locked is not None:  # locked vertices keep the input's position at every level
+                w = w[~self.locked[ids[w]]]
             verts[w] = self.frame.positions_to_mesh(_internal(V[ids[w]], ids[w], self.frame), ids[w])
         costs = self.history.costs[:j]
         rounds = self.history.rounds
@@ -195,6 +198,8 @@ class Record:
                "frame_sizes": fr.sizes if fr.sizes is not None else np.zeros(0)}
         for name, col in h.parts.items():
             out[f"parts/{name}"] = col
+        if self.locked is not None:  # only then: a record without locks keeps its bytes
+            out["locked"] = self.locked
         return out
 
     def save(self, path) -> None:
@@ -220,7 +225,7 @@ def load_record(path) -> Record:
                   a["frame_sizes"] if many else None)
     history = Contractions(a["pairs"], a["positions"], a["costs"], parts, a["rounds"])
     return Record(a["input_vertices"], a["input_faces"], history, a["removed_at"], a["coincident"], frame,
-                  str(a["scheduler"]), int(a["target_faces"]))
+                  str(a["scheduler"]), int(a["target_faces"]), a.get("locked"))
 
 
 def _roots(pairs: np.ndarray, n: int) -> np.ndarray:

@@ -60,13 +60,15 @@ def _unpack(out: np.ndarray) -> Priced:
     return Priced(np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8), out[5:])
 
 
-def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 0):
+def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 0, at_kept: bool = False):
     """Start pricing pairs P (K,2) with ``model`` over device rows VSd (kernel calls are asynchronous).
     Returns a function that waits for the kernels and gives a `Priced`. Ring models (``uses_ring``) also
-    need the `FaceLists` ``faces`` and a ``pad`` vertex row (zeros) for ring padding."""
+    need the `FaceLists` ``faces`` and a ``pad`` vertex row (zeros) for ring padding. ``at_kept``: price
+    each pair contracted onto its kept vertex (``model.price_at_kept``; locked vertices, `qemjax._schedulers.locks`)."""
     rows = 5 + len(model.parts)
+    price = model.price_at_kept if at_kept else model.price
     if not model.uses_ring:
-        outs = [model.price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
+        outs = [price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
 
         def result():
             out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else \
@@ -80,7 +82,7 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
             parts = zip(chunks(block[idx].astype(np.int32)), chunks(rg.corners, fill=pad), chunks(rg.mask))
             for (s, pp), (_, cc), (_, mm) in parts:
                 sel = idx[s:s + len(pp)]
-                pieces.append((b0 + sel, model.price(VSd, pp, _params(params, pp), ring.Rings(cc, mm))))
+                pieces.append((b0 + sel, price(VSd, pp, _params(params, pp), ring.Rings(cc, mm))))
 
     def ring_result():
         out = np.zeros((rows, len(P)), DTYPE)

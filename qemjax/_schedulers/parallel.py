@@ -34,6 +34,7 @@ import time
 import jax.numpy as jnp
 import numpy as np
 
+from . import locks as _locks
 from .._mesh import topology as topo
 from .._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
 from .._costs import MeshView
@@ -189,9 +190,11 @@ class _Run:
     """One simplification: the mesh state that lives across rounds, and the stages of a round."""
 
     def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges,
-                 part_scale=None, params=None, wedges=None, normals=None):
+                 part_scale=None, params=None, wedges=None, normals=None, locks=None):
         self.n, m = len(V), len(F)
         self.wedges = wedges  # a `_wedges.Tracker` when attributes are kept (else None)
+        self.locks = locks  # a `_locks.RunLocks` (else None); the weights are carried in a copy
+        self.weights = None if locks is None or locks.weights is None else np.array(locks.weights, np.float64)
         self.part_scale = part_scale
         self.model, self.options, self.progress = model, options, progress
         self.params = model.kernel_params() if params is None else params
@@ -225,7 +228,7 @@ class _Run:
         self.rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
         self.max_cost_used = 0.0
         self.faces_per_round = []
-        self.weights, self.weighed_at, self.reweights = None, 0, []  # ranking weights (`rank`)
+        self.rank_w, self.weighed_at, self.reweights = None, 0, []  # ranking weights (`rank`)
         self.history_parts = []
 
     # -- stage 1: update ---------------------------------------------------------------------------
@@ -268,9 +271,13 @@ class _Run:
             pending = self.first or start_price(model, VQd, st.E, self.params, self.faces, self.pad)
             self.first = None
             st.bad = np.zeros(len(st.E), np.int8)
+            if self.locks is not None:
+                pending = self.locked_prices(pending, st.E)
         else:
             d = np.flatnonzero(stale)
             pending = start_price(model, VQd, _take(st.E, d), self.params, self.faces, self.pad)
+            if self.locks is not None:
+                pending = self.locked_prices(pending, _take(st.E, d))
             st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
             if same is not None:
                 st.bad = st.bad * same
@@ -297,7 +304,16 @@ class _Run:
             seam = self.wedges.constrain(self.faces, self.VQ, _take(st.E, d), x, c)
             st.x[d], st.cost[d] = x, c
             st.bad[d[seam]] = outcome.SEAM
+        if self.locks is not None:  # pairs of two locked vertices never contract
+            st.bad[_locks.both_locked(self.locks, st.E)] = outcome.LOCKED
+            if self.wedges is not None:  # a seam placement never moves a locked vertex
+                _locks.pin(self.locks, self.VQ, st.E, st.x)
         self.timer.add("kernels_s", time.perf_counter() - t0)
+
+    def locked_prices(self, pending, P):
+        """``pending`` (a price of pairs P) with locked kept vertices and the weights applied (`_locks.adjust`)."""
+        return lambda: _locks.adjust(self.locks, self.weights, self.model, self.VQ, self.VQd, P, pending(),
+                                     self.params, self.faces, self.pad)
 
     def rank(self, st: RoundState, valid: np.ndarray):
         """Set ``st.key``: the cost, or for a model with `rank_weights` the cost plus its weighted parts,
@@ -307,11 +323,11 @@ class _Run:
             st.key = st.cost
             return
         count = self.faces.count
-        if self.weights is None or count <= (1.0 - self.model.reweight_step) * self.weighed_at:
-            self.weights = self.model.rank_weights(np.compress(valid, st.parts, axis=0))
+        if self.rank_w is None or count <= (1.0 - self.model.reweight_step) * self.weighed_at:
+            self.rank_w = self.model.rank_weights(np.compress(valid, st.parts, axis=0))
             self.weighed_at = count
-            self.reweights.append((count, self.weights))
-        st.key = (st.cost + st.parts.astype(np.float64) @ self.weights).astype(DTYPE)
+            self.reweights.append((count, self.rank_w))
+        st.key = (st.cost + st.parts.astype(np.float64) @ self.rank_w).astype(DTYPE)
 
     # -- stages 3 and 4: select and validate -------------------------------------------------------
     def candidates(self, st: RoundState, need, max_cost=None) -> np.ndarray:
@@ -374,6 +390,10 @@ class _Run:
                 why[np.bincount(owner, minlength=len(P)) == 0] = outcome.PART
             why[~linked] = outcome.TOPOLOGY
             at = (apex, np.take(free_rows, r), owner_r)
+        if self.locks is not None:  # a locked vertex never leaves the mesh (its part's or its own last faces)
+            gone_locked = _locks.vanishing(self.locks, P, np.bincount(owner, minlength=len(P))) | \
+                _locks.strands(self.locks, self.faces, P, dead)
+            why[(why == 0) & gone_locked] = outcome.LOCKED
         if self.wedges is not None:
             xs = _take(st.x, idx)
             seam = np.take(self.wedges.multi, P[:, 0]) | np.take(self.wedges.multi, P[:, 1])
@@ -398,6 +418,7 @@ class _Run:
         st.changed = np.zeros(n, bool)
         st.changed[a] = True
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
+        _locks.carry(self.weights, a, b)
         self.max_cost_used = max(self.max_cost_used, float(st.cost[acc].max()))
         self.history.append((self.rounds - 1, (a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64))))
         if st.parts.shape[1]:
@@ -488,14 +509,16 @@ class _Run:
 
 
 def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=None, edges=None,
-        part_scale=None, wedges=None):
+        part_scale=None, wedges=None, locks=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64 faces, extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be
     0); ``edges``: `topo.edges` of F when the caller has it; ``part_scale`` (n,): (extent of each vertex's
     part / the whole extent)², which scales ``Schedule.free_cost`` per pair (None: one part).
     Returns the `outcome.Outcome` (the schedulers' contract). ``wedges``: a `_wedges.Tracker`
-    (attributes kept: the seam rule applies and its corners are updated), or None."""
-    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges)
+    (attributes kept: the seam rule applies and its corners are updated), or None. ``locks``: a
+    `_locks.RunLocks` (locked vertices and weights; locked vertices numbered first), or None."""
+    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges,
+             locks=locks)
     stop, blocked = r.run()
     rounds, a, b, x, cost = _history_columns(r.history)
     hist = _history_arrays(a, b, x, cost)
