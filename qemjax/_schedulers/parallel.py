@@ -36,6 +36,7 @@ import numpy as np
 
 from .. import _topology as topo
 from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
+from .._batching import CHUNKS
 from .._costs import MeshView
 from .._incidence import FaceLists
 from . import outcome
@@ -43,7 +44,14 @@ from .common import (DTYPE, Options, Timer, bucket, face_normals, pad_rows, set_
                      start_price)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
-MERGE_CHUNK = 4096  # one merge shape whatever the round's size: a few more calls early, one compilation
+MERGE_CHUNK = 4096  # the merge and row-update shape of a large round: a few more calls early, one compilation
+SMALL_CHUNK = CHUNKS[0]  # ... and of a round with at most this many contractions (most rounds of a small mesh):
+# a 4096-row scatter costs ~12x a 256-row one, and a small mesh's rounds contract ~100 pairs
+
+
+def merge_size(k: int) -> int:
+    """The fixed piece shape of a round's merge and device row update for k rows: two shapes per run."""
+    return SMALL_CHUNK if k <= SMALL_CHUNK else MERGE_CHUNK
 
 
 @dataclasses.dataclass
@@ -394,7 +402,7 @@ class _Run:
         P = _take(st.E, acc)
         a, b = P[:, 0], P[:, 1]
         xs = _take(st.x, acc)
-        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=MERGE_CHUNK)  # runs meanwhile
+        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=merge_size(len(P)))  # runs meanwhile
         st.changed = np.zeros(n, bool)
         st.changed[a] = True
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
@@ -425,7 +433,7 @@ class _Run:
             self.extra_pairs = ep[ep[:, 0] != ep[:, 1]]
         rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
         put_rows(self.VQ, a, rows)
-        self.VQd = set_rows(self.VQd, a, rows, size=MERGE_CHUNK)
+        self.VQd = set_rows(self.VQd, a, rows, size=merge_size(len(a)))
         if self.model.support == "ring" or self.model.refresh is not None:
             ring = _ring_vertices(faces, a, n)
             if self.model.support == "ring":
@@ -446,7 +454,7 @@ class _Run:
         """Recompute the model's derived state at ``verts`` (after their neighbourhood changed)."""
         state = np.asarray(self.model.refresh(MeshView(self.faces, self.VQ[: self.n]), verts), DTYPE)
         self.VQ[verts, 3:] = state
-        self.VQd = set_rows(self.VQd, verts, self.VQ[verts], size=MERGE_CHUNK)
+        self.VQd = set_rows(self.VQd, verts, self.VQ[verts], size=merge_size(len(verts)))
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self):
