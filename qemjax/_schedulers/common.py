@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .._arrays import face_normals as face_normals
@@ -49,6 +51,13 @@ class PerCopy(NamedTuple):
     def at(self, pairs: np.ndarray) -> dict:
         c = np.take(self.copy, pairs[:, 0], mode="clip")
         return {k: np.take(v, c) for k, v in self.values.items()}
+
+
+def on_device(params: dict) -> dict:
+    """A kernel's settings with each numpy value (0-d arrays, `CostModel.kernel_params`) copied to the device
+    once, so that a run's hundreds of kernel calls pass device arrays instead of copying them each time.
+    Same dtypes and shapes: the same compiled kernels, the same results."""
+    return {k: jnp.asarray(v) if isinstance(v, (np.ndarray, np.generic)) else v for k, v in params.items()}
 
 
 def _params(params, pairs: np.ndarray) -> dict:
@@ -102,7 +111,7 @@ def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
     """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
     fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
     Returns a function that waits for the kernel and gives (S,) bool per pair."""
-    cos_max = np.asarray(cos_max, DTYPE)
+    cos_max = cos_max if isinstance(cos_max, jax.Array) else np.asarray(cos_max, DTYPE)
     parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
                 chunks(np.take(x, owner, axis=0)))
     outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max)

@@ -36,22 +36,23 @@ import numpy as np
 
 from .. import _topology as topo
 from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
-from .._batching import CHUNKS
+from .._batching import CHUNKS, MAX_PIECES
 from .._costs import MeshView
 from .._incidence import FaceLists
 from . import outcome
-from .common import (DTYPE, Options, Timer, bucket, face_normals, pad_rows, set_rows, start_flips, start_merge,
-                     start_price)
+from .common import (DTYPE, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
+                     start_merge, start_price)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
-MERGE_CHUNK = 4096  # the merge and row-update shape of a large round: a few more calls early, one compilation
-SMALL_CHUNK = CHUNKS[0]  # ... and of a round with at most this many contractions (most rounds of a small mesh):
-# a 4096-row scatter costs ~12x a 256-row one, and a small mesh's rounds contract ~100 pairs
+MERGE_CHUNK = 4096  # the merge and device row update of a round with many contractions: this piece shape
+SMALL_CHUNK = CHUNKS[0]  # ... and of one with at most MAX_PIECES pieces of this shape (every round of a small
+# mesh): a 4096-row scatter costs ~12x a 256-row one, and a small mesh's rounds contract ~100 pairs. Two shapes,
+# chosen as `chunks` chooses: meshes of similar size compile the same ones
 
 
 def merge_size(k: int) -> int:
-    """The fixed piece shape of a round's merge and device row update for k rows: two shapes per run."""
-    return SMALL_CHUNK if k <= SMALL_CHUNK else MERGE_CHUNK
+    """The fixed piece shape of a round's merge and device row update for k rows."""
+    return SMALL_CHUNK if k <= MAX_PIECES * SMALL_CHUNK else MERGE_CHUNK
 
 
 @dataclasses.dataclass
@@ -203,6 +204,9 @@ class _Run:
         self.part_scale = part_scale
         self.model, self.options, self.progress = model, options, progress
         self.params = model.kernel_params() if params is None else params
+        if isinstance(self.params, dict):  # the settings cross to the device once, not with every kernel call
+            self.params = on_device(self.params)
+        self.cos_max = jnp.asarray(np.asarray(options.cos_max, DTYPE))  # the flip threshold, likewise
         self.target = target_faces
         self.manifold = options.preserve_topology
         self.extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
@@ -371,7 +375,7 @@ class _Run:
                           edges_at=True, size=len(Efree))
         (fids, before, corner, owner, G), kept, dead = self.faces.touched_with_dead(P)
         flipped = start_flips(self.VQd, self.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
-                            self.options.cos_max)  # runs while the host tests the rest
+                            self.cos_max)  # runs while the host tests the rest
         gone = topo.coincidence_count(G, owner, len(P))
         why = np.zeros(len(P), np.int8)
         at = None
