@@ -230,11 +230,14 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     G, owner: the touched faces after contraction and their pairs, from `FaceLists.touched` (every face
     that could coincide touches the pair, because pairs are two edges apart).
     """
-    h = np.zeros(len(G), np.uint64)  # a symmetric hash: the same for any order of the corners
-    for j in range(3):
-        g = G[:, j].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-        g ^= g >> np.uint64(29)
-        h += g * np.uint64(0xBF58476D1CE4E5B9)
+    # a symmetric hash, the same for any order of the corners: each corner mixed, the three summed modulo
+    # 2**64 (so any order of summing gives the same bits); all corners in each array pass, in place
+    g = G.astype(np.uint64)
+    g *= np.uint64(0x9E3779B97F4A7C15)
+    g ^= g >> np.uint64(29)
+    g *= np.uint64(0xBF58476D1CE4E5B9)
+    h = g[:, 0] + g[:, 1]
+    h += g[:, 2]
     hs = np.sort(h)
     dup_h = hs[1:][hs[1:] == hs[:-1]]
     if dup_h.size == 0:  # the common case: no candidates at all

@@ -78,3 +78,19 @@ def test_flip_threshold_on_the_device_gives_the_host_thresholds_answers():
         b = common.start_flips(Vd, N0d, F, np.arange(200), corner, owner, x, 40,
                                jnp.asarray(np.float32(cos_max)))()
         assert np.array_equal(a, b) and (a.sum() > 0) == (cos_max >= 0) and a.sum() < 40
+
+
+def test_coincidence_count_finds_each_coincident_face_in_any_corner_order():
+    """`topo.coincidence_count` (one hash pass over all corners) counts, per pair, the faces that
+    `topo.coincident_removals` drops: same-orientation twins (one dropped) and opposite twins (both)."""
+    from qemjax import _topology as topo
+
+    rng = np.random.default_rng(5)
+    G = np.array([rng.permutation(3000)[:3] for _ in range(400)], np.int32)
+    owner = np.sort(rng.integers(0, 50, 400))
+    assert not topo.coincidence_count(G, owner, 50).any()
+    G[10] = G[200][[1, 2, 0]]  # the same face, rotated: one of the two goes
+    G[20] = G[300][[2, 1, 0]]  # opposite orientation: both go
+    want = np.bincount(owner[np.flatnonzero(topo.coincident_removals(G))], minlength=50)
+    assert want.sum() == 3
+    assert np.array_equal(topo.coincidence_count(G, owner, 50), want)
