@@ -111,16 +111,16 @@ def _accepted(E, found, take):
         t = take[idx]
         pos = np.cumsum(t) - 1 + off  # each taken pair's place in the combined set
         pair_of, side = w >> 1, w & 1
-        keep = np.take(t, pair_of)
-        ws.append(2 * np.take(pos, np.compress(keep, pair_of)) + np.compress(keep, side))
-        fs.append(np.compress(keep, f))
-        cs.append(np.compress(keep, c))
-        ds.append(np.compress(np.take(t, downer), df))
-        pairs.append(_take(E, np.compress(t, idx)))
+        keep = t.take(pair_of)
+        ws.append(2 * pos.take(pair_of.compress(keep)) + side.compress(keep))
+        fs.append(f.compress(keep))
+        cs.append(c.compress(keep))
+        ds.append(df.compress(t.take(downer)))
+        pairs.append(_take(E, idx.compress(t)))
         if at is not None:
             apex, rows, owner = at
             xs.append(_keep(apex, t))
-            rs.append(np.compress(np.take(t, owner), rows))
+            rs.append(rows.compress(t.take(owner)))
         off += int(t.sum())
     cat = np.concatenate
     return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
@@ -161,7 +161,7 @@ def _removal_steps(F, rounds, a, b, dead, dropped):
     step_of = np.full(n, np.iinfo(np.int64).max)
     step_of[b] = np.arange(len(b))
     d = np.concatenate(dead).astype(np.int64) if dead else np.zeros(0, np.int64)
-    s = np.take(step_of, np.take(F, d, axis=0))
+    s = step_of.take(F.take(d, axis=0))
     removed_at[d] = np.minimum(np.minimum(s[:, 0], s[:, 1]), s[:, 2])  # .min(axis=1), without the slow reduction
     if dropped:
         f = np.concatenate([x for _, x in dropped]).astype(np.int64)
@@ -320,7 +320,7 @@ class _Run:
             return
         count = self.faces.count
         if self.weights is None or count <= (1.0 - self.model.reweight_step) * self.weighed_at:
-            self.weights = self.model.rank_weights(np.compress(valid, st.parts, axis=0))
+            self.weights = self.model.rank_weights(st.parts.compress(valid, axis=0))
             self.weighed_at = count
             self.reweights.append((count, self.weights))
         st.key = (st.cost + st.parts.astype(np.float64) @ self.weights).astype(DTYPE)
@@ -343,7 +343,7 @@ class _Run:
         t0 = time.perf_counter()
         sch = self.options.schedule
         k = gate_rank(need, int(valid.sum()), len(st.E), sch)
-        kth = np.partition(np.compress(valid, st.key), k - 1)[k - 1]
+        kth = np.partition(st.key.compress(valid), k - 1)[k - 1]
         salt = self.rounds * 7919
 
         def key_of(idx):
@@ -385,10 +385,10 @@ class _Run:
             if self.options.keep_parts:  # the pair's faces are all its part has left
                 why[np.bincount(owner, minlength=len(P)) == 0] = outcome.PART
             why[~linked] = outcome.TOPOLOGY
-            at = (apex, np.take(free_rows, r), owner_r)
+            at = (apex, free_rows.take(r), owner_r)
         if self.wedges is not None:
             xs = _take(st.x, idx)
-            seam = np.take(self.wedges.multi, P[:, 0]) | np.take(self.wedges.multi, P[:, 1])
+            seam = self.wedges.multi.take(P[:, 0]) | self.wedges.multi.take(P[:, 1])
             for i in np.flatnonzero((why == 0) & seam):  # the others are always allowed
                 if not self.wedges.allowed(self.faces, self.VQ, int(P[i, 0]), int(P[i, 1]), xs[i]):
                     why[i] = outcome.SEAM
