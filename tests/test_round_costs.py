@@ -1,5 +1,5 @@
 """The parallel scheduler's per-round costs cut without changing outputs: a round's merge and device row
-update in pieces sized to the round (`parallel.merge_size`), and kernel settings and the flip threshold
+update in pieces sized to the mesh (`parallel.merge_size`), and kernel settings and the flip threshold
 copied to the device once per run (`common.on_device`). Each must give the same bits as before."""
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ def _rows(model, rng, n=4096):
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__ + str(getattr(m, "placement", "")))
 def test_merge_bits_do_not_depend_on_the_piece_shape(model):
     """A row merged in a 256-row piece equals the same row merged in a 4096-row piece, bit for bit (the
-    scheduler now picks the piece shape from the round's size)."""
+    scheduler now picks the piece shape from the mesh's size)."""
     VS, P, x = _rows(model, np.random.default_rng(0))
     VSd, params = jnp.asarray(VS), model.kernel_params()
     small = common.start_merge(model, VSd, P, x, params, size=parallel.SMALL_CHUNK)()
@@ -51,15 +51,15 @@ def test_settings_on_the_device_price_as_numpy_settings(model):
 
 
 def test_merge_size_is_two_shapes_and_the_row_update_is_exact():
-    assert parallel.merge_size(1) == parallel.merge_size(2048) == 256
-    assert parallel.merge_size(2049) == parallel.merge_size(10 ** 6) == 4096
+    assert parallel.merge_size(1) == parallel.merge_size(parallel.SMALL_MESH) == 256
+    assert parallel.merge_size(parallel.SMALL_MESH + 1) == parallel.merge_size(10 ** 6) == 4096
     rng = np.random.default_rng(2)
     A = rng.normal(size=(1000, 13)).astype(np.float32)
     idx = rng.permutation(1000)[:300]
     rows = rng.normal(size=(300, 13)).astype(np.float32)
     want = A.copy()
     want[idx] = rows
-    for size in (parallel.merge_size(300), parallel.MERGE_CHUNK):
+    for size in (parallel.SMALL_CHUNK, parallel.MERGE_CHUNK):
         assert np.array_equal(np.asarray(set_rows(jnp.asarray(A), idx, rows, size=size)), want)
 
 

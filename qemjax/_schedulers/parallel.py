@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import _topology as topo
 from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
-from .._batching import CHUNKS, MAX_PIECES
+from .._batching import CHUNKS
 from .._costs import MeshView
 from .._incidence import FaceLists
 from . import outcome
@@ -44,15 +44,15 @@ from .common import (DTYPE, Options, Timer, bucket, face_normals, on_device, pad
                      start_merge, start_price)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
-MERGE_CHUNK = 4096  # the merge and device row update of a round with many contractions: this piece shape
-SMALL_CHUNK = CHUNKS[0]  # ... and of one with at most MAX_PIECES pieces of this shape (every round of a small
-# mesh): a 4096-row scatter costs ~12x a 256-row one, and a small mesh's rounds contract ~100 pairs. Two shapes,
-# chosen as `chunks` chooses: meshes of similar size compile the same ones
+MERGE_CHUNK = 4096  # the piece shape of a round's merge and device row update (one compilation) ...
+SMALL_CHUNK = CHUNKS[0]  # ... or, for a mesh of at most SMALL_MESH faces, this one: such a mesh's rounds
+SMALL_MESH = 1 << 14  # contract ~100 pairs, and a 4096-row scatter costs ~12x a 256-row one. Chosen per run,
+# from the mesh's size, so that meshes of similar size compile the same shapes whatever their rounds
 
 
-def merge_size(k: int) -> int:
-    """The fixed piece shape of a round's merge and device row update for k rows."""
-    return SMALL_CHUNK if k <= MAX_PIECES * SMALL_CHUNK else MERGE_CHUNK
+def merge_size(m: int) -> int:
+    """The fixed piece shape of the merges and device row updates of a run on m faces."""
+    return SMALL_CHUNK if m <= SMALL_MESH else MERGE_CHUNK
 
 
 @dataclasses.dataclass
@@ -200,6 +200,7 @@ class _Run:
     def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges,
                  part_scale=None, params=None, wedges=None, normals=None):
         self.n, m = len(V), len(F)
+        self.merge_chunk = merge_size(m)
         self.wedges = wedges  # a `_wedges.Tracker` when attributes are kept (else None)
         self.part_scale = part_scale
         self.model, self.options, self.progress = model, options, progress
@@ -406,7 +407,7 @@ class _Run:
         P = _take(st.E, acc)
         a, b = P[:, 0], P[:, 1]
         xs = _take(st.x, acc)
-        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=merge_size(len(P)))  # runs meanwhile
+        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=self.merge_chunk)  # runs meanwhile
         st.changed = np.zeros(n, bool)
         st.changed[a] = True
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
@@ -437,7 +438,7 @@ class _Run:
             self.extra_pairs = ep[ep[:, 0] != ep[:, 1]]
         rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
         put_rows(self.VQ, a, rows)
-        self.VQd = set_rows(self.VQd, a, rows, size=merge_size(len(a)))
+        self.VQd = set_rows(self.VQd, a, rows, size=self.merge_chunk)
         if self.model.support == "ring" or self.model.refresh is not None:
             ring = _ring_vertices(faces, a, n)
             if self.model.support == "ring":
@@ -458,7 +459,7 @@ class _Run:
         """Recompute the model's derived state at ``verts`` (after their neighbourhood changed)."""
         state = np.asarray(self.model.refresh(MeshView(self.faces, self.VQ[: self.n]), verts), DTYPE)
         self.VQ[verts, 3:] = state
-        self.VQd = set_rows(self.VQd, verts, self.VQ[verts], size=merge_size(len(verts)))
+        self.VQd = set_rows(self.VQd, verts, self.VQ[verts], size=self.merge_chunk)
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self):
