@@ -40,5 +40,5 @@ def __getattr__(name):  # lazy submodules: importing qemjax stays light
     if name in ("metrics", "render", "shapes"):
         import importlib
 
-        return importlib.import_module(f"qemjax.{name}")
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'qemjax' has no attribute {name!r}")

@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import importlib
 
-_REGISTRY: dict = {"parallel": "qemjax._schedulers.parallel", "greedy": "qemjax._schedulers.greedy"}
+# module names relative to this package, so that a copy of the package under another name (experiments'
+# old-against-new comparisons, `experiments/ab_compare.py`) runs its own schedulers, not qemjax's
+_REGISTRY: dict = {"parallel": ".parallel", "greedy": ".greedy"}
 
 
 def names() -> tuple[str, ...]:
@@ -34,7 +36,7 @@ def names() -> tuple[str, ...]:
 def get(name: str):
     """The ``run`` function of the scheduler ``name`` (its module imported on first use)."""
     entry = _REGISTRY[name]
-    return importlib.import_module(entry).run if isinstance(entry, str) else entry
+    return importlib.import_module(entry, __name__).run if isinstance(entry, str) else entry
 
 
 def register(name: str, run) -> None:
