@@ -28,7 +28,7 @@ import meshes as bench_meshes  # noqa: E402
 
 # (module, object or None, function name)
 WRAPPED = [("_schedulers.parallel", "_Run", n) for n in ("cost", "select", "validate", "contract")] + \
-    [("_schedulers.select", None, "independent_sets"), ("_schedulers.parallel", None, "_accepted")] + \
+    [("_schedulers.parallel", None, "independent_sets"), ("_schedulers.parallel", None, "_accepted")] + \
     [("_schedulers.parallel", None, n) for n in ("start_price", "start_flips", "start_merge", "set_rows")] + \
     [("_topology", None, n) for n in ("link_ok", "coincidence_count", "contract_edges")] + \
     [("_incidence", "FaceLists", n) for n in ("touched_with_dead", "contract_touched")]
