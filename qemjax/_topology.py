@@ -159,10 +159,9 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     rows, L, c_, _ = _labelled_rows(lab, E)
     L = L.astype(np.int64)
     key = np.sort(((L >> 1) * n + c_) * 2 + (L & 1))
-    base = key // 2
+    base = key >> 1  # key // 2 (keys are non-negative)
     both = base[1:] == base[:-1]  # a neighbour seen from side 0 and side 1
-    common_pair = base[1:][both] // n
-    common_v = base[1:][both] % n
+    common_pair, common_v = np.divmod(base[1:].compress(both), n)
     ncommon = np.bincount(common_pair, minlength=S)
 
     ok = (nfaces >= 1) & (nfaces <= 2) & (ncommon == nfaces)
