@@ -40,6 +40,22 @@ def _value(text: str):
         return text
 
 
+# absolute module names in older revisions: the scheduler registry and the lazy submodules. Left as they are,
+# the old package would import this checkout's schedulers and compare the new scheduler with itself
+ABSOLUTE_NAMES = ('"qemjax._schedulers.', 'f"qemjax.{name}"')
+
+
+def _own_modules(root: Path, as_name: str) -> None:
+    """Point the absolute module names (`ABSOLUTE_NAMES`) of the package copy at ``root`` at the copy."""
+    for path in root.rglob("*.py"):
+        text = path.read_text()
+        new = text
+        for name in ABSOLUTE_NAMES:
+            new = new.replace(name, name.replace("qemjax", as_name, 1))
+        if new != text:
+            path.write_text(new)
+
+
 def load_old(rev: str, as_name: str = "qemjax_old"):
     """The qemjax package at git revision ``rev``, imported as ``as_name``."""
     tmp = Path(tempfile.mkdtemp(prefix="qemjax-old-"))
@@ -47,14 +63,9 @@ def load_old(rev: str, as_name: str = "qemjax_old"):
                          capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(tmp)], input=tar, check=True)
     os.rename(tmp / "qemjax", tmp / as_name)
+    _own_modules(tmp / as_name, as_name)
     sys.path.insert(0, str(tmp))
     pkg = importlib.import_module(as_name)
-    # revisions from e8f83fc on name their schedulers by absolute module ("qemjax._schedulers.greedy"):
-    # left so, the old copy would run the working tree's schedulers (and an A/B compare them with themselves)
-    registry = getattr(importlib.import_module(f"{as_name}._schedulers"), "_REGISTRY", {})
-    for name, entry in registry.items():
-        if isinstance(entry, str) and entry.startswith("qemjax."):
-            registry[name] = as_name + entry[len("qemjax"):]
     return pkg
 
 

@@ -26,8 +26,10 @@ import warnings
 
 import numpy as np
 
-from . import _api, _cache, _costs, _flat, _schedulers
-from ._lod import RATIOS
+from ._pipeline import api as _api, flat as _flat
+from ._kernels import cache as _cache
+from . import _costs, _schedulers
+from ._pipeline.lod import RATIOS
 
 # How the command line shows some options (choices, metavar, help beyond the docstrings, the default as
 # shown). Which options exist and their types come from `simplify`'s run keywords and from the fields of
@@ -183,6 +185,15 @@ def _read_feature_edges(path: str) -> np.ndarray:
     return a
 
 
+def _read_vector(path: str, kind, flag: str) -> np.ndarray:
+    """(k,) values from a .npy file or a text file of one value per line (``kind``: the text's type)."""
+    try:
+        a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=kind, ndmin=1)
+    except (OSError, ValueError) as exc:
+        raise CliError(f"could not read {flag} from {path}: {exc}") from None
+    return a.reshape(-1) if a.ndim == 2 and 1 in a.shape else a
+
+
 def _number_or_none(flag: str, text: str):
     if text.strip().lower() == "none":
         return None
@@ -204,6 +215,9 @@ def _simplify_kwargs(args) -> dict:
         kw[name] = value
     if "feature_edges" in kw:
         kw["feature_edges"] = _read_feature_edges(kw["feature_edges"])
+    for name, kind in (("locked", np.int64), ("vertex_weights", np.float64)):
+        if getattr(args, name, None) is not None:
+            kw[name] = _read_vector(getattr(args, name), kind, "--" + name.replace("_", "-"))
     if "attribute_weights" in kw:
         kw["attribute_weights"] = _attribute_weights(kw["attribute_weights"])
     if "attributes" in kw:
@@ -331,6 +345,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="stop before a contraction costs more than E (squared distance, mesh units²; "
                    "--method area: surface-area change, mesh units²); alone or with --faces/--ratio")
     _add_options(s)
+    s.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
+                   "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
+                   "integer per line)")
+    s.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0) "
+                   "per input vertex (.npy or text, one number per line): each pair's cost is multiplied by "
+                   "the larger weight of its vertices, so heavy regions keep more detail")
     lod = sub.add_parser("lod", help="levels of detail from one run: one file per level (and a .glb, a record)")
     lod.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
     lod.add_argument("out_dir", help="folder for the levels, NAME-lod0.EXT (finest) ... (created if absent)")
@@ -397,7 +417,7 @@ def _main(argv: list) -> int:
 
 def _lod(args, kwargs) -> int:
     """``qemjax lod``: one run, every level written (each file under a temporary name, then renamed)."""
-    from ._lod import lod_chain
+    from ._pipeline.lod import lod_chain
 
     refused = ["--" + name.replace("_", "-") for name in LOD_REFUSED if kwargs.get(name) is not None]
     if refused:
@@ -433,7 +453,7 @@ def _lod(args, kwargs) -> int:
 
 def _sweep(args) -> int:
     """``qemjax sweep CONFIG``: the whole config is checked before anything runs."""
-    from . import _sweep_config
+    from ._sweep import config as _sweep_config
 
     config = _sweep_config.load(args.config, out=args.out)
     if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
@@ -499,7 +519,7 @@ def _count(n: int, one: str, many: str | None = None) -> str:
 
 
 def cleanup_note(stats: dict, target: str | None = "the ratio") -> str:
-    """What the input's clean-up (`qemjax._io.prepare`) removed, and that ``target`` (a ratio's name, or
+    """What the input's clean-up (`qemjax._io.mesh.prepare`) removed, and that ``target`` (a ratio's name, or
     None) counted from the faces left: 'clean-up: 724 duplicate faces removed; the ratio applied to the
     1510 faces left (of 2234 read)'. '' when it removed nothing."""
     faces = {"duplicate": stats.get("duplicate_removed", 0), "degenerate": stats.get("degenerate_removed", 0),
@@ -550,7 +570,7 @@ def attributes_note(stats: dict) -> str:
 
 def _not_kept_names(stats: dict) -> list[str]:
     """The names in stats['dropped'] that `attributes_note` already gives as not kept for their seams."""
-    from ._wedges import DROPPED_NAME
+    from ._mesh.wedges import DROPPED_NAME
 
     names = [DROPPED_NAME[k] for k in stats.get("not_kept_seams", [])]
     return names + (["material"] if "uv" in stats.get("not_kept_seams", []) else [])

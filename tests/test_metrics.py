@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from qemjax import metrics
-from qemjax import _nearest
+from qemjax._mesh import nearest as _nearest
 from qemjax.metrics import _distance
 
 SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"

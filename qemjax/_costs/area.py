@@ -33,8 +33,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .. import _topology as topo
-from .._batching import DTYPE
+from .._mesh import topology as topo
+from .._kernels.batching import DTYPE
 from .._kernels import kernel
 from .base import MeshInput, Method, require_nonnegative
 
@@ -244,6 +244,9 @@ class AreaDifference(Method):
             return _price_host(VS, pairs, rings.corners, rings.mask)
         return _price(VS, pairs, params, rings.corners, rings.mask)
 
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        return price_at_kept_kernel(VS, pairs, params, rings.corners, rings.mask)
+
     def merge(self, VS, pairs, x, params):
         return _merge(VS, pairs)
 
@@ -251,3 +254,23 @@ class AreaDifference(Method):
 @kernel
 def _merge(VS, pairs):
     return jnp.maximum(VS[pairs[:, 0], 3:4], VS[pairs[:, 1], 3:4])
+
+
+def delta_at_kept(pa, pb, pos, moving, mask):
+    """One pair: |ΔS| when both endpoints go to pa (s = 0 of the pair's family; locked vertices)."""
+    u, w = affine_areas(pa, pb, pos, moving)
+    twice = jnp.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]).T
+    before = 0.5 * jnp.sum(jnp.where(mask, _norm(twice), 0.0))
+    return jnp.abs(_delta(jnp.zeros((), pa.dtype), (u.T, w.T, mask, before)))
+
+
+@kernel
+def price_at_kept_kernel(VS, pairs, params, corners, mask):
+    """The price rows at the kept vertex (`at_kept`): |ΔS| there, +inf where the boundary rule pins the
+    pair to the removed vertex; branch "end" (2)."""
+    pos, moving = ring_positions(VS, pairs, corners)
+    pa, pb = VS[pairs[:, 0], :3], VS[pairs[:, 1], :3]
+    lo, _ = interval(VS[pairs[:, 0], 3], VS[pairs[:, 1], 3])
+    d = jax.vmap(delta_at_kept)(pa, pb, pos, moving, mask)
+    cost = jnp.where(lo > 0, jnp.inf, d)
+    return jnp.concatenate([pa.T, cost[None], jnp.full_like(cost, 2.0)[None]], 0)

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE
+from .._kernels.batching import DTYPE
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 from .base import MeshInput
@@ -212,6 +212,7 @@ class AttributeQEM(QEM):
     weights: tuple = ()
 
     width = property(lambda self: 11 + 4 * self.channels)
+    at_kept_kernel = None  # locked vertices are priced on the host by `cost_at` (`qemjax._schedulers.locks`)
 
     def __post_init__(self):
         super().__post_init__()

@@ -86,6 +86,17 @@ class CostModel:
         """(K, width) state of the kept vertices after contracting pairs (K,2) to x (K,3)."""
         raise NotImplementedError
 
+    # a static function (VS, pairs, params) -> `price`'s rows with each pair placed at its kept vertex
+    # (`at_kept`), for a model whose price needs no ring; None: the model offers no such price
+    at_kept_kernel = None
+
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        """`price`'s rows for pairs (K,2) contracted onto their kept vertex (``pairs[:, 0]``), where it stands:
+        what a locked vertex allows (`at_kept`, `qemjax._schedulers.locks`)."""
+        if self.at_kept_kernel is None:
+            raise NotImplementedError(f"method {self.name!r} cannot price a contraction at a fixed position")
+        return self.at_kept_kernel(VS, pairs, params)
+
     refresh = None  # or a function (VS host rows, MeshView, verts) -> (len(verts), width) rows
     rank_weights = None  # or a function (parts (P, p) of the candidates) -> (p,) float64 weights
     reweight_step: ClassVar[float] = 0.05
@@ -116,7 +127,7 @@ class Method(CostModel):
 
     regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (`regularize`; 0: none).
     area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none).
-    refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._refit`).
+    refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._pipeline.refit`).
 
     A new method is a frozen dataclass subclass of a method (or of this class) with fields of its own,
     registered with `qemjax.register_method`; nothing else needs editing.

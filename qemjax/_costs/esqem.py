@@ -33,7 +33,7 @@ vertices only), and every pair at them is priced again. `merge` merges the quadr
 `refresh`. Curvature and area are computed from the faces around each vertex with one batched kernel
 (`vertex_curvature`), the same at the start and after each round.
 
-Edge splitting after simplification (``split_factor``) is ESQEM's second half; see `qemjax._split`.
+Edge splitting after simplification (``split_factor``) is ESQEM's second half; see `qemjax._pipeline.split`.
 """
 from __future__ import annotations
 
@@ -45,10 +45,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE, chunks
-from .._incidence import FaceLists
+from .._kernels.batching import DTYPE, chunks
+from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
-from . import ring
+from . import at_kept, ring
 from .base import MeshInput, require_nonnegative
 from .qem import QEM
 
@@ -97,6 +97,16 @@ def _price(VS, pairs, endpoints_only, cond_eps, max_shift):
     return jnp.concatenate([out, out[3:4], ke[None]], 0)
 
 
+@kernel
+def _price_at_kept(VS, pairs):
+    """`_price`'s rows with each pair at its kept vertex (`at_kept`): parts [Q, K] as `_price` gives them."""
+    out = at_kept.qem(VS, pairs, None)
+    a = jnp.take(VS, pairs[:, 0], axis=0, mode="clip")
+    b = jnp.take(VS, pairs[:, 1], axis=0, mode="clip")
+    ke = edge_curvature(a[:, KCOL], a[:, ACOL], b[:, KCOL], b[:, ACOL])
+    return jnp.concatenate([out, out[3:4], ke[None]], 0)
+
+
 def ring_corners(faces: FaceLists, verts: np.ndarray):
     """The live faces around each of ``verts`` (k,) rotated so that the vertex comes first: (owner
     position in verts (r,) non-decreasing, corners (r,3) int32 ``[v, c1, c2]``), and (k,) bool: which of
@@ -139,7 +149,7 @@ def curvature_at(faces: FaceLists, P: np.ndarray, verts: np.ndarray) -> np.ndarr
 @dataclasses.dataclass(frozen=True)
 class ESQEM(QEM):
     """ESQEM (Zhang 2022): QEM's placement and error, ranked with a Gaussian-curvature term (module
-    docstring), then long edges split (`qemjax._split`). QEM's settings, plus:
+    docstring), then long edges split (`qemjax._pipeline.split`). QEM's settings, plus:
 
     curvature_weight: a ≥ 0; the curvature term's weight is w = a·Q̄/K̄ (0: rank by Q alone).
     split_factor: b > 0; after simplifying, split edges longer than b × the mean edge length (None: no
@@ -176,6 +186,9 @@ class ESQEM(QEM):
 
     def price(self, VS, pairs, params, rings=None):
         return _price(VS, pairs, params["endpoints_only"], params["cond_eps"], params["max_shift"])
+
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        return _price_at_kept(VS, pairs)
 
     def merge(self, VS, pairs, x, params):
         q = super().merge(VS, pairs, x, params)

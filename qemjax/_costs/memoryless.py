@@ -39,10 +39,11 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE
-from .._incidence import FaceLists
+from .._kernels.batching import DTYPE
+from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
+from . import at_kept
 
 WIDTH = 25  # state floats of a memoryless row (after the position)
 CCOLS = 13  # first column of the current quadric in a vertex row [position, history, current, g, means]
@@ -181,3 +182,10 @@ def merge(VS, pairs, x):
     current quadric, g and input means (`refresh` rebuilds the first two at once)."""
     q = placement.merged_quadrics(VS, pairs, x)
     return jnp.concatenate([q, jnp.take(VS[:, CCOLS:MCOLS[1] + 1], pairs[:, 0], axis=0)], 1)
+
+
+@kernel
+def price_at_kept(VS, pairs, params):
+    """Memoryless rows at the kept vertex (`at_kept`): current + μ·summed quadric with the volume term there."""
+    q1, q2, p1, p2 = _with_volume(VS, pairs, params["volume_weight"], params["memory_weight"])
+    return at_kept.stacked(p1, at_kept.quadric_cost(q1, q2, p1, p2), at_kept.ENDPOINT)

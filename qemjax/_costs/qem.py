@@ -18,11 +18,12 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _topology as topo
-from .._arrays import face_normals, face_stats
-from .._batching import DTYPE, bucket, pad_rows
-from .._incidence import FaceLists
+from .._mesh import topology as topo
+from .._mesh.arrays import face_normals, face_stats
+from .._kernels.batching import DTYPE, bucket, pad_rows
+from .._mesh.incidence import FaceLists
 from .._kernels import placement, quadrics
+from . import at_kept
 from . import memoryless as ml
 from .base import MeshInput, Method, require_nonnegative
 
@@ -195,6 +196,11 @@ class QEM(Method):
 
     def price(self, VS, pairs, params, rings=None):
         return self.price_kernel(VS, pairs, params)
+
+    @property
+    def at_kept_kernel(self):
+        """The price at the kept vertex (`at_kept`): the summed quadric (memoryless: its own rows) there."""
+        return ml.price_at_kept if self.memoryless else at_kept.qem
 
     def merge(self, VS, pairs, x, params):
         if self.memoryless:

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE
+from .._kernels.batching import DTYPE
 from .._kernels import kernel
 from .._kernels.fixed import cross3, dot3, norm3, tree_sum
 from .base import Term, require_nonnegative
@@ -80,6 +80,10 @@ class Regularized(Term):
 
     def price(self, VS, pairs, params, rings=None):
         return _price(self.base.price_kernel, VS, pairs, params, rings.corners, rings.mask)
+
+    def price_at_kept(self, VS, pairs, params, rings=None):
+        """The term at the kept vertex, added to the base's price there (`at_kept`)."""
+        return _price(self.base.at_kept_kernel, VS, pairs, params, rings.corners, rings.mask)
 
     def describe(self) -> dict:
         return {**self.base.describe(), "regularize": self.regularize}

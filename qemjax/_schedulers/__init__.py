@@ -36,7 +36,7 @@ def names() -> tuple[str, ...]:
 def get(name: str):
     """The ``run`` function of the scheduler ``name`` (its module imported on first use)."""
     entry = _REGISTRY[name]
-    return importlib.import_module(entry).run if isinstance(entry, str) else entry
+    return importlib.import_module(entry, __name__).run if isinstance(entry, str) else entry
 
 
 def register(name: str, run) -> None:

@@ -6,15 +6,18 @@ import contextlib
 import gc
 from typing import NamedTuple
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .._arrays import face_normals as face_normals
-from .._batching import DTYPE as DTYPE
-from .._batching import bucket as bucket
-from .._batching import chunk_size as chunk_size
-from .._batching import chunks as chunks
-from .._batching import pad_rows as pad_rows
-from .._batching import set_rows as set_rows
+from .._mesh.arrays import face_normals as face_normals
+from .._kernels.batching import DTYPE as DTYPE
+from .._kernels.batching import bucket as bucket
+from .._kernels.batching import chunk_size as chunk_size
+from .._kernels.batching import chunks as chunks
+from .._kernels.batching import pad_rows as pad_rows
+from .._kernels.batching import piece_sizes
+from .._kernels.batching import set_rows as set_rows
 from .._costs import ring
 from .._kernels import flips
 from .._options import Options as Options
@@ -69,6 +72,13 @@ class PerCopy(NamedTuple):
         return {k: np.take(v, c) for k, v in self.values.items()}
 
 
+def on_device(params: dict) -> dict:
+    """A kernel's settings with each numpy value (0-d arrays, `CostModel.kernel_params`) copied to the device
+    once, so that a run's hundreds of kernel calls pass device arrays instead of copying them each time.
+    Same dtypes and shapes: the same compiled kernels, the same results."""
+    return {k: jnp.asarray(v) if isinstance(v, (np.ndarray, np.generic)) else v for k, v in params.items()}
+
+
 def _params(params, pairs: np.ndarray) -> dict:
     """The params for a kernel call on ``pairs``: as given, or a `PerCopy`'s per pair."""
     return params.at(pairs) if isinstance(params, PerCopy) else params
@@ -78,13 +88,15 @@ def _unpack(out: np.ndarray) -> Priced:
     return Priced(np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8), out[5:])
 
 
-def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 0):
+def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 0, at_kept: bool = False):
     """Start pricing pairs P (K,2) with ``model`` over device rows VSd (kernel calls are asynchronous).
     Returns a function that waits for the kernels and gives a `Priced`. Ring models (``uses_ring``) also
-    need the `FaceLists` ``faces`` and a ``pad`` vertex row (zeros) for ring padding."""
+    need the `FaceLists` ``faces`` and a ``pad`` vertex row (zeros) for ring padding. ``at_kept``: price
+    each pair contracted onto its kept vertex (``model.price_at_kept``; locked vertices, `qemjax._schedulers.locks`)."""
     rows = 5 + len(model.parts)
+    price = model.price_at_kept if at_kept else model.price
     if not model.uses_ring:
-        outs = [model.price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
+        outs = [price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
 
         def result():
             out = np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(P)] if outs else \
@@ -98,7 +110,7 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
             parts = zip(chunks(block[idx].astype(np.int32)), chunks(rg.corners, fill=pad), chunks(rg.mask))
             for (s, pp), (_, cc), (_, mm) in parts:
                 sel = idx[s:s + len(pp)]
-                pieces.append((b0 + sel, model.price(VSd, pp, _params(params, pp), ring.Rings(cc, mm))))
+                pieces.append((b0 + sel, price(VSd, pp, _params(params, pp), ring.Rings(cc, mm))))
 
     def ring_result():
         out = np.zeros((rows, len(P)), DTYPE)
@@ -119,15 +131,31 @@ def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: in
 def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
     """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
     fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
-    Returns a function that waits for the kernel and gives (S,) bool per pair."""
-    cos_max = np.asarray(cos_max, DTYPE)
-    parts = zip(chunks(F), chunks(fids.astype(np.int32)), chunks(corner.astype(np.int32)),
-                chunks(np.take(x, owner, axis=0)))
-    outs = [flips.face_flips_at(VQd, N0d, ff, ii, kk, xx, cos_max)
-            for (_, ff), (_, ii), (_, kk), (_, xx) in parts]
+    Returns a function that waits for the kernel and gives (S,) bool per pair.
+
+    The inputs are padded once to the pieces' total (`piece_sizes`; zeros, as `chunks` pads) and each
+    piece is a view: a pass tests a few dozen faces on a small mesh, where padding each array per piece
+    cost half as much as the kernel."""
+    cos_max = cos_max if isinstance(cos_max, jax.Array) else np.asarray(cos_max, DTYPE)
+    k = len(F)
+    sizes = piece_sizes(k)
+    total = sum(sizes)
+    ints = np.zeros((3, total), np.int32)  # faces' first corner is padded as the other columns: zeros
+    Fp = np.zeros((total, 3), F.dtype)
+    Fp[:k] = F
+    ints[0, :k] = fids
+    ints[1, :k] = corner
+    xp = np.zeros((total, 3), x.dtype)
+    np.take(x, owner, axis=0, out=xp[:k])
+    outs, start = [], 0
+    for size in sizes:
+        end = start + size
+        outs.append(flips.face_flips_at(VQd, N0d, Fp[start:end], ints[0, start:end], ints[1, start:end],
+                                        xp[start:end], cos_max))
+        start = end
 
     def result():
-        bad = np.concatenate([np.asarray(o) for o in outs])[: len(F)] if outs else np.zeros(0, bool)
+        bad = np.concatenate([np.asarray(o) for o in outs])[:k] if len(outs) > 1 else np.asarray(outs[0])[:k]
         res = np.zeros(S, bool)
         res[owner[bad]] = True
         return res

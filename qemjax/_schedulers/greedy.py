@@ -19,9 +19,10 @@ import heapq
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _topology as topo
+from . import locks as _locks
+from .._mesh import topology as topo
 from .._costs import MeshView
-from .._incidence import FaceLists
+from .._mesh.incidence import FaceLists
 from . import outcome
 from .._kernels import flips
 from .common import DTYPE, Options, bucket, face_normals, gc_paused, set_rows, start_merge, start_price
@@ -59,18 +60,18 @@ def _on_boundary(ring: np.ndarray, v: int) -> bool:
 
 
 def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
-        options: Options, progress=None, wedges=None, edges=None, part_scale=None):
+        options: Options, progress=None, wedges=None, edges=None, part_scale=None, locks=None):
     """`_run` with Python's garbage collector paused (`common.gc_paused`)."""
     with gc_paused():
-        return _run(V, S, F, extra_pairs, target_faces, model, options, progress, wedges)
+        return _run(V, S, F, extra_pairs, target_faces, model, options, progress, wedges, locks)
 
 
 def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
-         options: Options, progress=None, wedges=None):
+         options: Options, progress=None, wedges=None, locks=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Returns the
     `outcome.Outcome` (``wedges``: as in `parallel.run`; ``edges`` and ``part_scale``, which the parallel
-    scheduler uses, are not needed by the queue)."""
+    scheduler uses, are not needed by the queue; ``locks``: a `_locks.RunLocks` or None, as there)."""
     n = len(V)
     manifold = options.preserve_topology
     params = model.kernel_params()
@@ -79,7 +80,7 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
     pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
     from . import greedy_batches  # lazily: its module imports jax kernels only the batched path uses
 
-    if greedy_batches.eligible(model, wedges):  # the same run, contracted in verified batches
+    if locks is None and greedy_batches.eligible(model, wedges):  # the same run, contracted in verified batches
         return greedy_batches.run(V, S, F, pairs, target_faces, model, options, progress)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
@@ -90,16 +91,24 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         nbr[a].add(b)
         nbr[b].add(a)
     q = _Queue()
+    weights = None if locks is None or locks.weights is None else np.array(locks.weights, np.float64)
 
     def push(plist):
         if plist:
             pa = np.array(plist, np.int64)
             d = VQ[pa[:, 0], :3] - VQ[pa[:, 1], :3]
             priced = start_price(model, VQd, pa, params, faces, n)()
+            if locks is not None:  # locked kept vertices priced where they stand, and the weights
+                priced = _locks.adjust(locks, weights, model, VQ, VQd, pa, priced, params, faces, n)
             if wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
                 priced = priced._replace(x=priced.x.copy(), cost=priced.cost.copy())
                 wedges.constrain(faces, VQ, pa, priced.x, priced.cost)  # refused ones: at the pop
+                if locks is not None:
+                    _locks.pin(locks, VQ, pa, priced.x)
             q.push(plist, priced, np.einsum("ij,ij->i", d, d))
+            if locks is not None:  # pairs of two locked vertices never contract
+                for k in np.flatnonzero(_locks.both_locked(locks, pa)).tolist():
+                    q.blocked[plist[k]] = outcome.LOCKED
 
     ranked = model.rank_weights is not None
     reweights, history_parts = [], []
@@ -130,6 +139,8 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
     while faces.count > target_faces and q.heap:
         if ranked and faces.count <= (1.0 - model.reweight_step) * reweights[-1][0]:
             reweigh()
+            if not q.heap:  # every pair left is blocked (the rebuilt heap holds only unblocked ones)
+                break
         key, l2, tie, a, b, s = heapq.heappop(q.heap)
         if q.stamp.get((a, b)) != s or (a, b) in q.blocked:
             continue
@@ -153,6 +164,10 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         if manifold and options.keep_parts and len(fids) == 0:  # its faces are all its part has left
             block((a, b), outcome.PART)
             continue
+        if locks is not None and ((len(fids) == 0 and (locks.locked[a] or locks.locked[b])) or
+                                  _locks.strands(locks, faces, P, (dead, np.zeros(len(dead), np.int64)))[0]):
+            block((a, b), outcome.LOCKED)  # a locked vertex never leaves the mesh with its last faces
+            continue
         if wedges is not None and not wedges.allowed(faces, VQ, a, b, x):
             block((a, b), outcome.SEAM)
             continue
@@ -172,6 +187,7 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         VQ[a] = row[0]
         VQd = set_rows(VQd, np.array([a]), row, size=1)
         branches[br] += 1
+        _locks.carry(weights, np.array([a]), np.array([b]))
         max_cost_used = max(max_cost_used, float(cost))
         history.append((a, b, np.array(x), float(cost)))
         if len(model.parts):

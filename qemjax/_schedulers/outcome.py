@@ -7,7 +7,9 @@ A pair found invalid carries the first rule it broke (``REJECT``); a run ends wi
   loses faces in pairs, so with one face to go every contraction would overshoot);
 - ``"max_error"``: the cheapest remaining contraction costs more than ``max_error``;
 - ``"blocked"``: no valid contraction is left (`blocked_by` says which rules hold the rest back);
-- ``"unchanged"``: nothing was asked to be removed (the target is not below the input's faces).
+- ``"unchanged"``: nothing was asked to be removed (the target is not below the input's faces);
+- ``"locked"``: blocked, and locked vertices hold back most of what is left (set by `_stages.finish` from
+  ``blocked_by``; `qemjax._schedulers.locks.hold_back`).
 """
 from __future__ import annotations
 
@@ -17,10 +19,12 @@ from typing import NamedTuple
 import numpy as np
 
 BUDGET = 0  # not a rule broken: a pair held back only because it would remove more faces than are still needed
-TOPOLOGY, COINCIDENT, FLIP, PART, SEAM = 1, 2, 3, 4, 5
+TOPOLOGY, COINCIDENT, FLIP, PART, SEAM, LOCKED = 1, 2, 3, 4, 5, 6
+# seam: would move a seam vertex off its seam or merge wedges (`_wedges`); locked: both endpoints locked, or
+# the contraction would leave a locked vertex in no face (`qemjax._schedulers.locks`)
 REJECT = {TOPOLOGY: "topology", COINCIDENT: "coincident", FLIP: "flip", PART: "vanishing_part",
-          SEAM: "seam"}  # seam: would move a seam vertex off its seam or merge wedges (`_wedges`)
-STOPS = ("target", "max_error", "blocked", "unchanged")
+          SEAM: "seam", LOCKED: "locked"}
+STOPS = ("target", "max_error", "blocked", "unchanged", "locked")
 
 
 def count_reasons(codes: np.ndarray) -> dict:

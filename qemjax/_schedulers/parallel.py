@@ -34,16 +34,26 @@ import time
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _topology as topo
-from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
+from . import locks as _locks
+from .._mesh import topology as topo
+from .._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
+from .._kernels.batching import CHUNKS
 from .._costs import MeshView
-from .._incidence import FaceLists
+from .._mesh.incidence import FaceLists
 from . import outcome
-from .common import (DTYPE, Options, Timer, bucket, face_normals, pad_rows, set_rows, start_flips, start_merge,
-                     start_price)
+from .common import (DTYPE, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
+                     start_merge, start_price)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
-MERGE_CHUNK = 4096  # one merge shape whatever the round's size: a few more calls early, one compilation
+MERGE_CHUNK = 4096  # the piece shape of a round's merge and device row update (one compilation) ...
+SMALL_CHUNK = CHUNKS[0]  # ... or, for a mesh of at most SMALL_MESH faces, this one: such a mesh's rounds
+SMALL_MESH = 1 << 14  # contract ~100 pairs, and a 4096-row scatter costs ~12x a 256-row one. Chosen per run,
+# from the mesh's size, so that meshes of similar size compile the same shapes whatever their rounds
+
+
+def merge_size(m: int) -> int:
+    """The fixed piece shape of the merges and device row updates of a run on m faces."""
+    return SMALL_CHUNK if m <= SMALL_MESH else MERGE_CHUNK
 
 
 @dataclasses.dataclass
@@ -102,16 +112,16 @@ def _accepted(E, found, take):
         t = take[idx]
         pos = np.cumsum(t) - 1 + off  # each taken pair's place in the combined set
         pair_of, side = w >> 1, w & 1
-        keep = np.take(t, pair_of)
-        ws.append(2 * np.take(pos, np.compress(keep, pair_of)) + np.compress(keep, side))
-        fs.append(np.compress(keep, f))
-        cs.append(np.compress(keep, c))
-        ds.append(np.compress(np.take(t, downer), df))
-        pairs.append(_take(E, np.compress(t, idx)))
+        keep = t.take(pair_of)
+        ws.append(2 * pos.take(pair_of.compress(keep)) + side.compress(keep))
+        fs.append(f.compress(keep))
+        cs.append(c.compress(keep))
+        ds.append(df.compress(t.take(downer)))
+        pairs.append(_take(E, idx.compress(t)))
         if at is not None:
             apex, rows, owner = at
             xs.append(_keep(apex, t))
-            rs.append(np.compress(np.take(t, owner), rows))
+            rs.append(rows.compress(t.take(owner)))
         off += int(t.sum())
     cat = np.concatenate
     return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
@@ -152,7 +162,7 @@ def _removal_steps(F, rounds, a, b, dead, dropped):
     step_of = np.full(n, np.iinfo(np.int64).max)
     step_of[b] = np.arange(len(b))
     d = np.concatenate(dead).astype(np.int64) if dead else np.zeros(0, np.int64)
-    s = np.take(step_of, np.take(F, d, axis=0))
+    s = step_of.take(F.take(d, axis=0))
     removed_at[d] = np.minimum(np.minimum(s[:, 0], s[:, 1]), s[:, 2])  # .min(axis=1), without the slow reduction
     if dropped:
         f = np.concatenate([x for _, x in dropped]).astype(np.int64)
@@ -189,12 +199,18 @@ class _Run:
     """One simplification: the mesh state that lives across rounds, and the stages of a round."""
 
     def __init__(self, V, S, F, extra_pairs, target_faces, model, options: Options, progress, edges,
-                 part_scale=None, params=None, wedges=None, normals=None):
+                 part_scale=None, params=None, wedges=None, normals=None, locks=None):
         self.n, m = len(V), len(F)
+        self.merge_chunk = merge_size(m)
         self.wedges = wedges  # a `_wedges.Tracker` when attributes are kept (else None)
+        self.locks = locks  # a `_locks.RunLocks` (else None); the weights are carried in a copy
+        self.weights = None if locks is None or locks.weights is None else np.array(locks.weights, np.float64)
         self.part_scale = part_scale
         self.model, self.options, self.progress = model, options, progress
         self.params = model.kernel_params() if params is None else params
+        if isinstance(self.params, dict):  # the settings cross to the device once, not with every kernel call
+            self.params = on_device(self.params)
+        self.cos_max = jnp.asarray(np.asarray(options.cos_max, DTYPE))  # the flip threshold, likewise
         self.target = target_faces
         self.manifold = options.preserve_topology
         self.extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
@@ -225,7 +241,7 @@ class _Run:
         self.rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
         self.max_cost_used = 0.0
         self.faces_per_round = []
-        self.weights, self.weighed_at, self.reweights = None, 0, []  # ranking weights (`rank`)
+        self.rank_w, self.weighed_at, self.reweights = None, 0, []  # ranking weights (`rank`)
         self.history_parts = []
 
     # -- stage 1: update ---------------------------------------------------------------------------
@@ -268,9 +284,13 @@ class _Run:
             pending = self.first or start_price(model, VQd, st.E, self.params, self.faces, self.pad)
             self.first = None
             st.bad = np.zeros(len(st.E), np.int8)
+            if self.locks is not None:
+                pending = self.locked_prices(pending, st.E)
         else:
             d = np.flatnonzero(stale)
             pending = start_price(model, VQd, _take(st.E, d), self.params, self.faces, self.pad)
+            if self.locks is not None:
+                pending = self.locked_prices(pending, _take(st.E, d))
             st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
             if same is not None:
                 st.bad = st.bad * same
@@ -297,7 +317,16 @@ class _Run:
             seam = self.wedges.constrain(self.faces, self.VQ, _take(st.E, d), x, c)
             st.x[d], st.cost[d] = x, c
             st.bad[d[seam]] = outcome.SEAM
+        if self.locks is not None:  # pairs of two locked vertices never contract
+            st.bad[_locks.both_locked(self.locks, st.E)] = outcome.LOCKED
+            if self.wedges is not None:  # a seam placement never moves a locked vertex
+                _locks.pin(self.locks, self.VQ, st.E, st.x)
         self.timer.add("kernels_s", time.perf_counter() - t0)
+
+    def locked_prices(self, pending, P):
+        """``pending`` (a price of pairs P) with locked kept vertices and the weights applied (`_locks.adjust`)."""
+        return lambda: _locks.adjust(self.locks, self.weights, self.model, self.VQ, self.VQd, P, pending(),
+                                     self.params, self.faces, self.pad)
 
     def rank(self, st: RoundState, valid: np.ndarray):
         """Set ``st.key``: the cost, or for a model with `rank_weights` the cost plus its weighted parts,
@@ -307,11 +336,11 @@ class _Run:
             st.key = st.cost
             return
         count = self.faces.count
-        if self.weights is None or count <= (1.0 - self.model.reweight_step) * self.weighed_at:
-            self.weights = self.model.rank_weights(np.compress(valid, st.parts, axis=0))
+        if self.rank_w is None or count <= (1.0 - self.model.reweight_step) * self.weighed_at:
+            self.rank_w = self.model.rank_weights(st.parts.compress(valid, axis=0))
             self.weighed_at = count
-            self.reweights.append((count, self.weights))
-        st.key = (st.cost + st.parts.astype(np.float64) @ self.weights).astype(DTYPE)
+            self.reweights.append((count, self.rank_w))
+        st.key = (st.cost + st.parts.astype(np.float64) @ self.rank_w).astype(DTYPE)
 
     # -- stages 3 and 4: select and validate -------------------------------------------------------
     def candidates(self, st: RoundState, need, max_cost=None) -> np.ndarray:
@@ -331,7 +360,7 @@ class _Run:
         t0 = time.perf_counter()
         sch = self.options.schedule
         k = gate_rank(need, int(valid.sum()), len(st.E), sch)
-        kth = np.partition(np.compress(valid, st.key), k - 1)[k - 1]
+        kth = np.partition(st.key.compress(valid), k - 1)[k - 1]
         salt = self.rounds * 7919
 
         def key_of(idx):
@@ -363,7 +392,7 @@ class _Run:
                           edges_at=True, size=len(Efree))
         (fids, before, corner, owner, G), kept, dead = self.faces.touched_with_dead(P)
         flipped = start_flips(self.VQd, self.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
-                            self.options.cos_max)  # runs while the host tests the rest
+                            self.cos_max)  # runs while the host tests the rest
         gone = topo.coincidence_count(G, owner, len(P))
         why = np.zeros(len(P), np.int8)
         at = None
@@ -373,10 +402,14 @@ class _Run:
             if self.options.keep_parts:  # the pair's faces are all its part has left
                 why[np.bincount(owner, minlength=len(P)) == 0] = outcome.PART
             why[~linked] = outcome.TOPOLOGY
-            at = (apex, np.take(free_rows, r), owner_r)
+            at = (apex, free_rows.take(r), owner_r)
+        if self.locks is not None:  # a locked vertex never leaves the mesh (its part's or its own last faces)
+            gone_locked = _locks.vanishing(self.locks, P, np.bincount(owner, minlength=len(P))) | \
+                _locks.strands(self.locks, self.faces, P, dead)
+            why[(why == 0) & gone_locked] = outcome.LOCKED
         if self.wedges is not None:
             xs = _take(st.x, idx)
-            seam = np.take(self.wedges.multi, P[:, 0]) | np.take(self.wedges.multi, P[:, 1])
+            seam = self.wedges.multi.take(P[:, 0]) | self.wedges.multi.take(P[:, 1])
             for i in np.flatnonzero((why == 0) & seam):  # the others are always allowed
                 if not self.wedges.allowed(self.faces, self.VQ, int(P[i, 0]), int(P[i, 1]), xs[i]):
                     why[i] = outcome.SEAM
@@ -394,10 +427,11 @@ class _Run:
         P = _take(st.E, acc)
         a, b = P[:, 0], P[:, 1]
         xs = _take(st.x, acc)
-        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=MERGE_CHUNK)  # runs meanwhile
+        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=self.merge_chunk)  # runs meanwhile
         st.changed = np.zeros(n, bool)
         st.changed[a] = True
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
+        _locks.carry(self.weights, a, b)
         self.max_cost_used = max(self.max_cost_used, float(st.cost[acc].max()))
         self.history.append((self.rounds - 1, (a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64))))
         if st.parts.shape[1]:
@@ -425,7 +459,7 @@ class _Run:
             self.extra_pairs = ep[ep[:, 0] != ep[:, 1]]
         rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
         put_rows(self.VQ, a, rows)
-        self.VQd = set_rows(self.VQd, a, rows, size=MERGE_CHUNK)
+        self.VQd = set_rows(self.VQd, a, rows, size=self.merge_chunk)
         if self.model.support == "ring" or self.model.refresh is not None:
             ring = _ring_vertices(faces, a, n)
             if self.model.support == "ring":
@@ -446,7 +480,7 @@ class _Run:
         """Recompute the model's derived state at ``verts`` (after their neighbourhood changed)."""
         state = np.asarray(self.model.refresh(MeshView(self.faces, self.VQ[: self.n]), verts), DTYPE)
         self.VQ[verts, 3:] = state
-        self.VQd = set_rows(self.VQd, verts, self.VQ[verts], size=MERGE_CHUNK)
+        self.VQd = set_rows(self.VQd, verts, self.VQ[verts], size=self.merge_chunk)
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self):
@@ -488,14 +522,16 @@ class _Run:
 
 
 def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=None, edges=None,
-        part_scale=None, wedges=None):
+        part_scale=None, wedges=None, locks=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64 faces, extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be
     0); ``edges``: `topo.edges` of F when the caller has it; ``part_scale`` (n,): (extent of each vertex's
     part / the whole extent)², which scales ``Schedule.free_cost`` per pair (None: one part).
     Returns the `outcome.Outcome` (the schedulers' contract). ``wedges``: a `_wedges.Tracker`
-    (attributes kept: the seam rule applies and its corners are updated), or None."""
-    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges)
+    (attributes kept: the seam rule applies and its corners are updated), or None. ``locks``: a
+    `_locks.RunLocks` (locked vertices and weights; locked vertices numbered first), or None."""
+    r = _Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges,
+             locks=locks)
     stop, blocked = r.run()
     rounds, a, b, x, cost = _history_columns(r.history)
     hist = _history_arrays(a, b, x, cost)

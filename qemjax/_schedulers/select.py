@@ -9,7 +9,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
-from .._arrays import any_at, keep_rows as _keep, take_rows as _take
+from .._mesh.arrays import any_at, keep_rows as _keep, take_rows as _take
 from .._options import Schedule
 
 NO_KEY = np.iinfo(np.int64).max
@@ -44,8 +44,8 @@ def sort_keys(cost: np.ndarray, idx: np.ndarray, salt: int = 0, offset: np.ndarr
     descending chains with one local minimum each. Only the pairs asked for are keyed (a round looks
     at a small part of them). ``offset`` (P,): scramble ``idx - offset[idx]`` instead, each pair's index
     within its copy in a batched run (`batched`), so a copy breaks ties as it does alone."""
-    bits = np.take(cost, idx).astype(np.float32, copy=False).view(np.int32).astype(np.int64)
-    local = idx if offset is None else idx - np.take(offset, idx)
+    bits = cost.take(idx).astype(np.float32, copy=False).view(np.int32).astype(np.int64)
+    local = idx if offset is None else idx - offset.take(idx)
     h = local.astype(np.uint32) * np.uint32(0x9E3779B1) + np.uint32(salt & 0xFFFFFFFF)
     bits <<= 32
     bits |= h
@@ -77,9 +77,9 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
             half = submit(narrow, avail, (one[:h], Eo[:h], None), split=False)
             rest = narrow(avail, (one[h:], Eo[h:], None), split=False)
             return tuple(np.concatenate(pair) for pair in zip(half.result(), rest))
-        ae = np.take(avail, Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
+        ae = avail.take(Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
         k1 = ae != 0
-        return np.compress(k1, one), _keep(Eo, k1), np.compress(k1, ae) == 0x0101
+        return one.compress(k1), _keep(Eo, k1), ae.compress(k1) == 0x0101
 
     def endpoints(mask):
         v = np.zeros(n, bool)
@@ -98,7 +98,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
     n_acc = 0
     for p in range(schedule.max_passes):
         one, Eo, bmask = ws
-        both, Eb = np.compress(bmask, one), _keep(Eo, bmask)
+        both, Eb = one.compress(bmask), _keep(Eo, bmask)
         live = cand[both]
         if not live.any():
             break
@@ -107,9 +107,9 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
         np.minimum.at(m1, Eb[:, 0], kl)
         np.minimum.at(m1, Eb[:, 1], kl)
         m2 = m1.copy()
-        np.minimum.at(m2, Eb[:, 0], np.take(m1, Eb[:, 1]))
-        np.minimum.at(m2, Eb[:, 1], np.take(m1, Eb[:, 0]))
-        sel = np.compress(live & (kl == np.take(m2, Eb[:, 0])) & (kl == np.take(m2, Eb[:, 1])), both)
+        np.minimum.at(m2, Eb[:, 0], m1.take(Eb[:, 1]))
+        np.minimum.at(m2, Eb[:, 1], m1.take(Eb[:, 0]))
+        sel = both.compress(live & (kl == m2.take(Eb[:, 0])) & (kl == m2.take(Eb[:, 1])))
         if sel.size == 0:
             break
         why, extra_sel = validate(_take(E, sel), sel, one, Eo)
@@ -146,8 +146,8 @@ def _copies_staying(groups, sel, good, p, schedule):
     that have left in ``groups``."""
     vcopy, need, cp, n_acc, out = groups
     C = len(need)
-    g = np.bincount(np.take(cp, good), minlength=C)
-    tried = np.bincount(np.take(cp, sel), minlength=C) > 0
+    g = np.bincount(cp.take(good), minlength=C)
+    tried = np.bincount(cp.take(sel), minlength=C) > 0
     n_acc += g
     done = ~tried | (g < schedule.pass_yield * n_acc) | ((g * 50 < need // 2) & (p > 2))
     if done.all():
@@ -155,7 +155,7 @@ def _copies_staying(groups, sel, good, p, schedule):
     if not (done & ~out).any():  # no copy left the passes now: the vertex mask stays as it is
         return True
     out |= done
-    return np.take(~done, vcopy)
+    return (~done).take(vcopy)
 
 
 def gate_rank(need: int, n_valid: int, n_pairs: int, schedule: Schedule) -> int:

@@ -19,7 +19,7 @@ first round on (selection gates on the faces still to remove), so it is not a re
 
 ESQEM's edge splits (``split_factor``) come after all contractions and are not in the record: a replay covers
 the contraction phase only, down to the face count the contractions reached (`Record.faces_out`). Likewise
-``refit`` (`qemjax._refit`) moves the output's vertices after the contractions: a replay gives the
+``refit`` (`qemjax._pipeline.refit`) moves the output's vertices after the contractions: a replay gives the
 positions the contractions chose, so its last level is the result before the re-fit.
 
 Progressive form: `Record.save` writes an ``.npz`` (byte-identical for the same record), `load_record`
@@ -33,9 +33,9 @@ import zipfile
 
 import numpy as np
 
-from ._arrays import face_normals
-from ._result import Contractions
-from ._units import Frame
+from .._mesh.arrays import face_normals
+from .result import Contractions
+from .._mesh.units import Frame
 
 FORMAT = "qemjax-record-1"  # written into every .npz; `load_record` refuses others
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed time stamps: the same record gives the same bytes
@@ -88,6 +88,7 @@ class Record:
     frame: Frame
     scheduler: str = "parallel"
     target_faces: int = 0
+    locked: np.ndarray | None = None  # (n,) bool: locked input vertices (None: none), kept exactly
 
     # -- what the record says ----------------------------------------------------------------------
     def faces_removed(self) -> np.ndarray:
@@ -173,6 +174,8 @@ class Record:
         if flat.size:  # as `simplify`: an exactly flat face keeps the rounded internal positions
             w = np.unique(faces[flat])
             w = w[~moved[w]]
+            if self.locked is not None:  # locked vertices keep the input's position at every level
+                w = w[~self.locked[ids[w]]]
             verts[w] = self.frame.positions_to_mesh(_internal(V[ids[w]], ids[w], self.frame), ids[w])
         costs = self.history.costs[:j]
         rounds = self.history.rounds
@@ -195,6 +198,8 @@ class Record:
                "frame_sizes": fr.sizes if fr.sizes is not None else np.zeros(0)}
         for name, col in h.parts.items():
             out[f"parts/{name}"] = col
+        if self.locked is not None:  # only then: a record without locks keeps its bytes
+            out["locked"] = self.locked
         return out
 
     def save(self, path) -> None:
@@ -220,7 +225,7 @@ def load_record(path) -> Record:
                   a["frame_sizes"] if many else None)
     history = Contractions(a["pairs"], a["positions"], a["costs"], parts, a["rounds"])
     return Record(a["input_vertices"], a["input_faces"], history, a["removed_at"], a["coincident"], frame,
-                  str(a["scheduler"]), int(a["target_faces"]))
+                  str(a["scheduler"]), int(a["target_faces"]), a.get("locked"))
 
 
 def _roots(pairs: np.ndarray, n: int) -> np.ndarray:

@@ -53,6 +53,9 @@ class SimplifyResult:
     ``max_error`` and the history's costs measure (the cost model's `error_unit`); with attributes kept,
     ``attributes`` (their kinds) and the input's seams: ``seams_in`` (connected pieces), ``seam_edges_in``
     and ``seam_vertices_in``.
+    With ``locked=`` / ``vertex_weights=`` (`qemjax._schedulers.locks`): ``locked_in`` (the vertices given),
+    ``locked`` (the cleaned vertices they are), ``locked_unreferenced`` (given ones no face uses: not
+    kept) and ``vertex_weights`` (whether any weight differs from 1).
 
     Appearance attributes (``simplify(attributes=...)``; None when the input carries none or they were not
     kept) are per wedge, a distinct attribute value at a vertex (a vertex on a UV seam has one per chart):
@@ -98,7 +101,7 @@ class SimplifyResult:
         a `qemjax.Level` (vertices, faces, source_vertices, source_faces, vertex_map, max_error). Greedy:
         equal to ``simplify(target_faces=k, scheduler="greedy")`` when a prefix of the run has k faces;
         parallel: the run's own mesh at round boundaries, the round's cheapest contractions first in
-        between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record`."""
+        between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record.history`."""
         return self._record().replay(target_faces, ratio=ratio, contractions=contractions)
 
     def _record(self):

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._arrays import sorted_triples
+from .arrays import sorted_triples
 
 
 def half_edges(F: np.ndarray) -> np.ndarray:
@@ -159,10 +159,9 @@ def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,
     rows, L, c_, _ = _labelled_rows(lab, E)
     L = L.astype(np.int64)
     key = np.sort(((L >> 1) * n + c_) * 2 + (L & 1))
-    base = key // 2
+    base = key >> 1  # key // 2 (keys are non-negative)
     both = base[1:] == base[:-1]  # a neighbour seen from side 0 and side 1
-    common_pair = base[1:][both] // n
-    common_v = base[1:][both] % n
+    common_pair, common_v = np.divmod(base[1:].compress(both), n)
     ncommon = np.bincount(common_pair, minlength=S)
 
     ok = (nfaces >= 1) & (nfaces <= 2) & (ncommon == nfaces)
@@ -230,17 +229,20 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     G, owner: the touched faces after contraction and their pairs, from `FaceLists.touched` (every face
     that could coincide touches the pair, because pairs are two edges apart).
     """
-    h = np.zeros(len(G), np.uint64)  # a symmetric hash: the same for any order of the corners
-    for j in range(3):
-        g = G[:, j].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-        g ^= g >> np.uint64(29)
-        h += g * np.uint64(0xBF58476D1CE4E5B9)
+    # a symmetric hash, the same for any order of the corners: each corner mixed, the three summed modulo
+    # 2**64 (so any order of summing gives the same bits); all corners in each array pass, in place
+    g = G.astype(np.uint64)
+    g *= np.uint64(0x9E3779B97F4A7C15)
+    g ^= g >> np.uint64(29)
+    g *= np.uint64(0xBF58476D1CE4E5B9)
+    h = g[:, 0] + g[:, 1]
+    h += g[:, 2]
     hs = np.sort(h)
     dup_h = hs[1:][hs[1:] == hs[:-1]]
     if dup_h.size == 0:  # the common case: no candidates at all
         return np.zeros(S, np.int64)
     idx = np.flatnonzero(np.isin(h, dup_h))
-    rm = coincident_removals(np.take(G, idx, axis=0))
+    rm = coincident_removals(G.take(idx, axis=0))
     return np.bincount(owner[idx[rm]], minlength=S)
 
 
@@ -249,12 +251,12 @@ def _labelled_rows(label: np.ndarray, E: np.ndarray, rows: np.ndarray | None = N
     labelled endpoint, the other endpoint (int64), and which rows have both endpoints labelled. ``rows``:
     those rows when the caller knows them already (in any order), which saves the scan of E."""
     if rows is None:
-        L = np.take(label.astype(np.int32, copy=False), E)  # one 2-D gather: faster than two column gathers
+        L = label.astype(np.int32, copy=False).take(E)  # one 2-D gather: faster than two column gathers
         rows = np.flatnonzero(L.view(np.int64).reshape(-1) != -1)  # an unlabelled edge is two -1s: all ones
-        Lr, Er = np.take(L, rows, axis=0), np.take(E, rows, axis=0)
+        Lr, Er = L.take(rows, axis=0), E.take(rows, axis=0)
     else:
-        Er = np.take(E, rows, axis=0)
-        Lr = np.take(label.astype(np.int32, copy=False), Er)
+        Er = E.take(rows, axis=0)
+        Lr = label.astype(np.int32, copy=False).take(Er)
     first = Lr[:, 0] >= 0
     lab = np.where(first, Lr[:, 0], Lr[:, 1])
     other = np.where(first, Er[:, 1], Er[:, 0]).astype(np.int64)
@@ -285,31 +287,31 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     rows, lab, other, own = _labelled_rows(label, E, rows)
     # edges at b: (b, apex) merge into (a, apex), the rest move to a
     ib = np.flatnonzero((lab >= S) & ~own)
-    s, c = np.take(lab, ib) - S, np.take(other, ib)
-    ap = np.take(apex, s, axis=0)
+    s, c = lab.take(ib) - S, other.take(ib)
+    ap = apex.take(s, axis=0)
     which = np.where(c == ap[:, 0], 0, np.where(c == ap[:, 1], 1, -1))
     merge = which >= 0
-    rb = np.take(rows, ib)
+    rb = rows.take(ib)
     # (a, apex) loses the vanished face and gains the other faces of (b, apex)
     delta = np.zeros((S, 2), np.int64)
-    rm = np.compress(merge, rb)
-    delta[np.compress(merge, s), np.compress(merge, which)] = np.take(ecount, rm) - 2
+    rm = rb.compress(merge)
+    delta[s.compress(merge), which.compress(merge)] = ecount.take(rm) - 2
     ia = np.flatnonzero((lab < S) & ~own)
-    ta, oa = np.take(lab, ia), np.take(other, ia)
-    ap = np.take(apex, ta, axis=0)
+    ta, oa = lab.take(ia), other.take(ia)
+    ap = apex.take(ta, axis=0)
     hit = np.where(oa == ap[:, 0], 0, np.where(oa == ap[:, 1], 1, -1))
     h = hit >= 0
     count = ecount.copy()
-    rh = np.compress(h, np.take(rows, ia))
-    count[rh] += delta[np.compress(h, ta), np.compress(h, hit)]
+    rh = rows.take(ia).compress(h)
+    count[rh] += delta[ta.compress(h), hit.compress(h)]
     E2 = E.copy()
-    mv = np.compress(~merge, rb)
-    to, c = np.take(a, np.compress(~merge, s)).astype(np.int64), np.compress(~merge, c)
+    mv = rb.compress(~merge)
+    to, c = a.take(s.compress(~merge)).astype(np.int64), c.compress(~merge)
     E2[mv, 0] = np.minimum(to, c)
     E2[mv, 1] = np.maximum(to, c)
     keep = np.ones(len(E), bool)  # every edge has faces; only (a, apex) counts change, and may reach 0
-    keep[rh] = np.take(count, rh) > 0
-    keep[np.compress(own, rows)] = False
+    keep[rh] = count.take(rh) > 0
+    keep[rows.compress(own)] = False
     keep[rm] = False
     deg = degree.copy()  # a gains b's edges but (a, b) and one of each (a, apex), (b, apex) pair
     deg[a] += degree[b] - 2 - (apex >= 0).sum(1)
@@ -318,4 +320,4 @@ def contract_edges(E: np.ndarray, ecount: np.ndarray, a: np.ndarray, b: np.ndarr
     at_a = np.zeros(len(E), bool)
     at_a[rows] = True  # every edge at an a or a b; those at a b that survive move to its a
     idx = np.flatnonzero(keep)  # one index array serves the three gathers
-    return np.take(E2, idx, axis=0), np.take(count, idx), keep, deg, np.take(at_a, idx)
+    return E2.take(idx, axis=0), count.take(idx), keep, deg, at_a.take(idx)

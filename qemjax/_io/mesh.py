@@ -13,8 +13,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import _io_files, _wedges
-from ._arrays import face_stats, column_bounds, sorted_triples
+from . import files as _io_files
+from .._mesh import wedges as _wedges
+from .._mesh.arrays import face_stats, column_bounds, sorted_triples
 
 
 class Mesh(NamedTuple):
@@ -210,13 +211,14 @@ def _maybe_repeated(h: np.ndarray) -> bool:
     return bool(np.any(hs[1:] == hs[:-1]))
 
 
-def weld(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """Merge vertices with identical coordinates. Returns (V', F', number merged).
+def weld(V: np.ndarray, F: np.ndarray, with_map: bool = False):
+    """Merge vertices with identical coordinates. Returns (V', F', number merged), and with ``with_map``
+    also each input vertex's index in V' (n,) int64.
 
     Kept vertices stay in first-occurrence order, so a mesh without duplicates is returned unchanged.
     """
     if not _maybe_repeated(_row_hash((V + 0.0).view(np.uint64))):  # + 0.0: -0.0 becomes 0.0
-        return V, F, 0
+        return (V, F, 0, np.arange(len(V))) if with_map else (V, F, 0)
     order = np.lexsort(V.T[::-1])
     Vs = V[order]
     new = np.ones(len(V), bool)
@@ -228,9 +230,10 @@ def weld(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     rep[order] = first[group]
     keep = rep == np.arange(len(V))
     if keep.all():
-        return V, F, 0
+        return (V, F, 0, np.arange(len(V))) if with_map else (V, F, 0)
     newidx = np.cumsum(keep) - 1
-    return V[keep], newidx[rep][F], int((~keep).sum())
+    out = V[keep], newidx[rep][F], int((~keep).sum())
+    return (*out, newidx[rep]) if with_map else out
 
 
 def unique_face_mask(F: np.ndarray) -> np.ndarray:
@@ -280,7 +283,8 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
             texture=None) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
     ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear
-    corners), ``unreferenced_removed`` and lists the attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
+    corners), ``unreferenced_removed``, gives ``vertex_map`` (each given vertex's index in the cleaned
+    mesh, -1 for one no face uses) and lists the attributes not kept in ``dropped`` (`dropped_attributes`; also one warning, attributed to the
     caller ``stacklevel`` - 1 frames above prepare's caller).
 
     attributes: which appearance attributes to keep (`_wedges.select`: 'auto', None, a kind or a tuple);
@@ -297,8 +301,9 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
         material = _wedges.load_texture(texture)
     report = {"welded": 0}
     F0 = F
+    vmap = np.arange(len(V))  # each input vertex's index in the cleaned mesh (-1: dropped)
     if weld_vertices:
-        V, F, report["welded"] = weld(V, F)
+        V, F, report["welded"], vmap = weld(V, F, with_map=True)
     name = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh"
     if attributes == "auto" and kept:  # kinds with seams are kept only when asked for (`_wedges.AUTO_RULE`)
         seamed = {k: c for k in kept if (c := _wedges.seam_vertex_count(kept[k], F, F0))
@@ -343,7 +348,10 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     if report["zero_area_removed"]:
         F = F[nz]
         src = None if src is None else src[nz]
+    used = np.zeros(len(V), bool)
+    used[F.reshape(-1)] = True
     V, F, report["unreferenced_removed"] = drop_unreferenced(V, F)
+    report["vertex_map"] = np.where(used, np.cumsum(used) - 1, -1)[vmap]  # for `simplify`, popped there
     report["attributes"] = None
     if kept:  # wedges: the source vertex of each kept corner, split by value at each welded vertex
         a = _wedges.build(kept, F, F0.reshape(-1)[src])

@@ -8,7 +8,7 @@ E_dist with the connectivity fixed):
 
 1. the input is sampled at every vertex (weight: a third of the area of its faces) and every face's
    centroid (weight: its area), the weights scaled to mean 1;
-2. each sample is attached to its nearest point on the output (`qemjax._nearest`), as barycentric
+2. each sample is attached to its nearest point on the output (`qemjax._mesh.nearest`), as barycentric
    coordinates b of an output face, among the faces of its own part (the input's connected parts, joined
    as aggregation joins them; an output face belongs to the part of the input face it continues): a
    sample of one part must not pull another part that happens to lie nearer (the truck's 50 parts did);
@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ._arrays import face_normals
+from .._mesh.arrays import face_normals
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
 HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
@@ -52,7 +52,7 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
 
 def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spart: np.ndarray):
     """For each sample, a nearest output face among those of its part (-1: its part has none)."""
-    from ._nearest import nearest_triangles
+    from .._mesh.nearest import nearest_triangles
 
     f = np.full(len(P), -1, np.int64)
     order = np.argsort(gpart, kind="stable")
@@ -108,11 +108,13 @@ def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
 
 
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
-          part: np.ndarray | None = None, source_faces: np.ndarray | None = None) -> np.ndarray:
+          part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
+          fixed: np.ndarray | None = None) -> np.ndarray:
     """Positions X (k,3) of the output faces G (j,3) re-fitted to the input (V, F) in ``rounds`` rounds
     (module docstring); float64, the input's units. ``part``: a part label per input vertex and
-    ``source_faces``: the input face each output face continues (None: one part). X is returned unchanged
-    (a copy) when there is nothing to fit."""
+    ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
+    vertices that keep their position exactly (locked ones; the others are fitted around them). X is
+    returned unchanged (a copy) when there is nothing to fit."""
     X = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
@@ -126,6 +128,9 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     if rounds <= 0 or len(G) == 0 or len(P) == 0:
         return X
     lam = DAMPING * w.sum() / k
+    free = np.ones(k, bool) if fixed is None else ~np.asarray(fixed, bool)
+    if not free.any():
+        return X
     for _ in range(rounds):
         f = _attach(X, G, gpart, P, spart)
         seen = f >= 0
@@ -134,10 +139,15 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
         tri = G[f]
         B = closest_barycentric(Ps, X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
         A = sp.csr_matrix(((B * sw[:, None]).ravel(), (rows, tri.ravel())), shape=(len(Ps), k))
-        N = (A.T @ A + lam * sp.identity(k, format="csr")).tocsc()
-        rhs = A.T @ (Ps * sw[:, None]) + lam * X
+        target = Ps * sw[:, None]
+        if fixed is not None:  # the fixed vertices' part of each sample moves to the right-hand side
+            target = target - A[:, ~free] @ X[~free]
+            A = A[:, free]
+        N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsc()
+        rhs = A.T @ target + lam * X[free]
         solve = spla.factorized(N)
-        Y = np.stack([solve(np.ascontiguousarray(rhs[:, i])) for i in range(3)], 1)
+        Y = X.copy()
+        Y[free] = np.stack([solve(np.ascontiguousarray(rhs[:, i])) for i in range(3)], 1)
         if not np.all(np.isfinite(Y)):
             break
         n0 = face_normals(X, G)

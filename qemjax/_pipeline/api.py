@@ -11,13 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from . import _compilation
-from . import _costs
-from ._options import Topology
-from ._result import SimplifyResult
-from ._schedulers import batched
-from . import _stages as stages
-from ._stages import Job, _resolve_target
+from .._kernels import compilation as _compilation
+from .. import _costs
+from .._schedulers import locks as _locks
+from .._options import Topology
+from .._record.result import SimplifyResult
+from .._schedulers import batched
+from . import stages
+from .stages import Job, _resolve_target
 
 PLACEMENTS = _costs.qem.PLACEMENTS
 
@@ -53,7 +54,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     topology: a `qemjax.Topology`: topology preservation, pruning of small parts, aggregation of close
         pairs (``pair_threshold``), the flip angle and welding (None: its defaults).
     attributes: which appearance attributes to carry through (per-corner wedges, seams kept: README,
-        "Appearance attributes"; ``qemjax._wedges``): ``'auto'`` (each kind the input carries without
+        "Appearance attributes"; ``qemjax._mesh.wedges``): ``'auto'`` (each kind the input carries without
         seams: UVs and their material, vertex colours, stored normals, normalised to unit length; a kind
         with seams, which hold vertices in place, only when asked for by name, or UVs when a texture is
         given: one warning names them), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, None
@@ -64,22 +65,32 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (others warn and drop).
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
     progress: show a progress bar (tqdm).
+    locked, vertex_weights (given by name, with the settings): per-vertex constraints, numbered as the
+        vertices were given (before welding; `qemjax._schedulers.locks`; README, "Locking vertices and weighting
+        importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
+        output, and at every level of ``res.record``, exactly where they are (bit for bit); a pair with
+        one locked vertex contracts onto it, a pair of two never. ``vertex_weights``: (n,) finite, >= 0;
+        each pair's cost is multiplied by the larger weight of its two vertices (a kept vertex takes the
+        larger weight of the pair), so heavy regions keep more detail. A run the locks stop short of the
+        target ends with ``stop_reason="locked"`` and ``stats["blocked_by"]["locked"]``.
     settings: any field of the method, `Topology` or `Attributes` by its name (``boundary_weight=10``,
         ``flip_angle=None``, ``attribute_weights=0.1``) or dotted (``**{"method.refit": 0}``); each
         replaces that field of the object given (so ``method="accurate", refit=0`` is the preset without
         its re-fit). ``preset=NAME`` is ``method=NAME``. README, "Settings as objects", lists where each
         of the flat keywords of qemjax 0.1 lives.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
-    ``"blocked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
+    ``"blocked"``, ``"locked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options, TypeError for an
     unknown setting.
     """
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
+    settings = dict(settings)
+    locks = _locks.pop_settings(settings)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings)
     _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     geo = stages.geometry(mesh, setup, stacklevel=3)
-    job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3)
+    job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks)
     return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
 
 
@@ -116,9 +127,10 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
             if "progress" in cfg:
                 raise ValueError("simplify_batch: progress is not offered here (a sweep shows its own bar)")
             kw = {**_RUN_DEFAULTS, **{k: v for k, v in cfg.items() if k in _RUN_DEFAULTS}}
+            rest = {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS}
+            locks = _locks.pop_settings(rest)
             try:
-                setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False,
-                               {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS})
+                setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest)
             except TypeError as exc:
                 raise ValueError(f"simplify_batch: {exc}") from None
             _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
@@ -126,7 +138,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
             if gk not in geos:
                 geos[gk] = stages.geometry(mesh, setup, stacklevel=4)
             jobs.append((i, stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
-                                 kw["max_error"], stacklevel=4, states=states)))
+                                 kw["max_error"], stacklevel=4, states=states, locks=locks)))
         except ValueError as exc:
             if not errors:
                 raise
@@ -188,7 +200,8 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
 def _batch_key(job: "Job"):
     """Jobs with equal keys can run as copies of one batch (`_schedulers.batched`); None: run alone."""
     s, model = job.setup, job.model
-    if s.scheduler != "parallel" or len(job.geo.extra) or job.tracker is not None or not batched.batchable(model) or not (
+    if s.scheduler != "parallel" or len(job.geo.extra) or job.tracker is not None or job.locks is not None or \
+            not batched.batchable(model) or not (
             job.target < len(job.geo.F) or job.err < math.inf):
         return None
     return (_model_key(model), tuple(sorted(model.kernel_params())), s.cos_max,

@@ -43,18 +43,18 @@ class FaceLists:
 
     def live(self) -> np.ndarray:
         """(count,3) the live faces, in face order."""
-        return np.compress(self.alive, self.F, axis=0)
+        return self.F.compress(self.alive, axis=0)
 
     def around(self, verts: np.ndarray):
         """Every live face at each of ``verts`` (k,): (positions into verts, face ids), grouped by
         position in order (a face at two of the vertices appears twice)."""
-        lens = np.take(self.cnt, verts)
+        lens = self.cnt.take(verts)
         which = np.repeat(np.arange(len(verts)), lens)
         pos = np.arange(len(which), dtype=np.int64)
-        pos += np.repeat(np.take(self.off, verts) - _exclusive_cumsum(lens), lens)
-        f = np.take(self.pool, pos)
-        live = np.take(self.alive, f)
-        return np.compress(live, which), np.compress(live, f)
+        pos += np.repeat(self.off.take(verts) - _exclusive_cumsum(lens), lens)
+        f = self.pool.take(pos)
+        live = self.alive.take(f)
+        return which.compress(live), f.compress(live)
 
     def remove(self, faces: np.ndarray):
         """Mark faces dead (they stay listed at their corners until those runs are rewritten)."""
@@ -81,8 +81,8 @@ class FaceLists:
         if self.end + k > len(self.pool):
             self._compact(k)
         start = self.end + _exclusive_cumsum(total)
-        p1 = np.arange(len(w1), dtype=np.int64) + np.take(start - _exclusive_cumsum(c1), w1)
-        p2 = np.arange(len(w2), dtype=np.int64) + np.take(start + c1 - _exclusive_cumsum(c2), w2)
+        p1 = np.arange(len(w1), dtype=np.int64) + (start - _exclusive_cumsum(c1)).take(w1)
+        p2 = np.arange(len(w2), dtype=np.int64) + (start + c1 - _exclusive_cumsum(c2)).take(w2)
         self.pool[p1] = f1
         self.pool[p2] = f2
         self.off[verts] = start
@@ -116,17 +116,17 @@ class FaceLists:
         faces, and (faces, owner pairs) of the faces that die (seen from b's side)."""
         ends = pairs.reshape(-1)
         w, f = self.around(ends)
-        G = np.take(self.F, f, axis=0)
-        other = np.take(ends, w ^ 1)  # the pair's other endpoint
+        G = self.F.take(f, axis=0)
+        other = ends.take(w ^ 1)  # the pair's other endpoint
         keep = (G[:, 0] != other) & (G[:, 1] != other) & (G[:, 2] != other)
         dies = ~keep & (w & 1).astype(bool)
-        dead = (np.compress(dies, f), np.compress(dies, w) >> 1)
-        w, f, G = np.compress(keep, w), np.compress(keep, f), np.compress(keep, G, axis=0)
-        me = np.take(ends, w)
+        dead = (f.compress(dies), w.compress(dies) >> 1)
+        w, f, G = w.compress(keep), f.compress(keep), G.compress(keep, axis=0)
+        me = ends.take(w)
         corner = np.where(G[:, 0] == me, 0, np.where(G[:, 1] == me, 1, 2))
         owner = w >> 1
         after = G.copy()
-        after[np.arange(len(G)), corner] = np.take(ends, 2 * owner)
+        after[np.arange(len(G)), corner] = ends.take(2 * owner)
         return (f, G, corner, owner, after), (w, f, corner), dead
 
     def contract_touched(self, pairs: np.ndarray, kept, dead) -> None:
@@ -138,8 +138,8 @@ class FaceLists:
         self.alive[dead] = False
         self.count -= len(dead)
         at_b = (w & 1).astype(bool)
-        wa, wb = np.compress(~at_b, w) >> 1, np.compress(at_b, w) >> 1
-        mv = np.compress(at_b, f)
-        self.F[mv, np.compress(at_b, corner)] = np.take(a, wb).astype(np.int32)
-        self._write(a, wa, np.compress(~at_b, f), wb, mv)
+        wa, wb = w.compress(~at_b) >> 1, w.compress(at_b) >> 1
+        mv = f.compress(at_b)
+        self.F[mv, corner.compress(at_b)] = a.take(wb).astype(np.int32)
+        self._write(a, wa, f.compress(~at_b), wb, mv)
         self.cnt[b] = 0

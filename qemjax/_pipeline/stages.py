@@ -9,7 +9,7 @@
 5. `finish`: the `SimplifyResult`: output in mesh units, splitting, re-fit, stop reason and warning,
    history, record and stats.
 
-`qemjax._api` drives them for one run (`simplify`) and for many (`simplify_cells`).
+`qemjax._pipeline.api` drives them for one run (`simplify`) and for many (`simplify_cells`).
 """
 from __future__ import annotations
 
@@ -23,21 +23,22 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import _compilation
-from . import _costs
-from . import _flat
-from . import _io
-from . import _refit
-from . import _schedulers
-from . import _split
-from . import _topology as topo
-from . import _units
-from . import _wedges
-from ._arrays import face_normals
-from ._options import Attributes, Options, Schedule, Topology
-from ._record import Record
-from ._result import Contractions, SimplifyResult
-from ._schedulers import common, outcome
+from .._kernels import compilation as _compilation
+from .. import _costs
+from . import flat as _flat
+from .._io import mesh as _io
+from . import refit as _refit
+from .. import _schedulers
+from .._schedulers import locks as _locks
+from . import split as _split
+from .._mesh import topology as topo
+from .._mesh import units as _units
+from .._mesh import wedges as _wedges
+from .._mesh.arrays import face_normals
+from .._options import Attributes, Options, Schedule, Topology
+from .._record.history import Record
+from .._record.result import Contractions, SimplifyResult
+from .._schedulers import common, outcome
 
 
 def _real(name: str, x) -> float:
@@ -130,6 +131,7 @@ class Geometry(NamedTuple):
     edges: tuple
     nonmanifold: int
     attrs: Any = None
+    vertex_map: Any = None  # (given vertices,) int64: each given vertex's index here (-1: dropped)
 
 
 class Job(NamedTuple):
@@ -147,6 +149,7 @@ class Job(NamedTuple):
     report: dict
     attrs: Any = None
     tracker: Any = None
+    locks: Any = None  # `_locks.Locks` (geo is then the run's renumbered geometry), or None
 
 
 def setup(method, scheduler, topology, attributes, progress, settings: dict) -> Setup:
@@ -167,18 +170,26 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
                                  attributes=setup.attributes, texture=setup.texture)
     face_means = report.pop("face_means")
     attrs = report.pop("attributes")
+    vertex_map = report.pop("vertex_map")
     extra = topo.close_pairs(V, F, setup.pair_threshold)
     parts = topo.parts(F, len(V), extra)
     Vn, frame = _units.normalize(V, common.DTYPE, parts)
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
-    return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs)
+    return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs,
+                    vertex_map)
 
 
 def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
-         states: dict | None = None) -> Job:
+         states: dict | None = None, locks: tuple = (None, None)) -> Job:
     """The face target, the model's initial vertex state and the scheduler's options for one run.
-    ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch."""
+    ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch.
+    ``locks``: the user's (locked, vertex_weights) (`_locks`); with any, the run works on the geometry
+    renumbered with the locked vertices first (`_locks.permuted_geometry`)."""
+    lk = _locks.resolve(*locks, geo, stacklevel=stacklevel + 1)
+    if lk is not None:
+        geo = _locks.permuted_geometry(geo, lk)
+        states = None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
     if attrs is not None and (setup.method != "qem" or setup.split is not None or
                               getattr(model, "memoryless", False)):
@@ -194,6 +205,10 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
             model = _costs.build(setup.method_obj, weights=np.maximum(channel_weights, 1e-30))
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
+    if lk is not None and feature_edges is not None:
+        if len(feature_edges):  # checked as given: an error names the user's indices, not the run's
+            topo.feature_edges_with_faces(lk.geo.F, len(lk.geo.V), feature_edges)
+        feature_edges = lk.inv[feature_edges]
     if attrs is not None and attrs.has_seams():  # seams are constrained like boundaries: feature-edge planes
         seams = _wedges.seam_edges(geo.F, attrs.corners)
         if len(seams):
@@ -221,7 +236,9 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
                       keep_parts=not setup.prune)
     tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(geo.V), geo.F, model,
                                                          None if corner_values is None else channel_weights > 0)
-    return Job(setup, geo, target, err, S, options, model, report, attrs, tracker)
+    if lk is not None:
+        report.update(lk.stats)
+    return Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)
 
 
 def unchanged(job: Job):
@@ -252,8 +269,9 @@ def run(job: Job):
     else:
         progress_cb = None
     run_target, planned = target, None
+    more = {} if job.locks is None else {"locks": job.locks.run()}
     run = functools.partial(_schedulers.get(setup.scheduler), edges=g.edges[:2],
-                            part_scale=g.frame.part_scale2(), wedges=job.tracker)
+                            part_scale=g.frame.part_scale2(), wedges=job.tracker, **more)
     if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
         run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options, setup.split)
     try:
@@ -273,6 +291,9 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     out, run_target, planned = ran
     if run_target is None:
         run_target = target
+    locked = None
+    if job.locks is not None:  # back to the cleaned input's numbering (`_locks`)
+        out, g, locked = _locks.outcome_back(out, job.locks), job.locks.geo, job.locks.locked
     V, F, frame, split = g.V, g.F, g.frame, setup.split
     m = len(F)
     Vout, Fout, ids, fids = common.compact_output(out.positions, out.faces, out.alive)
@@ -284,7 +305,13 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     flat = np.flatnonzero(~np.any(face_normals(vout, Fout) != 0, axis=1))
     if flat.size:  # an input face with exactly collinear corners: keep the rounded positions there
         w = np.unique(Fout[flat])
+        if locked is not None:
+            w = w[~locked[ids[w]]]
         vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
+    fixed = None
+    if locked is not None:  # locked vertices: the input's position, exactly (contractions onto them too)
+        fixed = locked[ids]
+        vout[fixed] = V[ids[fixed]]
     verr = frame.errors_to_mesh(model.vertex_error(out.states[ids]))
     appearance = {}
     if job.tracker is not None:
@@ -299,12 +326,15 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
                           input_wedge_faces=attrs.corners)
     if split is not None:
         vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
+        if fixed is not None:  # the midpoints it adds are free
+            fixed = np.concatenate([fixed, np.zeros(len(vout) - len(fixed), bool)])
         split_stats.update(planned=planned, run_target=run_target if target else None,
                            run_stop_reason=out.stop_reason)
         if target and len(Fout) <= target and out.stop_reason == "blocked":
             out = dataclasses.replace(out, stop_reason="target")  # splitting spent what contractions could not reach
     if setup.refit and len(Fout) < m:
-        vout = _refit.refit(V, F, vout, Fout, setup.refit, setup.cos_max, g.parts[1], fids)
+        vout = _refit.refit(V, F, vout, Fout, setup.refit, setup.cos_max, g.parts[1], fids,
+                            fixed=fixed)
     stop = out.stop_reason
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
@@ -312,10 +342,15 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
             stop = "target"  # documented: a closed mesh loses faces in pairs
         else:
             stop = "blocked" if stop == "target" else stop
+            if stop == "blocked" and _locks.hold_back(out.blocked_by):
+                stop = "locked"
             warnings.warn(_above_target_message(len(Fout), target, stop, out.blocked_by, g.nonmanifold,
                                                 setup.preserve_topology), stacklevel=stacklevel)
     h = out.history
     hp, hx, hc = h.pairs, frame.positions_to_mesh(h.positions, h.pairs[:, 0]), frame.errors_to_mesh(h.costs)
+    if locked is not None:  # contractions onto a locked vertex: its input position, exactly
+        k = np.flatnonzero(locked[hp[:, 0]])
+        hx[k] = V[hp[k, 0]]
     hparts = {}
     if out.parts is not None and len(model.part_units) == len(model.parts):  # in mesh units
         for name, unit, col in zip(model.parts + ("rank",), model.part_units + (2,), out.parts.T):
@@ -348,7 +383,7 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
                            np.zeros(0, np.int64) if out.history_rounds is None else out.history_rounds)
     record = Record(V, F, history, np.full(m, -1, np.int64) if out.removed_at is None else out.removed_at,
                     np.zeros(m, bool) if out.coincident is None else out.coincident, frame, setup.scheduler,
-                    run_target)
+                    run_target, locked=locked)
     return SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(frame.errors_to_mesh(out.worst_cost)), source_vertices=ids.astype(np.int64),
@@ -361,7 +396,8 @@ def _above_target_message(faces: int, target: int, stop: str, blocked: dict, non
                           manifold_mode: bool) -> str:
     held = ", ".join(f"{k}: {v}" for k, v in blocked.items() if v) or "no pairs left"
     why = {"max_error": "the remaining contractions cost more than max_error",
-           "blocked": "no valid contraction is left"}.get(stop, stop)
+           "blocked": "no valid contraction is left",
+           "locked": "the locked vertices hold back the contractions left"}.get(stop, stop)
     hint = ""
     if manifold_mode and stop == "blocked":
         if nonmanifold:
@@ -371,6 +407,9 @@ def _above_target_message(faces: int, target: int, stop: str, blocked: dict, non
             hint = "; separate parts keep their last faces: prune=True lets small parts vanish"
         else:
             hint = "; preserve_topology=False may reach further (genus and boundaries may then change)"
+    if blocked.get("locked"):
+        hint += ("; locked vertices hold pairs back (pairs of two locked vertices never contract): lock fewer "
+                 "vertices to reach further")
     if blocked.get("seam"):
         hint += ("; UV seams / colour discontinuities are kept where they are and hold pairs back: "
                  "attributes=None (positions only) may reach further")
