@@ -35,7 +35,8 @@ from __future__ import annotations
 
 import bisect
 import heapq
-from collections import _count_elements, deque  # (the C loop behind Counter)
+from collections import deque
+
 from itertools import chain, repeat
 from types import SimpleNamespace
 from typing import NamedTuple
@@ -50,6 +51,13 @@ from . import outcome
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
 from .outcome import BUDGET
 from .queue import stop_report as _stop
+
+try:  # the C loop behind Counter (CPython); the same counts in Python elsewhere
+    from collections import _count_elements
+except ImportError:  # pragma: no cover
+    def _count_elements(counts, items):
+        for x in items:
+            counts[x] = counts.get(x, 0) + 1
 
 CONTRACT, BLOCK, STOP = "contract", "block", "stop"
 FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
