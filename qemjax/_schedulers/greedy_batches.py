@@ -36,7 +36,6 @@ from __future__ import annotations
 import bisect
 import heapq
 from collections import deque
-
 from itertools import chain, repeat
 from types import SimpleNamespace
 from typing import NamedTuple
