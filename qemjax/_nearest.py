@@ -39,6 +39,8 @@ _GRID_BUDGET = 4_000_000  # (triangle, cell) pairs enumerated while filling the 
 _GRID_PILOT = 2_048  # points measured exactly first to choose the grid's margin delta
 _GRID_QUANTILE = 0.99  # fraction of pilot points the margin covers
 _GRID_MAX_LIST = 32  # mean faces per cell above which the grid is not used
+_GRID_CELLS_PER_EDGE = 2.5  # grid cell size: the median edge length over this (or delta / 2 if larger)
+_CELL_PAD = 1e-6  # cells (fraction of a cell) added to each side of a computed range against rounding
 
 
 class Triangles:
@@ -240,38 +242,32 @@ class GridIndex:
         lo_t = corners.min(axis=0)  # (3, m)
         hi_t = corners.max(axis=0)
         edge = np.sqrt(_sq_norm(corners[1] - corners[0]))
-        h = max(float(np.median(edge)) / 3.0, delta / 2.0, 1e-300)
-        while True:
-            reach = delta + h * np.sqrt(3.0) / 2.0
-            origin = lo_t.min(axis=1) - reach - h
-            c0 = np.floor((lo_t - reach - origin[:, None]) / h).astype(np.int64)
-            c1 = np.floor((hi_t + reach - origin[:, None]) / h).astype(np.int64)
-            span = c1 - c0 + 1  # (3, m) cells per axis
-            total = span.prod(axis=0)
-            dims = c1.max(axis=1) + 2
-            if total.sum() <= max(_GRID_BUDGET, 8 * len(tris)) and float(np.prod(dims.astype(float))) < 2.0**62:
-                break
-            h *= 1.25
-        self.h, self.origin, self.dims = h, origin, dims
-        # Enumerate the cells of every face's box, keep those whose centre is within reach of the face.
-        owner, local = _ragged_arange(total)
-        syz = (span[1] * span[2])[owner]
-        sz = span[2][owner]
-        cell = np.stack([c0[0][owner] + local // syz, c0[1][owner] + local % syz // sz, c0[2][owner] + local % sz])
-        centre = origin[:, None] + (cell + 0.5) * h
-        limit = reach * (1 + _SLACK)
-        # Cheap slab test (distance to the face's plane) first, then the exact distance.
         normal = np.cross(corners[1] - corners[0], corners[2] - corners[0], axis=0)
         length = np.sqrt(_sq_norm(normal))
         normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
-        rel = centre - np.take(tris.a, owner, axis=1)
-        near = np.abs(_dot3(np.take(normal, owner, axis=1), rel)) <= limit
-        near |= np.take(tris.flat, owner)  # no reliable normal: exact test only
-        owner, cell, centre = owner[near], cell[:, near], centre[:, near]
-        keep = tris.sq_dist(centre, owner) <= limit * limit
+        flat = tris.flat | ~(length > 0)  # no reliable normal: every cell of the box, exact test only
+        h = max(float(np.median(edge)) / _GRID_CELLS_PER_EDGE, delta / 2.0, 1e-300)
+        while True:
+            reach = delta + h * np.sqrt(3.0) / 2.0
+            limit = reach * (1 + _SLACK)
+            origin = lo_t.min(axis=1) - reach - h
+            dims = np.floor((hi_t.max(axis=1) + reach - origin) / h).astype(np.int64) + 2
+            # The cells whose centre origin + (c + 1/2) h lies in the face's box grown by the limit (a cell
+            # listing the face has its centre within the limit of the face, hence in that box).
+            c0 = np.maximum(np.ceil((lo_t - limit - origin[:, None]) / h - 0.5 - _CELL_PAD), 0).astype(np.int64)
+            c1 = np.floor((hi_t + limit - origin[:, None]) / h - 0.5 + _CELL_PAD).astype(np.int64)
+            span = np.maximum(c1 - c0 + 1, 0)  # (3, m) cells per axis
+            if (span.prod(axis=0).sum() <= max(_GRID_BUDGET, 8 * len(tris))
+                    and float(np.prod(dims.astype(float))) < 2.0**62):
+                break
+            h *= 1.25
+        self.h, self.origin, self.dims = h, origin, dims
+        owner, cell = self._slab_cells(tris, normal, flat, c0, span, limit)
+        # Keep the cells whose centre is within the limit of the face (exact distance).
+        keep = tris.sq_dist(origin[:, None] + (cell + 0.5) * h, owner) <= limit * limit
         key = self._key(cell[:, keep])
         owner = owner[keep]
-        order = np.argsort(key, kind="stable")
+        order = np.argsort(key)  # any order of the faces within a cell (the query breaks ties by index)
         key = key[order]
         self.cell_face = owner[order]
         first = np.ones(len(key), dtype=bool)
@@ -279,6 +275,40 @@ class GridIndex:
         self.cell_key = key[first]
         self.cell_start = np.flatnonzero(first)
         self.cell_count = np.diff(np.append(self.cell_start, len(key)))
+
+    def _slab_cells(self, tris, normal, flat, c0, span, limit):
+        """Candidate (face, cell) pairs: for each face, the columns of its box along the axis its normal is
+        closest to, each cut to the cells whose centre lies within the limit of the face's plane (all of the
+        column for a flat face). Returns owner (n,) int64 and cell (3, n) int64."""
+        h, origin = self.h, self.origin
+        axis = np.argmax(np.abs(normal), axis=0)  # (m,) column axis of each face
+        owners, cells = [], []
+        for k in range(3):  # the faces of each column axis together: axes are then plain rows
+            i, j = (k + 1) % 3, (k + 2) % 3
+            faces = np.flatnonzero(axis == k)
+            si, sj, sk = span[i, faces], span[j, faces], span[k, faces]
+            col, local = _ragged_arange(si * sj)
+            ci = c0[i, faces][col] + local // sj[col]
+            cj = c0[j, faces][col] + local % sj[col]
+            f = faces[col]
+            # The plane's k-coordinate above each column's centre, and the slab's half-height along k.
+            a, n = tris.a[:, f], normal[:, f]
+            is_flat = flat[f]
+            nk = np.where(is_flat, 1.0, n[k])
+            zk = a[k] - (n[i] * (origin[i] + (ci + 0.5) * h - a[i]) + n[j] * (origin[j] + (cj + 0.5) * h - a[j])) / nk
+            half = limit / np.abs(nk)
+            k0 = c0[k, f]
+            k1 = k0 + sk[col] - 1
+            lo = np.ceil((zk - half - origin[k]) / h - 0.5 - _CELL_PAD)
+            hi = np.floor((zk + half - origin[k]) / h - 0.5 + _CELL_PAD)
+            lo = np.where(is_flat, k0, np.clip(lo, k0, k1 + 1)).astype(np.int64)
+            hi = np.where(is_flat, k1, np.clip(hi, k0 - 1, k1)).astype(np.int64)
+            c, local = _ragged_arange(np.maximum(hi - lo + 1, 0))
+            cell = np.empty((3, len(c)), dtype=np.int64)
+            cell[i], cell[j], cell[k] = ci[c], cj[c], lo[c] + local
+            owners.append(f[c])
+            cells.append(cell)
+        return np.concatenate(owners), np.concatenate(cells, axis=1)
 
     def _key(self, cell: np.ndarray) -> np.ndarray:
         return (cell[0] * self.dims[1] + cell[1]) * self.dims[2] + cell[2]
@@ -288,10 +318,8 @@ class GridIndex:
         points = np.asarray(points, dtype=np.float64)
         dist = np.full(len(points), np.inf)
         face = np.zeros(len(points), dtype=np.int64)
-        order = _morton_order(points)
-        for s in range(0, len(points), _CHUNK):
-            idx = order[s : s + _CHUNK]
-            dist[idx], face[idx] = self._query_block(points[idx])
+        for s in range(0, len(points), _CHUNK):  # each point on its own: no order needed
+            dist[s : s + _CHUNK], face[s : s + _CHUNK] = self._query_block(points[s : s + _CHUNK])
         redo = np.flatnonzero(~(dist <= self.delta))
         if redo.size:
             dist[redo], face[redo] = self.fallback.query(points[redo])
@@ -312,7 +340,9 @@ class GridIndex:
         owner, local = _ragged_arange(count)
         cand = self.cell_face[self.cell_start[pos[has]][owner] + local]
         d2 = self.tris.sq_dist(np.take(np.ascontiguousarray(points[has].T), owner, axis=1), cand)
-        best, best_face = _segment_argmin(d2, cand, count)
+        seg = np.cumsum(count) - count
+        best = np.minimum.reduceat(d2, seg)
+        best_face = np.maximum.reduceat(np.where(d2 <= best[owner], cand, -1), seg)  # ties: largest index
         dist[has] = np.sqrt(best)
         face[has] = best_face
         return dist, face
