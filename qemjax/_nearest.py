@@ -25,7 +25,7 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._pointtri import flat_triangles, squared_distance_cf
+from ._pointtri import edge_products, flat_triangles, squared_distance_cf
 
 _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cache)
 _CHUNK = 65_536  # query points per block (bounds temporary memory)
@@ -44,13 +44,18 @@ _CELL_PAD = 1e-6  # cells (fraction of a cell) added to each side of a computed 
 
 
 class Triangles:
-    """A mesh's faces as the kernel wants them: corners (3 corners, 3 axes, m) float64 component-first, and
-    flat (m,) bool (too thin for the barycentric solve: measured as three segments)."""
+    """A mesh's faces as the kernel wants them: corners (3 corners, 3 axes, m) float64 component-first; per
+    face, computed once: a (3, m) the first corners, ab, ac (3, m) the edge vectors, products (3, m) their
+    dot products (`edge_products`) and flat (m,) bool (too thin for the barycentric solve: measured as three
+    segments)."""
 
     def __init__(self, corners: np.ndarray):
         self.corners = corners
         self.a = corners[0]  # (3, m), contiguous
-        self.flat = flat_triangles(corners[1] - corners[0], corners[2] - corners[0])
+        self.ab = corners[1] - corners[0]
+        self.ac = corners[2] - corners[0]
+        self.products = edge_products(self.ab, self.ac)
+        self.flat = flat_triangles(self.ab, self.ac)
 
     def __len__(self) -> int:
         return self.corners.shape[2]
@@ -58,16 +63,15 @@ class Triangles:
     def sq_dist(self, points_cf: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Squared distances (n,) from points (3, n) to faces (n,) int64, pair by pair."""
         out = np.empty(len(faces))
-        c = self.corners
         for s in range(0, len(faces), _BLOCK):
             f = faces[s : s + _BLOCK]
-            a = np.take(c[0], f, axis=1)
             out[s : s + _BLOCK] = squared_distance_cf(
                 points_cf[:, s : s + _BLOCK],
-                a,
-                np.take(c[1], f, axis=1) - a,
-                np.take(c[2], f, axis=1) - a,
+                np.take(self.a, f, axis=1),
+                np.take(self.ab, f, axis=1),
+                np.take(self.ac, f, axis=1),
                 np.take(self.flat, f),
+                np.take(self.products, f, axis=1),
             )
         return out
 
