@@ -40,6 +40,7 @@ _GRID_PILOT = 2_048  # points measured exactly first to choose the grid's margin
 _GRID_QUANTILE = 0.99  # fraction of pilot points the margin covers
 _GRID_MAX_LIST = 32  # mean faces per cell above which the grid is not used
 _GRID_CELLS_PER_EDGE = 2.5  # grid cell size: the median edge length over this (or delta / 2 if larger)
+_DENSE_PER_PAIR = 8  # grid cells per listed (face, cell) pair up to which lookups use a dense table
 _CELL_PAD = 1e-6  # cells (fraction of a cell) added to each side of a computed range against rounding
 
 
@@ -251,22 +252,27 @@ class GridIndex:
         normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
         flat = tris.flat | ~(length > 0)  # no reliable normal: every cell of the box, exact test only
         h = max(float(np.median(edge)) / _GRID_CELLS_PER_EDGE, delta / 2.0, 1e-300)
+        margin = delta * (1 + _SLACK)
         while True:
             reach = delta + h * np.sqrt(3.0) / 2.0
-            limit = reach * (1 + _SLACK)
             origin = lo_t.min(axis=1) - reach - h
             dims = np.floor((hi_t.max(axis=1) + reach - origin) / h).astype(np.int64) + 2
-            # The cells whose centre origin + (c + 1/2) h lies in the face's box grown by the limit (a cell
-            # listing the face has its centre within the limit of the face, hence in that box).
-            c0 = np.maximum(np.ceil((lo_t - limit - origin[:, None]) / h - 0.5 - _CELL_PAD), 0).astype(np.int64)
-            c1 = np.floor((hi_t + limit - origin[:, None]) / h - 0.5 + _CELL_PAD).astype(np.int64)
-            span = np.maximum(c1 - c0 + 1, 0)  # (3, m) cells per axis
+            # A cell lists a face when some point of the cell (a cube) can lie within delta of it. Three
+            # necessary conditions select the cells: the cube meets the face's box grown by delta (here), it
+            # meets the face's plane grown by delta (`_slab_cells`), and its centre lies within
+            # delta + (half the cube's diagonal) of the face (below).
+            c0 = np.floor((lo_t - margin - origin[:, None]) / h - _CELL_PAD).astype(np.int64)
+            c1 = np.floor((hi_t + margin - origin[:, None]) / h + _CELL_PAD).astype(np.int64)
+            span = c1 - c0 + 1  # (3, m) cells per axis
             if (span.prod(axis=0).sum() <= max(_GRID_BUDGET, 8 * len(tris))
                     and float(np.prod(dims.astype(float))) < 2.0**62):
                 break
             h *= 1.25
         self.h, self.origin, self.dims = h, origin, dims
-        owner, cell = self._slab_cells(tris, normal, flat, c0, span, limit)
+        limit = reach * (1 + _SLACK)
+        # Half-thickness of the slab of centres whose cube meets the plane grown by delta.
+        slab = (0.5 * h * np.abs(normal).sum(axis=0) + delta) * (1 + _SLACK)
+        owner, cell = self._slab_cells(tris, normal, flat, c0, span, slab)
         # Keep the cells whose centre is within the limit of the face (exact distance).
         keep = tris.sq_dist(origin[:, None] + (cell + 0.5) * h, owner) <= limit * limit
         key = self._key(cell[:, keep])
@@ -279,11 +285,17 @@ class GridIndex:
         self.cell_key = key[first]
         self.cell_start = np.flatnonzero(first)
         self.cell_count = np.diff(np.append(self.cell_start, len(key)))
+        # A dense table from key to listed cell when it is small beside the lists (a lookup instead of a
+        # binary search per point).
+        self.table = None
+        if float(np.prod(dims.astype(float))) <= _DENSE_PER_PAIR * len(key):
+            self.table = np.full(int(np.prod(dims)), -1, dtype=np.int64)
+            self.table[self.cell_key] = np.arange(len(self.cell_key))
 
-    def _slab_cells(self, tris, normal, flat, c0, span, limit):
-        """Candidate (face, cell) pairs: for each face, the columns of its box along the axis its normal is
-        closest to, each cut to the cells whose centre lies within the limit of the face's plane (all of the
-        column for a flat face). Returns owner (n,) int64 and cell (3, n) int64."""
+    def _slab_cells(self, tris, normal, flat, c0, span, slab):
+        """Candidate (face, cell) pairs: for each face, the columns of its box of cells along the axis its
+        normal is closest to, each cut to the cells whose centre lies within slab (m,) of the face's plane
+        (all of the column for a flat face). Returns owner (n,) int64 and cell (3, n) int64."""
         h, origin = self.h, self.origin
         axis = np.argmax(np.abs(normal), axis=0)  # (m,) column axis of each face
         owners, cells = [], []
@@ -300,7 +312,7 @@ class GridIndex:
             is_flat = flat[f]
             nk = np.where(is_flat, 1.0, n[k])
             zk = a[k] - (n[i] * (origin[i] + (ci + 0.5) * h - a[i]) + n[j] * (origin[j] + (cj + 0.5) * h - a[j])) / nk
-            half = limit / np.abs(nk)
+            half = slab[f] / np.abs(nk)
             k0 = c0[k, f]
             k1 = k0 + sk[col] - 1
             lo = np.ceil((zk - half - origin[k]) / h - 0.5 - _CELL_PAD)
@@ -334,9 +346,13 @@ class GridIndex:
         face = np.zeros(len(points), dtype=np.int64)
         cell = np.floor((points - self.origin) / self.h).astype(np.int64).T
         inside = ((cell >= 0) & (cell < self.dims[:, None])).all(axis=0)
-        key = np.where(inside, self._key(cell), -1)
-        pos = np.minimum(np.searchsorted(self.cell_key, key), len(self.cell_key) - 1)
-        count = np.where(self.cell_key[pos] == key, self.cell_count[pos], 0)
+        if self.table is not None:
+            pos = np.where(inside, self.table[np.where(inside, self._key(cell), 0)], -1)
+            count = np.where(pos >= 0, self.cell_count[pos], 0)
+        else:
+            key = np.where(inside, self._key(cell), -1)
+            pos = np.minimum(np.searchsorted(self.cell_key, key), len(self.cell_key) - 1)
+            count = np.where(self.cell_key[pos] == key, self.cell_count[pos], 0)
         has = np.flatnonzero(count)
         if has.size == 0:
             return dist, face
