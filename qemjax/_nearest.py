@@ -31,6 +31,7 @@ _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cac
 _CHUNK = 65_536  # query points per block (bounds temporary memory)
 _K_NEAREST = 16  # centroids asked of the KD-tree per point before falling back to a ball query
 _BALL_BATCH = 4_000_000  # candidates per ball-query batch (bounds memory)
+_THREADED_QUERY = 16_384  # points from which a KD-tree query uses every core
 _LEAFSIZE = 16  # KD-tree leaf size (bigger builds faster, queries a little slower)
 _SLACK = 1e-9  # relative padding of every exactness bound against rounding
 _PIECES_PER_FACE = 1.5  # KD-tree piece budget: <= this * faces + _MIN_PIECES
@@ -182,7 +183,7 @@ class TriangleIndex:
     def _query_block(self, points: np.ndarray):
         pts_cf = np.ascontiguousarray(points.T)
         k = min(_K_NEAREST, len(self.parent))
-        cd, ci = self.tree.query(points, k=k, workers=-1)
+        cd, ci = self.tree.query(points, k=k, workers=_workers(len(points)))
         cd, ci = cd.reshape(len(points), k), ci.reshape(len(points), k)
         parent = self.parent[ci]
         best2 = self.tris.sq_dist(pts_cf, parent[:, 0])
@@ -197,7 +198,7 @@ class TriangleIndex:
         if len(redo):
             radius = (ub[redo] + self.max_radius) * (1 + _SLACK)
             # Batches of bounded size: points far from the mesh can have very many candidates.
-            sizes = self.tree.query_ball_point(points[redo], radius, workers=-1, return_length=True)
+            sizes = self.tree.query_ball_point(points[redo], radius, workers=_workers(len(redo)), return_length=True)
             batch = np.cumsum(sizes) // _BALL_BATCH
             for b in np.unique(batch):
                 sel = batch == b
@@ -206,7 +207,7 @@ class TriangleIndex:
 
     def _ball(self, points, pts_cf, rows, radius, ub, best2, best_face):
         """Exact answers for points[rows] (sorted): every piece within radius (>= ub + R) is a candidate."""
-        lists = self.tree.query_ball_point(points[rows], radius, workers=-1, return_sorted=False)
+        lists = self.tree.query_ball_point(points[rows], radius, workers=_workers(len(rows)), return_sorted=False)
         counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
         piece = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
         rows = np.repeat(rows, counts)
@@ -366,6 +367,11 @@ class GridIndex:
         dist[has] = np.sqrt(best)
         face[has] = best_face
         return dist, face
+
+
+def _workers(n: int) -> int:
+    """Threads for a KD-tree query of n points: one for a small query (starting threads costs more)."""
+    return -1 if n >= _THREADED_QUERY else 1
 
 
 def _dot3(x: np.ndarray, y: np.ndarray) -> np.ndarray:

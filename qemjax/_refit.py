@@ -32,6 +32,7 @@ import scipy.sparse.linalg as spla
 from ._arrays import face_normals
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
+_ROWS = 32_768  # rows per block of closest_barycentric
 HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
 
 
@@ -69,6 +70,14 @@ def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spar
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(q,3) barycentric coordinates of the point of triangle (a, b, c) nearest to p, row by row (Ericson,
     Real-Time Collision Detection 5.1.5: vertex, edge or interior region)."""
+    out = np.empty((len(p), 3))
+    for s in range(0, len(p), _ROWS):  # blocks of rows: the temporaries stay in cache
+        out[s : s + _ROWS] = _closest_barycentric(p[s : s + _ROWS], a[s : s + _ROWS], b[s : s + _ROWS],
+                                                  c[s : s + _ROWS])
+    return out
+
+
+def _closest_barycentric(p, a, b, c):
     ab, ac = b - a, c - a
     d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
     d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
