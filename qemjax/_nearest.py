@@ -11,16 +11,23 @@ k-th lies at least U + R away; otherwise a ball query of radius U + R lists ever
 whose lower bound |p - centroid| - radius is not below U are skipped before the exact test. Splitting the
 few large triangles keeps R close to the typical piece size (otherwise one huge face would widen every ball).
 
-Grid (`GridIndex`), for many points near a coarser mesh. A face is listed in every cell whose centre lies
-within delta + (half the cell diagonal) of it. A point is compared with the faces listed in its own cell
-only: a handful, and no tree walk. If the best distance found is <= delta it is exact (the nearest face is
-then within delta of the point, hence within reach of the cell's centre, hence listed). Other points go to
-the KD-tree. delta is the 99th percentile of the exact distances of a small pilot sample.
+Grid (`GridIndex`), for many points near a coarser mesh. A cell (a cube of side h, about 2/5 of the median
+edge) lists every face that a point of the cube can lie within delta of: the faces whose box and plane,
+grown by delta, meet the cube and that lie within delta + (half the cube's diagonal) of its centre. The
+cells of a face are enumerated column by column along the axis nearest its normal, each column cut to the
+slab around the plane, so the work follows the listed pairs rather than the face's whole box. A point is
+compared with the faces listed in its own cell only: a handful, and no tree walk. If the best distance
+found is <= delta it is exact (every face within delta of the point is listed), and the face returned is
+the largest index among the nearest (so it does not depend on the lists' order). Other points go to the
+KD-tree. delta is the 99th percentile of the exact distances of a small pilot sample, which the grid
+measures itself (`nearest_triangles`).
 """
 
 from __future__ import annotations
 
 import itertools
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -31,6 +38,8 @@ _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cac
 _CHUNK = 65_536  # query points per block (bounds temporary memory)
 _K_NEAREST = 16  # centroids asked of the KD-tree per point before falling back to a ball query
 _BALL_BATCH = 4_000_000  # candidates per ball-query batch (bounds memory)
+_MAX_THREADS = 4  # threads for the blocks of a grid query
+_MIN_THREAD_POINTS = 16_384  # points per thread below which a grid query stays on one thread
 _THREADED_QUERY = 16_384  # points from which a KD-tree query uses every core
 _LEAFSIZE = 16  # KD-tree leaf size (bigger builds faster, queries a little slower)
 _SLACK = 1e-9  # relative padding of every exactness bound against rounding
@@ -39,6 +48,7 @@ _MIN_PIECES = 16_384
 _GRID_BUDGET = 4_000_000  # (triangle, cell) pairs enumerated while filling the grid
 _GRID_PILOT = 2_048  # points measured exactly first to choose the grid's margin delta
 _GRID_QUANTILE = 0.99  # fraction of pilot points the margin covers
+_PILOT_PIECES = 8  # nearest pieces whose faces bound a pilot point's distance (a grid margin near delta)
 _GRID_MAX_LIST = 32  # mean faces per cell above which the grid is not used
 _GRID_CELLS_PER_EDGE = 2.5  # grid cell size: the median edge length over this (or delta / 2 if larger)
 _DENSE_PER_PAIR = 8  # grid cells per listed (face, cell) pair up to which lookups use a dense table
@@ -309,7 +319,7 @@ class GridIndex:
             cj = c0[j, faces][col] + local % sj[col]
             f = faces[col]
             # The plane's k-coordinate above each column's centre, and the slab's half-height along k.
-            a, n = tris.a[:, f], normal[:, f]
+            a, n = np.take(tris.a, f, axis=1), np.take(normal, f, axis=1)
             is_flat = flat[f]
             nk = np.where(is_flat, 1.0, n[k])
             zk = a[k] - (n[i] * (origin[i] + (ci + 0.5) * h - a[i]) + n[j] * (origin[j] + (cj + 0.5) * h - a[j])) / nk
@@ -333,11 +343,27 @@ class GridIndex:
     def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Same contract as `TriangleIndex.query`."""
         points = np.asarray(points, dtype=np.float64)
+        return self.finish(points, *self.settle(points), self.delta)
+
+    def settle(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The grid's answers alone: dist (q,), exact where it is <= delta (else an upper bound, or inf when
+        the point's cell lists no face), and face (q,): the largest index among the nearest faces listed."""
         dist = np.full(len(points), np.inf)
         face = np.zeros(len(points), dtype=np.int64)
-        for s in range(0, len(points), _CHUNK):  # each point on its own: no order needed
-            dist[s : s + _CHUNK], face[s : s + _CHUNK] = self._query_block(points[s : s + _CHUNK])
-        redo = np.flatnonzero(~(dist <= self.delta))
+        # Each point on its own (no order needed), blocks on threads (numpy releases the GIL in its loops).
+        n_blocks = max(-(-len(points) // _CHUNK), min(_threads(), len(points) // _MIN_THREAD_POINTS), 1)
+        bounds = np.linspace(0, len(points), n_blocks + 1).astype(np.int64)
+
+        def block(i):
+            a, b = bounds[i], bounds[i + 1]
+            dist[a:b], face[a:b] = self._query_block(points[a:b])
+
+        _map(block, range(n_blocks))
+        return dist, face
+
+    def finish(self, points, dist, face, within: float):
+        """`settle`'s answers kept where dist <= within (<= delta), the fallback's elsewhere (in place)."""
+        redo = np.flatnonzero(~(dist <= within))
         if redo.size:
             dist[redo], face[redo] = self.fallback.query(points[redo])
         return dist, face
@@ -367,6 +393,24 @@ class GridIndex:
         dist[has] = np.sqrt(best)
         face[has] = best_face
         return dist, face
+
+
+def _threads() -> int:
+    """Threads for work split in blocks: the cores this process may use, at most _MAX_THREADS."""
+    return max(1, min(_MAX_THREADS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                      else os.cpu_count() or 1))
+
+
+def _map(fn, items) -> None:
+    """fn(item) for each item, on up to `_threads` threads (in this thread when one suffices)."""
+    items = list(items)
+    if len(items) <= 1 or _threads() == 1:
+        for item in items:
+            fn(item)
+        return
+    with ThreadPoolExecutor(max_workers=min(_threads(), len(items))) as pool:
+        for _ in pool.map(fn, items):  # re-raises a block's exception here
+            pass
 
 
 def _workers(n: int) -> int:
@@ -400,11 +444,21 @@ def nearest_triangles(corners: np.ndarray, points: np.ndarray) -> tuple[np.ndarr
     if len(points) < 8 * len(tris) or len(points) < 8 * _GRID_PILOT:
         return tree.query(points)
     pilot = np.random.default_rng(0).choice(len(points), _GRID_PILOT, replace=False)
-    pilot_dist, _ = tree.query(points[pilot])
     # A tiny floor keeps points lying on the surface (distance ~1e-17 from rounding) on the grid's side.
     floor = 1e-9 * float(np.sqrt(_sq_norm(corners[1] - corners[0])).max())
-    delta = max(float(np.quantile(pilot_dist, _GRID_QUANTILE)), floor)
-    grid = GridIndex(tris, delta, tree)
+    # The grid's margin delta is the _GRID_QUANTILE quantile of the pilot points' exact distances. The grid
+    # measures them itself: built with a margin no smaller than the largest order statistic the quantile
+    # reads (bounded above by the distances of the pilot points to the faces of their nearest pieces), it
+    # settles those order statistics exactly.
+    k = min(_PILOT_PIECES, len(tree.parent))
+    _, piece = tree.tree.query(points[pilot], k=k, workers=1)
+    pts = np.ascontiguousarray(np.repeat(points[pilot], k, axis=0).T)
+    bound = np.sqrt(tris.sq_dist(pts, tree.parent[piece.reshape(-1)]).reshape(-1, k).min(axis=1))
+    need = int(np.ceil((_GRID_PILOT - 1) * _GRID_QUANTILE))
+    grid = GridIndex(tris, max(float(np.partition(bound, need)[need]), floor), tree)
     if len(grid.cell_face) > _GRID_MAX_LIST * len(grid.cell_key):
         return tree.query(points)  # points far from the mesh: lists too long for the grid to pay off
-    return grid.query(points)
+    dist, face = grid.settle(points)
+    pilot_dist = np.where(dist[pilot] <= grid.delta, dist[pilot], np.inf)
+    delta = max(float(np.quantile(pilot_dist, _GRID_QUANTILE)), floor)
+    return grid.finish(points, dist, face, delta)
