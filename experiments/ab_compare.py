@@ -48,7 +48,14 @@ def load_old(rev: str, as_name: str = "qemjax_old"):
     subprocess.run(["tar", "-x", "-C", str(tmp)], input=tar, check=True)
     os.rename(tmp / "qemjax", tmp / as_name)
     sys.path.insert(0, str(tmp))
-    return importlib.import_module(as_name)
+    pkg = importlib.import_module(as_name)
+    # revisions from e8f83fc on name their schedulers by absolute module ("qemjax._schedulers.greedy"):
+    # left so, the old copy would run the working tree's schedulers (and an A/B compare them with themselves)
+    registry = getattr(importlib.import_module(f"{as_name}._schedulers"), "_REGISTRY", {})
+    for name, entry in registry.items():
+        if isinstance(entry, str) and entry.startswith("qemjax."):
+            registry[name] = as_name + entry[len("qemjax"):]
+    return pkg
 
 
 def digest(res) -> str:

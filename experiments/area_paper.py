@@ -70,10 +70,11 @@ def kernel_throughput(out_csv):
 
     import meshes as bench
     import qemjax
-    from qemjax import _costs, _topology as topo
+    from qemjax import _costs
+    from qemjax._mesh import topology as topo
     from qemjax._costs import area, ring
-    from qemjax._incidence import FaceLists
-    from qemjax._units import normalize
+    from qemjax._mesh.incidence import FaceLists
+    from qemjax._mesh.units import normalize
 
     bm = bench.load("max-planck-10k")
     Vn, _ = normalize(bm.V, np.float32)

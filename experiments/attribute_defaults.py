@@ -32,7 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 import qemjax  # noqa: E402
-from qemjax import _attribute_files as af  # noqa: E402
+from qemjax._io import attribute_files as af  # noqa: E402
 from qemjax import metrics, shapes  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "meshes"

@@ -23,7 +23,7 @@ from ab_compare import cpu_time, load_old  # noqa: E402
 from sweep_bench import GRIDS  # noqa: E402
 
 import qemjax  # noqa: E402
-from qemjax._sweep import expand_grid  # noqa: E402
+from qemjax._sweep.run import expand_grid  # noqa: E402
 
 
 def _clock(fn) -> tuple[float, float]:

@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(RESULTS / "dask_speedup.csv"))
     args = ap.parse_args(argv)
     if args.ship == "arrays":
-        qemjax._sweep._ship = lambda executor, loaded: loaded
+        qemjax._sweep.run._ship = lambda executor, loaded: loaded
 
     files = bench_meshes.shared_files()
     paths = {name: str(files[name]) for name in args.meshes}

@@ -42,8 +42,10 @@ def child(subdivisions: int, ratio: float) -> dict:
     import numpy as np
 
     import qemjax
-    from qemjax import _io, _topology as topo, _units, shapes
-    from qemjax._batching import bucket, chunk_size, chunks
+    from qemjax._io import mesh as _io
+    from qemjax._mesh import topology as topo, units as _units
+    from qemjax import shapes
+    from qemjax._kernels.batching import bucket, chunk_size, chunks
     from qemjax._costs.qem import QEM, initial_quadrics
     from qemjax._kernels import CPU_COMPILER_OPTIONS, placement
 

@@ -71,7 +71,7 @@ def angle_deficit(V, F):
 def feature_metrics(V0, F0, V, F, top=0.05):
     """Distance from the original's top-|K| vertices to the result, and the ∫|K| ratio (module doc)."""
     from qemjax.metrics._common import as_mesh
-    from qemjax._nearest import nearest_triangles
+    from qemjax._mesh.nearest import nearest_triangles
 
     K0, A0 = angle_deficit(V0, F0)
     K1, A1 = angle_deficit(V, F)

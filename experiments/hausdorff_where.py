@@ -127,7 +127,7 @@ def two_way_points(o, s, seed: int = 0):
     """The samples and distances of `metrics.surface_distance` (same seeds): original points, their distance
     to s; simplified points, their distance to o and nearest face of o."""
     from qemjax.metrics._distance import sample_points
-    from qemjax._nearest import nearest_triangles
+    from qemjax._mesh.nearest import nearest_triangles
 
     rng_o, rng_s = (np.random.default_rng(ss) for ss in np.random.SeedSequence(seed).spawn(2))
     pts_o = sample_points(o, N_SAMPLES, rng_o)
@@ -142,7 +142,7 @@ def classify(V, F, V2, F2, feats, top: int) -> dict:
     import trimesh.triangles
 
     from qemjax.metrics import _common
-    from qemjax._nearest import nearest_triangles
+    from qemjax._mesh.nearest import nearest_triangles
 
     boundary, sharp, N = feats
     o, s = _common.as_mesh((V, F)), _common.as_mesh((V2, F2))

@@ -55,7 +55,7 @@ def main(argv=None) -> int:
             cases.append((name, m.n_faces, r, "simplify", lambda m=m, r=r: [qemjax.simplify((m.V, m.F), ratio=r)]))
     if args.batch:
         from sweep_bench import GRIDS
-        from qemjax._sweep import expand_grid
+        from qemjax._sweep.run import expand_grid
         cow = qemjax.load(bench_meshes.shared_files()["cow"])
         configs = [dict(c, ratio=0.1) for c in expand_grid(GRIDS["qem"])]
         cases.append(("cow", len(cow.faces), 0.1, "batch-64", lambda: qemjax.simplify_batch(cow, configs)))

@@ -6,43 +6,31 @@ For each shared mesh (../shared/meshes) at 10 % and 1 %: two-way rms and Hausdor
 diagonal, `qemjax.metrics.surface_distance`), the sliver fraction (`metrics.triangle_quality`: min angle
 under 10°), the share of contractions that left the 3×3 solve (``stats["branches"]``: segment, endpoint or
 truncated) and warm time, for QEM and for the probabilistic model at each ``--sigmas`` pair σn:σp
-(registered as methods "prob-σn-σp" here, since `simplify` has no keyword for the model's fields; σp is a
-fraction of the mesh's rms edge length).
+(``qemjax.ProbabilisticQEM(sigma_normal=σn, sigma_position=σp)``, labelled "prob-σn-σp"; σp is a fraction
+of the mesh's rms edge length).
 
     python experiments/probabilistic_quadrics.py --meshes cow stanford-bunny fandisk rocker-arm max-planck-10k
 """
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import statistics
 import sys
-import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path[:0] = [str(ROOT), str(ROOT / "experiments")]
 import qemjax  # noqa: E402
-from qemjax import _costs, metrics  # noqa: E402
-from qemjax._costs.probabilistic import ProbabilisticQEM  # noqa: E402
+from line_quadrics import measure  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "meshes"
 OUT = ROOT / "experiments" / "results"
 
 
-def prob_method(sn: float, sp: float) -> str:
-    name = f"prob-{sn:g}-{sp:g}"
-    if name not in _costs.REGISTRY:
-        cls = dataclasses.make_dataclass(
-            f"Prob_{sn:g}_{sp:g}".replace(".", "_"),
-            [("sigma_normal", float, dataclasses.field(default=sn)),
-             ("sigma_position", float, dataclasses.field(default=sp))], bases=(ProbabilisticQEM,), frozen=True)
-        cls.name = name
-        _costs.register(cls)
-    return name
+def prob_method(sn: float, sp: float) -> tuple[str, qemjax.ProbabilisticQEM]:
+    return f"prob-{sn:g}-{sp:g}", qemjax.ProbabilisticQEM(sigma_normal=sn, sigma_position=sp)
 
 
 def summary(rows: list[tuple], methods: list[str]) -> list[str]:
@@ -69,7 +57,7 @@ def main(argv=None):
     ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args(argv)
-    methods = ["qem"] + [prob_method(*map(float, s.split(":"))) for s in args.sigmas]
+    methods = {"qem": qemjax.QEM(), **dict(prob_method(*map(float, s.split(":"))) for s in args.sigmas)}
     lines = ["| mesh | ratio | method | faces | rms_rel | hausdorff_rel | slivers | fall-back | time_s | rms / qem "
              "| hd / qem | time / qem |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     rows = []
@@ -82,21 +70,14 @@ def main(argv=None):
         orig = qemjax.load(path)
         for ratio in args.ratios:
             base = None
-            for method in methods:
-                qemjax.simplify(orig, ratio=ratio, method=method)  # warm
-                ts = []
-                for _ in range(args.repeats):
-                    t = time.perf_counter()
-                    res = qemjax.simplify(orig, ratio=ratio, method=method)
-                    ts.append(time.perf_counter() - t)
-                d = metrics.surface_distance(orig, res, n_samples=50000)
-                q = metrics.triangle_quality(res)
+            for label, method in methods.items():
+                res, rms, hd, slivers, t = measure(orig, ratio, method, args.repeats)
                 br = res.stats["branches"]
                 fall = (sum(br.values()) - br["solve"]) / max(sum(br.values()), 1)
-                row = (d["rms_rel"], d["hausdorff_rel"], q["sliver_fraction"], statistics.median(ts), fall)
+                row = (rms, hd, slivers, t, fall)
                 base = base or row
-                rows.append((method, row[0] / base[0], row[1] / base[1], row[3] / base[3], row[2], row[4]))
-                lines.append(f"| {name} | {ratio} | {method} | {len(res.faces)} | {row[0]:.3g} | {row[1]:.3g} | "
+                rows.append((label, row[0] / base[0], row[1] / base[1], row[3] / base[3], row[2], row[4]))
+                lines.append(f"| {name} | {ratio} | {label} | {len(res.faces)} | {row[0]:.3g} | {row[1]:.3g} | "
                              f"{row[2]:.3f} | {row[4]:.3f} | {row[3]:.3f} | {row[0] / base[0]:.3f} | "
                              f"{row[1] / base[1]:.3f} | {row[3] / base[3]:.2f} |")
                 print(lines[-1], flush=True)

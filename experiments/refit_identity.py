@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib
 import statistics
 import sys
 import time
@@ -36,11 +37,15 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     import qemjax
-    from qemjax import _refit as new_refit
-    from qemjax import _topology as topo
+    from qemjax._mesh import topology as topo
     from qemjax._options import Topology
+    from qemjax._pipeline import refit as new_refit
 
-    old_refit = load_old(args.rev)._refit
+    old = load_old(args.rev)
+    try:  # the package's layout before and after the regrouping (61c71ce)
+        old_refit = importlib.import_module(old.__name__ + "._pipeline.refit")
+    except ModuleNotFoundError:
+        old_refit = importlib.import_module(old.__name__ + "._refit")
     cos_max = Topology().cos_max
     rows, lines = [], ["| mesh | ratio | method | faces out | old refit s | new refit s | new / old | identical |",
                        "|---|---|---|---|---|---|---|---|"]

@@ -1,4 +1,4 @@
-"""The two safeguards of ``simplify(refit=N)`` (`qemjax._refit`), switched off one at a time on the cases
+"""The two safeguards of ``simplify(refit=N)`` (`qemjax._pipeline.refit`), switched off one at a time on the cases
 that showed why they are there: samples attached within their own part (else the nearest output face of
 any part) and the flip rule's halved moves (else a move that turns a face is undone at once, or, with no
 rule, kept). Each case runs the ``accurate`` preset's options with ``refit=0`` (rank_peers' variant
@@ -32,8 +32,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(HERE / "results" / "refit_parts"))
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
-    from qemjax import _refit
-    from qemjax import _topology as topo
+    from qemjax._pipeline import refit as _refit
+    from qemjax._mesh import topology as topo
 
     run = variant_runner(*parse_variant(NOFIT))
     cos90 = float(np.cos(np.radians(90.0)))

@@ -15,7 +15,7 @@ variant with and without the fit::
 
 The committed results (``results/refit_probe_*``) ran at 354c1da, before ``simplify(refit=)`` existed:
 their ``preset=accurate`` had no re-fit. The preset now re-fits itself, so to repeat them name its options
-instead (``experiments/refit_parts.py``'s NOFIT). ``simplify(refit=N)`` (`qemjax._refit`) is this
+instead (``experiments/refit_parts.py``'s NOFIT). ``simplify(refit=N)`` (`qemjax._pipeline.refit`) is this
 probe made an option, with per-part attachment and a flip rule added.
 """
 from __future__ import annotations
@@ -92,7 +92,7 @@ def refit(V, F, X, G, iters=3, damping=1e-3, bwd=0.0, power=0.0):
     """Output positions X (k,3) of faces G re-fitted to the input (V, F) (module docstring). bwd: weight of
     the other direction (points on the output's faces to their nearest input points; its total weight is
     bwd times the forward samples'); power: IRLS, each residual weighted by (r / rms)^power."""
-    from qemjax._nearest import nearest_triangles
+    from qemjax._mesh.nearest import nearest_triangles
 
     P, w = samples(V, F)
     X = np.array(X, np.float64)

@@ -4,7 +4,7 @@ without it (issue 32: the re-fit is what keeps the accurate ranks above 1.5x the
     python experiments/refit_profile.py --mesh stanford-bunny --ratio 0.1
 
 Prints the two warm wall times (median of 3) and the cumulative times of the re-fit's stages
-(`qemjax._refit.refit`, the nearest-triangle search and its index) in the profiled run.
+(`qemjax._pipeline.refit.refit`, the nearest-triangle search and its index) in the profiled run.
 """
 from __future__ import annotations
 
@@ -46,13 +46,13 @@ def main(argv=None) -> int:
     qemjax.simplify((m.V, m.F), target_faces=t, refit=1)
     pr.disable()
     stats = pstats.Stats(pr).stats
-    total = sum(v[3] for (f, _, name), v in stats.items() if name == "simplify" and f.endswith("_api.py"))
-    for label, (file, name) in {"simplify (profiled)": ("_api.py", "simplify"),
+    total = sum(v[3] for (f, _, name), v in stats.items() if name == "simplify" and f.endswith("_pipeline/api.py"))
+    for label, (file, name) in {"simplify (profiled)": ("_pipeline/api.py", "simplify"),
                                 "scheduler run": ("parallel.py", "run"),
-                                "refit": ("_refit.py", "refit"),
-                                "  nearest_triangles": ("_nearest.py", "nearest_triangles"),
-                                "    grid index build": ("_nearest.py", "__init__"),
-                                "    grid query": ("_nearest.py", "query")}.items():
+                                "refit": ("_pipeline/refit.py", "refit"),
+                                "  nearest_triangles": ("_mesh/nearest.py", "nearest_triangles"),
+                                "    grid index build": ("_mesh/nearest.py", "__init__"),
+                                "    grid query": ("_mesh/nearest.py", "query")}.items():
         cum = max((v[3] for (f, _, n), v in stats.items() if f.endswith(file) and n == name), default=0.0)
         print(f"{label:24s} {cum:.3f} s  ({cum / total:.0%})")
     return 0

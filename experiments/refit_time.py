@@ -33,8 +33,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     import qemjax
-    from qemjax import _refit
-    from qemjax import _topology as topo
+    from qemjax._pipeline import refit as _refit
+    from qemjax._mesh import topology as topo
 
     nofit = variant_runner(*parse_variant(NOFIT))
     rows, lines = [], [f"| case | faces | default s | preset without refit s | refit ({args.rounds} rounds) s | "

@@ -37,7 +37,7 @@ def zone_shares(V, F, V2, F2, feats) -> dict:
     import trimesh.triangles
 
     from qemjax.metrics import _common
-    from qemjax._nearest import nearest_triangles
+    from qemjax._mesh.nearest import nearest_triangles
 
     boundary, sharp, _ = feats
     o, s = _common.as_mesh((V, F)), _common.as_mesh((V2, F2))

@@ -75,7 +75,7 @@ def main(argv=None) -> int:
 def batch_profile(mesh, name: str, ratio: float, grid: str, repeats: int) -> int:
     """Stage times of a warm batch (the median run of ``repeats``) and of one warm default run."""
     import qemjax
-    from qemjax._sweep import expand_grid
+    from qemjax._sweep.run import expand_grid
     from sweep_bench import GRIDS
 
     configs = [dict(c, ratio=ratio) for c in expand_grid(GRIDS[grid])]

@@ -5,7 +5,7 @@ lengths 0.05-13, and unit vectors, → 10 %.
     python experiments/stored_normals.py                 # this checkout
     python experiments/stored_normals.py --rev 065dd34   # also an older revision, in a temporary worktree
 
-The files are written by this checkout's `qemjax._attribute_files` (loaded by path, so an older revision
+The files are written by this checkout's `qemjax._io.attribute_files` (loaded by path, so an older revision
 without it still runs); the simplification is the revision's. Results: results/stored_normals.md.
 """
 from __future__ import annotations
@@ -26,10 +26,10 @@ OUT = ROOT / "experiments" / "results"
 
 
 def writers():
-    """`qemjax._attribute_files` of this checkout, without importing this checkout's qemjax."""
-    src = (ROOT / "qemjax" / "_attribute_files.py").read_text().replace("from ._io import Mesh", "Mesh = tuple")
+    """`qemjax._io.attribute_files` of this checkout, without importing this checkout's qemjax."""
+    src = (ROOT / "qemjax" / "_io/attribute_files.py").read_text().replace("from .mesh import Mesh", "Mesh = tuple")
     ns: dict = {}
-    exec(compile(src, "_attribute_files.py", "exec"), ns)
+    exec(compile(src, "_io/attribute_files.py", "exec"), ns)
     return ns
 
 

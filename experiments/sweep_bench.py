@@ -41,8 +41,8 @@ import meshes as bench_meshes  # noqa: E402
 import peers  # noqa: E402
 
 import qemjax  # noqa: E402
-from qemjax import _io  # noqa: E402
-from qemjax._sweep import expand_grid  # noqa: E402
+from qemjax._io import mesh as _io  # noqa: E402
+from qemjax._sweep.run import expand_grid  # noqa: E402
 
 RESULTS = HERE / "results"
 GRIDS = {

@@ -26,8 +26,10 @@ import warnings
 
 import numpy as np
 
-from . import _api, _cache, _costs, _flat, _schedulers
-from ._lod import RATIOS
+from ._pipeline import api as _api, flat as _flat
+from ._kernels import cache as _cache
+from . import _costs, _schedulers
+from ._pipeline.lod import RATIOS
 
 # How the command line shows some options (choices, metavar, help beyond the docstrings, the default as
 # shown). Which options exist and their types come from `simplify`'s run keywords and from the fields of
@@ -397,7 +399,7 @@ def _main(argv: list) -> int:
 
 def _lod(args, kwargs) -> int:
     """``qemjax lod``: one run, every level written (each file under a temporary name, then renamed)."""
-    from ._lod import lod_chain
+    from ._pipeline.lod import lod_chain
 
     refused = ["--" + name.replace("_", "-") for name in LOD_REFUSED if kwargs.get(name) is not None]
     if refused:
@@ -433,7 +435,7 @@ def _lod(args, kwargs) -> int:
 
 def _sweep(args) -> int:
     """``qemjax sweep CONFIG``: the whole config is checked before anything runs."""
-    from . import _sweep_config
+    from ._sweep import config as _sweep_config
 
     config = _sweep_config.load(args.config, out=args.out)
     if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
@@ -499,7 +501,7 @@ def _count(n: int, one: str, many: str | None = None) -> str:
 
 
 def cleanup_note(stats: dict, target: str | None = "the ratio") -> str:
-    """What the input's clean-up (`qemjax._io.prepare`) removed, and that ``target`` (a ratio's name, or
+    """What the input's clean-up (`qemjax._io.mesh.prepare`) removed, and that ``target`` (a ratio's name, or
     None) counted from the faces left: 'clean-up: 724 duplicate faces removed; the ratio applied to the
     1510 faces left (of 2234 read)'. '' when it removed nothing."""
     faces = {"duplicate": stats.get("duplicate_removed", 0), "degenerate": stats.get("degenerate_removed", 0),
@@ -550,7 +552,7 @@ def attributes_note(stats: dict) -> str:
 
 def _not_kept_names(stats: dict) -> list[str]:
     """The names in stats['dropped'] that `attributes_note` already gives as not kept for their seams."""
-    from ._wedges import DROPPED_NAME
+    from ._mesh.wedges import DROPPED_NAME
 
     names = [DROPPED_NAME[k] for k in stats.get("not_kept_seams", [])]
     return names + (["material"] if "uv" in stats.get("not_kept_seams", []) else [])

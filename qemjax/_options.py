@@ -119,7 +119,7 @@ class Attributes:
     attributes: ``'auto'`` (each kind the input carries without seams; a seamed kind only when named),
         ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, or None (positions only).
     attribute_weights: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
-        (``qemjax._wedges.DEFAULT_WEIGHTS``).
+        (``qemjax._mesh.wedges.DEFAULT_WEIGHTS``).
     texture: a path or PIL image: the texture of the UVs (for a file that names no material).
     """
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ._io import Mesh
+from ._io.mesh import Mesh
 
 SHAPES = ("bumpy_sphere", "icosphere", "torus", "cube", "grid")  # the generators a spec may name
 

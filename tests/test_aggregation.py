@@ -10,7 +10,7 @@ from conftest import assert_valid, shared_mesh
 
 import qemjax
 from qemjax import shapes
-from qemjax import _topology as topo
+from qemjax._mesh import topology as topo
 
 SCHEDULERS = ["parallel", "greedy"]
 

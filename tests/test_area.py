@@ -12,10 +12,11 @@ import pytest
 from conftest import assert_valid, shared_mesh
 
 import qemjax
-from qemjax import _compilation, _costs, metrics, shapes
+from qemjax._kernels import compilation as _compilation
+from qemjax import _costs, metrics, shapes
 from qemjax._costs import area, area_term, ring
 from qemjax._schedulers import common
-from qemjax._incidence import FaceLists
+from qemjax._mesh.incidence import FaceLists
 
 SCHEDULERS = ["parallel", "greedy"]
 
@@ -262,7 +263,7 @@ def test_area_method_keeps_boundary_vertices_on_the_boundary(scheduler):
     V0, F0 = mesh.vertices, mesh.faces
     r = qemjax.simplify(mesh, ratio=0.3, method="area", scheduler=scheduler)
     assert_valid(r, None, V0, F0)
-    from qemjax import _topology as topo
+    from qemjax._mesh import topology as topo
     be0 = topo.boundary_edges(F0, len(V0))[0]
     be = topo.boundary_edges(r.faces, len(r.vertices))[0]
     a, b = V0[be0[:, 0]], V0[be0[:, 1]]

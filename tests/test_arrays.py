@@ -1,10 +1,10 @@
-"""The numpy idioms in qemjax/_arrays.py against plain fancy indexing."""
+"""The numpy idioms in qemjax/_mesh/arrays.py against plain fancy indexing."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from qemjax._arrays import any_at, column_bounds, keep_rows, put_rows, sorted_triples, take_rows
+from qemjax._mesh.arrays import any_at, column_bounds, keep_rows, put_rows, sorted_triples, take_rows
 from qemjax._schedulers.common import face_normals
 
 rng = np.random.default_rng(3)

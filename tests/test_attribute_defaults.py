@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 import qemjax
-from qemjax import _attribute_files as af
-from qemjax import _wedges, metrics, shapes
+from qemjax._io import attribute_files as af
+from qemjax._mesh import wedges as _wedges
+from qemjax import metrics, shapes
 
 from conftest import shared_mesh
 

@@ -10,7 +10,8 @@ import pytest
 import trimesh
 
 import qemjax
-from qemjax import _wedges, metrics, shapes
+from qemjax._mesh import wedges as _wedges
+from qemjax import metrics, shapes
 
 from conftest import shared_mesh
 
@@ -304,7 +305,7 @@ def test_attribute_model_with_rank_placement_and_terms():
 def test_seam_edges_are_the_chart_borders():
     """`_wedges.seam_edges` (constrained like boundaries) finds exactly the edges between two charts."""
     mesh, chart = atlas_sphere(2)
-    from qemjax import _io
+    from qemjax._io import mesh as _io
 
     (V, F), rep = _io.prepare(mesh, attributes="uv")
     E = _wedges.seam_edges(F, rep["attributes"].corners)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import qemjax
-from qemjax import _compilation, shapes
+from qemjax._kernels import compilation as _compilation
+from qemjax import shapes
 from qemjax import simplify_batch, simplify_cells
 from qemjax._schedulers import batched, select
 

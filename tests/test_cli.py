@@ -164,7 +164,7 @@ def test_every_simplify_keyword_and_setting_is_reachable_or_listed():
     option of `qemjax simplify` (with help), or named in NOT_EXPOSED."""
     import inspect as _inspect
 
-    from qemjax import _flat
+    from qemjax._pipeline import flat as _flat
 
     params = _inspect.signature(qemjax.simplify).parameters
     keywords = {k for k, p in params.items() if p.kind is not p.VAR_KEYWORD}
@@ -321,7 +321,7 @@ def _boom(*args, **kwargs):
     ('meshes = ["sheet.ply"]\ntargets = [0.5\n', "not valid TOML"),
 ])
 def test_sweep_command_bad_config(sweep_dir, monkeypatch, capsys, text, match):
-    monkeypatch.setattr(qemjax._sweep, "sweep", _boom)
+    monkeypatch.setattr(qemjax._sweep.run, "sweep", _boom)
     (sweep_dir / "bad.toml").write_text(text)
     assert _cli.main(["sweep", str(sweep_dir / "bad.toml"), "--quiet"]) == 2
     err = capsys.readouterr().err
@@ -330,7 +330,7 @@ def test_sweep_command_bad_config(sweep_dir, monkeypatch, capsys, text, match):
 
 
 def test_sweep_command_bad_files(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(qemjax._sweep, "sweep", _boom)
+    monkeypatch.setattr(qemjax._sweep.run, "sweep", _boom)
     assert _cli.main(["sweep", str(tmp_path / "missing.toml")]) == 2
     assert "config file not found" in capsys.readouterr().err
     (tmp_path / "c.json").write_text("{}")
@@ -344,7 +344,7 @@ def test_sweep_command_bad_files(tmp_path, monkeypatch, capsys):
 
 def test_sweep_config_executors(sweep_dir):
     """workers = N is a spawn process pool of N (not started here: nothing is submitted)."""
-    from qemjax import _sweep_config
+    from qemjax._sweep import config as _sweep_config
 
     (sweep_dir / "c.toml").write_text('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 3')
     config = _sweep_config.load(sweep_dir / "c.toml", out=str(sweep_dir / "x.csv"))
@@ -358,7 +358,8 @@ def test_sweep_config_executors(sweep_dir):
 def test_sweep_example_config_is_valid():
     """The README's example file passes the checks anywhere: its meshes are made in code (the README test
     runs it)."""
-    from qemjax import _sweep_config, shapes
+    from qemjax._sweep import config as _sweep_config
+    from qemjax import shapes
 
     config = _sweep_config.load(ROOT / "experiments" / "sweep_example.toml")
     assert set(config.meshes) == {"bumpy_sphere", "torus"}

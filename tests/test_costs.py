@@ -17,7 +17,7 @@ import qemjax
 from qemjax import _costs, shapes
 from qemjax._costs import regularize as reg
 from qemjax._costs.qem import QEM
-from qemjax._incidence import FaceLists
+from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import greedy
 
 SCHEDULERS = ["parallel", "greedy"]

@@ -14,9 +14,10 @@ import pytest
 from conftest import assert_valid, one_pair_per_round, shared_mesh
 
 import qemjax
-from qemjax import _costs, _split, shapes
+from qemjax import _costs, shapes
+from qemjax._pipeline import split as _split
 from qemjax._costs import esqem
-from qemjax._incidence import FaceLists
+from qemjax._mesh.incidence import FaceLists
 
 SCHEDULERS = ["parallel", "greedy"]
 rng = np.random.default_rng(17)
@@ -298,7 +299,7 @@ def test_split_without_budget_leaves_no_long_edge():
 def test_esqem_meets_the_face_target_exactly_and_stays_valid(scheduler, make, target):
     V, F = make()
     r = qemjax.simplify((V, F), target_faces=target, method="esqem", scheduler=scheduler)
-    closed_odd = target % 2 and not len(qemjax._topology.boundary_edges(F, len(V))[0])
+    closed_odd = target % 2 and not len(qemjax._mesh.topology.boundary_edges(F, len(V))[0])
     assert_valid(r, target + 1 if closed_odd else target, V, F)  # a closed mesh: faces come in pairs
     assert r.stop_reason == "target"
     sp = r.stats["split"]

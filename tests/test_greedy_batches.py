@@ -10,7 +10,7 @@ import pytest
 
 import qemjax
 from qemjax import shapes
-from qemjax._incidence import FaceLists
+from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import greedy, greedy_batches
 
 CASES = {

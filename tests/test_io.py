@@ -9,7 +9,8 @@ import trimesh
 from conftest import shared_mesh
 
 import qemjax
-from qemjax import _io, shapes
+from qemjax._io import mesh as _io
+from qemjax import shapes
 
 
 @pytest.mark.parametrize("ext", ["obj", "ply", "stl", "off", "glb"])

@@ -12,7 +12,9 @@ import pytest
 import trimesh
 
 import qemjax
-from qemjax import _io, _io_strips, _wedges, shapes
+from qemjax._io import mesh as _io, strips as _io_strips
+from qemjax._mesh import wedges as _wedges
+from qemjax import shapes
 
 INTERNALS = ("broadcast", "index", "out of bounds", "list index", "chunk", "could not be read to its end",
              "traceback", "codec", "charset", "module", "unpack", "inhomogeneous", "expecting value")

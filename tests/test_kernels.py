@@ -8,7 +8,7 @@ import pytest
 
 from qemjax._kernels import flips, placement
 from qemjax._kernels import quadrics as qd
-from qemjax._batching import DTYPE
+from qemjax._kernels.batching import DTYPE
 from qemjax._costs.qem import QEM, initial_quadrics
 
 rng = np.random.default_rng(0)
@@ -68,7 +68,7 @@ def test_vertex_quadrics_match_brute_force(power):
     area = np.linalg.norm(cr, axis=1) / 2
     nrm = cr / (2 * area[:, None])
     w = (area / area.mean()) ** power
-    from qemjax import _topology as topo
+    from qemjax._mesh import topology as topo
 
     be, bf = topo.boundary_edges(F, len(V))
     ed = np.concatenate([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]])

@@ -8,12 +8,13 @@ import pytest
 from conftest import assert_valid
 
 import qemjax
-from qemjax import _compilation, shapes
-from qemjax import _topology as topo
+from qemjax._kernels import compilation as _compilation
+from qemjax import shapes
+from qemjax._mesh import topology as topo
 from qemjax._costs import memoryless as ml
 from qemjax._costs.base import MeshInput, MeshView
 from qemjax._costs.qem import QEM
-from qemjax._incidence import FaceLists
+from qemjax._mesh.incidence import FaceLists
 
 
 def random_mesh(seed: int):

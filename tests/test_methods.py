@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 import qemjax
-from qemjax import _cli, _costs, _flat, _sweep, _sweep_config, shapes
+from qemjax import _cli, _costs, shapes
+from qemjax._pipeline import flat as _flat
+from qemjax._sweep import run as _sweep, config as _sweep_config
 
 
 # -- a method from outside the package: QEM with a point quadric at each vertex ------------------------

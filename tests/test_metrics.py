@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from qemjax import metrics
-from qemjax import _nearest
+from qemjax._mesh import nearest as _nearest
 from qemjax.metrics import _distance
 
 SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
@@ -266,7 +266,7 @@ def test_grid_lists_every_face_within_delta_of_its_cells(delta):
 
 
 def test_squared_distance_with_given_edge_products_is_bitwise_the_same():
-    from qemjax._pointtri import edge_products, squared_distance_cf
+    from qemjax._mesh.pointtri import edge_products, squared_distance_cf
 
     rng = np.random.default_rng(8)
     p, a, ab, ac = (rng.normal(size=(3, 5000)) * 10 ** rng.uniform(-3, 3, size=(1, 5000)) for _ in range(4))

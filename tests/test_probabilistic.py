@@ -11,7 +11,7 @@ from conftest import assert_valid
 
 import qemjax
 from qemjax import _costs, shapes
-from qemjax._arrays import face_stats
+from qemjax._mesh.arrays import face_stats
 from qemjax._costs.base import MeshInput
 from qemjax._costs.probabilistic import ProbabilisticQEM, plane_quadric
 

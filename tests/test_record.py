@@ -12,7 +12,7 @@ from conftest import one_pair_per_round, shared_mesh
 import qemjax
 from qemjax import shapes
 from qemjax._schedulers import parallel
-from qemjax._pointtri import point_triangle_distance
+from qemjax._mesh.pointtri import point_triangle_distance
 
 
 def same_mesh(level, res):

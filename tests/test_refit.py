@@ -1,4 +1,4 @@
-"""``simplify(refit=N)`` (`qemjax._refit`): the output's positions re-fitted to the input surface lower the
+"""``simplify(refit=N)`` (`qemjax._pipeline.refit`): the output's positions re-fitted to the input surface lower the
 distance to it, change nothing but the positions, never turn a face by the flip angle, and bad values are
 refused."""
 from __future__ import annotations
@@ -8,8 +8,9 @@ import pytest
 from conftest import assert_valid
 
 import qemjax
-from qemjax import _refit, shapes
-from qemjax._arrays import face_normals
+from qemjax._pipeline import refit as _refit
+from qemjax import shapes
+from qemjax._mesh.arrays import face_normals
 from qemjax.metrics import point_triangle_distance, surface_distance
 
 

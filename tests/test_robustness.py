@@ -11,8 +11,9 @@ import trimesh
 from conftest import assert_valid
 
 import qemjax
-from qemjax import _topology as topo
-from qemjax import _units, shapes
+from qemjax._mesh import topology as topo
+from qemjax._mesh import units as _units
+from qemjax import shapes
 
 V1, F1 = shapes.icosphere(1)  # 80 faces: small, so the corpus stays quick
 TRI = (np.eye(3), np.array([[0, 1, 2]]))

@@ -107,3 +107,23 @@ def test_a_scheduler_registered_from_outside_runs_through_simplify():
         del _schedulers._REGISTRY["idle"]
     with pytest.raises(ValueError, match="unknown scheduler 'idle'"):
         qemjax.simplify(shapes.icosphere(1), ratio=0.5, scheduler="idle")
+
+
+def test_a_copy_of_the_package_runs_its_own_schedulers(tmp_path):
+    """A copy imported under another name (the A/B scripts' `load_old`) looks its schedulers up in itself:
+    with absolute names it ran the installed package's, and an A/B compared the new code with itself."""
+    import importlib
+    import shutil
+    import sys
+    from pathlib import Path
+
+    shutil.copytree(Path(qemjax.__file__).parent, tmp_path / "qemjax_copy")
+    sys.path.insert(0, str(tmp_path))
+    try:
+        copy = importlib.import_module("qemjax_copy._schedulers")
+        for name in copy.names():
+            assert copy.get(name).__module__ == f"qemjax_copy._schedulers.{name}"
+    finally:
+        sys.path.remove(str(tmp_path))
+        for m in [m for m in sys.modules if m == "qemjax_copy" or m.startswith("qemjax_copy.")]:
+            del sys.modules[m]

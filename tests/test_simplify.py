@@ -62,7 +62,7 @@ def test_boundary_is_preserved_on_open_grid(scheduler):
     V, F = shapes.grid(20)
     r = qemjax.simplify((V, F), target_faces=60, scheduler=scheduler)
     assert_valid(r, 60, V, F)
-    from qemjax import _topology as topo
+    from qemjax._mesh import topology as topo
 
     be, _ = topo.boundary_edges(r.faces, len(r.vertices))
     bv = r.vertices[np.unique(be)]
@@ -85,7 +85,7 @@ def test_deterministic(bumpy, scheduler):
 def test_genus_preserved_in_manifold_mode(scheduler):
     V, F = shapes.torus()
     r = qemjax.simplify((V, F), target_faces=100, scheduler=scheduler)
-    from qemjax import _topology as topo
+    from qemjax._mesh import topology as topo
 
     E, cnt = topo.edges(r.faces, len(r.vertices))
     assert np.all(cnt == 2)
@@ -129,7 +129,7 @@ def test_rank_placement_truncates_on_a_flat_grid_without_recompiling():
     assert_valid(r, 60, V, F)
     assert r.stats["branches"]["truncated"] > 0 and base.stats["branches"]["truncated"] == 0
     assert np.all(np.abs(r.vertices[:, 2]) < 1e-6)
-    from qemjax import _compilation
+    from qemjax._kernels import compilation as _compilation
     from qemjax._costs.qem import QEM
 
     VS, pairs = np.zeros((64, 13), np.float32), np.zeros((256, 2), np.int32)
@@ -221,7 +221,7 @@ def test_feature_edges_are_kept_like_boundaries():
     simplification without features does cross it."""
     V, F = shapes.grid(16)
     on_line = np.isclose(V[:, 0], 0.5)
-    from qemjax import _topology as topo
+    from qemjax._mesh import topology as topo
 
     E, _ = topo.edges(F, len(V))
     feat = E[on_line[E[:, 0]] & on_line[E[:, 1]]]

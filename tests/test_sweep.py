@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import qemjax
-import qemjax._sweep as sw
+import qemjax._sweep.run as sw
 from qemjax import shapes
 
 GRID = {"scheduler": ["parallel", "greedy"], "boundary_weight": [0.0, 1.0]}
@@ -293,7 +293,7 @@ def test_sweep_takes_shapes_named_as_text():
 
 
 def test_config_file_with_shapes(tmp_path):
-    from qemjax import _sweep_config
+    from qemjax._sweep import config as _sweep_config
 
     cfg = tmp_path / "s.toml"
     cfg.write_text('meshes = ["shapes.icosphere(subdivisions=2)", "shapes.torus"]\ntargets = [0.5, 40]\n'
@@ -315,7 +315,7 @@ def test_config_file_with_shapes(tmp_path):
 def test_config_grid_takes_integers_and_untyped_keywords(tmp_path):
     """`grid.refit = [0, 1]` (an int keyword) and `grid.attributes = ["auto", "none"]` (a keyword without
     an annotation) are read as the Python sweep takes them, and run (issue 31's two config failures)."""
-    from qemjax import _sweep_config
+    from qemjax._sweep import config as _sweep_config
 
     cfg = tmp_path / "s.toml"
     cfg.write_text('meshes = ["shapes.icosphere(subdivisions=2)"]\ntargets = [0.5]\nout = "t.csv"\n'

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qemjax import _topology as topo
+from qemjax._mesh import topology as topo
 from qemjax import shapes
-from qemjax._incidence import FaceLists
+from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers.parallel import _accepted
 
 rng = np.random.default_rng(7)

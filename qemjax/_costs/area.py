@@ -33,8 +33,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .. import _topology as topo
-from .._batching import DTYPE
+from .._mesh import topology as topo
+from .._kernels.batching import DTYPE
 from .._kernels import kernel
 from .base import MeshInput, Method, require_nonnegative
 

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE
+from .._kernels.batching import DTYPE
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 from .base import MeshInput

@@ -116,7 +116,7 @@ class Method(CostModel):
 
     regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (`regularize`; 0: none).
     area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none).
-    refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._refit`).
+    refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._pipeline.refit`).
 
     A new method is a frozen dataclass subclass of a method (or of this class) with fields of its own,
     registered with `qemjax.register_method`; nothing else needs editing.

@@ -33,7 +33,7 @@ vertices only), and every pair at them is priced again. `merge` merges the quadr
 `refresh`. Curvature and area are computed from the faces around each vertex with one batched kernel
 (`vertex_curvature`), the same at the start and after each round.
 
-Edge splitting after simplification (``split_factor``) is ESQEM's second half; see `qemjax._split`.
+Edge splitting after simplification (``split_factor``) is ESQEM's second half; see `qemjax._pipeline.split`.
 """
 from __future__ import annotations
 
@@ -45,8 +45,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE, chunks
-from .._incidence import FaceLists
+from .._kernels.batching import DTYPE, chunks
+from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
 from . import ring
 from .base import MeshInput, require_nonnegative
@@ -139,7 +139,7 @@ def curvature_at(faces: FaceLists, P: np.ndarray, verts: np.ndarray) -> np.ndarr
 @dataclasses.dataclass(frozen=True)
 class ESQEM(QEM):
     """ESQEM (Zhang 2022): QEM's placement and error, ranked with a Gaussian-curvature term (module
-    docstring), then long edges split (`qemjax._split`). QEM's settings, plus:
+    docstring), then long edges split (`qemjax._pipeline.split`). QEM's settings, plus:
 
     curvature_weight: a ≥ 0; the curvature term's weight is w = a·Q̄/K̄ (0: rank by Q alone).
     split_factor: b > 0; after simplifying, split edges longer than b × the mean edge length (None: no

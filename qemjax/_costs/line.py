@@ -22,7 +22,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .._batching import DTYPE
+from .._kernels.batching import DTYPE
 from .base import MeshInput, require_nonnegative
 from .qem import QEM
 

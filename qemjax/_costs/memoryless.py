@@ -39,8 +39,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE
-from .._incidence import FaceLists
+from .._kernels.batching import DTYPE
+from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 

@@ -33,8 +33,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .._arrays import face_stats
-from .._batching import DTYPE
+from .._mesh.arrays import face_stats
+from .._kernels.batching import DTYPE
 from .base import MeshInput, require_nonnegative
 from .qem import QEM
 

@@ -18,10 +18,10 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _topology as topo
-from .._arrays import face_normals, face_stats
-from .._batching import DTYPE, bucket, pad_rows
-from .._incidence import FaceLists
+from .._mesh import topology as topo
+from .._mesh.arrays import face_normals, face_stats
+from .._kernels.batching import DTYPE, bucket, pad_rows
+from .._mesh.incidence import FaceLists
 from .._kernels import placement, quadrics
 from . import memoryless as ml
 from .base import MeshInput, Method, require_nonnegative

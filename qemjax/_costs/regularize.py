@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DTYPE
+from .._kernels.batching import DTYPE
 from .._kernels import kernel
 from .._kernels.fixed import cross3, dot3, norm3, tree_sum
 from .base import Term, require_nonnegative

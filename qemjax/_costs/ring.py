@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._batching import bucket
+from .._kernels.batching import bucket
 
 RING_MIN = 16
 

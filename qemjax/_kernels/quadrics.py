@@ -117,7 +117,7 @@ def vertex_quadrics(V, F, fmask, area_power, cedges, cnormals, cweight, cmask, m
     ``cmask``: each adds the plane through the edge perpendicular to that face, weighted by
     cweight·(|e|²/mean|e|²)^area_power, to both endpoints.
     ``mean_area``, ``mean_e2`` (): the mean area and mean squared edge length of the real faces, computed
-    by the caller (`qemjax._arrays.face_stats`): an XLA:CPU reduction's order depends on the number of threads, and these
+    by the caller (`qemjax._mesh.arrays.face_stats`): an XLA:CPU reduction's order depends on the number of threads, and these
     two scale every weight.
     Returns (N,10) packed quadrics. Errors are squared distances in the units of V.
     """

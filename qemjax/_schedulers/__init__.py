@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import importlib
 
-_REGISTRY: dict = {"parallel": "qemjax._schedulers.parallel", "greedy": "qemjax._schedulers.greedy"}
+# module names relative to this package, so that a copy imported under another name (the A/B scripts'
+# `load_old`) runs its own schedulers, not the installed package's
+_REGISTRY: dict = {"parallel": f"{__name__}.parallel", "greedy": f"{__name__}.greedy"}
 
 
 def names() -> tuple[str, ...]:

@@ -29,8 +29,8 @@ import time
 
 import numpy as np
 
-from .._arrays import face_normals, keep_rows as _keep
-from .._batching import DTYPE
+from .._mesh.arrays import face_normals, keep_rows as _keep
+from .._kernels.batching import DTYPE
 from . import outcome
 from .common import Options, PerCopy
 from .parallel import RoundState, _Run, _history_arrays, _history_columns, _removal_steps, _ring_vertices

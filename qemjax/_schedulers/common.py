@@ -6,13 +6,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._arrays import face_normals as face_normals
-from .._batching import DTYPE as DTYPE
-from .._batching import bucket as bucket
-from .._batching import chunk_size as chunk_size
-from .._batching import chunks as chunks
-from .._batching import pad_rows as pad_rows
-from .._batching import set_rows as set_rows
+from .._mesh.arrays import face_normals as face_normals
+from .._kernels.batching import DTYPE as DTYPE
+from .._kernels.batching import bucket as bucket
+from .._kernels.batching import chunk_size as chunk_size
+from .._kernels.batching import chunks as chunks
+from .._kernels.batching import pad_rows as pad_rows
+from .._kernels.batching import set_rows as set_rows
 from .._costs import ring
 from .._kernels import flips
 from .._options import Options as Options

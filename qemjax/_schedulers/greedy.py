@@ -19,9 +19,9 @@ import heapq
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _topology as topo
+from .._mesh import topology as topo
 from .._costs import MeshView
-from .._incidence import FaceLists
+from .._mesh.incidence import FaceLists
 from . import outcome
 from .._kernels import flips
 from .common import DTYPE, Options, bucket, face_normals, set_rows, start_merge, start_price

@@ -30,8 +30,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _topology as topo
-from .._incidence import FaceLists
+from .._mesh import topology as topo
+from .._mesh.incidence import FaceLists
 from .._kernels import flips
 from . import outcome
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price

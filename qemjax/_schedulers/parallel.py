@@ -34,10 +34,10 @@ import time
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _topology as topo
-from .._arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
+from .._mesh import topology as topo
+from .._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
 from .._costs import MeshView
-from .._incidence import FaceLists
+from .._mesh.incidence import FaceLists
 from . import outcome
 from .common import (DTYPE, Options, Timer, bucket, face_normals, pad_rows, set_rows, start_flips, start_merge,
                      start_price)

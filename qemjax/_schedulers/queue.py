@@ -8,7 +8,7 @@ import itertools
 
 import numpy as np
 
-from .._incidence import FaceLists
+from .._mesh.incidence import FaceLists
 from . import outcome
 from .common import Options
 from .outcome import BUDGET

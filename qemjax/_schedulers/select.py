@@ -9,7 +9,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
-from .._arrays import any_at, keep_rows as _keep, take_rows as _take
+from .._mesh.arrays import any_at, keep_rows as _keep, take_rows as _take
 from .._options import Schedule
 
 NO_KEY = np.iinfo(np.int64).max

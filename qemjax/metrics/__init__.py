@@ -15,7 +15,7 @@ from ._appearance import seam_report as seam_report
 from ._appearance import uv_chart_integrity as uv_chart_integrity
 from ._distance import surface_distance as surface_distance
 from ._evaluate import evaluate as evaluate
-from .._pointtri import point_triangle_distance as point_triangle_distance
+from .._mesh.pointtri import point_triangle_distance as point_triangle_distance
 from ._quality import area_volume as area_volume
 from ._quality import min_angle_histogram as min_angle_histogram
 from ._quality import triangle_quality as triangle_quality

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import as_mesh
-from .._nearest import nearest_triangles
+from .._mesh.nearest import nearest_triangles
 from ._topology import _components
 
 KINDS = ("uv", "color")
@@ -30,7 +30,7 @@ def corner_values(mesh, kind: str):
     tm = _as_trimesh(mesh)
     if tm is None:
         return None
-    from .._wedges import from_trimesh
+    from .._mesh.wedges import from_trimesh
 
     vals = from_trimesh(tm)[0].get(kind)  # as simplify reads them
     if vals is None:
@@ -44,7 +44,7 @@ def _as_trimesh(mesh):
     for anything else (arrays, a `qemjax.Mesh`: positions only)."""
     import os
 
-    from .. import _io
+    from .._io import mesh as _io
 
     if isinstance(mesh, (str, os.PathLike)):
         return _io._read_trimesh(mesh)

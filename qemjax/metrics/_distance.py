@@ -7,7 +7,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ._common import MeshArrays, as_mesh
-from .._nearest import nearest_triangles
+from .._mesh.nearest import nearest_triangles
 
 DEFAULT_SAMPLES = 100_000
 

@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._arrays import column_bounds
+from .arrays import column_bounds
 
 MIN_EXTENT = 1e-150  # scale² ≥ 1e-300: a normal float64 (smallest 2.2e-308) with room for small errors
 MAX_EXTENT = 1e150  # scale² ≤ 1e300: room for errors up to 1e8 × scale² below float64's 1.8e308

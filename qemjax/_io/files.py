@@ -17,7 +17,7 @@ import struct
 
 import numpy as np
 
-from . import _io_ply, _io_strips, _io_text
+from . import ply as _io_ply, strips as _io_strips, text as _io_text
 
 _NAMES = {"obj": "OBJ", "ply": "PLY", "stl": "STL", "off": "OFF", "glb": "GLB", "gltf": "glTF"}
 _TEXT = ("obj", "off", "gltf")  # formats that are text through and through

@@ -9,7 +9,7 @@
 5. `finish`: the `SimplifyResult`: output in mesh units, splitting, re-fit, stop reason and warning,
    history, record and stats.
 
-`qemjax._api` drives them for one run (`simplify`) and for many (`simplify_cells`).
+`qemjax._pipeline.api` drives them for one run (`simplify`) and for many (`simplify_cells`).
 """
 from __future__ import annotations
 
@@ -23,21 +23,21 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import _compilation
-from . import _costs
-from . import _flat
-from . import _io
-from . import _refit
-from . import _schedulers
-from . import _split
-from . import _topology as topo
-from . import _units
-from . import _wedges
-from ._arrays import face_normals
-from ._options import Attributes, Options, Schedule, Topology
-from ._record import Record
-from ._result import Contractions, SimplifyResult
-from ._schedulers import common, outcome
+from .._kernels import compilation as _compilation
+from .. import _costs
+from . import flat as _flat
+from .._io import mesh as _io
+from . import refit as _refit
+from .. import _schedulers
+from . import split as _split
+from .._mesh import topology as topo
+from .._mesh import units as _units
+from .._mesh import wedges as _wedges
+from .._mesh.arrays import face_normals
+from .._options import Attributes, Options, Schedule, Topology
+from .._record.history import Record
+from .._record.result import Contractions, SimplifyResult
+from .._schedulers import common, outcome
 
 
 def _real(name: str, x) -> float:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._io import Mesh
+from .mesh import Mesh
 
 
 def vertex_normals(mesh: Mesh) -> np.ndarray:

@@ -98,7 +98,7 @@ class SimplifyResult:
         a `qemjax.Level` (vertices, faces, source_vertices, source_faces, vertex_map, max_error). Greedy:
         equal to ``simplify(target_faces=k, scheduler="greedy")`` when a prefix of the run has k faces;
         parallel: the run's own mesh at round boundaries, the round's cheapest contractions first in
-        between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record`."""
+        between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record.history`."""
         return self._record().replay(target_faces, ratio=ratio, contractions=contractions)
 
     def _record(self):

@@ -7,9 +7,9 @@ from typing import Any
 
 import numpy as np
 
-from ._api import simplify
-from ._record import Level
-from ._result import SimplifyResult
+from .api import simplify
+from .._record.history import Level
+from .._record.result import SimplifyResult
 
 RATIOS = (0.5, 0.25, 0.1, 0.01)
 
@@ -58,7 +58,7 @@ class LodChain:
 def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     """One simplification run down to the smallest of ``ratios`` (each in (0, 1], the fraction of faces to
     keep; any order, levels come back in the order given), and every level replayed from its record
-    (`qemjax._record`): one run's cost instead of one per level. ``options`` are `simplify`'s keywords
+    (`qemjax._record.history`): one run's cost instead of one per level. ``options`` are `simplify`'s keywords
     (not its targets). With the greedy scheduler each level equals a separate ``simplify(ratio=r)`` run
     whenever the run passes through exactly that face count; with the parallel scheduler (default) the
     levels are the run's own intermediate meshes, not those of separate runs.

@@ -13,8 +13,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import _io_files, _wedges
-from ._arrays import face_stats, column_bounds, sorted_triples
+from . import files as _io_files
+from .._mesh import wedges as _wedges
+from .._mesh.arrays import face_stats, column_bounds, sorted_triples
 
 
 class Mesh(NamedTuple):

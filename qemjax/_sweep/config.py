@@ -15,7 +15,9 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from . import _api, _flat, _schedulers, _sweep, shapes
+from .._pipeline import api as _api, flat as _flat
+from .. import _schedulers, shapes
+from . import run as _sweep
 
 KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
 EXECUTOR_KEYS = ("workers", "scheduler", "address")

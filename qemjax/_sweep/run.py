@@ -21,10 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from . import _costs, _flat, _io, shapes
-from ._costs.base import Method
-from ._api import simplify, simplify_cells
-from ._options import Attributes, Schedule, Topology
+from .. import _costs, shapes
+from .._pipeline import flat as _flat
+from .._io import mesh as _io
+from .._costs.base import Method
+from .._pipeline.api import simplify, simplify_cells
+from .._options import Attributes, Schedule, Topology
 
 # a grid varies the run keywords of `simplify` and every setting by its flat or dotted name
 # (`_flat.grid_keys`); not the target (that is `targets`), progress (the sweep's own) or feature edges
@@ -210,7 +212,7 @@ def _simplify_cell(mesh, cell: Cell):
     name = _peer(cell)
     if name is None:
         return simplify(mesh, **cell.kwargs())
-    from . import peers
+    from .. import peers
 
     m = len(mesh[1])
     target = max(1, int(round(cell.target * m))) if isinstance(cell.target, float) else cell.target
@@ -261,7 +263,7 @@ def row(mesh, cell: Cell, res, metrics, seconds: float) -> dict:
                result_sha256=result_hash(res))
     t0 = time.perf_counter()
     if metrics is not False:
-        from .metrics import evaluate
+        from ..metrics import evaluate
 
         out.update(evaluate(mesh, res, target_faces=s["target_faces"], **metrics))
     out["cell_s"] = seconds + time.perf_counter() - t0

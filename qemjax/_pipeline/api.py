@@ -11,13 +11,13 @@ from typing import Any
 
 import numpy as np
 
-from . import _compilation
-from . import _costs
-from ._options import Topology
-from ._result import SimplifyResult
-from ._schedulers import batched
-from . import _stages as stages
-from ._stages import Job, _resolve_target
+from .._kernels import compilation as _compilation
+from .. import _costs
+from .._options import Topology
+from .._record.result import SimplifyResult
+from .._schedulers import batched
+from . import stages
+from .stages import Job, _resolve_target
 
 PLACEMENTS = _costs.qem.PLACEMENTS
 
@@ -53,7 +53,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     topology: a `qemjax.Topology`: topology preservation, pruning of small parts, aggregation of close
         pairs (``pair_threshold``), the flip angle and welding (None: its defaults).
     attributes: which appearance attributes to carry through (per-corner wedges, seams kept: README,
-        "Appearance attributes"; ``qemjax._wedges``): ``'auto'`` (each kind the input carries without
+        "Appearance attributes"; ``qemjax._mesh.wedges``): ``'auto'`` (each kind the input carries without
         seams: UVs and their material, vertex colours, stored normals, normalised to unit length; a kind
         with seams, which hold vertices in place, only when asked for by name, or UVs when a texture is
         given: one warning names them), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, None

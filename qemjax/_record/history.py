@@ -19,7 +19,7 @@ first round on (selection gates on the faces still to remove), so it is not a re
 
 ESQEM's edge splits (``split_factor``) come after all contractions and are not in the record: a replay covers
 the contraction phase only, down to the face count the contractions reached (`Record.faces_out`). Likewise
-``refit`` (`qemjax._refit`) moves the output's vertices after the contractions: a replay gives the
+``refit`` (`qemjax._pipeline.refit`) moves the output's vertices after the contractions: a replay gives the
 positions the contractions chose, so its last level is the result before the re-fit.
 
 Progressive form: `Record.save` writes an ``.npz`` (byte-identical for the same record), `load_record`
@@ -33,9 +33,9 @@ import zipfile
 
 import numpy as np
 
-from ._arrays import face_normals
-from ._result import Contractions
-from ._units import Frame
+from .._mesh.arrays import face_normals
+from .result import Contractions
+from .._mesh.units import Frame
 
 FORMAT = "qemjax-record-1"  # written into every .npz; `load_record` refuses others
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed time stamps: the same record gives the same bytes

@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._io_text import quote
+from .text import quote
 
 # PLY type name -> numpy type code (sizes follow)
 TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",

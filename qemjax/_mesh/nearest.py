@@ -32,7 +32,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._pointtri import edge_products, flat_triangles, squared_distance_cf
+from .pointtri import edge_products, flat_triangles, squared_distance_cf
 
 _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cache)
 _CHUNK = 65_536  # query points per block (bounds temporary memory)

@@ -14,8 +14,8 @@ import functools
 import typing
 from typing import Any
 
-from . import _costs, _schedulers
-from ._options import Attributes, Schedule, Topology
+from .. import _costs, _schedulers
+from .._options import Attributes, Schedule, Topology
 
 GROUPS = {"topology": Topology, "attributes": Attributes}  # and "method": the registered classes
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._io_ply import FORMATS, TYPES, Header, PlyError, element_bytes, rows_name, type_dtype, type_size
+from .ply import FORMATS, TYPES, Header, PlyError, element_bytes, rows_name, type_dtype, type_size
 
 
 def _read_ascii(h: Header, data: bytes) -> dict:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._arrays import sorted_triples
+from .arrays import sorted_triples
 
 
 def half_edges(F: np.ndarray) -> np.ndarray:

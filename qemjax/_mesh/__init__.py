@@ -1,0 +1,1 @@
+"""Mesh data, connectivity and geometric queries (numpy, no JAX)."""

@@ -1,0 +1,1 @@
+"""What a run returns: the result object and the replayable multiresolution record."""

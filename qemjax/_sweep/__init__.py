@@ -1,0 +1,1 @@
+"""Sweeps: grids of runs, their configuration files, and Pareto fronts."""
