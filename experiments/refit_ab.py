@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     libs = {"old": old, "new": new}
     rows = []
     lines = ["| case | faces out | " + " | ".join(f"{v} {c} s" for c in configs for v in libs)
-             + " | refit/default old | refit/default new | refit outputs |", "|---" * (4 + 2 * len(configs)) + "|"]
+             + " | refit/default old | refit/default new | refit outputs |", "|---" * (5 + 2 * len(configs)) + "|"]
     for case in args.cases:
         name, ratio = case.rsplit(":", 1)
         m = bench_meshes.load(name)
