@@ -52,7 +52,8 @@ def main(argv=None) -> int:
                                 "refit": ("_pipeline/refit.py", "refit"),
                                 "  nearest_triangles": ("_mesh/nearest.py", "nearest_triangles"),
                                 "    grid index build": ("_mesh/nearest.py", "__init__"),
-                                "    grid query": ("_mesh/nearest.py", "query")}.items():
+                                "    grid query": ("_mesh/nearest.py", "settle"),
+                                "    KD-tree queries": ("_mesh/nearest.py", "query")}.items():
         cum = max((v[3] for (f, _, n), v in stats.items() if f.endswith(file) and n == name), default=0.0)
         print(f"{label:24s} {cum:.3f} s  ({cum / total:.0%})")
     return 0

@@ -205,6 +205,76 @@ def test_nearest_triangles_picks_grid_for_dense_points():
     np.testing.assert_allclose(dist, brute_force(pts, noisy_v, f), rtol=1e-9, atol=1e-13)
 
 
+def _all_pairs_sq(tris, pts):
+    """(q, m) squared distances of every point to every face, with the search's own kernel (float64)."""
+    m = len(tris)
+    owner = np.repeat(np.arange(len(pts)), m)
+    return tris.sq_dist(np.ascontiguousarray(pts[owner].T), np.tile(np.arange(m), len(pts))).reshape(len(pts), m)
+
+
+def _dense_points_case(seed=6):
+    """A perturbed sphere (320 faces), dense points on and near the unperturbed one, some of them exactly at
+    mesh vertices (distance 0 to several faces: exact ties), and a few far away (the fallback)."""
+    rng = np.random.default_rng(seed)
+    v, f = sphere(2)
+    noisy_v = v * (1 + 0.02 * rng.normal(size=(len(v), 1)))
+    mesh = metrics._common.as_mesh((noisy_v, f))
+    pts = _distance.sample_points(metrics._common.as_mesh((v, f)), 20_000, rng)
+    pts[:500] = noisy_v[rng.integers(0, len(v), 500)]  # on a vertex: every face around it ties at 0
+    pts[500:700] *= 1.5  # far from the surface
+    return noisy_v, f, mesh, pts
+
+
+def test_nearest_triangles_grid_face_is_the_largest_nearest_index():
+    """On the grid path, a point within the margin gets the largest index among the faces at its minimum
+    distance (exact ties included); every other point gets the KD-tree's answer; all distances are the
+    brute-force float64 ones."""
+    v, f, mesh, pts = _dense_points_case()
+    tris = _nearest.Triangles(mesh.corners)
+    d2 = _all_pairs_sq(tris, pts)
+    best = d2.min(axis=1)
+    largest = np.array([np.flatnonzero(row == b).max() for row, b in zip(d2, best)])
+    assert (np.sum(d2 == best[:, None], axis=1) > 1).sum() >= 400  # the vertex points tie
+    dist, face = _nearest.nearest_triangles(mesh.corners, pts)
+    np.testing.assert_allclose(dist, brute_force(pts, v, f), rtol=1e-9, atol=1e-13)
+    np.testing.assert_array_equal(dist, np.sqrt(best))  # the same kernel: the same bits
+    # delta as the 99th percentile of the pilot's exact distances (what the grid's own pilot must give)
+    pilot = np.random.default_rng(0).choice(len(pts), _nearest._GRID_PILOT, replace=False)
+    floor = 1e-9 * float(np.sqrt(((mesh.corners[1] - mesh.corners[0]) ** 2).sum(axis=0)).max())
+    delta = max(float(np.quantile(np.sqrt(best[pilot]), _nearest._GRID_QUANTILE)), floor)
+    near = np.sqrt(best) <= delta
+    assert 0.9 < near.mean() < 1.0
+    np.testing.assert_array_equal(face[near], largest[near])
+    tree_face = _nearest.TriangleIndex(tris).query(pts[~near])[1]
+    np.testing.assert_array_equal(face[~near], tree_face)
+
+
+@pytest.mark.parametrize("delta", [1e-3, 0.05])
+def test_grid_lists_every_face_within_delta_of_its_cells(delta):
+    """Every (point, face) pair within delta is listed in the point's cell (float64 brute force), for thin
+    and large margins (the cell size follows delta when delta is large)."""
+    v, f, mesh, pts = _dense_points_case(7)
+    tris = _nearest.Triangles(mesh.corners)
+    grid = _nearest.GridIndex(tris, delta, _nearest.TriangleIndex(tris))
+    pts = pts[700:3700]
+    within = np.sqrt(_all_pairs_sq(tris, pts)) <= delta
+    cell = np.floor((pts - grid.origin) / grid.h).astype(np.int64).T
+    key = grid._key(cell)
+    listed = {k: set(grid.cell_face[s : s + n]) for k, s, n in zip(grid.cell_key, grid.cell_start, grid.cell_count)}
+    for i in np.flatnonzero(within.any(axis=1)):
+        assert set(np.flatnonzero(within[i])) <= listed.get(key[i], set())
+
+
+def test_squared_distance_with_given_edge_products_is_bitwise_the_same():
+    from qemjax._mesh.pointtri import edge_products, squared_distance_cf
+
+    rng = np.random.default_rng(8)
+    p, a, ab, ac = (rng.normal(size=(3, 5000)) * 10 ** rng.uniform(-3, 3, size=(1, 5000)) for _ in range(4))
+    ac[:, :100] = 2.5 * ab[:, :100]  # flat ones too
+    np.testing.assert_array_equal(squared_distance_cf(p, a, ab, ac),
+                                  squared_distance_cf(p, a, ab, ac, None, edge_products(ab, ac)))
+
+
 # -------------------------------------------------------------------------------------- surface distance
 
 

@@ -30,6 +30,15 @@ def test_closest_barycentric_gives_the_exact_distance():
                                rtol=1e-7, atol=1e-9)
 
 
+
+def test_closest_barycentric_in_blocks_is_bitwise_one_block(monkeypatch):
+    rng = np.random.default_rng(1)
+    p, a, b, c = (rng.normal(size=(1000, 3)) for _ in range(4))
+    b[:50] = a[:50]  # repeated corners: the division guards
+    whole = _refit.closest_barycentric(p, a, b, c)
+    monkeypatch.setattr(_refit, "_ROWS", 7)
+    np.testing.assert_array_equal(_refit.closest_barycentric(p, a, b, c), whole)
+
 @pytest.mark.parametrize("target", [24, 200])
 def test_refit_lowers_the_distance_and_keeps_the_connectivity(bumpy, target):
     plain = qemjax.simplify(bumpy, target_faces=target)

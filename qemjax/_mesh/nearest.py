@@ -11,26 +11,36 @@ k-th lies at least U + R away; otherwise a ball query of radius U + R lists ever
 whose lower bound |p - centroid| - radius is not below U are skipped before the exact test. Splitting the
 few large triangles keeps R close to the typical piece size (otherwise one huge face would widen every ball).
 
-Grid (`GridIndex`), for many points near a coarser mesh. A face is listed in every cell whose centre lies
-within delta + (half the cell diagonal) of it. A point is compared with the faces listed in its own cell
-only: a handful, and no tree walk. If the best distance found is <= delta it is exact (the nearest face is
-then within delta of the point, hence within reach of the cell's centre, hence listed). Other points go to
-the KD-tree. delta is the 99th percentile of the exact distances of a small pilot sample.
+Grid (`GridIndex`), for many points near a coarser mesh. A cell (a cube of side h, about 2/5 of the median
+edge) lists every face that a point of the cube can lie within delta of: the faces whose box and plane,
+grown by delta, meet the cube and that lie within delta + (half the cube's diagonal) of its centre. The
+cells of a face are enumerated column by column along the axis nearest its normal, each column cut to the
+slab around the plane, so the work follows the listed pairs rather than the face's whole box. A point is
+compared with the faces listed in its own cell only: a handful, and no tree walk. If the best distance
+found is <= delta it is exact (every face within delta of the point is listed), and the face returned is
+the largest index among the nearest (so it does not depend on the lists' order). Other points go to the
+KD-tree. delta is the 99th percentile of the exact distances of a small pilot sample, which the grid
+measures itself (`nearest_triangles`).
 """
 
 from __future__ import annotations
 
 import itertools
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .pointtri import flat_triangles, squared_distance_cf
+from .pointtri import edge_products, flat_triangles, squared_distance_cf
 
 _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cache)
 _CHUNK = 65_536  # query points per block (bounds temporary memory)
 _K_NEAREST = 16  # centroids asked of the KD-tree per point before falling back to a ball query
 _BALL_BATCH = 4_000_000  # candidates per ball-query batch (bounds memory)
+_MAX_THREADS = 4  # threads for the blocks of a grid query
+_MIN_THREAD_POINTS = 16_384  # points per thread below which a grid query stays on one thread
+_THREADED_QUERY = 16_384  # points from which a KD-tree query uses every core
 _LEAFSIZE = 16  # KD-tree leaf size (bigger builds faster, queries a little slower)
 _SLACK = 1e-9  # relative padding of every exactness bound against rounding
 _PIECES_PER_FACE = 1.5  # KD-tree piece budget: <= this * faces + _MIN_PIECES
@@ -38,17 +48,26 @@ _MIN_PIECES = 16_384
 _GRID_BUDGET = 4_000_000  # (triangle, cell) pairs enumerated while filling the grid
 _GRID_PILOT = 2_048  # points measured exactly first to choose the grid's margin delta
 _GRID_QUANTILE = 0.99  # fraction of pilot points the margin covers
+_PILOT_PIECES = 8  # nearest pieces whose faces bound a pilot point's distance (a grid margin near delta)
 _GRID_MAX_LIST = 32  # mean faces per cell above which the grid is not used
+_GRID_CELLS_PER_EDGE = 2.5  # grid cell size: the median edge length over this (or delta / 2 if larger)
+_DENSE_PER_PAIR = 8  # grid cells per listed (face, cell) pair up to which lookups use a dense table
+_CELL_PAD = 1e-6  # cells (fraction of a cell) added to each side of a computed range against rounding
 
 
 class Triangles:
-    """A mesh's faces as the kernel wants them: corners (3 corners, 3 axes, m) float64 component-first, and
-    flat (m,) bool (too thin for the barycentric solve: measured as three segments)."""
+    """A mesh's faces as the kernel wants them: corners (3 corners, 3 axes, m) float64 component-first; per
+    face, computed once: a (3, m) the first corners, ab, ac (3, m) the edge vectors, products (3, m) their
+    dot products (`edge_products`) and flat (m,) bool (too thin for the barycentric solve: measured as three
+    segments)."""
 
     def __init__(self, corners: np.ndarray):
         self.corners = corners
         self.a = corners[0]  # (3, m), contiguous
-        self.flat = flat_triangles(corners[1] - corners[0], corners[2] - corners[0])
+        self.ab = corners[1] - corners[0]
+        self.ac = corners[2] - corners[0]
+        self.products = edge_products(self.ab, self.ac)
+        self.flat = flat_triangles(self.ab, self.ac)
 
     def __len__(self) -> int:
         return self.corners.shape[2]
@@ -56,16 +75,15 @@ class Triangles:
     def sq_dist(self, points_cf: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Squared distances (n,) from points (3, n) to faces (n,) int64, pair by pair."""
         out = np.empty(len(faces))
-        c = self.corners
         for s in range(0, len(faces), _BLOCK):
             f = faces[s : s + _BLOCK]
-            a = np.take(c[0], f, axis=1)
             out[s : s + _BLOCK] = squared_distance_cf(
                 points_cf[:, s : s + _BLOCK],
-                a,
-                np.take(c[1], f, axis=1) - a,
-                np.take(c[2], f, axis=1) - a,
+                np.take(self.a, f, axis=1),
+                np.take(self.ab, f, axis=1),
+                np.take(self.ac, f, axis=1),
                 np.take(self.flat, f),
+                np.take(self.products, f, axis=1),
             )
         return out
 
@@ -175,7 +193,7 @@ class TriangleIndex:
     def _query_block(self, points: np.ndarray):
         pts_cf = np.ascontiguousarray(points.T)
         k = min(_K_NEAREST, len(self.parent))
-        cd, ci = self.tree.query(points, k=k, workers=-1)
+        cd, ci = self.tree.query(points, k=k, workers=_workers(len(points)))
         cd, ci = cd.reshape(len(points), k), ci.reshape(len(points), k)
         parent = self.parent[ci]
         best2 = self.tris.sq_dist(pts_cf, parent[:, 0])
@@ -190,7 +208,7 @@ class TriangleIndex:
         if len(redo):
             radius = (ub[redo] + self.max_radius) * (1 + _SLACK)
             # Batches of bounded size: points far from the mesh can have very many candidates.
-            sizes = self.tree.query_ball_point(points[redo], radius, workers=-1, return_length=True)
+            sizes = self.tree.query_ball_point(points[redo], radius, workers=_workers(len(redo)), return_length=True)
             batch = np.cumsum(sizes) // _BALL_BATCH
             for b in np.unique(batch):
                 sel = batch == b
@@ -199,7 +217,7 @@ class TriangleIndex:
 
     def _ball(self, points, pts_cf, rows, radius, ub, best2, best_face):
         """Exact answers for points[rows] (sorted): every piece within radius (>= ub + R) is a candidate."""
-        lists = self.tree.query_ball_point(points[rows], radius, workers=-1, return_sorted=False)
+        lists = self.tree.query_ball_point(points[rows], radius, workers=_workers(len(rows)), return_sorted=False)
         counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
         piece = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
         rows = np.repeat(rows, counts)
@@ -240,38 +258,37 @@ class GridIndex:
         lo_t = corners.min(axis=0)  # (3, m)
         hi_t = corners.max(axis=0)
         edge = np.sqrt(_sq_norm(corners[1] - corners[0]))
-        h = max(float(np.median(edge)) / 3.0, delta / 2.0, 1e-300)
-        while True:
-            reach = delta + h * np.sqrt(3.0) / 2.0
-            origin = lo_t.min(axis=1) - reach - h
-            c0 = np.floor((lo_t - reach - origin[:, None]) / h).astype(np.int64)
-            c1 = np.floor((hi_t + reach - origin[:, None]) / h).astype(np.int64)
-            span = c1 - c0 + 1  # (3, m) cells per axis
-            total = span.prod(axis=0)
-            dims = c1.max(axis=1) + 2
-            if total.sum() <= max(_GRID_BUDGET, 8 * len(tris)) and float(np.prod(dims.astype(float))) < 2.0**62:
-                break
-            h *= 1.25
-        self.h, self.origin, self.dims = h, origin, dims
-        # Enumerate the cells of every face's box, keep those whose centre is within reach of the face.
-        owner, local = _ragged_arange(total)
-        syz = (span[1] * span[2])[owner]
-        sz = span[2][owner]
-        cell = np.stack([c0[0][owner] + local // syz, c0[1][owner] + local % syz // sz, c0[2][owner] + local % sz])
-        centre = origin[:, None] + (cell + 0.5) * h
-        limit = reach * (1 + _SLACK)
-        # Cheap slab test (distance to the face's plane) first, then the exact distance.
         normal = np.cross(corners[1] - corners[0], corners[2] - corners[0], axis=0)
         length = np.sqrt(_sq_norm(normal))
         normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
-        rel = centre - np.take(tris.a, owner, axis=1)
-        near = np.abs(_dot3(np.take(normal, owner, axis=1), rel)) <= limit
-        near |= np.take(tris.flat, owner)  # no reliable normal: exact test only
-        owner, cell, centre = owner[near], cell[:, near], centre[:, near]
-        keep = tris.sq_dist(centre, owner) <= limit * limit
+        flat = tris.flat | ~(length > 0)  # no reliable normal: every cell of the box, exact test only
+        h = max(float(np.median(edge)) / _GRID_CELLS_PER_EDGE, delta / 2.0, 1e-300)
+        margin = delta * (1 + _SLACK)
+        while True:
+            reach = delta + h * np.sqrt(3.0) / 2.0
+            origin = lo_t.min(axis=1) - reach - h
+            dims = np.floor((hi_t.max(axis=1) + reach - origin) / h).astype(np.int64) + 2
+            # A cell lists a face when some point of the cell (a cube) can lie within delta of it. Three
+            # necessary conditions select the cells: the cube meets the face's box grown by delta (here), it
+            # meets the face's plane grown by delta (`_slab_cells`), and its centre lies within
+            # delta + (half the cube's diagonal) of the face (below).
+            c0 = np.floor((lo_t - margin - origin[:, None]) / h - _CELL_PAD).astype(np.int64)
+            c1 = np.floor((hi_t + margin - origin[:, None]) / h + _CELL_PAD).astype(np.int64)
+            span = c1 - c0 + 1  # (3, m) cells per axis
+            if (span.prod(axis=0).sum() <= max(_GRID_BUDGET, 8 * len(tris))
+                    and float(np.prod(dims.astype(float))) < 2.0**62):
+                break
+            h *= 1.25
+        self.h, self.origin, self.dims = h, origin, dims
+        limit = reach * (1 + _SLACK)
+        # Half-thickness of the slab of centres whose cube meets the plane grown by delta.
+        slab = (0.5 * h * np.abs(normal).sum(axis=0) + delta) * (1 + _SLACK)
+        owner, cell = self._slab_cells(tris, normal, flat, c0, span, slab)
+        # Keep the cells whose centre is within the limit of the face (exact distance).
+        keep = tris.sq_dist(origin[:, None] + (cell + 0.5) * h, owner) <= limit * limit
         key = self._key(cell[:, keep])
         owner = owner[keep]
-        order = np.argsort(key, kind="stable")
+        order = np.argsort(key)  # any order of the faces within a cell (the query breaks ties by index)
         key = key[order]
         self.cell_face = owner[order]
         first = np.ones(len(key), dtype=bool)
@@ -279,6 +296,46 @@ class GridIndex:
         self.cell_key = key[first]
         self.cell_start = np.flatnonzero(first)
         self.cell_count = np.diff(np.append(self.cell_start, len(key)))
+        # A dense table from key to listed cell when it is small beside the lists (a lookup instead of a
+        # binary search per point).
+        self.table = None
+        if float(np.prod(dims.astype(float))) <= _DENSE_PER_PAIR * len(key):
+            self.table = np.full(int(np.prod(dims)), -1, dtype=np.int64)
+            self.table[self.cell_key] = np.arange(len(self.cell_key))
+
+    def _slab_cells(self, tris, normal, flat, c0, span, slab):
+        """Candidate (face, cell) pairs: for each face, the columns of its box of cells along the axis its
+        normal is closest to, each cut to the cells whose centre lies within slab (m,) of the face's plane
+        (all of the column for a flat face). Returns owner (n,) int64 and cell (3, n) int64."""
+        h, origin = self.h, self.origin
+        axis = np.argmax(np.abs(normal), axis=0)  # (m,) column axis of each face
+        owners, cells = [], []
+        for k in range(3):  # the faces of each column axis together: axes are then plain rows
+            i, j = (k + 1) % 3, (k + 2) % 3
+            faces = np.flatnonzero(axis == k)
+            si, sj, sk = span[i, faces], span[j, faces], span[k, faces]
+            col, local = _ragged_arange(si * sj)
+            ci = c0[i, faces][col] + local // sj[col]
+            cj = c0[j, faces][col] + local % sj[col]
+            f = faces[col]
+            # The plane's k-coordinate above each column's centre, and the slab's half-height along k.
+            a, n = np.take(tris.a, f, axis=1), np.take(normal, f, axis=1)
+            is_flat = flat[f]
+            nk = np.where(is_flat, 1.0, n[k])
+            zk = a[k] - (n[i] * (origin[i] + (ci + 0.5) * h - a[i]) + n[j] * (origin[j] + (cj + 0.5) * h - a[j])) / nk
+            half = slab[f] / np.abs(nk)
+            k0 = c0[k, f]
+            k1 = k0 + sk[col] - 1
+            lo = np.ceil((zk - half - origin[k]) / h - 0.5 - _CELL_PAD)
+            hi = np.floor((zk + half - origin[k]) / h - 0.5 + _CELL_PAD)
+            lo = np.where(is_flat, k0, np.clip(lo, k0, k1 + 1)).astype(np.int64)
+            hi = np.where(is_flat, k1, np.clip(hi, k0 - 1, k1)).astype(np.int64)
+            c, local = _ragged_arange(np.maximum(hi - lo + 1, 0))
+            cell = np.empty((3, len(c)), dtype=np.int64)
+            cell[i], cell[j], cell[k] = ci[c], cj[c], lo[c] + local
+            owners.append(f[c])
+            cells.append(cell)
+        return np.concatenate(owners), np.concatenate(cells, axis=1)
 
     def _key(self, cell: np.ndarray) -> np.ndarray:
         return (cell[0] * self.dims[1] + cell[1]) * self.dims[2] + cell[2]
@@ -286,13 +343,27 @@ class GridIndex:
     def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Same contract as `TriangleIndex.query`."""
         points = np.asarray(points, dtype=np.float64)
+        return self.finish(points, *self.settle(points), self.delta)
+
+    def settle(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The grid's answers alone: dist (q,), exact where it is <= delta (else an upper bound, or inf when
+        the point's cell lists no face), and face (q,): the largest index among the nearest faces listed."""
         dist = np.full(len(points), np.inf)
         face = np.zeros(len(points), dtype=np.int64)
-        order = _morton_order(points)
-        for s in range(0, len(points), _CHUNK):
-            idx = order[s : s + _CHUNK]
-            dist[idx], face[idx] = self._query_block(points[idx])
-        redo = np.flatnonzero(~(dist <= self.delta))
+        # Each point on its own (no order needed), blocks on threads (numpy releases the GIL in its loops).
+        n_blocks = max(-(-len(points) // _CHUNK), min(_threads(), len(points) // _MIN_THREAD_POINTS), 1)
+        bounds = np.linspace(0, len(points), n_blocks + 1).astype(np.int64)
+
+        def block(i):
+            a, b = bounds[i], bounds[i + 1]
+            dist[a:b], face[a:b] = self._query_block(points[a:b])
+
+        _map(block, range(n_blocks))
+        return dist, face
+
+    def finish(self, points, dist, face, within: float):
+        """`settle`'s answers kept where dist <= within (<= delta), the fallback's elsewhere (in place)."""
+        redo = np.flatnonzero(~(dist <= within))
         if redo.size:
             dist[redo], face[redo] = self.fallback.query(points[redo])
         return dist, face
@@ -302,9 +373,13 @@ class GridIndex:
         face = np.zeros(len(points), dtype=np.int64)
         cell = np.floor((points - self.origin) / self.h).astype(np.int64).T
         inside = ((cell >= 0) & (cell < self.dims[:, None])).all(axis=0)
-        key = np.where(inside, self._key(cell), -1)
-        pos = np.minimum(np.searchsorted(self.cell_key, key), len(self.cell_key) - 1)
-        count = np.where(self.cell_key[pos] == key, self.cell_count[pos], 0)
+        if self.table is not None:
+            pos = np.where(inside, self.table[np.where(inside, self._key(cell), 0)], -1)
+            count = np.where(pos >= 0, self.cell_count[pos], 0)
+        else:
+            key = np.where(inside, self._key(cell), -1)
+            pos = np.minimum(np.searchsorted(self.cell_key, key), len(self.cell_key) - 1)
+            count = np.where(self.cell_key[pos] == key, self.cell_count[pos], 0)
         has = np.flatnonzero(count)
         if has.size == 0:
             return dist, face
@@ -312,10 +387,35 @@ class GridIndex:
         owner, local = _ragged_arange(count)
         cand = self.cell_face[self.cell_start[pos[has]][owner] + local]
         d2 = self.tris.sq_dist(np.take(np.ascontiguousarray(points[has].T), owner, axis=1), cand)
-        best, best_face = _segment_argmin(d2, cand, count)
+        seg = np.cumsum(count) - count
+        best = np.minimum.reduceat(d2, seg)
+        best_face = np.maximum.reduceat(np.where(d2 <= best[owner], cand, -1), seg)  # ties: largest index
         dist[has] = np.sqrt(best)
         face[has] = best_face
         return dist, face
+
+
+def _threads() -> int:
+    """Threads for work split in blocks: the cores this process may use, at most _MAX_THREADS."""
+    return max(1, min(_MAX_THREADS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                      else os.cpu_count() or 1))
+
+
+def _map(fn, items) -> None:
+    """fn(item) for each item, on up to `_threads` threads (in this thread when one suffices)."""
+    items = list(items)
+    if len(items) <= 1 or _threads() == 1:
+        for item in items:
+            fn(item)
+        return
+    with ThreadPoolExecutor(max_workers=min(_threads(), len(items))) as pool:
+        for _ in pool.map(fn, items):  # re-raises a block's exception here
+            pass
+
+
+def _workers(n: int) -> int:
+    """Threads for a KD-tree query of n points: one for a small query (starting threads costs more)."""
+    return -1 if n >= _THREADED_QUERY else 1
 
 
 def _dot3(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -344,11 +444,21 @@ def nearest_triangles(corners: np.ndarray, points: np.ndarray) -> tuple[np.ndarr
     if len(points) < 8 * len(tris) or len(points) < 8 * _GRID_PILOT:
         return tree.query(points)
     pilot = np.random.default_rng(0).choice(len(points), _GRID_PILOT, replace=False)
-    pilot_dist, _ = tree.query(points[pilot])
     # A tiny floor keeps points lying on the surface (distance ~1e-17 from rounding) on the grid's side.
     floor = 1e-9 * float(np.sqrt(_sq_norm(corners[1] - corners[0])).max())
-    delta = max(float(np.quantile(pilot_dist, _GRID_QUANTILE)), floor)
-    grid = GridIndex(tris, delta, tree)
+    # The grid's margin delta is the _GRID_QUANTILE quantile of the pilot points' exact distances. The grid
+    # measures them itself: built with a margin no smaller than the largest order statistic the quantile
+    # reads (bounded above by the distances of the pilot points to the faces of their nearest pieces), it
+    # settles those order statistics exactly.
+    k = min(_PILOT_PIECES, len(tree.parent))
+    _, piece = tree.tree.query(points[pilot], k=k, workers=1)
+    pts = np.ascontiguousarray(np.repeat(points[pilot], k, axis=0).T)
+    bound = np.sqrt(tris.sq_dist(pts, tree.parent[piece.reshape(-1)]).reshape(-1, k).min(axis=1))
+    need = int(np.ceil((_GRID_PILOT - 1) * _GRID_QUANTILE))
+    grid = GridIndex(tris, max(float(np.partition(bound, need)[need]), floor), tree)
     if len(grid.cell_face) > _GRID_MAX_LIST * len(grid.cell_key):
         return tree.query(points)  # points far from the mesh: lists too long for the grid to pay off
-    return grid.query(points)
+    dist, face = grid.settle(points)
+    pilot_dist = np.where(dist[pilot] <= grid.delta, dist[pilot], np.inf)
+    delta = max(float(np.quantile(pilot_dist, _GRID_QUANTILE)), floor)
+    return grid.finish(points, dist, face, delta)

@@ -32,6 +32,7 @@ import scipy.sparse.linalg as spla
 from .._mesh.arrays import face_normals
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
+_ROWS = 32_768  # rows per block of closest_barycentric
 HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
 
 
@@ -41,7 +42,8 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
     samples of zero weight are left out."""
     area = 0.5 * np.linalg.norm(face_normals(V, F), axis=1)
     wv = np.bincount(F.ravel(), weights=np.repeat(area / 3, 3), minlength=len(V))
-    P = np.concatenate([V, V[F].mean(1)])
+    centroid = np.stack([np.take(V[:, i], F).sum(1) / 3 for i in range(3)], 1)  # V[F].mean(1), in a third of the time
+    P = np.concatenate([V, centroid])
     w = np.concatenate([wv, area])
     lab = np.concatenate([part, part[F[:, 0]]])
     keep = w > 0
@@ -68,35 +70,34 @@ def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spar
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(q,3) barycentric coordinates of the point of triangle (a, b, c) nearest to p, row by row (Ericson,
     Real-Time Collision Detection 5.1.5: vertex, edge or interior region)."""
+    out = np.empty((len(p), 3))
+    for s in range(0, len(p), _ROWS):  # blocks of rows: the temporaries stay in cache
+        out[s : s + _ROWS] = _closest_barycentric(p[s : s + _ROWS], a[s : s + _ROWS], b[s : s + _ROWS],
+                                                  c[s : s + _ROWS])
+    return out
+
+
+def _closest_barycentric(p, a, b, c):
     ab, ac = b - a, c - a
     d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
     d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
     d5, d6 = np.einsum("ij,ij->i", ab, p - c), np.einsum("ij,ij->i", ac, p - c)
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    q = len(p)
-    out = np.zeros((q, 3))
-    done = np.zeros(q, bool)
-
-    def put(mask, u, v, w):
-        m = mask & ~done
-        out[m] = np.stack([u, v, w], 1)[m]
-        done[m] = True
-
-    one, zero = np.ones(q), np.zeros(q)
+    # The first region that holds (np.select: the first true condition) gives the coordinates.
+    regions = [(d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6),
+               (vc <= 0) & (d1 >= 0) & (d3 <= 0), (vb <= 0) & (d2 >= 0) & (d6 <= 0),
+               (va <= 0) & (d4 >= d3) & (d5 >= d6)]
     with np.errstate(divide="ignore", invalid="ignore"):
-        put((d1 <= 0) & (d2 <= 0), one, zero, zero)
-        put((d3 >= 0) & (d4 <= d3), zero, one, zero)
-        put((d6 >= 0) & (d5 <= d6), zero, zero, one)
-        t = np.nan_to_num(d1 / (d1 - d3))
-        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), 1 - t, t, zero)
-        t = np.nan_to_num(d2 / (d2 - d6))
-        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), 1 - t, zero, t)
-        t = np.nan_to_num((d4 - d3) / ((d4 - d3) + (d5 - d6)))
-        put((va <= 0) & (d4 >= d3) & (d5 >= d6), zero, 1 - t, t)
+        t_ab = np.nan_to_num(d1 / (d1 - d3))
+        t_ac = np.nan_to_num(d2 / (d2 - d6))
+        t_bc = np.nan_to_num((d4 - d3) / ((d4 - d3) + (d5 - d6)))
         den = va + vb + vc
         den = np.where(den != 0, den, 1.0)
         v, w = vb / den, vc / den
-        put(np.ones(q, bool), 1 - v - w, v, w)
+    out = np.empty((len(p), 3))
+    out[:, 0] = np.select(regions, [1.0, 0.0, 0.0, 1 - t_ab, 1 - t_ac, 0.0], 1 - v - w)
+    out[:, 1] = np.select(regions, [0.0, 1.0, 0.0, t_ab, 0.0, 1 - t_bc], v)
+    out[:, 2] = np.select(regions, [0.0, 0.0, 1.0, 0.0, t_ac, t_bc], w)
     return out
 
 
