@@ -1,5 +1,7 @@
 """Golden-output cases: the fixed list of `qemjax.simplify` calls whose outputs must stay bit-identical, and
-the hash of one result. Used by ``tests/test_golden.py`` and ``experiments/golden.py`` (which writes
+the hash of one result. Every case runs ``method="classic"`` (``QEM()``, the default until the default was
+chosen by ranking) unless it names another, so those hashes are the ones the package gave before; the
+``default/`` cases pin `qemjax.QEM.default` (what `simplify` runs when no method is given). Used by ``tests/test_golden.py`` and ``experiments/golden.py`` (which writes
 ``tests/golden_hashes.json``). Plain module (no pytest): the script imports it with ``tests/`` on sys.path.
 
 A case is an id (``parallel/cow/0.1``), a mesh (a file in ``../shared/meshes`` or a `qemjax.shapes` call) and
@@ -38,6 +40,7 @@ SHARED_MESHES = (
 # keep the golden test near 90 s on a 2-core machine: cow, spot, teapot (10-25 s each), max-planck-10k (~25 s),
 # fandisk (~200 s).
 GREEDY_MESHES = ("rocker-arm-small.off", "suzanne.obj", "beetle.obj")
+DEFAULT_MESHES = ("cow.obj", "beetle.obj", "fandisk.obj", "suzanne.obj", "truck.obj", "rocker-arm-small.off")
 RATIOS = (0.1, 0.01)
 
 # generated meshes (no files): name -> (qemjax.shapes function, its keywords, schedulers at 10 %)
@@ -90,6 +93,13 @@ def cases() -> list[Case]:
     for shape, (_, _, schedulers) in SHAPES.items():
         for scheduler in schedulers:
             out.append(Case(f"{scheduler}/{shape}/0.1", shape, {"ratio": 0.1, "scheduler": scheduler}))
+    for mesh in DEFAULT_MESHES:
+        for r in RATIOS:
+            out.append(Case(f"default/{_name(mesh)}/{r:g}", mesh, {"ratio": r, "method": "default"}))
+    for shape in ("bumpy-sphere-3", "torus-32x16"):
+        for scheduler in ("parallel", "greedy"):
+            out.append(Case(f"default/{scheduler}/{shape}/0.1", shape,
+                            {"ratio": 0.1, "scheduler": scheduler, "method": "default"}))
     ids = [c.id for c in out]
     assert len(set(ids)) == len(ids), "duplicate case ids"
     return out
@@ -125,7 +135,7 @@ def run(case: Case, resolve=None) -> dict:
     # (attributes='auto', issue #21) keeps, with seams that change their contractions; these hashes guard the
     # geometric path, identical to the default on every mesh without attributes (the other 45 cases). The
     # attribute path is tested in tests/test_attributes.py.
-    res = qemjax.simplify(mesh_input(case, resolve), **({"attributes": None} | case.kwargs))
+    res = qemjax.simplify(mesh_input(case, resolve), **({"attributes": None, "method": "classic"} | case.kwargs))
     return {"hash": digest(res), "faces_out": int(len(res.faces)), "contractions": int(len(res.history))}
 
 

@@ -96,7 +96,10 @@ def test_uv_follow_an_affine_field(scheduler, placement, weight, tol):
     1) every face's field is the same affine map, so the solved UVs are that map at the placement (up to
     the float32 state: ~4e-5)."""
     mesh = _linear_uv_grid()
-    r = qemjax.simplify(mesh, ratio=0.1, scheduler=scheduler, placement=placement, attribute_weights=weight)
+    # classic (QEM()): the default's re-fit moves positions after the attributes were interpolated, and its
+    # boundary weight 10 lets optimal placements leave the grid's border further than these tolerances
+    r = qemjax.simplify(mesh, ratio=0.1, scheduler=scheduler, placement=placement, attribute_weights=weight,
+                        method="classic")
     P = r.vertices[r.wedge_vertex]
     want = np.c_[0.3 + 0.5 * P[:, 0] - 0.2 * P[:, 1], 0.1 + 0.7 * P[:, 1] + 0.1 * P[:, 0]]
     assert np.abs(r.uv - want).max() < tol

@@ -150,7 +150,7 @@ def test_a_registered_model_runs_and_its_refresh_keeps_state_current(area_model,
     r = qemjax.simplify((V, F), target_faces=200, method=area_model, scheduler=scheduler)
     assert_valid(r, 200, V, F)
     # the same contractions as plain QEM (the extra state does not enter the cost)
-    plain = qemjax.simplify((V, F), target_faces=200, scheduler=scheduler)
+    plain = qemjax.simplify((V, F), target_faces=200, scheduler=scheduler, method="qem")
     assert np.array_equal(r.faces, plain.faces)
     # every output vertex's state is the area around it in the output mesh: refreshed, not merged
     want = _area_around(r.vertices, r.faces, len(r.vertices))
@@ -277,9 +277,9 @@ def test_greedy_link_rule_matches_the_set_reference(make):
 
 def test_area_power_keyword_reaches_the_model_and_one_is_the_default():
     mesh = shapes.bumpy_sphere(2, seed=3)
-    base = qemjax.simplify(mesh, ratio=0.2)
-    same = qemjax.simplify(mesh, ratio=0.2, area_power=1.0)
-    half = qemjax.simplify(mesh, ratio=0.2, area_power=0.5)
+    base = qemjax.simplify(mesh, ratio=0.2, method="qem")
+    same = qemjax.simplify(mesh, ratio=0.2, area_power=1.0, method="qem")
+    half = qemjax.simplify(mesh, ratio=0.2, area_power=0.5, method="qem")
     assert np.array_equal(base.vertices, same.vertices) and np.array_equal(base.faces, same.faces)
     assert half.stats["model"]["area_power"] == 0.5
     assert not np.array_equal(base.history.pairs, half.history.pairs)

@@ -34,14 +34,14 @@ def reachable(record, ratio):
 @pytest.mark.parametrize("name", ["suzanne.obj", "rocker-arm-small.off"])
 def test_greedy_replay_equals_simplify(name):
     path = shared_mesh(name)
-    res = qemjax.simplify(path, ratio=0.05, scheduler="greedy", attributes=None)
+    res = qemjax.simplify(path, ratio=0.05, scheduler="greedy", attributes=None, refit=0)
     same_mesh(res.replay(contractions=len(res.history)), res)
     for ratio in (0.5, 0.2):
         k = reachable(res.record, ratio)
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # reached exactly: no warning (attributes: named already)
             warnings.filterwarnings("ignore", "suzanne.obj carries")
-            direct = qemjax.simplify(path, target_faces=k, scheduler="greedy", attributes=None)
+            direct = qemjax.simplify(path, target_faces=k, scheduler="greedy", attributes=None, refit=0)
         assert len(direct.faces) == k
         same_mesh(res.replay(k), direct)
 
@@ -50,10 +50,10 @@ def test_one_pair_per_round_replay_equals_simplify():
     """With one pair per round the parallel scheduler's choices do not depend on the target: every prefix
     is a run of its own."""
     V, F = shapes.bumpy_sphere(2)
-    res = qemjax.simplify((V, F), ratio=0.1, schedule=one_pair_per_round())
+    res = qemjax.simplify((V, F), ratio=0.1, schedule=one_pair_per_round(), refit=0)
     for ratio in (0.6, 0.3):
         k = reachable(res.record, ratio)
-        same_mesh(res.replay(k), qemjax.simplify((V, F), target_faces=k, schedule=one_pair_per_round()))
+        same_mesh(res.replay(k), qemjax.simplify((V, F), target_faces=k, schedule=one_pair_per_round(), refit=0))
 
 
 @pytest.mark.shared
@@ -68,7 +68,7 @@ def test_parallel_replay_is_the_run_at_round_boundaries(monkeypatch):
             snaps.append((alive, self.faces.F[alive].copy(), self.VQ[: self.n, :3].copy()))
 
     monkeypatch.setattr(parallel, "_Run", Spy)
-    res = qemjax.simplify(shared_mesh("cow.obj"), ratio=0.05)
+    res = qemjax.simplify(shared_mesh("cow.obj"), ratio=0.05, refit=0)
     monkeypatch.undo()
     rec = res.record
     ends = np.flatnonzero(np.diff(np.append(rec.history.rounds, np.inf)) != 0) + 1  # prefix length per round
@@ -146,7 +146,7 @@ def test_non_manifold_record_replays_coincident_removals(scheduler):
     s = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
     V = np.concatenate([b.vertices, s.vertices + [2, 0, 0], b.vertices + [0, 3, 0]])
     F = np.concatenate([b.faces, s.faces + 8, b.faces + 16]).astype(np.int64)
-    res = qemjax.simplify((V, F), target_faces=12, scheduler=scheduler, pair_threshold=0.1)
+    res = qemjax.simplify((V, F), target_faces=12, scheduler=scheduler, pair_threshold=0.1, refit=0)
     rec = res.record
     assert rec.coincident.any()
     assert np.all(rec.removed_at[rec.coincident] >= 0)

@@ -41,7 +41,7 @@ def test_closest_barycentric_in_blocks_is_bitwise_one_block(monkeypatch):
 
 @pytest.mark.parametrize("target", [24, 200])
 def test_refit_lowers_the_distance_and_keeps_the_connectivity(bumpy, target):
-    plain = qemjax.simplify(bumpy, target_faces=target)
+    plain = qemjax.simplify(bumpy, target_faces=target, refit=0)
     fit = qemjax.simplify(bumpy, target_faces=target, refit=3)
     assert np.array_equal(fit.faces, plain.faces) and np.array_equal(fit.source_vertices, plain.source_vertices)
     assert np.array_equal(fit.history.positions, plain.history.positions)
@@ -61,7 +61,7 @@ def _turn(X0, X1, G):
 
 
 def test_refit_never_turns_a_face_by_the_flip_angle(bumpy):
-    r = qemjax.simplify(bumpy, target_faces=24)
+    r = qemjax.simplify(bumpy, target_faces=24, refit=0)
     free = _refit.refit(*bumpy, r.vertices, r.faces, 1, cos_max=-2.0)  # no limit
     assert np.count_nonzero(_turn(r.vertices, free, r.faces) >= 3.0) > 0  # so the limit below binds
     held = _refit.refit(*bumpy, r.vertices, r.faces, 1, cos_max=float(np.cos(np.radians(3.0))))
@@ -80,8 +80,10 @@ def test_samples_attach_to_faces_of_their_own_part():
 
 
 def test_refit_zero_is_the_plain_run_and_bad_values_are_refused(bumpy):
-    a, b = qemjax.simplify(bumpy, ratio=0.1), qemjax.simplify(bumpy, ratio=0.1, refit=0)
-    assert np.array_equal(a.vertices, b.vertices)
+    a, b = qemjax.simplify(bumpy, ratio=0.1, method="classic"), qemjax.simplify(bumpy, ratio=0.1, refit=0)
+    assert np.array_equal(a.vertices, b.vertices) != (qemjax.QEM.default().area_power != 1.0)  # classic = QEM()
+    assert np.array_equal(a.vertices, qemjax.simplify(bumpy, ratio=0.1, area_power=1.0, boundary_weight=100.0,
+                                                      refit=0).vertices)
     for bad in (-1, 1.5, True, "3"):
         with pytest.raises(ValueError, match="refit"):
             qemjax.simplify(bumpy, ratio=0.1, refit=bad)
@@ -95,7 +97,7 @@ def test_refit_in_a_batch_equals_simplify(bumpy):
 
 def test_the_record_keeps_the_contractions_positions(bumpy):
     """A replay rebuilds the contraction phase: its last level is the run without the re-fit."""
-    plain = qemjax.simplify(bumpy, target_faces=200)
+    plain = qemjax.simplify(bumpy, target_faces=200, refit=0)
     fit = qemjax.simplify(bumpy, target_faces=200, refit=1)
     last = fit.replay(contractions=len(fit.history.pairs))
     assert np.array_equal(last.faces, fit.faces)

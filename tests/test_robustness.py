@@ -324,7 +324,8 @@ def test_vertices_never_contracted_keep_their_input_position_exactly(offset):
     bit for bit."""
     V, F = shapes.icosphere(3)
     V, F = _lone_triangle_beside(V, F, offset=offset)
-    r = qemjax.simplify((V, F), target_faces=1 + 1200)  # of 1 + 1280: the sphere loses faces in pairs
+    r = qemjax.simplify((V, F), target_faces=1 + 1200, refit=0)  # of 1 + 1280: the sphere loses faces in pairs
+    # (refit=0: the re-fit, part of the default, moves every vertex it can towards the input surface)
     moved = np.isin(r.source_vertices, r.history.pairs[:, 0])
     assert (~moved).sum() > 400
     assert np.array_equal(r.vertices[~moved], r.input_vertices[r.source_vertices[~moved]])

@@ -128,7 +128,7 @@ def test_failed_cells_have_an_error_and_rerun(meshes, tmp_path):
 def test_metrics_columns(meshes):
     m = meshes["sphere"]
     df = qemjax.sweep({"sphere": m}, {"method": ["qem"]}, [0.5], metrics={"n_samples": 1000}, progress=False)
-    res = qemjax.simplify(m, ratio=0.5)
+    res = qemjax.simplify(m, ratio=0.5, method="qem")
     row = qemjax.metrics.evaluate(m, res, target_faces=res.stats["target_faces"], n_samples=1000)
     for k, v in row.items():
         assert k in df.columns

@@ -31,9 +31,11 @@ REGISTRY: dict[str, type[Method]] = {
 }
 # named configurations of a method: ``method="accurate"`` is ``QEM.accurate()``
 PRESETS = {
+    "default": QEM.default,
     "classic": QEM.classic,
     "accurate": QEM.accurate,
 }
+DEFAULT = "default"  # what `simplify` runs without a method (`QEM.default`)
 TERMS = {
     "regularize": Regularized,
     "area_weight": AreaTerm,

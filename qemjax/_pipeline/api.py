@@ -29,7 +29,7 @@ def methods() -> tuple[str, ...]:
 
 
 def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None = None,
-             max_error: float | None = None, method: Any = "qem", scheduler: Any = "parallel",
+             max_error: float | None = None, method: Any = "default", scheduler: Any = "parallel",
              topology: Topology | None = None, attributes: Any = "auto", feature_edges=None,
              progress: bool = False, **settings) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
@@ -45,8 +45,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     method: the cost model and all its settings, as an object (``qemjax.QEM(boundary_weight=10)``,
         ``qemjax.ESQEM(curvature_weight=0.1)``, ``qemjax.AreaDifference()``, ``qemjax.LineQEM()``, a
         preset such as ``qemjax.QEM.accurate()``, or a class registered with `qemjax.register_method`), or
-        its name (`qemjax.methods()`: ``'qem'``, ``'esqem'``, ``'area'``, ``'line'``, ``'classic'``,
-        ``'accurate'``), which means the object with its defaults. Each class's docstring lists its
+        its name (`qemjax.methods()`: ``'qem'``, ``'esqem'``, ``'area'``, ``'line'``, ``'probabilistic'``,
+        the presets ``'default'`` (`qemjax.QEM.default`: what runs when no method is given), ``'classic'``
+        (``QEM()``, the default until 0.2) and ``'accurate'``), which means the object with its defaults. Each class's docstring lists its
         settings; every method also has ``regularize``, ``area_weight`` and ``refit`` (`_costs.base.Method`).
     scheduler: ``'parallel'`` (default): rounds of many non-interacting contractions chosen by an
         independent-set rule; a `qemjax.Schedule`: the parallel scheduler with those tunables;

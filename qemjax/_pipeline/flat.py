@@ -99,7 +99,7 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
                             f"the method (method=qemjax.QEM(boundary_weight=10)), or by name: "
                             f"{sorted(table)}")
     if preset is not None:
-        if not (isinstance(method, str) and method == "qem"):
+        if not (isinstance(method, str) and method in ("qem", _costs.DEFAULT)):
             raise ValueError(f"preset={preset!r} names a method: give it as method={preset!r} alone")
         if preset not in _costs.PRESETS:
             raise ValueError(f"unknown preset {preset!r}; choose from {tuple(_costs.PRESETS)}")

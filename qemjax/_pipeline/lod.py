@@ -68,6 +68,9 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     contraction left: `simplify` warns, `SimplifyResult.stop_reason` says why), that level is the run's
     last mesh.
 
+    The levels are the contractions' own meshes, so the run skips the default's re-fit (``refit=0``; pass
+    ``refit=N`` to re-fit the result, whose last level then differs from ``chain.result``).
+
     Levels carry positions and faces only: the record replays contractions, not the wedges of appearance
     attributes, so ``attributes`` defaults to None here (what the input carries is named in a warning)
     and ``texture`` is refused.
@@ -76,6 +79,7 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
         raise ValueError("lod_chain keeps positions only: its levels are replayed from contractions; use "
                          "simplify(texture=...) for a textured result")
     options.setdefault("attributes", None)
+    options.setdefault("refit", 0)  # levels are replays of the contractions, which a re-fit would not reach
     ratios = tuple(float(r) for r in ratios)
     if not ratios:
         raise ValueError("give at least one ratio")

@@ -17,7 +17,8 @@ E_dist with the connectivity fixed):
    with a small damping λ = DAMPING · Σw / (vertices) towards the current positions x⁰, which holds a
    vertex that no sample sees and keeps the system definite;
 4. a face whose normal the new positions turn by the flip angle or more (``cos_max``, as the contractions'
-   rule) has the moves of its vertices halved, up to HALVINGS times, then undone (back to the position
+   rule), or turn against the input face it continues (``source_faces``; the output's validity rule), has the
+   moves of its vertices halved, up to HALVINGS times, then undone (back to the position
    before this round), repeated until no face turns.
 
 Steps 2-4 run ``rounds`` times (the attachment changes as the surface moves). Faces, connectivity and
@@ -116,9 +117,27 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
     vertices that keep their position exactly (locked ones; the others are fitted around them). X is
     returned unchanged (a copy) when there is nothing to fit."""
-    X = np.array(X, np.float64)
+    X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    # work in the input's unit frame (centre of its box, its largest extent as unit): squared distances
+    # and areas stay finite at any scale (1e-100 or 1e100 mesh units)
+    lo, hi = (V.min(0), V.max(0)) if len(V) else (np.zeros(3), np.ones(3))
+    centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
+    if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
+        return X0
+    X = (X0 - centre) / unit
+    Y = _fit((V - centre) / unit, F, X, G, rounds, cos_max, part, source_faces, fixed)
+    out = Y * unit + centre
+    moved = np.any(Y != X, axis=1) & np.all(np.isfinite(out), axis=1)  # the others keep X0 bit for bit
+    return np.where(moved[:, None], out, X0)
+
+
+def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
+    """`refit` in the unit frame."""
+    ns = None  # the normal of the input face each output face continues
+    if source_faces is not None:
+        ns = face_normals(V, F[np.asarray(source_faces, np.int64)])
     if part is None or source_faces is None:
         part, gpart = np.zeros(len(V), np.int64), np.zeros(len(G), np.int64)
     else:
@@ -152,9 +171,13 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
         if not np.all(np.isfinite(Y)):
             break
         n0 = face_normals(X, G)
+        agreed = None if ns is None else np.einsum("ij,ij->i", n0, ns) > 0
         cut = np.zeros(k, np.int64)  # times each vertex's move was halved (HALVINGS + 1: undone)
         while True:  # each pass only shortens moves, and an undone one stays undone: it ends
-            bad = _turned(n0, face_normals(Y, G), cos_max)
+            n1 = face_normals(Y, G)
+            bad = _turned(n0, n1, cos_max)
+            if ns is not None:  # nor may a face come to point against the input face it continues
+                bad |= agreed & (np.einsum("ij,ij->i", n1, ns) <= 0)
             new = np.unique(G[bad])
             new = new[cut[new] <= HALVINGS]
             if len(new) == 0:

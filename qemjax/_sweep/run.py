@@ -159,7 +159,7 @@ def _applicable(combo: tuple) -> tuple:
         return (("method", params["method"]),)  # a peer: no setting of qemjax's applies
     table = _flat.options()
     try:
-        method = _costs.resolve(params.get("method", params.get("preset") or "qem"))
+        method = _costs.resolve(params.get("method", params.get("preset") or _costs.DEFAULT))
     except ValueError:
         return combo  # simplify reports the bad method, per cell
     have = {f.name for f in dataclasses.fields(method)}
