@@ -10,8 +10,9 @@ A variant is ``LABEL`` or ``LABEL:key=value,...``: ``rev=REV`` runs qemjax as it
 (unpacked by `ab_compare.load_old`, in this process); other keys set the QEM model's fields
 (``placement``, ``cond_eps``, ``rank_eps``, ``max_shift``, ``area_weighted``, ``area_power``,
 ``boundary_weight``), other numeric keywords of ``simplify`` (``refit``) are passed to it, and
-``preset=NAME`` passes ``simplify(preset=NAME)``; ``method=NAME`` runs another registered method (its
-QEM fields set as above). ``--warm`` times each qemjax run after an untimed one. So the table before and
+``preset=NAME`` passes ``simplify(preset=NAME)``; ``method=NAME`` runs another registered method or
+preset (its QEM fields set as above); without either, the revision's own default method runs.
+``--warm`` times each qemjax run after an untimed one. So the table before and
 after a change comes from one command::
 
     python experiments/rank_peers.py --variant old:rev=02a1390 --variant rank:placement=rank
@@ -79,20 +80,25 @@ def variant_runner(label: str, rev: str | None, settings: dict):
         import qemjax as package
     costs = package._costs
     preset = settings.pop("preset", None)  # a simplify(preset=...) name
-    base_method = settings.pop("method", "qem")  # a registered method (its fields: the QEM ones it shares)
-    if hasattr(package, "_flat"):  # every setting of a method, Topology or Attributes by its name
-        table = package._flat.options()
+    base_method = settings.pop("method", None)  # a registered method (its fields: the QEM ones it shares)
+    # every setting of a method, Topology or Attributes by its name: `_pipeline.flat` (`_flat` before the
+    # layout regroup, 61c71ce)
+    flat = getattr(getattr(package, "_pipeline", None), "flat", None) or getattr(package, "_flat", None)
+    if flat is not None:
+        table = flat.options()
         unknown = set(settings) - set(table)
         if unknown:
             raise SystemExit(f"unknown setting(s) {sorted(unknown)}; choose from {sorted(table)} or preset")
         keywords = {k: v if isinstance(v, bool) or v is None
                     else (None if str(v).lower() == "none" else float(v)) if table[k].default is None
                     else type(table[k].default)(v) for k, v in settings.items()}
-        method = preset or base_method
+        if preset or base_method:  # else the package's own default method
+            keywords["method"] = preset or base_method
 
         def run_flat(V, F, target):
-            return package.simplify((V, F), target_faces=target, method=method, **keywords)
+            return package.simplify((V, F), target_faces=target, **keywords)
         return run_flat
+    base_method = base_method or "qem"  # the default method of revisions before settings-as-objects
     # an older revision: its flat keywords, and QEM fields without a keyword as a registered subclass
     fields = {f.name: f for f in dataclasses.fields(costs.QEM)}
     params = inspect.signature(package.simplify).parameters
