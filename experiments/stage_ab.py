@@ -21,8 +21,7 @@ sys.path.insert(0, str(HERE))
 
 import ab_compare  # noqa: E402
 import meshes as bench_meshes  # noqa: E402
-
-STAGES = ("topology_s", "kernels_s", "select_s", "validity_s", "contract_s")
+from round_profile import STAGES  # noqa: E402  (the scheduler's stage timers in stats)
 
 
 def main(argv=None) -> int:

@@ -135,14 +135,13 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
 
 def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
     """`refit` in the unit frame."""
-    ns = None  # the normal of the input face each output face continues
-    if source_faces is not None:
-        ns = face_normals(V, F[np.asarray(source_faces, np.int64)])
-    if part is None or source_faces is None:
+    src = None if source_faces is None else F[np.asarray(source_faces, np.int64)]  # each output face's input face
+    ns = None if src is None else face_normals(V, src)  # its normal
+    if part is None or src is None:
         part, gpart = np.zeros(len(V), np.int64), np.zeros(len(G), np.int64)
     else:
         part = np.asarray(part, np.int64)
-        gpart = part[F[np.asarray(source_faces, np.int64), 0]]
+        gpart = part[src[:, 0]]
     P, w, spart = samples(V, F, part)
     k = len(X)
     if rounds <= 0 or len(G) == 0 or len(P) == 0:
