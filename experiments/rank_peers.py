@@ -10,7 +10,8 @@ A variant is ``LABEL`` or ``LABEL:key=value,...``: ``rev=REV`` runs qemjax as it
 (unpacked by `ab_compare.load_old`, in this process); other keys set the QEM model's fields
 (``placement``, ``cond_eps``, ``rank_eps``, ``max_shift``, ``area_weighted``, ``area_power``,
 ``boundary_weight``), other numeric keywords of ``simplify`` (``refit``) are passed to it, and
-``preset=NAME`` passes ``simplify(preset=NAME)``; ``method=NAME`` runs another registered method or
+``preset=NAME`` passes ``simplify(preset=NAME)``; ``schedule.FIELD=VALUE`` (e.g. ``schedule.gate=2``) runs the
+parallel scheduler with a `qemjax.Schedule` of those fields; ``method=NAME`` runs another registered method or
 preset (its QEM fields set as above); without either, the revision's own default method runs.
 ``--warm`` times each qemjax run after an untimed one. So the table before and
 after a change comes from one command::
@@ -80,6 +81,11 @@ def variant_runner(label: str, rev: str | None, settings: dict):
         import qemjax as package
     costs = package._costs
     preset = settings.pop("preset", None)  # a simplify(preset=...) name
+    # schedule.FIELD=VALUE: the parallel scheduler's `Schedule` with those fields (issue 33: fewer rounds)
+    schedule = {k.split(".", 1)[1]: float(settings.pop(k)) for k in list(settings) if k.startswith("schedule.")}
+    if schedule:
+        ints = {"tail", "max_passes"}
+        schedule = package.Schedule(**{k: int(v) if k in ints else v for k, v in schedule.items()})
     base_method = settings.pop("method", None)  # a registered method (its fields: the QEM ones it shares)
     # every setting of a method, Topology or Attributes by its name: `_pipeline.flat` (`_flat` before the
     # layout regroup, 61c71ce)
@@ -94,6 +100,8 @@ def variant_runner(label: str, rev: str | None, settings: dict):
                     else type(table[k].default)(v) for k, v in settings.items()}
         if preset or base_method:  # else the package's own default method
             keywords["method"] = preset or base_method
+        if schedule:
+            keywords["scheduler"] = schedule
 
         def run_flat(V, F, target):
             return package.simplify((V, F), target_faces=target, **keywords)
@@ -126,6 +134,9 @@ def variant_runner(label: str, rev: str | None, settings: dict):
         method = name
     else:
         method = base_method
+
+    if schedule:
+        keywords["scheduler"] = schedule
 
     def run(V, F, target):
         return package.simplify((V, F), target_faces=target, method=method, **keywords)

@@ -48,6 +48,7 @@ def test_refit_lowers_the_distance_and_keeps_the_connectivity(bumpy, target):
     assert np.array_equal(fit.vertex_error, plain.vertex_error)
     assert not np.array_equal(fit.vertices, plain.vertices)
     assert fit.stats["refit"] == 3 and plain.stats["refit"] == 0
+    assert fit.stats["refit_s"] > 0 and plain.stats["refit_s"] == 0
     assert_valid(fit, target, *bumpy)
     d0, d1 = surface_distance(bumpy, (plain.vertices, plain.faces)), surface_distance(bumpy, (fit.vertices, fit.faces))
     assert d1["rms"] < 0.9 * d0["rms"]

@@ -332,7 +332,7 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
                            run_stop_reason=out.stop_reason)
         if target and len(Fout) <= target and out.stop_reason == "blocked":
             out = dataclasses.replace(out, stop_reason="target")  # splitting spent what contractions could not reach
-    refit_rounds, refit_skipped = setup.refit, None
+    refit_rounds, refit_skipped, refit_s = setup.refit, None, 0.0
     if refit_rounds and appearance and appearance.get("uv") is not None:
         # moved positions would leave their texture coordinates behind (the textured example's UV deviation
         # 0.0011 -> 0.016, experiments/refit_uv.py): with UVs kept, positions stay where the contractions put them
@@ -342,8 +342,10 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
         if appearance:  # seam vertices (two or more wedges) stay on the input's seams
             seam = np.bincount(appearance["wedge_vertex"], minlength=len(vout)) > 1
             held = seam if held is None else (held | seam)
+        t_refit = time.perf_counter()
         vout = _refit.refit(V, F, vout, Fout, refit_rounds, setup.cos_max, g.parts[1], fids,
                             fixed=held)
+        refit_s = time.perf_counter() - t_refit
     stop = out.stop_reason
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
@@ -375,7 +377,8 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
         rejected_by=out.rejected_by, blocked_by=out.blocked_by, model=model.describe(),
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
-        max_error_limit=err if math.isfinite(err) else None, refit=refit_rounds, error_unit=model.error_unit)
+        max_error_limit=err if math.isfinite(err) else None, refit=refit_rounds, refit_s=refit_s,
+        error_unit=model.error_unit)
     if refit_skipped:
         stats["refit_skipped"] = refit_skipped
     if job.tracker is not None:
