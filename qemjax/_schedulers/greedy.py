@@ -10,7 +10,8 @@ batched price and merge on the device rows.
 Models whose price reads only the pair's two rows (`greedy_batches.eligible`: QEM without memoryless or
 attributes) run the same queue in verified speculative batches (`greedy_batches`): one merge and one
 price call per few dozen contractions instead of per contraction, with the same contractions in the same
-order. The others run the loop below, one contraction and one device round trip at a time.
+order (on a simple mesh in manifold mode, the usual case, with the host side compiled:
+`greedy_compiled`). The others run the loop below, one contraction and one device round trip at a time.
 """
 from __future__ import annotations
 

@@ -125,6 +125,15 @@ class _Step(NamedTuple):
     drop: tuple = ()
 
 
+def simple(F: np.ndarray) -> bool:
+    """No face with a repeated corner, no two faces with the same corners. In manifold mode a mesh stays
+    so (a contraction removes the faces with both endpoints, and one that would make two faces coincide is
+    refused), and the rules take shortcuts that rely on it."""
+    Fs = np.sort(np.asarray(F).reshape(-1, 3), axis=1)
+    return bool(np.all(Fs[:, 0] != Fs[:, 1]) and np.all(Fs[:, 1] != Fs[:, 2])
+                and len(np.unique(Fs, axis=0)) == len(Fs))
+
+
 class _Mesh:
     """Faces on the host as Python objects, cheap to test and change one contraction at a time: tri[f]
     the corners of face f, at[v] the set of live faces at v, alive[f], and nbr[v] v's pair partners. Sets
@@ -145,12 +154,7 @@ class _Mesh:
             nbr[a].add(b)
             nbr[b].add(a)
         self.nbr = [frozenset(s) for s in nbr]
-        # no face with a repeated corner, no two faces with the same corners: in manifold mode it stays so
-        # (a contraction removes the faces with both endpoints, and one that would make two faces coincide
-        # is refused), and the rules below take shortcuts that rely on it
-        Fs = np.sort(np.asarray(F).reshape(-1, 3), axis=1)
-        self.simple = bool(np.all(Fs[:, 0] != Fs[:, 1]) and np.all(Fs[:, 1] != Fs[:, 2])
-                           and len(np.unique(Fs, axis=0)) == len(Fs))
+        self.simple = simple(F)
 
     def corners(self, faces) -> set:
         return set(chain.from_iterable(map(self.tri.__getitem__, faces)))
@@ -727,7 +731,10 @@ class _Batches:
 
 def run(V, S, F, pairs, target_faces, model, options, progress):
     """`greedy.run` for an `eligible` model; pairs (k,2): the candidate pairs (edges and extra pairs,
-    each row sorted). Same return."""
+    each row sorted). Same return. Where `greedy_compiled.fits`, its compiled twin runs instead."""
+    compiled = _compiled()
+    if compiled is not None and compiled.fits(options, F):
+        return compiled.run(V, S, F, pairs, target_faces, model, options, progress)
     r = _Batches(V, S, F, pairs, target_faces, model, options, progress)
     r.push_all(pairs)
     r.loop()
@@ -744,3 +751,12 @@ def run(V, S, F, pairs, target_faces, model, options, progress):
         branches=r.branches, parts=np.array(r.history_parts, np.float64).reshape(-1, nparts + 1) if nparts else None,
         history_rounds=np.arange(len(r.history), dtype=np.int64), removed_at=r.removed_at,
         coincident=r.coincident)
+
+
+def _compiled():
+    """`greedy_compiled`, or None without numba (a core dependency; the Python loop above is its twin)."""
+    try:
+        from . import greedy_compiled
+    except ImportError:  # pragma: no cover
+        return None
+    return greedy_compiled

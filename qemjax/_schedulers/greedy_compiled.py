@@ -1,0 +1,281 @@
+"""The greedy queue's verified batches with their host side compiled (`greedy_jit`): the batch loop of
+`greedy_batches._Batches` (speculate, merge and price on the device, check the order, undo, commit), with
+the same contractions in the same order and the same outputs bit for bit (tests/test_greedy_compiled.py
+runs both on the same meshes). Used where `fits` holds: manifold mode on a simple mesh."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import jax.numpy as jnp
+import numpy as np
+from numba import types
+from numba.typed import Dict
+
+from . import greedy_jit as jit
+from . import outcome
+from .._kernels.flips import SLIVER
+from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
+from .greedy_batches import FIRST_BATCH, MAX_BATCH, PREFETCH, REBUILD, _ties, ordered_bits, simple
+from .queue import stop_report
+
+_M32 = 0xFFFFFFFF
+# first sizes (they grow when a batch needs more: `_Compiled.room`)
+ROOM, SLACK = 2, 1024  # pools and queue arrays: ROOM times what they start with, plus SLACK
+JOURNAL_ROWS, INTERVAL_ROWS = 1 << 16, 1 << 14  # a batch's journal and stale intervals
+
+
+def fits(options, F) -> bool:
+    """Whether `greedy_jit` covers the run: manifold mode on a `greedy_batches.simple` mesh (its rules
+    take the shortcuts those allow, and no contraction drops coincident faces)."""
+    return bool(options.preserve_topology) and simple(F)
+
+
+def _dict():
+    return Dict.empty(types.int64, types.int64)
+
+
+def queue_keys(P: np.ndarray, cost: np.ndarray, l2: np.ndarray) -> np.ndarray:
+    """Queue keys (k,3) uint64 of pairs P (k,2): `greedy_batches._entries`' fields, in three words."""
+    a, b = P[:, 0].astype(np.uint64), P[:, 1].astype(np.uint64)
+    K = np.empty((len(P), 3), np.uint64)
+    K[:, 0] = (ordered_bits(cost) << np.uint64(32)) | ordered_bits(l2)
+    K[:, 1] = (_ties(P[:, 0], P[:, 1]) << np.uint64(32)) | a
+    K[:, 2] = b
+    return K
+
+
+def _lists(n: int, owner: np.ndarray, item: np.ndarray):
+    """Per vertex lists (start, length, pool with as much room again) of ``item`` grouped by ``owner``."""
+    order = np.argsort(owner, kind="stable")
+    length = np.bincount(owner, minlength=n).astype(np.int64)
+    start = np.cumsum(length) - length
+    pool = np.empty(ROOM * len(item) + SLACK, np.int64)
+    pool[:len(item)] = item[order]
+    return start, length, pool
+
+
+def _grown(a: np.ndarray, size: int) -> np.ndarray:
+    out = np.zeros((size,) + a.shape[1:], a.dtype)
+    out[:len(a)] = a
+    return out
+
+
+class _Compiled:
+    """The run's state (arrays and typed dicts, as `greedy_jit` describes) and its batch loop."""
+
+    def __init__(self, V, S, F, pairs, target, model, options, progress):
+        n, m = len(V), len(F)
+        self.n, self.target, self.model, self.options, self.progress = n, target, model, options, progress
+        self.params = model.kernel_params()
+        self.scratch = n + 1  # a batch's merged rows go to rows scratch.. (row n stays zero)
+        self.VQ = np.zeros((bucket(n + 1 + MAX_BATCH), 3 + model.width), DTYPE)
+        self.VQ[:n, :3], self.VQ[:n, 3:] = V, S
+        self.VQd = jnp.asarray(self.VQ)
+        self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
+        self.T = np.array(F, np.int64).reshape(-1, 3)
+        self.alive = np.ones(m, bool)
+        self.fs, self.fl, self.fpool = _lists(n, self.T.reshape(-1), np.repeat(np.arange(m, dtype=np.int64), 3))
+        P = np.unique(np.asarray(pairs, np.int64).reshape(-1, 2), axis=0)
+        self.P0 = P = P[P[:, 0] != P[:, 1]]
+        self.ns, self.nl, self.npool = _lists(n, P[:, ::-1].reshape(-1), P.reshape(-1))
+        self.cnt = np.zeros((n, 3), np.int64)
+        cap = ROOM * len(P) + SLACK
+        self.heap = np.zeros(cap, np.int64)
+        self.K = np.zeros((cap, 3), np.uint64)
+        self.X = np.zeros((cap, 3), DTYPE)
+        self.cost = np.zeros(cap, DTYPE)
+        self.branch = np.zeros(cap, np.int64)
+        self.parts = np.zeros((cap, len(model.parts)), DTYPE)
+        self.cur, self.blocked = _dict(), _dict()
+        self.bat = np.zeros(n, np.int64)
+        self.steps = np.zeros((MAX_BATCH + 1, 10), np.int64)
+        self.iv = np.zeros((INTERVAL_ROWS, 5), np.int64)
+        self.J = np.zeros((JOURNAL_ROWS, 4), np.int64)
+        self.ver = np.full(n, -1, np.int64)
+        self.orig = np.zeros((MAX_BATCH + 1, self.VQ.shape[1]), DTYPE)
+        self.ctr = np.zeros(10, np.int64)
+        self.ctr[jit.C_FACES] = m
+        self.ctr[jit.C_FTOP], self.ctr[jit.C_NTOP] = 3 * m, 2 * len(P)  # the pools' ends
+        self.cos_max, self.sliver = np.float32(options.cos_max), np.float32(SLIVER)
+        self.history, self.history_parts = [], []
+        self.removed_at = np.full(m, -1, np.int64)
+        self.rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
+        self.branches = np.zeros(len(model.branches), np.int64)
+        self.max_cost_used = 0.0
+        self.stop = None
+        self.depth = FIRST_BATCH
+        self.batches = self.failed = 0
+
+    def arrays(self):
+        """The arrays and dicts `greedy_jit.speculate` takes after its settings, in its order."""
+        return (self.T, self.alive, self.fs, self.fl, self.fpool, self.ns, self.nl, self.npool, self.VQ, self.N0,
+                self.cnt, self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.cur, self.blocked,
+                self.bat)
+
+    def push_all(self):
+        """Every pair into the queue (stamps in row order, as `greedy_batches._Batches.push_all`)."""
+        P = self.P0
+        if not len(P):
+            return
+        d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
+        priced = start_price(self.model, self.VQd, P, self.params, None, self.n)()
+        self.push(P, priced, np.einsum("ij,ij->i", d, d))
+
+    def push(self, P, priced, l2, keys=None):
+        keys = queue_keys(P, priced.cost, l2) if keys is None else keys
+        self.room(stamps=len(P))
+        jit.push((P[:, 0] << 32) | P[:, 1], keys, priced.x, priced.cost, priced.branch.astype(np.int64),
+                 np.ascontiguousarray(priced.parts.T), self.heap, self.K, self.X, self.cost, self.branch,
+                 self.parts, self.cur, self.blocked, self.bat, self.ctr)
+
+    def room(self, stamps=0, full=False):
+        """Grow the arrays for ``stamps`` more pushes; with ``full`` (a batch stopped for room), all of them."""
+        ctr = self.ctr
+        need = ctr[jit.C_STAMP] + stamps + 1
+        if need > len(self.K) or full:
+            size = 2 * max(need, len(self.K))
+            self.K, self.X, self.cost = _grown(self.K, size), _grown(self.X, size), _grown(self.cost, size)
+            self.branch, self.parts = _grown(self.branch, size), _grown(self.parts, size)
+        if ctr[jit.C_HSIZE] + stamps > len(self.heap) or full:
+            self.heap = _grown(self.heap, 2 * (len(self.heap) + stamps))
+        if full:
+            self.J, self.iv = _grown(self.J, 2 * len(self.J)), _grown(self.iv, 2 * len(self.iv))
+        for top, s, ln, pool in ((jit.C_FTOP, self.fs, self.fl, "fpool"), (jit.C_NTOP, self.ns, self.nl, "npool")):
+            arr = getattr(self, pool)
+            if full or ctr[top] > 3 * len(arr) // 4:  # packed, with room for as much again (or more)
+                extra = 2 * max(len(arr), ln.sum(), SLACK) if full else max(ln.sum(), SLACK)
+                new, ctr[top] = jit.compact(s, ln, arr, extra)
+                setattr(self, pool, new)
+
+    # a batch ---------------------------------------------------------------------------------------
+
+    def batch(self):
+        ctr = self.ctr
+        if ctr[jit.C_HSIZE] > REBUILD * len(self.cur) + PREFETCH:  # mostly old entries: keep the current ones
+            jit.rebuild(self.heap, ctr, self.K, self.cur, self.blocked)
+        held, gone = _dict(), _dict()
+        opt = self.options  # (scalars of fixed types: one compiled specialisation)
+        jit.speculate(int(self.depth), int(self.target), float(opt.max_cost), bool(opt.keep_parts), self.cos_max,
+                      self.sliver, int(self.scratch), *self.arrays(), self.steps, self.iv, held, gone, self.ver,
+                      self.orig, self.J, ctr)
+        ns = int(ctr[jit.C_NSTEPS])
+        steps = self.steps[:ns].copy()
+        contracted = steps[steps[:, jit.S_KIND] == jit.CONTRACT]
+        rows = np.zeros((0, self.VQ.shape[1]), DTYPE)
+        if len(contracted):
+            P = contracted[:, [jit.S_A, jit.S_B]]
+            X = self.X[contracted[:, jit.S_STAMP]]
+            rows = np.concatenate([X, start_merge(self.model, self.VQd, P, X, self.params)()], 1)
+        niv = int(ctr[jit.C_NIV])
+        VQd, priced, keys = self.VQd, None, np.zeros((0, 3), np.uint64)
+        iv = self.iv[:niv].copy()
+        if niv:
+            VQd, priced, keys = self.price_intervals(iv, rows)
+        ok = int(jit.first_wrong(steps, self.K, iv, keys, ns))
+        self.batches += 1
+        if ok < ns:
+            self.failed += 1
+            self.depth = max(1, self.depth // 2)
+            jit.undo(int(steps[ok, jit.S_MARK]), self.T, self.alive, self.fs, self.fl, self.ns, self.nl, self.heap,
+                     self.K, self.cur, self.blocked, self.bat, self.J, ctr)
+            m = int(np.sum(steps[:ok, jit.S_KIND] == jit.CONTRACT))
+            self.VQ[contracted[m:, jit.S_A]] = self.orig[m:len(contracted)]  # their rows from before
+        elif ns == self.depth:
+            self.depth = min(MAX_BATCH, 2 * self.depth)
+        ctr[jit.C_JLEN] = 0
+        self.ver[contracted[:, jit.S_A]] = -1
+        m = int(np.sum(steps[:ok, jit.S_KIND] == jit.CONTRACT))  # the merged rows of the steps that stand
+        if m:
+            kept = contracted[:m, jit.S_A]
+            self.VQ[kept, 3:] = rows[:m, 3:]
+            VQd = set_rows(VQd, kept, rows[:m], size=MAX_BATCH)
+        self.VQd = VQd
+        jit.forget_gone(gone, ok, self.cur, self.blocked, self.bat)
+        if niv:
+            sel = jit.last_intervals(iv, int(niv), ok, gone)
+            if len(sel):
+                pk = iv[sel, jit.I_PAIR]
+                sub = priced._replace(x=priced.x[sel], cost=priced.cost[sel], branch=priced.branch[sel],
+                                      parts=priced.parts[:, sel])
+                self.push(np.stack([pk >> 32, pk & _M32], 1), sub, None, keys[sel])
+        self.record(steps[:ok][steps[:ok, jit.S_KIND] == jit.CONTRACT])
+        for code in steps[:ok][steps[:ok, jit.S_KIND] == jit.BLOCK, jit.S_CODE].tolist():
+            if code != outcome.BUDGET:
+                self.rejected_by[code] += 1
+        if np.any(steps[:ok, jit.S_KIND] == jit.STOP):
+            self.stop = "max_error"
+        self.room(full=bool(ctr[jit.C_FULL]))  # (a batch stopped for room: rare)
+
+    def price_intervals(self, iv, rows):
+        """`greedy_batches._Batches.price_intervals` (same kernel calls, same lengths)."""
+        ids = iv[:, [jit.I_RA, jit.I_RB]]
+        VQd = set_rows(self.VQd, self.scratch + np.arange(len(rows)), rows, size=MAX_BATCH) if len(rows) \
+            else self.VQd
+        priced = start_price(self.model, VQd, ids, self.params, None, self.n)()
+        self.VQ[self.scratch:self.scratch + len(rows), :3] = rows[:, :3]
+        first = ids.reshape(-1)
+        pos = self.VQ[first, :3]
+        moved = np.flatnonzero((first < self.n) & (self.ver[np.minimum(first, self.n - 1)] >= 0))
+        if len(moved):  # rows a later step of the batch changed: the positions from before
+            pos[moved] = self.orig[self.ver[first[moved]] - self.scratch, :3]
+        pos = pos.reshape(-1, 2, 3)
+        d = np.ascontiguousarray(pos[:, 0]) - np.ascontiguousarray(pos[:, 1])
+        l2 = np.einsum("ij,ij->i", d, d)
+        pk = iv[:, jit.I_PAIR]
+        return VQd, priced, queue_keys(np.stack([pk >> 32, pk & _M32], 1), priced.cost, l2)
+
+    def record(self, steps):
+        """The history of the contraction steps that stand, in order."""
+        history, parts = self.history, len(self.model.parts)
+        for a, b, s, left, nd, d0, d1 in steps[:, [jit.S_A, jit.S_B, jit.S_STAMP, jit.S_LEFT, jit.S_ND, jit.S_D0,
+                                                   jit.S_D1]].tolist():
+            step = len(history)
+            cost = float(self.cost[s])
+            history.append((a, b, self.X[s].copy(), cost))
+            self.branches[self.branch[s]] += 1
+            if cost > self.max_cost_used:
+                self.max_cost_used = cost
+            if parts:
+                self.history_parts.append(np.append(self.parts[s], cost))
+            self.removed_at[d0] = step
+            if nd > 1:
+                self.removed_at[d1] = step
+            if self.progress is not None:
+                self.progress(left)
+
+    def loop(self):
+        while self.stop is None and self.ctr[jit.C_FACES] > self.target and self.ctr[jit.C_HSIZE]:
+            self.batch()
+
+    def output(self):
+        """The faces as a `FaceLists`, and the queue as `queue.stop_report` reads it."""
+        from .._mesh.incidence import FaceLists
+        faces = FaceLists(self.T.astype(np.int32), self.n)
+        faces.alive = self.alive.copy()
+        faces.count = int(self.ctr[jit.C_FACES])
+        pairs, stamps = jit.export(self.cur)
+        bp, codes = jit.export(self.blocked)
+        pair = lambda p: (p >> 32, p & _M32)  # noqa: E731
+        q = SimpleNamespace(placed={pair(p): (None, None, c) for p, c in zip(pairs.tolist(), self.cost[stamps].tolist())},
+                            blocked={pair(p): c for p, c in zip(bp.tolist(), codes.tolist())})
+        return faces, q
+
+
+def run(V, S, F, pairs, target_faces, model, options, progress):
+    """`greedy_batches.run` where `fits` holds. Same return."""
+    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress)
+    r.push_all()
+    r.loop()
+    faces, q = r.output()
+    stop, blocked = r.stop, {}
+    if faces.count > target_faces:
+        stop, blocked = stop_report(faces, q, options, target_faces, stop)
+    nparts = len(model.parts)
+    return outcome.Outcome(
+        r.VQ[:len(V), :3], r.VQ[:len(V), 3:], faces.F, faces.alive, outcome.History.of(r.history),
+        stop or "target", blocked,
+        outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)),
+        rejected=int(r.rejected_by.sum()), rounds=len(r.history), worst_cost=r.max_cost_used,
+        branches=r.branches, parts=np.array(r.history_parts, np.float64).reshape(-1, nparts + 1) if nparts else None,
+        history_rounds=np.arange(len(r.history), dtype=np.int64), removed_at=r.removed_at,
+        coincident=np.zeros(len(F), bool))

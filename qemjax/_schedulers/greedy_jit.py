@@ -1,0 +1,648 @@
+"""The host side of the greedy queue's verified batches (`greedy_batches`), compiled (numba): the same
+pops, rules, contractions, journal and commits as `greedy_batches._Batches`, on integer arrays.
+
+Why: after the batching, a greedy run was Python bookkeeping (~150 µs per contraction on the bunny, no
+stage above a fifth of it: experiments/results/greedy_where.md); the same steps over arrays take a few
+µs. What stays in Python (`greedy_compiled`) is what needs the device: merging the batch's kept vertices
+and pricing its stale intervals, and the history. It covers the common case only (`greedy_compiled.fits`):
+manifold mode on a `simple` mesh (no face with a repeated corner, no two faces alike), where a contraction
+removes its pair's one or two faces and never drops coincident ones.
+
+Layout (one `State`, every field an array so that the kernels compile once and cache):
+* faces: ``T`` (m,3) corners, ``alive``; per vertex its faces and its pair partners as lists in a pool
+  (``fs``/``fl`` start and length into ``fpool``, ``ns``/``nl`` into ``npool``). A list that changes is
+  written anew at the pool's end, so that the journal restores a list by its (start, length).
+* queue: ``heap`` of stamps (one per push, never reused); a stamp's key ``K`` (3 uint64: ordered cost bits
+  << 32 | ordered squared-length bits, `queue.tie` << 32 | a, b), price ``X``, ``cost``, ``branch``,
+  ``parts``. Entries order by (K, stamp), as `greedy_batches`' ints do. ``cur`` {pair: current stamp},
+  ``blocked`` {pair: rule} and ``bat`` (blocked pairs per vertex); pairs are ints a << 32 | b, a < b.
+* a batch: ``steps`` rows (kind, a, b, journal mark, rule, stamp, faces left, dead faces), the stale
+  intervals ``iv`` rows (pair, first step, end step, row of a, row of b), ``held``/``gone`` {pair: index}
+  (as in `greedy_batches`), ``ver`` (the scratch row of a vertex kept in this batch, else -1), ``orig`` (its
+  row before), and the journal ``J`` rows (kind, index, old, old).
+* ``ctr``: the counters (named by the C_* indices).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from . import outcome
+
+BUDGET, TOPOLOGY, FLIP, PART, COINCIDENT = outcome.BUDGET, outcome.TOPOLOGY, outcome.FLIP, outcome.PART, \
+    outcome.COINCIDENT
+CONTRACT, BLOCK, STOP = 0, 1, 2
+S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_D0, S_D1 = range(10)  # columns of ``steps``
+I_PAIR, I_START, I_END, I_RA, I_RB = range(5)  # columns of ``iv``
+C_FACES, C_FTOP, C_NTOP, C_HSIZE, C_STAMP, C_JLEN, C_NSTEPS, C_NIV, C_DONE, C_FULL = range(10)
+J_HEAP, J_ALIVE, J_AT, J_NBR, J_TRI, J_COUNT, J_CUR, J_BLOCKED = range(8)
+OPEN = 1 << 62
+M32 = 0xFFFFFFFF
+
+
+@njit(cache=True, inline="always")
+def _less(K, s, t):
+    """Whether entry s ranks before entry t: by key, then stamp."""
+    for i in range(3):
+        if K[s, i] != K[t, i]:
+            return K[s, i] < K[t, i]
+    return s < t
+
+
+@njit(cache=True)
+def heap_push(heap, ctr, K, s):
+    i = ctr[C_HSIZE]
+    ctr[C_HSIZE] = i + 1
+    while i > 0:
+        up = (i - 1) >> 1
+        if not _less(K, s, heap[up]):
+            break
+        heap[i] = heap[up]
+        i = up
+    heap[i] = s
+
+
+@njit(cache=True)
+def heap_pop(heap, ctr, K):
+    n = ctr[C_HSIZE] - 1
+    ctr[C_HSIZE] = n
+    top, last = heap[0], heap[n]
+    i = 0
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and _less(K, heap[c + 1], heap[c]):
+            c += 1
+        if not _less(K, heap[c], last):
+            break
+        heap[i] = heap[c]
+        i = c
+    if n > 0:
+        heap[i] = last
+    return top
+
+
+@njit(cache=True)
+def heapify(heap, ctr, K, stamps):
+    """The heap of ``stamps`` (any order)."""
+    ctr[C_HSIZE] = 0
+    for s in stamps:
+        heap_push(heap, ctr, K, s)
+
+
+@njit(cache=True)
+def rebuild(heap, ctr, K, cur, blocked):
+    """The heap of the current, unblocked entries (old entries dropped)."""
+    out = np.empty(len(cur), np.int64)
+    k = 0
+    for p, s in cur.items():
+        if p not in blocked:
+            out[k] = s
+            k += 1
+    heapify(heap, ctr, K, out[:k])
+
+
+@njit(cache=True, inline="always")
+def _pair(u, w):
+    return (u << 32) | w if u < w else (w << 32) | u
+
+
+@njit(cache=True, inline="always")
+def _journal(J, ctr, kind, i, o0, o1):
+    j = ctr[C_JLEN]
+    J[j, 0], J[j, 1], J[j, 2], J[j, 3] = kind, i, o0, o1
+    ctr[C_JLEN] = j + 1
+
+
+@njit(cache=True, inline="always")
+def _has(pool, start, length, v):
+    for i in range(start, start + length):
+        if pool[i] == v:
+            return True
+    return False
+
+
+@njit(cache=True)
+def flips(VQ, N0, T, f, corner, x, cos_max, sliver):
+    """`flips.flips_host_faces` for face f with its corner ``corner`` moved to x: the same float32
+    operations in the same order (products, then sums x + y, then + z; each rounded to float32)."""
+    g = np.empty((3, 3), np.float32)
+    for c in range(3):
+        for i in range(3):
+            g[c, i] = VQ[T[f, c], i]
+    q = g.copy()
+    for i in range(3):
+        q[corner, i] = x[i]
+    u0, v0, u1, v1 = g[1] - g[0], g[2] - g[0], q[1] - q[0], q[2] - q[0]
+    n0 = np.empty(3, np.float32)
+    n1 = np.empty(3, np.float32)
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        n0[i] = u0[j] * v0[k] - u0[k] * v0[j]
+        n1[i] = u1[j] * v1[k] - u1[k] * v1[j]
+    e1, e2 = q[2] - q[1], q[0] - q[2]
+    ref = N0[f]
+    d11 = n1[0] * n1[0] + n1[1] * n1[1] + n1[2] * n1[2]
+    d01 = n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2]
+    d00 = n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2]
+    de0 = u1[0] * u1[0] + u1[1] * u1[1] + u1[2] * u1[2]
+    de1 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]
+    de2 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]
+    dr1 = ref[0] * n1[0] + ref[1] * n1[1] + ref[2] * n1[2]
+    drr = ref[0] * ref[0] + ref[1] * ref[1] + ref[2] * ref[2]
+    l1 = np.float32(np.sqrt(d11))
+    if d01 <= cos_max * np.float32(np.sqrt(d00)) * l1:
+        return True
+    longest2 = de0 if (de0 >= de1 or de0 != de0) else de1  # np.maximum: a NaN wins
+    longest2 = longest2 if (longest2 >= de2 or longest2 != longest2) else de2
+    if l1 <= sliver * longest2 and cos_max > -1.0:
+        return True
+    return dr1 <= cos_max * np.float32(np.sqrt(drr)) * l1
+
+
+@njit(cache=True)
+def link_common(T, fs, fl, fpool, cnt, a, b, nshared, out):
+    """`greedy_batches._Mesh.link_common` on a simple mesh: the common neighbours of a and b into
+    ``out`` (their number), or -1 where the link rule fails. ``cnt`` (n,3): zeros, left zeros."""
+    if nshared < 1 or nshared > 2:
+        return -1
+    for side in range(2):  # corners of a's faces counted in column 0, of b's in column 1
+        v = a if side == 0 else b
+        for i in range(fs[v], fs[v] + fl[v]):
+            for c in T[fpool[i]]:
+                cnt[c, side] += 1
+    k = 0
+    bound = np.zeros(2, np.bool_)  # a (b) on a boundary: a neighbour counted once
+    for side in range(2):
+        v = a if side == 0 else b
+        for i in range(fs[v], fs[v] + fl[v]):
+            for c in T[fpool[i]]:
+                if c != v and cnt[c, side] == 1:
+                    bound[side] = True
+                if side == 0 and cnt[c, 1] > 0 and c != a and c != b and cnt[c, 2] == 0:
+                    cnt[c, 2] = 1
+                    if k < 2:
+                        out[k] = c
+                    k += 1
+    for side in range(2):  # back to zeros
+        v = a if side == 0 else b
+        for i in range(fs[v], fs[v] + fl[v]):
+            for c in T[fpool[i]]:
+                cnt[c, 0] = cnt[c, 1] = cnt[c, 2] = 0
+    if k != nshared:
+        return -1
+    if nshared == 2:
+        if bound[0] and bound[1]:
+            return -1
+        for j in range(2):
+            c = out[j]
+            # k distinct faces at c need k <= C(d, 2) of its d neighbours: 4 faces or more, 4 or more
+            if fl[c] <= 3 and _distinct_corners(T, fs, fl, fpool, c) - 1 <= 3:
+                return -1
+    return k
+
+
+@njit(cache=True)
+def _distinct_corners(T, fs, fl, fpool, c):
+    seen = np.empty(3 * fl[c], np.int64)
+    k = 0
+    for i in range(fs[c], fs[c] + fl[c]):
+        for v in T[fpool[i]]:
+            new = True
+            for j in range(k):
+                if seen[j] == v:
+                    new = False
+                    break
+            if new:
+                seen[k] = v
+                k += 1
+    return k
+
+
+@njit(cache=True)
+def _set_list(start, length, pool, ctr, top, v, items, k):
+    """v's list := items[:k], written at the pool's end (the old list stays where it was)."""
+    t = ctr[top]
+    pool[t:t + k] = items[:k]
+    start[v], length[v] = t, k
+    ctr[top] = t + k
+
+
+@njit(cache=True)
+def _unblock(p, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat):
+    """Back in the queue at its stored price (a new stamp with the current entry's key and price)."""
+    _journal(J, ctr, J_BLOCKED, p, blocked[p], 0)
+    del blocked[p]
+    bat[p >> 32] -= 1
+    bat[p & M32] -= 1
+    old = cur[p]
+    s = ctr[C_STAMP] + 1
+    ctr[C_STAMP] = s
+    K[s] = K[old]
+    X[s] = X[old]
+    cost[s], branch[s] = cost[old], branch[old]
+    parts[s] = parts[old]
+    _journal(J, ctr, J_CUR, p, old, 0)
+    cur[p] = s
+    heap_push(heap, ctr, K, s)
+
+
+@njit(cache=True)
+def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
+              T, alive, fs, fl, fpool, ns, nl, npool, VQ, N0, cnt,
+              heap, K, X, cost, branch, parts, cur, blocked, bat,
+              steps, iv, held, gone, ver, orig, J, ctr):
+    """`greedy_batches._Batches.speculate` (with its `check` and `contract`): pop and apply up to ``depth``
+    steps into ``steps``; ctr[C_NSTEPS] of them. Stops early, with ctr[C_FULL] = 1, before a step that
+    would not fit the arrays (the caller grows them; a shorter batch gives the same run)."""
+    ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = 0
+    common = np.empty(2, np.int64)
+    A = np.empty(64, np.int64)
+    B = np.empty(64, np.int64)
+    buf = np.empty(64, np.int64)
+    while ctr[C_FACES] > target and ctr[C_NSTEPS] < depth:
+        s = -1
+        while ctr[C_HSIZE] > 0:  # the next live entry
+            t = heap[0]
+            p = np.int64(K[t, 1] & np.uint64(M32)) << 32 | np.int64(K[t, 2])
+            if cur.get(p, -1) != t or p in blocked:  # an old entry: never current again
+                heap_pop(heap, ctr, K)
+                continue
+            if p in held or p in gone:  # current again if this batch's step is undone
+                if ctr[C_JLEN] + 1 > len(J):
+                    ctr[C_FULL] = 1
+                    break
+                heap_pop(heap, ctr, K)
+                _journal(J, ctr, J_HEAP, t, 0, 0)
+                continue
+            s = t
+            break
+        if s < 0:
+            break
+        k = ctr[C_NSTEPS]
+        a, b = p >> 32, p & M32
+        step = steps[k]
+        step[S_A], step[S_B], step[S_STAMP], step[S_MARK] = a, b, s, ctr[C_JLEN]
+        if cost[s] > max_cost:  # left in the queue: the stop report counts it
+            step[S_KIND] = STOP
+            ctr[C_NSTEPS] = k + 1
+            break
+        if ctr[C_JLEN] + 2 > len(J):
+            ctr[C_FULL] = 1
+            break
+        heap_pop(heap, ctr, K)
+        _journal(J, ctr, J_HEAP, s, 0, 0)
+        # the rules (`greedy_batches._Batches.check`)
+        if fl[a] > len(A) or fl[b] > len(B):
+            A = np.empty(2 * max(fl[a], fl[b]), np.int64)
+            B = np.empty(2 * max(fl[a], fl[b]), np.int64)
+        nd = nka = nkb = 0
+        d0 = d1 = -1
+        for i in range(fs[a], fs[a] + fl[a]):
+            f = fpool[i]
+            if _has(fpool, fs[b], fl[b], f):
+                if nd == 0:
+                    d0 = f
+                else:
+                    d1 = f
+                nd += 1
+            else:
+                A[nka] = f
+                nka += 1
+        for i in range(fs[b], fs[b] + fl[b]):
+            f = fpool[i]
+            if f != d0 and f != d1:
+                B[nkb] = f
+                nkb += 1
+        code = -1
+        ncommon = 0
+        if ctr[C_FACES] - nd < target:
+            code = BUDGET
+        else:
+            ncommon = link_common(T, fs, fl, fpool, cnt, a, b, nd, common)
+            if ncommon < 0:
+                code = TOPOLOGY
+            elif keep_parts and nka == 0 and nkb == 0:
+                code = PART
+        if code < 0:
+            x = X[s]
+            for i in range(nka + nkb):
+                f = A[i] if i < nka else B[i - nka]
+                v = a if i < nka else b
+                corner = 0 if T[f, 0] == v else (1 if T[f, 1] == v else 2)
+                if flips(VQ, N0, T, f, corner, x, cos_max, sliver):
+                    code = FLIP
+                    break
+        if code < 0 and ncommon == 2:  # (a, u, w) and (b, u, w) would coincide
+            u, w = common[0], common[1]
+            hit_a = hit_b = False
+            for i in range(fs[u], fs[u] + fl[u]):
+                f = fpool[i]
+                if _has(fpool, fs[w], fl[w], f):
+                    for j in range(nka):
+                        hit_a |= A[j] == f
+                    for j in range(nkb):
+                        hit_b |= B[j] == f
+            if hit_a and hit_b:
+                code = COINCIDENT
+        if code >= 0:
+            _journal(J, ctr, J_BLOCKED, p, -1, 0)
+            blocked[p] = code
+            bat[a] += 1
+            bat[b] += 1
+            step[S_KIND], step[S_CODE] = BLOCK, code
+            ctr[C_NSTEPS] = k + 1
+            continue
+        # room for the contraction (else: the pop undone, and the batch ends here)
+        unb = 0  # at most this many blocked pairs come back
+        for i in range(ns[a], ns[a] + nl[a]):
+            unb += bat[npool[i]]
+        for i in range(ns[b], ns[b] + nl[b]):
+            unb += bat[npool[i]]
+        need_f, need_n, need_buf = nka + nkb, nl[a] + nl[b], nka + nkb + nl[a] + nl[b]
+        for f in (d0, d1):
+            if f >= 0:
+                for c in T[f]:
+                    need_f += fl[c]
+                    need_buf = max(need_buf, fl[c])
+        for i in range(ns[b], ns[b] + nl[b]):
+            need_n += nl[npool[i]] + 1
+            need_buf = max(need_buf, nl[npool[i]] + 1)
+        need_j = 16 + 3 * nd + nkb + 2 * (nl[a] + nl[b]) + nl[b] + 2 * unb
+        if (ctr[C_JLEN] + need_j > len(J) or ctr[C_FTOP] + need_f > len(fpool)
+                or ctr[C_NTOP] + need_n > len(npool) or ctr[C_NIV] + nl[a] + nl[b] > len(iv)
+                or ctr[C_HSIZE] + unb > len(heap) or ctr[C_STAMP] + unb + 1 > len(K)):
+            ctr[C_JLEN] -= 1
+            heap_push(heap, ctr, K, s)
+            ctr[C_FULL] = 1
+            break
+        if need_buf > len(buf):
+            buf = np.empty(2 * need_buf, np.int64)
+        # the contraction (`greedy_batches._Batches.contract`)
+        for f in (d0, d1):
+            if f < 0:
+                continue
+            _journal(J, ctr, J_ALIVE, f, 1, 0)
+            alive[f] = False
+            for c in T[f]:
+                if c != a and c != b:
+                    _journal(J, ctr, J_AT, c, fs[c], fl[c])
+                    m = 0
+                    for i in range(fs[c], fs[c] + fl[c]):
+                        if fpool[i] != f:
+                            buf[m] = fpool[i]
+                            m += 1
+                    _set_list(fs, fl, fpool, ctr, C_FTOP, c, buf, m)
+        for i in range(nkb):
+            f = B[i]
+            for j in range(3):
+                if T[f, j] == b:
+                    _journal(J, ctr, J_TRI, f, j, b)
+                    T[f, j] = a
+        _journal(J, ctr, J_AT, a, fs[a], fl[a])
+        buf[:nka] = A[:nka]
+        buf[nka:nka + nkb] = B[:nkb]
+        _set_list(fs, fl, fpool, ctr, C_FTOP, a, buf, nka + nkb)
+        _journal(J, ctr, J_AT, b, fs[b], fl[b])
+        fl[b] = 0
+        _journal(J, ctr, J_COUNT, 0, ctr[C_FACES], 0)
+        ctr[C_FACES] -= nd
+        slot = ctr[C_DONE]
+        orig[slot] = VQ[a]
+        VQ[a, :3] = X[s]
+        ver[a] = scratch + slot
+        ctr[C_DONE] = slot + 1
+        # pair partners: b's become a's; pairs at b are gone, each's stale interval (if any) ends here
+        for i in range(ns[b], ns[b] + nl[b]):
+            w = npool[i]
+            if w != a:
+                _journal(J, ctr, J_NBR, w, ns[w], nl[w])
+                has_a = _has(npool, ns[w], nl[w], a)
+                m = 0
+                for jj in range(ns[w], ns[w] + nl[w]):
+                    if npool[jj] != b:
+                        buf[m] = npool[jj]
+                        m += 1
+                if not has_a:
+                    buf[m] = a
+                    m += 1
+                _set_list(ns, nl, npool, ctr, C_NTOP, w, buf, m)
+            q = _pair(w, b)
+            gone[q] = k
+            if q in held:
+                iv[held[q], I_END] = k
+                del held[q]
+        _journal(J, ctr, J_NBR, a, ns[a], nl[a])
+        m = 0
+        for i in range(ns[a], ns[a] + nl[a]):
+            if npool[i] != b:
+                buf[m] = npool[i]
+                m += 1
+        for i in range(ns[b], ns[b] + nl[b]):
+            w = npool[i]
+            if w != a and not _has(buf, 0, m, w):
+                buf[m] = w
+                m += 1
+        _set_list(ns, nl, npool, ctr, C_NTOP, a, buf, m)
+        _journal(J, ctr, J_NBR, b, ns[b], nl[b])
+        nl[b] = 0
+        # the pairs at a need new prices: held out of the queue, a new stale interval each
+        for i in range(ns[a], ns[a] + nl[a]):
+            w = npool[i]
+            vw = ver[w] if ver[w] >= 0 else w
+            q = _pair(a, w)
+            if q in held:
+                iv[held[q], I_END] = k
+            r = ctr[C_NIV]
+            held[q] = r
+            iv[r, I_PAIR], iv[r, I_START], iv[r, I_END] = q, k, OPEN
+            iv[r, I_RA], iv[r, I_RB] = (scratch + slot, vw) if a < w else (vw, scratch + slot)
+            ctr[C_NIV] = r + 1
+            if q in blocked:
+                _journal(J, ctr, J_BLOCKED, q, blocked[q], 0)
+                del blocked[q]
+                bat[a] -= 1
+                bat[w] -= 1
+        # blocked pairs around a may have become valid: back in the queue at their stored price
+        for i in range(ns[a], ns[a] + nl[a]):
+            u = npool[i]
+            if bat[u] > 0:
+                for jj in range(ns[u], ns[u] + nl[u]):
+                    q = _pair(u, npool[jj])
+                    if q in blocked and q not in gone:
+                        _unblock(q, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat)
+        step[S_KIND], step[S_LEFT], step[S_ND], step[S_D0], step[S_D1] = CONTRACT, ctr[C_FACES], nd, d0, d1
+        ctr[C_NSTEPS] = k + 1
+
+
+@njit(cache=True)
+def undo(mark, T, alive, fs, fl, ns, nl, heap, K, cur, blocked, bat, J, ctr):
+    """Every change journaled since ``mark``, undone (last first)."""
+    for j in range(ctr[C_JLEN] - 1, mark - 1, -1):
+        kind, i, o0, o1 = J[j, 0], J[j, 1], J[j, 2], J[j, 3]
+        if kind == J_HEAP:
+            heap_push(heap, ctr, K, i)
+        elif kind == J_ALIVE:
+            alive[i] = True
+        elif kind == J_AT:
+            fs[i], fl[i] = o0, o1
+        elif kind == J_NBR:
+            ns[i], nl[i] = o0, o1
+        elif kind == J_TRI:
+            T[i, o0] = o1
+        elif kind == J_COUNT:
+            ctr[C_FACES] = o0
+        elif kind == J_CUR:
+            cur[i] = o0
+        elif o0 < 0:  # J_BLOCKED: was not blocked
+            del blocked[i]
+            bat[i >> 32] -= 1
+            bat[i & M32] -= 1
+        else:
+            if i not in blocked:
+                bat[i >> 32] += 1
+                bat[i & M32] += 1
+            blocked[i] = o0
+    ctr[C_JLEN] = mark
+
+
+@njit(cache=True)
+def first_wrong(steps, K, iv, ikeys, n):
+    """`greedy_batches._Batches.first_wrong`: the first of the ``n`` steps that a stale interval open at
+    it (begun before it, not ended before it) ranks before; ``ikeys`` (niv,3) the intervals' keys."""
+    niv = len(ikeys)
+    h = np.empty(niv, np.int64)  # a heap of interval indices by key
+    hn = 0
+    i = 0
+    for k in range(n):
+        while i < niv and iv[i, I_START] < k:
+            j = hn
+            hn += 1
+            while j > 0:
+                up = (j - 1) >> 1
+                if not _key_less(ikeys, i, h[up]):
+                    break
+                h[j] = h[up]
+                j = up
+            h[j] = i
+            i += 1
+        while hn > 0 and iv[h[0], I_END] < k:
+            hn -= 1
+            last = h[hn]
+            j = 0
+            while True:
+                c = 2 * j + 1
+                if c >= hn:
+                    break
+                if c + 1 < hn and _key_less(ikeys, h[c + 1], h[c]):
+                    c += 1
+                if not _key_less(ikeys, h[c], last):
+                    break
+                h[j] = h[c]
+                j = c
+            if hn > 0:
+                h[j] = last
+        if hn > 0:
+            s, top = steps[k, S_STAMP], h[0]
+            for c in range(3):
+                if ikeys[top, c] != K[s, c]:
+                    if ikeys[top, c] < K[s, c]:
+                        return k
+                    break
+    return n
+
+
+@njit(cache=True, inline="always")
+def _key_less(keys, i, j):
+    for c in range(3):
+        if keys[i, c] != keys[j, c]:
+            return keys[i, c] < keys[j, c]
+    return False
+
+
+@njit(cache=True)
+def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocked, bat, ctr):
+    """Into the queue: pairs P (k,) with keys (k,3) and prices, a new stamp each, in order."""
+    for r in range(len(P)):
+        p = P[r]
+        s = ctr[C_STAMP] + 1
+        ctr[C_STAMP] = s
+        K[s] = ikeys[r]
+        X[s] = x[r]
+        cost[s], branch[s] = cst[r], br[r]
+        parts[s] = prt[r]
+        cur[p] = s
+        if p in blocked:
+            del blocked[p]
+            bat[p >> 32] -= 1
+            bat[p & M32] -= 1
+        heap_push(heap, ctr, K, s)
+
+
+@njit(cache=True)
+def forget_gone(gone, ok, cur, blocked, bat):
+    """Commit: the pairs the steps before ``ok`` removed leave the queue."""
+    for p, k in gone.items():
+        if k < ok:
+            cur.pop(p, 0)
+            if p in blocked:
+                del blocked[p]
+                bat[p >> 32] -= 1
+                bat[p & M32] -= 1
+
+
+@njit(cache=True)
+def last_intervals(iv, niv, ok, gone):
+    """Commit: each pair's last interval that began in a step before ``ok``, pairs the steps before ``ok``
+    removed left out; interval indices in order of the pairs' first interval."""
+    last = dict()
+    order = []
+    for r in range(niv):
+        if iv[r, I_START] >= ok:
+            break
+        p = iv[r, I_PAIR]
+        if p not in last:
+            order.append(p)
+        last[p] = r
+    out = np.empty(len(order), np.int64)
+    k = 0
+    for p in order:
+        if gone.get(p, ok) >= ok:
+            out[k] = last[p]
+            k += 1
+    return out[:k]
+
+
+@njit(cache=True)
+def compact(start, length, pool, extra):
+    """The lists moved to a new pool, packed (``extra`` free slots after)."""
+    total = 0
+    for v in range(len(start)):
+        total += length[v]
+    new = np.empty(total + extra, np.int64)
+    t = 0
+    for v in range(len(start)):
+        k = length[v]
+        new[t:t + k] = pool[start[v]:start[v] + k]
+        start[v] = t
+        t += k
+    return new, t
+
+
+@njit(cache=True)
+def fill_cur(P, stamps, cur):
+    for r in range(len(P)):
+        cur[P[r]] = stamps[r]
+
+
+@njit(cache=True)
+def export(d):
+    """A typed dict's keys and values as arrays."""
+    ks = np.empty(len(d), np.int64)
+    vs = np.empty(len(d), np.int64)
+    k = 0
+    for p, v in d.items():
+        ks[k], vs[k] = p, v
+        k += 1
+    return ks, vs
