@@ -53,7 +53,7 @@ def test_batched_queue_gives_the_one_at_a_time_result(case, monkeypatch):
         failed.append(self.failed)
 
     monkeypatch.setattr(greedy_batches._Batches, "loop", counting_loop)
-    monkeypatch.setattr(greedy_batches, "_compiled", lambda: None)  # this Python loop (its compiled twin:
+    monkeypatch.setattr(greedy, "_compiled", lambda: None)  # this Python loop (its compiled twin:
     # tests/test_greedy_compiled.py)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

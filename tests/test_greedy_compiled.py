@@ -12,7 +12,7 @@ import pytest
 import qemjax
 from qemjax import shapes
 from qemjax._kernels import flips as flips_mod
-from qemjax._schedulers import greedy_batches, greedy_compiled
+from qemjax._schedulers import greedy, greedy_batches, greedy_compiled
 from qemjax._schedulers import greedy_jit as jit
 from test_greedy_batches import CASES, TENT, _edges, _same
 
@@ -234,7 +234,7 @@ def test_compiled_queue_ends_in_the_python_batches_state(case, monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         qemjax.simplify(mesh, scheduler="greedy", **kw)
-        monkeypatch.setattr(greedy_batches, "_compiled", lambda: None)
+        monkeypatch.setattr(greedy, "_compiled", lambda: None)
         qemjax.simplify(mesh, scheduler="greedy", **kw)
     c, py = seen["compiled"], seen["python"]
     pairs, stamps = jit.export(c.cur)

@@ -60,6 +60,15 @@ def _on_boundary(ring: np.ndarray, v: int) -> bool:
     return bool(np.any(np.unique(others[others != v], return_counts=True)[1] == 1))
 
 
+def _compiled():
+    """`greedy_compiled`, or None without numba (a core dependency; `greedy_batches` is its Python twin)."""
+    try:
+        from . import greedy_compiled
+    except ImportError:  # pragma: no cover
+        return None
+    return greedy_compiled
+
+
 def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
         options: Options, progress=None, wedges=None, edges=None, part_scale=None, locks=None):
     """`_run` with Python's garbage collector paused (`common.gc_paused`)."""
@@ -82,6 +91,9 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
     from . import greedy_batches  # lazily: its module imports jax kernels only the batched path uses
 
     if locks is None and greedy_batches.eligible(model, wedges):  # the same run, contracted in verified batches
+        compiled = _compiled()
+        if compiled is not None and compiled.fits(options, F):  # (their host side compiled)
+            return compiled.run(V, S, F, pairs, target_faces, model, options, progress)
         return greedy_batches.run(V, S, F, pairs, target_faces, model, options, progress)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S

@@ -731,10 +731,7 @@ class _Batches:
 
 def run(V, S, F, pairs, target_faces, model, options, progress):
     """`greedy.run` for an `eligible` model; pairs (k,2): the candidate pairs (edges and extra pairs,
-    each row sorted). Same return. Where `greedy_compiled.fits`, its compiled twin runs instead."""
-    compiled = _compiled()
-    if compiled is not None and compiled.fits(options, F):
-        return compiled.run(V, S, F, pairs, target_faces, model, options, progress)
+    each row sorted). Same return."""
     r = _Batches(V, S, F, pairs, target_faces, model, options, progress)
     r.push_all(pairs)
     r.loop()
@@ -752,11 +749,3 @@ def run(V, S, F, pairs, target_faces, model, options, progress):
         history_rounds=np.arange(len(r.history), dtype=np.int64), removed_at=r.removed_at,
         coincident=r.coincident)
 
-
-def _compiled():
-    """`greedy_compiled`, or None without numba (a core dependency; the Python loop above is its twin)."""
-    try:
-        from . import greedy_compiled
-    except ImportError:  # pragma: no cover
-        return None
-    return greedy_compiled
