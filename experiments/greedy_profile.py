@@ -1,9 +1,10 @@
-"""Where a greedy run's time goes, per contraction: process CPU time of the verified batches' stages
-(`qemjax._schedulers.greedy_batches`), each timed by wrapping it, in µs per contraction, with the device
-calls (merge, price, row updates: the JAX dispatch and the wait) apart.
+"""Where a greedy run's time goes, per contraction: process CPU time of the verified batches' stages,
+each timed by wrapping it, in µs per contraction, with the device calls (merge, price, row updates: the
+JAX dispatch and the wait) apart. The compiled loop (`qemjax._schedulers.greedy_compiled`, the one a
+simple mesh in manifold mode takes) by default; ``--python``: the Python loop (`greedy_batches`).
 
     python experiments/greedy_profile.py                         # stanford-bunny -> 10 %
-    python experiments/greedy_profile.py --mesh cow.obj
+    python experiments/greedy_profile.py --mesh cow.obj --python
 
 Nested stages are indented under the stage that calls them (their time is part of it). One warm-up run
 first (compilation), then one timed run. CPU time, so other processes on a shared machine count less
@@ -21,19 +22,26 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent)]  # this checkout's qemjax
 
 import qemjax  # noqa: E402
-from qemjax._schedulers import greedy_batches as gb  # noqa: E402
+from qemjax._schedulers import greedy, greedy_batches as gb  # noqa: E402
+from qemjax._schedulers import greedy_compiled as gc  # noqa: E402
+from qemjax._schedulers import greedy_jit as jit  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "meshes"
 STAGES = [  # (name, depth): methods of greedy_batches._Batches, and the device calls
     ("batch", 0), ("speculate", 1), ("next_entry", 2), ("prefetch", 3), ("flip_tests", 4), ("check", 2),
     ("contract", 2), ("price_intervals", 1), ("first_wrong", 1), ("commit", 1), ("push", 2), ("record", 2),
     ("undo", 1), ("device: merge", 1), ("device: price", 1), ("device: set_rows", 1)]
+COMPILED = [  # (name, depth): methods of greedy_compiled._Compiled, kernels of greedy_jit, device calls
+    ("batch", 0), ("jit: speculate", 1), ("price_intervals", 1), ("jit: first_wrong", 1), ("jit: undo", 1),
+    ("jit: forget_gone", 1), ("jit: last_intervals", 1), ("push", 1), ("jit: push", 2), ("record", 1),
+    ("room", 1), ("jit: rebuild", 1), ("device: merge", 1), ("device: price", 1), ("device: set_rows", 1)]
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mesh", default="stanford-bunny.obj")
     ap.add_argument("--ratio", type=float, default=0.1)
+    ap.add_argument("--python", action="store_true", help="the Python loop (greedy_batches) instead")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     spent = {}
@@ -55,12 +63,19 @@ def main() -> int:
             return out
         return g
 
-    for name, _ in STAGES:
-        if not name.startswith("device"):
-            setattr(gb._Batches, name, timed(name, getattr(gb._Batches, name)))
-    gb.start_merge = timed("device: merge", gb.start_merge, waits=True)
-    gb.start_price = timed("device: price", gb.start_price, waits=True)
-    gb.set_rows = timed("device: set_rows", gb.set_rows)
+    stages = STAGES if args.python else COMPILED
+    if args.python:
+        greedy._compiled = lambda: None
+    for name, _ in stages:
+        if name.startswith("jit: "):
+            setattr(jit, name[5:], timed(name, getattr(jit, name[5:])))
+        elif not name.startswith("device"):
+            cls = gb._Batches if args.python else gc._Compiled
+            setattr(cls, name, timed(name, getattr(cls, name)))
+    for mod in (gb, gc):
+        mod.start_merge = timed("device: merge", mod.start_merge, waits=True)
+        mod.start_price = timed("device: price", mod.start_price, waits=True)
+        mod.set_rows = timed("device: set_rows", mod.set_rows)
     path = str(SHARED / args.mesh)
     qemjax.simplify(path, ratio=args.ratio, scheduler="greedy")  # warm-up
     spent.clear()
@@ -70,7 +85,7 @@ def main() -> int:
     n = res.stats["contractions"]
     print(f"{args.mesh} -> {args.ratio:g}: {n} contractions, wall {wall:.2f} s, cpu {cpu:.2f} s "
           f"({1e6 * cpu / n:.0f} µs per contraction)")
-    for name, depth in STAGES:
+    for name, depth in stages:
         if name in spent:
             print(f"  {'  ' * depth}{name:{24 - 2 * depth}s} {spent[name]:6.2f} s  {1e6 * spent[name] / n:6.1f} µs")
     outside = cpu - spent.get("batch", 0.0)
