@@ -11,6 +11,8 @@ import pytest
 
 import qemjax
 from qemjax import shapes
+
+pytest.importorskip("numba")  # a core dependency; without it the Python batches run (tests/test_greedy_batches.py)
 from qemjax._kernels import flips as flips_mod
 from qemjax._schedulers import greedy, greedy_batches, greedy_compiled
 from qemjax._schedulers import greedy_jit as jit
