@@ -250,3 +250,23 @@ def test_compiled_queue_ends_in_the_python_batches_state(case, monkeypatch):
         counts[v] = k
     assert np.array_equal(c.bat, counts)
     assert np.array_equal(c.alive, py.mesh.alive) and np.array_equal(c.T, np.array(py.mesh.tri))
+
+
+def test_kernels_stay_in_bounds():
+    """The compiled loop indexes its arrays unchecked: run the cases that push its room checks (arrays
+    grown from near-empty sizes, rollbacks, high-degree vertices) with numba's bounds checks on, in a
+    process of its own (a separately cached compilation), where an index past an array's end raises."""
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1",
+               NUMBA_CACHE_DIR=str(Path(tempfile.gettempdir()) / "qemjax-numba-boundscheck"))
+    here = Path(__file__).resolve()
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(here), "-k",
+                          "grows or bipyramid or grid-with-hole or two-parts"],
+                         cwd=here.parent.parent, env=env, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    assert " passed" in out.stdout

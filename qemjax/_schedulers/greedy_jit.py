@@ -257,6 +257,9 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
     steps into ``steps``; ctr[C_NSTEPS] of them. Stops early, with ctr[C_FULL] = 1, before a step that
     would not fit the arrays (the caller grows them; a shorter batch gives the same run)."""
     ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = 0
+    # the heap's size can come back to where it started plus every entry pushed since (an undo pushes
+    # back what the batch popped): the room check counts from there
+    most = ctr[C_HSIZE]
     common = np.empty(2, np.int64)
     A = np.empty(64, np.int64)
     B = np.empty(64, np.int64)
@@ -372,13 +375,14 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
         need_j = 16 + 3 * nd + nkb + 2 * (nl[a] + nl[b]) + nl[b] + 2 * unb
         if (ctr[C_JLEN] + need_j > len(J) or ctr[C_FTOP] + need_f > len(fpool)
                 or ctr[C_NTOP] + need_n > len(npool) or ctr[C_NIV] + nl[a] + nl[b] > len(iv)
-                or ctr[C_HSIZE] + unb > len(heap) or ctr[C_STAMP] + unb + 1 > len(K)):
+                or most + unb > len(heap) or ctr[C_STAMP] + unb + 1 > len(K)):
             ctr[C_JLEN] -= 1
             heap_push(heap, ctr, K, s)
             ctr[C_FULL] = 1
             break
         if need_buf > len(buf):
             buf = np.empty(2 * need_buf, np.int64)
+        most += unb
         # the contraction (`greedy_batches._Batches.contract`)
         for f in (d0, d1):
             if f < 0:
