@@ -16,6 +16,7 @@ pytest.importorskip("numba")  # a core dependency; without it the Python batches
 from qemjax._kernels import flips as flips_mod
 from qemjax._schedulers import greedy, greedy_batches, greedy_compiled
 from qemjax._schedulers import greedy_jit as jit
+from qemjax._schedulers import greedy_rules_jit as rules_jit
 from test_greedy_batches import CASES, TENT, _edges, _same
 
 
@@ -115,7 +116,7 @@ def test_compiled_queue_grows_its_arrays(monkeypatch):
 
 
 def test_flip_kernel_matches_numpy():
-    """`greedy_jit.flips` per face = `flips.flips_host_faces`, bit for bit in its float32 decisions: random
+    """`greedy_rules_jit.flips` per face = `flips.flips_host_faces`, bit for bit in its float32 decisions: random
     faces and moves, near-degenerate ones (collinear, zero area, tiny), three thresholds."""
     rng = np.random.default_rng(1)
     V = rng.normal(size=(60, 3)).astype(np.float32)
@@ -129,7 +130,7 @@ def test_flip_kernel_matches_numpy():
                  rng.normal(size=(len(F), 3))).astype(np.float32)
     for cos_max in (0.0, float(np.cos(np.radians(45))), -2.0):
         want = flips_mod.flips_host_faces(V, N0, F, np.arange(len(F)), k, X, cos_max)
-        got = [jit.flips(V, N0, F, f, k[f], X[f], np.float32(cos_max), np.float32(flips_mod.SLIVER))
+        got = [rules_jit.flips(V, N0, F, f, k[f], X[f], np.float32(cos_max), np.float32(flips_mod.SLIVER))
                for f in range(len(F))]
         assert np.array_equal(np.array(got), want)
         assert 0 < want.sum() < len(F)
@@ -138,7 +139,7 @@ def test_flip_kernel_matches_numpy():
 @pytest.mark.parametrize("make", [lambda: shapes.grid(7, hole=True), lambda: shapes.torus(1.0, 0.35, 10, 6),
                                   lambda: (np.zeros((5, 3)), TENT)], ids=["grid-with-hole", "torus", "tent"])
 def test_link_kernel_matches_python(make):
-    """`greedy_jit.link_common` = `greedy_batches._Mesh.link_common` for every edge of simple meshes and
+    """`greedy_rules_jit.link_common` = `greedy_batches._Mesh.link_common` for every edge of simple meshes and
     coarser versions of them (irregular valence, degree-3 vertices)."""
     V, F = make()
     meshes = [(V, F)]
@@ -156,7 +157,7 @@ def test_link_kernel_matches_python(make):
         for a, b in E.tolist():
             nshared = len(mesh.at[a] & mesh.at[b])
             want = mesh.link_common(a, b, nshared)
-            got = jit.link_common(Fm, fs, fl, fpool, cnt, a, b, nshared, out)
+            got = rules_jit.link_common(Fm, fs, fl, fpool, cnt, a, b, nshared, out)
             assert (got < 0) == (want is None), (a, b)
             if want is not None:
                 assert got == len(want) and set(out[:got].tolist()) == want, (a, b)

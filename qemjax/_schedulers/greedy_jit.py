@@ -1,5 +1,6 @@
 """The host side of the greedy queue's verified batches (`greedy_batches`), compiled (numba): the same
-pops, rules, contractions, journal and commits as `greedy_batches._Batches`, on integer arrays.
+pops, rules (`greedy_rules_jit`), contractions, journal and commits as `greedy_batches._Batches`, on
+integer arrays.
 
 Why: after the batching, a greedy run was Python bookkeeping (~150 µs per contraction on the bunny, no
 stage above a fifth of it: experiments/results/greedy_where.md); the same steps over arrays take a few
@@ -27,10 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from . import outcome
+from .greedy_rules_jit import has, rules
 
-BUDGET, TOPOLOGY, FLIP, PART, COINCIDENT = outcome.BUDGET, outcome.TOPOLOGY, outcome.FLIP, outcome.PART, \
-    outcome.COINCIDENT
 CONTRACT, BLOCK, STOP = 0, 1, 2
 S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_D0, S_D1 = range(10)  # columns of ``steps``
 I_PAIR, I_START, I_END, I_RA, I_RB = range(5)  # columns of ``iv``
@@ -115,111 +114,6 @@ def _journal(J, ctr, kind, i, o0, o1):
     ctr[C_JLEN] = j + 1
 
 
-@njit(cache=True, inline="always")
-def _has(pool, start, length, v):
-    for i in range(start, start + length):
-        if pool[i] == v:
-            return True
-    return False
-
-
-@njit(cache=True)
-def flips(VQ, N0, T, f, corner, x, cos_max, sliver):
-    """`flips.flips_host_faces` for face f with its corner ``corner`` moved to x: the same float32
-    operations in the same order (products, then sums x + y, then + z; each rounded to float32)."""
-    g = np.empty((3, 3), np.float32)
-    for c in range(3):
-        for i in range(3):
-            g[c, i] = VQ[T[f, c], i]
-    q = g.copy()
-    for i in range(3):
-        q[corner, i] = x[i]
-    u0, v0, u1, v1 = g[1] - g[0], g[2] - g[0], q[1] - q[0], q[2] - q[0]
-    n0 = np.empty(3, np.float32)
-    n1 = np.empty(3, np.float32)
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        n0[i] = u0[j] * v0[k] - u0[k] * v0[j]
-        n1[i] = u1[j] * v1[k] - u1[k] * v1[j]
-    e1, e2 = q[2] - q[1], q[0] - q[2]
-    ref = N0[f]
-    d11 = n1[0] * n1[0] + n1[1] * n1[1] + n1[2] * n1[2]
-    d01 = n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2]
-    d00 = n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2]
-    de0 = u1[0] * u1[0] + u1[1] * u1[1] + u1[2] * u1[2]
-    de1 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]
-    de2 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]
-    dr1 = ref[0] * n1[0] + ref[1] * n1[1] + ref[2] * n1[2]
-    drr = ref[0] * ref[0] + ref[1] * ref[1] + ref[2] * ref[2]
-    l1 = np.float32(np.sqrt(d11))
-    if d01 <= cos_max * np.float32(np.sqrt(d00)) * l1:
-        return True
-    longest2 = de0 if (de0 >= de1 or de0 != de0) else de1  # np.maximum: a NaN wins
-    longest2 = longest2 if (longest2 >= de2 or longest2 != longest2) else de2
-    if l1 <= sliver * longest2 and cos_max > -1.0:
-        return True
-    return dr1 <= cos_max * np.float32(np.sqrt(drr)) * l1
-
-
-@njit(cache=True)
-def link_common(T, fs, fl, fpool, cnt, a, b, nshared, out):
-    """`greedy_batches._Mesh.link_common` on a simple mesh: the common neighbours of a and b into
-    ``out`` (their number), or -1 where the link rule fails. ``cnt`` (n,3): zeros, left zeros."""
-    if nshared < 1 or nshared > 2:
-        return -1
-    for side in range(2):  # corners of a's faces counted in column 0, of b's in column 1
-        v = a if side == 0 else b
-        for i in range(fs[v], fs[v] + fl[v]):
-            for c in T[fpool[i]]:
-                cnt[c, side] += 1
-    k = 0
-    bound = np.zeros(2, np.bool_)  # a (b) on a boundary: a neighbour counted once
-    for side in range(2):
-        v = a if side == 0 else b
-        for i in range(fs[v], fs[v] + fl[v]):
-            for c in T[fpool[i]]:
-                if c != v and cnt[c, side] == 1:
-                    bound[side] = True
-                if side == 0 and cnt[c, 1] > 0 and c != a and c != b and cnt[c, 2] == 0:
-                    cnt[c, 2] = 1
-                    if k < 2:
-                        out[k] = c
-                    k += 1
-    for side in range(2):  # back to zeros
-        v = a if side == 0 else b
-        for i in range(fs[v], fs[v] + fl[v]):
-            for c in T[fpool[i]]:
-                cnt[c, 0] = cnt[c, 1] = cnt[c, 2] = 0
-    if k != nshared:
-        return -1
-    if nshared == 2:
-        if bound[0] and bound[1]:
-            return -1
-        for j in range(2):
-            c = out[j]
-            # k distinct faces at c need k <= C(d, 2) of its d neighbours: 4 faces or more, 4 or more
-            if fl[c] <= 3 and _distinct_corners(T, fs, fl, fpool, c) - 1 <= 3:
-                return -1
-    return k
-
-
-@njit(cache=True)
-def _distinct_corners(T, fs, fl, fpool, c):
-    seen = np.empty(3 * fl[c], np.int64)
-    k = 0
-    for i in range(fs[c], fs[c] + fl[c]):
-        for v in T[fpool[i]]:
-            new = True
-            for j in range(k):
-                if seen[j] == v:
-                    new = False
-                    break
-            if new:
-                seen[k] = v
-                k += 1
-    return k
-
-
 @njit(cache=True)
 def _set_list(start, length, pool, ctr, top, v, items, k):
     """v's list := items[:k], written at the pool's end (the old list stays where it was)."""
@@ -253,38 +147,22 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
               T, alive, fs, fl, fpool, ns, nl, npool, VQ, N0, cnt,
               heap, K, X, cost, branch, parts, cur, blocked, bat,
               steps, iv, held, gone, ver, orig, J, ctr):
-    """`greedy_batches._Batches.speculate` (with its `check` and `contract`): pop and apply up to ``depth``
-    steps into ``steps``; ctr[C_NSTEPS] of them. Stops early, with ctr[C_FULL] = 1, before a step that
-    would not fit the arrays (the caller grows them; a shorter batch gives the same run)."""
+    """`greedy_batches._Batches.speculate`: pop and apply up to ``depth`` steps into ``steps``;
+    ctr[C_NSTEPS] of them. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
+    (the caller grows them; a shorter batch gives the same run)."""
     ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = 0
     # the heap's size can come back to where it started plus every entry pushed since (an undo pushes
     # back what the batch popped): the room check counts from there
     most = ctr[C_HSIZE]
-    common = np.empty(2, np.int64)
-    A = np.empty(64, np.int64)
-    B = np.empty(64, np.int64)
-    buf = np.empty(64, np.int64)
+    common, info = np.empty(2, np.int64), np.empty(5, np.int64)
+    A, B, buf = np.empty(64, np.int64), np.empty(64, np.int64), np.empty(64, np.int64)
     while ctr[C_FACES] > target and ctr[C_NSTEPS] < depth:
-        s = -1
-        while ctr[C_HSIZE] > 0:  # the next live entry
-            t = heap[0]
-            p = np.int64(K[t, 1] & np.uint64(M32)) << 32 | np.int64(K[t, 2])
-            if cur.get(p, -1) != t or p in blocked:  # an old entry: never current again
-                heap_pop(heap, ctr, K)
-                continue
-            if p in held or p in gone:  # current again if this batch's step is undone
-                if ctr[C_JLEN] + 1 > len(J):
-                    ctr[C_FULL] = 1
-                    break
-                heap_pop(heap, ctr, K)
-                _journal(J, ctr, J_HEAP, t, 0, 0)
-                continue
-            s = t
-            break
+        s = _next_live(heap, K, cur, blocked, held, gone, J, ctr)
         if s < 0:
             break
         k = ctr[C_NSTEPS]
-        a, b = p >> 32, p & M32
+        a, b = np.int64(K[s, 1] & np.uint64(M32)), np.int64(K[s, 2])
+        p = a << 32 | b
         step = steps[k]
         step[S_A], step[S_B], step[S_STAMP], step[S_MARK] = a, b, s, ctr[C_JLEN]
         if cost[s] > max_cost:  # left in the queue: the stop report counts it
@@ -296,59 +174,10 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
             break
         heap_pop(heap, ctr, K)
         _journal(J, ctr, J_HEAP, s, 0, 0)
-        # the rules (`greedy_batches._Batches.check`)
         if fl[a] > len(A) or fl[b] > len(B):
-            A = np.empty(2 * max(fl[a], fl[b]), np.int64)
-            B = np.empty(2 * max(fl[a], fl[b]), np.int64)
-        nd = nka = nkb = 0
-        d0 = d1 = -1
-        for i in range(fs[a], fs[a] + fl[a]):
-            f = fpool[i]
-            if _has(fpool, fs[b], fl[b], f):
-                if nd == 0:
-                    d0 = f
-                else:
-                    d1 = f
-                nd += 1
-            else:
-                A[nka] = f
-                nka += 1
-        for i in range(fs[b], fs[b] + fl[b]):
-            f = fpool[i]
-            if f != d0 and f != d1:
-                B[nkb] = f
-                nkb += 1
-        code = -1
-        ncommon = 0
-        if ctr[C_FACES] - nd < target:
-            code = BUDGET
-        else:
-            ncommon = link_common(T, fs, fl, fpool, cnt, a, b, nd, common)
-            if ncommon < 0:
-                code = TOPOLOGY
-            elif keep_parts and nka == 0 and nkb == 0:
-                code = PART
-        if code < 0:
-            x = X[s]
-            for i in range(nka + nkb):
-                f = A[i] if i < nka else B[i - nka]
-                v = a if i < nka else b
-                corner = 0 if T[f, 0] == v else (1 if T[f, 1] == v else 2)
-                if flips(VQ, N0, T, f, corner, x, cos_max, sliver):
-                    code = FLIP
-                    break
-        if code < 0 and ncommon == 2:  # (a, u, w) and (b, u, w) would coincide
-            u, w = common[0], common[1]
-            hit_a = hit_b = False
-            for i in range(fs[u], fs[u] + fl[u]):
-                f = fpool[i]
-                if _has(fpool, fs[w], fl[w], f):
-                    for j in range(nka):
-                        hit_a |= A[j] == f
-                    for j in range(nkb):
-                        hit_b |= B[j] == f
-            if hit_a and hit_b:
-                code = COINCIDENT
+            A, B = np.empty(2 * max(fl[a], fl[b]), np.int64), np.empty(2 * max(fl[a], fl[b]), np.int64)
+        code = rules(a, b, X[s], ctr[C_FACES], target, keep_parts, cos_max, sliver, T, fs, fl, fpool, VQ, N0,
+                     cnt, A, B, common, info)
         if code >= 0:
             _journal(J, ctr, J_BLOCKED, p, -1, 0)
             blocked[p] = code
@@ -357,127 +186,168 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
             step[S_KIND], step[S_CODE] = BLOCK, code
             ctr[C_NSTEPS] = k + 1
             continue
-        # room for the contraction (else: the pop undone, and the batch ends here)
-        unb = 0  # at most this many blocked pairs come back
-        for i in range(ns[a], ns[a] + nl[a]):
-            unb += bat[npool[i]]
-        for i in range(ns[b], ns[b] + nl[b]):
-            unb += bat[npool[i]]
-        need_f, need_n, need_buf = nka + nkb, nl[a] + nl[b], nka + nkb + nl[a] + nl[b]
-        for f in (d0, d1):
-            if f >= 0:
-                for c in T[f]:
-                    need_f += fl[c]
-                    need_buf = max(need_buf, fl[c])
-        for i in range(ns[b], ns[b] + nl[b]):
-            need_n += nl[npool[i]] + 1
-            need_buf = max(need_buf, nl[npool[i]] + 1)
-        need_j = 16 + 3 * nd + nkb + 2 * (nl[a] + nl[b]) + nl[b] + 2 * unb
+        need_j, need_f, need_n, unb, need_buf = _needs(a, b, info, T, fl, ns, nl, npool, bat)
         if (ctr[C_JLEN] + need_j > len(J) or ctr[C_FTOP] + need_f > len(fpool)
                 or ctr[C_NTOP] + need_n > len(npool) or ctr[C_NIV] + nl[a] + nl[b] > len(iv)
                 or most + unb > len(heap) or ctr[C_STAMP] + unb + 1 > len(K)):
-            ctr[C_JLEN] -= 1
+            ctr[C_JLEN] -= 1  # no room: the pop undone, and the batch ends here
             heap_push(heap, ctr, K, s)
             ctr[C_FULL] = 1
             break
         if need_buf > len(buf):
             buf = np.empty(2 * need_buf, np.int64)
         most += unb
-        # the contraction (`greedy_batches._Batches.contract`)
-        for f in (d0, d1):
-            if f < 0:
-                continue
-            _journal(J, ctr, J_ALIVE, f, 1, 0)
-            alive[f] = False
-            for c in T[f]:
-                if c != a and c != b:
-                    _journal(J, ctr, J_AT, c, fs[c], fl[c])
-                    m = 0
-                    for i in range(fs[c], fs[c] + fl[c]):
-                        if fpool[i] != f:
-                            buf[m] = fpool[i]
-                            m += 1
-                    _set_list(fs, fl, fpool, ctr, C_FTOP, c, buf, m)
-        for i in range(nkb):
-            f = B[i]
-            for j in range(3):
-                if T[f, j] == b:
-                    _journal(J, ctr, J_TRI, f, j, b)
-                    T[f, j] = a
-        _journal(J, ctr, J_AT, a, fs[a], fl[a])
-        buf[:nka] = A[:nka]
-        buf[nka:nka + nkb] = B[:nkb]
-        _set_list(fs, fl, fpool, ctr, C_FTOP, a, buf, nka + nkb)
-        _journal(J, ctr, J_AT, b, fs[b], fl[b])
-        fl[b] = 0
-        _journal(J, ctr, J_COUNT, 0, ctr[C_FACES], 0)
-        ctr[C_FACES] -= nd
-        slot = ctr[C_DONE]
-        orig[slot] = VQ[a]
-        VQ[a, :3] = X[s]
-        ver[a] = scratch + slot
-        ctr[C_DONE] = slot + 1
-        # pair partners: b's become a's; pairs at b are gone, each's stale interval (if any) ends here
-        for i in range(ns[b], ns[b] + nl[b]):
-            w = npool[i]
-            if w != a:
-                _journal(J, ctr, J_NBR, w, ns[w], nl[w])
-                has_a = _has(npool, ns[w], nl[w], a)
-                m = 0
-                for jj in range(ns[w], ns[w] + nl[w]):
-                    if npool[jj] != b:
-                        buf[m] = npool[jj]
-                        m += 1
-                if not has_a:
-                    buf[m] = a
-                    m += 1
-                _set_list(ns, nl, npool, ctr, C_NTOP, w, buf, m)
-            q = _pair(w, b)
-            gone[q] = k
-            if q in held:
-                iv[held[q], I_END] = k
-                del held[q]
-        _journal(J, ctr, J_NBR, a, ns[a], nl[a])
-        m = 0
-        for i in range(ns[a], ns[a] + nl[a]):
-            if npool[i] != b:
-                buf[m] = npool[i]
-                m += 1
-        for i in range(ns[b], ns[b] + nl[b]):
-            w = npool[i]
-            if w != a and not _has(buf, 0, m, w):
-                buf[m] = w
-                m += 1
-        _set_list(ns, nl, npool, ctr, C_NTOP, a, buf, m)
-        _journal(J, ctr, J_NBR, b, ns[b], nl[b])
-        nl[b] = 0
-        # the pairs at a need new prices: held out of the queue, a new stale interval each
-        for i in range(ns[a], ns[a] + nl[a]):
-            w = npool[i]
-            vw = ver[w] if ver[w] >= 0 else w
-            q = _pair(a, w)
-            if q in held:
-                iv[held[q], I_END] = k
-            r = ctr[C_NIV]
-            held[q] = r
-            iv[r, I_PAIR], iv[r, I_START], iv[r, I_END] = q, k, OPEN
-            iv[r, I_RA], iv[r, I_RB] = (scratch + slot, vw) if a < w else (vw, scratch + slot)
-            ctr[C_NIV] = r + 1
-            if q in blocked:
-                _journal(J, ctr, J_BLOCKED, q, blocked[q], 0)
-                del blocked[q]
-                bat[a] -= 1
-                bat[w] -= 1
-        # blocked pairs around a may have become valid: back in the queue at their stored price
-        for i in range(ns[a], ns[a] + nl[a]):
-            u = npool[i]
-            if bat[u] > 0:
-                for jj in range(ns[u], ns[u] + nl[u]):
-                    q = _pair(u, npool[jj])
-                    if q in blocked and q not in gone:
-                        _unblock(q, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat)
-        step[S_KIND], step[S_LEFT], step[S_ND], step[S_D0], step[S_D1] = CONTRACT, ctr[C_FACES], nd, d0, d1
+        _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
+                  heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr)
+        step[S_KIND], step[S_LEFT], step[S_ND], step[S_D0], step[S_D1] = CONTRACT, ctr[C_FACES], info[0], \
+            info[3], info[4]
         ctr[C_NSTEPS] = k + 1
+
+
+@njit(cache=True)
+def _next_live(heap, K, cur, blocked, held, gone, J, ctr):
+    """The stamp of the queue's next live entry (left in the heap), or -1: none left, or no journal room.
+    Old entries are popped; those of pairs this batch holds out or removed are popped and journaled (an
+    undo of their step makes them current again)."""
+    while ctr[C_HSIZE] > 0:
+        t = heap[0]
+        p = np.int64(K[t, 1] & np.uint64(M32)) << 32 | np.int64(K[t, 2])
+        if cur.get(p, -1) != t or p in blocked:  # an old entry: never current again
+            heap_pop(heap, ctr, K)
+            continue
+        if p in held or p in gone:
+            if ctr[C_JLEN] + 1 > len(J):
+                ctr[C_FULL] = 1
+                return -1
+            heap_pop(heap, ctr, K)
+            _journal(J, ctr, J_HEAP, t, 0, 0)
+            continue
+        return t
+    return -1
+
+
+@njit(cache=True)
+def _needs(a, b, info, T, fl, ns, nl, npool, bat):
+    """Bounds on what contracting b into a adds (`_contract`): journal rows, face-pool and partner-pool
+    slots, blocked pairs coming back (heap entries, stamps), and the scratch buffer's length."""
+    nd, nka, nkb, d0, d1 = info[0], info[1], info[2], info[3], info[4]
+    unb = 0
+    for i in range(ns[a], ns[a] + nl[a]):
+        unb += bat[npool[i]]
+    for i in range(ns[b], ns[b] + nl[b]):
+        unb += bat[npool[i]]
+    need_f, need_n, need_buf = nka + nkb, nl[a] + nl[b], nka + nkb + nl[a] + nl[b]
+    for f in (d0, d1):
+        if f >= 0:
+            for c in T[f]:
+                need_f += fl[c]
+                need_buf = max(need_buf, fl[c])
+    for i in range(ns[b], ns[b] + nl[b]):
+        need_n += nl[npool[i]] + 1
+        need_buf = max(need_buf, nl[npool[i]] + 1)
+    need_j = 16 + 3 * nd + nkb + 2 * (nl[a] + nl[b]) + nl[b] + 2 * unb
+    return need_j, need_f, need_n, unb, need_buf
+
+
+@njit(cache=True)
+def _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
+              heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr):
+    """`greedy_batches._Batches.contract`: contract b into a at X[s] as step k (journaled); its pairs at b
+    are gone, those at a stale (a new interval each), blocked pairs around a back in the queue. ``info``,
+    A, B: from `rules`; ``buf``: room for the longest list written (`_needs`)."""
+    nd, nka, nkb, d0, d1 = info[0], info[1], info[2], info[3], info[4]
+    for f in (d0, d1):
+        if f < 0:
+            continue
+        _journal(J, ctr, J_ALIVE, f, 1, 0)
+        alive[f] = False
+        for c in T[f]:
+            if c != a and c != b:
+                _journal(J, ctr, J_AT, c, fs[c], fl[c])
+                m = 0
+                for i in range(fs[c], fs[c] + fl[c]):
+                    if fpool[i] != f:
+                        buf[m] = fpool[i]
+                        m += 1
+                _set_list(fs, fl, fpool, ctr, C_FTOP, c, buf, m)
+    for i in range(nkb):
+        f = B[i]
+        for j in range(3):
+            if T[f, j] == b:
+                _journal(J, ctr, J_TRI, f, j, b)
+                T[f, j] = a
+    _journal(J, ctr, J_AT, a, fs[a], fl[a])
+    buf[:nka] = A[:nka]
+    buf[nka:nka + nkb] = B[:nkb]
+    _set_list(fs, fl, fpool, ctr, C_FTOP, a, buf, nka + nkb)
+    _journal(J, ctr, J_AT, b, fs[b], fl[b])
+    fl[b] = 0
+    _journal(J, ctr, J_COUNT, 0, ctr[C_FACES], 0)
+    ctr[C_FACES] -= nd
+    slot = ctr[C_DONE]
+    orig[slot] = VQ[a]
+    VQ[a, :3] = X[s]
+    ver[a] = scratch + slot
+    ctr[C_DONE] = slot + 1
+    # pair partners: b's become a's; pairs at b are gone, each's stale interval (if any) ends here
+    for i in range(ns[b], ns[b] + nl[b]):
+        w = npool[i]
+        if w != a:
+            _journal(J, ctr, J_NBR, w, ns[w], nl[w])
+            has_a = has(npool, ns[w], nl[w], a)
+            m = 0
+            for jj in range(ns[w], ns[w] + nl[w]):
+                if npool[jj] != b:
+                    buf[m] = npool[jj]
+                    m += 1
+            if not has_a:
+                buf[m] = a
+                m += 1
+            _set_list(ns, nl, npool, ctr, C_NTOP, w, buf, m)
+        q = _pair(w, b)
+        gone[q] = k
+        if q in held:
+            iv[held[q], I_END] = k
+            del held[q]
+    _journal(J, ctr, J_NBR, a, ns[a], nl[a])
+    m = 0
+    for i in range(ns[a], ns[a] + nl[a]):
+        if npool[i] != b:
+            buf[m] = npool[i]
+            m += 1
+    for i in range(ns[b], ns[b] + nl[b]):
+        w = npool[i]
+        if w != a and not has(buf, 0, m, w):
+            buf[m] = w
+            m += 1
+    _set_list(ns, nl, npool, ctr, C_NTOP, a, buf, m)
+    _journal(J, ctr, J_NBR, b, ns[b], nl[b])
+    nl[b] = 0
+    # the pairs at a need new prices: held out of the queue, a new stale interval each
+    for i in range(ns[a], ns[a] + nl[a]):
+        w = npool[i]
+        vw = ver[w] if ver[w] >= 0 else w
+        q = _pair(a, w)
+        if q in held:
+            iv[held[q], I_END] = k
+        r = ctr[C_NIV]
+        held[q] = r
+        iv[r, I_PAIR], iv[r, I_START], iv[r, I_END] = q, k, OPEN
+        iv[r, I_RA], iv[r, I_RB] = (scratch + slot, vw) if a < w else (vw, scratch + slot)
+        ctr[C_NIV] = r + 1
+        if q in blocked:
+            _journal(J, ctr, J_BLOCKED, q, blocked[q], 0)
+            del blocked[q]
+            bat[a] -= 1
+            bat[w] -= 1
+    # blocked pairs around a may have become valid: back in the queue at their stored price
+    for i in range(ns[a], ns[a] + nl[a]):
+        u = npool[i]
+        if bat[u] > 0:
+            for jj in range(ns[u], ns[u] + nl[u]):
+                q = _pair(u, npool[jj])
+                if q in blocked and q not in gone:
+                    _unblock(q, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat)
 
 
 @njit(cache=True)
