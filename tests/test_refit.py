@@ -98,6 +98,30 @@ def test_refit_in_a_batch_equals_simplify(bumpy):
     assert np.array_equal(both[0].vertices, alone.vertices) and np.array_equal(both[0].faces, alone.faces)
 
 
+def test_a_batchs_refits_run_side_by_side_with_the_same_bits(bumpy, monkeypatch):
+    """`simplify_cells` leaves each cell's re-fit to `stages.refit_all`, which runs them on a pool of
+    threads (with two or more cores): every result equals its `simplify` alone bit for bit, with its own
+    ``refit_s``, and the re-fits ran off the calling thread."""
+    import os
+    import threading
+
+    from qemjax._pipeline import stages
+
+    cfgs = [dict(ratio=r) for r in (0.03, 0.05, 0.1, 0.2)] + [dict(ratio=0.05, refit=0)]
+    alone = [qemjax.simplify(bumpy, **c) for c in cfgs]
+    ran_on, call = [], stages.RefitTask.__call__
+    monkeypatch.setattr(stages.RefitTask, "__call__", lambda task: (ran_on.append(threading.get_ident()),
+                                                                    call(task))[1])
+    together = qemjax.simplify_batch(bumpy, cfgs)
+    assert together[0].stats["batch"]["size"] == 5 and len(ran_on) == 4  # refit=0: no task
+    for a, b in zip(alone, together):
+        assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+    assert all(r.stats["refit_s"] > 0 for r in together[:4]) and together[4].stats["refit_s"] == 0
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    if cores >= 2:
+        assert threading.get_ident() not in ran_on
+
+
 def test_the_record_keeps_the_contractions_positions(bumpy):
     """A replay rebuilds the contraction phase: its last level is the run without the re-fit."""
     plain = qemjax.simplify(bumpy, target_faces=200, refit=0)

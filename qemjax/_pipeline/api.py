@@ -165,13 +165,15 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         c2, s2 = _compilation.snapshot()
         share, comp = wall / len(members), min(s2 - s1, wall) / len(members)
         served = np.bincount(which, minlength=len(js))
+        later: list = []  # the batch's re-fits, run side by side below
         for k, (i, job) in enumerate(members):
             r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
             res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=4,
                           batch={"size": len(members), "copies": len(js), "same_run": int(served[which[k]]),
-                                 "total_s": wall, "compilations": c2 - c1})
+                                 "total_s": wall, "compilations": c2 - c1}, later=later)
             res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
             out[i] = res
+        stages.refit_all(later)
     return out
 
 

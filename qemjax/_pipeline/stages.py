@@ -17,8 +17,10 @@ import dataclasses
 import functools
 import math
 import numbers
+import os
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -39,6 +41,8 @@ from .._options import Attributes, Options, Schedule, Topology
 from .._record.history import Record
 from .._record.result import Contractions, SimplifyResult
 from .._schedulers import common, outcome
+
+_REFIT_THREADS = 4  # threads for a batch's re-fits (`refit_all`), at most one per core
 
 
 def _real(name: str, x) -> float:
@@ -282,11 +286,13 @@ def run(job: Job):
     return out, run_target, planned
 
 
-def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict | None = None
-            ) -> SimplifyResult:
-    """The `SimplifyResult` of a run: compact output in mesh units, splitting, the stop reason (and a
-    warning when it ends above the target), history, record and stats. ``batch``: for a run that went
-    through `simplify_batch`, what stats say of the batch."""
+def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict | None = None,
+           later: list | None = None) -> SimplifyResult:
+    """The `SimplifyResult` of a run: compact output in mesh units, splitting, re-fit, the stop reason (and
+    a warning when it ends above the target), history, record and stats. ``batch``: for a run that went
+    through `simplify_batch`, what stats say of the batch. ``later``: a list to which the re-fit is
+    appended as ``(result, RefitTask)`` instead of running here (the result then holds the contractions'
+    positions until `refit_all` runs the list: a batch's re-fits run side by side)."""
     setup, g, model, target, err = job.setup, job.geo, job.model, job.target, job.err
     out, run_target, planned = ran
     if run_target is None:
@@ -332,7 +338,7 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
                            run_stop_reason=out.stop_reason)
         if target and len(Fout) <= target and out.stop_reason == "blocked":
             out = dataclasses.replace(out, stop_reason="target")  # splitting spent what contractions could not reach
-    refit_rounds, refit_skipped, refit_s = setup.refit, None, 0.0
+    refit_rounds, refit_skipped, refit_s, task = setup.refit, None, 0.0, None
     if refit_rounds and appearance and appearance.get("uv") is not None:
         # moved positions would leave their texture coordinates behind (the textured example's UV deviation
         # 0.0011 -> 0.016, experiments/refit_uv.py): with UVs kept, positions stay where the contractions put them
@@ -342,10 +348,9 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
         if appearance:  # seam vertices (two or more wedges) stay on the input's seams
             seam = np.bincount(appearance["wedge_vertex"], minlength=len(vout)) > 1
             held = seam if held is None else (held | seam)
-        t_refit = time.perf_counter()
-        vout = _refit.refit(V, F, vout, Fout, refit_rounds, setup.cos_max, g.parts[1], fids,
-                            fixed=held)
-        refit_s = time.perf_counter() - t_refit
+        task = RefitTask(V, F, vout, Fout, refit_rounds, setup.cos_max, g.parts[1], fids, held)
+        if later is None:
+            vout, refit_s = task()
     stop = out.stop_reason
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
@@ -398,12 +403,53 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     record = Record(V, F, history, np.full(m, -1, np.int64) if out.removed_at is None else out.removed_at,
                     np.zeros(m, bool) if out.coincident is None else out.coincident, frame, setup.scheduler,
                     run_target, locked=locked)
-    return SimplifyResult(
+    res = SimplifyResult(
         vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
         max_error=float(frame.errors_to_mesh(out.worst_cost)), source_vertices=ids.astype(np.int64),
         source_faces=fids.astype(np.int64),
         input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record,
         **appearance)
+    if later is not None and task is not None:
+        later.append((res, task))
+    return res
+
+
+class RefitTask(NamedTuple):
+    """One result's re-fit (`_pipeline.refit.refit`'s arguments); calling it returns (positions, seconds)."""
+    V: np.ndarray
+    F: np.ndarray
+    X: np.ndarray
+    G: np.ndarray
+    rounds: int
+    cos_max: float
+    part: np.ndarray
+    source_faces: np.ndarray
+    fixed: np.ndarray | None
+
+    def __call__(self) -> tuple[np.ndarray, float]:
+        t = time.perf_counter()
+        X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
+                         self.source_faces, fixed=self.fixed)
+        return X, time.perf_counter() - t
+
+
+def refit_all(later: list) -> None:
+    """Run the re-fits `finish` left in ``later`` and put their positions and ``refit_s`` into their results.
+    Each is independent of the others (the same arithmetic as alone, bit for bit), so two or more run on
+    a pool of threads, one per core up to four: their numpy, KD-tree and sparse-solver work releases the
+    GIL (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid distinct`)."""
+    if not later:
+        return
+    threads = min(_REFIT_THREADS, len(later), len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                  else os.cpu_count() or 1)
+    if threads <= 1:
+        done = [task() for _, task in later]
+    else:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            done = list(pool.map(lambda item: item[1](), later))
+    for (res, _), (X, seconds) in zip(later, done):
+        res.vertices = X
+        res.stats["refit_s"] = seconds
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,

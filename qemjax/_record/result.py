@@ -47,10 +47,12 @@ class SimplifyResult:
     stats: counts and timings (``compile_s`` is JAX tracing + compilation
     time inside this call, ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
     times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``
-    and ``faces_per_round``), ``refit`` (re-fit rounds run) and ``refit_s`` (their seconds), the targets (``target_faces``, 0 for none; ``max_error_limit``, a squared
-    distance in input units, None for none) and ``dropped``: what the input carried that the result
-    does not keep (any of "uv", "material", "vertex_colors", "face_colors"); ``error_unit``: what
-    ``max_error`` and the history's costs measure (the cost model's `error_unit`); with attributes kept,
+    and ``faces_per_round``), ``refit`` (re-fit rounds run) and ``refit_s`` (their seconds; a batch runs
+    its cells' re-fits side by side on threads, each timed on its own), the targets (``target_faces``, 0 for
+    none; ``max_error_limit``, a squared distance in input units, None for none) and ``dropped``: what
+    the input carried that the result does not keep (any of "uv", "material", "vertex_colors",
+    "face_colors"); ``error_unit``: what ``max_error`` and the history's costs measure (the cost model's
+    `error_unit`); with attributes kept,
     ``attributes`` (their kinds) and the input's seams: ``seams_in`` (connected pieces), ``seam_edges_in``
     and ``seam_vertices_in``.
     With ``locked=`` / ``vertex_weights=`` (`qemjax._schedulers.locks`): ``locked_in`` (the vertices given),
