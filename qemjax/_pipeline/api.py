@@ -113,7 +113,9 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     (`_schedulers.batched`), each with its own target, ``max_error``, vertex state and settings; the rest
     run alone. Cells of a batch that would run exactly alike (`_same_runs`: the same mesh, vertex state,
     kernel settings, target and max error, e.g. every ``boundary_weight`` of a closed mesh) run once, and
-    each gets its own copy of the result. ``progress`` is not offered here (a sweep shows its own bar).
+    each gets its own copy of the result. A batch's re-fits (the default's post-pass) run side by side on
+    threads (`stages.refit_all`), each as it would alone. ``progress`` is not offered here (a sweep shows
+    its own bar).
     A batched result's ``stats["batch"]`` gives the batch's ``size`` (cells), ``copies`` (distinct runs in
     its rounds), ``same_run`` (the cells this cell's run served, itself included) and wall time; its
     ``total_s``, ``run_s`` and ``compile_s`` are its share (the batch's / its size), and its stage times
