@@ -101,7 +101,8 @@ def test_refit_in_a_batch_equals_simplify(bumpy):
 def test_a_batchs_refits_run_side_by_side_with_the_same_bits(bumpy, monkeypatch):
     """`simplify_cells` leaves each cell's re-fit to `stages.refit_all`, which runs them on a pool of
     threads (with two or more cores): every result equals its `simplify` alone bit for bit, with its own
-    ``refit_s``, and the re-fits ran off the calling thread."""
+    ``refit_s``, and the re-fits ran off the calling thread; re-fits of large inputs run one at a time on
+    the calling thread, with the same bits."""
     import os
     import threading
 
@@ -120,6 +121,12 @@ def test_a_batchs_refits_run_side_by_side_with_the_same_bits(bumpy, monkeypatch)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     if cores >= 2:
         assert threading.get_ident() not in ran_on
+    # re-fits of large inputs run one at a time on the calling thread, with the same bits
+    monkeypatch.setattr(stages, "_REFIT_ALONE", 0)
+    ran_on.clear()
+    again = qemjax.simplify_batch(bumpy, cfgs)
+    assert ran_on == [threading.get_ident()] * 4
+    assert all(np.array_equal(a.vertices, b.vertices) for a, b in zip(alone, again))
 
 
 def test_the_record_keeps_the_contractions_positions(bumpy):

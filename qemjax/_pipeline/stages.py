@@ -43,6 +43,7 @@ from .._record.result import Contractions, SimplifyResult
 from .._schedulers import common, outcome
 
 _REFIT_THREADS = 4  # threads for a batch's re-fits (`refit_all`), at most one per core
+_REFIT_ALONE = 1 << 17  # input faces from which a re-fit runs by itself (its nearest search is threaded)
 
 
 def _real(name: str, x) -> float:
@@ -437,19 +438,19 @@ def refit_all(later: list) -> None:
     """Run the re-fits `finish` left in ``later`` and put their positions and ``refit_s`` into their results.
     Each is independent of the others (the same arithmetic as alone, bit for bit), so two or more run on
     a pool of threads, one per core up to four: their numpy, KD-tree and sparse-solver work releases the
-    GIL (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid distinct`)."""
-    if not later:
-        return
-    threads = min(_REFIT_THREADS, len(later), len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+    GIL (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid distinct`). A re-fit of a large
+    input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already uses the cores, and
+    side by side the large ones would hold their memory at once."""
+    small = [item for item in later if len(item[1].F) < _REFIT_ALONE]
+    threads = min(_REFIT_THREADS, len(small), len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                   else os.cpu_count() or 1)
-    if threads <= 1:
-        done = [task() for _, task in later]
-    else:
+    done = {}
+    if threads > 1:
         with ThreadPoolExecutor(max_workers=threads) as pool:
-            done = list(pool.map(lambda item: item[1](), later))
-    for (res, _), (X, seconds) in zip(later, done):
-        res.vertices = X
-        res.stats["refit_s"] = seconds
+            done = dict(zip(map(id, small), pool.map(lambda item: item[1](), small)))
+    for item in later:
+        res, task = item
+        res.vertices, res.stats["refit_s"] = done[id(item)] if id(item) in done else task()
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,
