@@ -358,7 +358,7 @@ class GridIndex:
             a, b = bounds[i], bounds[i + 1]
             dist[a:b], face[a:b] = self._query_block(points[a:b])
 
-        _map(block, range(n_blocks))
+        each_on_threads(block, range(n_blocks))
         return dist, face
 
     def finish(self, points, dist, face, within: float):
@@ -401,8 +401,9 @@ def _threads() -> int:
                       else os.cpu_count() or 1))
 
 
-def _map(fn, items) -> None:
-    """fn(item) for each item, on up to `_threads` threads (in this thread when one suffices)."""
+def each_on_threads(fn, items) -> None:
+    """fn(item) for each item, on up to `_threads` threads (in this thread when one suffices); also the
+    batch's re-fits (`_pipeline.stages.refit_all`)."""
     items = list(items)
     if len(items) <= 1 or _threads() == 1:
         for item in items:

@@ -17,10 +17,8 @@ import dataclasses
 import functools
 import math
 import numbers
-import os
 import time
 import warnings
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -42,7 +40,6 @@ from .._record.history import Record
 from .._record.result import Contractions, SimplifyResult
 from .._schedulers import common, outcome
 
-_REFIT_THREADS = 4  # threads for a batch's re-fits (`refit_all`), at most one per core
 _REFIT_ALONE = 1 << 17  # input faces from which a re-fit runs by itself (its nearest search is threaded)
 
 
@@ -436,21 +433,21 @@ class RefitTask(NamedTuple):
 
 def refit_all(later: list) -> None:
     """Run the re-fits `finish` left in ``later`` and put their positions and ``refit_s`` into their results.
-    Each is independent of the others (the same arithmetic as alone, bit for bit), so two or more run on
-    a pool of threads, one per core up to four: their numpy, KD-tree and sparse-solver work releases the
-    GIL (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid distinct`). A re-fit of a large
-    input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already uses the cores, and
-    side by side the large ones would hold their memory at once."""
-    small = [item for item in later if len(item[1].F) < _REFIT_ALONE]
-    threads = min(_REFIT_THREADS, len(small), len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                  else os.cpu_count() or 1)
-    done = {}
-    if threads > 1:
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            done = dict(zip(map(id, small), pool.map(lambda item: item[1](), small)))
-    for item in later:
+    Each is independent of the others (the same arithmetic as alone, bit for bit), so they run side by side
+    on threads (`nearest.each_on_threads`: one per core up to four): their numpy, KD-tree and sparse-solver
+    work releases the GIL (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid distinct`). A
+    re-fit of a large input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already
+    uses the cores, and side by side the large ones would hold their memory at once."""
+    from .._mesh.nearest import each_on_threads  # lazily, as the re-fit imports it (scipy.spatial)
+
+    def run(item):
         res, task = item
-        res.vertices, res.stats["refit_s"] = done[id(item)] if id(item) in done else task()
+        res.vertices, res.stats["refit_s"] = task()
+
+    each_on_threads(run, [item for item in later if len(item[1].F) < _REFIT_ALONE])
+    for item in later:
+        if len(item[1].F) >= _REFIT_ALONE:
+            run(item)
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,

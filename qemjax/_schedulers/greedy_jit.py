@@ -114,6 +114,17 @@ def _journal(J, ctr, kind, i, o0, o1):
     ctr[C_JLEN] = j + 1
 
 
+@njit(cache=True, inline="always")
+def _without(pool, start, length, x, buf):
+    """pool[start:start+length] without x, into buf; returns how many."""
+    m = 0
+    for i in range(start, start + length):
+        if pool[i] != x:
+            buf[m] = pool[i]
+            m += 1
+    return m
+
+
 @njit(cache=True)
 def _set_list(start, length, pool, ctr, top, v, items, k):
     """v's list := items[:k], written at the pool's end (the old list stays where it was)."""
@@ -264,12 +275,7 @@ def _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns,
         for c in T[f]:
             if c != a and c != b:
                 _journal(J, ctr, J_AT, c, fs[c], fl[c])
-                m = 0
-                for i in range(fs[c], fs[c] + fl[c]):
-                    if fpool[i] != f:
-                        buf[m] = fpool[i]
-                        m += 1
-                _set_list(fs, fl, fpool, ctr, C_FTOP, c, buf, m)
+                _set_list(fs, fl, fpool, ctr, C_FTOP, c, buf, _without(fpool, fs[c], fl[c], f, buf))
     for i in range(nkb):
         f = B[i]
         for j in range(3):
@@ -295,11 +301,7 @@ def _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns,
         if w != a:
             _journal(J, ctr, J_NBR, w, ns[w], nl[w])
             has_a = has(npool, ns[w], nl[w], a)
-            m = 0
-            for jj in range(ns[w], ns[w] + nl[w]):
-                if npool[jj] != b:
-                    buf[m] = npool[jj]
-                    m += 1
+            m = _without(npool, ns[w], nl[w], b, buf)
             if not has_a:
                 buf[m] = a
                 m += 1
@@ -310,11 +312,7 @@ def _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns,
             iv[held[q], I_END] = k
             del held[q]
     _journal(J, ctr, J_NBR, a, ns[a], nl[a])
-    m = 0
-    for i in range(ns[a], ns[a] + nl[a]):
-        if npool[i] != b:
-            buf[m] = npool[i]
-            m += 1
+    m = _without(npool, ns[a], nl[a], b, buf)
     for i in range(ns[b], ns[b] + nl[b]):
         w = npool[i]
         if w != a and not has(buf, 0, m, w):
