@@ -342,8 +342,9 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument(TARGETS["target_faces"], dest="target_faces", type=_faces, metavar="N",
                    help="target face count")
     s.add_argument(TARGETS["max_error"], dest="max_error", type=_max_error, metavar="E",
-                   help="stop before a contraction costs more than E (squared distance, mesh units²; "
-                   "--method area: surface-area change, mesh units²); alone or with --faces/--ratio")
+                   help="stop before a contraction costs more than E (the quadric error, a sum of squared distances to "
+                   "planes, mesh units²: not the output's distance, which the summary measures; --method area: "
+                   "surface-area change, mesh units²); alone or with --faces/--ratio")
     _add_options(s)
     s.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
                    "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "

@@ -26,6 +26,8 @@ import warnings
 
 import numpy as np
 
+from . import fixed_order
+
 KINDS = ("uv", "color", "normal")
 SIZES = {"uv": 2, "color": 4, "normal": 3}
 
@@ -358,7 +360,8 @@ class Tracker:
         if free:
             pa, pb = VQ[a, :3].astype(np.float64), VQ[b, :3].astype(np.float64)
             d = pb - pa
-            t = float(np.clip(np.dot(np.asarray(x, np.float64) - pa, d) / max(np.dot(d, d), 1e-300), 0, 1))
+            t = float(np.clip(fixed_order.dot(np.asarray(x, np.float64) - pa, d) / max(fixed_order.dot(d, d), 1e-300),
+                              0, 1))
             val = (1 - t) * self.val[wa] + t * self.val[wbv]
             if self.attributes_at is not None:  # the attribute quadric's optimum at x
                 val = np.where(self.solved, self.attributes_at(VQ[a], VQ[b], x), val)
@@ -469,7 +472,7 @@ def _quadric(row: np.ndarray, x: np.ndarray) -> float:
     q = row[3:13].astype(np.float64)
     u = np.asarray(x, np.float64) - row[:3].astype(np.float64)
     A = np.array([[q[0], q[1], q[2]], [q[1], q[3], q[4]], [q[2], q[4], q[5]]])
-    return float(u @ A @ u + 2 * q[6:9] @ u + q[9])
+    return float(fixed_order.dot(u, fixed_order.matvec(A, u)) + 2 * fixed_order.dot(q[6:9], u) + q[9])
 
 
 def output(C: np.ndarray, values: np.ndarray, F: np.ndarray, fids: np.ndarray, ids: np.ndarray):

@@ -38,9 +38,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         object with ``.vertices``/``.faces``. Polygons are triangulated.
     target_faces / ratio: stop at this many faces (ratio × the cleaned input's faces). Met exactly when
         the mesh allows it; otherwise the result has the fewest faces reachable above the target.
-    max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
-        mesh's own units* for the quadric methods (the quadric error, e.g. ``(0.01 * diagonal)**2``; the
-        method's ``error_unit`` says what it is). May be combined with a face target; whichever is reached
+    max_error: stop before the cheapest contraction costs more than this, in the method's cost (its
+        ``error_unit``): for the quadric methods the *quadric error* in mesh units², a sum of squared
+        distances from the new vertex to the planes of the input faces merged into it (e.g.
+        ``(0.01 * diagonal)**2``). It bounds each contraction's cost, not the output's distance from the
+        input: a sum over many planes, its square root is often several times that distance, and later
+        contractions and the re-fit move the surface again. The distance is measured in
+        ``stats["distance_max"]`` (``measure``). May be combined with a face target; whichever is reached
         first stops.
     method: the cost model and all its settings, as an object (``qemjax.QEM(boundary_weight=10)``,
         ``qemjax.ESQEM(curvature_weight=0.1)``, ``qemjax.AreaDifference()``, ``qemjax.LineQEM()``, a
@@ -66,6 +70,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (others warn and drop).
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
     progress: show a progress bar (tqdm).
+    measure (given by name): measure the output's distance from the input (`_pipeline.measure`: every input
+        vertex and face centroid to its nearest output point) into ``stats["distance_max"]``,
+        ``["distance_rms"]`` (mesh units) and their ``_rel`` forms (over the bounding-box diagonal). None
+        (default): measured when the method re-fits (the default method; the re-fit already makes the
+        output depend on the input's samples), else not (``measure=True`` there costs one nearest-surface
+        query over 1.5× the input's faces in points; ``experiments/distance_check.py`` times it).
     locked, vertex_weights (given by name, with the settings): per-vertex constraints, numbered as the
         vertices were given (before welding; `qemjax._schedulers.locks`; README, "Locking vertices and weighting
         importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the

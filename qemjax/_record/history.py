@@ -48,7 +48,7 @@ class Level:
     vertices (k,3) float64 and faces (j,3) int64 in the input's units, exactly as `simplify` builds its
     output; source_vertices (k,) / source_faces (j,) int64: the input vertex each vertex grew from and the
     input face each face continues; vertex_map (n,) int64: each input vertex's vertex here (-1: its part
-    vanished); max_error: the largest cost among the contractions used (squared distance, mesh units²; 0
+    vanished); max_error: the largest cost among the contractions used (the cost model's measure, e.g. the quadric error, mesh units²; 0
     for none); round: the round of the last contraction used (-1 for none)."""
 
     vertices: np.ndarray
