@@ -42,13 +42,13 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray) -> dict
     diag = float(np.sqrt(np.sum((hi - lo) ** 2)))
     # in the input's unit frame (as the re-fit): squared distances stay finite at any scale
     centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo)) if len(V) else 0.0
-    P, w, _ = samples(V, F, np.zeros(len(V), np.int64))
-    if not (unit > 0 and np.isfinite(unit)) or len(P) == 0 or len(G) == 0:
-        out = not_measured()
-        out.update(distance_samples=int(len(P)), distance_s=time.perf_counter() - t)
-        return out
+    if not (unit > 0 and np.isfinite(unit)) or len(G) == 0:
+        return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
+    P, w, _ = samples((V - centre) / unit, F, np.zeros(len(V), np.int64))  # areas too: no underflow
+    if len(P) == 0:
+        return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
     corners = np.ascontiguousarray(np.transpose((X[G] - centre) / unit, (1, 2, 0)))
-    d, _ = nearest_triangles(corners, (P - centre) / unit)
+    d, _ = nearest_triangles(corners, P)
     d_max = float(d.max()) * unit
     d_rms = float(np.sqrt(np.sum(w * d * d) / np.sum(w))) * unit
     return dict(distance_max=d_max, distance_rms=d_rms, distance_max_rel=d_max / diag if diag > 0 else None,
