@@ -21,7 +21,7 @@ import scipy.sparse as sp
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _matvec(indptr, indices, data, x, out):
     """out = N @ x for x (n, c), row by row in index order."""
     n, c = x.shape
@@ -34,7 +34,7 @@ def _matvec(indptr, indices, data, x, out):
                 out[i, j] += a * x[col, j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _dot(a, b, j):
     """Σ_i a[i, j]·b[i, j], in index order."""
     s = 0.0
@@ -43,7 +43,7 @@ def _dot(a, b, j):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pcg(indptr, indices, data, diag, B, X, rtol, max_iter):
     """Jacobi-preconditioned conjugate gradients on the columns of B, from X (updated in place). Returns the
     iterations each column took (-1: it did not reach rtol within max_iter)."""

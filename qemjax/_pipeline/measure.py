@@ -4,7 +4,7 @@ The contraction costs are quadric errors: each a sum of squared distances to man
 tens or hundreds of times the squared distance the output actually lies from the input. What a user can
 report as an error is measured here instead, in mesh units: the distance from the input's surface to the
 output's, at deterministic samples of the input (every vertex and every face centroid, the re-fit's
-samples, `refit.samples`), each to its exact nearest point of the output (`_mesh.nearest`).
+samples, `refit.samples`), each to its exact nearest point of the output (`_mesh.grid_nearest`).
 
 * ``distance_max``: the largest sample's distance (a one-sided Hausdorff distance, input → output, at
   those samples: a lower bound of the continuous one, which points between samples can exceed);
@@ -32,7 +32,7 @@ def not_measured() -> dict:
 
 def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray) -> dict:
     """The stats of the module docstring for the input (V, F) and the output (X, G), float64, mesh units."""
-    from .._mesh.nearest import nearest_triangles  # scipy.spatial, lazily (as the re-fit)
+    from .._mesh.grid_nearest import nearest  # numba, lazily
     from .refit import samples
 
     t = time.perf_counter()
@@ -47,8 +47,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray) -> dict
     P, w, _ = samples((V - centre) / unit, F, np.zeros(len(V), np.int64))  # areas too: no underflow
     if len(P) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
-    corners = np.ascontiguousarray(np.transpose((X[G] - centre) / unit, (1, 2, 0)))
-    d, _ = nearest_triangles(corners, P)
+    _, d = nearest((X - centre) / unit, G, P)
     d_max = float(d.max()) * unit
     d_rms = float(np.sqrt(np.sum(w * d * d) / np.sum(w))) * unit
     return dict(distance_max=d_max, distance_rms=d_rms, distance_max_rel=d_max / diag if diag > 0 else None,

@@ -8,7 +8,7 @@ E_dist with the connectivity fixed):
 
 1. the input is sampled at every vertex (weight: a third of the area of its faces) and every face's
    centroid (weight: its area), the weights scaled to mean 1;
-2. each sample is attached to its nearest point on the output (`qemjax._mesh.nearest`), as barycentric
+2. each sample is attached to its nearest point on the output (`qemjax._mesh.grid_nearest`), as barycentric
    coordinates b of an output face, among the faces of its own part (the input's connected parts, joined
    as aggregation joins them; an output face belongs to the part of the input face it continues): a
    sample of one part must not pull another part that happens to lie nearer (the truck's 50 parts did);
@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._mesh.arrays import face_normals
+from .._mesh.grid_nearest import nearest
 from .._mesh.spd_solve import solve_spd
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
@@ -57,16 +58,13 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
 
 def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spart: np.ndarray):
     """For each sample, a nearest output face among those of its part (-1: its part has none)."""
-    from .._mesh.nearest import nearest_triangles
-
     f = np.full(len(P), -1, np.int64)
     order = np.argsort(gpart, kind="stable")
     starts = np.searchsorted(gpart[order], np.unique(gpart))
     for faces in np.split(order, starts[1:]):
         mine = np.flatnonzero(spart == gpart[faces[0]])
         if len(mine):
-            corners = np.ascontiguousarray(np.transpose(X[G[faces]], (1, 2, 0)))
-            f[mine] = faces[nearest_triangles(corners, P[mine])[1]]
+            f[mine] = faces[nearest(X, G[faces], P[mine])[0]]
     return f
 
 
