@@ -251,8 +251,7 @@ def check_output(path: str) -> str:
     try:  # the format: one triangle written to memory
         trimesh.Trimesh(np.eye(3), [[0, 1, 2]], process=False).export(file_type=ext)
     except Exception as exc:
-        raise CliError(f"cannot write .{ext} files ({type(exc).__name__}: {exc}); "
-                       f"use one of {', '.join(FORMATS)}") from None
+        raise CliError(_not_a_mesh_format(ext, exc)) from None
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise CliError(f"cannot write {path}: folder {folder} does not exist")
@@ -264,6 +263,20 @@ def check_output(path: str) -> str:
     except OSError as exc:
         raise CliError(f"cannot write to {folder}: {exc.strerror}") from None
     return ext
+
+
+def _not_a_mesh_format(ext: str, exc: Exception) -> str:
+    """Why ``.ext`` cannot take a mesh, in the user's terms (``exc``: what writing one triangle raised)."""
+    import trimesh
+
+    formats = ", ".join(FORMATS)
+    if isinstance(exc, ImportError):
+        return f"writing .{ext} files needs a Python package that is not installed ({exc}); or use one of {formats}"
+    try:  # a format for points (.xyz) takes a point cloud but no faces
+        trimesh.PointCloud(np.eye(3)).export(file_type=ext)
+    except Exception:
+        return f"cannot write a mesh as .{ext}: not a mesh format; use one of {formats}"
+    return f"cannot write a mesh as .{ext}: the format holds points only, no faces; use one of {formats}"
 
 
 def _temp_name(path: str, tag: str) -> str:
