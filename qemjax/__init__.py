@@ -37,6 +37,7 @@ _PUBLIC = {
     "sweep": ("._sweep.run", "sweep"),
 }
 _MODULES = ("metrics", "render", "shapes")  # public submodules, also imported on first use
+__all__ = list(_PUBLIC)  # ``from qemjax import *``: the same names as when they were imported eagerly
 
 __version__ = "0.1.0"
 
