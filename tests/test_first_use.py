@@ -188,3 +188,11 @@ def _write_ply(path: Path) -> None:
              "property float z", f"element face {len(F)}", "property list uchar int vertex_indices", "end_header"]
     lines += [" ".join(map(repr, map(float, v))) for v in V] + [f"3 {a} {b} {c}" for a, b, c in F]
     path.write_text("\n".join(lines) + "\n")
+
+
+def test_the_readmes_notebook_command_has_timeouts():
+    """nbconvert waits without end by default: a stuck kernel (issue 40 §4) must become an error."""
+    text = " ".join((ROOT / "README.md").read_text().split())
+    command = text[text.index("jupyter nbconvert --to notebook --execute"):]
+    command = command[:command.index("`")]
+    assert "--ExecutePreprocessor.timeout=600" in command and "--ExecutePreprocessor.startup_timeout=" in command
