@@ -6,9 +6,9 @@ whether the process imported JAX, numba or trimesh.
     python experiments/startup.py --rev db766be              # before issue 42's start-up item
     python experiments/startup.py --rev db766be --repeats 15
 
-Each run is ``python -c "from qemjax._cli import main; ..."`` (the command's entry point at either revision)
-with the package's folder first on sys.path; a run before the timed ones checks that each side imports its
-own copy. Needs no peers and no meshes.
+Each run is ``python -c "from qemjax.__main__ import main; ..."``, the command's entry point (before it
+existed: ``qemjax._cli``), with the package's folder first on sys.path; a run before the timed ones checks
+that each side imports its own copy. Needs no peers and no meshes.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 COMMANDS = {"--version": ["--version"], "simplify --help": ["simplify", "--help"]}
 HEAVY = ("jax", "numba", "trimesh")
-RUN = ("import sys; sys.path.insert(0, {root!r}); from qemjax._cli import main; code = main({argv!r}); "
+RUN = ("import sys; sys.path.insert(0, {root!r}); from qemjax.{entry} import main; code = main({argv!r}); "
        "print('@@', __import__('qemjax').__file__, *[m for m in {heavy!r} if m in sys.modules], file=sys.stderr); "
        "sys.exit(code)")
 
@@ -40,9 +40,14 @@ def unpack(rev: str, into: Path) -> Path:
     return into
 
 
+def entry(root: Path) -> str:
+    """The module of the command's entry point in the package under ``root``."""
+    return "__main__" if (root / "qemjax" / "__main__.py").exists() else "_cli"
+
+
 def run(root: Path, argv: list[str]) -> tuple[float, str, list[str]]:
     """(wall seconds, the qemjax file imported, the heavy modules imported) of one fresh process."""
-    code = RUN.format(root=str(root), argv=argv, heavy=HEAVY)
+    code = RUN.format(root=str(root), entry=entry(root), argv=argv, heavy=HEAVY)
     t = time.perf_counter()
     p = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True)
     wall = time.perf_counter() - t
@@ -72,8 +77,9 @@ def main() -> None:
             for side, root in order:
                 for name, argv in COMMANDS.items():
                     times[side, name].append(run(root, argv)[0])
-    print(f"{sys.executable} -c 'from qemjax._cli import main; main(ARGV)', {args.repeats} alternating runs each; "
-          f"median wall seconds")
+    print(f"{sys.executable} -c 'from qemjax.ENTRY import main; main(ARGV)' (ENTRY: "
+          f"{', '.join(f'{side}: {entry(root)}' for side, root in sides.items())}), {args.repeats} alternating runs "
+          f"each; wall seconds")
     print(f"{'command':<18} {'side':<22} {'median s':>9} {'min s':>7}  imports")
     for (side, name), ts in times.items():
         print(f"{name:<18} {side:<22} {statistics.median(ts):9.3f} {min(ts):7.3f}  "

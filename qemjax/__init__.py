@@ -42,6 +42,14 @@ __all__ = list(_PUBLIC)  # ``from qemjax import *``: the same names as when they
 __version__ = "0.1.0"
 
 
+def _version_line() -> str:
+    """What ``qemjax --version`` prints: this version and the installed JAX's (read from its package metadata,
+    without importing JAX)."""
+    from importlib.metadata import version
+
+    return f"qemjax {__version__} (jax {version('jax')})"
+
+
 def __getattr__(name):
     import importlib.util
 

@@ -343,24 +343,17 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"qemjax: warning: {message}", file=sys.stderr)
 
 
-def _version() -> str:
-    """What --version prints: qemjax's version and the installed JAX's (read without importing JAX)."""
-    from importlib.metadata import version
-
-    from . import __version__
-
-    return f"qemjax {__version__} (jax {version('jax')})"
-
-
 class _Version(argparse.Action):
-    """--version, its text made when it is given (`_version`)."""
+    """--version, its text made when it is given (`qemjax._version_line`: no JAX imported)."""
 
     def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
                  help="show program's version number and exit"):
         super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
 
     def __call__(self, parser, namespace, values, option_string=None):
-        print(_version())
+        from . import _version_line
+
+        print(_version_line())
         parser.exit()
 
 
@@ -437,7 +430,9 @@ def main(argv=None) -> int:
 
 def _main(argv: list) -> int:
     if argv == ["--version"]:  # without building the parser (its options read every method's fields)
-        print(_version())
+        from . import _version_line
+
+        print(_version_line())
         return 0
     ap = _parser()
     cmd = next((a for a in argv if not a.startswith("-")), None)

@@ -133,15 +133,20 @@ def _python(code: str, **kw) -> subprocess.CompletedProcess:
                           timeout=120, **kw)
 
 
+@pytest.mark.parametrize("entry", ["_cli", "__main__"])
 @pytest.mark.parametrize("argv,expect", [(["--version"], f"qemjax {qemjax.__version__} (jax "),
                                          (["simplify", "--help"], "usage: qemjax simplify"),
                                          (["lod", "--help"], "usage: qemjax lod"),
                                          (["--help"], "usage: qemjax")])
-def test_version_and_help_do_not_import_jax(argv, expect):
-    p = _python(f"import sys; from qemjax._cli import main; code = main({argv!r}); "
+def test_version_and_help_do_not_import_jax(argv, expect, entry):
+    p = _python(f"import sys; from qemjax.{entry} import main; code = main({argv!r}); "
                 "print('heavy:', *sorted(m for m in ('jax', 'numba', 'trimesh') if m in sys.modules)); sys.exit(code)")
     assert p.returncode == 0, p.stderr
     assert p.stdout.startswith(expect) and p.stdout.splitlines()[-1] == "heavy:"
+    if entry == "__main__" and argv == ["--version"]:  # answered before the command's modules are imported
+        p = _python("import sys; from qemjax.__main__ import main; main(['--version']); print('numpy' in sys.modules)")
+        version, numpy_imported = p.stdout.splitlines()
+        assert version.startswith(expect) and numpy_imported == "False"
     if argv == ["simplify", "--help"]:
         assert "--boundary-weight" in p.stdout and "--curvature-weight" in p.stdout  # every method's fields
 
