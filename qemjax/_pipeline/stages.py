@@ -88,8 +88,9 @@ def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """A run's settings, checked and resolved before the mesh is read (`_setup`): the method object and
-    its name as shown (`_costs.shown_name`: ``"default"`` when the call named none), the scheduler and its `Schedule`, the model it prices with (`_costs.build`), `Topology`,
-    `Attributes` (with the checked weights per kind) and whether to show progress."""
+    its name as shown (`_costs.shown_name`: ``"default"`` when the call named none), the scheduler and its
+    `Schedule`, the model it prices with (`_costs.build`), `Topology`, `Attributes` (with the checked weights
+    per kind) and whether to show progress."""
 
     method_obj: Any
     method: str
@@ -374,8 +375,7 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     total = time.perf_counter() - t_start
     stats = dict(job.report)
     stats.update(
-        method=setup.method, scheduler=setup.scheduler, faces_in=m, faces_out=len(Fout),
-        target_faces=target,
+        method=setup.method, scheduler=setup.scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
         vertices_in=len(V), vertices_out=len(vout), close_pairs=len(g.extra), contractions=out.contractions,
         rejected=out.rejected, rounds=out.rounds,
         branches={name: int(c) for name, c in zip(model.branches, out.branches)},
