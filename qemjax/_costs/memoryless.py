@@ -36,7 +36,7 @@ ranks (Q_current + μ·Q_history + the volume term).
 """
 from __future__ import annotations
 
-import jax.numpy as jnp
+from .._kernels.lazy import jnp  # imported on first use (`_kernels.lazy`)
 import numpy as np
 
 from .._kernels.batching import DTYPE

@@ -11,14 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import compilation as _compilation
 from .. import _costs
 from .._schedulers import locks as _locks
 from .._options import Topology
 from .._record.result import SimplifyResult
-from .._schedulers import batched
-from . import stages
-from .stages import Job, _resolve_target
 
 PLACEMENTS = _costs.qem.PLACEMENTS
 
@@ -94,12 +90,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     reason but the parity of a closed mesh. Raises ValueError for bad input or options, TypeError for an
     unknown setting.
     """
+    from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
+    from . import stages
+
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
     settings = dict(settings)
     locks = _locks.pop_settings(settings)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings)
-    _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
+    stages._resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     geo = stages.geometry(mesh, setup, stacklevel=3)
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks)
     return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
@@ -133,6 +132,10 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
     list is that exception instead.
     """
+    from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
+    from .._schedulers import batched
+    from . import stages
+
     t_start = time.perf_counter()
     geos, states, jobs, out = {}, {}, [], [None] * len(cells)
     for i, (mesh, cfg) in enumerate(cells):
@@ -146,7 +149,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
                 setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest)
             except TypeError as exc:
                 raise ValueError(f"simplify_batch: {exc}") from None
-            _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
+            stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
                 geos[gk] = stages.geometry(mesh, setup, stacklevel=4)
@@ -214,6 +217,8 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
 
 def _batch_key(job: "Job"):
     """Jobs with equal keys can run as copies of one batch (`_schedulers.batched`); None: run alone."""
+    from .._schedulers import batched
+
     s, model = job.setup, job.model
     if s.scheduler != "parallel" or len(job.geo.extra) or job.tracker is not None or job.locks is not None or \
             not batched.batchable(model) or not (

@@ -89,8 +89,9 @@ def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """A run's settings, checked and resolved before the mesh is read (`_setup`): the method object and
-    its name, the scheduler and its `Schedule`, the model it prices with (`_costs.build`), `Topology`,
-    `Attributes` (with the checked weights per kind) and whether to show progress."""
+    its name as shown (`_costs.shown_name`: ``"default"`` when the call named none), the scheduler and its
+    `Schedule`, the model it prices with (`_costs.build`), `Topology`, `Attributes` (with the checked weights
+    per kind) and whether to show progress."""
 
     method_obj: Any
     method: str
@@ -167,10 +168,11 @@ def setup(method, scheduler, topology, attributes, progress, settings: dict) -> 
     settings = dict(settings)
     sched_name, schedule = _flat.scheduler_of(scheduler, settings.pop("schedule", None))
     measure = settings.pop("measure", None)
+    named = settings.get("preset") or method  # what the call named ("default" when it named none)
     method_obj, topology, attrs = _flat.apply(method, topology, attributes, settings)
     model = _costs.build(method_obj)
     kind_weights = _wedges.check_weights(attrs.attribute_weights)
-    return Setup(method_obj, _costs.name_of(method_obj), sched_name, schedule, model, topology, attrs,
+    return Setup(method_obj, _costs.shown_name(method_obj, named), sched_name, schedule, model, topology, attrs,
                  kind_weights, _flag("progress", progress), None if measure is None else _flag("measure", measure))
 
 
@@ -201,7 +203,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         geo = _locks.permuted_geometry(geo, lk)
         states = None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
-    if attrs is not None and (setup.method != "qem" or setup.split is not None or
+    if attrs is not None and (_costs.name_of(setup.method_obj) != "qem" or setup.split is not None or
                               getattr(model, "memoryless", False)):
         warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
         what = "memoryless=True" if getattr(model, "memoryless", False) else f"method={setup.method!r}"

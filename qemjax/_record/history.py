@@ -60,6 +60,10 @@ class Level:
     max_error: float
     round: int
 
+    def __repr__(self):  # counts, not arrays
+        return (f"Level({len(self.faces)} faces, {len(self.vertices)} vertices, {self.contractions} contractions, "
+                f"max_error {self.max_error:.3g}, round {self.round})")
+
     def to_trimesh(self):
         """The level as a `trimesh.Trimesh` (no processing)."""
         import trimesh
@@ -89,6 +93,10 @@ class Record:
     scheduler: str = "parallel"
     target_faces: int = 0
     locked: np.ndarray | None = None  # (n,) bool: locked input vertices (None: none), kept exactly
+
+    def __repr__(self):  # counts, not arrays
+        return (f"Record({len(self.input_faces)} -> {self.faces_out} faces, {len(self.history)} contractions, "
+                f"scheduler {self.scheduler!r})")
 
     # -- what the record says ----------------------------------------------------------------------
     def faces_removed(self) -> np.ndarray:

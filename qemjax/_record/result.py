@@ -29,6 +29,11 @@ class Contractions:
     def __len__(self):
         return len(self.pairs)
 
+    def __repr__(self):  # counts, not arrays
+        rounds = "" if self.rounds is None or not len(self.rounds) else f", {int(self.rounds.max()) + 1} rounds"
+        parts = f", parts {', '.join(self.parts)}" if self.parts else ""
+        return f"Contractions({len(self)} contractions{rounds}{parts})"
+
 
 @dataclasses.dataclass
 class SimplifyResult:
@@ -93,6 +98,25 @@ class SimplifyResult:
     wedge_vertex: np.ndarray | None = None
     material: object = None
     input_wedge_faces: np.ndarray | None = None
+
+    def __repr__(self):
+        """A few lines (a notebook cell shows this): the counts, the method, why the run stopped and its
+        key figures; the arrays are the fields (``res.vertices``, ...), every figure is in ``res.stats``."""
+        s = self.stats
+        first = (f"SimplifyResult: {len(self.input_faces)} -> {len(self.faces)} faces, {len(self.input_vertices)} -> "
+                 f"{len(self.vertices)} vertices, stop_reason {self.stop_reason!r}")
+        if s.get("target_faces"):
+            first += f" (target {s['target_faces']} faces)"
+        lines = [first, f"  method {s.get('method')!r}, scheduler {s.get('scheduler')!r}, {s.get('rounds', 0)} rounds, "
+                        f"{len(self.history)} contractions, {s.get('total_s', 0.0):.2f} s "
+                        f"(compile {s.get('compile_s', 0.0):.2f} s)",
+                 f"  max_error {self.max_error:.3g} ({s.get('error_unit', 'squared distance, mesh units²')})"]
+        kept = [k for k in ("uv", "colors", "normals") if getattr(self, k) is not None]
+        extra = ([f"attributes kept: {', '.join(kept)} ({len(self.wedge_vertex)} wedges)"] if kept else []) + \
+                ([f"dropped: {', '.join(s['dropped'])}"] if s.get("dropped") else [])
+        if extra:
+            lines.append("  " + "; ".join(extra))
+        return "\n".join(lines)
 
     @property
     def vertex_map(self) -> np.ndarray:
