@@ -110,7 +110,9 @@ class SimplifyResult:
         lines = [first, f"  method {s.get('method')!r}, scheduler {s.get('scheduler')!r}, {s.get('rounds', 0)} rounds, "
                         f"{len(self.history)} contractions, {s.get('total_s', 0.0):.2f} s "
                         f"(compile {s.get('compile_s', 0.0):.2f} s)",
-                 f"  max_error {self.max_error:.3g} ({s.get('error_unit', 'squared distance, mesh units²')})"]
+                 (f"  distance from the input: max {s['distance_max']:.3g}, rms {s['distance_rms']:.3g} mesh units"
+                  if s.get("distance_max") is not None else "  distance from the input: not measured (measure=True)")
+                 + f"; max_error {self.max_error:.3g} ({s.get('error_unit', 'quadric error, mesh units²')})"]
         kept = [k for k in ("uv", "colors", "normals") if getattr(self, k) is not None]
         extra = ([f"attributes kept: {', '.join(kept)} ({len(self.wedge_vertex)} wedges)"] if kept else []) + \
                 ([f"dropped: {', '.join(s['dropped'])}"] if s.get("dropped") else [])
