@@ -163,13 +163,16 @@ def attribute_state(V: np.ndarray, F: np.ndarray, S: np.ndarray, w: np.ndarray) 
 
 def _np_translate(st: np.ndarray, d: np.ndarray, m: int) -> np.ndarray:
     """A state (11 + 4m,) re-expressed in a frame moved by d (3,), float64 numpy."""
-    A = st[[0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(3, 3)
-    Ad = fixed_order.matvec(A, d)
+    # Python floats, in a fixed order (not BLAS, whose bits vary by CPU; and a pair at a time, numpy's
+    # per-call overhead would dominate)
+    a0, a1, a2, a3, a4, a5, b0, b1, b2 = st[:9].tolist()
+    d0, d1, d2 = d.tolist()
+    ad = (a0 * d0 + a1 * d1 + a2 * d2, a1 * d0 + a3 * d1 + a4 * d2, a2 * d0 + a4 * d1 + a5 * d2)
     out = st.copy()
-    out[6:9] += Ad
-    out[9] += fixed_order.dot(d, Ad + 2 * st[6:9])
-    G = st[11:].reshape(m, 4)
-    out[14::4] += fixed_order.matvec(G[:, :3], d)
+    out[6:9] += ad
+    out[9] += d0 * (ad[0] + 2 * b0) + d1 * (ad[1] + 2 * b1) + d2 * (ad[2] + 2 * b2)
+    g = st[11:].tolist()
+    out[14::4] += [g[4 * j] * d0 + g[4 * j + 1] * d1 + g[4 * j + 2] * d2 for j in range(m)]
     return out
 
 

@@ -41,8 +41,13 @@ def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(…,) a·b over the last axis, added left to right (float64)."""
+    """(…,) a·b over the last axis, added left to right (float64; two vectors: a Python float)."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    if a.ndim == 1 and b.ndim == 1:  # one pair of vectors: Python floats (numpy's per-call cost dominates)
+        s = 0.0
+        for x, y in zip(a.tolist(), b.tolist()):
+            s += x * y
+        return s
     out = np.zeros(np.broadcast_shapes(a.shape, b.shape)[:-1])
     for j in range(a.shape[-1]):
         out = out + a[..., j] * b[..., j]
