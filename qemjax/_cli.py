@@ -393,8 +393,8 @@ def main(argv=None) -> int:
     one line, and no partial output, since files are written under a temporary name and renamed)."""
     try:
         return _main(sys.argv[1:] if argv is None else list(argv))
-    except KeyboardInterrupt:
-        print("qemjax: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # a sweep's says how many rows it kept (`SweepInterrupted`)
+        print(f"qemjax: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
         return 130
 
 
@@ -460,7 +460,12 @@ def _sweep(args) -> int:
         _cache.enable()
     df = _sweep_config.run(config, progress=not args.quiet)
     failed = int((df["error"].fillna("") != "").sum())
-    print(f"{args.config}: {len(df)} cells ({failed} failed) -> {config.out}")
+    info = df.attrs.get("sweep", {})
+    extra = f"; {info['skipped']} were already there (skipped)" if info.get("skipped") else ""
+    if info.get("collapsed"):
+        extra += (f"; {info['requested']} requested cells collapsed to {info['cells']} ("
+                  + "; ".join(f"{n}: {why}" for why, n in info["collapsed"].items()) + ")")
+    print(f"{args.config}: {len(df)} cells ({failed} failed) -> {config.out}{extra}")
     return 0
 
 

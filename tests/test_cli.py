@@ -355,18 +355,17 @@ def test_sweep_config_executors(sweep_dir):
         assert none is None
 
 
-def test_sweep_example_config_is_valid():
-    """The README's example file passes the checks anywhere: its meshes are made in code (the README test
-    runs it)."""
+def test_sweep_example_config_is_valid(tmp_path):
+    """The example config `qemjax examples` writes passes the checks where it is written (the README test
+    runs it): bumpy.obj beside it, the torus made in code."""
     from qemjax._sweep import config as _sweep_config
-    from qemjax import shapes
 
-    config = _sweep_config.load(ROOT / "experiments" / "sweep_example.toml")
-    assert set(config.meshes) == {"bumpy_sphere", "torus"}
-    assert all(shapes.is_spec(m) for m in config.meshes.values())
+    assert _cli.main(["examples", str(tmp_path)]) == 0
+    config = _sweep_config.load(tmp_path / "sweep_example.toml")
+    assert config.meshes == {"bumpy": str(tmp_path / "bumpy.obj"), "torus": "shapes.torus(n_major=32, n_minor=16)"}
     assert config.grid["split_factor"] == [None, 1.3333333] and config.executor == {"workers": 2}
     assert config.targets == [0.1, 0.25, 200] and isinstance(config.targets[2], int)
-    assert config.out.endswith("sweep_example.csv")
+    assert config.out == str(tmp_path / "sweep_example.csv")
 
 
 # ---- rough edges: one-line errors, Ctrl-C, units, clean-up and attributes in the summary, lod -------
