@@ -16,6 +16,7 @@ import json
 import math
 import numbers
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -453,7 +454,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     from tqdm.auto import tqdm
 
     if progress and skipped:
-        tqdm.write(f"sweep: {skipped} of {len(cells)} cells already in {os.fspath(out)}: skipped")
+        tqdm.write(f"sweep: {skipped} of {len(cells)} cells already in {os.fspath(out)}: skipped", file=sys.stderr)
     bar = tqdm(total=len(cells), initial=skipped, unit="cell", desc="sweep", disable=not progress)
     ran = []
 
@@ -476,12 +477,12 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         ran.extend(batch_rows)
         bar.update(len(batch_rows))
 
-    saved = [time.perf_counter()]
+    saved = [time.perf_counter(), 0]  # when the table was last written, and with how many new rows
 
     def save():
-        if out is None:
+        if out is None or saved[1] == len(ran):
             return
-        saved[0] = time.perf_counter()
+        saved[:] = time.perf_counter(), len(ran)
         if _format(out) == "csv":  # rows already in the file: as they were, byte for byte
             order = other_keys + [k for k in keys if k in rows]
             cols = list(dict.fromkeys([*header, *(c for k in order for c in texts[k])]))
@@ -508,8 +509,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         stopped = True
     finally:
         bar.close()
-        if ran or stopped:
-            save()
+        save()  # nothing when every finished row is written already
     if stopped:
         where = f" in {os.fspath(out)}" if out is not None else " (no out= given: not written)"
         raise SweepInterrupted(f"{len(ran)} of {len(todo)} cells finished this run, kept{where}; "

@@ -68,12 +68,21 @@ def _value(text: str):
 
 def _not_applicable_back(df):
     """Columns that hold "n/a" were stored as text: their other values back to numbers / bools."""
-    cols = [c for c in df.columns if df[c].dtype == object and (df[c] == NOT_APPLICABLE).any()]
+    cols = [c for c in df.columns if _marked(df[c])]
     if cols:
         df = df.copy()
         for col in cols:
-            df[col] = [v if not isinstance(v, str) or v == NOT_APPLICABLE else _value(v) for v in df[col]]
+            df[col] = np.array([v if not isinstance(v, str) or v == NOT_APPLICABLE else _value(v) for v in df[col]],
+                               dtype=object)
     return df
+
+
+def _marked(column) -> bool:
+    """Whether a column of text or objects holds "n/a"."""
+    import pandas as pd
+
+    return (column.dtype == object or pd.api.types.is_string_dtype(column)) and \
+        bool((column.astype(object) == NOT_APPLICABLE).any())
 
 
 def read_table(out):
@@ -140,7 +149,7 @@ def write_table(df, out) -> None:
     else:
         df = df.copy()
         for col in df.columns:
-            if df[col].dtype == object and (df[col].astype(str) == NOT_APPLICABLE).any():
+            if _marked(df[col]):
                 df[col] = [None if v is None or isinstance(v, float) and math.isnan(v) else as_text(v)
                            for v in df[col]]
         df.to_parquet(tmp, index=False)
