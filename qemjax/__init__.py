@@ -5,7 +5,8 @@ as frozen settings objects (`QEM`, `ESQEM`, `AreaDifference`, `LineQEM`, `Probab
 `Method`,
 `register_method`, `methods`), the run's other settings (`Topology`, `Attributes`, `Schedule`); `load`, `SimplifyResult`, `Contractions`, `Mesh`; the multiresolution record (`Record`, `Level`,
 `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` and
-`shapes` (meshes made in code, `shapes.write_examples`) modules.
+`shapes` (meshes made in code, `shapes.write_examples`) modules; `cache` (JAX's persistent compilation
+cache, on by default).
 """
 from ._pipeline.api import methods as methods
 from ._costs import register as register_method
@@ -32,6 +33,10 @@ from ._record.history import load_record as load_record
 from ._record.result import Contractions as Contractions
 from ._record.result import SimplifyResult as SimplifyResult
 from ._sweep.run import sweep as sweep
+from ._kernels.cache import cache as cache
+from ._kernels import cache as _cache
+
+_cache.enable_default()  # JAX's persistent compilation cache: `cache` (QEMJAX_NO_CACHE=1 opts out)
 
 __version__ = "0.1.0"
 

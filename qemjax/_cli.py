@@ -12,7 +12,8 @@ interrupted`` and exits with 130. The output format and folder are checked befor
 file is written under a temporary name and renamed, so a failure never leaves a partial file. Below the
 summary line, indented lines name what clean-up removed and the appearance attributes kept.
 
-The command enables JAX's persistent compilation cache (`_cache.enable`); the library never does.
+JAX's persistent compilation cache is on (importing qemjax enables it: `_cache.enable_default`); ``--no-cache``
+or QEMJAX_NO_CACHE=1 turns it off.
 """
 from __future__ import annotations
 
@@ -432,8 +433,8 @@ def _lod(args, kwargs) -> int:
     stem = os.path.splitext(os.path.basename(args.input))[0]
     paths = [os.path.join(folder, f"{stem}-lod{i}.{args.fmt}") for i in range(len(args.ratios))]
     check_output(paths[0])
-    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
-        _cache.enable()
+    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+        _cache.disable()
     chain = lod_chain(args.input, ratios=args.ratios, **kwargs)
     for path, level, r in zip(paths, chain.levels, chain.ratios):
         write(level, path, args.fmt)
@@ -456,8 +457,8 @@ def _sweep(args) -> int:
     from ._sweep import config as _sweep_config
 
     config = _sweep_config.load(args.config, out=args.out)
-    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
-        _cache.enable()
+    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+        _cache.disable()
     df = _sweep_config.run(config, progress=not args.quiet)
     failed = int((df["error"].fillna("") != "").sum())
     info = df.attrs.get("sweep", {})
@@ -492,8 +493,8 @@ def _run(args) -> int:
     out = args.output if args.cmd == "simplify" else args.out
     ext = check_output(out) if out is not None else None
     kwargs = _simplify_kwargs(args)
-    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
-        _cache.enable()
+    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+        _cache.disable()
     if args.cmd == "simplify":
         res = _api.simplify(args.input, **kwargs)
         name = args.input
