@@ -1,8 +1,8 @@
 """Parameter sweeps: meshes × a grid of `simplify` keywords × targets, one table row per cell.
 
 A pipeline of small stages: name and load the meshes (once each), cross the grid into cells, drop the
-cells already in ``out`` (resume), run the rest in batches (in process or on an executor), write the table
-after each batch. A batch of cells runs through `simplify_cells`: the cells that can share rounds (of
+cells already in ``out`` (resume), run the rest in small batches (in process or on an executor), write the
+table as rows come in (table.py), keep every finished row on Ctrl-C. A batch of cells runs through `simplify_cells`: the cells that can share rounds (of
 one mesh or several) run as one disjoint union of copies, the rest alone; either way each cell's mesh is the one
 `simplify` gives alone (tested).
 """
@@ -173,7 +173,7 @@ def _why_collapsed(full: tuple, combo: tuple) -> str:
 
 def _applicable(combo: tuple) -> tuple:
     """A cell's parameters without the method settings its method does not have (a peer: none; a grid that crosses
-    ``method = ["qem", "esqem"]`` with ``split_factor`` gives the qem cells no split factor: NaN in the
+    ``method = ["qem", "esqem"]`` with ``split_factor`` gives the qem cells no split factor: "n/a" in the
     table, and one cell instead of one per value). Settings the method has, and the rest, stay."""
     params = dict(combo)
     if isinstance(params.get("method"), str) and params["method"] in _PEER_NAMES:
@@ -273,13 +273,12 @@ def run_cells(items: list, metrics) -> list[dict]:
     return list(iter_rows(items, metrics))
 
 
-def row(mesh, cell: Cell, res, metrics, seconds: float | None = None) -> dict:
+def row(mesh, cell: Cell, res, metrics) -> dict:
     """A cell's row: parameters, counts, stop reason, timings, output hash, metrics (``metrics``: False, or
     a dict of `qemjax.metrics.evaluate` keywords); ``res`` is the `SimplifyResult` or the exception
     `simplify` raised (then only ``error`` is set). Timings (see `sweep`): a cell that ran alone has its own
     ``compile_s``, ``run_s``, ``total_s``; a cell that shared its rounds with others (``batch_size`` > 1)
-    has them empty (not measured) and its apportioned ``share_s`` of the shared run's ``batch_wall_s``.
-    ``seconds`` is unused (kept for callers of the older signature)."""
+    has them empty (not measured) and its apportioned ``share_s`` of the shared run's ``batch_wall_s``."""
     peer = _peer(cell)  # a peer's row: the grid keys other than method do not apply ("n/a", filled by `sweep`)
     out = {"cell": cell.key, "mesh": cell.mesh,
            **{k: _plain(v) if peer is None or k == "method" else NOT_APPLICABLE for k, v in cell.params},
