@@ -69,7 +69,7 @@ def test_resume_runs_only_missing_cells(meshes, reference, tmp_path, monkeypatch
         pytest.importorskip("pyarrow")
     out = tmp_path / f"sweep{ext}"
     calls = []
-    real, real_batch = sw.simplify, sw.simplify_cells
+    real, real_batch = sw.simplify, sw.iter_cells
 
     def counting(mesh, **kw):
         calls.append(kw)
@@ -80,7 +80,7 @@ def test_resume_runs_only_missing_cells(meshes, reference, tmp_path, monkeypatch
         return real_batch(cells, **kw)
 
     monkeypatch.setattr(sw, "simplify", counting)
-    monkeypatch.setattr(sw, "simplify_cells", counting_batch)
+    monkeypatch.setattr(sw, "iter_cells", counting_batch)
     first = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, out=out, progress=False)
     assert len(calls) == len(reference)
     assert list(first["result_sha256"]) == list(reference["result_sha256"])

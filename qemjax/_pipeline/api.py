@@ -123,6 +123,17 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
     list is that exception instead.
     """
+    out = [None] * len(cells)
+    for i, res in iter_cells(cells, errors=errors, stacklevel=5):
+        out[i] = res
+    return out
+
+
+def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
+    """`simplify_cells`, as (index, result) pairs as each is final: the bad configurations first, then each
+    cell that runs alone when it ends, each batch's cells when the batch (and its re-fits) ends. A sweep
+    writes each row as soon as it can. ``stacklevel``: where warnings point (`simplify_cells` passes its
+    caller's)."""
     t_start = time.perf_counter()
     geos, states, jobs, out = {}, {}, [], [None] * len(cells)
     for i, (mesh, cfg) in enumerate(cells):
@@ -139,13 +150,16 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
             _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
-                geos[gk] = stages.geometry(mesh, setup, stacklevel=4)
+                geos[gk] = stages.geometry(mesh, setup, stacklevel=stacklevel)
             jobs.append((i, stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
-                                 kw["max_error"], stacklevel=4, states=states, locks=locks)))
+                                 kw["max_error"], stacklevel=stacklevel, states=states, locks=locks)))
         except ValueError as exc:
             if not errors:
                 raise
             out[i] = exc
+    for i, exc in enumerate(out):
+        if exc is not None:
+            yield i, exc
     groups: dict = {}
     for i, job in jobs:
         groups.setdefault(_batch_key(job), []).append((i, job))
@@ -154,7 +168,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         if key is None or len(members) == 1:
             for i, job in members:
                 t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
-                out[i] = stages.finish(job, stages.run(job), t0 - prep, c1, s1, stacklevel=4)
+                yield i, stages.finish(job, stages.run(job), t0 - prep, c1, s1, stacklevel=stacklevel)
             continue
         t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
         which, firsts = _same_runs([j for _, j in members])
@@ -170,13 +184,14 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         later: list = []  # the batch's re-fits, run side by side below
         for k, (i, job) in enumerate(members):
             r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
-            res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=4,
+            res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=stacklevel,
                           batch={"size": len(members), "copies": len(js), "same_run": int(served[which[k]]),
                                  "total_s": wall, "compilations": c2 - c1}, later=later)
             res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
             out[i] = res
         stages.refit_all(later)
-    return out
+        for i, _ in members:
+            yield i, out[i]
 
 
 def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:

@@ -27,7 +27,7 @@ from .. import _costs, shapes
 from .._pipeline import flat as _flat
 from .._io import mesh as _io
 from .._costs.base import Method
-from .._pipeline.api import simplify, simplify_cells
+from .._pipeline.api import iter_cells, simplify
 from .._options import Attributes, Schedule, Topology
 from .table import (FORMATS, NOT_APPLICABLE, _check_writable, _format, _typed, as_text,  # noqa: F401
                     read_table, read_text, target_column, write_table, write_text)
@@ -251,21 +251,22 @@ def run_cell(mesh, cell: Cell, metrics) -> dict:
 
 def iter_rows(items: list, metrics):
     """The rows of cells, items = [(mesh, `Cell`)], one at a time as each is final: computed together by
-    `simplify_cells` (each result equals `simplify`'s alone; cells of several meshes may share rounds),
-    then each row's metrics. If the batch fails as a whole, each cell runs alone, so the rows say which
+    `simplify_cells` (its `iter_cells`: each result equals `simplify`'s alone; cells of several meshes may
+    share rounds; each cell or shared batch yields its rows when its run ends), then each row's metrics. If the batch fails as a whole, each cell runs alone, so the rows say which
     configuration fails and why. Peers and a batch of one run alone."""
     if len(items) == 1 or any(_peer(c) for _, c in items):  # peers run alone (`qemjax.peers`)
         for mesh, c in items:
             yield run_cell(mesh, c, metrics)
         return
-    try:
-        results = simplify_cells([(mesh, c.kwargs()) for mesh, c in items], errors=True)
+    done = set()
+    try:  # each cell as soon as its run ends: a cell alone when it ends, a shared batch when it ends
+        for i, r in iter_cells([(mesh, c.kwargs()) for mesh, c in items], errors=True):
+            done.add(i)
+            yield row(items[i][0], items[i][1], r, metrics)
     except Exception:  # noqa: BLE001 - rerun alone: the failing cell's row will carry its error
-        for mesh, c in items:
-            yield run_cell(mesh, c, metrics)
-        return
-    for (mesh, c), r in zip(items, results):
-        yield row(mesh, c, r, metrics)
+        for i, (mesh, c) in enumerate(items):
+            if i not in done:
+                yield run_cell(mesh, c, metrics)
 
 
 def run_cells(items: list, metrics) -> list[dict]:
