@@ -238,3 +238,41 @@ def test_a_batch_yields_each_run_as_it_ends(ball, monkeypatch):
     for r in sw.iter_rows(items, False):
         order.append(r["boundary_weight"])
     assert order == ["run", 1.0, "run", 2.0]
+
+
+class _Losing(concurrent.futures.ThreadPoolExecutor):
+    """An executor whose first ``lose`` tasks are lost (their futures fail, as when a worker dies), and that
+    takes no task at all after ``broken_after`` submissions (a broken pool)."""
+
+    def __init__(self, lose: int, broken_after: int = 10**9):
+        super().__init__(1)
+        self.lose, self.broken_after, self.submitted = lose, broken_after, 0
+
+    def submit(self, fn, *args, **kwargs):
+        self.submitted += 1
+        if self.submitted > self.broken_after:
+            raise concurrent.futures.BrokenExecutor("a worker died")
+        if self.lose:
+            self.lose -= 1
+            f = concurrent.futures.Future()
+            f.set_exception(RuntimeError("worker lost"))
+            return f
+        return super().submit(fn, *args, **kwargs)
+
+
+@pytest.mark.parametrize("lose, broken_after, submitted", [(2, 10**9, 3 + 2), (1, 3, 4)])
+def test_lost_tasks_are_retried_then_run_here(ball, lose, broken_after, submitted):
+    grid = {"boundary_weight": [1.0, 2.0, 3.0]}
+    want = qemjax.sweep({"ball": ball}, grid, [0.5], metrics=False, progress=False)
+    with _Losing(lose, broken_after) as pool:
+        df = qemjax.sweep({"ball": ball}, grid, [0.5], metrics=False, executor=pool, progress=False)
+        assert pool.submitted == submitted  # 3 tasks + one per lost one (the last one refused: run here)
+    assert (df["error"] == "").all() and list(df["result_sha256"]) == list(want["result_sha256"])
+
+
+def test_lost_tasks_give_up_after_the_retries(ball, monkeypatch):
+    monkeypatch.setattr(sw, "RETRIES", 2)
+    with _Losing(100) as pool:  # every submission lost: 1 + 2 tries, then the cell runs here
+        df = qemjax.sweep({"ball": ball}, {}, [0.5], metrics=False, executor=pool, progress=False)
+        assert pool.submitted == 3
+    assert (df["error"] == "").all() and df["faces_out"].item() > 0
