@@ -8,7 +8,7 @@ The options are generated from `qemjax.simplify`'s run keywords and from the fie
 docstrings and the presentation details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
 the command line another way. Errors are one line on stderr and exit code 2 (argparse's with one hint
 line naming the --help to read); warnings are one line ``qemjax: warning: …``; Ctrl-C prints ``qemjax:
-interrupted`` and exits with 130. The output format and folder are checked before simplifying, and the
+interrupted`` (a sweep adds how many rows it kept) and exits with 130. The output format and folder are checked before simplifying, and the
 file is written under a temporary name and renamed, so a failure never leaves a partial file. Below the
 summary line, indented lines name what clean-up removed and the appearance attributes kept.
 

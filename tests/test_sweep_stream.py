@@ -53,6 +53,7 @@ def test_rows_reach_the_file_batch_by_batch(ball, tmp_path, monkeypatch, ext):
 
 def test_rows_reach_the_file_task_by_task_on_an_executor(ball, tmp_path, monkeypatch):
     seen = _saves(monkeypatch)
+    monkeypatch.setattr(sw, "SAVE_EVERY_S", 0.0)  # tiny cells: written at each wake-up, not once a second
     with concurrent.futures.ThreadPoolExecutor(1) as pool:
         qemjax.sweep({"ball": ball}, {"boundary_weight": [1.0, 2.0, 3.0]}, [0.5], metrics=False, out=tmp_path / "s.csv",
                      executor=pool, progress=False)

@@ -479,9 +479,14 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
 
     saved = [time.perf_counter(), 0]  # when the table was last written, and with how many new rows
 
-    def save():
+    def save(force: bool = True) -> float | None:
+        """Write the table if rows are waiting (unless not ``force`` and the last write was under
+        `SAVE_EVERY_S` ago); the seconds until a write is due, or None when no row is waiting."""
         if out is None or saved[1] == len(ran):
-            return
+            return None
+        wait = SAVE_EVERY_S - (time.perf_counter() - saved[0])
+        if not force and wait > 0:
+            return wait
         saved[:] = time.perf_counter(), len(ran)
         if _format(out) == "csv":  # rows already in the file: as they were, byte for byte
             order = other_keys + [k for k in keys if k in rows]
@@ -500,8 +505,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
             for b in work:
                 for r in iter_rows([(loaded[c.mesh], c) for c in b], metrics):
                     finish([r])
-                    if time.perf_counter() - saved[0] >= SAVE_EVERY_S:
-                        save()
+                    save(force=False)
                 save()
         else:
             _run_on(executor, submit, work, loaded, metrics, finish, save)
@@ -523,14 +527,17 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
 
 
 def _run_on(executor, submit, work, loaded, metrics, finish, save) -> None:
-    """The batches as tasks on an executor; rows written as each task ends. A task whose future fails (not a
-    cell: a cell's error is its row) was lost, e.g. its worker died: submitted again with the mesh arrays
+    """The batches as tasks on an executor; rows written as tasks end (at most every `SAVE_EVERY_S`, and
+    never later than that after a row came in). A task whose future fails (not a cell: a cell's error is
+    its row) was lost, e.g. its worker died: submitted again with the mesh arrays
     themselves, up to `RETRIES` times, then run here. Ctrl-C cancels the tasks not started."""
     shipped = _ship(executor, loaded)
     pending = {submit(run_cells, [(shipped[c.mesh], c) for c in b], metrics): (b, 0) for b in work}
+    due = None  # seconds until waiting rows must be written; None: none waiting
     try:
         while pending:
-            done, _ = concurrent.futures.wait(list(pending), return_when=concurrent.futures.FIRST_COMPLETED)
+            done, _ = concurrent.futures.wait(list(pending), timeout=due,
+                                              return_when=concurrent.futures.FIRST_COMPLETED)
             for f in done:
                 b, tries = pending.pop(f)
                 try:
@@ -548,7 +555,7 @@ def _run_on(executor, submit, work, loaded, metrics, finish, save) -> None:
                         continue
                     got = run_cells(items, metrics)
                 finish(got)
-            save()
+            due = save(force=False)
     except BaseException:
         for f in pending:
             f.cancel()
