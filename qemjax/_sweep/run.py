@@ -379,8 +379,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         again (`RETRIES` times), then run in this process.
     out: a ``.parquet`` (needs pyarrow: ``pip install 'qemjax[sweep]'``) or ``.csv`` path, rewritten
         (temporary file, fsync, rename) as cells finish: after each batch in process (a few seconds of work:
-        `BATCH_FACES`) and while a batch yields rows, at most every `SAVE_EVERY_S`; on an executor after each
-        finished task. Rows in row order (the rows of other grids already in the file first). Cells whose key
+        `BATCH_FACES`) and while a batch yields rows, at most every `SAVE_EVERY_S`; on an executor as tasks
+        end, at most every `SAVE_EVERY_S` and within it of a row coming in. Rows in row order (the rows of other grids already in the file first). Cells whose key
         is already there without an error are not run again (an interrupted sweep resumes; a CSV's rows
         already there are written back as the same text); rows of other cells in the file are kept. Ctrl-C
         writes every finished row and raises `SweepInterrupted` (a KeyboardInterrupt) saying how many.
