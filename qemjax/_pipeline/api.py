@@ -124,7 +124,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     list is that exception instead.
     """
     out = [None] * len(cells)
-    for i, res in iter_cells(cells, errors=errors, stacklevel=5):
+    for i, res in iter_cells(cells, errors=errors):  # its warnings point at our caller (checked: stacklevel 4)
         out[i] = res
     return out
 
@@ -132,8 +132,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
 def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
     """`simplify_cells`, as (index, result) pairs as each is final: the bad configurations first, then each
     cell that runs alone when it ends, each batch's cells when the batch (and its re-fits) ends. A sweep
-    writes each row as soon as it can. ``stacklevel``: where warnings point (`simplify_cells` passes its
-    caller's)."""
+    writes each row as soon as it can. ``stacklevel``: where warnings point (4: at `simplify_cells`'s caller)."""
     t_start = time.perf_counter()
     geos, states, jobs, out = {}, {}, [], [None] * len(cells)
     for i, (mesh, cfg) in enumerate(cells):
