@@ -277,3 +277,11 @@ def test_lost_tasks_give_up_after_the_retries(ball, monkeypatch):
         df = qemjax.sweep({"ball": ball}, {}, [0.5], metrics=False, executor=pool, progress=False)
         assert pool.submitted == 3
     assert (df["error"] == "").all() and df["faces_out"].item() > 0
+
+
+def test_simplify_cells_warnings_point_at_its_caller(ball):
+    """simplify_cells runs through the generator iter_cells (rows as runs end): its warnings still name
+    the caller's file."""
+    with pytest.warns(UserWarning, match="is not below the mesh") as got:
+        qemjax.simplify_cells([(ball, {"target_faces": 10**6}), (ball, {"target_faces": 10**6 + 1})])
+    assert {Path(w.filename).name for w in got} == {Path(__file__).name}
