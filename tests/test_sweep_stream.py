@@ -153,8 +153,11 @@ def _wait_for_rows(proc, path: Path, n: int, timeout: float = 240) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("executor", ["", "[executor]\nworkers = 2\n"], ids=["in-process", "process-pool"])
+@pytest.mark.parametrize("executor", ["", "[executor]\nworkers = 2\n", "[executor]\nworkers = 2\nscheduler = \"dask\"\n"],
+                         ids=["in-process", "process-pool", "dask"])
 def test_ctrl_c_keeps_finished_rows_and_the_rerun_resumes(tmp_path, executor):
+    if "dask" in executor:
+        pytest.importorskip("distributed")
     (tmp_path / "s.toml").write_text(CONFIG + executor)
     table = tmp_path / "table.csv"
     proc = _start(tmp_path, tmp_path / "cache")
