@@ -13,12 +13,22 @@ imports included.
     python experiments/compile_cache.py --pair shared   # ../shared/meshes cow.obj (5,804 faces), spot (5,856)
 
 Prints a table and appends to results/compile_cache.csv.
+
+``--sweep N`` (issue 41): a `qemjax.sweep` over N generated tori of N different sizes (one cell each, ratio
+0.1, metrics off, ``batch_size`` 1 by default so each mesh compiles as a sweep on an executor would, or
+``--batch-size 0``: the in-process default), three times, each in a fresh Python process: ``no_cache``
+(QEMJAX_NO_CACHE=1: what the library paid before it turned the cache on), ``cold`` (an empty cache folder)
+and ``warm`` (the same folder again). ``compile_s`` is the process's JAX tracing + lowering + compilation
+(or cache loading) time (`qemjax._kernels.compilation.snapshot`), ``sweep_s`` the sweep's wall time.
+
+    python experiments/compile_cache.py --sweep 20
 """
 from __future__ import annotations
 
 import argparse
 import csv
 import datetime
+import json
 import os
 import re
 import subprocess
@@ -63,11 +73,66 @@ def run_cli(mesh: Path, out: Path, cache: Path, ratio: float, extra=()) -> dict:
             "wall_s": round(wall, 2), "command": " ".join(["qemjax", *cmd[3:]])}
 
 
+SWEEP = """
+import json, sys, time
+t0 = time.perf_counter()
+import qemjax
+from qemjax import shapes
+from qemjax._kernels import compilation
+n, batch = int(sys.argv[1]), int(sys.argv[2]) or None
+meshes = {f"torus{k}": shapes.torus(n_major=24 + 6 * k, n_minor=12 + 3 * k) for k in range(n)}
+t1 = time.perf_counter()
+df = qemjax.sweep(meshes, {}, [0.1], metrics=False, progress=False, batch_size=batch)
+t2 = time.perf_counter()
+c, s = compilation.snapshot()
+print(json.dumps({"compile_s": round(s, 2), "compilations": c, "sweep_s": round(t2 - t1, 2),
+                  "import_s": round(t1 - t0, 2), "errors": int((df["error"] != "").sum()),
+                  "faces": [int(df["faces_in"].min()), int(df["faces_in"].max())], "cache": qemjax.cache()}))
+"""
+
+
+def sweep_runs(n: int, batch: int) -> None:
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="qemjax-cache-exp-") as tmp:
+        for label in ("no_cache", "cold", "warm"):
+            env = dict(os.environ, QEMJAX_CACHE_DIR=str(Path(tmp) / "cache"), PYTHONPATH=str(ROOT))
+            env.pop("QEMJAX_NO_CACHE", None)
+            env.pop("JAX_COMPILATION_CACHE_DIR", None)
+            if label == "no_cache":
+                env["QEMJAX_NO_CACHE"] = "1"
+            t0 = time.perf_counter()
+            done = subprocess.run([sys.executable, "-c", SWEEP, str(n), str(batch)], env=env, capture_output=True,
+                                  text=True, check=True)
+            r = json.loads(done.stdout.strip().splitlines()[-1])
+            rows.append({"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M"),
+                         "cores": len(os.sched_getaffinity(0)), "run": label, "meshes": n,
+                         "faces": f"{r['faces'][0]}-{r['faces'][1]}", "batch_size": batch or "default",
+                         "compile_s": r["compile_s"], "compilations": r["compilations"], "sweep_s": r["sweep_s"],
+                         "wall_s": round(time.perf_counter() - t0, 2), "errors": r["errors"],
+                         "load_avg": round(os.getloadavg()[0], 2),
+                         "command": f"python experiments/compile_cache.py --sweep {n} --batch-size {batch}"})
+    keys = list(rows[0])
+    print(" | ".join(keys[2:-1]))
+    for row in rows:
+        print(" | ".join(str(row[k]) for k in keys[2:-1]))
+    out = HERE / "results" / "compile_cache_sweep.csv"
+    new = not out.exists()
+    with open(out, "a", newline="") as f:
+        w = csv.DictWriter(f, keys)
+        if new:
+            w.writeheader()
+        w.writerows(rows)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--pair", choices=["generated", "shared"], default="generated")
     ap.add_argument("--ratio", type=float, default=0.1)
+    ap.add_argument("--sweep", type=int, default=0, help="a sweep over this many differently sized meshes")
+    ap.add_argument("--batch-size", type=int, default=1, help="with --sweep: cells per batch (0: the default)")
     args = ap.parse_args(argv)
+    if args.sweep:
+        return sweep_runs(args.sweep, args.batch_size)
     rows = []
     with tempfile.TemporaryDirectory(prefix="qemjax-cache-exp-") as tmp:
         tmp = Path(tmp)

@@ -92,13 +92,13 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: in
     def loop_peer(peer):
         return lambda: [peers.run_peer(peer, *cleaned[n], targets[n]) for n in names for _ in configs]
 
-    inside = []  # Σ simplify total_s within each timed sweep: the rest is the sweep's own overhead
+    inside = []  # Σ share_s within each timed sweep (the batches' wall times): the rest is the sweep's own overhead
 
     def timed_sweep(**kw):
         def go():
             df = qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, **kw)
             if not kw:
-                inside.append(float(df["total_s"].sum()))
+                inside.append(float(df["share_s"].sum()))
         return go
 
     def one_warm():  # the median of 5 runs: one run of a small mesh is short and varies most
@@ -146,7 +146,7 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: in
         workers.shutdown()
     one = statistics.median(t[0] for t in times["one warm config (default simplify)"]) / len(names)
     one_cpu = statistics.median(t[1] for t in times["one warm config (default simplify)"]) / len(names)
-    times["sum of simplify total_s in the sweep"] = [(t, float("nan")) for t in inside]
+    times["sum of share_s in the sweep"] = [(t, float("nan")) for t in inside]
     rows = []
     load = os.getloadavg()[0]
     for method, ts in times.items():

@@ -5,7 +5,8 @@ as frozen settings objects (`QEM`, `ESQEM`, `AreaDifference`, `LineQEM`, `Probab
 `Method`,
 `register_method`, `methods`), the run's other settings (`Topology`, `Attributes`, `Schedule`); `load`, `SimplifyResult`, `Contractions`, `Mesh`; the multiresolution record (`Record`, `Level`,
 `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` and
-`shapes` (meshes made in code, `shapes.write_examples`) modules.
+`shapes` (meshes made in code, `shapes.write_examples`) modules; `cache` (JAX's persistent compilation
+cache, on by default).
 """
 # name -> (module, attribute): imported on first use (PEP 562), so that `import qemjax` and the command line's
 # --version and --help stay light (no JAX, numba or trimesh until a name that needs them is used)
@@ -35,6 +36,7 @@ _PUBLIC = {
     "Contractions": ("._record.result", "Contractions"),
     "SimplifyResult": ("._record.result", "SimplifyResult"),
     "sweep": ("._sweep.run", "sweep"),
+    "cache": ("._kernels.cache", "cache"),
 }
 _MODULES = ("metrics", "render", "shapes")  # public submodules, also imported on first use
 __all__ = list(_PUBLIC)  # ``from qemjax import *``: the same names as when they were imported eagerly

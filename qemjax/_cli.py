@@ -8,11 +8,12 @@ The options are generated from `qemjax.simplify`'s run keywords and from the fie
 docstrings and the presentation details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
 the command line another way. Errors are one line on stderr and exit code 2 (argparse's with one hint
 line naming the --help to read); warnings are one line ``qemjax: warning: …``; Ctrl-C prints ``qemjax:
-interrupted`` and exits with 130. The output format and folder are checked before simplifying, and the
+interrupted`` (a sweep adds how many rows it kept) and exits with 130. The output format and folder are checked before simplifying, and the
 file is written under a temporary name and renamed, so a failure never leaves a partial file. Below the
 summary line, indented lines name what clean-up removed and the appearance attributes kept.
 
-The command enables JAX's persistent compilation cache (`_cache.enable`); the library never does.
+JAX's persistent compilation cache is on (importing qemjax enables it: `_cache.enable_default`); ``--no-cache``
+or QEMJAX_NO_CACHE=1 turns it off.
 """
 from __future__ import annotations
 
@@ -424,8 +425,8 @@ def main(argv=None) -> int:
     one line, and no partial output, since files are written under a temporary name and renamed)."""
     try:
         return _main(sys.argv[1:] if argv is None else list(argv))
-    except KeyboardInterrupt:
-        print("qemjax: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # a sweep's says how many rows it kept (`SweepInterrupted`)
+        print(f"qemjax: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
         return 130
 
 
@@ -468,8 +469,8 @@ def _lod(args, kwargs) -> int:
     stem = os.path.splitext(os.path.basename(args.input))[0]
     paths = [os.path.join(folder, f"{stem}-lod{i}.{args.fmt}") for i in range(len(args.ratios))]
     check_output(paths[0])
-    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
-        _cache.enable()
+    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+        _cache.disable()
     chain = lod_chain(args.input, ratios=args.ratios, **kwargs)
     for path, level, r in zip(paths, chain.levels, chain.ratios):
         write(level, path, args.fmt)
@@ -492,11 +493,16 @@ def _sweep(args) -> int:
     from ._sweep import config as _sweep_config
 
     config = _sweep_config.load(args.config, out=args.out)
-    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
-        _cache.enable()
+    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+        _cache.disable()
     df = _sweep_config.run(config, progress=not args.quiet)
     failed = int((df["error"].fillna("") != "").sum())
-    print(f"{args.config}: {len(df)} cells ({failed} failed) -> {config.out}")
+    info = df.attrs.get("sweep", {})
+    extra = f"; {info['skipped']} were already there (skipped)" if info.get("skipped") else ""
+    if info.get("collapsed"):
+        extra += (f"; {info['requested']} requested cells collapsed to {info['cells']} ("
+                  + "; ".join(f"{n}: {why}" for why, n in info["collapsed"].items()) + ")")
+    print(f"{args.config}: {len(df)} cells ({failed} failed) -> {config.out}{extra}")
     return 0
 
 
@@ -523,8 +529,8 @@ def _run(args) -> int:
     out = args.output if args.cmd == "simplify" else args.out
     ext = check_output(out) if out is not None else None
     kwargs = _simplify_kwargs(args)
-    if not (args.no_cache or os.environ.get("QEMJAX_NO_CACHE")):
-        _cache.enable()
+    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+        _cache.disable()
     if args.cmd == "simplify":
         res = _api.simplify(args.input, **kwargs)
         name = args.input

@@ -235,6 +235,29 @@ def _write(path: Path, text: str) -> Path:
     return path
 
 
+EXAMPLE_SWEEP = """\
+# qemjax sweep sweep_example.toml   (written by `qemjax examples`; the README's "Parameter sweeps" explains every key)
+# Paths are relative to this file's folder: bumpy.obj is written beside it; the torus is made in code.
+
+meshes = ["bumpy.obj", "shapes.torus(n_major=32, n_minor=16)"]  # or [meshes] name = "path"; shapes.NAME(...)
+targets = [0.1, 0.25, 200]            # ratios (floats in (0, 1)) and face counts (integers)
+out = "sweep_example.csv"             # default: the config's name with .parquet (needs pyarrow); .csv needs nothing
+
+[grid]                                # simplify keywords = lists of values, crossed
+method = ["qem", "esqem"]
+boundary_weight = [1.0, 100.0]
+split_factor = ["none", 1.3333333]    # "none" is None (TOML has no null); an ESQEM setting: "n/a" in qem's rows
+
+[metrics]                             # or: metrics = false (none), true (the default: all, 100 000 samples)
+n_samples = 5000                      # qemjax.metrics.evaluate's keywords: n_samples, seed
+
+[executor]                            # leave out to run in this process
+workers = 2                           # a local process pool of 2 (spawn) ...
+# scheduler = "dask"                  # ... or a Dask LocalCluster of 2 single-threaded worker processes
+# address = "tcp://scheduler:8786"    # or a running Dask cluster (instead of workers)
+"""
+
+
 def write_examples(folder=".", subdivisions: int = 4) -> list[Path]:
     """Write small example files made in code into ``folder`` (created if absent) and return their paths:
 
@@ -243,7 +266,9 @@ def write_examples(folder=".", subdivisions: int = 4) -> list[Path]:
       ``--feature-edges``);
     - ``textured.obj``: the same sphere with ``vt`` lines and no ``mtllib`` (so give ``texture=``): a cube
       map into a 3×2 UV atlas, 6 charts with seams between them;
-    - ``textured.png``: its texture, a checkerboard per chart.
+    - ``textured.png``: its texture, a checkerboard per chart;
+    - ``sweep_example.toml``: a sweep of bumpy.obj and a torus (`EXAMPLE_SWEEP`: ``qemjax sweep
+      sweep_example.toml`` in that folder writes sweep_example.csv).
 
     Existing files of these names are replaced."""
     from PIL import Image
@@ -275,4 +300,5 @@ def write_examples(folder=".", subdivisions: int = 4) -> list[Path]:
     Image.fromarray(_checkerboard()).save(tmp, format="PNG")
     os.replace(tmp, png)
     out.append(png)
+    out.append(_write(folder / "sweep_example.toml", EXAMPLE_SWEEP))
     return out

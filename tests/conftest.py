@@ -2,10 +2,16 @@
 tests using them skip when it is absent (a user's machine)."""
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+# importing qemjax turns JAX's persistent compilation cache on (qemjax.cache): the tests use a folder of their
+# own, shared by their runs, never the user's ~/.cache/qemjax (tests that check the cache set their own)
+os.environ.setdefault("QEMJAX_CACHE_DIR", os.path.join(tempfile.gettempdir(), "qemjax-test-cache"))
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 

@@ -79,15 +79,15 @@ def test_readme_has_the_blocks_it_promises():
     assert py and sh
     use = py[0][1]
     assert use.splitlines()[2].startswith("qemjax.shapes.write_examples()")  # the Use block's first line
-    assert any(line.startswith("qemjax sweep experiments/sweep_example.toml") for _, line in sh)
+    assert any(line.startswith("qemjax sweep sweep_example.toml") for _, line in sh)  # `qemjax examples` wrote it
     assert "shared" not in "".join(code for _, code in py) + "".join(line for _, line in sh)
     assert "m_in" not in use  # every name the block uses is defined in it
 
 
 def test_toml_block_is_the_example_config():
-    """The README shows experiments/sweep_example.toml as it is."""
+    """The README shows the sweep_example.toml that `qemjax examples` writes, as it is."""
     (_, shown), = blocks("toml")
-    assert tomllib.loads(shown) == tomllib.loads((ROOT / "experiments" / "sweep_example.toml").read_text())
+    assert shown.strip() == qemjax.shapes.EXAMPLE_SWEEP.strip()
 
 
 def test_python_blocks_run(tmp_path, monkeypatch, env):
@@ -123,7 +123,8 @@ def test_python_blocks_run(tmp_path, monkeypatch, env):
 
 def test_bash_lines_run(tmp_path, env):
     """Each command line exits 0, in a folder laid out like a fresh clone: the repository files the lines
-    name (experiments/sweep_example.toml) and experiments/results, nothing else."""
+    name and experiments/results, nothing else (the sweep's config is the one `qemjax examples` writes, as
+    for a pip-only user)."""
     lines = command_lines()
     for _, line in lines:
         for arg in shlex.split(line, comments=True)[1:]:
@@ -143,7 +144,7 @@ def test_bash_lines_run(tmp_path, env):
     for name in ("out.ply", "lods/bumpy-lod0.obj", "lods/bumpy-lods.glb", "lods/bumpy-record.npz",
                  "textured-10.obj", "textured-10.mtl", "textured-10.png"):
         assert (tmp_path / name).is_file(), name
-    with open(tmp_path / "experiments" / "results" / "sweep_example.csv", newline="") as f:
+    with open(tmp_path / "sweep_example.csv", newline="") as f:  # the pip-only example: written by qemjax examples
         rows = list(csv.DictReader(f))
     assert [r["target"] for r in rows[:3]] == ["0.1", "0.25", "200"]  # the config's order; a face count an int
     assert all(r["error"] == "" for r in rows)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 
+from . import cache as _cache
 from .lazy import jax  # imported on first use: importing qemjax stays light
 
 # On the CPU, XLA's newer fusion emitter compiles a loop fusion that it splits over several threads into
@@ -33,6 +34,7 @@ def kernel(fn=None, **jit_kwargs):
         if any(isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves((args, kwargs))):
             return fn(*args, **kwargs)  # inside another kernel's trace: inline (options are top-level only)
         if not compiled:
+            _cache.ensure_default()  # JAX's persistent compilation cache, before the first compilation
             opts = CPU_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
             compiled.append(jax.jit(fn, compiler_options=opts, **jit_kwargs))
         return compiled[0](*args, **kwargs)

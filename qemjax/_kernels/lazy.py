@@ -41,6 +41,9 @@ def jit(fn=None, **jit_kwargs):
     @functools.wraps(fn)
     def call(*args, **kwargs):
         if not compiled:
+            from .cache import ensure_default
+
+            ensure_default()  # JAX's persistent compilation cache, before the first compilation
             compiled.append(jax.jit(fn, **jit_kwargs))
         return compiled[0](*args, **kwargs)
     return call

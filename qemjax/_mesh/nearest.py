@@ -410,8 +410,12 @@ def each_on_threads(fn, items) -> None:
             fn(item)
         return
     with ThreadPoolExecutor(max_workers=min(_threads(), len(items))) as pool:
-        for _ in pool.map(fn, items):  # re-raises a block's exception here
-            pass
+        try:
+            for _ in pool.map(fn, items):  # re-raises a block's exception here
+                pass
+        except BaseException:  # an error or Ctrl-C: the items not started are dropped, not waited for
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
 
 
 def _workers(n: int) -> int:

@@ -27,7 +27,7 @@ def methods() -> tuple[str, ...]:
 def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None = None,
              max_error: float | None = None, method: Any = "default", scheduler: Any = "parallel",
              topology: Topology | None = None, attributes: Any = "auto", feature_edges=None,
-             progress: bool = False, **settings) -> SimplifyResult:
+             progress: bool = False, measure: bool | None = None, **settings) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -66,7 +66,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (others warn and drop).
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
     progress: show a progress bar (tqdm).
-    measure (given by name): measure the output's distance from the input (`_pipeline.measure`: every input
+    measure: measure the output's distance from the input (`_pipeline.measure`: every input
         vertex and face centroid to its nearest output point) into ``stats["distance_max"]``,
         ``["distance_rms"]`` (mesh units) and their ``_rel`` forms (over the bounding-box diagonal). None
         (default): measured when the method re-fits (the default method; the re-fit already makes the
@@ -95,7 +95,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
 
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
-    settings = dict(settings)
+    settings = dict(settings, measure=measure)
     locks = _locks.pop_settings(settings)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings)
     stages._resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
@@ -132,6 +132,16 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
     list is that exception instead.
     """
+    out = [None] * len(cells)
+    for i, res in iter_cells(cells, errors=errors):  # its warnings point at our caller (checked: stacklevel 4)
+        out[i] = res
+    return out
+
+
+def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
+    """`simplify_cells`, as (index, result) pairs as each is final: the bad configurations first, then each
+    cell that runs alone when it ends, each batch's cells when the batch (and its re-fits) ends. A sweep
+    writes each row as soon as it can. ``stacklevel``: where warnings point (4: at `simplify_cells`'s caller)."""
     from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
     from .._schedulers import batched
     from . import stages
@@ -143,7 +153,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
             if "progress" in cfg:
                 raise ValueError("simplify_batch: progress is not offered here (a sweep shows its own bar)")
             kw = {**_RUN_DEFAULTS, **{k: v for k, v in cfg.items() if k in _RUN_DEFAULTS}}
-            rest = {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS}
+            rest = {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS} | {"measure": kw["measure"]}
             locks = _locks.pop_settings(rest)
             try:
                 setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest)
@@ -152,13 +162,16 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
             stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
-                geos[gk] = stages.geometry(mesh, setup, stacklevel=4)
+                geos[gk] = stages.geometry(mesh, setup, stacklevel=stacklevel)
             jobs.append((i, stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
-                                 kw["max_error"], stacklevel=4, states=states, locks=locks)))
+                                 kw["max_error"], stacklevel=stacklevel, states=states, locks=locks)))
         except ValueError as exc:
             if not errors:
                 raise
             out[i] = exc
+    for i, exc in enumerate(out):
+        if exc is not None:
+            yield i, exc
     groups: dict = {}
     for i, job in jobs:
         groups.setdefault(_batch_key(job), []).append((i, job))
@@ -167,7 +180,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         if key is None or len(members) == 1:
             for i, job in members:
                 t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
-                out[i] = stages.finish(job, stages.run(job), t0 - prep, c1, s1, stacklevel=4)
+                yield i, stages.finish(job, stages.run(job), t0 - prep, c1, s1, stacklevel=stacklevel)
             continue
         t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
         which, firsts = _same_runs([j for _, j in members])
@@ -183,13 +196,14 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
         later: list = []  # the batch's re-fits, run side by side below
         for k, (i, job) in enumerate(members):
             r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
-            res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=4,
+            res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=stacklevel,
                           batch={"size": len(members), "copies": len(js), "same_run": int(served[which[k]]),
                                  "total_s": wall, "compilations": c2 - c1}, later=later)
             res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
             out[i] = res
         stages.refit_all(later)
-    return out
+        for i, _ in members:
+            yield i, out[i]
 
 
 def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:

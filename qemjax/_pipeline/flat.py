@@ -153,7 +153,8 @@ def field_names(group: str, obj=None) -> tuple[str, ...]:
 
 
 RUN_TYPES = {"method": str, "scheduler": str, "topology": Topology, "attributes": Any,
-             "max_error": typing.Optional[float], "preset": str, "schedule": Schedule}
+             "max_error": typing.Optional[float], "preset": str, "schedule": Schedule,
+             "measure": typing.Optional[bool]}  # measure: `_pipeline.measure` (None: with a re-fit)
 
 
 def grid_keys() -> tuple[str, ...]:

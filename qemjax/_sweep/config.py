@@ -270,9 +270,16 @@ def executor(settings: dict):
         import multiprocessing
 
         # spawn: JAX's threads do not survive fork
-        with concurrent.futures.ProcessPoolExecutor(settings["workers"],
-                                                    mp_context=multiprocessing.get_context("spawn")) as pool:
+        pool = concurrent.futures.ProcessPoolExecutor(settings["workers"],
+                                                      mp_context=multiprocessing.get_context("spawn"))
+        try:
             yield pool
+        except BaseException:  # Ctrl-C (or an error): stop the cells in flight now rather than wait for them
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):  # no public way before 3.14
+                proc.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
 
 
 def run(config: SweepConfig, progress: bool = True) -> Any:

@@ -1,8 +1,8 @@
 """Parameter sweeps: meshes × a grid of `simplify` keywords × targets, one table row per cell.
 
 A pipeline of small stages: name and load the meshes (once each), cross the grid into cells, drop the
-cells already in ``out`` (resume), run the rest in batches (in process or on an executor), write the table
-after each batch. A batch of cells runs through `simplify_cells`: the cells that can share rounds (of
+cells already in ``out`` (resume), run the rest in small batches (in process or on an executor), write the
+table as rows come in (table.py), keep every finished row on Ctrl-C. A batch of cells runs through `simplify_cells`: the cells that can share rounds (of
 one mesh or several) run as one disjoint union of copies, the rest alone; either way each cell's mesh is the one
 `simplify` gives alone (tested).
 """
@@ -13,8 +13,10 @@ import dataclasses
 import hashlib
 import itertools
 import json
+import math
 import numbers
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -25,8 +27,10 @@ from .. import _costs, shapes
 from .._pipeline import flat as _flat
 from .._io import mesh as _io
 from .._costs.base import Method
-from .._pipeline.api import simplify, simplify_cells
+from .._pipeline.api import iter_cells, simplify
 from .._options import Attributes, Schedule, Topology
+from .table import (FORMATS, NOT_APPLICABLE, _check_writable, _format, _typed, as_text,  # noqa: F401
+                    read_table, read_text, target_column, write_table, write_text)
 
 # a grid varies the run keywords of `simplify` and every setting by its flat or dotted name
 # (`_flat.grid_keys`); not the target (that is `targets`), progress (the sweep's own) or feature edges
@@ -40,9 +44,12 @@ def is_grid_key(key: str) -> bool:
     except KeyError:
         return False
     return True
-BATCH_FACES = 4_000_000  # a batch holds at most this many faces in all (its copies' memory)
+BATCH_FACES = 400_000  # an in-process batch holds at most this many faces in all: a few seconds of work, so
+# rows reach the file and the bar as cells finish (64 cow configurations are one batch; 100 k-face meshes 4)
+BATCH_CELLS = 128  # and at most this many cells
+SAVE_EVERY_S = 1.0  # in process, the table is rewritten after each batch and while one yields rows, at most this often
+RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
-FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
 _PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
@@ -123,11 +130,12 @@ def name_meshes(meshes) -> dict[str, Any]:
     return named
 
 
-def expand_grid(grid: dict) -> list[tuple[tuple[str, Any], ...]]:
+def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[str, Any], ...]]:
     """The cross product of ``grid`` (keyword → list of values; a non-list value is one value), in
     order: the last key varies fastest; a method setting is left out of the cells whose method does not
-    have it (`_applicable`), and cells that are then alike are kept once. Unknown keywords raise
-    ValueError naming them."""
+    have it (`_applicable`: "n/a" in their rows), and cells that are then alike are kept once. Unknown
+    keywords raise ValueError naming them. ``collapsed``: a dict that gets, for each reason (``"split_factor
+    does not apply to method 'qem'"``), how many configurations of the full cross product it removed."""
     if not isinstance(grid, dict):
         raise ValueError(f"grid must be a dict of simplify keywords → lists of values, got {type(grid).__name__}")
     unknown = [k for k in grid if not is_grid_key(k)]
@@ -142,18 +150,31 @@ def expand_grid(grid: dict) -> list[tuple[tuple[str, Any], ...]]:
             raise ValueError(f"grid[{k!r}] is empty")
         axes.append([(k, v) for v in values])
     out, seen = [], set()
-    for combo in itertools.product(*axes):
-        combo = _applicable(combo)
+    for full in itertools.product(*axes):
+        combo = _applicable(full)
         key = json.dumps([(k, _plain(v)) for k, v in combo], default=repr)
         if key not in seen:  # crossing a method without a setting with that setting's values: once
             seen.add(key)
             out.append(combo)
+        elif collapsed is not None:
+            why = _why_collapsed(full, combo)
+            collapsed[why] = collapsed.get(why, 0) + 1
     return out
+
+
+def _why_collapsed(full: tuple, combo: tuple) -> str:
+    """Why a configuration fell together with another: the keys `_applicable` left out, and for what method."""
+    gone = [k for k, _ in full if k not in dict(combo)]
+    method = dict(full).get("method", dict(full).get("preset") or _costs.DEFAULT)
+    label = _plain(method) if not isinstance(method, str) else method
+    if isinstance(method, str) and method in _PEER_NAMES:
+        return f"{', '.join(gone)} {'does' if len(gone) == 1 else 'do'} not apply to the peer {label!r}"
+    return f"{', '.join(gone)} {'does' if len(gone) == 1 else 'do'} not apply to method {label!r}"
 
 
 def _applicable(combo: tuple) -> tuple:
     """A cell's parameters without the method settings its method does not have (a peer: none; a grid that crosses
-    ``method = ["qem", "esqem"]`` with ``split_factor`` gives the qem cells no split factor: NaN in the
+    ``method = ["qem", "esqem"]`` with ``split_factor`` gives the qem cells no split factor: "n/a" in the
     table, and one cell instead of one per value). Settings the method has, and the rest, stay."""
     params = dict(combo)
     if isinstance(params.get("method"), str) and params["method"] in _PEER_NAMES:
@@ -222,131 +243,97 @@ def _simplify_cell(mesh, cell: Cell):
 
 def run_cell(mesh, cell: Cell, metrics) -> dict:
     """One row, from `simplify` alone (see `row`). A failing `simplify` gives a row with ``error`` set."""
-    t0 = time.perf_counter()
     try:
         res = _simplify_cell(mesh, cell)
     except Exception as exc:  # one bad combination must not stop a sweep: the row says why
         res = exc
-    return row(mesh, cell, res, metrics, time.perf_counter() - t0)
+    return row(mesh, cell, res, metrics)
+
+
+def iter_rows(items: list, metrics):
+    """The rows of cells, items = [(mesh, `Cell`)], one at a time as each is final: computed together by
+    `simplify_cells` (its `iter_cells`: each result equals `simplify`'s alone; cells of several meshes may
+    share rounds; each cell or shared batch yields its rows when its run ends), then each row's metrics. If the batch fails as a whole, each cell runs alone, so the rows say which
+    configuration fails and why. Peers and a batch of one run alone."""
+    if len(items) == 1 or any(_peer(c) for _, c in items):  # peers run alone (`qemjax.peers`)
+        for mesh, c in items:
+            yield run_cell(mesh, c, metrics)
+        return
+    done = set()
+    try:  # each cell as soon as its run ends: a cell alone when it ends, a shared batch when it ends
+        for i, r in iter_cells([(mesh, c.kwargs()) for mesh, c in items], errors=True):
+            done.add(i)
+            yield row(items[i][0], items[i][1], r, metrics)
+    except Exception:  # noqa: BLE001 - rerun alone: the failing cell's row will carry its error
+        for i, (mesh, c) in enumerate(items):
+            if i not in done:
+                yield run_cell(mesh, c, metrics)
 
 
 def run_cells(items: list, metrics) -> list[dict]:
-    """The rows of cells, items = [(mesh, `Cell`)], computed together by `simplify_cells` (each result
-    equals `simplify`'s alone; cells of several meshes may share rounds). If the batch fails as a whole,
-    each cell runs alone, so the rows say which configuration fails and why."""
-    if len(items) == 1 or any(_peer(c) for _, c in items):  # peers run alone (`qemjax.peers`)
-        return [run_cell(mesh, c, metrics) for mesh, c in items]
-    t0 = time.perf_counter()
-    try:
-        results = simplify_cells([(mesh, c.kwargs()) for mesh, c in items], errors=True)
-    except Exception:  # noqa: BLE001 - rerun alone: the failing cell's row will carry its error
-        return [run_cell(mesh, c, metrics) for mesh, c in items]
-    share = (time.perf_counter() - t0) / len(items)
-    return [row(mesh, c, r, metrics, share) for (mesh, c), r in zip(items, results)]
+    """`iter_rows` as a list: an executor's task (one per batch)."""
+    return list(iter_rows(items, metrics))
 
 
-def row(mesh, cell: Cell, res, metrics, seconds: float) -> dict:
+def _measured(x) -> float:
+    """A measured distance for a row (NaN: not measured)."""
+    return math.nan if x is None else float(x)
+
+
+def row(mesh, cell: Cell, res, metrics) -> dict:
     """A cell's row: parameters, counts, stop reason, timings, output hash, metrics (``metrics``: False, or
     a dict of `qemjax.metrics.evaluate` keywords); ``res`` is the `SimplifyResult` or the exception
-    `simplify` raised (then only ``error`` is set). ``seconds``: the cell's share of the run's wall time."""
-    peer = _peer(cell)  # a peer's row: the grid keys other than method do not apply (NaN)
+    `simplify` raised (then only ``error`` is set). Timings (see `sweep`): a cell that ran alone has its own
+    ``compile_s``, ``run_s``, ``total_s``; a cell that shared its rounds with others (``batch_size`` > 1)
+    has them empty (not measured) and its apportioned ``share_s`` of the shared run's ``batch_wall_s``."""
+    peer = _peer(cell)  # a peer's row: the grid keys other than method do not apply ("n/a", filled by `sweep`)
     out = {"cell": cell.key, "mesh": cell.mesh,
-           **{k: _plain(v) if peer is None or k == "method" else float("nan") for k, v in cell.params},
+           **{k: _plain(v) if peer is None or k == "method" else NOT_APPLICABLE for k, v in cell.params},
            "target": cell.target, "error": ""}
     if isinstance(res, Exception):
         out["error"] = f"{type(res).__name__}: {res}"
         return out
     s = res.stats
+    batch = s.get("batch", {})
+    size = batch.get("size", 1)
     out.update(faces_in=s["faces_in"], faces_out=s["faces_out"], target_faces=s["target_faces"],
-               stop_reason=res.stop_reason, rounds=s["rounds"], compile_s=s["compile_s"],
-               run_s=s["run_s"], total_s=s["total_s"], batch_size=s.get("batch", {}).get("size", 1),
-               same_run=s.get("batch", {}).get("same_run", 1),
-               result_sha256=result_hash(res))
-    t0 = time.perf_counter()
+               stop_reason=res.stop_reason, rounds=s["rounds"], batch_size=size,
+               same_run=batch.get("same_run", 1), result_sha256=result_hash(res),
+               distance_max=_measured(s.get("distance_max")), distance_rms=_measured(s.get("distance_rms")))
+    if size > 1:  # rounds shared with size - 1 other cells: its own time was not measured
+        wall = float(batch["total_s"])
+        # its re-fit and distance measurement ran on their own (side by side)
+        share = wall / size + float(s.get("refit_s", 0.0)) + float(s.get("distance_s") or 0.0)
+        out.update(compile_s=math.nan, run_s=math.nan, total_s=math.nan,
+                   batch_wall_s=wall, share_s=share)
+    else:
+        out.update(compile_s=s["compile_s"], run_s=s["run_s"], total_s=s["total_s"], batch_wall_s=s["total_s"],
+                   share_s=s["total_s"])
+    metrics_s = 0.0
     if metrics is not False:
         from ..metrics import evaluate
 
-        out.update(evaluate(mesh, res, target_faces=s["target_faces"], **metrics))
-    out["cell_s"] = seconds + time.perf_counter() - t0
+        got = evaluate(mesh, res, target_faces=s["target_faces"], **metrics)
+        metrics_s = got.pop("time_s")
+        out.update(got)
+        out["metrics_s"] = metrics_s
+    out["cell_s"] = out["share_s"] + metrics_s
     return out
 
 
 def batches(cells: list[Cell], faces: dict, size: int | None) -> list[list[Cell]]:
     """Cells, in order, cut into batches of at most ``size`` cells (None: as many as `BATCH_FACES` faces
-    allow, with ``faces`` the face count of each mesh by name; a larger mesh is a batch of one)."""
+    and `BATCH_CELLS` cells allow, with ``faces`` the face count of each mesh by name; a larger mesh is a batch of one)."""
     out, cur, total = [], [], 0
     for c in cells:
         f = faces[c.mesh]
-        full = len(cur) >= size if size else cur and total + f > BATCH_FACES
+        full = len(cur) >= size if size else cur and (total + f > BATCH_FACES or len(cur) >= BATCH_CELLS)
         if full:
             out.append(cur)
             cur, total = [], 0
         cur.append(c)
         total += f
     return out + ([cur] if cur else [])
-
-
-def _format(out) -> str:
-    ext = Path(out).suffix.lower()
-    if ext not in FORMATS:
-        raise ValueError(f"out must end in one of {sorted(FORMATS)}, got {os.fspath(out)!r}")
-    return FORMATS[ext]
-
-
-def _check_writable(out) -> str:
-    """The format of ``out``; ValueError when it is Parquet and pyarrow is missing (before anything runs)."""
-    fmt = _format(out)
-    if fmt == "parquet":
-        try:
-            import pyarrow  # noqa: F401
-        except ImportError:
-            raise ValueError(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), "
-                             "or give a .csv out") from None
-    return fmt
-
-
-def target_column(values):
-    """The ``target`` column as given: ints (face counts) stay ints beside floats (ratios). A target
-    >= 1 is always a face count and < 1 a ratio (`check_targets`), so the type follows from the value,
-    also when a file stored the column as float (Parquet: one type per column; CSV read back)."""
-    import pandas as pd
-
-    vals = [v if isinstance(v, str) else int(v) if v >= 1 else float(v) for v in values]
-    kinds = {type(v) for v in vals}
-    dtype = "int64" if kinds == {int} else "float64" if kinds == {float} else object
-    return pd.Series(vals, dtype=dtype)
-
-
-def _typed(df):
-    if "target" in df and len(df):
-        df = df.copy()
-        df["target"] = target_column(df["target"]).to_numpy()
-    return df
-
-
-def read_table(out):
-    """The table at ``out`` (Parquet or CSV by extension), its ``target`` column as given (`target_column`);
-    an empty DataFrame when it does not exist."""
-    import pandas as pd
-
-    if not Path(out).exists():
-        return pd.DataFrame()
-    if _format(out) == "csv":
-        return _typed(pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str}))
-    _check_writable(out)
-    return _typed(pd.read_parquet(out))
-
-
-def write_table(df, out) -> None:
-    """Write ``df`` to a temporary file next to ``out``, then rename: an interruption never leaves a
-    partial table. CSV keeps integer targets as integers ("424"); Parquet stores a column of ratios and
-    face counts as float64 (`read_table` gives them back as ints)."""
-    tmp = Path(out).with_name(f".{Path(out).name}.tmp")
-    if _format(out) == "csv":
-        _typed(df).to_csv(tmp, index=False)
-    else:
-        df.to_parquet(tmp, index=False)
-    os.replace(tmp, out)
 
 
 def _submitter(executor):
@@ -368,6 +355,11 @@ def _ship(executor, loaded: dict) -> dict:
     return loaded
 
 
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a sweep: every finished row is in ``out``; the message says how many (``qemjax sweep``
+    prints it and exits 130). A rerun with the same ``out`` resumes."""
+
+
 def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True,
           batch_size: int | None = None):
     """Run every (mesh, grid configuration, target) cell with `qemjax.simplify`; a pandas DataFrame, one
@@ -379,40 +371,58 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         literal values, never evaluated). Paths are named by their stem, shapes by their name, other
         meshes ``mesh0``, ``mesh1``, … Each is read (or made) once.
     grid: `simplify` keywords → lists of values, crossed (e.g. ``{"method": ["qem", "esqem"],
-        "regularize": [0, 0.1]}``). A ``method`` that names a peer (``"meshoptimizer"``, ``"pymeshlab"``,
-        ``"fast-simplification"``, ``"libigl"``, ``"pyfqmr"``: `qemjax.peers`, ``pip install
-        'qemjax[bench]'``) runs that peer for the cell, warm, alone, with the same metrics; the other grid
-        keys do not apply to it (NaN in its row; one cell per peer, mesh and target, however many values
-        they have), ``stop_reason`` is ``"peer"``, ``rounds`` NaN, ``compile_s`` 0,
-        ``run_s`` = ``total_s`` = the peer call's time. A missing peer package: the row's ``error`` says so.
+        "regularize": [0, 0.1]}``). A method setting crossed with a method that does not have it (e.g.
+        ``split_factor`` with ``qem``) is "n/a" in that method's rows, and the cells that then fall together
+        run once: a warning (and ``df.attrs["sweep"]["collapsed"]``) says how many and why. A ``method`` that
+        names a peer (``"meshoptimizer"``, ``"pymeshlab"``, ``"fast-simplification"``, ``"libigl"``,
+        ``"pyfqmr"``: `qemjax.peers`, ``pip install 'qemjax[bench]'``) runs that peer for the cell, warm,
+        alone, with the same metrics; the other grid keys do not apply to it ("n/a"; one cell per peer,
+        mesh and target), ``stop_reason`` is ``"peer"``, ``rounds`` NaN, ``compile_s`` 0, ``run_s`` =
+        ``total_s`` = the peer call's time. A missing peer package: the row's ``error`` says so.
     targets: ratios (floats in (0, 1)) and/or face counts (ints).
     metrics: True: every column of `qemjax.metrics.evaluate` (original = the mesh as given); a dict:
         the same with these keywords to `evaluate` (e.g. ``{"n_samples": 10_000}``); False: none.
     executor: None (in this process, in order), a `concurrent.futures.Executor` or a
-        `dask.distributed.Client`: one task per batch.
+        `dask.distributed.Client`: one task per batch. A task that is lost (its worker died) is submitted
+        again (`RETRIES` times), then run in this process.
     out: a ``.parquet`` (needs pyarrow: ``pip install 'qemjax[sweep]'``) or ``.csv`` path, rewritten
-        after each finished batch, in row order (the rows of other grids already in the file first).
-        Cells whose key is already there without an error are not run again (an interrupted sweep
-        resumes); rows of other cells in the file are kept.
-    progress: a tqdm bar counting cells.
+        (temporary file, fsync, rename) as cells finish: after each batch in process (a few seconds of work:
+        `BATCH_FACES`) and while a batch yields rows, at most every `SAVE_EVERY_S`; on an executor as tasks
+        end, at most every `SAVE_EVERY_S` and within it of a row coming in. Rows in row order (the rows of other grids already in the file first). Cells whose key
+        is already there without an error are not run again (an interrupted sweep resumes; a CSV's rows
+        already there are written back as the same text); rows of other cells in the file are kept. Ctrl-C
+        writes every finished row and raises `SweepInterrupted` (a KeyboardInterrupt) saying how many.
+    progress: a tqdm bar counting cells, moving as each cell's row is final; a line saying how many cells
+        were already in ``out`` (skipped) and a warning about collapsed cells.
     batch_size: at most this many cells per batch (`simplify_cells`: cells that can share rounds, of one
         mesh or several, run together as one disjoint union of copies); None: in process, as many as
-        `BATCH_FACES` faces allow; on an executor, `EXECUTOR_BATCH`. 1: every cell alone.
+        `BATCH_FACES` faces and `BATCH_CELLS` cells allow; on an executor, `EXECUTOR_BATCH`. 1: every cell
+        alone (then every cell's timings are its own, measured).
 
-    Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key,
-    ``target`` (as given: face counts stay ints beside ratios), ``error`` (empty, or why `simplify` raised), ``faces_in``, ``faces_out``,
-    ``target_faces``, ``stop_reason``, ``rounds``, ``compile_s``, ``run_s``, ``total_s``,
-    ``batch_size`` (the cells its run shared rounds with, itself included; 1: alone), ``same_run`` (the
-    cells that got the very same run, itself included: cells whose settings make no difference on this
-    mesh, such as ``boundary_weight`` on a closed one, run once),
-    ``result_sha256`` (of the output vertices and faces), the metrics, ``cell_s`` (the cell's share of
-    its batch's wall time, plus its metrics). A batched cell's ``total_s`` / ``run_s`` / ``compile_s``
-    are its share of the batch's. Rows come in cell order (mesh, then grid, last key fastest, then target), however the
-    cells finished. Raises ValueError for unknown grid keys, bad targets or a bad ``out``/``executor``.
+    Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key ("n/a"
+    where the cell's method does not have that setting; empty/NaN is None), ``target`` (as given: face
+    counts stay ints beside ratios), ``error`` (empty, or why `simplify` raised), ``faces_in``,
+    ``faces_out``, ``target_faces``, ``stop_reason``, ``rounds``, ``batch_size`` (the cells its run
+    shared rounds with, itself included; 1: alone), ``same_run`` (the cells that got the very same run,
+    itself included: cells whose settings make no difference on this mesh, such as ``boundary_weight`` on
+    a closed one, run once), ``result_sha256`` (of the output vertices and faces), ``distance_max`` and
+    ``distance_rms`` (the output's measured distance from the input, mesh units: `simplify`'s stats of those
+    names; NaN where not measured: ``measure=True`` in the grid measures it for every method); timings in seconds:
+    ``compile_s``, ``run_s``, ``total_s`` (the cell's own `simplify` stats: JAX compilation or cache
+    loading, the rest, all; measured when it ran alone, ``batch_size`` 1; empty when it shared its rounds:
+    not measured), ``batch_wall_s`` (the wall time of the run that computed it: the shared rounds of its
+    batch, or its own ``total_s``), ``share_s`` (apportioned: ``batch_wall_s / batch_size`` plus its own
+    re-fit and distance measurement, or its own ``total_s``); then the metrics (`qemjax.metrics.evaluate`'s columns, its ``time_s``
+    as ``metrics_s``: the evaluation's own wall time); ``cell_s`` = ``share_s`` + ``metrics_s`` (the
+    cell's time in the sweep, apportioned when batched). Rows come in cell order (mesh, then grid, last key
+    fastest, then target), however the cells finished. Raises ValueError for unknown grid keys, bad targets
+    or a bad ``out``/``executor``. ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``,
+    ``collapsed`` (reason → cells).
     """
     import pandas as pd
 
-    configs, targets = expand_grid(grid), check_targets(targets)
+    collapsed: dict = {}
+    configs, targets = expand_grid(grid, collapsed), check_targets(targets)
     if out is not None:
         _check_writable(out)
     if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, numbers.Integral)
@@ -425,23 +435,38 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     keys = [c.key for c in cells]
     if len(set(keys)) != len(keys):
         raise ValueError("the grid or targets repeat a value: two cells would be the same")
+    per_config = len(named) * len(targets)
+    collapsed = {why: n * per_config for why, n in collapsed.items()}
+    requested = len(cells) + sum(collapsed.values())
 
     table = read_table(out) if out is not None else pd.DataFrame()
     rows = {}
     if len(table) and "cell" not in table:
         raise ValueError(f"{os.fspath(out)} exists but is not a sweep table (no 'cell' column)")
+    header, texts = read_text(out) if out is not None else ([], {})
     if len(table):
         ok = table[table["error"].fillna("") == ""] if "error" in table else table
         rows = {r["cell"]: r for r in ok.to_dict("records")}
         table = table[~table["cell"].isin(set(keys) - set(rows))]  # failed rows of this grid are re-run
+    texts = {k: t for k, t in texts.items() if k in rows or k not in set(keys)}
     todo = [c for c in cells if c.key not in rows]
+    skipped = len(cells) - len(todo)
     loaded = {name: load_mesh(named[name]) for name in dict.fromkeys(c.mesh for c in todo)}
     others = table[~table["cell"].isin(set(keys))] if len(table) else table  # rows of other grids: kept
+    other_keys = list(others["cell"]) if len(others) else []
 
+    if collapsed:
+        import warnings
+
+        why = "; ".join(f"{n} cells: {reason}" for reason, n in collapsed.items())
+        warnings.warn(f"sweep: {requested} requested cells are {len(cells)} ({why}; \"n/a\" in their rows)",
+                      stacklevel=2)
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(cells), initial=len(cells) - len(todo), unit="cell", desc="sweep", disable=not progress)
-    done = []
+    if progress and skipped:
+        tqdm.write(f"sweep: {skipped} of {len(cells)} cells already in {os.fspath(out)}: skipped", file=sys.stderr)
+    bar = tqdm(total=len(cells), initial=skipped, unit="cell", desc="sweep", disable=not progress)
+    ran = []
 
     def frame(records):
         df = pd.DataFrame(records)
@@ -449,29 +474,99 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
             df["target"] = target_column(df["target"]).to_numpy()
         return df
 
+    def complete(r):
+        for k in grid:  # a grid key the cell does not have: its method has no such setting
+            r.setdefault(k, NOT_APPLICABLE)
+        return r
+
     def finish(batch_rows):
         for r in batch_rows:
-            rows[r["cell"]] = r
-        done.extend(batch_rows)
+            rows[r["cell"]] = complete(r)
+            if out is not None and _format(out) == "csv":
+                texts[r["cell"]] = {k: as_text(v) for k, v in r.items()}
+        ran.extend(batch_rows)
         bar.update(len(batch_rows))
-        if out is not None:  # the rows of other grids first, then this grid's in cell order
-            ours = frame([rows[k] for k in keys if k in rows])
-            write_table(pd.concat([others, ours], ignore_index=True) if len(others) else ours, out)
+
+    saved = [time.perf_counter(), 0]  # when the table was last written, and with how many new rows
+
+    def save(force: bool = True) -> float | None:
+        """Write the table if rows are waiting (unless not ``force`` and the last write was under
+        `SAVE_EVERY_S` ago); the seconds until a write is due, or None when no row is waiting."""
+        if out is None or saved[1] == len(ran):
+            return None
+        wait = SAVE_EVERY_S - (time.perf_counter() - saved[0])
+        if not force and wait > 0:
+            return wait
+        saved[:] = time.perf_counter(), len(ran)
+        if _format(out) == "csv":  # rows already in the file: as they were, byte for byte
+            order = other_keys + [k for k in keys if k in rows]
+            cols = list(dict.fromkeys([*header, *(c for k in order for c in texts[k])]))
+            write_text(cols, [texts[k] for k in order], out)
+            return
+        ours = frame([rows[k] for k in keys if k in rows])
+        write_table(pd.concat([others, ours], ignore_index=True) if len(others) else ours, out)
 
     faces = {name: len(loaded[name][1]) for name in loaded}
     size = batch_size if batch_size is not None or submit is None else EXECUTOR_BATCH
     work = batches(todo, faces, size)
+    stopped = False
     try:
         if submit is None:
             for b in work:
-                finish(run_cells([(loaded[c.mesh], c) for c in b], metrics))
+                for r in iter_rows([(loaded[c.mesh], c) for c in b], metrics):
+                    finish([r])
+                    save(force=False)
+                save()
         else:
-            shipped = _ship(executor, loaded)
-            futures = [submit(run_cells, [(shipped[c.mesh], c) for c in b], metrics) for b in work]
-            for f in concurrent.futures.as_completed(futures):
-                finish(f.result())
+            _run_on(executor, submit, work, loaded, metrics, finish, save)
+    except KeyboardInterrupt:
+        stopped = True
     finally:
         bar.close()
+        save()  # nothing when every finished row is written already
+    if stopped:
+        where = f" in {os.fspath(out)}" if out is not None else " (no out= given: not written)"
+        raise SweepInterrupted(f"{len(ran)} of {len(todo)} cells finished this run, kept{where}; "
+                               f"{len(rows)} of {len(cells)} done in all (a rerun resumes)")
     df = frame([rows[k] for k in keys])
     front = [*_FIRST, *grid, "target"]
-    return df[front + [c for c in df.columns if c not in front]]
+    df = df[front + [c for c in df.columns if c not in front]]
+    df.attrs["sweep"] = {"requested": requested, "cells": len(cells), "skipped": skipped, "ran": len(ran),
+                         "collapsed": collapsed}
+    return df
+
+
+def _run_on(executor, submit, work, loaded, metrics, finish, save) -> None:
+    """The batches as tasks on an executor; rows written as tasks end (at most every `SAVE_EVERY_S`, and
+    never later than that after a row came in). A task whose future fails (not a cell: a cell's error is
+    its row) was lost, e.g. its worker died: submitted again with the mesh arrays
+    themselves, up to `RETRIES` times, then run here. Ctrl-C cancels the tasks not started."""
+    shipped = _ship(executor, loaded)
+    pending = {submit(run_cells, [(shipped[c.mesh], c) for c in b], metrics): (b, 0) for b in work}
+    due = None  # seconds until waiting rows must be written; None: none waiting
+    try:
+        while pending:
+            done, _ = concurrent.futures.wait(list(pending), timeout=due,
+                                              return_when=concurrent.futures.FIRST_COMPLETED)
+            for f in done:
+                b, tries = pending.pop(f)
+                try:
+                    got = f.result()
+                except Exception:  # noqa: BLE001 - lost, not failed: run_cells catches the cells' errors
+                    items = [(loaded[c.mesh], c) for c in b]
+                    again = None
+                    if tries < RETRIES:
+                        try:
+                            again = submit(run_cells, items, metrics)
+                        except Exception:  # noqa: BLE001 - a broken pool takes no more tasks
+                            again = None
+                    if again is not None:
+                        pending[again] = (b, tries + 1)
+                        continue
+                    got = run_cells(items, metrics)
+                finish(got)
+            due = save(force=False)
+    except BaseException:
+        for f in pending:
+            f.cancel()
+        raise

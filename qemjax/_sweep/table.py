@@ -1,0 +1,156 @@
+"""A sweep's table on disk: read it back (typed, and for CSV also as the text of each row), write it whole
+under a temporary name, fsync, rename. A CSV's rows already in the file are written back as the same text,
+so a resumed sweep leaves them byte for byte as they were.
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
+NOT_APPLICABLE = "n/a"  # a grid key the cell's method does not have (empty / NaN stays "None")
+
+
+def _format(out) -> str:
+    ext = Path(out).suffix.lower()
+    if ext not in FORMATS:
+        raise ValueError(f"out must end in one of {sorted(FORMATS)}, got {os.fspath(out)!r}")
+    return FORMATS[ext]
+
+
+def _check_writable(out) -> str:
+    """The format of ``out``; ValueError when it is Parquet and pyarrow is missing (before anything runs)."""
+    fmt = _format(out)
+    if fmt == "parquet":
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            raise ValueError(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), "
+                             "or give a .csv out") from None
+    return fmt
+
+
+def target_column(values):
+    """The ``target`` column as given: ints (face counts) stay ints beside floats (ratios). A target
+    >= 1 is always a face count and < 1 a ratio (`check_targets`), so the type follows from the value,
+    also when a file stored the column as float (Parquet: one type per column; CSV read back)."""
+    import pandas as pd
+
+    vals = [v if isinstance(v, str) else int(v) if v >= 1 else float(v) for v in values]
+    kinds = {type(v) for v in vals}
+    dtype = "int64" if kinds == {int} else "float64" if kinds == {float} else object
+    return pd.Series(vals, dtype=dtype)
+
+
+def _typed(df):
+    if "target" in df and len(df):
+        df = df.copy()
+        df["target"] = target_column(df["target"]).to_numpy()
+    return _not_applicable_back(df)
+
+
+def _value(text: str):
+    """A value of a column that holds "n/a" (so it was stored as text): a number, a bool, or the text."""
+    if text in ("True", "False"):
+        return text == "True"
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _not_applicable_back(df):
+    """Columns that hold "n/a" were stored as text: their other values back to numbers / bools."""
+    cols = [c for c in df.columns if _marked(df[c])]
+    if cols:
+        df = df.copy()
+        for col in cols:
+            df[col] = np.array([v if not isinstance(v, str) or v == NOT_APPLICABLE else _value(v) for v in df[col]],
+                               dtype=object)
+    return df
+
+
+def _marked(column) -> bool:
+    """Whether a column of text or objects holds "n/a"."""
+    import pandas as pd
+
+    return (column.dtype == object or pd.api.types.is_string_dtype(column)) and \
+        bool((column.astype(object) == NOT_APPLICABLE).any())
+
+
+def read_table(out):
+    """The table at ``out`` (Parquet or CSV by extension), its ``target`` column as given (`target_column`),
+    "n/a" columns' other values as numbers; an empty DataFrame when it does not exist."""
+    import pandas as pd
+
+    if not Path(out).exists():
+        return pd.DataFrame()
+    if _format(out) == "csv":
+        return _typed(pd.read_csv(out, keep_default_na=False, na_values=[""],
+                                  dtype={"error": str, "cell": str}))
+    _check_writable(out)
+    return _typed(pd.read_parquet(out))
+
+
+def read_text(out) -> tuple[list[str], dict[str, dict]]:
+    """A CSV table's header and each row's fields as the text in the file, by ``cell`` (empty when absent)."""
+    import pandas as pd
+
+    if not Path(out).exists() or _format(out) != "csv":
+        return [], {}
+    df = pd.read_csv(out, dtype=str, keep_default_na=False)
+    if "cell" not in df:
+        return list(df.columns), {}
+    return list(df.columns), {r["cell"]: r for r in df.to_dict("records")}
+
+
+def as_text(value) -> str:
+    """A new row's value as a CSV field: what pandas writes for it (floats by repr, None / NaN empty)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, np.generic):
+        value = value.item()
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def _fsynced_replace(tmp: Path, out) -> None:
+    fd = os.open(tmp, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    os.replace(tmp, out)
+
+
+def write_text(header: list[str], records: list[dict], out) -> None:
+    """Write CSV text rows (column → field text; missing fields empty) under a temporary name, fsync, rename."""
+    import pandas as pd
+
+    tmp = Path(out).with_name(f".{Path(out).name}.tmp")
+    pd.DataFrame([[r.get(c, "") for c in header] for r in records], columns=header, dtype=object) \
+        .to_csv(tmp, index=False)
+    _fsynced_replace(tmp, out)
+
+
+def write_table(df, out) -> None:
+    """Write ``df`` to a temporary file next to ``out``, fsync, then rename: an interruption never leaves a
+    partial table. CSV keeps integer targets as integers ("424"); Parquet stores a column of ratios and
+    face counts as float64 (`read_table` gives them back as ints), and a column that holds "n/a" as text."""
+    tmp = Path(out).with_name(f".{Path(out).name}.tmp")
+    if _format(out) == "csv":
+        _typed(df).to_csv(tmp, index=False)
+    else:
+        df = df.copy()
+        for col in df.columns:
+            if _marked(df[col]):
+                df[col] = [None if v is None or isinstance(v, float) and math.isnan(v) else as_text(v)
+                           for v in df[col]]
+        df.to_parquet(tmp, index=False)
+    _fsynced_replace(tmp, out)
