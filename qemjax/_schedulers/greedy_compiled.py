@@ -21,6 +21,7 @@ from .queue import stop_report
 _M32 = 0xFFFFFFFF
 # first sizes (they grow when a batch needs more: `_Compiled.room`)
 ROOM, SLACK = 2, 1024  # pools and queue arrays: ROOM times what they start with, plus SLACK
+POOL_ROOM = 8  # a pool packed after a step did not fit: room for a batch of such steps, up to this many times its lists
 JOURNAL_ROWS, INTERVAL_ROWS = 1 << 16, 1 << 14  # a batch's journal and stale intervals
 
 
@@ -74,6 +75,7 @@ class _Compiled:
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
         self.T = np.array(F, np.int64).reshape(-1, 3)
         self.alive = np.ones(m, bool)
+        self.pool_room = {"fpool": 0, "npool": 0}  # free slots a packed pool keeps (`room`)
         self.fs, self.fl, self.fpool = _lists(n, self.T.reshape(-1), np.repeat(np.arange(m, dtype=np.int64), 3))
         P = np.unique(np.asarray(pairs, np.int64).reshape(-1, 2), axis=0)
         self.P0 = P = P[P[:, 0] != P[:, 1]]
@@ -157,10 +159,12 @@ class _Compiled:
         for top, w, s, ln, pool in ((jit.C_FTOP, jit.C_WF, self.fs, self.fl, "fpool"),
                                     (jit.C_NTOP, jit.C_WN, self.ns, self.nl, "npool")):
             arr = getattr(self, pool)
-            short = full and ctr[w] > len(arr)
-            if short or ctr[top] > 3 * len(arr) // 4:  # packed, with room for as much again (or the step)
-                extra = max(ln.sum(), SLACK, 2 * int(ctr[w] - ctr[top]) if short else 0)
-                new, ctr[top] = jit.compact(s, ln, arr, extra)
+            short = full and ctr[w] > 0  # (this pool stopped the batch)
+            if short or ctr[top] > 3 * len(arr) // 4:  # packed, with room for as much again (or the steps)
+                live = int(ln.sum())
+                if short:  # room for a batch of such steps, at most POOL_ROOM times the lists
+                    self.pool_room[pool] = max(2 * int(ctr[w]), min(self.depth * int(ctr[w]), POOL_ROOM * (live + SLACK)))
+                new, ctr[top] = jit.compact(s, ln, arr, max(live, SLACK, self.pool_room[pool]))
                 setattr(self, pool, new)
 
     def renumber(self):
