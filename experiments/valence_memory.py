@@ -7,6 +7,7 @@ process (its peak RSS is that process's high-water mark, jax's import included) 
 limit (``--limit-gib``, RLIMIT_AS, set before importing jax) and a time limit (``--timeout``):
 
     python experiments/valence_memory.py [--limit-gib 3.5] [--timeout 300] [--method classic] [--out FILE]
+    python experiments/valence_memory.py --memoryless --schedulers greedy   # the one-at-a-time queue's path
 
 Prints a table: faces in/out, stop reason, seconds in `simplify` (compilation included: a fresh process
 each), peak RSS (GiB), or the error (MemoryError, time-out) a case ended with.
@@ -38,7 +39,7 @@ def build(case: str):
     return double_cone(int(n))
 
 
-def one(case: str, scheduler: str, limit_gib: float, method: str | None) -> dict:
+def one(case: str, scheduler: str, limit_gib: float, method: str | None, memoryless: bool) -> dict:
     """Run one case in this process (the child); returns its row."""
     lim = int(limit_gib * 2**30)
     resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
@@ -49,6 +50,8 @@ def one(case: str, scheduler: str, limit_gib: float, method: str | None) -> dict
         V, F = build(case)
         row["faces_in"] = len(F)
         kw = {} if method is None else {"method": method}
+        if memoryless:
+            kw["method"] = qemjax.QEM(memoryless=True)
         t0 = time.perf_counter()
         r = qemjax.simplify((V, F), ratio=0.1, scheduler=scheduler, **kw)
         row.update(time_s=round(time.perf_counter() - t0, 2), faces_out=len(r.faces), stop=r.stop_reason)
@@ -63,16 +66,17 @@ def main(argv=None):
     ap.add_argument("--limit-gib", type=float, default=3.5, help="address-space limit of each case's process")
     ap.add_argument("--timeout", type=float, default=300, help="seconds a case may run")
     ap.add_argument("--method", default=None, help="simplify's method= (default: the default)")
+    ap.add_argument("--memoryless", action="store_true", help="method=QEM(memoryless=True) (ring support)")
     ap.add_argument("--cases", nargs="*", default=list(CASES))
     ap.add_argument("--schedulers", nargs="*", default=list(SCHEDULERS))
     ap.add_argument("--out", default=None, help="also write the table to this file")
     ap.add_argument("--one", nargs=2, metavar=("CASE", "SCHEDULER"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
-        print(json.dumps(one(*args.one, args.limit_gib, args.method)))
+        print(json.dumps(one(*args.one, args.limit_gib, args.method, args.memoryless)))
         return
     lines = [f"# python experiments/valence_memory.py {' '.join(sys.argv[1:] if argv is None else argv)}",
-             f"# ratio 0.1, method {args.method or 'default'}, RLIMIT_AS {args.limit_gib} GiB, timeout {args.timeout} s",
+             f"# ratio 0.1, method {'QEM(memoryless=True)' if args.memoryless else args.method or 'default'}, RLIMIT_AS {args.limit_gib} GiB, timeout {args.timeout} s",
              f"{'case':<13} {'scheduler':<9} {'faces':>6} {'out':>5} {'stop':<9} {'time_s':>7} {'peak_GiB':>8}  error"]
     print("\n".join(lines), flush=True)
     for case in args.cases:
@@ -80,6 +84,8 @@ def main(argv=None):
             cmd = [sys.executable, __file__, "--one", case, sched, "--limit-gib", str(args.limit_gib)]
             if args.method:
                 cmd += ["--method", args.method]
+            if args.memoryless:
+                cmd += ["--memoryless"]
             try:
                 p = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
                 out = p.stdout.strip().splitlines()
