@@ -237,6 +237,7 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         else:
             more = {(min(u, w), max(u, w)) for u in ring for w in nbr[u] if (min(u, w), max(u, w)) in q.blocked}
         push(at_a + sorted(more))  # one kernel call
+        q.compact()
         if progress is not None:
             progress(faces.count)
     blocked = {}

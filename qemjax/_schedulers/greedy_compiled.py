@@ -21,6 +21,7 @@ from .queue import stop_report
 _M32 = 0xFFFFFFFF
 # first sizes (they grow when a batch needs more: `_Compiled.room`)
 ROOM, SLACK = 2, 1024  # pools and queue arrays: ROOM times what they start with, plus SLACK
+POOL_ROOM = 8  # a pool packed after a step did not fit: room for a batch of such steps, up to this many times its lists
 JOURNAL_ROWS, INTERVAL_ROWS = 1 << 16, 1 << 14  # a batch's journal and stale intervals
 
 
@@ -74,6 +75,7 @@ class _Compiled:
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
         self.T = np.array(F, np.int64).reshape(-1, 3)
         self.alive = np.ones(m, bool)
+        self.pool_room = {"fpool": 0, "npool": 0}  # free slots a packed pool keeps (`room`)
         self.fs, self.fl, self.fpool = _lists(n, self.T.reshape(-1), np.repeat(np.arange(m, dtype=np.int64), 3))
         P = np.unique(np.asarray(pairs, np.int64).reshape(-1, 2), axis=0)
         self.P0 = P = P[P[:, 0] != P[:, 1]]
@@ -93,7 +95,7 @@ class _Compiled:
         self.J = np.zeros((JOURNAL_ROWS, 4), np.int64)
         self.ver = np.full(n, -1, np.int64)
         self.orig = np.zeros((MAX_BATCH + 1, self.VQ.shape[1]), DTYPE)
-        self.ctr = np.zeros(10, np.int64)
+        self.ctr = np.zeros(jit.NCTR, np.int64)
         self.ctr[jit.C_FACES] = m
         self.ctr[jit.C_FTOP], self.ctr[jit.C_NTOP] = 3 * m, 2 * len(P)  # the pools' ends
         self.cos_max, self.sliver = np.float32(options.cos_max), np.float32(SLIVER)
@@ -129,28 +131,55 @@ class _Compiled:
                  self.parts, self.cur, self.blocked, self.bat, self.ctr)
 
     def room(self, stamps=0, full=False):
-        """Grow the arrays for ``stamps`` more pushes; with ``full`` (a batch stopped for room), all of them."""
+        """Grow the arrays for ``stamps`` more pushes; with ``full`` (a batch stopped for room), grow each
+        array the step that did not fit wanted more of (`greedy_jit.speculate` leaves the lengths), so that
+        the step fits from an empty batch. Memory stays O(input) whatever the valence: the journal and the
+        stale intervals, a batch's own, grow only when a batch could not take its first step (a batch that
+        took some runs on in the next one); the pools are packed with room for the step; the stamp arrays
+        stay as long as the queue (`renumber`)."""
         ctr = self.ctr
+        if full:
+            want = lambda c, length: ctr[c] > length  # noqa: E731
+            if want(jit.C_WK, len(self.K)):
+                stamps = max(stamps, int(ctr[jit.C_WK] - ctr[jit.C_STAMP]))
+            if want(jit.C_WHEAP, len(self.heap)):
+                self.heap = _grown(self.heap, int(max(2 * len(self.heap), ctr[jit.C_WHEAP])))
+            if ctr[jit.C_NSTEPS] == 0:  # not one step fitted: room for it, from an empty batch
+                if want(jit.C_WJ, len(self.J)):
+                    self.J = _grown(self.J, int(max(2 * len(self.J), ctr[jit.C_WJ])))
+                if want(jit.C_WIV, len(self.iv)):
+                    self.iv = _grown(self.iv, int(max(2 * len(self.iv), ctr[jit.C_WIV])))
         need = ctr[jit.C_STAMP] + stamps + 1
-        if need > len(self.K) or full:
+        if need > len(self.K):
             size = 2 * max(need, len(self.K))
             self.K, self.X, self.cost = _grown(self.K, size), _grown(self.X, size), _grown(self.cost, size)
             self.branch, self.parts = _grown(self.branch, size), _grown(self.parts, size)
-        if ctr[jit.C_HSIZE] + stamps > len(self.heap) or full:
+        if ctr[jit.C_HSIZE] + stamps > len(self.heap):
             self.heap = _grown(self.heap, 2 * (len(self.heap) + stamps))
-        if full:
-            self.J, self.iv = _grown(self.J, 2 * len(self.J)), _grown(self.iv, 2 * len(self.iv))
-        for top, s, ln, pool in ((jit.C_FTOP, self.fs, self.fl, "fpool"), (jit.C_NTOP, self.ns, self.nl, "npool")):
+        for top, w, s, ln, pool in ((jit.C_FTOP, jit.C_WF, self.fs, self.fl, "fpool"),
+                                    (jit.C_NTOP, jit.C_WN, self.ns, self.nl, "npool")):
             arr = getattr(self, pool)
-            if full or ctr[top] > 3 * len(arr) // 4:  # packed, with room for as much again (or more)
-                extra = 2 * max(len(arr), ln.sum(), SLACK) if full else max(ln.sum(), SLACK)
-                new, ctr[top] = jit.compact(s, ln, arr, extra)
+            short = full and ctr[w] > 0  # (this pool stopped the batch)
+            if short or ctr[top] > 3 * len(arr) // 4:  # packed, with room for as much again (or the steps)
+                live = int(ln.sum())
+                if short:  # room for a batch of such steps, at most POOL_ROOM times the lists
+                    self.pool_room[pool] = max(2 * int(ctr[w]), min(self.depth * int(ctr[w]), POOL_ROOM * (live + SLACK)))
+                new, ctr[top] = jit.compact(s, ln, arr, max(live, SLACK, self.pool_room[pool]))
                 setattr(self, pool, new)
+
+    def renumber(self):
+        """`greedy_jit.renumber` when the stamps used pass twice the queue's pairs (and SLACK): old stamps'
+        rows are reused, so the stamp arrays do not grow with the run's pushes (a vertex of valence d
+        re-prices d pairs per contraction at it: d² pushes where it absorbs its neighbours)."""
+        if self.ctr[jit.C_STAMP] > 2 * len(self.cur) + SLACK:
+            jit.renumber(self.heap, self.ctr, self.K, self.X, self.cost, self.branch, self.parts, self.cur,
+                         self.blocked)
 
     # a batch ---------------------------------------------------------------------------------------
 
     def batch(self):
         ctr = self.ctr
+        self.renumber()
         if ctr[jit.C_HSIZE] > REBUILD * len(self.cur) + PREFETCH:  # mostly old entries: keep the current ones
             jit.rebuild(self.heap, ctr, self.K, self.cur, self.blocked)
         held, gone = _dict(), _dict()

@@ -34,6 +34,11 @@ CONTRACT, BLOCK, STOP = 0, 1, 2
 S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_D0, S_D1 = range(10)  # columns of ``steps``
 I_PAIR, I_START, I_END, I_RA, I_RB = range(5)  # columns of ``iv``
 C_FACES, C_FTOP, C_NTOP, C_HSIZE, C_STAMP, C_JLEN, C_NSTEPS, C_NIV, C_DONE, C_FULL = range(10)
+# a batch that stopped for room (C_FULL): the lengths the step that did not fit wanted, per array (for the
+# two pools, the slots it wanted past their tops where they were short, else 0: a commit may pack them
+# before the arrays grow)
+C_WJ, C_WF, C_WN, C_WIV, C_WHEAP, C_WK = range(10, 16)
+NCTR = 16
 J_HEAP, J_ALIVE, J_AT, J_NBR, J_TRI, J_COUNT, J_CUR, J_BLOCKED = range(8)
 OPEN = 1 << 62
 M32 = 0xFFFFFFFF
@@ -160,8 +165,10 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
               steps, iv, held, gone, ver, orig, J, ctr):
     """`greedy_batches._Batches.speculate`: pop and apply up to ``depth`` steps into ``steps``;
     ctr[C_NSTEPS] of them. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
-    (the caller grows them; a shorter batch gives the same run)."""
+    (the caller grows them; a shorter batch gives the same run), and the lengths that step wanted in
+    ctr[C_WJ:C_WK + 1] (the pools: the slots it wanted, where short)."""
     ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = 0
+    ctr[C_WJ:C_WK + 1] = 0
     # the heap's size can come back to where it started plus every entry pushed since (an undo pushes
     # back what the batch popped): the room check counts from there
     most = ctr[C_HSIZE]
@@ -181,7 +188,7 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
             ctr[C_NSTEPS] = k + 1
             break
         if ctr[C_JLEN] + 2 > len(J):
-            ctr[C_FULL] = 1
+            ctr[C_FULL], ctr[C_WJ] = 1, ctr[C_JLEN] + 2
             break
         heap_pop(heap, ctr, K)
         _journal(J, ctr, J_HEAP, s, 0, 0)
@@ -204,6 +211,10 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
             ctr[C_JLEN] -= 1  # no room: the pop undone, and the batch ends here
             heap_push(heap, ctr, K, s)
             ctr[C_FULL] = 1
+            ctr[C_WJ] = ctr[C_JLEN] + 1 + need_j
+            ctr[C_WF] = need_f if ctr[C_FTOP] + need_f > len(fpool) else 0
+            ctr[C_WN] = need_n if ctr[C_NTOP] + need_n > len(npool) else 0
+            ctr[C_WIV], ctr[C_WHEAP], ctr[C_WK] = ctr[C_NIV] + nl[a] + nl[b], most + unb, ctr[C_STAMP] + unb + 1
             break
         if need_buf > len(buf):
             buf = np.empty(2 * need_buf, np.int64)
@@ -228,7 +239,7 @@ def _next_live(heap, K, cur, blocked, held, gone, J, ctr):
             continue
         if p in held or p in gone:
             if ctr[C_JLEN] + 1 > len(J):
-                ctr[C_FULL] = 1
+                ctr[C_FULL], ctr[C_WJ] = 1, ctr[C_JLEN] + 1
                 return -1
             heap_pop(heap, ctr, K)
             _journal(J, ctr, J_HEAP, t, 0, 0)
@@ -484,6 +495,27 @@ def last_intervals(iv, niv, ok, gone):
             out[k] = last[p]
             k += 1
     return out[:k]
+
+
+@njit(cache=True)
+def renumber(heap, ctr, K, X, cost, branch, parts, cur, blocked):
+    """The current entries' stamps renumbered 1, 2, ... in their order (a stamp's rows moved with it), and
+    the heap rebuilt from them: entries order as before, and old stamps no longer hold rows, so that the
+    stamp arrays stay as long as the queue, not as the run's pushes (between batches only: the journal
+    and a batch's steps hold stamps)."""
+    ks, vs = export(cur)
+    order = np.argsort(vs)
+    for r in range(len(order)):
+        i = order[r]
+        old, s = vs[i], r + 1  # s <= old (distinct stamps from 1, in order): rows move down, in place
+        if s != old:
+            K[s] = K[old]
+            X[s] = X[old]
+            cost[s], branch[s] = cost[old], branch[old]
+            parts[s] = parts[old]
+        cur[ks[i]] = s
+    ctr[C_STAMP] = len(order)
+    rebuild(heap, ctr, K, cur, blocked)
 
 
 @njit(cache=True)

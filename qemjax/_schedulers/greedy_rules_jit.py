@@ -153,16 +153,17 @@ def rules(a, b, x, faces, target, keep_parts, cos_max, sliver, T, fs, fl, fpool,
         corner = 0 if T[f, 0] == v else (1 if T[f, 1] == v else 2)
         if flips(VQ, N0, T, f, corner, x, cos_max, sliver):
             return FLIP
-    if ncommon == 2:  # (a, u, w) and (b, u, w) would coincide
-        u, w = common[0], common[1]
-        hit_a = hit_b = False
-        for i in range(fs[u], fs[u] + fl[u]):
-            f = fpool[i]
-            if has(fpool, fs[w], fl[w], f):
-                for j in range(nka):
-                    hit_a |= A[j] == f
-                for j in range(nkb):
-                    hit_b |= B[j] == f
+    if ncommon == 2:  # (a, u, w) and (b, u, w) would coincide: a face kept at a and one kept at b on u and w
+        u, w = common[0], common[1]  # (looked up in the kept faces' corners, O(fl[a] + fl[b]); not in u's
+        hit_a = hit_b = False        # and w's face lists, O(fl[u] fl[w]): two apexes of valence d, d²)
+        for i in range(nka + nkb):
+            f = A[i] if i < nka else B[i - nka]
+            t0, t1, t2 = T[f, 0], T[f, 1], T[f, 2]
+            if (t0 == u or t1 == u or t2 == u) and (t0 == w or t1 == w or t2 == w):
+                if i < nka:
+                    hit_a = True
+                else:
+                    hit_b = True
         if hit_a and hit_b:
             return COINCIDENT
     return -1

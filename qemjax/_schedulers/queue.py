@@ -41,10 +41,13 @@ class Queue:
         return float(np.float32(cost + float(weighted_parts(np.asarray(parts)[None], self.weights)[0])))
 
     def push(self, pairs, priced, length2):
+        # each entry's own copies of its rows: a view would keep the whole pushed block alive while one of
+        # its pairs stays current (a vertex of valence d re-prices d pairs per contraction: d² rows)
+        X, parts_t = np.asarray(priced.x), np.asarray(priced.parts).T
         for k, ((a, b), c, l2) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist())):
             s = self.stamp[(a, b)] = next(self.stamps)
-            parts = priced.parts[:, k]
-            self.placed[(a, b)] = (priced.x[k], int(priced.branch[k]), c, parts, l2)
+            parts = parts_t[k].copy()
+            self.placed[(a, b)] = (X[k].copy(), int(priced.branch[k]), c, parts, l2)
             self.blocked.pop((a, b), None)
             heapq.heappush(self.heap, (self._key(c, parts), l2, tie(a, b), a, b, s))
 
@@ -54,6 +57,15 @@ class Queue:
         self.heap = [(self._key(c, parts), l2, tie(a, b), a, b, self.stamp[(a, b)])
                      for (a, b), (_, _, c, parts, l2) in self.placed.items() if (a, b) not in self.blocked]
         heapq.heapify(self.heap)
+
+    def compact(self):
+        """Drop the heap's old entries (stamp no longer current, or pair blocked: a blocked pair comes back
+        only by a new push) once they outnumber the current ones, so that the heap stays as long as the
+        queue, not as the run's pushes. Pops come in the same order (entries are distinct tuples)."""
+        if len(self.heap) > 2 * len(self.stamp) + 1024:
+            stamp, blocked = self.stamp, self.blocked
+            self.heap = [e for e in self.heap if stamp.get((e[3], e[4])) == e[5] and (e[3], e[4]) not in blocked]
+            heapq.heapify(self.heap)
 
     def forget(self, pair):
         self.stamp.pop(pair, None)
