@@ -234,11 +234,11 @@ def test_dask_worker_killed_mid_sweep_loses_nothing(tmp_path):
 def test_a_batch_yields_each_run_as_it_ends(ball, monkeypatch):
     """Cells of one batch that cannot share rounds (the greedy scheduler) run one after another: each row
     is final, and counted, when its own run ends, not when the whole batch does."""
-    from qemjax._pipeline import api
+    from qemjax._pipeline import stages
 
     order = []
-    real = api.stages.run
-    monkeypatch.setattr(api.stages, "run", lambda job: order.append("run") or real(job))
+    real = stages.run
+    monkeypatch.setattr(stages, "run", lambda job: order.append("run") or real(job))
     items = [(ball, sw.Cell("ball", (("scheduler", "greedy"), ("boundary_weight", b)), 0.5)) for b in (1.0, 2.0)]
     for r in sw.iter_rows(items, False):
         order.append(r["boundary_weight"])

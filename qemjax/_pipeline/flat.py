@@ -133,7 +133,7 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
 
 # `simplify`'s keywords besides the settings (tests/test_first_use.py checks them against its signature)
 KEYWORDS = ("target_faces", "ratio", "max_error", "method", "scheduler", "topology", "attributes",
-            "feature_edges", "progress", "locked", "vertex_weights", "preset")
+            "feature_edges", "progress", "measure", "locked", "vertex_weights", "preset")
 
 
 def unknown_setting(key: str, table: dict | None = None) -> str:
