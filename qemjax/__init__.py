@@ -33,7 +33,7 @@ from ._record.result import Contractions as Contractions
 from ._record.result import SimplifyResult as SimplifyResult
 from ._sweep.run import sweep as sweep
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def __getattr__(name):  # lazy submodules: importing qemjax stays light

@@ -114,13 +114,13 @@ class Topology:
 @dataclasses.dataclass(frozen=True)
 class Attributes:
     """Which appearance attributes a run carries through, and how they weigh (``simplify(attributes=...)``;
-    README, "Appearance attributes").
+    docs/attributes.md).
 
-    attributes: ``'auto'`` (each kind the input carries without seams; a seamed kind only when named),
+    ``attributes``: ``'auto'`` (each kind the input carries without seams; a seamed kind only when named),
         ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, or None (positions only).
-    attribute_weights: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
+    ``attribute_weights``: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
         (``qemjax._mesh.wedges.DEFAULT_WEIGHTS``).
-    texture: a path or PIL image: the texture of the UVs (for a file that names no material).
+    ``texture``: a path or PIL image: the texture of the UVs (for a file that names no material).
     """
 
     attributes: object = "auto"
