@@ -105,7 +105,7 @@ def mixed_orientation():
     return V, F
 
 
-@pytest.mark.parametrize("make", [fins, bowtie, mixed_orientation])
+@pytest.mark.parametrize("make", [pytest.param(fins, marks=pytest.mark.slow), bowtie, mixed_orientation])
 @pytest.mark.parametrize("scheduler", SCHEDULERS)
 @pytest.mark.parametrize("manifold", [True, False])
 def test_non_manifold_input_is_simplified(make, scheduler, manifold):

@@ -76,6 +76,7 @@ def _solve64(rings, lo=0.0, hi=1.0, tol=1e-13):
         return [np.asarray(o) for o in out]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_solve_matches_dense_sampling_in_float64(seed):
     rings = _rings(seed)

@@ -43,6 +43,7 @@ def test_images_are_committed_and_small():
         assert img.stat().st_size < 150_000, img
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", WITH_PYTHON, ids=lambda p: p.name)
 def test_python_blocks_run(page, tmp_path, monkeypatch, env):
     from qemjax import _schedulers

@@ -343,6 +343,7 @@ def test_bad_esqem_options():
         qemjax.simplify(shapes.icosphere(1), ratio=0.5, method="esqem", curvature_weight="high")
 
 
+@pytest.mark.slow
 def test_cow_table_counts():
     """The paper's Table 1 counts on its Cow: ESQEM and QEM end with the same number of faces."""
     cow = shared_mesh("cow.obj")

@@ -56,6 +56,7 @@ def test_python_blocks_run(tmp_path, monkeypatch, env):
     assert (df["faces_out"] <= df["faces_in"]).all()
 
 
+@pytest.mark.slow
 def test_bash_lines_run(tmp_path, env):
     run_commands(README, tmp_path, env)
     assert (tmp_path / "out.ply").is_file()
