@@ -15,7 +15,7 @@ import numpy as np
 @dataclasses.dataclass(frozen=True)
 class Schedule:
     """How much the parallel scheduler takes per round (results depend on these; the defaults are the
-    measured trade-off between quality and rounds, see the README).
+    measured trade-off between quality and rounds, see docs/schedulers.md).
 
     gate: a round's candidates are the pairs costing at most gate × the cost of the k-th cheapest, where
         k = min(contractions still needed / (2·tail), gate_fraction × live pairs).

@@ -3,7 +3,7 @@
 Every generator (`SHAPES`) returns a `Mesh` (vertices (n,3) float64, faces (m,3) int64), consistently
 oriented. A sweep (or its config file) names them as text, ``"shapes.torus"`` or
 ``"shapes.bumpy_sphere(subdivisions=4)"`` (`parse_spec`: a name from `SHAPES` and keyword arguments with
-literal values, never evaluated as code). `write_examples` writes the small example files the README uses.
+literal values, never evaluated as code). `write_examples` writes the small example files the README and docs/ use.
 """
 from __future__ import annotations
 
