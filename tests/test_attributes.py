@@ -282,6 +282,7 @@ def test_attribute_weights_do_not_recompile_and_matter():
         qemjax.simplify(mesh, ratio=0.2, attribute_weights={"texture": 1})
 
 
+@pytest.mark.slow
 def test_colour_term_lowers_colour_error():
     """A sphere coloured by a sharp pattern: with the colour term, the colour deviation is lower than
     with positions-only costs (interpolated colours)."""

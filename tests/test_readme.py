@@ -46,6 +46,7 @@ def test_readme_links_resolve():
             assert (ROOT / target).exists(), target
 
 
+@pytest.mark.slow
 def test_python_blocks_run(tmp_path, monkeypatch, env):
     monkeypatch.chdir(tmp_path)
     namespace = run_python(README, tmp_path, env)
