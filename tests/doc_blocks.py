@@ -102,10 +102,16 @@ def run_python(path: Path, folder: Path, env: dict) -> dict:
     return namespace
 
 
-def run_commands(path: Path, folder: Path, env: dict) -> None:
+def bare(line: str) -> list[str]:
+    """A command line's words, without its comment."""
+    return shlex.split(line, comments=True)
+
+
+def run_commands(path: Path, folder: Path, env: dict, skip=()) -> None:
     """Run ``path``'s command lines in ``folder``, laid out like a fresh clone: the repository files the
-    lines name, and experiments/results (the example config's output folder)."""
-    lines = command_lines(path)
+    lines name, and experiments/results (the example config's output folder). Lines whose words are in
+    ``skip`` (run by another test already) are left out."""
+    lines = [(n, line) for n, line in command_lines(path) if bare(line) not in [bare(s) for s in skip]]
     for _, line in lines:
         for arg in shlex.split(line, comments=True)[1:]:
             if not arg.startswith("-") and "/" in arg and (ROOT / arg).is_file():
