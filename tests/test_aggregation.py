@@ -117,6 +117,7 @@ def test_non_manifold_input_is_simplified(make, scheduler, manifold):
     assert len(r.faces) <= target + 2
 
 
+@pytest.mark.slow  # real meshes
 @pytest.mark.parametrize("name,genus", [("3holes.off", 3), ("fertility.off", 4)])
 @pytest.mark.parametrize("scheduler", SCHEDULERS)
 def test_genus_survives_in_manifold_mode(name, genus, scheduler):
