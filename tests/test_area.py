@@ -204,6 +204,7 @@ def test_area_change_term_matches_numpy():
             np.testing.assert_allclose(float(ell2), e2, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_area_weight_reorders_and_never_recompiles():
     mesh = shapes.bumpy_sphere(4)
     base = qemjax.simplify(mesh, ratio=0.1)
@@ -279,7 +280,7 @@ def test_area_method_keeps_boundary_vertices_on_the_boundary(scheduler):
     assert len(free.faces) <= len(r.faces)
 
 
-@pytest.mark.parametrize("scheduler", SCHEDULERS)
+@pytest.mark.parametrize("scheduler", ["parallel", pytest.param("greedy", marks=pytest.mark.slow)])
 def test_area_max_error_is_an_area_in_mesh_units(scheduler):
     """On an icosphere every first contraction changes the area by the same c0 (mesh units²): a limit
     under it stops at once with stop_reason "max_error", one over it bounds every contraction, and
