@@ -7,38 +7,62 @@ as frozen settings objects (`QEM`, `ESQEM`, `AreaDifference`, `LineQEM`, `Probab
 `load_record`, `lod_chain`, `LodChain`), parameter sweeps (`sweep`, `pareto_front`), and the `metrics` and
 `shapes` (meshes made in code, `shapes.write_examples`) modules.
 """
-from ._pipeline.api import methods as methods
-from ._costs import register as register_method
-from ._costs.area import AreaDifference as AreaDifference
-from ._costs.base import Method as Method
-from ._costs.esqem import ESQEM as ESQEM
-from ._costs.line import LineQEM as LineQEM
-from ._costs.probabilistic import ProbabilisticQEM as ProbabilisticQEM
-from ._costs.qem import QEM as QEM
-from ._pipeline.api import simplify as simplify
-from ._pipeline.api import simplify_batch as simplify_batch
-from ._pipeline.api import simplify_cells as simplify_cells
-from ._io.mesh import Mesh as Mesh
-from ._io.mesh import load as load
-from ._pipeline.lod import LodChain as LodChain
-from ._pipeline.lod import lod_chain as lod_chain
-from ._options import Attributes as Attributes
-from ._options import Schedule as Schedule
-from ._options import Topology as Topology
-from ._sweep.pareto import pareto_front as pareto_front
-from ._record.history import Level as Level
-from ._record.history import Record as Record
-from ._record.history import load_record as load_record
-from ._record.result import Contractions as Contractions
-from ._record.result import SimplifyResult as SimplifyResult
-from ._sweep.run import sweep as sweep
+# name -> (module, attribute): imported on first use (PEP 562), so that `import qemjax` and the command line's
+# --version and --help stay light (no JAX, numba or trimesh until a name that needs them is used)
+_PUBLIC = {
+    "methods": ("._pipeline.api", "methods"),
+    "register_method": ("._costs", "register"),
+    "AreaDifference": ("._costs.area", "AreaDifference"),
+    "Method": ("._costs.base", "Method"),
+    "ESQEM": ("._costs.esqem", "ESQEM"),
+    "LineQEM": ("._costs.line", "LineQEM"),
+    "ProbabilisticQEM": ("._costs.probabilistic", "ProbabilisticQEM"),
+    "QEM": ("._costs.qem", "QEM"),
+    "simplify": ("._pipeline.api", "simplify"),
+    "simplify_batch": ("._pipeline.api", "simplify_batch"),
+    "simplify_cells": ("._pipeline.api", "simplify_cells"),
+    "Mesh": ("._io.mesh", "Mesh"),
+    "load": ("._io.mesh", "load"),
+    "LodChain": ("._pipeline.lod", "LodChain"),
+    "lod_chain": ("._pipeline.lod", "lod_chain"),
+    "Attributes": ("._options", "Attributes"),
+    "Schedule": ("._options", "Schedule"),
+    "Topology": ("._options", "Topology"),
+    "pareto_front": ("._sweep.pareto", "pareto_front"),
+    "Level": ("._record.history", "Level"),
+    "Record": ("._record.history", "Record"),
+    "load_record": ("._record.history", "load_record"),
+    "Contractions": ("._record.result", "Contractions"),
+    "SimplifyResult": ("._record.result", "SimplifyResult"),
+    "sweep": ("._sweep.run", "sweep"),
+}
+_MODULES = ("metrics", "render", "shapes")  # public submodules, also imported on first use
+__all__ = list(_PUBLIC)  # ``from qemjax import *``: the same names as when they were imported eagerly
 
 __version__ = "0.2.0"
 
 
-def __getattr__(name):  # lazy submodules: importing qemjax stays light
-    if name in ("metrics", "render", "shapes"):
-        import importlib
+def _version_line() -> str:
+    """What ``qemjax --version`` prints: this version and the installed JAX's (read from its package metadata,
+    without importing JAX)."""
+    from importlib.metadata import version
 
-        return importlib.import_module(f"{__name__}.{name}")
+    return f"qemjax {__version__} (jax {version('jax')})"
+
+
+def __getattr__(name):
+    import importlib.util
+
+    if name in _PUBLIC:
+        module, attr = _PUBLIC[name]
+        value = getattr(importlib.import_module(module, __name__), attr)
+        globals()[name] = value  # once: later lookups are plain attribute reads
+        return value
+    if name in _MODULES or (name.startswith("_") and not name.startswith("__")
+                            and importlib.util.find_spec(f"{__name__}.{name}") is not None):
+        return importlib.import_module(f"{__name__}.{name}")  # a submodule not imported yet
     raise AttributeError(f"module 'qemjax' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_PUBLIC) | set(_MODULES))

@@ -87,10 +87,10 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def _doc_help(name: str) -> str:
-    """The first sentence of ``name``'s entry in simplify's docstring ('' if absent), %-escaped."""
-    doc = "\n".join(inspect.getdoc(x) or "" for x in (_api.simplify, *_flat.GROUPS.values(),
-                                                       *_costs.REGISTRY.values(), _costs.base.Method))
+def _doc_help(name: str, doc: str | None = None) -> str:
+    """The first sentence of ``name``'s entry in simplify's docstring ('' if absent), %-escaped (``doc``: the
+    docstrings searched, `_docs`)."""
+    doc = _docs() if doc is None else doc
     m = re.search(rf"^(?:\w+ / )*{name}(?: / \w+)*: (.*?)(?=^\S|\Z)", doc, re.M | re.S)
     if not m:
         return ""
@@ -102,6 +102,12 @@ def _doc_help(name: str) -> str:
             text = text[:i]
             break
     return text.replace("%", "%%")
+
+
+def _docs() -> str:
+    """The docstrings `_doc_help` searches: simplify's, then those of the settings' objects and methods."""
+    return "\n".join(inspect.getdoc(x) or "" for x in (_api.simplify, *_flat.GROUPS.values(),
+                                                      *_costs.REGISTRY.values(), _costs.base.Method))
 
 
 def _cli_options() -> dict:
@@ -126,6 +132,7 @@ def _kind(hint):
 def _add_options(p: argparse.ArgumentParser, hidden=()):
     """Every option of `_cli_options`; those in ``hidden`` are parsed but left out of the help (the
     command refuses them with its reason). Booleans are --x / --no-x; numbers that may be None take 'none'."""
+    docs = _docs()
     for name, (hint, default) in _cli_options().items():
         spec = dict(OPTIONS.get(name, {}))
         if callable(spec.get("choices")):
@@ -137,7 +144,7 @@ def _add_options(p: argparse.ArgumentParser, hidden=()):
             spec.setdefault("type", kind)
             spec.setdefault("metavar", "N" if kind is int else "X")
         if "help" not in spec:
-            spec["help"] = _doc_help(name)
+            spec["help"] = _doc_help(name, docs)
         spec["help"] += f" (default: {spec.pop('shown', default)})"
         if name in hidden:
             spec["help"] = argparse.SUPPRESS
@@ -251,8 +258,7 @@ def check_output(path: str) -> str:
     try:  # the format: one triangle written to memory
         trimesh.Trimesh(np.eye(3), [[0, 1, 2]], process=False).export(file_type=ext)
     except Exception as exc:
-        raise CliError(f"cannot write .{ext} files ({type(exc).__name__}: {exc}); "
-                       f"use one of {', '.join(FORMATS)}") from None
+        raise CliError(_not_a_mesh_format(ext, exc)) from None
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise CliError(f"cannot write {path}: folder {folder} does not exist")
@@ -264,6 +270,20 @@ def check_output(path: str) -> str:
     except OSError as exc:
         raise CliError(f"cannot write to {folder}: {exc.strerror}") from None
     return ext
+
+
+def _not_a_mesh_format(ext: str, exc: Exception) -> str:
+    """Why ``.ext`` cannot take a mesh, in the user's terms (``exc``: what writing one triangle raised)."""
+    import trimesh
+
+    formats = ", ".join(FORMATS)
+    if isinstance(exc, ImportError):
+        return f"writing .{ext} files needs a Python package that is not installed ({exc}); or use one of {formats}"
+    try:  # a format for points (.xyz) takes a point cloud but no faces
+        trimesh.PointCloud(np.eye(3)).export(file_type=ext)
+    except Exception:
+        return f"cannot write a mesh as .{ext}: not a mesh format; use one of {formats}"
+    return f"cannot write a mesh as .{ext}: the format holds points only, no faces; use one of {formats}"
 
 
 def _temp_name(path: str, tag: str) -> str:
@@ -323,16 +343,26 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"qemjax: warning: {message}", file=sys.stderr)
 
 
+class _Version(argparse.Action):
+    """--version, its text made when it is given (`qemjax._version_line`: no JAX imported)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help="show program's version number and exit"):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from . import _version_line
+
+        print(_version_line())
+        parser.exit()
+
+
 def _parser() -> argparse.ArgumentParser:
-    import jax
-
-    from . import __version__
-
     ap = _Parser(prog="qemjax", description="Quadric-error mesh simplification with JAX.",
                  epilog="Errors (--max-error, the reported max error) are squared distances in the mesh's "
                  "units (mesh units²); with --method area, surface-area changes (also mesh units²). The "
                  "summary names the unit of each run.")
-    ap.add_argument("--version", action="version", version=f"qemjax {__version__} (jax {jax.__version__})")
+    ap.add_argument("--version", action=_Version)
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("simplify", help="simplify a mesh file")
     s.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
@@ -342,8 +372,9 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument(TARGETS["target_faces"], dest="target_faces", type=_faces, metavar="N",
                    help="target face count")
     s.add_argument(TARGETS["max_error"], dest="max_error", type=_max_error, metavar="E",
-                   help="stop before a contraction costs more than E (squared distance, mesh units²; "
-                   "--method area: surface-area change, mesh units²); alone or with --faces/--ratio")
+                   help="stop before a contraction costs more than E (the quadric error, a sum of squared distances to "
+                   "planes, mesh units²: not the output's distance, which the summary measures; --method area: "
+                   "surface-area change, mesh units²); alone or with --faces/--ratio")
     _add_options(s)
     s.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
                    "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
@@ -399,6 +430,11 @@ def main(argv=None) -> int:
 
 
 def _main(argv: list) -> int:
+    if argv == ["--version"]:  # without building the parser (its options read every method's fields)
+        from . import _version_line
+
+        print(_version_line())
+        return 0
     ap = _parser()
     cmd = next((a for a in argv if not a.startswith("-")), None)
     ap.hint = f"qemjax {cmd}" if cmd in ap.commands else None  # argparse reports stray options at the top

@@ -9,6 +9,7 @@ tests and sweeps pass these objects.
 from __future__ import annotations
 
 import dataclasses
+import math
 import numpy as np
 
 
@@ -108,7 +109,7 @@ class Topology:
     @property
     def cos_max(self) -> float:
         """The cosine of the flip angle (-2: flips allowed)."""
-        return -2.0 if self.flip_angle is None else float(np.cos(np.radians(self.flip_angle)))
+        return -2.0 if self.flip_angle is None else math.cos(math.radians(self.flip_angle))
 
 
 @dataclasses.dataclass(frozen=True)

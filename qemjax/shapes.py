@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from ._io.mesh import Mesh
+from ._mesh import fixed_order
 
 SHAPES = ("bumpy_sphere", "icosphere", "torus", "cube", "grid")  # the generators a spec may name
 
@@ -33,8 +34,9 @@ def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 48, n_minor: i
     """Closed genus-1 torus with 2·n_major·n_minor faces."""
     u, v = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
     a, b = 2 * np.pi * u / n_major, 2 * np.pi * v / n_minor
-    V = np.stack([(major + minor * np.cos(b)) * np.cos(a), (major + minor * np.cos(b)) * np.sin(a),
-                  minor * np.sin(b)], -1).reshape(-1, 3)
+    cos, sin = fixed_order.cos, fixed_order.sin  # the C library's: the same mesh on every CPU
+    V = np.stack([(major + minor * cos(b)) * cos(a), (major + minor * cos(b)) * sin(a),
+                  minor * sin(b)], -1).reshape(-1, 3)
     i0 = (u * n_minor + v).reshape(-1)
     i1 = (((u + 1) % n_major) * n_minor + v).reshape(-1)
     i2 = (((u + 1) % n_major) * n_minor + (v + 1) % n_minor).reshape(-1)
@@ -84,8 +86,10 @@ def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) 
     rng = np.random.default_rng(seed)
     dirs = rng.normal(size=(12, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    r = 1.0 + amplitude * np.sum(np.exp(8.0 * (V @ dirs.T - 1.0)) * rng.uniform(-1, 1, 12), 1)
-    r += 0.25 * amplitude * np.sin(9 * V[:, 0]) * np.sin(7 * V[:, 1]) * np.sin(8 * V[:, 2])
+    # fixed-order products and the C library's exp and sin: the same mesh on every CPU (_mesh.fixed_order)
+    bumps = fixed_order.exp(8.0 * (fixed_order.dot(V[:, None], dirs[None]) - 1.0)) * rng.uniform(-1, 1, 12)
+    r = 1.0 + amplitude * np.sum(bumps, 1)
+    r += 0.25 * amplitude * fixed_order.sin(9 * V[:, 0]) * fixed_order.sin(7 * V[:, 1]) * fixed_order.sin(8 * V[:, 2])
     return Mesh(V * r[:, None], F)
 
 

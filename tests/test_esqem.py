@@ -330,7 +330,7 @@ def test_split_factor_none_skips_splitting_and_qem_never_splits():
     r = qemjax.simplify(mesh, target_faces=400, method="esqem", split_factor=None)
     assert "split" not in r.stats and len(r.faces) == 400
     assert "split" not in qemjax.simplify(mesh, target_faces=400).stats
-    with pytest.raises(ValueError, match="split_factor is not a setting of method 'qem'"):
+    with pytest.raises(ValueError, match="split_factor is not a setting of method 'default'"):
         qemjax.simplify(mesh, target_faces=400, split_factor=2.0)
 
 

@@ -89,7 +89,7 @@ def test_registration_refuses_taken_names_and_non_methods():
 
 
 def test_a_setting_of_another_method_is_refused_by_name(ball):
-    with pytest.raises(ValueError, match="curvature_weight is not a setting of method 'qem'.*esqem"):
+    with pytest.raises(ValueError, match="curvature_weight is not a setting of method 'default'.*esqem"):
         qemjax.simplify(ball, ratio=0.2, curvature_weight=0.5)
     with pytest.raises(TypeError, match="unknown setting 'no_such'"):
         qemjax.simplify(ball, ratio=0.2, no_such=1)

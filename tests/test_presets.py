@@ -73,7 +73,8 @@ def test_preset_in_a_batch_and_a_sweep_equals_simplify(sheet):
     df = qemjax.sweep({"sheet": sheet}, {"method": ["qem", qemjax.QEM.accurate()]}, [0.3], metrics=False,
                       progress=False)
     assert list(df["faces_out"]) == [len(both[1].faces), len(alone.faces)]
-    assert df["method"][1].startswith("qem(") and "refit=1" in df["method"][1]
+    assert list(df["method"]) == ["qem", "accurate"]  # the preset's object by the preset's name (issue 40 §4)
+    assert both[0].stats["method"] == "accurate" and alone.stats["method"] == "accurate"
 
 
 @pytest.mark.parametrize("flags", [["--preset", "accurate"], ["--method", "accurate"]])

@@ -87,6 +87,33 @@ def name_of(method: Method) -> str:
     return method.name
 
 
+def shown_name(method: Method, given=None) -> str:
+    """The name a result (``stats["method"]``), an error and a sweep's table give ``method``: ``given``
+    when it is a name of `methods` (what the call named: ``"default"`` when it named none, also with
+    settings replaced by name); else the preset's (``"default"``, ``"accurate"``) for an object equal to
+    a preset that is not its class's defaults; else its registered name (`name_of`)."""
+    if isinstance(given, str) and given in methods():
+        return given
+    name = name_of(method)
+    cls = REGISTRY.get(name)
+    if cls is not None and method == cls():
+        return name
+    for preset, make in PRESETS.items():
+        if method == make():
+            return preset
+    return name
+
+
+def label(method: Method) -> str:
+    """`shown_name` and, unless the object equals that preset, the fields that differ from its class's
+    defaults: ``"default"``, ``"toy(extra=3.0)"``, ``"esqem(curvature_weight=0.1)"``."""
+    name = shown_name(method)
+    if name in PRESETS:
+        return name
+    changed = method.changed()
+    return name + ("(" + ", ".join(f"{k}={v!r}" for k, v in changed.items()) + ")" if changed else "")
+
+
 # a method's model over appearance attributes, built when `simplify` keeps attributes with a weight > 0
 WITH_ATTRIBUTES: dict[type, type[CostModel]] = {QEM: AttributeQEM}
 

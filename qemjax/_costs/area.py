@@ -28,10 +28,8 @@ from __future__ import annotations
 import dataclasses
 from typing import ClassVar
 
-import jax
-import jax.numpy as jnp
+from .._kernels.lazy import jax, jnp, optx  # imported on first use (`_kernels.lazy`)
 import numpy as np
-import optimistix as optx
 
 from .._mesh import topology as topo
 from .._kernels.batching import DTYPE

@@ -13,8 +13,7 @@ from __future__ import annotations
 import dataclasses
 from typing import ClassVar
 
-import jax
-import jax.numpy as jnp
+from .._kernels.lazy import jax, jnp  # imported on first use (`_kernels.lazy`)
 import numpy as np
 
 from .._kernels.batching import DTYPE

@@ -20,7 +20,7 @@ a model with its own state keeps its kernel in its own module.
 """
 from __future__ import annotations
 
-import jax.numpy as jnp
+from .._kernels.lazy import jnp  # imported on first use (`_kernels.lazy`)
 
 from .._kernels import kernel
 from .._kernels import placement

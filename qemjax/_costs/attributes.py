@@ -30,11 +30,11 @@ from __future__ import annotations
 import dataclasses
 from typing import ClassVar
 
-import jax
-import jax.numpy as jnp
+from .._kernels.lazy import jax, jnp  # imported on first use (`_kernels.lazy`)
 import numpy as np
 
 from .._kernels.batching import DTYPE
+from .._mesh import fixed_order
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 from .base import MeshInput
@@ -132,10 +132,10 @@ def face_fields(P: np.ndarray, S: np.ndarray):
     M[:, :3, :3], M[:, :3, 3], M[:, 3, :3] = P, 1.0, n
     rhs = np.zeros((len(P), 4, S.shape[2]))
     rhs[:, :3] = S
-    ok = np.abs(np.linalg.det(M)) > 1e-12 * np.maximum(nn[:, 0], 1e-300) ** 1.5
+    X, det = fixed_order.solve(M, rhs)  # not np.linalg: LAPACK's bits differ by CPU
+    ok = np.abs(det) > 1e-12 * np.maximum(nn[:, 0], 1e-300) ** 1.5
     sol = np.zeros_like(rhs)
-    if ok.any():
-        sol[ok] = np.linalg.solve(M[ok], rhs[ok])
+    sol[ok] = X[ok]
     sol[~ok, 3] = S[~ok].mean(1)
     return np.transpose(sol[:, :3], (0, 2, 1)), sol[:, 3]
 
@@ -163,13 +163,16 @@ def attribute_state(V: np.ndarray, F: np.ndarray, S: np.ndarray, w: np.ndarray) 
 
 def _np_translate(st: np.ndarray, d: np.ndarray, m: int) -> np.ndarray:
     """A state (11 + 4m,) re-expressed in a frame moved by d (3,), float64 numpy."""
-    A = st[[0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(3, 3)
-    Ad = A @ d
+    # Python floats, in a fixed order (not BLAS, whose bits vary by CPU; and a pair at a time, numpy's
+    # per-call overhead would dominate)
+    a0, a1, a2, a3, a4, a5, b0, b1, b2 = st[:9].tolist()
+    d0, d1, d2 = d.tolist()
+    ad = (a0 * d0 + a1 * d1 + a2 * d2, a1 * d0 + a3 * d1 + a4 * d2, a2 * d0 + a4 * d1 + a5 * d2)
     out = st.copy()
-    out[6:9] += Ad
-    out[9] += d @ (Ad + 2 * st[6:9])
-    G = st[11:].reshape(m, 4)
-    out[14::4] += G[:, :3] @ d
+    out[6:9] += ad
+    out[9] += d0 * (ad[0] + 2 * b0) + d1 * (ad[1] + 2 * b1) + d2 * (ad[2] + 2 * b2)
+    g = st[11:].tolist()
+    out[14::4] += [g[4 * j] * d0 + g[4 * j + 1] * d1 + g[4 * j + 2] * d2 for j in range(m)]
     return out
 
 
@@ -207,7 +210,7 @@ class AttributeQEM(QEM):
     of attribute scalars, in `_wedges.KINDS` order) and ``weights`` (m,) each channel's weight."""
 
     name: ClassVar[str] = "qem"  # `simplify(method='qem')` with attributes kept
-    error_measure: ClassVar[str] = "squared distance plus weighted attribute deviation"
+    error_measure: ClassVar[str] = "quadric error (a sum of squared distances to planes) plus weighted attribute deviation"
     channels: int = 0
     weights: tuple = ()
 

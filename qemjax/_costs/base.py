@@ -103,11 +103,12 @@ class CostModel:
     part_units: ClassVar[tuple[int, ...]] = ()  # each part's power of length (empty: not reported)
     # what a contraction's cost (row 3: ``max_error``, ``history.costs``) measures, for summaries; every
     # model's cost is in mesh units² (`_units.Frame.errors_to_mesh`)
-    error_measure: ClassVar[str] = "squared distance"
+    error_measure: ClassVar[str] = "quadric error (a sum of squared distances to planes)"
 
     @property
     def error_unit(self) -> str:
-        """The cost's measure and unit, as the summary prints it: ``"squared distance, mesh units²"``."""
+        """The cost's measure and unit, as the summary prints it: ``"quadric error (a sum of squared distances to planes), mesh units²"``. Not a
+        distance of the output from the input: `simplify`'s ``stats["distance_max"]`` measures that."""
         return f"{self.error_measure}, mesh units²"
 
     def vertex_error(self, state: np.ndarray) -> np.ndarray:

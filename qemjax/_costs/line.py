@@ -59,7 +59,7 @@ class LineQEM(QEM):
 
     @property
     def error_measure(self) -> str:
-        return "squared distance plus λ·squared distance to the vertices' normal lines"
+        return "quadric error (a sum of squared distances to planes) plus λ·squared distances to normal lines"
 
     def __post_init__(self):
         super().__post_init__()

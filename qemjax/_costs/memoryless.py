@@ -36,10 +36,11 @@ ranks (Q_current + μ·Q_history + the volume term).
 """
 from __future__ import annotations
 
-import jax.numpy as jnp
+from .._kernels.lazy import jnp  # imported on first use (`_kernels.lazy`)
 import numpy as np
 
 from .._kernels.batching import DTYPE
+from .._mesh import fixed_order
 from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
@@ -57,7 +58,7 @@ def _power(r: np.ndarray, p: float) -> np.ndarray:
         return r
     if p == 0:
         return np.ones_like(r)
-    return np.power(np.maximum(r, np.finfo(np.float64).tiny), p)
+    return fixed_order.power(np.maximum(r, np.finfo(np.float64).tiny), p)  # not np.power: its bits vary by CPU
 
 
 def _planes(n: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -110,10 +110,10 @@ class QEM(Method):
 
     @property
     def error_measure(self) -> str:
-        """What a cost is: a squared distance (memoryless: to the current faces, plus the weighted terms)."""
+        """What a cost is: a quadric error (memoryless: of the current faces, plus the weighted terms)."""
         if not self.memoryless:
-            return "squared distance"
-        return "squared distance to the current faces" + "".join(
+            return "quadric error (a sum of squared distances to planes)"
+        return "quadric error of the current faces (a sum of squared distances to their planes)" + "".join(
             f" plus {t}" for t, w in (("μ·summed quadric", self.memory_weight),
                                       ("λ·volume term", self.volume_weight)) if w)
 

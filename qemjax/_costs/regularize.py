@@ -19,8 +19,7 @@ import dataclasses
 import math
 from typing import ClassVar
 
-import jax
-import jax.numpy as jnp
+from .._kernels.lazy import jax, jnp  # imported on first use (`_kernels.lazy`)
 import numpy as np
 
 from .._kernels.batching import DTYPE

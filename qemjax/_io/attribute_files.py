@@ -5,8 +5,11 @@ file an exporter would (PLY with ``nx ny nz`` or ``red green blue``, OBJ with ``
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from .._mesh import fixed_order
 from .mesh import Mesh
 
 
@@ -24,7 +27,7 @@ def vertex_normals(mesh: Mesh) -> np.ndarray:
 def scaled_normals(mesh: Mesh, lo: float = 0.05, hi: float = 13.0, seed: int = 0) -> np.ndarray:
     """(n,3) unit normals times random lengths in [lo, hi] (log-uniform): what some exporters store."""
     rng = np.random.default_rng(seed)
-    return vertex_normals(mesh) * np.exp(rng.uniform(np.log(lo), np.log(hi), len(mesh.vertices)))[:, None]
+    return vertex_normals(mesh) * fixed_order.exp(rng.uniform(math.log(lo), math.log(hi), len(mesh.vertices)))[:, None]
 
 
 def area_sum_normals(mesh: Mesh) -> np.ndarray:
@@ -68,7 +71,7 @@ def crease_normals(mesh: Mesh, angle: float = 60.0) -> np.ndarray:
     P = V[F]
     cross = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
     unit = cross / np.linalg.norm(cross, axis=1, keepdims=True)
-    cos = np.cos(np.radians(angle))
+    cos = math.cos(math.radians(angle))
     order = np.argsort(F.reshape(-1), kind="stable")
     corner_face = np.repeat(np.arange(len(F)), 3)[order]
     verts = F.reshape(-1)[order]
@@ -76,8 +79,8 @@ def crease_normals(mesh: Mesh, angle: float = 60.0) -> np.ndarray:
     out = np.zeros((len(F), 3, 3))
     for v in range(len(V)):
         fs = corner_face[start[v]:start[v + 1]]
-        near = (unit[fs] @ unit[fs].T) >= cos  # (k,k): which faces smooth with which
-        acc = near.astype(np.float64) @ cross[fs]
+        near = fixed_order.dot(unit[fs][:, None], unit[fs][None]) >= cos  # (k,k): which faces smooth with which
+        acc = fixed_order.dot(near.astype(np.float64)[:, None], cross[fs].T[None])  # near @ cross[fs]
         acc /= np.linalg.norm(acc, axis=1, keepdims=True)
         k = np.argmax(F[fs] == v, axis=1)
         out[fs, k] = acc
@@ -114,7 +117,8 @@ def write_obj(path, mesh: Mesh, corner_normals: np.ndarray | None = None, uv: np
 def smooth_colors(mesh: Mesh) -> np.ndarray:
     """(n,3) colours in [0, 1] that vary smoothly over the surface."""
     V = mesh.vertices
-    return 0.5 + 0.5 * np.stack([np.sin(3 * V[:, 0]), np.sin(3 * V[:, 1] + 1), np.cos(2 * V[:, 2])], 1)
+    return 0.5 + 0.5 * np.stack([fixed_order.sin(3 * V[:, 0]), fixed_order.sin(3 * V[:, 1] + 1),
+                                 fixed_order.cos(2 * V[:, 2])], 1)
 
 
 def spherical_uv(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -122,8 +126,8 @@ def spherical_uv(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
     the meridian at u = 0 / 1 (faces that cross it take u + 1 at their low corners): one UV seam."""
     V, F = mesh
     d = V / np.linalg.norm(V, axis=1, keepdims=True)
-    u = (np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)) % 1.0
-    v = np.arccos(np.clip(d[:, 2], -1, 1)) / np.pi
+    u = (fixed_order.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)) % 1.0
+    v = fixed_order.arccos(np.clip(d[:, 2], -1, 1)) / np.pi
     cu = u[F]
     wrap = (cu.max(1) - cu.min(1)) > 0.5
     cu = np.where(wrap[:, None] & (cu < 0.5), cu + 1.0, cu)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 
-import jax
+from .lazy import jax  # imported on first use: importing qemjax stays light
 
 # On the CPU, XLA's newer fusion emitter compiles a loop fusion that it splits over several threads into
 # different machine code than the unsplit loop (other multiply-adds become FMAs), and it splits by the

@@ -6,9 +6,7 @@ whatever its number of rounds: pair batches use the three sizes of CHUNKS, other
 """
 from __future__ import annotations
 
-import functools
-
-import jax
+from .lazy import jit  # jax.jit made at the first call (`_kernels.lazy`)
 import numpy as np
 
 DTYPE = np.float32
@@ -70,7 +68,7 @@ def chunks(arr: np.ndarray, fill=0, size: int | None = None):
         start += s
 
 
-@functools.partial(jax.jit, donate_argnums=0)
+@jit(donate_argnums=0)  # jax.jit, made at the first call
 def _set_rows(A, idx, rows):
     return A.at[idx].set(rows, mode="drop")
 

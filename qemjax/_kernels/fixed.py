@@ -9,7 +9,7 @@ left to right, a ring summed by halving (its width is a power of two: `ring.grou
 """
 from __future__ import annotations
 
-import jax.numpy as jnp
+from .lazy import jnp  # imported on first use (`_kernels.lazy`)
 
 
 def dot3(a, b):

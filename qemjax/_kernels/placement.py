@@ -26,8 +26,7 @@ solve costs more arithmetic (docs/methods.md, "QEM and its presets"), so each mo
 """
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
+from .lazy import jax, jnp  # imported on first use (`_kernels.lazy`)
 
 from . import kernel
 from . import quadrics as qd

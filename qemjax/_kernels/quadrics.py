@@ -9,8 +9,7 @@ vectors: no large terms cancel, which is what makes float32 costs trustworthy ne
 """
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
+from .lazy import jax, jnp  # imported on first use (`_kernels.lazy`)
 
 from . import kernel
 

@@ -11,7 +11,6 @@ its other corners, and readers skip it. When the pool is full, the live entries 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
 
 
 def _exclusive_cumsum(c: np.ndarray) -> np.ndarray:
@@ -31,6 +30,8 @@ class FaceLists:
         m = len(self.F)
         self.alive = np.ones(m, bool)
         self.count = m
+        import scipy.sparse  # here: importing the cost models stays light
+
         # grouping corners by vertex is a counting sort, which scipy's COO -> CSR conversion does in C
         inc = scipy.sparse.csr_matrix(
             (np.ones(3 * m, np.int8), (self.F.reshape(-1), np.repeat(np.arange(m, dtype=np.int32), 3))),

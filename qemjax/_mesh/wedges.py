@@ -26,6 +26,8 @@ import warnings
 
 import numpy as np
 
+from . import fixed_order
+
 KINDS = ("uv", "color", "normal")
 SIZES = {"uv": 2, "color": 4, "normal": 3}
 
@@ -358,7 +360,8 @@ class Tracker:
         if free:
             pa, pb = VQ[a, :3].astype(np.float64), VQ[b, :3].astype(np.float64)
             d = pb - pa
-            t = float(np.clip(np.dot(np.asarray(x, np.float64) - pa, d) / max(np.dot(d, d), 1e-300), 0, 1))
+            t = float(np.clip(fixed_order.dot(np.asarray(x, np.float64) - pa, d) / max(fixed_order.dot(d, d), 1e-300),
+                              0, 1))
             val = (1 - t) * self.val[wa] + t * self.val[wbv]
             if self.attributes_at is not None:  # the attribute quadric's optimum at x
                 val = np.where(self.solved, self.attributes_at(VQ[a], VQ[b], x), val)
@@ -466,10 +469,11 @@ def _one_to_one(src: np.ndarray, dst: np.ndarray, need: np.ndarray):
 
 def _quadric(row: np.ndarray, x: np.ndarray) -> float:
     """Q(x) of a vertex row [position, quadric (10) in the vertex's frame, …] in float64."""
-    q = row[3:13].astype(np.float64)
-    u = np.asarray(x, np.float64) - row[:3].astype(np.float64)
-    A = np.array([[q[0], q[1], q[2]], [q[1], q[3], q[4]], [q[2], q[4], q[5]]])
-    return float(u @ A @ u + 2 * q[6:9] @ u + q[9])
+    a0, a1, a2, a3, a4, a5, b0, b1, b2, c = row[3:13].astype(np.float64).tolist()
+    u0, u1, u2 = (np.asarray(x, np.float64) - row[:3].astype(np.float64)).tolist()
+    # uᵀAu + 2 b·u + c in Python floats, in a fixed order (not BLAS: its bits vary by CPU)
+    au = (a0 * u0 + a1 * u1 + a2 * u2, a1 * u0 + a3 * u1 + a4 * u2, a2 * u0 + a4 * u1 + a5 * u2)
+    return (u0 * au[0] + u1 * au[1] + u2 * au[2]) + 2 * (b0 * u0 + b1 * u1 + b2 * u2) + c
 
 
 def output(C: np.ndarray, values: np.ndarray, F: np.ndarray, fids: np.ndarray, ids: np.ndarray):

@@ -11,14 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import compilation as _compilation
 from .. import _costs
 from .._schedulers import locks as _locks
 from .._options import Topology
 from .._record.result import SimplifyResult
-from .._schedulers import batched
-from . import stages
-from .stages import Job, _resolve_target
 
 PLACEMENTS = _costs.qem.PLACEMENTS
 
@@ -38,9 +34,13 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         object with ``.vertices``/``.faces``. Polygons are triangulated.
     target_faces / ratio: stop at this many faces (ratio × the cleaned input's faces). Met exactly when
         the mesh allows it; otherwise the result has the fewest faces reachable above the target.
-    max_error: stop before the cheapest contraction costs more than this: a *squared distance in the
-        mesh's own units* for the quadric methods (the quadric error, e.g. ``(0.01 * diagonal)**2``; the
-        method's ``error_unit`` says what it is). May be combined with a face target; whichever is reached
+    max_error: stop before the cheapest contraction costs more than this, in the method's cost (its
+        ``error_unit``): for the quadric methods the *quadric error* in mesh units², a sum of squared
+        distances from the new vertex to the planes of the input faces merged into it (e.g.
+        ``(0.01 * diagonal)**2``). It bounds each contraction's cost, not the output's distance from the
+        input: a sum over many planes, its square root is often several times that distance, and later
+        contractions and the re-fit move the surface again. The distance is measured in
+        ``stats["distance_max"]`` (``measure``). May be combined with a face target; whichever is reached
         first stops.
     method: the cost model and all its settings, as an object (``qemjax.QEM(boundary_weight=10)``,
         ``qemjax.ESQEM(curvature_weight=0.1)``, ``qemjax.AreaDifference()``, ``qemjax.LineQEM()``, a
@@ -66,6 +66,12 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         (others warn and drop).
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
     progress: show a progress bar (tqdm).
+    measure (given by name): measure the output's distance from the input (`_pipeline.measure`: every input
+        vertex and face centroid to its nearest output point) into ``stats["distance_max"]``,
+        ``["distance_rms"]`` (mesh units) and their ``_rel`` forms (over the bounding-box diagonal). None
+        (default): measured when the method re-fits (the default method; the re-fit already makes the
+        output depend on the input's samples), else not (``measure=True`` there costs one nearest-surface
+        query over 1.5× the input's faces in points; ``experiments/distance_check.py`` times it).
     locked, vertex_weights (given by name, with the settings): per-vertex constraints, numbered as the
         vertices were given (before welding; `qemjax._schedulers.locks`; docs/methods.md, "Locking vertices and
         weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
@@ -84,12 +90,15 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     reason but the parity of a closed mesh. Raises ValueError for bad input or options, TypeError for an
     unknown setting.
     """
+    from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
+    from . import stages
+
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
     settings = dict(settings)
     locks = _locks.pop_settings(settings)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings)
-    _resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
+    stages._resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     geo = stages.geometry(mesh, setup, stacklevel=3)
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks)
     return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
@@ -123,6 +132,10 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
     list is that exception instead.
     """
+    from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
+    from .._schedulers import batched
+    from . import stages
+
     t_start = time.perf_counter()
     geos, states, jobs, out = {}, {}, [], [None] * len(cells)
     for i, (mesh, cfg) in enumerate(cells):
@@ -136,7 +149,7 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
                 setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest)
             except TypeError as exc:
                 raise ValueError(f"simplify_batch: {exc}") from None
-            _resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
+            stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
                 geos[gk] = stages.geometry(mesh, setup, stacklevel=4)
@@ -204,6 +217,8 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
 
 def _batch_key(job: "Job"):
     """Jobs with equal keys can run as copies of one batch (`_schedulers.batched`); None: run alone."""
+    from .._schedulers import batched
+
     s, model = job.setup, job.model
     if s.scheduler != "parallel" or len(job.geo.extra) or job.tracker is not None or job.locks is not None or \
             not batched.batchable(model) or not (

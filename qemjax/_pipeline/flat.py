@@ -10,6 +10,7 @@ so a field added to a method is an option everywhere with no other edit.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import functools
 import typing
 from typing import Any
@@ -95,9 +96,7 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
         elif not dot and key in table:
             given[table[key].group][key] = value
         else:
-            raise TypeError(f"unknown setting {key!r}: simplify takes the method's settings as fields of "
-                            f"the method (method=qemjax.QEM(boundary_weight=10)), or by name: "
-                            f"{sorted(table)}")
+            raise TypeError(unknown_setting(key, table))
     if preset is not None:
         if not (isinstance(method, str) and method in ("qem", _costs.DEFAULT)):
             raise ValueError(f"preset={preset!r} names a method: give it as method={preset!r} alone")
@@ -110,7 +109,7 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
         foreign = sorted(set(given["method"]) - names)
         if foreign:
             owners = {k: table[k].owners if k in table else () for k in foreign}
-            raise ValueError("; ".join(f"{k} is not a setting of method {m.name!r}"
+            raise ValueError("; ".join(f"{k} is not a setting of method {_costs.shown_name(m, method)!r}"
                                        + (f" (it is one of {', '.join(owners[k])})" if owners[k] else "")
                                        for k in foreign))
         m = dataclasses.replace(m, **given["method"])
@@ -130,6 +129,20 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
     if given["attributes"]:
         attributes = dataclasses.replace(attributes, **given["attributes"])
     return m, topology, attributes
+
+
+# `simplify`'s keywords besides the settings (tests/test_first_use.py checks them against its signature)
+KEYWORDS = ("target_faces", "ratio", "max_error", "method", "scheduler", "topology", "attributes",
+            "feature_edges", "progress", "locked", "vertex_weights", "preset")
+
+
+def unknown_setting(key: str, table: dict | None = None) -> str:
+    """One line for a keyword that names nothing: the close names first (``did you mean 'ratio'?``)."""
+    names = list(KEYWORDS) + sorted(options() if table is None else table)
+    close = difflib.get_close_matches(key, names, n=3, cutoff=0.6)
+    hint = f"; did you mean {' or '.join(map(repr, close))}?" if close else \
+        " (help(qemjax.simplify) lists the keywords; a method's settings are its fields, qemjax.QEM(...))"
+    return f"unknown setting {key!r}{hint}"
 
 
 def field_names(group: str, obj=None) -> tuple[str, ...]:

@@ -27,6 +27,15 @@ class LodChain:
     def __len__(self):
         return len(self.levels)
 
+    def __repr__(self):
+        """One line for the run, one per level (counts, not arrays)."""
+        r = self.result
+        lines = [f"LodChain: {len(self.levels)} levels of {len(r.input_faces)} faces from one run "
+                 f"(method {r.stats.get('method')!r}, stop_reason {r.stop_reason!r})"]
+        lines += [f"  [{i}] ratio {ratio:g}: {len(lv.faces)} faces, {len(lv.vertices)} vertices, max_error "
+                  f"{lv.max_error:.3g}" for i, (ratio, lv) in enumerate(zip(self.ratios, self.levels))]
+        return "\n".join(lines)
+
     def __getitem__(self, i) -> Level:
         return self.levels[i]
 

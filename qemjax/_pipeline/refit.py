@@ -8,12 +8,13 @@ E_dist with the connectivity fixed):
 
 1. the input is sampled at every vertex (weight: a third of the area of its faces) and every face's
    centroid (weight: its area), the weights scaled to mean 1;
-2. each sample is attached to its nearest point on the output (`qemjax._mesh.nearest`), as barycentric
+2. each sample is attached to its nearest point on the output (`qemjax._mesh.grid_nearest`), as barycentric
    coordinates b of an output face, among the faces of its own part (the input's connected parts, joined
    as aggregation joins them; an output face belongs to the part of the input face it continues): a
    sample of one part must not pull another part that happens to lie nearer (the truck's 50 parts did);
 3. the positions X minimise Σ_i w_i·|b_i·X − p_i|² + λ·Σ_v |x_v − x_v⁰|² (a sparse linear least-squares
-   problem, the same for the three coordinates): the samples' squared distances to the output surface,
+   problem, the same for the three coordinates, solved by conjugate gradients in a fixed order of sums so
+   that every CPU gives the same bits: `qemjax._mesh.spd_solve`): the samples' squared distances to the output surface,
    with a small damping λ = DAMPING · Σw / (vertices) towards the current positions x⁰, which holds a
    vertex that no sample sees and keeps the system definite;
 4. a face whose normal the new positions turn by the flip angle or more (``cos_max``, as the contractions'
@@ -26,14 +27,18 @@ everything but the positions stay as they are.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .._mesh.arrays import face_normals
+from .._mesh.grid_nearest import nearest
+from .._mesh.spd_solve import solve_spd
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
 _ROWS = 32_768  # rows per block of closest_barycentric
+RTOL = 1e-12  # the normal equations' relative residual (conjugate gradients, `_mesh.spd_solve`)
 HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
 
 
@@ -55,16 +60,13 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
 
 def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spart: np.ndarray):
     """For each sample, a nearest output face among those of its part (-1: its part has none)."""
-    from .._mesh.nearest import nearest_triangles
-
     f = np.full(len(P), -1, np.int64)
     order = np.argsort(gpart, kind="stable")
     starts = np.searchsorted(gpart[order], np.unique(gpart))
     for faces in np.split(order, starts[1:]):
         mine = np.flatnonzero(spart == gpart[faces[0]])
         if len(mine):
-            corners = np.ascontiguousarray(np.transpose(X[G[faces]], (1, 2, 0)))
-            f[mine] = faces[nearest_triangles(corners, P[mine])[1]]
+            f[mine] = faces[nearest(X, G[faces], P[mine])[0]]
     return f
 
 
@@ -162,11 +164,13 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
         if fixed is not None:  # the fixed vertices' part of each sample moves to the right-hand side
             target = target - A[:, ~free] @ X[~free]
             A = A[:, free]
-        N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsc()
+        N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
         rhs = A.T @ target + lam * X[free]
-        solve = spla.factorized(N)
         Y = X.copy()
-        Y[free] = np.stack([solve(np.ascontiguousarray(rhs[:, i])) for i in range(3)], 1)
+        Y[free], converged = solve_spd(N, rhs, X[free], rtol=RTOL)  # fixed-order sums: the same bits on every CPU
+        if not converged:  # the last iterate still lowers the fit's error; the checks below still hold
+            warnings.warn(f"re-fit: the solver stopped short of its tolerance ({RTOL:g}) on {len(Y[free])} vertices; "
+                          "the positions are fitted less closely than usual", stacklevel=4)
         if not np.all(np.isfinite(Y)):
             break
         n0 = face_normals(X, G)

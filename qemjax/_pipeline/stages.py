@@ -27,6 +27,7 @@ from .._kernels import compilation as _compilation
 from .. import _costs
 from . import flat as _flat
 from .._io import mesh as _io
+from . import measure
 from . import refit as _refit
 from .. import _schedulers
 from .._schedulers import locks as _locks
@@ -88,8 +89,9 @@ def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """A run's settings, checked and resolved before the mesh is read (`_setup`): the method object and
-    its name, the scheduler and its `Schedule`, the model it prices with (`_costs.build`), `Topology`,
-    `Attributes` (with the checked weights per kind) and whether to show progress."""
+    its name as shown (`_costs.shown_name`: ``"default"`` when the call named none), the scheduler and its
+    `Schedule`, the model it prices with (`_costs.build`), `Topology`, `Attributes` (with the checked weights
+    per kind) and whether to show progress."""
 
     method_obj: Any
     method: str
@@ -100,6 +102,7 @@ class Setup:
     attribute_options: Attributes
     kind_weights: Any
     progress: bool
+    measure: bool | None = None  # measure the output's distance from the input (`measure`); None: with a re-fit
 
     cos_max = property(lambda self: self.topology.cos_max)
     pair_threshold = property(lambda self: float(self.topology.pair_threshold))
@@ -109,6 +112,11 @@ class Setup:
     attributes = property(lambda self: self.attribute_options.attributes)
     texture = property(lambda self: self.attribute_options.texture)
     refit = property(lambda self: int(self.method_obj.refit))
+
+    @property
+    def measures(self) -> bool:
+        """Whether the run measures its distance from the input: ``measure``, or (None) when it re-fits."""
+        return self.refit > 0 if self.measure is None else self.measure
 
     @property
     def split(self):
@@ -159,11 +167,13 @@ def setup(method, scheduler, topology, attributes, progress, settings: dict) -> 
     the objects); ValueError naming the bad one, TypeError for an unknown name."""
     settings = dict(settings)
     sched_name, schedule = _flat.scheduler_of(scheduler, settings.pop("schedule", None))
+    measure = settings.pop("measure", None)
+    named = settings.get("preset") or method  # what the call named ("default" when it named none)
     method_obj, topology, attrs = _flat.apply(method, topology, attributes, settings)
     model = _costs.build(method_obj)
     kind_weights = _wedges.check_weights(attrs.attribute_weights)
-    return Setup(method_obj, _costs.name_of(method_obj), sched_name, schedule, model, topology, attrs,
-                 kind_weights, _flag("progress", progress))
+    return Setup(method_obj, _costs.shown_name(method_obj, named), sched_name, schedule, model, topology, attrs,
+                 kind_weights, _flag("progress", progress), None if measure is None else _flag("measure", measure))
 
 
 def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
@@ -193,7 +203,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         geo = _locks.permuted_geometry(geo, lk)
         states = None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
-    if attrs is not None and (setup.method != "qem" or setup.split is not None or
+    if attrs is not None and (_costs.name_of(setup.method_obj) != "qem" or setup.split is not None or
                               getattr(model, "memoryless", False)):
         warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
         what = "memoryless=True" if getattr(model, "memoryless", False) else f"method={setup.method!r}"
@@ -341,14 +351,17 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
         # moved positions would leave their texture coordinates behind (the textured example's UV deviation
         # 0.0011 -> 0.016, experiments/refit_uv.py): with UVs kept, positions stay where the contractions put them
         refit_rounds, refit_skipped = 0, "uv kept"
-    if refit_rounds and len(Fout) < m:
+    refits = bool(refit_rounds and len(Fout) < m)
+    distance = measure.not_measured()
+    if refits or setup.measures:
         held = fixed
-        if appearance:  # seam vertices (two or more wedges) stay on the input's seams
+        if refits and appearance:  # seam vertices (two or more wedges) stay on the input's seams
             seam = np.bincount(appearance["wedge_vertex"], minlength=len(vout)) > 1
             held = seam if held is None else (held | seam)
-        task = RefitTask(V, F, vout, Fout, refit_rounds, setup.cos_max, g.parts[1], fids, held)
+        task = RefitTask(V, F, vout, Fout, refit_rounds if refits else 0, setup.cos_max, g.parts[1], fids, held,
+                         setup.measures)
         if later is None:
-            vout, refit_s = task()
+            vout, refit_s, distance = task()
     stop = out.stop_reason
     if target and len(Fout) > target:  # a face target was asked for and not met
         closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
@@ -381,7 +394,7 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
         compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
         total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
         max_error_limit=err if math.isfinite(err) else None, refit=refit_rounds, refit_s=refit_s,
-        error_unit=model.error_unit)
+        error_unit=model.error_unit, **distance)
     if refit_skipped:
         stats["refit_skipped"] = refit_skipped
     if job.tracker is not None:
@@ -423,26 +436,33 @@ class RefitTask(NamedTuple):
     part: np.ndarray
     source_faces: np.ndarray
     fixed: np.ndarray | None
+    measure: bool = False  # then measure the output's distance from the input (`_pipeline.measure`)
 
-    def __call__(self) -> tuple[np.ndarray, float]:
+    def __call__(self) -> tuple[np.ndarray, float, dict]:
+        """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None)."""
         t = time.perf_counter()
-        X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
-                         self.source_faces, fixed=self.fixed)
-        return X, time.perf_counter() - t
+        X = self.X
+        if self.rounds:
+            X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
+                             self.source_faces, fixed=self.fixed)
+        refit_s = time.perf_counter() - t
+        return X, refit_s, measure.distance(self.V, self.F, X, self.G) if self.measure else measure.not_measured()
 
 
 def refit_all(later: list) -> None:
     """Run the re-fits `finish` left in ``later`` and put their positions and ``refit_s`` into their results.
     Each is independent of the others (the same arithmetic as alone, bit for bit), so they run side by side
-    on threads (`nearest.each_on_threads`: one per core up to four): their numpy, KD-tree and sparse-solver
-    work releases the GIL (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid distinct`). A
+    on threads (`nearest.each_on_threads`: one per core up to four): their compiled nearest-face search and
+    solver release the GIL, as numpy does (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid
+    distinct`). A
     re-fit of a large input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already
     uses the cores, and side by side the large ones would hold their memory at once."""
     from .._mesh.nearest import each_on_threads  # lazily, as the re-fit imports it (scipy.spatial)
 
     def run(item):
         res, task = item
-        res.vertices, res.stats["refit_s"] = task()
+        res.vertices, res.stats["refit_s"], distance = task()
+        res.stats.update(distance)
 
     each_on_threads(run, [item for item in later if len(item[1].F) < _REFIT_ALONE])
     for item in later:

@@ -48,7 +48,7 @@ class Level:
     vertices (k,3) float64 and faces (j,3) int64 in the input's units, exactly as `simplify` builds its
     output; source_vertices (k,) / source_faces (j,) int64: the input vertex each vertex grew from and the
     input face each face continues; vertex_map (n,) int64: each input vertex's vertex here (-1: its part
-    vanished); max_error: the largest cost among the contractions used (squared distance, mesh units²; 0
+    vanished); max_error: the largest cost among the contractions used (the cost model's measure, e.g. the quadric error, mesh units²; 0
     for none); round: the round of the last contraction used (-1 for none)."""
 
     vertices: np.ndarray
@@ -59,6 +59,10 @@ class Level:
     contractions: int
     max_error: float
     round: int
+
+    def __repr__(self):  # counts, not arrays
+        return (f"Level({len(self.faces)} faces, {len(self.vertices)} vertices, {self.contractions} contractions, "
+                f"max_error {self.max_error:.3g}, round {self.round})")
 
     def to_trimesh(self):
         """The level as a `trimesh.Trimesh` (no processing)."""
@@ -89,6 +93,10 @@ class Record:
     scheduler: str = "parallel"
     target_faces: int = 0
     locked: np.ndarray | None = None  # (n,) bool: locked input vertices (None: none), kept exactly
+
+    def __repr__(self):  # counts, not arrays
+        return (f"Record({len(self.input_faces)} -> {self.faces_out} faces, {len(self.history)} contractions, "
+                f"scheduler {self.scheduler!r})")
 
     # -- what the record says ----------------------------------------------------------------------
     def faces_removed(self) -> np.ndarray:

@@ -29,6 +29,11 @@ class Contractions:
     def __len__(self):
         return len(self.pairs)
 
+    def __repr__(self):  # counts, not arrays
+        rounds = "" if self.rounds is None or not len(self.rounds) else f", {int(self.rounds.max()) + 1} rounds"
+        parts = f", parts {', '.join(self.parts)}" if self.parts else ""
+        return f"Contractions({len(self)} contractions{rounds}{parts})"
+
 
 @dataclasses.dataclass
 class SimplifyResult:
@@ -36,7 +41,10 @@ class SimplifyResult:
 
     vertices (k,3) float64 and faces (j,3) int64 in the input's units and orientation;
     vertex_error (k,) float64: each output vertex's quadric error Q(v), a squared distance in input units;
-    max_error: the largest contraction cost used (squared distance, input units);
+    max_error: the largest contraction cost used (the cost model's measure, ``stats["error_unit"]``: for the
+    quadric methods a quadric error, a sum of squared distances to planes in input units², which can be
+    many times the squared distance the output lies from the input; that distance is measured in
+    ``stats["distance_max"]`` / ``["distance_rms"]``);
     source_vertices (k,) int64: for each output vertex, the id (in the cleaned input) of the vertex it
     grew from; source_faces (j,) int64: for each output face, the input face it continues (contraction
     only re-links faces, it never creates them); input_vertices / input_faces: the cleaned input (after
@@ -52,7 +60,10 @@ class SimplifyResult:
     none; ``max_error_limit``, a squared distance in input units, None for none) and ``dropped``: what
     the input carried that the result does not keep (any of "uv", "material", "vertex_colors",
     "face_colors"); ``error_unit``: what ``max_error`` and the history's costs measure (the cost model's
-    `error_unit`); with attributes kept,
+    `error_unit`); the measured distance from the input (``simplify(measure=...)``, `_pipeline.measure`):
+    ``distance_max`` and ``distance_rms`` (mesh units), ``distance_max_rel`` and ``distance_rms_rel`` (over the
+    input's bounding-box diagonal), ``distance_samples`` and ``distance_s``, all None when not measured;
+    with attributes kept,
     ``attributes`` (their kinds) and the input's seams: ``seams_in`` (connected pieces), ``seam_edges_in``
     and ``seam_vertices_in``.
     With ``locked=`` / ``vertex_weights=`` (`qemjax._schedulers.locks`): ``locked_in`` (the vertices given),
@@ -87,6 +98,27 @@ class SimplifyResult:
     wedge_vertex: np.ndarray | None = None
     material: object = None
     input_wedge_faces: np.ndarray | None = None
+
+    def __repr__(self):
+        """A few lines (a notebook cell shows this): the counts, the method, why the run stopped and its
+        key figures; the arrays are the fields (``res.vertices``, ...), every figure is in ``res.stats``."""
+        s = self.stats
+        first = (f"SimplifyResult: {len(self.input_faces)} -> {len(self.faces)} faces, {len(self.input_vertices)} -> "
+                 f"{len(self.vertices)} vertices, stop_reason {self.stop_reason!r}")
+        if s.get("target_faces"):
+            first += f" (target {s['target_faces']} faces)"
+        lines = [first, f"  method {s.get('method')!r}, scheduler {s.get('scheduler')!r}, {s.get('rounds', 0)} rounds, "
+                        f"{len(self.history)} contractions, {s.get('total_s', 0.0):.2f} s "
+                        f"(compile {s.get('compile_s', 0.0):.2f} s)",
+                 (f"  distance from the input: max {s['distance_max']:.3g}, rms {s['distance_rms']:.3g} mesh units"
+                  if s.get("distance_max") is not None else "  distance from the input: not measured (measure=True)")
+                 + f"; max_error {self.max_error:.3g} ({s.get('error_unit', 'quadric error, mesh units²')})"]
+        kept = [k for k in ("uv", "colors", "normals") if getattr(self, k) is not None]
+        extra = ([f"attributes kept: {', '.join(kept)} ({len(self.wedge_vertex)} wedges)"] if kept else []) + \
+                ([f"dropped: {', '.join(s['dropped'])}"] if s.get("dropped") else [])
+        if extra:
+            lines.append("  " + "; ".join(extra))
+        return "\n".join(lines)
 
     @property
     def vertex_map(self) -> np.ndarray:
@@ -133,16 +165,24 @@ class SimplifyResult:
         return trimesh.Trimesh(self.vertices[self.wedge_vertex], self.wedge_faces, process=False, **kw)
 
     def summary(self) -> str:
-        """One line: faces before -> after and the target, times, rounds and the largest contraction
-        cost with what it measures (``stats["error_unit"]``, the cost model's `error_unit`: a squared
-        distance in mesh units² for qem and esqem, a surface-area change for ``method="area"``)."""
+        """One line: faces before -> after and the target, times, rounds, the measured distance from the
+        input (``stats["distance_max"]`` and ``["distance_rms"]`` in mesh units, the largest also as a
+        percentage of the input's bounding-box diagonal; `_pipeline.measure`), and the largest contraction
+        cost named for what it is (``stats["error_unit"]``: a quadric error, a sum of squared distances to
+        planes, for the quadric methods; a surface-area change for ``method="area"``)."""
         s = self.stats
         goals = []
         if s.get("target_faces"):
             goals.append(f"{s['target_faces']} faces")
         if s.get("max_error_limit") is not None:
             goals.append(f"max error {s['max_error_limit']:.3g}")
+        if s.get("distance_max") is not None:
+            rel = s.get("distance_max_rel")
+            of = f" = {100 * rel:.3g} % of the diagonal" if rel is not None else ""
+            dist = f"distance from the input: max {s['distance_max']:.3g}{of}, rms {s['distance_rms']:.3g} mesh units"
+        else:
+            dist = "distance from the input: not measured (measure=True measures it)"
         return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
                 f"in {s['total_s']:.2f} s (compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
-                f"{s['rounds']} rounds, max error {self.max_error:.3g} "
-                f"({s.get('error_unit', 'squared distance, mesh units²')})")
+                f"{s['rounds']} rounds; {dist}; largest contraction cost {self.max_error:.3g} "
+                f"({s.get('error_unit', 'quadric error, mesh units²')})")

@@ -41,7 +41,7 @@ from .._kernels.batching import CHUNKS
 from .._costs import MeshView
 from .._mesh.incidence import FaceLists
 from . import outcome
-from .common import (DTYPE, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
+from .common import (DTYPE, weighted_parts, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
                      start_merge, start_price)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
@@ -340,7 +340,7 @@ class _Run:
             self.rank_w = self.model.rank_weights(st.parts.compress(valid, axis=0))
             self.weighed_at = count
             self.reweights.append((count, self.rank_w))
-        st.key = (st.cost + st.parts.astype(np.float64) @ self.rank_w).astype(DTYPE)
+        st.key = (st.cost + weighted_parts(st.parts, self.rank_w)).astype(DTYPE)
 
     # -- stages 3 and 4: select and validate -------------------------------------------------------
     def candidates(self, st: RoundState, need, max_cost=None) -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 
 from .._mesh.incidence import FaceLists
 from . import outcome
-from .common import Options
+from .common import Options, weighted_parts
 from .outcome import BUDGET
 
 
@@ -38,7 +38,7 @@ class Queue:
     def _key(self, cost, parts):
         if self.weights is None:
             return cost
-        return float(np.float32(cost + float(np.asarray(parts, np.float64) @ self.weights)))
+        return float(np.float32(cost + float(weighted_parts(np.asarray(parts)[None], self.weights)[0])))
 
     def push(self, pairs, priced, length2):
         for k, ((a, b), c, l2) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist())):

@@ -67,10 +67,11 @@ class Cell:
 
 
 def _plain(value):
-    """A grid value as JSON/table data: a method object by its label (``esqem(curvature_weight=0.1)``),
-    Schedules, Topology and Attributes objects (frozen dataclasses) by their repr."""
+    """A grid value as JSON/table data: a method object by its label (`_costs.label`:
+    ``esqem(curvature_weight=0.1)``, ``default``), Schedules, Topology and Attributes objects (frozen
+    dataclasses) by their repr."""
     if isinstance(value, Method):
-        return value.label()
+        return _costs.label(value)
     if isinstance(value, (Schedule, Topology, Attributes)):
         return repr(value)
     if isinstance(value, np.generic):

@@ -1,0 +1,24 @@
+"""``python -m qemjax`` and the ``qemjax`` command: `qemjax._cli.main`, imported inside the Ctrl-C guard, so an
+interrupt while the package is still importing is one line and exit code 130 as well; ``--version`` alone
+is answered here, before importing it."""
+import sys
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        if argv == ["--version"]:  # without importing the command's modules (numpy, the settings)
+            from . import _version_line
+
+            print(_version_line())
+            return 0
+        from ._cli import main as run
+
+        return run(argv)
+    except KeyboardInterrupt:
+        print("qemjax: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

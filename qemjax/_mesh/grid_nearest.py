@@ -1,0 +1,208 @@
+"""Exact nearest triangles for many points, compiled: a uniform grid searched in growing shells (numba).
+
+For the re-fit's attachment and the measured distance (`_pipeline.measure`): many points (the input's
+vertices and face centroids) against a coarser mesh (the output). `_mesh.nearest` answers the same question
+with a KD-tree and numpy blocks, whose per-call overhead dominated at these sizes; here one compiled loop
+does all of it.
+
+Grid: cubes of side h over the triangles' bounding box; each triangle is listed in every cube its bounding box
+meets. h starts at half the median edge and grows until the grid has at most ``CUBES_PER_FACE`` cubes per
+triangle and the listing at most ``PAIRS_PER_FACE`` entries per triangle (a few huge triangles would
+otherwise fill millions of cubes).
+
+Query of a point p: the cube c of p's projection p' onto the grid's box, then the shells of cubes at
+Chebyshev distance r = 0, 1, 2, ... from c; each triangle met is measured exactly (closest point, Ericson's
+regions); after shell r, every point of the box within r·h + w of p' has been seen (w: p''s distance to the
+walls of its own cube), and since projecting onto a box never lengthens a distance to a point inside it, a
+best distance below that is final. Ties go to the lowest
+triangle index, so the answer does not depend on the order of the search. Plain multiplies and adds in a
+fixed order (numba fuses none): the same bits on every CPU.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from numba import njit
+
+PAIRS_PER_FACE = 16  # (triangle, cube) listings per triangle at most, on average
+CUBES_PER_FACE = 32  # cubes per triangle at most (the grid's memory)
+BLOCK = 65_536  # points per query call; several blocks run on threads
+
+
+@njit(cache=True, nogil=True)
+def closest_d2(px, py, pz, X, g0, g1, g2):
+    """Squared distance from p to the closest point of triangle (X[g0], X[g1], X[g2]) (Ericson, Real-Time
+    Collision Detection 5.1.5: vertex, edge or interior region)."""
+    ax, ay, az = X[g0, 0], X[g0, 1], X[g0, 2]
+    abx, aby, abz = X[g1, 0] - ax, X[g1, 1] - ay, X[g1, 2] - az
+    acx, acy, acz = X[g2, 0] - ax, X[g2, 1] - ay, X[g2, 2] - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    u, v = 0.0, 0.0
+    if not (d1 <= 0.0 and d2 <= 0.0):
+        bpx, bpy, bpz = px - X[g1, 0], py - X[g1, 1], pz - X[g1, 2]
+        d3 = abx * bpx + aby * bpy + abz * bpz
+        d4 = acx * bpx + acy * bpy + acz * bpz
+        cpx, cpy, cpz = px - X[g2, 0], py - X[g2, 1], pz - X[g2, 2]
+        d5 = abx * cpx + aby * cpy + abz * cpz
+        d6 = acx * cpx + acy * cpy + acz * cpz
+        va = d3 * d6 - d5 * d4
+        vb = d5 * d2 - d1 * d6
+        vc = d1 * d4 - d3 * d2
+        if d3 >= 0.0 and d4 <= d3:
+            u = 1.0
+        elif d6 >= 0.0 and d5 <= d6:
+            v = 1.0
+        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+            u = d1 / (d1 - d3) if d1 - d3 != 0.0 else 0.0
+        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+            v = d2 / (d2 - d6) if d2 - d6 != 0.0 else 0.0
+        elif va <= 0.0 and d4 >= d3 and d5 >= d6:
+            den = (d4 - d3) + (d5 - d6)
+            v = (d4 - d3) / den if den != 0.0 else 0.0
+            u = 1.0 - v
+        else:
+            den = va + vb + vc
+            if den == 0.0:
+                den = 1.0
+            u, v = vb / den, vc / den
+    qx = ax + u * abx + v * acx - px
+    qy = ay + u * aby + v * acy - py
+    qz = az + u * abz + v * acz - pz
+    return qx * qx + qy * qy + qz * qz
+
+
+@njit(cache=True, nogil=True)
+def _cell_range(lo, h, n, a, b):
+    """The cubes [i0, i1] along one axis that the interval [a, b] meets."""
+    i0 = min(max(int(np.floor((a - lo) / h)), 0), n - 1)
+    i1 = min(max(int(np.floor((b - lo) / h)), 0), n - 1)
+    return i0, i1
+
+
+@njit(cache=True, nogil=True)
+def _listing(X, G, lo, h, dims):
+    """(pairs count) the (triangle, cube) listings a cube side h gives."""
+    total = 0
+    for f in range(G.shape[0]):
+        cnt = 1
+        for ax in range(3):
+            a = min(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+            b = max(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+            i0, i1 = _cell_range(lo[ax], h, dims[ax], a, b)
+            cnt *= i1 - i0 + 1
+        total += cnt
+    return total
+
+
+@njit(cache=True, nogil=True)
+def _build(X, G, lo, h, dims):
+    """CSR (start, faces) of the triangles listed in each cube (cube id = (i·ny + j)·nz + k), in triangle order."""
+    ncell = dims[0] * dims[1] * dims[2]
+    count = np.zeros(ncell + 1, np.int64)
+    rng = np.empty((G.shape[0], 6), np.int64)
+    for f in range(G.shape[0]):
+        for ax in range(3):
+            a = min(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+            b = max(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+            rng[f, 2 * ax], rng[f, 2 * ax + 1] = _cell_range(lo[ax], h, dims[ax], a, b)
+        for i in range(rng[f, 0], rng[f, 1] + 1):
+            for j in range(rng[f, 2], rng[f, 3] + 1):
+                for k in range(rng[f, 4], rng[f, 5] + 1):
+                    count[(i * dims[1] + j) * dims[2] + k + 1] += 1
+    for c in range(ncell):
+        count[c + 1] += count[c]
+    fill = count[:-1].copy()
+    faces = np.empty(count[ncell], np.int64)
+    for f in range(G.shape[0]):
+        for i in range(rng[f, 0], rng[f, 1] + 1):
+            for j in range(rng[f, 2], rng[f, 3] + 1):
+                for k in range(rng[f, 4], rng[f, 5] + 1):
+                    c = (i * dims[1] + j) * dims[2] + k
+                    faces[fill[c]] = f
+                    fill[c] += 1
+    return count, faces
+
+
+@njit(cache=True, nogil=True)
+def _query(P, X, G, lo, h, dims, start, faces):
+    q = P.shape[0]
+    best_f = np.full(q, -1, np.int64)
+    best_d2 = np.full(q, np.inf)
+    mark = np.full(G.shape[0], -1, np.int64)
+    rmax = max(dims[0], dims[1], dims[2])
+    for p in range(q):
+        c = np.empty(3, np.int64)
+        for ax in range(3):
+            x = min(max(P[p, ax], lo[ax]), lo[ax] + dims[ax] * h)  # p' (projection onto the box)
+            c[ax] = min(max(int(np.floor((x - lo[ax]) / h)), 0), dims[ax] - 1)
+        wall = np.inf  # p''s distance to its own cube's walls: what shell 0 alone has covered
+        for ax in range(3):
+            x = min(max(P[p, ax], lo[ax]), lo[ax] + dims[ax] * h)
+            wall = min(wall, x - (lo[ax] + c[ax] * h), (lo[ax] + (c[ax] + 1) * h) - x)
+        wall = max(wall, 0.0)
+        bf, bd2 = -1, np.inf
+        for r in range(rmax + 1):
+            for i in range(max(c[0] - r, 0), min(c[0] + r, dims[0] - 1) + 1):
+                for j in range(max(c[1] - r, 0), min(c[1] + r, dims[1] - 1) + 1):
+                    on_shell_ij = abs(i - c[0]) == r or abs(j - c[1]) == r
+                    for k in range(max(c[2] - r, 0), min(c[2] + r, dims[2] - 1) + 1):
+                        if not (on_shell_ij or abs(k - c[2]) == r):
+                            continue
+                        cell = (i * dims[1] + j) * dims[2] + k
+                        for t in range(start[cell], start[cell + 1]):
+                            f = faces[t]
+                            if mark[f] == p:
+                                continue
+                            mark[f] = p
+                            d2 = closest_d2(P[p, 0], P[p, 1], P[p, 2], X, G[f, 0], G[f, 1], G[f, 2])
+                            if d2 < bd2 or (d2 == bd2 and f < bf):
+                                bf, bd2 = f, d2
+            # every box point this close to p' has been seen (less a margin for rounding)
+            reach = r * h + wall - 1e-6 * h
+            if bf >= 0 and reach > 0 and bd2 < reach * reach:  # strict: none as close lies further out
+                break
+        best_f[p], best_d2[p] = bf, bd2
+    return best_f, best_d2
+
+
+def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(faces (q,) int64, distances (q,) float64): for each point P (q,3), the triangle of G (j,3) over
+    vertices X (k,3) nearest to it (the lowest index among equals) and its exact distance. G must not be
+    empty."""
+    X = np.ascontiguousarray(X, np.float64)
+    G = np.ascontiguousarray(G, np.int64)
+    P = np.ascontiguousarray(P, np.float64).reshape(-1, 3)
+    if len(G) == 0:
+        raise ValueError("nearest: no triangles")
+    used = X[np.unique(G)]
+    lo, hi = used.min(0), used.max(0)
+    ext = np.maximum(hi - lo, 1e-300)
+    edges = np.sqrt(np.sum((X[G[:, [1, 2, 0]]] - X[G]) ** 2, axis=2)).ravel()
+    h = max(0.5 * float(np.median(edges)), float(ext.max()) * 1e-6)  # cubes of half an edge
+    while True:
+        dims = np.minimum(np.floor(ext / h).astype(np.int64) + 1, 1 << 20)
+        if (int(np.prod(dims)) <= CUBES_PER_FACE * len(G) + 4096
+                and _listing(X, G, lo, h, dims) <= PAIRS_PER_FACE * len(G)):
+            break
+        h *= 1.25
+    start, faces = _build(X, G, lo, h, dims)
+    blocks = [P[i:i + BLOCK] for i in range(0, len(P), BLOCK)]
+    if len(blocks) <= 1:
+        f, d2 = _query(P, X, G, lo, h, dims, start, faces)
+        return f, np.sqrt(d2)
+    # blocks of points on threads (the loop releases the GIL); each point's answer is its own: any split
+    # gives the same bits
+    with ThreadPoolExecutor(max_workers=min(len(blocks), _threads())) as pool:
+        parts = list(pool.map(lambda b: _query(b, X, G, lo, h, dims, start, faces), blocks))
+    return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
+
+
+def _threads() -> int:
+    try:
+        return max(1, min(4, len(os.sched_getaffinity(0))))
+    except AttributeError:  # not Linux
+        return max(1, min(4, os.cpu_count() or 1))

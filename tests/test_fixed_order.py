@@ -1,0 +1,96 @@
+"""The compiled, fixed-order kernels of the default's re-fit and measured distance, against float64
+references on random inputs: the sparse solver (`_mesh.spd_solve`) against scipy's direct solver, the grid
+nearest-triangle search (`_mesh.grid_nearest`) against the KD-tree search and brute force, and the numpy
+helpers (`_mesh.fixed_order`) against numpy."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from qemjax._mesh import fixed_order as fo
+from qemjax._mesh.grid_nearest import nearest
+from qemjax._mesh.nearest import nearest_triangles
+from qemjax._mesh.spd_solve import solve_spd
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_spd_solve_matches_a_direct_solve(seed):
+    rng = np.random.default_rng(seed)
+    n = 200
+    A = sp.random(400, n, density=0.02, random_state=seed, format="csr")
+    N = (A.T @ A + 1e-2 * sp.identity(n)).tocsr()
+    B = rng.normal(size=(n, 3))
+    X, ok = solve_spd(N, B, np.zeros((n, 3)), rtol=1e-13)
+    want = np.stack([spla.spsolve(N.tocsc(), B[:, i]) for i in range(3)], 1)
+    assert ok and np.allclose(X, want, rtol=1e-9, atol=1e-9)
+    X2, _ = solve_spd(N, B, want + 1e-3, rtol=1e-13)  # from another start: the same solution
+    assert np.allclose(X2, want, rtol=1e-9, atol=1e-9)
+
+
+def test_spd_solve_reports_what_it_did_not_reach():
+    n = 300  # a path graph's Laplacian, shifted: definite, far from diagonal
+    N = sp.diags([-np.ones(n - 1), 2.001 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    _, ok = solve_spd(N, np.ones((n, 1)), np.zeros((n, 1)), rtol=1e-14, max_iter=3)
+    assert not ok
+    X, ok = solve_spd(N, np.ones((n, 1)), np.zeros((n, 1)), rtol=1e-12)
+    assert ok and np.allclose(N @ X, 1.0, atol=1e-9)
+    with pytest.raises(ValueError, match="not positive"):
+        solve_spd(sp.identity(3, format="csr") * -1.0, np.ones((3, 1)), np.zeros((3, 1)))
+
+
+def _brute(X, G, P):
+    """Exact nearest distances by testing every triangle (the KD-tree search's kernel, all pairs)."""
+    c = np.ascontiguousarray(np.transpose(X[G], (1, 2, 0)))
+    return np.array([nearest_triangles(c, p[None])[0][0] for p in P])
+
+
+@pytest.mark.parametrize("shape", ["cloud", "flat", "degenerate", "far", "one"])
+def test_grid_nearest_is_exact(shape):
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(120, 3))
+    if shape == "flat":
+        X[:, 2] *= 1e-9
+    G = np.array([rng.choice(len(X), 3, replace=False) for _ in range(200 if shape != "one" else 1)])
+    if shape == "degenerate":
+        G[:40, 2] = G[:40, 1]  # segments
+        X[G[40:60, 2]] = X[G[40:60, 1]]  # coincident corners
+    P = rng.normal(size=(300, 3)) * (50.0 if shape == "far" else 2.0)
+    f, d = nearest(X, G, P)
+    want = _brute(X, G, P)
+    assert np.allclose(d, want, rtol=1e-12, atol=1e-14)
+    # the face it names lies at that distance
+    named = np.array([_brute(X, G[f[i]][None], P[i][None])[0] for i in range(len(P))])
+    assert np.allclose(named, d, rtol=1e-12, atol=1e-14)
+
+
+def test_grid_nearest_threads_and_blocks_give_the_same_bits(monkeypatch):
+    from qemjax._mesh import grid_nearest
+
+    rng = np.random.default_rng(5)
+    X, G = rng.normal(size=(500, 3)), rng.integers(0, 500, size=(800, 3))
+    P = rng.normal(size=(5000, 3))
+    f1, d1 = nearest(X, G, P)
+    monkeypatch.setattr(grid_nearest, "BLOCK", 700)  # 8 blocks on threads
+    f2, d2 = nearest(X, G, P)
+    assert np.array_equal(f1, f2) and np.array_equal(d1, d2)
+
+
+def test_fixed_order_helpers_match_numpy():
+    rng = np.random.default_rng(0)
+    M, R = rng.normal(size=(50, 4, 4)), rng.normal(size=(50, 4, 2))
+    X, det = fo.solve(M, R)
+    assert np.allclose(X, np.linalg.solve(M, R), rtol=1e-9, atol=1e-9)
+    assert np.allclose(det, np.linalg.det(M), rtol=1e-9)
+    A, x = rng.normal(size=(7, 3, 3)), rng.normal(size=3)
+    assert np.allclose(fo.matvec(A, x), A @ x, rtol=1e-14)
+    assert np.allclose(fo.dot(A, A), np.einsum("...i,...i", A, A), rtol=1e-14)
+    parts, w = rng.normal(size=(9, 3)), [0.5, 2.0, -1.0]
+    assert np.array_equal(fo.weighted_sum(parts, w), parts[:, 0] * 0.5 + parts[:, 1] * 2.0 + parts[:, 2] * -1.0)
+    v = rng.uniform(0.1, 3.0, size=20)
+    assert fo.exp(v).tolist() == [math.exp(t) for t in v]
+    assert fo.power(v, 0.6).tolist() == [math.pow(t, 0.6) for t in v]
+    assert fo.arctan2(v, v[::-1]).shape == v.shape
