@@ -41,7 +41,7 @@ _PUBLIC = {
 _MODULES = ("metrics", "render", "shapes")  # public submodules, also imported on first use
 __all__ = list(_PUBLIC)  # ``from qemjax import *``: the same names as when they were imported eagerly
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def _version_line() -> str:

@@ -398,7 +398,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_options(lod, hidden=LOD_REFUSED)
     sw = sub.add_parser("sweep", help="a parameter sweep described in a TOML (or YAML) file; writes its table",
                         description="Run qemjax.sweep as CONFIG describes: meshes, grid, targets, out (default: "
-                        "CONFIG's name with .parquet), metrics, executor. See the README's 'Parameter sweeps'.")
+                        "CONFIG's name with .parquet), metrics, executor. See docs/cli.md, 'Sweep config files'.")
     sw.add_argument("config", help="a .toml file (.yaml/.yml with pyyaml installed)")
     sw.add_argument("--out", help="write the table here instead of the config's out (.parquet or .csv; a "
                     "table already there is resumed)")

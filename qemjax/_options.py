@@ -16,7 +16,7 @@ import numpy as np
 @dataclasses.dataclass(frozen=True)
 class Schedule:
     """How much the parallel scheduler takes per round (results depend on these; the defaults are the
-    measured trade-off between quality and rounds, see the README).
+    measured trade-off between quality and rounds, see docs/schedulers.md).
 
     gate: a round's candidates are the pairs costing at most gate × the cost of the k-th cheapest, where
         k = min(contractions still needed / (2·tail), gate_fraction × live pairs).
@@ -115,13 +115,13 @@ class Topology:
 @dataclasses.dataclass(frozen=True)
 class Attributes:
     """Which appearance attributes a run carries through, and how they weigh (``simplify(attributes=...)``;
-    README, "Appearance attributes").
+    docs/attributes.md).
 
-    attributes: ``'auto'`` (each kind the input carries without seams; a seamed kind only when named),
+    ``attributes``: ``'auto'`` (each kind the input carries without seams; a seamed kind only when named),
         ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, or None (positions only).
-    attribute_weights: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
+    ``attribute_weights``: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
         (``qemjax._mesh.wedges.DEFAULT_WEIGHTS``).
-    texture: a path or PIL image: the texture of the UVs (for a file that names no material).
+    ``texture``: a path or PIL image: the texture of the UVs (for a file that names no material).
     """
 
     attributes: object = "auto"

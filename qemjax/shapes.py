@@ -3,7 +3,7 @@
 Every generator (`SHAPES`) returns a `Mesh` (vertices (n,3) float64, faces (m,3) int64), consistently
 oriented. A sweep (or its config file) names them as text, ``"shapes.torus"`` or
 ``"shapes.bumpy_sphere(subdivisions=4)"`` (`parse_spec`: a name from `SHAPES` and keyword arguments with
-literal values, never evaluated as code). `write_examples` writes the small example files the README uses.
+literal values, never evaluated as code). `write_examples` writes the small example files the README and docs/ use.
 """
 from __future__ import annotations
 
@@ -247,7 +247,7 @@ def _write(path: Path, text: str) -> Path:
 
 
 EXAMPLE_SWEEP = """\
-# qemjax sweep sweep_example.toml   (written by `qemjax examples`; the README's "Parameter sweeps" explains every key)
+# qemjax sweep sweep_example.toml   (written by `qemjax examples`; docs/cli.md explains every key)
 # Paths are relative to this file's folder: bumpy.obj is written beside it; the torus is made in code.
 
 meshes = ["bumpy.obj", "shapes.torus(n_major=32, n_minor=16)"]  # or [meshes] name = "path"; shapes.NAME(...)

@@ -67,3 +67,10 @@ def assert_valid(result, target=None, V0=None, F0=None, allow_flips=False):
         # every output face continues an input face: it must not point against that face
         dots = np.sum(face_normals(V, F) * face_normals(V0, F0)[result.source_faces], 1)
         assert np.all(dots > 0), f"{np.sum(dots <= 0)} faces point against the input face they continue"
+
+
+def pytest_collection_modifyitems(config, items):
+    """The notebooks (run through nbmake) belong to the slow tier: ``pytest -m "not slow"`` leaves them out."""
+    for item in items:
+        if str(item.path).endswith(".ipynb"):
+            item.add_marker(pytest.mark.slow)

@@ -105,7 +105,7 @@ def mixed_orientation():
     return V, F
 
 
-@pytest.mark.parametrize("make", [fins, bowtie, mixed_orientation])
+@pytest.mark.parametrize("make", [pytest.param(fins, marks=pytest.mark.slow), bowtie, mixed_orientation])
 @pytest.mark.parametrize("scheduler", SCHEDULERS)
 @pytest.mark.parametrize("manifold", [True, False])
 def test_non_manifold_input_is_simplified(make, scheduler, manifold):
@@ -117,6 +117,7 @@ def test_non_manifold_input_is_simplified(make, scheduler, manifold):
     assert len(r.faces) <= target + 2
 
 
+@pytest.mark.slow  # real meshes
 @pytest.mark.parametrize("name,genus", [("3holes.off", 3), ("fertility.off", 4)])
 @pytest.mark.parametrize("scheduler", SCHEDULERS)
 def test_genus_survives_in_manifold_mode(name, genus, scheduler):

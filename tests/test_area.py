@@ -76,6 +76,7 @@ def _solve64(rings, lo=0.0, hi=1.0, tol=1e-13):
         return [np.asarray(o) for o in out]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_solve_matches_dense_sampling_in_float64(seed):
     rings = _rings(seed)
@@ -102,6 +103,7 @@ def test_solve_matches_dense_sampling_in_float64(seed):
     assert 5 <= crossing <= len(rings) - 5, crossing
 
 
+@pytest.mark.slow
 def test_solve_respects_the_interval_and_pins():
     rings = _rings(2, 20)
     for lo, hi in [(0.0, 0.0), (1.0, 1.0), (0.25, 0.6)]:
@@ -114,6 +116,7 @@ def test_solve_respects_the_interval_and_pins():
             assert cost[k] <= np.abs(d).min() + 1e-10 * (np.abs(d).max() + 1e-300)
 
 
+@pytest.mark.slow
 def test_host_path_agrees_with_the_kernel():
     rings = _rings(3, 30)
     s, cost, delta, branch = _solve64(rings)
@@ -201,6 +204,7 @@ def test_area_change_term_matches_numpy():
             np.testing.assert_allclose(float(ell2), e2, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_area_weight_reorders_and_never_recompiles():
     mesh = shapes.bumpy_sphere(4)
     base = qemjax.simplify(mesh, ratio=0.1)
@@ -244,7 +248,7 @@ def _digest(r):
     return hashlib.sha256(r.vertices.tobytes() + r.faces.tobytes()).hexdigest()
 
 
-@pytest.mark.parametrize("scheduler", SCHEDULERS)
+@pytest.mark.parametrize("scheduler", ["parallel", pytest.param("greedy", marks=pytest.mark.slow)])
 def test_area_method_valid_keeps_area_and_is_deterministic(scheduler):
     mesh = shapes.bumpy_sphere(3)
     r = qemjax.simplify(mesh, target_faces=300, method="area", scheduler=scheduler)
@@ -276,7 +280,7 @@ def test_area_method_keeps_boundary_vertices_on_the_boundary(scheduler):
     assert len(free.faces) <= len(r.faces)
 
 
-@pytest.mark.parametrize("scheduler", SCHEDULERS)
+@pytest.mark.parametrize("scheduler", ["parallel", pytest.param("greedy", marks=pytest.mark.slow)])
 def test_area_max_error_is_an_area_in_mesh_units(scheduler):
     """On an icosphere every first contraction changes the area by the same c0 (mesh units²): a limit
     under it stops at once with stop_reason "max_error", one over it bounds every contraction, and
@@ -298,6 +302,7 @@ def test_area_max_error_is_an_area_in_mesh_units(scheduler):
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_area_keeps_surface_area_closer_than_qem_on_max_planck():
     """The issue's criterion, on one shared mesh (all three: experiments/area_paper.py): at 80 % and 90 %
     reduction the area method's |A' − A| is below QEM's."""
@@ -308,6 +313,7 @@ def test_area_keeps_surface_area_closer_than_qem_on_max_planck():
         assert gap["area"] < 0.01 * gap["qem"], gap
 
 
+@pytest.mark.slow
 def test_high_valence_takes_the_host_path():
     """A disc whose centre has 160 neighbours: the pairs at the centre have rings over RING_CAP and are
     priced on the host; the run stays valid and keeps the area of the (flat) disc."""
@@ -342,6 +348,7 @@ print(hashlib.sha256(r.vertices.tobytes() + r.faces.tobytes()).hexdigest())
 """
 
 
+@pytest.mark.slow
 def test_area_output_is_the_same_on_one_core():
     """As `test_determinism`: the area kernel (vmapped while loops) gives the same bits pinned to one core."""
     import os

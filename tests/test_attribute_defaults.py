@@ -148,6 +148,7 @@ def test_smooth_colours_are_kept(tmp_path):
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_bunny_with_normals_scaled_by_random_lengths(tmp_path):
     """Row 3 of the issue's table: stanford-bunny written with unit normals scaled by random lengths
     (0.05-13), 10 %: the default was 45.9x attributes=None's rms."""

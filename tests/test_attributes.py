@@ -172,6 +172,7 @@ def test_seams_hold_a_mesh_above_its_target():
     assert r.stop_reason == "blocked" and len(r.faces) > 8 and r.stats["blocked_by"]["seam"] > 0
 
 
+@pytest.mark.slow  # a real mesh
 def test_spot_writes_textured_obj_and_glb(tmp_path):
     """spot -> 10 %: an OBJ (with MTL and texture) and a GLB that reload with UVs and the image."""
     from qemjax import _cli
@@ -282,6 +283,7 @@ def test_attribute_weights_do_not_recompile_and_matter():
         qemjax.simplify(mesh, ratio=0.2, attribute_weights={"texture": 1})
 
 
+@pytest.mark.slow
 def test_colour_term_lowers_colour_error():
     """A sphere coloured by a sharp pattern: with the colour term, the colour deviation is lower than
     with positions-only costs (interpolated colours)."""

@@ -63,7 +63,8 @@ def same(a, b) -> list[str]:
     return diff
 
 
-@pytest.fixture(scope="module", params=sorted(MESHES))
+@pytest.fixture(scope="module", params=[pytest.param(name, marks=pytest.mark.slow) if name == "sheet" else name
+                                        for name in sorted(MESHES)])  # one mesh in the fast tier
 def case(request):
     mesh = MESHES[request.param]()
     with warnings.catch_warnings():

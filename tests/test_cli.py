@@ -234,6 +234,7 @@ def test_simplify_sets_no_global_jax_options(src):
     assert jax.config.jax_compilation_cache_dir == before
 
 
+@pytest.mark.slow
 def test_fresh_process_fills_the_compilation_cache(src, tmp_path):
     """The real command, in its own process: the persistent cache in QEMJAX_CACHE_DIR is on, and --no-cache
     leaves it alone."""
@@ -429,6 +430,7 @@ def _interrupt(cmd, env, folder, timeout=300):
     return (None if finished else rc), err.decode()
 
 
+@pytest.mark.slow
 def test_ctrl_c_is_one_line_and_leaves_no_file(tmp_path):
     """SIGINT during a run: 'qemjax: interrupted', exit code 130, no output and no temporary file."""
     V, F = shapes.bumpy_sphere(7)  # 327,680 faces: seconds of work after the bar appears

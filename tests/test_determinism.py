@@ -37,6 +37,7 @@ def _digest(r) -> str:
                           ).hexdigest()
 
 
+@pytest.mark.slow  # fresh processes under taskset
 @pytest.mark.parametrize("kwargs", [dict(scheduler="greedy"), dict(scheduler="parallel"), dict(preset="accurate")],
                          ids=["greedy", "parallel", "accurate"])
 def test_same_output_on_one_core(kwargs):

@@ -232,7 +232,7 @@ def test_a_new_curvature_weight_does_not_recompile():
     assert r.stats["model"]["curvature_weight"] == 0.02
 
 
-@pytest.mark.parametrize("scheduler", SCHEDULERS)
+@pytest.mark.parametrize("scheduler", ["parallel", pytest.param("greedy", marks=pytest.mark.slow)])
 def test_deterministic(scheduler):
     mesh = shapes.bumpy_sphere(3)
     runs = [qemjax.simplify(mesh, target_faces=500, method="esqem", scheduler=scheduler) for _ in range(2)]
@@ -343,6 +343,7 @@ def test_bad_esqem_options():
         qemjax.simplify(shapes.icosphere(1), ratio=0.5, method="esqem", curvature_weight="high")
 
 
+@pytest.mark.slow
 def test_cow_table_counts():
     """The paper's Table 1 counts on its Cow: ESQEM and QEM end with the same number of faces."""
     cow = shared_mesh("cow.obj")

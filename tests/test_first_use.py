@@ -167,6 +167,7 @@ CHILD = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # fresh processes, SIGINT
 @pytest.mark.parametrize("module", ["qemjax._cli", "jax"])
 def test_ctrl_c_while_importing_is_one_line(module, tmp_path):
     """SIGINT while the command imports the package (``qemjax._cli``) or JAX (the run's first import of

@@ -27,7 +27,8 @@ def test_golden_file_lists_exactly_the_cases():
 
 
 @pytest.mark.filterwarnings("ignore:stopped at")  # beetle, truck, suzanne stop above the target: expected
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c.shared else c for c in CASES],
+                         ids=[c.id for c in CASES])  # real meshes: the slow tier; generated ones: the fast tier too
 def test_golden(case):
     if case.shared:
         shared_mesh(case.mesh)  # skips when ../shared/meshes lacks the file

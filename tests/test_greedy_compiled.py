@@ -253,6 +253,7 @@ def test_compiled_queue_ends_in_the_python_batches_state(case, monkeypatch):
     assert np.array_equal(c.alive, py.mesh.alive) and np.array_equal(c.T, np.array(py.mesh.tri))
 
 
+@pytest.mark.slow
 def test_kernels_stay_in_bounds():
     """The compiled loop indexes its arrays unchecked: run the cases that push its room checks (arrays
     grown from near-empty sizes, rollbacks, high-degree vertices) with numba's bounds checks on, in a

@@ -7,6 +7,7 @@ target or stop above it. Derandomized, so a run is deterministic; about 25 examp
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import assert_valid
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -60,6 +61,7 @@ def _check(r, target):
     assert len(r.history) == r.stats["contractions"] <= len(r.input_vertices) - len(r.vertices)
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(mesh=meshes(), ratio=st.floats(0.01, 1.0), options=OPTIONS)
 def test_random_meshes_ratio(mesh, ratio, options):

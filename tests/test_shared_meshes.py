@@ -6,6 +6,8 @@ from conftest import assert_valid, one_pair_per_round, shared_mesh
 
 import qemjax
 
+pytestmark = pytest.mark.slow  # every real mesh, both schedulers: the slow tier
+
 
 def test_cow_to_1000_faces_exactly():
     p = shared_mesh("cow.obj")

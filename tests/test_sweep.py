@@ -145,7 +145,7 @@ def test_progress_bar_counts_cells(meshes, capsys):
     assert "2/2" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("kind", ["thread", "process"])
+@pytest.mark.parametrize("kind", ["thread", pytest.param("process", marks=pytest.mark.slow)])
 def test_executor_matches_in_process(meshes, reference, kind):
     if kind == "thread":
         pool = concurrent.futures.ThreadPoolExecutor(2)

@@ -77,7 +77,7 @@ class QEM(Method):
         ``'endpoints'`` (the paper's fixed placement).
     area_weighted: weight each face plane by area / mean face area (else 1, the paper's choice).
     area_power: with area_weighted, weight by (area / mean area)^area_power instead (0.5: small faces,
-        such as those at thin tips, count for more than their area; see the README's Hausdorff study).
+        such as those at thin tips, count for more than their area; see docs/benchmarks.md).
     boundary_weight: weight of the plane through each boundary (or feature) edge perpendicular to its face.
     cond_eps: ``'optimal'``: the 3×3 solve is used when det(A) > cond_eps·‖A‖_F³.
     rank_eps: ``'rank'``: eigenvalues of A at or below rank_eps·λmax are truncated.
@@ -152,8 +152,8 @@ class QEM(Method):
         """What `simplify` runs when no method is given (``method="default"``): summed quadrics with face
         planes weighted by (area / mean area)^0.6, boundary planes at weight 10, then one round of
         re-fitting the positions to the input (``refit=1``). Chosen by ranking every candidate against the
-        peers on the shared meshes at 10 % and 1 % (``experiments/rank_peers.py``; README, "The default,
-        chosen by evidence"): the best ranks at about 1.4× `classic`'s time."""
+        peers on the benchmark meshes at 10 % and 1 % (``experiments/rank_peers.py``; docs/methods.md, "QEM and
+        its presets"): the best ranks at about 1.4× `classic`'s time."""
         return cls(area_power=0.6, boundary_weight=10.0, refit=1)
 
     @classmethod
@@ -161,9 +161,9 @@ class QEM(Method):
         """Lindstrom–Turk-style memoryless quadrics with 0.3 of the summed (Garland–Heckbert) ones, the
         rank-aware placement with loose limits (``rank_eps=1e-3``, ``max_shift=0.5``), face planes weighted
         by (area / mean area)^0.6, boundary planes at weight 10, then one round of re-fitting the positions
-        to the input (``refit=1``). Chosen on the shared meshes against meshoptimizer, fast-simplification,
-        pyfqmr, pymeshlab and libigl (``experiments/rank_peers.py``; README, "Placement and the ranking
-        against peers"); it costs 1.3–6.5× the default's time. ``method="accurate"`` names it, and
+        to the input (``refit=1``). Chosen on the benchmark meshes against meshoptimizer, fast-simplification,
+        pyfqmr, pymeshlab and libigl (``experiments/rank_peers.py``; docs/methods.md, "QEM and its
+        presets"); it costs 1.3–6.5× the default's time. ``method="accurate"`` names it, and
         ``dataclasses.replace(QEM.accurate(), refit=0)`` is it without the re-fit."""
         return cls(memoryless=True, memory_weight=0.3, placement="rank", area_power=0.6, boundary_weight=10.0,
                    rank_eps=1e-3, max_shift=0.5, refit=1)

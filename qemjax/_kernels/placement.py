@@ -21,7 +21,7 @@ The arithmetic is written on lists of component arrays (one array per coordinate
 On the CPU this matters: XLA then fuses the whole computation into one loop over contiguous rows, while
 column slices of (K,10) arrays or several separate outputs make it recompute shared terms per output
 (measured 4-8× slower). `place_pairs` therefore returns a single stacked (5,K) array. The truncated
-solve costs more arithmetic (README, "Placement"), so each mode is its own kernel (`place_pairs`,
+solve costs more arithmetic (docs/methods.md, "QEM and its presets"), so each mode is its own kernel (`place_pairs`,
 `place_pairs_rank`): the default's compiled code is the one it always was.
 """
 from __future__ import annotations

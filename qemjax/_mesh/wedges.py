@@ -159,7 +159,7 @@ def warn_seamed(seamed: dict, others: list, what: str, stacklevel: int):
     seams = ", ".join(f"{k}: {c} seam vertices" for k, c in seamed.items())
     also = f"; also not kept: {', '.join(others)}" if others else ""
     warnings.warn(f"{what}: {', '.join(kinds)} not kept by default ({seams}): seams hold their vertices in "
-                  f"place, which costs geometry and time (README, 'Appearance attributes'); "
+                  f"place, which costs geometry and time (docs/attributes.md); "
                   f"attributes={arg} (CLI: --attributes {cli}) keeps them{also}", stacklevel=stacklevel + 1)
 
 

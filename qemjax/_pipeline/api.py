@@ -54,8 +54,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         ``'greedy'``: the paper's priority queue, one contraction at a time.
     topology: a `qemjax.Topology`: topology preservation, pruning of small parts, aggregation of close
         pairs (``pair_threshold``), the flip angle and welding (None: its defaults).
-    attributes: which appearance attributes to carry through (per-corner wedges, seams kept: README,
-        "Appearance attributes"; ``qemjax._mesh.wedges``): ``'auto'`` (each kind the input carries without
+    attributes: which appearance attributes to carry through (per-corner wedges, seams kept: docs/attributes.md;
+        ``qemjax._mesh.wedges``): ``'auto'`` (each kind the input carries without
         seams: UVs and their material, vertex colours, stored normals, normalised to unit length; a kind
         with seams, which hold vertices in place, only when asked for by name, or UVs when a texture is
         given: one warning names them), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, None
@@ -73,8 +73,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         output depend on the input's samples), else not (``measure=True`` there costs one nearest-surface
         query over 1.5× the input's faces in points; ``experiments/distance_check.py`` times it).
     locked, vertex_weights (given by name, with the settings): per-vertex constraints, numbered as the
-        vertices were given (before welding; `qemjax._schedulers.locks`; README, "Locking vertices and weighting
-        importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
+        vertices were given (before welding; `qemjax._schedulers.locks`; docs/methods.md, "Locking vertices and
+        weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
         output, and at every level of ``res.record``, exactly where they are (bit for bit); a pair with
         one locked vertex contracts onto it, a pair of two never. ``vertex_weights``: (n,) finite, >= 0;
         each pair's cost is multiplied by the larger weight of its two vertices (a kept vertex takes the
@@ -83,7 +83,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     settings: any field of the method, `Topology` or `Attributes` by its name (``boundary_weight=10``,
         ``flip_angle=None``, ``attribute_weights=0.1``) or dotted (``**{"method.refit": 0}``); each
         replaces that field of the object given (so ``method="accurate", refit=0`` is the preset without
-        its re-fit). ``preset=NAME`` is ``method=NAME``. README, "Settings as objects", lists where each
+        its re-fit). ``preset=NAME`` is ``method=NAME``. docs/methods.md, "Settings as objects", lists where each
         of the flat keywords of qemjax 0.1 lives.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"``, ``"locked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any

@@ -3,7 +3,7 @@
 Everything is checked before any mesh is simplified or any worker started: unknown keys, missing files,
 unknown shapes, wrong types and bad targets raise ValueError with one line naming the file and the key.
 Relative paths (meshes, out) are relative to the config file's folder; a mesh may also be a shape made in
-code (``"shapes.torus"``, ``"shapes.bumpy_sphere(subdivisions=4)"`` or ``{shape = "torus", n_major = 32}``). See the README's "Parameter sweeps".
+code (``"shapes.torus"``, ``"shapes.bumpy_sphere(subdivisions=4)"`` or ``{shape = "torus", n_major = 32}``). See docs/cli.md, "Sweep config files".
 """
 from __future__ import annotations
 

@@ -1,0 +1,72 @@
+"""Every page of docs/: its python blocks run as written, in order, in a fresh folder holding the example
+files (`qemjax.shapes.write_examples`), and its command lines run as separate processes
+(`tests/doc_blocks.py` says how). Pages name no development history. `mkdocs build --strict` itself runs in
+CI (.ci/run)."""
+from __future__ import annotations
+
+import tomllib
+
+import pytest
+
+import qemjax
+from doc_blocks import ROOT, blocks, child_env, command_lines, dev_log_references, python_blocks, run_commands, run_python
+
+DOCS = ROOT / "docs"
+PAGES = sorted(DOCS.glob("*.md"))
+WITH_PYTHON = [p for p in PAGES if python_blocks(p)]
+
+
+@pytest.fixture(scope="module")
+def env(tmp_path_factory):
+    return child_env(tmp_path_factory.mktemp("jax-cache"))
+
+
+def test_every_page_is_in_the_site():
+    nav = (ROOT / "mkdocs.yml").read_text()
+    assert {p.name for p in PAGES} == {p.name for p in PAGES if f": {p.name}" in nav}
+    assert {"getting-started.md", "methods.md", "papers.md", "benchmarks.md", "api.md"} <= {p.name for p in PAGES}
+
+
+@pytest.mark.parametrize("page", PAGES + [ROOT / "CHANGELOG.md", ROOT / "experiments" / "README.md"],
+                         ids=lambda p: p.name)
+def test_page_names_no_development_history(page):
+    assert not dev_log_references(page), "\n".join(dev_log_references(page))
+
+
+def test_the_config_shown_is_the_example_config():
+    (_, shown), = blocks(DOCS / "cli.md", "toml")
+    assert tomllib.loads(shown) == tomllib.loads(qemjax.shapes.EXAMPLE_SWEEP)  # what `qemjax examples` writes
+
+
+def test_images_are_committed_and_small():
+    for img in (DOCS / "img").glob("*.png"):
+        assert img.stat().st_size < 150_000, img
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", WITH_PYTHON, ids=lambda p: p.name)
+def test_python_blocks_run(page, tmp_path, monkeypatch, env):
+    from qemjax import _schedulers
+
+    monkeypatch.chdir(tmp_path)
+    qemjax.shapes.write_examples(tmp_path)
+    monkeypatch.setattr(_schedulers, "_REGISTRY", dict(_schedulers._REGISTRY))  # a page registers one
+    namespace = run_python(page, tmp_path, env)
+    if page.name == "sweeps.md":
+        assert (tmp_path / "sweep.csv").is_file() and (namespace["df"]["error"] == "").all()
+    if page.name == "record.md":
+        assert (tmp_path / "bumpy-lods.glb").is_file() and (tmp_path / "bumpy.npz").is_file()
+    if page.name == "attributes.md":
+        assert (tmp_path / "textured-10.glb").is_file()
+
+
+@pytest.mark.slow
+def test_command_lines_run(tmp_path, env):
+    page = DOCS / "cli.md"
+    assert len(command_lines(page)) >= 10
+    # what the README's test runs already (the sweep, above all) is not run twice; the example files are
+    already = [line for _, line in command_lines(ROOT / "README.md") if not line.startswith("qemjax examples")]
+    run_commands(page, tmp_path, env, skip=already)
+    for name in ("out.ply", "lods/bumpy-lod0.obj", "lods/bumpy-lods.glb", "lods/bumpy-record.npz",
+                 "textured-10.obj", "textured-10.mtl", "textured-10.png"):
+        assert (tmp_path / name).is_file(), name
