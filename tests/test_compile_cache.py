@@ -8,6 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.slow  # fresh processes (the fast tier leaves them out)
+
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ("import qemjax, jax\n"
        "from qemjax import shapes\n"

@@ -14,6 +14,8 @@ import pytest
 
 LIMIT = int(3.5 * 2**30)
 
+pytestmark = pytest.mark.slow  # each case a fresh process under a memory limit (the fast tier leaves them out)
+
 CHILD = """
 import json, resource, sys
 resource.setrlimit(resource.RLIMIT_AS, ({limit}, {limit}))
