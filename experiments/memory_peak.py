@@ -32,6 +32,7 @@ def main(argv=None):
     ap.add_argument("--mesh", default="armadillo-x64")
     ap.add_argument("--ratio", type=float, default=0.01)
     ap.add_argument("--scheduler", default="parallel")
+    ap.add_argument("--no-measure", action="store_true", help="simplify(measure=False): no measured distance")
     args = ap.parse_args(argv)
     import meshes  # experiments/meshes.py: builds and caches the subdivided armadillo
 
@@ -41,16 +42,24 @@ def main(argv=None):
     V, F = bm.V, bm.F
     after_load = rss_gib()
     t0 = time.perf_counter()
-    r = qemjax.simplify((V, F), ratio=args.ratio, scheduler=args.scheduler)
+    r = qemjax.simplify((V, F), ratio=args.ratio, scheduler=args.scheduler, measure=False if args.no_measure else None)
     dt = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     row = {"mesh": args.mesh, "faces_in": len(F), "faces_out": len(r.faces), "ratio": args.ratio,
            "scheduler": args.scheduler, "time_s": round(dt, 2), "compile_s": round(r.stats["compile_s"], 2),
            "rounds": r.stats["rounds"], "rss_after_load_gib": round(after_load, 2),
-           "peak_rss_gib": round(peak, 2)}
+           "peak_rss_gib": round(peak, 2), "measured": r.stats.get("distance_max") is not None}
     print(row)
     out = HERE / "results" / "memory.csv"
     new = not out.exists()
+    if not new:  # a file from before a column was added: rewrite it with the new header (old rows: empty there)
+        with open(out, newline="") as f:
+            old = list(csv.DictReader(f))
+        if old and set(row) - set(old[0]):
+            with open(out, "w", newline="") as f:
+                w = csv.DictWriter(f, fieldnames=list(row))
+                w.writeheader()
+                w.writerows(old)
     with open(out, "a", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(row))
         if new:
