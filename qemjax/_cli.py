@@ -12,7 +12,7 @@ interrupted`` (a sweep adds how many rows it kept) and exits with 130. The outpu
 file is written under a temporary name and renamed, so a failure never leaves a partial file. Below the
 summary line, indented lines name what clean-up removed and the appearance attributes kept.
 
-JAX's persistent compilation cache is on (importing qemjax enables it: `_cache.enable_default`); ``--no-cache``
+JAX's persistent compilation cache is on (from qemjax's first compilation: `_cache.ensure_default`); ``--no-cache``
 or QEMJAX_NO_CACHE=1 turns it off.
 """
 from __future__ import annotations
@@ -469,7 +469,7 @@ def _lod(args, kwargs) -> int:
     stem = os.path.splitext(os.path.basename(args.input))[0]
     paths = [os.path.join(folder, f"{stem}-lod{i}.{args.fmt}") for i in range(len(args.ratios))]
     check_output(paths[0])
-    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+    if args.no_cache:  # else on from the first compilation (unless QEMJAX_NO_CACHE)
         _cache.disable()
     chain = lod_chain(args.input, ratios=args.ratios, **kwargs)
     for path, level, r in zip(paths, chain.levels, chain.ratios):
@@ -493,7 +493,7 @@ def _sweep(args) -> int:
     from ._sweep import config as _sweep_config
 
     config = _sweep_config.load(args.config, out=args.out)
-    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+    if args.no_cache:  # else on from the first compilation (unless QEMJAX_NO_CACHE)
         _cache.disable()
     df = _sweep_config.run(config, progress=not args.quiet)
     failed = int((df["error"].fillna("") != "").sum())
@@ -529,7 +529,7 @@ def _run(args) -> int:
     out = args.output if args.cmd == "simplify" else args.out
     ext = check_output(out) if out is not None else None
     kwargs = _simplify_kwargs(args)
-    if args.no_cache:  # on since import (unless QEMJAX_NO_CACHE)
+    if args.no_cache:  # else on from the first compilation (unless QEMJAX_NO_CACHE)
         _cache.disable()
     if args.cmd == "simplify":
         res = _api.simplify(args.input, **kwargs)

@@ -97,7 +97,7 @@ def double_cone(n: int = 500, radius: float = 1.0, height: float = 1.0) -> Mesh:
     """Closed double cone: a ring of n vertices in the z=0 plane and two apexes at z=±height, each apex
     joined to every ring vertex (valence n), 2n faces. A fan-triangulated cap taken to the extreme."""
     t = 2 * np.pi * np.arange(n) / n
-    V = np.concatenate([np.stack([radius * np.cos(t), radius * np.sin(t), np.zeros(n)], 1),
+    V = np.concatenate([np.stack([radius * fixed_order.cos(t), radius * fixed_order.sin(t), np.zeros(n)], 1),
                         [[0.0, 0.0, height], [0.0, 0.0, -height]]])
     i, j = np.arange(n), (np.arange(n) + 1) % n
     F = np.concatenate([np.stack([i, j, np.full(n, n)], 1), np.stack([j, i, np.full(n, n + 1)], 1)])

@@ -11,8 +11,8 @@ change which pair contracts first and so the whole output:
 
 Here sums run left to right over a short axis with plain multiplies and adds, and transcendental
 functions go through Python's ``math`` (the C library: one implementation on every FMA-capable x86-64).
-Use these on every path that leads to a result; ``tests/test_determinism.py`` runs the golden cases
-under several BLAS kernels and without AVX-512 and checks one hash.
+Use these on every path that leads to a result; ``tests/test_cpu_independence.py`` runs the golden
+cases under several BLAS kernels and without AVX-512 and checks one hash.
 """
 from __future__ import annotations
 
@@ -27,16 +27,6 @@ def weighted_sum(parts: np.ndarray, weights) -> np.ndarray:
     out = np.zeros(parts.shape[0])
     for j, w in enumerate(np.asarray(weights, np.float64).tolist()):
         out = out + parts[:, j] * w
-    return out
-
-
-def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """(…, n) M @ x for M (…, n, k) and x (k,) or (…, k), added left to right over k (float64)."""
-    M = np.asarray(M, np.float64)
-    x = np.asarray(x, np.float64)
-    out = np.zeros(M.shape[:-1])
-    for j in range(M.shape[-1]):
-        out = out + M[..., j] * x[..., None, j]
     return out
 
 
@@ -94,7 +84,6 @@ def _elementwise(fn):
 
 
 exp = _elementwise(math.exp)
-log = _elementwise(math.log)
 arccos = _elementwise(math.acos)
 arctan2 = _elementwise(math.atan2)
 sin = _elementwise(math.sin)

@@ -136,12 +136,10 @@ def _query(P, X, G, lo, h, dims, start, faces):
     rmax = max(dims[0], dims[1], dims[2])
     for p in range(q):
         c = np.empty(3, np.int64)
+        wall = np.inf  # p''s distance to its own cube's walls: what shell 0 alone has covered
         for ax in range(3):
             x = min(max(P[p, ax], lo[ax]), lo[ax] + dims[ax] * h)  # p' (projection onto the box)
             c[ax] = min(max(int(np.floor((x - lo[ax]) / h)), 0), dims[ax] - 1)
-        wall = np.inf  # p''s distance to its own cube's walls: what shell 0 alone has covered
-        for ax in range(3):
-            x = min(max(P[p, ax], lo[ax]), lo[ax] + dims[ax] * h)
             wall = min(wall, x - (lo[ax] + c[ax] * h), (lo[ax] + (c[ax] + 1) * h) - x)
         wall = max(wall, 0.0)
         bf, bd2 = -1, np.inf

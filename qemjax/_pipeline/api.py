@@ -7,7 +7,7 @@ import hashlib
 import inspect
 import math
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -15,6 +15,9 @@ from .. import _costs
 from .._schedulers import locks as _locks
 from .._options import Topology
 from .._record.result import SimplifyResult
+
+if TYPE_CHECKING:  # annotations only: stages is imported where a run needs it (importing qemjax stays light)
+    from .stages import Job
 
 PLACEMENTS = _costs.qem.PLACEMENTS
 
@@ -95,9 +98,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
 
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
-    settings = dict(settings, measure=measure)
+    settings = dict(settings)
     locks = _locks.pop_settings(settings)
-    setup = stages.setup(method, scheduler, topology, attributes, progress, settings)
+    setup = stages.setup(method, scheduler, topology, attributes, progress, settings, measure)
     stages._resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
     geo = stages.geometry(mesh, setup, stacklevel=3)
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks)
@@ -153,10 +156,11 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
             if "progress" in cfg:
                 raise ValueError("simplify_batch: progress is not offered here (a sweep shows its own bar)")
             kw = {**_RUN_DEFAULTS, **{k: v for k, v in cfg.items() if k in _RUN_DEFAULTS}}
-            rest = {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS} | {"measure": kw["measure"]}
+            rest = {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS}
             locks = _locks.pop_settings(rest)
             try:
-                setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest)
+                setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest,
+                                     kw["measure"])
             except TypeError as exc:
                 raise ValueError(f"simplify_batch: {exc}") from None
             stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])

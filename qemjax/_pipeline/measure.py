@@ -33,16 +33,14 @@ def not_measured() -> dict:
 def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray) -> dict:
     """The stats of the module docstring for the input (V, F) and the output (X, G), float64, mesh units."""
     from .._mesh.grid_nearest import nearest  # numba, lazily
-    from .refit import samples
+    from .refit import samples, unit_frame
 
     t = time.perf_counter()
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
     X, G = np.asarray(X, np.float64), np.asarray(G, np.int64)
-    lo, hi = (V.min(0), V.max(0)) if len(V) else (np.zeros(3), np.zeros(3))
-    diag = float(np.sqrt(np.sum((hi - lo) ** 2)))
-    # in the input's unit frame (as the re-fit): squared distances stay finite at any scale
-    centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo)) if len(V) else 0.0
-    if not (unit > 0 and np.isfinite(unit)) or len(G) == 0:
+    centre, unit = unit_frame(V)  # as the re-fit: squared distances stay finite at any scale
+    diag = float(np.sqrt(np.sum((V.max(0) - V.min(0)) ** 2))) if len(V) else 0.0
+    if not (unit > 0 and np.isfinite(unit)) or len(V) == 0 or len(G) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
     P, w, _ = samples((V - centre) / unit, F, np.zeros(len(V), np.int64))  # areas too: no underflow
     if len(P) == 0:

@@ -111,6 +111,13 @@ def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
     return ((l1 == 0) & (l0 > 0)) | ((l0 > 0) & (cos <= cos_max))
 
 
+def unit_frame(V: np.ndarray) -> tuple[np.ndarray, float]:
+    """(centre (3,), unit): the centre of V's bounding box and its largest extent (no vertices: 0 and 1).
+    Work in this frame keeps squared distances and areas finite at any scale (1e-100 or 1e100 mesh units)."""
+    lo, hi = (V.min(0), V.max(0)) if len(V) else (np.zeros(3), np.ones(3))
+    return 0.5 * (lo + hi), float(np.max(hi - lo))
+
+
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
           part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
           fixed: np.ndarray | None = None) -> np.ndarray:
@@ -122,10 +129,7 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
-    # work in the input's unit frame (centre of its box, its largest extent as unit): squared distances
-    # and areas stay finite at any scale (1e-100 or 1e100 mesh units)
-    lo, hi = (V.min(0), V.max(0)) if len(V) else (np.zeros(3), np.ones(3))
-    centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
+    centre, unit = unit_frame(V)
     if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
         return X0
     X = (X0 - centre) / unit

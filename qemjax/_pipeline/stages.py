@@ -27,7 +27,7 @@ from .._kernels import compilation as _compilation
 from .. import _costs
 from . import flat as _flat
 from .._io import mesh as _io
-from . import measure
+from . import measure as _measure
 from . import refit as _refit
 from .. import _schedulers
 from .._schedulers import locks as _locks
@@ -162,12 +162,11 @@ class Job(NamedTuple):
     locks: Any = None  # `_locks.Locks` (geo is then the run's renumbered geometry), or None
 
 
-def setup(method, scheduler, topology, attributes, progress, settings: dict) -> Setup:
+def setup(method, scheduler, topology, attributes, progress, settings: dict, measure=None) -> Setup:
     """Check every setting that does not need the mesh (`_flat.apply` folds settings given by name into
     the objects); ValueError naming the bad one, TypeError for an unknown name."""
     settings = dict(settings)
     sched_name, schedule = _flat.scheduler_of(scheduler, settings.pop("schedule", None))
-    measure = settings.pop("measure", None)
     named = settings.get("preset") or method  # what the call named ("default" when it named none)
     method_obj, topology, attrs = _flat.apply(method, topology, attributes, settings)
     model = _costs.build(method_obj)
@@ -352,7 +351,7 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
         # 0.0011 -> 0.016, experiments/refit_uv.py): with UVs kept, positions stay where the contractions put them
         refit_rounds, refit_skipped = 0, "uv kept"
     refits = bool(refit_rounds and len(Fout) < m)
-    distance = measure.not_measured()
+    distance = _measure.not_measured()
     if refits or setup.measures:
         held = fixed
         if refits and appearance:  # seam vertices (two or more wedges) stay on the input's seams
@@ -446,7 +445,7 @@ class RefitTask(NamedTuple):
             X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
                              self.source_faces, fixed=self.fixed)
         refit_s = time.perf_counter() - t
-        return X, refit_s, measure.distance(self.V, self.F, X, self.G) if self.measure else measure.not_measured()
+        return X, refit_s, _measure.distance(self.V, self.F, X, self.G) if self.measure else _measure.not_measured()
 
 
 def refit_all(later: list) -> None:

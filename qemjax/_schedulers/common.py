@@ -11,7 +11,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._mesh.arrays import face_normals as face_normals
-from .._mesh.fixed_order import weighted_sum as weighted_parts
 from .._kernels.batching import DTYPE as DTYPE
 from .._kernels.batching import bucket as bucket
 from .._kernels.batching import chunk_size as chunk_size

@@ -36,12 +36,13 @@ import numpy as np
 
 from . import locks as _locks
 from .._mesh import topology as topo
+from .._mesh.fixed_order import weighted_sum
 from .._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
 from .._kernels.batching import CHUNKS
 from .._costs import MeshView
 from .._mesh.incidence import FaceLists
 from . import outcome
-from .common import (DTYPE, weighted_parts, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
+from .common import (DTYPE, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
                      start_merge, start_price)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
@@ -340,7 +341,7 @@ class _Run:
             self.rank_w = self.model.rank_weights(st.parts.compress(valid, axis=0))
             self.weighed_at = count
             self.reweights.append((count, self.rank_w))
-        st.key = (st.cost + weighted_parts(st.parts, self.rank_w)).astype(DTYPE)
+        st.key = (st.cost + weighted_sum(st.parts, self.rank_w)).astype(DTYPE)
 
     # -- stages 3 and 4: select and validate -------------------------------------------------------
     def candidates(self, st: RoundState, need, max_cost=None) -> np.ndarray:

@@ -10,7 +10,8 @@ import numpy as np
 
 from .._mesh.incidence import FaceLists
 from . import outcome
-from .common import Options, weighted_parts
+from .._mesh.fixed_order import weighted_sum
+from .common import Options
 from .outcome import BUDGET
 
 
@@ -38,7 +39,7 @@ class Queue:
     def _key(self, cost, parts):
         if self.weights is None:
             return cost
-        return float(np.float32(cost + float(weighted_parts(np.asarray(parts)[None], self.weights)[0])))
+        return float(np.float32(cost + float(weighted_sum(np.asarray(parts)[None], self.weights)[0])))
 
     def push(self, pairs, priced, length2):
         # each entry's own copies of its rows: a view would keep the whole pushed block alive while one of
