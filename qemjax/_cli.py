@@ -18,10 +18,13 @@ or QEMJAX_NO_CACHE=1 turns it off.
 from __future__ import annotations
 
 import argparse
+import gc
 import inspect
 import os
 import re
+import signal
 import sys
+import threading
 import typing
 import warnings
 
@@ -298,6 +301,7 @@ def _atomic(path: str, save) -> None:
     tmp = _temp_name(path, "out")
     try:
         save(tmp)
+        _check_interrupted()  # no output for an interrupted run, even if the interrupt was swallowed
         os.replace(tmp, path)
     except OSError as exc:
         raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
@@ -420,14 +424,58 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+_INTERRUPTED: list = []  # non-empty once Ctrl-C arrived during `main` (`_on_sigint`)
+_ACTIVE: list = []  # non-empty while `main` runs with `_on_sigint` installed
+
+
+def _resend() -> None:
+    if _ACTIVE:  # main still runs with its handler: deliver the deferred Ctrl-C
+        os.kill(os.getpid(), signal.SIGINT)
+
+
+def _on_sigint(signum, frame):
+    """Ctrl-C: remembered, then raised as Python does, except inside a garbage-collector callback (JAX has
+    one), where Python would print the exception as ignored and go on: there the signal is sent again a
+    moment later, once the callback has returned. `_atomic` and `main` also check the flag, so a run whose
+    interrupt was lost all the same writes nothing and ends with exit code 130."""
+    _INTERRUPTED.append(True)
+    callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
+    f = frame
+    while f is not None:
+        if f.f_code in callbacks:
+            timer = threading.Timer(0.05, _resend)
+            timer.daemon = True
+            timer.start()
+            return
+        f = f.f_back
+    raise KeyboardInterrupt
+
+
+def _check_interrupted() -> None:
+    if _INTERRUPTED:
+        raise KeyboardInterrupt
+
+
 def main(argv=None) -> int:
     """Run the command; returns the exit code (0 ok, 2 bad arguments, input or output, 130 interrupted:
     one line, and no partial output, since files are written under a temporary name and renamed)."""
+    _INTERRUPTED.clear()
     try:
-        return _main(sys.argv[1:] if argv is None else list(argv))
+        previous = signal.signal(signal.SIGINT, _on_sigint)
+        _ACTIVE.append(True)
+    except ValueError:  # not the main thread: Python's own handling
+        previous = None
+    try:
+        code = _main(sys.argv[1:] if argv is None else list(argv))
+        _check_interrupted()  # a Ctrl-C that was swallowed on the way
+        return code
     except KeyboardInterrupt as exc:  # a sweep's says how many rows it kept (`SweepInterrupted`)
         print(f"qemjax: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            _ACTIVE.clear()
+            signal.signal(signal.SIGINT, previous)
 
 
 def _main(argv: list) -> int:

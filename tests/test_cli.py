@@ -451,6 +451,35 @@ def test_ctrl_c_is_one_line_and_leaves_no_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["big.obj"]
 
 
+def test_ctrl_c_inside_a_gc_callback_is_sent_again(monkeypatch):
+    """Python swallows an exception raised while a garbage-collector callback runs (JAX registers one), so
+    the handler does not raise there: it remembers the interrupt and sends it again a moment later."""
+    import gc
+    import signal
+    import time
+
+    sent = []
+    monkeypatch.setattr(_cli, "_resend", lambda: sent.append(True))
+    monkeypatch.setattr(_cli, "_INTERRUPTED", [])
+    frames = []
+
+    def callback(phase, info):
+        frames.append(sys._getframe())
+
+    gc.callbacks.append(callback)
+    try:
+        gc.collect()
+        assert _cli._on_sigint(signal.SIGINT, frames[0]) is None  # inside the callback: deferred, not raised
+    finally:
+        gc.callbacks.remove(callback)
+    deadline = time.monotonic() + 5
+    while not sent and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert sent and _cli._INTERRUPTED
+    with pytest.raises(KeyboardInterrupt):  # anywhere else: raised at once
+        _cli._on_sigint(signal.SIGINT, sys._getframe())
+
+
 def test_summary_names_each_methods_unit(src, tmp_path, capsys):
     """max error is a quadric error for qem/esqem, an area change for --method area."""
     from qemjax import _costs

@@ -280,12 +280,13 @@ def run(job: Job):
     else:
         progress_cb = None
     run_target, planned = target, None
-    more = {} if job.locks is None else {"locks": job.locks.run()}
-    run = functools.partial(_schedulers.get(setup.scheduler), edges=g.edges[:2],
-                            part_scale=g.frame.part_scale2(), wedges=job.tracker, **more)
-    if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
-        run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options, setup.split)
-    try:
+    try:  # from the bar's first line on: an interrupt anywhere below still ends its line
+        more = {} if job.locks is None else {"locks": job.locks.run()}
+        run = functools.partial(_schedulers.get(setup.scheduler), edges=g.edges[:2],
+                                part_scale=g.frame.part_scale2(), wedges=job.tracker, **more)
+        if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
+            run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
+                                              setup.split)
         out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
     finally:  # an interrupted run also ends its bar's line
         if bar is not None:
