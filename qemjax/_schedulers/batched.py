@@ -34,7 +34,7 @@ from .._kernels.batching import DTYPE
 from . import outcome
 from .common import Options, PerCopy
 from .parallel import RoundState, _Run, _history_arrays, _history_columns, _removal_steps, _ring_vertices
-from .select import fits_target, gate_rank, independent_sets, sort_keys
+from .select import fits_target, gate_rank, sort_keys
 
 
 def batchable(model) -> bool:
@@ -134,17 +134,19 @@ class _Batch(_Run):
             return sort_keys(st.key, idx, salt, offset)
         free = sch.free_cost if self.free_v is None else np.take(self.free_v, st.E[:, 0])
         cand = valid & (st.key <= np.maximum(sch.gate * np.take(thresh, cp), free))
-        found = []
-        acc, bad, why, extra, locked = independent_sets(
-            st.E, key_of, cand, 0, self.n, lambda *a: self.validate(st, found, *a), sch,
-            groups=(self.vcopy, need, cp))
+        acc, bad, why, extra, locked, found = self.passes(st, key_of, cand, 0, (self.vcopy, need, cp),
+                                                          np.arange(len(st.E)) - offset)
         self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
                                           minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
         n_bad = np.bincount(np.take(cp, bad), minlength=self.C)
-        acc = acc[np.argsort(key_of(acc), kind="stable")]
+        order = np.argsort(key_of(acc), kind="stable")
+        acc = acc[order]
         ca = np.take(cp, acc)
         n_sel = np.bincount(ca, minlength=self.C)
-        acc = acc[_fits_targets(ca, st.ecount[acc] + extra[acc], need, self.C)]
+        fit = _fits_targets(ca, st.ecount[acc] + (0 if extra is None else extra[acc]), need, self.C)
+        acc = acc[fit]
+        if self.compiled:  # the apexes of the accepted pairs, in the same order
+            found = found[order][fit]
         self.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why
         return acc, n_sel, n_bad, locked, found

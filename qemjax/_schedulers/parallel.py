@@ -41,7 +41,8 @@ from .._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _t
 from .._kernels.batching import CHUNKS
 from .._costs import MeshView
 from .._mesh.incidence import FaceLists
-from . import outcome
+from . import outcome, round_jit
+from .._kernels.flips import SLIVER
 from .common import (DTYPE, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
                      start_merge, start_price)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
@@ -233,6 +234,14 @@ class _Run:
         lists = submit(FaceLists, F, self.n, size=m)
         N0 = face_normals(np.asarray(V, DTYPE), F) if normals is None else normals  # input normals
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
+        # the common case's rounds run as compiled loops (`round_jit`), with the flip test on the host
+        self.compiled = round_jit.fits(self.manifold, self.incremental, wedges, locks)
+        if self.compiled:
+            self.N0 = np.ascontiguousarray(N0, DTYPE)
+            self.flip_limits = (np.float32(options.cos_max), np.float32(SLIVER))
+            self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
+            self.mark = np.zeros(self.n, np.int64)  # scratch of `round_jit.select_validate`
+            self._rows = self._verts = None  # more of it (`scratch`)
         self.faces = lists.result()
         self.timer = Timer()
         self.history = []  # per round: (round, (kept, removed, positions, costs)) in record order
@@ -368,17 +377,51 @@ class _Run:
             return sort_keys(st.key, idx, salt)
         free = sch.free_cost if self.part_scale is None else sch.free_cost * self.part_scale[st.E[:, 0]]
         cand = valid & (st.key <= np.maximum(sch.gate * kth, free))
-        found = []
-        acc, bad, why, extra, locked = independent_sets(
-            st.E, key_of, cand, need, self.n, lambda *a: self.validate(st, found, *a), sch)
+        acc, bad, why, extra, locked, found = self.passes(st, key_of, cand, need, None)
         self.rejected += bad.size
         self.rejected_by += np.bincount(why, minlength=len(self.rejected_by))
         n_sel = acc.size
-        acc = acc[np.argsort(key_of(acc), kind="stable")]
-        acc = acc[fits_target(st.ecount[acc] + extra[acc], need)]
+        order = np.argsort(key_of(acc), kind="stable")
+        fit = fits_target(st.ecount[acc[order]] + (0 if extra is None else extra[acc[order]]), need)
+        acc = acc[order[fit]]
+        if self.compiled:  # the apexes of the accepted pairs, in the same order
+            found = found[order[fit]]
         self.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why
         return acc, n_sel, bad.size, locked, found
+
+    def passes(self, st: RoundState, key_of, cand, need, groups, local=None):
+        """The selection passes with validation (`select.independent_sets`; ``groups``: a batched run's
+        (vcopy, need per copy, pair copies), ``local``: each pair's index within its copy). Returns
+        (accepted pairs in pass order, rejected pairs, their rules, the extra faces each accepted pair
+        removes (None: none), the locked vertices, what validation found: for the compiled loops the
+        accepted pairs' apexes (S,2), else the list `validate` fills)."""
+        sch = self.options.schedule
+        if not self.compiled:
+            found = []
+            acc, bad, why, extra, locked = independent_sets(
+                st.E, key_of, cand, need, self.n, lambda *a: self.validate(st, found, *a), sch, groups=groups)
+            return acc, bad, why, extra, locked, found
+        if groups is None:
+            vcopy, needs, local = np.zeros(self.n, np.int32), np.array([need], np.int64), np.arange(len(st.E))
+        else:
+            vcopy, needs = groups[0], np.asarray(groups[1], np.int64)
+        free, active = np.ones(self.n, bool), np.zeros(self.n, bool)
+        faces = self.faces
+        acc, apex, bad, why = round_jit.select_validate(
+            st.E, st.ecount, cand, np.ascontiguousarray(st.key, DTYPE).view(np.int32), local,
+            (self.rounds * 7919) & 0xFFFFFFFF, vcopy, needs, sch.max_passes, float(sch.pass_yield),
+            bool(self.options.keep_parts), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, self.VQ,
+            self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, *self.scratch(len(st.E)))
+        return acc, bad, why, None, ~free, apex
+
+    def scratch(self, P: int):
+        """`round_jit.select_validate`'s working arrays for P pairs, (3, ≥ P) and (2, n) int64: made once
+        a run (its pairs only get fewer), so that no round maps megabytes afresh."""
+        if self._rows is None or self._rows.shape[1] < P:
+            self._rows = np.empty((3, P), np.int64)
+            self._verts = np.empty((2, self.n), np.int64)
+        return self._rows, self._verts
 
     def validate(self, st: RoundState, found: list, P, idx, free_rows, Efree):
         """(rule broken per pair (0: valid), faces made coincident) for vertex-disjoint pairs P (indices
@@ -437,20 +480,16 @@ class _Run:
         self.history.append((self.rounds - 1, (a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64))))
         if st.parts.shape[1]:
             self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
-        r = np.flatnonzero(st.bad)
-        if r.size:  # pairs whose faces change get another chance
-            # the 1-rings that selection locked, unless the target cut the set short
-            st.bad[r[any_at(self.touched(locked, acc, n_sel, P), _take(st.E, r))]] = 0
-        taken = np.zeros(len(st.E), bool)
-        taken[acc] = True
-        pairs, kept, dead, (apex, erows) = _accepted(st.E, found, taken)  # in pass order, not acc's
-        if self.incremental:  # the edge update runs on the worker while this thread relinks the faces
-            edges_next = submit(topo.contract_edges, st.E, st.ecount, pairs[:, 0], pairs[:, 1], apex, n,
-                                st.deg, rows=erows, size=len(st.E))
-        if self.wedges is not None:  # the corners' wedges, before the faces are relinked
-            self.wedges.contract_many(faces, self.VQ, P, xs)
-        faces.contract_touched(pairs, kept, dead)
-        self.dead.append(dead)
+        # pairs whose faces change get another chance: those at the 1-rings that selection locked, unless
+        # the target cut the set short
+        if self.compiled:
+            round_jit.clear_bad(st.E, st.bad, self.touched(locked, acc, n_sel, P))
+            self.contract_compiled(st, a, b, found)
+        else:
+            r = np.flatnonzero(st.bad)
+            if r.size:
+                st.bad[r[any_at(self.touched(locked, acc, n_sel, P), _take(st.E, r))]] = 0
+            edges_next = self.contract_numpy(st, acc, xs, found)
         if not self.manifold:
             self.dropped.append((self.rounds - 1, _drop_coincident(faces, a)))
         if len(self.extra_pairs):
@@ -467,10 +506,41 @@ class _Run:
                 st.changed = ring
             if self.model.refresh is not None:
                 self.refresh(np.flatnonzero(ring))
-        if self.incremental:
+        if self.incremental and not self.compiled:
             st.edges_next = edges_next.result()
         self.faces_per_round.append(faces.count)
         self.timer.add("contract_s", time.perf_counter() - t0)
+
+    def contract_numpy(self, st: RoundState, acc, xs, found):
+        """The faces after the accepted pairs ``acc`` (placed at xs) contract, from what validation
+        ``found`` (`_accepted`). In manifold mode the pairs' update starts on the worker thread: returns
+        its future (else None)."""
+        n, faces = self.n, self.faces
+        P = _take(st.E, acc)
+        taken = np.zeros(len(st.E), bool)
+        taken[acc] = True
+        pairs, kept, dead, (apex, erows) = _accepted(st.E, found, taken)  # in pass order, not acc's
+        edges_next = None
+        if self.incremental:  # the edge update runs on the worker while this thread relinks the faces
+            edges_next = submit(topo.contract_edges, st.E, st.ecount, pairs[:, 0], pairs[:, 1], apex, n,
+                                st.deg, rows=erows, size=len(st.E))
+        if self.wedges is not None:  # the corners' wedges, before the faces are relinked
+            self.wedges.contract_many(faces, self.VQ, P, xs)
+        faces.contract_touched(pairs, kept, dead)
+        self.dead.append(dead)
+        return edges_next
+
+    def contract_compiled(self, st: RoundState, a, b, apex):
+        """`contract_numpy` as compiled loops (`round_jit`): the faces, then the pairs."""
+        faces = self.faces
+        k = int(faces.cnt.take(a).sum() + faces.cnt.take(b).sum())
+        if faces.end + k > len(faces.pool):
+            faces._compact(k)
+        faces.end, dead = round_jit.contract_faces(a, b, faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
+                                                   faces.end)
+        faces.count -= len(dead)
+        self.dead.append(dead)
+        st.edges_next = round_jit.contract_edges(st.E, st.ecount, st.deg, a, b, apex, self.label)
 
     def touched(self, locked, acc, n_sel, P):
         """(n,) bool: the vertices around this round's contractions P (rows ``acc``): the 1-rings that

@@ -1,0 +1,466 @@
+"""The parallel round's host side, compiled (numba): selection passes with validation, and the contraction.
+
+`parallel._Run` spends a round in hundreds of numpy calls on small arrays (about 1 ms a round on a 6 k-face
+mesh); the same steps as two loops over integer arrays take a few tens of µs. This module holds those two
+loops, for the common case (`fits`): manifold mode with the pairs updated through the contractions (no
+non-edge pairs), no attributes kept and no locks. They make exactly the choices of the numpy stages they
+replace (`select.independent_sets` with `parallel._Run.validate`, then `FaceLists.contract_touched` and
+`topology.contract_edges`): the golden outputs are the same bits, and tests/test_round_jit.py compares each
+loop with the numpy code on random meshes.
+
+* `select_validate`: the independent-set passes (each pair that holds the smallest key among the
+  candidates touching its endpoints' closed 1-rings), each selected pair's rules (link condition,
+  coincident faces, the part rule, the flip test with the device kernel's float32 operations,
+  `greedy_rules_jit.flips`), the locking of accepted 1-rings and each copy's pass rule
+  (`select._copies_staying`; one run is one copy).
+* `contract`: the accepted pairs' faces (dead ones out, b's corners to a, new runs in the pool) and
+  pairs (merged, moved, counted, compacted), with the degrees after and which pairs are stale.
+
+A vertex's neighbours are read from its faces: in this mode every pair is an edge of a live face, and every
+such edge is a pair (`topology.contract_edges` keeps exactly those).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .outcome import COINCIDENT, FLIP, PART, TOPOLOGY
+
+NO_KEY = np.iinfo(np.int64).max
+_SCRAMBLE = np.uint32(0x9E3779B1)
+
+
+def fits(manifold: bool, incremental: bool, wedges, locks) -> bool:
+    """Whether a run's rounds can take the compiled loops (see the module docstring)."""
+    return manifold and incremental and wedges is None and locks is None
+
+
+@njit(cache=True, inline="always")
+def _flips(VQ, N0, F, f, corner, x, cos_max, sliver):
+    """`greedy_rules_jit.flips` (the device kernel's float32 operations in the same order) on scalars,
+    without its small arrays: does moving corner ``corner`` of face f to x flip it?"""
+    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    g0x, g0y, g0z = VQ[i0, 0], VQ[i0, 1], VQ[i0, 2]
+    g1x, g1y, g1z = VQ[i1, 0], VQ[i1, 1], VQ[i1, 2]
+    g2x, g2y, g2z = VQ[i2, 0], VQ[i2, 1], VQ[i2, 2]
+    q0x, q0y, q0z = g0x, g0y, g0z
+    q1x, q1y, q1z = g1x, g1y, g1z
+    q2x, q2y, q2z = g2x, g2y, g2z
+    if corner == 0:
+        q0x, q0y, q0z = x[0], x[1], x[2]
+    elif corner == 1:
+        q1x, q1y, q1z = x[0], x[1], x[2]
+    else:
+        q2x, q2y, q2z = x[0], x[1], x[2]
+    u0x, u0y, u0z = g1x - g0x, g1y - g0y, g1z - g0z
+    v0x, v0y, v0z = g2x - g0x, g2y - g0y, g2z - g0z
+    u1x, u1y, u1z = q1x - q0x, q1y - q0y, q1z - q0z
+    v1x, v1y, v1z = q2x - q0x, q2y - q0y, q2z - q0z
+    n0x, n0y, n0z = u0y * v0z - u0z * v0y, u0z * v0x - u0x * v0z, u0x * v0y - u0y * v0x
+    n1x, n1y, n1z = u1y * v1z - u1z * v1y, u1z * v1x - u1x * v1z, u1x * v1y - u1y * v1x
+    e1x, e1y, e1z = q2x - q1x, q2y - q1y, q2z - q1z
+    e2x, e2y, e2z = q0x - q2x, q0y - q2y, q0z - q2z
+    rx, ry, rz = N0[f, 0], N0[f, 1], N0[f, 2]
+    d11 = n1x * n1x + n1y * n1y + n1z * n1z
+    d01 = n0x * n1x + n0y * n1y + n0z * n1z
+    d00 = n0x * n0x + n0y * n0y + n0z * n0z
+    de0 = u1x * u1x + u1y * u1y + u1z * u1z
+    de1 = e1x * e1x + e1y * e1y + e1z * e1z
+    de2 = e2x * e2x + e2y * e2y + e2z * e2z
+    dr1 = rx * n1x + ry * n1y + rz * n1z
+    drr = rx * rx + ry * ry + rz * rz
+    l1 = np.float32(np.sqrt(d11))
+    if d01 <= cos_max * np.float32(np.sqrt(d00)) * l1:
+        return True
+    longest2 = de0 if (de0 >= de1 or de0 != de0) else de1  # np.maximum: a NaN wins
+    longest2 = longest2 if (longest2 >= de2 or longest2 != longest2) else de2
+    if l1 <= sliver * longest2 and cos_max > -1.0:
+        return True
+    return dr1 <= cos_max * np.float32(np.sqrt(drr)) * l1
+
+
+@njit(cache=True, inline="always")
+def _key(kbits, idx, local, salt):
+    """`select.sort_keys` of one pair: its key's float32 bits over a scramble of its index in its copy."""
+    h = (np.uint32(local) * _SCRAMBLE + np.uint32(salt)) & np.uint32(0xFFFFFFFF)
+    return (np.int64(kbits[idx]) << 32) | np.int64(h)
+
+
+@njit(cache=True)
+def _neighbours(v, F, alive, cnt, off, pool, mark, stamp, out):
+    """Write the distinct neighbours of v (corners of its live faces) into ``out``, marking each with
+    ``stamp`` in ``mark``; returns how many."""
+    k = 0
+    for i in range(off[v], off[v] + cnt[v]):
+        f = pool[i]
+        if not alive[f]:
+            continue
+        for c in range(3):
+            u = F[f, c]
+            if u != v and mark[u] != stamp:
+                mark[u] = stamp
+                out[k] = u
+                k += 1
+    return k
+
+
+@njit(cache=True)
+def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
+           mark, stamp, nb, fa, apex, s):
+    """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
+    manifold mode: coincident faces after the contraction, then the part rule, then the link condition
+    override each other in that order; the flip test counts only for a pair that passes the rest.
+    Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s]."""
+    # link condition: the common neighbours are the apexes of the pair's faces
+    ka = _neighbours(a, F, alive, cnt, off, pool, mark, stamp, nb)
+    ncommon = 0
+    c0, c1 = -1, -1
+    bad_apex = False
+    for i in range(off[b], off[b] + cnt[b]):
+        f = pool[i]
+        if not alive[f]:
+            continue
+        for c in range(3):
+            u = F[f, c]
+            if u != b and u != a and mark[u] == stamp:
+                mark[u] = stamp + 1  # counted once
+                ncommon += 1
+                if c0 < 0 or u < c0:
+                    c0, c1 = u, c0
+                elif c1 < 0 or u < c1:
+                    c1 = u
+                if nf == 2 and deg[u] <= 3:
+                    bad_apex = True
+    for i in range(ka):  # the marks of a's neighbours, undone (stamps are reused per pass)
+        mark[nb[i]] = 0
+    apex[s, 0], apex[s, 1] = c0, c1
+    linked = nf >= 1 and nf <= 2 and ncommon == nf and not (bvert[a] and bvert[b] and nf == 2) and not bad_apex
+    # the faces that stay (not holding both endpoints), each with the corner that moves
+    nk = 0
+    for side in range(2):
+        me, other = (a, b) if side == 0 else (b, a)
+        for i in range(off[me], off[me] + cnt[me]):
+            f = pool[i]
+            if not alive[f]:
+                continue
+            if F[f, 0] == other or F[f, 1] == other or F[f, 2] == other:
+                continue
+            corner = 0 if F[f, 0] == me else (1 if F[f, 1] == me else 2)
+            fa[nk, 0], fa[nk, 1] = f, corner
+            nk += 1
+    # coincident faces: two surviving faces with the same three corners once b is a
+    gone = False
+    for i in range(nk):
+        fi, ci = fa[i, 0], fa[i, 1]
+        p0 = a if ci == 0 else F[fi, 0]
+        p1 = a if ci == 1 else F[fi, 1]
+        p2 = a if ci == 2 else F[fi, 2]
+        for j in range(i + 1, nk):
+            fj, cj = fa[j, 0], fa[j, 1]
+            q0 = a if cj == 0 else F[fj, 0]
+            q1 = a if cj == 1 else F[fj, 1]
+            q2 = a if cj == 2 else F[fj, 2]
+            if ((p0 == q0 or p0 == q1 or p0 == q2) and (p1 == q0 or p1 == q1 or p1 == q2)
+                    and (p2 == q0 or p2 == q1 or p2 == q2)):
+                gone = True
+                break
+        if gone:
+            break
+    why = 0
+    if gone:
+        why = COINCIDENT
+    if keep_parts and nk == 0:
+        why = PART
+    if not linked:
+        why = TOPOLOGY
+    if why == 0:
+        for i in range(nk):
+            if _flips(VQ, N0, F, fa[i, 0], fa[i, 1], x, cos_max, sliver):
+                why = FLIP
+                break
+    return why
+
+
+@njit(cache=True)
+def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes, pass_yield, keep_parts,
+                    F, alive, cnt, off, pool, VQ, N0, X, bvert, deg, cos_max, sliver, free, active, mark,
+                    rows, verts):
+    """`select.independent_sets` with `parallel._Run.validate` (manifold mode, no locks or attributes).
+
+    E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
+    kbits (P,) int32: the float32 bits of each pair's ranking key; local (P,): each pair's index within its
+    copy; salt: the round's scramble; vcopy (n,): each vertex's copy, need (C,): each copy's face budget;
+    the faces (`FaceLists` arrays), positions VQ and reference normals N0, the pairs' placements X (P,3),
+    boundary vertices and degrees; free, active (n,) bool and mark (n,) int64 zeros: scratch (free comes
+    back with the locked vertices False); rows (3, ≥ P) and verts (2, n) int64: working arrays, kept from
+    round to round (fresh arrays this large would be mapped and faulted in anew on every call).
+    Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices and their
+    rules)."""
+    P = len(E)
+    n = len(vcopy)
+    C = len(need)
+    K, one, bo = rows[0], rows[1], rows[2]  # each pair's key (NO_KEY: not a candidate, or rejected)
+    m1, m2 = verts[0], verts[1]
+    ncand = 0
+    for i in range(P):
+        if cand[i]:
+            ncand += 1
+            K[i] = _key(kbits, i, local[i], salt)
+            active[E[i, 0]] = True
+            active[E[i, 1]] = True
+        else:
+            K[i] = NO_KEY
+    # the working set: pairs with an available endpoint (ascending), and those with both (``bo``)
+    k1 = nbo = 0
+    for i in range(P):
+        pa, pb = active[E[i, 0]], active[E[i, 1]]
+        if pa or pb:
+            one[k1] = i
+            k1 += 1
+            if pa and pb:
+                bo[nbo] = i
+                nbo += 1
+    acc = np.empty(ncand, np.int64)
+    apex = np.empty((ncand, 2), np.int64)
+    rej = np.empty(ncand, np.int64)
+    why = np.empty(ncand, np.int8)
+    sel = np.empty(ncand, np.int64)
+    n_acc = np.zeros(C, np.int64)
+    g = np.zeros(C, np.int64)
+    tried = np.zeros(C, np.bool_)
+    out = np.zeros(C, np.bool_)
+    done = np.zeros(C, np.bool_)
+    nb = np.empty(64, np.int64)
+    fa = np.empty((64, 2), np.int64)
+    na = nr = 0
+    stamp = 0
+    for p in range(max_passes):
+        # each available vertex's smallest key among its pairs (m1), then among its neighbours' (m2)
+        live_any = False
+        for j in range(nbo):
+            i = bo[j]
+            u, v = E[i, 0], E[i, 1]
+            m1[u] = m1[v] = m2[u] = m2[v] = NO_KEY
+            live_any |= cand[i]
+        if not live_any:
+            break
+        for j in range(nbo):
+            i = bo[j]
+            k = K[i]
+            u, v = E[i, 0], E[i, 1]
+            if k < m1[u]:
+                m1[u] = k
+            if k < m1[v]:
+                m1[v] = k
+        for j in range(nbo):
+            i = bo[j]
+            u, v = E[i, 0], E[i, 1]
+            k = min(m1[u], m1[v])
+            if k < m2[u]:
+                m2[u] = k
+            if k < m2[v]:
+                m2[v] = k
+        ns = 0
+        for j in range(nbo):
+            i = bo[j]
+            k = K[i]
+            if k != NO_KEY and k == m2[E[i, 0]] and k == m2[E[i, 1]]:
+                sel[ns] = i
+                ns += 1
+        if ns == 0:
+            break
+        g[:] = 0
+        tried[:] = False
+        first = na
+        for t in range(ns):
+            i = sel[t]
+            a, b = E[i, 0], E[i, 1]
+            nf = ecount[i]
+            if 2 * (cnt[a] + cnt[b]) > len(fa):  # room for the faces of the busiest pair so far
+                nb = np.empty(4 * (cnt[a] + cnt[b]), np.int64)
+                fa = np.empty((4 * (cnt[a] + cnt[b]), 2), np.int64)
+            stamp += 2
+            w = _rules(a, b, nf, X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
+                       mark, stamp, nb, fa, apex, na)
+            c = vcopy[a]
+            tried[c] = True
+            if w == 0:
+                acc[na] = i
+                na += 1
+                g[c] += 1
+            else:
+                cand[i] = False
+                K[i] = NO_KEY
+                rej[nr] = i
+                why[nr] = w
+                nr += 1
+        # lock the closed 1-rings of this pass's accepted pairs (every pair at them is in the working set)
+        for t in range(first, na):
+            i = acc[t]
+            mark[E[i, 0]] = -1
+            mark[E[i, 1]] = -1
+        for j in range(k1):
+            i = one[j]
+            u, v = E[i, 0], E[i, 1]
+            if mark[u] == -1 or mark[v] == -1:
+                free[u] = False
+                free[v] = False
+        for t in range(first, na):
+            i = acc[t]
+            mark[E[i, 0]] = 0
+            mark[E[i, 1]] = 0
+        # each copy's pass rule (`select._copies_staying`): a copy that selected nothing, or little
+        all_done, left = True, False
+        for c in range(C):
+            n_acc[c] += g[c]
+            done[c] = (not tried[c]) or g[c] < pass_yield * n_acc[c] or (g[c] * 50 < need[c] // 2 and p > 2)
+            all_done &= done[c]
+            left |= done[c] and not out[c]
+        if all_done:
+            break
+        if left:  # some copy leaves the passes now: its vertices are no longer available
+            for c in range(C):
+                out[c] |= done[c]
+            for v in range(n):
+                if active[v] and done[vcopy[v]]:
+                    active[v] = False
+        if p + 1 < max_passes:  # narrow the working set to what touches an available vertex
+            k2 = nbo = 0
+            for j in range(k1):
+                i = one[j]
+                u, v = E[i, 0], E[i, 1]
+                pa, pb = active[u] and free[u], active[v] and free[v]
+                if pa or pb:
+                    one[k2] = i
+                    k2 += 1
+                    if pa and pb:
+                        bo[nbo] = i
+                        nbo += 1
+            k1 = k2
+    return acc[:na].copy(), apex[:na].copy(), rej[:nr].copy(), why[:nr].copy()
+
+
+@njit(cache=True)
+def contract_faces(a, b, F, alive, cnt, off, pool, end):
+    """`FaceLists.contract_touched` for vertex-disjoint pairs (a, b) two edges apart: the faces holding
+    both endpoints die, b's other faces take a, and a's run (its surviving faces, then b's) is written at
+    the pool's end (which must have room for cnt[a] + cnt[b] more entries). Returns the new end and the
+    faces that died, pair by pair."""
+    dead = np.empty(2 * len(a), np.int64)
+    nd = 0
+    for s in range(len(a)):
+        u, v = a[s], b[s]
+        for i in range(off[v], off[v] + cnt[v]):
+            f = pool[i]
+            if alive[f] and (F[f, 0] == u or F[f, 1] == u or F[f, 2] == u):
+                alive[f] = False
+                if nd == len(dead):
+                    dead = np.concatenate((dead, np.empty(len(dead), np.int64)))
+                dead[nd] = f
+                nd += 1
+        start = end
+        for i in range(off[u], off[u] + cnt[u]):
+            f = pool[i]
+            if alive[f]:
+                pool[end] = f
+                end += 1
+        for i in range(off[v], off[v] + cnt[v]):
+            f = pool[i]
+            if alive[f]:
+                for c in range(3):
+                    if F[f, c] == v:
+                        F[f, c] = u
+                pool[end] = f
+                end += 1
+        off[u] = start
+        cnt[u] = end - start
+        cnt[v] = 0
+    return end, dead[:nd].copy()
+
+
+@njit(cache=True)
+def contract_edges(E, ecount, deg, a, b, apex, label):
+    """`topology.contract_edges` for vertex-disjoint pairs (a, b) that passed the link test, with their
+    apexes (S,2) (-1 where a pair has one face): (b, c) merges into (a, c) for an apex c (which loses the
+    vanished face and gains (b, c)'s others), b's other pairs move to a, the contracted pair goes.
+    ``label`` (n,) int32 scratch, all -1 (left so). Returns (E', ecount', keep, degree', stale'): the
+    pairs that stay in their order, which old rows they continue, the degrees after, and which of them
+    are at a kept vertex (their cost is stale)."""
+    S = len(a)
+    P = len(E)
+    for s in range(S):
+        label[a[s]] = s
+        label[b[s]] = S + s
+    rows = np.empty(P, np.int64)
+    nr = 0
+    for i in range(P):
+        if label[E[i, 0]] >= 0 or label[E[i, 1]] >= 0:
+            rows[nr] = i
+            nr += 1
+    E2 = E.copy()
+    count = ecount.copy()
+    keep = np.ones(P, np.bool_)
+    stale = np.zeros(P, np.bool_)
+    delta = np.zeros((S, 2), np.int64)
+    for t in range(nr):  # pairs at a b: merge into (a, apex) or move to a
+        i = rows[t]
+        stale[i] = True
+        l0, l1 = label[E[i, 0]], label[E[i, 1]]
+        if l0 >= 0 and l1 >= 0:  # the contracted pair itself
+            keep[i] = False
+            continue
+        lab, c = (l0, E[i, 1]) if l0 >= 0 else (l1, E[i, 0])
+        if lab < S:
+            continue
+        s = lab - S
+        if c == apex[s, 0] or c == apex[s, 1]:
+            delta[s, 0 if c == apex[s, 0] else 1] = ecount[i] - 2
+            keep[i] = False
+        else:
+            u = a[s]
+            E2[i, 0], E2[i, 1] = min(u, c), max(u, c)
+    for t in range(nr):  # pairs (a, apex): their new face counts
+        i = rows[t]
+        l0, l1 = label[E[i, 0]], label[E[i, 1]]
+        if l0 >= 0 and l1 >= 0:
+            continue
+        lab, c = (l0, E[i, 1]) if l0 >= 0 else (l1, E[i, 0])
+        if lab >= S:
+            continue
+        if c == apex[lab, 0] or c == apex[lab, 1]:
+            count[i] += delta[lab, 0 if c == apex[lab, 0] else 1]
+            keep[i] = count[i] > 0
+    d2 = deg.copy()
+    for s in range(S):
+        k = 0
+        for j in range(2):
+            if apex[s, j] >= 0:
+                k += 1
+                d2[apex[s, j]] -= 1
+        d2[a[s]] += deg[b[s]] - 2 - k
+        d2[b[s]] = 0
+        label[a[s]] = -1
+        label[b[s]] = -1
+    m = 0
+    for i in range(P):
+        if keep[i]:
+            m += 1
+    E3 = np.empty((m, 2), E.dtype)
+    c3 = np.empty(m, ecount.dtype)
+    s3 = np.empty(m, np.bool_)
+    k = 0
+    for i in range(P):
+        if keep[i]:
+            E3[k, 0], E3[k, 1] = E2[i, 0], E2[i, 1]
+            c3[k] = count[i]
+            s3[k] = stale[i]
+            k += 1
+    return E3, c3, keep, d2, s3
+
+
+@njit(cache=True)
+def clear_bad(E, bad, touched):
+    """Pairs known invalid get another chance where an endpoint is in ``touched`` (the round's rings)."""
+    for i in range(len(E)):
+        if bad[i] != 0 and (touched[E[i, 0]] or touched[E[i, 1]]):
+            bad[i] = 0

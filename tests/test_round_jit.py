@@ -1,0 +1,163 @@
+"""The parallel round's compiled loops (`_schedulers.round_jit`) make exactly the choices of the numpy
+stages they replace: whole runs (alone and batched) give the same result bit for bit, and each loop
+answers as the numpy code it stands for (the flip test, the faces' and the pairs' contraction)."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import shapes
+from qemjax._kernels import flips as flips_mod
+from qemjax._mesh import topology as topo
+from qemjax._mesh.incidence import FaceLists
+from qemjax._schedulers import parallel, round_jit
+from test_greedy_batches import CASES, _same
+from test_greedy_compiled import _bipyramid, _jittered_sphere, _two_spheres
+
+RUNS = {k: v for k, v in CASES.items() if k not in ("cube-non-manifold",)}  # (manifold mode only)
+RUNS.update({
+    "jittered-sphere": (_jittered_sphere, {"ratio": 0.05}),
+    "bipyramid": (_bipyramid, {"ratio": 0.1}),
+    "two-parts": (_two_spheres, {"ratio": 0.01}),
+    "default-method": (lambda: shapes.bumpy_sphere(4), {"ratio": 0.02, "method": "default"}),
+    "regularized": (lambda: shapes.torus(n_major=24, n_minor=12), {"ratio": 0.1, "regularize": 0.1}),
+    "double-cone": (lambda: shapes.double_cone(60), {"ratio": 0.2}),
+})
+
+
+def _run(mesh, kw, monkeypatch, compiled: bool, batch=None):
+    seen = []
+    init = parallel._Run.__init__
+
+    def recording_init(self, *a, **k):
+        init(self, *a, **k)
+        seen.append(self.compiled)
+
+    with monkeypatch.context() as m:
+        m.setattr(parallel._Run, "__init__", recording_init)
+        if not compiled:
+            m.setattr(round_jit, "fits", lambda *a: False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if batch is not None:
+                return qemjax.simplify_batch(mesh, batch), seen
+            return qemjax.simplify(mesh, **({"method": "classic"} | kw)), seen
+
+
+def _assert_same(new, old):
+    for name in ("vertices", "faces", "vertex_error", "max_error", "stop_reason"):
+        _same(getattr(new, name), getattr(old, name), name)
+    for name in ("pairs", "positions", "costs", "rounds"):
+        _same(getattr(new.history, name), getattr(old.history, name), f"history.{name}")
+    drop = {k for k in (*new.stats, *old.stats) if k.endswith("_s") or k in ("compilations", "batch")}
+    _same({k: v for k, v in new.stats.items() if k not in drop},
+          {k: v for k, v in old.stats.items() if k not in drop}, "stats")
+
+
+@pytest.mark.parametrize("case", list(RUNS))
+def test_compiled_round_gives_the_numpy_rounds_result(case, monkeypatch):
+    make, kw = RUNS[case]
+    mesh = make()
+    new, seen = _run(mesh, kw, monkeypatch, True)
+    old, seen_old = _run(mesh, kw, monkeypatch, False)
+    assert seen == [True] and seen_old == [False]
+    _assert_same(new, old)
+    assert new.stats["rounds"] > 1
+
+
+def test_compiled_round_in_a_batch(monkeypatch):
+    """Copies with their own targets, boundary weights and max_error leave the passes at their own times
+    (each copy's pass rule): the same results as the numpy rounds, and as each copy alone."""
+    mesh = shapes.bumpy_sphere(3)
+    configs = [{"ratio": 0.1}, {"ratio": 0.3, "boundary_weight": 1.0}, {"ratio": 0.02},
+               {"max_error": 1e-4}, {"ratio": 0.05, "area_weighted": False}]
+    configs = [{"method": "classic"} | c for c in configs]
+    new, seen = _run(mesh, None, monkeypatch, True, batch=configs)
+    old, seen_old = _run(mesh, None, monkeypatch, False, batch=configs)
+    assert True in seen and False not in seen and seen_old and not any(seen_old)
+    for a, b in zip(new, old):
+        _assert_same(a, b)
+    alone, _ = _run(mesh, configs[2], monkeypatch, True)
+    _same(new[2].faces, alone.faces, "batch vs alone")
+
+
+def test_flip_test_matches_the_kernel():
+    """`round_jit._flips` against `flips.flips_host_faces` (the device kernel's host twin) on random faces,
+    near-degenerate ones included, at the default threshold and at 45°."""
+    rng = np.random.default_rng(3)
+    V = rng.normal(size=(60, 3)).astype(np.float32)
+    V[50:] = V[:10] + rng.normal(0, 1e-4, (10, 3)).astype(np.float32)  # near-duplicates: slivers
+    F = np.array([rng.choice(60, 3, replace=False) for _ in range(400)], np.int32)
+    N0 = flips_mod.np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32)
+    N0[::7] = -N0[::7]  # some references disagree with the face
+    corner = rng.integers(0, 3, 400)
+    X = (V[F[np.arange(400), corner]] + rng.normal(0, 0.3, (400, 3))).astype(np.float32)
+    VQ = np.concatenate([V, np.zeros((60, 4), np.float32)], 1)
+    for cos_max in (0.0, np.cos(np.radians(45))):
+        want = flips_mod.flips_host_faces(VQ, N0, F, np.arange(400), corner, X, cos_max)
+        got = np.array([round_jit._flips(VQ, N0, F, f, corner[f], X[f], np.float32(cos_max),
+                                         np.float32(flips_mod.SLIVER)) for f in range(400)])
+        assert want.any() and not want.all()
+        np.testing.assert_array_equal(got, want)
+
+
+def _selected_pairs(F, n, seed):
+    """Vertex-disjoint interior edges two edges apart that pass the link test, their apexes and the
+    pairs E with counts and degrees (as a round hands them to the contraction)."""
+    E, ecount = topo.edges(F, n)
+    deg = topo.vertex_degree(E, n)
+    bvert = np.zeros(n, bool)
+    bvert[E[ecount == 1].reshape(-1)] = True
+    rng = np.random.default_rng(seed)
+    locked = np.zeros(n, bool)
+    pick = []
+    nbr = [set() for _ in range(n)]
+    for u, v in E:
+        nbr[u].add(v)
+        nbr[v].add(u)
+    for i in rng.permutation(len(E)):
+        a, b = E[i]
+        ring = {a, b} | nbr[a] | nbr[b]
+        if not any(locked[list(ring)]):
+            pick.append(i)
+            locked[list(ring)] = True
+    P = E[pick]
+    ok, apex = topo.link_ok(P, ecount[pick], E, n, bvert, deg, apexes=True)
+    return E, ecount, deg, P[ok], apex[ok]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_contraction_loops_match_the_numpy_code(seed):
+    V, F = shapes.bumpy_sphere(2) if seed != 2 else shapes.grid(12, hole=True)
+    n = len(V)
+    E, ecount, deg, P, apex = _selected_pairs(F, n, seed)
+    assert len(P) > 5
+    a, b = P[:, 0].copy(), P[:, 1].copy()
+    # pairs: the numpy update against the compiled one
+    want = topo.contract_edges(E, ecount, a, b, apex, n, deg)
+    label = np.full(n, -1, np.int32)
+    got = round_jit.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), label)
+    for w, g, name in zip(want, got, ("E", "ecount", "keep", "degree", "stale")):
+        np.testing.assert_array_equal(g, w, err_msg=name)
+    assert (label == -1).all()
+    # faces: `FaceLists.contract` against the compiled loop (with a pool that must be compacted first)
+    ref, new = FaceLists(F, n), FaceLists(F, n)
+    dead_ref = ref.contract(a, b)
+    k = int(new.cnt[a].sum() + new.cnt[b].sum())
+    new._compact(k)
+    new.end, dead = round_jit.contract_faces(a, b, new.F, new.alive, new.cnt, new.off, new.pool, new.end)
+    np.testing.assert_array_equal(np.sort(dead), np.sort(dead_ref))
+    np.testing.assert_array_equal(new.F[new.alive], ref.F[ref.alive])
+    np.testing.assert_array_equal(new.alive, ref.alive)
+    for v in range(n):  # each vertex's live faces, as sets
+        w1, f1 = ref.around(np.array([v]))
+        w2, f2 = new.around(np.array([v]))
+        assert sorted(f1) == sorted(f2), v
+    # and the edges of the contracted faces are the updated pairs
+    E2, c2 = topo.edges(new.F[new.alive], n)
+    order = np.lexsort((got[0][:, 1], got[0][:, 0]))
+    np.testing.assert_array_equal(got[0][order], E2)
+    np.testing.assert_array_equal(got[1][order], c2)
