@@ -127,38 +127,69 @@ def _build(X, G, lo, h, dims):
     return count, faces
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _gap(x, a, b):
+    """Distance from x to the interval [a, b] (0 inside)."""
+    return a - x if x < a else (x - b if x > b else 0.0)
+
+
 @njit(cache=True, nogil=True)
-def _query(P, X, G, lo, h, dims, start, faces):
+def _query(P, X, G, B, lo, h, dims, start, faces):
     q = P.shape[0]
     best_f = np.full(q, -1, np.int64)
     best_d2 = np.full(q, np.inf)
     mark = np.full(G.shape[0], -1, np.int64)
     rmax = max(dims[0], dims[1], dims[2])
+    slack = 1e-6 * h  # what a box's distance bound gives up, far above its rounding
     for p in range(q):
-        c = np.empty(3, np.int64)
+        px, py, pz = P[p, 0], P[p, 1], P[p, 2]
         wall = np.inf  # p''s distance to its own cube's walls: what shell 0 alone has covered
+        c0 = c1 = c2 = 0
         for ax in range(3):
             x = min(max(P[p, ax], lo[ax]), lo[ax] + dims[ax] * h)  # p' (projection onto the box)
-            c[ax] = min(max(int(np.floor((x - lo[ax]) / h)), 0), dims[ax] - 1)
-            wall = min(wall, x - (lo[ax] + c[ax] * h), (lo[ax] + (c[ax] + 1) * h) - x)
+            ci = min(max(int(np.floor((x - lo[ax]) / h)), 0), dims[ax] - 1)
+            wall = min(wall, x - (lo[ax] + ci * h), (lo[ax] + (ci + 1) * h) - x)
+            if ax == 0:
+                c0 = ci
+            elif ax == 1:
+                c1 = ci
+            else:
+                c2 = ci
         wall = max(wall, 0.0)
         bf, bd2 = -1, np.inf
+        lim2 = np.inf  # (best distance + slack)²: a box farther than this holds nothing as close
         for r in range(rmax + 1):
-            for i in range(max(c[0] - r, 0), min(c[0] + r, dims[0] - 1) + 1):
-                for j in range(max(c[1] - r, 0), min(c[1] + r, dims[1] - 1) + 1):
-                    on_shell_ij = abs(i - c[0]) == r or abs(j - c[1]) == r
-                    for k in range(max(c[2] - r, 0), min(c[2] + r, dims[2] - 1) + 1):
-                        if not (on_shell_ij or abs(k - c[2]) == r):
+            for i in range(max(c0 - r, 0), min(c0 + r, dims[0] - 1) + 1):
+                gx = _gap(px, lo[0] + i * h, lo[0] + (i + 1) * h)
+                for j in range(max(c1 - r, 0), min(c1 + r, dims[1] - 1) + 1):
+                    on_shell_ij = abs(i - c0) == r or abs(j - c1) == r
+                    gy = _gap(py, lo[1] + j * h, lo[1] + (j + 1) * h)
+                    for k in range(max(c2 - r, 0), min(c2 + r, dims[2] - 1) + 1):
+                        if not (on_shell_ij or abs(k - c2) == r):
                             continue
                         cell = (i * dims[1] + j) * dims[2] + k
+                        if start[cell] == start[cell + 1]:
+                            continue
+                        # a cube farther than the best so far can be passed over: each triangle listed in it
+                        # is also listed in the cube of its own closest point, which is no farther
+                        gz = _gap(pz, lo[2] + k * h, lo[2] + (k + 1) * h)
+                        if gx * gx + gy * gy + gz * gz > lim2:
+                            continue
                         for t in range(start[cell], start[cell + 1]):
                             f = faces[t]
                             if mark[f] == p:
                                 continue
                             mark[f] = p
-                            d2 = closest_d2(P[p, 0], P[p, 1], P[p, 2], X, G[f, 0], G[f, 1], G[f, 2])
+                            # the triangle's bounding box first: most listed triangles are farther
+                            bx = _gap(px, B[f, 0], B[f, 3])
+                            by = _gap(py, B[f, 1], B[f, 4])
+                            bz = _gap(pz, B[f, 2], B[f, 5])
+                            if bx * bx + by * by + bz * bz > lim2:
+                                continue
+                            d2 = closest_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
                             if d2 < bd2 or (d2 == bd2 and f < bf):
                                 bf, bd2 = f, d2
+                                lim2 = (np.sqrt(bd2) + slack) ** 2
             # every box point this close to p' has been seen (less a margin for rounding)
             reach = r * h + wall - 1e-6 * h
             if bf >= 0 and reach > 0 and bd2 < reach * reach:  # strict: none as close lies further out
@@ -188,14 +219,16 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np
             break
         h *= 1.25
     start, faces = _build(X, G, lo, h, dims)
+    T = X[G]  # (j,3,3): each triangle's bounding box, (min xyz, max xyz)
+    B = np.ascontiguousarray(np.concatenate([T.min(1), T.max(1)], 1))
     blocks = [P[i:i + BLOCK] for i in range(0, len(P), BLOCK)]
     if len(blocks) <= 1:
-        f, d2 = _query(P, X, G, lo, h, dims, start, faces)
+        f, d2 = _query(P, X, G, B, lo, h, dims, start, faces)
         return f, np.sqrt(d2)
     # blocks of points on threads (the loop releases the GIL); each point's answer is its own: any split
     # gives the same bits
     with ThreadPoolExecutor(max_workers=min(len(blocks), _threads())) as pool:
-        parts = list(pool.map(lambda b: _query(b, X, G, lo, h, dims, start, faces), blocks))
+        parts = list(pool.map(lambda b: _query(b, X, G, B, lo, h, dims, start, faces), blocks))
     return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
 
 
