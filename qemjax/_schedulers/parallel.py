@@ -238,9 +238,11 @@ class _Run:
         self.compiled = round_jit.fits(self.manifold, self.incremental, wedges, locks)
         if self.compiled:
             self.N0 = np.ascontiguousarray(N0, DTYPE)
+            # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
+            self.V3 = np.ascontiguousarray(self.VQ[:, :3])
             self.flip_limits = (np.float32(options.cos_max), np.float32(SLIVER))
             self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
-            self.mark = np.zeros(self.n, np.int64)  # scratch of `round_jit.select_validate`
+            self.mark = np.zeros(self.n, np.int32)  # scratch of `round_jit.select_validate`
             self._rows = self._verts = None  # more of it (`scratch`)
         self.faces = lists.result()
         self.timer = Timer()
@@ -411,7 +413,7 @@ class _Run:
         acc, apex, bad, why = round_jit.select_validate(
             st.E, st.ecount, cand, np.ascontiguousarray(st.key, DTYPE).view(np.int32), local,
             (self.rounds * 7919) & 0xFFFFFFFF, vcopy, needs, sch.max_passes, float(sch.pass_yield),
-            bool(self.options.keep_parts), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, self.VQ,
+            bool(self.options.keep_parts), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, self.V3,
             self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, *self.scratch(len(st.E)))
         return acc, bad, why, None, ~free, apex
 
@@ -499,6 +501,8 @@ class _Run:
             self.extra_pairs = ep[ep[:, 0] != ep[:, 1]]
         rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
         put_rows(self.VQ, a, rows)
+        if self.compiled:
+            put_rows(self.V3, a, xs)
         self.VQd = set_rows(self.VQd, a, rows, size=self.merge_chunk)
         if self.model.support == "ring" or self.model.refresh is not None:
             ring = _ring_vertices(faces, a, n)

@@ -131,7 +131,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
                     c1 = u
                 if nf == 2 and deg[u] <= 3:
                     bad_apex = True
-    for i in range(ka):  # the marks of a's neighbours, undone (stamps are reused per pass)
+    for i in range(ka):  # the marks of a's neighbours, undone
         mark[nb[i]] = 0
     apex[s, 0], apex[s, 1] = c0, c1
     linked = nf >= 1 and nf <= 2 and ncommon == nf and not (bvert[a] and bvert[b] and nf == 2) and not bad_apex
@@ -190,8 +190,8 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
     kbits (P,) int32: the float32 bits of each pair's ranking key; local (P,): each pair's index within its
     copy; salt: the round's scramble; vcopy (n,): each vertex's copy, need (C,): each copy's face budget;
-    the faces (`FaceLists` arrays), positions VQ and reference normals N0, the pairs' placements X (P,3),
-    boundary vertices and degrees; free, active (n,) bool and mark (n,) int64 zeros: scratch (free comes
+    the faces (`FaceLists` arrays), positions VQ (n, ≥3) and reference normals N0, the pairs' placements X (P,3),
+    boundary vertices and degrees; free, active (n,) bool and mark (n,) int32 zeros: scratch (free comes
     back with the locked vertices False); rows (3, ≥ P) and verts (2, n) int64: working arrays, kept from
     round to round (fresh arrays this large would be mapped and faulted in anew on every call).
     Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices and their
@@ -233,7 +233,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     nb = np.empty(64, np.int64)
     fa = np.empty((64, 2), np.int64)
     na = nr = 0
-    stamp = 0
+    stamp = 1  # a's neighbours: 1, common ones 2 (reset after each pair); locked endpoints: -1
     for p in range(max_passes):
         # each available vertex's smallest key among its pairs (m1), then among its neighbours' (m2)
         live_any = False
@@ -279,7 +279,6 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
             if 2 * (cnt[a] + cnt[b]) > len(fa):  # room for the faces of the busiest pair so far
                 nb = np.empty(4 * (cnt[a] + cnt[b]), np.int64)
                 fa = np.empty((4 * (cnt[a] + cnt[b]), 2), np.int64)
-            stamp += 2
             w = _rules(a, b, nf, X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
                        mark, stamp, nb, fa, apex, na)
             c = vcopy[a]
