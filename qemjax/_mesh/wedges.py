@@ -347,12 +347,16 @@ class Tracker:
 
     def contract(self, faces, VQ, a: int, b: int, x) -> None:
         """Update the corners for contracting b into a at x (before the faces are relinked)."""
-        self.contract_many(faces, VQ, np.array([[a, b]], np.int64), np.asarray(x).reshape(1, 3), one=True)
+        self._contract(faces, VQ, np.array([[a, b]], np.int64), np.asarray(x).reshape(1, 3), one=True)
 
-    def contract_many(self, faces, VQ, P, X, one: bool = False) -> None:
+    def contract_many(self, faces, VQ, P, X) -> None:
         """`contract` for vertex-disjoint pairs P (K,2) at X (K,3) (a round's: 1-rings apart). Pairs of
         single-wedge vertices (most of them: every pair away from seams) first, together, then the others
-        one by one (``one``: every pair by `contract`'s rule)."""
+        one by one."""
+        self._contract(faces, VQ, P, X, one=False)
+
+    def _contract(self, faces, VQ, P, X, one: bool) -> None:
+        """`contract` (``one``: the single pair P[0]) or `contract_many`."""
         P, X = np.asarray(P), np.asarray(X)
         if len(P) == 0:
             return
