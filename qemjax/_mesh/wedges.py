@@ -130,8 +130,17 @@ def from_trimesh(obj, report: dict | None = None) -> tuple[dict, object]:
 # What attributes='auto' keeps (measured: `python experiments/attribute_defaults.py`, README "Appearance
 # attributes"): each kind whose values are continuous over the welded mesh. A kind with seams (UV chart
 # borders, colour discontinuities, hard normal edges) holds its seam vertices in place, which cost up to
-# 2.1x the geometric rms and 3-15x the time of attributes=None there: it is kept only when asked for.
-AUTO_RULE = "kinds without seams"
+# 2.1x the geometric rms of attributes=None there: it is kept only when asked for, except UVs whose file
+# names a texture image (or given texture=): a texture without its UVs is lost, and keeping them costs
+# 1.4x the time (`python experiments/texture_cost.py`, spot at 10 %; 5.9x before the seam rule was compiled).
+AUTO_RULE = "kinds without seams, and UVs with a texture image"
+
+
+def names_texture(material) -> bool:
+    """Whether a material (not trimesh's placeholder) carries a texture image: an OBJ's ``map_Kd``, a glTF
+    base colour texture."""
+    return material is not None and (getattr(material, "image", None) is not None
+                                     or getattr(material, "baseColorTexture", None) is not None)
 DROPPED_NAME = {"uv": "uv", "color": "vertex_colors", "normal": "normals"}
 
 
