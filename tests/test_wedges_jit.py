@@ -166,3 +166,38 @@ def test_broken_seam_rule_is_an_error():
     seam = E[tr.multi[E[:, 0]] & tr.multi[E[:, 1]]][0]
     with pytest.raises(AssertionError, match="seam rule broken"):
         tr.contract(faces, VQ, int(seam[0]), int(seam[1]), 0.5 * (VQ[seam[0], :3] + VQ[seam[1], :3]) + 1)
+
+
+@pytest.mark.parametrize("n,m", [(4, 2), (4, 9), (3, 1), (5, 3)])
+def test_compiled_solve_matches_fixed_order(n, m):
+    """`fixed_order_jit.solve` gives `fixed_order.solve`'s bits: random, near-singular, singular and NaN
+    systems, pivots that tie."""
+    from qemjax._mesh import fixed_order, fixed_order_jit
+
+    rng = np.random.default_rng(n * 10 + m)
+    M = rng.normal(size=(400, n, n)) * 10.0 ** rng.integers(-4, 4, size=(400, 1, 1))
+    M[:40, :, 0] = M[:40, :, 1]  # singular
+    M[40:80, 1] = M[40:80, 0] * (1 + 1e-15)  # nearly so
+    M[80:120] = np.round(M[80:120])  # ties among pivots
+    M[120:130, 0, 0] = np.nan
+    M[130:140, 2, 0] = np.nan
+    rhs = rng.normal(size=(400, n, m))
+    with np.errstate(all="ignore"):
+        X0, d0 = fixed_order.solve(M, rhs)
+    X1, d1 = fixed_order_jit.solve(M, rhs)
+    assert same_bits(X0, X1) and same_bits(d0, d1)
+
+
+def test_face_fields_unchanged_by_the_compiled_solve(monkeypatch):
+    """`attributes.face_fields` with the compiled solve: the bits of the numpy solve's fields."""
+    from qemjax._mesh import fixed_order
+
+    rng = np.random.default_rng(3)
+    V, F = shapes.bumpy_sphere(2)
+    P = np.asarray(V, np.float64)[F]
+    P[:5, 2] = P[:5, 1]  # degenerate faces: the corners' mean
+    S = rng.normal(size=(len(F), 3, 2))
+    g, d = at.face_fields(P, S)
+    monkeypatch.setattr(at.fixed_order_jit, "solve", fixed_order.solve)  # the numpy solve in its place
+    g0, d0 = at.face_fields(P, S)
+    assert same_bits(g, g0) and same_bits(d, d0)
