@@ -31,19 +31,19 @@ def random_rows(rng, n, m, zero_alpha=0.2):
 def test_host_solves_match_numpy_bit_for_bit(m):
     rng = np.random.default_rng(m)
     VQ = random_rows(rng, 64, m)
-    s = np.empty(m)
+    s, W = np.empty(m), np.empty((3, m))
     for _ in range(300):
         a, b = rng.integers(0, len(VQ), 2)
         x = rng.normal(size=3) if rng.random() < 0.5 else VQ[rng.choice([a, b]), :3].astype(np.float64)
         cost, want = at.solve_host(VQ[a], VQ[b], x, m)
-        got = wj.solve_host(VQ, a, b, x[0], x[1], x[2], m, s)
+        got = wj.solve_host(VQ, a, b, x[0], x[1], x[2], m, s, W)
         assert same_bits(got, cost) and same_bits(s, want)
         wj.optimal_attributes(VQ, a, b, x[0], x[1], x[2], m, s)
         assert same_bits(s, at.optimal_attributes(VQ[[a]], VQ[[b]], x[None], m)[0])
         assert same_bits(wj.quadric(VQ, a, x[0], x[1], x[2]), _quadric(VQ[a], x))
         v = rng.choice([a, b])
-        assert same_bits(wj.cost_at(VQ, a, b, v, -1), _quadric(VQ[a], VQ[v, :3]) + _quadric(VQ[b], VQ[v, :3]))
-        assert same_bits(wj.cost_at(VQ, a, b, v, m), at.solve_host(VQ[a], VQ[b], VQ[v, :3], m)[0])
+        assert same_bits(wj.cost_at(VQ, a, b, v, -1, W), _quadric(VQ[a], VQ[v, :3]) + _quadric(VQ[b], VQ[v, :3]))
+        assert same_bits(wj.cost_at(VQ, a, b, v, m, W), at.solve_host(VQ[a], VQ[b], VQ[v, :3], m)[0])
 
 
 def test_numpy_conventions():
@@ -52,7 +52,7 @@ def test_numpy_conventions():
     for n in range(0, 40):
         for _ in range(50):
             v = rng.normal(size=n) * 10.0 ** rng.integers(-8, 8, size=n)
-            assert same_bits(wj.numpy_sum(v), np.sum(v))
+            assert same_bits(wj.numpy_sum(np.r_[v, 7.0], n), np.sum(v))
 
     @wj.njit
     def clip(t):
@@ -120,6 +120,9 @@ def test_tracker_matches_the_python_rule(m, solved):
         x = x[rng.integers(0, 4, len(E)), np.arange(len(E))].astype(np.float32)
         cost = rng.random(len(E)).astype(np.float32)
         seen["seam_pairs"] += int((new.multi[E[:, 0]] | new.multi[E[:, 1]]).sum())
+        for a, b in E[rng.choice(len(E), 30)]:  # the rule's answer, as maps
+            assert new.modes(faces, int(a), int(b)) == ref.modes(faces, int(a), int(b))
+            assert np.array_equal(new.multi, ref.multi)
         xn, cn, xr, cr = x.copy(), cost.copy(), x.copy(), cost.copy()
         bad = new.constrain(faces, VQ, E, xn, cn)
         assert np.array_equal(bad, ref.constrain(faces, VQ, E, xr, cr))

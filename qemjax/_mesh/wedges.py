@@ -318,16 +318,18 @@ class Tracker:
     # -- per pair -------------------------------------------------------------------------------------
     def _corners(self, faces, v):
         """(live faces at v, their rows, v's corner in each, its wedge there)."""
-        f, k, w = wedges_jit.corners(*self._lists(faces), self.C, int(v))
-        return f, faces.F[f], k, w
+        f, k, w = (np.empty(int(faces.cnt[v]), np.int64) for _ in range(3))
+        j = wedges_jit.corners(*self._lists(faces), self.C, int(v), f, k, w)
+        return f[:j], faces.F[f[:j]], k[:j], w[:j]
 
     def modes(self, faces, a: int, b: int):
         """(free, map b->a or None, map a->b or None): free when both have one wedge; a map when keeping
         that endpoint is allowed (every wedge of the other maps one to one through the shared faces)."""
-        free, kba, vba, nba, kab, vab, nab = wedges_jit.modes(*self._lists(faces), self.C, self.multi,
-                                                              int(a), int(b))
-        as_map = lambda k, v, n: None if n < 0 else dict(zip(k[:n].tolist(), v[:n].tolist()))  # noqa: E731
-        return bool(free), as_map(kba, vba, nba), as_map(kab, vab, nab)
+        T, _ = wedges_jit.scratch(np.array([[a, b]], np.int64), faces.cnt, 0)
+        free, nba, nab, _, _ = wedges_jit.modes(*self._lists(faces), self.C, self.multi, int(a), int(b), T)
+        J = wedges_jit
+        as_map = lambda k, v, n: None if n < 0 else dict(zip(T[k, :n].tolist(), T[v, :n].tolist()))  # noqa: E731
+        return bool(free), as_map(J.KBA, J.VBA, nba), as_map(J.KAB, J.VAB, nab)
 
     def allowed(self, faces, VQ, a: int, b: int, x) -> bool:
         """The validity rule for contracting b into a at x (module docstring)."""

@@ -12,7 +12,11 @@ values of the translated, summed states) and its batched twin (`optimal_attribut
 parameter of a contraction (`fixed_order.dot`'s left-to-right sum from 0.0 per pair, numpy's elementwise
 sum for the batched pairs) and numpy's ``np.clip``/``np.sum`` conventions. numba contracts no multiply-add,
 so the bits do not depend on the CPU. ``m``: the attribute model's channel count, or -1 (positions only:
-the quadric error; no optimal values)."""
+the quadric error; no optimal values).
+
+Each entry point allocates its scratch once (`scratch`: integer rows for the faces, corners and wedges at
+the two endpoints and the two maps; float rows for the host solve), so the per-pair work allocates
+nothing."""
 from __future__ import annotations
 
 import numpy as np
@@ -24,7 +28,7 @@ _ONE_TO_ONE_FAILS = -1
 
 @njit(cache=True, inline="always")
 def _corner_of(F, f, v):
-    """The first corner of face f holding v (0 if none)."""
+    """The first corner of face f holding v (0 if none, as ``argmax`` gives)."""
     if F[f, 0] == v:
         return 0
     if F[f, 1] == v:
@@ -39,16 +43,28 @@ def _holds(F, f, v):
     return F[f, 0] == v or F[f, 1] == v or F[f, 2] == v
 
 
+# rows of the integer scratch: faces, corners and wedges at a and at b, the wedges of the faces holding
+# both (a's side, b's side), the maps b -> a and a -> b (keys, values)
+FA, KA, WA, FB, KB, WB, SA, SB, KBA, VBA, KAB, VAB = range(12)
+
+
 @njit(cache=True)
-def corners(F, alive, cnt, off, pool, C, v):
-    """(faces, corner, wedge) of the live faces at v, in list order (`FaceLists.around`); corner: the
-    first of the face's corners holding v (0 if none, as ``argmax`` gives)."""
-    s, n = off[v], cnt[v]
-    f = np.empty(n, np.int64)
-    k = np.empty(n, np.int64)
-    w = np.empty(n, np.int64)
+def scratch(P, cnt, width):
+    """(integer scratch (12, the longest face list at P's endpoints), float scratch (4, width))."""
+    cap = 1
+    for i in range(len(P)):
+        for e in range(2):
+            if cnt[P[i, e]] > cap:
+                cap = cnt[P[i, e]]
+    return np.empty((12, cap), np.int64), np.empty((4, max(width, 1)))
+
+
+@njit(cache=True)
+def corners(F, alive, cnt, off, pool, C, v, f, k, w):
+    """The live faces at v, in list order (`FaceLists.around`), into f; v's corner in each into k, its
+    wedge into w. Returns their number."""
     j = 0
-    for i in range(s, s + n):
+    for i in range(off[v], off[v] + cnt[v]):
         fi = pool[i]
         if alive[fi]:
             c = _corner_of(F, fi, v)
@@ -56,14 +72,14 @@ def corners(F, alive, cnt, off, pool, C, v):
             k[j] = c
             w[j] = C[fi, c]
             j += 1
-    return f[:j], k[:j], w[:j]
+    return j
 
 
 @njit(cache=True)
-def distinct(w):
-    """(how many distinct values w holds, the smallest; -1 when empty)."""
+def distinct(w, n):
+    """(how many distinct values w[:n] holds, the smallest; -1 when none)."""
     count, low = 0, -1
-    for i in range(len(w)):
+    for i in range(n):
         new = True
         for j in range(i):
             if w[j] == w[i]:
@@ -77,19 +93,17 @@ def distinct(w):
 
 
 @njit(cache=True)
-def one_to_one(src, dst, need):
-    """`wedges._one_to_one`: (keys, values, count) of the map src -> dst when it is a function, one to one
-    and covers every value of ``need``; count -1 otherwise."""
-    keys = np.empty(len(src), np.int64)
-    vals = np.empty(len(src), np.int64)
+def one_to_one(src, dst, ns, need, nn, keys, vals):
+    """`wedges._one_to_one`: the map src[:ns] -> dst[:ns] into keys, vals when it is a function, one to
+    one and covers every value of need[:nn]; returns its size, or -1 otherwise."""
     n = 0
-    for i in range(len(src)):
+    for i in range(ns):
         found = False
         for j in range(n):
             if keys[j] == src[i]:
                 found = True
                 if vals[j] != dst[i]:
-                    return keys, vals, _ONE_TO_ONE_FAILS
+                    return _ONE_TO_ONE_FAILS
                 break
         if not found:
             keys[n] = src[i]
@@ -98,16 +112,16 @@ def one_to_one(src, dst, need):
     for i in range(n):
         for j in range(i):
             if vals[i] == vals[j]:
-                return keys, vals, _ONE_TO_ONE_FAILS
-    for i in range(len(need)):
+                return _ONE_TO_ONE_FAILS
+    for i in range(nn):
         found = False
         for j in range(n):
             if keys[j] == need[i]:
                 found = True
                 break
         if not found:
-            return keys, vals, _ONE_TO_ONE_FAILS
-    return keys, vals, n
+            return _ONE_TO_ONE_FAILS
+    return n
 
 
 @njit(cache=True)
@@ -119,31 +133,28 @@ def lookup(keys, vals, n, key):
 
 
 @njit(cache=True)
-def modes(F, alive, cnt, off, pool, C, multi, a, b):
-    """`wedges.Tracker.modes`: (free, (keys, values, count) of the map b -> a, the same of a -> b); count
-    -1: keeping that endpoint is not allowed. Sets multi[a], multi[b] to whether each has two or more
-    wedges now."""
-    fa, ka, wa = corners(F, alive, cnt, off, pool, C, a)
-    fb, kb, wb = corners(F, alive, cnt, off, pool, C, b)
-    na, ua = distinct(wa)
-    nb, ub = distinct(wb)
+def modes(F, alive, cnt, off, pool, C, multi, a, b, T):
+    """`wedges.Tracker.modes`: (free, size of the map b -> a, of a -> b, faces at a, faces at b), the maps
+    in T's rows KBA/VBA and KAB/VAB (size -1: keeping that endpoint is not allowed), the corners in
+    FA..WB. Sets multi[a], multi[b] to whether each has two or more wedges now."""
+    la = corners(F, alive, cnt, off, pool, C, a, T[FA], T[KA], T[WA])
+    lb = corners(F, alive, cnt, off, pool, C, b, T[FB], T[KB], T[WB])
+    na, ua = distinct(T[WA], la)
+    nb, ub = distinct(T[WB], lb)
     multi[a], multi[b] = na > 1, nb > 1
     if na == 1 and nb == 1:
-        k1 = np.array([ub], np.int64)
-        v1 = np.array([ua], np.int64)
-        return True, k1, v1, 1, v1.copy(), k1.copy(), 1
-    sa = np.empty(len(fa), np.int64)
-    sb = np.empty(len(fa), np.int64)
+        T[KBA, 0], T[VBA, 0], T[KAB, 0], T[VAB, 0] = ub, ua, ua, ub
+        return True, 1, 1, la, lb
     s = 0
-    for i in range(len(fa)):
-        f = fa[i]
+    for i in range(la):
+        f = T[FA, i]
         if _holds(F, f, b):
-            sa[s] = wa[i]
-            sb[s] = C[f, _corner_of(F, f, b)]
+            T[SA, s] = T[WA, i]
+            T[SB, s] = C[f, _corner_of(F, f, b)]
             s += 1
-    kba, vba, nba = one_to_one(sb[:s], sa[:s], wb)
-    kab, vab, nab = one_to_one(sa[:s], sb[:s], wa)
-    return False, kba, vba, nba, kab, vab, nab
+    nba = one_to_one(T[SB], T[SA], s, T[WB], lb, T[KBA], T[VBA])
+    nab = one_to_one(T[SA], T[SB], s, T[WA], la, T[KAB], T[VAB])
+    return False, nba, nab, la, lb
 
 
 @njit(cache=True, inline="always")
@@ -170,7 +181,7 @@ def quadric(VQ, r, x0, x1, x2):
 @njit(cache=True)
 def translated(VQ, r, x0, x1, x2, m, D):
     """Row r's attribute state moved to x (`attributes._np_translate`): returns its constant term (state
-    entry 9) and fills D (m,) with the channels' constants (entries 14 + 4j)."""
+    entry 9) and fills D[:m] with the channels' constants (entries 14 + 4j)."""
     d0 = x0 - np.float64(VQ[r, 0])
     d1 = x1 - np.float64(VQ[r, 1])
     d2 = x2 - np.float64(VQ[r, 2])
@@ -188,22 +199,27 @@ def translated(VQ, r, x0, x1, x2, m, D):
 
 
 @njit(cache=True)
-def numpy_sum(v):
-    """``np.sum`` of a short float64 vector as numpy adds it (pairwise: left to right under 8 entries,
-    else eight running sums, up to 128)."""
-    n = len(v)
+def numpy_sum(v, n):
+    """``np.sum(v[:n])`` of a short float64 vector as numpy adds it (pairwise: left to right under 8
+    entries, else eight running sums, up to 128)."""
     if n < 8:
         s = 0.0
         for i in range(n):
             s += v[i]
         return s
-    r = v[:8].copy()
+    r0, r1, r2, r3, r4, r5, r6, r7 = v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7]
     i = 8
     while i < n - n % 8:
-        for j in range(8):
-            r[j] += v[i + j]
+        r0 += v[i]
+        r1 += v[i + 1]
+        r2 += v[i + 2]
+        r3 += v[i + 3]
+        r4 += v[i + 4]
+        r5 += v[i + 5]
+        r6 += v[i + 6]
+        r7 += v[i + 7]
         i += 8
-    s = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    s = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
     while i < n:
         s += v[i]
         i += 1
@@ -211,29 +227,32 @@ def numpy_sum(v):
 
 
 @njit(cache=True)
-def solve_host(VQ, ra, rb, x0, x1, x2, m, s):
-    """`attributes.solve_host` of rows ra, rb at x: returns the reduced cost (≥ 0; NaN stays) and fills s
-    (m,) with the optimal (weighted) attribute values."""
-    Da = np.empty(m)
-    Db = np.empty(m)
+def solve_host(VQ, ra, rb, x0, x1, x2, m, s, W):
+    """`attributes.solve_host` of rows ra, rb at x: returns the reduced cost (≥ 0; NaN stays) and fills
+    s[:m] with the optimal (weighted) attribute values. W: float scratch (2, ≥ m)."""
+    Da, Db = W[0], W[1]
     ca = translated(VQ, ra, x0, x1, x2, m, Da)
     cb = translated(VQ, rb, x0, x1, x2, m, Db)
     alpha = np.float64(VQ[ra, 13]) + np.float64(VQ[rb, 13])
-    G3 = Da + Db
+    for j in range(m):
+        Da[j] = Da[j] + Db[j]  # the summed state's constants G3
+        Db[j] = Da[j] * Da[j]
     if alpha > 0:
         for j in range(m):
-            s[j] = G3[j] / alpha
-        cost = (ca + cb) - numpy_sum(G3 * G3) / alpha
+            s[j] = Da[j] / alpha
+        cost = (ca + cb) - numpy_sum(Db, m) / alpha
     else:
-        s[:] = 0.0
+        for j in range(m):
+            s[j] = 0.0
         cost = (ca + cb) - 0.0
     return _max0(cost)
 
 
 @njit(cache=True)
 def optimal_attributes(VQ, ra, rb, x0, x1, x2, m, s):
-    """`attributes.optimal_attributes` for one pair: s (m,) = Σ (D_j + G_j·(x − p)) / Σ α (0 where α ≤ 0)."""
-    num = np.zeros(m)
+    """`attributes.optimal_attributes` for one pair: s[:m] = Σ (D_j + G_j·(x − p)) / Σ α (0 where α ≤ 0)."""
+    for j in range(m):
+        s[j] = 0.0
     alpha = 0.0
     for r in (ra, rb):
         d0 = x0 - np.float64(VQ[r, 0])
@@ -241,21 +260,20 @@ def optimal_attributes(VQ, ra, rb, x0, x1, x2, m, s):
         d2 = x2 - np.float64(VQ[r, 2])
         for j in range(m):
             g = 14 + 4 * j
-            num[j] += np.float64(VQ[r, g + 3]) + (np.float64(VQ[r, g]) * d0 + np.float64(VQ[r, g + 1]) * d1
-                                                  + np.float64(VQ[r, g + 2]) * d2)
+            s[j] += np.float64(VQ[r, g + 3]) + (np.float64(VQ[r, g]) * d0 + np.float64(VQ[r, g + 1]) * d1
+                                                + np.float64(VQ[r, g + 2]) * d2)
         alpha += np.float64(VQ[r, 13])
     for j in range(m):
-        s[j] = num[j] / alpha if alpha > 0 else 0.0
+        s[j] = s[j] / alpha if alpha > 0 else 0.0
 
 
 @njit(cache=True)
-def cost_at(VQ, a, b, v, m):
+def cost_at(VQ, a, b, v, m, W):
     """The Tracker's price of contracting pair (a, b) onto vertex v's position: the attribute model's
-    reduced cost (m ≥ 0), else the sum of the two quadric errors."""
+    reduced cost (m ≥ 0), else the sum of the two quadric errors. W: float scratch (3, ≥ m)."""
     x0, x1, x2 = np.float64(VQ[v, 0]), np.float64(VQ[v, 1]), np.float64(VQ[v, 2])
     if m >= 0:
-        s = np.empty(m)
-        return solve_host(VQ, a, b, x0, x1, x2, m, s)
+        return solve_host(VQ, a, b, x0, x1, x2, m, W[2], W)
     return quadric(VQ, a, x0, x1, x2) + quadric(VQ, b, x0, x1, x2)
 
 
@@ -265,6 +283,7 @@ def constrain(F, alive, cnt, off, pool, C, multi, VQ, P, x, cost, m):
     x (K,3) and cost (K,) at the allowed endpoint of smaller price (a first among equals). Returns (K,)
     bool: pairs with no allowed placement."""
     K = len(P)
+    T, W = scratch(P, cnt, m)
     seam = np.empty(K, np.bool_)
     for i in range(K):
         seam[i] = multi[P[i, 0]] or multi[P[i, 1]]
@@ -273,14 +292,14 @@ def constrain(F, alive, cnt, off, pool, C, multi, VQ, P, x, cost, m):
         if not seam[i]:
             continue
         a, b = P[i, 0], P[i, 1]
-        free, _, _, nba, _, _, nab = modes(F, alive, cnt, off, pool, C, multi, a, b)
+        free, nba, nab, _, _ = modes(F, alive, cnt, off, pool, C, multi, a, b, T)
         if free:
             continue
         best, best_v = 0.0, -1
         if nba >= 0:
-            best, best_v = cost_at(VQ, a, b, a, m), a
+            best, best_v = cost_at(VQ, a, b, a, m, W), a
         if nab >= 0:
-            c = cost_at(VQ, a, b, b, m)
+            c = cost_at(VQ, a, b, b, m, W)
             if best_v < 0 or c < best:
                 best, best_v = c, b
         if best_v < 0:
@@ -303,6 +322,7 @@ def refused(F, alive, cnt, off, pool, C, multi, VQ, P, X, check):
     """`wedges.Tracker.allowed` for each pair of P (K,2) at X (K,3) (VQ's dtype) where ``check`` (K,) and
     a flag (read before the loop) marks a seam endpoint, in order. Returns (K,) bool: refused."""
     K = len(P)
+    T, _ = scratch(P, cnt, 0)
     seam = np.empty(K, np.bool_)
     for i in range(K):
         seam[i] = multi[P[i, 0]] or multi[P[i, 1]]
@@ -313,7 +333,7 @@ def refused(F, alive, cnt, off, pool, C, multi, VQ, P, X, check):
         a, b = P[i, 0], P[i, 1]
         if not (multi[a] or multi[b]):
             continue
-        free, _, _, nba, _, _, nab = modes(F, alive, cnt, off, pool, C, multi, a, b)
+        free, nba, nab, _, _ = modes(F, alive, cnt, off, pool, C, multi, a, b, T)
         if free:
             continue
         out[i] = not ((nba >= 0 and _at(VQ, a, X[i])) or (nab >= 0 and _at(VQ, b, X[i])))
@@ -331,20 +351,19 @@ def _clip01(t):
 
 
 @njit(cache=True)
-def _interpolate(VQ, val, a, b, wa, wb, t, x0, x1, x2, m, solved, weights, batched):
+def _interpolate(VQ, val, a, b, wa, wb, t, x0, x1, x2, m, solved, weights, batched, W):
     """The kept wedge wa's new value: (1 − t)·val[wa] + t·val[wb], and for the solved channels the
     attribute model's optimum at x over the channel weights (``batched``: `optimal_attributes`' form,
-    else `solve_host`'s)."""
+    else `solve_host`'s). W: float scratch (4, ≥ the channels)."""
     k = val.shape[1]
-    out = np.empty(k)
+    out, s = W[3], W[2]
     for c in range(k):
         out[c] = (1.0 - t) * val[wa, c] + t * val[wb, c]
     if m >= 0:
-        s = np.empty(m)
         if batched:
             optimal_attributes(VQ, a, b, x0, x1, x2, m, s)
         else:
-            solve_host(VQ, a, b, x0, x1, x2, m, s)
+            solve_host(VQ, a, b, x0, x1, x2, m, s, W)
         for c in range(k):
             if solved[c]:
                 out[c] = s[c] / weights[c]
@@ -353,25 +372,24 @@ def _interpolate(VQ, val, a, b, wa, wb, t, x0, x1, x2, m, solved, weights, batch
 
 
 @njit(cache=True)
-def contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights):
+def _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights, T, W):
     """`wedges.Tracker.contract`: the corners (and values) for contracting b into a at x64 (float64; x:
     the same in VQ's dtype). Returns False where the seam rule does not allow it (nothing changed)."""
-    fb, kb, wb = corners(F, alive, cnt, off, pool, C, b)
+    lb = corners(F, alive, cnt, off, pool, C, b, T[FB], T[KB], T[WB])
     first = -1
-    for j in range(len(fb)):
-        if _holds(F, fb[j], a):
+    for j in range(lb):
+        if _holds(F, T[FB, j], a):
             first = j
             break
     wa = wbv = -1
-    kba = vba = kab = vab = np.empty(0, np.int64)
-    nba = nab = _ONE_TO_ONE_FAILS
+    nba = nab = la = _ONE_TO_ONE_FAILS
     if not (multi[a] or multi[b]) and first >= 0:  # single wedges: a's from a shared face
         free = True
-        wa, wbv = C[fb[first], _corner_of(F, fb[first], a)], wb[0]
+        wa, wbv = C[T[FB, first], _corner_of(F, T[FB, first], a)], T[WB, 0]
     else:
-        free, kba, vba, nba, kab, vab, nab = modes(F, alive, cnt, off, pool, C, multi, a, b)
+        free, nba, nab, la, lb = modes(F, alive, cnt, off, pool, C, multi, a, b, T)
         if free:
-            wa, wbv = kab[0], vab[0]
+            wa, wbv = T[KAB, 0], T[VAB, 0]
     if free:
         pa0, pa1, pa2 = np.float64(VQ[a, 0]), np.float64(VQ[a, 1]), np.float64(VQ[a, 2])
         d0 = np.float64(VQ[b, 0]) - pa0
@@ -387,17 +405,16 @@ def contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solve
         dd += d1 * d1
         dd += d2 * d2
         t = _clip01(ud / (1e-300 if 1e-300 > dd else dd))
-        _interpolate(VQ, val, a, b, wa, wbv, t, x64[0], x64[1], x64[2], m, solved, weights, False)
-        for j in range(len(fb)):
-            C[fb[j], kb[j]] = wa
+        _interpolate(VQ, val, a, b, wa, wbv, t, x64[0], x64[1], x64[2], m, solved, weights, False, W)
+        for j in range(lb):
+            C[T[FB, j], T[KB, j]] = wa
         return True
     if nba >= 0 and _at(VQ, a, x):
-        for j in range(len(fb)):
-            C[fb[j], kb[j]] = lookup(kba, vba, nba, wb[j])
+        for j in range(lb):
+            C[T[FB, j], T[KB, j]] = lookup(T[KBA], T[VBA], nba, T[WB, j])
     elif nab >= 0 and _at(VQ, b, x):
-        fa, ka, wa_ = corners(F, alive, cnt, off, pool, C, a)
-        for j in range(len(fa)):
-            C[fa[j], ka[j]] = lookup(kab, vab, nab, wa_[j])
+        for j in range(la):
+            C[T[FA, j], T[KA, j]] = lookup(T[KAB], T[VAB], nab, T[WA, j])
     else:
         return False
     multi[a] = True  # conservative: the exact test decides
@@ -409,8 +426,10 @@ def contract_many(F, alive, cnt, off, pool, C, val, multi, VQ, P, X64, X, m, sol
     """`wedges.Tracker.contract_many` for vertex-disjoint pairs P (K,2) at X64 (K,3) float64 (X: the same
     in VQ's dtype): first the pairs of single-wedge vertices with live faces at both ends, in order (a's
     first face's wedge takes the value at the placement's projection, every corner of b names it), then
-    the others one by one (`contract`). Returns the first pair the seam rule refuses, or -1."""
+    the others one by one (`Tracker.contract`'s rule). Returns the first pair the seam rule refuses, or
+    -1."""
     K = len(P)
+    T, W = scratch(P, cnt, max(m, val.shape[1]))
     free = np.empty(K, np.bool_)
     for i in range(K):
         free[i] = not (multi[P[i, 0]] or multi[P[i, 1]])
@@ -418,9 +437,9 @@ def contract_many(F, alive, cnt, off, pool, C, val, multi, VQ, P, X64, X, m, sol
         if not free[i]:
             continue
         a, b = P[i, 0], P[i, 1]
-        fa, ka, wa = corners(F, alive, cnt, off, pool, C, a)
-        fb, kb, wb = corners(F, alive, cnt, off, pool, C, b)
-        if len(fa) == 0 or len(fb) == 0:
+        la = corners(F, alive, cnt, off, pool, C, a, T[FA], T[KA], T[WA])
+        lb = corners(F, alive, cnt, off, pool, C, b, T[FB], T[KB], T[WB])
+        if la == 0 or lb == 0:
             free[i] = False  # left to `contract`
             continue
         pa0, pa1, pa2 = np.float64(VQ[a, 0]), np.float64(VQ[a, 1]), np.float64(VQ[a, 2])
@@ -431,12 +450,23 @@ def contract_many(F, alive, cnt, off, pool, C, val, multi, VQ, P, X64, X, m, sol
         dd = d0 * d0 + d1 * d1 + d2 * d2  # numpy's elementwise sums
         ud = u0 * d0 + u1 * d1 + u2 * d2
         t = _clip01(ud / (dd if dd >= 1e-300 or dd != dd else 1e-300))
-        _interpolate(VQ, val, a, b, wa[0], wb[0], t, X64[i, 0], X64[i, 1], X64[i, 2], m, solved, weights, True)
-        for j in range(len(fb)):
-            C[fb[j], kb[j]] = wa[0]
+        wa = T[WA, 0]
+        _interpolate(VQ, val, a, b, wa, T[WB, 0], t, X64[i, 0], X64[i, 1], X64[i, 2], m, solved, weights, True, W)
+        for j in range(lb):
+            C[T[FB, j], T[KB, j]] = wa
     for i in range(K):
         if not free[i]:
-            if not contract(F, alive, cnt, off, pool, C, val, multi, VQ, P[i, 0], P[i, 1], X64[i], X[i], m,
-                            solved, weights):
+            if not _contract(F, alive, cnt, off, pool, C, val, multi, VQ, P[i, 0], P[i, 1], X64[i], X[i], m,
+                             solved, weights, T, W):
                 return i
     return -1
+
+
+@njit(cache=True)
+def contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights):
+    """`wedges.Tracker.contract` for one pair (b into a at x64, float64; x: the same in VQ's dtype).
+    Returns False where the seam rule does not allow it (nothing changed)."""
+    P = np.empty((1, 2), np.int64)
+    P[0, 0], P[0, 1] = a, b
+    T, W = scratch(P, cnt, max(m, val.shape[1]))
+    return _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights, T, W)
