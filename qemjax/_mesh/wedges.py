@@ -26,7 +26,6 @@ import warnings
 
 import numpy as np
 
-from . import wedges_jit
 
 KINDS = ("uv", "color", "normal")
 SIZES = {"uv": 2, "color": 4, "normal": 3}
@@ -277,6 +276,13 @@ def load_texture(texture):
     return SimpleMaterial(image=img)
 
 
+def _jit():
+    """The compiled seam rule (`wedges_jit`), imported on first use: loading a mesh does not need numba."""
+    from . import wedges_jit
+
+    return wedges_jit
+
+
 class Tracker:
     """The wedges during a run: C (m,3) wedge per corner of each face row, V (w,k) wedge values.
 
@@ -319,15 +325,15 @@ class Tracker:
     def _corners(self, faces, v):
         """(live faces at v, their rows, v's corner in each, its wedge there)."""
         f, k, w = (np.empty(int(faces.cnt[v]), np.int64) for _ in range(3))
-        j = wedges_jit.corners(*self._lists(faces), self.C, int(v), f, k, w)
+        j = _jit().corners(*self._lists(faces), self.C, int(v), f, k, w)
         return f[:j], faces.F[f[:j]], k[:j], w[:j]
 
     def modes(self, faces, a: int, b: int):
         """(free, map b->a or None, map a->b or None): free when both have one wedge; a map when keeping
         that endpoint is allowed (every wedge of the other maps one to one through the shared faces)."""
-        T, _ = wedges_jit.scratch(np.array([[a, b]], np.int64), faces.cnt, 0)
-        free, nba, nab, _, _ = wedges_jit.modes(*self._lists(faces), self.C, self.multi, int(a), int(b), T)
-        J = wedges_jit
+        J = _jit()
+        T, _ = J.scratch(np.array([[a, b]], np.int64), faces.cnt, 0)
+        free, nba, nab, _, _ = J.modes(*self._lists(faces), self.C, self.multi, int(a), int(b), T)
         as_map = lambda k, v, n: None if n < 0 else dict(zip(T[k, :n].tolist(), T[v, :n].tolist()))  # noqa: E731
         return bool(free), as_map(J.KBA, J.VBA, nba), as_map(J.KAB, J.VAB, nab)
 
@@ -345,7 +351,7 @@ class Tracker:
         P = np.asarray(P)
         if len(P) == 0:
             return np.zeros(0, bool)
-        return wedges_jit.refused(*self._lists(faces), self.C, self.multi, VQ, P,
+        return _jit().refused(*self._lists(faces), self.C, self.multi, VQ, P,
                                   np.asarray(X, VQ.dtype).reshape(-1, 3), np.asarray(check, bool))
 
     def constrain(self, faces, VQ, P: np.ndarray, x: np.ndarray, cost: np.ndarray) -> np.ndarray:
@@ -354,7 +360,7 @@ class Tracker:
         P = np.asarray(P)
         if len(P) == 0:
             return np.zeros(0, bool)
-        return wedges_jit.constrain(*self._lists(faces), self.C, self.multi, VQ, P, x, cost, self.m)
+        return _jit().constrain(*self._lists(faces), self.C, self.multi, VQ, P, x, cost, self.m)
 
     def contract(self, faces, VQ, a: int, b: int, x) -> None:
         """Update the corners for contracting b into a at x (before the faces are relinked)."""
@@ -374,11 +380,11 @@ class Tracker:
         args = (*self._lists(faces), self.C, self.val, self.multi, VQ)
         X64, Xv = np.asarray(X, np.float64), np.asarray(X, VQ.dtype)
         if one:
-            ok = wedges_jit.contract(*args, int(P[0, 0]), int(P[0, 1]), X64[0], Xv[0], self.m_solved,
+            ok = _jit().contract(*args, int(P[0, 0]), int(P[0, 1]), X64[0], Xv[0], self.m_solved,
                                      self.solved, self.weights)
             i = -1 if ok else 0
         else:
-            i = wedges_jit.contract_many(*args, P, X64, Xv, self.m_solved, self.solved, self.weights)
+            i = _jit().contract_many(*args, P, X64, Xv, self.m_solved, self.solved, self.weights)
         if i >= 0:
             raise AssertionError(f"seam rule broken for pair ({int(P[i, 0])}, {int(P[i, 1])})")
 
