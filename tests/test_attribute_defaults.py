@@ -164,6 +164,9 @@ def test_uv_seams_are_kept_when_the_file_names_a_texture(tmp_path):
     assert np.array_equal(res.faces, asked.faces) and np.array_equal(res.uv, asked.uv)
     none, warned_none = run(path, ratio=0.2, attributes=None)
     assert none.uv is None and any("uv" in w for w in warned_none)
+    res.to_trimesh().export(tmp_path / "uv.glb")  # a glTF base colour texture counts too
+    glb, warned_glb = run(tmp_path / "uv.glb", ratio=0.5)
+    assert glb.uv is not None and glb.material is not None and not warned_glb, warned_glb
 
 
 def test_smooth_colours_are_kept(tmp_path):

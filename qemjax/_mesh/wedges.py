@@ -131,7 +131,7 @@ def from_trimesh(obj, report: dict | None = None) -> tuple[dict, object]:
 # borders, colour discontinuities, hard normal edges) holds its seam vertices in place, which cost up to
 # 2.1x the geometric rms of attributes=None there: it is kept only when asked for, except UVs whose file
 # names a texture image (or given texture=): a texture without its UVs is lost, and keeping them costs
-# 1.4x the time (`python experiments/texture_cost.py`, spot at 10 %; 5.9x before the seam rule was compiled).
+# 1.3x the time (`python experiments/texture_cost.py`, spot at 10 %; 5.4x before the seam rule was compiled).
 AUTO_RULE = "kinds without seams, and UVs with a texture image"
 
 
