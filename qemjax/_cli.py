@@ -57,7 +57,8 @@ OPTIONS = {
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),
     "attributes": dict(metavar="KINDS", help="appearance attributes to keep, seams held: 'auto' "
-                       "(the kinds the input carries without seams; UVs too with --texture), 'none', or a comma "
+                       "(the kinds the input carries without seams; UVs too when the file names a texture image or "
+                       "with --texture), 'none', or a comma "
                        "list of uv, color, normal"),
     "attribute_weights": dict(metavar="W", help="weight of the attributes in the cost: one number, "
                               "or kind=W pairs separated by commas (uv=0.1,color=0.03); 0: positions-only cost, "

@@ -117,7 +117,8 @@ class Attributes:
     """Which appearance attributes a run carries through, and how they weigh (``simplify(attributes=...)``;
     docs/attributes.md).
 
-    ``attributes``: ``'auto'`` (each kind the input carries without seams; a seamed kind only when named),
+    ``attributes``: ``'auto'`` (each kind the input carries without seams, and UVs with seams when the material names a
+        texture image or ``texture`` is given; another seamed kind only when named),
         ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, or None (positions only).
     ``attribute_weights``: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
         (``qemjax._mesh.wedges.DEFAULT_WEIGHTS``).

@@ -137,6 +137,38 @@ def test_uv_seams_are_kept_when_a_texture_is_given(tmp_path):
     assert res.uv is not None and res.material is not None
 
 
+def _with_texture(path, image):
+    """Make the OBJ at path name ``image`` as its texture (an mtllib with map_Kd, the faces using it)."""
+    from PIL import Image
+    Image.new("RGB", (8, 8), (200, 30, 30)).save(path.parent / image)
+    (path.parent / "tex.mtl").write_text(f"newmtl tex\nKd 1 1 1\nmap_Kd {image}\n")
+    path.write_text("mtllib tex.mtl\nusemtl tex\n" + path.read_text())
+
+
+def test_uv_seams_are_kept_when_the_file_names_a_texture(tmp_path):
+    """A file whose material names a texture image keeps its UVs and the texture by default, seams and
+    all, without a warning; the same file without the image leaves them out (with the warning)."""
+    mesh = shapes.bumpy_sphere(3)
+    uv, cuv = af.spherical_uv(mesh)
+    path = tmp_path / "uv.obj"
+    af.write_obj(path, mesh, uv=uv, corner_uv=cuv)
+    plain, warned_plain = run(path, ratio=0.2)
+    assert plain.uv is None and any("attributes='uv'" in w for w in warned_plain)
+    _with_texture(path, "t.png")
+    res, warned = run(path, ratio=0.2)
+    assert not warned, warned
+    assert res.uv is not None and res.material is not None and res.stats["dropped"] == []
+    assert res.stats["attributes"] == ["uv"] and res.stats["seam_vertices_in"] > 0
+    assert np.asarray(res.material.image).shape[:2] == (8, 8)
+    asked, _ = run(path, ratio=0.2, attributes="uv")  # the same run as asking for them by name
+    assert np.array_equal(res.faces, asked.faces) and np.array_equal(res.uv, asked.uv)
+    none, warned_none = run(path, ratio=0.2, attributes=None)
+    assert none.uv is None and any("uv" in w for w in warned_none)
+    res.to_trimesh().export(tmp_path / "uv.glb")  # a glTF base colour texture counts too
+    glb, warned_glb = run(tmp_path / "uv.glb", ratio=0.5)
+    assert glb.uv is not None and glb.material is not None and not warned_glb, warned_glb
+
+
 def test_smooth_colours_are_kept(tmp_path):
     mesh = shapes.bumpy_sphere(3)
     path = tmp_path / "c.ply"

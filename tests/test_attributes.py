@@ -74,12 +74,15 @@ def test_seam_test_can_fail(monkeypatch):
     """With the seam rule switched off the same run welds charts together: `seam_report` sees it."""
     monkeypatch.setattr(_wedges.Tracker, "constrain", lambda self, faces, VQ, P, x, c: np.zeros(len(P), bool))
     monkeypatch.setattr(_wedges.Tracker, "allowed", lambda self, *a: True)
+    monkeypatch.setattr(_wedges.Tracker, "refused", lambda self, faces, VQ, P, X, check: np.zeros(len(P), bool))
 
     def merge_anyway(self, faces, VQ, a, b, x):  # every b corner takes a's first wedge
         fa, _, _, wa = self._corners(faces, a)
         fb, _, kb, _ = self._corners(faces, b)
         self.C[fb, kb] = wa[0]
     monkeypatch.setattr(_wedges.Tracker, "contract", merge_anyway)
+    monkeypatch.setattr(_wedges.Tracker, "contract_many", lambda self, faces, VQ, P, X: [
+        merge_anyway(self, faces, VQ, a, b, x) for (a, b), x in zip(np.asarray(P).tolist(), X)])
     mesh, _ = atlas_sphere(3)
     r = qemjax.simplify(mesh, ratio=0.1, attributes="uv")
     assert metrics.seam_report(r)["mixed_charts"] > 0

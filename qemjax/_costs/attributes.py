@@ -34,7 +34,6 @@ from .._kernels.lazy import jax, jnp  # imported on first use (`_kernels.lazy`)
 import numpy as np
 
 from .._kernels.batching import DTYPE
-from .._mesh import fixed_order
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 from .base import MeshInput
@@ -132,7 +131,9 @@ def face_fields(P: np.ndarray, S: np.ndarray):
     M[:, :3, :3], M[:, :3, 3], M[:, 3, :3] = P, 1.0, n
     rhs = np.zeros((len(P), 4, S.shape[2]))
     rhs[:, :3] = S
-    X, det = fixed_order.solve(M, rhs)  # not np.linalg: LAPACK's bits differ by CPU
+    from .._mesh import fixed_order_jit  # here: importing the cost models does not need numba
+
+    X, det = fixed_order_jit.solve(M, rhs)  # not np.linalg: LAPACK's bits differ by CPU
     ok = np.abs(det) > 1e-12 * np.maximum(nn[:, 0], 1e-300) ** 1.5
     sol = np.zeros_like(rhs)
     sol[ok] = X[ok]

@@ -305,9 +305,11 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     if weld_vertices:
         V, F, report["welded"], vmap = weld(V, F, with_map=True)
     name = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh"
-    if attributes == "auto" and kept:  # kinds with seams are kept only when asked for (`_wedges.AUTO_RULE`)
+    if attributes == "auto" and kept:  # kinds with seams are kept only when asked for, or UVs with a
+        # texture image (`_wedges.AUTO_RULE`)
+        textured = texture is not None or _wedges.names_texture(material)
         seamed = {k: c for k in kept if (c := _wedges.seam_vertex_count(kept[k], F, F0))
-                  and not (k == "uv" and texture is not None)}
+                  and not (k == "uv" and textured)}
         if seamed:
             kept = {k: v for k, v in kept.items() if k not in seamed}
             extra = ["material"] if "uv" in seamed and material is not None else []

@@ -59,9 +59,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         pairs (``pair_threshold``), the flip angle and welding (None: its defaults).
     attributes: which appearance attributes to carry through (per-corner wedges, seams kept: docs/attributes.md;
         ``qemjax._mesh.wedges``): ``'auto'`` (each kind the input carries without
-        seams: UVs and their material, vertex colours, stored normals, normalised to unit length; a kind
-        with seams, which hold vertices in place, only when asked for by name, or UVs when a texture is
-        given: one warning names them), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, None
+        seams: UVs and their material, vertex colours, stored normals, normalised to unit length; UVs with
+        seams and their texture when the file's material names a texture image or ``texture`` is given;
+        another kind with seams, which hold vertices in place, only when asked for by name: one warning
+        names it), ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, None
         (positions only; what is dropped is named in a warning), or a `qemjax.Attributes` that also sets
         their weights in the cost and the texture. Kept ones come back as ``res.uv`` / ``res.colors`` /
         ``res.normals``; a contraction that would move a seam vertex off its seam or merge wedges of

@@ -453,12 +453,8 @@ class _Run:
             gone_locked = _locks.vanishing(self.locks, P, np.bincount(owner, minlength=len(P))) | \
                 _locks.strands(self.locks, self.faces, P, dead)
             why[(why == 0) & gone_locked] = outcome.LOCKED
-        if self.wedges is not None:
-            xs = _take(st.x, idx)
-            seam = self.wedges.multi.take(P[:, 0]) | self.wedges.multi.take(P[:, 1])
-            for i in np.flatnonzero((why == 0) & seam):  # the others are always allowed
-                if not self.wedges.allowed(self.faces, self.VQ, int(P[i, 0]), int(P[i, 1]), xs[i]):
-                    why[i] = outcome.SEAM
+        if self.wedges is not None:  # the seam rule, for the pairs still valid
+            why[self.wedges.refused(self.faces, self.VQ, P, _take(st.x, idx), why == 0)] = outcome.SEAM
         found.append((idx, kept, dead, at))
         flip = flipped()
         why[(why == 0) & flip] = outcome.FLIP
