@@ -366,3 +366,15 @@ def test_vectorised_wedge_contractions_equal_the_per_pair_ones(monkeypatch, kw):
     for name in ("vertices", "faces", "wedge_faces", "wedge_vertex"):
         assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
     np.testing.assert_allclose(fast.uv, slow.uv, rtol=0, atol=1e-15)
+
+
+def test_skipped_refit_is_named_in_the_summary():
+    """The default re-fits; with UVs kept it cannot (positions would leave their texture behind): stats and
+    the summary say so, and a run without the UVs re-fits."""
+    mesh, _ = atlas_sphere(3)
+    kept = qemjax.simplify(mesh, ratio=0.1, attributes="uv")
+    plain = qemjax.simplify(mesh, ratio=0.1, attributes=None)
+    assert kept.stats["refit"] == 0 and kept.stats["refit_skipped"] == "uv kept"
+    assert "re-fit skipped: uv kept" in kept.summary()
+    assert plain.stats["refit"] == 1 and "refit_skipped" not in plain.stats
+    assert "re-fit skipped" not in plain.summary()

@@ -169,7 +169,8 @@ class SimplifyResult:
         input (``stats["distance_max"]`` and ``["distance_rms"]`` in mesh units, the largest also as a
         percentage of the input's bounding-box diagonal; `_pipeline.measure`), and the largest contraction
         cost named for what it is (``stats["error_unit"]``: a quadric error, a sum of squared distances to
-        planes, for the quadric methods; a surface-area change for ``method="area"``)."""
+        planes, for the quadric methods; a surface-area change for ``method="area"``). A re-fit the method
+        asks for but that did not run (``stats["refit_skipped"]``: UVs kept) is named beside the distance."""
         s = self.stats
         goals = []
         if s.get("target_faces"):
@@ -182,6 +183,8 @@ class SimplifyResult:
             dist = f"distance from the input: max {s['distance_max']:.3g}{of}, rms {s['distance_rms']:.3g} mesh units"
         else:
             dist = "distance from the input: not measured (measure=True measures it)"
+        if s.get("refit_skipped"):  # the method's re-fit did not run: say so where the distance is read
+            dist += f" (re-fit skipped: {s['refit_skipped']}; attributes=None re-fits)"
         return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
                 f"in {s['total_s']:.2f} s (compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
                 f"{s['rounds']} rounds; {dist}; largest contraction cost {self.max_error:.3g} "
