@@ -28,7 +28,8 @@ from numba import njit
 
 PAIRS_PER_FACE = 16  # (triangle, cube) listings per triangle at most, on average
 CUBES_PER_FACE = 32  # cubes per triangle at most (the grid's memory)
-BLOCK = 65_536  # points per query call; several blocks run on threads
+BLOCK = 65_536  # points per query call at most; several blocks run on threads
+MIN_BLOCK = 2_048  # ... and at least this many (a thread's hand-off costs about as much as these)
 
 
 @njit(cache=True, nogil=True)
@@ -221,15 +222,27 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np
     start, faces = _build(X, G, lo, h, dims)
     T = X[G]  # (j,3,3): each triangle's bounding box, (min xyz, max xyz)
     B = np.ascontiguousarray(np.concatenate([T.min(1), T.max(1)], 1))
-    blocks = [P[i:i + BLOCK] for i in range(0, len(P), BLOCK)]
-    if len(blocks) <= 1:
+    # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
+    # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits
+    k = max(-(-len(P) // BLOCK), min(_threads(), len(P) // MIN_BLOCK), 1)
+    if k == 1:
         f, d2 = _query(P, X, G, B, lo, h, dims, start, faces)
         return f, np.sqrt(d2)
-    # blocks of points on threads (the loop releases the GIL); each point's answer is its own: any split
-    # gives the same bits
-    with ThreadPoolExecutor(max_workers=min(len(blocks), _threads())) as pool:
-        parts = list(pool.map(lambda b: _query(b, X, G, B, lo, h, dims, start, faces), blocks))
+    step = -(-len(P) // k)
+    blocks = [P[i:i + step] for i in range(0, len(P), step)]
+    parts = list(_pool().map(lambda b: _query(b, X, G, B, lo, h, dims, start, faces), blocks))
     return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
+
+
+_POOL = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The query's threads, made once (a new pool per call costs more than a small query)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=_threads(), thread_name_prefix="qemjax-nearest")
+    return _POOL
 
 
 def _threads() -> int:
