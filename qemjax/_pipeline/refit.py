@@ -60,7 +60,7 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
 
 def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spart: np.ndarray):
     """For each sample, a nearest output face among those of its part (-1: its part has none)."""
-    f = np.full(len(P), -1, np.int64)
+    f = np.full(len(P), -1, np.int32 if len(G) < 2**31 else np.int64)
     order = np.argsort(gpart, kind="stable")
     starts = np.searchsorted(gpart[order], np.unique(gpart))
     for faces in np.split(order, starts[1:]):
@@ -104,6 +104,25 @@ def _closest_barycentric(p, a, b, c):
     return out
 
 
+def _design(Ps: np.ndarray, sw: np.ndarray, X: np.ndarray, G: np.ndarray, f: np.ndarray, k: int):
+    """The fit's (q,k) CSR matrix: row i holds sample i's barycentric coordinates on its face f[i] of (X, G),
+    times sw[i], in the columns of that face's corners (sorted, as a COO matrix's conversion leaves them).
+    Built in blocks of rows and straight into CSR: the (q,3) corner positions and the COO triplets of a
+    5.5 M-face input are gigabytes."""
+    q = len(Ps)
+    data = np.empty((q, 3))
+    cols = np.empty((q, 3), np.int32 if k < 2**31 else np.int64)
+    for s in range(0, q, _ROWS):
+        tri = G[f[s : s + _ROWS]]
+        B = _closest_barycentric(Ps[s : s + _ROWS], X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
+        B *= sw[s : s + _ROWS, None]
+        order = np.argsort(tri, axis=1, kind="stable")  # a face's corners are distinct: one order
+        data[s : s + _ROWS] = np.take_along_axis(B, order, 1)
+        cols[s : s + _ROWS] = np.take_along_axis(tri, order, 1)
+    indptr = np.arange(0, 3 * q + 1, 3, dtype=cols.dtype)
+    return sp.csr_matrix((data.reshape(-1), cols.reshape(-1), indptr), shape=(q, k))
+
+
 def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
     """Faces whose normal turned by the flip angle or more (cos ≤ cos_max), or that lost all area."""
     l0, l1 = np.linalg.norm(n0, axis=1), np.linalg.norm(n1, axis=1)
@@ -144,9 +163,9 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
     src = None if source_faces is None else F[np.asarray(source_faces, np.int64)]  # each output face's input face
     ns = None if src is None else face_normals(V, src)  # its normal
     if part is None or src is None:
-        part, gpart = np.zeros(len(V), np.int64), np.zeros(len(G), np.int64)
+        part, gpart = np.zeros(len(V), np.int32), np.zeros(len(G), np.int32)
     else:
-        part = np.asarray(part, np.int64)
+        part = np.asarray(part, np.int32)  # labels of parts: fewer than the vertices
         gpart = part[src[:, 0]]
     P, w, spart = samples(V, F, part)
     k = len(X)
@@ -159,17 +178,24 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
     for _ in range(rounds):
         f = _attach(X, G, gpart, P, spart)
         seen = f >= 0
-        Ps, sw, f = P[seen], np.sqrt(w[seen]), f[seen]
-        rows = np.repeat(np.arange(len(Ps)), 3)
-        tri = G[f]
-        B = closest_barycentric(Ps, X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
-        A = sp.csr_matrix(((B * sw[:, None]).ravel(), (rows, tri.ravel())), shape=(len(Ps), k))
-        target = Ps * sw[:, None]
+        if seen.all():  # the usual case: no copies of the samples
+            Ps, sw = P, np.sqrt(w)
+        else:
+            Ps, sw, f = P[seen], np.sqrt(w[seen]), f[seen]
+        A = _design(Ps, sw, X, G, f, k)
+        del f
         if fixed is not None:  # the fixed vertices' part of each sample moves to the right-hand side
-            target = target - A[:, ~free] @ X[~free]
+            shift = A[:, ~free] @ X[~free]
             A = A[:, free]
+        # the normal matrix before the right-hand side: the product's transposed copy of A and the (q,3)
+        # targets are never held at once (a 5.5 M-face input's peak memory)
         N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
+        target = Ps * sw[:, None]
+        if fixed is not None:
+            target = target - shift
+            del shift
         rhs = A.T @ target + lam * X[free]
+        del A, target
         Y = X.copy()
         Y[free], converged = solve_spd(N, rhs, X[free], rtol=RTOL)  # fixed-order sums: the same bits on every CPU
         if not converged:  # the last iterate still lowers the fit's error; the checks below still hold

@@ -186,6 +186,8 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
     parts = topo.parts(F, len(V), extra)
     Vn, frame = _units.normalize(V, common.DTYPE, parts)
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
+    if len(V) < 2**31:  # held for the whole call (and a batch's): half the memory, as the scheduler uses it
+        E = E.astype(np.int32)
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
     return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs,
                     vertex_map)

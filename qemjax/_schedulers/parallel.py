@@ -164,8 +164,10 @@ def _removal_steps(F, rounds, a, b, dead, dropped):
     step_of = np.full(n, np.iinfo(np.int64).max)
     step_of[b] = np.arange(len(b))
     d = np.concatenate(dead).astype(np.int64) if dead else np.zeros(0, np.int64)
-    s = step_of.take(F.take(d, axis=0))
-    removed_at[d] = np.minimum(np.minimum(s[:, 0], s[:, 1]), s[:, 2])  # .min(axis=1), without the slow reduction
+    for i in range(0, len(d), 1 << 20):  # in blocks: the (k,3) steps of a 5.5 M-face run are 130 MB
+        di = d[i:i + (1 << 20)]
+        s = step_of.take(F.take(di, axis=0))
+        removed_at[di] = np.minimum(np.minimum(s[:, 0], s[:, 1]), s[:, 2])  # .min(axis=1), without the slow reduction
     if dropped:
         f = np.concatenate([x for _, x in dropped]).astype(np.int64)
         r = np.repeat([r for r, _ in dropped], [len(x) for _, x in dropped]).astype(np.int64)
@@ -608,8 +610,11 @@ def run(V, S, F, extra_pairs, target_faces, model, options: Options, progress=No
     hist = _history_arrays(a, b, x, cost)
     removed_at, coincident, rounds = _removal_steps(r.faces.F, rounds, a, b, r.dead, r.dropped)
     n = r.n
+    # the vertices' rows without the padding of the run's arrays (a quarter more rows on a large mesh)
+    V, S = np.ascontiguousarray(r.VQ[:n, :3]), np.ascontiguousarray(r.VQ[:n, 3:])
+    r.VQ = r.VQd = None
     return outcome.Outcome(
-        r.VQ[:n, :3], r.VQ[:n, 3:], r.faces.F, r.faces.alive, outcome.History(*hist), stop, blocked,
+        V, S, r.faces.F, r.faces.alive, outcome.History(*hist), stop, blocked,
         outcome.count_reasons(np.repeat(np.arange(len(r.rejected_by)), r.rejected_by)), rejected=r.rejected,
         rounds=r.rounds, worst_cost=r.max_cost_used, branches=r.branches, stage_times=outcome.stage_times(r.timer.t),
         faces_per_round=r.faces_per_round, parts=np.concatenate(r.history_parts) if r.history_parts else None,
