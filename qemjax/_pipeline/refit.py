@@ -175,11 +175,12 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
     free = np.ones(k, bool) if fixed is None else ~np.asarray(fixed, bool)
     if not free.any():
         return X
-    for _ in range(rounds):
+    for r in range(rounds):
+        last = r == rounds - 1  # then the samples' arrays are no longer needed as they are: reused in place
         f = _attach(X, G, gpart, P, spart)
         seen = f >= 0
         if seen.all():  # the usual case: no copies of the samples
-            Ps, sw = P, np.sqrt(w)
+            Ps, sw = P, (np.sqrt(w, out=w) if last else np.sqrt(w))
         else:
             Ps, sw, f = P[seen], np.sqrt(w[seen]), f[seen]
         A = _design(Ps, sw, X, G, f, k)
@@ -190,7 +191,11 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
         # the normal matrix before the right-hand side: the product's transposed copy of A and the (q,3)
         # targets are never held at once (a 5.5 M-face input's peak memory)
         N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
-        target = Ps * sw[:, None]
+        if last and Ps is P:
+            P *= sw[:, None]  # the targets, in place (the same products)
+            target = P
+        else:
+            target = Ps * sw[:, None]
         if fixed is not None:
             target = target - shift
             del shift

@@ -272,6 +272,8 @@ class _Run:
             else:
                 E, ecount = topo.edges(self.faces.live(), n)
             E, ecount = _with_extra_pairs(E, ecount, self.extra_pairs, n)
+            if self.compiled:  # face counts are small: int32 halves the largest per-pair array but x
+                ecount = ecount.astype(np.int32)
             deg = topo.vertex_degree(E if self.incremental else _keep(E, ecount > 0), n)
             keys = None if self.incremental else topo.edge_keys(E[:, 0], E[:, 1], n)  # sorted, as E is
             st = RoundState(E, ecount, deg, keys=keys)
@@ -420,12 +422,13 @@ class _Run:
         return acc, bad, why, None, ~free, apex
 
     def scratch(self, P: int):
-        """`round_jit.select_validate`'s working arrays for P pairs, (3, ≥ P) and (2, n) int64: made once
-        a run (its pairs only get fewer), so that no round maps megabytes afresh."""
+        """`round_jit.select_validate`'s working arrays for P pairs, (≥ P,) int64, (2, ≥ P) int32 and (2, n)
+        int64: made once a run (its pairs only get fewer), so that no round maps megabytes afresh."""
         if self._rows is None or self._rows.shape[1] < P:
-            self._rows = np.empty((3, P), np.int64)
+            self._keys = np.empty(P, np.int64)
+            self._rows = np.empty((2, P), np.int32)
             self._verts = np.empty((2, self.n), np.int64)
-        return self._rows, self._verts
+        return self._keys, self._rows, self._verts
 
     def validate(self, st: RoundState, found: list, P, idx, free_rows, Efree):
         """(rule broken per pair (0: valid), faces made coincident) for vertex-disjoint pairs P (indices

@@ -184,7 +184,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
 @njit(cache=True)
 def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes, pass_yield, keep_parts,
                     F, alive, cnt, off, pool, VQ, N0, X, bvert, deg, cos_max, sliver, free, active, mark,
-                    rows, verts):
+                    keys, rows, verts):
     """`select.independent_sets` with `parallel._Run.validate` (manifold mode, no locks or attributes).
 
     E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
@@ -192,14 +192,15 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     copy; salt: the round's scramble; vcopy (n,): each vertex's copy, need (C,): each copy's face budget;
     the faces (`FaceLists` arrays), positions VQ (n, ≥3) and reference normals N0, the pairs' placements X (P,3),
     boundary vertices and degrees; free, active (n,) bool and mark (n,) int32 zeros: scratch (free comes
-    back with the locked vertices False); rows (3, ≥ P) and verts (2, n) int64: working arrays, kept from
-    round to round (fresh arrays this large would be mapped and faulted in anew on every call).
+    back with the locked vertices False); keys (≥ P,) int64, rows (2, ≥ P) int32 and verts (2, n) int64:
+    working arrays, kept from round to round (fresh arrays this large would be mapped and faulted in anew on
+    every call).
     Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices and their
     rules)."""
     P = len(E)
     n = len(vcopy)
     C = len(need)
-    K, one, bo = rows[0], rows[1], rows[2]  # each pair's key (NO_KEY: not a candidate, or rejected)
+    K, one, bo = keys, rows[0], rows[1]  # each pair's key (NO_KEY: not a candidate, or rejected)
     m1, m2 = verts[0], verts[1]
     ncand = 0
     for i in range(P):
