@@ -161,3 +161,13 @@ def test_contraction_loops_match_the_numpy_code(seed):
     order = np.lexsort((got[0][:, 1], got[0][:, 0]))
     np.testing.assert_array_equal(got[0][order], E2)
     np.testing.assert_array_equal(got[1][order], c2)
+
+
+def test_large_runs_keep_the_numpy_stages(monkeypatch):
+    """Above `round_jit.MAX_FACES` the rounds run the numpy stages (faster there), with the same result."""
+    mesh = shapes.bumpy_sphere(3)
+    small, seen_small = _run(mesh, {"ratio": 0.1}, monkeypatch, True)
+    monkeypatch.setattr(round_jit, "MAX_FACES", len(mesh[1]) - 1)
+    large, seen_large = _run(mesh, {"ratio": 0.1}, monkeypatch, True)
+    assert seen_small == [True] and seen_large == [False]
+    _assert_same(large, small)

@@ -237,7 +237,7 @@ class _Run:
         N0 = face_normals(np.asarray(V, DTYPE), F) if normals is None else normals  # input normals
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
         # the common case's rounds run as compiled loops (`round_jit`), with the flip test on the host
-        self.compiled = round_jit.fits(self.manifold, self.incremental, wedges, locks)
+        self.compiled = round_jit.fits(self.manifold, self.incremental, wedges, locks, m)
         if self.compiled:
             self.N0 = np.ascontiguousarray(N0, DTYPE)
             # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
