@@ -38,8 +38,8 @@ def fits(manifold: bool, incremental: bool, wedges, locks, faces: int = 0) -> bo
     `MAX_FACES` faces. Both give the same bits; the choice is speed alone. The loops test one pair after
     another, and on a large mesh each pair's faces are cache misses that wait in turn, where numpy's
     whole-array gathers keep many in flight (and share the round with a worker thread): warm, the cow
-    (5.8 k faces) to 10 % took 0.066 -> 0.038 s with the loops, the bunny (69 k) 0.277 -> 0.278 s, and
-    armadillo x16 (1.38 M) to 1 % 5.5 -> 6.0 s (experiments/results/ab_round_*_1127.txt)."""
+    (5.8 k faces) to 10 % took 0.073 s with the numpy stages and 0.040 s with the loops, the bunny (69 k)
+    0.301 and 0.298 s, armadillo x16 (1.38 M) to 1 % 5.5 and 6.0 s (experiments/results/ab_round_*_1127.txt)."""
     return manifold and incremental and wedges is None and locks is None and faces <= MAX_FACES
 
 
