@@ -35,13 +35,14 @@ from . import split as _split
 from .._mesh import topology as topo
 from .._mesh import units as _units
 from .._mesh import wedges as _wedges
-from .._mesh.arrays import face_normals
+from .._mesh.arrays import face_normals, release_free_memory
 from .._options import Attributes, Options, Schedule, Topology
 from .._record.history import Record
 from .._record.result import Contractions, SimplifyResult
 from .._schedulers import common, outcome
 
 _REFIT_ALONE = 1 << 17  # input faces from which a re-fit runs by itself (its nearest search is threaded)
+LARGE_RUN = 1 << 20  # inputs of this many faces hand freed heap pages back between stages (`finish`)
 
 
 def _real(name: str, x) -> float:
@@ -187,7 +188,7 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
     Vn, frame = _units.normalize(V, common.DTYPE, parts)
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     if len(V) < 2**31:  # held for the whole call (and a batch's): half the memory, as the scheduler uses it
-        E = E.astype(np.int32)
+        E, ecount = E.astype(np.int32), ecount.astype(np.int32)
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
     return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs,
                     vertex_map)
@@ -305,6 +306,8 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     positions until `refit_all` runs the list: a batch's re-fits run side by side)."""
     setup, g, model, target, err = job.setup, job.geo, job.model, job.target, job.err
     out, run_target, planned = ran
+    if len(g.F) >= LARGE_RUN:  # the rounds' freed arrays, back to the system before the re-fit's
+        release_free_memory()
     if run_target is None:
         run_target = target
     locked = None

@@ -267,13 +267,14 @@ class _Run:
         n = self.n
         if prev is None or prev.edges_next is None:
             if self.edges is not None:
-                E, ecount = self.edges[0].astype(np.int32), self.edges[1]
+                # the caller's arrays as they are when int32 (read only here: every round makes new ones)
+                E, ecount = np.asarray(self.edges[0], np.int32), self.edges[1]
                 self.edges = None
             else:
                 E, ecount = topo.edges(self.faces.live(), n)
             E, ecount = _with_extra_pairs(E, ecount, self.extra_pairs, n)
             if self.compiled:  # face counts are small: int32 halves the largest per-pair array but x
-                ecount = ecount.astype(np.int32)
+                ecount = np.asarray(ecount, np.int32)
             deg = topo.vertex_degree(E if self.incremental else _keep(E, ecount > 0), n)
             keys = None if self.incremental else topo.edge_keys(E[:, 0], E[:, 1], n)  # sorted, as E is
             st = RoundState(E, ecount, deg, keys=keys)

@@ -71,15 +71,20 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
         """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
         (locking, link test) and their rows, and which of those have both endpoints available
         (selection). Large sets are split between this thread and the worker (idle here)."""
-        one, Eo, _ = ws
+        one, Eo, start = ws  # one None: the rows start, start + 1, ... (the first narrowing, without an arange)
         if split and len(Eo) >= SPLIT_ROWS:
             h = len(Eo) // 2
-            half = submit(narrow, avail, (one[:h], Eo[:h], None), split=False)
-            rest = narrow(avail, (one[h:], Eo[h:], None), split=False)
+            if one is None:
+                halves = (None, Eo[:h], start), (None, Eo[h:], start + h)
+            else:
+                halves = (one[:h], Eo[:h], None), (one[h:], Eo[h:], None)
+            half = submit(narrow, avail, halves[0], split=False)
+            rest = narrow(avail, halves[1], split=False)
             return tuple(np.concatenate(pair) for pair in zip(half.result(), rest))
         ae = avail.take(Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
         k1 = ae != 0
-        return one.compress(k1), _keep(Eo, k1), ae.compress(k1) == 0x0101
+        rows = np.flatnonzero(k1) + start if one is None else one.compress(k1)
+        return rows, _keep(Eo, k1), ae.compress(k1) == 0x0101
 
     def endpoints(mask):
         v = np.zeros(n, bool)
@@ -92,7 +97,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
         groups = (*groups, np.zeros(len(groups[1]), np.int64), np.zeros(len(groups[1]), bool))
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
-    ws = narrow(active, (np.arange(len(E)), E, None))
+    ws = narrow(active, (None, E, 0))
     accepted, rejected, reasons = [], [], []
     extra = np.zeros(len(E), np.int64)
     n_acc = 0
