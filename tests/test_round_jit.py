@@ -14,6 +14,7 @@ from qemjax._kernels import flips as flips_mod
 from qemjax._mesh import topology as topo
 from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import parallel, round_jit
+from test_attributes import atlas_sphere
 from test_greedy_batches import CASES, _same
 from test_greedy_compiled import _bipyramid, _jittered_sphere, _two_spheres
 
@@ -25,6 +26,9 @@ RUNS.update({
     "default-method": (lambda: shapes.bumpy_sphere(4), {"ratio": 0.02, "method": "default"}),
     "regularized": (lambda: shapes.torus(n_major=24, n_minor=12), {"ratio": 0.1, "regularize": 0.1}),
     "double-cone": (lambda: shapes.double_cone(60), {"ratio": 0.2}),
+    # kept UVs: the seam rule refuses contractions inside the loop, and the wedges follow the contractions
+    "uv-seams": (lambda: atlas_sphere(3)[0], {"ratio": 0.1, "attributes": "uv"}),
+    "uv-seams-default": (lambda: atlas_sphere(3)[0], {"ratio": 0.05, "attributes": "uv", "method": "default"}),
 })
 
 
@@ -66,6 +70,9 @@ def test_compiled_round_gives_the_numpy_rounds_result(case, monkeypatch):
     assert seen == [True] and seen_old == [False]
     _assert_same(new, old)
     assert new.stats["rounds"] > 1
+    if "uv" in case:
+        _same(new.uv, old.uv, "uv")
+        assert new.stats["rejected_by"]["seam"] > 0  # the rule did refuse contractions
 
 
 def test_compiled_round_in_a_batch(monkeypatch):

@@ -237,7 +237,7 @@ class _Run:
         N0 = face_normals(np.asarray(V, DTYPE), F) if normals is None else normals  # input normals
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
         # the common case's rounds run as compiled loops (`round_jit`), with the flip test on the host
-        self.compiled = round_jit.fits(self.manifold, self.incremental, wedges, locks, m)
+        self.compiled = round_jit.fits(self.manifold, self.incremental, locks, m)
         if self.compiled:
             self.N0 = np.ascontiguousarray(N0, DTYPE)
             # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
@@ -246,6 +246,9 @@ class _Run:
             self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
             self.mark = np.zeros(self.n, np.int32)  # scratch of `round_jit.select_validate`
             self._rows = self._verts = None  # more of it (`scratch`)
+            # kept attributes: the wedge of each face corner and the seam vertices, for the seam rule
+            self.seams = ((np.zeros((0, 3), np.int64), np.zeros(self.n, bool)) if wedges is None
+                          else (wedges.C, wedges.multi))
         self.faces = lists.result()
         self.timer = Timer()
         self.history = []  # per round: (round, (kept, removed, positions, costs)) in record order
@@ -419,7 +422,8 @@ class _Run:
             st.E, st.ecount, cand, np.ascontiguousarray(st.key, DTYPE).view(np.int32), local,
             (self.rounds * 7919) & 0xFFFFFFFF, vcopy, needs, sch.max_passes, float(sch.pass_yield),
             bool(self.options.keep_parts), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, self.V3,
-            self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, *self.scratch(len(st.E)))
+            self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, *self.scratch(len(st.E)),
+            *self.seams)
         return acc, bad, why, None, ~free, apex
 
     def scratch(self, P: int):
@@ -488,7 +492,7 @@ class _Run:
         # the target cut the set short
         if self.compiled:
             round_jit.clear_bad(st.E, st.bad, self.touched(locked, acc, n_sel, P))
-            self.contract_compiled(st, a, b, found)
+            self.contract_compiled(st, a, b, xs, found)
         else:
             r = np.flatnonzero(st.bad)
             if r.size:
@@ -536,9 +540,11 @@ class _Run:
         self.dead.append(dead)
         return edges_next
 
-    def contract_compiled(self, st: RoundState, a, b, apex):
+    def contract_compiled(self, st: RoundState, a, b, xs, apex):
         """`contract_numpy` as compiled loops (`round_jit`): the faces, then the pairs."""
         faces = self.faces
+        if self.wedges is not None:  # the corners' wedges, before the faces are relinked
+            self.wedges.contract_many(faces, self.VQ, np.stack([a, b], 1), xs)
         k = int(faces.cnt.take(a).sum() + faces.cnt.take(b).sum())
         if faces.end + k > len(faces.pool):
             faces._compact(k)

@@ -24,7 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .outcome import COINCIDENT, FLIP, PART, TOPOLOGY
+from .._mesh import wedges_jit
+from .outcome import COINCIDENT, FLIP, PART, SEAM, TOPOLOGY
 
 NO_KEY = np.iinfo(np.int64).max
 _SCRAMBLE = np.uint32(0x9E3779B1)
@@ -33,14 +34,14 @@ _SCRAMBLE = np.uint32(0x9E3779B1)
 MAX_FACES = 1 << 17  # runs on more faces keep the numpy stages: see `fits`
 
 
-def fits(manifold: bool, incremental: bool, wedges, locks, faces: int = 0) -> bool:
+def fits(manifold: bool, incremental: bool, locks, faces: int = 0) -> bool:
     """Whether a run's rounds take the compiled loops: the mode of the module docstring, on at most
     `MAX_FACES` faces. Both give the same bits; the choice is speed alone. The loops test one pair after
     another, and on a large mesh each pair's faces are cache misses that wait in turn, where numpy's
     whole-array gathers keep many in flight (and share the round with a worker thread): warm, the cow
     (5.8 k faces) to 10 % took 0.073 s with the numpy stages and 0.040 s with the loops, the bunny (69 k)
     0.301 and 0.298 s, armadillo x16 (1.38 M) to 1 % 5.5 and 6.0 s (experiments/results/ab_round_*_1127.txt)."""
-    return manifold and incremental and wedges is None and locks is None and faces <= MAX_FACES
+    return manifold and incremental and locks is None and faces <= MAX_FACES
 
 
 @njit(cache=True, inline="always")
@@ -114,7 +115,7 @@ def _neighbours(v, F, alive, cnt, off, pool, mark, stamp, out):
 
 @njit(cache=True)
 def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-           mark, stamp, nb, fa, apex, s):
+           mark, stamp, nb, fa, apex, s, C, multi, T):
     """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
     override each other in that order; the flip test counts only for a pair that passes the rest.
@@ -181,6 +182,10 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
         why = PART
     if not linked:
         why = TOPOLOGY
+    if why == 0 and (multi[a] or multi[b]):  # kept attributes: the seam rule (`wedges.Tracker.allowed`)
+        free, nba, nab, _, _ = wedges_jit.modes(F, alive, cnt, off, pool, C, multi, a, b, T)
+        if not free and not ((nba >= 0 and wedges_jit._at(VQ, a, x)) or (nab >= 0 and wedges_jit._at(VQ, b, x))):
+            why = SEAM
     if why == 0:
         for i in range(nk):
             if _flips(VQ, N0, F, fa[i, 0], fa[i, 1], x, cos_max, sliver):
@@ -192,7 +197,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
 @njit(cache=True)
 def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes, pass_yield, keep_parts,
                     F, alive, cnt, off, pool, VQ, N0, X, bvert, deg, cos_max, sliver, free, active, mark,
-                    keys, rows, verts):
+                    keys, rows, verts, corner_wedge, multi):
     """`select.independent_sets` with `parallel._Run.validate` (manifold mode, no locks or attributes).
 
     E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
@@ -202,7 +207,8 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     boundary vertices and degrees; free, active (n,) bool and mark (n,) int32 zeros: scratch (free comes
     back with the locked vertices False); keys (≥ P,) int64, rows (2, ≥ P) int32 and verts (2, n) int64:
     working arrays, kept from round to round (fresh arrays this large would be mapped and faulted in anew on
-    every call).
+    every call). corner_wedge (m,3) and multi (n,): the wedge of each face corner and the vertices on a
+    seam, when attributes are kept (else (0,3) and all False).
     Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices and their
     rules)."""
     P = len(E)
@@ -241,6 +247,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     done = np.zeros(C, np.bool_)
     nb = np.empty(64, np.int64)
     fa = np.empty((64, 2), np.int64)
+    T = np.empty((12, 64), np.int64)  # the seam rule's scratch
     na = nr = 0
     stamp = 1  # a's neighbours: 1, common ones 2 (reset after each pair); locked endpoints: -1
     for p in range(max_passes):
@@ -288,8 +295,9 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
             if 2 * (cnt[a] + cnt[b]) > len(fa):  # room for the faces of the busiest pair so far
                 nb = np.empty(4 * (cnt[a] + cnt[b]), np.int64)
                 fa = np.empty((4 * (cnt[a] + cnt[b]), 2), np.int64)
+                T = np.empty((12, 4 * (cnt[a] + cnt[b])), np.int64)
             w = _rules(a, b, nf, X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-                       mark, stamp, nb, fa, apex, na)
+                       mark, stamp, nb, fa, apex, na, corner_wedge, multi, T)
             c = vcopy[a]
             tried[c] = True
             if w == 0:
