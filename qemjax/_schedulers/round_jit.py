@@ -3,15 +3,16 @@
 `parallel._Run` spends a round in hundreds of numpy calls on small arrays (about 1 ms a round on a 6 k-face
 mesh); the same steps as two loops over integer arrays take a few tens of µs. This module holds those two
 loops, for the common case (`fits`): manifold mode with the pairs updated through the contractions (no
-non-edge pairs), no attributes kept and no locks. They make exactly the choices of the numpy stages they
+non-edge pairs), no locks, at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through
+`wedges_jit`). They make exactly the choices of the numpy stages they
 replace (`select.independent_sets` with `parallel._Run.validate`, then `FaceLists.contract_touched` and
 `topology.contract_edges`): the golden outputs are the same bits, and tests/test_round_jit.py compares each
 loop with the numpy code on random meshes.
 
 * `select_validate`: the independent-set passes (each pair that holds the smallest key among the
   candidates touching its endpoints' closed 1-rings), each selected pair's rules (link condition,
-  coincident faces, the part rule, the flip test with the device kernel's float32 operations,
-  `greedy_rules_jit.flips`), the locking of accepted 1-rings and each copy's pass rule
+  coincident faces, the part rule, the seam rule, the flip test with the device kernel's float32
+  operations, `greedy_rules_jit.flips`), the locking of accepted 1-rings and each copy's pass rule
   (`select._copies_staying`; one run is one copy).
 * `contract`: the accepted pairs' faces (dead ones out, b's corners to a, new runs in the pool) and
   pairs (merged, moved, counted, compacted), with the degrees after and which pairs are stale.
