@@ -13,6 +13,7 @@ from qemjax import shapes
 from qemjax._kernels import flips as flips_mod
 from qemjax._mesh import topology as topo
 from qemjax._mesh.incidence import FaceLists
+from qemjax._schedulers import greedy_rules_jit as rules_jit
 from qemjax._schedulers import parallel, round_jit
 from test_attributes import atlas_sphere
 from test_greedy_batches import CASES, _same
@@ -92,8 +93,8 @@ def test_compiled_round_in_a_batch(monkeypatch):
 
 
 def test_flip_test_matches_the_kernel():
-    """`round_jit._flips` against `flips.flips_host_faces` (the device kernel's host twin) on random faces,
-    near-degenerate ones included, at the default threshold and at 45°."""
+    """`greedy_rules_jit.flips` (the rounds' flip test) against `flips.flips_host_faces` (the device
+    kernel's host twin) on random faces, near-degenerate ones included, at the default threshold and 45°."""
     rng = np.random.default_rng(3)
     V = rng.normal(size=(60, 3)).astype(np.float32)
     V[50:] = V[:10] + rng.normal(0, 1e-4, (10, 3)).astype(np.float32)  # near-duplicates: slivers
@@ -105,7 +106,7 @@ def test_flip_test_matches_the_kernel():
     VQ = np.concatenate([V, np.zeros((60, 4), np.float32)], 1)
     for cos_max in (0.0, np.cos(np.radians(45))):
         want = flips_mod.flips_host_faces(VQ, N0, F, np.arange(400), corner, X, cos_max)
-        got = np.array([round_jit._flips(VQ, N0, F, f, corner[f], X[f], np.float32(cos_max),
+        got = np.array([rules_jit.flips(VQ, N0, F, f, corner[f], X[f], np.float32(cos_max),
                                          np.float32(flips_mod.SLIVER)) for f in range(400)])
         assert want.any() and not want.all()
         np.testing.assert_array_equal(got, want)

@@ -19,33 +19,40 @@ def has(pool, start, length, v):
 
 
 @njit(cache=True)
-def flips(VQ, N0, T, f, corner, x, cos_max, sliver):
-    """`flips.flips_host_faces` for face f with its corner ``corner`` moved to x: the same float32
-    operations in the same order (products, then sums x + y, then + z; each rounded to float32)."""
-    g = np.empty((3, 3), np.float32)
-    for c in range(3):
-        for i in range(3):
-            g[c, i] = VQ[T[f, c], i]
-    q = g.copy()
-    for i in range(3):
-        q[corner, i] = x[i]
-    u0, v0, u1, v1 = g[1] - g[0], g[2] - g[0], q[1] - q[0], q[2] - q[0]
-    n0 = np.empty(3, np.float32)
-    n1 = np.empty(3, np.float32)
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        n0[i] = u0[j] * v0[k] - u0[k] * v0[j]
-        n1[i] = u1[j] * v1[k] - u1[k] * v1[j]
-    e1, e2 = q[2] - q[1], q[0] - q[2]
-    ref = N0[f]
-    d11 = n1[0] * n1[0] + n1[1] * n1[1] + n1[2] * n1[2]
-    d01 = n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2]
-    d00 = n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2]
-    de0 = u1[0] * u1[0] + u1[1] * u1[1] + u1[2] * u1[2]
-    de1 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]
-    de2 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]
-    dr1 = ref[0] * n1[0] + ref[1] * n1[1] + ref[2] * n1[2]
-    drr = ref[0] * ref[0] + ref[1] * ref[1] + ref[2] * ref[2]
+def flips(VQ, N0, F, f, corner, x, cos_max, sliver):
+    """`flips.flips_host_faces` for face f (corners F[f], positions VQ (n, ≥3)) with its corner ``corner``
+    moved to x: the same float32 operations in the same order (products, then sums x + y, then + z; each
+    rounded to float32), on scalars (no small arrays per face: the parallel round tests thousands)."""
+    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    g0x, g0y, g0z = VQ[i0, 0], VQ[i0, 1], VQ[i0, 2]
+    g1x, g1y, g1z = VQ[i1, 0], VQ[i1, 1], VQ[i1, 2]
+    g2x, g2y, g2z = VQ[i2, 0], VQ[i2, 1], VQ[i2, 2]
+    q0x, q0y, q0z = g0x, g0y, g0z
+    q1x, q1y, q1z = g1x, g1y, g1z
+    q2x, q2y, q2z = g2x, g2y, g2z
+    if corner == 0:
+        q0x, q0y, q0z = x[0], x[1], x[2]
+    elif corner == 1:
+        q1x, q1y, q1z = x[0], x[1], x[2]
+    else:
+        q2x, q2y, q2z = x[0], x[1], x[2]
+    u0x, u0y, u0z = g1x - g0x, g1y - g0y, g1z - g0z
+    v0x, v0y, v0z = g2x - g0x, g2y - g0y, g2z - g0z
+    u1x, u1y, u1z = q1x - q0x, q1y - q0y, q1z - q0z
+    v1x, v1y, v1z = q2x - q0x, q2y - q0y, q2z - q0z
+    n0x, n0y, n0z = u0y * v0z - u0z * v0y, u0z * v0x - u0x * v0z, u0x * v0y - u0y * v0x
+    n1x, n1y, n1z = u1y * v1z - u1z * v1y, u1z * v1x - u1x * v1z, u1x * v1y - u1y * v1x
+    e1x, e1y, e1z = q2x - q1x, q2y - q1y, q2z - q1z
+    e2x, e2y, e2z = q0x - q2x, q0y - q2y, q0z - q2z
+    rx, ry, rz = N0[f, 0], N0[f, 1], N0[f, 2]
+    d11 = n1x * n1x + n1y * n1y + n1z * n1z
+    d01 = n0x * n1x + n0y * n1y + n0z * n1z
+    d00 = n0x * n0x + n0y * n0y + n0z * n0z
+    de0 = u1x * u1x + u1y * u1y + u1z * u1z
+    de1 = e1x * e1x + e1y * e1y + e1z * e1z
+    de2 = e2x * e2x + e2y * e2y + e2z * e2z
+    dr1 = rx * n1x + ry * n1y + rz * n1z
+    drr = rx * rx + ry * ry + rz * rz
     l1 = np.float32(np.sqrt(d11))
     if d01 <= cos_max * np.float32(np.sqrt(d00)) * l1:
         return True

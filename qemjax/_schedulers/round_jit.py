@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from .._mesh import wedges_jit
+from .greedy_rules_jit import flips
 from .outcome import COINCIDENT, FLIP, PART, SEAM, TOPOLOGY
 
 NO_KEY = np.iinfo(np.int64).max
@@ -43,50 +44,6 @@ def fits(manifold: bool, incremental: bool, locks, faces: int = 0) -> bool:
     (5.8 k faces) to 10 % took 0.073 s with the numpy stages and 0.040 s with the loops, the bunny (69 k)
     0.301 and 0.298 s, armadillo x16 (1.38 M) to 1 % 5.5 and 6.0 s (experiments/results/ab_round_*_1127.txt)."""
     return manifold and incremental and locks is None and faces <= MAX_FACES
-
-
-@njit(cache=True, inline="always")
-def _flips(VQ, N0, F, f, corner, x, cos_max, sliver):
-    """`greedy_rules_jit.flips` (the device kernel's float32 operations in the same order) on scalars,
-    without its small arrays: does moving corner ``corner`` of face f to x flip it?"""
-    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-    g0x, g0y, g0z = VQ[i0, 0], VQ[i0, 1], VQ[i0, 2]
-    g1x, g1y, g1z = VQ[i1, 0], VQ[i1, 1], VQ[i1, 2]
-    g2x, g2y, g2z = VQ[i2, 0], VQ[i2, 1], VQ[i2, 2]
-    q0x, q0y, q0z = g0x, g0y, g0z
-    q1x, q1y, q1z = g1x, g1y, g1z
-    q2x, q2y, q2z = g2x, g2y, g2z
-    if corner == 0:
-        q0x, q0y, q0z = x[0], x[1], x[2]
-    elif corner == 1:
-        q1x, q1y, q1z = x[0], x[1], x[2]
-    else:
-        q2x, q2y, q2z = x[0], x[1], x[2]
-    u0x, u0y, u0z = g1x - g0x, g1y - g0y, g1z - g0z
-    v0x, v0y, v0z = g2x - g0x, g2y - g0y, g2z - g0z
-    u1x, u1y, u1z = q1x - q0x, q1y - q0y, q1z - q0z
-    v1x, v1y, v1z = q2x - q0x, q2y - q0y, q2z - q0z
-    n0x, n0y, n0z = u0y * v0z - u0z * v0y, u0z * v0x - u0x * v0z, u0x * v0y - u0y * v0x
-    n1x, n1y, n1z = u1y * v1z - u1z * v1y, u1z * v1x - u1x * v1z, u1x * v1y - u1y * v1x
-    e1x, e1y, e1z = q2x - q1x, q2y - q1y, q2z - q1z
-    e2x, e2y, e2z = q0x - q2x, q0y - q2y, q0z - q2z
-    rx, ry, rz = N0[f, 0], N0[f, 1], N0[f, 2]
-    d11 = n1x * n1x + n1y * n1y + n1z * n1z
-    d01 = n0x * n1x + n0y * n1y + n0z * n1z
-    d00 = n0x * n0x + n0y * n0y + n0z * n0z
-    de0 = u1x * u1x + u1y * u1y + u1z * u1z
-    de1 = e1x * e1x + e1y * e1y + e1z * e1z
-    de2 = e2x * e2x + e2y * e2y + e2z * e2z
-    dr1 = rx * n1x + ry * n1y + rz * n1z
-    drr = rx * rx + ry * ry + rz * rz
-    l1 = np.float32(np.sqrt(d11))
-    if d01 <= cos_max * np.float32(np.sqrt(d00)) * l1:
-        return True
-    longest2 = de0 if (de0 >= de1 or de0 != de0) else de1  # np.maximum: a NaN wins
-    longest2 = longest2 if (longest2 >= de2 or longest2 != longest2) else de2
-    if l1 <= sliver * longest2 and cos_max > -1.0:
-        return True
-    return dr1 <= cos_max * np.float32(np.sqrt(drr)) * l1
 
 
 @njit(cache=True, inline="always")
@@ -189,7 +146,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
             why = SEAM
     if why == 0:
         for i in range(nk):
-            if _flips(VQ, N0, F, fa[i, 0], fa[i, 1], x, cos_max, sliver):
+            if flips(VQ, N0, F, fa[i, 0], fa[i, 1], x, cos_max, sliver):
                 why = FLIP
                 break
     return why
