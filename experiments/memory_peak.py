@@ -4,7 +4,8 @@ Run it as its own process (the peak is the process's high-water mark, loading in
 
     python experiments/memory_peak.py [--mesh armadillo-x64] [--ratio 0.01]
 
-Prints and appends to results/memory.csv: faces in/out, time, peak RSS (GiB) and RSS after loading.
+Prints and appends to results/memory.csv: faces in/out, time, peak RSS (GiB) and RSS after loading; also
+prints the sha256 of the output arrays (`memory_profile.output_hash`: a memory change must keep it).
 """
 from __future__ import annotations
 
@@ -50,6 +51,9 @@ def main(argv=None):
            "rounds": r.stats["rounds"], "rss_after_load_gib": round(after_load, 2),
            "peak_rss_gib": round(peak, 2), "measured": r.stats.get("distance_max") is not None}
     print(row)
+    from memory_profile import output_hash
+
+    print("output sha256", output_hash(r))
     out = HERE / "results" / "memory.csv"
     new = not out.exists()
     if not new:  # a file from before a column was added: rewrite it with the new header (old rows: empty there)
