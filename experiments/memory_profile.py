@@ -101,6 +101,9 @@ def main(argv=None):
     prof.thread.start()
     import meshes
 
+    bm = prof.stage("load", meshes.load)(args.mesh)  # before jax starts, as experiments/memory_peak.py
+    V, F = bm.V, bm.F
+    del bm
     import qemjax
     from qemjax._pipeline import measure, refit, stages
     from qemjax._schedulers import common, parallel
@@ -119,10 +122,6 @@ def main(argv=None):
         prof.wrap(parallel._Run, attr, "round." + attr)
     for attr in ("_history_columns", "_removal_steps"):
         prof.wrap(parallel, attr, "run." + attr.strip("_"))
-    load = prof.stage("load", meshes.load)
-    bm = load(args.mesh)
-    V, F = bm.V, bm.F
-    del bm
     simplify = prof.stage("simplify", qemjax.simplify)
     t0 = time.perf_counter()
     r = simplify((V, F), ratio=args.ratio, scheduler=args.scheduler, measure=False if args.no_measure else None)
