@@ -38,6 +38,7 @@ from .._mesh.spd_solve import solve_spd
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
 _ROWS = 32_768  # rows per block of closest_barycentric
+_BLOCK = 1 << 19  # faces per block of `samples`
 RTOL = 1e-12  # the normal equations' relative residual (conjugate gradients, `_mesh.spd_solve`)
 HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
 
@@ -46,15 +47,26 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
     """(points (q,3), weights (q,), mean 1, parts (q,)): the input's vertices (a third of their faces' area
     each) and face centroids (their area), with the part of each (``part``: a label per input vertex);
     samples of zero weight are left out."""
-    area = 0.5 * np.linalg.norm(face_normals(V, F), axis=1)
-    wv = np.bincount(F.ravel(), weights=np.repeat(area / 3, 3), minlength=len(V))
-    centroid = np.stack([np.take(V[:, i], F).sum(1) / 3 for i in range(3)], 1)  # V[F].mean(1), in a third of the time
-    P = np.concatenate([V, centroid])
+    n, m = len(V), len(F)
+    # row by row, so in blocks of faces (the same bits): no (m,3) float64 normals, corner values or centroids
+    # held at once (a 5.5 M-face input's re-fit and measure peaks)
+    area = np.empty(m)
+    P = np.empty((n + m, 3))
+    P[:n] = V
+    for s in range(0, m, _BLOCK):
+        Fb = F[s : s + _BLOCK]
+        area[s : s + _BLOCK] = 0.5 * np.linalg.norm(face_normals(V, Fb), axis=1)
+        for i in range(3):  # V[F].mean(1), in a third of the time
+            P[n + s : n + s + len(Fb), i] = np.take(V[:, i], Fb).sum(1) / 3
+    wv = np.bincount(F.ravel(), weights=np.repeat(area / 3, 3), minlength=n)
     w = np.concatenate([wv, area])
+    del wv, area
     lab = np.concatenate([part, part[F[:, 0]]])
     keep = w > 0
     if not keep.any():
         return P[:0], w[:0], lab[:0]
+    if keep.all():  # the usual case: no copies
+        return P, w / w.mean(), lab
     return P[keep], w[keep] / w[keep].mean(), lab[keep]
 
 
