@@ -76,7 +76,11 @@ def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spar
     order = np.argsort(gpart, kind="stable")
     starts = np.searchsorted(gpart[order], np.unique(gpart))
     for faces in np.split(order, starts[1:]):
-        mine = np.flatnonzero(spart == gpart[faces[0]])
+        at = spart == gpart[faces[0]]
+        if at.all():  # one part (the usual case): the samples as they are, not a copy of them
+            f[:] = faces[nearest(X, G[faces], P)[0]]
+            continue
+        mine = np.flatnonzero(at)
         if len(mine):
             f[mine] = faces[nearest(X, G[faces], P[mine])[0]]
     return f
@@ -200,19 +204,27 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
         if fixed is not None:  # the fixed vertices' part of each sample moves to the right-hand side
             shift = A[:, ~free] @ X[~free]
             A = A[:, free]
-        # the normal matrix before the right-hand side: the product's transposed copy of A and the (q,3)
-        # targets are never held at once (a 5.5 M-face input's peak memory)
-        N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
-        if last and Ps is P:
-            P *= sw[:, None]  # the targets, in place (the same products)
-            target = P
+        if last and Ps is P and fixed is None:  # the targets in place and the right-hand side first: the
+            # samples are gone before the product's transposed copy of A is made (a 5.5 M-face input's peak)
+            P *= sw[:, None]
+            rhs = A.T @ P + lam * X[free]
+            del P, Ps
+            N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
         else:
-            target = Ps * sw[:, None]
-        if fixed is not None:
-            target = target - shift
-            del shift
-        rhs = A.T @ target + lam * X[free]
-        del A, target
+            # the normal matrix before the right-hand side: the product's transposed copy of A and the (q,3)
+            # targets are never held at once
+            N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
+            if last and Ps is P:
+                P *= sw[:, None]  # the targets, in place (the same products)
+                target = P
+            else:
+                target = Ps * sw[:, None]
+            if fixed is not None:
+                target = target - shift
+                del shift
+            rhs = A.T @ target + lam * X[free]
+            del target
+        del A
         Y = X.copy()
         Y[free], converged = solve_spd(N, rhs, X[free], rtol=RTOL)  # fixed-order sums: the same bits on every CPU
         if not converged:  # the last iterate still lowers the fit's error; the checks below still hold
