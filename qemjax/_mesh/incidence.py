@@ -79,8 +79,7 @@ class FaceLists:
         c1, c2 = np.bincount(w1, minlength=S), np.bincount(w2, minlength=S)
         total = c1 + c2
         k = int(total.sum())
-        if self.end + k > len(self.pool):
-            self._compact(k)
+        self.reserve(k)
         start = self.end + _exclusive_cumsum(total)
         p1 = np.arange(len(w1), dtype=np.int64) + (start - _exclusive_cumsum(c1)).take(w1)
         p2 = np.arange(len(w2), dtype=np.int64) + (start + c1 - _exclusive_cumsum(c2)).take(w2)
@@ -89,6 +88,11 @@ class FaceLists:
         self.off[verts] = start
         self.cnt[verts] = total
         self.end += k
+
+    def reserve(self, k: int) -> None:
+        """Room for k more entries at the pool's end (compacting it first when they would not fit)."""
+        if self.end + k > len(self.pool):
+            self._compact(k)
 
     def _compact(self, extra: int):
         """Rewrite every run without its dead faces at the start of the pool, with room for ``extra``

@@ -246,6 +246,7 @@ class _Run:
             self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
             self.mark = np.zeros(self.n, np.int32)  # scratch of `round_jit.select_validate`
             self._rows = self._verts = None  # more of it (`scratch`)
+            self.one_copy = np.zeros(self.n, np.int32)  # a run alone is one copy (`passes`)
             # kept attributes: the wedge of each face corner and the seam vertices, for the seam rule
             self.seams = ((np.zeros((0, 3), np.int64), np.zeros(self.n, bool)) if wedges is None
                           else (wedges.C, wedges.multi))
@@ -413,7 +414,7 @@ class _Run:
                 st.E, key_of, cand, need, self.n, lambda *a: self.validate(st, found, *a), sch, groups=groups)
             return acc, bad, why, extra, locked, found
         if groups is None:
-            vcopy, needs, local = np.zeros(self.n, np.int32), np.array([need], np.int64), np.arange(len(st.E))
+            vcopy, needs, local = self.one_copy, np.array([need], np.int64), np.arange(len(st.E))
         else:
             vcopy, needs = groups[0], np.asarray(groups[1], np.int64)
         free, active = np.ones(self.n, bool), np.zeros(self.n, bool)
@@ -545,9 +546,7 @@ class _Run:
         faces = self.faces
         if self.wedges is not None:  # the corners' wedges, before the faces are relinked
             self.wedges.contract_many(faces, self.VQ, np.stack([a, b], 1), xs)
-        k = int(faces.cnt.take(a).sum() + faces.cnt.take(b).sum())
-        if faces.end + k > len(faces.pool):
-            faces._compact(k)
+        faces.reserve(int(faces.cnt.take(a).sum() + faces.cnt.take(b).sum()))  # the kept vertices' new runs
         faces.end, dead = round_jit.contract_faces(a, b, faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
                                                    faces.end)
         faces.count -= len(dead)

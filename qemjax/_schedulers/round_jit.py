@@ -36,7 +36,7 @@ _SCRAMBLE = np.uint32(0x9E3779B1)
 MAX_FACES = 1 << 17  # runs on more faces keep the numpy stages: see `fits`
 
 
-def fits(manifold: bool, incremental: bool, locks, faces: int = 0) -> bool:
+def fits(manifold: bool, incremental: bool, locks, faces: int) -> bool:
     """Whether a run's rounds take the compiled loops: the mode of the module docstring, on at most
     `MAX_FACES` faces. Both give the same bits; the choice is speed alone. The loops test one pair after
     another, and on a large mesh each pair's faces are cache misses that wait in turn, where numpy's
@@ -54,9 +54,9 @@ def _key(kbits, idx, local, salt):
 
 
 @njit(cache=True)
-def _neighbours(v, F, alive, cnt, off, pool, mark, stamp, out):
-    """Write the distinct neighbours of v (corners of its live faces) into ``out``, marking each with
-    ``stamp`` in ``mark``; returns how many."""
+def _neighbours(v, F, alive, cnt, off, pool, mark, out):
+    """Write the distinct neighbours of v (corners of its live faces) into ``out``, marking each 1 in
+    ``mark``; returns how many."""
     k = 0
     for i in range(off[v], off[v] + cnt[v]):
         f = pool[i]
@@ -64,8 +64,8 @@ def _neighbours(v, F, alive, cnt, off, pool, mark, stamp, out):
             continue
         for c in range(3):
             u = F[f, c]
-            if u != v and mark[u] != stamp:
-                mark[u] = stamp
+            if u != v and mark[u] != 1:
+                mark[u] = 1
                 out[k] = u
                 k += 1
     return k
@@ -73,13 +73,14 @@ def _neighbours(v, F, alive, cnt, off, pool, mark, stamp, out):
 
 @njit(cache=True)
 def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-           mark, stamp, nb, fa, apex, s, C, multi, T):
+           mark, nb, fa, apex, s, C, multi, T):
     """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
     override each other in that order; the flip test counts only for a pair that passes the rest.
-    Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s]."""
+    Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s].
+    ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested."""
     # link condition: the common neighbours are the apexes of the pair's faces
-    ka = _neighbours(a, F, alive, cnt, off, pool, mark, stamp, nb)
+    ka = _neighbours(a, F, alive, cnt, off, pool, mark, nb)
     ncommon = 0
     c0, c1 = -1, -1
     bad_apex = False
@@ -89,8 +90,8 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
             continue
         for c in range(3):
             u = F[f, c]
-            if u != b and u != a and mark[u] == stamp:
-                mark[u] = stamp + 1  # counted once
+            if u != b and u != a and mark[u] == 1:
+                mark[u] = 2  # counted once
                 ncommon += 1
                 if c0 < 0 or u < c0:
                     c0, c1 = u, c0
@@ -156,7 +157,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
 def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes, pass_yield, keep_parts,
                     F, alive, cnt, off, pool, VQ, N0, X, bvert, deg, cos_max, sliver, free, active, mark,
                     keys, rows, verts, corner_wedge, multi):
-    """`select.independent_sets` with `parallel._Run.validate` (manifold mode, no locks or attributes).
+    """`select.independent_sets` with `parallel._Run.validate` (manifold mode, no locks).
 
     E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
     kbits (P,) int32: the float32 bits of each pair's ranking key; local (P,): each pair's index within its
@@ -207,7 +208,6 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     fa = np.empty((64, 2), np.int64)
     T = np.empty((12, 64), np.int64)  # the seam rule's scratch
     na = nr = 0
-    stamp = 1  # a's neighbours: 1, common ones 2 (reset after each pair); locked endpoints: -1
     for p in range(max_passes):
         # each available vertex's smallest key among its pairs (m1), then among its neighbours' (m2)
         live_any = False
@@ -255,7 +255,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
                 fa = np.empty((4 * (cnt[a] + cnt[b]), 2), np.int64)
                 T = np.empty((12, 4 * (cnt[a] + cnt[b])), np.int64)
             w = _rules(a, b, nf, X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-                       mark, stamp, nb, fa, apex, na, corner_wedge, multi, T)
+                       mark, nb, fa, apex, na, corner_wedge, multi, T)
             c = vcopy[a]
             tried[c] = True
             if w == 0:
@@ -268,7 +268,8 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
                 rej[nr] = i
                 why[nr] = w
                 nr += 1
-        # lock the closed 1-rings of this pass's accepted pairs (every pair at them is in the working set)
+        # lock the closed 1-rings of this pass's accepted pairs (every pair at them is in the working set);
+        # their endpoints are marked -1 meanwhile
         for t in range(first, na):
             i = acc[t]
             mark[E[i, 0]] = -1
