@@ -204,26 +204,21 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
         if fixed is not None:  # the fixed vertices' part of each sample moves to the right-hand side
             shift = A[:, ~free] @ X[~free]
             A = A[:, free]
-        if last and Ps is P and fixed is None:  # the targets in place and the right-hand side first: the
-            # samples are gone before the product's transposed copy of A is made (a 5.5 M-face input's peak)
+        if last and Ps is P:  # the samples are not needed again: the targets in place (the same products)
             P *= sw[:, None]
-            rhs = A.T @ P + lam * X[free]
-            del P, Ps
-            N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
+            target = P
         else:
-            # the normal matrix before the right-hand side: the product's transposed copy of A and the (q,3)
-            # targets are never held at once
-            N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
-            if last and Ps is P:
-                P *= sw[:, None]  # the targets, in place (the same products)
-                target = P
-            else:
-                target = Ps * sw[:, None]
-            if fixed is not None:
-                target = target - shift
-                del shift
-            rhs = A.T @ target + lam * X[free]
-            del target
+            target = Ps * sw[:, None]
+        if fixed is not None:
+            target = target - shift
+            del shift
+        # the right-hand side before the normal matrix: the (q,3) targets are gone before the product's
+        # transposed copy of A is made (a 5.5 M-face input's peak)
+        rhs = A.T @ target + lam * X[free]
+        del target, Ps
+        if last:
+            del P
+        N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
         del A
         Y = X.copy()
         Y[free], converged = solve_spd(N, rhs, X[free], rtol=RTOL)  # fixed-order sums: the same bits on every CPU
