@@ -67,23 +67,21 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
     endpoints' closed 1-rings, validates them (flips, duplicate faces, link condition), and locks the
     1-rings of the accepted ones. Later passes only look at what is still free, so they cost little.
     """
-    def narrow(avail, ws, split=True):
+    def narrow(avail, ws, split=True, first=0):
         """Working sets, narrowed to what touches ``avail`` vertices: pairs with an available endpoint
         (locking, link test) and their rows, and which of those have both endpoints available
-        (selection). Large sets are split between this thread and the worker (idle here)."""
-        one, Eo, start = ws  # one None: the rows start, start + 1, ... (the first narrowing, without an arange)
+        (selection). Large sets are split between this thread and the worker (idle here). ``ws`` rows
+        None: its pairs are rows first, first + 1, ... of E (the first narrowing, without an arange)."""
+        one, Eo, _ = ws
         if split and len(Eo) >= SPLIT_ROWS:
             h = len(Eo) // 2
-            if one is None:
-                halves = (None, Eo[:h], start), (None, Eo[h:], start + h)
-            else:
-                halves = (one[:h], Eo[:h], None), (one[h:], Eo[h:], None)
-            half = submit(narrow, avail, halves[0], split=False)
-            rest = narrow(avail, halves[1], split=False)
+            lo, hi = (None, None) if one is None else (one[:h], one[h:])
+            half = submit(narrow, avail, (lo, Eo[:h], None), split=False, first=first)
+            rest = narrow(avail, (hi, Eo[h:], None), split=False, first=first + h)
             return tuple(np.concatenate(pair) for pair in zip(half.result(), rest))
         ae = avail.take(Eo).view(np.uint16).reshape(-1)  # two bools per edge: 0x0101 = both
         k1 = ae != 0
-        rows = np.flatnonzero(k1) + start if one is None else one.compress(k1)
+        rows = np.flatnonzero(k1) + first if one is None else one.compress(k1)
         return rows, _keep(Eo, k1), ae.compress(k1) == 0x0101
 
     def endpoints(mask):
@@ -97,7 +95,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
         groups = (*groups, np.zeros(len(groups[1]), np.int64), np.zeros(len(groups[1]), bool))
     # only vertices with a candidate pair matter: the rest never select and never conflict
     active = endpoints(cand)
-    ws = narrow(active, (None, E, 0))
+    ws = narrow(active, (None, E, None))
     accepted, rejected, reasons = [], [], []
     extra = np.zeros(len(E), np.int64)
     n_acc = 0
