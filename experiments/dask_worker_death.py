@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures
-import csv
 import datetime
 import os
 import signal
@@ -22,9 +21,10 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
+sys.path[:0] = [str(HERE.parent), str(HERE)]
 SHARED = HERE.parent.parent / "shared" / "meshes"
 
+import csv_rows  # noqa: E402
 import qemjax  # noqa: E402
 from qemjax import shapes  # noqa: E402
 
@@ -92,13 +92,7 @@ def main(argv=None):
             print(r, flush=True)
             rows.append(r)
     print(f"{sum(r['ok'] for r in rows)} of {len(rows)} runs kept every row")
-    path = HERE / "results" / "dask_worker_death.csv"
-    new = not path.exists()
-    with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
-        if new:
-            w.writeheader()
-        w.writerows(rows)
+    csv_rows.append(HERE / "results" / "dask_worker_death.csv", rows)
 
 
 if __name__ == "__main__":

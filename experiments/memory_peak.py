@@ -19,13 +19,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-
-def rss_gib() -> float:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 2**20
-    return float("nan")
+from memory_profile import output_hash, rss_gib  # noqa: E402  (numpy only: jax starts after the mesh loads)
 
 
 def main(argv=None):
@@ -51,8 +45,6 @@ def main(argv=None):
            "rounds": r.stats["rounds"], "rss_after_load_gib": round(after_load, 2),
            "peak_rss_gib": round(peak, 2), "measured": r.stats.get("distance_max") is not None}
     print(row)
-    from memory_profile import output_hash
-
     print("output sha256", output_hash(r))
     out = HERE / "results" / "memory.csv"
     new = not out.exists()

@@ -13,7 +13,6 @@ Prints the rows and appends them to results/sweep_interrupt.csv.
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime
 import os
 import signal
@@ -25,6 +24,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+import csv_rows  # noqa: E402
 SHARED = ROOT.parent / "shared" / "meshes"
 MESHES = ("armadillo.obj", "stanford-bunny.obj", "bumpy-cube.obj")
 GRIDS = {4: 'boundary_weight = [1.0, 100.0]\nregularize = [0.0, 0.1]\n',
@@ -89,13 +90,7 @@ def main(argv=None):
                                         f"--stop-at {args.stop_at:g}"})
     for r in out_rows:
         print(r)
-    path = HERE / "results" / "sweep_interrupt.csv"
-    new = not path.exists()
-    with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, list(out_rows[0]))
-        if new:
-            w.writeheader()
-        w.writerows(out_rows)
+    csv_rows.append(HERE / "results" / "sweep_interrupt.csv", out_rows)
 
 
 if __name__ == "__main__":
