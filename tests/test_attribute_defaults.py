@@ -124,11 +124,17 @@ def test_hard_normal_edges_are_kept_only_when_asked(tmp_path):
     assert kept.normals is not None and kept.stats["seam_vertices_in"] > 0
 
 
-def test_uv_seams_are_kept_when_a_texture_is_given(tmp_path):
+def _seamed_uv_obj(tmp_path):
+    """An OBJ of a sphere with spherical UVs (seams included) and no material."""
     mesh = shapes.bumpy_sphere(3)
     uv, cuv = af.spherical_uv(mesh)
     path = tmp_path / "uv.obj"
     af.write_obj(path, mesh, uv=uv, corner_uv=cuv)
+    return path
+
+
+def test_uv_seams_are_kept_when_a_texture_is_given(tmp_path):
+    path = _seamed_uv_obj(tmp_path)
     res, warned = run(path, ratio=0.2)
     assert res.uv is None and any("attributes='uv'" in w for w in warned)
     from PIL import Image
@@ -148,10 +154,7 @@ def _with_texture(path, image):
 def test_uv_seams_are_kept_when_the_file_names_a_texture(tmp_path):
     """A file whose material names a texture image keeps its UVs and the texture by default, seams and
     all, without a warning; the same file without the image leaves them out (with the warning)."""
-    mesh = shapes.bumpy_sphere(3)
-    uv, cuv = af.spherical_uv(mesh)
-    path = tmp_path / "uv.obj"
-    af.write_obj(path, mesh, uv=uv, corner_uv=cuv)
+    path = _seamed_uv_obj(tmp_path)
     plain, warned_plain = run(path, ratio=0.2)
     assert plain.uv is None and any("attributes='uv'" in w for w in warned_plain)
     _with_texture(path, "t.png")

@@ -98,34 +98,26 @@ def one_to_one(src, dst, ns, need, nn, keys, vals):
     one and covers every value of need[:nn]; returns its size, or -1 otherwise."""
     n = 0
     for i in range(ns):
-        found = False
-        for j in range(n):
-            if keys[j] == src[i]:
-                found = True
-                if vals[j] != dst[i]:
-                    return _ONE_TO_ONE_FAILS
-                break
-        if not found:
+        v = lookup(keys, vals, n, src[i])
+        if v < 0:  # wedges are numbered from 0: not in the map yet
             keys[n] = src[i]
             vals[n] = dst[i]
             n += 1
+        elif v != dst[i]:
+            return _ONE_TO_ONE_FAILS
     for i in range(n):
         for j in range(i):
             if vals[i] == vals[j]:
                 return _ONE_TO_ONE_FAILS
     for i in range(nn):
-        found = False
-        for j in range(n):
-            if keys[j] == need[i]:
-                found = True
-                break
-        if not found:
+        if lookup(keys, vals, n, need[i]) < 0:
             return _ONE_TO_ONE_FAILS
     return n
 
 
 @njit(cache=True)
 def lookup(keys, vals, n, key):
+    """The value of ``key`` in the map keys[:n] -> vals[:n], -1 when it has none."""
     for j in range(n):
         if keys[j] == key:
             return vals[j]
