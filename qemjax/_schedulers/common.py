@@ -84,8 +84,16 @@ def _params(params, pairs: np.ndarray) -> dict:
     return params.at(pairs) if isinstance(params, PerCopy) else params
 
 
-def _unpack(out: np.ndarray) -> Priced:
-    return Priced(np.ascontiguousarray(out[:3].T), out[3], out[4].astype(np.int8), out[5:])
+def _priced(K: int, rows: int, dtype=DTYPE) -> Priced:
+    """A `Priced` of K pairs, zeros, to fill from the kernels' (rows, k) outputs (`_put`)."""
+    return Priced(np.zeros((K, 3), dtype), np.zeros(K, dtype), np.zeros(K, np.int8), np.zeros((rows - 5, K), dtype))
+
+
+def _put(pr: Priced, at, o: np.ndarray) -> None:
+    """Write a kernel output o (rows, k): [x (3), cost, branch, parts...] per column, into pairs ``at`` (a
+    slice or k indices) of ``pr``."""
+    pr.x[at], pr.cost[at] = o[:3].T, o[3]
+    pr.branch[at], pr.parts[:, at] = o[4].astype(np.int8), o[5:]
 
 
 def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 0, at_kept: bool = False):
@@ -101,20 +109,15 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
         def result():  # (called once) each piece straight into its four arrays, its device buffer let go as
             # it is copied: no (rows, K) matrix held by the views of cost and parts (a 5.5 M-face mesh's first
             # round: 166 MB less held, and no second copy of the pieces while they are joined)
-            if not outs:
-                return _unpack(np.zeros((rows, 0), DTYPE))
-            K, dt = len(P), np.asarray(outs[0]).dtype
-            x, cost = np.empty((K, 3), dt), np.empty(K, dt)
-            branch, parts = np.empty(K, np.int8), np.empty((rows - 5, K), dt)
+            K = len(P)
+            pr = _priced(K, rows, np.asarray(outs[0]).dtype if outs else DTYPE)
             s = 0
             for i in range(len(outs)):
                 o = np.asarray(outs[i])[:, : K - s]
                 outs[i] = None
-                w = o.shape[1]
-                x[s : s + w], cost[s : s + w] = o[:3].T, o[3]
-                branch[s : s + w], parts[:, s : s + w] = o[4].astype(np.int8), o[5:]
-                s += w
-            return Priced(x, cost, branch, parts)
+                _put(pr, slice(s, s + o.shape[1]), o)
+                s += o.shape[1]
+            return pr
         return result
     pieces = []  # (indices into P, device output)
     for b0 in range(0, len(P), RING_BLOCK):
@@ -126,10 +129,10 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
                 pieces.append((b0 + sel, price(VSd, pp, _params(params, pp), ring.Rings(cc, mm))))
 
     def ring_result():
-        out = np.zeros((rows, len(P)), DTYPE)
+        pr = _priced(len(P), rows)
         for sel, o in pieces:
-            out[:, sel] = np.asarray(o)[:, : len(sel)]
-        return _unpack(out)
+            _put(pr, sel, np.asarray(o)[:, : len(sel)])
+        return pr
     return ring_result
 
 
