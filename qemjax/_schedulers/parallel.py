@@ -413,8 +413,9 @@ class _Run:
             acc, bad, why, extra, locked = independent_sets(
                 st.E, key_of, cand, need, self.n, lambda *a: self.validate(st, found, *a), sch, groups=groups)
             return acc, bad, why, extra, locked, found
+        keys, rows, verts, count = self.scratch(len(st.E))
         if groups is None:
-            vcopy, needs, local = self.one_copy, np.array([need], np.int64), np.arange(len(st.E))
+            vcopy, needs, local = self.one_copy, np.array([need], np.int64), count[: len(st.E)]
         else:
             vcopy, needs = groups[0], np.asarray(groups[1], np.int64)
         free, active = np.ones(self.n, bool), np.zeros(self.n, bool)
@@ -423,18 +424,20 @@ class _Run:
             st.E, st.ecount, cand, np.ascontiguousarray(st.key, DTYPE).view(np.int32), local,
             (self.rounds * 7919) & 0xFFFFFFFF, vcopy, needs, sch.max_passes, float(sch.pass_yield),
             bool(self.options.keep_parts), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, self.V3,
-            self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, *self.scratch(len(st.E)),
+            self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, keys, rows, verts,
             *self.seams)
         return acc, bad, why, None, ~free, apex
 
     def scratch(self, P: int):
         """`round_jit.select_validate`'s working arrays for P pairs, (≥ P,) int64, (2, ≥ P) int32 and (2, n)
-        int64: made once a run (its pairs only get fewer), so that no round maps megabytes afresh."""
+        int64, and 0, 1, ... (≥ P): made once a run (its pairs only get fewer), so that no round maps
+        megabytes afresh."""
         if self._rows is None or self._rows.shape[1] < P:
             self._keys = np.empty(P, np.int64)
             self._rows = np.empty((2, P), np.int32)
             self._verts = np.empty((2, self.n), np.int64)
-        return self._keys, self._rows, self._verts
+            self._count = np.arange(P)
+        return self._keys, self._rows, self._verts, self._count
 
     def validate(self, st: RoundState, found: list, P, idx, free_rows, Efree):
         """(rule broken per pair (0: valid), faces made coincident) for vertex-disjoint pairs P (indices
