@@ -25,6 +25,7 @@ import re
 import signal
 import sys
 import threading
+import _thread
 import typing
 import warnings
 
@@ -426,12 +427,19 @@ def _parser() -> argparse.ArgumentParser:
 
 
 _INTERRUPTED: list = []  # non-empty once Ctrl-C arrived during `main` (`_on_sigint`)
+_RAISED: list = []  # non-empty once that interrupt was raised: the run is on its way out
 _ACTIVE: list = []  # non-empty while `main` runs with `_on_sigint` installed
+_LOCK = threading.Lock()  # `_resend` against `main` restoring the previous handler
 
 
 def _resend() -> None:
-    if _ACTIVE:  # main still runs with its handler: deliver the deferred Ctrl-C
-        os.kill(os.getpid(), signal.SIGINT)
+    """Deliver a deferred Ctrl-C to the main thread, while `main` still runs with its handler and has not
+    raised one yet. Simulated (``_thread.interrupt_main``), not sent to the process: should the handler be
+    gone by then (the interpreter resets it to the default action as it exits), nothing happens, where a
+    real SIGINT would kill the process (exit -2)."""
+    with _LOCK:
+        if _ACTIVE and not _RAISED:
+            _thread.interrupt_main(signal.SIGINT)
 
 
 def _on_sigint(signum, frame):
@@ -440,6 +448,8 @@ def _on_sigint(signum, frame):
     moment later, once the callback has returned. `_atomic` and `main` also check the flag, so a run whose
     interrupt was lost all the same writes nothing and ends with exit code 130."""
     _INTERRUPTED.append(True)
+    if _RAISED:  # one interrupt is enough: the first is unwinding the run already
+        return
     callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
     f = frame
     while f is not None:
@@ -449,11 +459,13 @@ def _on_sigint(signum, frame):
             timer.start()
             return
         f = f.f_back
+    _RAISED.append(True)
     raise KeyboardInterrupt
 
 
 def _check_interrupted() -> None:
     if _INTERRUPTED:
+        _RAISED.append(True)
         raise KeyboardInterrupt
 
 
@@ -461,6 +473,7 @@ def main(argv=None) -> int:
     """Run the command; returns the exit code (0 ok, 2 bad arguments, input or output, 130 interrupted:
     one line, and no partial output, since files are written under a temporary name and renamed)."""
     _INTERRUPTED.clear()
+    _RAISED.clear()
     try:
         previous = signal.signal(signal.SIGINT, _on_sigint)
         _ACTIVE.append(True)
@@ -475,8 +488,10 @@ def main(argv=None) -> int:
         return 130
     finally:
         if previous is not None:
-            _ACTIVE.clear()
-            signal.signal(signal.SIGINT, previous)
+            with _LOCK:
+                _ACTIVE.clear()
+                signal.signal(signal.SIGINT, previous)
+        _RAISED.clear()
 
 
 def _main(argv: list) -> int:
