@@ -25,7 +25,6 @@ import re
 import signal
 import sys
 import threading
-import _thread
 import typing
 import warnings
 
@@ -428,18 +427,23 @@ def _parser() -> argparse.ArgumentParser:
 
 _INTERRUPTED: list = []  # non-empty once Ctrl-C arrived during `main` (`_on_sigint`)
 _RAISED: list = []  # non-empty once that interrupt was raised: the run is on its way out
+_SETTLING: list = []  # non-empty while `main` hands a last pending Ctrl-C to its handler before restoring
 _ACTIVE: list = []  # non-empty while `main` runs with `_on_sigint` installed
-_LOCK = threading.Lock()  # `_resend` against `main` restoring the previous handler
+_LOCK = threading.Lock()  # `_resend` against `main` leaving
 
 
 def _resend() -> None:
-    """Deliver a deferred Ctrl-C to the main thread, while `main` still runs with its handler and has not
-    raised one yet. Simulated (``_thread.interrupt_main``), not sent to the process: should the handler be
-    gone by then (the interpreter resets it to the default action as it exits), nothing happens, where a
-    real SIGINT would kill the process (exit -2)."""
+    """Send a deferred Ctrl-C again, while `main` still runs with its handler and has not raised one. A
+    real signal, so that a main thread waiting on a lock or a future wakes up; sent to the process, so its
+    C-level handler has run when ``os.kill`` returns. Under the lock `main` takes to leave: never after
+    `main` returned, when the interpreter, exiting, has reset SIGINT to its default action (exit -2)."""
     with _LOCK:
         if _ACTIVE and not _RAISED:
-            _thread.interrupt_main(signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+
+
+def _settle() -> None:
+    """Nothing: calling a Python function lets the interpreter run a pending signal's handler."""
 
 
 def _on_sigint(signum, frame):
@@ -448,7 +452,7 @@ def _on_sigint(signum, frame):
     moment later, once the callback has returned. `_atomic` and `main` also check the flag, so a run whose
     interrupt was lost all the same writes nothing and ends with exit code 130."""
     _INTERRUPTED.append(True)
-    if _RAISED:  # one interrupt is enough: the first is unwinding the run already
+    if _RAISED or _SETTLING:  # one interrupt is enough: the first is unwinding the run already
         return
     callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
     f = frame
@@ -488,9 +492,12 @@ def main(argv=None) -> int:
         return 130
     finally:
         if previous is not None:
-            with _LOCK:
+            with _LOCK:  # no re-send from here on
                 _ACTIVE.clear()
-                signal.signal(signal.SIGINT, previous)
+            _SETTLING.append(True)
+            _settle()  # one sent just before reaches `_on_sigint`, which only records it now
+            signal.signal(signal.SIGINT, previous)
+            _SETTLING.clear()
         _RAISED.clear()
 
 
