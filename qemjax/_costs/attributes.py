@@ -113,6 +113,18 @@ def price_function(m: int, rank: bool):
     return _PRICE_FNS[key]
 
 
+_MERGE_FNS = {}
+
+
+def merge_function(m: int):
+    """The merge as a static function of (VS, pairs, x, params), one object per m (as `price_function`)."""
+    if m not in _MERGE_FNS:
+        def fn(VS, pairs, x, params):
+            return merge_pairs(m, VS, pairs, x)
+        _MERGE_FNS[m] = fn
+    return _MERGE_FNS[m]
+
+
 @kernel(static_argnums=0)
 def merge_pairs(m, VS, pairs, x):
     """(K, 11 + 4m) summed states in the frames of the new positions x (K,3)."""
@@ -246,8 +258,12 @@ class AttributeQEM(QEM):
     def price(self, VS, pairs, params, rings=None):
         return self.price_kernel(VS, pairs, params)
 
+    @property
+    def merge_kernel(self):
+        return merge_function(int(self.channels))
+
     def merge(self, VS, pairs, x, params):
-        return merge_pairs(self.channels, VS, pairs, x)
+        return self.merge_kernel(VS, pairs, x, params)
 
     def vertex_error(self, state: np.ndarray) -> np.ndarray:
         """The position-and-attribute error at each vertex (attributes at their optimum)."""

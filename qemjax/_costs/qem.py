@@ -62,6 +62,14 @@ def _price(VS, pairs, params):
     return placement.place_pairs(VS, pairs, params["endpoints_only"], params["cond_eps"], params["max_shift"])
 
 
+def _merge(VS, pairs, x, params):
+    return placement.merged_quadrics(VS, pairs, x)
+
+
+def _merge_memoryless(VS, pairs, x, params):
+    return ml.merge(VS, pairs, x)
+
+
 def _price_rank(VS, pairs, params):
     return placement.place_pairs_rank(VS, pairs, params["endpoints_only"], params["rank_eps"],
                                       params["max_shift"])
@@ -211,10 +219,13 @@ class QEM(Method):
         """The price at the kept vertex (`at_kept`): the summed quadric (memoryless: its own rows) there."""
         return ml.price_at_kept if self.memoryless else at_kept.qem
 
+    @property
+    def merge_kernel(self):
+        """The merge as a static function of arrays (VS, pairs, x, params)."""
+        return _merge_memoryless if self.memoryless else _merge
+
     def merge(self, VS, pairs, x, params):
-        if self.memoryless:
-            return ml.merge(VS, pairs, x)
-        return placement.merged_quadrics(VS, pairs, x)
+        return self.merge_kernel(VS, pairs, x, params)
 
     def vertex_error(self, state: np.ndarray) -> np.ndarray:
         return np.maximum(state[:, 9].astype(np.float64), 0.0)

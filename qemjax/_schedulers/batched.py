@@ -196,6 +196,7 @@ class _Batch(_Run):
             t0 = time.perf_counter()
             if prev is not None and prev.edges_next is not None and self.active.sum() < self.n_in_rounds:
                 prev.edges_next = self._without_stopped(prev.edges_next)
+                prev.next_price = None  # started for the pairs before: priced again, without the stopped copies
                 self.n_in_rounds = int(self.active.sum())
             st, follow, stale, same = self.update(prev)
             self.timer.add("topology_s", time.perf_counter() - t0)
@@ -224,6 +225,7 @@ class _Batch(_Run):
             self.contract_batch(st, acc, n_sel, locked, found, cp)
             self.copy_faces.append((n_acc > 0, self.counts()))
             prev = st
+        self.settle()
 
     # -- per-copy outputs --------------------------------------------------------------------------
     def outputs(self):

@@ -20,6 +20,7 @@ from .._kernels.batching import piece_sizes
 from .._kernels.batching import set_rows as set_rows
 from .._costs import ring
 from .._kernels import flips
+from .._kernels import kernel
 from .._options import Options as Options
 
 RING_BLOCK = 1 << 16  # ring models gather the faces of this many pairs at a time (bounded memory)
@@ -104,21 +105,8 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
     rows = 5 + len(model.parts)
     price = model.price_at_kept if at_kept else model.price
     if not model.uses_ring:
-        outs = [price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
-
-        def result():  # (called once) each piece straight into its four arrays, its device buffer let go as
-            # it is copied: no (rows, K) matrix held by the views of cost and parts (a 5.5 M-face mesh's first
-            # round: 166 MB less held, and no second copy of the pieces while they are joined)
-            K = len(P)
-            pr = _priced(K, rows, np.asarray(outs[0]).dtype if outs else DTYPE)
-            s = 0
-            for i in range(len(outs)):
-                o = np.asarray(outs[i])[:, : K - s]
-                outs[i] = None
-                _put(pr, slice(s, s + o.shape[1]), o)
-                s += o.shape[1]
-            return pr
-        return result
+        return _joined([price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))],
+                       len(P), rows)
     pieces = []  # (indices into P, device output)
     for b0 in range(0, len(P), RING_BLOCK):
         block = P[b0:b0 + RING_BLOCK]
@@ -134,6 +122,68 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
             _put(pr, sel, np.asarray(o)[:, : len(sel)])
         return pr
     return ring_result
+
+
+def _joined(outs: list, K: int, rows: int):
+    """A function that waits for the price pieces ``outs`` (device (rows, k) arrays, in order) and gives the
+    `Priced` of their first K columns. (Called once) each piece goes straight into its four arrays and
+    its device buffer is let go as it is copied: no (rows, K) matrix held by the views of cost and parts
+    (a 5.5 M-face mesh's first round: 166 MB less held, and no second copy of the pieces while they are
+    joined)."""
+    def result():
+        pr = _priced(K, rows, np.asarray(outs[0]).dtype if outs else DTYPE)
+        s = 0
+        for i in range(len(outs)):
+            o = np.asarray(outs[i])[:, : K - s]
+            outs[i] = None
+            _put(pr, slice(s, s + o.shape[1]), o)
+            s += o.shape[1]
+        return pr
+    return result
+
+
+def fuses(model) -> bool:
+    """Whether a round's merge, row update and next price can go to the device as one call (`start_step`):
+    a model whose price reads only the pair's two rows, with no refresh between the merge and the price,
+    and whose merge and price are static functions of arrays (``merge_kernel``, ``price_kernel``: the call
+    is compiled once for them, whatever the settings)."""
+    return (model.support == "pair" and not model.uses_ring and model.refresh is None
+            and getattr(model, "merge_kernel", None) is not None and getattr(model, "price_kernel", None) is not None)
+
+
+@kernel(static_argnums=(0, 1), donate_argnums=2)
+def _step(merge, price, VS, rows_at, P, x, merge_params, Pn, price_params):
+    """`start_step`'s one call: the merged state of pairs P at x (``merge``, a model's ``merge_kernel``),
+    written with x into rows ``rows_at`` of VS (indices past the end are padding: dropped), then the price
+    of pairs Pn on the new rows (``price``, its ``price_kernel``)."""
+    merged = merge(VS, P, x, merge_params)
+    VS = VS.at[rows_at].set(jnp.concatenate([x.astype(VS.dtype), merged.astype(VS.dtype)], 1), mode="drop")
+    return VS, merged, price(VS, Pn, price_params)
+
+
+def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, size: int, price_size: int):
+    """A round's device work in one call (`fuses`): contract pairs P (K,2) at x (K,3), i.e. write
+    [x, merged state] into their kept vertices' rows, and start pricing the next round's stale pairs Pn
+    (J,2) on the new rows. The merges go in pieces of ``size`` rows, one call each, and the first
+    ``price_size`` stale pairs ride with the last one (the calls before it price padding); the other stale
+    pairs go in `chunks`' shapes as calls of their own. On a small mesh that is one call a round, and a run compiles
+    one `_step` per size. A round's kept and removed vertices are all distinct, so the merges read the
+    same rows whatever their order, and the values are those of `start_merge`, `set_rows` and
+    `start_price`. Returns (the new device rows (VSd is donated), a function giving the (K, width) merged
+    states, and one giving the `Priced` of Pn)."""
+    Pi, Pn = P.astype(np.int32), Pn.astype(np.int32)
+    pieces = list(zip(chunks(Pi, size=size), chunks(x, size=size), chunks(Pi[:, 0], fill=len(VSd), size=size)))
+    head, idle = pad_rows(Pn[:price_size], price_size), np.zeros((price_size, 2), np.int32)
+    merged = []
+    for i, ((_, pp), (_, xx), (_, ii)) in enumerate(pieces):
+        qq = head if i == len(pieces) - 1 else idle
+        VSd, m, first = _step(model.merge_kernel, model.price_kernel, VSd, ii, pp, xx, _params(params, pp), qq,
+                              _params(params, qq))
+        merged.append(m)
+    outs = [first] + ([model.price(VSd, part, _params(params, part)) for _, part in chunks(Pn[price_size:])]
+                      if len(Pn) > price_size else [])
+    return (VSd, lambda: np.concatenate([np.asarray(o) for o in merged])[: len(P)],
+            _joined(outs, len(Pn), 5 + len(model.parts)))
 
 
 def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: int | None = None):

@@ -43,14 +43,19 @@ from .._costs import MeshView
 from .._mesh.incidence import FaceLists
 from . import outcome, round_jit
 from .._kernels.flips import SLIVER
-from .common import (DTYPE, Options, Timer, bucket, face_normals, on_device, pad_rows, set_rows, start_flips,
-                     start_merge, start_price)
+from .common import (DTYPE, Options, Timer, bucket, face_normals, fuses, on_device, pad_rows, set_rows, start_flips,
+                     start_merge, start_price, start_step)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
 MERGE_CHUNK = 4096  # the piece shape of a round's merge and device row update (one compilation) ...
 SMALL_CHUNK = CHUNKS[0]  # ... or, for a mesh of at most SMALL_MESH faces, this one: such a mesh's rounds
 SMALL_MESH = 1 << 14  # contract ~100 pairs, and a 4096-row scatter costs ~12x a 256-row one. Chosen per run,
 # from the mesh's size, so that meshes of similar size compile the same shapes whatever their rounds
+
+
+# the stale pairs priced in a round's one device call (`common.start_step`), by merge piece: a small mesh's
+# rounds have a few hundred (the cow's to 10 %: median 350, at most 1,113), which then take one call, not 2-5
+STEP_PRICE = {SMALL_CHUNK: 1024, MERGE_CHUNK: 8192}
 
 
 def merge_size(m: int) -> int:
@@ -84,6 +89,7 @@ class RoundState:
     bad: np.ndarray = None
     changed: np.ndarray = None
     edges_next: tuple | None = None
+    next_price: tuple | None = None  # (the stale rows of edges_next, their price started) when it is known
 
 
 def _with_extra_pairs(E, ecount, extra_pairs, n):
@@ -206,6 +212,7 @@ class _Run:
                  part_scale=None, params=None, wedges=None, normals=None, locks=None):
         self.n, m = len(V), len(F)
         self.merge_chunk = merge_size(m)
+        self.price_chunk = STEP_PRICE.get(self.merge_chunk, self.merge_chunk)
         self.wedges = wedges  # a `_wedges.Tracker` when attributes are kept (else None)
         self.locks = locks  # a `_locks.RunLocks` (else None); the weights are carried in a copy
         self.weights = None if locks is None or locks.weights is None else np.array(locks.weights, np.float64)
@@ -238,6 +245,9 @@ class _Run:
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
         # the common case's rounds run as compiled loops (`round_jit`), with the flip test on the host
         self.compiled = round_jit.fits(self.manifold, self.incremental, locks, m)
+        # a round's merge, row update and the next round's price in one device call (`start_step`)
+        self.fused = self.incremental and locks is None and fuses(model)
+        self.merged = None  # (kept vertices, their merged states) not yet in VQ: `settle`
         if self.compiled:
             self.N0 = np.ascontiguousarray(N0, DTYPE)
             # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
@@ -308,8 +318,12 @@ class _Run:
             if self.locks is not None:
                 pending = self.locked_prices(pending, st.E)
         else:
-            d = np.flatnonzero(stale)
-            pending = start_price(model, VQd, _take(st.E, d), self.params, self.faces, self.pad)
+            if prev.next_price is not None:  # started with the last round's merge (`contract`)
+                d, pending = prev.next_price
+                prev.next_price = None
+            else:
+                d = np.flatnonzero(stale)
+                pending = start_price(model, VQd, _take(st.E, d), self.params, self.faces, self.pad)
             if self.locks is not None:
                 pending = self.locked_prices(pending, _take(st.E, d))
             st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
@@ -320,6 +334,7 @@ class _Run:
         self.timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
+        self.settle()
         if prev is None:
             st.x, st.cost, st.branch, parts = pending()
             st.parts = np.ascontiguousarray(parts.T)
@@ -343,6 +358,14 @@ class _Run:
             if self.wedges is not None:  # a seam placement never moves a locked vertex
                 _locks.pin(self.locks, self.VQ, st.E, st.x)
         self.timer.add("kernels_s", time.perf_counter() - t0)
+
+    def settle(self):
+        """The last round's merged vertex states into the host rows VQ (`contract` leaves them on the device
+        while the host works on): before anything reads VQ's states, and at the end of the run."""
+        if self.merged is not None:
+            a, merged = self.merged
+            self.merged = None
+            self.VQ[a, 3:] = merged()
 
     def locked_prices(self, pending, P):
         """``pending`` (a price of pairs P) with locked kept vertices and the weights applied (`_locks.adjust`)."""
@@ -483,7 +506,8 @@ class _Run:
         P = _take(st.E, acc)
         a, b = P[:, 0], P[:, 1]
         xs = _take(st.x, acc)
-        merged = start_merge(self.model, self.VQd, P, xs, self.params, size=self.merge_chunk)  # runs meanwhile
+        if not self.fused:
+            merged = start_merge(self.model, self.VQd, P, xs, self.params, size=self.merge_chunk)  # runs meanwhile
         st.changed = np.zeros(n, bool)
         st.changed[a] = True
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
@@ -509,19 +533,28 @@ class _Run:
             rep[b] = a
             ep = rep[self.extra_pairs]
             self.extra_pairs = ep[ep[:, 0] != ep[:, 1]]
-        rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
-        put_rows(self.VQ, a, rows)
+        if self.incremental and not self.compiled:
+            st.edges_next = edges_next.result()
         if self.compiled:
             put_rows(self.V3, a, xs)
-        self.VQd = set_rows(self.VQd, a, rows, size=self.merge_chunk)
+        if self.fused:  # the merge, the row update and the next round's price: one device call
+            E, stale = st.edges_next[0], st.edges_next[4]
+            d = np.flatnonzero(stale)
+            self.VQd, merged, priced = start_step(self.model, self.VQd, P, xs, _take(E, d), self.params,
+                                                  self.merge_chunk, self.price_chunk)
+            st.next_price = (d, priced)
+            self.VQ[a, :3] = xs
+            self.merged = (a, merged)  # the states reach VQ when the price is waited for (`settle`)
+        else:
+            rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
+            put_rows(self.VQ, a, rows)
+            self.VQd = set_rows(self.VQd, a, rows, size=self.merge_chunk)
         if self.model.support == "ring" or self.model.refresh is not None:
             ring = _ring_vertices(faces, a, n)
             if self.model.support == "ring":
                 st.changed = ring
             if self.model.refresh is not None:
                 self.refresh(np.flatnonzero(ring))
-        if self.incremental and not self.compiled:
-            st.edges_next = edges_next.result()
         self.faces_per_round.append(faces.count)
         self.timer.add("contract_s", time.perf_counter() - t0)
 
@@ -597,6 +630,7 @@ class _Run:
             prev = st
             if self.progress is not None:
                 self.progress(self.faces.count)
+        self.settle()
         return stop, blocked
 
     def stop(self, st: RoundState, need: int):

@@ -1,0 +1,135 @@
+"""A round's device work in one call (`common.start_step`: the merge, the row update and the next round's
+price together) gives what the separate calls give: the same values on random rows, and whole runs
+(alone and batched, small and large meshes, several cost models) bit for bit."""
+from __future__ import annotations
+
+import warnings
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import shapes
+from qemjax._costs import build, resolve
+from qemjax._schedulers import common, parallel
+from test_attributes import atlas_sphere
+from test_round_jit import _assert_same
+
+
+def _unfused(monkeypatch):
+    monkeypatch.setattr(parallel, "fuses", lambda model: False)
+
+
+def _spy(monkeypatch):
+    calls = []
+    step = parallel.start_step
+
+    def spy(model, VSd, P, x, Pn, params, size, price_size):
+        calls.append((len(P), len(Pn), size, price_size))
+        return step(model, VSd, P, x, Pn, params, size, price_size)
+    monkeypatch.setattr(parallel, "start_step", spy)
+    return calls
+
+
+def _simplify(mesh, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return qemjax.simplify(mesh, **({"method": "classic"} | kw))
+
+
+@pytest.mark.parametrize("method", ["classic", "default", "line", "probabilistic"])
+@pytest.mark.parametrize("K, J", [(40, 300), (600, 2000), (256, 0)])
+def test_step_gives_the_separate_calls_values(method, K, J):
+    """Random rows and pairs: merge pieces of 256 (several when K > 256) and price pieces beyond the
+    first 1024 (J = 2000) give the merge, row update and price of `start_merge`, `set_rows` and
+    `start_price`, bit for bit."""
+    rng = np.random.default_rng(K + J)
+    model = build(resolve(method))
+    n = 4000
+    rows = np.zeros((4096, 3 + model.width), np.float32)
+    V = rng.normal(size=(n, 3)).astype(np.float32)
+    Fr = rng.integers(0, n, (3 * n, 3))
+    Fr = Fr[(Fr[:, 0] != Fr[:, 1]) & (Fr[:, 1] != Fr[:, 2]) & (Fr[:, 0] != Fr[:, 2])]
+    from qemjax._costs.base import MeshInput
+    from qemjax._mesh import topology as topo
+    S = model.init_state(MeshInput(V, Fr, topo.boundary_edges(Fr, n), None))
+    rows[:n, :3], rows[:n, 3:] = V, S
+    verts = rng.permutation(n)
+    P = np.stack([verts[:K], verts[K:2 * K]], 1)  # vertex-disjoint, as a round's contractions are
+    x = (0.5 * (V[P[:, 0]] + V[P[:, 1]]) + 0.01 * rng.normal(size=(K, 3))).astype(np.float32)
+    Pn = np.sort(rng.integers(0, n, (J, 2)), axis=1)
+    params = common.on_device(model.kernel_params())
+
+    merged_ref = common.start_merge(model, jnp.asarray(rows), P, x, params, size=256)()
+    VSref = common.set_rows(jnp.asarray(rows), P[:, 0], np.concatenate([x, merged_ref], 1), size=256)
+    priced_ref = common.start_price(model, VSref, Pn, params)()
+
+    VS, merged, priced = common.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024)
+    assert np.array_equal(merged(), merged_ref)
+    assert np.array_equal(np.asarray(VS), np.asarray(VSref))
+    got = priced()  # (waits once)
+    for name in ("x", "cost", "branch", "parts"):
+        assert np.array_equal(getattr(got, name), getattr(priced_ref, name), equal_nan=True), name
+
+
+RUNS = {
+    "bumpy-classic": (lambda: shapes.bumpy_sphere(4), {"ratio": 0.05}),
+    "bumpy-default": (lambda: shapes.bumpy_sphere(4), {"ratio": 0.02, "method": "default"}),
+    "icosphere-rank": (lambda: shapes.icosphere(4), {"target_faces": 300, "placement": "rank"}),
+    "grid-line": (lambda: shapes.grid(40, hole=True), {"ratio": 0.1, "method": "line"}),
+    "uv-seams": (lambda: atlas_sphere(3)[0], {"ratio": 0.1, "attributes": "uv"}),
+    # above `parallel.SMALL_MESH` faces: merge pieces of 4096, prices of 8192 in the call
+    "large-bumpy": (lambda: shapes.bumpy_sphere(6), {"ratio": 0.02}),
+}
+
+
+@pytest.mark.parametrize("case", list(RUNS))
+def test_runs_with_one_call_a_round_give_the_separate_calls_result(case, monkeypatch):
+    make, kw = RUNS[case]
+    mesh = make()
+    with monkeypatch.context() as m:
+        calls = _spy(m)
+        new = _simplify(mesh, **kw)
+    with monkeypatch.context() as m:
+        _unfused(m)
+        old = _simplify(mesh, **kw)
+    _assert_same(new, old)
+    if "uv" in case:
+        assert np.array_equal(new.uv, old.uv)
+    # every round that contracted made its one call (and started the next round's price there)
+    assert len(calls) == len(new.stats["faces_per_round"]) >= 2
+    if case == "icosphere-rank":  # a round with more contractions than one merge piece
+        assert max(k for k, _, size, _ in calls) > calls[0][2]
+    if case == "large-bumpy":
+        assert calls[0][2:] == (4096, 8192) and max(j for _, j, _, _ in calls) > 8192
+
+
+def test_a_batch_with_one_call_a_round_gives_the_separate_calls_result(monkeypatch):
+    """Copies stop at their own targets: the price started for the pairs of a round where a copy stopped
+    is dropped and the round prices again without it (`batched`)."""
+    mesh = shapes.bumpy_sphere(4)
+    configs = [{"ratio": r, "boundary_weight": w} for r in (0.02, 0.1, 0.3) for w in (1.0, 100.0)]
+    with monkeypatch.context() as m:
+        calls = _spy(m)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            new = qemjax.simplify_batch(mesh, configs)
+    with monkeypatch.context() as m:
+        _unfused(m)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            old = qemjax.simplify_batch(mesh, configs)
+    assert calls
+    for a, b in zip(new, old):
+        _assert_same(a, b)
+
+
+def test_models_that_read_more_than_the_pair_are_not_fused():
+    """A ring model's price reads the faces around the pair, and a refresh changes rows between the merge
+    and the price: those keep the separate calls."""
+    assert common.fuses(build(resolve("classic")))
+    assert not common.fuses(build(resolve("esqem")))
+    assert not common.fuses(build(resolve("area")))
+    assert not common.fuses(build(qemjax.QEM(memoryless=True)))
+    assert not common.fuses(build(qemjax.QEM(regularize=0.1)))
