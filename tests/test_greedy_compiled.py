@@ -43,7 +43,7 @@ def _two_spheres():
     return np.concatenate([V1, 0.2 * V2 + 3.0]), np.concatenate([F1, F2 + len(V1)])
 
 
-COMPILED = {k: v for k, v in CASES.items() if k not in ("cube-non-manifold",)}  # (manifold mode only)
+COMPILED = dict(CASES)
 COMPILED.update({
     "jittered-sphere": (_jittered_sphere, {"ratio": 0.05}),
     "bipyramid": (_bipyramid, {"ratio": 0.1}),
@@ -157,7 +157,7 @@ def test_link_kernel_matches_python(make):
         for a, b in E.tolist():
             nshared = len(mesh.at[a] & mesh.at[b])
             want = mesh.link_common(a, b, nshared)
-            got = rules_jit.link_common(Fm, fs, fl, fpool, cnt, a, b, nshared, out)
+            got = rules_jit.link_common(Fm, fs, fl, fpool, cnt, a, b, nshared, out, True)
             assert (got < 0) == (want is None), (a, b)
             if want is not None:
                 assert got == len(want) and set(out[:got].tolist()) == want, (a, b)

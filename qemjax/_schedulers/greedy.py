@@ -92,7 +92,7 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
 
     if locks is None and greedy_batches.eligible(model, wedges):  # the same run, contracted in verified batches
         compiled = _compiled()
-        if compiled is not None and compiled.fits(options, F):  # (their host side compiled)
+        if compiled is not None:  # (their host side compiled)
             return compiled.run(V, S, F, pairs, target_faces, model, options, progress)
         return greedy_batches.run(V, S, F, pairs, target_faces, model, options, progress)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
