@@ -4,6 +4,7 @@ so both see the same machine state (and the hashes show whether the outputs are 
 
     python experiments/greedy_speed.py                          # cow and stanford-bunny -> 10 %
     python experiments/greedy_speed.py --rev a9c2f4d --repeats 3
+    python experiments/greedy_speed.py --rev eee561e --non-manifold --method classic   # preserve_topology=False
 
 The hash is sha256 over the output vertices, faces, history pairs, positions and costs, and the run's stop
 reason, contraction count and rejections by rule (the rules that refused some pair; hashes from before
@@ -51,10 +52,14 @@ def main() -> int:
     ap.add_argument("--ratio", type=float, default=0.1)
     ap.add_argument("--repeats", type=int, default=3, help="timed runs per mesh and version (median reported)")
     ap.add_argument("--rev", default=None, help="also run the package at this git revision")
+    ap.add_argument("--method", default=None, help="the cost method (default: simplify's)")
+    ap.add_argument("--non-manifold", action="store_true", help="preserve_topology=False")
     args = ap.parse_args()
+    kw = ({} if args.method is None else {"method": args.method}) | (
+        {"preserve_topology": False} if args.non_manifold else {})
     warnings.simplefilter("ignore")
     versions = [("new", qemjax)] + ([(args.rev, load_old(args.rev))] if args.rev else [])
-    print(f"qemjax from {Path(qemjax.__file__).parent}; ratio {args.ratio}, {args.repeats} warm runs each")
+    print(f"qemjax from {Path(qemjax.__file__).parent}; ratio {args.ratio}, {args.repeats} warm runs each; {kw}")
     for mesh in args.meshes:
         path = SHARED / mesh
         if not path.exists():
@@ -64,13 +69,13 @@ def main() -> int:
         cpus = {label: [] for label, _ in versions}
         hashes = {}
         for label, pkg in versions:  # warm-up: compilation and file caches
-            res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
+            res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy", **kw)
             hashes[label] = digest(res)
             faces = (len(res.faces), res.stats["contractions"])
         for _ in range(args.repeats):
             for label, pkg in versions:
                 t, c = time.perf_counter(), time.process_time()
-                res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
+                res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy", **kw)
                 times[label].append(time.perf_counter() - t)
                 cpus[label].append(time.process_time() - c)
                 if digest(res) != hashes[label]:
