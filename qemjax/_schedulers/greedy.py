@@ -9,11 +9,11 @@ batched price and merge on the device rows.
 
 A run takes one of two paths, with the same contractions in the same order and the same outputs:
 * models whose price reads only the pair's two rows (`greedy_compiled.eligible`: QEM without memoryless,
-  ring support, refresh, ranking weights or kept attributes) and no locks: the queue in verified
-  speculative batches with its host side compiled (`greedy_compiled`, `greedy_jit`, `greedy_rules_jit`):
-  one merge and one price call per few dozen contractions instead of per contraction, in both modes and on
-  any mesh;
-* everything else (locks, kept attributes (wedges), ring-support, refreshed or rank-weighted models), and
+  ring support, refresh, ranking weights or kept attributes): the queue in verified speculative batches
+  with its host side compiled (`greedy_compiled`, `greedy_jit`, `greedy_rules_jit`): one merge and one
+  price call per few dozen contractions instead of per contraction, in both modes, on any mesh, with or
+  without locks and weights;
+* everything else (kept attributes (wedges), ring-support, refreshed or rank-weighted models), and
   any run where numba is missing (a core dependency: only a safety net): the loop below, one contraction
   and one device round trip at a time. It is the reference the compiled path is tested against
   (tests/test_greedy_compiled.py).
@@ -93,9 +93,9 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
     faces = FaceLists(F, n)
     E, _ = topo.edges(F, n)
     pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
-    compiled = _compiled() if locks is None else None
-    if compiled is not None and compiled.eligible(model, wedges):  # the same run, in verified batches
-        return compiled.run(V, S, F, pairs, target_faces, model, options, progress)
+    compiled = _compiled()
+    if compiled is not None and compiled.eligible(model, wedges, locks):  # the same run, in verified batches
+        return compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)

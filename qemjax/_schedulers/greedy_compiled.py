@@ -36,6 +36,7 @@ from numba import types
 from numba.typed import Dict
 
 from . import greedy_jit as jit
+from . import locks as _locks
 from . import outcome
 from .._kernels.flips import SLIVER
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
@@ -52,10 +53,11 @@ JOURNAL_ROWS, INTERVAL_ROWS = 1 << 16, 1 << 14  # a batch's journal and stale in
 REMOVED_ROWS = 1 << 12  # a batch's removed faces
 
 
-def eligible(model, wedges) -> bool:
-    """Whether a run can use this module: a pair's price reads only its two vertices' rows."""
+def eligible(model, wedges, locks=None) -> bool:
+    """Whether a run can use this module: a pair's price reads only its two vertices' rows (with locks:
+    priced on the device, `_locks.adjust`, not by a host ``cost_at``)."""
     return (wedges is None and model.support == "pair" and model.refresh is None and not model.uses_ring
-            and model.rank_weights is None)
+            and model.rank_weights is None and (locks is None or getattr(model, "cost_at", None) is None))
 
 
 def simple(F: np.ndarray) -> bool:
@@ -121,7 +123,7 @@ def _grown(a: np.ndarray, size: int) -> np.ndarray:
 class _Compiled:
     """The run's state (arrays and typed dicts, as `greedy_jit` describes) and its batch loop."""
 
-    def __init__(self, V, S, F, pairs, target, model, options, progress):
+    def __init__(self, V, S, F, pairs, target, model, options, progress, locks=None):
         n, m = len(V), len(F)
         self.n, self.target, self.model, self.options, self.progress = n, target, model, options, progress
         self.params = model.kernel_params()
@@ -129,6 +131,13 @@ class _Compiled:
         self.VQ = np.zeros((bucket(n + 1 + MAX_BATCH), 3 + model.width), DTYPE)
         self.VQ[:n, :3], self.VQ[:n, 3:] = V, S
         self.VQd = jnp.asarray(self.VQ)
+        # locks (`_locks`): locked vertices, and the weights carried through contractions, per row (a batch's
+        # kept vertices' new weights in their scratch rows, as their merged rows)
+        self.locks, rows = locks, len(self.VQ)
+        self.locked = np.zeros(n, bool) if locks is None else np.asarray(locks.locked, bool)
+        self.row_locks = None if locks is None else _locks.RunLocks(_grown(self.locked, rows))
+        self.weights = None if locks is None or locks.weights is None else _grown(
+            np.array(locks.weights, np.float64), rows)
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
         self.T = np.array(F, np.int64).reshape(-1, 3)
         self.manifold, self.simple = bool(options.preserve_topology), simple(self.T)
@@ -180,15 +189,23 @@ class _Compiled:
         if not len(P):
             return
         d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
-        priced = start_price(self.model, self.VQd, P, self.params, None, self.n)()
+        priced = self.adjust(self.VQd, P, start_price(self.model, self.VQd, P, self.params, None, self.n)())
         self.push(P, priced, np.einsum("ij,ij->i", d, d))
+
+    def adjust(self, VQd, rows, priced):
+        """With locks, `_locks.adjust` of the prices of pairs whose two rows are ``rows`` (k,2): pairs with a
+        locked kept vertex priced there, costs and parts times the larger weight of the two rows."""
+        if self.locks is None:
+            return priced
+        return _locks.adjust(self.row_locks, self.weights, self.model, self.VQ, VQd, rows, priced, self.params,
+                             None, self.n)
 
     def push(self, P, priced, l2, keys=None):
         keys = queue_keys(P, priced.cost, l2) if keys is None else keys
         self.room(stamps=len(P))
         jit.push((P[:, 0] << 32) | P[:, 1], keys, priced.x, priced.cost, priced.branch.astype(np.int64),
                  np.ascontiguousarray(priced.parts.T), self.heap, self.K, self.X, self.cost, self.branch,
-                 self.parts, self.cur, self.blocked, self.bat, self.ctr)
+                 self.parts, self.cur, self.blocked, self.bat, self.ctr, self.locks is not None, self.locked)
 
     def room(self, stamps=0, full=False):
         """Grow the arrays for ``stamps`` more pushes; with ``full`` (a batch stopped for room), grow each
@@ -247,7 +264,8 @@ class _Compiled:
         held, gone = _dict(), _dict()
         opt = self.options  # (scalars of fixed types: one compiled specialisation)
         jit.speculate(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
-                      bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch), *self.arrays(), self.steps,
+                      bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch), self.locks is not None,
+                      self.locked, *self.arrays(), self.steps,
                       self.iv, held, gone, self.ver, self.orig, self.J, self.rm, ctr)
         ns = int(ctr[jit.C_NSTEPS])
         steps = self.steps[:ns].copy()
@@ -257,12 +275,17 @@ class _Compiled:
             P = contracted[:, [jit.S_A, jit.S_B]]
             X = self.X[contracted[:, jit.S_STAMP]]
             rows = np.concatenate([X, start_merge(self.model, self.VQd, P, X, self.params)()], 1)
+            if self.locks is not None:  # the kept vertices' scratch rows: locked as they are, the larger weight
+                slots = self.scratch + np.arange(len(P))  # (`_locks.carry`; a popped pair's vertices were not
+                self.row_locks.locked[slots] = self.locked[P[:, 0]]  # merged earlier in the batch: their
+                if self.weights is not None:  # weights are those the batch started with)
+                    self.weights[slots] = np.maximum(self.weights[P[:, 0]], self.weights[P[:, 1]])
         niv = int(ctr[jit.C_NIV])
         VQd, priced, keys = self.VQd, None, np.zeros((0, 3), np.uint64)
         iv = self.iv[:niv].copy()
         if niv:
             VQd, priced, keys = self.price_intervals(iv, rows)
-        ok = int(jit.first_wrong(steps, self.K, iv, keys, ns))
+        ok = int(jit.first_wrong(steps, self.K, iv, self.order_keys(iv, keys), ns))
         self.batches += 1
         if ok < ns:
             self.failed += 1
@@ -279,6 +302,8 @@ class _Compiled:
         if m:
             kept = contracted[:m, jit.S_A]
             self.VQ[kept, 3:] = rows[:m, 3:]
+            if self.weights is not None:
+                self.weights[kept] = self.weights[self.scratch + np.arange(m)]
             VQd = set_rows(VQd, kept, rows[:m], size=MAX_BATCH)
         self.VQd = VQd
         jit.forget_gone(gone, ok, self.cur, self.blocked, self.bat)
@@ -303,7 +328,7 @@ class _Compiled:
         ids = iv[:, [jit.I_RA, jit.I_RB]]
         VQd = set_rows(self.VQd, self.scratch + np.arange(len(rows)), rows, size=MAX_BATCH) if len(rows) \
             else self.VQd
-        priced = start_price(self.model, VQd, ids, self.params, None, self.n)()
+        priced = self.adjust(VQd, ids, start_price(self.model, VQd, ids, self.params, None, self.n)())
         self.VQ[self.scratch:self.scratch + len(rows), :3] = rows[:, :3]
         first = ids.reshape(-1)
         pos = self.VQ[first, :3]
@@ -315,6 +340,19 @@ class _Compiled:
         l2 = np.einsum("ij,ij->i", d, d)
         pk = iv[:, jit.I_PAIR]
         return VQd, priced, queue_keys(np.stack([pk >> 32, pk & _M32], 1), priced.cost, l2)
+
+    def order_keys(self, iv, keys):
+        """The intervals' keys as the order check takes them: a pair of two locked vertices is blocked as
+        soon as it is pushed, so it precedes nothing (its key: the largest)."""
+        if self.locks is None or not len(keys):
+            return keys
+        pk = iv[:, jit.I_PAIR]
+        both = self.locked[pk >> 32] & self.locked[pk & _M32]
+        if not both.any():
+            return keys
+        keys = keys.copy()
+        keys[both] = np.iinfo(np.uint64).max
+        return keys
 
     def record(self, steps):
         """The history of the contraction steps that stand, in order."""
@@ -353,10 +391,10 @@ class _Compiled:
         return faces, q
 
 
-def run(V, S, F, pairs, target_faces, model, options, progress):
+def run(V, S, F, pairs, target_faces, model, options, progress, locks=None):
     """`greedy.run` for an `eligible` model; pairs (k,2): the candidate pairs (edges and extra pairs, each
     row sorted). Same return."""
-    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress)
+    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress, locks)
     r.push_all()
     r.loop()
     faces, q = r.output()

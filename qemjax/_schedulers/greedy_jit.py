@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from .greedy_rules_jit import has, rules
+from .outcome import LOCKED
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
 S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_RM, S_NDROP = range(10)  # columns of ``steps``
@@ -161,7 +162,7 @@ def _unblock(p, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat):
 
 
 @njit(cache=True)
-def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch,
+def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks, locked,
               T, alive, fs, fl, fpool, ns, nl, npool, VQ, N0, cnt,
               heap, K, X, cost, branch, parts, cur, blocked, bat,
               steps, iv, held, gone, ver, orig, J, rm, ctr):
@@ -200,8 +201,8 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             size = 2 * max(fl[a], fl[b])
             A, B, D, R = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64), \
                 np.empty(2 * size, np.int64)
-        code = rules(a, b, X[s], ctr[C_FACES], target, manifold, simple, keep_parts, cos_max, sliver, T, fs, fl,
-                     fpool, VQ, N0, cnt, A, B, D, R, common, info)
+        code = rules(a, b, X[s], ctr[C_FACES], target, manifold, simple, keep_parts, cos_max, sliver, has_locks,
+                     locked, T, fs, fl, fpool, VQ, N0, cnt, A, B, D, R, common, info)
         if code >= 0:
             _journal(J, ctr, J_BLOCKED, p, -1, 0)
             blocked[p] = code
@@ -231,7 +232,7 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
         rm[r0:r0 + info[0]] = D[:info[0]]
         rm[r0 + info[0]:r0 + nrm] = R[:info[3]]
         ctr[C_NRM] = r0 + nrm
-        _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
+        _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
                   heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr)
         step[S_KIND], step[S_LEFT], step[S_ND], step[S_RM], step[S_NDROP] = CONTRACT, ctr[C_FACES], info[0], \
             r0, info[3]
@@ -284,12 +285,12 @@ def _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat):
 
 
 @njit(cache=True)
-def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
+def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
               heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr):
     """Contract b into a at X[s] as step k (journaled): its dead faces D and dropped faces R leave the
     mesh, b's other faces use a; its pairs at b are gone, those at a stale (a new interval each), blocked
     pairs around a back in the queue. ``info``, A, B, D, R: from `rules`; ``buf``: room for the longest
-    list written (`_needs`)."""
+    list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never contract)."""
     nd, nka, nkb, ndrop = info[0], info[1], info[2], info[3]
     for i in range(nd):
         f = D[i]
@@ -379,7 +380,7 @@ def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpoo
         if bat[u] > 0:
             for jj in range(ns[u], ns[u] + nl[u]):
                 q = _pair(u, npool[jj])
-                if q in blocked and q not in gone:
+                if q in blocked and q not in gone and not (locked[u] and locked[npool[jj]]):
                     _unblock(q, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat)
 
 
@@ -469,8 +470,9 @@ def _key_less(keys, i, j):
 
 
 @njit(cache=True)
-def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocked, bat, ctr):
-    """Into the queue: pairs P (k,) with keys (k,3) and prices, a new stamp each, in order."""
+def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocked, bat, ctr, has_locks, locked):
+    """Into the queue: pairs P (k,) with keys (k,3) and prices, a new stamp each, in order; pairs of two
+    ``locked`` vertices blocked (rule LOCKED: they never contract)."""
     for r in range(len(P)):
         p = P[r]
         s = ctr[C_STAMP] + 1
@@ -485,6 +487,10 @@ def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocke
             bat[p >> 32] -= 1
             bat[p & M32] -= 1
         heap_push(heap, ctr, K, s)
+        if has_locks and locked[p >> 32] and locked[p & M32]:
+            blocked[p] = LOCKED
+            bat[p >> 32] += 1
+            bat[p & M32] += 1
 
 
 @njit(cache=True)

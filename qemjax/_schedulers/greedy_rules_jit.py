@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .outcome import BUDGET, COINCIDENT, FLIP, PART, TOPOLOGY
+from .outcome import BUDGET, COINCIDENT, FLIP, LOCKED, PART, TOPOLOGY
 
 @njit(cache=True, inline="always")
 def has(pool, start, length, v):
@@ -198,8 +198,8 @@ def coincident_drop(a, b, T, A, nka, B, nkb, R):
 
 
 @njit(cache=True)
-def rules(a, b, x, faces, target, manifold, simple, keep_parts, cos_max, sliver, T, fs, fl, fpool, VQ, N0, cnt,
-          A, B, D, R, common, info):
+def rules(a, b, x, faces, target, manifold, simple, keep_parts, cos_max, sliver, has_locks, locked, T, fs, fl, fpool,
+          VQ, N0, cnt, A, B, D, R, common, info):
     """The checks of the one-at-a-time loop (`greedy._run`), in its order: the code of the first rule that
     contracting b into a at x breaks, or -1. Leaves what the contraction would change: info = (number of
     dead faces, of faces kept at a, at b, of faces dropped as coincident (non-manifold mode)), A and B the
@@ -229,6 +229,8 @@ def rules(a, b, x, faces, target, manifold, simple, keep_parts, cos_max, sliver,
             return TOPOLOGY
         if keep_parts and nka == 0 and nkb == 0:  # its faces are all its part has left
             return PART
+    if has_locks and _strands(a, b, nd, nka + nkb, locked, T, fl, D):
+        return LOCKED
     for i in range(nka + nkb):
         f = A[i] if i < nka else B[i - nka]
         v = a if i < nka else b
@@ -244,6 +246,25 @@ def rules(a, b, x, faces, target, manifold, simple, keep_parts, cos_max, sliver,
         return COINCIDENT if manifold else BUDGET
     info[3] = ndrop
     return -1
+
+
+@njit(cache=True)
+def _strands(a, b, nd, nkept, locked, T, fl, D):
+    """Whether the contraction would leave a locked vertex in no face (`_locks.vanishing`, `_locks.strands`):
+    a or b locked and no face kept, or a locked third corner of the dead faces D whose faces all die."""
+    if nkept == 0 and (locked[a] or locked[b]):
+        return True
+    for i in range(nd):
+        for c in T[D[i]]:
+            if c != a and c != b and locked[c]:
+                k = 0  # c's corners among the dead faces
+                for j in range(nd):
+                    for v in T[D[j]]:
+                        if v == c:
+                            k += 1
+                if k >= fl[c]:
+                    return True
+    return False
 
 
 @njit(cache=True, inline="always")
