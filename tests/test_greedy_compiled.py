@@ -83,6 +83,32 @@ COMPILED.update({
 DROPS = ("torus-non-manifold", "nested-cubes-non-manifold")
 
 
+def _random_picks(n, k, seed):
+    return np.random.default_rng(seed).choice(n, k, replace=False)
+
+
+_N3 = len(shapes.bumpy_sphere(3)[0])
+_NG = len(shapes.grid(16, hole=True)[0])
+_N2 = len(_two_spheres()[0])
+# locks and weights (`_locks`): locked kept vertices priced where they stand, weights scaling the costs and
+# carried through contractions, pairs of two locked vertices never taken, the LOCKED rule
+COMPILED.update({
+    "locked": (lambda: shapes.bumpy_sphere(3), {"ratio": 0.1, "locked": _random_picks(_N3, _N3 // 10, 0)}),
+    "weights": (lambda: shapes.bumpy_sphere(3),
+                {"ratio": 0.1, "vertex_weights": np.random.default_rng(1).choice([0.0, 1.0, 10.0], _N3)}),
+    "locks-weights-non-manifold": (lambda: shapes.bumpy_sphere(3), {
+        "ratio": 0.05, "preserve_topology": False, "locked": _random_picks(_N3, 30, 2),
+        "vertex_weights": np.random.default_rng(3).random(_N3) * 5}),
+    # 40 % locked: the run stops held back by its locks
+    "locks-stop": (lambda: shapes.grid(16, hole=True),
+                   {"ratio": 0.02, "locked": np.random.default_rng(4).random(_NG) < 0.4}),
+    "locks-max-error": (lambda: shapes.grid(16, hole=True), {
+        "max_error": 1e-3, "locked": [0, 5, 17], "vertex_weights": np.random.default_rng(5).random(_NG) * 3}),
+    # the small sphere's last contractions would leave its locked vertex in no face: refused (LOCKED)
+    "locks-vanishing-non-manifold": (_two_spheres, {"ratio": 0.001, "preserve_topology": False, "locked": [_N2 - 1]}),
+})
+
+
 def _same(x, y, where="res"):
     if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
         x, y = np.asarray(x), np.asarray(y)
@@ -144,6 +170,10 @@ def test_compiled_queue_gives_the_one_at_a_time_result(case, monkeypatch):
         assert new.record.coincident.sum() > 0  # contractions did drop coincident faces
     if "ratio" not in kw:
         assert new.stop_reason == "max_error"
+    if case == "locks-stop":
+        assert new.stop_reason == "locked"
+    if case == "locks-vanishing-non-manifold":
+        assert new.stats["rejected_by"]["locked"] > 0
     _assert_same(new, old)
     k = max(1, len(old.faces) * 2)  # the record replays the same prefixes
     _same(new.replay(k).faces, old.replay(k).faces, "replay")
@@ -334,6 +364,36 @@ def test_link_kernel_matches_the_loops_rule(make):
     assert seen == {True, False}
 
 
+@pytest.mark.parametrize("make", [lambda: shapes.grid(7, hole=True), lambda: shapes.torus(1.0, 0.35, 10, 6)],
+                         ids=["grid-with-hole", "torus"])
+def test_lock_rule_kernel_matches_the_loops(make):
+    """`greedy_rules_jit._strands` = the loop's LOCKED rule (`_locks.vanishing` or `_locks.strands`) for
+    every edge of the mesh and of coarser versions, with a third, then two thirds of the vertices locked."""
+    from qemjax._schedulers import locks as _locks
+
+    V, F = make()
+    seen = set()
+    rng = np.random.default_rng(6)
+    for Vm, Fm in _coarser(V, F):
+        Fm = np.asarray(Fm, np.int64)
+        n, E = len(Vm), _edges(Fm)
+        faces, at = FaceLists(Fm, n), _at(Fm, n)
+        fs, fl, fpool = _kernel_lists(Fm, n)
+        for share in (1 / 3, 2 / 3):
+            locked = rng.random(n) < share
+            lk = _locks.RunLocks(locked)
+            for a, b in E.tolist():
+                P = np.array([[a, b]])
+                (fids, *_), _, (dead, _) = faces.touched_with_dead(P)
+                want = bool(_locks.vanishing(lk, P, np.array([len(fids)]))[0]
+                            or _locks.strands(lk, faces, P, (dead, np.zeros(len(dead), np.int64)))[0])
+                D = np.array(sorted(at[a] & at[b]), np.int64)
+                got = rules_jit._strands(a, b, len(D), len(fids), locked, Fm, fl, D)
+                assert got == want, (a, b)
+                seen.add(want)
+    assert seen == ({True, False} if len(F) != 120 else {False})  # (the closed torus strands no vertex)
+
+
 def _kept(F, at, a, b):
     dead = at[a] & at[b]
     return np.array(sorted(at[a] - dead), np.int64), np.array(sorted(at[b] - dead), np.int64)
@@ -463,7 +523,8 @@ def test_order_check_matches_python():
         assert jit.first_wrong(steps, K, iv, ik, n) == want
 
 
-@pytest.mark.parametrize("case", ["torus-flip-45", "grid-max-error", "jittered-sphere", "torus-non-manifold"])
+@pytest.mark.parametrize("case", ["torus-flip-45", "grid-max-error", "jittered-sphere", "torus-non-manifold",
+                                  "locks-stop", "locks-weights-non-manifold"])
 def test_compiled_queue_ends_in_the_loops_state(case, monkeypatch):
     """After the run, the queue as the one-at-a-time loop leaves it: the same pairs in it at the same
     cost and position, the same ones blocked by the same rules (pairs unblocked around a contraction and
@@ -517,7 +578,7 @@ def test_kernels_stay_in_bounds():
                NUMBA_CACHE_DIR=str(Path(tempfile.gettempdir()) / "qemjax-numba-boundscheck"))
     here = Path(__file__).resolve()
     out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(here), "-k",
-                          "grows or bipyramid or grid-with-hole or two-parts or non_simple or nested"],
+                          "grows or bipyramid or grid-with-hole or two-parts or non_simple or nested or locks"],
                          cwd=here.parent.parent, env=env, capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     assert " passed" in out.stdout
