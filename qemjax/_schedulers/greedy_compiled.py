@@ -25,6 +25,11 @@ call: the kernels gather rows and are elementwise over pairs, and the outputs ma
 
 A blocked pair that becomes a candidate again keeps its stored price, which is what re-pricing it would
 give (its two vertices' rows have not changed since it was priced): hence `eligible`.
+
+Locks and weights (`_locks`): prices go through `_locks.adjust` on each interval's rows (a kept vertex's
+scratch row carries its lock and its new weight, `_locks.carry`), pairs of two locked vertices are blocked
+whenever they are pushed (and take no part in the order check: they never come first), and the rules
+refuse a contraction that would leave a locked vertex in no face.
 """
 from __future__ import annotations
 
@@ -275,10 +280,13 @@ class _Compiled:
             P = contracted[:, [jit.S_A, jit.S_B]]
             X = self.X[contracted[:, jit.S_STAMP]]
             rows = np.concatenate([X, start_merge(self.model, self.VQd, P, X, self.params)()], 1)
-            if self.locks is not None:  # the kept vertices' scratch rows: locked as they are, the larger weight
-                slots = self.scratch + np.arange(len(P))  # (`_locks.carry`; a popped pair's vertices were not
-                self.row_locks.locked[slots] = self.locked[P[:, 0]]  # merged earlier in the batch: their
-                if self.weights is not None:  # weights are those the batch started with)
+            if self.locks is not None:
+                # the kept vertices' scratch rows: locked as they are, with the larger weight of the pair
+                # (`_locks.carry`; a popped pair's vertices were not merged earlier in the batch, so their
+                # weights are those the batch started with)
+                slots = self.scratch + np.arange(len(P))
+                self.row_locks.locked[slots] = self.locked[P[:, 0]]
+                if self.weights is not None:
                     self.weights[slots] = np.maximum(self.weights[P[:, 0]], self.weights[P[:, 1]])
         niv = int(ctr[jit.C_NIV])
         VQd, priced, keys = self.VQd, None, np.zeros((0, 3), np.uint64)
