@@ -1,10 +1,11 @@
 """Where a greedy run's time goes, per contraction: process CPU time of the verified batches' stages,
 each timed by wrapping it, in µs per contraction, with the device calls (merge, price, row updates: the
-JAX dispatch and the wait) apart. The compiled loop (`qemjax._schedulers.greedy_compiled`, the one a
-simple mesh in manifold mode takes) by default; ``--python``: the Python loop (`greedy_batches`).
+JAX dispatch and the wait) apart: the compiled loop (`qemjax._schedulers.greedy_compiled`; its Python
+twin, `greedy_batches`, was retired at 2026-11-27: ``git show eee561e:experiments/greedy_profile.py`` for
+its stages). ``--non-manifold``: with ``preserve_topology=False``.
 
     python experiments/greedy_profile.py                         # stanford-bunny -> 10 %
-    python experiments/greedy_profile.py --mesh cow.obj --python
+    python experiments/greedy_profile.py --mesh cow.obj --non-manifold
 
 Nested stages are indented under the stage that calls them (their time is part of it). One warm-up run
 first (compilation), then one timed run. CPU time, so other processes on a shared machine count less
@@ -22,15 +23,10 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent)]  # this checkout's qemjax
 
 import qemjax  # noqa: E402
-from qemjax._schedulers import greedy, greedy_batches as gb  # noqa: E402
 from qemjax._schedulers import greedy_compiled as gc  # noqa: E402
 from qemjax._schedulers import greedy_jit as jit  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "meshes"
-STAGES = [  # (name, depth): methods of greedy_batches._Batches, and the device calls
-    ("batch", 0), ("speculate", 1), ("next_entry", 2), ("prefetch", 3), ("flip_tests", 4), ("check", 2),
-    ("contract", 2), ("price_intervals", 1), ("first_wrong", 1), ("commit", 1), ("push", 2), ("record", 2),
-    ("undo", 1), ("device: merge", 1), ("device: price", 1), ("device: set_rows", 1)]
 COMPILED = [  # (name, depth): methods of greedy_compiled._Compiled, kernels of greedy_jit, device calls
     ("batch", 0), ("jit: speculate", 1), ("price_intervals", 1), ("jit: first_wrong", 1), ("jit: undo", 1),
     ("jit: forget_gone", 1), ("jit: last_intervals", 1), ("push", 1), ("jit: push", 2), ("record", 1),
@@ -41,7 +37,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mesh", default="stanford-bunny.obj")
     ap.add_argument("--ratio", type=float, default=0.1)
-    ap.add_argument("--python", action="store_true", help="the Python loop (greedy_batches) instead")
+    ap.add_argument("--non-manifold", action="store_true", help="preserve_topology=False")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     spent = {}
@@ -63,24 +59,21 @@ def main() -> int:
             return out
         return g
 
-    stages = STAGES if args.python else COMPILED
-    if args.python:
-        greedy._compiled = lambda: None
+    stages = COMPILED
+    kw = {"preserve_topology": False} if args.non_manifold else {}
     for name, _ in stages:
         if name.startswith("jit: "):
             setattr(jit, name[5:], timed(name, getattr(jit, name[5:])))
         elif not name.startswith("device"):
-            cls = gb._Batches if args.python else gc._Compiled
-            setattr(cls, name, timed(name, getattr(cls, name)))
-    for mod in (gb, gc):
-        mod.start_merge = timed("device: merge", mod.start_merge, waits=True)
-        mod.start_price = timed("device: price", mod.start_price, waits=True)
-        mod.set_rows = timed("device: set_rows", mod.set_rows)
+            setattr(gc._Compiled, name, timed(name, getattr(gc._Compiled, name)))
+    gc.start_merge = timed("device: merge", gc.start_merge, waits=True)
+    gc.start_price = timed("device: price", gc.start_price, waits=True)
+    gc.set_rows = timed("device: set_rows", gc.set_rows)
     path = str(SHARED / args.mesh)
-    qemjax.simplify(path, ratio=args.ratio, scheduler="greedy")  # warm-up
+    qemjax.simplify(path, ratio=args.ratio, scheduler="greedy", **kw)  # warm-up
     spent.clear()
     t, c = time.perf_counter(), time.process_time()
-    res = qemjax.simplify(path, ratio=args.ratio, scheduler="greedy")
+    res = qemjax.simplify(path, ratio=args.ratio, scheduler="greedy", **kw)
     wall, cpu = time.perf_counter() - t, time.process_time() - c
     n = res.stats["contractions"]
     print(f"{args.mesh} -> {args.ratio:g}: {n} contractions, wall {wall:.2f} s, cpu {cpu:.2f} s "

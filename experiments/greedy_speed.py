@@ -4,6 +4,8 @@ so both see the same machine state (and the hashes show whether the outputs are 
 
     python experiments/greedy_speed.py                          # cow and stanford-bunny -> 10 %
     python experiments/greedy_speed.py --rev a9c2f4d --repeats 3
+    python experiments/greedy_speed.py --rev eee561e --non-manifold --method classic   # preserve_topology=False
+    python experiments/greedy_speed.py --rev eee561e --meshes cow.obj --locked-share 0.01 --weights  # locks
 
 The hash is sha256 over the output vertices, faces, history pairs, positions and costs, and the run's stop
 reason, contraction count and rejections by rule (the rules that refused some pair; hashes from before
@@ -51,26 +53,39 @@ def main() -> int:
     ap.add_argument("--ratio", type=float, default=0.1)
     ap.add_argument("--repeats", type=int, default=3, help="timed runs per mesh and version (median reported)")
     ap.add_argument("--rev", default=None, help="also run the package at this git revision")
+    ap.add_argument("--method", default=None, help="the cost method (default: simplify's)")
+    ap.add_argument("--non-manifold", action="store_true", help="preserve_topology=False")
+    ap.add_argument("--locked-share", type=float, default=0.0,
+                    help="lock this share of the input vertices (random, seed 0)")
+    ap.add_argument("--weights", action="store_true", help="vertex_weights: random in [0.5, 2) (seed 1)")
     args = ap.parse_args()
+    kw = ({} if args.method is None else {"method": args.method}) | (
+        {"preserve_topology": False} if args.non_manifold else {})
     warnings.simplefilter("ignore")
     versions = [("new", qemjax)] + ([(args.rev, load_old(args.rev))] if args.rev else [])
-    print(f"qemjax from {Path(qemjax.__file__).parent}; ratio {args.ratio}, {args.repeats} warm runs each")
+    print(f"qemjax from {Path(qemjax.__file__).parent}; ratio {args.ratio}, {args.repeats} warm runs each; {kw}; "
+          f"locked share {args.locked_share}, weights {args.weights}")
     for mesh in args.meshes:
         path = SHARED / mesh
         if not path.exists():
             print(f"SKIP {mesh} ({path} absent)")
             continue
+        n = len(qemjax.load(str(path)).vertices) if args.locked_share or args.weights else 0
+        if args.locked_share:
+            kw["locked"] = np.random.default_rng(0).choice(n, int(round(args.locked_share * n)), replace=False)
+        if args.weights:
+            kw["vertex_weights"] = 0.5 + 1.5 * np.random.default_rng(1).random(n)
         times = {label: [] for label, _ in versions}
         cpus = {label: [] for label, _ in versions}
         hashes = {}
         for label, pkg in versions:  # warm-up: compilation and file caches
-            res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
+            res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy", **kw)
             hashes[label] = digest(res)
             faces = (len(res.faces), res.stats["contractions"])
         for _ in range(args.repeats):
             for label, pkg in versions:
                 t, c = time.perf_counter(), time.process_time()
-                res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy")
+                res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy", **kw)
                 times[label].append(time.perf_counter() - t)
                 cpus[label].append(time.process_time() - c)
                 if digest(res) != hashes[label]:

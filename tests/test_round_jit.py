@@ -16,8 +16,7 @@ from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import greedy_rules_jit as rules_jit
 from qemjax._schedulers import parallel, round_jit
 from test_attributes import atlas_sphere
-from test_greedy_batches import CASES, _same
-from test_greedy_compiled import _bipyramid, _jittered_sphere, _two_spheres
+from test_greedy_compiled import CASES, _bipyramid, _jittered_sphere, _same, _two_spheres
 
 RUNS = {k: v for k, v in CASES.items() if k not in ("cube-non-manifold",)}  # (manifold mode only)
 RUNS.update({

@@ -7,11 +7,16 @@ coincident-face rule of `topo.coincident_removals`, the flip test (`flips.flips_
 numpy twin: one contraction's few faces cost less on the host than a device call), and the cost model's
 batched price and merge on the device rows.
 
-Models whose price reads only the pair's two rows (`greedy_batches.eligible`: QEM without memoryless or
-attributes) run the same queue in verified speculative batches (`greedy_batches`): one merge and one
-price call per few dozen contractions instead of per contraction, with the same contractions in the same
-order (on a simple mesh in manifold mode, the usual case, with the host side compiled:
-`greedy_compiled`). The others run the loop below, one contraction and one device round trip at a time.
+A run takes one of two paths, with the same contractions in the same order and the same outputs:
+* models whose price reads only the pair's two rows (`greedy_compiled.eligible`: QEM without memoryless,
+  ring support, refresh, ranking weights or kept attributes): the queue in verified speculative batches
+  with its host side compiled (`greedy_compiled`, `greedy_jit`, `greedy_rules_jit`): one merge and one
+  price call per few dozen contractions instead of per contraction, in both modes, on any mesh, with or
+  without locks and weights;
+* everything else (kept attributes (wedges), ring-support, refreshed or rank-weighted models), and
+  any run where numba is missing (a core dependency: only a safety net): the loop below, one contraction
+  and one device round trip at a time. It is the reference the compiled path is tested against
+  (tests/test_greedy_compiled.py).
 """
 from __future__ import annotations
 
@@ -61,7 +66,7 @@ def _on_boundary(ring: np.ndarray, v: int) -> bool:
 
 
 def _compiled():
-    """`greedy_compiled`, or None without numba (a core dependency; `greedy_batches` is its Python twin)."""
+    """`greedy_compiled`, or None without numba (a core dependency; then the loop below runs)."""
     try:
         from . import greedy_compiled
     except ImportError:  # pragma: no cover
@@ -88,21 +93,18 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
     faces = FaceLists(F, n)
     E, _ = topo.edges(F, n)
     pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
-    from . import greedy_batches  # lazily: its module imports jax kernels only the batched path uses
-
-    if locks is None and greedy_batches.eligible(model, wedges):  # the same run, contracted in verified batches
-        compiled = _compiled()
-        if compiled is not None and compiled.fits(options, F):  # (their host side compiled)
-            return compiled.run(V, S, F, pairs, target_faces, model, options, progress)
-        return greedy_batches.run(V, S, F, pairs, target_faces, model, options, progress)
+    compiled = _compiled()
+    if compiled is not None and compiled.eligible(model, wedges, locks):  # the same run, in verified batches
+        return compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)
     N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)  # each input face's normal: the reference
-    nbr = [set() for _ in range(n)]  # pair partners
-    for a, b in pairs.tolist():
-        nbr[a].add(b)
-        nbr[b].add(a)
+    nbr = [set() for _ in range(n)]  # pair partners (not a vertex itself: the edge of a face with a repeated
+    for a, b in pairs.tolist():       # corner, which is no pair)
+        if a != b:
+            nbr[a].add(b)
+            nbr[b].add(a)
     q = _Queue()
     weights = None if locks is None or locks.weights is None else np.array(locks.weights, np.float64)
 

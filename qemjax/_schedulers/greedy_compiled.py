@@ -1,7 +1,36 @@
-"""The greedy queue's verified batches with their host side compiled (`greedy_jit`): the batch loop of
-`greedy_batches._Batches` (speculate, merge and price on the device, check the order, undo, commit), with
-the same contractions in the same order and the same outputs bit for bit (tests/test_greedy_compiled.py
-runs both on the same meshes). Used where `fits` holds: manifold mode on a simple mesh."""
+"""The greedy queue in verified batches, with its host side compiled (`greedy_jit`): the same
+contractions, in the same order, with the same outputs bit for bit, as the one-at-a-time loop of `greedy`
+(tests/test_greedy_compiled.py runs both on the same meshes). Used for the models whose price reads only
+the pair's two rows (`eligible`: QEM without memoryless, ring support, refresh, ranking weights or kept
+attributes), in both modes (manifold, and non-manifold, where a contraction drops the faces it makes
+coincide) and on any mesh (the rules take shortcuts on a `simple` one).
+
+One contraction at a time costs a device round trip (merge, then re-price the pairs at the kept vertex)
+per contraction, and the pairs it re-prices are rarely the next cheapest: on the cow, 3 % of the pops
+take a pair priced by the contraction just before. So the queue runs ahead (*speculates*): it keeps
+popping and contracting on the host, with the pairs whose price is out of date (*stale*) held out of the
+queue, then merges and re-prices all of them in one device call each, and checks the order: a step
+stands if no stale pair held out before it ranks before it (with the queue's own keys, ties included).
+The first step that fails and all after it are undone (a journal of every host change) and run again
+from the queue with the new prices in it.
+
+A pair is stale over an *interval* of steps: from the step that changed one of its vertices to the next
+step that changes one again (or removes the pair), or to the end of the batch. Each interval has its own
+price, from the rows as they were then: a kept vertex's new row goes to a scratch row of its own (past
+the mesh's rows), so one price call reads each interval's versions of its two rows, and the order check
+compares each step with the intervals open at it. A popped pair never has a vertex merged earlier in the
+batch (every pair at a kept vertex is stale), so all of a batch's merges read the rows the batch started
+from: one merge call. (A pair's price and merge do not depend on which rows or pairs share their kernel
+call: the kernels gather rows and are elementwise over pairs, and the outputs match bit for bit.)
+
+A blocked pair that becomes a candidate again keeps its stored price, which is what re-pricing it would
+give (its two vertices' rows have not changed since it was priced): hence `eligible`.
+
+Locks and weights (`_locks`): prices go through `_locks.adjust` on each interval's rows (a kept vertex's
+scratch row carries its lock and its new weight, `_locks.carry`), pairs of two locked vertices are blocked
+whenever they are pushed (and take no part in the order check: they never come first), and the rules
+refuse a contraction that would leave a locked vertex in no face.
+"""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -12,23 +41,51 @@ from numba import types
 from numba.typed import Dict
 
 from . import greedy_jit as jit
+from . import locks as _locks
 from . import outcome
 from .._kernels.flips import SLIVER
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
-from .greedy_batches import FIRST_BATCH, MAX_BATCH, PREFETCH, REBUILD, _ties, ordered_bits, simple
 from .queue import stop_report
 
 _M32 = 0xFFFFFFFF
+FIRST_BATCH, MAX_BATCH = 16, 256  # speculation depth: doubled after a batch that stands, halved after one that fails
+REBUILD, PREFETCH = 2, 64  # the heap is rebuilt from the current entries when it holds more than REBUILD
+# times as many entries, plus PREFETCH
 # first sizes (they grow when a batch needs more: `_Compiled.room`)
 ROOM, SLACK = 2, 1024  # pools and queue arrays: ROOM times what they start with, plus SLACK
 POOL_ROOM = 8  # a pool packed after a step did not fit: room for a batch of such steps, up to this many times its lists
 JOURNAL_ROWS, INTERVAL_ROWS = 1 << 16, 1 << 14  # a batch's journal and stale intervals
+REMOVED_ROWS = 1 << 12  # a batch's removed faces
 
 
-def fits(options, F) -> bool:
-    """Whether `greedy_jit` covers the run: manifold mode on a `greedy_batches.simple` mesh (its rules
-    take the shortcuts those allow, and no contraction drops coincident faces)."""
-    return bool(options.preserve_topology) and simple(F)
+def eligible(model, wedges, locks=None) -> bool:
+    """Whether a run can use this module: a pair's price reads only its two vertices' rows (with locks:
+    priced on the device, `_locks.adjust`, not by a host ``cost_at``)."""
+    return (wedges is None and model.support == "pair" and model.refresh is None and not model.uses_ring
+            and model.rank_weights is None and (locks is None or getattr(model, "cost_at", None) is None))
+
+
+def simple(F: np.ndarray) -> bool:
+    """No face with a repeated corner, no two faces with the same corners. In manifold mode a mesh stays
+    so (a contraction removes the faces with both endpoints, and one that would make two faces coincide is
+    refused), and the rules take shortcuts that rely on it."""
+    Fs = np.sort(np.asarray(F).reshape(-1, 3), axis=1)
+    return bool(np.all(Fs[:, 0] != Fs[:, 1]) and np.all(Fs[:, 1] != Fs[:, 2])
+                and len(np.unique(Fs, axis=0)) == len(Fs))
+
+
+def _ties(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """`queue.tie` of many pairs (exact in uint64: the products stay below 2**64 for any vertex index
+    below 2**32)."""
+    a, b = a.astype(np.uint64), b.astype(np.uint64)
+    return ((a * np.uint64(0x9E3779B1)) ^ (b * np.uint64(0x85EBCA77))) & np.uint64(0xFFFFFFFF)
+
+
+def ordered_bits(v: np.ndarray) -> np.ndarray:
+    """float32 values -> uint64 in the same order (-0.0 as 0.0, equal floats equal ints; a NaN ranks
+    after +inf, where a tuple of floats has no order at all)."""
+    u = (np.asarray(v, np.float32) + np.float32(0.0)).view(np.uint32).astype(np.uint64)
+    return np.where(u >> np.uint64(31), ~u & np.uint64(_M32), u | np.uint64(0x80000000))
 
 
 def _dict():
@@ -36,7 +93,9 @@ def _dict():
 
 
 def queue_keys(P: np.ndarray, cost: np.ndarray, l2: np.ndarray) -> np.ndarray:
-    """Queue keys (k,3) uint64 of pairs P (k,2): `greedy_batches._entries`' fields, in three words."""
+    """Queue keys (k,3) uint64 of pairs P (k,2): the fields of `queue.Queue`'s entries (cost, squared
+    length, `queue.tie`, a, b) in three words (ordered cost bits << 32 | ordered length bits, tie << 32 | a,
+    b), which compare as the tuples do."""
     a, b = P[:, 0].astype(np.uint64), P[:, 1].astype(np.uint64)
     K = np.empty((len(P), 3), np.uint64)
     K[:, 0] = (ordered_bits(cost) << np.uint64(32)) | ordered_bits(l2)
@@ -46,12 +105,17 @@ def queue_keys(P: np.ndarray, cost: np.ndarray, l2: np.ndarray) -> np.ndarray:
 
 
 def _lists(n: int, owner: np.ndarray, item: np.ndarray):
-    """Per vertex lists (start, length, pool with as much room again) of ``item`` grouped by ``owner``."""
+    """Per vertex lists (start, length, pool with as much room again) of ``item`` grouped by ``owner``,
+    each item once per list (a face with a repeated corner is listed once there)."""
     order = np.argsort(owner, kind="stable")
+    owner, item = owner[order], item[order]
+    once = np.ones(len(item), bool)
+    once[1:] = (owner[1:] != owner[:-1]) | (item[1:] != item[:-1])  # (items come in order within a list)
+    owner, item = owner[once], item[once]
     length = np.bincount(owner, minlength=n).astype(np.int64)
     start = np.cumsum(length) - length
     pool = np.empty(ROOM * len(item) + SLACK, np.int64)
-    pool[:len(item)] = item[order]
+    pool[:len(item)] = item
     return start, length, pool
 
 
@@ -64,7 +128,7 @@ def _grown(a: np.ndarray, size: int) -> np.ndarray:
 class _Compiled:
     """The run's state (arrays and typed dicts, as `greedy_jit` describes) and its batch loop."""
 
-    def __init__(self, V, S, F, pairs, target, model, options, progress):
+    def __init__(self, V, S, F, pairs, target, model, options, progress, locks=None):
         n, m = len(V), len(F)
         self.n, self.target, self.model, self.options, self.progress = n, target, model, options, progress
         self.params = model.kernel_params()
@@ -72,8 +136,16 @@ class _Compiled:
         self.VQ = np.zeros((bucket(n + 1 + MAX_BATCH), 3 + model.width), DTYPE)
         self.VQ[:n, :3], self.VQ[:n, 3:] = V, S
         self.VQd = jnp.asarray(self.VQ)
+        # locks (`_locks`): locked vertices, and the weights carried through contractions, per row (a batch's
+        # kept vertices' new weights in their scratch rows, as their merged rows)
+        self.locks, rows = locks, len(self.VQ)
+        self.locked = np.zeros(n, bool) if locks is None else np.asarray(locks.locked, bool)
+        self.row_locks = None if locks is None else _locks.RunLocks(_grown(self.locked, rows))
+        self.weights = None if locks is None or locks.weights is None else _grown(
+            np.array(locks.weights, np.float64), rows)
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
         self.T = np.array(F, np.int64).reshape(-1, 3)
+        self.manifold, self.simple = bool(options.preserve_topology), simple(self.T)
         self.alive = np.ones(m, bool)
         self.pool_room = {"fpool": 0, "npool": 0}  # free slots a packed pool keeps (`room`)
         self.fs, self.fl, self.fpool = _lists(n, self.T.reshape(-1), np.repeat(np.arange(m, dtype=np.int64), 3))
@@ -93,6 +165,7 @@ class _Compiled:
         self.steps = np.zeros((MAX_BATCH + 1, 10), np.int64)
         self.iv = np.zeros((INTERVAL_ROWS, 5), np.int64)
         self.J = np.zeros((JOURNAL_ROWS, 4), np.int64)
+        self.rm = np.zeros(REMOVED_ROWS, np.int64)
         self.ver = np.full(n, -1, np.int64)
         self.orig = np.zeros((MAX_BATCH + 1, self.VQ.shape[1]), DTYPE)
         self.ctr = np.zeros(jit.NCTR, np.int64)
@@ -101,6 +174,7 @@ class _Compiled:
         self.cos_max, self.sliver = np.float32(options.cos_max), np.float32(SLIVER)
         self.history, self.history_parts = [], []
         self.removed_at = np.full(m, -1, np.int64)
+        self.coincident = np.zeros(m, bool)
         self.rejected_by = np.zeros(len(outcome.REJECT) + 1, np.int64)
         self.branches = np.zeros(len(model.branches), np.int64)
         self.max_cost_used = 0.0
@@ -115,20 +189,28 @@ class _Compiled:
                 self.bat)
 
     def push_all(self):
-        """Every pair into the queue (stamps in row order, as `greedy_batches._Batches.push_all`)."""
+        """Every pair into the queue, stamps in row order (pairs sorted)."""
         P = self.P0
         if not len(P):
             return
         d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
-        priced = start_price(self.model, self.VQd, P, self.params, None, self.n)()
+        priced = self.adjust(self.VQd, P, start_price(self.model, self.VQd, P, self.params, None, self.n)())
         self.push(P, priced, np.einsum("ij,ij->i", d, d))
+
+    def adjust(self, VQd, rows, priced):
+        """With locks, `_locks.adjust` of the prices of pairs whose two rows are ``rows`` (k,2): pairs with a
+        locked kept vertex priced there, costs and parts times the larger weight of the two rows."""
+        if self.locks is None:
+            return priced
+        return _locks.adjust(self.row_locks, self.weights, self.model, self.VQ, VQd, rows, priced, self.params,
+                             None, self.n)
 
     def push(self, P, priced, l2, keys=None):
         keys = queue_keys(P, priced.cost, l2) if keys is None else keys
         self.room(stamps=len(P))
         jit.push((P[:, 0] << 32) | P[:, 1], keys, priced.x, priced.cost, priced.branch.astype(np.int64),
                  np.ascontiguousarray(priced.parts.T), self.heap, self.K, self.X, self.cost, self.branch,
-                 self.parts, self.cur, self.blocked, self.bat, self.ctr)
+                 self.parts, self.cur, self.blocked, self.bat, self.ctr, self.locks is not None, self.locked)
 
     def room(self, stamps=0, full=False):
         """Grow the arrays for ``stamps`` more pushes; with ``full`` (a batch stopped for room), grow each
@@ -149,6 +231,8 @@ class _Compiled:
                     self.J = _grown(self.J, int(max(2 * len(self.J), ctr[jit.C_WJ])))
                 if want(jit.C_WIV, len(self.iv)):
                     self.iv = _grown(self.iv, int(max(2 * len(self.iv), ctr[jit.C_WIV])))
+                if want(jit.C_WRM, len(self.rm)):
+                    self.rm = _grown(self.rm, int(max(2 * len(self.rm), ctr[jit.C_WRM])))
         need = ctr[jit.C_STAMP] + stamps + 1
         if need > len(self.K):
             size = 2 * max(need, len(self.K))
@@ -184,9 +268,10 @@ class _Compiled:
             jit.rebuild(self.heap, ctr, self.K, self.cur, self.blocked)
         held, gone = _dict(), _dict()
         opt = self.options  # (scalars of fixed types: one compiled specialisation)
-        jit.speculate(int(self.depth), int(self.target), float(opt.max_cost), bool(opt.keep_parts), self.cos_max,
-                      self.sliver, int(self.scratch), *self.arrays(), self.steps, self.iv, held, gone, self.ver,
-                      self.orig, self.J, ctr)
+        jit.speculate(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
+                      bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch), self.locks is not None,
+                      self.locked, *self.arrays(), self.steps,
+                      self.iv, held, gone, self.ver, self.orig, self.J, self.rm, ctr)
         ns = int(ctr[jit.C_NSTEPS])
         steps = self.steps[:ns].copy()
         contracted = steps[steps[:, jit.S_KIND] == jit.CONTRACT]
@@ -195,12 +280,20 @@ class _Compiled:
             P = contracted[:, [jit.S_A, jit.S_B]]
             X = self.X[contracted[:, jit.S_STAMP]]
             rows = np.concatenate([X, start_merge(self.model, self.VQd, P, X, self.params)()], 1)
+            if self.locks is not None:
+                # the kept vertices' scratch rows: locked as they are, with the larger weight of the pair
+                # (`_locks.carry`; a popped pair's vertices were not merged earlier in the batch, so their
+                # weights are those the batch started with)
+                slots = self.scratch + np.arange(len(P))
+                self.row_locks.locked[slots] = self.locked[P[:, 0]]
+                if self.weights is not None:
+                    self.weights[slots] = np.maximum(self.weights[P[:, 0]], self.weights[P[:, 1]])
         niv = int(ctr[jit.C_NIV])
         VQd, priced, keys = self.VQd, None, np.zeros((0, 3), np.uint64)
         iv = self.iv[:niv].copy()
         if niv:
             VQd, priced, keys = self.price_intervals(iv, rows)
-        ok = int(jit.first_wrong(steps, self.K, iv, keys, ns))
+        ok = int(jit.first_wrong(steps, self.K, iv, self.order_keys(iv, keys), ns))
         self.batches += 1
         if ok < ns:
             self.failed += 1
@@ -217,6 +310,8 @@ class _Compiled:
         if m:
             kept = contracted[:m, jit.S_A]
             self.VQ[kept, 3:] = rows[:m, 3:]
+            if self.weights is not None:
+                self.weights[kept] = self.weights[self.scratch + np.arange(m)]
             VQd = set_rows(VQd, kept, rows[:m], size=MAX_BATCH)
         self.VQd = VQd
         jit.forget_gone(gone, ok, self.cur, self.blocked, self.bat)
@@ -236,11 +331,12 @@ class _Compiled:
         self.room(full=bool(ctr[jit.C_FULL]))  # (a batch stopped for room: rare)
 
     def price_intervals(self, iv, rows):
-        """`greedy_batches._Batches.price_intervals` (same kernel calls, same lengths)."""
+        """Prices and queue keys of the stale intervals, each from its own versions of its two rows: the
+        device rows with the batch's merged ``rows`` in the scratch rows."""
         ids = iv[:, [jit.I_RA, jit.I_RB]]
         VQd = set_rows(self.VQd, self.scratch + np.arange(len(rows)), rows, size=MAX_BATCH) if len(rows) \
             else self.VQd
-        priced = start_price(self.model, VQd, ids, self.params, None, self.n)()
+        priced = self.adjust(VQd, ids, start_price(self.model, VQd, ids, self.params, None, self.n)())
         self.VQ[self.scratch:self.scratch + len(rows), :3] = rows[:, :3]
         first = ids.reshape(-1)
         pos = self.VQ[first, :3]
@@ -253,11 +349,24 @@ class _Compiled:
         pk = iv[:, jit.I_PAIR]
         return VQd, priced, queue_keys(np.stack([pk >> 32, pk & _M32], 1), priced.cost, l2)
 
+    def order_keys(self, iv, keys):
+        """The intervals' keys as the order check takes them: a pair of two locked vertices is blocked as
+        soon as it is pushed, so it precedes nothing (its key: the largest)."""
+        if self.locks is None or not len(keys):
+            return keys
+        pk = iv[:, jit.I_PAIR]
+        both = self.locked[pk >> 32] & self.locked[pk & _M32]
+        if not both.any():
+            return keys
+        keys = keys.copy()
+        keys[both] = np.iinfo(np.uint64).max
+        return keys
+
     def record(self, steps):
         """The history of the contraction steps that stand, in order."""
         history, parts = self.history, len(self.model.parts)
-        for a, b, s, left, nd, d0, d1 in steps[:, [jit.S_A, jit.S_B, jit.S_STAMP, jit.S_LEFT, jit.S_ND, jit.S_D0,
-                                                   jit.S_D1]].tolist():
+        for a, b, s, left, nd, r0, ndrop in steps[:, [jit.S_A, jit.S_B, jit.S_STAMP, jit.S_LEFT, jit.S_ND, jit.S_RM,
+                                                      jit.S_NDROP]].tolist():
             step = len(history)
             cost = float(self.cost[s])
             history.append((a, b, self.X[s].copy(), cost))
@@ -266,9 +375,9 @@ class _Compiled:
                 self.max_cost_used = cost
             if parts:
                 self.history_parts.append(np.append(self.parts[s], cost))
-            self.removed_at[d0] = step
-            if nd > 1:
-                self.removed_at[d1] = step
+            self.removed_at[self.rm[r0:r0 + nd + ndrop]] = step
+            if ndrop:
+                self.coincident[self.rm[r0 + nd:r0 + nd + ndrop]] = True
             if self.progress is not None:
                 self.progress(left)
 
@@ -290,9 +399,10 @@ class _Compiled:
         return faces, q
 
 
-def run(V, S, F, pairs, target_faces, model, options, progress):
-    """`greedy_batches.run` where `fits` holds. Same return."""
-    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress)
+def run(V, S, F, pairs, target_faces, model, options, progress, locks=None):
+    """`greedy.run` for an `eligible` model; pairs (k,2): the candidate pairs (edges and extra pairs, each
+    row sorted). Same return."""
+    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress, locks)
     r.push_all()
     r.loop()
     faces, q = r.output()
@@ -307,4 +417,4 @@ def run(V, S, F, pairs, target_faces, model, options, progress):
         rejected=int(r.rejected_by.sum()), rounds=len(r.history), worst_cost=r.max_cost_used,
         branches=r.branches, parts=np.array(r.history_parts, np.float64).reshape(-1, nparts + 1) if nparts else None,
         history_rounds=np.arange(len(r.history), dtype=np.int64), removed_at=r.removed_at,
-        coincident=np.zeros(len(F), bool))
+        coincident=r.coincident)

@@ -1,13 +1,13 @@
-"""The host side of the greedy queue's verified batches (`greedy_batches`), compiled (numba): the same
-pops, rules (`greedy_rules_jit`), contractions, journal and commits as `greedy_batches._Batches`, on
-integer arrays.
+"""The host side of the greedy queue's verified batches (`greedy_compiled`), compiled (numba): pops,
+rules (`greedy_rules_jit`), contractions, journal and commits on integer arrays, giving the contractions of
+the one-at-a-time loop (`greedy._run`) in its order.
 
 Why: after the batching, a greedy run was Python bookkeeping (~150 µs per contraction on the bunny, no
 stage above a fifth of it: experiments/results/greedy_where.md); the same steps over arrays take a few
 µs. What stays in Python (`greedy_compiled`) is what needs the device: merging the batch's kept vertices
-and pricing its stale intervals, and the history. It covers the common case only (`greedy_compiled.fits`):
-manifold mode on a `simple` mesh (no face with a repeated corner, no two faces alike), where a contraction
-removes its pair's one or two faces and never drops coincident ones.
+and pricing its stale intervals, and the history. Both modes: in manifold mode a contraction removes the
+faces holding both its vertices; in non-manifold mode it also drops the faces it makes coincide
+(`greedy_rules_jit.coincident_drop`).
 
 Layout (one `State`, every field an array so that the kernels compile once and cache):
 * faces: ``T`` (m,3) corners, ``alive``; per vertex its faces and its pair partners as lists in a pool
@@ -15,11 +15,12 @@ Layout (one `State`, every field an array so that the kernels compile once and c
   written anew at the pool's end, so that the journal restores a list by its (start, length).
 * queue: ``heap`` of stamps (one per push, never reused); a stamp's key ``K`` (3 uint64: ordered cost bits
   << 32 | ordered squared-length bits, `queue.tie` << 32 | a, b), price ``X``, ``cost``, ``branch``,
-  ``parts``. Entries order by (K, stamp), as `greedy_batches`' ints do. ``cur`` {pair: current stamp},
+  ``parts``. Entries order by (K, stamp), as the tuples of `queue.Queue` do. ``cur`` {pair: current stamp},
   ``blocked`` {pair: rule} and ``bat`` (blocked pairs per vertex); pairs are ints a << 32 | b, a < b.
-* a batch: ``steps`` rows (kind, a, b, journal mark, rule, stamp, faces left, dead faces), the stale
-  intervals ``iv`` rows (pair, first step, end step, row of a, row of b), ``held``/``gone`` {pair: index}
-  (as in `greedy_batches`), ``ver`` (the scratch row of a vertex kept in this batch, else -1), ``orig`` (its
+* a batch: ``steps`` rows (kind, a, b, journal mark, rule, stamp, faces left, dead faces, where its
+  removed faces start in ``rm``, dropped faces), ``rm`` the faces each step removed (its dead faces, then
+  those it dropped as coincident), the stale intervals ``iv`` rows (pair, first step, end step, row of a,
+  row of b), ``held`` {pair: its open interval} and ``gone`` {pair: the step that removed it}, ``ver`` (the scratch row of a vertex kept in this batch, else -1), ``orig`` (its
   row before), and the journal ``J`` rows (kind, index, old, old).
 * ``ctr``: the counters (named by the C_* indices).
 """
@@ -29,16 +30,18 @@ import numpy as np
 from numba import njit
 
 from .greedy_rules_jit import has, rules
+from .outcome import LOCKED
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
-S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_D0, S_D1 = range(10)  # columns of ``steps``
+S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_RM, S_NDROP = range(10)  # columns of ``steps``
 I_PAIR, I_START, I_END, I_RA, I_RB = range(5)  # columns of ``iv``
 C_FACES, C_FTOP, C_NTOP, C_HSIZE, C_STAMP, C_JLEN, C_NSTEPS, C_NIV, C_DONE, C_FULL = range(10)
 # a batch that stopped for room (C_FULL): the lengths the step that did not fit wanted, per array (for the
 # two pools, the slots it wanted past their tops where they were short, else 0: a commit may pack them
 # before the arrays grow)
 C_WJ, C_WF, C_WN, C_WIV, C_WHEAP, C_WK = range(10, 16)
-NCTR = 16
+C_NRM, C_WRM = 16, 17  # the removed faces written to ``rm`` this batch, and the length a step wanted
+NCTR = 18
 J_HEAP, J_ALIVE, J_AT, J_NBR, J_TRI, J_COUNT, J_CUR, J_BLOCKED = range(8)
 OPEN = 1 << 62
 M32 = 0xFFFFFFFF
@@ -159,21 +162,23 @@ def _unblock(p, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat):
 
 
 @njit(cache=True)
-def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
+def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks, locked,
               T, alive, fs, fl, fpool, ns, nl, npool, VQ, N0, cnt,
               heap, K, X, cost, branch, parts, cur, blocked, bat,
-              steps, iv, held, gone, ver, orig, J, ctr):
-    """`greedy_batches._Batches.speculate`: pop and apply up to ``depth`` steps into ``steps``;
-    ctr[C_NSTEPS] of them. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
+              steps, iv, held, gone, ver, orig, J, rm, ctr):
+    """Pop and apply up to ``depth`` steps on the host into ``steps``; ctr[C_NSTEPS] of them. Pairs the
+    steps stale are ``held`` out of the queue, pairs they remove are ``gone``. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
     (the caller grows them; a shorter batch gives the same run), and the lengths that step wanted in
     ctr[C_WJ:C_WK + 1] (the pools: the slots it wanted, where short)."""
-    ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = 0
+    ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = ctr[C_NRM] = 0
     ctr[C_WJ:C_WK + 1] = 0
+    ctr[C_WRM] = 0
     # the heap's size can come back to where it started plus every entry pushed since (an undo pushes
     # back what the batch popped): the room check counts from there
     most = ctr[C_HSIZE]
     common, info = np.empty(2, np.int64), np.empty(5, np.int64)
     A, B, buf = np.empty(64, np.int64), np.empty(64, np.int64), np.empty(64, np.int64)
+    D, R = np.empty(64, np.int64), np.empty(128, np.int64)
     while ctr[C_FACES] > target and ctr[C_NSTEPS] < depth:
         s = _next_live(heap, K, cur, blocked, held, gone, J, ctr)
         if s < 0:
@@ -193,9 +198,11 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
         heap_pop(heap, ctr, K)
         _journal(J, ctr, J_HEAP, s, 0, 0)
         if fl[a] > len(A) or fl[b] > len(B):
-            A, B = np.empty(2 * max(fl[a], fl[b]), np.int64), np.empty(2 * max(fl[a], fl[b]), np.int64)
-        code = rules(a, b, X[s], ctr[C_FACES], target, keep_parts, cos_max, sliver, T, fs, fl, fpool, VQ, N0,
-                     cnt, A, B, common, info)
+            size = 2 * max(fl[a], fl[b])
+            A, B, D, R = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64), \
+                np.empty(2 * size, np.int64)
+        code = rules(a, b, X[s], ctr[C_FACES], target, manifold, simple, keep_parts, cos_max, sliver, has_locks,
+                     locked, T, fs, fl, fpool, VQ, N0, cnt, A, B, D, R, common, info)
         if code >= 0:
             _journal(J, ctr, J_BLOCKED, p, -1, 0)
             blocked[p] = code
@@ -204,10 +211,11 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
             step[S_KIND], step[S_CODE] = BLOCK, code
             ctr[C_NSTEPS] = k + 1
             continue
-        need_j, need_f, need_n, unb, need_buf = _needs(a, b, info, T, fl, ns, nl, npool, bat)
+        need_j, need_f, need_n, unb, need_buf = _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat)
+        nrm = info[0] + info[3]
         if (ctr[C_JLEN] + need_j > len(J) or ctr[C_FTOP] + need_f > len(fpool)
                 or ctr[C_NTOP] + need_n > len(npool) or ctr[C_NIV] + nl[a] + nl[b] > len(iv)
-                or most + unb > len(heap) or ctr[C_STAMP] + unb + 1 > len(K)):
+                or most + unb > len(heap) or ctr[C_STAMP] + unb + 1 > len(K) or ctr[C_NRM] + nrm > len(rm)):
             ctr[C_JLEN] -= 1  # no room: the pop undone, and the batch ends here
             heap_push(heap, ctr, K, s)
             ctr[C_FULL] = 1
@@ -215,14 +223,19 @@ def speculate(depth, target, max_cost, keep_parts, cos_max, sliver, scratch,
             ctr[C_WF] = need_f if ctr[C_FTOP] + need_f > len(fpool) else 0
             ctr[C_WN] = need_n if ctr[C_NTOP] + need_n > len(npool) else 0
             ctr[C_WIV], ctr[C_WHEAP], ctr[C_WK] = ctr[C_NIV] + nl[a] + nl[b], most + unb, ctr[C_STAMP] + unb + 1
+            ctr[C_WRM] = ctr[C_NRM] + nrm
             break
         if need_buf > len(buf):
             buf = np.empty(2 * need_buf, np.int64)
         most += unb
-        _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
+        r0 = ctr[C_NRM]
+        rm[r0:r0 + info[0]] = D[:info[0]]
+        rm[r0 + info[0]:r0 + nrm] = R[:info[3]]
+        ctr[C_NRM] = r0 + nrm
+        _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
                   heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr)
-        step[S_KIND], step[S_LEFT], step[S_ND], step[S_D0], step[S_D1] = CONTRACT, ctr[C_FACES], info[0], \
-            info[3], info[4]
+        step[S_KIND], step[S_LEFT], step[S_ND], step[S_RM], step[S_NDROP] = CONTRACT, ctr[C_FACES], info[0], \
+            r0, info[3]
         ctr[C_NSTEPS] = k + 1
 
 
@@ -249,38 +262,38 @@ def _next_live(heap, K, cur, blocked, held, gone, J, ctr):
 
 
 @njit(cache=True)
-def _needs(a, b, info, T, fl, ns, nl, npool, bat):
+def _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat):
     """Bounds on what contracting b into a adds (`_contract`): journal rows, face-pool and partner-pool
     slots, blocked pairs coming back (heap entries, stamps), and the scratch buffer's length."""
-    nd, nka, nkb, d0, d1 = info[0], info[1], info[2], info[3], info[4]
+    nd, nka, nkb, ndrop = info[0], info[1], info[2], info[3]
     unb = 0
     for i in range(ns[a], ns[a] + nl[a]):
         unb += bat[npool[i]]
     for i in range(ns[b], ns[b] + nl[b]):
         unb += bat[npool[i]]
     need_f, need_n, need_buf = nka + nkb, nl[a] + nl[b], nka + nkb + nl[a] + nl[b]
-    for f in (d0, d1):
-        if f >= 0:
-            for c in T[f]:
-                need_f += fl[c]
-                need_buf = max(need_buf, fl[c])
+    for i in range(nd + ndrop):  # the lists of the removed faces' corners, each written anew
+        f = D[i] if i < nd else R[i - nd]
+        for c in T[f]:
+            need_f += fl[c]
+            need_buf = max(need_buf, fl[c])
     for i in range(ns[b], ns[b] + nl[b]):
         need_n += nl[npool[i]] + 1
         need_buf = max(need_buf, nl[npool[i]] + 1)
-    need_j = 16 + 3 * nd + nkb + 2 * (nl[a] + nl[b]) + nl[b] + 2 * unb
+    need_j = 16 + 4 * (nd + ndrop) + 3 * nkb + 2 * (nl[a] + nl[b]) + nl[b] + 2 * unb
     return need_j, need_f, need_n, unb, need_buf
 
 
 @njit(cache=True)
-def _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
+def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
               heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr):
-    """`greedy_batches._Batches.contract`: contract b into a at X[s] as step k (journaled); its pairs at b
-    are gone, those at a stale (a new interval each), blocked pairs around a back in the queue. ``info``,
-    A, B: from `rules`; ``buf``: room for the longest list written (`_needs`)."""
-    nd, nka, nkb, d0, d1 = info[0], info[1], info[2], info[3], info[4]
-    for f in (d0, d1):
-        if f < 0:
-            continue
+    """Contract b into a at X[s] as step k (journaled): its dead faces D and dropped faces R leave the
+    mesh, b's other faces use a; its pairs at b are gone, those at a stale (a new interval each), blocked
+    pairs around a back in the queue. ``info``, A, B, D, R: from `rules`; ``buf``: room for the longest
+    list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never contract)."""
+    nd, nka, nkb, ndrop = info[0], info[1], info[2], info[3]
+    for i in range(nd):
+        f = D[i]
         _journal(J, ctr, J_ALIVE, f, 1, 0)
         alive[f] = False
         for c in T[f]:
@@ -294,13 +307,25 @@ def _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns,
                 _journal(J, ctr, J_TRI, f, j, b)
                 T[f, j] = a
     _journal(J, ctr, J_AT, a, fs[a], fl[a])
-    buf[:nka] = A[:nka]
-    buf[nka:nka + nkb] = B[:nkb]
-    _set_list(fs, fl, fpool, ctr, C_FTOP, a, buf, nka + nkb)
+    m = 0
+    for i in range(nka + nkb):  # a's faces: those kept at a and at b, less the dropped ones
+        f = A[i] if i < nka else B[i - nka]
+        if ndrop == 0 or not has(R, 0, ndrop, f):
+            buf[m] = f
+            m += 1
+    _set_list(fs, fl, fpool, ctr, C_FTOP, a, buf, m)
     _journal(J, ctr, J_AT, b, fs[b], fl[b])
     fl[b] = 0
+    for i in range(ndrop):  # dropped as coincident (non-manifold mode): out of their other corners' lists
+        f = R[i]
+        _journal(J, ctr, J_ALIVE, f, 1, 0)
+        alive[f] = False
+        for c in T[f]:
+            if c != a:
+                _journal(J, ctr, J_AT, c, fs[c], fl[c])
+                _set_list(fs, fl, fpool, ctr, C_FTOP, c, buf, _without(fpool, fs[c], fl[c], f, buf))
     _journal(J, ctr, J_COUNT, 0, ctr[C_FACES], 0)
-    ctr[C_FACES] -= nd
+    ctr[C_FACES] -= nd + ndrop
     slot = ctr[C_DONE]
     orig[slot] = VQ[a]
     VQ[a, :3] = X[s]
@@ -355,7 +380,7 @@ def _contract(a, b, s, k, scratch, info, A, B, buf, T, alive, fs, fl, fpool, ns,
         if bat[u] > 0:
             for jj in range(ns[u], ns[u] + nl[u]):
                 q = _pair(u, npool[jj])
-                if q in blocked and q not in gone:
+                if q in blocked and q not in gone and not (locked[u] and locked[npool[jj]]):
                     _unblock(q, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat)
 
 
@@ -392,7 +417,7 @@ def undo(mark, T, alive, fs, fl, ns, nl, heap, K, cur, blocked, bat, J, ctr):
 
 @njit(cache=True)
 def first_wrong(steps, K, iv, ikeys, n):
-    """`greedy_batches._Batches.first_wrong`: the first of the ``n`` steps that a stale interval open at
+    """The first of the ``n`` steps that a stale interval open at
     it (begun before it, not ended before it) ranks before; ``ikeys`` (niv,3) the intervals' keys."""
     niv = len(ikeys)
     h = np.empty(niv, np.int64)  # a heap of interval indices by key
@@ -445,8 +470,9 @@ def _key_less(keys, i, j):
 
 
 @njit(cache=True)
-def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocked, bat, ctr):
-    """Into the queue: pairs P (k,) with keys (k,3) and prices, a new stamp each, in order."""
+def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocked, bat, ctr, has_locks, locked):
+    """Into the queue: pairs P (k,) with keys (k,3) and prices, a new stamp each, in order; pairs of two
+    ``locked`` vertices blocked (rule LOCKED: they never contract)."""
     for r in range(len(P)):
         p = P[r]
         s = ctr[C_STAMP] + 1
@@ -461,6 +487,10 @@ def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocke
             bat[p >> 32] -= 1
             bat[p & M32] -= 1
         heap_push(heap, ctr, K, s)
+        if has_locks and locked[p >> 32] and locked[p & M32]:
+            blocked[p] = LOCKED
+            bat[p >> 32] += 1
+            bat[p & M32] += 1
 
 
 @njit(cache=True)

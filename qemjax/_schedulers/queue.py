@@ -1,6 +1,6 @@
 """The greedy scheduler's priority queue (`Queue`, lazy deletion), its tie-break (`tie`) and the stop
 report from what is left in it (`stop_report`): shared by the one-at-a-time loop (`greedy`) and the verified
-batches (`greedy_batches`)."""
+batches (`greedy_compiled`)."""
 from __future__ import annotations
 
 import heapq
