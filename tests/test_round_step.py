@@ -79,7 +79,7 @@ RUNS = {
     "icosphere-rank": (lambda: shapes.icosphere(4), {"target_faces": 300, "placement": "rank"}),
     "grid-line": (lambda: shapes.grid(40, hole=True), {"ratio": 0.1, "method": "line"}),
     "uv-seams": (lambda: atlas_sphere(3)[0], {"ratio": 0.1, "attributes": "uv"}),
-    # above `parallel.SMALL_MESH` faces: merge pieces of 4096, prices of 8192 in the call
+    # above `parallel.SMALL_MESH` faces: merge pieces of 4096, prices of 4096 or 16384 in the call
     "large-bumpy": (lambda: shapes.bumpy_sphere(6), {"ratio": 0.02}),
 }
 
@@ -101,8 +101,12 @@ def test_runs_with_one_call_a_round_give_the_separate_calls_result(case, monkeyp
     assert len(calls) == len(new.stats["faces_per_round"]) >= 2
     if case == "icosphere-rank":  # a round with more contractions than one merge piece
         assert max(k for k, _, size, _ in calls) > calls[0][2]
+    for _, j, _, price_size in calls:  # the smallest of the size class's shapes that holds the stale pairs
+        sizes = parallel.STEP_PRICE[calls[0][2]]
+        assert price_size == next((s for s in sizes if s >= j), sizes[-1])
     if case == "large-bumpy":
-        assert calls[0][2:] == (4096, 8192) and max(j for _, j, _, _ in calls) > 8192
+        assert {c[2] for c in calls} == {4096} and {c[3] for c in calls} == {4096, 16384}
+        # (pairs beyond one call's piece, calls of their own: `test_step_gives_the_separate_calls_values`)
 
 
 def test_a_batch_with_one_call_a_round_gives_the_separate_calls_result(monkeypatch):

@@ -53,9 +53,16 @@ SMALL_MESH = 1 << 14  # contract ~100 pairs, and a 4096-row scatter costs ~12x a
 # from the mesh's size, so that meshes of similar size compile the same shapes whatever their rounds
 
 
-# the stale pairs priced in a round's one device call (`common.start_step`), by merge piece: a small mesh's
-# rounds have a few hundred (the cow's to 10 %: median 350, at most 1,113), which then take one call, not 2-5
-STEP_PRICE = {SMALL_CHUNK: 1024, MERGE_CHUNK: 8192}
+# the shapes of the stale pairs priced in a round's one device call (`common.start_step`), by merge piece:
+# the smallest that holds a round's stale pairs, else the largest and more calls. The cow's rounds to 10 %
+# have 350 (median) to 1,113, the bunny's 6,020 to 13,592 (experiments/device_calls.py); two shapes per
+# size class, so a run compiles at most two such calls
+STEP_PRICE = {SMALL_CHUNK: (1024, 4096), MERGE_CHUNK: (4096, 16384)}
+
+
+def _holding(sizes: tuple, k: int) -> int:
+    """The smallest of ``sizes`` (ascending) that holds k rows, else the largest."""
+    return next((s for s in sizes if s >= k), sizes[-1])
 
 
 def merge_size(m: int) -> int:
@@ -212,7 +219,7 @@ class _Run:
                  part_scale=None, params=None, wedges=None, normals=None, locks=None):
         self.n, m = len(V), len(F)
         self.merge_chunk = merge_size(m)
-        self.price_chunk = STEP_PRICE.get(self.merge_chunk, self.merge_chunk)
+        self.price_sizes = STEP_PRICE[self.merge_chunk]
         self.wedges = wedges  # a `_wedges.Tracker` when attributes are kept (else None)
         self.locks = locks  # a `_locks.RunLocks` (else None); the weights are carried in a copy
         self.weights = None if locks is None or locks.weights is None else np.array(locks.weights, np.float64)
@@ -541,7 +548,7 @@ class _Run:
             E, stale = st.edges_next[0], st.edges_next[4]
             d = np.flatnonzero(stale)
             self.VQd, merged, priced = start_step(self.model, self.VQd, P, xs, _take(E, d), self.params,
-                                                  self.merge_chunk, self.price_chunk)
+                                                  self.merge_chunk, _holding(self.price_sizes, len(d)))
             st.next_price = (d, priced)
             self.VQ[a, :3] = xs
             self.merged = (a, merged)  # the states reach VQ when the price is waited for (`settle`)
