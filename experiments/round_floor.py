@@ -1,0 +1,80 @@
+"""What the default would still take with every line of Python and numpy glue in its rounds gone: the time
+inside the round's compiled loops (`round_jit`: selection with validation, the faces' and pairs'
+contraction, clearing the rejections), the wait for the device (`stats["kernels_s"]`), the re-fit and the
+measured distance, summed, against the whole run and against a goal of G × meshoptimizer's time.
+
+Each compiled loop is wrapped with a timer; warm runs, medians.
+
+    python experiments/round_floor.py --cases cow:0.1:20 stanford-bunny:0.1:5 --repeats 7
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent), str(HERE)]
+
+import meshes as bench_meshes  # noqa: E402
+
+LOOPS = ("select_validate", "contract_faces", "contract_edges", "clear_bad")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", nargs="+", default=["cow:0.1:20", "stanford-bunny:0.1:5"],
+                    help="mesh:ratio:goal (the goal as a multiple of meshoptimizer's time)")
+    ap.add_argument("--repeats", type=int, default=7)
+    args = ap.parse_args()
+    import qemjax
+    from qemjax import peers
+    from qemjax._schedulers import round_jit
+
+    spent = {"loops": 0.0}
+    for name in LOOPS:
+        fn = getattr(round_jit, name)
+
+        def timed(*a, _fn=fn):
+            t = time.perf_counter()
+            try:
+                return _fn(*a)
+            finally:
+                spent["loops"] += time.perf_counter() - t
+        setattr(round_jit, name, timed)
+    print(f"# python experiments/round_floor.py --cases {' '.join(args.cases)} --repeats {args.repeats}")
+    print("| case | whole run ms | compiled loops ms | device wait ms | re-fit ms | measured distance ms | "
+          "sum (the floor) ms | meshoptimizer ms | goal ms | floor / goal |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for case in args.cases:
+        name, ratio, goal = case.split(":")
+        bm = bench_meshes.load(name)
+        target = int(len(bm.F) * float(ratio))
+        rows = {k: [] for k in ("run", "loops", "kernels", "refit", "distance", "mo")}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            qemjax.simplify((bm.V, bm.F), target_faces=target)  # warm
+            peers.run_peer("meshoptimizer", bm.V, bm.F, target)
+            for _ in range(args.repeats):
+                spent["loops"] = 0.0
+                t = time.perf_counter()
+                r = qemjax.simplify((bm.V, bm.F), target_faces=target)
+                rows["run"].append(time.perf_counter() - t)
+                rows["loops"].append(spent["loops"])
+                rows["kernels"].append(r.stats["kernels_s"])
+                rows["refit"].append(r.stats["refit_s"] or 0.0)
+                rows["distance"].append(r.stats["distance_s"] or 0.0)
+                rows["mo"].append(peers.run_peer("meshoptimizer", bm.V, bm.F, target)[2])  # its call alone
+        med = {k: statistics.median(v) * 1e3 for k, v in rows.items()}
+        floor = med["loops"] + med["kernels"] + med["refit"] + med["distance"]
+        g = float(goal) * med["mo"]
+        print(f"| {name} → {ratio} | {med['run']:.1f} | {med['loops']:.1f} | {med['kernels']:.1f} | "
+              f"{med['refit']:.1f} | {med['distance']:.1f} | {floor:.1f} | {med['mo']:.2f} | {g:.1f} "
+              f"({goal}×) | {floor / g:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
