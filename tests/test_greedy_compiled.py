@@ -650,3 +650,42 @@ def test_compiled_queue_keeps_the_loops_wedges(monkeypatch):
     assert new is not old
     for name in ("C", "val", "multi"):
         _same(getattr(new, name), getattr(old, name), name)
+
+
+@pytest.mark.parametrize("case", ["atlas", "atlas-locks-weights-non-manifold"])
+def test_an_undone_batch_restores_the_wedges(case, monkeypatch):
+    """Every other batch undone whole (its order check told to fail at its first step): the tracker's
+    corners' wedges, values and seam flags come back exactly as the batch found them, and the run is still
+    the loop's."""
+    snaps, restored, changed = [], [], []
+    calls = iter(range(10**9))
+    real_spec, real_first, real_undo = jit.speculate, jit.first_wrong, jit.undo
+
+    def speculate(*a):
+        snaps.append([np.array(x, copy=True) for x in a[12:15]])  # C, val, multi
+        return real_spec(*a)
+
+    def first_wrong(*a):
+        k = real_first(*a)
+        return 0 if a[4] and next(calls) % 2 == 0 else k
+
+    def undo(mark, *a):
+        wedges = a[-4:-1]
+        if mark == 0:
+            changed.append(any(not np.array_equal(x, y) for x, y in zip(wedges, snaps[-1])))
+        real_undo(mark, *a)
+        if mark == 0:
+            restored.append(all(np.array_equal(x, y) for x, y in zip(wedges, snaps[-1])))
+
+    make, kw = UV[case]
+    kw = dict(kw, attributes="uv")
+    old, _ = _run(make(), kw, monkeypatch, False)
+    with monkeypatch.context() as m:
+        m.setattr(jit, "speculate", speculate)
+        m.setattr(jit, "first_wrong", first_wrong)
+        m.setattr(jit, "undo", undo)
+        new, ran = _run(make(), kw, monkeypatch, True)
+    assert len(restored) > 5 and all(restored)
+    assert sum(changed) > 5  # the undone batches had changed wedges
+    _assert_same(new, old)
+    _same(new.uv, old.uv, "uv")
