@@ -1,9 +1,10 @@
 """The greedy queue in verified batches, with its host side compiled (`greedy_jit`): the same
 contractions, in the same order, with the same outputs bit for bit, as the one-at-a-time loop of `greedy`
 (tests/test_greedy_compiled.py runs both on the same meshes). Used for the models whose price reads only
-the pair's two rows (`eligible`: QEM without memoryless, ring support, refresh, ranking weights or kept
-attributes), in both modes (manifold, and non-manifold, where a contraction drops the faces it makes
-coincide) and on any mesh (the rules take shortcuts on a `simple` one).
+the pair's two rows (`eligible`: QEM and its attribute form without memoryless, ring support, refresh or
+ranking weights), in both modes (manifold, and non-manifold, where a contraction drops the faces it makes
+coincide), on any mesh (the rules take shortcuts on a `simple` one), with locks, weights and kept
+attributes.
 
 One contraction at a time costs a device round trip (merge, then re-price the pairs at the kept vertex)
 per contraction, and the pairs it re-prices are rarely the next cheapest: on the cow, 3 % of the pops
@@ -29,7 +30,17 @@ give (its two vertices' rows have not changed since it was priced): hence `eligi
 Locks and weights (`_locks`): prices go through `_locks.adjust` on each interval's rows (a kept vertex's
 scratch row carries its lock and its new weight, `_locks.carry`), pairs of two locked vertices are blocked
 whenever they are pushed (and take no part in the order check: they never come first), and the rules
-refuse a contraction that would leave a locked vertex in no face.
+refuse a contraction that would leave a locked vertex in no face. While a batch's prices are computed the
+host rows hold the same versions as the device rows (the kept vertices' rows from before the batch, the
+scratch rows merged), so that prices computed on the host (the attribute model's ``cost_at`` at a locked
+vertex, the seam constraint) read each interval's rows too.
+
+Kept attributes (`greedy_wedges_jit`): the seam rule at the pop and the wedge updates at the contraction
+run during the speculation, journaled; at each push the loop places pairs at seam vertices at an allowed
+endpoint (`wedges.Tracker.constrain`), which depends on the faces and wedges of that moment: the batch
+takes each pushed pair's mode then, and prices the endpoint after the merge call from the interval's
+rows. A blocked pair that comes back is placed anew (the faces around it changed), from its price
+before the constraint (``RP``).
 """
 from __future__ import annotations
 
