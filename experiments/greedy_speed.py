@@ -6,10 +6,13 @@ so both see the same machine state (and the hashes show whether the outputs are 
     python experiments/greedy_speed.py --rev a9c2f4d --repeats 3
     python experiments/greedy_speed.py --rev eee561e --non-manifold --method classic   # preserve_topology=False
     python experiments/greedy_speed.py --rev eee561e --meshes cow.obj --locked-share 0.01 --weights  # locks
+    python experiments/greedy_speed.py --rev 1843c68 --meshes spot/spot.obj cow.obj --attributes uv  # seams
 
 The hash is sha256 over the output vertices, faces, history pairs, positions and costs, and the run's stop
 reason, contraction count and rejections by rule (the rules that refused some pair; hashes from before
-2026-11-24 19:30 UTC also counted rules at zero, so they differ from these). Meshes come from ../shared/meshes (absent ones skip).
+2026-11-24 19:30 UTC also counted rules at zero, so they differ from these), and with ``--attributes`` the
+output's wedge values and wedge faces. Meshes come from ../shared/meshes (absent ones skip, and so do
+meshes without the attributes asked for).
 Each version simplifies each mesh once first (compilation, caches), outside the timings. Wall and process
 CPU time are both reported (medians): on a shared machine the CPU time is the steadier of the two.
 """
@@ -42,6 +45,12 @@ def digest(res) -> str:
         h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
         h.update(a.tobytes())
     # rules that refused nothing are left out: a version with a new rule (main's 'locked', 0) hashes the same
+    for name in ("uv", "colors", "normals", "wedge_faces"):  # kept attributes (runs without: none)
+        a = getattr(res, name, None)
+        if a is not None:
+            a = np.ascontiguousarray(a)
+            h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
+            h.update(a.tobytes())
     refused = sorted((k, v) for k, v in res.stats["rejected_by"].items() if v)
     h.update(repr((res.stop_reason, res.stats["contractions"], refused)).encode())
     return h.hexdigest()[:16]
@@ -58,9 +67,11 @@ def main() -> int:
     ap.add_argument("--locked-share", type=float, default=0.0,
                     help="lock this share of the input vertices (random, seed 0)")
     ap.add_argument("--weights", action="store_true", help="vertex_weights: random in [0.5, 2) (seed 1)")
+    ap.add_argument("--attributes", default=None, help="attributes to keep (e.g. uv); meshes without them skip")
     args = ap.parse_args()
     kw = ({} if args.method is None else {"method": args.method}) | (
-        {"preserve_topology": False} if args.non_manifold else {})
+        {"preserve_topology": False} if args.non_manifold else {}) | (
+        {} if args.attributes is None else {"attributes": args.attributes})
     warnings.simplefilter("ignore")
     versions = [("new", qemjax)] + ([(args.rev, load_old(args.rev))] if args.rev else [])
     print(f"qemjax from {Path(qemjax.__file__).parent}; ratio {args.ratio}, {args.repeats} warm runs each; {kw}; "
@@ -78,6 +89,12 @@ def main() -> int:
         times = {label: [] for label, _ in versions}
         cpus = {label: [] for label, _ in versions}
         hashes = {}
+        if args.attributes:
+            try:
+                qemjax.simplify(str(path), ratio=0.99, attributes=args.attributes)
+            except ValueError as e:
+                print(f"SKIP {mesh} ({e})")
+                continue
         for label, pkg in versions:  # warm-up: compilation and file caches
             res = pkg.simplify(str(path), ratio=args.ratio, scheduler="greedy", **kw)
             hashes[label] = digest(res)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import heapq
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,6 +28,7 @@ from qemjax._schedulers import greedy, greedy_compiled  # noqa: E402
 from qemjax._schedulers import greedy_jit as jit  # noqa: E402
 from qemjax._schedulers import greedy_rules_jit as rules_jit  # noqa: E402
 from qemjax._schedulers.queue import tie  # noqa: E402
+from test_attributes import atlas_sphere  # noqa: E402
 
 CASES = {
     "bumpy-sphere": (lambda: shapes.bumpy_sphere(3), {"ratio": 0.1}),
@@ -254,7 +256,8 @@ def test_compiled_queue_on_a_non_simple_mesh(kind, manifold, monkeypatch):
 
 def test_compiled_queue_grows_its_arrays(monkeypatch):
     """Started with almost no room (journal, intervals, removed faces, pools, queue), the arrays grow
-    between batches (batches that stop for room end early): the same result, in both modes."""
+    between batches (batches that stop for room end early): the same result, in both modes, with kept
+    attributes (their journal rows)."""
     grown = []
     room = greedy_compiled._Compiled.room
 
@@ -262,8 +265,8 @@ def test_compiled_queue_grows_its_arrays(monkeypatch):
         grown.append(full)
         return room(self, stamps, full)
 
-    for case in ("grid-with-hole", "nested-cubes-non-manifold"):
-        make, kw = COMPILED[case]
+    for case in ("grid-with-hole", "nested-cubes-non-manifold", "atlas-non-manifold"):
+        make, kw = COMPILED[case] if case in COMPILED else (UV[case][0], dict(UV[case][1], attributes="uv"))
         mesh = make()
         old, _ = _run(mesh, kw, monkeypatch, False)
         with monkeypatch.context() as m:
@@ -282,7 +285,7 @@ def test_compiled_queue_grows_its_arrays(monkeypatch):
 def test_eligible_models():
     assert greedy_compiled.eligible(QEM(), None)
     assert not greedy_compiled.eligible(QEM(memoryless=True), None)  # ring support, refreshed state
-    assert not greedy_compiled.eligible(QEM(), object())  # wedges (attributes)
+    assert greedy_compiled.eligible(QEM(), object())  # wedges (kept attributes): compiled too
 
 
 def test_simple_means_no_repeated_corners_or_faces():
@@ -524,7 +527,7 @@ def test_order_check_matches_python():
 
 
 @pytest.mark.parametrize("case", ["torus-flip-45", "grid-max-error", "jittered-sphere", "torus-non-manifold",
-                                  "locks-stop", "locks-weights-non-manifold"])
+                                  "locks-stop", "locks-weights-non-manifold", "atlas-locks-weights-non-manifold"])
 def test_compiled_queue_ends_in_the_loops_state(case, monkeypatch):
     """After the run, the queue as the one-at-a-time loop leaves it: the same pairs in it at the same
     cost and position, the same ones blocked by the same rules (pairs unblocked around a contraction and
@@ -545,7 +548,7 @@ def test_compiled_queue_ends_in_the_loops_state(case, monkeypatch):
 
     monkeypatch.setattr(greedy_compiled._Compiled, "loop", kept_loop)
     monkeypatch.setattr(greedy, "_Queue", KeptQueue)
-    make, kw = COMPILED[case]
+    make, kw = COMPILED[case] if case in COMPILED else (UV[case][0], dict(UV[case][1], attributes="uv"))
     new, _ = _run(make(), kw, monkeypatch, True)
     old, _ = _run(make(), kw, monkeypatch, False)
     c, q = seen["compiled"], seen["loop"]
@@ -582,3 +585,107 @@ def test_kernels_stay_in_bounds():
                          cwd=here.parent.parent, env=env, capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     assert " passed" in out.stdout
+
+
+# kept attributes (UV seams, `greedy_wedges_jit`): the seam rule at the pop, the wedge updates journaled (a
+# batch undone restores them), pairs at seam vertices priced at an allowed endpoint where the loop pushes them
+SPOT = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "spot" / "spot.obj"
+_NA = len(atlas_sphere(3)[0].vertices)
+UV = {
+    "atlas": (lambda: atlas_sphere(3)[0], {"ratio": 0.1}),
+    "atlas-non-manifold": (lambda: atlas_sphere(3)[0], {"ratio": 0.02, "preserve_topology": False}),
+    "atlas-max-error": (lambda: atlas_sphere(3)[0], {"max_error": 1e-3}),
+    "atlas-locks": (lambda: atlas_sphere(3)[0], {"ratio": 0.1, "locked": np.arange(0, _NA, 17)}),
+    "atlas-locks-weights-non-manifold": (lambda: atlas_sphere(3)[0], {
+        "ratio": 0.05, "preserve_topology": False, "locked": _random_picks(_NA, 40, 6),
+        "vertex_weights": np.random.default_rng(7).random(_NA) * 3}),
+    "atlas-weight0": (lambda: atlas_sphere(3)[0], {"ratio": 0.1, "attribute_weights": 0}),  # plain QEM model
+    "spot": (lambda: str(SPOT), {"ratio": 0.1}),
+    "spot-non-manifold-locks": (lambda: str(SPOT), {"ratio": 0.05, "preserve_topology": False,
+                                                    "locked": np.arange(0, 2930, 31)}),
+}
+
+
+@pytest.mark.parametrize("case", list(UV))
+def test_compiled_queue_keeps_attributes_as_the_loop(case, monkeypatch):
+    """``attributes="uv"`` on seamed meshes: the compiled batches give the loop's run bit for bit (the
+    contractions, positions, UVs and wedges, stats), with the seam rule refusing contractions."""
+    make, kw = UV[case]
+    if case.startswith("spot") and not SPOT.exists():
+        pytest.skip("the shared textured mesh is absent")
+    kw = dict(kw, attributes="uv")
+    new, ran = _run(make(), kw, monkeypatch, True)
+    old, ran_old = _run(make(), kw, monkeypatch, False)
+    assert len(ran) == 1 and ran_old == []
+    _assert_same(new, old)
+    for name in ("uv", "wedge_faces", "wedge_vertex"):
+        _same(getattr(new, name), getattr(old, name), name)
+    assert new.stats["seam_vertices_in"] > 50
+    if "ratio" in kw:
+        assert new.stats["rejected_by"]["seam"] > 0  # the rule fired
+    else:
+        assert new.stop_reason == "max_error"
+    if case in ("atlas", "atlas-non-manifold"):
+        assert ran[0] > 0  # batches were undone (with their wedge changes) and run again
+    if "locked" in kw:
+        assert new.stats["locked"] > 0
+
+
+def test_compiled_queue_keeps_the_loops_wedges(monkeypatch):
+    """After a uv run, the tracker as the loop leaves it: every corner's wedge, every wedge value and the
+    seam flags (which decide how pairs at vertices with no faces left are priced), and the queue's entries."""
+    trackers = []
+    real = greedy._run
+
+    def keep(*a, **k):
+        trackers.append(a[8])
+        return real(*a, **k)
+
+    monkeypatch.setattr(greedy, "_run", keep)
+    mesh = atlas_sphere(3)[0]
+    kw = {"ratio": 0.02, "preserve_topology": False, "attributes": "uv"}
+    _run(mesh, kw, monkeypatch, True)
+    _run(mesh, kw, monkeypatch, False)
+    new, old = trackers
+    assert new is not old
+    for name in ("C", "val", "multi"):
+        _same(getattr(new, name), getattr(old, name), name)
+
+
+@pytest.mark.parametrize("case", ["atlas", "atlas-locks-weights-non-manifold"])
+def test_an_undone_batch_restores_the_wedges(case, monkeypatch):
+    """Every other batch undone whole (its order check told to fail at its first step): the tracker's
+    corners' wedges, values and seam flags come back exactly as the batch found them, and the run is still
+    the loop's."""
+    snaps, restored, changed = [], [], []
+    calls = iter(range(10**9))
+    real_spec, real_first, real_undo = jit.speculate, jit.first_wrong, jit.undo
+
+    def speculate(*a):
+        snaps.append([np.array(x, copy=True) for x in a[12:15]])  # C, val, multi
+        return real_spec(*a)
+
+    def first_wrong(*a):
+        k = real_first(*a)
+        return 0 if a[4] and next(calls) % 2 == 0 else k
+
+    def undo(mark, *a):
+        wedges = a[-4:-1]
+        if mark == 0:
+            changed.append(any(not np.array_equal(x, y) for x, y in zip(wedges, snaps[-1])))
+        real_undo(mark, *a)
+        if mark == 0:
+            restored.append(all(np.array_equal(x, y) for x, y in zip(wedges, snaps[-1])))
+
+    make, kw = UV[case]
+    kw = dict(kw, attributes="uv")
+    old, _ = _run(make(), kw, monkeypatch, False)
+    with monkeypatch.context() as m:
+        m.setattr(jit, "speculate", speculate)
+        m.setattr(jit, "first_wrong", first_wrong)
+        m.setattr(jit, "undo", undo)
+        new, ran = _run(make(), kw, monkeypatch, True)
+    assert len(restored) > 5 and all(restored)
+    assert sum(changed) > 5  # the undone batches had changed wedges
+    _assert_same(new, old)
+    _same(new.uv, old.uv, "uv")

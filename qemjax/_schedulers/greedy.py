@@ -8,15 +8,15 @@ numpy twin: one contraction's few faces cost less on the host than a device call
 batched price and merge on the device rows.
 
 A run takes one of two paths, with the same contractions in the same order and the same outputs:
-* models whose price reads only the pair's two rows (`greedy_compiled.eligible`: QEM without memoryless,
-  ring support, refresh, ranking weights or kept attributes): the queue in verified speculative batches
-  with its host side compiled (`greedy_compiled`, `greedy_jit`, `greedy_rules_jit`): one merge and one
-  price call per few dozen contractions instead of per contraction, in both modes, on any mesh, with or
-  without locks and weights;
-* everything else (kept attributes (wedges), ring-support, refreshed or rank-weighted models), and
-  any run where numba is missing (a core dependency: only a safety net): the loop below, one contraction
-  and one device round trip at a time. It is the reference the compiled path is tested against
-  (tests/test_greedy_compiled.py).
+* models whose price reads only the pair's two rows (`greedy_compiled.eligible`: QEM and its attribute
+  form without memoryless, ring support, refresh or ranking weights): the queue in verified speculative
+  batches with its host side compiled (`greedy_compiled`, `greedy_jit`, `greedy_rules_jit`): one merge and
+  one price call per few dozen contractions instead of per contraction, in both modes, on any mesh, with
+  or without locks and weights, and with kept attributes (the seam rule, the wedge updates and the seam
+  pricing at each push, journaled: `greedy_wedges_jit`);
+* everything else (ring-support, refreshed or rank-weighted models), and any run where numba is missing
+  (a core dependency: only a safety net): the loop below, one contraction and one device round trip at
+  a time. It is the reference the compiled path is tested against (tests/test_greedy_compiled.py).
 """
 from __future__ import annotations
 
@@ -95,7 +95,7 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
     pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
     compiled = _compiled()
     if compiled is not None and compiled.eligible(model, wedges, locks):  # the same run, in verified batches
-        return compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks)
+        return compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks, wedges)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)

@@ -1,9 +1,10 @@
 """The greedy queue in verified batches, with its host side compiled (`greedy_jit`): the same
 contractions, in the same order, with the same outputs bit for bit, as the one-at-a-time loop of `greedy`
 (tests/test_greedy_compiled.py runs both on the same meshes). Used for the models whose price reads only
-the pair's two rows (`eligible`: QEM without memoryless, ring support, refresh, ranking weights or kept
-attributes), in both modes (manifold, and non-manifold, where a contraction drops the faces it makes
-coincide) and on any mesh (the rules take shortcuts on a `simple` one).
+the pair's two rows (`eligible`: QEM and its attribute form without memoryless, ring support, refresh or
+ranking weights), in both modes (manifold, and non-manifold, where a contraction drops the faces it makes
+coincide), on any mesh (the rules take shortcuts on a `simple` one), with locks, weights and kept
+attributes.
 
 One contraction at a time costs a device round trip (merge, then re-price the pairs at the kept vertex)
 per contraction, and the pairs it re-prices are rarely the next cheapest: on the cow, 3 % of the pops
@@ -29,7 +30,17 @@ give (its two vertices' rows have not changed since it was priced): hence `eligi
 Locks and weights (`_locks`): prices go through `_locks.adjust` on each interval's rows (a kept vertex's
 scratch row carries its lock and its new weight, `_locks.carry`), pairs of two locked vertices are blocked
 whenever they are pushed (and take no part in the order check: they never come first), and the rules
-refuse a contraction that would leave a locked vertex in no face.
+refuse a contraction that would leave a locked vertex in no face. While a batch's prices are computed the
+host rows hold the same versions as the device rows (the kept vertices' rows from before the batch, the
+scratch rows merged), so that prices computed on the host (the attribute model's ``cost_at`` at a locked
+vertex, the seam constraint) read each interval's rows too.
+
+Kept attributes (`greedy_wedges_jit`): the seam rule at the pop and the wedge updates at the contraction
+run during the speculation, journaled; at each push the loop places pairs at seam vertices at an allowed
+endpoint (`wedges.Tracker.constrain`), which depends on the faces and wedges of that moment: the batch
+takes each pushed pair's mode then, and prices the endpoint after the merge call from the interval's
+rows. A blocked pair that comes back is placed anew (the faces around it changed), from its price
+before the constraint (``RP``).
 """
 from __future__ import annotations
 
@@ -41,7 +52,9 @@ from numba import types
 from numba.typed import Dict
 
 from . import greedy_jit as jit
+from . import greedy_wedges_jit as gw
 from . import locks as _locks
+from .._mesh import wedges_jit
 from . import outcome
 from .._kernels.flips import SLIVER
 from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
@@ -58,11 +71,11 @@ JOURNAL_ROWS, INTERVAL_ROWS = 1 << 16, 1 << 14  # a batch's journal and stale in
 REMOVED_ROWS = 1 << 12  # a batch's removed faces
 
 
-def eligible(model, wedges, locks=None) -> bool:
-    """Whether a run can use this module: a pair's price reads only its two vertices' rows (with locks:
-    priced on the device, `_locks.adjust`, not by a host ``cost_at``)."""
-    return (wedges is None and model.support == "pair" and model.refresh is None and not model.uses_ring
-            and model.rank_weights is None and (locks is None or getattr(model, "cost_at", None) is None))
+def eligible(model, wedges=None, locks=None) -> bool:
+    """Whether a run can use this module: a pair's price reads only its two vertices' rows (with or without
+    kept attributes, locks and weights)."""
+    return (model.support == "pair" and model.refresh is None and not model.uses_ring
+            and model.rank_weights is None)
 
 
 def simple(F: np.ndarray) -> bool:
@@ -128,7 +141,7 @@ def _grown(a: np.ndarray, size: int) -> np.ndarray:
 class _Compiled:
     """The run's state (arrays and typed dicts, as `greedy_jit` describes) and its batch loop."""
 
-    def __init__(self, V, S, F, pairs, target, model, options, progress, locks=None):
+    def __init__(self, V, S, F, pairs, target, model, options, progress, locks=None, wedges=None):
         n, m = len(V), len(F)
         self.n, self.target, self.model, self.options, self.progress = n, target, model, options, progress
         self.params = model.kernel_params()
@@ -144,6 +157,15 @@ class _Compiled:
         self.weights = None if locks is None or locks.weights is None else _grown(
             np.array(locks.weights, np.float64), rows)
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
+        # kept attributes: the tracker's arrays, changed in place (`greedy_wedges_jit`); none: empty ones
+        self.wedges = wedges
+        if wedges is None:
+            self.wed = (False, np.zeros((0, 3), np.int64), np.zeros((0, 1)), np.zeros(n, bool), np.zeros((1, 1)),
+                        -1, -1, np.zeros(1, bool), np.ones(1))
+        else:
+            self.wed = (True, wedges.C, wedges.val, wedges.multi,
+                        np.zeros((MAX_BATCH + 1, wedges.val.shape[1])), int(wedges.m), int(wedges.m_solved),
+                        np.ascontiguousarray(wedges.solved, bool), np.ascontiguousarray(wedges.weights, np.float64))
         self.T = np.array(F, np.int64).reshape(-1, 3)
         self.manifold, self.simple = bool(options.preserve_topology), simple(self.T)
         self.alive = np.ones(m, bool)
@@ -160,10 +182,11 @@ class _Compiled:
         self.cost = np.zeros(cap, DTYPE)
         self.branch = np.zeros(cap, np.int64)
         self.parts = np.zeros((cap, len(model.parts)), DTYPE)
+        self.RP = np.zeros((cap, 4), DTYPE)  # each stamp's position and cost before the seam constraint
         self.cur, self.blocked = _dict(), _dict()
         self.bat = np.zeros(n, np.int64)
         self.steps = np.zeros((MAX_BATCH + 1, 10), np.int64)
-        self.iv = np.zeros((INTERVAL_ROWS, 5), np.int64)
+        self.iv = np.zeros((INTERVAL_ROWS, 6), np.int64)
         self.J = np.zeros((JOURNAL_ROWS, 4), np.int64)
         self.rm = np.zeros(REMOVED_ROWS, np.int64)
         self.ver = np.full(n, -1, np.int64)
@@ -185,8 +208,8 @@ class _Compiled:
     def arrays(self):
         """The arrays and dicts `greedy_jit.speculate` takes after its settings, in its order."""
         return (self.T, self.alive, self.fs, self.fl, self.fpool, self.ns, self.nl, self.npool, self.VQ, self.N0,
-                self.cnt, self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.cur, self.blocked,
-                self.bat)
+                self.cnt, self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur,
+                self.blocked, self.bat)
 
     def push_all(self):
         """Every pair into the queue, stamps in row order (pairs sorted)."""
@@ -194,8 +217,16 @@ class _Compiled:
         if not len(P):
             return
         d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
-        priced = self.adjust(self.VQd, P, start_price(self.model, self.VQd, P, self.params, None, self.n)())
-        self.push(P, priced, np.einsum("ij,ij->i", d, d))
+        raw = self.adjust(self.VQd, P, start_price(self.model, self.VQd, P, self.params, None, self.n)())
+        priced = raw
+        if self.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint (as the loop)
+            priced = raw._replace(x=raw.x.copy(), cost=raw.cost.copy())
+            w = self.wedges
+            wedges_jit.constrain(self.T, self.alive, self.fl, self.fs, self.fpool, w.C, w.multi, self.VQ, P,
+                                 priced.x, priced.cost, w.m)
+            if self.locks is not None:
+                _locks.pin(self.row_locks, self.VQ, P, priced.x)
+        self.push(P, priced, np.einsum("ij,ij->i", d, d), raw=raw)
 
     def adjust(self, VQd, rows, priced):
         """With locks, `_locks.adjust` of the prices of pairs whose two rows are ``rows`` (k,2): pairs with a
@@ -205,12 +236,15 @@ class _Compiled:
         return _locks.adjust(self.row_locks, self.weights, self.model, self.VQ, VQd, rows, priced, self.params,
                              None, self.n)
 
-    def push(self, P, priced, l2, keys=None):
+    def push(self, P, priced, l2, keys=None, raw=None):
+        """Pairs P (k,2) into the queue at ``priced`` (``raw``: before the seam constraint; None: the same)."""
         keys = queue_keys(P, priced.cost, l2) if keys is None else keys
+        raw = priced if raw is None else raw
         self.room(stamps=len(P))
         jit.push((P[:, 0] << 32) | P[:, 1], keys, priced.x, priced.cost, priced.branch.astype(np.int64),
-                 np.ascontiguousarray(priced.parts.T), self.heap, self.K, self.X, self.cost, self.branch,
-                 self.parts, self.cur, self.blocked, self.bat, self.ctr, self.locks is not None, self.locked)
+                 np.ascontiguousarray(priced.parts.T), np.concatenate([raw.x, raw.cost[:, None]], 1).astype(DTYPE),
+                 self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur, self.blocked,
+                 self.bat, self.ctr, self.locks is not None, self.locked)
 
     def room(self, stamps=0, full=False):
         """Grow the arrays for ``stamps`` more pushes; with ``full`` (a batch stopped for room), grow each
@@ -238,6 +272,7 @@ class _Compiled:
             size = 2 * max(need, len(self.K))
             self.K, self.X, self.cost = _grown(self.K, size), _grown(self.X, size), _grown(self.cost, size)
             self.branch, self.parts = _grown(self.branch, size), _grown(self.parts, size)
+            self.RP = _grown(self.RP, size)
         if ctr[jit.C_HSIZE] + stamps > len(self.heap):
             self.heap = _grown(self.heap, 2 * (len(self.heap) + stamps))
         for top, w, s, ln, pool in ((jit.C_FTOP, jit.C_WF, self.fs, self.fl, "fpool"),
@@ -256,7 +291,7 @@ class _Compiled:
         rows are reused, so the stamp arrays do not grow with the run's pushes (a vertex of valence d
         re-prices d pairs per contraction at it: d² pushes where it absorbs its neighbours)."""
         if self.ctr[jit.C_STAMP] > 2 * len(self.cur) + SLACK:
-            jit.renumber(self.heap, self.ctr, self.K, self.X, self.cost, self.branch, self.parts, self.cur,
+            jit.renumber(self.heap, self.ctr, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur,
                          self.blocked)
 
     # a batch ---------------------------------------------------------------------------------------
@@ -270,7 +305,7 @@ class _Compiled:
         opt = self.options  # (scalars of fixed types: one compiled specialisation)
         jit.speculate(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
                       bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch), self.locks is not None,
-                      self.locked, *self.arrays(), self.steps,
+                      self.locked, *self.wed, *self.arrays(), self.steps,
                       self.iv, held, gone, self.ver, self.orig, self.J, self.rm, ctr)
         ns = int(ctr[jit.C_NSTEPS])
         steps = self.steps[:ns].copy()
@@ -289,17 +324,18 @@ class _Compiled:
                 if self.weights is not None:
                     self.weights[slots] = np.maximum(self.weights[P[:, 0]], self.weights[P[:, 1]])
         niv = int(ctr[jit.C_NIV])
-        VQd, priced, keys = self.VQd, None, np.zeros((0, 3), np.uint64)
+        VQd, priced, raw, keys = self.VQd, None, None, np.zeros((0, 3), np.uint64)
         iv = self.iv[:niv].copy()
         if niv:
-            VQd, priced, keys = self.price_intervals(iv, rows)
+            VQd, priced, raw, keys = self.price_intervals(iv, rows, contracted[:, jit.S_A])
         ok = int(jit.first_wrong(steps, self.K, iv, self.order_keys(iv, keys), ns))
         self.batches += 1
         if ok < ns:
             self.failed += 1
             self.depth = max(1, self.depth // 2)
+            w = self.wed
             jit.undo(int(steps[ok, jit.S_MARK]), self.T, self.alive, self.fs, self.fl, self.ns, self.nl, self.heap,
-                     self.K, self.cur, self.blocked, self.bat, self.J, ctr)
+                     self.K, self.cur, self.blocked, self.bat, self.J, ctr, w[1], w[2], w[3], w[4])
             m = int(np.sum(steps[:ok, jit.S_KIND] == jit.CONTRACT))
             self.VQ[contracted[m:, jit.S_A]] = self.orig[m:len(contracted)]  # their rows from before
         elif ns == self.depth:
@@ -321,7 +357,8 @@ class _Compiled:
                 pk = iv[sel, jit.I_PAIR]
                 sub = priced._replace(x=priced.x[sel], cost=priced.cost[sel], branch=priced.branch[sel],
                                       parts=priced.parts[:, sel])
-                self.push(np.stack([pk >> 32, pk & _M32], 1), sub, None, keys[sel])
+                self.push(np.stack([pk >> 32, pk & _M32], 1), sub, None, keys[sel],
+                          raw._replace(x=raw.x[sel], cost=raw.cost[sel]))
         self.record(steps[:ok][steps[:ok, jit.S_KIND] == jit.CONTRACT])
         for code in steps[:ok][steps[:ok, jit.S_KIND] == jit.BLOCK, jit.S_CODE].tolist():
             if code != outcome.BUDGET:
@@ -330,24 +367,31 @@ class _Compiled:
             self.stop = "max_error"
         self.room(full=bool(ctr[jit.C_FULL]))  # (a batch stopped for room: rare)
 
-    def price_intervals(self, iv, rows):
-        """Prices and queue keys of the stale intervals, each from its own versions of its two rows: the
-        device rows with the batch's merged ``rows`` in the scratch rows."""
+    def price_intervals(self, iv, rows, kept):
+        """Prices (after the seam constraint, and before it) and queue keys of the stale intervals, each from
+        its own versions of its two rows: the device rows with the batch's merged ``rows`` in the scratch
+        rows. The host rows are the same versions meanwhile (``kept``, the batch's kept vertices: their rows
+        from before the batch; the scratch rows: the merged ones), for the prices computed on the host (a
+        host ``cost_at`` with locks, the seam constraint)."""
         ids = iv[:, [jit.I_RA, jit.I_RB]]
         VQd = set_rows(self.VQd, self.scratch + np.arange(len(rows)), rows, size=MAX_BATCH) if len(rows) \
             else self.VQd
-        priced = self.adjust(VQd, ids, start_price(self.model, VQd, ids, self.params, None, self.n)())
-        self.VQ[self.scratch:self.scratch + len(rows), :3] = rows[:, :3]
-        first = ids.reshape(-1)
-        pos = self.VQ[first, :3]
-        moved = np.flatnonzero((first < self.n) & (self.ver[np.minimum(first, self.n - 1)] >= 0))
-        if len(moved):  # rows a later step of the batch changed: the positions from before
-            pos[moved] = self.orig[self.ver[first[moved]] - self.scratch, :3]
-        pos = pos.reshape(-1, 2, 3)
+        self.VQ[self.scratch:self.scratch + len(rows)] = rows
+        moved = self.VQ[kept, :3].copy()
+        self.VQ[kept] = self.orig[:len(kept)]
+        raw = self.adjust(VQd, ids, start_price(self.model, VQd, ids, self.params, None, self.n)())
+        priced = raw
+        if self.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint, by their modes
+            priced = raw._replace(x=raw.x.copy(), cost=raw.cost.copy())
+            gw.constrain_rows(self.VQ, ids, iv[:, jit.I_MODE], priced.x, priced.cost, int(self.wedges.m))
+            if self.locks is not None:
+                _locks.pin(self.row_locks, self.VQ, ids, priced.x)
+        pos = self.VQ[ids.reshape(-1), :3].reshape(-1, 2, 3)
+        self.VQ[kept, :3] = moved
         d = np.ascontiguousarray(pos[:, 0]) - np.ascontiguousarray(pos[:, 1])
         l2 = np.einsum("ij,ij->i", d, d)
         pk = iv[:, jit.I_PAIR]
-        return VQd, priced, queue_keys(np.stack([pk >> 32, pk & _M32], 1), priced.cost, l2)
+        return VQd, priced, raw, queue_keys(np.stack([pk >> 32, pk & _M32], 1), priced.cost, l2)
 
     def order_keys(self, iv, keys):
         """The intervals' keys as the order check takes them: a pair of two locked vertices is blocked as
@@ -399,10 +443,10 @@ class _Compiled:
         return faces, q
 
 
-def run(V, S, F, pairs, target_faces, model, options, progress, locks=None):
+def run(V, S, F, pairs, target_faces, model, options, progress, locks=None, wedges=None):
     """`greedy.run` for an `eligible` model; pairs (k,2): the candidate pairs (edges and extra pairs, each
     row sorted). Same return."""
-    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress, locks)
+    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress, locks, wedges)
     r.push_all()
     r.loop()
     faces, q = r.output()

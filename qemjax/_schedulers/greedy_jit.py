@@ -29,12 +29,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .greedy_rules_jit import has, rules
-from .outcome import LOCKED
+from . import greedy_wedges_jit as gw
+from .greedy_rules_jit import has, rules_head, rules_tail
+from .outcome import LOCKED, SEAM
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
 S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_RM, S_NDROP = range(10)  # columns of ``steps``
-I_PAIR, I_START, I_END, I_RA, I_RB = range(5)  # columns of ``iv``
+I_PAIR, I_START, I_END, I_RA, I_RB, I_MODE = range(6)  # columns of ``iv``
 C_FACES, C_FTOP, C_NTOP, C_HSIZE, C_STAMP, C_JLEN, C_NSTEPS, C_NIV, C_DONE, C_FULL = range(10)
 # a batch that stopped for room (C_FULL): the lengths the step that did not fit wanted, per array (for the
 # two pools, the slots it wanted past their tops where they were short, else 0: a commit may pack them
@@ -143,12 +144,22 @@ def _set_list(start, length, pool, ctr, top, v, items, k):
 
 
 @njit(cache=True)
-def _unblock(p, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat):
-    """Back in the queue at its stored price (a new stamp with the current entry's key and price)."""
+def _unblock(p, ctr, J, heap, K, X, cost, branch, parts, RP, cur, blocked, bat, push):
+    """Back in the queue at its stored price (a new stamp with the current entry's key and price; into the
+    heap unless not ``push``: kept attributes price it first). Returns the stamp."""
     _journal(J, ctr, J_BLOCKED, p, blocked[p], 0)
     del blocked[p]
     bat[p >> 32] -= 1
     bat[p & M32] -= 1
+    s = _restamp(p, ctr, J, K, X, cost, branch, parts, RP, cur)
+    if push:
+        heap_push(heap, ctr, K, s)
+    return s
+
+
+@njit(cache=True)
+def _restamp(p, ctr, J, K, X, cost, branch, parts, RP, cur):
+    """A new stamp for pair p with its current entry's key and price (journaled)."""
     old = cur[p]
     s = ctr[C_STAMP] + 1
     ctr[C_STAMP] = s
@@ -156,20 +167,27 @@ def _unblock(p, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat):
     X[s] = X[old]
     cost[s], branch[s] = cost[old], branch[old]
     parts[s] = parts[old]
+    RP[s] = RP[old]
     _journal(J, ctr, J_CUR, p, old, 0)
     cur[p] = s
-    heap_push(heap, ctr, K, s)
+    return s
 
 
 @njit(cache=True)
 def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks, locked,
+              wed, C, val, multi, VJ, m, m_solved, solved, weights,
               T, alive, fs, fl, fpool, ns, nl, npool, VQ, N0, cnt,
-              heap, K, X, cost, branch, parts, cur, blocked, bat,
+              heap, K, X, cost, branch, parts, RP, cur, blocked, bat,
               steps, iv, held, gone, ver, orig, J, rm, ctr):
     """Pop and apply up to ``depth`` steps on the host into ``steps``; ctr[C_NSTEPS] of them. Pairs the
     steps stale are ``held`` out of the queue, pairs they remove are ``gone``. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
     (the caller grows them; a shorter batch gives the same run), and the lengths that step wanted in
-    ctr[C_WJ:C_WK + 1] (the pools: the slots it wanted, where short)."""
+    ctr[C_WJ:C_WK + 1] (the pools: the slots it wanted, where short).
+
+    ``wed``: kept attributes (`greedy_wedges_jit`): the tracker's corners' wedges C, values val, seam flags
+    multi (changed in place, journaled; VJ (depth + 1, k): old values), the model's channels m (-1: none)
+    and the solved channels (m_solved, solved, weights) as `wedges.Tracker` holds them; RP: each stamp's
+    price before the seam constraint (x, cost)."""
     ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = ctr[C_NRM] = 0
     ctr[C_WJ:C_WK + 1] = 0
     ctr[C_WRM] = 0
@@ -179,6 +197,9 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
     common, info = np.empty(2, np.int64), np.empty(5, np.int64)
     A, B, buf = np.empty(64, np.int64), np.empty(64, np.int64), np.empty(64, np.int64)
     D, R = np.empty(64, np.int64), np.empty(128, np.int64)
+    TS, UB = np.empty((12, 64), np.int64), np.empty(64, np.int64)  # wedge scratch; a step's repriced stamps
+    W = np.empty((4, max(m, val.shape[1], 1)))
+    X64 = np.empty(3)
     while ctr[C_FACES] > target and ctr[C_NSTEPS] < depth:
         s = _next_live(heap, K, cur, blocked, held, gone, J, ctr)
         if s < 0:
@@ -192,8 +213,8 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             step[S_KIND] = STOP
             ctr[C_NSTEPS] = k + 1
             break
-        if ctr[C_JLEN] + 2 > len(J):
-            ctr[C_FULL], ctr[C_WJ] = 1, ctr[C_JLEN] + 2
+        if ctr[C_JLEN] + 4 > len(J):  # the pop, a block, two seam flags
+            ctr[C_FULL], ctr[C_WJ] = 1, ctr[C_JLEN] + 4
             break
         heap_pop(heap, ctr, K)
         _journal(J, ctr, J_HEAP, s, 0, 0)
@@ -201,8 +222,15 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             size = 2 * max(fl[a], fl[b])
             A, B, D, R = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64), \
                 np.empty(2 * size, np.int64)
-        code = rules(a, b, X[s], ctr[C_FACES], target, manifold, simple, keep_parts, cos_max, sliver, has_locks,
-                     locked, T, fs, fl, fpool, VQ, N0, cnt, A, B, D, R, common, info)
+        code = rules_head(a, b, ctr[C_FACES], target, manifold, simple, keep_parts, has_locks, locked, T, fs, fl,
+                          fpool, cnt, A, B, D, common, info)
+        if code < 0 and wed and (multi[a] or multi[b]):  # the seam rule, where the loop applies it
+            TS = gw.fit(TS, max(fl[a], fl[b]))
+            if not gw.seam_ok(T, alive, fs, fl, fpool, C, multi, VQ, a, b, X[s], TS, J, ctr, C_JLEN):
+                code = SEAM
+        if code < 0:
+            code = rules_tail(a, b, X[s], ctr[C_FACES], target, manifold, simple, cos_max, sliver, T, VQ, N0, A, B,
+                              R, common, info)
         if code >= 0:
             _journal(J, ctr, J_BLOCKED, p, -1, 0)
             blocked[p] = code
@@ -212,31 +240,89 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             ctr[C_NSTEPS] = k + 1
             continue
         need_j, need_f, need_n, unb, need_buf = _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat)
+        nst = unb
+        if wed:  # the wedges' journal rows (`greedy_wedges_jit.contract`, a flag pair per pushed pair), and
+            # the blocked pairs of two locked vertices around a, priced again (a stamp each)
+            need_j += fl[a] + fl[b] + 3 + 2 * (nl[a] + nl[b] + 2 * unb) + unb
+            nst = 2 * unb
         nrm = info[0] + info[3]
         if (ctr[C_JLEN] + need_j > len(J) or ctr[C_FTOP] + need_f > len(fpool)
                 or ctr[C_NTOP] + need_n > len(npool) or ctr[C_NIV] + nl[a] + nl[b] > len(iv)
-                or most + unb > len(heap) or ctr[C_STAMP] + unb + 1 > len(K) or ctr[C_NRM] + nrm > len(rm)):
+                or most + unb > len(heap) or ctr[C_STAMP] + nst + 1 > len(K) or ctr[C_NRM] + nrm > len(rm)):
             ctr[C_JLEN] -= 1  # no room: the pop undone, and the batch ends here
             heap_push(heap, ctr, K, s)
             ctr[C_FULL] = 1
             ctr[C_WJ] = ctr[C_JLEN] + 1 + need_j
             ctr[C_WF] = need_f if ctr[C_FTOP] + need_f > len(fpool) else 0
             ctr[C_WN] = need_n if ctr[C_NTOP] + need_n > len(npool) else 0
-            ctr[C_WIV], ctr[C_WHEAP], ctr[C_WK] = ctr[C_NIV] + nl[a] + nl[b], most + unb, ctr[C_STAMP] + unb + 1
+            ctr[C_WIV], ctr[C_WHEAP], ctr[C_WK] = ctr[C_NIV] + nl[a] + nl[b], most + unb, ctr[C_STAMP] + nst + 1
             ctr[C_WRM] = ctr[C_NRM] + nrm
             break
         if need_buf > len(buf):
             buf = np.empty(2 * need_buf, np.int64)
+        if wed and 2 * unb + nl[a] + nl[b] > len(UB):
+            UB = np.empty(2 * (2 * unb + nl[a] + nl[b]), np.int64)
         most += unb
         r0 = ctr[C_NRM]
         rm[r0:r0 + info[0]] = D[:info[0]]
         rm[r0 + info[0]:r0 + nrm] = R[:info[3]]
         ctr[C_NRM] = r0 + nrm
-        _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
-                  heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr)
+        if wed:  # the corners' wedges, before the faces relink
+            TS = gw.fit(TS, max(fl[a], fl[b]))
+            X64[0], X64[1], X64[2] = X[s, 0], X[s, 1], X[s, 2]
+            gw.contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, X[s], X64, m_solved, solved, weights, TS, W,
+                        VJ, ctr[C_DONE], J, ctr, C_JLEN)
+        iv0 = ctr[C_NIV]
+        nub = _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
+                        locked, heap, K, cost, branch, parts, RP, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr,
+                        wed, UB)
+        if wed:
+            TS = _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K, X, cost, RP,
+                             has_locks, locked, m, W, TS, J, ctr)
         step[S_KIND], step[S_LEFT], step[S_ND], step[S_RM], step[S_NDROP] = CONTRACT, ctr[C_FACES], info[0], \
             r0, info[3]
         ctr[C_NSTEPS] = k + 1
+
+
+@njit(cache=True)
+def _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K, X, cost, RP, has_locks, locked,
+                m, W, TS, J, ctr):
+    """Kept attributes: what the loop's push after a contraction does with the seam constraint
+    (`wedges.Tracker.constrain`), for the pairs it pushes: the new stale intervals iv[iv0:] (their mode,
+    priced after the batch) and the stamps in UB[:nub] (pairs back from blocked, priced now and into the
+    heap; ``-s - 1``: a pair of two locked vertices, priced and left blocked). The seam flags are read for
+    all of them first, as `constrain` does. Returns the wedge scratch (grown where needed)."""
+    niv = ctr[C_NIV] - iv0
+    total = niv + nub
+    seam = np.empty(total, np.bool_)
+    for i in range(total):
+        if i < niv:
+            p = iv[iv0 + i, I_PAIR]
+            u, w = p >> 32, p & M32
+        else:
+            t = UB[i - niv]
+            t = t if t >= 0 else -t - 1
+            u, w = np.int64(K[t, 1] & np.uint64(M32)), np.int64(K[t, 2])
+        seam[i] = multi[u] or multi[w]
+    for i in range(total):
+        if i < niv:
+            p = iv[iv0 + i, I_PAIR]
+            u, w = p >> 32, p & M32
+        else:
+            t = UB[i - niv]
+            t = t if t >= 0 else -t - 1
+            u, w = np.int64(K[t, 1] & np.uint64(M32)), np.int64(K[t, 2])
+        mode = gw.FREE
+        if seam[i]:
+            TS = gw.fit(TS, max(fl[u], fl[w]))
+            mode = gw.modes(T, alive, fs, fl, fpool, C, multi, u, w, TS, J, ctr, C_JLEN)
+        if i < niv:
+            iv[iv0 + i, I_MODE] = mode
+        else:
+            gw.reprice(t, u, w, mode, VQ, K, X, cost, RP, has_locks, locked, m, W)
+            if UB[i - niv] >= 0:
+                heap_push(heap, ctr, K, t)
+    return TS
 
 
 @njit(cache=True)
@@ -286,11 +372,13 @@ def _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat):
 
 @njit(cache=True)
 def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
-              heap, K, cost, branch, parts, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr):
+              heap, K, cost, branch, parts, RP, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr, wed, UB):
     """Contract b into a at X[s] as step k (journaled): its dead faces D and dropped faces R leave the
     mesh, b's other faces use a; its pairs at b are gone, those at a stale (a new interval each), blocked
     pairs around a back in the queue. ``info``, A, B, D, R: from `rules`; ``buf``: room for the longest
-    list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never contract)."""
+    list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never contract).
+    ``wed`` (kept attributes): the pairs back from blocked are not pushed here but listed in UB (with the
+    pairs of two locked vertices around a, new stamps: ``-s - 1``) for `_push_modes`; returns how many."""
     nd, nka, nkb, ndrop = info[0], info[1], info[2], info[3]
     for i in range(nd):
         f = D[i]
@@ -366,7 +454,7 @@ def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpoo
             iv[held[q], I_END] = k
         r = ctr[C_NIV]
         held[q] = r
-        iv[r, I_PAIR], iv[r, I_START], iv[r, I_END] = q, k, OPEN
+        iv[r, I_PAIR], iv[r, I_START], iv[r, I_END], iv[r, I_MODE] = q, k, OPEN, gw.FREE
         iv[r, I_RA], iv[r, I_RB] = (scratch + slot, vw) if a < w else (vw, scratch + slot)
         ctr[C_NIV] = r + 1
         if q in blocked:
@@ -375,18 +463,29 @@ def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpoo
             bat[a] -= 1
             bat[w] -= 1
     # blocked pairs around a may have become valid: back in the queue at their stored price
+    nub = 0
+    s0 = ctr[C_STAMP]
     for i in range(ns[a], ns[a] + nl[a]):
         u = npool[i]
         if bat[u] > 0:
             for jj in range(ns[u], ns[u] + nl[u]):
                 q = _pair(u, npool[jj])
-                if q in blocked and q not in gone and not (locked[u] and locked[npool[jj]]):
-                    _unblock(q, ctr, J, heap, K, X, cost, branch, parts, cur, blocked, bat)
+                if q in blocked and q not in gone:
+                    if not (locked[u] and locked[npool[jj]]):
+                        t = _unblock(q, ctr, J, heap, K, X, cost, branch, parts, RP, cur, blocked, bat, not wed)
+                        if wed:
+                            UB[nub] = t
+                            nub += 1
+                    elif wed and cur[q] <= s0:  # (pushed again and blocked again by the loop)
+                        UB[nub] = -_restamp(q, ctr, J, K, X, cost, branch, parts, RP, cur) - 1
+                        nub += 1
+    return nub
 
 
 @njit(cache=True)
-def undo(mark, T, alive, fs, fl, ns, nl, heap, K, cur, blocked, bat, J, ctr):
-    """Every change journaled since ``mark``, undone (last first)."""
+def undo(mark, T, alive, fs, fl, ns, nl, heap, K, cur, blocked, bat, J, ctr, C, val, multi, VJ):
+    """Every change journaled since ``mark``, undone (last first); C, val, multi, VJ: the wedges'
+    (`greedy_wedges_jit`)."""
     for j in range(ctr[C_JLEN] - 1, mark - 1, -1):
         kind, i, o0, o1 = J[j, 0], J[j, 1], J[j, 2], J[j, 3]
         if kind == J_HEAP:
@@ -403,6 +502,8 @@ def undo(mark, T, alive, fs, fl, ns, nl, heap, K, cur, blocked, bat, J, ctr):
             ctr[C_FACES] = o0
         elif kind == J_CUR:
             cur[i] = o0
+        elif kind >= gw.J_MULTI:
+            gw.undo_one(kind, i, o0, o1, C, val, multi, VJ)
         elif o0 < 0:  # J_BLOCKED: was not blocked
             del blocked[i]
             bat[i >> 32] -= 1
@@ -470,9 +571,11 @@ def _key_less(keys, i, j):
 
 
 @njit(cache=True)
-def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocked, bat, ctr, has_locks, locked):
-    """Into the queue: pairs P (k,) with keys (k,3) and prices, a new stamp each, in order; pairs of two
-    ``locked`` vertices blocked (rule LOCKED: they never contract)."""
+def push(P, ikeys, x, cst, br, prt, raw, heap, K, X, cost, branch, parts, RP, cur, blocked, bat, ctr, has_locks,
+         locked):
+    """Into the queue: pairs P (k,) with keys (k,3) and prices (``raw`` (k,4): position and cost before the
+    seam constraint), a new stamp each, in order; pairs of two ``locked`` vertices blocked (rule LOCKED:
+    they never contract)."""
     for r in range(len(P)):
         p = P[r]
         s = ctr[C_STAMP] + 1
@@ -481,6 +584,7 @@ def push(P, ikeys, x, cst, br, prt, heap, K, X, cost, branch, parts, cur, blocke
         X[s] = x[r]
         cost[s], branch[s] = cst[r], br[r]
         parts[s] = prt[r]
+        RP[s] = raw[r]
         cur[p] = s
         if p in blocked:
             del blocked[p]
@@ -528,7 +632,7 @@ def last_intervals(iv, niv, ok, gone):
 
 
 @njit(cache=True)
-def renumber(heap, ctr, K, X, cost, branch, parts, cur, blocked):
+def renumber(heap, ctr, K, X, cost, branch, parts, RP, cur, blocked):
     """The current entries' stamps renumbered 1, 2, ... in their order (a stamp's rows moved with it), and
     the heap rebuilt from them: entries order as before, and old stamps no longer hold rows, so that the
     stamp arrays stay as long as the queue, not as the run's pushes (between batches only: the journal
@@ -543,6 +647,7 @@ def renumber(heap, ctr, K, X, cost, branch, parts, cur, blocked):
             X[s] = X[old]
             cost[s], branch[s] = cost[old], branch[old]
             parts[s] = parts[old]
+            RP[s] = RP[old]
         cur[ks[i]] = s
     ctr[C_STAMP] = len(order)
     rebuild(heap, ctr, K, cur, blocked)

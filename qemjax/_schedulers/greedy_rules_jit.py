@@ -14,6 +14,7 @@ from numba import njit
 
 from .outcome import BUDGET, COINCIDENT, FLIP, LOCKED, PART, TOPOLOGY
 
+
 @njit(cache=True, inline="always")
 def has(pool, start, length, v):
     for i in range(start, start + length):
@@ -202,9 +203,21 @@ def rules(a, b, x, faces, target, manifold, simple, keep_parts, cos_max, sliver,
           VQ, N0, cnt, A, B, D, R, common, info):
     """The checks of the one-at-a-time loop (`greedy._run`), in its order: the code of the first rule that
     contracting b into a at x breaks, or -1. Leaves what the contraction would change: info = (number of
-    dead faces, of faces kept at a, at b, of faces dropped as coincident (non-manifold mode)), A and B the
-    faces kept at a and at b (room for fl[a] and fl[b]), D the dead faces (room for fl[a]), R the dropped
-    ones (room for fl[a] + fl[b])."""
+    dead faces, of faces kept at a, at b, of faces dropped as coincident (non-manifold mode), of common
+    neighbours), A and B the faces kept at a and at b (room for fl[a] and fl[b]), D the dead faces (room for
+    fl[a]), R the dropped ones (room for fl[a] + fl[b]). In two parts (`rules_head`, `rules_tail`): the
+    loop's seam rule (kept attributes, `greedy_wedges_jit.seam_ok`) comes between them."""
+    code = rules_head(a, b, faces, target, manifold, simple, keep_parts, has_locks, locked, T, fs, fl, fpool, cnt,
+                      A, B, D, common, info)
+    if code >= 0:
+        return code
+    return rules_tail(a, b, x, faces, target, manifold, simple, cos_max, sliver, T, VQ, N0, A, B, R, common, info)
+
+
+@njit(cache=True)
+def rules_head(a, b, faces, target, manifold, simple, keep_parts, has_locks, locked, T, fs, fl, fpool, cnt, A, B,
+               D, common, info):
+    """`rules` up to the lock rule (the face budget, the link rule, the vanishing part, the locks)."""
     nd = nka = nkb = 0
     for i in range(fs[a], fs[a] + fl[a]):
         f = fpool[i]
@@ -229,8 +242,16 @@ def rules(a, b, x, faces, target, manifold, simple, keep_parts, cos_max, sliver,
             return TOPOLOGY
         if keep_parts and nka == 0 and nkb == 0:  # its faces are all its part has left
             return PART
+    info[4] = ncommon
     if has_locks and _strands(a, b, nd, nka + nkb, locked, T, fl, D):
         return LOCKED
+    return -1
+
+
+@njit(cache=True)
+def rules_tail(a, b, x, faces, target, manifold, simple, cos_max, sliver, T, VQ, N0, A, B, R, common, info):
+    """`rules` from the flip test on (the flip test, the coincident faces), after `rules_head`."""
+    nd, nka, nkb, ncommon = info[0], info[1], info[2], info[4]
     for i in range(nka + nkb):
         f = A[i] if i < nka else B[i - nka]
         v = a if i < nka else b
