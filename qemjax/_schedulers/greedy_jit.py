@@ -284,6 +284,17 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
         ctr[C_NSTEPS] = k + 1
 
 
+@njit(cache=True, inline="always")
+def _pushed_pair(i, niv, iv, iv0, UB, K):
+    """`_push_modes`' i-th pair: the i-th new stale interval's, then the unblocked stamps' (``-s - 1``: s)."""
+    if i < niv:
+        p = iv[iv0 + i, I_PAIR]
+        return p >> 32, p & M32
+    t = UB[i - niv]
+    t = t if t >= 0 else -t - 1
+    return np.int64(K[t, 1] & np.uint64(M32)), np.int64(K[t, 2])
+
+
 @njit(cache=True)
 def _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K, X, cost, RP, has_locks, locked,
                 m, W, TS, J, ctr):
@@ -296,22 +307,10 @@ def _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K
     total = niv + nub
     seam = np.empty(total, np.bool_)
     for i in range(total):
-        if i < niv:
-            p = iv[iv0 + i, I_PAIR]
-            u, w = p >> 32, p & M32
-        else:
-            t = UB[i - niv]
-            t = t if t >= 0 else -t - 1
-            u, w = np.int64(K[t, 1] & np.uint64(M32)), np.int64(K[t, 2])
+        u, w = _pushed_pair(i, niv, iv, iv0, UB, K)
         seam[i] = multi[u] or multi[w]
     for i in range(total):
-        if i < niv:
-            p = iv[iv0 + i, I_PAIR]
-            u, w = p >> 32, p & M32
-        else:
-            t = UB[i - niv]
-            t = t if t >= 0 else -t - 1
-            u, w = np.int64(K[t, 1] & np.uint64(M32)), np.int64(K[t, 2])
+        u, w = _pushed_pair(i, niv, iv, iv0, UB, K)
         mode = gw.FREE
         if seam[i]:
             TS = gw.fit(TS, max(fl[u], fl[w]))
@@ -319,6 +318,8 @@ def _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K
         if i < niv:
             iv[iv0 + i, I_MODE] = mode
         else:
+            t = UB[i - niv]
+            t = t if t >= 0 else -t - 1
             gw.reprice(t, u, w, mode, VQ, K, X, cost, RP, has_locks, locked, m, W)
             if UB[i - niv] >= 0:
                 heap_push(heap, ctr, K, t)
