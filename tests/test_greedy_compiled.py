@@ -18,6 +18,7 @@ import qemjax
 from qemjax import shapes
 
 pytest.importorskip("numba")  # a core dependency; without it the one-at-a-time loop runs
+from qemjax._costs import build  # noqa: E402
 from qemjax._costs.base import MeshInput  # noqa: E402
 from qemjax._costs.qem import QEM  # noqa: E402
 from qemjax._kernels import flips as flips_mod  # noqa: E402
@@ -283,9 +284,10 @@ def test_compiled_queue_grows_its_arrays(monkeypatch):
 
 
 def test_eligible_models():
-    assert greedy_compiled.eligible(QEM(), None)
-    assert not greedy_compiled.eligible(QEM(memoryless=True), None)  # ring support, refreshed state
-    assert greedy_compiled.eligible(QEM(), object())  # wedges (kept attributes): compiled too
+    assert greedy_compiled.eligible(QEM())
+    assert not greedy_compiled.eligible(QEM(memoryless=True))  # ring support, refreshed state
+    # the model of a run that keeps attributes (its wedges and locks run in the compiled batches too)
+    assert greedy_compiled.eligible(build(QEM(), weights=np.ones(2)))
 
 
 def test_simple_means_no_repeated_corners_or_faces():

@@ -19,8 +19,7 @@ from .._kernels.batching import pad_rows as pad_rows
 from .._kernels.batching import piece_sizes
 from .._kernels.batching import set_rows as set_rows
 from .._costs import ring
-from .._kernels import flips
-from .._kernels import kernel
+from .._kernels import flips, kernel
 from .._options import Options as Options
 
 RING_BLOCK = 1 << 16  # ring models gather the faces of this many pairs at a time (bounded memory)

@@ -94,7 +94,7 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
     E, _ = topo.edges(F, n)
     pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
     compiled = _compiled()
-    if compiled is not None and compiled.eligible(model, wedges, locks):  # the same run, in verified batches
+    if compiled is not None and compiled.eligible(model):  # the same run, in verified batches
         return compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks, wedges)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S

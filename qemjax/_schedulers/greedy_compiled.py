@@ -71,9 +71,9 @@ JOURNAL_ROWS, INTERVAL_ROWS = 1 << 16, 1 << 14  # a batch's journal and stale in
 REMOVED_ROWS = 1 << 12  # a batch's removed faces
 
 
-def eligible(model, wedges=None, locks=None) -> bool:
-    """Whether a run can use this module: a pair's price reads only its two vertices' rows (with or without
-    kept attributes, locks and weights)."""
+def eligible(model) -> bool:
+    """Whether a run can use this module: a pair's price reads only its two vertices' rows (whether or not
+    it keeps attributes or has locks and weights: those run here too)."""
     return (model.support == "pair" and model.refresh is None and not model.uses_ring
             and model.rank_weights is None)
 
