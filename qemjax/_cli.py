@@ -448,16 +448,19 @@ def _settle() -> None:
 
 def _on_sigint(signum, frame):
     """Ctrl-C: remembered, then raised as Python does, except inside a garbage-collector callback (JAX has
-    one), where Python would print the exception as ignored and go on: there the signal is sent again a
-    moment later, once the callback has returned. `_atomic` and `main` also check the flag, so a run whose
+    one), where Python would print the exception as ignored and go on, and inside numba's own Python code
+    (compiled loops call back into it, for one to build their constants, and drop an exception raised
+    there): there the signal is sent again a moment later, once the callback has returned. `_atomic` and `main` also check the flag, so a run whose
     interrupt was lost all the same writes nothing and ends with exit code 130."""
     _INTERRUPTED.append(True)
     if _RAISED or _SETTLING:  # one interrupt is enough: the first is unwinding the run already
         return
     callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
+    numba = sys.modules.get("numba")
+    numba_dir = os.path.dirname(numba.__file__) + os.sep if getattr(numba, "__file__", None) else None
     f = frame
     while f is not None:
-        if f.f_code in callbacks:
+        if f.f_code in callbacks or (numba_dir and f.f_code.co_filename.startswith(numba_dir)):
             timer = threading.Timer(0.05, _resend)
             timer.daemon = True
             timer.start()

@@ -480,6 +480,35 @@ def test_ctrl_c_inside_a_gc_callback_is_sent_again(monkeypatch):
         _cli._on_sigint(signal.SIGINT, sys._getframe())
 
 
+def test_ctrl_c_inside_numbas_python_code_is_sent_again(monkeypatch):
+    """A compiled loop calls back into numba's Python code (to build its constants) and drops an exception
+    raised there: a Ctrl-C that lands in such a frame is remembered and sent again, not raised (a sweep ran
+    to its end once this way, its interrupt lost)."""
+    import os
+    import signal
+    import time
+
+    import numba
+
+    sent = []
+    monkeypatch.setattr(_cli, "_resend", lambda: sent.append(True))
+    monkeypatch.setattr(_cli, "_INTERRUPTED", [])
+    monkeypatch.setattr(_cli, "_RAISED", [])
+    space = {"sys": sys}  # a function whose code lives in numba's folder, as numba.core.serialize's does
+    exec(compile("def callback():\n    return sys._getframe()\n",
+                 os.path.join(os.path.dirname(numba.__file__), "core", "serialize.py"), "exec"), space)
+    try:
+        _cli._on_sigint(signal.SIGINT, space["callback"]())
+    except KeyboardInterrupt:
+        pytest.fail("raised inside numba's code, where a compiled loop would drop it")
+    deadline = time.monotonic() + 5
+    while not sent and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert sent and _cli._INTERRUPTED and not _cli._RAISED
+    with pytest.raises(KeyboardInterrupt):  # in the project's own code: raised at once
+        _cli._on_sigint(signal.SIGINT, sys._getframe())
+
+
 def test_summary_names_each_methods_unit(src, tmp_path, capsys):
     """max error is a quadric error for qem/esqem, an area change for --method area."""
     from qemjax import _costs
