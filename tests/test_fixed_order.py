@@ -58,6 +58,8 @@ def test_grid_nearest_is_exact(shape):
     if shape == "degenerate":
         G[:40, 2] = G[:40, 1]  # segments
         X[G[40:60, 2]] = X[G[40:60, 1]]  # coincident corners
+        G[60:80, 1] = G[60:80, 0]  # segments whose first two corners are one
+        X[G[80:100, 1]] = X[G[80:100, 0]]  # ... or at one point
     P = rng.normal(size=(300, 3)) * (50.0 if shape == "far" else 2.0)
     f, d = nearest(X, G, P)
     want = _brute(X, G, P)
@@ -65,6 +67,27 @@ def test_grid_nearest_is_exact(shape):
     # the face it names lies at that distance
     named = np.array([_brute(X, G[f[i]][None], P[i][None])[0] for i in range(len(P))])
     assert np.allclose(named, d, rtol=1e-12, atol=1e-14)
+
+
+def test_grid_nearest_is_exact_on_slivers_and_segments():
+    """Triangles whose corners are collinear or coincide (in any of their three positions): the distance
+    to the set of points they are, as the float64 reference measures it (Ericson's regions alone do not)."""
+    rng = np.random.default_rng(11)
+    a, b = rng.normal(size=(2, 300, 3))
+    c = rng.normal(size=(300, 3))
+    c[:50] = a[:50] + 0.3 * (b[:50] - a[:50])  # collinear, the third corner between
+    c[50:100] = a[50:100] + 1.7 * (b[50:100] - a[50:100])  # ... or beyond
+    b[100:130] = a[100:130]  # two corners at one point
+    c[130:160] = a[130:160]
+    c[160:190] = b[160:190]
+    X = np.concatenate([a, b, c])
+    G = np.arange(900).reshape(3, 300).T
+    for rows in (slice(0, 190), slice(0, 300)):  # the degenerate ones alone, then among ordinary ones
+        P = rng.normal(size=(2000, 3)) * 1.5
+        f, d = nearest(X, G[rows], P)
+        assert np.allclose(d, _brute(X, G[rows], P), rtol=1e-12, atol=1e-12)
+        named = np.array([_brute(X, G[rows][f[i]][None], P[i][None])[0] for i in range(len(P))])
+        assert np.allclose(named, d, rtol=1e-12, atol=1e-12)
 
 
 def test_grid_nearest_threads_and_blocks_give_the_same_bits(monkeypatch):
@@ -77,6 +100,28 @@ def test_grid_nearest_threads_and_blocks_give_the_same_bits(monkeypatch):
     monkeypatch.setattr(grid_nearest, "BLOCK", 700)  # 8 blocks on threads
     f2, d2 = nearest(X, G, P)
     assert np.array_equal(f1, f2) and np.array_equal(d1, d2)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_grid_nearest_in_the_cubes_order_gives_the_same_bits(monkeypatch, threads):
+    """Many points are queried in the order of their cubes and put back: the same faces and distances, bit
+    for bit, as in their own order, with ties (points on shared corners) included."""
+    from qemjax._mesh import grid_nearest
+
+    rng = np.random.default_rng(7)
+    X, G = rng.normal(size=(400, 3)), rng.integers(0, 400, size=(700, 3))
+    P = rng.normal(size=(6000, 3)) * 1.5
+    P[:1000] = X[rng.integers(0, 400, 1000)]  # on corners: several faces at distance 0, the lowest named
+    monkeypatch.setattr(grid_nearest, "_threads", lambda: threads)
+    monkeypatch.setattr(grid_nearest, "MIN_ORDERED", 10**9)  # in their own order
+    f1, d1 = nearest(X, G, P)
+    monkeypatch.setattr(grid_nearest, "MIN_ORDERED", 1)  # in the cubes' order
+    monkeypatch.setattr(grid_nearest, "BLOCK", 1500)  # in several blocks
+    f2, d2 = nearest(X, G, P)
+    assert np.array_equal(f1, f2) and np.array_equal(d1, d2)
+    assert np.allclose(d1, _brute(X, G, P), rtol=1e-12, atol=1e-7)  # a corner's 0 against rounding's 1e-9
+    order = grid_nearest._cell_order(P, np.array([-5.0, -5, -5]), 0.5, np.array([20, 20, 20]))
+    assert sorted(order) == list(range(len(P)))  # a permutation
 
 
 def test_fixed_order_helpers_match_numpy():

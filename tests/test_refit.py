@@ -23,6 +23,12 @@ def test_closest_barycentric_gives_the_exact_distance():
     rng = np.random.default_rng(0)
     p, a, b, c = (rng.normal(size=(2000, 3)) for _ in range(4))
     c[:200] = a[:200] + 1e-3 * rng.normal(size=(200, 3))  # thin triangles too
+    b[200:300] = a[200:300]  # segments: two corners at one point, each pair of them
+    c[300:400] = a[300:400]
+    c[400:500] = b[400:500]
+    b[500:550] = c[500:550] = a[500:550]  # a point
+    c[550:600] = a[550:600] + 0.3 * (b[550:600] - a[550:600])  # collinear corners
+    c[600:650] = a[600:650] + 1.7 * (b[600:650] - a[600:650])
     B = _refit.closest_barycentric(p, a, b, c)
     assert np.all(B >= -1e-12) and np.allclose(B.sum(1), 1.0)
     x = B[:, :1] * a + B[:, 1:2] * b + B[:, 2:] * c

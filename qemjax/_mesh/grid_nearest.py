@@ -26,16 +26,44 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
+from .pointtri import flat_triangles
+
 PAIRS_PER_FACE = 16  # (triangle, cube) listings per triangle at most, on average
 CUBES_PER_FACE = 32  # cubes per triangle at most (the grid's memory)
 BLOCK = 65_536  # points per query call at most; several blocks run on threads
 MIN_BLOCK = 2_048  # ... and at least this many (a thread's hand-off costs about as much as these)
+MIN_ORDERED = 16_384  # from this many points on, they are queried in the order of their cubes
+
+
+@njit(cache=True, nogil=True)
+def _segment_d2(px, py, pz, X, g0, g1):
+    """Squared distance from p to the segment (X[g0], X[g1])."""
+    ex, ey, ez = X[g1, 0] - X[g0, 0], X[g1, 1] - X[g0, 1], X[g1, 2] - X[g0, 2]
+    wx, wy, wz = px - X[g0, 0], py - X[g0, 1], pz - X[g0, 2]
+    e2 = ex * ex + ey * ey + ez * ez
+    t = 0.0 if e2 == 0.0 else min(max((wx * ex + wy * ey + wz * ez) / e2, 0.0), 1.0)
+    qx, qy, qz = wx - t * ex, wy - t * ey, wz - t * ez
+    return qx * qx + qy * qy + qz * qz
+
+
+@njit(cache=True, nogil=True)
+def _edges_d2(px, py, pz, X, g0, g1, g2):
+    """Squared distance from p to a sliver (`slivers`), as the closest point of its three edges."""
+    return min(_segment_d2(px, py, pz, X, g0, g1), _segment_d2(px, py, pz, X, g0, g2),
+               _segment_d2(px, py, pz, X, g1, g2))
+
+
+def slivers(T: np.ndarray) -> np.ndarray:
+    """(j,) bool: which triangles T (j,3,3) are too thin for Ericson's regions, as `_mesh.pointtri` measures
+    them (twice their area under 1e-8 of their longest edge squared: two corners at one point, three in a line)."""
+    return flat_triangles((T[:, 1] - T[:, 0]).T, (T[:, 2] - T[:, 0]).T)
 
 
 @njit(cache=True, nogil=True)
 def closest_d2(px, py, pz, X, g0, g1, g2):
     """Squared distance from p to the closest point of triangle (X[g0], X[g1], X[g2]) (Ericson, Real-Time
-    Collision Detection 5.1.5: vertex, edge or interior region)."""
+    Collision Detection 5.1.5: vertex, edge or interior region). Not for a sliver (`_edges_d2`): its
+    regions need the triangle's sides apart."""
     ax, ay, az = X[g0, 0], X[g0, 1], X[g0, 2]
     abx, aby, abz = X[g1, 0] - ax, X[g1, 1] - ay, X[g1, 2] - az
     acx, acy, acz = X[g2, 0] - ax, X[g2, 1] - ay, X[g2, 2] - az
@@ -135,7 +163,34 @@ def _gap(x, a, b):
 
 
 @njit(cache=True, nogil=True)
-def _query(P, X, G, B, lo, h, dims, start, faces):
+def _cell(x, lo, h, n):
+    """The cube along one axis of coordinate x projected onto the grid's box."""
+    x = min(max(x, lo), lo + n * h)
+    return min(max(int(np.floor((x - lo) / h)), 0), n - 1)
+
+
+@njit(cache=True, nogil=True)
+def _cell_order(P, lo, h, dims):
+    """The points' indices sorted by the cube they fall in (counting sort: stable, so ties keep their order)."""
+    ncell = dims[0] * dims[1] * dims[2]
+    cell = np.empty(P.shape[0], np.int64)
+    count = np.zeros(ncell + 1, np.int64)
+    for p in range(P.shape[0]):
+        c = (_cell(P[p, 0], lo[0], h, dims[0]) * dims[1] + _cell(P[p, 1], lo[1], h, dims[1])) * dims[2] \
+            + _cell(P[p, 2], lo[2], h, dims[2])
+        cell[p] = c
+        count[c + 1] += 1
+    for c in range(ncell):
+        count[c + 1] += count[c]
+    order = np.empty(P.shape[0], np.int64)
+    for p in range(P.shape[0]):
+        order[count[cell[p]]] = p
+        count[cell[p]] += 1
+    return order
+
+
+@njit(cache=True, nogil=True)
+def _query(P, X, G, B, flat, lo, h, dims, start, faces):
     q = P.shape[0]
     best_f = np.full(q, -1, np.int64)
     best_d2 = np.full(q, np.inf)
@@ -187,7 +242,10 @@ def _query(P, X, G, B, lo, h, dims, start, faces):
                             bz = _gap(pz, B[f, 2], B[f, 5])
                             if bx * bx + by * by + bz * bz > lim2:
                                 continue
-                            d2 = closest_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
+                            if flat[f]:
+                                d2 = _edges_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
+                            else:
+                                d2 = closest_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
                             if d2 < bd2 or (d2 == bd2 and f < bf):
                                 bf, bd2 = f, d2
                                 lim2 = (np.sqrt(bd2) + slack) ** 2
@@ -222,16 +280,34 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np
     start, faces = _build(X, G, lo, h, dims)
     T = X[G]  # (j,3,3): each triangle's bounding box, (min xyz, max xyz)
     B = np.ascontiguousarray(np.concatenate([T.min(1), T.max(1)], 1))
+    flat = slivers(T)
     # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
-    # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits
-    k = max(-(-len(P) // BLOCK), min(_threads(), len(P) // MIN_BLOCK), 1)
-    if k == 1:
-        f, d2 = _query(P, X, G, B, lo, h, dims, start, faces)
+    # are threads, at most BLOCK each. Each point's answer is its own: any split and order give the same bits
+    q = len(P)
+    k = max(-(-q // BLOCK), min(_threads(), q // MIN_BLOCK), 1)
+    step = -(-q // k)
+    if k == 1 and q < MIN_ORDERED:
+        f, d2 = _query(P, X, G, B, flat, lo, h, dims, start, faces)
         return f, np.sqrt(d2)
-    step = -(-len(P) // k)
-    blocks = [P[i:i + step] for i in range(0, len(P), step)]
-    parts = list(_pool().map(lambda b: _query(b, X, G, B, lo, h, dims, start, faces), blocks))
-    return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
+    if q < MIN_ORDERED:
+        parts = list(_pool().map(lambda i: _query(P[i:i + step], X, G, B, flat, lo, h, dims, start, faces),
+                                 range(0, q, step)))
+        return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
+    # many points: queried in the order of their cubes, side by side in memory, so that neighbours follow
+    # one another while the lists and triangles they read are still in the caches (each block gathers its
+    # points and puts its answers back at their rows)
+    order = _cell_order(P, lo, h, dims)
+    f, d = np.empty(q, np.int64), np.empty(q)
+
+    def block(i):
+        rows = order[i:i + step]
+        fb, d2 = _query(np.take(P, rows, axis=0), X, G, B, flat, lo, h, dims, start, faces)
+        f[rows], d[rows] = fb, np.sqrt(d2)
+    if k == 1:
+        block(0)
+    else:
+        list(_pool().map(block, range(0, q, step)))
+    return f, d
 
 
 _POOL = None

@@ -34,6 +34,7 @@ import scipy.sparse as sp
 
 from .._mesh.arrays import face_normals
 from .._mesh.grid_nearest import nearest
+from .._mesh.pointtri import flat_triangles
 from .._mesh.spd_solve import solve_spd
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
@@ -97,6 +98,18 @@ def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
 
 
 def _closest_barycentric(p, a, b, c):
+    """`closest_barycentric` of one block. Ericson's regions need the first two corners apart: a row whose
+    a and b are one point is solved as (a, c, b), the same set of points, and its b and c weights swapped back."""
+    one = np.all(a == b, axis=1)
+    if one.any():
+        b, c = np.where(one[:, None], c, b), np.where(one[:, None], b, c)
+        out = _regions(p, a, b, c)
+        out[one, 1:] = out[one, :0:-1]
+        return out
+    return _regions(p, a, b, c)
+
+
+def _regions(p, a, b, c):
     ab, ac = b - a, c - a
     d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
     d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
@@ -117,6 +130,29 @@ def _closest_barycentric(p, a, b, c):
     out[:, 0] = np.select(regions, [1.0, 0.0, 0.0, 1 - t_ab, 1 - t_ac, 0.0], 1 - v - w)
     out[:, 1] = np.select(regions, [0.0, 1.0, 0.0, t_ab, 0.0, 1 - t_bc], v)
     out[:, 2] = np.select(regions, [0.0, 0.0, 1.0, 0.0, t_ac, t_bc], w)
+    # the interior's solve on a sliver loses all precision: there the closest point of its three edges
+    inner = np.flatnonzero(~np.logical_or.reduce(regions))
+    if inner.size:
+        sliver = inner[flat_triangles(ab[inner].T, ac[inner].T)]
+        if sliver.size:
+            out[sliver] = _closest_on_edges(p[sliver], a[sliver], b[sliver], c[sliver])
+    return out
+
+
+def _closest_on_edges(p, a, b, c):
+    """(q,3) barycentric coordinates of the closest point of the three edges of triangles (a, b, c) to p."""
+    best = np.full(len(p), np.inf)
+    out = np.zeros((len(p), 3))
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        o, e = (a, b, c)[i], (a, b, c)[j] - (a, b, c)[i]
+        ee = np.einsum("ij,ij->i", e, e)
+        t = np.clip(np.divide(np.einsum("ij,ij->i", p - o, e), ee, out=np.zeros_like(ee), where=ee > 0), 0.0, 1.0)
+        r = p - o - t[:, None] * e
+        d = np.einsum("ij,ij->i", r, r)
+        closer = d < best
+        best[closer] = d[closer]
+        out[closer] = 0.0
+        out[closer, i], out[closer, j] = 1 - t[closer], t[closer]
     return out
 
 

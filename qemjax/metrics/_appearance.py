@@ -63,43 +63,12 @@ def _missing(mesh, name: str, kind: str) -> str:
 
 
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(q,3) barycentric coordinates of the point of each triangle (a, b, c: (q,3)) closest to p (q,3)
-    (Ericson, Real-Time Collision Detection, 5.1.5; degenerate triangles fall back to a vertex)."""
-    ab, ac, ap = b - a, c - a, p - a
-    dot = lambda x, y: np.einsum("ij,ij->i", x, y)  # noqa: E731
-    d1, d2 = dot(ab, ap), dot(ac, ap)
-    bp, cp = p - b, p - c
-    d3, d4 = dot(ab, bp), dot(ac, bp)
-    d5, d6 = dot(ab, cp), dot(ac, cp)
-    vc = d1 * d4 - d3 * d2
-    vb = d5 * d2 - d1 * d6
-    va = d3 * d6 - d5 * d4
-    q = len(p)
-    out = np.zeros((q, 3))
-    done = np.zeros(q, bool)
+    """(q,3) barycentric coordinates of the point of each triangle (a, b, c: (q,3)) closest to p (q,3): the
+    re-fit's (`qemjax._pipeline.refit.closest_barycentric`; segments and slivers included)."""
+    from .._pipeline.refit import closest_barycentric as exact  # numba and scipy: imported when first used
 
-    def put(mask, w):
-        nonlocal done
-        m = mask & ~done
-        out[m] = w[m] if w.ndim == 2 else w
-        done |= m
-
-    with np.errstate(divide="ignore", invalid="ignore"):
-        put((d1 <= 0) & (d2 <= 0), np.array([1.0, 0, 0]))
-        put((d3 >= 0) & (d4 <= d3), np.array([0, 1.0, 0]))
-        put((d6 >= 0) & (d5 <= d6), np.array([0, 0, 1.0]))
-        t = d1 / (d1 - d3)
-        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - t, t, 0 * t], 1))
-        t = d2 / (d2 - d6)
-        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - t, 0 * t, t], 1))
-        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([0 * t, 1 - t, t], 1))
-        den = va + vb + vc
-        v, w = vb / den, vc / den
-        inside = np.stack([1 - v - w, v, w], 1)
-    inside[~np.all(np.isfinite(inside), axis=1)] = [1.0, 0, 0]
-    put(np.ones(q, bool), inside)
-    return out
+    return exact(np.asarray(p, np.float64), np.asarray(a, np.float64), np.asarray(b, np.float64),
+                 np.asarray(c, np.float64))
 
 
 def _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, tol):
