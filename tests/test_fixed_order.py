@@ -102,28 +102,6 @@ def test_grid_nearest_threads_and_blocks_give_the_same_bits(monkeypatch):
     assert np.array_equal(f1, f2) and np.array_equal(d1, d2)
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-def test_grid_nearest_in_the_cubes_order_gives_the_same_bits(monkeypatch, threads):
-    """Many points are queried in the order of their cubes and put back: the same faces and distances, bit
-    for bit, as in their own order, with ties (points on shared corners) included."""
-    from qemjax._mesh import grid_nearest
-
-    rng = np.random.default_rng(7)
-    X, G = rng.normal(size=(400, 3)), rng.integers(0, 400, size=(700, 3))
-    P = rng.normal(size=(6000, 3)) * 1.5
-    P[:1000] = X[rng.integers(0, 400, 1000)]  # on corners: several faces at distance 0, the lowest named
-    monkeypatch.setattr(grid_nearest, "_threads", lambda: threads)
-    monkeypatch.setattr(grid_nearest, "MIN_ORDERED", 10**9)  # in their own order
-    f1, d1 = nearest(X, G, P)
-    monkeypatch.setattr(grid_nearest, "MIN_ORDERED", 1)  # in the cubes' order
-    monkeypatch.setattr(grid_nearest, "BLOCK", 1500)  # in several blocks
-    f2, d2 = nearest(X, G, P)
-    assert np.array_equal(f1, f2) and np.array_equal(d1, d2)
-    assert np.allclose(d1, _brute(X, G, P), rtol=1e-12, atol=1e-7)  # a corner's 0 against rounding's 1e-9
-    order = grid_nearest._cell_order(P, np.array([-5.0, -5, -5]), 0.5, np.array([20, 20, 20]))
-    assert sorted(order) == list(range(len(P)))  # a permutation
-
-
 def test_fixed_order_helpers_match_numpy():
     rng = np.random.default_rng(0)
     M, R = rng.normal(size=(50, 4, 4)), rng.normal(size=(50, 4, 2))

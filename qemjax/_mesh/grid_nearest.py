@@ -32,7 +32,6 @@ PAIRS_PER_FACE = 16  # (triangle, cube) listings per triangle at most, on averag
 CUBES_PER_FACE = 32  # cubes per triangle at most (the grid's memory)
 BLOCK = 65_536  # points per query call at most; several blocks run on threads
 MIN_BLOCK = 2_048  # ... and at least this many (a thread's hand-off costs about as much as these)
-MIN_ORDERED = 16_384  # from this many points on, they are queried in the order of their cubes
 
 
 @njit(cache=True, nogil=True)
@@ -163,33 +162,6 @@ def _gap(x, a, b):
 
 
 @njit(cache=True, nogil=True)
-def _cell(x, lo, h, n):
-    """The cube along one axis of coordinate x projected onto the grid's box."""
-    x = min(max(x, lo), lo + n * h)
-    return min(max(int(np.floor((x - lo) / h)), 0), n - 1)
-
-
-@njit(cache=True, nogil=True)
-def _cell_order(P, lo, h, dims):
-    """The points' indices sorted by the cube they fall in (counting sort: stable, so ties keep their order)."""
-    ncell = dims[0] * dims[1] * dims[2]
-    cell = np.empty(P.shape[0], np.int64)
-    count = np.zeros(ncell + 1, np.int64)
-    for p in range(P.shape[0]):
-        c = (_cell(P[p, 0], lo[0], h, dims[0]) * dims[1] + _cell(P[p, 1], lo[1], h, dims[1])) * dims[2] \
-            + _cell(P[p, 2], lo[2], h, dims[2])
-        cell[p] = c
-        count[c + 1] += 1
-    for c in range(ncell):
-        count[c + 1] += count[c]
-    order = np.empty(P.shape[0], np.int64)
-    for p in range(P.shape[0]):
-        order[count[cell[p]]] = p
-        count[cell[p]] += 1
-    return order
-
-
-@njit(cache=True, nogil=True)
 def _query(P, X, G, B, flat, lo, h, dims, start, faces):
     q = P.shape[0]
     best_f = np.full(q, -1, np.int64)
@@ -282,32 +254,17 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np
     B = np.ascontiguousarray(np.concatenate([T.min(1), T.max(1)], 1))
     flat = slivers(T)
     # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
-    # are threads, at most BLOCK each. Each point's answer is its own: any split and order give the same bits
-    q = len(P)
-    k = max(-(-q // BLOCK), min(_threads(), q // MIN_BLOCK), 1)
-    step = -(-q // k)
-    if k == 1 and q < MIN_ORDERED:
+    # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried
+    # in the order of their cubes instead, 2 M points took 0.80x as long but whole runs no less:
+    # experiments/results/nearest_order_1128.txt)
+    k = max(-(-len(P) // BLOCK), min(_threads(), len(P) // MIN_BLOCK), 1)
+    if k == 1:
         f, d2 = _query(P, X, G, B, flat, lo, h, dims, start, faces)
         return f, np.sqrt(d2)
-    if q < MIN_ORDERED:
-        parts = list(_pool().map(lambda i: _query(P[i:i + step], X, G, B, flat, lo, h, dims, start, faces),
-                                 range(0, q, step)))
-        return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
-    # many points: queried in the order of their cubes, side by side in memory, so that neighbours follow
-    # one another while the lists and triangles they read are still in the caches (each block gathers its
-    # points and puts its answers back at their rows)
-    order = _cell_order(P, lo, h, dims)
-    f, d = np.empty(q, np.int64), np.empty(q)
-
-    def block(i):
-        rows = order[i:i + step]
-        fb, d2 = _query(np.take(P, rows, axis=0), X, G, B, flat, lo, h, dims, start, faces)
-        f[rows], d[rows] = fb, np.sqrt(d2)
-    if k == 1:
-        block(0)
-    else:
-        list(_pool().map(block, range(0, q, step)))
-    return f, d
+    step = -(-len(P) // k)
+    blocks = [P[i:i + step] for i in range(0, len(P), step)]
+    parts = list(_pool().map(lambda b: _query(b, X, G, B, flat, lo, h, dims, start, faces), blocks))
+    return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
 
 
 _POOL = None
