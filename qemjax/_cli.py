@@ -450,8 +450,9 @@ def _on_sigint(signum, frame):
     """Ctrl-C: remembered, then raised as Python does, except inside a garbage-collector callback (JAX has
     one), where Python would print the exception as ignored and go on, and inside numba's own Python code
     (compiled loops call back into it, for one to build their constants, and drop an exception raised
-    there): there the signal is sent again a moment later, once the callback has returned. `_atomic` and `main` also check the flag, so a run whose
-    interrupt was lost all the same writes nothing and ends with exit code 130."""
+    there): there the signal is sent again a moment later, once the callback has returned. `_atomic` and
+    `main` also check the flag, so a run whose interrupt was lost all the same writes nothing and ends with
+    exit code 130."""
     _INTERRUPTED.append(True)
     if _RAISED or _SETTLING:  # one interrupt is enough: the first is unwinding the run already
         return

@@ -98,15 +98,14 @@ def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
 
 
 def _closest_barycentric(p, a, b, c):
-    """`closest_barycentric` of one block. Ericson's regions need the first two corners apart: a row whose
-    a and b are one point is solved as (a, c, b), the same set of points, and its b and c weights swapped back."""
-    one = np.all(a == b, axis=1)
-    if one.any():
-        b, c = np.where(one[:, None], c, b), np.where(one[:, None], b, c)
-        out = _regions(p, a, b, c)
-        out[one, 1:] = out[one, :0:-1]
-        return out
-    return _regions(p, a, b, c)
+    """`closest_barycentric` of one block: Ericson's regions, except on slivers (two corners at one point,
+    three in a line, as `_mesh.pointtri` tells them), whose regions lose all precision: there the closest
+    point of the three edges."""
+    out = _regions(p, a, b, c)
+    sliver = np.flatnonzero(flat_triangles((b - a).T, (c - a).T))
+    if sliver.size:
+        out[sliver] = _closest_on_edges(p[sliver], a[sliver], b[sliver], c[sliver])
+    return out
 
 
 def _regions(p, a, b, c):
@@ -130,12 +129,6 @@ def _regions(p, a, b, c):
     out[:, 0] = np.select(regions, [1.0, 0.0, 0.0, 1 - t_ab, 1 - t_ac, 0.0], 1 - v - w)
     out[:, 1] = np.select(regions, [0.0, 1.0, 0.0, t_ab, 0.0, 1 - t_bc], v)
     out[:, 2] = np.select(regions, [0.0, 0.0, 1.0, 0.0, t_ac, t_bc], w)
-    # the interior's solve on a sliver loses all precision: there the closest point of its three edges
-    inner = np.flatnonzero(~np.logical_or.reduce(regions))
-    if inner.size:
-        sliver = inner[flat_triangles(ab[inner].T, ac[inner].T)]
-        if sliver.size:
-            out[sliver] = _closest_on_edges(p[sliver], a[sliver], b[sliver], c[sliver])
     return out
 
 
