@@ -76,6 +76,26 @@ def test_refit_never_turns_a_face_by_the_flip_angle(bumpy):
     assert not np.array_equal(held, r.vertices)  # halved moves, not all undone
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_samples_are_numpys_arithmetic_bit_for_bit(seed):
+    """The compiled samples against numpy's whole-array arithmetic (float64): points, weights, parts."""
+    rng = np.random.default_rng(seed)
+    n, m = 500, 1200
+    V = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-30, 30)
+    F = rng.integers(0, n, size=(m, 3))
+    F[:100, 1] = F[:100, 0]  # zero areas: those centroids go
+    part = rng.integers(0, 4, n).astype(np.int32)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    w = np.concatenate([np.bincount(F.ravel(), weights=np.repeat(area / 3, 3), minlength=n), area])
+    P = np.concatenate([V, V[F].sum(1) / 3])
+    lab = np.concatenate([part, part[F[:, 0]]])
+    keep = w > 0
+    got = _refit.samples(V, F, part)
+    for have, want in zip(got, (P[keep], w[keep] / w[keep].mean(), lab[keep])):
+        np.testing.assert_array_equal(have, want)
+        assert have.dtype == want.dtype
+
+
 def test_samples_attach_to_faces_of_their_own_part():
     """A sample lying on a face of another part is attached to its own part's nearest face (the truck's
     parts pulled each other), and a sample of a part without faces to none."""
