@@ -255,15 +255,9 @@ class AttributeQEM(QEM):
     def price_kernel(self):
         return price_function(self.channels, self.placement == "rank")
 
-    def price(self, VS, pairs, params, rings=None):
-        return self.price_kernel(VS, pairs, params)
-
     @property
-    def merge_kernel(self):
+    def merge_kernel(self):  # (`QEM.price` and `QEM.merge` call these two kernels)
         return merge_function(int(self.channels))
-
-    def merge(self, VS, pairs, x, params):
-        return self.merge_kernel(VS, pairs, x, params)
 
     def vertex_error(self, state: np.ndarray) -> np.ndarray:
         """The position-and-attribute error at each vertex (attributes at their optimum)."""
