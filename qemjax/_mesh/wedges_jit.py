@@ -287,20 +287,29 @@ def constrain(F, alive, cnt, off, pool, C, multi, VQ, P, x, cost, m):
         free, nba, nab, _, _ = modes(F, alive, cnt, off, pool, C, multi, a, b, T)
         if free:
             continue
-        best, best_v = 0.0, -1
-        if nba >= 0:
-            best, best_v = cost_at(VQ, a, b, a, m, W), a
-        if nab >= 0:
-            c = cost_at(VQ, a, b, b, m, W)
-            if best_v < 0 or c < best:
-                best, best_v = c, b
+        best_v, c = endpoint(VQ, a, b, nba >= 0, nab >= 0, m, W)
         if best_v < 0:
             bad[i] = True
             continue
         for k in range(3):
             x[i, k] = VQ[best_v, k]
-        cost[i] = _max0(best)
+        cost[i] = c
     return bad
+
+
+@njit(cache=True)
+def endpoint(VQ, a, b, keep_a, keep_b, m, W):
+    """Of the pair (a, b) (rows of VQ), the endpoint to contract onto where keeping a (``keep_a``) or b
+    (``keep_b``) is allowed: the one of smaller price (`cost_at`; a first among equals), as (its row, its
+    price, not below 0); (-1, 0.0) where neither is allowed."""
+    best, best_v = 0.0, -1
+    if keep_a:
+        best, best_v = cost_at(VQ, a, b, a, m, W), a
+    if keep_b:
+        c = cost_at(VQ, a, b, b, m, W)
+        if best_v < 0 or c < best:
+            best, best_v = c, b
+    return best_v, _max0(best)
 
 
 @njit(cache=True)

@@ -111,23 +111,11 @@ def undo_one(kind, i, o0, o1, C, val, multi, VJ):
         val[i] = VJ[o0]
 
 
-@njit(cache=True, inline="always")
-def _max0(c):
-    return 0.0 if 0.0 > c else c
-
-
 @njit(cache=True)
 def place(VQ, ra, rb, mode, m, W):
-    """`wedges_jit.constrain`'s placement of a pair whose rows are ra, rb (its first and second vertex) and
-    whose mode (> 0) allows keeping one of them: (row of the endpoint taken, its price)."""
-    best, best_v = 0.0, -1
-    if mode & KEEP_A:
-        best, best_v = wj.cost_at(VQ, ra, rb, ra, m, W), ra
-    if mode & KEEP_B:
-        c = wj.cost_at(VQ, ra, rb, rb, m, W)
-        if best_v < 0 or c < best:
-            best, best_v = c, rb
-    return best_v, _max0(best)
+    """`wedges_jit.constrain`'s placement (`wedges_jit.endpoint`) of a pair whose rows are ra, rb (its first
+    and second vertex) and whose mode (> 0) allows keeping one of them: (row of the endpoint taken, its price)."""
+    return wj.endpoint(VQ, ra, rb, (mode & KEEP_A) != 0, (mode & KEEP_B) != 0, m, W)
 
 
 @njit(cache=True)
