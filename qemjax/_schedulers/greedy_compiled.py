@@ -218,15 +218,22 @@ class _Compiled:
             return
         d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
         raw = self.adjust(self.VQd, P, start_price(self.model, self.VQd, P, self.params, None, self.n)())
-        priced = raw
-        if self.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint (as the loop)
-            priced = raw._replace(x=raw.x.copy(), cost=raw.cost.copy())
-            w = self.wedges
-            wedges_jit.constrain(self.T, self.alive, self.fl, self.fs, self.fpool, w.C, w.multi, self.VQ, P,
-                                 priced.x, priced.cost, w.m)
-            if self.locks is not None:
-                _locks.pin(self.row_locks, self.VQ, P, priced.x)
+        w = self.wedges  # pairs at seam vertices: placed at an allowed endpoint (as the loop)
+        priced = self.seamed(raw, P, lambda x, cost: wedges_jit.constrain(
+            self.T, self.alive, self.fl, self.fs, self.fpool, w.C, w.multi, self.VQ, P, x, cost, w.m))
         self.push(P, priced, np.einsum("ij,ij->i", d, d), raw=raw)
+
+    def seamed(self, raw, rows, place):
+        """With kept attributes, the prices ``raw`` of pairs whose two rows are ``rows`` (k,2) with those at
+        seam vertices placed at an allowed endpoint (``place(x, cost)``, in place, on copies) and, with locks,
+        a locked first vertex pinned (`_locks.pin`); else ``raw`` itself."""
+        if self.wedges is None:
+            return raw
+        priced = raw._replace(x=raw.x.copy(), cost=raw.cost.copy())
+        place(priced.x, priced.cost)
+        if self.locks is not None:
+            _locks.pin(self.row_locks, self.VQ, rows, priced.x)
+        return priced
 
     def adjust(self, VQd, rows, priced):
         """With locks, `_locks.adjust` of the prices of pairs whose two rows are ``rows`` (k,2): pairs with a
@@ -380,12 +387,8 @@ class _Compiled:
         moved = self.VQ[kept, :3].copy()
         self.VQ[kept] = self.orig[:len(kept)]
         raw = self.adjust(VQd, ids, start_price(self.model, VQd, ids, self.params, None, self.n)())
-        priced = raw
-        if self.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint, by their modes
-            priced = raw._replace(x=raw.x.copy(), cost=raw.cost.copy())
-            gw.constrain_rows(self.VQ, ids, iv[:, jit.I_MODE], priced.x, priced.cost, int(self.wedges.m))
-            if self.locks is not None:
-                _locks.pin(self.row_locks, self.VQ, ids, priced.x)
+        priced = self.seamed(raw, ids, lambda x, cost: gw.constrain_rows(  # by the modes taken at their pushes
+            self.VQ, ids, iv[:, jit.I_MODE], x, cost, int(self.wedges.m)))
         pos = self.VQ[ids.reshape(-1), :3].reshape(-1, 2, 3)
         self.VQ[kept, :3] = moved
         d = np.ascontiguousarray(pos[:, 0]) - np.ascontiguousarray(pos[:, 1])
