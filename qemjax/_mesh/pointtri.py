@@ -64,13 +64,18 @@ def flat_triangles(ab: np.ndarray, ac: np.ndarray) -> np.ndarray:
     return _dot(n, n) <= (_FLAT_REL * longest) ** 2
 
 
-def _segment_sq(p, o, e):
-    """Squared distance from p to the segment o + t e, t in [0, 1]; arrays are (3, n)."""
+def segment_closest(p, o, e):
+    """(t, squared distance) of the point o + t e of the segment, t in [0, 1], closest to p; arrays are (3, n)."""
     ee = _dot(e, e)
     po = p - o
     t = np.clip(np.divide(_dot(po, e), ee, out=np.zeros_like(ee), where=ee > 0), 0.0, 1.0)
     r = po - t * e
-    return _dot(r, r)
+    return t, _dot(r, r)
+
+
+def _segment_sq(p, o, e):
+    """Squared distance from p to the segment o + t e, t in [0, 1]; arrays are (3, n)."""
+    return segment_closest(p, o, e)[1]
 
 
 def edge_products(ab: np.ndarray, ac: np.ndarray) -> np.ndarray:

@@ -35,7 +35,7 @@ from numba import njit
 
 from .._mesh.arrays import face_normals
 from .._mesh.grid_nearest import nearest
-from .._mesh.pointtri import flat_triangles
+from .._mesh.pointtri import flat_triangles, segment_closest
 from .._mesh.spd_solve import solve_spd
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
@@ -118,15 +118,16 @@ def _closest_barycentric(p, a, b, c):
     """`closest_barycentric` of one block: Ericson's regions, except on slivers (two corners at one point,
     three in a line, as `_mesh.pointtri` tells them), whose regions lose all precision: there the closest
     point of the three edges."""
-    out = _regions(p, a, b, c)
-    sliver = np.flatnonzero(flat_triangles((b - a).T, (c - a).T))
+    ab, ac = b - a, c - a
+    out = _regions(p, a, b, c, ab, ac)
+    sliver = np.flatnonzero(flat_triangles(ab.T, ac.T))
     if sliver.size:
         out[sliver] = _closest_on_edges(p[sliver], a[sliver], b[sliver], c[sliver])
     return out
 
 
-def _regions(p, a, b, c):
-    ab, ac = b - a, c - a
+def _regions(p, a, b, c, ab, ac):
+    """Ericson's regions (5.1.5) for rows p, triangles (a, b, c) with edges ab = b - a and ac = c - a."""
     d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
     d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
     d5, d6 = np.einsum("ij,ij->i", ab, p - c), np.einsum("ij,ij->i", ac, p - c)
@@ -153,12 +154,9 @@ def _closest_on_edges(p, a, b, c):
     """(q,3) barycentric coordinates of the closest point of the three edges of triangles (a, b, c) to p."""
     best = np.full(len(p), np.inf)
     out = np.zeros((len(p), 3))
+    corners = (a, b, c)
     for i, j in ((0, 1), (0, 2), (1, 2)):
-        o, e = (a, b, c)[i], (a, b, c)[j] - (a, b, c)[i]
-        ee = np.einsum("ij,ij->i", e, e)
-        t = np.clip(np.divide(np.einsum("ij,ij->i", p - o, e), ee, out=np.zeros_like(ee), where=ee > 0), 0.0, 1.0)
-        r = p - o - t[:, None] * e
-        d = np.einsum("ij,ij->i", r, r)
+        t, d = segment_closest(p.T, corners[i].T, (corners[j] - corners[i]).T)
         closer = d < best
         best[closer] = d[closer]
         out[closer] = 0.0
