@@ -56,12 +56,18 @@ def _own_modules(root: Path, as_name: str) -> None:
             path.write_text(new)
 
 
-def load_old(rev: str, as_name: str = "qemjax_old"):
-    """The qemjax package at git revision ``rev``, imported as ``as_name``."""
+def package_at(rev: str) -> Path:
+    """A new folder holding the qemjax package as it was at git revision ``rev`` (``folder / "qemjax"``)."""
     tmp = Path(tempfile.mkdtemp(prefix="qemjax-old-"))
     tar = subprocess.run(["git", "-C", str(HERE.parent), "archive", rev, "qemjax"], check=True,
                          capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(tmp)], input=tar, check=True)
+    return tmp
+
+
+def load_old(rev: str, as_name: str = "qemjax_old"):
+    """The qemjax package at git revision ``rev``, imported as ``as_name``."""
+    tmp = package_at(rev)
     os.rename(tmp / "qemjax", tmp / as_name)
     _own_modules(tmp / as_name, as_name)
     sys.path.insert(0, str(tmp))

@@ -24,15 +24,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "experiments"))
+from ab_compare import package_at  # noqa: E402
 from tests.test_sweep_stream import CONFIG, N_CELLS, SCRIPT, _rows, _wait_for_rows  # noqa: E402
-
-
-def package_at(rev: str) -> Path:
-    """A folder holding the qemjax package at git revision ``rev`` (for PYTHONPATH)."""
-    tmp = Path(tempfile.mkdtemp(prefix="qemjax-rev-"))
-    tar = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "qemjax"], check=True, capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(tmp)], input=tar, check=True)
-    return tmp
 
 
 def _busy(_):

@@ -11,9 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -23,14 +21,13 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import meshes as bench_meshes  # noqa: E402
+from ab_compare import package_at  # noqa: E402
 
 
 def module_at(rev: str, path: str, name: str):
     """The module at ``path`` in git revision ``rev``, loaded as ``name`` (its imports: the working tree's)."""
-    src = subprocess.run(["git", "-C", str(HERE.parent), "show", f"{rev}:{path}"], check=True,
-                         capture_output=True, text=True).stdout
-    file = Path(tempfile.mkdtemp(prefix="qemjax-rev-")) / Path(path).name
-    file.write_text(src.replace("from .pointtri import", "from qemjax._mesh.pointtri import"))
+    file = package_at(rev) / path
+    file.write_text(file.read_text().replace("from .pointtri import", "from qemjax._mesh.pointtri import"))
     spec = importlib.util.spec_from_file_location(name, file)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
