@@ -5,6 +5,7 @@ end: every row kept) and the seconds from the signal to the exit.
 
     python experiments/ctrl_c_repeat.py --runs 40
     python experiments/ctrl_c_repeat.py --runs 40 --rev a9188fd   # the package at a git revision
+    python experiments/ctrl_c_repeat.py --runs 40 --executor dask --load 1 --trace
 
 ``--load`` runs that many busy processes beside it (a loaded machine, as a CI runner may be).
 """
@@ -26,7 +27,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "experiments"))
 from ab_compare import package_at  # noqa: E402
-from tests.test_sweep_stream import CONFIG, N_CELLS, SCRIPT, _rows, _wait_for_rows  # noqa: E402
+from tests.test_sweep_stream import CONFIG, EXECUTORS, N_CELLS, SCRIPT, _rows, _wait_for_rows  # noqa: E402
+
+
+# the command, printing the stack each Ctrl-C meets the handler at (``--trace``)
+TRACED = SCRIPT.replace("from qemjax import _cli; ", "from qemjax import _cli; import traceback; h = _cli._on_sigint; "
+                        "_cli._on_sigint = lambda s, f: (sys.stderr.write('Ctrl-C at:\\n' + "
+                        "''.join(traceback.format_stack(f))), h(s, f))[1]; ")
 
 
 def _busy(_):
@@ -39,6 +46,9 @@ def main():
     ap.add_argument("--runs", type=int, default=40)
     ap.add_argument("--rev", default=None, help="run the package at this git revision instead of the tree's")
     ap.add_argument("--load", type=int, default=0, help="busy processes beside the sweeps")
+    ap.add_argument("--executor", choices=sorted(EXECUTORS), default="in-process", help="where the cells run")
+    ap.add_argument("--trace", action="store_true",
+                    help="print where the handler met the signal, in runs that lost it")
     args = ap.parse_args()
     path = package_at(args.rev) if args.rev else ROOT
     burners = [multiprocessing.Process(target=_busy, args=(i,), daemon=True) for i in range(args.load)]
@@ -48,26 +58,29 @@ def main():
     try:
         for i in range(args.runs):
             folder = Path(tempfile.mkdtemp(prefix="ctrl-c-"))
-            (folder / "s.toml").write_text(CONFIG)
+            (folder / "s.toml").write_text(CONFIG + EXECUTORS[args.executor])
             env = dict(os.environ, QEMJAX_CACHE_DIR=str(folder / "cache"), PYTHONPATH=str(path))
             env.pop("QEMJAX_NO_CACHE", None)
-            proc = subprocess.Popen([sys.executable, "-c", SCRIPT, "sweep", str(folder / "s.toml"), "--quiet"],
+            script = TRACED if args.trace else SCRIPT
+            proc = subprocess.Popen([sys.executable, "-c", script, "sweep", str(folder / "s.toml"), "--quiet"],
                                     cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
             _wait_for_rows(proc, folder / "table.csv", 1)
             t = time.monotonic()
             proc.send_signal(signal.SIGINT)
-            proc.communicate(timeout=120)
+            _, err = proc.communicate(timeout=120)
             waits.append(time.monotonic() - t)
             kept = len(_rows(folder / "table.csv"))
             lost += kept >= N_CELLS
             print(f"run {i + 1}: exit {proc.returncode}, {kept} of {N_CELLS} rows kept, "
                   f"{waits[-1]:.2f} s to stop{'  (interrupt lost)' if kept >= N_CELLS else ''}", flush=True)
+            if args.trace and kept >= N_CELLS:
+                print(err, flush=True)
             shutil.rmtree(folder)
     finally:
         for b in burners:
             b.terminate()
-    print(f"package {args.rev or 'working tree'}, load {args.load}: interrupt lost in {lost} of {args.runs} runs; "
-          f"seconds to stop: median {statistics.median(waits):.2f}, max {max(waits):.2f}")
+    print(f"package {args.rev or 'working tree'}, {args.executor}, load {args.load}: "
+          f"interrupt lost in {lost} of {args.runs} runs; seconds to stop: median {statistics.median(waits):.2f}, max {max(waits):.2f}")
 
 
 if __name__ == "__main__":

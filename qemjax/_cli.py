@@ -27,6 +27,8 @@ import sys
 import threading
 import typing
 import warnings
+import weakref
+import _weakrefset
 
 import numpy as np
 
@@ -446,27 +448,40 @@ def _settle() -> None:
     """Nothing: calling a Python function lets the interpreter run a pending signal's handler."""
 
 
-def _on_sigint(signum, frame):
-    """Ctrl-C: remembered, then raised as Python does, except inside a garbage-collector callback (JAX has
-    one), where Python would print the exception as ignored and go on, and inside numba's own Python code
-    (compiled loops call back into it, for one to build their constants, and drop an exception raised
-    there): there the signal is sent again a moment later, once the callback has returned. `_atomic` and
-    `main` also check the flag, so a run whose interrupt was lost all the same writes nothing and ends with
-    exit code 130."""
-    _INTERRUPTED.append(True)
-    if _RAISED or _SETTLING:  # one interrupt is enough: the first is unwinding the run already
-        return
+def _drops_exceptions(frame) -> bool:
+    """Whether an exception raised at ``frame`` would be dropped on its way out: the stack holds a frame
+    that Python runs as a callback and whose exceptions it prints as ignored and goes on (a garbage
+    collector callback, as JAX has; a destructor, ``__del__``, as dask's futures have; a weak reference's
+    callback, as `weakref.finalize`, the weak dictionaries and the weak sets run), or numba's own Python
+    code, which its compiled loops call back into (to build their constants) and which drops an exception
+    raised there."""
     callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
     numba = sys.modules.get("numba")
     numba_dir = os.path.dirname(numba.__file__) + os.sep if getattr(numba, "__file__", None) else None
+    weak = (weakref.__file__, _weakrefset.__file__)
     f = frame
     while f is not None:
-        if f.f_code in callbacks or (numba_dir and f.f_code.co_filename.startswith(numba_dir)):
-            timer = threading.Timer(0.05, _resend)
-            timer.daemon = True
-            timer.start()
-            return
+        code = f.f_code
+        if (code in callbacks or code.co_name == "__del__" or code.co_filename in weak
+                or (numba_dir and code.co_filename.startswith(numba_dir))):
+            return True
         f = f.f_back
+    return False
+
+
+def _on_sigint(signum, frame):
+    """Ctrl-C: remembered, then raised as Python does, except where the exception would be dropped
+    (`_drops_exceptions`): there the signal is sent again a moment later, once that callback has returned.
+    `_atomic` and `main` also check the flag, so a run whose interrupt was lost all the same writes nothing
+    and ends with exit code 130."""
+    _INTERRUPTED.append(True)
+    if _RAISED or _SETTLING:  # one interrupt is enough: the first is unwinding the run already
+        return
+    if _drops_exceptions(frame):
+        timer = threading.Timer(0.05, _resend)
+        timer.daemon = True
+        timer.start()
+        return
     _RAISED.append(True)
     raise KeyboardInterrupt
 

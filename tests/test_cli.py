@@ -480,27 +480,50 @@ def test_ctrl_c_inside_a_gc_callback_is_sent_again(monkeypatch):
         _cli._on_sigint(signal.SIGINT, sys._getframe())
 
 
-def test_ctrl_c_inside_numbas_python_code_is_sent_again(monkeypatch):
-    """A compiled loop calls back into numba's Python code (to build its constants) and drops an exception
-    raised there: a Ctrl-C that lands in such a frame is remembered and sent again, not raised (a sweep ran
-    to its end once this way, its interrupt lost)."""
+def _frame_in(context: str):
+    """A frame (finished) where Python or a library drops an exception raised there: numba's own Python
+    code, a destructor, or a weak reference's callback (there: the weakref module's frame that calls it)."""
     import os
-    import signal
-    import time
+    import weakref
 
     import numba
+
+    frames = []
+    if context == "numba":  # a function whose code lives in numba's folder, as numba.core.serialize's does
+        space = {"sys": sys}
+        exec(compile("def callback():\n    return sys._getframe()\n",
+                     os.path.join(os.path.dirname(numba.__file__), "core", "serialize.py"), "exec"), space)
+        return space["callback"]()
+
+    class Held:
+        def __del__(self):
+            frames.append(sys._getframe())
+    held = Held()
+    if context == "destructor":
+        del held
+    else:
+        weakref.finalize(held, lambda: frames.append(sys._getframe(1)))
+        del held
+    return frames[-1]
+
+
+@pytest.mark.parametrize("context", ["numba", "destructor", "weakref"])
+def test_ctrl_c_where_python_drops_exceptions_is_sent_again(monkeypatch, context):
+    """A compiled loop calls back into numba's Python code (to build its constants) and drops an exception
+    raised there; Python drops one raised in a destructor (dask's futures have one) or a weak reference's
+    callback. A Ctrl-C that lands in such a frame is remembered and sent again, not raised (a sweep ran to
+    its end this way, its interrupt lost: in process in numba's code, once on Dask)."""
+    import signal
+    import time
 
     sent = []
     monkeypatch.setattr(_cli, "_resend", lambda: sent.append(True))
     monkeypatch.setattr(_cli, "_INTERRUPTED", [])
     monkeypatch.setattr(_cli, "_RAISED", [])
-    space = {"sys": sys}  # a function whose code lives in numba's folder, as numba.core.serialize's does
-    exec(compile("def callback():\n    return sys._getframe()\n",
-                 os.path.join(os.path.dirname(numba.__file__), "core", "serialize.py"), "exec"), space)
     try:
-        _cli._on_sigint(signal.SIGINT, space["callback"]())
+        _cli._on_sigint(signal.SIGINT, _frame_in(context))
     except KeyboardInterrupt:
-        pytest.fail("raised inside numba's code, where a compiled loop would drop it")
+        pytest.fail(f"raised inside {context}, where the exception would be dropped")
     deadline = time.monotonic() + 5
     while not sent and time.monotonic() < deadline:
         time.sleep(0.01)

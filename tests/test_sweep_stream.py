@@ -152,9 +152,13 @@ def _wait_for_rows(proc, path: Path, n: int, timeout: float = 240) -> None:
         time.sleep(0.05)
 
 
+# where the cells run: in the command's process, in a process pool, on a local Dask cluster (config lines)
+EXECUTORS = {"in-process": "", "process-pool": "[executor]\nworkers = 2\n",
+             "dask": "[executor]\nworkers = 2\nscheduler = \"dask\"\n"}
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("executor", ["", "[executor]\nworkers = 2\n", "[executor]\nworkers = 2\nscheduler = \"dask\"\n"],
-                         ids=["in-process", "process-pool", "dask"])
+@pytest.mark.parametrize("executor", list(EXECUTORS.values()), ids=list(EXECUTORS))
 def test_ctrl_c_keeps_finished_rows_and_the_rerun_resumes(tmp_path, executor):
     if "dask" in executor:
         pytest.importorskip("distributed")
