@@ -45,6 +45,58 @@ def test_closest_barycentric_in_blocks_is_bitwise_one_block(monkeypatch):
     monkeypatch.setattr(_refit, "_ROWS", 7)
     np.testing.assert_array_equal(_refit.closest_barycentric(p, a, b, c), whole)
 
+def _scipy_system(Ps, sw, X, G, f, free, lam):
+    """The re-fit's normal equations as scipy's sparse products make them (the reference): A's rows are the
+    samples' weighted barycentric coordinates in their face's corners' columns (ascending)."""
+    import scipy.sparse as sp
+
+    q, k = len(Ps), len(X)
+    tri = G[f]
+    B = _refit.closest_barycentric(Ps, X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]]) * sw[:, None]
+    order = np.argsort(tri, axis=1, kind="stable")
+    A = sp.csr_matrix((np.take_along_axis(B, order, 1).ravel(), np.take_along_axis(tri, order, 1).ravel(),
+                       np.arange(0, 3 * q + 1, 3)), shape=(q, k))
+    target = Ps * sw[:, None]
+    if not free.all():
+        target = target - A[:, ~free] @ X[~free]
+        A = A[:, free]
+    rhs = A.T @ target
+    N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
+    N.sort_indices()
+    return N, rhs
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_normal_equations_are_scipys_products_bit_for_bit(seed):
+    """`refit_system` against scipy's AᵀA + λI and Aᵀt (float64, random samples on a random mesh, some
+    vertices fixed in two of the cases, blocks of 7 rows): the same entries, columns and bits."""
+    from qemjax._pipeline.refit_system import layout
+
+    rng = np.random.default_rng(seed)
+    k, j, q = 300, 500, 4000
+    X = rng.normal(size=(k, 3))
+    G = np.array([rng.choice(k, 3, replace=False) for _ in range(j)])
+    f = rng.integers(0, j, q)
+    Ps = rng.normal(size=(q, 3))
+    Ps[:300] = X[G[f[:300], 0]]  # samples at a corner: zeros among the coordinates
+    sw = rng.uniform(0.1, 2.0, q)
+    free = np.ones(k, bool) if seed < 2 else rng.random(k) > 0.2
+    lam = 1e-3
+    want_N, want_rhs = _scipy_system(Ps, sw, X, G, f, free, lam)
+    col = np.where(free, np.cumsum(free) - 1, -1)
+    lay = layout(G, col, int(free.sum()))
+    rows = _refit._ROWS
+    try:
+        _refit._ROWS = 7
+        N, rhs = _refit._system(Ps, sw, X, G, f, col, lay, lam)
+    finally:
+        _refit._ROWS = rows
+    np.testing.assert_array_equal(N.indptr, want_N.indptr)
+    np.testing.assert_array_equal(N.indices, want_N.indices)
+    np.testing.assert_array_equal(N.data, want_N.data)
+    np.testing.assert_array_equal(rhs, want_rhs)
+
+
 @pytest.mark.parametrize("target", [24, 200])
 def test_refit_lowers_the_distance_and_keeps_the_connectivity(bumpy, target):
     plain = qemjax.simplify(bumpy, target_faces=target, refit=0)

@@ -13,7 +13,8 @@ E_dist with the connectivity fixed):
    as aggregation joins them; an output face belongs to the part of the input face it continues): a
    sample of one part must not pull another part that happens to lie nearer (the truck's 50 parts did);
 3. the positions X minimise Σ_i w_i·|b_i·X − p_i|² + λ·Σ_v |x_v − x_v⁰|² (a sparse linear least-squares
-   problem, the same for the three coordinates, solved by conjugate gradients in a fixed order of sums so
+   problem, the same for the three coordinates, its normal equations summed in compiled loops
+   (`refit_system`), solved by conjugate gradients in a fixed order of sums so
    that every CPU gives the same bits: `qemjax._mesh.spd_solve`): the samples' squared distances to the output surface,
    with a small damping λ = DAMPING · Σw / (vertices) towards the current positions x⁰, which holds a
    vertex that no sample sees and keeps the system definite;
@@ -37,6 +38,7 @@ from .._mesh.arrays import face_normals
 from .._mesh.grid_nearest import nearest
 from .._mesh.pointtri import flat_triangles, segment_closest
 from .._mesh.spd_solve import solve_spd
+from .refit_system import accumulate, finish, layout
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
 _ROWS = 32_768  # rows per block of closest_barycentric
@@ -164,23 +166,19 @@ def _closest_on_edges(p, a, b, c):
     return out
 
 
-def _design(Ps: np.ndarray, sw: np.ndarray, X: np.ndarray, G: np.ndarray, f: np.ndarray, k: int):
-    """The fit's (q,k) CSR matrix: row i holds sample i's barycentric coordinates on its face f[i] of (X, G),
-    times sw[i], in the columns of that face's corners (sorted, as a COO matrix's conversion leaves them).
-    Built in blocks of rows and straight into CSR: the (q,3) corner positions and the COO triplets of a
-    5.5 M-face input are gigabytes."""
-    q = len(Ps)
-    data = np.empty((q, 3))
-    cols = np.empty((q, 3), np.int32 if k < 2**31 else np.int64)
-    for s in range(0, q, _ROWS):
+def _system(Ps, sw, X, G, f, col, lay, lam):
+    """The normal equations (N as CSR, R (free, 3)) of the samples Ps with weights' square roots sw, attached
+    to faces f of (X, G) (`refit_system`). The barycentric coordinates are found in blocks of rows."""
+    indptr, indices, pos = lay
+    data, rhs = np.zeros(len(indices)), np.zeros((len(indptr) - 1, 3))
+    for s in range(0, len(Ps), _ROWS):
         tri = G[f[s : s + _ROWS]]
         B = _closest_barycentric(Ps[s : s + _ROWS], X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
         B *= sw[s : s + _ROWS, None]
-        order = np.argsort(tri, axis=1, kind="stable")  # a face's corners are distinct: one order
-        data[s : s + _ROWS] = np.take_along_axis(B, order, 1)
-        cols[s : s + _ROWS] = np.take_along_axis(tri, order, 1)
-    indptr = np.arange(0, 3 * q + 1, 3, dtype=cols.dtype)
-    return sp.csr_matrix((data.reshape(-1), cols.reshape(-1), indptr), shape=(q, k))
+        accumulate(B, f[s : s + _ROWS], Ps[s : s + _ROWS], sw[s : s + _ROWS], G, col, X, pos, data, rhs)
+    ip, ix, dx = finish(indptr, indices, data, lam)
+    n = len(ip) - 1
+    return sp.csr_matrix((dx, ix, ip), shape=(n, n)), rhs
 
 
 def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
@@ -235,35 +233,18 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
     free = np.ones(k, bool) if fixed is None else ~np.asarray(fixed, bool)
     if not free.any():
         return X
-    for r in range(rounds):
-        last = r == rounds - 1  # then the samples' arrays are no longer needed as they are: reused in place
+    col = np.where(free, np.cumsum(free) - 1, -1)  # each output vertex's row in the system (-1: fixed)
+    lay = layout(G, col, int(free.sum()))
+    for _ in range(rounds):
         f = _attach(X, G, gpart, P, spart)
         seen = f >= 0
         if seen.all():  # the usual case: no copies of the samples
-            Ps, sw = P, (np.sqrt(w, out=w) if last else np.sqrt(w))
+            Ps, sw = P, np.sqrt(w)
         else:
             Ps, sw, f = P[seen], np.sqrt(w[seen]), f[seen]
-        A = _design(Ps, sw, X, G, f, k)
-        del f
-        if fixed is not None:  # the fixed vertices' part of each sample moves to the right-hand side
-            shift = A[:, ~free] @ X[~free]
-            A = A[:, free]
-        if last and Ps is P:  # the samples are not needed again: the targets in place (the same products)
-            P *= sw[:, None]
-            target = P
-        else:
-            target = Ps * sw[:, None]
-        if fixed is not None:
-            target = target - shift
-            del shift
-        # the right-hand side before the normal matrix: the (q,3) targets are gone before the product's
-        # transposed copy of A is made (a 5.5 M-face input's peak)
-        rhs = A.T @ target + lam * X[free]
-        del target, Ps
-        if last:
-            del P
-        N = (A.T @ A + lam * sp.identity(A.shape[1], format="csr")).tocsr()
-        del A
+        N, rhs = _system(Ps, sw, X, G, f, col, lay, lam)
+        del f, Ps, sw
+        rhs = rhs + lam * X[free]
         Y = X.copy()
         Y[free], converged = solve_spd(N, rhs, X[free], rtol=RTOL)  # fixed-order sums: the same bits on every CPU
         if not converged:  # the last iterate still lowers the fit's error; the checks below still hold
