@@ -146,3 +146,25 @@ def test_face_lists_follow_contractions(mesh, pool, apply):
         live = np.flatnonzero(lists.alive)
         assert listed == {(int(v), int(live[i])) for i, face in enumerate(F) for v in face}
         E, ecount = topo.edges(F, n)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_parts_are_scipys_connected_components_label_for_label(seed):
+    """The compiled union-find (`_mesh.parts_jit`) against scipy's weak components of the same graph: the
+    same count and the same labels (numbered by each part's lowest vertex), with isolated vertices and
+    ``extra`` pairs joining parts."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    F = rng.integers(0, n - 40, size=(150, 3))  # the last 40 vertices in no face: parts of their own
+    extra = rng.integers(0, n, size=(5 * seed, 2))
+    a = np.concatenate([F[:, :2].reshape(-1), extra[:, 0]])
+    b = np.concatenate([F[:, 1:].reshape(-1), extra[:, 1]])
+    want = connected_components(csr_matrix((np.ones(len(a), np.int8), (a, b)), shape=(n, n)), directed=True,
+                                connection="weak")
+    count, label = topo.parts(F, n, extra)
+    assert count == want[0] and count > 40
+    np.testing.assert_array_equal(label, want[1])
+    assert label.dtype == np.int64

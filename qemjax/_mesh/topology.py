@@ -79,15 +79,12 @@ def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
 def parts(F: np.ndarray, n: int, extra: np.ndarray | None = None) -> tuple[int, np.ndarray]:
     """Connected parts of the graph of the faces' edges (and the ``extra`` pairs (k,2), which join parts
     that may merge): (count, (n,) int64 label of each vertex; a vertex in no face is a part of its own)."""
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
+    from .parts_jit import labels  # numba: imported when first used
 
     a = [F[:, :2].reshape(-1)] + ([] if extra is None or not len(extra) else [extra[:, 0]])
     b = [F[:, 1:].reshape(-1)] + ([] if extra is None or not len(extra) else [extra[:, 1]])
-    a, b = np.concatenate(a), np.concatenate(b)
-    g = csr_matrix((np.ones(len(a), np.int8), (a, b)), shape=(n, n))
-    count, label = connected_components(g, directed=True, connection="weak")
-    return int(count), label.astype(np.int64)
+    count, label = labels(np.concatenate(a).astype(np.int64), np.concatenate(b).astype(np.int64), int(n))
+    return int(count), label
 
 
 def edge_table(F: np.ndarray, n: int):
