@@ -54,12 +54,18 @@ def layout(G, col, nfree):
                     raw[fill[r]] = c
                     fill[r] += 1
     indptr = np.zeros(nfree + 1, np.int64)
-    for r in range(nfree):  # each row's columns sorted, repeats removed, in place
-        row = np.sort(raw[start[r]:start[r + 1]])
+    for r in range(nfree):  # each row's columns sorted (a few dozen: insertion), repeats removed, in place
+        s0, s1 = start[r], start[r + 1]
+        for t in range(s0 + 1, s1):
+            c, u = raw[t], t
+            while u > s0 and raw[u - 1] > c:
+                raw[u] = raw[u - 1]
+                u -= 1
+            raw[u] = c
         k = 0
-        for t in range(len(row)):
-            if t == 0 or row[t] != row[t - 1]:
-                raw[start[r] + k] = row[t]
+        for t in range(s0, s1):
+            if t == s0 or raw[t] != raw[t - 1]:
+                raw[s0 + k] = raw[t]
                 k += 1
         indptr[r + 1] = indptr[r] + k
     indices = np.empty(indptr[-1], np.int64)
