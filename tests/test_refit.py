@@ -37,13 +37,52 @@ def test_closest_barycentric_gives_the_exact_distance():
 
 
 
-def test_closest_barycentric_in_blocks_is_bitwise_one_block(monkeypatch):
-    rng = np.random.default_rng(1)
-    p, a, b, c = (rng.normal(size=(1000, 3)) for _ in range(4))
-    b[:50] = a[:50]  # repeated corners: the division guards
-    whole = _refit.closest_barycentric(p, a, b, c)
-    monkeypatch.setattr(_refit, "_ROWS", 7)
-    np.testing.assert_array_equal(_refit.closest_barycentric(p, a, b, c), whole)
+def _numpy_regions(p, a, b, c):
+    """Ericson's regions in numpy's whole-array arithmetic (einsum, np.select, np.nan_to_num): the re-fit's
+    coordinates as they were made before they were compiled."""
+    ab, ac = b - a, c - a
+    d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
+    d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
+    d5, d6 = np.einsum("ij,ij->i", ab, p - c), np.einsum("ij,ij->i", ac, p - c)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    regions = [(d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6),
+               (vc <= 0) & (d1 >= 0) & (d3 <= 0), (vb <= 0) & (d2 >= 0) & (d6 <= 0),
+               (va <= 0) & (d4 >= d3) & (d5 >= d6)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_ab = np.nan_to_num(d1 / (d1 - d3))
+        t_ac = np.nan_to_num(d2 / (d2 - d6))
+        t_bc = np.nan_to_num((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+        den = va + vb + vc
+        den = np.where(den != 0, den, 1.0)
+        v, w = vb / den, vc / den
+    return np.stack([np.select(regions, [1.0, 0.0, 0.0, 1 - t_ab, 1 - t_ac, 0.0], 1 - v - w),
+                     np.select(regions, [0.0, 1.0, 0.0, t_ab, 0.0, 1 - t_bc], v),
+                     np.select(regions, [0.0, 0.0, 1.0, 0.0, t_ac, t_bc], w)], 1)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_regions_are_numpys_arithmetic_bit_for_bit(seed):
+    """`refit_system.regions` against numpy's whole-array arithmetic (float64): every bit, signed zeros
+    included, on random faces with repeated corners, points at corners and coordinates on a coarse grid
+    (exact ties and zeros)."""
+    from qemjax._pipeline.refit_system import regions
+
+    rng = np.random.default_rng(seed)
+    q, k, j = 50_000, 800, 1500
+    X = rng.normal(size=(k, 3)) * 10.0 ** rng.uniform(-3, 3)
+    G = rng.integers(0, k, size=(j, 3))  # some faces repeat a corner: the guards against 0/0
+    f = rng.integers(0, j, q)
+    P = rng.normal(size=(q, 3)) * X.std()
+    P[:2000] = X[G[f[:2000], 0]]
+    P[2000:4000] = X[G[f[2000:4000], 1]]
+    if seed == 1:
+        X, P = np.round(X, 1), np.round(P, 1)
+    tri = G[f]
+    want = _numpy_regions(P, X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
+    got = np.empty((q, 3))
+    regions(P, X, G, f, got)
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+
 
 def _scipy_system(Ps, sw, X, G, f, free, lam):
     """The re-fit's normal equations as scipy's sparse products make them (the reference): A's rows are the

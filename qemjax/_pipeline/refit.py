@@ -35,13 +35,13 @@ import scipy.sparse as sp
 from numba import njit
 
 from .._mesh.arrays import face_normals
-from .._mesh.grid_nearest import nearest
-from .._mesh.pointtri import flat_triangles, segment_closest
+from .._mesh.grid_nearest import nearest, slivers
+from .._mesh.pointtri import segment_closest
 from .._mesh.spd_solve import solve_spd
-from .refit_system import accumulate, finish, layout
+from .refit_system import accumulate, finish, layout, regions
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
-_ROWS = 32_768  # rows per block of closest_barycentric
+_ROWS = 32_768  # samples per block of the normal equations' assembly
 RTOL = 1e-12  # the normal equations' relative residual (conjugate gradients, `_mesh.spd_solve`)
 HALVINGS = 4  # a move that turns a face is halved this many times before it is undone (step 4)
 
@@ -109,46 +109,23 @@ def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spar
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(q,3) barycentric coordinates of the point of triangle (a, b, c) nearest to p, row by row (Ericson,
     Real-Time Collision Detection 5.1.5: vertex, edge or interior region)."""
-    out = np.empty((len(p), 3))
-    for s in range(0, len(p), _ROWS):  # blocks of rows: the temporaries stay in cache
-        out[s : s + _ROWS] = _closest_barycentric(p[s : s + _ROWS], a[s : s + _ROWS], b[s : s + _ROWS],
-                                                  c[s : s + _ROWS])
-    return out
+    q = len(p)
+    X = np.concatenate([a, b, c]).astype(np.float64, copy=False)
+    G = np.arange(3 * q).reshape(3, q).T
+    return _barycentric_at(np.asarray(p, np.float64), X, G, np.arange(q), slivers(X[G]))
 
 
-def _closest_barycentric(p, a, b, c):
-    """`closest_barycentric` of one block: Ericson's regions, except on slivers (two corners at one point,
-    three in a line, as `_mesh.pointtri` tells them), whose regions lose all precision: there the closest
-    point of the three edges."""
-    ab, ac = b - a, c - a
-    out = _regions(p, a, b, c, ab, ac)
-    sliver = np.flatnonzero(flat_triangles(ab.T, ac.T))
+def _barycentric_at(P, X, G, f, flat):
+    """`closest_barycentric` of points P on faces f of (X, G): Ericson's regions (`refit_system.regions`),
+    except on slivers (``flat``, per face of G: two corners at one point, three in a line, as
+    `_mesh.pointtri` tells them), whose regions lose all precision: there the closest point of the three
+    edges."""
+    out = np.empty((len(f), 3))
+    regions(P, X, G, f, out)
+    sliver = np.flatnonzero(flat[f])
     if sliver.size:
-        out[sliver] = _closest_on_edges(p[sliver], a[sliver], b[sliver], c[sliver])
-    return out
-
-
-def _regions(p, a, b, c, ab, ac):
-    """Ericson's regions (5.1.5) for rows p, triangles (a, b, c) with edges ab = b - a and ac = c - a."""
-    d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
-    d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
-    d5, d6 = np.einsum("ij,ij->i", ab, p - c), np.einsum("ij,ij->i", ac, p - c)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    # The first region that holds (np.select: the first true condition) gives the coordinates.
-    regions = [(d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6),
-               (vc <= 0) & (d1 >= 0) & (d3 <= 0), (vb <= 0) & (d2 >= 0) & (d6 <= 0),
-               (va <= 0) & (d4 >= d3) & (d5 >= d6)]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_ab = np.nan_to_num(d1 / (d1 - d3))
-        t_ac = np.nan_to_num(d2 / (d2 - d6))
-        t_bc = np.nan_to_num((d4 - d3) / ((d4 - d3) + (d5 - d6)))
-        den = va + vb + vc
-        den = np.where(den != 0, den, 1.0)
-        v, w = vb / den, vc / den
-    out = np.empty((len(p), 3))
-    out[:, 0] = np.select(regions, [1.0, 0.0, 0.0, 1 - t_ab, 1 - t_ac, 0.0], 1 - v - w)
-    out[:, 1] = np.select(regions, [0.0, 1.0, 0.0, t_ab, 0.0, 1 - t_bc], v)
-    out[:, 2] = np.select(regions, [0.0, 0.0, 1.0, 0.0, t_ac, t_bc], w)
+        tri = G[f[sliver]]
+        out[sliver] = _closest_on_edges(P[sliver], X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
     return out
 
 
@@ -171,9 +148,9 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
     to faces f of (X, G) (`refit_system`). The barycentric coordinates are found in blocks of rows."""
     indptr, indices, pos = lay
     data, rhs = np.zeros(len(indices)), np.zeros((len(indptr) - 1, 3))
+    flat = slivers(X[G])
     for s in range(0, len(Ps), _ROWS):
-        tri = G[f[s : s + _ROWS]]
-        B = _closest_barycentric(Ps[s : s + _ROWS], X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
+        B = _barycentric_at(Ps[s : s + _ROWS], X, G, f[s : s + _ROWS], flat)
         B *= sw[s : s + _ROWS, None]
         accumulate(B, f[s : s + _ROWS], Ps[s : s + _ROWS], sw[s : s + _ROWS], G, col, X, pos, data, rhs)
     ip, ix, dx = finish(indptr, indices, data, lam)
