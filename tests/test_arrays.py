@@ -60,3 +60,31 @@ def test_face_normals_match_cross(dtype):
     want = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     got = face_normals(V, F)
     assert got.dtype == dtype and np.array_equal(got, want)  # the same arithmetic, bit for bit
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_face_stats_are_numpys_whole_array_arithmetic_bit_for_bit(seed):
+    """`arrays.face_stats` (per-face values compiled: `_mesh.faces_jit`) against the whole-array numpy
+    expressions it replaced: the same non-zero mask and the same bits of both means, with zero-area faces
+    (repeated corners, collinear corners) among them."""
+    from qemjax._mesh.arrays import face_stats
+
+    rng = np.random.default_rng(seed)
+    V = rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-20, 20)
+    F = rng.integers(0, 400, size=(3000, 3))
+    F[:50, 1] = F[:50, 0]
+    V[:20] = V[20:40] * 0.5 + V[40:60] * 0.5  # ... and some exactly midway: collinear corners
+    F[50:70] = np.stack([np.arange(20), np.arange(20, 40), np.arange(40, 60)], 1)
+    c = [np.take(V[:, i], F) for i in range(3)]
+    d = [[ci[:, (j + 1) % 3] - ci[:, j] for ci in c] for j in range(3)]
+    u, w = d[0], [-x for x in d[2]]
+    n = [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]]
+    nz = (n[0] != 0) | (n[1] != 0) | (n[2] != 0)
+    area = 0.5 * np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    e2 = sum(x * x for ej in d for x in ej)
+    k = max(int(np.count_nonzero(nz)), 1)
+    want = (nz, float(np.sum(area, dtype=np.float64) / k), float(np.sum(np.compress(nz, e2), dtype=np.float64) / (3 * k)))
+    got = face_stats(V, F)
+    np.testing.assert_array_equal(got[0], want[0])
+    assert not got[0][:50].any()
+    assert got[1:] == want[1:]

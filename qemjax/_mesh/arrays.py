@@ -76,16 +76,12 @@ _NORMAL_ROWS = 1 << 19  # faces per block of `face_normals`
 
 
 def face_stats(V: np.ndarray, F: np.ndarray):
-    """From one gather of the corners of faces F (m,3) over V (n,3): which faces have a non-zero area
-    (m,) bool, and the mean area and mean squared edge length of those faces (float64; numpy's sums do not
-    depend on the number of threads)."""
-    c = [np.take(V[:, i], F) for i in range(3)]  # (m,3) per coordinate
-    d = [[ci[:, (j + 1) % 3] - ci[:, j] for ci in c] for j in range(3)]  # edge j, per coordinate
-    u, w = d[0], [-x for x in d[2]]
-    n = [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]]
-    nz = (n[0] != 0) | (n[1] != 0) | (n[2] != 0)
-    area = 0.5 * np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
-    e2 = sum(x * x for ej in d for x in ej)
+    """Which faces F (m,3) over V (n,3, float64) have a non-zero area (m,) bool, and the mean area and mean
+    squared edge length of those faces (float64; numpy's sums do not depend on the number of threads). The
+    per-face values come from one compiled pass (`faces_jit.face_rows`)."""
+    from .faces_jit import face_rows  # numba: imported when first used
+
+    nz, area, e2 = face_rows(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64))
     k = max(int(np.count_nonzero(nz)), 1)
     return nz, float(np.sum(area, dtype=np.float64) / k), float(np.sum(np.compress(nz, e2), dtype=np.float64) / (3 * k))
 
