@@ -28,6 +28,7 @@ from numba import njit
 
 from .pointtri import flat_triangles
 
+CUBE_EDGE = 0.5  # the cubes' side at first, times the triangles' median edge
 PAIRS_PER_FACE = 16  # (triangle, cube) listings per triangle at most, on average
 CUBES_PER_FACE = 32  # cubes per triangle at most (the grid's memory)
 BLOCK = 65_536  # points per query call at most; several blocks run on threads
@@ -242,7 +243,7 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np
     lo, hi = used.min(0), used.max(0)
     ext = np.maximum(hi - lo, 1e-300)
     edges = np.sqrt(np.sum((X[G[:, [1, 2, 0]]] - X[G]) ** 2, axis=2)).ravel()
-    h = max(0.5 * float(np.median(edges)), float(ext.max()) * 1e-6)  # cubes of half an edge
+    h = max(CUBE_EDGE * float(np.median(edges)), float(ext.max()) * 1e-6)
     while True:
         dims = np.minimum(np.floor(ext / h).astype(np.int64) + 1, 1 << 20)
         if (int(np.prod(dims)) <= CUBES_PER_FACE * len(G) + 4096
