@@ -1,6 +1,5 @@
 """Per-face quantities in one compiled pass (numba), in numpy's arithmetic: the same bits as the whole-array
-expressions they replace, without their dozen (m,) temporaries (`arrays.face_stats`: 0.33 s of a
-1.4 M-face run's set-up; tests/test_arrays.py compares them)."""
+expressions they replace, without their dozen (m,) temporaries (`arrays.face_stats`; tests/test_arrays.py compares them)."""
 from __future__ import annotations
 
 import numpy as np

@@ -3,13 +3,13 @@
 The least-squares problem of `refit` (its step 3) has one row per sample: the sample's barycentric
 coordinates b on its output face, times the square root of its weight, in the columns of the face's
 corners. Its normal equations are N = AᵀA + λI and R = Aᵀ(targets) + λX. Building A as a scipy matrix and
-multiplying it out cost a (q,3) CSR matrix, its transpose and two sparse products per round (0.6 s of a
-1.4 M-face run, and the largest arrays of the re-fit). Here the same sums are made directly: every entry
+multiplying it out cost a (q,3) CSR matrix, its transpose and two sparse products per round (the re-fit of
+armadillo x16 to 1 % took 0.69x as long without them: experiments/results/refit_system_1128.txt). Here the same sums are made directly: every entry
 of N and R is a sum over the samples in increasing order, as scipy's products make it, so the system is
 the same bit for bit (tests/test_refit.py compares them), and it does not depend on a library's kernels.
 
 * `regions`: each sample's barycentric coordinates on its face (Ericson's regions), in numpy's arithmetic
-  (`refit.closest_barycentric` made them with einsum and np.select: the same bits, 5x faster, no (q,3)
+  (`refit.closest_barycentric` made them with einsum and np.select: the same bits, without their (q,3)
   temporaries);
 * `layout`: N's sparsity (a row per free output vertex, the columns of the free vertices it shares a face
   with and its own, ascending) and where each face's corner pairs sit in it;
