@@ -70,6 +70,9 @@ def test_default_measures_classic_offers_it():
     assert np.array_equal(cm.vertices, c.vertices)  # measuring changes nothing of the result
     want = measure.distance(c.input_vertices, c.input_faces, c.vertices, c.faces)
     assert cm.stats["distance_max"] == want["distance_max"] and cm.stats["distance_rms"] == want["distance_rms"]
+    # the default's measured distance takes the re-fit's samples (made once): the same stats as made anew
+    again = measure.distance(d.input_vertices, d.input_faces, d.vertices, d.faces)
+    assert all(d.stats[k] == again[k] for k in KEYS if k != "distance_s")
     off = qemjax.simplify(m, ratio=0.1, measure=False)
     assert np.array_equal(off.vertices, d.vertices) and off.stats["distance_max"] is None
     # the re-fit lowers the distance it measures (it minimises it at these samples)

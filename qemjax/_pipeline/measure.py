@@ -30,8 +30,10 @@ def not_measured() -> dict:
     return dict.fromkeys(KEYS)
 
 
-def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray) -> dict:
-    """The stats of the module docstring for the input (V, F) and the output (X, G), float64, mesh units."""
+def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled: tuple | None = None) -> dict:
+    """The stats of the module docstring for the input (V, F) and the output (X, G), float64, mesh units.
+    ``sampled``: the input's samples as the re-fit of the same run made them (its ``sampled``: points in
+    the input's unit frame, weights), the same arrays as made here."""
     from .._mesh.grid_nearest import nearest  # numba, lazily
     from .refit import samples, unit_frame
 
@@ -42,7 +44,10 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray) -> dict
     diag = float(np.sqrt(np.sum((V.max(0) - V.min(0)) ** 2))) if len(V) else 0.0
     if not (unit > 0 and np.isfinite(unit)) or len(V) == 0 or len(G) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
-    P, w, _ = samples((V - centre) / unit, F, np.zeros(len(V), np.int64))  # areas too: no underflow
+    if sampled is None:
+        P, w, _ = samples((V - centre) / unit, F, np.zeros(len(V), np.int64))  # areas too: no underflow
+    else:
+        P, w = sampled
     if len(P) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
     _, d = nearest((X - centre) / unit, G, P)

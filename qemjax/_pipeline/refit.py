@@ -174,12 +174,14 @@ def unit_frame(V: np.ndarray) -> tuple[np.ndarray, float]:
 
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
           part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
-          fixed: np.ndarray | None = None) -> np.ndarray:
+          fixed: np.ndarray | None = None, sampled: list | None = None) -> np.ndarray:
     """Positions X (k,3) of the output faces G (j,3) re-fitted to the input (V, F) in ``rounds`` rounds
     (module docstring); float64, the input's units. ``part``: a part label per input vertex and
     ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
     vertices that keep their position exactly (locked ones; the others are fitted around them). X is
-    returned unchanged (a copy) when there is nothing to fit."""
+    returned unchanged (a copy) when there is nothing to fit. ``sampled``: a list to which the input's
+    samples are appended, (points in the input's unit frame, weights), once made: the measured distance
+    of the same run takes them (`measure.distance`) instead of making them again."""
     X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
@@ -187,13 +189,13 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
         return X0
     X = (X0 - centre) / unit
-    Y = _fit((V - centre) / unit, F, X, G, rounds, cos_max, part, source_faces, fixed)
+    Y = _fit((V - centre) / unit, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled)
     out = Y * unit + centre
     moved = np.any(Y != X, axis=1) & np.all(np.isfinite(out), axis=1)  # the others keep X0 bit for bit
     return np.where(moved[:, None], out, X0)
 
 
-def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
+def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None) -> np.ndarray:
     """`refit` in the unit frame."""
     src = None if source_faces is None else F[np.asarray(source_faces, np.int64)]  # each output face's input face
     ns = None if src is None else face_normals(V, src)  # its normal
@@ -203,6 +205,8 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed) -> np.ndarray:
         part = np.asarray(part, np.int32)  # labels of parts: fewer than the vertices
         gpart = part[src[:, 0]]
     P, w, spart = samples(V, F, part)
+    if sampled is not None:
+        sampled.append((P, w))
     k = len(X)
     if rounds <= 0 or len(G) == 0 or len(P) == 0:
         return X

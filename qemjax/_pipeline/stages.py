@@ -447,11 +447,14 @@ class RefitTask(NamedTuple):
         """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None)."""
         t = time.perf_counter()
         X = self.X
+        sampled = []  # the input's samples, made once for the re-fit and the measured distance
         if self.rounds:
             X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
-                             self.source_faces, fixed=self.fixed)
+                             self.source_faces, fixed=self.fixed, sampled=sampled if self.measure else None)
         refit_s = time.perf_counter() - t
-        return X, refit_s, _measure.distance(self.V, self.F, X, self.G) if self.measure else _measure.not_measured()
+        if not self.measure:
+            return X, refit_s, _measure.not_measured()
+        return X, refit_s, _measure.distance(self.V, self.F, X, self.G, sampled[0] if sampled else None)
 
 
 def refit_all(later: list) -> None:
