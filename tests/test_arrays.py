@@ -62,15 +62,16 @@ def test_face_normals_match_cross(dtype):
     assert got.dtype == dtype and np.array_equal(got, want)  # the same arithmetic, bit for bit
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("seed", range(3))
-def test_face_stats_are_numpys_whole_array_arithmetic_bit_for_bit(seed):
+def test_face_stats_are_numpys_whole_array_arithmetic_bit_for_bit(seed, dtype):
     """`arrays.face_stats` (per-face values compiled: `_mesh.faces_jit`) against the whole-array numpy
-    expressions it replaced: the same non-zero mask and the same bits of both means, with zero-area faces
-    (repeated corners, collinear corners) among them."""
+    expressions it replaced, in float64 and in float32: the same non-zero mask and the same bits of both
+    means, with zero-area faces (repeated corners, collinear corners) among them."""
     from qemjax._mesh.arrays import face_stats
 
     rng = np.random.default_rng(seed)
-    V = rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-20, 20)
+    V = (rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-20, 20)).astype(dtype)
     F = rng.integers(0, 400, size=(3000, 3))
     F[:50, 1] = F[:50, 0]
     V[:20] = V[20:40] * 0.5 + V[40:60] * 0.5  # ... and some exactly midway: collinear corners

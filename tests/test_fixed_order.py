@@ -116,3 +116,24 @@ def test_fixed_order_helpers_match_numpy():
     assert fo.exp(v).tolist() == [math.exp(t) for t in v]
     assert fo.power(v, 0.6).tolist() == [math.pow(t, 0.6) for t in v]
     assert fo.arctan2(v, v[::-1]).shape == v.shape
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_grid_nearest_slivers_are_pointtris_flat_triangles(seed):
+    """`grid_nearest.slivers` (per face, compiled) against `pointtri.flat_triangles` (whole arrays): the same
+    flags, on random faces with repeated corners, collinear corners and corners a hair off a line."""
+    from qemjax._mesh.grid_nearest import slivers
+    from qemjax._mesh.pointtri import flat_triangles
+
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(300, 3)) * 10.0 ** rng.uniform(-5, 5)
+    X[:50] = X[50:100] + 0.25 * (X[100:150] - X[50:100])  # on the segment between two others
+    X[150:200] = X[:50] + 10.0 ** rng.uniform(-12, -4, (50, 1)) * rng.normal(size=(50, 3)) * np.abs(X).max()
+    G = rng.integers(0, 300, size=(4000, 3))
+    G[:100] = np.stack([np.arange(50, 100), np.arange(100, 150), np.arange(50)], 1).repeat(2, 0)
+    G[100:150] = np.stack([np.arange(50, 100), np.arange(100, 150), np.arange(150, 200)], 1)
+    T = X[G]
+    want = flat_triangles((T[:, 1] - T[:, 0]).T, (T[:, 2] - T[:, 0]).T)
+    got = slivers(X, G)
+    np.testing.assert_array_equal(got, want)
+    assert 0 < got.sum() < len(G)

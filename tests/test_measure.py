@@ -9,6 +9,7 @@ import qemjax
 from qemjax import shapes
 from qemjax._pipeline import measure
 from qemjax._pipeline.refit import samples
+from qemjax._pipeline import refit as _refit
 
 KEYS = measure.KEYS
 
@@ -59,7 +60,7 @@ def test_scale_does_not_change_the_relative_distance():
         assert r.stats["distance_max_rel"] == pytest.approx(base.stats["distance_max_rel"], rel=1e-6)
 
 
-def test_default_measures_classic_offers_it():
+def test_default_measures_classic_offers_it(monkeypatch):
     m = shapes.bumpy_sphere(3)
     d = qemjax.simplify(m, ratio=0.1)
     assert d.stats["distance_max"] > d.stats["distance_rms"] > 0
@@ -73,6 +74,10 @@ def test_default_measures_classic_offers_it():
     # the default's measured distance takes the re-fit's samples (made once): the same stats as made anew
     again = measure.distance(d.input_vertices, d.input_faces, d.vertices, d.faces)
     assert all(d.stats[k] == again[k] for k in KEYS if k != "distance_s")
+    made = []
+    real = _refit.samples
+    monkeypatch.setattr(_refit, "samples", lambda *a: made.append(1) or real(*a))
+    assert qemjax.simplify(m, ratio=0.1).stats["distance_max"] == d.stats["distance_max"] and len(made) == 1
     off = qemjax.simplify(m, ratio=0.1, measure=False)
     assert np.array_equal(off.vertices, d.vertices) and off.stats["distance_max"] is None
     # the re-fit lowers the distance it measures (it minimises it at these samples)

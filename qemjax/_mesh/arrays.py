@@ -76,12 +76,16 @@ _NORMAL_ROWS = 1 << 19  # faces per block of `face_normals`
 
 
 def face_stats(V: np.ndarray, F: np.ndarray):
-    """Which faces F (m,3) over V (n,3, float64) have a non-zero area (m,) bool, and the mean area and mean
-    squared edge length of those faces (float64; numpy's sums do not depend on the number of threads). The
-    per-face values come from one compiled pass (`faces_jit.face_rows`)."""
+    """Which faces F (m,3) over V (n,3) have a non-zero area (m,) bool, and the mean area and mean squared
+    edge length of those faces (float64; numpy's sums do not depend on the number of threads). The per-face
+    values come from one compiled pass (`faces_jit.face_rows`), in V's dtype (float32 or float64; others as
+    float64)."""
     from .faces_jit import face_rows  # numba: imported when first used
 
-    nz, area, e2 = face_rows(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64))
+    V = np.ascontiguousarray(V)
+    if V.dtype not in (np.float32, np.float64):
+        V = V.astype(np.float64)
+    nz, area, e2 = face_rows(V, np.ascontiguousarray(F, np.int64), V.dtype.type(0.5))
     k = max(int(np.count_nonzero(nz)), 1)
     return nz, float(np.sum(area, dtype=np.float64) / k), float(np.sum(np.compress(nz, e2), dtype=np.float64) / (3 * k))
 

@@ -6,16 +6,16 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
-def face_rows(V, F):
-    """(nz (m,) bool, area (m,), e2 (m,)) of faces F over V (float64): whether the normal
-    (p1 − p0) × (p2 − p0) is non-zero, half its length, and the sum of the squared edge vectors' coordinates,
-    edges p1 − p0, p2 − p1, p0 − p2, coordinates x, y, z, summed left to right (numpy's order in
-    `arrays.face_stats`)."""
+@njit(cache=True, nogil=True)
+def face_rows(V, F, half):
+    """(nz (m,) bool, area (m,), e2 (m,)) of faces F over V, in V's dtype (``half``: 0.5 in it, as numpy's
+    ``0.5 * array`` keeps a float32 array float32): whether the normal (p1 − p0) × (p2 − p0) is non-zero,
+    half its length, and the sum of the squared edge vectors' coordinates, edges p1 − p0, p2 − p1, p0 − p2,
+    coordinates x, y, z, summed left to right (numpy's order in `arrays.face_stats`)."""
     m = F.shape[0]
     nz = np.empty(m, np.bool_)
-    area = np.empty(m)
-    e2 = np.empty(m)
+    area = np.empty(m, V.dtype)
+    e2 = np.empty(m, V.dtype)
     for f in range(m):
         i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
         u0, u1, u2 = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
@@ -24,7 +24,7 @@ def face_rows(V, F):
         w0, w1, w2 = -t0, -t1, -t2
         n0, n1, n2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
         nz[f] = n0 != 0 or n1 != 0 or n2 != 0
-        area[f] = 0.5 * np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
+        area[f] = half * np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
         e2[f] = ((((((((u0 * u0 + u1 * u1) + u2 * u2) + s0 * s0) + s1 * s1) + s2 * s2) + t0 * t0) + t1 * t1)
                  + t2 * t2)
     return nz, area, e2

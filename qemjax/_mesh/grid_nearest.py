@@ -26,7 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
-from .pointtri import flat_triangles
+from .pointtri import _FLAT_REL
 
 CUBE_EDGE = 0.5  # the cubes' side at first, times the triangles' median edge
 PAIRS_PER_FACE = 16  # (triangle, cube) listings per triangle at most, on average
@@ -53,10 +53,31 @@ def _edges_d2(px, py, pz, X, g0, g1, g2):
                _segment_d2(px, py, pz, X, g1, g2))
 
 
-def slivers(T: np.ndarray) -> np.ndarray:
-    """(j,) bool: which triangles T (j,3,3) are too thin for Ericson's regions, as `_mesh.pointtri` measures
-    them (twice their area under 1e-8 of their longest edge squared: two corners at one point, three in a line)."""
-    return flat_triangles((T[:, 1] - T[:, 0]).T, (T[:, 2] - T[:, 0]).T)
+@njit(cache=True, nogil=True, inline="always")
+def _max(a, b):
+    """np.maximum of two values: a NaN wins."""
+    return a if (a >= b or a != a) else b
+
+
+@njit(cache=True, nogil=True)
+def slivers(X, G):
+    """(j,) bool: which triangles G (j,3) over X (k,3) are too thin for Ericson's regions, as `_mesh.pointtri`
+    measures them (twice their area under 1e-8 of their longest edge squared: two corners at one point, three
+    in a line): `pointtri.flat_triangles`' arithmetic per face, without its (j,3) temporaries (a large
+    output's re-fit and search made them every round). tests/test_fixed_order.py compares the two."""
+    j = G.shape[0]
+    out = np.empty(j, np.bool_)
+    for g in range(j):
+        i0, i1, i2 = G[g, 0], G[g, 1], G[g, 2]
+        b0, b1, b2 = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
+        c0, c1, c2 = X[i2, 0] - X[i0, 0], X[i2, 1] - X[i0, 1], X[i2, 2] - X[i0, 2]
+        n0, n1, n2 = b1 * c2 - b2 * c1, b2 * c0 - b0 * c2, b0 * c1 - b1 * c0
+        e0, e1, e2 = c0 - b0, c1 - b1, c2 - b2
+        longest = _max(_max((b0 * b0 + b1 * b1) + b2 * b2, (c0 * c0 + c1 * c1) + c2 * c2),
+                       (e0 * e0 + e1 * e1) + e2 * e2)
+        t = _FLAT_REL * longest
+        out[g] = (n0 * n0 + n1 * n1) + n2 * n2 <= t * t
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -253,7 +274,8 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np
     start, faces = _build(X, G, lo, h, dims)
     T = X[G]  # (j,3,3): each triangle's bounding box, (min xyz, max xyz)
     B = np.ascontiguousarray(np.concatenate([T.min(1), T.max(1)], 1))
-    flat = slivers(T)
+    del T
+    flat = slivers(X, G)
     # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
     # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried
     # in the order of their cubes instead, 2 M points took 0.80x as long but whole runs no less:

@@ -112,7 +112,7 @@ def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
     q = len(p)
     X = np.concatenate([a, b, c]).astype(np.float64, copy=False)
     G = np.arange(3 * q).reshape(3, q).T
-    return _barycentric_at(np.asarray(p, np.float64), X, G, np.arange(q), slivers(X[G]))
+    return _barycentric_at(np.asarray(p, np.float64), X, G, np.arange(q), slivers(X, G))
 
 
 def _barycentric_at(P, X, G, f, flat):
@@ -148,7 +148,7 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
     to faces f of (X, G) (`refit_system`). The barycentric coordinates are found in blocks of rows."""
     indptr, indices, pos = lay
     data, rhs = np.zeros(len(indices)), np.zeros((len(indptr) - 1, 3))
-    flat = slivers(X[G])
+    flat = slivers(X, G)
     for s in range(0, len(Ps), _ROWS):
         B = _barycentric_at(Ps[s : s + _ROWS], X, G, f[s : s + _ROWS], flat)
         B *= sw[s : s + _ROWS, None]

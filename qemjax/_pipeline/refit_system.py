@@ -5,8 +5,10 @@ coordinates b on its output face, times the square root of its weight, in the co
 corners. Its normal equations are N = AᵀA + λI and R = Aᵀ(targets) + λX. Building A as a scipy matrix and
 multiplying it out cost a (q,3) CSR matrix, its transpose and two sparse products per round (the re-fit of
 armadillo x16 to 1 % took 0.69x as long without them: experiments/results/refit_system_1128.txt). Here the same sums are made directly: every entry
-of N and R is a sum over the samples in increasing order, as scipy's products make it, so the system is
-the same bit for bit (tests/test_refit.py compares them), and it does not depend on a library's kernels.
+of N and R is a sum over the samples in increasing order, as scipy's products made it, so the system is
+the same bit for bit (experiments/results/refit_system_1128.txt: the same re-fits as with scipy 1.17;
+tests/test_refit.py compares the sums with numpy's in sample order), and it depends on no library's kernels.
+The loops release the GIL: a batch's re-fits run side by side on threads (`stages.refit_all`).
 
 * `regions`: each sample's barycentric coordinates on its face (Ericson's regions), in numpy's arithmetic
   (`refit.closest_barycentric` made them with einsum and np.select: the same bits, without their (q,3)
@@ -24,9 +26,10 @@ from numba import njit
 
 
 _HUGE = 1.7976931348623157e308  # np.nan_to_num's stand-in for an infinity
+SHORT_ROW = 48  # rows of N's layout up to this long are sorted by insertion, longer ones by numpy's sort
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _finite(t):
     """np.nan_to_num of one value: NaN 0, ±inf ±the largest float."""
     if t != t:
@@ -36,7 +39,7 @@ def _finite(t):
     return -_HUGE if t == -np.inf else t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def regions(P, X, G, f, out):
     """out[s] = the barycentric coordinates of the point of face f[s] of (X, G) closest to P[s] (Ericson,
     Real-Time Collision Detection 5.1.5: the first of the vertex, edge and interior regions that holds).
@@ -88,7 +91,7 @@ def regions(P, X, G, f, out):
         out[s, 0], out[s, 1], out[s, 2] = o0, o1, o2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def layout(G, col, nfree):
     """(indptr (nfree+1,), indices, pos (j,3,3)): N's rows (free vertices: ``col`` maps an output vertex to
     its row, -1 for a fixed one) with the sorted columns of itself and of the free vertices it shares a face
@@ -122,9 +125,11 @@ def layout(G, col, nfree):
                     raw[fill[r]] = c
                     fill[r] += 1
     indptr = np.zeros(nfree + 1, np.int64)
-    for r in range(nfree):  # each row's columns sorted (a few dozen: insertion), repeats removed, in place
+    for r in range(nfree):  # each row's columns sorted in place, repeats removed
         s0, s1 = start[r], start[r + 1]
-        for t in range(s0 + 1, s1):
+        if s1 - s0 > SHORT_ROW:  # a vertex of high valence (a fan's hub): no quadratic sort
+            raw[s0:s1].sort()
+        for t in range(s0 + 1, s1):  # insertion: a no-op on a sorted row, quick on a short one
             c, u = raw[t], t
             while u > s0 and raw[u - 1] > c:
                 raw[u] = raw[u - 1]
@@ -136,11 +141,13 @@ def layout(G, col, nfree):
                 raw[s0 + k] = raw[t]
                 k += 1
         indptr[r + 1] = indptr[r] + k
+    if indptr[nfree] >= 2**31:
+        raise ValueError("re-fit: the output has too many vertices for the solver's index type")
     indices = np.empty(indptr[-1], np.int64)
     for r in range(nfree):
         for t in range(indptr[r + 1] - indptr[r]):
             indices[indptr[r] + t] = raw[start[r] + t]
-    pos = np.full((j, 3, 3), -1, np.int64)
+    pos = np.full((j, 3, 3), -1, np.int32)  # N's entries, fewer than 2**31 (checked above)
     for g in range(j):
         for x in range(3):
             r = col[G[g, x]]
@@ -161,7 +168,7 @@ def layout(G, col, nfree):
     return indptr, indices, pos
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _ascending(a, b, c):
     """The positions 0, 1, 2 of three distinct numbers a, b, c in ascending order of the numbers."""
     if a < b:
@@ -169,7 +176,7 @@ def _ascending(a, b, c):
     return (1, 0, 2) if a < c else ((1, 2, 0) if b < c else (2, 1, 0))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def accumulate(Bw, f, P, sw, G, col, X, pos, data, rhs):
     """Add the rows of one block of samples, in their order: Bw (q,3) each sample's barycentric coordinates
     on its face f (q,) times its weight's square root sw (q,), P (q,3) its point. N's entries (``data``, at
@@ -205,7 +212,7 @@ def accumulate(Bw, f, P, sw, G, col, X, pos, data, rhs):
                 rhs[r, d] += Bw[s, x] * t[d]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def finish(indptr, indices, data, lam):
     """N's CSR arrays: the off-diagonal entries that summed to exactly zero dropped, λ added to the
     diagonal (every row keeps its diagonal)."""

@@ -460,8 +460,8 @@ class RefitTask(NamedTuple):
 def refit_all(later: list) -> None:
     """Run the re-fits `finish` left in ``later`` and put their positions and ``refit_s`` into their results.
     Each is independent of the others (the same arithmetic as alone, bit for bit), so they run side by side
-    on threads (`nearest.each_on_threads`: one per core up to four): their compiled nearest-face search and
-    solver release the GIL, as numpy does (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid
+    on threads (`nearest.each_on_threads`: one per core up to four): their compiled nearest-face search,
+    assembly (`refit_system`) and solver release the GIL, as numpy does (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid
     distinct`). A
     re-fit of a large input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already
     uses the cores, and side by side the large ones would hold their memory at once."""
