@@ -272,3 +272,33 @@ def test_the_record_keeps_the_contractions_positions(bumpy):
     last = fit.replay(contractions=len(fit.history.pairs))
     assert np.array_equal(last.faces, fit.faces)
     assert np.array_equal(last.vertices, plain.vertices) and not np.array_equal(last.vertices, fit.vertices)
+
+
+def test_the_layout_of_a_fans_hub_lists_each_neighbour_once_in_order():
+    """`refit_system.layout` on a closed fan of 200 faces around one hub (its row is longer than
+    `SHORT_ROW`: numpy's sort, the other rows by insertion) and a locked rim vertex: every row holds itself
+    and the free vertices it shares a face with, ascending, once; each face's corner pairs point at their
+    entries."""
+    from qemjax._pipeline.refit_system import SHORT_ROW, layout
+
+    n = 200
+    G = np.array([[0, 1 + i, 1 + (i + 1) % n] for i in range(n)])
+    free = np.ones(n + 1, bool)
+    free[7] = False
+    col = np.where(free, np.cumsum(free) - 1, -1)
+    indptr, indices, pos = layout(G, col, int(free.sum()))
+    assert 3 * n > SHORT_ROW
+    for v in range(n + 1):
+        if not free[v]:
+            continue
+        want = {v} | {int(u) for g in G if v in g for u in g if free[u]}
+        row = indices[indptr[col[v]]:indptr[col[v] + 1]]
+        np.testing.assert_array_equal(row, sorted(col[u] for u in want))
+    for g in range(n):
+        for x in range(3):
+            for y in range(3):
+                a, b = G[g, x], G[g, y]
+                if free[a] and free[b]:
+                    assert indices[pos[g, x, y]] == col[b] and indptr[col[a]] <= pos[g, x, y] < indptr[col[a] + 1]
+                else:
+                    assert pos[g, x, y] == -1
