@@ -60,7 +60,7 @@ def samples(V: np.ndarray, F: np.ndarray, part: np.ndarray) -> tuple[np.ndarray,
     return P[keep], w[keep] / w[keep].mean(), lab[keep]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # the re-fits of a batch run on threads (`stages.refit_all`)
 def _sample_rows(V, F, part):
     """`samples` before the zero weights go and the weights are scaled: every vertex, then every face's
     centroid, with their weights and parts, in one pass (no (m,3) temporaries: a 5.5 M-face input's peak).
