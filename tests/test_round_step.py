@@ -22,13 +22,20 @@ def _unfused(monkeypatch):
 
 
 def _spy(monkeypatch):
+    """Record each round's device call, (contractions, stale pairs, merge piece, price shape): `start_step`,
+    or `step_one` where the compiled glue padded one piece (its padding pairs are (0, 0))."""
     calls = []
-    step = parallel.start_step
+    step, one = parallel.start_step, parallel.step_one
 
     def spy(model, VSd, P, x, Pn, params, size, price_size):
         calls.append((len(P), len(Pn), size, price_size))
         return step(model, VSd, P, x, Pn, params, size, price_size)
+
+    def spy_one(model, VSd, rows_at, P, x, Pn, params, K):
+        calls.append((K, int(np.count_nonzero(Pn[:, 0] != Pn[:, 1])), len(P), len(Pn)))
+        return one(model, VSd, rows_at, P, x, Pn, params, K)
     monkeypatch.setattr(parallel, "start_step", spy)
+    monkeypatch.setattr(parallel, "step_one", spy_one)
     return calls
 
 

@@ -72,6 +72,7 @@ class _Batch(_Run):
                          int(np.sum(targets)), model, options, None,
                          (Eu, np.concatenate([ec for _, ec in edges])), None, PerCopy(stacked, self.vcopy),
                          normals=np.concatenate([normals[id(V), id(F)] for V, F in zip(Vs, Fs)]))
+        self.fast = False  # its copies' gates, budgets and targets are their own (`select_batch`)
         self.targets = np.asarray(targets, np.int64)
         self.max_costs = np.asarray(max_costs, np.float64)
         self.active = np.ones(C, bool)

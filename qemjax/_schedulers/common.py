@@ -185,6 +185,17 @@ def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params,
             _joined(outs, len(Pn), 5 + len(model.parts)))
 
 
+def step_one(model, VSd, rows_at: np.ndarray, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, K: int):
+    """`start_step` for a round that one piece holds, its inputs already padded to the piece's shapes
+    (`round_glue_jit.contract`): the merges of pairs P at x into rows ``rows_at`` (padding past the end),
+    and the price of the stale pairs Pn. Returns (the new device rows (VSd is donated), a function giving
+    the K pairs' (K, width) merged states, and one giving the raw price, (5 + p, len(Pn)) as the kernel
+    gives it)."""
+    VSd, merged, priced = _step(model.merge_kernel, model.price_kernel, VSd, rows_at, P, x, _params(params, P), Pn,
+                                _params(params, Pn))
+    return VSd, (lambda: np.asarray(merged)[:K]), (lambda: np.asarray(priced))
+
+
 def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: int | None = None):
     """Start computing the (K, width) state of the kept vertices of pairs P (K,2) contracted to x (K,3);
     returns a function that waits for it. ``size``: one fixed piece shape (else `chunks`' shapes)."""

@@ -41,10 +41,10 @@ from .._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _t
 from .._kernels.batching import CHUNKS
 from .._costs import MeshView
 from .._mesh.incidence import FaceLists
-from . import outcome, round_jit
+from . import outcome, round_glue_jit, round_jit
 from .._kernels.flips import SLIVER
 from .common import (DTYPE, Options, Timer, bucket, face_normals, fuses, on_device, pad_rows, set_rows, start_flips,
-                     start_merge, start_price, start_step)
+                     start_merge, start_price, start_step, step_one)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
 MERGE_CHUNK = 4096  # the piece shape of a round's merge and device row update (one compilation) ...
@@ -140,6 +140,11 @@ def _accepted(E, found, take):
         off += int(t.sum())
     cat = np.concatenate
     return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
+
+
+def _raw(pr) -> np.ndarray:
+    """A `Priced` of K pairs as the device gives it: (5 + p, K), [x (3), cost, branch, parts] per column."""
+    return np.concatenate([pr.x.T, pr.cost[None], pr.branch[None].astype(pr.cost.dtype), pr.parts])
 
 
 def _ring_vertices(faces: FaceLists, verts, n):
@@ -267,6 +272,15 @@ class _Run:
             # kept attributes: the wedge of each face corner and the seam vertices, for the seam rule
             self.seams = ((np.zeros((0, 3), np.int64), np.zeros(self.n, bool)) if wedges is None
                           else (wedges.C, wedges.multi))
+        # and the glue between those loops and the device call compiled too (`round_glue_jit`): one run
+        # whose rounds are the compiled loops with the fused device call, without attributes (a batch sets
+        # it False: its gates and budgets are per copy)
+        self.fast = self.compiled and self.fused and wedges is None
+        if self.fast:
+            self.limit = round_glue_jit.bound(options.max_cost, DTYPE)  # as `candidates` compares it
+            # the free cost at each vertex's part scale, as `select` takes it per pair (empty: one part)
+            self.free_at = (np.zeros(0) if part_scale is None
+                           else options.schedule.free_cost * np.asarray(part_scale))
         self.faces = lists.result()
         self.timer = Timer()
         self.history = []  # per round: (round, (kept, removed, positions, costs)) in record order
@@ -311,6 +325,25 @@ class _Run:
             stale = stale | any_at(prev.changed, E)
         idx = np.flatnonzero(kept)  # several arrays follow: the indices once
         return st, (lambda a: _take(a, idx)), stale, None
+
+    def carry(self, prev: RoundState, need: int):
+        """Stages 1 and 2 and the candidates (`update`, `cost`, `candidates`) of a `fast` run's round after
+        the first, in one compiled pass once the device's prices are in (`round_glue_jit.carry`). Returns
+        the new state and its candidates."""
+        t0 = time.perf_counter()
+        E, ecount, kept, deg, stale = prev.edges_next
+        d, raw = prev.next_price
+        prev.next_price = None
+        self.settle()
+        out = raw()
+        t1 = time.perf_counter()
+        st = RoundState(E, ecount, deg)
+        st.x, st.cost, st.branch, st.parts, st.bad, st.bvert, valid, _ = round_glue_jit.carry(
+            kept, d, out, prev.x, prev.cost, prev.branch, prev.parts, prev.bad, E, ecount, self.n, self.limit,
+            need, self.manifold)
+        self.timer.add("kernels_s", t1 - t0)
+        self.timer.add("topology_s", time.perf_counter() - t1)
+        return st, valid
 
     # -- stage 2: cost -----------------------------------------------------------------------------
     def cost(self, st: RoundState, prev, follow, stale, same):
@@ -408,6 +441,8 @@ class _Run:
         """The accepted pairs in cost order, cut to the face target; records the rejected ones in
         ``st.bad``. Returns (accepted indices, how many were selected, how many were rejected, the
         locked vertices, what validation found for them)."""
+        if self.fast:
+            return self.select_fast(st, need, valid)
         t0 = time.perf_counter()
         sch = self.options.schedule
         k = gate_rank(need, int(valid.sum()), len(st.E), sch)
@@ -430,6 +465,27 @@ class _Run:
         self.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why
         return acc, n_sel, bad.size, locked, found
+
+    def select_fast(self, st: RoundState, need: int, valid: np.ndarray):
+        """`select` for a `fast` run: the gate, the order and the face target as compiled passes
+        (`round_glue_jit`), the threshold's arithmetic as numpy does it. Returns what `select` returns, the
+        pool room the contraction takes last."""
+        t0 = time.perf_counter()
+        sch = self.options.schedule
+        k = gate_rank(need, int(np.count_nonzero(valid)), len(st.E), sch)
+        thr = sch.gate * np.partition(st.key.compress(valid), k - 1)[k - 1]
+        if not len(self.free_at):
+            thr = np.maximum(thr, sch.free_cost)
+        cand = round_glue_jit.under_gate(st.key, valid, thr, st.E, self.free_at)
+        acc, bad, why, _, locked, apex = self.passes(st, None, cand, need, None)
+        self.rejected += bad.size
+        self.rejected_by += np.bincount(why, minlength=len(self.rejected_by))
+        n_sel = acc.size
+        acc, apex, room = round_glue_jit.order_fit(acc, apex, st.key, st.ecount, (self.rounds * 7919) & 0xFFFFFFFF,
+                                                   need, self.faces.cnt, st.E)
+        self.timer.add("select_s", time.perf_counter() - t0)
+        st.bad[bad] = why
+        return acc, n_sel, bad.size, locked, (apex, room)
 
     def passes(self, st: RoundState, key_of, cand, need, groups, local=None):
         """The selection passes with validation (`select.independent_sets`; ``groups``: a batched run's
@@ -508,6 +564,8 @@ class _Run:
     # -- stage 5: contract -------------------------------------------------------------------------
     def contract(self, st: RoundState, acc, n_sel, locked, found):
         """Contract the accepted pairs together; leaves in ``st`` what the next round's update needs."""
+        if self.fast:
+            return self.contract_fast(st, acc, n_sel, locked, *found)
         t0 = time.perf_counter()
         n, faces = self.n, self.faces
         P = _take(st.E, acc)
@@ -565,6 +623,36 @@ class _Run:
         self.faces_per_round.append(faces.count)
         self.timer.add("contract_s", time.perf_counter() - t0)
 
+    def contract_fast(self, st: RoundState, acc, n_sel, locked, apex, room):
+        """`contract` for a `fast` run: one compiled pass (`round_glue_jit.contract`), then the device call
+        (one piece: `step_one`; else `start_step`)."""
+        t0 = time.perf_counter()
+        faces = self.faces
+        faces.reserve(int(room))  # the kept vertices' new runs
+        touched = locked if acc.size == n_sel else _ring_vertices(faces, _take(st.E, acc).reshape(-1), self.n)
+        a, b, xs, costs, top, faces.end, dead, st.edges_next, d, one = round_glue_jit.contract(
+            st.E, st.ecount, st.deg, st.bad, touched, acc, apex, st.x, st.cost, st.branch, self.branches, self.V3,
+            faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, self.label, len(self.VQd),
+            self.merge_chunk, self.price_sizes[0])
+        faces.count -= len(dead)
+        self.dead.append(dead)
+        self.max_cost_used = max(self.max_cost_used, top)
+        self.history.append((self.rounds - 1, (a, b, xs, costs)))
+        if st.parts.shape[1]:
+            self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
+        if len(one[0]):
+            self.VQd, merged, priced = step_one(self.model, self.VQd, *one, self.params, len(acc))
+        else:
+            E = st.edges_next[0]
+            self.VQd, merged, joined = start_step(self.model, self.VQd, np.stack([a, b], 1), xs, _take(E, d),
+                                                  self.params, self.merge_chunk, _holding(self.price_sizes, len(d)))
+            priced = lambda: _raw(joined())  # noqa: E731
+        st.next_price = (d, priced)
+        self.VQ[a, :3] = xs
+        self.merged = (a, merged)  # the states reach VQ when the price is waited for (`settle`)
+        self.faces_per_round.append(faces.count)
+        self.timer.add("contract_s", time.perf_counter() - t0)
+
     def contract_numpy(self, st: RoundState, acc, xs, found):
         """The faces after the accepted pairs ``acc`` (placed at xs) contract, from what validation
         ``found`` (`_accepted`). In manifold mode the pairs' update starts on the worker thread: returns
@@ -612,12 +700,15 @@ class _Run:
         prev, stop, blocked = None, "target", {}
         while self.faces.count > self.target:
             self.rounds += 1
-            t0 = time.perf_counter()
-            st, follow, stale, same = self.update(prev)
-            self.timer.add("topology_s", time.perf_counter() - t0)
-            self.cost(st, prev, follow, stale, same)
             need = self.faces.count - self.target
-            valid = self.candidates(st, need)
+            if self.fast and prev is not None and prev.next_price is not None:
+                st, valid = self.carry(prev, need)
+            else:
+                t0 = time.perf_counter()
+                st, follow, stale, same = self.update(prev)
+                self.timer.add("topology_s", time.perf_counter() - t0)
+                self.cost(st, prev, follow, stale, same)
+                valid = self.candidates(st, need)
             self.rank(st, valid)
             if not valid.any():
                 stop, blocked = self.stop(st, need)

@@ -1,0 +1,188 @@
+"""The parallel round's glue, compiled: what a run's round does between its compiled loops (`round_jit`) and
+its one device call, as four calls instead of dozens of numpy calls on small arrays.
+
+On a small mesh a round's own work is a few tens of µs, and the numpy calls around it (each a few µs: take,
+put, compress, bincount, ...) cost more than the work (the cow's 45 rounds spent about 7 ms in them:
+experiments/round_floor.py). These loops take the same values from the same arrays, so the golden outputs
+stay the same bits; tests/test_round_glue.py compares each with the numpy code it replaces on random
+inputs. They serve one run on the compiled path (`parallel._Run.fast`): a batch's gates and budgets are per
+copy (`batched`).
+
+* `carry`: stages 1 and 2 and the candidate test (`_Run.update`, `_Run.cost`, `_Run.candidates`): the pairs
+  that stay take their last prices and rules, the stale ones the device's new prices, and the boundary
+  vertices and the candidates are marked;
+* `under_gate`: the round's gate (`_Run.select`), the candidates at most gate × the k-th cheapest valid key
+  (or the free cost);
+* `order_fit`: the accepted pairs in key order, cut to the face target (`select.sort_keys`,
+  `select.fits_target`);
+* `contract`: the rejections cleared around the round, the faces and pairs contracted (`round_jit`), the
+  positions written, the stale pairs listed, and the device call's inputs padded to their shapes.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .round_jit import _key, clear_bad, contract_edges, contract_faces
+
+
+def bound(limit, dtype) -> np.generic:
+    """max_error's cost bound as numpy compares it with costs of ``dtype``: a Python float becomes one of
+    that dtype (numpy's weak scalars), a numpy float keeps its own precision (overflow: infinity)."""
+    with np.errstate(over="ignore"):
+        return np.asarray(limit, np.result_type(dtype, limit))[()]
+
+
+@njit(cache=True, nogil=True)
+def carry(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold):
+    """The new pairs' prices, rules, boundary vertices and candidates.
+
+    kept (P0,) bool: which of the last round's pairs stay, in order (`round_jit.contract_edges`); d (K,):
+    the rows of the new pairs E (P,2) whose price is stale; out (5 + p, ≥ K): the device's price of them
+    ([x (3), cost, branch, parts] per column, `common.start_step`); x0, cost0, branch0, parts0 (P0, p),
+    bad0: the last round's. limit: max_error's cost bound (`bound`); need: the faces still to remove.
+    Returns x, cost, branch, parts, bad, the boundary vertices (n,) bool, the candidates (P,) bool
+    (`_Run.candidates`) and how many there are."""
+    P = len(E)
+    p = parts0.shape[1]
+    x = np.empty((P, 3), x0.dtype)
+    cost = np.empty(P, cost0.dtype)
+    branch = np.empty(P, np.int8)
+    parts = np.empty((P, p), parts0.dtype)
+    bad = np.empty(P, np.int8)
+    j = 0
+    for i in range(len(kept)):
+        if kept[i]:
+            x[j, 0], x[j, 1], x[j, 2] = x0[i, 0], x0[i, 1], x0[i, 2]
+            cost[j], branch[j], bad[j] = cost0[i], branch0[i], bad0[i]
+            for c in range(p):
+                parts[j, c] = parts0[i, c]
+            j += 1
+    for t in range(len(d)):
+        i = d[t]
+        x[i, 0], x[i, 1], x[i, 2] = out[0, t], out[1, t], out[2, t]
+        cost[i] = out[3, t]
+        branch[i] = np.int8(out[4, t])
+        for c in range(p):
+            parts[i, c] = out[5 + c, t]
+    bvert = np.zeros(n, np.bool_)
+    valid = np.empty(P, np.bool_)
+    nv = 0
+    for i in range(P):
+        c = ecount[i]
+        if c == 1:
+            bvert[E[i, 0]] = True
+            bvert[E[i, 1]] = True
+        ok = cost[i] <= limit and bad[i] == 0 and c <= need
+        if manifold:
+            ok = ok and c >= 1 and c <= 2
+        valid[i] = ok
+        if ok:
+            nv += 1
+    return x, cost, branch, parts, bad, bvert, valid, nv
+
+
+@njit(cache=True, nogil=True)
+def under_gate(key, valid, thr, E, free_v):
+    """(P,) bool: the candidates whose key is at most the gate: ``thr`` (numpy's maximum of gate × k-th and
+    the free cost), or with free_v (n,) (the free cost at each vertex's part scale; empty: none) the
+    larger of thr and free_v at the pair's first vertex, in numpy's promotion of the two."""
+    P = len(key)
+    cand = np.empty(P, np.bool_)
+    if len(free_v) == 0:
+        for i in range(P):
+            cand[i] = valid[i] and key[i] <= thr
+    else:
+        for i in range(P):
+            f = free_v[E[i, 0]]
+            t = thr if thr >= f else f
+            cand[i] = valid[i] and key[i] <= t
+    return cand
+
+
+@njit(cache=True, nogil=True)
+def order_fit(acc, apex, key, ecount, salt, need, cnt, E):
+    """The accepted pairs ``acc`` (pass order) and their apexes (S,2) in the order of their sort keys
+    (`select.sort_keys` of ``key`` with the round's salt), cut as `select.fits_target` cuts them to the
+    faces still needed (ecount: the faces each removes). Returns (pairs, apexes, the pool room their
+    contraction takes: Σ cnt at both endpoints)."""
+    S = len(acc)
+    keys = np.empty(S, np.int64)
+    kbits = key.view(np.int32)
+    for s in range(S):
+        keys[s] = _key(kbits, acc[s], acc[s], salt)
+    order = np.argsort(keys, kind="mergesort")
+    take = np.zeros(S, np.bool_)
+    left = need
+    m = 0
+    for s in range(S):  # in order: each that still fits (fits_target's prefix, then its fill, is this)
+        r = ecount[acc[order[s]]]
+        if r <= left:
+            take[s] = True
+            left -= r
+            m += 1
+    out = np.empty(m, acc.dtype)
+    ap = np.empty((m, 2), apex.dtype)
+    room = 0
+    j = 0
+    for s in range(S):
+        if take[s]:
+            i = order[s]
+            out[j] = acc[i]
+            ap[j, 0], ap[j, 1] = apex[i, 0], apex[i, 1]
+            room += cnt[E[acc[i], 0]] + cnt[E[acc[i], 1]]
+            j += 1
+    return out, ap, room
+
+
+@njit(cache=True, nogil=True)
+def contract(E, ecount, deg, bad, touched, acc, apex, x, cost, branch, counts, V3, F, alive, cnt, off, pool,
+             end, label, n_rows, size, price_size):
+    """The round's contraction of pairs ``acc`` (apexes (S,2)) placed at x[acc]: known rejections cleared
+    where ``touched`` (`round_jit.clear_bad`), the faces (`round_jit.contract_faces`; the pool must have
+    room) and the pairs (`round_jit.contract_edges`) contracted, V3's kept rows moved, branch counts
+    added to ``counts``. Returns the kept and removed vertices, their positions, costs (float64) and
+    the largest, the pool's new end, the dead faces, `contract_edges`' result, the stale rows d of the new
+    pairs, and the device call's inputs when one piece holds them (``size`` merges, ``price_size`` stale
+    pairs: `common.step_one`): kept rows padded with n_rows, pairs, positions, stale pairs (else empty)."""
+    clear_bad(E, bad, touched)
+    S = len(acc)
+    a = np.empty(S, E.dtype)
+    b = np.empty(S, E.dtype)
+    xs = np.empty((S, 3), x.dtype)
+    c64 = np.empty(S, np.float64)
+    top = -np.inf
+    for s in range(S):
+        i = acc[s]
+        a[s], b[s] = E[i, 0], E[i, 1]
+        xs[s, 0], xs[s, 1], xs[s, 2] = x[i, 0], x[i, 1], x[i, 2]
+        c64[s] = cost[i]
+        if cost[i] > top:
+            top = cost[i]
+        counts[branch[i]] += 1
+    end, dead = contract_faces(a, b, F, alive, cnt, off, pool, end)
+    E3, c3, keep, d2, s3 = contract_edges(E, ecount, deg, a, b, apex, label)
+    for s in range(S):
+        V3[a[s], 0], V3[a[s], 1], V3[a[s], 2] = xs[s, 0], xs[s, 1], xs[s, 2]
+    nd = 0
+    for i in range(len(s3)):
+        nd += s3[i]
+    d = np.empty(nd, np.int64)
+    j = 0
+    for i in range(len(s3)):
+        if s3[i]:
+            d[j] = i
+            j += 1
+    one = S <= size and nd <= price_size
+    rows = np.full(size if one else 0, n_rows, np.int32)
+    pp = np.zeros((size if one else 0, 2), np.int32)
+    xx = np.zeros((size if one else 0, 3), x.dtype)
+    qq = np.zeros((price_size if one else 0, 2), np.int32)
+    if one:
+        for s in range(S):
+            rows[s] = a[s]
+            pp[s, 0], pp[s, 1] = a[s], b[s]
+            xx[s, 0], xx[s, 1], xx[s, 2] = xs[s, 0], xs[s, 1], xs[s, 2]
+        for t in range(nd):
+            qq[t, 0], qq[t, 1] = E3[d[t], 0], E3[d[t], 1]
+    return a, b, xs, c64, top, end, dead, (E3, c3, keep, d2, s3), d, (rows, pp, xx, qq)
