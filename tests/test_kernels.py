@@ -512,3 +512,27 @@ def test_flips_host_blocks_match_the_component_twin():
             one = flips.flips_host_reference(V, N0, F[i:i + 1], np.arange(K)[i:i + 1], k[i:i + 1],
                                              x.astype(np.float32), cos_max)
             assert bool(per_face[i]) == one, (t, i)
+
+
+@pytest.mark.parametrize("jax_flag", [True, False])
+def test_a_kernel_called_inside_a_trace_is_inlined(jax_flag, monkeypatch):
+    """`_kernels.kernel` compiles a call of its own at the top level and inlines itself inside another
+    trace (where its compiler options cannot apply), by JAX's trace flag or, without it, by its arguments."""
+    import qemjax._kernels as K
+
+    calls = []
+
+    @K.kernel
+    def double(x):
+        calls.append(type(x).__name__)
+        return 2 * x
+
+    if not jax_flag:  # a JAX without the flag: the wrapper looks at its arguments
+        monkeypatch.setattr(K, "_trace_flag", lambda: None)
+    x = jnp.arange(3.0)
+    assert np.array_equal(double(x), 2 * np.arange(3.0))
+    assert np.array_equal(jax.jit(lambda y: double(y) + 1)(x), 2 * np.arange(3.0) + 1)
+    assert np.array_equal(jax.jit(lambda: double(jnp.ones(2)))(), [2.0, 2.0])  # a trace, no tracer argument
+    for outer in (lambda y: double(y) + 1, lambda y: double(jnp.ones(2))):  # inline: no nested jit call
+        prims = {e.primitive.name for e in jax.make_jaxpr(outer)(x).eqns}
+        assert "mul" in prims and not prims & {"pjit", "jit"}, prims
