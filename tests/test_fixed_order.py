@@ -102,6 +102,38 @@ def test_grid_nearest_threads_and_blocks_give_the_same_bits(monkeypatch):
     assert np.array_equal(f1, f2) and np.array_equal(d1, d2)
 
 
+@pytest.mark.parametrize("where", ["random", "none", "near", "threads"])
+def test_grid_nearest_seeds_change_no_answer(where, monkeypatch):
+    """Seeded searches (a face near each point, as the measured distance takes the re-fit's) give the same
+    faces and bits as unseeded ones: with ties (points and corners on a coarse grid, repeated triangles,
+    the lower index among equals), with seeds far off, missing (-1), or right."""
+    from qemjax._mesh import grid_nearest
+
+    rng = np.random.default_rng(len(where))
+    X = rng.integers(-4, 5, size=(300, 3)).astype(np.float64) * 0.25  # many ties on a lattice
+    G = rng.integers(0, 300, size=(600, 3))
+    G[300:360] = G[:60]  # repeated triangles: equal distances, different indices
+    G[360:380, 2] = G[360:380, 1]  # segments
+    P = rng.integers(-5, 6, size=(4000, 3)).astype(np.float64) * 0.25
+    P[::3] += rng.normal(0, 0.05, size=P[::3].shape)
+    f0, d0 = nearest(X, G, P)
+    if where == "random":
+        seed = rng.integers(-1, len(G), len(P))
+    elif where == "none":
+        seed = np.full(len(P), -1)
+    elif where == "near":  # the answers themselves, or the repeated triangle's twin
+        seed = np.where(f0 < 60, f0 + 300, f0)
+    else:  # blocks on threads, each with its own seeds
+        monkeypatch.setattr(grid_nearest, "BLOCK", 700)
+        seed = rng.integers(0, len(G), len(P))
+    f1, d1 = nearest(X, G, P, seed)
+    assert np.array_equal(f1, f0) and np.array_equal(d1, d0)
+    with pytest.raises(ValueError, match="seeds for"):
+        nearest(X, G, P, seed[:-1])
+    with pytest.raises(ValueError, match="past the last"):
+        nearest(X, G, P, np.full(len(P), len(G)))
+
+
 def test_fixed_order_helpers_match_numpy():
     rng = np.random.default_rng(0)
     M, R = rng.normal(size=(50, 4, 4)), rng.normal(size=(50, 4, 2))

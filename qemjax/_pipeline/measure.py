@@ -30,10 +30,13 @@ def not_measured() -> dict:
     return dict.fromkeys(KEYS)
 
 
-def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled: tuple | None = None) -> dict:
+def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled: tuple | None = None,
+             seeds: np.ndarray | None = None) -> dict:
     """The stats of the module docstring for the input (V, F) and the output (X, G), float64, mesh units.
     ``sampled``: the input's samples as the re-fit of the same run made them (its ``sampled``: points in
-    the input's unit frame, weights), the same arrays as made here."""
+    the input's unit frame, weights), the same arrays as made here; ``seeds``: a face of G near each
+    sample (the re-fit's last attachment), where each search starts (the same distances, found sooner:
+    `grid_nearest.nearest`)."""
     from .._mesh.grid_nearest import nearest  # numba, lazily
     from .refit import samples, unit_frame
 
@@ -50,7 +53,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
         P, w = sampled
     if len(P) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
-    _, d = nearest((X - centre) / unit, G, P)
+    _, d = nearest((X - centre) / unit, G, P, None if sampled is None else seeds)
     d_max = float(d.max()) * unit
     d_rms = float(np.sqrt(np.sum(w * d * d) / np.sum(w))) * unit
     return dict(distance_max=d_max, distance_rms=d_rms, distance_max_rel=d_max / diag if diag > 0 else None,

@@ -180,8 +180,9 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
     vertices that keep their position exactly (locked ones; the others are fitted around them). X is
     returned unchanged (a copy) when there is nothing to fit. ``sampled``: a list to which the input's
-    samples are appended, (points in the input's unit frame, weights), once made: the measured distance
-    of the same run takes them (`measure.distance`) instead of making them again."""
+    samples are appended, (points in the input's unit frame, weights), once made, then the output face
+    each was attached to in the last round (-1: none): the measured distance of the same run takes the
+    samples (`measure.distance`) instead of making them again, and starts each search at that face."""
     X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
@@ -216,8 +217,10 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None) -
         return X
     col = np.where(free, np.cumsum(free) - 1, -1)  # each output vertex's row in the system (-1: fixed)
     lay = layout(G, col, int(free.sum()))
-    for _ in range(rounds):
+    for r in range(rounds):
         f = _attach(X, G, gpart, P, spart)
+        if sampled is not None and r == rounds - 1:  # the last round's faces: the measured distance's seeds
+            sampled.append(f)
         seen = f >= 0
         if seen.all():  # the usual case: no copies of the samples
             Ps, sw = P, np.sqrt(w)

@@ -454,7 +454,8 @@ class RefitTask(NamedTuple):
         refit_s = time.perf_counter() - t
         if not self.measure:
             return X, refit_s, _measure.not_measured()
-        return X, refit_s, _measure.distance(self.V, self.F, X, self.G, sampled[0] if sampled else None)
+        return X, refit_s, _measure.distance(self.V, self.F, X, self.G, sampled[0] if sampled else None,
+                                             sampled[1] if len(sampled) > 1 else None)
 
 
 def refit_all(later: list) -> None:
