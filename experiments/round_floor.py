@@ -1,6 +1,7 @@
 """What the default would still take with every line of Python and numpy glue in its rounds gone: the time
 inside the round's compiled loops (`round_jit`: selection with validation, the faces' and pairs'
-contraction, clearing the rejections), the wait for the device (`stats["kernels_s"]`), the re-fit and the
+contraction, clearing the rejections; `round_glue_jit`: the prices carried, the gate, the order and the
+contraction with the device call's inputs), the wait for the device (`stats["kernels_s"]`), the re-fit and the
 measured distance, summed, against the whole run and against a goal of G × meshoptimizer's time.
 
 Each compiled loop is wrapped with a timer; warm runs, medians.
@@ -21,7 +22,8 @@ sys.path[:0] = [str(HERE.parent), str(HERE)]
 
 import meshes as bench_meshes  # noqa: E402
 
-LOOPS = ("select_validate", "contract_faces", "contract_edges", "clear_bad")
+LOOPS = ("select_validate", "contract_faces", "contract_edges", "clear_bad")  # round_jit's, called from Python
+GLUE = ("carry", "under_gate", "order_fit", "contract")  # round_glue_jit's (which call round_jit's inside)
 
 
 def main():
@@ -32,11 +34,11 @@ def main():
     args = ap.parse_args()
     import qemjax
     from qemjax import peers
-    from qemjax._schedulers import round_jit
+    from qemjax._schedulers import round_glue_jit, round_jit
 
     spent = {"loops": 0.0}
-    for name in LOOPS:
-        fn = getattr(round_jit, name)
+    for module, name in [(round_jit, n) for n in LOOPS] + [(round_glue_jit, n) for n in GLUE]:
+        fn = getattr(module, name)
 
         def timed(*a, _fn=fn):
             t = time.perf_counter()
@@ -44,7 +46,7 @@ def main():
                 return _fn(*a)
             finally:
                 spent["loops"] += time.perf_counter() - t
-        setattr(round_jit, name, timed)
+        setattr(module, name, timed)
     print(f"# python experiments/round_floor.py --cases {' '.join(args.cases)} --repeats {args.repeats}")
     print("| case | whole run ms | compiled loops ms | device wait ms | re-fit ms | measured distance ms | "
           "sum (the floor) ms | meshoptimizer ms | goal ms | floor / goal |")
