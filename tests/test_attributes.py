@@ -383,3 +383,27 @@ def test_skipped_refit_is_named_in_the_summary():
     assert "re-fit skipped: uv kept" in kept.summary()
     assert plain.stats["refit"] == 1 and "refit_skipped" not in plain.stats
     assert "re-fit skipped" not in plain.summary()
+
+
+@pytest.mark.parametrize("m", [1, 2])
+def test_attribute_state_compiled_is_the_numpy_sums_bit_for_bit(m, monkeypatch):
+    """`attributes_jit.corner_sums` against `attribute_state`'s numpy code (the compiled path switched off),
+    on random faces with shared corners, zero and negative-zero values, thin faces and zero weights: every
+    bit, signed zeros included."""
+    from qemjax._costs import attributes as A, attributes_jit
+
+    rng = np.random.default_rng(m)
+    n, f = 150, 400
+    V = rng.normal(size=(n, 3))
+    V[:10] = V[10:20]  # coincident corners: thin faces (gradients 0)
+    F = np.array([rng.choice(n, 3, replace=False) for _ in range(f)])
+    S = rng.normal(size=(f, 3, m))
+    S[rng.random(S.shape) < 0.2] = 0.0
+    S[rng.random(S.shape) < 0.2] = -0.0
+    w = rng.random(f)
+    w[::9] = 0.0
+    got = A.attribute_state(V, F, S, w)
+    monkeypatch.setattr(attributes_jit, "MAX_CHANNELS", 0)  # the numpy code
+    want = A.attribute_state(V, F, S, w)
+    assert got.shape == want.shape == (n, 11 + 4 * m)
+    assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))

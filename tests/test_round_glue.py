@@ -18,6 +18,7 @@ from qemjax._mesh.arrays import put_rows
 from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import common, parallel, round_glue_jit as glue, round_jit
 from qemjax._schedulers.select import fits_target, sort_keys
+from test_attributes import atlas_sphere
 from test_greedy_compiled import _two_spheres
 from test_round_jit import _assert_same, _selected_pairs
 
@@ -201,6 +202,8 @@ RUNS = {
     "numpy-gate": (lambda: shapes.torus(n_major=30, n_minor=14),
                    {"ratio": 0.1, "scheduler": Schedule(gate=np.float64(1.5), free_cost=np.float32(1e-9))}),
     "line-boundary": (lambda: shapes.grid(30, hole=True), {"ratio": 0.05, "method": "line"}),
+    # kept UVs: the seam placement of the carried prices, the wedges before the faces are relinked
+    "uv-seams": (lambda: atlas_sphere(3)[0], {"ratio": 0.05, "attributes": "uv", "method": "default"}),
 }
 
 
@@ -230,3 +233,5 @@ def test_runs_with_the_compiled_glue_give_the_numpy_glues_result(case, monkeypat
     assert seen == [True, True]
     _assert_same(new, old)
     assert new.stats["rounds"] > 2
+    if "uv" in case:
+        assert np.array_equal(new.uv, old.uv) and new.stats["rejected_by"]["seam"] > 0

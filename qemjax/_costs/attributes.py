@@ -158,6 +158,11 @@ def attribute_state(V: np.ndarray, F: np.ndarray, S: np.ndarray, w: np.ndarray) 
     its position quadric: V (n,3), F (f,3), corner values S (f,3,m), face weights w (f,)."""
     n, m = len(V), S.shape[2]
     g, d = face_fields(V[F], S)
+    from . import attributes_jit  # here: importing the cost models does not need numba
+
+    if m <= attributes_jit.MAX_CHANNELS and len(F):  # the same sums, compiled
+        return attributes_jit.corner_sums(np.ascontiguousarray(F, np.int64), np.ascontiguousarray(g, np.float64),
+                                          np.ascontiguousarray(S, np.float64), np.ascontiguousarray(w, np.float64), n)
     gg = np.einsum("fji,fjk->fik", g, g)  # Σ_j g gᵀ per face
     packed = gg[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
     cols = []  # per corner k (k-major, as the faces' corners are summed): the columns to scatter

@@ -273,9 +273,9 @@ class _Run:
             self.seams = ((np.zeros((0, 3), np.int64), np.zeros(self.n, bool)) if wedges is None
                           else (wedges.C, wedges.multi))
         # and the glue between those loops and the device call compiled too (`round_glue_jit`): one run
-        # whose rounds are the compiled loops with the fused device call, without attributes (a batch sets
-        # it False: its gates and budgets are per copy)
-        self.fast = self.compiled and self.fused and wedges is None
+        # whose rounds are the compiled loops with the fused device call (a batch sets it False: its gates
+        # and budgets are per copy)
+        self.fast = self.compiled and self.fused
         if self.fast:
             self.limit = round_glue_jit.bound(options.max_cost, DTYPE)  # as `candidates` compares it
             # the free cost at each vertex's part scale, as `select` takes it per pair (empty: one part)
@@ -341,6 +341,13 @@ class _Run:
         st.x, st.cost, st.branch, st.parts, st.bad, st.bvert, valid, _ = round_glue_jit.carry(
             kept, d, out, prev.x, prev.cost, prev.branch, prev.parts, prev.bad, E, ecount, self.n, self.limit,
             need, self.manifold)
+        if self.wedges is not None:  # stale pairs at seam vertices: placed at an allowed endpoint (as `cost`)
+            x, c = st.x[d], st.cost[d].copy()
+            seam = self.wedges.constrain(self.faces, self.VQ, _take(E, d), x, c)
+            st.x[d], st.cost[d] = x, c
+            st.bad[d[seam]] = outcome.SEAM
+            ec = ecount[d]  # their candidate test again (`candidates`)
+            valid[d] = (c <= self.limit) & (st.bad[d] == 0) & (ec <= need) & (ec >= 1) & (ec <= 2)
         self.timer.add("kernels_s", t1 - t0)
         self.timer.add("topology_s", time.perf_counter() - t1)
         return st, valid
@@ -628,8 +635,10 @@ class _Run:
         (one piece: `step_one`; else `start_step`)."""
         t0 = time.perf_counter()
         faces = self.faces
-        faces.reserve(int(room))  # the kept vertices' new runs
         touched = locked if acc.size == n_sel else _ring_vertices(faces, _take(st.E, acc).reshape(-1), self.n)
+        if self.wedges is not None:  # the corners' wedges, before the faces are relinked
+            self.wedges.contract_many(faces, self.VQ, _take(st.E, acc), _take(st.x, acc))
+        faces.reserve(int(room))  # the kept vertices' new runs
         a, b, xs, costs, top, faces.end, dead, st.edges_next, d, one = round_glue_jit.contract(
             st.E, st.ecount, st.deg, st.bad, touched, acc, apex, st.x, st.cost, st.branch, self.branches, self.V3,
             faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, self.label, len(self.VQd),
