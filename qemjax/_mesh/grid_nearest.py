@@ -269,11 +269,15 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
     X = np.ascontiguousarray(X, np.float64)
     G = np.ascontiguousarray(G, np.int64)
     P = np.ascontiguousarray(P, np.float64).reshape(-1, 3)
-    seed = np.zeros(0, np.int64) if seed is None else np.ascontiguousarray(seed, np.int64).reshape(-1)
+    # seeds as int32 (the re-fit's faces are: no copy, one compilation of the query with or without them)
+    seed = np.zeros(0, np.int32) if seed is None else np.asarray(seed).reshape(-1)
+    if not np.issubdtype(seed.dtype, np.integer):
+        raise ValueError(f"nearest: seeds must be face indices (integers), got {seed.dtype}")
     if len(seed) and len(seed) != len(P):
         raise ValueError(f"nearest: {len(seed)} seeds for {len(P)} points")
     if len(seed) and seed.max(initial=-1) >= len(G):
         raise ValueError("nearest: a seed face past the last triangle")
+    seed = np.ascontiguousarray(seed, np.int32 if len(G) < 2**31 else np.int64)
     if len(G) == 0:
         raise ValueError("nearest: no triangles")
     used = X[np.unique(G)]
