@@ -407,3 +407,23 @@ def test_attribute_state_compiled_is_the_numpy_sums_bit_for_bit(m, monkeypatch):
     want = A.attribute_state(V, F, S, w)
     assert got.shape == want.shape == (n, 11 + 4 * m)
     assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
+
+
+def test_seam_edges_are_the_four_key_sort_and_unique_rows():
+    """`wedges.seam_edges` against a four-key lexsort and `np.unique(axis=0)` on random faces and wedges."""
+    from qemjax._mesh.wedges import seam_edges
+
+    rng = np.random.default_rng(2)
+    for _ in range(300):
+        n, m = int(rng.integers(3, 60)), int(rng.integers(0, 120))
+        F, C = rng.integers(0, n, (m, 3)), rng.integers(0, int(rng.integers(1, 2 * n + 2)), (m, 3))
+        u, v = F[:, [0, 1, 2]].reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+        wu, wv = C[:, [0, 1, 2]].reshape(-1), C[:, [1, 2, 0]].reshape(-1)
+        lo, hi, wlo, whi = np.minimum(u, v), np.maximum(u, v), np.where(u > v, wv, wu), np.where(u > v, wu, wv)
+        o = np.lexsort((whi, wlo, hi, lo))
+        lo, hi, wlo, whi = lo[o], hi[o], wlo[o], whi[o]
+        d = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1]) & ((wlo[1:] != wlo[:-1]) | (whi[1:] != whi[:-1]))
+        E = np.stack([lo[1:][d], hi[1:][d]], 1)
+        want = np.unique(E, axis=0) if len(E) else np.zeros((0, 2), np.int64)
+        got = seam_edges(F, C)
+        assert got.shape == want.shape and np.array_equal(got, want)

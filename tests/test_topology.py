@@ -168,3 +168,27 @@ def test_parts_are_scipys_connected_components_label_for_label(seed):
     assert count == want[0] and count > 40
     np.testing.assert_array_equal(label, want[1])
     assert label.dtype == np.int64
+
+
+def test_feature_edges_with_faces_is_isin_both_ways():
+    """The half-edges on feature edges and the check that every feature edge is a mesh edge, against
+    `np.isin` both ways, on random faces (repeated corners, duplicate and non-edge feature pairs)."""
+    from qemjax._mesh.topology import edge_keys, feature_edges_with_faces, half_edges
+
+    rng = np.random.default_rng(1)
+    for t in range(300):
+        n, m = int(rng.integers(3, 60)), int(rng.integers(1, 120))
+        F = rng.integers(0, n, (m, 3))
+        he = half_edges(F)
+        feat = he[rng.choice(len(he), rng.integers(0, min(10, len(he)) + 1))]
+        if t % 2:
+            feat = np.concatenate([feat, feat[:1], rng.integers(0, n, (2, 2))])
+        keys, fk = edge_keys(he[:, 0], he[:, 1], n), edge_keys(feat[:, 0], feat[:, 1], n)
+        missing = ~np.isin(fk, keys)
+        if missing.any():
+            with pytest.raises(ValueError, match=f"contains {int(missing.sum())} pairs"):
+                feature_edges_with_faces(F, n, feat)
+            continue
+        e, f = feature_edges_with_faces(F, n, feat)
+        idx = np.flatnonzero(np.isin(keys, fk))
+        assert np.array_equal(e, he[idx]) and np.array_equal(f, idx // 3)

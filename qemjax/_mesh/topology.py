@@ -115,8 +115,15 @@ def feature_edges_with_faces(F: np.ndarray, n: int, feat: np.ndarray) -> tuple[n
     he = half_edges(F)
     keys = edge_keys(he[:, 0], he[:, 1], n)
     fk = edge_keys(feat[:, 0], feat[:, 1], n)
-    hit = np.isin(keys, fk)
-    missing = ~np.isin(fk, keys)
+    # np.isin both ways, by one binary search of the half-edges among the (few) distinct feature keys
+    fs = np.unique(fk)
+    hit = np.zeros(len(keys), bool)
+    found = np.zeros(len(fs), bool)
+    if len(fs):
+        at = np.minimum(np.searchsorted(fs, keys), len(fs) - 1)
+        hit = fs[at] == keys
+        found[at[hit]] = True
+    missing = ~found[np.searchsorted(fs, fk)] if len(fk) else np.zeros(0, bool)
     if missing.any():
         raise ValueError(f"feature_edges contains {int(missing.sum())} pairs that are not mesh edges, "
                          f"first: {feat[np.flatnonzero(missing)[0]].tolist()}")

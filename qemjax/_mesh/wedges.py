@@ -397,12 +397,19 @@ def seam_edges(F: np.ndarray, C: np.ndarray) -> np.ndarray:
     swap = u > v
     lo, hi = np.where(swap, v, u), np.where(swap, u, v)
     wlo, whi = np.where(swap, wv, wu), np.where(swap, wu, wv)
-    order = np.lexsort((whi, wlo, hi, lo))
-    lo, hi, wlo, whi = lo[order], hi[order], wlo[order], whi[order]
-    same_edge = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    # by (lo, hi, wlo, whi) as two int64 keys (the order of a four-key lexsort, at half its passes)
+    n, w = int(max(hi.max(initial=0), lo.max(initial=0))) + 1, int(max(whi.max(initial=0), wlo.max(initial=0))) + 1
+    ek = lo.astype(np.int64) * n + hi
+    order = np.lexsort((wlo.astype(np.int64) * w + whi, ek))
+    lo, hi, wlo, whi, ek = lo[order], hi[order], wlo[order], whi[order], ek[order]
+    same_edge = ek[1:] == ek[:-1]
     differ = same_edge & ((wlo[1:] != wlo[:-1]) | (whi[1:] != whi[:-1]))
     E = np.stack([lo[1:][differ], hi[1:][differ]], 1)
-    return np.unique(E, axis=0) if len(E) else np.zeros((0, 2), np.int64)
+    if not len(E):
+        return np.zeros((0, 2), np.int64)
+    first = np.ones(len(E), bool)  # sorted already: np.unique(E, axis=0) keeps each run's first row
+    first[1:] = np.any(E[1:] != E[:-1], axis=1)
+    return E[first]
 
 
 def seam_count(E: np.ndarray) -> int:
