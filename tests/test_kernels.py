@@ -536,3 +536,37 @@ def test_a_kernel_called_inside_a_trace_is_inlined(jax_flag, monkeypatch):
     for outer in (lambda y: double(y) + 1, lambda y: double(jnp.ones(2))):  # inline: no nested jit call
         prims = {e.primitive.name for e in jax.make_jaxpr(outer)(x).eqns}
         assert "mul" in prims and not prims & {"pjit", "jit"}, prims
+
+
+def test_a_kernels_first_call_from_two_threads(monkeypatch):
+    """Two threads making a kernel's first call together both get its result (the wrapper publishes its
+    compiled call and its trace test at once)."""
+    import threading
+    import time as _time
+
+    import qemjax._kernels as K
+
+    real = K._trace_flag
+
+    def slow():  # widen the window between compiling and publishing
+        _time.sleep(0.05)
+        return real()
+    monkeypatch.setattr(K, "_trace_flag", slow)
+
+    @K.kernel
+    def triple(x):
+        return 3 * x
+
+    out, errors = [], []
+
+    def call():
+        try:
+            out.append(np.asarray(triple(jnp.arange(4.0))))
+        except Exception as exc:  # noqa: BLE001 (any failure is the finding)
+            errors.append(repr(exc))
+    threads = [threading.Thread(target=call) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors and len(out) == 2 and all(np.array_equal(o, 3 * np.arange(4.0)) for o in out)

@@ -92,6 +92,10 @@ def test_under_gate_is_numpys_threshold(gate, free):
         ref = valid & (key <= np.maximum(thr, free_cost * scale[E[:, 0]]))
     got = glue.under_gate(key, valid, thr, E, free_at)
     assert np.array_equal(got, ref) and 0 < ref.sum() < valid.sum()
+    if free != "one part":  # a NaN threshold: np.maximum is NaN, and nothing passes
+        nan = np.float32(np.nan) * np.float32(gate)
+        ref = valid & (key <= np.maximum(nan, free_cost * scale[E[:, 0]]))
+        assert np.array_equal(glue.under_gate(key, valid, nan, E, free_at), ref) and not ref.any()
 
 
 @pytest.mark.parametrize("need", [0, 3, 40, 10**6])

@@ -160,7 +160,7 @@ def attribute_state(V: np.ndarray, F: np.ndarray, S: np.ndarray, w: np.ndarray) 
     g, d = face_fields(V[F], S)
     from . import attributes_jit  # here: importing the cost models does not need numba
 
-    if m <= attributes_jit.MAX_CHANNELS and len(F):  # the same sums, compiled
+    if 1 <= m <= attributes_jit.MAX_CHANNELS and len(F):  # the same sums, compiled
         return attributes_jit.corner_sums(np.ascontiguousarray(F, np.int64), np.ascontiguousarray(g, np.float64),
                                           np.ascontiguousarray(S, np.float64), np.ascontiguousarray(w, np.float64), n)
     gg = np.einsum("fji,fjk->fik", g, g)  # Σ_j g gᵀ per face

@@ -31,14 +31,14 @@ def kernel(fn=None, **jit_kwargs):
 
     @functools.wraps(fn)
     def call(*args, **kwargs):
-        if not compiled:
+        if not compiled:  # (one append of both: a thread's first call beside another's sees both or neither)
             _cache.ensure_default()  # JAX's persistent compilation cache, before the first compilation
             opts = CPU_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
-            compiled.append(jax.jit(fn, compiler_options=opts, **jit_kwargs))
-            compiled.append(_tracing())
-        if compiled[1](args, kwargs):
+            compiled.append((jax.jit(fn, compiler_options=opts, **jit_kwargs), _tracing()))
+        jitted, tracing = compiled[0]
+        if tracing(args, kwargs):
             return fn(*args, **kwargs)  # inside another kernel's trace: inline (options are top-level only)
-        return compiled[0](*args, **kwargs)
+        return jitted(*args, **kwargs)
     return call
 
 

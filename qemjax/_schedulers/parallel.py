@@ -96,7 +96,9 @@ class RoundState:
     bad: np.ndarray = None
     changed: np.ndarray = None
     edges_next: tuple | None = None
-    next_price: tuple | None = None  # (the stale rows of edges_next, their price started) when it is known
+    # (the stale rows of edges_next, a function giving their price started with the last round's merge) when it
+    # is known: a `Priced` (`cost`), or on a `fast` run the kernel's raw (5 + p, ≥ K) output (`carry`)
+    next_price: tuple | None = None
 
 
 def _with_extra_pairs(E, ecount, extra_pairs, n):
@@ -346,8 +348,7 @@ class _Run:
             seam = self.wedges.constrain(self.faces, self.VQ, _take(E, d), x, c)
             st.x[d], st.cost[d] = x, c
             st.bad[d[seam]] = outcome.SEAM
-            ec = ecount[d]  # their candidate test again (`candidates`)
-            valid[d] = (c <= self.limit) & (st.bad[d] == 0) & (ec <= need) & (ec >= 1) & (ec <= 2)
+            valid[d] = self.candidates_of(c, st.bad[d], ecount[d], need)  # their candidate test again
         self.timer.add("kernels_s", t1 - t0)
         self.timer.add("topology_s", time.perf_counter() - t1)
         return st, valid
@@ -438,10 +439,14 @@ class _Run:
         """(P,) bool: the pairs that may contract this round (not known invalid, within max_error and
         the face budget; manifold mode: edges with one or two faces). ``need`` and ``max_cost`` may be
         given per pair (a batch's copies); max_cost None: the options'."""
+        return self.candidates_of(st.cost, st.bad, st.ecount, need, max_cost)
+
+    def candidates_of(self, cost, bad, ecount, need, max_cost=None) -> np.ndarray:
+        """`candidates` of pairs given by their costs, known rules and face counts."""
         limit = self.options.max_cost if max_cost is None else max_cost
-        valid = (st.cost <= limit) & (st.bad == 0) & (st.ecount <= need)
+        valid = (cost <= limit) & (bad == 0) & (ecount <= need)
         if self.manifold:
-            valid &= (st.ecount >= 1) & (st.ecount <= 2)
+            valid &= (ecount >= 1) & (ecount <= 2)
         return valid
 
     def select(self, st: RoundState, need: int, valid: np.ndarray):
@@ -585,9 +590,7 @@ class _Run:
         self.branches += np.bincount(st.branch[acc], minlength=len(self.branches))
         _locks.carry(self.weights, a, b)
         self.max_cost_used = max(self.max_cost_used, float(st.cost[acc].max()))
-        self.history.append((self.rounds - 1, (a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64))))
-        if st.parts.shape[1]:
-            self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
+        self.record(st, acc, a.copy(), b.copy(), xs, st.cost[acc].astype(np.float64))
         # pairs whose faces change get another chance: those at the 1-rings that selection locked, unless
         # the target cut the set short
         if self.compiled:
@@ -614,9 +617,7 @@ class _Run:
             d = np.flatnonzero(stale)
             self.VQd, merged, priced = start_step(self.model, self.VQd, P, xs, _take(E, d), self.params,
                                                   self.merge_chunk, _holding(self.price_sizes, len(d)))
-            st.next_price = (d, priced)
-            self.VQ[a, :3] = xs
-            self.merged = (a, merged)  # the states reach VQ when the price is waited for (`settle`)
+            self.started(st, a, xs, d, merged, priced)
         else:
             rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
             put_rows(self.VQ, a, rows)
@@ -646,9 +647,7 @@ class _Run:
         faces.count -= len(dead)
         self.dead.append(dead)
         self.max_cost_used = max(self.max_cost_used, top)
-        self.history.append((self.rounds - 1, (a, b, xs, costs)))
-        if st.parts.shape[1]:
-            self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
+        self.record(st, acc, a, b, xs, costs)
         if len(one[0]):
             self.VQd, merged, priced = step_one(self.model, self.VQd, *one, self.params, len(acc))
         else:
@@ -656,11 +655,23 @@ class _Run:
             self.VQd, merged, joined = start_step(self.model, self.VQd, np.stack([a, b], 1), xs, _take(E, d),
                                                   self.params, self.merge_chunk, _holding(self.price_sizes, len(d)))
             priced = lambda: _raw(joined())  # noqa: E731
+        self.started(st, a, xs, d, merged, priced)
+        self.faces_per_round.append(faces.count)
+        self.timer.add("contract_s", time.perf_counter() - t0)
+
+    def record(self, st: RoundState, acc, a, b, xs, costs):
+        """The round's contractions ``acc`` (kept a, removed b, at xs, costs float64) into the history, with
+        their cost parts and keys for a model with parts."""
+        self.history.append((self.rounds - 1, (a, b, xs, costs)))
+        if st.parts.shape[1]:
+            self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
+
+    def started(self, st: RoundState, a, xs, d, merged, priced):
+        """After a round's one device call (fused): the kept vertices' positions into VQ, their merged states
+        pending until `settle`, and the next round's price of its stale rows d pending in ``st``."""
         st.next_price = (d, priced)
         self.VQ[a, :3] = xs
         self.merged = (a, merged)  # the states reach VQ when the price is waited for (`settle`)
-        self.faces_per_round.append(faces.count)
-        self.timer.add("contract_s", time.perf_counter() - t0)
 
     def contract_numpy(self, st: RoundState, acc, xs, found):
         """The faces after the accepted pairs ``acc`` (placed at xs) contract, from what validation

@@ -95,7 +95,7 @@ def under_gate(key, valid, thr, E, free_v):
     else:
         for i in range(P):
             f = free_v[E[i, 0]]
-            t = thr if thr >= f else f
+            t = thr if (thr >= f or thr != thr) else f  # np.maximum: the larger, NaN if either is
             cand[i] = valid[i] and key[i] <= t
     return cand
 
@@ -159,6 +159,8 @@ def contract(E, ecount, deg, bad, touched, acc, apex, x, cost, branch, counts, V
         c64[s] = cost[i]
         if cost[i] > top:
             top = cost[i]
+        if branch[i] < 0 or branch[i] >= len(counts):
+            raise ValueError("a price's branch is not one of the model's branches")
         counts[branch[i]] += 1
     end, dead = contract_faces(a, b, F, alive, cnt, off, pool, end)
     E3, c3, keep, d2, s3 = contract_edges(E, ecount, deg, a, b, apex, label)

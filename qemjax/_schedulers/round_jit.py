@@ -357,8 +357,8 @@ def contract_edges(E, ecount, deg, a, b, apex, label):
     vanished face and gains (b, c)'s others), b's other pairs move to a, the contracted pair goes.
     ``label`` (n,) int32 scratch, all -1 (left so). Returns (E', ecount', keep, degree', stale'): the
     pairs that stay in their order, which old rows they continue, the degrees after, and which of them
-    are at a kept vertex (their cost is stale). Only the rows at an endpoint are copied aside: E and
-    ecount are read once more for the pairs that stay (no full copies: a 5.5 M-face mesh's memory).
+    are at a kept vertex (their cost is stale). The rows at an endpoint are listed (in an int64 array as
+    long as the pairs, of which about a third is written) and their new values copied aside.
 
     The pairs are passed over twice, each time without a branch (about a third of them are at an endpoint in
     a round, in no pattern a branch predictor learns): once to list the rows at an endpoint, once to copy
@@ -368,7 +368,8 @@ def contract_edges(E, ecount, deg, a, b, apex, label):
     for s in range(S):
         label[a[s]] = s
         label[b[s]] = S + s
-    rows = np.empty(P + 1, np.int64)  # the rows at an endpoint (ascending), and what becomes of each
+    rows = np.empty(P, np.int64)  # the rows at an endpoint (ascending), and what becomes of each (row i is
+    # written at nr <= i before nr may move on: P entries hold them)
     nr = 0
     for i in range(P):
         rows[nr] = i
