@@ -51,6 +51,33 @@ def test_rows_reach_the_file_batch_by_batch(ball, tmp_path, monkeypatch, ext):
     assert list(sw.read_table(out)["cell"]) == list(df["cell"])
 
 
+@pytest.mark.parametrize("ext", [".csv", ".parquet"])
+def test_ctrl_c_during_a_write_still_keeps_every_finished_row(ball, tmp_path, monkeypatch, ext):
+    """A Ctrl-C that lands while the table is being written (the write is lost: it goes to a temporary
+    file first) leaves those rows waiting, and the interrupted sweep's last write keeps them all."""
+    if ext == ".parquet":
+        pytest.importorskip("pyarrow")
+    real_text, real_table = sw.write_text, sw.write_table
+    calls = []
+
+    def interrupted_once(real):
+        def write(*a):
+            calls.append(1)
+            if len(calls) == 2:
+                raise KeyboardInterrupt  # the second write is where the signal lands
+            return real(*a)
+        return write
+    monkeypatch.setattr(sw, "write_text", interrupted_once(real_text))
+    monkeypatch.setattr(sw, "write_table", interrupted_once(real_table))
+    monkeypatch.setattr(sw, "BATCH_CELLS", 2)  # 6 cells: a write after each batch of 2 ...
+    monkeypatch.setattr(sw, "SAVE_EVERY_S", 1e9)  # ... and none within a batch
+    out = tmp_path / f"s{ext}"
+    with pytest.raises(sw.SweepInterrupted, match="4 of 6 cells finished this run"):
+        qemjax.sweep({"ball": ball}, {"boundary_weight": [1.0, 2.0, 3.0]}, [0.5, 40], metrics=False, out=out,
+                     progress=False)
+    assert len(sw.read_table(out)) == 4  # every finished row, though the write that held the last two failed
+
+
 def test_rows_reach_the_file_task_by_task_on_an_executor(ball, tmp_path, monkeypatch):
     seen = _saves(monkeypatch)
     monkeypatch.setattr(sw, "SAVE_EVERY_S", 0.0)  # tiny cells: written at each wake-up, not once a second

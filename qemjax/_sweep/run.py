@@ -497,14 +497,16 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         wait = SAVE_EVERY_S - (time.perf_counter() - saved[0])
         if not force and wait > 0:
             return wait
-        saved[:] = time.perf_counter(), len(ran)
+        now, n = time.perf_counter(), len(ran)
         if _format(out) == "csv":  # rows already in the file: as they were, byte for byte
             order = other_keys + [k for k in keys if k in rows]
             cols = list(dict.fromkeys([*header, *(c for k in order for c in texts[k])]))
             write_text(cols, [texts[k] for k in order], out)
-            return
-        ours = frame([rows[k] for k in keys if k in rows])
-        write_table(pd.concat([others, ours], ignore_index=True) if len(others) else ours, out)
+        else:
+            ours = frame([rows[k] for k in keys if k in rows])
+            write_table(pd.concat([others, ours], ignore_index=True) if len(others) else ours, out)
+        # marked written only once written: a Ctrl-C during the write leaves them waiting, for the last save
+        saved[:] = now, n
 
     faces = {name: len(loaded[name][1]) for name in loaded}
     size = batch_size if batch_size is not None or submit is None else EXECUTOR_BATCH
