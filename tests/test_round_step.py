@@ -27,9 +27,9 @@ def _spy(monkeypatch):
     calls = []
     step, one = parallel.start_step, parallel.step_one
 
-    def spy(model, VSd, P, x, Pn, params, size, price_size):
+    def spy(model, VSd, P, x, Pn, params, size, price_size, **kw):
         calls.append((len(P), len(Pn), size, price_size))
-        return step(model, VSd, P, x, Pn, params, size, price_size)
+        return step(model, VSd, P, x, Pn, params, size, price_size, **kw)
 
     def spy_one(model, VSd, rows_at, P, x, Pn, params, K):
         calls.append((K, int(np.count_nonzero(Pn[:, 0] != Pn[:, 1])), len(P), len(Pn)))
@@ -78,6 +78,12 @@ def test_step_gives_the_separate_calls_values(method, K, J):
     got = priced()  # (waits once)
     for name in ("x", "cost", "branch", "parts"):
         assert np.array_equal(getattr(got, name), getattr(priced_ref, name), equal_nan=True), name
+    # the same price as the kernel's columns (`raw`: what a fast run's carry reads), every piece joined
+    _, _, raw = common.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024, raw=True)
+    out = raw()
+    assert out.shape == (5 + len(model.parts), J)
+    assert np.array_equal(out[:3].T, got.x) and np.array_equal(out[3], got.cost, equal_nan=True)
+    assert np.array_equal(out[4].astype(np.int8), got.branch) and np.array_equal(out[5:], got.parts, equal_nan=True)
 
 
 RUNS = {

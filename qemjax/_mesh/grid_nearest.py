@@ -178,6 +178,14 @@ def _build(X, G, lo, h, dims):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _face_d2(px, py, pz, X, G, flat, f):
+    """Squared distance from p to face f of G: its edges' for a sliver (``flat``), else `closest_d2`."""
+    if flat[f]:
+        return _edges_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
+    return closest_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _gap(x, a, b):
     """Distance from x to the interval [a, b] (0 inside)."""
     return a - x if x < a else (x - b if x > b else 0.0)
@@ -211,10 +219,7 @@ def _query(P, X, G, B, flat, lo, h, dims, start, faces, seed):
         if len(seed) and seed[p] >= 0:  # a face known to be near: the cubes and boxes beyond it are passed over
             f = seed[p]
             mark[f] = p
-            if flat[f]:
-                bd2 = _edges_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
-            else:
-                bd2 = closest_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
+            bd2 = _face_d2(px, py, pz, X, G, flat, f)
             bf = f
             lim2 = (np.sqrt(bd2) + slack) ** 2
         for r in range(rmax + 1):
@@ -245,10 +250,7 @@ def _query(P, X, G, B, flat, lo, h, dims, start, faces, seed):
                             bz = _gap(pz, B[f, 2], B[f, 5])
                             if bx * bx + by * by + bz * bz > lim2:
                                 continue
-                            if flat[f]:
-                                d2 = _edges_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
-                            else:
-                                d2 = closest_d2(px, py, pz, X, G[f, 0], G[f, 1], G[f, 2])
+                            d2 = _face_d2(px, py, pz, X, G, flat, f)
                             if d2 < bd2 or (d2 == bd2 and f < bf):
                                 bf, bd2 = f, d2
                                 lim2 = (np.sqrt(bd2) + slack) ** 2

@@ -53,7 +53,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
         P, w = sampled
     if len(P) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
-    _, d = nearest((X - centre) / unit, G, P, None if sampled is None else seeds)
+    _, d = nearest((X - centre) / unit, G, P, seeds)
     d_max = float(d.max()) * unit
     d_rms = float(np.sqrt(np.sum(w * d * d) / np.sum(w))) * unit
     return dict(distance_max=d_max, distance_rms=d_rms, distance_max_rel=d_max / diag if diag > 0 else None,

@@ -160,7 +160,8 @@ def _step(merge, price, VS, rows_at, P, x, merge_params, Pn, price_params):
     return VS, merged, price(VS, Pn, price_params)
 
 
-def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, size: int, price_size: int):
+def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, size: int, price_size: int,
+               raw: bool = False):
     """A round's device work in one call (`fuses`): contract pairs P (K,2) at x (K,3), i.e. write
     [x, merged state] into their kept vertices' rows, and start pricing the next round's stale pairs Pn
     (J,2) on the new rows. The merges go in pieces of ``size`` rows, one call each, and the first
@@ -169,7 +170,8 @@ def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params,
     one `_step` per size. A round's kept and removed vertices are all distinct, so the merges read the
     same rows whatever their order, and the values are those of `start_merge`, `set_rows` and
     `start_price`. Returns (the new device rows (VSd is donated), a function giving the (K, width) merged
-    states, and one giving the `Priced` of Pn)."""
+    states, and one giving the `Priced` of Pn, or with ``raw`` its (5 + p, J) columns as the kernel gives
+    them, as `step_one` does)."""
     Pi, Pn = P.astype(np.int32), Pn.astype(np.int32)
     pieces = list(zip(chunks(Pi, size=size), chunks(x, size=size), chunks(Pi[:, 0], fill=len(VSd), size=size)))
     head, idle = pad_rows(Pn[:price_size], price_size), np.zeros((price_size, 2), np.int32)
@@ -181,8 +183,9 @@ def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params,
         merged.append(m)
     outs = [first] + ([model.price(VSd, part, _params(params, part)) for _, part in chunks(Pn[price_size:])]
                       if len(Pn) > price_size else [])
-    return (VSd, lambda: np.concatenate([np.asarray(o) for o in merged])[: len(P)],
-            _joined(outs, len(Pn), 5 + len(model.parts)))
+    priced = ((lambda: np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(Pn)]) if raw
+              else _joined(outs, len(Pn), 5 + len(model.parts)))
+    return VSd, lambda: np.concatenate([np.asarray(o) for o in merged])[: len(P)], priced
 
 
 def step_one(model, VSd, rows_at: np.ndarray, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, K: int):

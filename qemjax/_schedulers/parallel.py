@@ -144,11 +144,6 @@ def _accepted(E, found, take):
     return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
 
 
-def _raw(pr) -> np.ndarray:
-    """A `Priced` of K pairs as the device gives it: (5 + p, K), [x (3), cost, branch, parts] per column."""
-    return np.concatenate([pr.x.T, pr.cost[None], pr.branch[None].astype(pr.cost.dtype), pr.parts])
-
-
 def _ring_vertices(faces: FaceLists, verts, n):
     """(n,) bool: ``verts`` and every vertex sharing a live face with one."""
     t = np.zeros(n, bool)
@@ -344,11 +339,8 @@ class _Run:
             kept, d, out, prev.x, prev.cost, prev.branch, prev.parts, prev.bad, E, ecount, self.n, self.limit,
             need, self.manifold)
         if self.wedges is not None:  # stale pairs at seam vertices: placed at an allowed endpoint (as `cost`)
-            x, c = st.x[d], st.cost[d].copy()
-            seam = self.wedges.constrain(self.faces, self.VQ, _take(E, d), x, c)
-            st.x[d], st.cost[d] = x, c
-            st.bad[d[seam]] = outcome.SEAM
-            valid[d] = self.candidates_of(c, st.bad[d], ecount[d], need)  # their candidate test again
+            self.place_at_seams(st, d)
+            valid[d] = self.candidates_of(st.cost[d], st.bad[d], ecount[d], need)  # their candidate test again
         self.timer.add("kernels_s", t1 - t0)
         self.timer.add("topology_s", time.perf_counter() - t1)
         return st, valid
@@ -396,16 +388,20 @@ class _Run:
             if len(parts):  # a model with cost parts
                 put_rows(st.parts, d, np.ascontiguousarray(parts.T))
         if self.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
-            d = np.arange(len(st.E)) if prev is None else d
-            x, c = st.x[d], st.cost[d].copy()
-            seam = self.wedges.constrain(self.faces, self.VQ, _take(st.E, d), x, c)
-            st.x[d], st.cost[d] = x, c
-            st.bad[d[seam]] = outcome.SEAM
+            self.place_at_seams(st, np.arange(len(st.E)) if prev is None else d)
         if self.locks is not None:  # pairs of two locked vertices never contract
             st.bad[_locks.both_locked(self.locks, st.E)] = outcome.LOCKED
             if self.wedges is not None:  # a seam placement never moves a locked vertex
                 _locks.pin(self.locks, self.VQ, st.E, st.x)
         self.timer.add("kernels_s", time.perf_counter() - t0)
+
+    def place_at_seams(self, st: RoundState, d):
+        """Newly priced pairs d at seam vertices (kept attributes): placed at an allowed endpoint, and marked
+        `outcome.SEAM` where none is (`wedges.Tracker.constrain`)."""
+        x, c = st.x[d], st.cost[d].copy()
+        seam = self.wedges.constrain(self.faces, self.VQ, _take(st.E, d), x, c)
+        st.x[d], st.cost[d] = x, c
+        st.bad[d[seam]] = outcome.SEAM
 
     def settle(self):
         """The last round's merged vertex states into the host rows VQ (`contract` leaves them on the device
@@ -636,9 +632,10 @@ class _Run:
         (one piece: `step_one`; else `start_step`)."""
         t0 = time.perf_counter()
         faces = self.faces
-        touched = locked if acc.size == n_sel else _ring_vertices(faces, _take(st.E, acc).reshape(-1), self.n)
+        P = _take(st.E, acc)
+        touched = self.touched(locked, acc, n_sel, P)
         if self.wedges is not None:  # the corners' wedges, before the faces are relinked
-            self.wedges.contract_many(faces, self.VQ, _take(st.E, acc), _take(st.x, acc))
+            self.wedges.contract_many(faces, self.VQ, P, _take(st.x, acc))
         faces.reserve(int(room))  # the kept vertices' new runs
         a, b, xs, costs, top, faces.end, dead, st.edges_next, d, one = round_glue_jit.contract(
             st.E, st.ecount, st.deg, st.bad, touched, acc, apex, st.x, st.cost, st.branch, self.branches, self.V3,
@@ -651,10 +648,8 @@ class _Run:
         if len(one[0]):
             self.VQd, merged, priced = step_one(self.model, self.VQd, *one, self.params, len(acc))
         else:
-            E = st.edges_next[0]
-            self.VQd, merged, joined = start_step(self.model, self.VQd, np.stack([a, b], 1), xs, _take(E, d),
-                                                  self.params, self.merge_chunk, _holding(self.price_sizes, len(d)))
-            priced = lambda: _raw(joined())  # noqa: E731
+            self.VQd, merged, priced = start_step(self.model, self.VQd, P, xs, _take(st.edges_next[0], d), self.params,
+                                                  self.merge_chunk, _holding(self.price_sizes, len(d)), raw=True)
         self.started(st, a, xs, d, merged, priced)
         self.faces_per_round.append(faces.count)
         self.timer.add("contract_s", time.perf_counter() - t0)

@@ -166,15 +166,8 @@ def contract(E, ecount, deg, bad, touched, acc, apex, x, cost, branch, counts, V
     E3, c3, keep, d2, s3 = contract_edges(E, ecount, deg, a, b, apex, label)
     for s in range(S):
         V3[a[s], 0], V3[a[s], 1], V3[a[s], 2] = xs[s, 0], xs[s, 1], xs[s, 2]
-    nd = 0
-    for i in range(len(s3)):
-        nd += s3[i]
-    d = np.empty(nd, np.int64)
-    j = 0
-    for i in range(len(s3)):
-        if s3[i]:
-            d[j] = i
-            j += 1
+    d = np.flatnonzero(s3)
+    nd = len(d)
     one = S <= size and nd <= price_size
     rows = np.full(size if one else 0, n_rows, np.int32)
     pp = np.zeros((size if one else 0, 2), np.int32)
