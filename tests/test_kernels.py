@@ -570,3 +570,35 @@ def test_a_kernels_first_call_from_two_threads(monkeypatch):
     for t in threads:
         t.join()
     assert not errors and len(out) == 2 and all(np.array_equal(o, 3 * np.arange(4.0)) for o in out)
+
+
+def test_to_host_polls_then_gives_the_array(monkeypatch):
+    """`_kernels.host.to_host`: the values of np.asarray (device arrays, numpy arrays); a result not yet
+    ready is polled until it is, and past `SPIN_S` the wait blocks (no more polls)."""
+    from qemjax._kernels import host
+
+    x = jnp.arange(12.0, dtype=jnp.float32).reshape(3, 4) * 0.1
+    assert np.array_equal(host.to_host(x), np.asarray(x)) and host.to_host(x).dtype == np.float32
+    a = np.arange(5)
+    assert host.to_host(a) is a
+
+    class Pending:
+        def __init__(self, polls, size=3):
+            self.polls, self.left, self.size = 0, polls, size
+
+        def is_ready(self):
+            self.polls += 1
+            self.left -= 1
+            return self.left < 0
+
+        def __array__(self, dtype=None, copy=None):
+            self.read_after = self.polls
+            return np.ones(3)
+
+    p = Pending(50)
+    assert np.array_equal(host.to_host(p), np.ones(3)) and p.read_after == 51  # read once ready
+    p = Pending(50, size=host.POLL_SIZE + 1)
+    assert np.array_equal(host.to_host(p), np.ones(3)) and p.read_after == 0  # large: not polled
+    monkeypatch.setattr(host, "SPIN_S", 0.0)
+    p = Pending(10 ** 9)
+    assert np.array_equal(host.to_host(p), np.ones(3)) and p.read_after <= 2  # no time to poll: read (blocks)

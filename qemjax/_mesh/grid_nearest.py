@@ -308,7 +308,14 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
         return f, np.sqrt(d2)
     step = -(-len(P) // k)
     blocks = [(P[i:i + step], seed[i:i + step]) for i in range(0, len(P), step)]
-    parts = list(_pool().map(lambda b: _query(b[0], X, G, B, flat, lo, h, dims, start, faces, b[1]), blocks))
+
+    def query(b):
+        return _query(b[0], X, G, B, flat, lo, h, dims, start, faces, b[1])
+    if len(blocks) <= _threads():  # a block a thread: this one takes the first, not handing it off and waiting
+        rest = [_pool().submit(query, b) for b in blocks[1:]]
+        parts = [query(blocks[0])] + [r.result() for r in rest]
+    else:
+        parts = list(_pool().map(query, blocks))
     return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
 
 

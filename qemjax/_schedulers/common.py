@@ -20,6 +20,7 @@ from .._kernels.batching import piece_sizes
 from .._kernels.batching import set_rows as set_rows
 from .._costs import ring
 from .._kernels import flips, kernel
+from .._kernels.host import to_host
 from .._options import Options as Options
 
 RING_BLOCK = 1 << 16  # ring models gather the faces of this many pairs at a time (bounded memory)
@@ -118,7 +119,7 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
     def ring_result():
         pr = _priced(len(P), rows)
         for sel, o in pieces:
-            _put(pr, sel, np.asarray(o)[:, : len(sel)])
+            _put(pr, sel, to_host(o)[:, : len(sel)])
         return pr
     return ring_result
 
@@ -130,10 +131,10 @@ def _joined(outs: list, K: int, rows: int):
     (a 5.5 M-face mesh's first round: 166 MB less held, and no second copy of the pieces while they are
     joined)."""
     def result():
-        pr = _priced(K, rows, np.asarray(outs[0]).dtype if outs else DTYPE)
+        pr = _priced(K, rows, to_host(outs[0]).dtype if outs else DTYPE)
         s = 0
         for i in range(len(outs)):
-            o = np.asarray(outs[i])[:, : K - s]
+            o = to_host(outs[i])[:, : K - s]
             outs[i] = None
             _put(pr, slice(s, s + o.shape[1]), o)
             s += o.shape[1]
@@ -183,9 +184,9 @@ def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params,
         merged.append(m)
     outs = [first] + ([model.price(VSd, part, _params(params, part)) for _, part in chunks(Pn[price_size:])]
                       if len(Pn) > price_size else [])
-    priced = ((lambda: np.concatenate([np.asarray(o) for o in outs], 1)[:, : len(Pn)]) if raw
+    priced = ((lambda: np.concatenate([to_host(o) for o in outs], 1)[:, : len(Pn)]) if raw
               else _joined(outs, len(Pn), 5 + len(model.parts)))
-    return VSd, lambda: np.concatenate([np.asarray(o) for o in merged])[: len(P)], priced
+    return VSd, lambda: np.concatenate([to_host(o) for o in merged])[: len(P)], priced
 
 
 def step_one(model, VSd, rows_at: np.ndarray, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, K: int):
@@ -196,7 +197,7 @@ def step_one(model, VSd, rows_at: np.ndarray, P: np.ndarray, x: np.ndarray, Pn: 
     gives it)."""
     VSd, merged, priced = _step(model.merge_kernel, model.price_kernel, VSd, rows_at, P, x, _params(params, P), Pn,
                                 _params(params, Pn))
-    return VSd, (lambda: np.asarray(merged)[:K]), (lambda: np.asarray(priced))
+    return VSd, (lambda: to_host(merged)[:K]), (lambda: to_host(priced))
 
 
 def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: int | None = None):
@@ -204,7 +205,7 @@ def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: in
     returns a function that waits for it. ``size``: one fixed piece shape (else `chunks`' shapes)."""
     outs = [model.merge(VSd, pp, xx, _params(params, pp)) for (_, pp), (_, xx)
             in zip(chunks(P.astype(np.int32), size=size), chunks(x, size=size))]
-    return lambda: np.concatenate([np.asarray(o) for o in outs])[: len(P)]
+    return lambda: np.concatenate([to_host(o) for o in outs])[: len(P)]
 
 
 def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
@@ -234,7 +235,7 @@ def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
         start = end
 
     def result():
-        bad = np.concatenate([np.asarray(o) for o in outs])[:k] if len(outs) > 1 else np.asarray(outs[0])[:k]
+        bad = np.concatenate([to_host(o) for o in outs])[:k] if len(outs) > 1 else to_host(outs[0])[:k]
         res = np.zeros(S, bool)
         res[owner[bad]] = True
         return res
