@@ -26,6 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
+from .bounds_jit import face_boxes, used_bounds
 from .pointtri import _FLAT_REL
 
 CUBE_EDGE = 0.5  # the cubes' side at first, times the triangles' median edge
@@ -282,8 +283,7 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
     seed = np.ascontiguousarray(seed, np.int32 if len(G) < 2**31 else np.int64)
     if len(G) == 0:
         raise ValueError("nearest: no triangles")
-    used = X[np.unique(G)]
-    lo, hi = used.min(0), used.max(0)
+    lo, hi = used_bounds(X, G)
     ext = np.maximum(hi - lo, 1e-300)
     edges = np.sqrt(np.sum((X[G[:, [1, 2, 0]]] - X[G]) ** 2, axis=2)).ravel()
     h = max(CUBE_EDGE * float(np.median(edges)), float(ext.max()) * 1e-6)
@@ -294,9 +294,7 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
             break
         h *= 1.25
     start, faces = _build(X, G, lo, h, dims)
-    T = X[G]  # (j,3,3): each triangle's bounding box, (min xyz, max xyz)
-    B = np.ascontiguousarray(np.concatenate([T.min(1), T.max(1)], 1))
-    del T
+    B = face_boxes(X, G)  # each triangle's bounding box, (min xyz, max xyz)
     flat = slivers(X, G)
     # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
     # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried

@@ -37,14 +37,16 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
     the input's unit frame, weights), the same arrays as made here; ``seeds``: a face of G near each
     sample (the re-fit's last attachment), where each search starts (the same distances, found sooner:
     `grid_nearest.nearest`)."""
-    from .._mesh.grid_nearest import nearest  # numba, lazily
+    from .._mesh.bounds_jit import row_bounds  # numba, lazily
+    from .._mesh.grid_nearest import nearest
     from .refit import samples, unit_frame
 
     t = time.perf_counter()
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
     X, G = np.asarray(X, np.float64), np.asarray(G, np.int64)
     centre, unit = unit_frame(V)  # as the re-fit: squared distances stay finite at any scale
-    diag = float(np.sqrt(np.sum((V.max(0) - V.min(0)) ** 2))) if len(V) else 0.0
+    lo, hi = row_bounds(V) if len(V) else (np.zeros(3), np.zeros(3))
+    diag = float(np.sqrt(np.sum((hi - lo) ** 2)))
     if not (unit > 0 and np.isfinite(unit)) or len(V) == 0 or len(G) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
     if sampled is None:

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from .._mesh.arrays import face_normals
+from .._mesh.bounds_jit import row_bounds
 from .._mesh.grid_nearest import nearest, slivers
 from .._mesh.pointtri import segment_closest
 from .._mesh.spd_solve import solve_spd
@@ -168,7 +169,7 @@ def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
 def unit_frame(V: np.ndarray) -> tuple[np.ndarray, float]:
     """(centre (3,), unit): the centre of V's bounding box and its largest extent (no vertices: 0 and 1).
     Work in this frame keeps squared distances and areas finite at any scale (1e-100 or 1e100 mesh units)."""
-    lo, hi = (V.min(0), V.max(0)) if len(V) else (np.zeros(3), np.ones(3))
+    lo, hi = row_bounds(V) if len(V) else (np.zeros(3), np.ones(3))
     return 0.5 * (lo + hi), float(np.max(hi - lo))
 
 
