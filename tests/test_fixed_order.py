@@ -15,7 +15,7 @@ import scipy.sparse.linalg as spla
 from qemjax._mesh import fixed_order as fo
 from qemjax._mesh.grid_nearest import nearest
 from qemjax._mesh.nearest import nearest_triangles
-from qemjax._mesh.spd_solve import solve_spd
+from qemjax._mesh.spd_solve import _diagonal, solve_csr, solve_spd
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -30,6 +30,27 @@ def test_spd_solve_matches_a_direct_solve(seed):
     assert ok and np.allclose(X, want, rtol=1e-9, atol=1e-9)
     X2, _ = solve_spd(N, B, want + 1e-3, rtol=1e-13)  # from another start: the same solution
     assert np.allclose(X2, want, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_solve_csr_is_solve_spd_on_the_arrays(seed):
+    """The re-fit's call on CSR arrays gives `solve_spd`'s bits, and its diagonal is scipy's (rows with no
+    diagonal entry, explicit zeros kept)."""
+    rng = np.random.default_rng(seed)
+    n = 150
+    A = sp.random(300, n, density=0.03, random_state=seed, format="csr")
+    N = (A.T @ A + 1e-2 * sp.identity(n)).tocsr()
+    N.sort_indices()
+    B, X0 = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    X1, ok1 = solve_spd(N, B, X0, rtol=1e-12)
+    X2, ok2 = solve_csr(N.indptr.astype(np.int64), N.indices.astype(np.int64), N.data, B, X0, rtol=1e-12)
+    assert ok1 == ok2 and np.array_equal(X1.view(np.int64), X2.view(np.int64))
+    M = sp.random(40, 40, density=0.2, random_state=seed, format="csr")
+    M.data[::3] = 0.0
+    M.sort_indices()
+    assert np.array_equal(_diagonal(M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data), M.diagonal())
+    with pytest.raises(ValueError, match="not positive"):
+        solve_csr(np.array([0, 1, 1]), np.array([0]), np.array([1.0]), np.ones((2, 1)), np.zeros((2, 1)))
 
 
 def test_spd_solve_reports_what_it_did_not_reach():
@@ -209,3 +230,9 @@ def test_bounds_are_numpys_min_and_max(dtype):
         assert same(lo, used.min(0)) and same(hi, used.max(0)), trial
         T = V[G]
         assert same(bounds_jit.face_boxes(V, G), np.concatenate([T.min(1), T.max(1)], 1)), trial
+        if dtype == np.float64 and trial % 4 == 0:  # the grid's edge lengths, likewise
+            from qemjax._mesh.grid_nearest import edge_lengths
+
+            W = V * 10.0 ** (trial % 7 - 3)
+            want = np.sqrt(np.sum((W[G[:, [1, 2, 0]]] - W[G]) ** 2, axis=2)).ravel()
+            assert np.array_equal(edge_lengths(W, G), want), trial

@@ -149,9 +149,10 @@ def test_the_compiled_normal_equations_are_the_sums_in_sample_order_bit_for_bit(
         N, rhs = _refit._system(Ps, sw, X, G, f, col, lay, lam)
     finally:
         _refit._ROWS = rows
-    np.testing.assert_array_equal(N.indptr, want_indptr)
-    np.testing.assert_array_equal(N.indices, want_indices)
-    np.testing.assert_array_equal(N.data.view(np.int64), want_data.view(np.int64))
+    indptr, indices, data = N
+    np.testing.assert_array_equal(indptr, want_indptr)
+    np.testing.assert_array_equal(indices, want_indices)
+    np.testing.assert_array_equal(data.view(np.int64), want_data.view(np.int64))
     np.testing.assert_array_equal(rhs.view(np.int64), want_rhs.view(np.int64))
 
 

@@ -31,14 +31,13 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
 
 from .._mesh.arrays import face_normals
 from .._mesh.bounds_jit import row_bounds
 from .._mesh.grid_nearest import nearest, slivers
 from .._mesh.pointtri import segment_closest
-from .._mesh.spd_solve import solve_spd
+from .._mesh.spd_solve import solve_csr
 from .refit_system import accumulate, finish, layout, regions
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
@@ -145,7 +144,7 @@ def _closest_on_edges(p, a, b, c):
 
 
 def _system(Ps, sw, X, G, f, col, lay, lam):
-    """The normal equations (N as CSR, R (free, 3)) of the samples Ps with weights' square roots sw, attached
+    """The normal equations (N as its CSR arrays (indptr, indices, data), R (free, 3)) of the samples Ps with weights' square roots sw, attached
     to faces f of (X, G) (`refit_system`). The barycentric coordinates are found in blocks of rows."""
     indptr, indices, pos = lay
     data, rhs = np.zeros(len(indices)), np.zeros((len(indptr) - 1, 3))
@@ -154,9 +153,7 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
         B = _barycentric_at(Ps[s : s + _ROWS], X, G, f[s : s + _ROWS], flat)
         B *= sw[s : s + _ROWS, None]
         accumulate(B, f[s : s + _ROWS], Ps[s : s + _ROWS], sw[s : s + _ROWS], G, col, X, pos, data, rhs)
-    ip, ix, dx = finish(indptr, indices, data, lam)
-    n = len(ip) - 1
-    return sp.csr_matrix((dx, ix, ip), shape=(n, n)), rhs
+    return finish(indptr, indices, data, lam), rhs
 
 
 def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
@@ -231,7 +228,7 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None) -
         del f, Ps, sw
         rhs = rhs + lam * X[free]
         Y = X.copy()
-        Y[free], converged = solve_spd(N, rhs, X[free], rtol=RTOL)  # fixed-order sums: the same bits on every CPU
+        Y[free], converged = solve_csr(*N, rhs, X[free], rtol=RTOL)  # fixed-order sums: the same bits on every CPU
         if not converged:  # the last iterate still lowers the fit's error; the checks below still hold
             warnings.warn(f"re-fit: the solver stopped short of its tolerance ({RTOL:g}) on {len(Y[free])} vertices; "
                           "the positions are fitted less closely than usual", stacklevel=4)
