@@ -89,3 +89,26 @@ def test_face_stats_are_numpys_whole_array_arithmetic_bit_for_bit(seed, dtype):
     np.testing.assert_array_equal(got[0], want[0])
     assert not got[0][:50].any()
     assert got[1:] == want[1:]
+
+
+def test_vertex_runs_are_the_incidence_matrix_rows():
+    """`faces_jit.vertex_runs` against scipy's COO -> CSR conversion of the vertex-face incidence (what
+    `FaceLists` used): each vertex's faces in face order, counts and offsets; an index out of range fails."""
+    import scipy.sparse
+
+    from qemjax._mesh.faces_jit import vertex_runs
+
+    rng = np.random.default_rng(3)
+    for n, m in ((1, 0), (5, 3), (40, 70), (300, 900)):
+        F = np.array([rng.choice(n, 3, replace=False) for _ in range(m)], np.int32).reshape(-1, 3) if n >= 3 \
+            else np.zeros((0, 3), np.int32)
+        inc = scipy.sparse.csr_matrix(
+            (np.ones(3 * m, np.int8), (F.reshape(-1), np.repeat(np.arange(m, dtype=np.int32), 3))),
+            shape=(n, max(m, 1)))
+        cnt, off, pool, end = vertex_runs(F, n)
+        assert np.array_equal(cnt, np.diff(inc.indptr)) and cnt.dtype == np.int64
+        assert np.array_equal(off, inc.indptr[:-1]) and off.dtype == np.int64
+        assert end == len(inc.indices) and np.array_equal(pool[:end], inc.indices) and pool.dtype == np.int32
+        assert len(pool) == 6 * m + 64
+    with pytest.raises(ValueError, match="out of range"):
+        vertex_runs(np.array([[0, 1, 5]], np.int32), 5)

@@ -50,6 +50,21 @@ def test_settings_on_the_device_price_as_numpy_settings(model):
         assert np.array_equal(u, v, equal_nan=True)
 
 
+def test_small_settings_copies_are_kept_for_the_next_run():
+    """`common.on_device` reuses its device copy of a small setting with the same value, dtype and shape (a
+    run's set-up made four copies), and never mixes values whose bytes are equal under another dtype."""
+    p1 = {"a": np.asarray(0.25, np.float32), "b": np.asarray(False), "c": np.asarray(0, np.int32), "s": "x"}
+    p2 = {"a": np.asarray(0.25, np.float32), "b": np.asarray(0, np.int8), "c": np.asarray(0.0, np.float32),
+          "s": "x"}
+    d1, d2 = common.on_device(p1), common.on_device(p2)
+    assert d1["a"] is d2["a"] and d1["s"] == d2["s"] == "x"
+    for k in ("b", "c"):  # same bytes, other dtypes: their own copies
+        assert d1[k] is not d2[k] and d1[k].dtype == p1[k].dtype and d2[k].dtype == p2[k].dtype
+        assert np.array_equal(np.asarray(d2[k]), p2[k])
+    big = np.arange(17.0)
+    assert common.on_device({"w": big})["w"] is not common.on_device({"w": big})["w"]  # large: copied each time
+
+
 def test_merge_size_is_two_shapes_and_the_row_update_is_exact():
     assert parallel.merge_size(1) == parallel.merge_size(parallel.SMALL_MESH) == 256
     assert parallel.merge_size(parallel.SMALL_MESH + 1) == parallel.merge_size(10 ** 6) == 4096

@@ -28,3 +28,31 @@ def face_rows(V, F, half):
         e2[f] = ((((((((u0 * u0 + u1 * u1) + u2 * u2) + s0 * s0) + s1 * s1) + s2 * s2) + t0 * t0) + t1 * t1)
                  + t2 * t2)
     return nz, area, e2
+
+
+@njit(cache=True, nogil=True)
+def vertex_runs(F, n):
+    """Each vertex's faces as one run, in face order (`incidence.FaceLists`' layout): (cnt (n,) int64, off
+    (n,) int64, pool (6m + 64,) int32 with the runs first, and where they end). A counting sort, as
+    scipy's COO -> CSR conversion of the incidence matrix made it."""
+    m = F.shape[0]
+    cnt = np.zeros(n, np.int64)
+    for f in range(m):
+        for c in range(3):
+            v = F[f, c]
+            if v < 0 or v >= n:
+                raise ValueError("a face's vertex index is out of range")
+            cnt[v] += 1
+    off = np.empty(n, np.int64)
+    end = 0
+    for v in range(n):
+        off[v] = end
+        end += cnt[v]
+    pool = np.empty(6 * m + 64, np.int32)
+    fill = off.copy()
+    for f in range(m):
+        for c in range(3):
+            v = F[f, c]
+            pool[fill[v]] = f
+            fill[v] += 1
+    return cnt, off, pool, end

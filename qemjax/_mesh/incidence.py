@@ -30,17 +30,10 @@ class FaceLists:
         m = len(self.F)
         self.alive = np.ones(m, bool)
         self.count = m
-        import scipy.sparse  # here: importing the cost models stays light
+        from .faces_jit import vertex_runs  # here: importing the cost models stays light
 
-        # grouping corners by vertex is a counting sort, which scipy's COO -> CSR conversion does in C
-        inc = scipy.sparse.csr_matrix(
-            (np.ones(3 * m, np.int8), (self.F.reshape(-1), np.repeat(np.arange(m, dtype=np.int32), 3))),
-            shape=(n, max(m, 1)))
-        self.cnt = np.diff(inc.indptr).astype(np.int64)
-        self.off = inc.indptr[:-1].astype(np.int64)
-        self.pool = np.empty(2 * 3 * m + 64, np.int32)
-        self.end = len(inc.indices)
-        self.pool[: self.end] = inc.indices
+        # grouping corners by vertex: a counting sort, compiled
+        self.cnt, self.off, self.pool, self.end = vertex_runs(self.F, n)
 
     def live(self) -> np.ndarray:
         """(count,3) the live faces, in face order."""

@@ -76,8 +76,27 @@ class PerCopy(NamedTuple):
 def on_device(params: dict) -> dict:
     """A kernel's settings with each numpy value (0-d arrays, `CostModel.kernel_params`) copied to the device
     once, so that a run's hundreds of kernel calls pass device arrays instead of copying them each time.
-    Same dtypes and shapes: the same compiled kernels, the same results."""
-    return {k: jnp.asarray(v) if isinstance(v, (np.ndarray, np.generic)) else v for k, v in params.items()}
+    Same dtypes and shapes: the same compiled kernels, the same results. A small value's copy is kept for
+    the next run with the same value (device arrays are immutable): the copies cost a small run as much
+    as a round."""
+    return {k: _device_value(np.asarray(v)) if isinstance(v, (np.ndarray, np.generic)) else v
+            for k, v in params.items()}
+
+
+_DEVICE_VALUES: dict = {}  # (dtype, shape, bytes, default device) -> the device copy of a small setting
+
+
+def _device_value(v: np.ndarray):
+    """``jnp.asarray(v)``; for at most 16 values, the copy made for the same value before."""
+    if v.size > 16:
+        return jnp.asarray(v)
+    key = (v.dtype.str, v.shape, v.tobytes(), str(jax.config.jax_default_device))
+    d = _DEVICE_VALUES.get(key)
+    if d is None:
+        if len(_DEVICE_VALUES) >= 4096:  # a sweep over many values: start again rather than grow
+            _DEVICE_VALUES.clear()
+        d = _DEVICE_VALUES[key] = jnp.asarray(v)
+    return d
 
 
 def _params(params, pairs: np.ndarray) -> dict:
