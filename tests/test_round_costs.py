@@ -50,6 +50,22 @@ def test_settings_on_the_device_price_as_numpy_settings(model):
         assert np.array_equal(u, v, equal_nan=True)
 
 
+def test_pricing_no_pairs_calls_no_kernel(monkeypatch):
+    """`common.start_price` of no pairs (a round after one that only rejected: nothing is stale) gives an
+    empty price without a device call (its one piece would have priced padding alone)."""
+    model = MODELS[0]
+    VS, P, _ = _rows(model, np.random.default_rng(2))
+    calls = []
+    price = type(model).price
+    monkeypatch.setattr(type(model), "price", lambda self, *a, **k: calls.append(1) or price(self, *a, **k))
+    pr = common.start_price(model, jnp.asarray(VS), P[:0], model.kernel_params())()
+    assert not calls
+    assert pr.x.shape == (0, 3) and pr.cost.shape == (0,) and pr.branch.shape == (0,) and pr.branch.dtype == np.int8
+    assert pr.parts.shape == (len(model.parts), 0)
+    common.start_price(model, jnp.asarray(VS), P[:3], model.kernel_params())()
+    assert calls  # (the spy sees real calls)
+
+
 def test_small_settings_copies_are_kept_for_the_next_run():
     """`common.on_device` reuses its device copy of a small setting with the same value, dtype and shape (a
     run's set-up made four copies), and never mixes values whose bytes are equal under another dtype."""

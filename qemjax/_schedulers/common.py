@@ -123,9 +123,9 @@ def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 
     each pair contracted onto its kept vertex (``model.price_at_kept``; locked vertices, `qemjax._schedulers.locks`)."""
     rows = 5 + len(model.parts)
     price = model.price_at_kept if at_kept else model.price
-    if not model.uses_ring:
-        return _joined([price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))],
-                       len(P), rows)
+    if not model.uses_ring:  # (no pairs: no call, whose one piece would price padding alone)
+        return _joined([price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
+                       if len(P) else [], len(P), rows)
     pieces = []  # (indices into P, device output)
     for b0 in range(0, len(P), RING_BLOCK):
         block = P[b0:b0 + RING_BLOCK]
