@@ -135,8 +135,9 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
     bad = np.where(rng.random(len(E)) < 0.3, 2, 0).astype(np.int8)
     touched = rng.random(n) < 0.5
     V3 = rng.random((n + 5, 3)).astype(np.float32)
+    VQ = rng.random((n + 5, 13)).astype(np.float32)
 
-    ref_bad, ref_V3, ref_faces = bad.copy(), V3.copy(), FaceLists(F, n)
+    ref_bad, ref_V3, ref_VQ, ref_faces = bad.copy(), V3.copy(), VQ.copy(), FaceLists(F, n)
     a, b = E[acc, 0], E[acc, 1]
     room = int(ref_faces.cnt[a].sum() + ref_faces.cnt[b].sum())
     ref_faces.reserve(room)
@@ -145,14 +146,15 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
                                          ref_faces.pool, ref_faces.end)
     want_edges = round_jit.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), np.full(n, -1, np.int32))
     put_rows(ref_V3, a, x[acc])
+    ref_VQ[a, :3] = x[acc]
     d = np.flatnonzero(want_edges[4])
 
     faces, counts, label = FaceLists(F, n), np.zeros(4, np.int64), np.full(n, -1, np.int32)
     faces.reserve(room)
-    got = glue.contract(E, ecount, deg, bad, touched, acc, apex.astype(np.int64), x, cost, branch, counts, V3,
+    got = glue.contract(E, ecount, deg, bad, touched, acc, apex.astype(np.int64), x, cost, branch, counts, V3, VQ,
                         faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, label, 4096, 256, 1024)
     ga, gb, gx, gc, top, gend, gdead, gedges, gd, (rows, pp, xx, qq) = got
-    assert np.array_equal(bad, ref_bad) and np.array_equal(V3, ref_V3)
+    assert np.array_equal(bad, ref_bad) and np.array_equal(V3, ref_V3) and np.array_equal(VQ, ref_VQ)
     assert np.array_equal(ga, a) and np.array_equal(gb, b) and np.array_equal(gx, x[acc])
     assert np.array_equal(gc, cost[acc].astype(np.float64)) and top == float(cost[acc].max())
     assert np.array_equal(counts, np.bincount(branch[acc], minlength=4))
@@ -171,7 +173,7 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
     faces = FaceLists(F, n)
     faces.reserve(room)
     more = glue.contract(E, ecount, deg, bad.copy(), touched, acc, apex.astype(np.int64), x, cost, branch,
-                         counts, V3.copy(), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end,
+                         counts, V3.copy(), VQ.copy(), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end,
                          np.full(n, -1, np.int32), 4096, len(acc) - 1, 1024)[-1]
     assert all(len(t) == 0 for t in more)
 

@@ -639,7 +639,7 @@ class _Run:
         faces.reserve(int(room))  # the kept vertices' new runs
         a, b, xs, costs, top, faces.end, dead, st.edges_next, d, one = round_glue_jit.contract(
             st.E, st.ecount, st.deg, st.bad, touched, acc, apex, st.x, st.cost, st.branch, self.branches, self.V3,
-            faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, self.label, len(self.VQd),
+            self.VQ, faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, self.label, len(self.VQd),
             self.merge_chunk, self.price_sizes[0])
         faces.count -= len(dead)
         self.dead.append(dead)
@@ -650,7 +650,7 @@ class _Run:
         else:
             self.VQd, merged, priced = start_step(self.model, self.VQd, P, xs, _take(st.edges_next[0], d), self.params,
                                                   self.merge_chunk, _holding(self.price_sizes, len(d)), raw=True)
-        self.started(st, a, xs, d, merged, priced)
+        self.started(st, a, xs, d, merged, priced, moved=True)
         self.faces_per_round.append(faces.count)
         self.timer.add("contract_s", time.perf_counter() - t0)
 
@@ -661,11 +661,13 @@ class _Run:
         if st.parts.shape[1]:
             self.history_parts.append(np.concatenate([_take(st.parts, acc), _take(st.key, acc)[:, None]], 1))
 
-    def started(self, st: RoundState, a, xs, d, merged, priced):
-        """After a round's one device call (fused): the kept vertices' positions into VQ, their merged states
-        pending until `settle`, and the next round's price of its stale rows d pending in ``st``."""
+    def started(self, st: RoundState, a, xs, d, merged, priced, moved: bool = False):
+        """After a round's one device call (fused): the kept vertices' positions into VQ (unless ``moved``:
+        the compiled contraction wrote them), their merged states pending until `settle`, and the next
+        round's price of its stale rows d pending in ``st``."""
         st.next_price = (d, priced)
-        self.VQ[a, :3] = xs
+        if not moved:
+            self.VQ[a, :3] = xs
         self.merged = (a, merged)  # the states reach VQ when the price is waited for (`settle`)
 
     def contract_numpy(self, st: RoundState, acc, xs, found):

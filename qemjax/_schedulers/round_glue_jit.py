@@ -136,11 +136,12 @@ def order_fit(acc, apex, key, ecount, salt, need, cnt, E):
 
 
 @njit(cache=True, nogil=True)
-def contract(E, ecount, deg, bad, touched, acc, apex, x, cost, branch, counts, V3, F, alive, cnt, off, pool,
+def contract(E, ecount, deg, bad, touched, acc, apex, x, cost, branch, counts, V3, VQ, F, alive, cnt, off, pool,
              end, label, n_rows, size, price_size):
     """The round's contraction of pairs ``acc`` (apexes (S,2)) placed at x[acc]: known rejections cleared
     where ``touched`` (`round_jit.clear_bad`), the faces (`round_jit.contract_faces`; the pool must have
-    room) and the pairs (`round_jit.contract_edges`) contracted, V3's kept rows moved, branch counts
+    room) and the pairs (`round_jit.contract_edges`) contracted, the kept rows moved in V3 and in the first
+    three columns of VQ (the host rows: their states follow with the device call), branch counts
     added to ``counts``. Returns the kept and removed vertices, their positions, costs (float64) and
     the largest, the pool's new end, the dead faces, `contract_edges`' result, the stale rows d of the new
     pairs, and the device call's inputs when one piece holds them (``size`` merges, ``price_size`` stale
@@ -166,6 +167,7 @@ def contract(E, ecount, deg, bad, touched, acc, apex, x, cost, branch, counts, V
     E3, c3, keep, d2, s3 = contract_edges(E, ecount, deg, a, b, apex, label)
     for s in range(S):
         V3[a[s], 0], V3[a[s], 1], V3[a[s], 2] = xs[s, 0], xs[s, 1], xs[s, 2]
+        VQ[a[s], 0], VQ[a[s], 1], VQ[a[s], 2] = xs[s, 0], xs[s, 1], xs[s, 2]
     d = np.flatnonzero(s3)
     nd = len(d)
     one = S <= size and nd <= price_size
