@@ -257,12 +257,13 @@ class _Run:
         # a round's merge, row update and the next round's price in one device call (`start_step`)
         self.fused = self.incremental and locks is None and fuses(model)
         self.merged = None  # (kept vertices, their merged states) not yet in VQ: `settle`
+        if self.incremental:
+            self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
         if self.compiled:
             self.N0 = np.ascontiguousarray(N0, DTYPE)
             # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
             self.V3 = np.ascontiguousarray(self.VQ[:, :3])
             self.flip_limits = (np.float32(options.cos_max), np.float32(SLIVER))
-            self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
             self.mark = np.zeros(self.n, np.int32)  # scratch of `round_jit.select_validate`
             self._rows = self._verts = None  # more of it (`scratch`)
             self.one_copy = np.zeros(self.n, np.int32)  # a run alone is one copy (`passes`)
@@ -678,11 +679,11 @@ class _Run:
         P = _take(st.E, acc)
         taken = np.zeros(len(st.E), bool)
         taken[acc] = True
-        pairs, kept, dead, (apex, erows) = _accepted(st.E, found, taken)  # in pass order, not acc's
+        pairs, kept, dead, (apex, _) = _accepted(st.E, found, taken)  # in pass order, not acc's
         edges_next = None
-        if self.incremental:  # the edge update runs on the worker while this thread relinks the faces
-            edges_next = submit(topo.contract_edges, st.E, st.ecount, pairs[:, 0], pairs[:, 1], apex, n,
-                                st.deg, rows=erows, size=len(st.E))
+        if self.incremental:  # the edge update (compiled) runs on the worker while this thread relinks the faces
+            edges_next = submit(round_jit.contract_edges, st.E, st.ecount, st.deg, pairs[:, 0], pairs[:, 1],
+                                np.asarray(apex, np.int64), self.label, size=len(st.E))
         if self.wedges is not None:  # the corners' wedges, before the faces are relinked
             self.wedges.contract_many(faces, self.VQ, P, xs)
         faces.contract_touched(pairs, kept, dead)

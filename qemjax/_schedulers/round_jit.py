@@ -350,7 +350,7 @@ def contract_faces(a, b, F, alive, cnt, off, pool, end):
     return end, dead[:nd].copy()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # (the numpy stages run it on the worker thread beside their face update)
 def contract_edges(E, ecount, deg, a, b, apex, label):
     """`topology.contract_edges` for vertex-disjoint pairs (a, b) that passed the link test, with their
     apexes (S,2) (-1 where a pair has one face): (b, c) merges into (a, c) for an apex c (which loses the
