@@ -385,7 +385,8 @@ class _Run:
             st.x, st.cost, st.branch = follow(prev.x), follow(prev.cost), follow(prev.branch)
             xd, st.cost[d], st.branch[d], parts = pending()
             put_rows(st.x, d, xd)
-            st.parts = follow(prev.parts)
+            # (a model without cost parts: no take of P empty rows, which numpy still spends P checks on)
+            st.parts = follow(prev.parts) if prev.parts.shape[1] else prev.parts[:0].reshape(len(st.E), 0)
             if len(parts):  # a model with cost parts
                 put_rows(st.parts, d, np.ascontiguousarray(parts.T))
         if self.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
