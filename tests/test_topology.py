@@ -192,3 +192,34 @@ def test_feature_edges_with_faces_is_isin_both_ways():
         e, f = feature_edges_with_faces(F, n, feat)
         idx = np.flatnonzero(np.isin(keys, fk))
         assert np.array_equal(e, he[idx]) and np.array_equal(f, idx // 3)
+
+
+def _edge_table_numpy(F, n):
+    """`topology.edge_table` as numpy computed it (half-edges, packed keys, one sort)."""
+    he = topo.half_edges(F)
+    keys = topo.edge_keys(he[:, 0], he[:, 1], n)
+    bits = int(len(keys)).bit_length()
+    packed = np.sort((keys << bits) | np.arange(len(keys), dtype=np.int64))
+    ks, order = packed >> bits, packed & ((1 << bits) - 1)
+    start, counts = topo._runs(ks)
+    single = order[start[counts == 1]]
+    return topo.key_pairs(ks[start], n, F.dtype), counts, he[single], single // 3
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_edge_table_is_numpys(dtype):
+    """The compiled `edge_table` against numpy's: edges, counts, boundary half-edges and their faces, values
+    and dtypes, on closed and open meshes, edges with three faces, repeated faces, no faces; and the
+    unpacked path (keys too large to pack the index) gives the same tables."""
+    rng = np.random.default_rng(7)
+    meshes = [shapes.bumpy_sphere(2)[1], shapes.grid(9, hole=True)[1], np.zeros((0, 3), np.int64),
+              rng.integers(0, 30, size=(200, 3))]  # random triangles: edges with many faces, repeats
+    for F in meshes:
+        F = F.astype(dtype)
+        n = int(F.max()) + 1 if len(F) else 0
+        want = _edge_table_numpy(F, n)
+        got = topo.edge_table(F, n)
+        unpacked = topo._edge_table_unpacked(F, n)
+        for w, g, u in zip(want, got, unpacked):
+            assert np.array_equal(g, w) and g.dtype == w.dtype and g.shape == w.shape
+            assert np.array_equal(u, w) and u.dtype == w.dtype

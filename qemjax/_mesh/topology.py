@@ -90,15 +90,24 @@ def parts(F: np.ndarray, n: int, extra: np.ndarray | None = None) -> tuple[int, 
 def edge_table(F: np.ndarray, n: int):
     """`edges` and `boundary_edges` from one sort: (E (k,2) u < v sorted, face counts (k,), boundary
     edges (B,2) as directed in their face, their face indices (B,))."""
+    bits = int(3 * len(F)).bit_length()
+    if n > 0 and (n * n) < (1 << (63 - bits)):  # pack the half-edge index under the key: one fast sort
+        from . import edges_jit  # numba: imported when first used
+
+        F = np.ascontiguousarray(F)
+        packed = edges_jit.packed_keys(F, n, bits)
+        packed.sort()  # in place: no second array of 3m keys
+        return edges_jit.tables(packed, F, n, bits)
+    return _edge_table_unpacked(F, n)
+
+
+def _edge_table_unpacked(F: np.ndarray, n: int):
+    """`edge_table` where the keys leave no room to pack the half-edge index (n² ≥ 2^(63 - bits)): a stable
+    argsort."""
     he = half_edges(F)
     keys = edge_keys(he[:, 0], he[:, 1], n)
-    bits = int(len(keys)).bit_length()
-    if n > 0 and (n * n) < (1 << (63 - bits)):  # pack the half-edge index under the key: one fast sort
-        packed = np.sort((keys << bits) | np.arange(len(keys), dtype=np.int64))
-        ks, order = packed >> bits, packed & ((1 << bits) - 1)
-    else:
-        order = np.argsort(keys, kind="stable")
-        ks = keys[order]
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
     start, counts = _runs(ks)
     single = order[start[counts == 1]]
     return key_pairs(ks[start], n, F.dtype), counts, he[single], single // 3

@@ -1,0 +1,65 @@
+"""`topology.edge_table` compiled: the edges and the boundary from one sort, without its large temporaries.
+
+numpy's version made the (3m,2) half-edges, their keys, the packed keys and a sorted copy: on armadillo ×16
+(4.15 M half-edges) arrays of 33-66 MB each, which glibc maps afresh and the machine faults in page by page
+on every run. Here the packed keys are written straight from the faces and sorted in place, and one pass
+over them gives the tables. The outputs are `topology.edge_table`'s, bit for bit (tests/test_topology.py).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def packed_keys(F, n, bits):
+    """(3m,) int64: each half-edge (F[f,c], F[f,(c+1)%3]) as (min·n + max) << bits | its index 3f + c."""
+    m = F.shape[0]
+    out = np.empty(3 * m, np.int64)
+    for f in range(m):
+        for c in range(3):
+            a, b = np.int64(F[f, c]), np.int64(F[f, (c + 1) % 3])
+            lo, hi = (a, b) if a < b else (b, a)
+            out[3 * f + c] = ((lo * n + hi) << bits) | (3 * f + c)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def tables(packed, F, n, bits):
+    """From the sorted packed keys: (E (k,2) in F's dtype, u < v, sorted; face counts (k,) int64; the boundary
+    half-edges (B,2) as directed in their face; their faces (B,) int64)."""
+    h = len(packed)
+    mask = (np.int64(1) << bits) - 1
+    k = 0
+    B = 0
+    i = 0
+    while i < h:  # count the edges and the single ones
+        key = packed[i] >> bits
+        j = i + 1
+        while j < h and (packed[j] >> bits) == key:
+            j += 1
+        k += 1
+        B += j - i == 1
+        i = j
+    E = np.empty((k, 2), F.dtype)
+    counts = np.empty(k, np.int64)
+    he = np.empty((B, 2), F.dtype)
+    face = np.empty(B, np.int64)
+    k = B = 0
+    i = 0
+    while i < h:
+        key = packed[i] >> bits
+        j = i + 1
+        while j < h and (packed[j] >> bits) == key:
+            j += 1
+        E[k, 0], E[k, 1] = key // n, key % n
+        counts[k] = j - i
+        k += 1
+        if j - i == 1:
+            t = packed[i] & mask
+            f, c = t // 3, t % 3
+            he[B, 0], he[B, 1] = F[f, c], F[f, (c + 1) % 3]
+            face[B] = f
+            B += 1
+        i = j
+    return E, counts, he, face
