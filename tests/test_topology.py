@@ -223,3 +223,20 @@ def test_edge_table_is_numpys(dtype):
         for w, g, u in zip(want, got, unpacked):
             assert np.array_equal(g, w) and g.dtype == w.dtype and g.shape == w.shape
             assert np.array_equal(u, w) and u.dtype == w.dtype
+
+
+def test_seam_count_is_scipys_component_count():
+    """`wedges.seam_count` (compiled union-find) against scipy's connected components of the seam graph."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from qemjax._mesh.wedges import seam_count
+
+    rng = np.random.default_rng(11)
+    assert seam_count(np.zeros((0, 2), np.int64)) == 0
+    for k in (1, 5, 40, 300):
+        E = rng.integers(0, 10 ** 6, size=(k, 2)) // rng.integers(1, 5000)  # sparse ids, shared endpoints
+        ids, inv = np.unique(E, return_inverse=True)
+        inv = inv.reshape(-1, 2)
+        g = coo_matrix((np.ones(k), (inv[:, 0], inv[:, 1])), shape=(len(ids), len(ids)))
+        assert seam_count(E) == connected_components(g, directed=False)[0]

@@ -124,9 +124,19 @@ def test_tracker_matches_the_python_rule(m, solved):
             assert new.modes(faces, int(a), int(b)) == ref.modes(faces, int(a), int(b))
             assert np.array_equal(new.multi, ref.multi)
         xn, cn, xr, cr = x.copy(), cost.copy(), x.copy(), cost.copy()
+        multi0 = new.multi.copy()
         bad = new.constrain(faces, VQ, E, xn, cn)
         assert np.array_equal(bad, ref.constrain(faces, VQ, E, xr, cr))
         assert same_bits(xn, xr) and same_bits(cn, cr) and np.array_equal(new.multi, ref.multi)
+        # the in-place form over some rows d: their placements, costs and refusals, the other rows untouched
+        multi1, new.multi[:] = new.multi.copy(), multi0
+        d = np.flatnonzero(rng.random(len(E)) < 0.7)
+        xd, cd, bd = x.copy(), cost.copy(), np.zeros(len(E), np.int8)
+        new.constrain_rows(faces, VQ, E, d, xd, cd, bd, 7)
+        rest = np.setdiff1d(np.arange(len(E)), d)
+        assert same_bits(xd[d], xn[d]) and same_bits(cd[d], cn[d]) and np.array_equal(bd[d] == 7, bad[d])
+        assert same_bits(xd[rest], x[rest]) and same_bits(cd[rest], cost[rest]) and not bd[rest].any()
+        new.multi[:] = multi1
         seen["bad"] += int(bad.sum())
         # a round: pairs far apart, placed where constrain put them, refused by the rule or contracted
         pick = _far_apart(faces, E, rng)

@@ -311,7 +311,8 @@ class Tracker:
         self.weights = (np.asarray(model.weights, np.float64) if attrs else np.ones(k))
         # seam candidates: vertices with two or more wedges (a flag that may stay set after faces die,
         # which only sends a pair through the exact per-pair test)
-        used = np.unique(self.C)  # each wedge belongs to one vertex: count the wedges in use per vertex
+        # each wedge belongs to one vertex: count the wedges in use per vertex (np.unique's values, by count)
+        used = np.flatnonzero(np.bincount(self.C.reshape(-1), minlength=len(self.val)))
         vertex_of = np.zeros(len(self.val), np.int64)
         vertex_of[self.C.reshape(-1)] = np.asarray(F).reshape(-1)
         self.multi = np.bincount(vertex_of[used], minlength=n) > 1
@@ -361,6 +362,14 @@ class Tracker:
         if len(P) == 0:
             return np.zeros(0, bool)
         return _jit().constrain(*self._lists(faces), self.C, self.multi, VQ, P, x, cost, self.m)
+
+    def constrain_rows(self, faces, VQ, E: np.ndarray, d: np.ndarray, x: np.ndarray, cost: np.ndarray,
+                       bad: np.ndarray, code: int) -> None:
+        """`constrain` of the pairs E[d], in place: rows d of x and cost, and bad[row] = ``code`` for a pair
+        with no allowed placement (a round's newly priced pairs: no gather and scatter of every row d)."""
+        if len(d):
+            _jit().constrain_rows(*self._lists(faces), self.C, self.multi, VQ, E, np.asarray(d, np.int64), x, cost,
+                                  bad, code, self.m)
 
     def contract(self, faces, VQ, a: int, b: int, x) -> None:
         """Update the corners for contracting b into a at x (before the faces are relinked)."""
@@ -416,13 +425,11 @@ def seam_count(E: np.ndarray) -> int:
     """The number of seams: connected pieces of the seam edges E (k,2) (`seam_edges`)."""
     if not len(E):
         return 0
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from .parts_jit import labels  # numba: imported when first used
 
     ids, E = np.unique(E, return_inverse=True)
-    E = E.reshape(-1, 2)
-    graph = coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(len(ids), len(ids)))
-    return int(connected_components(graph, directed=False)[0])
+    E = E.reshape(-1, 2).astype(np.int64)
+    return int(labels(E[:, 0], E[:, 1], len(ids))[0])  # (every vertex of the graph is on an edge)
 
 
 def output(C: np.ndarray, values: np.ndarray, F: np.ndarray, fids: np.ndarray, ids: np.ndarray):

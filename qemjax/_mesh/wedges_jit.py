@@ -298,6 +298,45 @@ def constrain(F, alive, cnt, off, pool, C, multi, VQ, P, x, cost, m):
 
 
 @njit(cache=True)
+def constrain_rows(F, alive, cnt, off, pool, C, multi, VQ, E, d, x, cost, bad, code, m):
+    """`constrain` of the pairs E[d] written in place: rows d of x (P,3) and cost (P,) placed at the allowed
+    endpoint, and bad[row] = ``code`` where there is none. Only the pairs at a seam vertex are touched (the
+    flags read before the loop, as `constrain` reads them)."""
+    K = len(d)
+    seam = np.empty(K, np.bool_)
+    n_seam = 0
+    for i in range(K):
+        seam[i] = multi[E[d[i], 0]] or multi[E[d[i], 1]]
+        n_seam += seam[i]
+    if n_seam == 0:
+        return
+    P = np.empty((n_seam, 2), E.dtype)
+    j = 0
+    for i in range(K):
+        if seam[i]:
+            P[j, 0], P[j, 1] = E[d[i], 0], E[d[i], 1]
+            j += 1
+    T, W = scratch(P, cnt, m)
+    j = -1
+    for i in range(K):
+        if not seam[i]:
+            continue
+        j += 1
+        r = d[i]
+        a, b = P[j, 0], P[j, 1]
+        free, nba, nab, _, _ = modes(F, alive, cnt, off, pool, C, multi, a, b, T)
+        if free:
+            continue
+        best_v, c = endpoint(VQ, a, b, nba >= 0, nab >= 0, m, W)
+        if best_v < 0:
+            bad[r] = code
+            continue
+        for k in range(3):
+            x[r, k] = VQ[best_v, k]
+        cost[r] = c
+
+
+@njit(cache=True)
 def endpoint(VQ, a, b, keep_a, keep_b, m, W):
     """Of the pair (a, b) (rows of VQ), the endpoint to contract onto where keeping a (``keep_a``) or b
     (``keep_b``) is allowed: the one of smaller price (`cost_at`; a first among equals), as (its row, its

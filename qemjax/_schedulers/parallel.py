@@ -400,10 +400,7 @@ class _Run:
     def place_at_seams(self, st: RoundState, d):
         """Newly priced pairs d at seam vertices (kept attributes): placed at an allowed endpoint, and marked
         `outcome.SEAM` where none is (`wedges.Tracker.constrain`)."""
-        x, c = st.x[d], st.cost[d].copy()
-        seam = self.wedges.constrain(self.faces, self.VQ, _take(st.E, d), x, c)
-        st.x[d], st.cost[d] = x, c
-        st.bad[d[seam]] = outcome.SEAM
+        self.wedges.constrain_rows(self.faces, self.VQ, st.E, d, st.x, st.cost, st.bad, outcome.SEAM)
 
     def settle(self):
         """The last round's merged vertex states into the host rows VQ (`contract` leaves them on the device
