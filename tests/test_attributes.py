@@ -427,3 +427,21 @@ def test_seam_edges_are_the_four_key_sort_and_unique_rows():
         want = np.unique(E, axis=0) if len(E) else np.zeros((0, 2), np.int64)
         got = seam_edges(F, C)
         assert got.shape == want.shape and np.array_equal(got, want)
+
+
+def test_wedge_rows_are_every_corners_unique_rows():
+    """`wedges._wedge_rows` (distinct vertex/source pairs first) against `_unique_rows` of every corner's
+    [vertex, values] row: the same rows and indices, bit for bit, with values that differ only in the sign
+    of a zero (the first corner's stays), NaNs, and shared values across source vertices."""
+    from qemjax._mesh.wedges import _unique_rows, _wedge_rows
+
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        ns, n, k = int(rng.integers(1, 40)), int(rng.integers(1, 20)), int(rng.integers(0, 150))
+        M = rng.choice([0.0, -0.0, 0.5, 1.0, np.nan] if trial % 2 else [0.0, -0.0, 0.25], size=(ns, 2))
+        src = rng.integers(0, ns, k)
+        rep = rng.integers(0, n, k).astype(np.int64)
+        want_u, want_i = _unique_rows(np.concatenate([rep.reshape(-1, 1).astype(np.float64), M[src]], 1))
+        got_u, got_i = _wedge_rows(rep, src, M)
+        assert got_u.shape == want_u.shape and np.array_equal(got_i, want_i), trial
+        assert np.array_equal(got_u.view(np.int64), want_u.view(np.int64)), trial  # bits, signed zeros too
