@@ -445,3 +445,27 @@ def test_wedge_rows_are_every_corners_unique_rows():
         got_u, got_i = _wedge_rows(rep, src, M)
         assert got_u.shape == want_u.shape and np.array_equal(got_i, want_i), trial
         assert np.array_equal(got_u.view(np.int64), want_u.view(np.int64)), trial  # bits, signed zeros too
+
+
+def test_face_systems_are_numpys():
+    """`attributes_jit.face_systems` against the numpy code it replaces (np.cross, np.linalg.norm, the
+    normal divided where non-zero), bit for bit: random faces, degenerate ones (zero normal), signed zeros."""
+    from qemjax._costs import attributes_jit
+
+    rng = np.random.default_rng(9)
+    for trial in range(20):
+        f, m = int(rng.integers(1, 300)), int(rng.integers(1, 4))
+        P = rng.normal(size=(f, 3, 3)) * 10.0 ** rng.integers(-3, 4)
+        P[::7, 2] = P[::7, 1]  # two corners at one point: no normal
+        P[::11] = rng.choice([0.0, -0.0, 1.0], size=P[::11].shape)
+        S = rng.normal(size=(f, 3, m))
+        n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+        nn = np.linalg.norm(n, axis=1, keepdims=True)
+        n = n / np.where(nn > 0, nn, 1.0)
+        M = np.zeros((f, 4, 4))
+        M[:, :3, :3], M[:, :3, 3], M[:, 3, :3] = P, 1.0, n
+        rhs = np.zeros((f, 4, m))
+        rhs[:, :3] = S
+        gM, grhs, gnn = attributes_jit.face_systems(P, S)
+        for g, w in ((gM, M), (grhs, rhs), (gnn, nn[:, 0])):
+            assert np.array_equal(g.view(np.int64), w.view(np.int64)), trial

@@ -136,17 +136,12 @@ def face_fields(P: np.ndarray, S: np.ndarray):
     """Per face, the linear attribute fields through its corners: P (f,3,3) corner positions, S (f,3,m)
     corner values -> g (f,m,3) gradients in the face's plane and d (f,m) with s(p) = g·p + d (float64).
     Faces too thin to fit get g = 0, d = the mean of their corners."""
-    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    nn = np.linalg.norm(n, axis=1, keepdims=True)
-    n = n / np.where(nn > 0, nn, 1.0)
-    M = np.zeros((len(P), 4, 4))
-    M[:, :3, :3], M[:, :3, 3], M[:, 3, :3] = P, 1.0, n
-    rhs = np.zeros((len(P), 4, S.shape[2]))
-    rhs[:, :3] = S
     from .._mesh import fixed_order_jit  # here: importing the cost models does not need numba
+    from . import attributes_jit
 
+    M, rhs, nn = attributes_jit.face_systems(np.ascontiguousarray(P, np.float64), np.ascontiguousarray(S, np.float64))
     X, det = fixed_order_jit.solve(M, rhs)  # not np.linalg: LAPACK's bits differ by CPU
-    ok = np.abs(det) > 1e-12 * np.maximum(nn[:, 0], 1e-300) ** 1.5
+    ok = np.abs(det) > 1e-12 * np.maximum(nn, 1e-300) ** 1.5
     sol = np.zeros_like(rhs)
     sol[ok] = X[ok]
     sol[~ok, 3] = S[~ok].mean(1)

@@ -48,3 +48,29 @@ def corner_sums(F, g, S, w, n):
                     out[v, 11 + 4 * j + i] += wf * g[f, j, i]
                 out[v, 14 + 4 * j] += wf * S[f, k, j]
     return out
+
+
+@njit(cache=True, nogil=True)
+def face_systems(P, S):
+    """`attributes.face_fields`' systems, in numpy's arithmetic: per face of corners P (f,3,3) and corner
+    values S (f,3,m), M (f,4,4) = [corners | 1; unit normal | 0], rhs (f,4,m) = [S; 0], and the normal's
+    length nn (f,) (np.cross's products and differences, np.linalg.norm's squares added left to right)."""
+    nf, m = P.shape[0], S.shape[2]
+    M = np.zeros((nf, 4, 4))
+    rhs = np.zeros((nf, 4, m))
+    nn = np.empty(nf)
+    for f in range(nf):
+        u0, u1, u2 = P[f, 1, 0] - P[f, 0, 0], P[f, 1, 1] - P[f, 0, 1], P[f, 1, 2] - P[f, 0, 2]
+        v0, v1, v2 = P[f, 2, 0] - P[f, 0, 0], P[f, 2, 1] - P[f, 0, 1], P[f, 2, 2] - P[f, 0, 2]
+        n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+        length = np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
+        nn[f] = length
+        d = length if length > 0 else 1.0
+        for i in range(3):
+            for j in range(3):
+                M[f, i, j] = P[f, i, j]
+            M[f, i, 3] = 1.0
+            for c in range(m):
+                rhs[f, i, c] = S[f, i, c]
+        M[f, 3, 0], M[f, 3, 1], M[f, 3, 2] = n0 / d, n1 / d, n2 / d
+    return M, rhs, nn
