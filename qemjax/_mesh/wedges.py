@@ -217,7 +217,7 @@ def _wedge_rows(rep: np.ndarray, src: np.ndarray, M: np.ndarray) -> tuple[np.nda
     """`_unique_rows` of the corners' rows [rep, M[src]] (welded vertex, then its source vertex's values),
     the same arrays, bit for bit: the distinct (rep, src) pairs first, by an integer sort (a source vertex
     has one row of values, so a welded vertex sees a few), in the order each first appears among the
-    corners, then their rows (a sixth of the corners on spot). Among rows that compare equal (0.0 and
+    corners, then their rows (fewer than the corners). Among rows that compare equal (0.0 and
     -0.0), the first corner's stays the representative, as the sort of every corner keeps it. Values
     with a NaN take every corner's row (a NaN row is a wedge of its own at each corner)."""
     if len(rep) == 0 or np.isnan(M).any():  # (a NaN row equals nothing, itself neither: every corner)
