@@ -93,15 +93,20 @@ def test_face_stats_are_numpys_whole_array_arithmetic_bit_for_bit(seed, dtype):
 
 def test_vertex_runs_are_the_incidence_matrix_rows():
     """`faces_jit.vertex_runs` against scipy's COO -> CSR conversion of the vertex-face incidence (what
-    `FaceLists` used): each vertex's faces in face order, counts and offsets; an index out of range fails."""
+    `FaceLists` used): each vertex's faces in face order, counts and offsets, a face that repeats a vertex
+    listed once there; an index out of range fails."""
     import scipy.sparse
 
     from qemjax._mesh.faces_jit import vertex_runs
 
     rng = np.random.default_rng(3)
-    for n, m in ((1, 0), (5, 3), (40, 70), (300, 900)):
+    for n, m in ((1, 0), (5, 3), (40, 70), (300, 900), (6, 50)):
         F = np.array([rng.choice(n, 3, replace=False) for _ in range(m)], np.int32).reshape(-1, 3) if n >= 3 \
             else np.zeros((0, 3), np.int32)
+        if n == 6:  # faces that repeat a corner (non-manifold mode keeps them): listed once at it
+            F[::3, 2] = F[::3, 0]
+            F[1::5, 1] = F[1::5, 2]
+            F[2::7] = F[2::7, :1]
         inc = scipy.sparse.csr_matrix(
             (np.ones(3 * m, np.int8), (F.reshape(-1), np.repeat(np.arange(m, dtype=np.int32), 3))),
             shape=(n, max(m, 1)))

@@ -32,7 +32,8 @@ def face_rows(V, F, half):
 
 @njit(cache=True, nogil=True)
 def vertex_runs(F, n):
-    """Each vertex's faces as one run, in face order (`incidence.FaceLists`' layout): (cnt (n,) int64, off
+    """Each vertex's faces as one run, in face order, a face once even where it repeats the vertex
+    (`incidence.FaceLists`' layout): (cnt (n,) int64, off
     (n,) int64, pool (6m + 64,) int32 with the runs first, and where they end). A counting sort, as
     scipy's COO -> CSR conversion of the incidence matrix made it."""
     m = F.shape[0]
@@ -42,6 +43,8 @@ def vertex_runs(F, n):
             v = F[f, c]
             if v < 0 or v >= n:
                 raise ValueError("a face's vertex index is out of range")
+            if (c >= 1 and F[f, 0] == v) or (c == 2 and F[f, 1] == v):
+                continue  # a corner repeated in its face is listed once (scipy summed the duplicates)
             cnt[v] += 1
     off = np.empty(n, np.int64)
     end = 0
@@ -53,6 +56,8 @@ def vertex_runs(F, n):
     for f in range(m):
         for c in range(3):
             v = F[f, c]
+            if (c >= 1 and F[f, 0] == v) or (c == 2 and F[f, 1] == v):
+                continue
             pool[fill[v]] = f
             fill[v] += 1
     return cnt, off, pool, end

@@ -274,26 +274,8 @@ def constrain(F, alive, cnt, off, pool, C, multi, VQ, P, x, cost, m):
     """`wedges.Tracker.constrain`: pairs P (K,2) touching a seam vertex (flags read before the loop) get
     x (K,3) and cost (K,) at the allowed endpoint of smaller price (a first among equals). Returns (K,)
     bool: pairs with no allowed placement."""
-    K = len(P)
-    T, W = scratch(P, cnt, m)
-    seam = np.empty(K, np.bool_)
-    for i in range(K):
-        seam[i] = multi[P[i, 0]] or multi[P[i, 1]]
-    bad = np.zeros(K, np.bool_)
-    for i in range(K):
-        if not seam[i]:
-            continue
-        a, b = P[i, 0], P[i, 1]
-        free, nba, nab, _, _ = modes(F, alive, cnt, off, pool, C, multi, a, b, T)
-        if free:
-            continue
-        best_v, c = endpoint(VQ, a, b, nba >= 0, nab >= 0, m, W)
-        if best_v < 0:
-            bad[i] = True
-            continue
-        for k in range(3):
-            x[i, k] = VQ[best_v, k]
-        cost[i] = c
+    bad = np.zeros(len(P), np.bool_)
+    constrain_rows(F, alive, cnt, off, pool, C, multi, VQ, P, np.arange(len(P)), x, cost, bad, True, m)
     return bad
 
 
