@@ -49,6 +49,9 @@ def test_solve_csr_is_solve_spd_on_the_arrays(seed):
     M.data[::3] = 0.0
     M.sort_indices()
     assert np.array_equal(_diagonal(M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data), M.diagonal())
+    D = sp.csr_matrix((np.array([2.0, -1.0]), np.array([0, 0]), np.array([0, 2])), shape=(1, 1))  # a duplicate
+    X, ok = solve_spd(D, np.ones((1, 1)), np.zeros((1, 1)))  # summed, as scipy's diagonal sums it: N = [1]
+    assert ok and X[0, 0] == 1.0
     with pytest.raises(ValueError, match="not positive"):
         solve_csr(np.array([0, 1, 1]), np.array([0]), np.array([1.0]), np.ones((2, 1)), np.zeros((2, 1)))
 
@@ -167,6 +170,10 @@ def test_grid_nearest_seeds_change_no_answer(where, monkeypatch):
         nearest(X, G, P, seed[:-1])
     with pytest.raises(ValueError, match="past the last"):
         nearest(X, G, P, np.full(len(P), len(G)))
+    bad = G.copy()
+    bad[5, 1] = len(X)
+    with pytest.raises(ValueError, match="not one of the vertices"):
+        nearest(X, bad, P)
 
 
 def test_fixed_order_helpers_match_numpy():

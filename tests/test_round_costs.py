@@ -3,6 +3,7 @@ update in pieces sized to the mesh (`parallel.merge_size`), and kernel settings 
 copied to the device once per run (`common.on_device`). Each must give the same bits as before."""
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -79,6 +80,11 @@ def test_small_settings_copies_are_kept_for_the_next_run():
         assert np.array_equal(np.asarray(d2[k]), p2[k])
     big = np.arange(17.0)
     assert common.on_device({"w": big})["w"] is not common.on_device({"w": big})["w"]  # large: copied each time
+    f64 = {"e": np.asarray(0.5, np.float64)}  # its device dtype follows x64 mode: a copy per mode
+    plain = common.on_device(f64)["e"]
+    with jax.enable_x64(True):
+        wide = common.on_device(f64)["e"]
+    assert plain.dtype == jnp.float32 and wide.dtype == jnp.float64
 
 
 def test_merge_size_is_two_shapes_and_the_row_update_is_exact():

@@ -1,7 +1,7 @@
 """Bounding boxes, compiled: numpy's ``V.min(0)`` / ``V.max(0)`` without its cost on (n,3) rows.
 
 numpy reduces an (n,3) array over its first axis three values at a time: a minimum and a maximum took
-0.13 ms on the cow's 2.9 k vertices and 30 ms on armadillo ×16's 0.69 M, against 0.011 and 2.5 ms here
+0.13 ms on the cow's 2.9 k vertices and 31 ms on armadillo ×16's 0.69 M, against 0.011 and 2.5 ms here
 (``python experiments/bounds_cost.py``). A run took three on its input (the re-fit's frame, the measured
 distance's frame and diagonal) and more in each nearest search's grid. These loops give the same values, signed
 zeros and NaNs included: numpy's reduction keeps the running value only where it is strictly smaller (for
@@ -27,7 +27,8 @@ def _hi(acc, x):
 
 @njit(cache=True, nogil=True)
 def row_bounds(V):
-    """(V.min(0), V.max(0)) of (n, c) rows, n >= 1."""
+    """(V.min(0), V.max(0)) of (n, c) rows, n >= 1, as numpy gives them for rows in C order (for another
+    layout numpy reduces each column with other loops, and a signed zero or a NaN's sign may differ)."""
     n, c = V.shape
     lo, hi = V[0].copy(), V[0].copy()
     for i in range(1, n):

@@ -298,6 +298,8 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
     seed = np.ascontiguousarray(seed, np.int32 if len(G) < 2**31 else np.int64)
     if len(G) == 0:
         raise ValueError("nearest: no triangles")
+    if G.min() < 0 or G.max() >= len(X):  # (the compiled loops below read X[G] unchecked)
+        raise ValueError("nearest: a triangle's corner is not one of the vertices")
     lo, hi = used_bounds(X, G)
     ext = np.maximum(hi - lo, 1e-300)
     h = max(CUBE_EDGE * float(np.median(edge_lengths(X, G))), float(ext.max()) * 1e-6)

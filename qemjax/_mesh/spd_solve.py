@@ -100,7 +100,8 @@ def solve_spd(N, B: np.ndarray, X0: np.ndarray, rtol: float = 1e-12, max_iter: i
     guess X0, to a relative residual of ``rtol`` per column (module docstring); ``converged`` is False when
     some column needed more than ``max_iter`` iterations (default: 10·n + 100), X is then the last iterate."""
     N = sp.csr_matrix(N, dtype=np.float64)
-    N.sort_indices()  # the summation order is the index order: make it canonical
+    N.sum_duplicates()  # canonical: duplicates summed (as scipy's diagonal sums them), columns sorted (the
+    # summation order is the index order)
     return solve_csr(N.indptr.astype(np.int64), N.indices.astype(np.int64), N.data, B, X0, rtol, max_iter)
 
 

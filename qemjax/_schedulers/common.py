@@ -83,14 +83,15 @@ def on_device(params: dict) -> dict:
             for k, v in params.items()}
 
 
-_DEVICE_VALUES: dict = {}  # (dtype, shape, bytes, default device) -> the device copy of a small setting
+_DEVICE_VALUES: dict = {}  # (dtype, shape, bytes, default device, x64) -> the device copy of a small setting
 
 
 def _device_value(v: np.ndarray):
     """``jnp.asarray(v)``; for at most 16 values, the copy made for the same value before."""
     if v.size > 16:
         return jnp.asarray(v)
-    key = (v.dtype.str, v.shape, v.tobytes(), str(jax.config.jax_default_device))
+    # (the device dtype follows x64 mode too: float64 settings are float32 on the device without it)
+    key = (v.dtype.str, v.shape, v.tobytes(), str(jax.config.jax_default_device), bool(jax.config.jax_enable_x64))
     d = _DEVICE_VALUES.get(key)
     if d is None:
         if len(_DEVICE_VALUES) >= 4096:  # a sweep over many values: start again rather than grow
