@@ -30,6 +30,12 @@ def face_rows(V, F, half):
     return nz, area, e2
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _repeats(F, f, c):
+    """Whether corner c of face f repeats an earlier corner's vertex."""
+    return (c >= 1 and F[f, 0] == F[f, c]) or (c == 2 and F[f, 1] == F[f, c])
+
+
 @njit(cache=True, nogil=True)
 def vertex_runs(F, n):
     """Each vertex's faces as one run, in face order, a face once even where it repeats the vertex
@@ -43,9 +49,8 @@ def vertex_runs(F, n):
             v = F[f, c]
             if v < 0 or v >= n:
                 raise ValueError("a face's vertex index is out of range")
-            if (c >= 1 and F[f, 0] == v) or (c == 2 and F[f, 1] == v):
-                continue  # a corner repeated in its face is listed once (scipy summed the duplicates)
-            cnt[v] += 1
+            if not _repeats(F, f, c):  # a vertex repeated in its face lists it once (scipy summed duplicates)
+                cnt[v] += 1
     off = np.empty(n, np.int64)
     end = 0
     for v in range(n):
@@ -55,9 +60,8 @@ def vertex_runs(F, n):
     fill = off.copy()
     for f in range(m):
         for c in range(3):
-            v = F[f, c]
-            if (c >= 1 and F[f, 0] == v) or (c == 2 and F[f, 1] == v):
-                continue
-            pool[fill[v]] = f
-            fill[v] += 1
+            if not _repeats(F, f, c):
+                v = F[f, c]
+                pool[fill[v]] = f
+                fill[v] += 1
     return cnt, off, pool, end

@@ -44,9 +44,9 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
     t = time.perf_counter()
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
     X, G = np.asarray(X, np.float64), np.asarray(G, np.int64)
-    centre, unit = unit_frame(V)  # as the re-fit: squared distances stay finite at any scale
-    lo, hi = row_bounds(V) if len(V) else (np.zeros(3), np.zeros(3))
-    diag = float(np.sqrt(np.sum((hi - lo) ** 2)))
+    box = row_bounds(V) if len(V) else None  # (lo, hi), for the frame and the diagonal
+    centre, unit = unit_frame(V, box)  # as the re-fit: squared distances stay finite at any scale
+    diag = float(np.sqrt(np.sum((box[1] - box[0]) ** 2))) if len(V) else 0.0
     if not (unit > 0 and np.isfinite(unit)) or len(V) == 0 or len(G) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
     if sampled is None:

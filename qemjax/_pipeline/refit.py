@@ -163,10 +163,11 @@ def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
     return ((l1 == 0) & (l0 > 0)) | ((l0 > 0) & (cos <= cos_max))
 
 
-def unit_frame(V: np.ndarray) -> tuple[np.ndarray, float]:
+def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, float]:
     """(centre (3,), unit): the centre of V's bounding box and its largest extent (no vertices: 0 and 1).
-    Work in this frame keeps squared distances and areas finite at any scale (1e-100 or 1e100 mesh units)."""
-    lo, hi = row_bounds(V) if len(V) else (np.zeros(3), np.ones(3))
+    Work in this frame keeps squared distances and areas finite at any scale (1e-100 or 1e100 mesh units).
+    ``bounds``: V's (lo, hi) when the caller has them."""
+    lo, hi = bounds if bounds is not None else (row_bounds(V) if len(V) else (np.zeros(3), np.ones(3)))
     return 0.5 * (lo + hi), float(np.max(hi - lo))
 
 

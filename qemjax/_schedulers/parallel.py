@@ -117,15 +117,14 @@ def _with_extra_pairs(E, ecount, extra_pairs, n):
 
 def _accepted(E, found, take):
     """The pairs marked in ``take`` (len(E),) bool with what validation found for them (``found``: pair
-    indices, kept faces, dead faces and, in manifold mode, (apexes, rows of E at the endpoints, their
-    pairs) per pass; `FaceLists.touched_with_dead`, `topo.link_ok`), renumbered as one set in pass
-    order: pairs (S,2), the arguments ``kept`` and ``dead`` of `FaceLists.contract_touched`, and the
-    apexes (S,2) and the rows of E at the endpoints (None outside manifold mode).
+    indices, kept faces, dead faces and, in manifold mode, the apexes per pass; `FaceLists.touched_with_dead`,
+    `topo.link_ok`), renumbered as one set in pass order: pairs (S,2), the arguments ``kept`` and ``dead``
+    of `FaceLists.contract_touched`, and the apexes (S,2) (None outside manifold mode).
 
     A kept face's position w counts endpoints (2·pair + side, side 1 at b), as `FaceLists` numbers them."""
-    pairs, ws, fs, cs, ds, xs, rs = [], [], [], [], [], [], []
+    pairs, ws, fs, cs, ds, xs = [], [], [], [], [], []
     off = 0
-    for idx, (w, f, c), (df, downer), at in found:
+    for idx, (w, f, c), (df, downer), apex in found:
         t = take[idx]
         pos = np.cumsum(t) - 1 + off  # each taken pair's place in the combined set
         pair_of, side = w >> 1, w & 1
@@ -135,13 +134,11 @@ def _accepted(E, found, take):
         cs.append(c.compress(keep))
         ds.append(df.compress(t.take(downer)))
         pairs.append(_take(E, idx.compress(t)))
-        if at is not None:
-            apex, rows, owner = at
+        if apex is not None:
             xs.append(_keep(apex, t))
-            rs.append(rows.compress(t.take(owner)))
         off += int(t.sum())
     cat = np.concatenate
-    return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), (cat(xs), cat(rs)) if xs else (None, None)
+    return cat(pairs), (cat(ws), cat(fs), cat(cs)), cat(ds), cat(xs) if xs else None
 
 
 def _ring_vertices(faces: FaceLists, verts, n):
@@ -532,37 +529,34 @@ class _Run:
             self._count = np.arange(P)
         return self._keys, self._rows, self._verts, self._count
 
-    def validate(self, st: RoundState, found: list, P, idx, free_rows, Efree):
+    def validate(self, st: RoundState, found: list, P, idx, Efree):
         """(rule broken per pair (0: valid), faces made coincident) for vertex-disjoint pairs P (indices
-        idx into this round's pairs). Efree (rows free_rows of this round's pairs) holds every pair at
-        them; the faces come from `FaceLists`. In manifold mode the link test runs on the worker thread.
-        What the contraction will need again (the faces' look-up and, in manifold mode, the apexes and
-        the pairs at the endpoints that the link test found, for `topo.contract_edges`) is appended to
-        ``found``."""
+        idx into this round's pairs). Efree (rows of this round's pairs) holds every pair at them; the faces come from `FaceLists`. In manifold mode the link test runs on the worker thread.
+        What the contraction will need again (the faces' look-up and, in manifold mode, the apexes that
+        the link test found, for `round_jit.contract_edges`) is appended to ``found``."""
         tv = time.perf_counter()
         if self.manifold:
             link = submit(topo.link_ok, P, st.ecount[idx], Efree, self.n, st.bvert, st.deg, apexes=True,
-                          edges_at=True, size=len(Efree))
+                          size=len(Efree))
         (fids, before, corner, owner, G), kept, dead = self.faces.touched_with_dead(P)
         flipped = start_flips(self.VQd, self.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
                             self.cos_max)  # runs while the host tests the rest
         gone = topo.coincidence_count(G, owner, len(P))
         why = np.zeros(len(P), np.int8)
-        at = None
+        apex = None
         if self.manifold:  # link condition, no coincident faces
-            linked, apex, r, owner_r = link.result()
+            linked, apex = link.result()
             why[gone > 0] = outcome.COINCIDENT
             if self.options.keep_parts:  # the pair's faces are all its part has left
                 why[np.bincount(owner, minlength=len(P)) == 0] = outcome.PART
             why[~linked] = outcome.TOPOLOGY
-            at = (apex, free_rows.take(r), owner_r)
         if self.locks is not None:  # a locked vertex never leaves the mesh (its part's or its own last faces)
             gone_locked = _locks.vanishing(self.locks, P, np.bincount(owner, minlength=len(P))) | \
                 _locks.strands(self.locks, self.faces, P, dead)
             why[(why == 0) & gone_locked] = outcome.LOCKED
         if self.wedges is not None:  # the seam rule, for the pairs still valid
             why[self.wedges.refused(self.faces, self.VQ, P, _take(st.x, idx), why == 0)] = outcome.SEAM
-        found.append((idx, kept, dead, at))
+        found.append((idx, kept, dead, apex))
         flip = flipped()
         why[(why == 0) & flip] = outcome.FLIP
         self.timer.add("validity_s", time.perf_counter() - tv)
@@ -677,7 +671,7 @@ class _Run:
         P = _take(st.E, acc)
         taken = np.zeros(len(st.E), bool)
         taken[acc] = True
-        pairs, kept, dead, (apex, _) = _accepted(st.E, found, taken)  # in pass order, not acc's
+        pairs, kept, dead, apex = _accepted(st.E, found, taken)  # in pass order, not acc's
         edges_next = None
         if self.incremental:  # the edge update (compiled) runs on the worker while this thread relinks the faces
             edges_next = submit(round_jit.contract_edges, st.E, st.ecount, st.deg, pairs[:, 0], pairs[:, 1],

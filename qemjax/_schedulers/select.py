@@ -60,7 +60,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
 
     E (P,2) are all candidate pairs (mesh edges and, with aggregation, close vertex pairs): the conflict
     graph. ``key_of(idx)`` gives the (unique) int64 keys of pairs idx (`sort_keys`).
-    ``validate(pairs, idx, rows, pairs_at_free)`` (rows: the indices of pairs_at_free in E) returns
+    ``validate(pairs, idx, pairs_at_free)`` (pairs_at_free: every pair of E at a free vertex) returns
     (reason code per pair, 0 = valid; extra faces removed).
 
     Each pass takes the candidates that hold the smallest key among all candidates touching their
@@ -115,7 +115,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
         sel = both.compress(live & (kl == m2.take(Eb[:, 0])) & (kl == m2.take(Eb[:, 1])))
         if sel.size == 0:
             break
-        why, extra_sel = validate(_take(E, sel), sel, one, Eo)
+        why, extra_sel = validate(_take(E, sel), sel, Eo)
         ok = why == 0
         extra[sel] = extra_sel
         cand[sel[~ok]] = False
