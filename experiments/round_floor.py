@@ -6,6 +6,12 @@ measured distance, summed, against the whole run and against a goal of G × mesh
 
 Each compiled loop is wrapped with a timer; warm runs, medians.
 
+A second table sets the goal's room for the host loops (the goal less the device wait, the re-fit and the
+measured distance) beside what one part of them alone takes: the rule checks of every pair that the
+selection tested in the run (link condition, coincident faces, part and seam rules, the flip test), replayed
+as one compiled loop per round on that round's inputs, without the selection's scans or the contraction
+(`select_cost.rules_alone`, best of 3 per round), and the whole run's checks against its contractions.
+
     python experiments/round_floor.py --cases cow:0.1:20 stanford-bunny:0.1:5 --repeats 7
 """
 from __future__ import annotations
@@ -36,7 +42,10 @@ def main():
     from qemjax import peers
     from qemjax._schedulers import round_glue_jit, round_jit
 
+    from select_cost import _copy, rules_alone
+
     spent = {"loops": 0.0}
+    select_validate = round_jit.select_validate  # (the compiled function, before it is wrapped)
     for module, name in [(round_jit, n) for n in LOOPS] + [(round_glue_jit, n) for n in GLUE]:
         fn = getattr(module, name)
 
@@ -47,6 +56,7 @@ def main():
             finally:
                 spent["loops"] += time.perf_counter() - t
         setattr(module, name, timed)
+    budget = []
     print(f"# python experiments/round_floor.py --cases {' '.join(args.cases)} --repeats {args.repeats}")
     print("| case | whole run ms | compiled loops ms | device wait ms | re-fit ms | measured distance ms | "
           "sum (the floor) ms | meshoptimizer ms | goal ms | floor / goal |")
@@ -76,6 +86,45 @@ def main():
         print(f"| {name} → {ratio} | {med['run']:.1f} | {med['loops']:.1f} | {med['kernels']:.1f} | "
               f"{med['refit']:.1f} | {med['distance']:.1f} | {floor:.1f} | {med['mo']:.2f} | {g:.1f} "
               f"({goal}×) | {floor / g:.2f} |")
+        room = g - (med["kernels"] + med["refit"] + med["distance"])
+        checks, alone, contracted = _rule_checks(qemjax, bm, target, select_validate, _copy, rules_alone)
+        budget.append(f"| {name} → {ratio} | {g:.1f} | {room:.1f} | {med['loops']:.1f} | {checks} | {contracted} | "
+                      f"{alone * 1e3:.1f} | {alone * 1e3 / room:.2f} |")
+    print()
+    print("| case | goal ms | room for the host loops ms | the loops now ms | rule checks | contractions | "
+          "rule checks alone ms | rule checks alone / room |")
+    print("|---|---|---|---|---|---|---|---|")
+    print("\n".join(budget))
+
+
+def _rule_checks(qemjax, bm, target, fn, copy, rules_alone):
+    """(pairs tested, seconds the tests alone take, contractions) over one warm run: every call's inputs of
+    ``fn`` (`round_jit.select_validate`) recorded, then its tested pairs (accepted and rejected) replayed
+    through the rules alone."""
+    import numpy as np
+
+    from qemjax._schedulers import round_jit
+
+    timed = round_jit.select_validate
+    names = fn.py_func.__code__.co_varnames[: fn.py_func.__code__.co_argcount]
+    saved = []
+
+    def spy(*a):
+        saved.append(copy(a))
+        return fn(*a)
+    round_jit.select_validate = spy
+    try:
+        r = qemjax.simplify((bm.V, bm.F), target_faces=target)
+    finally:
+        round_jit.select_validate = timed
+    checks = alone = 0
+    for a in saved:
+        out = fn(*copy(a))
+        tested = np.concatenate([out[0], out[2]])
+        checks += len(tested)
+        if len(tested):
+            alone += rules_alone(copy(a), tested, names, repeats=3)
+    return checks, alone, r.stats["contractions"]
 
 
 if __name__ == "__main__":

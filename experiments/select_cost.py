@@ -26,9 +26,13 @@ import numpy as np  # noqa: E402
 import meshes as bench_meshes  # noqa: E402
 
 
-def _rules_alone(a, pairs, names):
-    """Seconds (best of 5) of `round_jit._rules` on each pair of ``pairs`` (rows of E), with the call's
-    inputs ``a``."""
+_LOOP = []
+
+
+def _rules_loop():
+    """A compiled loop of `round_jit._rules` over given pairs (built once a process)."""
+    if _LOOP:
+        return _LOOP[0]
     from numba import njit
 
     from qemjax._schedulers import round_jit
@@ -51,12 +55,20 @@ def _rules_alone(a, pairs, names):
                          sliver, keep_parts, mark, nb, fa, apex, 0, C, multi, T) != 0
         return bad
 
+    _LOOP.append(loop)
+    return loop
+
+
+def rules_alone(a, pairs, names, repeats=5):
+    """Seconds (best of ``repeats``) of `round_jit._rules` on each pair of ``pairs`` (rows of E), with the
+    inputs ``a`` of a `round_jit.select_validate` call (argument names ``names``)."""
+    loop = _rules_loop()
     g = dict(zip(names, a))
     args = [g[k] for k in ("E", "ecount", "X", "F", "alive", "cnt", "off", "pool", "VQ", "N0", "bvert", "deg",
                            "cos_max", "sliver", "keep_parts", "mark", "corner_wedge", "multi")]
     loop(pairs[:1], *args)  # compile
     ts = []
-    for _ in range(5):
+    for _ in range(repeats):
         t = time.perf_counter()
         loop(pairs, *args)
         ts.append(time.perf_counter() - t)
@@ -117,7 +129,7 @@ def main():
                 if passes == a[at]:
                     checked = np.concatenate([out[0], out[2]])
             t0, (t1, c1), (ta, ca) = best[0][0], best[1], best[a[at]]
-            alone = _rules_alone(_copy(a), checked, names)
+            alone = rules_alone(_copy(a), checked, names)
             print(f"| {name} | {r} | {len(a[0])} | {t0 * 1e3:.2f} | {t1 * 1e3:.2f} | {ta * 1e3:.2f} | {ca} | "
                   f"{(ta - t0) / max(ca, 1) * 1e6:.2f} | {alone * 1e3:.2f} | {alone / max(ca, 1) * 1e6:.2f} |")
 
