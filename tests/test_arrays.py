@@ -52,14 +52,19 @@ def test_column_bounds_match_min_max():
     assert np.array_equal(lo, V.min(0)) and np.array_equal(hi, V.max(0))
 
 
-@pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_face_normals_match_cross(dtype):
-    V = rng.standard_normal((100, 3)).astype(dtype)
-    F = rng.integers(0, 100, (400, 3))
-    p = V[F]
-    want = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    got = face_normals(V, F)
-    assert got.dtype == dtype and np.array_equal(got, want)  # the same arithmetic, bit for bit
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.float16])
+@pytest.mark.parametrize("fdtype", [np.int32, np.int64])
+def test_face_normals_match_cross(dtype, fdtype):
+    """Compiled (float32, float64) and numpy (others) normals: np.cross's values bit for bit, on
+    contiguous rows and on a view of wider rows (as the scheduler's VQ[:, :3])."""
+    V = rng.standard_normal((100, 5)).astype(dtype)
+    F = rng.integers(0, 100, (400, 3)).astype(fdtype)
+    for W in (np.ascontiguousarray(V[:, :3]), V[:, 1:4]):
+        p = W[F]
+        want = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        got = face_normals(W, F)
+        assert got.dtype == dtype and got.shape == (400, 3)
+        assert np.array_equal(got.view(np.uint8), want.view(np.uint8))  # the same arithmetic, bit for bit
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
@@ -117,3 +122,37 @@ def test_vertex_runs_are_the_incidence_matrix_rows():
         assert len(pool) == 6 * m + 64
     with pytest.raises(ValueError, match="out of range"):
         vertex_runs(np.array([[0, 1, 5]], np.int32), 5)
+
+
+@pytest.mark.parametrize("dtype,shape", [(np.float32, (500, 3)), (np.float32, (500,)), (np.int8, (500,)),
+                                         (np.float32, (500, 4)), (np.float32, (500, 0)), (np.bool_, (500,))])
+def test_compiled_row_take_is_numpys(dtype, shape):
+    """`rows_jit.take` gives ``A.take(idx, axis=0)``: values (bits), dtype and shape, for the per-pair arrays'
+    kinds, ascending and repeated indices, and none."""
+    from qemjax._mesh import rows_jit
+
+    A = (rng.standard_normal(shape) * 100).astype(dtype)
+    for idx in (np.flatnonzero(rng.random(500) < 0.7), rng.integers(0, 500, 300), np.zeros(0, np.int64)):
+        got, want = rows_jit.take(A, idx), A.take(idx, axis=0)
+        assert got.dtype == want.dtype and got.shape == want.shape and got.flags.c_contiguous
+        assert np.array_equal(got.view(np.uint8), want.view(np.uint8))
+
+
+@pytest.mark.parametrize("dtype,shape", [(np.float32, (500, 3)), (np.int8, (500,)), (np.float32, (500, 0))])
+def test_compact_in_place_is_take(dtype, shape):
+    """`rows_jit.compact`: numpy's take for ascending indices, as a view of the array's own first rows; a
+    read-only array is gathered into a new one and left as it was."""
+    from qemjax._mesh import rows_jit
+
+    A = (rng.standard_normal(shape) * 100).astype(dtype)
+    for idx in (np.flatnonzero(rng.random(500) < 0.7), np.arange(500), np.zeros(0, np.int64)):
+        B = A.copy()
+        want = B.take(idx, axis=0)
+        got = rows_jit.compact(B, idx)
+        assert got.dtype == want.dtype and got.shape == want.shape and np.shares_memory(got, B) or not got.size
+        assert np.array_equal(got.view(np.uint8), want.view(np.uint8))
+    R = A.copy()
+    R.flags.writeable = False
+    idx = np.flatnonzero(rng.random(500) < 0.5)
+    got = rows_jit.compact(R, idx)
+    assert not np.shares_memory(got, R) and np.array_equal(got, A.take(idx, axis=0)) and np.array_equal(R, A)

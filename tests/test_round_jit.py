@@ -179,3 +179,27 @@ def test_large_runs_keep_the_numpy_stages(monkeypatch):
     large, seen_large = _run(mesh, {"ratio": 0.1}, monkeypatch, True)
     assert seen_small == [True] and seen_large == [False]
     _assert_same(large, small)
+
+
+@pytest.mark.parametrize("threads", ["inline", "worker"])
+@pytest.mark.parametrize("seed", [0, 2])
+def test_edge_update_on_two_threads_is_contract_edges(seed, threads, monkeypatch):
+    """`parallel.EdgeUpdate` (the pairs' update with its passes split between the worker and the calling
+    thread) returns `round_jit.contract_edges`' arrays, dtypes included, and leaves the labels cleared;
+    ``worker``: the halves really run on the worker (no size is too small to hand over)."""
+    from qemjax._schedulers import select
+    from qemjax._schedulers.parallel import EdgeUpdate
+
+    if threads == "worker":
+        monkeypatch.setattr(select, "INLINE_ROWS", 0)
+    V, F = shapes.bumpy_sphere(2) if seed != 2 else shapes.grid(12, hole=True)
+    n = len(V)
+    E, ecount, deg, P, apex = _selected_pairs(F, n, seed)
+    a, b = P[:, 0].copy(), P[:, 1].copy()
+    label = np.full(n, -1, np.int32)
+    want = round_jit.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), label)
+    got = EdgeUpdate(E, ecount, deg, a, b, apex.astype(np.int64), label).result()
+    for w, g, name in zip(want, got, ("E", "ecount", "keep", "degree", "stale")):
+        assert g.dtype == w.dtype, name
+        np.testing.assert_array_equal(g, w, err_msg=name)
+    assert (label == -1).all() and not want[2].all()

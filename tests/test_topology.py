@@ -240,3 +240,93 @@ def test_seam_count_is_scipys_component_count():
         inv = inv.reshape(-1, 2)
         g = coo_matrix((np.ones(k), (inv[:, 0], inv[:, 1])), shape=(len(ids), len(ids)))
         assert seam_count(E) == connected_components(g, directed=False)[0]
+
+
+def _around_numpy(lists, verts):
+    """`FaceLists.around` as numpy expressions (the reference of the compiled loop)."""
+    lens = lists.cnt.take(verts)
+    which = np.repeat(np.arange(len(verts)), lens)
+    pos = np.arange(len(which), dtype=np.int64)
+    pos += np.repeat(lists.off.take(verts) - (np.cumsum(lens) - lens), lens)
+    f = lists.pool.take(pos)
+    live = lists.alive.take(f)
+    return which.compress(live), f.compress(live)
+
+
+def _touched_numpy(lists, pairs):
+    """`FaceLists.touched_with_dead` as numpy expressions (the reference of the compiled loop)."""
+    ends = pairs.reshape(-1)
+    w, f = _around_numpy(lists, ends)
+    G = lists.F.take(f, axis=0)
+    other = ends.take(w ^ 1)
+    keep = (G[:, 0] != other) & (G[:, 1] != other) & (G[:, 2] != other)
+    dies = ~keep & (w & 1).astype(bool)
+    dead = (f.compress(dies), w.compress(dies) >> 1)
+    w, f, G = w.compress(keep), f.compress(keep), G.compress(keep, axis=0)
+    me = ends.take(w)
+    corner = np.where(G[:, 0] == me, 0, np.where(G[:, 1] == me, 1, 2))
+    owner = w >> 1
+    after = G.copy()
+    after[np.arange(len(G)), corner] = ends.take(2 * owner)
+    return (f, G, corner, owner, after), (w, f, corner), dead
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_face_look_ups_are_numpys(seed, dtype):
+    """`FaceLists.around` and `touched_with_dead` (compiled loops) give the numpy expressions' arrays, order
+    and dtypes included, on a mesh whose lists went through contractions (dead faces still listed, runs
+    moved to the pool's end), for vertex lists with repeats and for vertex-disjoint pairs."""
+    rng = np.random.default_rng(seed)
+    mesh = shapes.bumpy_sphere(3)
+    F = np.asarray(mesh.faces, np.int64)
+    n = len(mesh.vertices)
+    lists = FaceLists(F, n)
+    E, ecount = topo.edges(F, n)
+    for _ in range(3):
+        P, _, _ = _independent_pairs(E, ecount, n, F)
+        P = P.astype(dtype)
+        verts = rng.integers(0, n, 200).astype(dtype)
+        for got, want in zip(lists.around(verts), _around_numpy(lists, verts)):
+            assert got.dtype == want.dtype and np.array_equal(got, want)
+        got, want = lists.touched_with_dead(P), _touched_numpy(lists, P)
+        for g, w in zip([*got[0], *got[1], *got[2]], [*want[0], *want[1], *want[2]]):
+            assert g.dtype == w.dtype and g.shape == w.shape and np.array_equal(g, w)
+        assert len(got[2][0]) > 0 and len(got[0][0]) > 0
+        dead = lists.contract(P[:, 0], P[:, 1])
+        rep = np.arange(n)
+        rep[P[:, 1]] = P[:, 0]
+        Fr = rep[F]
+        F = Fr[(Fr[:, 0] != Fr[:, 1]) & (Fr[:, 1] != Fr[:, 2]) & (Fr[:, 0] != Fr[:, 2])]
+        assert len(dead) > 0 and np.array_equal(lists.live(), F)
+        E, ecount = topo.edges(F, n)
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_compiled_degrees_endpoints_and_first_steps_are_numpys(dtype):
+    """`edges_jit.degrees` / `endpoints` and `faces_jit.first_step` against the numpy expressions they
+    replaced (bincount, a scatter of the masked rows, the row-wise minimum of gathered steps)."""
+    from qemjax._mesh.edges_jit import degrees, endpoints
+    from qemjax._mesh.faces_jit import first_step
+
+    rng = np.random.default_rng(5)
+    n = 300
+    E = rng.integers(0, n, (2000, 2)).astype(dtype)
+    E[:5] = [0, 0]  # a row repeating its vertex counts it twice, as bincount does
+    got = degrees(E, n)
+    assert got.dtype == np.int64 and np.array_equal(got, np.bincount(E.reshape(-1), minlength=n))
+    assert np.array_equal(degrees(E[:0], n), np.zeros(n, np.int64))
+    for p in (0.0, 0.3, 1.0):
+        mask = rng.random(len(E)) < p
+        want = np.zeros(n, bool)
+        want[E[mask].reshape(-1)] = True
+        assert np.array_equal(endpoints(E, mask, n), want)
+    F = rng.integers(0, n, (500, 3)).astype(dtype)
+    step_of = np.full(n, np.iinfo(np.int64).max)
+    step_of[rng.choice(n, 100, replace=False)] = rng.permutation(100)
+    faces = rng.choice(500, 200, replace=False).astype(dtype)
+    want = np.full(500, -1, np.int64)
+    want[faces] = step_of[F[faces]].min(1)
+    got = np.full(500, -1, np.int64)
+    first_step(F, step_of, faces, got)
+    assert np.array_equal(got, want)

@@ -63,3 +63,26 @@ def tables(packed, F, n, bits):
             B += 1
         i = j
     return E, counts, he, face
+
+
+@njit(cache=True, nogil=True)
+def degrees(E, n):
+    """(n,) int64: how many rows of E (k,2) hold each vertex (``np.bincount(E.reshape(-1), minlength=n)``,
+    without numpy's intp copy of E). Rows must hold vertices 0..n-1."""
+    deg = np.zeros(n, np.int64)
+    for i in range(E.shape[0]):
+        deg[E[i, 0]] += 1
+        deg[E[i, 1]] += 1
+    return deg
+
+
+@njit(cache=True, nogil=True)
+def endpoints(E, mask, n):
+    """(n,) bool: the vertices of the rows of E (k,2) where ``mask`` (k,) holds, without a branch (the
+    mask follows no pattern)."""
+    v = np.zeros(n, np.bool_)
+    for i in range(E.shape[0]):
+        m = mask[i]
+        v[E[i, 0]] |= m
+        v[E[i, 1]] |= m
+    return v

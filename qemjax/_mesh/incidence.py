@@ -13,6 +13,13 @@ from __future__ import annotations
 import numpy as np
 
 
+def _jit():
+    """The compiled loops (`faces_jit`), imported on first use: importing the cost models stays light."""
+    from . import faces_jit
+
+    return faces_jit
+
+
 def _exclusive_cumsum(c: np.ndarray) -> np.ndarray:
     out = np.cumsum(c)
     out -= c
@@ -30,10 +37,8 @@ class FaceLists:
         m = len(self.F)
         self.alive = np.ones(m, bool)
         self.count = m
-        from .faces_jit import vertex_runs  # here: importing the cost models stays light
-
         # grouping corners by vertex: a counting sort, compiled
-        self.cnt, self.off, self.pool, self.end = vertex_runs(self.F, n)
+        self.cnt, self.off, self.pool, self.end = _jit().vertex_runs(self.F, n)
 
     def live(self) -> np.ndarray:
         """(count,3) the live faces, in face order."""
@@ -42,13 +47,7 @@ class FaceLists:
     def around(self, verts: np.ndarray):
         """Every live face at each of ``verts`` (k,): (positions into verts, face ids), grouped by
         position in order (a face at two of the vertices appears twice)."""
-        lens = self.cnt.take(verts)
-        which = np.repeat(np.arange(len(verts)), lens)
-        pos = np.arange(len(which), dtype=np.int64)
-        pos += np.repeat(self.off.take(verts) - _exclusive_cumsum(lens), lens)
-        f = self.pool.take(pos)
-        live = self.alive.take(f)
-        return which.compress(live), f.compress(live)
+        return _jit().around(self.alive, self.cnt, self.off, self.pool, np.asarray(verts))
 
     def remove(self, faces: np.ndarray):
         """Mark faces dead (they stay listed at their corners until those runs are rewritten)."""
@@ -112,20 +111,7 @@ class FaceLists:
         """`touched`, plus what `contract_touched` needs to apply the contractions without looking the
         faces up again: (positions w into pairs.reshape(-1), faces, moving corners) of the surviving
         faces, and (faces, owner pairs) of the faces that die (seen from b's side)."""
-        ends = pairs.reshape(-1)
-        w, f = self.around(ends)
-        G = self.F.take(f, axis=0)
-        other = ends.take(w ^ 1)  # the pair's other endpoint
-        keep = (G[:, 0] != other) & (G[:, 1] != other) & (G[:, 2] != other)
-        dies = ~keep & (w & 1).astype(bool)
-        dead = (f.compress(dies), w.compress(dies) >> 1)
-        w, f, G = w.compress(keep), f.compress(keep), G.compress(keep, axis=0)
-        me = ends.take(w)
-        corner = np.where(G[:, 0] == me, 0, np.where(G[:, 1] == me, 1, 2))
-        owner = w >> 1
-        after = G.copy()
-        after[np.arange(len(G)), corner] = ends.take(2 * owner)
-        return (f, G, corner, owner, after), (w, f, corner), dead
+        return _jit().touched(self.F, self.alive, self.cnt, self.off, self.pool, np.asarray(pairs).reshape(-1, 2))
 
     def contract_touched(self, pairs: np.ndarray, kept, dead) -> None:
         """`contract` for pairs (S,2) whose faces `touched_with_dead` found (and have not changed since),

@@ -141,8 +141,10 @@ def feature_edges_with_faces(F: np.ndarray, n: int, feat: np.ndarray) -> tuple[n
 
 
 def vertex_degree(E: np.ndarray, n: int) -> np.ndarray:
-    """Number of edges at each vertex (n,)."""
-    return np.bincount(E.reshape(-1), minlength=n)
+    """Number of edges at each vertex (n,) int64 (one compiled pass: `edges_jit.degrees`)."""
+    from .edges_jit import degrees  # numba: imported when first used
+
+    return degrees(np.asarray(E), n)
 
 
 def link_ok(pairs: np.ndarray, nfaces: np.ndarray, E: np.ndarray, n: int,

@@ -350,65 +350,102 @@ def contract_faces(a, b, F, alive, cnt, off, pool, end):
     return end, dead[:nd].copy()
 
 
-@njit(cache=True, nogil=True)  # (the numpy stages run it on the worker thread beside their face update)
+@njit(cache=True, nogil=True)
 def contract_edges(E, ecount, deg, a, b, apex, label):
     """`topology.contract_edges` for vertex-disjoint pairs (a, b) that passed the link test, with their
     apexes (S,2) (-1 where a pair has one face): (b, c) merges into (a, c) for an apex c (which loses the
     vanished face and gains (b, c)'s others), b's other pairs move to a, the contracted pair goes.
     ``label`` (n,) int32 scratch, all -1 (left so). Returns (E', ecount', keep, degree', stale'): the
     pairs that stay in their order, which old rows they continue, the degrees after, and which of them
-    are at a kept vertex (their cost is stale). The rows at an endpoint are listed (in an int64 array as
-    long as the pairs, of which about a third is written) and their new values copied aside.
+    are at a kept vertex (their cost is stale).
 
-    The pairs are passed over twice, each time without a branch (about a third of them are at an endpoint in
-    a round, in no pattern a branch predictor learns): once to list the rows at an endpoint, once to copy
-    every row, a dropped one overwritten by the next; then the listed rows that stay are rewritten."""
-    S = len(a)
+    In four steps, which `parallel.EdgeUpdate` also runs with the two passes over every pair shared between
+    two threads: the endpoints labelled; the rows at an endpoint listed with their labels (`list_rows`);
+    what becomes of each listed row (`listed_rows`); every row that stays copied (`copy_rows`) and the
+    listed ones rewritten (`rewrite_rows`)."""
     P = len(E)
+    label_pairs(a, b, label)
+    rows, lab, far, nu, nv, cnt = listing(E, ecount, P)
+    nr = list_rows(E, ecount, label, 0, P, rows, lab, far, nu, nv, cnt)
+    rows, nu, nv, cnt = rows[:nr], nu[:nr], nv[:nr], cnt[:nr]
+    keep, d2, m = listed_rows(E, deg, a, b, apex, label, rows, lab[:nr], far[:nr], nu, nv, cnt)
+    E3 = np.empty((m, 2), E.dtype)
+    c3 = np.empty(m, ecount.dtype)
+    copy_rows(E, ecount, keep, 0, P, E3, c3, 0)
+    s3 = rewrite_rows(rows, keep, nu, nv, cnt, E3, c3)
+    return E3, c3, keep, d2, s3
+
+
+@njit(cache=True, nogil=True)
+def label_pairs(a, b, label):
+    """label[a[s]] = s and label[b[s]] = S + s (``label`` all -1 before; `listed_rows` undoes it)."""
+    S = len(a)
     for s in range(S):
         label[a[s]] = s
         label[b[s]] = S + s
-    rows = np.empty(P, np.int64)  # the rows at an endpoint (ascending), and what becomes of each (row i is
-    # written at nr <= i before nr may move on: P entries hold them)
+
+
+@njit(cache=True, nogil=True)
+def listing(E, ecount, P):
+    """Room for `list_rows` of P rows: (rows int64, lab int32, far, nu, nv in E's dtype, cnt in ecount's)."""
+    return (np.empty(P, np.int64), np.empty(P, np.int32), np.empty(P, E.dtype), np.empty(P, E.dtype),
+            np.empty(P, E.dtype), np.empty(P, ecount.dtype))
+
+
+@njit(cache=True, nogil=True)
+def list_rows(E, ecount, label, lo, hi, rows, lab, far, nu, nv, cnt):
+    """The rows of E in [lo, hi) with a labelled endpoint, ascending, written from rows[0], with what
+    `listed_rows` reads of each: the endpoint's label (lab; -1 for the contracted pair itself, both of
+    whose endpoints are labelled), the row's other vertex (far) and the row (nu, nv, cnt). Every row is
+    written, then the count moves past it or not (no branch: the rows at an endpoint, about a fifth of
+    them, follow no pattern), so each array must have room for hi - lo entries. Returns how many."""
     nr = 0
-    for i in range(P):
-        rows[nr] = i
-        nr += (label[E[i, 0]] >= 0) | (label[E[i, 1]] >= 0)
-    nu = np.empty(nr, E.dtype)
-    nv = np.empty(nr, E.dtype)
-    cnt = np.empty(nr, ecount.dtype)
-    for t in range(nr):
-        i = rows[t]
-        nu[t], nv[t], cnt[t] = E[i, 0], E[i, 1], ecount[i]
+    for i in range(lo, hi):
+        u, v = E[i, 0], E[i, 1]
+        l0, l1 = label[u], label[v]
+        rows[nr], nu[nr], nv[nr], cnt[nr] = i, u, v, ecount[i]
+        at0 = l0 >= 0
+        lab[nr] = -1 if (at0 and l1 >= 0) else (l0 if at0 else l1)
+        far[nr] = v if at0 else u
+        nr += at0 | (l1 >= 0)
+    return nr
+
+
+@njit(cache=True, nogil=True)
+def listed_rows(E, deg, a, b, apex, label, rows, lab, far, nu, nv, cnt):
+    """What becomes of the listed rows (`list_rows`' arrays, cut to the listed ones): their new (u, v, face
+    count) written over nu, nv, cnt, which rows stay (keep (P,) bool: all but dropped listed ones), the
+    degrees after, and how many rows stay. Unlabels the endpoints."""
+    S = len(a)
+    P = len(E)
+    nr = len(rows)
     keep = np.ones(P, np.bool_)
     delta = np.zeros((S, 2), np.int64)
+    m = P  # the rows that stay
     for t in range(nr):  # pairs at a b: merge into (a, apex) or move to a
-        i = rows[t]
-        l0, l1 = label[E[i, 0]], label[E[i, 1]]
-        if l0 >= 0 and l1 >= 0:  # the contracted pair itself
-            keep[i] = False
+        if lab[t] < 0:  # the contracted pair itself
+            keep[rows[t]] = False
+            m -= 1
             continue
-        lab, c = (l0, E[i, 1]) if l0 >= 0 else (l1, E[i, 0])
-        if lab < S:
+        if lab[t] < S:
             continue
-        s = lab - S
+        s, c = lab[t] - S, far[t]
         if c == apex[s, 0] or c == apex[s, 1]:
-            delta[s, 0 if c == apex[s, 0] else 1] = ecount[i] - 2
-            keep[i] = False
+            delta[s, 0 if c == apex[s, 0] else 1] = cnt[t] - 2
+            keep[rows[t]] = False
+            m -= 1
         else:
             u = a[s]
             nu[t], nv[t] = min(u, c), max(u, c)
     for t in range(nr):  # pairs (a, apex): their new face counts
-        i = rows[t]
-        l0, l1 = label[E[i, 0]], label[E[i, 1]]
-        if l0 >= 0 and l1 >= 0:
+        s, c = lab[t], far[t]
+        if s < 0 or s >= S:
             continue
-        lab, c = (l0, E[i, 1]) if l0 >= 0 else (l1, E[i, 0])
-        if lab >= S:
-            continue
-        if c == apex[lab, 0] or c == apex[lab, 1]:
-            cnt[t] += delta[lab, 0 if c == apex[lab, 0] else 1]
-            keep[i] = cnt[t] > 0
+        if c == apex[s, 0] or c == apex[s, 1]:
+            cnt[t] += delta[s, 0 if c == apex[s, 0] else 1]
+            if cnt[t] <= 0:
+                keep[rows[t]] = False
+                m -= 1
     d2 = deg.copy()
     for s in range(S):
         k = 0
@@ -420,27 +457,33 @@ def contract_edges(E, ecount, deg, a, b, apex, label):
         d2[b[s]] = 0
         label[a[s]] = -1
         label[b[s]] = -1
-    m = P
-    for t in range(nr):
-        if not keep[rows[t]]:
-            m -= 1
-    E3 = np.empty((m + 1, 2), E.dtype)  # (+1: the copy below writes one row past the last it keeps)
-    c3 = np.empty(m + 1, ecount.dtype)
-    s3 = np.zeros(m, np.bool_)
-    k = 0
-    for i in range(P):  # every row, without a branch; the dropped ones are overwritten by the next
-        E3[k, 0], E3[k, 1], c3[k] = E[i, 0], E[i, 1], ecount[i]
-        k += keep[i]
+    return keep, d2, m
+
+
+@njit(cache=True, nogil=True)
+def copy_rows(E, ecount, keep, lo, hi, E3, c3, k):
+    """The kept rows of E and ecount in [lo, hi) copied in order into E3 and c3 from row k (the kept rows
+    before lo)."""
+    for i in range(lo, hi):
+        if keep[i]:  # (a dropped row is rare: a predictable branch)
+            E3[k, 0], E3[k, 1], c3[k] = E[i, 0], E[i, 1], ecount[i]
+            k += 1
+
+
+@njit(cache=True, nogil=True)
+def rewrite_rows(rows, keep, nu, nv, cnt, E3, c3):
+    """The listed rows that stay take their new values, at their row less the rows dropped before; returns
+    which rows of E3 are at a kept vertex (stale)."""
+    s3 = np.zeros(len(E3), np.bool_)
     gone = 0
-    for t in range(nr):  # the listed rows that stay take their new values, at their row less those dropped before
+    for t in range(len(rows)):
         i = rows[t]
         if keep[i]:
             k = i - gone
             E3[k, 0], E3[k, 1], c3[k], s3[k] = nu[t], nv[t], cnt[t], True
         else:
             gone += 1
-    E3, c3 = E3[:m], c3[:m]
-    return E3, c3, keep, d2, s3
+    return s3
 
 
 @njit(cache=True)

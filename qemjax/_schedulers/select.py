@@ -85,9 +85,9 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
         return rows, _keep(Eo, k1), ae.compress(k1) == 0x0101
 
     def endpoints(mask):
-        v = np.zeros(n, bool)
-        v[_keep(E, mask).reshape(-1)] = True
-        return v
+        from .._mesh.edges_jit import endpoints as marked  # numba: imported when first used
+
+        return marked(E, mask, n)
 
     free = np.ones(n, bool)
     if groups is not None:
