@@ -111,39 +111,20 @@ def around(alive, cnt, off, pool, verts):
 
 
 @njit(cache=True, nogil=True)
-def touched(F, alive, cnt, off, pool, pairs):
-    """`incidence.FaceLists.touched_with_dead` over the live faces around pairs (S,2), visited endpoint by
-    endpoint (a0, b0, a1, b1, ...) in pool order: a face holding its pair's other endpoint dies (listed
-    once, from b's side, with its owner pair); every other one is kept with its position w into the
-    endpoints, its corners before and after (the moving corner, the first that holds the endpoint, takes
-    a) and its owner pair. Returns (f, G, corner, owner, after), (w, f, corner), (dead faces, their
-    owners), with numpy's dtypes (f and the dead faces: the pool's; G and after: F's; the rest int64).
+def touched(F, alive, cnt, off, pool, ends):
+    """`incidence.FaceLists.touched_with_dead` over the live faces around pairs given by their endpoints
+    ``ends`` (a0, b0, a1, b1, ...), visited in that order, each run in pool order (`around`): a face holding
+    its pair's other endpoint dies (listed once, from b's side, with its owner pair); every other one is
+    kept with its position w into the endpoints, its corners before and after (the moving corner, the first
+    that holds the endpoint, takes a) and its owner pair. Returns (f, G, corner, owner, after), (w, f,
+    corner), (dead faces, their owners), with numpy's dtypes (f and the dead faces: the pool's; G and after:
+    F's; the rest int64).
 
-    In four passes, each over arrays in order and the later ones without a branch (whether a face lives
-    or dies follows no pattern): the runs copied, the live faces kept, their corners gathered, the faces
-    sorted into kept and dead. On a large mesh the faces' rows are cache misses; loads that do not wait on
-    a branch overlap (one pass per face, with its branches, was 1.5x slower than numpy's whole-array
-    steps on armadillo x16; this is faster than them)."""
-    S = len(pairs)
-    total = 0
-    for s in range(S):
-        total += cnt[pairs[s, 0]] + cnt[pairs[s, 1]]
-    fk = np.empty(total, pool.dtype)
-    wk = np.empty(total, np.int64)
-    k = 0
-    for w in range(2 * S):  # the runs as listed
-        v = pairs[w >> 1, w & 1]
-        o = off[v]
-        for i in range(cnt[v]):
-            fk[k + i] = pool[o + i]
-            wk[k + i] = w
-        k += cnt[v]
-    m = 0
-    for i in range(k):  # the live ones (in place: m <= i)
-        f = fk[i]
-        fk[m] = f
-        wk[m] = wk[i]
-        m += alive[f]
+    After the look-up, two passes over arrays in order: the faces' corners gathered (loads that wait on no
+    branch, so their cache misses overlap), then the faces sorted into kept and dead without a branch
+    (whether a face lives or dies follows no pattern)."""
+    wk, fk = around(alive, cnt, off, pool, ends)
+    m = len(fk)
     G = np.empty((m, 3), F.dtype)
     for i in range(m):
         f = fk[i]
@@ -157,7 +138,7 @@ def touched(F, alive, cnt, off, pool, pairs):
     for i in range(m):  # kept or dead (in place: k <= i); each is written, then the count moves or not
         w = wk[i]
         s, side = w >> 1, w & 1
-        v, other = pairs[s, side], pairs[s, 1 - side]
+        v, other = ends[w], ends[w ^ 1]
         g0, g1, g2 = G[i, 0], G[i, 1], G[i, 2]
         holds = (g0 == other) | (g1 == other) | (g2 == other)
         dead[nd] = fk[i]
@@ -167,7 +148,7 @@ def touched(F, alive, cnt, off, pool, pairs):
         fk[k], wk[k], corner[k], owner[k] = fk[i], w, c, s
         G[k, 0], G[k, 1], G[k, 2] = g0, g1, g2
         after[k, 0], after[k, 1], after[k, 2] = g0, g1, g2
-        after[k, c] = pairs[s, 0]
+        after[k, c] = ends[2 * s]
         k += not holds
     fk, corner = fk[:k], corner[:k]
     return (fk, G[:k], corner, owner[:k], after[:k]), (wk[:k], fk, corner), (dead[:nd], dead_owner[:nd])

@@ -2,9 +2,8 @@
 same done in place for ascending indices (`compact`).
 
 Each round carries the pairs' placements, costs and flags over to the pairs that stay: a gather of about
-two million rows on a large mesh, with ascending indices. A fresh array of that size (24 MB of placements)
-is mapped anew by glibc and faulted in page by page, every round; moving the rows down within the array
-they are in touches no new memory (tests/test_arrays.py compares both with numpy's take).
+two million rows on a large mesh, with ascending indices. Moving the rows down within the array they are
+in writes no new array of that size (tests/test_arrays.py compares both with numpy's take).
 """
 from __future__ import annotations
 

@@ -197,8 +197,8 @@ class EdgeUpdate:
     copying the rows that stay) each split between the worker thread and the calling one: the first half's
     listing starts on the worker when the update is made, the rest runs when its `result` is asked for.
     The threads write disjoint parts of the arrays; the steps and the result are `contract_edges`'
-    (tests/test_round_jit.py compares them). On armadillo x16 the calling thread waited for the whole
-    update on the worker after its face update, about 6 ms a round."""
+    (tests/test_round_jit.py compares them). Before, the calling thread waited for the whole update on the
+    worker once its own face update was done."""
 
     def __init__(self, E, ecount, deg, a, b, apex, label):
         self.args = (E, ecount, deg, a, b, apex, label)
