@@ -62,10 +62,10 @@ def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     with np.cross's arithmetic. float32 and float64 positions take one compiled pass (`faces_jit.normals`:
     on 1.4 M faces the whole-array expressions gather (m,3) coordinates three times and make a dozen
     temporaries); other dtypes take those expressions, in blocks of faces."""
-    if V.dtype in (np.float32, np.float64) and F.dtype.kind in "iu":
+    if isinstance(V, np.ndarray) and V.dtype in (np.float32, np.float64) and np.asarray(F).dtype.kind in "iu":
         from .faces_jit import normals  # numba: imported when first used
 
-        return normals(V, F)
+        return normals(V, np.asarray(F))
     if len(F) > _NORMAL_ROWS:
         out = np.empty((len(F), 3), V.dtype)
         for s in range(0, len(F), _NORMAL_ROWS):

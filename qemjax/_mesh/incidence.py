@@ -111,7 +111,8 @@ class FaceLists:
         """`touched`, plus what `contract_touched` needs to apply the contractions without looking the
         faces up again: (positions w into pairs.reshape(-1), faces, moving corners) of the surviving
         faces, and (faces, owner pairs) of the faces that die (seen from b's side)."""
-        return _jit().touched(self.F, self.alive, self.cnt, self.off, self.pool, np.ascontiguousarray(pairs).reshape(-1))
+        ends = np.ascontiguousarray(pairs).reshape(-1)
+        return _jit().touched(self.F, self.alive, self.cnt, self.off, self.pool, ends)
 
     def contract_touched(self, pairs: np.ndarray, kept, dead) -> None:
         """`contract` for pairs (S,2) whose faces `touched_with_dead` found (and have not changed since),
