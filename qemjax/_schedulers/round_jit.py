@@ -78,7 +78,8 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
     override each other in that order; the flip test counts only for a pair that passes the rest.
     Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s].
-    ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested."""
+    ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested.
+    T (12, ≥ the faces at a and b): scratch (the coincidence test's sorted corners, the seam rule)."""
     # link condition: the common neighbours are the apexes of the pair's faces
     ka = _neighbours(a, F, alive, cnt, off, pool, mark, nb)
     ncommon = 0
@@ -116,24 +117,26 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
             corner = 0 if F[f, 0] == me else (1 if F[f, 1] == me else 2)
             fa[nk, 0], fa[nk, 1] = f, corner
             nk += 1
-    # coincident faces: two surviving faces with the same three corners once b is a
+    # coincident faces: two surviving faces with the same three corners once b is a. Only asked of a pair
+    # that passes the link condition (one that fails is refused for that, whatever else holds); a kept
+    # face's corners are three different vertices, so the same corners are the same sorted triple (in T's
+    # first rows, which the seam rule below uses afresh)
     gone = False
-    for i in range(nk):
-        fi, ci = fa[i, 0], fa[i, 1]
-        p0 = a if ci == 0 else F[fi, 0]
-        p1 = a if ci == 1 else F[fi, 1]
-        p2 = a if ci == 2 else F[fi, 2]
-        for j in range(i + 1, nk):
-            fj, cj = fa[j, 0], fa[j, 1]
-            q0 = a if cj == 0 else F[fj, 0]
-            q1 = a if cj == 1 else F[fj, 1]
-            q2 = a if cj == 2 else F[fj, 2]
-            if ((p0 == q0 or p0 == q1 or p0 == q2) and (p1 == q0 or p1 == q1 or p1 == q2)
-                    and (p2 == q0 or p2 == q1 or p2 == q2)):
-                gone = True
+    if linked:
+        for i in range(nk):
+            fi, ci = fa[i, 0], fa[i, 1]
+            p0 = a if ci == 0 else F[fi, 0]
+            p1 = a if ci == 1 else F[fi, 1]
+            p2 = a if ci == 2 else F[fi, 2]
+            lo, hi = min(min(p0, p1), p2), max(max(p0, p1), p2)
+            T[0, i], T[1, i], T[2, i] = lo, p0 + p1 + p2 - lo - hi, hi
+        for i in range(nk):
+            for j in range(i + 1, nk):
+                if T[0, i] == T[0, j] and T[1, i] == T[1, j] and T[2, i] == T[2, j]:
+                    gone = True
+                    break
+            if gone:
                 break
-        if gone:
-            break
     why = 0
     if gone:
         why = COINCIDENT
