@@ -54,24 +54,6 @@ def _key(kbits, idx, local, salt):
 
 
 @njit(cache=True)
-def _neighbours(v, F, alive, cnt, off, pool, mark, out):
-    """Write the distinct neighbours of v (corners of its live faces) into ``out``, marking each 1 in
-    ``mark``; returns how many."""
-    k = 0
-    for i in range(off[v], off[v] + cnt[v]):
-        f = pool[i]
-        if not alive[f]:
-            continue
-        for c in range(3):
-            u = F[f, c]
-            if u != v and mark[u] != 1:
-                mark[u] = 1
-                out[k] = u
-                k += 1
-    return k
-
-
-@njit(cache=True)
 def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
            mark, nb, fa, apex, s, C, multi, T):
     """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
@@ -80,8 +62,22 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
     Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s].
     ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested.
     T (12, ≥ the faces at a and b): scratch (the coincidence test's sorted corners, the seam rule)."""
-    # link condition: the common neighbours are the apexes of the pair's faces
-    ka = _neighbours(a, F, alive, cnt, off, pool, mark, nb)
+    # one scan of each endpoint's faces: the link condition (the common neighbours are the apexes of the
+    # pair's faces) and the faces that stay (not holding both endpoints), each with the corner that moves
+    ka = nk = 0
+    for i in range(off[a], off[a] + cnt[a]):  # a's neighbours marked 1; a's faces without b kept
+        f = pool[i]
+        if not alive[f]:
+            continue
+        g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
+        for u in (g0, g1, g2):
+            if u != a and mark[u] != 1:
+                mark[u] = 1
+                nb[ka] = u
+                ka += 1
+        if g0 != b and g1 != b and g2 != b:
+            fa[nk, 0], fa[nk, 1] = f, 0 if g0 == a else (1 if g1 == a else 2)
+            nk += 1
     ncommon = 0
     c0, c1 = -1, -1
     bad_apex = False
@@ -89,8 +85,8 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
         f = pool[i]
         if not alive[f]:
             continue
-        for c in range(3):
-            u = F[f, c]
+        g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
+        for u in (g0, g1, g2):
             if u != b and u != a and mark[u] == 1:
                 mark[u] = 2  # counted once
                 ncommon += 1
@@ -100,23 +96,13 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
                     c1 = u
                 if nf == 2 and deg[u] <= 3:
                     bad_apex = True
+        if g0 != a and g1 != a and g2 != a:
+            fa[nk, 0], fa[nk, 1] = f, 0 if g0 == b else (1 if g1 == b else 2)
+            nk += 1
     for i in range(ka):  # the marks of a's neighbours, undone
         mark[nb[i]] = 0
     apex[s, 0], apex[s, 1] = c0, c1
     linked = nf >= 1 and nf <= 2 and ncommon == nf and not (bvert[a] and bvert[b] and nf == 2) and not bad_apex
-    # the faces that stay (not holding both endpoints), each with the corner that moves
-    nk = 0
-    for side in range(2):
-        me, other = (a, b) if side == 0 else (b, a)
-        for i in range(off[me], off[me] + cnt[me]):
-            f = pool[i]
-            if not alive[f]:
-                continue
-            if F[f, 0] == other or F[f, 1] == other or F[f, 2] == other:
-                continue
-            corner = 0 if F[f, 0] == me else (1 if F[f, 1] == me else 2)
-            fa[nk, 0], fa[nk, 1] = f, corner
-            nk += 1
     # coincident faces: two surviving faces with the same three corners once b is a. Only asked of a pair
     # that passes the link condition (one that fails is refused for that, whatever else holds); a kept
     # face's corners are three different vertices, so the same corners are the same sorted triple (in T's
