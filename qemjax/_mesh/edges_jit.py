@@ -4,6 +4,9 @@ numpy's version made the (3m,2) half-edges, their keys, the packed keys and a so
 (4.15 M half-edges) arrays of 33-66 MB each, which glibc maps afresh and the machine faults in page by page
 on every run. Here the packed keys are written straight from the faces and sorted in place, and one pass
 over them gives the tables. The outputs are `topology.edge_table`'s, bit for bit (tests/test_topology.py).
+
+Also the vertex degrees and a mask's endpoints (`degrees`, `endpoints`: numpy's bincount and scatter,
+without their copies of the pairs).
 """
 from __future__ import annotations
 

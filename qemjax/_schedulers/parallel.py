@@ -567,9 +567,10 @@ class _Run:
 
     def validate(self, st: RoundState, found: list, P, idx, Efree):
         """(rule broken per pair (0: valid), faces made coincident) for vertex-disjoint pairs P (indices
-        idx into this round's pairs). Efree (rows of this round's pairs) holds every pair at them; the faces come from `FaceLists`. In manifold mode the link test runs on the worker thread.
-        What the contraction will need again (the faces' look-up and, in manifold mode, the apexes that
-        the link test found, for `round_jit.contract_edges`) is appended to ``found``."""
+        idx into this round's pairs). Efree (rows of this round's pairs) holds every pair at them; the faces
+        come from `FaceLists`. In manifold mode the link test runs on the worker thread. What the contraction
+        will need again (the faces' look-up and, in manifold mode, the apexes that the link test found, for
+        `round_jit.contract_edges`) is appended to ``found``."""
         tv = time.perf_counter()
         if self.manifold:
             link = submit(topo.link_ok, P, st.ecount[idx], Efree, self.n, st.bvert, st.deg, apexes=True,

@@ -348,7 +348,7 @@ def contract_edges(E, ecount, deg, a, b, apex, label):
     pairs that stay in their order, which old rows they continue, the degrees after, and which of them
     are at a kept vertex (their cost is stale).
 
-    In four steps, which `parallel.EdgeUpdate` also runs with the two passes over every pair shared between
+    In five steps, which `parallel.EdgeUpdate` also runs with the two passes over every pair shared between
     two threads: the endpoints labelled; the rows at an endpoint listed with their labels (`list_rows`);
     what becomes of each listed row (`listed_rows`); every row that stays copied (`copy_rows`) and the
     listed ones rewritten (`rewrite_rows`)."""
@@ -386,8 +386,8 @@ def list_rows(E, ecount, label, lo, hi, rows, lab, far, nu, nv, cnt):
     """The rows of E in [lo, hi) with a labelled endpoint, ascending, written from rows[0], with what
     `listed_rows` reads of each: the endpoint's label (lab; -1 for the contracted pair itself, both of
     whose endpoints are labelled), the row's other vertex (far) and the row (nu, nv, cnt). Every row is
-    written, then the count moves past it or not (no branch: the rows at an endpoint, about a fifth of
-    them, follow no pattern), so each array must have room for hi - lo entries. Returns how many."""
+    written, then the count moves past it or not (no branch: the rows at an endpoint follow no pattern), so
+    each array must have room for hi - lo entries. Returns how many."""
     nr = 0
     for i in range(lo, hi):
         u, v = E[i, 0], E[i, 1]
