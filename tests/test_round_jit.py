@@ -18,6 +18,28 @@ from qemjax._schedulers import parallel, round_jit
 from test_attributes import atlas_sphere
 from test_greedy_compiled import CASES, _bipyramid, _jittered_sphere, _same, _two_spheres
 
+def _finned_sphere(k=20, size=0.02):
+    """A bumpy sphere with a small closed tetrahedron (a, b, c0, c1) on k of its edges (c0, c1), which then
+    have four faces: contracting (a, b) passes the link condition (c0 and c1 have more than three
+    neighbours) but leaves (a, c0, c1) and (b, c0, c1) coincident, so the coincidence rule refuses it."""
+    V, F = shapes.bumpy_sphere(3)
+    V, F = [np.asarray(v, float) for v in V], [list(f) for f in np.asarray(F)]
+    used = set()
+    for f in np.asarray(F)[np.random.default_rng(0).permutation(len(F))]:
+        c0, c1 = int(f[0]), int(f[1])
+        if c0 in used or c1 in used:
+            continue
+        used |= {c0, c1}
+        mid, step = (V[c0] + V[c1]) / 2, (V[c1] - V[c0]) * 0.05
+        out = mid / np.linalg.norm(mid) * size
+        a, b = len(V), len(V) + 1
+        V += [mid + out + step, mid + out - step]
+        F += [[a, b, c0], [b, a, c1], [a, c1, c0], [b, c0, c1]]
+        if len(used) >= 2 * k:
+            break
+    return np.array(V), np.array(F)
+
+
 RUNS = {k: v for k, v in CASES.items() if k not in ("cube-non-manifold",)}  # (manifold mode only)
 RUNS.update({
     "jittered-sphere": (_jittered_sphere, {"ratio": 0.05}),
@@ -26,6 +48,7 @@ RUNS.update({
     "default-method": (lambda: shapes.bumpy_sphere(4), {"ratio": 0.02, "method": "default"}),
     "regularized": (lambda: shapes.torus(n_major=24, n_minor=12), {"ratio": 0.1, "regularize": 0.1}),
     "double-cone": (lambda: shapes.double_cone(60), {"ratio": 0.2}),
+    "finned-sphere": (_finned_sphere, {"ratio": 0.1}),  # coincident faces refused inside the loop
     # kept UVs: the seam rule refuses contractions inside the loop, and the wedges follow the contractions
     "uv-seams": (lambda: atlas_sphere(3)[0], {"ratio": 0.1, "attributes": "uv"}),
     "uv-seams-default": (lambda: atlas_sphere(3)[0], {"ratio": 0.05, "attributes": "uv", "method": "default"}),
@@ -73,6 +96,8 @@ def test_compiled_round_gives_the_numpy_rounds_result(case, monkeypatch):
     if "uv" in case:
         _same(new.uv, old.uv, "uv")
         assert new.stats["rejected_by"]["seam"] > 0  # the rule did refuse contractions
+    if case == "finned-sphere":
+        assert new.stats["rejected_by"]["coincident"] > 0
 
 
 def test_compiled_round_in_a_batch(monkeypatch):

@@ -61,7 +61,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
     override each other in that order; the flip test counts only for a pair that passes the rest.
     Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s].
     ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested.
-    T (12, ≥ the faces at a and b): scratch (the coincidence test's sorted corners, the seam rule)."""
+    T (12, ≥ the faces at a and b): the seam rule's scratch."""
     # one scan of each endpoint's faces: the link condition (the common neighbours are the apexes of the
     # pair's faces) and the faces that stay (not holding both endpoints), each with the corner that moves
     ka = nk = 0
@@ -78,6 +78,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
         if g0 != b and g1 != b and g2 != b:
             fa[nk, 0], fa[nk, 1] = f, 0 if g0 == a else (1 if g1 == a else 2)
             nk += 1
+    nka = nk  # fa's first nka rows are a's
     ncommon = 0
     c0, c1 = -1, -1
     bad_apex = False
@@ -104,25 +105,23 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
     apex[s, 0], apex[s, 1] = c0, c1
     linked = nf >= 1 and nf <= 2 and ncommon == nf and not (bvert[a] and bvert[b] and nf == 2) and not bad_apex
     # coincident faces: two surviving faces with the same three corners once b is a. Only asked of a pair
-    # that passes the link condition (one that fails is refused for that, whatever else holds); a kept
-    # face's corners are three different vertices, so the same corners are the same sorted triple (in T's
-    # first rows, which the seam rule below uses afresh)
+    # that passes the link condition (one that fails is refused for that, whatever else holds). No two live
+    # faces share three corners (the input has no duplicates, and this rule keeps it so), so such faces are
+    # one of a's, (a, p, q), and one of b's, (b, p, q): p and q are common neighbours of a and b, which for
+    # a linked pair are its apexes. So: a pair with two faces whose apexes c0, c1 are a face with a and one
+    # with b
     gone = False
-    if linked:
+    if linked and nf == 2:
+        at_a = at_b = False
         for i in range(nk):
-            fi, ci = fa[i, 0], fa[i, 1]
-            p0 = a if ci == 0 else F[fi, 0]
-            p1 = a if ci == 1 else F[fi, 1]
-            p2 = a if ci == 2 else F[fi, 2]
-            lo, hi = min(min(p0, p1), p2), max(max(p0, p1), p2)
-            T[0, i], T[1, i], T[2, i] = lo, p0 + p1 + p2 - lo - hi, hi
-        for i in range(nk):
-            for j in range(i + 1, nk):
-                if T[0, i] == T[0, j] and T[1, i] == T[1, j] and T[2, i] == T[2, j]:
-                    gone = True
-                    break
-            if gone:
-                break
+            f = fa[i, 0]
+            g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
+            both = ((g0 == c0) | (g1 == c0) | (g2 == c0)) & ((g0 == c1) | (g1 == c1) | (g2 == c1))
+            if i < nka:
+                at_a |= both
+            else:
+                at_b |= both
+        gone = at_a and at_b
     why = 0
     if gone:
         why = COINCIDENT
