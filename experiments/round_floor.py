@@ -9,13 +9,14 @@ take (`round_jit.MAX_FACES`) shows "-" there: its rounds run the numpy stages.
 
 A second table asks whether the parts every run of the design must have fit in the goal: the set-up (from
 the call until the first round: reading and cleaning the input, the quadrics, the pairs, the first prices),
-the device wait, the re-fit and the measured distance as the same runs took them, and the rule checks of
+the device wait, the contraction stage (`stats["contract_s"]`: the faces and pairs contracted, the device
+call started), the re-fit and the measured distance as the same runs took them, and the rule checks of
 every pair the selection tested (link condition, coincident faces, part and seam rules, the flip test),
 replayed as one compiled loop per round on that round's inputs, warm, best of 3, without the selection's
 scans or the contraction (`select_cost.rules_alone`; a large run is recorded through the compiled loops for
 this, which give the same contractions, and each round is replayed as it comes; where its own numpy stages'
 validation, `stats["validity_s"]`, took less, that is used). "The rest" is the whole run less those parts:
-the selection's scans, the contraction, the glue and the output.
+the selection's scans and gate, the glue between the stages and the output.
 
 A case is mesh:ratio:goal, the goal a multiple of meshoptimizer's time; several goals, each as GxPEER, are
 separated by commas (``armadillo-x16:0.01:2.5xmeshoptimizer,1.5xfast-simplification``).
@@ -89,7 +90,7 @@ def main():
         goals = _goals(goal)
         bm = bench_meshes.load(name)
         target = int(len(bm.F) * float(ratio))
-        rows = {k: [] for k in ("run", "loops", "setup", "kernels", "refit", "distance", "validation")}
+        rows = {k: [] for k in ("run", "loops", "setup", "kernels", "refit", "distance", "validation", "contract")}
         peer_s = {p: [] for _, p in goals}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -107,6 +108,7 @@ def main():
                 rows["refit"].append(r.stats["refit_s"] or 0.0)
                 rows["distance"].append(r.stats["distance_s"] or 0.0)
                 rows["validation"].append(r.stats.get("validity_s", 0.0))  # the numpy stages' (else 0)
+                rows["contract"].append(r.stats["contract_s"])
                 for p in peer_s:
                     peer_s[p].append(peers.run_peer(p, bm.V, bm.F, target)[2])  # its call alone
         med = {k: statistics.median(v) * 1e3 for k, v in rows.items()}
@@ -127,16 +129,16 @@ def main():
         if med["loops"] == 0 and med["validation"] < alone:  # the numpy stages' validation took less
             alone = med["validation"]
             how = f"{alone:.1f} (the numpy stages' validation; alone {how})"
-        parts = med["setup"] + med["kernels"] + med["refit"] + med["distance"] + alone
+        parts = med["setup"] + med["kernels"] + med["contract"] + med["refit"] + med["distance"] + alone
         for k, p in goals:
             g = k * mp[p]
             budget.append(f"| {name} → {ratio} | {g:.1f} ({k:g}× {p}) | {med['setup']:.1f} | {med['kernels']:.1f} | "
-                          f"{med['refit']:.1f} | {med['distance']:.1f} | {how} | {parts:.1f} | {parts / g:.2f} | "
+                          f"{med['contract']:.1f} | {med['refit']:.1f} | {med['distance']:.1f} | {how} | {parts:.1f} | {parts / g:.2f} | "
                           f"{med['run'] - parts:.1f} |")
     print()
-    print("| case | goal ms | set-up ms | device wait ms | re-fit ms | measured distance ms | rule checks alone ms | "
-          "these parts together ms | together / goal | the rest of the run ms |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| case | goal ms | set-up ms | device wait ms | contraction ms | re-fit ms | measured distance ms | "
+          "rule checks alone ms | these parts together ms | together / goal | the rest of the run ms |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(budget))
 
 
