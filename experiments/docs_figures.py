@@ -4,7 +4,7 @@ Reads ``experiments/results/rank_default_final.csv`` (every benchmark mesh at 10
 and classic method and five peers; written by ``python experiments/rank_peers.py --warm --reuse-peers
 experiments/results/rank_final.csv --out experiments/results/rank_default_final --variant
 classic:method=classic --variant default:method=default``) and
-``experiments/results/speed_table_1128f.txt`` (warm medians, every method in one process; written by
+``experiments/results/speed_table_1128g.txt`` (warm medians, every method in one process; written by
 ``python experiments/speed_ratio.py --mesh MESH --ratio R --methods default classic --peers meshoptimizer
 fast-simplification``). Writes, small and deterministic:
 
@@ -64,7 +64,7 @@ def table(cases) -> str:
     return "\n".join(lines)
 
 
-def speed_tables(path=RESULTS / "speed_table_1128f.txt"):
+def speed_tables(path=RESULTS / "speed_table_1128g.txt"):
     """[(title, {method: median s})] from speed_ratio.py's tables."""
     out = []
     for block in re.split(r"\n(?=\S+ \(\d+ faces\) -> )", path.read_text()):
