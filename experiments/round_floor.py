@@ -8,7 +8,8 @@ Each compiled loop is wrapped with a timer; warm runs, medians. A run on more fa
 take (`round_jit.MAX_FACES`) shows "-" there: its rounds run the numpy stages.
 
 A second table asks whether the parts every run of the design must have fit in the goal: the set-up (from
-the call until the first round: reading and cleaning the input, the quadrics, the pairs, the first prices),
+the call until the first round: reading and cleaning the input, the quadrics, the pairs, the first prices
+started; their wait is the first round's device wait),
 the device wait, the contraction stage (`stats["contract_s"]`: the faces and pairs contracted, the device
 call started), the re-fit and the measured distance as the same runs took them, and the rule checks of
 every pair the selection tested (link condition, coincident faces, part and seam rules, the flip test),
@@ -62,7 +63,7 @@ def main():
 
     from select_cost import _copy, rules_alone
 
-    spent = {"loops": 0.0, "called": 0.0, "rounds_from": 0.0}
+    spent = {"loops": 0.0, "rounds_from": 0.0}
     select_validate = round_jit.select_validate  # (the compiled function, before it is wrapped)
     for module, name in [(round_jit, n) for n in LOOPS] + [(round_glue_jit, n) for n in GLUE]:
         fn = getattr(module, name)
