@@ -40,9 +40,10 @@ def fits(manifold: bool, incremental: bool, locks, faces: int) -> bool:
     """Whether a run's rounds take the compiled loops: the mode of the module docstring, on at most
     `MAX_FACES` faces. Both give the same bits; the choice is speed alone. The loops test one pair after
     another, and on a large mesh each pair's faces are cache misses that wait in turn, where numpy's
-    whole-array gathers keep many in flight (and share the round with a worker thread): warm, the cow
-    (5.8 k faces) to 10 % took 0.073 s with the numpy stages and 0.040 s with the loops, the bunny (69 k)
-    0.301 and 0.298 s, armadillo x16 (1.38 M) to 1 % 5.5 and 6.0 s (experiments/results/ab_round_*_1127.txt)."""
+    whole-array gathers keep many in flight (and share the round with a worker thread): warm, with the numpy
+    stages and with the loops, the cow (5.8 k faces) to 10 % took 0.046 and 0.019 s, the bunny (69 k) 0.174
+    and 0.149 s, armadillo (86 k) 0.204 and 0.199 s, armadillo x16 (1.38 M) to 1 % 3.25 and 4.65 s, the
+    same bits (python experiments/round_paths.py, experiments/results/round_paths_1128g.txt)."""
     return manifold and incremental and locks is None and faces <= MAX_FACES
 
 
