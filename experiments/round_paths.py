@@ -11,7 +11,6 @@ answering no), so a mesh on either side of the limit shows what the other path w
 from __future__ import annotations
 
 import argparse
-import hashlib
 import statistics
 import sys
 import time
@@ -21,16 +20,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent), str(HERE)]
 
-import numpy as np  # noqa: E402
-
 import meshes as bench_meshes  # noqa: E402
-
-
-def _digest(r) -> str:
-    h = hashlib.sha256()
-    for a in (r.vertices, r.faces, r.history.pairs, r.history.positions):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()[:16]
+from ab_compare import digest  # noqa: E402
 
 
 def main():
@@ -68,7 +59,7 @@ def main():
         mesh = (bm.V, bm.F)
         wall = {"compiled": [], "numpy": []}
         cpu = {"compiled": [], "numpy": []}
-        digest = {}
+        digests = {}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             for path in wall:  # warm: each path's compilations
@@ -82,7 +73,7 @@ def main():
                     r = qemjax.simplify(mesh, ratio=args.ratio)
                     wall[path].append(time.perf_counter() - t)
                     cpu[path].append(time.process_time() - c)
-                    digest.setdefault(path, _digest(r))
+                    digests.setdefault(path, digest(r))
         round_jit.fits, round_jit.MAX_FACES = fits, most
         assert taken == [True, False] * args.repeats, "a run did not take the path it was given"
         own = "compiled" if fits(True, True, None, len(bm.F)) else "numpy stages"
@@ -90,7 +81,7 @@ def main():
         cmed = {p: statistics.median(v) for p, v in cpu.items()}
         print(f"| {name} | {len(bm.F)} | {own} | {med['compiled']:.3f} | {med['numpy']:.3f} | "
               f"{cmed['compiled']:.3f} | {cmed['numpy']:.3f} | {med['numpy'] / med['compiled']:.2f} | "
-              f"{'yes' if digest['compiled'] == digest['numpy'] else 'NO'} |")
+              f"{'yes' if digests['compiled'] == digests['numpy'] else 'NO'} |")
 
 
 if __name__ == "__main__":

@@ -40,6 +40,7 @@ from .._mesh.fixed_order import weighted_sum
 from .._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
 from .._kernels.batching import CHUNKS
 from .._costs import MeshView
+from .._mesh.edges_jit import endpoints
 from .._mesh.faces_jit import first_step
 from .._mesh.incidence import FaceLists
 from .._mesh import rows_jit
@@ -403,8 +404,7 @@ class _Run:
             st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
             if same is not None:
                 st.bad = st.bad * same
-        st.bvert = np.zeros(self.n, bool)
-        st.bvert[_keep(st.E, st.ecount == 1).reshape(-1)] = True
+        st.bvert = endpoints(st.E, st.ecount == 1, self.n)
         self.timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
