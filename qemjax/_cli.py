@@ -1,7 +1,7 @@
 """Command line: ``qemjax simplify IN OUT (--faces N | --ratio R) [--max-error E] [options]``,
 ``qemjax lod IN OUT_DIR [--ratios R ...] [--format EXT] [--glb] [--record] [options]``,
-``qemjax sweep CONFIG [--out PATH]``, ``qemjax demo [--out PATH]``, ``qemjax examples [FOLDER]`` and
-``qemjax --version``.
+``qemjax sweep CONFIG [--out PATH]``, ``qemjax demo [--out PATH]``, ``qemjax examples [FOLDER]``,
+``qemjax compile`` and ``qemjax --version``.
 
 The options are generated from `qemjax.simplify`'s run keywords and from the fields of the methods,
 `Topology` and `Attributes` (`_flat.options`: names, real types, defaults), with help from their
@@ -423,6 +423,12 @@ def _parser() -> argparse.ArgumentParser:
                         "(bumpy.obj, bumpy.ply), feature edges on it (creases.txt), and a UV-mapped copy with "
                         "6 charts (textured.obj, no mtllib) and its texture (textured.png).")
     ex.add_argument("folder", nargs="?", default=".", help="where to write them (created if absent; default: .)")
+    co = sub.add_parser("compile", help="compile the host loops ahead into numba's cache (an install from a "
+                        "wheel or `pip install .` has them already)",
+                        description="Compile every host loop that qemjax's common runs use into numba's cache, "
+                        "so that no later run spends time compiling them: for an editable install, a "
+                        "NUMBA_CACHE_DIR of your own, or a container image. `pip install .` does this already.")
+    co.add_argument("--jobs", type=int, default=0, help="processes to compile in (default: one per core)")
     ap.commands = tuple(sub.choices)
     return ap
 
@@ -610,6 +616,10 @@ def _examples(args) -> int:
 def _run(args) -> int:
     if args.cmd == "examples":
         return _examples(args)
+    if args.cmd == "compile":
+        from ._ahead.__main__ import main as compile_ahead
+
+        return compile_ahead(["--jobs", str(args.jobs)])
     if args.cmd == "sweep":
         return _sweep(args)
     if args.cmd == "lod":

@@ -52,8 +52,8 @@ class SimplifyResult:
     history: the `Contractions`; stop_reason: why the run stopped, one of ``"target"`` (met, or one face
     above an odd target on a closed mesh), ``"max_error"``, ``"blocked"`` (no valid contraction left:
     ``stats["blocked_by"]`` counts the pairs each rule held back) or ``"unchanged"`` (nothing to remove);
-    stats: counts and timings (``compile_s`` is JAX tracing + compilation
-    time inside this call, ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
+    stats: counts and timings (``compile_s`` is every compilation inside this call: JAX's tracing and
+    compiling, and numba's compiling of a host loop its cache did not have; ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
     times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``
     and ``faces_per_round``), ``refit`` (re-fit rounds run) and ``refit_s`` (their seconds; a batch runs
     its cells' re-fits side by side on threads, each timed on its own), the targets (``target_faces``, 0 for

@@ -408,8 +408,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     a closed one, run once), ``result_sha256`` (of the output vertices and faces), ``distance_max`` and
     ``distance_rms`` (the output's measured distance from the input, mesh units: `simplify`'s stats of those
     names; NaN where not measured: ``measure=True`` in the grid measures it for every method); timings in seconds:
-    ``compile_s``, ``run_s``, ``total_s`` (the cell's own `simplify` stats: JAX compilation or cache
-    loading, the rest, all; measured when it ran alone, ``batch_size`` 1; empty when it shared its rounds:
+    ``compile_s``, ``run_s``, ``total_s`` (the cell's own `simplify` stats: JAX's and numba's compilation,
+    the rest, all; measured when it ran alone, ``batch_size`` 1; empty when it shared its rounds:
     not measured), ``batch_wall_s`` (the wall time of the run that computed it: the shared rounds of its
     batch, or its own ``total_s``), ``share_s`` (apportioned: ``batch_wall_s / batch_size`` plus its own
     re-fit and distance measurement, or its own ``total_s``); then the metrics (`qemjax.metrics.evaluate`'s columns, its ``time_s``

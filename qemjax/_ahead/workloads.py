@@ -1,0 +1,61 @@
+"""The runs whose compiled loops a fresh install carries (`qemjax._ahead`): what a new user meets first (the
+README's commands and example) and each method, scheduler and mode on small meshes made in code."""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import tempfile
+import warnings
+
+
+def run_all(demo: bool = True) -> None:
+    """Run every workload once, in a temporary folder (their warnings and output swallowed)."""
+    import numpy as np
+
+    import qemjax
+    from qemjax import _cli, shapes
+
+    here = os.getcwd()
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings(), \
+            contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        warnings.simplefilter("ignore")
+        os.chdir(tmp)
+        try:
+            shapes.write_examples(tmp)
+            # the command line, as the README and docs/getting-started.md use it
+            for argv in (["simplify", "bumpy.obj", "o.ply", "--faces", "1000"],
+                         ["simplify", "bumpy.obj", "g.ply", "--faces", "1000", "--scheduler", "greedy"],
+                         ["simplify", "bumpy.obj", "e.ply", "--ratio", "0.1", "--method", "esqem", "--scheduler",
+                          "greedy"],
+                         ["simplify", "textured.obj", "t.obj", "--ratio", "0.1"],
+                         ["simplify", "textured.obj", "tg.obj", "--ratio", "0.1", "--scheduler", "greedy"],
+                         ["simplify", "bumpy.ply", "f.ply", "--ratio", "0.2", "--feature-edges", "creases.txt"],
+                         ["lod", "bumpy.obj", "--ratios", "0.5", "0.1"],
+                         ["sweep", "sweep_example.toml", "--quiet"]):
+                _cli.main(argv)
+            if demo:
+                _cli.main(["demo", "--quiet"])
+            m = qemjax.load("bumpy.ply")
+            res = qemjax.simplify(m, ratio=0.1, method="esqem", scheduler="greedy", progress=False)
+            qemjax.metrics.evaluate(m, res)
+            qemjax.lod_chain(m, ratios=[0.5, 0.25, 0.1])
+            qemjax.sweep(["bumpy.obj"], {"method": ["default", "classic", "line"]}, [0.1, 0.02],
+                         metrics={"n_samples": 10_000}, progress=False)
+            # each method and scheduler, open and closed meshes, locks, modes
+            meshes = [shapes.bumpy_sphere(3), shapes.grid(24, hole=True), shapes.torus(n_major=24, n_minor=12)]
+            for mesh in meshes:
+                for method in qemjax.methods():
+                    for scheduler in ("parallel", "greedy"):
+                        with contextlib.suppress(ValueError, TypeError):
+                            qemjax.simplify(mesh, ratio=0.3, method=method, scheduler=scheduler, progress=False)
+                nv = len(mesh.vertices)
+                locked = np.zeros(nv, bool)
+                locked[:: 7] = True
+                for scheduler in ("parallel", "greedy"):
+                    qemjax.simplify(mesh, ratio=0.3, scheduler=scheduler, locked=locked, progress=False)
+                    for topology in (qemjax.Topology(preserve_topology=False), qemjax.Topology(pair_threshold=0.05)):
+                        qemjax.simplify(mesh, ratio=0.3, scheduler=scheduler, topology=topology, progress=False)
+                qemjax.simplify_batch(mesh, [{"ratio": 0.3}, {"ratio": 0.2, "boundary_weight": 10.0}])
+        finally:
+            os.chdir(here)
