@@ -617,9 +617,13 @@ def _run(args) -> int:
     if args.cmd == "examples":
         return _examples(args)
     if args.cmd == "compile":
-        from ._ahead.__main__ import main as compile_ahead
+        from ._ahead import compile_ahead
 
-        return compile_ahead(["--jobs", str(args.jobs)])
+        r = compile_ahead(args.jobs)
+        print(f"qemjax: {r['compiled']} host loops compiled, {r['loaded']} already in numba's cache "
+              f"({r['signatures']} listed) in {r['seconds']:.1f} s" + (f"; {len(r['failed'])} failed (they "
+              f"compile on first use): " + "; ".join(r["failed"]) if r["failed"] else ""))
+        return 0
     if args.cmd == "sweep":
         return _sweep(args)
     if args.cmd == "lod":

@@ -8,7 +8,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "qemjax"
 LAYERS = ["_mesh", "_io", "_options", "_kernels", "_costs", "_schedulers", "_record", "_pipeline", "metrics",
-          "peers", "shapes", "render", "_sweep", "__init__", "_cli", "__main__"]
+          "peers", "shapes", "render", "_sweep", "__init__", "_ahead", "_cli", "__main__"]
 
 
 def _modules() -> dict[str, tuple[Path, list[str]]]:

@@ -5,31 +5,38 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
-import time
 
-from . import compile_all, read_manifest, used_signatures, write_manifest
+from . import compile_ahead, compile_all, read_manifest, used_signatures, write_manifest
 
 
-def _parallel(jobs: int, build: bool) -> None:
-    """Compile the manifest's functions in ``jobs`` processes, each its share. Two processes that compile
-    one shared helper can each save its cache index, one losing the other's entry: the caller's final
-    pass compiles whatever is missing then."""
-    cmd = [sys.executable, "-m", "qemjax._ahead"] + (["--build"] if build else [])
-    procs = [subprocess.Popen(cmd + ["--slice", f"{i}/{jobs}"]) for i in range(jobs)]
-    for p in procs:
-        p.wait()
+def _check(demo: bool) -> int:
+    import json
+
+    from .._kernels import compilation
+    from .workloads import run_all
+
+    run_all(demo=demo)
+    listed = read_manifest()
+    missing = [f"{m}.{n}{s}" for (m, n), sigs in used_signatures().items() for s in sigs
+               if s not in listed.get((m, n), ())]
+    print(json.dumps({"compiled": compilation.numba_compiles(), "missing": missing,
+                      "package": os.path.dirname(os.path.dirname(os.path.abspath(__file__)))}))
+    return 0
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m qemjax._ahead")
     ap.add_argument("--record", action="store_true", help="run the workloads and rewrite signatures.txt")
+    ap.add_argument("--check", action="store_true", help="run the workloads; print (JSON) the numba "
+                    "compilations they needed and the signatures they used that signatures.txt lacks")
     ap.add_argument("--build", action="store_true", help="compile without importing the packages' __init__")
     ap.add_argument("--no-demo", action="store_true", help="--record: leave out the 327,680-face demo")
     ap.add_argument("--jobs", type=int, default=0, help="processes to compile in (default: one per core)")
     ap.add_argument("--slice", help=argparse.SUPPRESS)  # "i/n": this process's share (see `_parallel`)
     args = ap.parse_args(argv)
+    if args.check:
+        return _check(demo=not args.no_demo)
     if args.record:
         from .workloads import run_all
 
@@ -43,12 +50,7 @@ def main(argv=None) -> int:
         items = sorted(read_manifest().items())
         compile_all(dict(items[i::n]), bare=args.build)
         return 0
-    jobs = args.jobs or os.cpu_count() or 1
-    t0 = time.perf_counter()
-    if jobs > 1:
-        _parallel(jobs, args.build)
-    r = compile_all(bare=args.build)  # what the shares left out or lost to a race, and the count
-    r["seconds"] = time.perf_counter() - t0
+    r = compile_ahead(args.jobs, build=args.build)
     print(f"qemjax: compiled {r['compiled']}, already cached {r['loaded']} of {r['signatures']} signatures "
           f"in {r['seconds']:.1f} s" + (f"; {len(r['failed'])} failed" if r["failed"] else ""))
     for line in r["failed"]:

@@ -14,7 +14,8 @@ def run_all(demo: bool = True) -> None:
     import numpy as np
 
     import qemjax
-    from qemjax import _cli, shapes
+    from qemjax import shapes
+    from qemjax._sweep import config as sweep_config
 
     here = os.getcwd()
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings(), \
@@ -23,19 +24,18 @@ def run_all(demo: bool = True) -> None:
         os.chdir(tmp)
         try:
             shapes.write_examples(tmp)
-            # the command line, as the README and docs/getting-started.md use it
-            for argv in (["simplify", "bumpy.obj", "o.ply", "--faces", "1000"],
-                         ["simplify", "bumpy.obj", "g.ply", "--faces", "1000", "--scheduler", "greedy"],
-                         ["simplify", "bumpy.obj", "e.ply", "--ratio", "0.1", "--method", "esqem", "--scheduler",
-                          "greedy"],
-                         ["simplify", "textured.obj", "t.obj", "--ratio", "0.1"],
-                         ["simplify", "textured.obj", "tg.obj", "--ratio", "0.1", "--scheduler", "greedy"],
-                         ["simplify", "bumpy.ply", "f.ply", "--ratio", "0.2", "--feature-edges", "creases.txt"],
-                         ["lod", "bumpy.obj", "--ratios", "0.5", "0.1"],
-                         ["sweep", "sweep_example.toml", "--quiet"]):
-                _cli.main(argv)
+            # what the README's and docs/getting-started.md's commands run
+            qemjax.simplify("bumpy.obj", target_faces=1000)
+            qemjax.simplify("bumpy.obj", target_faces=1000, scheduler="greedy")
+            qemjax.simplify("bumpy.obj", ratio=0.1, method="esqem", scheduler="greedy")
+            qemjax.simplify("textured.obj", ratio=0.1)
+            qemjax.simplify("textured.obj", ratio=0.1, scheduler="greedy")
+            qemjax.simplify("bumpy.ply", ratio=0.2, feature_edges=np.loadtxt("creases.txt", dtype=np.int64))
+            qemjax.lod_chain("bumpy.obj", ratios=[0.5, 0.1])
+            example = sweep_config.load("sweep_example.toml", out=os.path.join(tmp, "sweep.csv"))
+            sweep_config.run(example, progress=False)
             if demo:
-                _cli.main(["demo", "--quiet"])
+                qemjax.simplify(shapes.bumpy_sphere(7), ratio=0.02)
             m = qemjax.load("bumpy.ply")
             res = qemjax.simplify(m, ratio=0.1, method="esqem", scheduler="greedy", progress=False)
             qemjax.metrics.evaluate(m, res)

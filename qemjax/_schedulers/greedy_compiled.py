@@ -48,8 +48,6 @@ from types import SimpleNamespace
 
 import jax.numpy as jnp
 import numpy as np
-from numba import types
-from numba.typed import Dict
 
 from . import greedy_jit as jit
 from . import greedy_wedges_jit as gw
@@ -102,7 +100,7 @@ def ordered_bits(v: np.ndarray) -> np.ndarray:
 
 
 def _dict():
-    return Dict.empty(types.int64, types.int64)
+    return jit.new_dict()
 
 
 def queue_keys(P: np.ndarray, cost: np.ndarray, l2: np.ndarray) -> np.ndarray:
@@ -297,7 +295,7 @@ class _Compiled:
         """`greedy_jit.renumber` when the stamps used pass twice the queue's pairs (and SLACK): old stamps'
         rows are reused, so the stamp arrays do not grow with the run's pushes (a vertex of valence d
         re-prices d pairs per contraction at it: d² pushes where it absorbs its neighbours)."""
-        if self.ctr[jit.C_STAMP] > 2 * len(self.cur) + SLACK:
+        if self.ctr[jit.C_STAMP] > 2 * jit.size(self.cur) + SLACK:
             jit.renumber(self.heap, self.ctr, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur,
                          self.blocked)
 
@@ -306,7 +304,7 @@ class _Compiled:
     def batch(self):
         ctr = self.ctr
         self.renumber()
-        if ctr[jit.C_HSIZE] > REBUILD * len(self.cur) + PREFETCH:  # mostly old entries: keep the current ones
+        if ctr[jit.C_HSIZE] > REBUILD * jit.size(self.cur) + PREFETCH:  # mostly old entries: keep the current ones
             jit.rebuild(self.heap, ctr, self.K, self.cur, self.blocked)
         held, gone = _dict(), _dict()
         opt = self.options  # (scalars of fixed types: one compiled specialisation)

@@ -27,7 +27,8 @@ Layout (one `State`, every field an array so that the kernels compile once and c
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.typed import Dict
 
 from . import greedy_wedges_jit as gw
 from .greedy_rules_jit import has, rules_head, rules_tail
@@ -674,6 +675,19 @@ def compact(start, length, pool, extra):
 def fill_cur(P, stamps, cur):
     for r in range(len(P)):
         cur[P[r]] = stamps[r]
+
+
+@njit(cache=True)
+def new_dict():
+    """An empty int64 -> int64 typed dict, made in compiled code: made from Python, numba compiles its
+    constructor afresh in every process (it cannot cache it)."""
+    return Dict.empty(key_type=types.int64, value_type=types.int64)
+
+
+@njit(cache=True)
+def size(d):
+    """len(d) of a typed dict, compiled and cached (from Python, numba compiles len afresh per process)."""
+    return len(d)
 
 
 @njit(cache=True)
