@@ -8,7 +8,8 @@ The options are generated from `qemjax.simplify`'s run keywords and from the fie
 docstrings and the presentation details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
 the command line another way. Errors are one line on stderr and exit code 2 (argparse's with one hint
 line naming the --help to read); warnings are one line ``qemjax: warning: …``; Ctrl-C prints ``qemjax:
-interrupted`` (a sweep adds how many rows it kept) and exits with 130. The output format and folder are checked before simplifying, and the
+interrupted`` (a sweep adds how many rows it kept) and exits with 130, unless the command was started with
+SIGINT ignored (it then stays ignored). The output format and folder are checked before simplifying, and the
 file is written under a temporary name and renamed, so a failure never leaves a partial file. Below the
 summary line, indented lines name what clean-up removed and the appearance attributes kept.
 
@@ -497,9 +498,13 @@ def main(argv=None) -> int:
     one line, and no partial output, since files are written under a temporary name and renamed)."""
     _INTERRUPTED.clear()
     _RAISED.clear()
+    previous = None
     try:
-        previous = signal.signal(signal.SIGINT, _on_sigint)
-        _ACTIVE.append(True)
+        # started with Ctrl-C ignored (`nohup`, `cmd &` in a script, some CI runners): it stays ignored, as
+        # the one who started us asked; else our handler
+        if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+            previous = signal.signal(signal.SIGINT, _on_sigint)
+            _ACTIVE.append(True)
     except ValueError:  # not the main thread: Python's own handling
         previous = None
     try:
