@@ -88,11 +88,28 @@ class _Parser(argparse.ArgumentParser):
     (``hint``: the command whose help that is; set by `main` for errors argparse reports at the top)."""
 
     hint: str | None = None
+    subcommands: dict | None = None  # command name -> its parser (set by `_parser` on the top one)
 
     def error(self, message):
         print(f"qemjax: error: {' '.join(message.split())}", file=sys.stderr)
         print(f"see '{self.hint or self.prog} --help'", file=sys.stderr)
         raise SystemExit(2)
+
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, with a misspelt option's close names: ``did you mean --boundary-weight?``."""
+        args, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._did_you_mean(args, extras)}")
+        return args
+
+    def _did_you_mean(self, args, extras) -> str:
+        wrong = next((a.split("=", 1)[0] for a in extras if a.startswith("--")), None)
+        if wrong is None:
+            return ""
+        parser = (self.subcommands or {}).get(getattr(args, "cmd", None), self)
+        options = [o for action in parser._actions if action.help is not argparse.SUPPRESS
+                   for o in action.option_strings if o.startswith("--")]
+        return _flat.did_you_mean(wrong, options, show=str)
 
 
 def _doc_help(name: str, doc: str | None = None) -> str:
@@ -425,6 +442,7 @@ def _parser() -> argparse.ArgumentParser:
                         "6 charts (textured.obj, no mtllib) and its texture (textured.png).")
     ex.add_argument("folder", nargs="?", default=".", help="where to write them (created if absent; default: .)")
     ap.commands = tuple(sub.choices)
+    ap.subcommands = dict(sub.choices)
     return ap
 
 

@@ -105,6 +105,11 @@ def test_a_misspelt_setting_suggests_the_close_name(ball):
         qemjax.simplify_batch(ball, [dict(ratoi=0.1)])
 
 
+def test_a_misspelt_grid_key_suggests_the_close_name(ball):
+    with pytest.raises(ValueError, match=r"^unknown grid keys \['boundry_weight'\]; did you mean 'boundary_weight'\?;"):
+        qemjax.sweep({"ball": ball}, {"boundry_weight": [1.0]}, [0.5], metrics=False, progress=False)
+
+
 def test_the_suggested_keywords_are_simplifys():
     own = {n for n, p in inspect.signature(_api.simplify).parameters.items() if p.kind is p.KEYWORD_ONLY}
     assert set(_flat.KEYWORDS) == own | {"preset", "locked", "vertex_weights"}

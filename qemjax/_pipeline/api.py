@@ -91,8 +91,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         of the flat keywords of qemjax 0.1 lives.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"``, ``"locked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
-    reason but the parity of a closed mesh. Raises ValueError for bad input or options, TypeError for an
-    unknown setting.
+    reason but the parity of a closed mesh. Raises ValueError for bad input or options (FileNotFoundError,
+    also a ValueError, for a path that does not exist), TypeError for an unknown setting.
     """
     from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
     from . import stages

@@ -141,7 +141,8 @@ def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[s
     unknown = [k for k in grid if not is_grid_key(k)]
     if unknown:
         why = "; targets go in `targets`" if set(unknown) & {"target_faces", "ratio"} else ""
-        raise ValueError(f"unknown grid keys {unknown}{why}; a grid may vary {list(_flat.grid_keys())} "
+        hint = _flat.did_you_mean(unknown[0], _flat.grid_keys())
+        raise ValueError(f"unknown grid keys {unknown}{why}{hint}; a grid may vary {list(_flat.grid_keys())} "
                          "or a field by its dotted name ('method.curvature_weight')")
     axes = []
     for k, values in grid.items():
