@@ -250,3 +250,11 @@ def test_the_readmes_notebook_command_has_timeouts():
     command = text[text.index("jupyter nbconvert --to notebook --execute"):]
     command = command[:command.index("`")]
     assert "--ExecutePreprocessor.timeout=600" in command and "--ExecutePreprocessor.startup_timeout=" in command
+
+
+def test_the_readmes_notebook_output_is_ignored_by_git():
+    text = " ".join((ROOT / "README.md").read_text().split())
+    command = text[text.index("jupyter nbconvert --to notebook --execute"):]
+    folder = command[command.index("--output-dir ") + len("--output-dir "):].split()[0]
+    ignored = (ROOT / ".gitignore").read_text().splitlines()
+    assert f"{folder}/" in ignored or folder in ignored, folder
