@@ -8,7 +8,8 @@ The options are generated from `qemjax.simplify`'s run keywords and from the fie
 docstrings and the presentation details in `OPTIONS`; `NOT_EXPOSED` names the keywords that reach
 the command line another way. Errors are one line on stderr and exit code 2 (argparse's with one hint
 line naming the --help to read); warnings are one line ``qemjax: warning: …``; Ctrl-C prints ``qemjax:
-interrupted`` (a sweep adds how many rows it kept) and exits with 130. The output format and folder are checked before simplifying, and the
+interrupted`` (a sweep adds how many rows it kept) and exits with 130, unless the command was started with
+SIGINT ignored (it then stays ignored). The output format and folder are checked before simplifying, and the
 file is written under a temporary name and renamed, so a failure never leaves a partial file. Below the
 summary line, indented lines name what clean-up removed and the appearance attributes kept.
 
@@ -87,11 +88,28 @@ class _Parser(argparse.ArgumentParser):
     (``hint``: the command whose help that is; set by `main` for errors argparse reports at the top)."""
 
     hint: str | None = None
+    subcommands: dict | None = None  # command name -> its parser (set by `_parser` on the top one)
 
     def error(self, message):
         print(f"qemjax: error: {' '.join(message.split())}", file=sys.stderr)
         print(f"see '{self.hint or self.prog} --help'", file=sys.stderr)
         raise SystemExit(2)
+
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, with a misspelt option's close names: ``did you mean --boundary-weight?``."""
+        args, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._did_you_mean(args, extras)}")
+        return args
+
+    def _did_you_mean(self, args, extras) -> str:
+        wrong = next((a.split("=", 1)[0] for a in extras if a.startswith("--")), None)
+        if wrong is None:
+            return ""
+        parser = (self.subcommands or {}).get(getattr(args, "cmd", None), self)
+        options = [o for action in parser._actions if action.help is not argparse.SUPPRESS
+                   for o in action.option_strings if o.startswith("--")]
+        return _flat.did_you_mean(wrong, options, show=str)
 
 
 def _doc_help(name: str, doc: str | None = None) -> str:
@@ -430,6 +448,7 @@ def _parser() -> argparse.ArgumentParser:
                         "NUMBA_CACHE_DIR of your own, or a container image. `pip install .` does this already.")
     co.add_argument("--jobs", type=int, default=0, help="processes to compile in (default: one per core)")
     ap.commands = tuple(sub.choices)
+    ap.subcommands = dict(sub.choices)
     return ap
 
 
@@ -503,9 +522,13 @@ def main(argv=None) -> int:
     one line, and no partial output, since files are written under a temporary name and renamed)."""
     _INTERRUPTED.clear()
     _RAISED.clear()
+    previous = None
     try:
-        previous = signal.signal(signal.SIGINT, _on_sigint)
-        _ACTIVE.append(True)
+        # started with Ctrl-C ignored (`nohup`, `cmd &` in a script, some CI runners): it stays ignored, as
+        # the one who started us asked; else our handler
+        if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+            previous = signal.signal(signal.SIGINT, _on_sigint)
+            _ACTIVE.append(True)
     except ValueError:  # not the main thread: Python's own handling
         previous = None
     try:

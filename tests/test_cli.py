@@ -14,6 +14,7 @@ import trimesh
 
 import qemjax
 from qemjax import _cli, shapes
+import qemjax._sweep.run  # noqa: F401  (tests patch its sweep; imported whichever tests run)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -301,7 +302,7 @@ def _boom(*args, **kwargs):
 
 
 @pytest.mark.parametrize("text,match", [
-    ('meshes = ["sheet.ply"]\ntargets = [0.5]\nmesh = 1', "unknown key 'mesh'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\nmesh = 1', "unknown key 'mesh'; did you mean 'meshes'?"),
     ("targets = [0.5]", "'meshes' is missing"),
     ('meshes = ["sheet.ply"]', "'targets' is missing"),
     ('meshes = ["nope.ply"]\ntargets = [0.5]', "mesh file not found: "),
@@ -313,11 +314,14 @@ def _boom(*args, **kwargs):
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nweld = [1]', "grid.weld: expected true/false, got 1"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nmethod = ["qme"]', "grid.method: unknown value 'qme'"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nratio = [0.1]', "targets go in 'targets'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nboundry_weight = [0.1]',
+     "unknown grid key 'boundry_weight'; did you mean 'boundary_weight'?;"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[grid]\nregularize = []', "grid.regularize is empty"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\nout = "t.xlsx"', "out must end in one of"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\nout = "no/such/t.csv"', "does not exist"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\nmetrics = "yes"', "metrics must be true, false or a table"),
-    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[metrics]\nsamples = 5', "unknown metrics key 'samples'"),
+    ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[metrics]\nsamples = 5',
+     "unknown metrics key 'samples'; did you mean 'n_samples'?"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 0', "executor.workers must be an integer"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = "2"', "executor.workers must be an integer"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 2\nscheduler = "slurm"',
@@ -333,7 +337,44 @@ def test_sweep_command_bad_config(sweep_dir, monkeypatch, capsys, text, match):
     assert _cli.main(["sweep", str(sweep_dir / "bad.toml"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("qemjax: error: bad.toml: ") and err.count("\n") == 1, err
-    assert match in err, err
+    assert match in err and err.count("bad.toml") == 1, err  # the file named once
+
+
+def test_a_missing_mesh_in_a_config_is_a_file_not_found_error_named_once(sweep_dir):
+    from qemjax._sweep import config
+
+    (sweep_dir / "b1.toml").write_text('meshes = ["nope.ply"]\ntargets = [0.5]')
+    with pytest.raises(FileNotFoundError) as err:
+        config.load(sweep_dir / "b1.toml")
+    assert str(err.value) == f"b1.toml: mesh file not found: {sweep_dir / 'nope.ply'}"
+    assert err.value.filename == str(sweep_dir / "nope.ply")
+    with pytest.raises(FileNotFoundError, match=r"^config file not found: .*missing\.toml$"):
+        config.load(sweep_dir / "missing.toml")
+
+
+def test_a_misspelt_option_suggests_the_close_one(src, tmp_path, capsys, monkeypatch):
+    _no_simplify(monkeypatch)
+    for cmd, args in [("simplify", [str(src), str(tmp_path / "o.obj"), "--ratio", "0.5"]),
+                      ("lod", [str(src), str(tmp_path / "lods")])]:
+        assert _cli.main([cmd, *args, "--boundry-weight", "1"]) == 2
+        err = capsys.readouterr().err
+        assert err == ("qemjax: error: unrecognized arguments: --boundry-weight 1; did you mean "
+                       f"--boundary-weight?\nsee 'qemjax {cmd} --help'\n")
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio=0.5", "--flip-angel=30"]) == 2
+    assert "--flip-angel=30; did you mean --flip-angle?\n" in capsys.readouterr().err
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio", "0.5", "--xyzzy"]) == 2
+    assert capsys.readouterr().err.startswith("qemjax: error: unrecognized arguments: --xyzzy\n")
+    # lod hides the options it refuses: they are not suggested
+    assert _cli.main(["lod", str(src), str(tmp_path / "lods"), "--atributes", "uv"]) == 2
+    assert "--attributes" not in capsys.readouterr().err
+
+
+def test_a_file_with_nan_coordinates_is_named(tmp_path, capsys):
+    path = tmp_path / "nan.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n")
+    assert _cli.main(["simplify", str(path), str(tmp_path / "o.obj"), "--ratio", "0.5", "--quiet"]) == 2
+    assert capsys.readouterr().err == \
+        f"qemjax: error: {path}: vertices contain NaN or inf coordinates (1 vertices, first: 2)\n"
 
 
 def test_sweep_command_bad_files(tmp_path, monkeypatch, capsys):

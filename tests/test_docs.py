@@ -70,3 +70,28 @@ def test_command_lines_run(tmp_path, env):
     for name in ("out.ply", "lods/bumpy-lod0.obj", "lods/bumpy-lods.glb", "lods/bumpy-record.npz",
                  "textured-10.obj", "textured-10.mtl", "textured-10.png"):
         assert (tmp_path / name).is_file(), name
+
+
+@pytest.mark.slow  # collects the whole suite in a fresh process
+def test_contributing_states_the_test_counts():
+    """docs/contributing.md quotes what the two collection commands print; a test added or removed there
+    must be counted there too."""
+    import re
+    import subprocess
+    import sys
+
+    text = " ".join((DOCS / "contributing.md").read_text().split())
+    fast = re.search(r"`(\d+)/(\d+) tests collected \((\d+) deselected\)`", text)
+    full = re.search(r"`(\d+) tests collected`", text)
+    assert fast and full, "contributing.md quotes no counts"
+
+    def collected(*marks) -> str:
+        p = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+                            *marks], cwd=ROOT, capture_output=True, text=True, timeout=600)
+        return re.sub(r" in [\d.]+s.*$", "", p.stdout.strip().splitlines()[-1])
+
+    assert collected("-m", "not slow") == fast.group(0).strip("`")
+    assert collected() == full.group(0).strip("`")
+    n_fast, n_all, n_slow = map(int, fast.groups())
+    assert n_fast + n_slow == n_all == int(full.group(1))
+    assert f"{n_slow} of {n_all} tests" in text and f"fast tier runs {n_fast}" in text

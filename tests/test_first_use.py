@@ -105,6 +105,11 @@ def test_a_misspelt_setting_suggests_the_close_name(ball):
         qemjax.simplify_batch(ball, [dict(ratoi=0.1)])
 
 
+def test_a_misspelt_grid_key_suggests_the_close_name(ball):
+    with pytest.raises(ValueError, match=r"^unknown grid keys \['boundry_weight'\]; did you mean 'boundary_weight'\?;"):
+        qemjax.sweep({"ball": ball}, {"boundry_weight": [1.0]}, [0.5], metrics=False, progress=False)
+
+
 def test_the_suggested_keywords_are_simplifys():
     own = {n for n, p in inspect.signature(_api.simplify).parameters.items() if p.kind is p.KEYWORD_ONLY}
     assert set(_flat.KEYWORDS) == own | {"preset", "locked", "vertex_weights"}
@@ -167,6 +172,17 @@ CHILD = textwrap.dedent("""
 """)
 
 
+def _start(module: str, argv: list, sigint, sleep: float = 30) -> subprocess.Popen:
+    """The command in a fresh process whose import of ``module`` takes ``sleep`` seconds, started with
+    SIGINT's disposition ``sigint`` whatever this test run was started with (a CI runner or ``cmd &`` in a
+    script starts it with SIGINT ignored, and a child inherits that)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    code = CHILD.format(module=module, argv=argv).replace("time.sleep(30)", f"time.sleep({sleep})")
+    return subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, sigint))
+
+
 @pytest.mark.slow  # fresh processes, SIGINT
 @pytest.mark.parametrize("module", ["qemjax._cli", "jax"])
 def test_ctrl_c_while_importing_is_one_line(module, tmp_path):
@@ -175,9 +191,7 @@ def test_ctrl_c_while_importing_is_one_line(module, tmp_path):
     out = tmp_path / "out.ply"
     argv = ["simplify", str(tmp_path / "in.ply"), str(out), "--ratio", "0.5", "--quiet"]
     _write_ply(tmp_path / "in.ply")
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    p = subprocess.Popen([sys.executable, "-c", CHILD.format(module=module, argv=argv)], cwd=ROOT, env=env,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = _start(module, argv, signal.SIG_DFL)
     try:
         assert p.stdout.readline() == f"importing {module}\n"
         p.send_signal(signal.SIGINT)
@@ -186,6 +200,40 @@ def test_ctrl_c_while_importing_is_one_line(module, tmp_path):
         p.kill()
     assert p.returncode == 130 and stderr == "qemjax: interrupted\n" and stdout == ""
     assert not out.exists()
+
+
+@pytest.mark.slow  # a fresh process that runs to the end
+def test_started_with_sigint_ignored_the_command_keeps_ignoring_it(tmp_path):
+    """Started with SIGINT ignored (``nohup``, a background job of a script), the command does not turn it
+    back on: a SIGINT while it imports JAX changes nothing, and the run writes its output."""
+    out = tmp_path / "out.ply"
+    argv = ["simplify", str(tmp_path / "in.ply"), str(out), "--ratio", "0.5", "--quiet"]
+    _write_ply(tmp_path / "in.ply")
+    p = _start("jax", argv, signal.SIG_IGN, sleep=2)
+    try:
+        assert p.stdout.readline() == "importing jax\n"
+        p.send_signal(signal.SIGINT)  # while `main` runs: its handler would be installed by now
+        stdout, stderr = p.communicate(timeout=120)
+    finally:
+        p.kill()
+    assert p.returncode == 0, stderr
+    assert out.exists() and "interrupted" not in stderr
+
+
+def test_sigint_ignored_at_start_stays_ignored_while_main_runs(monkeypatch):
+    from qemjax import _cli
+
+    seen = []
+    monkeypatch.setattr(_cli, "_main", lambda argv: seen.append(signal.getsignal(signal.SIGINT)) or 0)
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        assert _cli.main(["examples"]) == 0
+        assert seen == [signal.SIG_IGN] and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        assert _cli.main(["examples"]) == 0  # started with Python's handler: ours while it runs, then back
+        assert seen[1] is _cli._on_sigint and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 def _write_ply(path: Path) -> None:
@@ -202,3 +250,11 @@ def test_the_readmes_notebook_command_has_timeouts():
     command = text[text.index("jupyter nbconvert --to notebook --execute"):]
     command = command[:command.index("`")]
     assert "--ExecutePreprocessor.timeout=600" in command and "--ExecutePreprocessor.startup_timeout=" in command
+
+
+def test_the_readmes_notebook_output_is_ignored_by_git():
+    text = " ".join((ROOT / "README.md").read_text().split())
+    command = text[text.index("jupyter nbconvert --to notebook --execute"):]
+    folder = command[command.index("--output-dir ") + len("--output-dir "):].split()[0]
+    ignored = (ROOT / ".gitignore").read_text().splitlines()
+    assert f"{folder}/" in ignored or folder in ignored, folder

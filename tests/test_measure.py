@@ -93,6 +93,26 @@ def test_batch_measures_as_alone():
         assert all(r.stats[k] == alone.stats[k] for k in KEYS if k != "distance_s")
 
 
+@pytest.mark.parametrize("more", [0, 100])
+@pytest.mark.parametrize("kw", [{}, {"measure": True, "refit": 0}, {"method": "esqem", "measure": True}])
+def test_a_mesh_returned_unchanged_is_at_distance_zero_exactly(kw, more):
+    import warnings
+
+    V, F = shapes.bumpy_sphere(3)
+    V = np.concatenate([V, [[9.0, 9.0, 9.0]]])  # an unused vertex: cleaned away, the surface the same
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a target above the faces says it returns the mesh unchanged
+        res = qemjax.simplify((V, F), target_faces=len(F) + more, **kw)
+    assert res.stop_reason == "unchanged" and len(res.faces) == len(F)
+    assert (res.stats["distance_max"], res.stats["distance_rms"]) == (0.0, 0.0)
+    assert (res.stats["distance_max_rel"], res.stats["distance_rms_rel"]) == (0.0, 0.0)
+    assert res.stats["distance_samples"] > 0
+    moved = res.vertices.copy()
+    moved[0] += 1e-3  # any other output is measured as before
+    d = measure.distance(res.input_vertices, res.input_faces, moved, res.faces)
+    assert 0 < d["distance_max"] <= 1e-3
+
+
 def test_measure_must_be_a_bool():
     with pytest.raises(ValueError, match="measure must be True or False"):
         qemjax.simplify(shapes.icosphere(2), ratio=0.5, measure="yes")

@@ -147,6 +147,27 @@ def test_bad_file_gives_a_clear_error(tmp_path, case):
         qemjax.simplify(str(path), target_faces=1)
 
 
+def test_a_missing_file_is_a_file_not_found_error(tmp_path):
+    import pickle
+
+    path = tmp_path / "missing.obj"
+    for call in (qemjax.load, lambda p: qemjax.simplify(p, ratio=0.5)):
+        with pytest.raises(FileNotFoundError) as err:  # and a ValueError, like every other bad input
+            call(path)
+        assert str(err.value) == f"mesh file not found: {path}" and err.value.filename == str(path)
+        assert isinstance(err.value, ValueError)
+    again = pickle.loads(pickle.dumps(err.value))  # crosses to and from a worker process unchanged
+    assert type(again) is type(err.value) and str(again) == str(err.value)
+
+
+def test_a_bad_mesh_file_is_named_in_the_error(tmp_path):
+    path = tmp_path / "nan.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n")
+    with pytest.raises(ValueError) as err:
+        qemjax.simplify(path, ratio=0.5)
+    assert str(err.value) == f"{path}: vertices contain NaN or inf coordinates (1 vertices, first: 2)"
+
+
 def _with_outlier(V, F, far, referenced):
     """V, F plus a triangle at distance ``far``: part of the mesh, or its vertices left unreferenced."""
     tri = np.array([[far, 0, 0], [far + 1, 0, 0], [far, 1, 0]])

@@ -135,6 +135,31 @@ def test_settings_that_do_not_apply_are_marked_and_counted(ball, tmp_path, ext):
     assert again.attrs["sweep"]["skipped"] == 6 and again.attrs["sweep"]["ran"] == 0
 
 
+def test_csv_columns_are_the_dataframes_and_the_documented_reader_keeps_not_applicable(ball, tmp_path):
+    import csv
+    import re
+
+    import pandas as pd
+
+    # qem rows come first and have no split_factor: the file's header must still put it after mesh
+    grid = {"method": ["qem", "esqem"], "split_factor": [None, 1.5]}
+    out = tmp_path / "sweep.csv"
+    with pytest.warns(UserWarning, match="requested cells"):
+        df = qemjax.sweep({"ball": ball}, grid, [0.5], metrics=False, out=out, progress=False)
+    with open(out, newline="") as f:
+        header = next(csv.reader(f))
+    assert header == list(df.columns) and header[:5] == ["cell", "mesh", "method", "split_factor", "target"]
+    # the recipe docs/sweeps.md gives, as written there
+    doc = (ROOT / "docs" / "sweeps.md").read_text()
+    (path, kwargs), = re.findall(r'pd\.read_csv\(("[^"]+"), (.*?)\)`', doc)
+    assert path == '"sweep.csv"'
+    back = eval(f"pd.read_csv(out, {kwargs})", {"pd": pd, "out": out})
+    assert back["split_factor"].tolist()[0] == "n/a"  # qem: does not apply
+    assert math.isnan(back["split_factor"].tolist()[1])  # esqem with split_factor None
+    assert back["split_factor"].tolist()[2] == "1.5"
+    assert pd.read_csv(out)["split_factor"].isna().tolist()[:2] == [True, True]  # what the recipe avoids
+
+
 def test_peer_rows_mark_the_other_keys_not_applicable(ball):
     pytest.importorskip("meshoptimizer")
     df = qemjax.sweep({"ball": ball}, {"method": ["qem", "meshoptimizer"], "boundary_weight": [1.0, 2.0]}, [0.5],

@@ -7,6 +7,7 @@ are kept: what else a mesh carries (UVs, a material, colours) is named in a warn
 """
 from __future__ import annotations
 
+import errno
 import os
 import warnings
 from typing import Any, NamedTuple
@@ -23,6 +24,14 @@ class Mesh(NamedTuple):
 
     vertices: np.ndarray
     faces: np.ndarray
+
+
+class MissingFileError(FileNotFoundError, ValueError):
+    """A mesh or config file that does not exist: a FileNotFoundError (``errno``, ``filename``), and a
+    ValueError like every other bad input. One line: ``mesh file not found: PATH``."""
+
+    def __str__(self):
+        return f"{self.strerror}: {self.filename}" if self.filename is not None else super().__str__()
 
 
 def _triangulate(faces: np.ndarray) -> np.ndarray:
@@ -84,7 +93,7 @@ def _read_trimesh(path):
     cannot be read, what is wrong with it in words about the file (`_io_files.read`)."""
     path = os.fspath(path)
     if not os.path.exists(path):
-        raise ValueError(f"mesh file not found: {path}")
+        raise MissingFileError(errno.ENOENT, "mesh file not found", path)
     if os.path.isdir(path):
         raise ValueError(f"expected a mesh file, got a folder: {path}")
     return _as_trimesh(_io_files.read(path))
@@ -127,8 +136,9 @@ def _array(name: str, x) -> np.ndarray:
 def _as_arrays(mesh: Any, keep_trimesh: bool = False):
     """`as_arrays`, also returning `dropped_attributes` (empty for arrays); with ``keep_trimesh`` also the
     `trimesh.Trimesh` read (None for arrays), whose attributes `prepare` may keep."""
-    dropped, tm = [], None
+    dropped, tm, source = [], None, None
     if isinstance(mesh, (str, os.PathLike)):
+        source = os.fspath(mesh)
         tm = _read_trimesh(mesh)
     elif type(mesh).__module__.startswith("trimesh"):
         tm = _as_trimesh(mesh)
@@ -141,6 +151,20 @@ def _as_arrays(mesh: Any, keep_trimesh: bool = False):
     else:
         raise ValueError("mesh must be a path, a trimesh.Trimesh, a (vertices, faces) pair "
                          f"or have .vertices and .faces; got {type(mesh).__name__}")
+    try:
+        V, F = _checked(V, F)
+    except ValueError as exc:
+        if source is None:
+            raise
+        raise ValueError(f"{source}: {exc}") from None  # which file, when the mesh came from one
+    if keep_trimesh:
+        return Mesh(V, F), dropped, tm
+    return Mesh(V, F), dropped
+
+
+def _checked(V, F) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n,3) float64 and triangles (m,3) int64 of arrays-like ``V``, ``F``, polygons fan-triangulated;
+    ValueError naming the problem."""
     V = _array("vertices", V)
     F = _array("faces", F)
     if V.ndim != 2 or V.shape[1] != 3:
@@ -167,9 +191,7 @@ def _as_arrays(mesh: Any, keep_trimesh: bool = False):
     lo, hi = F.min(), F.max()
     if lo < 0 or hi >= V.shape[0]:
         raise ValueError(f"face indices out of range: found [{lo}, {hi}] for {V.shape[0]} vertices")
-    if keep_trimesh:
-        return Mesh(V, F), dropped, tm
-    return Mesh(V, F), dropped
+    return V, F
 
 
 def as_arrays(mesh: Any) -> Mesh:

@@ -69,7 +69,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         different charts is refused (``stats['rejected_by']['seam']``). Only `qemjax.QEM` keeps attributes
         (others warn and drop).
     feature_edges: (k,2) vertex-index pairs (in the cleaned input) constrained like boundary edges.
-    progress: show a progress bar (tqdm).
+    progress: show a progress bar (tqdm) of the faces removed (with splitting, ESQEM's, first those of the
+        run that plans it).
     measure: measure the output's distance from the input (`_pipeline.measure`: every input
         vertex and face centroid to its nearest output point) into ``stats["distance_max"]``,
         ``["distance_rms"]`` (mesh units) and their ``_rel`` forms (over the bounding-box diagonal). None
@@ -91,8 +92,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         of the flat keywords of qemjax 0.1 lives.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
     ``"blocked"``, ``"locked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
-    reason but the parity of a closed mesh. Raises ValueError for bad input or options, TypeError for an
-    unknown setting.
+    reason but the parity of a closed mesh. Raises ValueError for bad input or options (FileNotFoundError,
+    also a ValueError, for a path that does not exist), TypeError for an unknown setting.
     """
     from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
     from . import stages

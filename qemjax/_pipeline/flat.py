@@ -136,11 +136,21 @@ KEYWORDS = ("target_faces", "ratio", "max_error", "method", "scheduler", "topolo
             "feature_edges", "progress", "measure", "locked", "vertex_weights", "preset")
 
 
+def did_you_mean(key: str, names, show=repr) -> str:
+    """``"; did you mean 'ratio'?"``: the names close to a misspelt ``key`` (each as ``show`` writes it), or
+    '' when none is close. The one hint for every unknown name: keywords, options, config keys."""
+    names = list(names)
+    close = difflib.get_close_matches(key, names, n=3, cutoff=0.6)
+    if close:  # the nearly as close only: 'boundary_weight' for 'boundry_weight', not 'memory_weight' too
+        best = difflib.SequenceMatcher(None, key, close[0]).ratio()
+        close = [c for c in close if difflib.SequenceMatcher(None, key, c).ratio() >= best - 0.1]
+    return f"; did you mean {' or '.join(map(show, close))}?" if close else ""
+
+
 def unknown_setting(key: str, table: dict | None = None) -> str:
     """One line for a keyword that names nothing: the close names first (``did you mean 'ratio'?``)."""
     names = list(KEYWORDS) + sorted(options() if table is None else table)
-    close = difflib.get_close_matches(key, names, n=3, cutoff=0.6)
-    hint = f"; did you mean {' or '.join(map(repr, close))}?" if close else \
+    hint = did_you_mean(key, names) or \
         " (help(qemjax.simplify) lists the keywords; a method's settings are its fields, qemjax.QEM(...))"
     return f"unknown setting {key!r}{hint}"
 

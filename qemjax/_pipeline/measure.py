@@ -55,7 +55,12 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
         P, w = sampled
     if len(P) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
-    _, d = nearest((X - centre) / unit, G, P, seeds)
+    if len(X) == len(V) and np.array_equal(G, F) and np.array_equal(X, V):
+        # the input itself (nothing removed, nothing moved): every sample lies on it, exactly; the search,
+        # in the unit frame, would round that to 1e-16 or so
+        d = np.zeros(len(P))
+    else:
+        _, d = nearest((X - centre) / unit, G, P, seeds)
     d_max = float(d.max()) * unit
     d_rms = float(np.sqrt(np.sum(w * d * d) / np.sum(w))) * unit
     return dict(distance_max=d_max, distance_rms=d_rms, distance_max_rel=d_max / diag if diag > 0 else None,

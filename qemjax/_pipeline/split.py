@@ -154,13 +154,14 @@ def added_faces(V: np.ndarray, F: np.ndarray, factor: float) -> int:
     return len(split_edges(V, F, factor).F) - len(F)
 
 
-def plan(run, args, target: int, model, options, factor: float) -> tuple[int, int]:
+def plan(run, args, target: int, model, options, factor: float, progress=None) -> tuple[int, int]:
     """The face target to simplify to so that splitting can bring the count back to ``target``: runs the
-    scheduler ``run`` once to ``target`` on ``args`` = (V, S, F, extra pairs) and subtracts the faces
-    splitting that result would add, but keeps at least (1 − MAX_SPLIT_SHARE) × target faces.
-    Returns (the face target, the faces splitting the first result would add)."""
+    scheduler ``run`` once to ``target`` on ``args`` = (V, S, F, extra pairs) (``progress``: its progress
+    callback) and subtracts the faces splitting that result would add, but keeps at least
+    (1 − MAX_SPLIT_SHARE) × target faces. Returns (the face target, the faces splitting the first result
+    would add)."""
     V, S, F, extra = args
-    out = run(V, S, F, extra, max(target, 1), model, options, None)
+    out = run(V, S, F, extra, max(target, 1), model, options, progress)
     s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor)
     return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s
 

@@ -261,6 +261,13 @@ def unchanged(job: Job):
     return outcome.Outcome.unchanged(g.Vn, job.S, g.F, len(job.model.branches)), None, None
 
 
+def faces_to_remove(m: int, target: int, closed: bool) -> int:
+    """The faces a run from ``m`` faces down to ``target`` removes, its progress bar's total: a closed
+    manifold loses faces in pairs, so it stops one above an odd target (`outcome.parity_only`)."""
+    n = m - max(target, 1)
+    return n - n % 2 if closed else n
+
+
 def run(job: Job):
     """Run the scheduler. Returns (its `outcome.Outcome`, the face target the run aimed at, the faces
     splitting was planned to add (None without splitting))."""
@@ -268,20 +275,20 @@ def run(job: Job):
     m = len(g.F)
     if not (target < m or job.err < math.inf):
         return unchanged(job)
-    bar = None
+    bar, progress_cb = None, None
+    closed = len(g.edges[2]) == 0 and g.nonmanifold == 0
     if setup.progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=m - target, unit="face", desc="simplify")
-
+        splits = setup.split is not None and target
+        bar = tqdm(total=faces_to_remove(m, target, closed), unit="face",
+                   desc="simplify (planning the splits)" if splits else "simplify")
         last = m
 
         def progress_cb(faces_now):
             nonlocal last
             bar.update(last - faces_now)
             last = faces_now
-    else:
-        progress_cb = None
     run_target, planned = target, None
     try:  # from the bar's first line on: an interrupt anywhere below still ends its line
         more = {} if job.locks is None else {"locks": job.locks.run()}
@@ -289,8 +296,18 @@ def run(job: Job):
                                 part_scale=g.frame.part_scale2(), wedges=job.tracker, **more)
         if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
             run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
-                                              setup.split)
+                                              setup.split, progress_cb)
+            if bar is not None:  # the run itself goes past the target, by the faces splitting adds back
+                last = m
+                bar.reset(total=faces_to_remove(m, run_target, closed))
+                bar.set_description("simplify")
         out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
+        if bar is not None and bar.n != bar.total and (out.stop_reason == "target" or (
+                out.stop_reason == "max_error" and not target)):
+            # its goal reached (a face target, or the error bound alone, whose faces no count foresees):
+            # the bar ends full; one that stopped short of its target stays short, as the run did
+            bar.total = bar.n
+            bar.refresh()
     finally:  # an interrupted run also ends its bar's line
         if bar is not None:
             bar.close()

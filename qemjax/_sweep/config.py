@@ -1,7 +1,8 @@
 """``qemjax sweep CONFIG``: a sweep described in a TOML file (or YAML, with pyyaml installed).
 
 Everything is checked before any mesh is simplified or any worker started: unknown keys, missing files,
-unknown shapes, wrong types and bad targets raise ValueError with one line naming the file and the key.
+unknown shapes, wrong types and bad targets raise ValueError with one line naming the file and the key
+(a missing file `MissingFileError`: a FileNotFoundError too).
 Relative paths (meshes, out) are relative to the config file's folder; a mesh may also be a shape made in
 code (``"shapes.torus"``, ``"shapes.bumpy_sphere(subdivisions=4)"`` or ``{shape = "torus", n_major = 32}``). See docs/cli.md, "Sweep config files".
 """
@@ -9,12 +10,14 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import numbers
 import os
 import typing
 from pathlib import Path
 from typing import Any
 
+from .._io.mesh import MissingFileError
 from .._pipeline import api as _api, flat as _flat
 from .. import _schedulers, shapes
 from . import run as _sweep
@@ -39,7 +42,7 @@ def read(path) -> dict:
     """The raw table of a .toml, .yaml or .yml file."""
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"config file not found: {path}")
+        raise MissingFileError(errno.ENOENT, "config file not found", os.fspath(path))
     ext = path.suffix.lower()
     if ext == ".toml":
         import tomllib
@@ -70,12 +73,15 @@ def load(path, out: str | None = None) -> SweepConfig:
     raw = read(path)
     where = path.name
 
-    def fail(msg):
+    def fail(msg, missing=None):
+        if missing is not None:  # a file the config names: FileNotFoundError too
+            raise MissingFileError(errno.ENOENT, f"{where}: {msg}", missing)
         raise ValueError(f"{where}: {msg}")
 
     unknown = [k for k in raw if k not in KEYS]
     if unknown:
-        fail(f"unknown key {unknown[0]!r}; a sweep config has {', '.join(KEYS)}")
+        fail(f"unknown key {unknown[0]!r}{_flat.did_you_mean(unknown[0], KEYS)}; a sweep config has "
+             f"{', '.join(KEYS)}")
     for key in ("meshes", "targets"):
         if key not in raw:
             fail(f"'{key}' is missing")
@@ -110,7 +116,7 @@ def _mesh(value, folder: Path, fail) -> str:
         fail(f"meshes must be file paths or shapes (strings such as \"shapes.torus\"), got {value!r}")
     path = os.fspath(folder / value)
     if not Path(path).is_file():
-        fail(f"mesh file not found: {path}")
+        fail("mesh file not found", missing=path)
     return path
 
 
@@ -118,8 +124,9 @@ def _meshes(value, folder: Path, fail) -> dict[str, str]:
     if isinstance(value, str):
         value = [value]
     if isinstance(value, list):
+        paths = [_mesh(v, folder, fail) for v in value]  # its errors name the config already (`fail`)
         try:
-            named = _sweep.name_meshes([_mesh(v, folder, fail) for v in value])
+            named = _sweep.name_meshes(paths)
         except ValueError as exc:
             fail(str(exc))
     elif isinstance(value, dict):
@@ -182,7 +189,8 @@ def _grid(value, fail) -> dict[str, list]:
         fail(f"grid must be a table of simplify keywords = lists of values, got {type(value).__name__}")
     unknown = [k for k in value if not _sweep.is_grid_key(k)]
     if unknown:
-        fail(f"unknown grid key {unknown[0]!r}; a grid may vary {', '.join(_flat.grid_keys())} "
+        fail(f"unknown grid key {unknown[0]!r}{_flat.did_you_mean(unknown[0], _flat.grid_keys())}; "
+             f"a grid may vary {', '.join(_flat.grid_keys())} "
              "(or a field by its dotted name: \"method.curvature_weight\")"
              + ("; targets go in 'targets'" if unknown[0] in ("ratio", "target_faces") else ""))
     grid = {}
@@ -201,7 +209,8 @@ def _metrics(value, fail) -> bool | dict:
         fail(f"metrics must be true, false or a table of {', '.join(METRICS_KEYS)}, got {value!r}")
     for k, v in value.items():
         if k not in METRICS_KEYS:
-            fail(f"unknown metrics key {k!r}; metrics may set {', '.join(METRICS_KEYS)}")
+            fail(f"unknown metrics key {k!r}{_flat.did_you_mean(k, METRICS_KEYS)}; metrics may set "
+                 f"{', '.join(METRICS_KEYS)}")
         if isinstance(v, bool) or not isinstance(v, int) or v < (1 if k == "n_samples" else 0):
             fail(f"metrics.{k} must be an integer >= {1 if k == 'n_samples' else 0}, got {v!r}")
     return dict(value)
@@ -212,7 +221,8 @@ def _executor(value, fail) -> dict:
         fail(f"executor must be a table of {', '.join(EXECUTOR_KEYS)}, got {type(value).__name__}")
     for k in value:
         if k not in EXECUTOR_KEYS:
-            fail(f"unknown executor key {k!r}; executor may set {', '.join(EXECUTOR_KEYS)}")
+            fail(f"unknown executor key {k!r}{_flat.did_you_mean(k, EXECUTOR_KEYS)}; executor may set "
+                 f"{', '.join(EXECUTOR_KEYS)}")
     workers, scheduler, address = value.get("workers"), value.get("scheduler"), value.get("address")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         fail(f"executor.workers must be an integer >= 1, got {workers!r}")

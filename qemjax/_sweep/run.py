@@ -141,7 +141,8 @@ def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[s
     unknown = [k for k in grid if not is_grid_key(k)]
     if unknown:
         why = "; targets go in `targets`" if set(unknown) & {"target_faces", "ratio"} else ""
-        raise ValueError(f"unknown grid keys {unknown}{why}; a grid may vary {list(_flat.grid_keys())} "
+        hint = _flat.did_you_mean(unknown[0], _flat.grid_keys())
+        raise ValueError(f"unknown grid keys {unknown}{why}{hint}; a grid may vary {list(_flat.grid_keys())} "
                          "or a field by its dotted name ('method.curvature_weight')")
     axes = []
     for k, values in grid.items():
@@ -467,11 +468,13 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         tqdm.write(f"sweep: {skipped} of {len(cells)} cells already in {os.fspath(out)}: skipped", file=sys.stderr)
     bar = tqdm(total=len(cells), initial=skipped, unit="cell", desc="sweep", disable=not progress)
     ran = []
+    front = [*_FIRST, *grid, "target"]  # the table's leading columns, in the DataFrame and the file alike
 
     def frame(records):
         df = pd.DataFrame(records)
         if len(df):
             df["target"] = target_column(df["target"]).to_numpy()
+            df = df[front + [c for c in df.columns if c not in front]]
         return df
 
     def complete(r):
@@ -500,7 +503,9 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         now, n = time.perf_counter(), len(ran)
         if _format(out) == "csv":  # rows already in the file: as they were, byte for byte
             order = other_keys + [k for k in keys if k in rows]
-            cols = list(dict.fromkeys([*header, *(c for k in order for c in texts[k])]))
+            # the DataFrame's leading columns first (a grid key the first rows lack would otherwise come
+            # last); a file's own header stays as it is, so the rows already there keep their text
+            cols = list(dict.fromkeys([*header, *front, *(c for k in order for c in texts[k])]))
             write_text(cols, [texts[k] for k in order], out)
         else:
             ours = frame([rows[k] for k in keys if k in rows])
@@ -531,8 +536,6 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         raise SweepInterrupted(f"{len(ran)} of {len(todo)} cells finished this run, kept{where}; "
                                f"{len(rows)} of {len(cells)} done in all (a rerun resumes)")
     df = frame([rows[k] for k in keys])
-    front = [*_FIRST, *grid, "target"]
-    df = df[front + [c for c in df.columns if c not in front]]
     df.attrs["sweep"] = {"requested": requested, "cells": len(cells), "skipped": skipped, "ran": len(ran),
                          "collapsed": collapsed}
     return df

@@ -43,7 +43,7 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         non_manifold_vertices, components, euler, closed, orientable, genus, flipped_faces,
         flipped_fraction; of the original: boundary_edges_before, non_manifold_edges_before,
         components_before, euler_before, closed_before, genus_before (genus without the non-manifold
-        vertex check, which is skipped on the original for speed);
+        vertex check, which is skipped on the original for speed: NaN all the same where the count is odd);
       appearance, only when both meshes carry it (see `attribute_deviation`): uv_dev_rms, uv_dev_mean,
         uv_dev_p95, uv_dev_max (texture-space deviation, UV units) and likewise color_dev_*;
       time_s: wall-clock seconds this evaluation took.

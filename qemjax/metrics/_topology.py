@@ -90,8 +90,8 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
       components: connected components of faces, two faces being connected when they share a vertex.
       euler: V - E + F, with V the vertices referenced by faces.
       closed: bool, every edge in exactly two faces. orientable: bool, faces can be oriented consistently.
-      genus: float, sum over components of g = (2 - chi_c) / 2, i.e. (2 * components - euler) / 2, defined
-        for closed, orientable meshes without non-manifold vertices; NaN otherwise.
+      genus: int, sum over components of g = (2 - chi_c) / 2, i.e. (2 * components - euler) / 2, defined
+        for closed, orientable meshes without non-manifold vertices; NaN (a float) otherwise.
       flipped_faces / flipped_fraction (with ``original``): faces whose normal points against the normal of
         the nearest original face (exact point-to-triangle nearest face of the face centroid; negative dot).
         Zero-area faces are never counted. Fraction of ``faces``.
@@ -109,7 +109,9 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
     nm_vertices = int((_fans_per_vertex(m) > 1).sum()) if fans else float("nan")
     closed = e.watertight
     orientable = _orientable(m)
-    genus_defined = closed and orientable and (not fans or nm_vertices == 0)
+    twice_genus = 2 * int(n_components) - euler
+    # an odd count proves a pinched vertex the skipped fans check would have found: no genus either
+    genus_defined = closed and orientable and (not fans or nm_vertices == 0) and twice_genus % 2 == 0
     out = {
         "vertices": len(m.vertices),
         "faces": F,
@@ -121,7 +123,7 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
         "euler": euler,
         "closed": closed,
         "orientable": orientable,
-        "genus": (2 * n_components - euler) / 2 if genus_defined else float("nan"),
+        "genus": twice_genus // 2 if genus_defined else float("nan"),  # an int: a count of handles
     }
     if original is not None:
         o = as_mesh(original, "original")
