@@ -37,6 +37,16 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.check:
         return _check(demo=not args.no_demo)
+    if args.record and not os.environ.get("QEMJAX_AHEAD_RECORDING"):
+        # in a fresh process with an empty numba cache, so that every function compiles, the ones only
+        # compiled loops call included: the list then does not depend on what this machine had cached
+        import subprocess
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            env = dict(os.environ, NUMBA_CACHE_DIR=tmp, QEMJAX_AHEAD_RECORDING="1")
+            return subprocess.run([sys.executable, "-m", "qemjax._ahead"] + list(argv or sys.argv[1:]),
+                                  env=env).returncode
     if args.record:
         from .workloads import run_all
 
