@@ -10,7 +10,11 @@ samples, `refit.samples`), each to its exact nearest point of the output (`_mesh
   those samples: a lower bound of the continuous one, which points between samples can exceed);
 * ``distance_rms``: the root mean square over the samples, each weighted by the area it stands for (a
   vertex a third of its faces' area, a centroid its face's), an estimate of the surface's rms distance;
-* ``distance_max_rel`` / ``distance_rms_rel``: the same divided by the input's bounding-box diagonal;
+* ``distance_p50``, ``distance_p95``, ``distance_p99``: the median, 95th and 99th percentile of the
+  samples' distances, each sample weighted by the area it stands for (as for the rms: the distance within
+  which that share of the input's surface lies, at the samples); observed values, never interpolated;
+* ``distance_max_rel``, ``distance_rms_rel``, ``distance_p50_rel``, ...: the same divided by the input's
+  bounding-box diagonal;
 * ``distance_samples`` and ``distance_s`` (the seconds it took).
 
 `qemjax.metrics.surface_distance` measures both ways with random samples too, for evaluations.
@@ -21,8 +25,9 @@ import time
 
 import numpy as np
 
-KEYS = ("distance_max", "distance_rms", "distance_max_rel", "distance_rms_rel", "distance_samples",
-        "distance_s")
+PERCENTILES = (50, 95, 99)
+KEYS = ("distance_max", "distance_rms", *(f"distance_p{p}" for p in PERCENTILES), "distance_max_rel",
+        "distance_rms_rel", *(f"distance_p{p}_rel" for p in PERCENTILES), "distance_samples", "distance_s")
 
 
 def not_measured() -> dict:
@@ -39,6 +44,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
     `grid_nearest.nearest`)."""
     from .._mesh.bounds_jit import row_bounds  # numba, lazily
     from .._mesh.grid_nearest import nearest
+    from .._mesh.quantiles import quantiles
     from .refit import samples, unit_frame
 
     t = time.perf_counter()
@@ -63,6 +69,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
         _, d = nearest((X - centre) / unit, G, P, seeds)
     d_max = float(d.max()) * unit
     d_rms = float(np.sqrt(np.sum(w * d * d) / np.sum(w))) * unit
-    return dict(distance_max=d_max, distance_rms=d_rms, distance_max_rel=d_max / diag if diag > 0 else None,
-                distance_rms_rel=d_rms / diag if diag > 0 else None, distance_samples=int(len(P)),
-                distance_s=time.perf_counter() - t)
+    pq = {f"distance_p{p}": v * unit for p, v in zip(PERCENTILES, quantiles(d, [p / 100 for p in PERCENTILES], w))}
+    out = dict(distance_max=d_max, distance_rms=d_rms, **pq)
+    out.update({f"{k}_rel": (v / diag if diag > 0 else None) for k, v in list(out.items())})
+    return out | dict(distance_samples=int(len(P)), distance_s=time.perf_counter() - t)

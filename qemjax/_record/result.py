@@ -61,7 +61,8 @@ class SimplifyResult:
     the input carried that the result does not keep (any of "uv", "material", "vertex_colors",
     "face_colors"); ``error_unit``: what ``max_error`` and the history's costs measure (the cost model's
     `error_unit`); the measured distance from the input (``simplify(measure=...)``, `_pipeline.measure`):
-    ``distance_max`` and ``distance_rms`` (mesh units), ``distance_max_rel`` and ``distance_rms_rel`` (over the
+    ``distance_max`` and ``distance_rms`` (mesh units), ``distance_p50`` / ``_p95`` / ``_p99`` (area-weighted
+    percentiles of the samples' distances), each also as ``*_rel`` (over the
     input's bounding-box diagonal), ``distance_samples`` and ``distance_s``, all None when not measured;
     with attributes kept,
     ``attributes`` (their kinds) and the input's seams: ``seams_in`` (connected pieces), ``seam_edges_in``

@@ -8,6 +8,7 @@ import numpy as np
 
 from ._common import MeshArrays, as_mesh
 from .._mesh.nearest import nearest_triangles
+from .._mesh.quantiles import quantiles
 
 DEFAULT_SAMPLES = 100_000
 
@@ -35,6 +36,9 @@ def nearest_faces(mesh: MeshArrays, points: np.ndarray) -> np.ndarray:
     return nearest_triangles(mesh.corners, points)[1]
 
 
+PERCENTILES = (50, 95, 99)
+
+
 def _summary(fwd: np.ndarray, bwd: np.ndarray, diag: float) -> dict:
     both = np.concatenate([fwd, bwd])
     e_gh = float(np.mean(both * both))
@@ -42,6 +46,7 @@ def _summary(fwd: np.ndarray, bwd: np.ndarray, diag: float) -> dict:
         "hausdorff": float(both.max()),
         "mean": float(both.mean()),
         "rms": float(np.sqrt(e_gh)),
+        **{f"p{p}": v for p, v in zip(PERCENTILES, quantiles(both, [p / 100 for p in PERCENTILES]))},
         "e_gh": e_gh,
         "hausdorff_fwd": float(fwd.max()),
         "hausdorff_bwd": float(bwd.max()),
@@ -106,6 +111,7 @@ def surface_distance(original, simplified, *, n_samples: int = DEFAULT_SAMPLES, 
     Returns a flat dict of floats; lengths in mesh units, ``*_rel`` keys divided by the original's
     bounding-box diagonal (``e_gh_rel`` by its square):
       hausdorff: max over both sample sets. mean: mean over both sets pooled. rms: sqrt(e_gh).
+      p50, p95, p99: the median, 95th and 99th percentile of both sets pooled (observed values, `quantiles`).
       e_gh: Garland-Heckbert's E_i = (sum fwd^2 + sum bwd^2) / (n_fwd + n_bwd), squared units.
       hausdorff_fwd / _bwd, mean_fwd / _bwd: one-sided values.
       n_points_fwd, n_points_bwd (ints), bbox_diagonal.

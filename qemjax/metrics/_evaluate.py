@@ -33,7 +33,7 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
     original's bounding-box diagonal), in this order:
       faces_before, faces_after, vertices_before, vertices_after, face_ratio (after / before);
       target_faces, target_error (faces_after / target - 1): NaN without ``target_faces``;
-      surface distance (see `surface_distance`): hausdorff, mean, rms, e_gh, hausdorff_fwd, hausdorff_bwd,
+      surface distance (see `surface_distance`): hausdorff, mean, rms, p50, p95, p99, e_gh, hausdorff_fwd, hausdorff_bwd,
         mean_fwd, mean_bwd, each also as *_rel; n_points_fwd, n_points_bwd, bbox_diagonal;
       area / volume (see `area_volume`): area_before, area_after, area_retention, volume_before,
         volume_after, volume_change;
