@@ -1,4 +1,4 @@
-"""Command line: ``qemjax simplify IN OUT (--faces N | --ratio R) [--max-error E] [options]``,
+"""Command line: ``qemjax simplify IN OUT (--faces N | --ratio R) [--max-error E] [--max-distance D] [options]``,
 ``qemjax lod IN OUT_DIR [--ratios R ...] [--format EXT] [--glb] [--record] [options]``,
 ``qemjax sweep CONFIG [--out PATH]``, ``qemjax demo [--out PATH]``, ``qemjax examples [FOLDER]``,
 ``qemjax compile`` and ``qemjax --version``.
@@ -71,7 +71,8 @@ OPTIONS = {
     "preset": dict(choices=lambda: tuple(_costs.PRESETS), shown="none",
                    help="a named method configuration (the same as --method NAME)"),
 }
-TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error"}
+TARGETS = {"target_faces": "--faces", "ratio": "--ratio", "max_error": "--max-error",
+           "max_distance": "--max-distance", "max_distance_rel": "--max-distance-rel"}
 NOT_EXPOSED = {"mesh": "the INPUT argument", "progress": "on unless --quiet",
                "topology": "its fields are options of their own (--flip-angle, --weld, ...)"}
 FORMATS = ("obj", "ply", "stl", "off", "glb", "gltf")
@@ -206,6 +207,13 @@ def _max_error(text: str) -> float:
     if not e >= 0:
         raise argparse.ArgumentTypeError(f"max error must be >= 0 (in the method's error unit), got {text}")
     return e
+
+
+def _distance(text: str) -> float:
+    d = _parse(float, text, "a distance >= 0")
+    if not (d >= 0 and np.isfinite(d)):
+        raise argparse.ArgumentTypeError(f"the distance must be finite and >= 0, got {text}")
+    return d
 
 
 def _read_feature_edges(path: str) -> np.ndarray:
@@ -401,6 +409,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="stop before a contraction costs more than E (the quadric error, a sum of squared distances to "
                    "planes, mesh units²: not the output's distance, which the summary measures; --method area: "
                    "surface-area change, mesh units²); alone or with --faces/--ratio")
+    d = s.add_mutually_exclusive_group()
+    d.add_argument(TARGETS["max_distance"], dest="max_distance", type=_distance, metavar="D",
+                   help="keep the output within D mesh units of the input, both ways, at the input's and the "
+                   "output's vertices and face centroids (stops early if needed; alone or with --faces/--ratio)")
+    d.add_argument(TARGETS["max_distance_rel"], dest="max_distance_rel", type=_distance, metavar="R",
+                   help="as --max-distance, with D = R × the input's bounding-box diagonal (0.005: 0.5 %%)")
     _add_options(s)
     s.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
                    "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
@@ -651,8 +665,8 @@ def _run(args) -> int:
         return _sweep(args)
     if args.cmd == "lod":
         return _lod(args, _simplify_kwargs(args))
-    if args.cmd == "simplify" and args.ratio is None and args.target_faces is None and args.max_error is None:
-        raise CliError("give a target: --faces N, --ratio R or --max-error E")
+    if args.cmd == "simplify" and all(getattr(args, k) is None for k in TARGETS):
+        raise CliError("give a target: --faces N, --ratio R, --max-error E or --max-distance D")
     out = args.output if args.cmd == "simplify" else args.out
     ext = check_output(out) if out is not None else None
     kwargs = _simplify_kwargs(args)

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import _costs
+from . import bound as _bound
 from .._schedulers import locks as _locks
 from .._options import Topology
 from .._record.result import SimplifyResult
@@ -28,7 +29,8 @@ def methods() -> tuple[str, ...]:
 
 
 def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None = None,
-             max_error: float | None = None, method: Any = "default", scheduler: Any = "parallel",
+             max_error: float | None = None, max_distance: float | None = None,
+             max_distance_rel: float | None = None, method: Any = "default", scheduler: Any = "parallel",
              topology: Topology | None = None, attributes: Any = "auto", feature_edges=None,
              progress: bool = False, measure: bool | None = None, **settings) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
@@ -45,6 +47,17 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         contractions and the re-fit move the surface again. The distance is measured in
         ``stats["distance_max"]`` (``measure``). May be combined with a face target; whichever is reached
         first stops.
+    max_distance / max_distance_rel: a distance the result is guaranteed to keep, in mesh units (or as a
+        fraction of the input's bounding-box diagonal; give one of the two): every input vertex and face
+        centroid lies within it of the output's surface, and every output vertex and face centroid within
+        it of the input's (exact point-triangle distances; not a continuous Hausdorff bound: points between
+        the samples may lie a little farther). The run goes toward the face target (none: as far as it
+        can), then returns the level of its record with the fewest faces found within the bound (checked,
+        re-fitted only if the re-fitted level passes too); ``stop_reason`` is ``"max_distance"`` when the
+        bound, not the target, stopped it, and ``stats["distance_two_way_max"]`` is the distance checked
+        (docs/metrics.md, "A distance you can ask for"). May be combined with a face target and
+        ``max_error``; whichever is reached first stops. Positions only (``attributes=None``; ESQEM with
+        ``split_factor=None``); `simplify_batch` and sweeps take it, `lod_chain` does not.
     method: the cost model and all its settings, as an object (``qemjax.QEM(boundary_weight=10)``,
         ``qemjax.ESQEM(curvature_weight=0.1)``, ``qemjax.AreaDifference()``, ``qemjax.LineQEM()``, a
         preset such as ``qemjax.QEM.accurate()``, or a class registered with `qemjax.register_method`), or
@@ -91,7 +104,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         its re-fit). ``preset=NAME`` is ``method=NAME``. docs/methods.md, "Settings as objects", lists where each
         of the flat keywords of qemjax 0.1 lives.
     Returns a `SimplifyResult`; ``stop_reason`` says why it stopped (``"target"``, ``"max_error"``,
-    ``"blocked"``, ``"locked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
+    ``"max_distance"``, ``"blocked"``, ``"locked"`` or ``"unchanged"``) and a warning is issued when it ends above the face target for any
     reason but the parity of a closed mesh. Raises ValueError for bad input or options (FileNotFoundError,
     also a ValueError, for a path that does not exist), TypeError for an unknown setting.
     """
@@ -103,10 +116,16 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     settings = dict(settings)
     locks = _locks.pop_settings(settings)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings, measure)
-    stages._resolve_target(1, target_faces, ratio, max_error)  # bad targets fail before the mesh is read
+    bound = _bound.check(max_distance, max_distance_rel)
+    # bad targets fail before the mesh is read
+    stages._resolve_target(1, target_faces, ratio, max_error, bound is not None)
     geo = stages.geometry(mesh, setup, stacklevel=3)
-    job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks)
-    return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
+    job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks,
+                     bounded=bound is not None)
+    if bound is None:
+        return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
+    _bound.supported(job)
+    return _bound.finish(job, stages.run(job), bound, t_start, c0, s0, stacklevel=3)
 
 
 
@@ -152,7 +171,7 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
     from . import stages
 
     t_start = time.perf_counter()
-    geos, states, jobs, out = {}, {}, [], [None] * len(cells)
+    geos, states, jobs, out, bounds = {}, {}, [], [None] * len(cells), {}
     for i, (mesh, cfg) in enumerate(cells):
         try:
             if "progress" in cfg:
@@ -165,12 +184,18 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
                                      kw["measure"])
             except TypeError as exc:
                 raise ValueError(f"simplify_batch: {exc}") from None
-            stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"])
+            bound = _bound.check(kw["max_distance"], kw["max_distance_rel"])
+            stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"], bound is not None)
             gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
             if gk not in geos:
                 geos[gk] = stages.geometry(mesh, setup, stacklevel=stacklevel)
-            jobs.append((i, stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
-                                 kw["max_error"], stacklevel=stacklevel, states=states, locks=locks)))
+            job = stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
+                             kw["max_error"], stacklevel=stacklevel, states=states, locks=locks,
+                             bounded=bound is not None)
+            if bound is not None:
+                _bound.supported(job)
+                bounds[i] = bound
+            jobs.append((i, job))
         except ValueError as exc:
             if not errors:
                 raise
@@ -186,7 +211,11 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
         if key is None or len(members) == 1:
             for i, job in members:
                 t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
-                yield i, stages.finish(job, stages.run(job), t0 - prep, c1, s1, stacklevel=stacklevel)
+                if i in bounds:
+                    yield i, _bound.finish(job, stages.run(job), bounds[i], t0 - prep, c1, s1,
+                                           stacklevel=stacklevel)
+                else:
+                    yield i, stages.finish(job, stages.run(job), t0 - prep, c1, s1, stacklevel=stacklevel)
             continue
         t0, (c1, s1) = time.perf_counter(), _compilation.snapshot()
         which, firsts = _same_runs([j for _, j in members])
@@ -202,9 +231,14 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
         later: list = []  # the batch's re-fits, run side by side below
         for k, (i, job) in enumerate(members):
             r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
-            res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=stacklevel,
-                          batch={"size": len(members), "copies": len(js), "same_run": int(served[which[k]]),
-                                 "total_s": wall, "compilations": c2 - c1}, later=later)
+            info = {"size": len(members), "copies": len(js), "same_run": int(served[which[k]]), "total_s": wall,
+                    "compilations": c2 - c1}
+            if i in bounds:  # its re-fit and check run here, on the level the bound picks
+                res = _bound.finish(job, (r, job.target, None), bounds[i], time.perf_counter(), c2, s2,
+                                    stacklevel=stacklevel, batch=info)
+            else:
+                res = stages.finish(job, (r, job.target, None), time.perf_counter(), c2, s2, stacklevel=stacklevel,
+                                    batch=info, later=later)
             res.stats.update(total_s=share, compile_s=comp, run_s=max(share - comp, 0.0))
             out[i] = res
         stages.refit_all(later)

@@ -132,8 +132,8 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
 
 
 # `simplify`'s keywords besides the settings (tests/test_first_use.py checks them against its signature)
-KEYWORDS = ("target_faces", "ratio", "max_error", "method", "scheduler", "topology", "attributes",
-            "feature_edges", "progress", "measure", "locked", "vertex_weights", "preset")
+KEYWORDS = ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel", "method", "scheduler",
+            "topology", "attributes", "feature_edges", "progress", "measure", "locked", "vertex_weights", "preset")
 
 
 def did_you_mean(key: str, names, show=repr) -> str:
@@ -163,7 +163,8 @@ def field_names(group: str, obj=None) -> tuple[str, ...]:
 
 
 RUN_TYPES = {"method": str, "scheduler": str, "topology": Topology, "attributes": Any,
-             "max_error": typing.Optional[float], "preset": str, "schedule": Schedule,
+             "max_error": typing.Optional[float], "max_distance": typing.Optional[float],
+             "max_distance_rel": typing.Optional[float], "preset": str, "schedule": Schedule,
              "measure": typing.Optional[bool]}  # measure: `_pipeline.measure` (None: with a re-fit)
 
 

@@ -68,7 +68,7 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     """One simplification run down to the smallest of ``ratios`` (each in (0, 1], the fraction of faces to
     keep; any order, levels come back in the order given), and every level replayed from its record
     (`qemjax._record.history`): one run's cost instead of one per level. ``options`` are `simplify`'s keywords
-    (not its targets). With the greedy scheduler each level equals a separate ``simplify(ratio=r)`` run
+    (not its targets, nor ``max_distance``: it bounds one result, not a chain). With the greedy scheduler each level equals a separate ``simplify(ratio=r)`` run
     whenever the run passes through exactly that face count; with the parallel scheduler (default) the
     levels are the run's own intermediate meshes, not those of separate runs.
 
@@ -95,7 +95,7 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     for r in ratios:
         if not 0 < r <= 1:
             raise ValueError(f"ratios must be in (0, 1] (the fraction of faces to keep), got {r}")
-    for key in ("target_faces", "ratio", "max_error"):
+    for key in ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel"):
         if key in options:
             raise ValueError(f"lod_chain takes its targets from ratios=, not {key}=")
     if options.get("method") == "esqem" and options.get("split_factor", 1.0) is not None:

@@ -59,13 +59,14 @@ def _flag(name: str, x) -> bool:
     return bool(x)
 
 
-def _resolve_target(m: int, target_faces, ratio, max_error) -> tuple[int, float]:
-    """(face target, max error) from the user's options; face target 0 means 'none'."""
+def _resolve_target(m: int, target_faces, ratio, max_error, bounded: bool = False) -> tuple[int, float]:
+    """(face target, max error) from the user's options; face target 0 means 'none'. ``bounded``: a
+    ``max_distance`` is given, a target of its own (`bound`)."""
     given = [x is not None for x in (target_faces, ratio)]
     if sum(given) > 1:
         raise ValueError("give at most one of target_faces and ratio")
-    if not any(given) and max_error is None:
-        raise ValueError("give a target: target_faces=, ratio= or max_error=")
+    if not any(given) and max_error is None and not bounded:
+        raise ValueError("give a target: target_faces=, ratio=, max_error= or max_distance=")
     err = math.inf
     if max_error is not None:
         err = _real("max_error", max_error)
@@ -195,7 +196,7 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
 
 
 def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
-         states: dict | None = None, locks: tuple = (None, None)) -> Job:
+         states: dict | None = None, locks: tuple = (None, None), bounded: bool = False) -> Job:
     """The face target, the model's initial vertex state and the scheduler's options for one run.
     ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch.
     ``locks``: the user's (locked, vertex_weights) (`_locks`); with any, the run works on the geometry
@@ -229,7 +230,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
             feature_edges = seams if feature_edges is None else np.concatenate([feature_edges, seams])
         report.update(seams_in=_wedges.seam_count(seams), seam_edges_in=len(seams))
     m = len(geo.F)
-    target, err = _resolve_target(m, target_faces, ratio, max_error)
+    target, err = _resolve_target(m, target_faces, ratio, max_error, bounded)
     if target > m:
         warnings.warn(f"target of {target} faces is not below the mesh's {m} faces: returning it unchanged",
                       stacklevel=stacklevel)

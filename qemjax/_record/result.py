@@ -50,7 +50,9 @@ class SimplifyResult:
     only re-links faces, it never creates them); input_vertices / input_faces: the cleaned input (after
     welding and face clean-up);
     history: the `Contractions`; stop_reason: why the run stopped, one of ``"target"`` (met, or one face
-    above an odd target on a closed mesh), ``"max_error"``, ``"blocked"`` (no valid contraction left:
+    above an odd target on a closed mesh), ``"max_error"``, ``"max_distance"`` (a level with more faces
+    than the run reached was returned: fewer would lie farther from the input than ``simplify(max_distance=)``
+    allows), ``"blocked"`` (no valid contraction left:
     ``stats["blocked_by"]`` counts the pairs each rule held back) or ``"unchanged"`` (nothing to remove);
     stats: counts and timings (``compile_s`` is every compilation inside this call: JAX's tracing and
     compiling, and numba's compiling of a host loop its cache did not have; ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
@@ -64,6 +66,10 @@ class SimplifyResult:
     ``distance_max`` and ``distance_rms`` (mesh units), ``distance_p50`` / ``_p95`` / ``_p99`` (area-weighted
     percentiles of the samples' distances), each also as ``*_rel`` (over the
     input's bounding-box diagonal), ``distance_samples`` and ``distance_s``, all None when not measured;
+    with ``max_distance`` (`_pipeline.bound`): ``max_distance`` (mesh units) and ``max_distance_rel``, the
+    verified two-way distance ``distance_two_way_max`` (and ``_rel``; <= ``max_distance``),
+    ``max_distance_checks`` (levels checked) and ``max_distance_s``; ``vertex_error`` is then NaN when the
+    bound stopped the run (the record keeps no vertex states for earlier levels);
     with attributes kept,
     ``attributes`` (their kinds) and the input's seams: ``seams_in`` (connected pieces), ``seam_edges_in``
     and ``seam_vertices_in``.
@@ -178,14 +184,19 @@ class SimplifyResult:
             goals.append(f"{s['target_faces']} faces")
         if s.get("max_error_limit") is not None:
             goals.append(f"max error {s['max_error_limit']:.3g}")
+        if s.get("max_distance") is not None:
+            goals.append(f"max distance {s['max_distance']:.3g}")
         if s.get("distance_max") is not None:
             rel = s.get("distance_max_rel")
             of = f" = {100 * rel:.3g} % of the diagonal" if rel is not None else ""
             dist = f"distance from the input: max {s['distance_max']:.3g}{of}, rms {s['distance_rms']:.3g} mesh units"
         else:
             dist = "distance from the input: not measured (measure=True measures it)"
+        if s.get("distance_two_way_max") is not None:
+            dist += f", both ways max {s['distance_two_way_max']:.3g} (checked against max_distance)"
         if s.get("refit_skipped"):  # the method's re-fit did not run: say so where the distance is read
-            dist += f" (re-fit skipped: {s['refit_skipped']}; attributes=None re-fits)"
+            hint = "; attributes=None re-fits" if s["refit_skipped"] == "uv kept" else ""
+            dist += f" (re-fit skipped: {s['refit_skipped']}{hint})"
         return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
                 f"in {s['total_s']:.2f} s (compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
                 f"{s['rounds']} rounds; {dist}; largest contraction cost {self.max_error:.3g} "

@@ -300,11 +300,13 @@ def row(mesh, cell: Cell, res, metrics) -> dict:
     out.update(faces_in=s["faces_in"], faces_out=s["faces_out"], target_faces=s["target_faces"],
                stop_reason=res.stop_reason, rounds=s["rounds"], batch_size=size,
                same_run=batch.get("same_run", 1), result_sha256=result_hash(res),
-               distance_max=_measured(s.get("distance_max")), distance_rms=_measured(s.get("distance_rms")))
+               distance_max=_measured(s.get("distance_max")), distance_rms=_measured(s.get("distance_rms")),
+               distance_two_way_max=_measured(s.get("distance_two_way_max")))
     if size > 1:  # rounds shared with size - 1 other cells: its own time was not measured
         wall = float(batch["total_s"])
         # its re-fit and distance measurement ran on their own (side by side)
-        share = wall / size + float(s.get("refit_s", 0.0)) + float(s.get("distance_s") or 0.0)
+        share = wall / size + float(s.get("refit_s", 0.0)) + float(s.get("distance_s") or 0.0) + \
+            float(s.get("max_distance_s") or 0.0)  # a max_distance search, also its own
         out.update(compile_s=math.nan, run_s=math.nan, total_s=math.nan,
                    batch_wall_s=wall, share_s=share)
     else:
@@ -408,7 +410,9 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     itself included: cells whose settings make no difference on this mesh, such as ``boundary_weight`` on
     a closed one, run once), ``result_sha256`` (of the output vertices and faces), ``distance_max`` and
     ``distance_rms`` (the output's measured distance from the input, mesh units: `simplify`'s stats of those
-    names; NaN where not measured: ``measure=True`` in the grid measures it for every method); timings in seconds:
+    names; NaN where not measured: ``measure=True`` in the grid measures it for every method),
+    ``distance_two_way_max`` (the checked two-way distance of a cell with ``max_distance`` or
+    ``max_distance_rel`` in the grid, NaN otherwise); timings in seconds:
     ``compile_s``, ``run_s``, ``total_s`` (the cell's own `simplify` stats: JAX's and numba's compilation,
     the rest, all; measured when it ran alone, ``batch_size`` 1; empty when it shared its rounds:
     not measured), ``batch_wall_s`` (the wall time of the run that computed it: the shared rounds of its
