@@ -200,7 +200,8 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         merged = start_merge(model, VQd, P, x[None], params)()
         row = np.concatenate([x[None], merged], 1)
         VQ[a] = row[0]
-        VQd = set_rows(VQd, np.array([a]), row, size=1)
+        if model.refresh is None:  # else the refresh below writes row a to the device with its 1-ring
+            VQd = set_rows(VQd, np.array([a]), row, size=1)
         branches[br] += 1
         _locks.carry(weights, np.array([a]), np.array([b]))
         max_cost_used = max(max_cost_used, float(cost))
