@@ -13,7 +13,9 @@ few large triangles keeps R close to the typical piece size (otherwise one huge 
 A thin triangle is cut into strips across its longest side instead (`_Strips`: pieces are balls around
 rectangles that cover the face, not sub-triangles), where that takes fewer pieces: a sliver of length L
 needs about L / 2R strips but (L / 2R)^2 sub-triangles, so within the same piece budget a mesh of long
-thin triangles (a finely subdivided capsule) keeps R near its faces' width instead of their length.
+thin triangles (a finely subdivided capsule) keeps R near its faces' width instead of their length. That
+is done only when it at least halves the widest piece (`STRIP_GAIN`); other meshes keep the regular
+subdivision, and with it the same index and the same answers as without strips.
 
 Grid (`GridIndex`), for many points near a coarser mesh. A cell (a cube of side h, about 2/5 of the median
 edge) lists every face that a point of the cube can lie within delta of: the faces whose box and plane,
@@ -57,6 +59,7 @@ _GRID_MAX_LIST = 32  # mean faces per cell above which the grid is not used
 _GRID_CELLS_PER_EDGE = 2.5  # grid cell size: the median edge length over this (or delta / 2 if larger)
 _DENSE_PER_PAIR = 8  # grid cells per listed (face, cell) pair up to which lookups use a dense table
 _CELL_PAD = 1e-6  # cells (fraction of a cell) added to each side of a computed range against rounding
+STRIP_GAIN = 0.5  # thin faces are cut into strips only when that makes the widest piece this much narrower
 
 
 class Triangles:
@@ -175,14 +178,49 @@ class _Strips:
             k = np.ceil(self.length / np.sqrt(np.maximum(room, 0.0)))
         return np.where(room > 2.0 * target * target, np.maximum(k, 1.0), np.inf)
 
+    def radius(self, k: np.ndarray) -> np.ndarray:
+        """(m,) the radius of each face's strips when it is cut into k (m,) of them."""
+        with np.errstate(invalid="ignore"):
+            return 0.5 * np.sqrt((self.length / k) ** 2 + self.height**2)
+
     def pieces(self, faces: np.ndarray, k: np.ndarray):
         """Centres (P, 3), radii (P,) and parent faces (P,) of faces (f,) cut into k (f,) strips each."""
         owner, local = _ragged_arange(k)
         f = faces[owner]
         t = (local + 0.5) / k[owner]
         cents = (np.take(self.a, f, axis=1) + t * np.take(self.ab, f, axis=1) + 0.5 * np.take(self.up, f, axis=1)).T
-        radii = 0.5 * np.sqrt((self.length[f] / k[owner]) ** 2 + self.height[f] ** 2)
+        radii = 0.5 * np.sqrt((self.length[f] / k[owner]) ** 2 + self.height[f] ** 2)  # as `radius`
         return cents, radii, f
+
+
+def _thin_split(strip: _Strips, radius: np.ndarray, budget: float, target: float):
+    """The pieces when thin faces may be cut into strips: (levels (m,), strips (m,), which faces are cut
+    (m,) bool, the widest piece's radius), for the smallest radius (from ``target`` in steps of 1.25) whose
+    pieces fit the budget; None when no face is cut then."""
+
+    def split(target):
+        levels = np.maximum(np.ceil(radius / target), 1).astype(np.int64)
+        strips = strip.count(target)
+        cut = strips < levels**2  # thin faces: fewer pieces as strips than as a regular subdivision
+        return levels, strips, cut, float(np.where(cut, strips, levels.astype(np.float64) ** 2).sum())
+
+    while True:
+        levels, strips, cut, total = split(target)
+        if total <= budget:
+            break
+        target *= 1.25
+    # with faces cut into strips the count no longer follows sum (r / R)^2, and the first guess may leave
+    # most of the budget unspent: shrink the radius while the pieces still fit
+    while cut.any():
+        smaller = split(target / 1.25)
+        if smaller[3] > budget:
+            break
+        target /= 1.25
+        levels, strips, cut, _ = smaller
+    if not cut.any():
+        return None
+    widest = max(float((radius / levels)[~cut].max(initial=0.0)), float(strip.radius(strips)[cut].max()))
+    return levels, strips, cut, widest
 
 
 class TriangleIndex:
@@ -200,29 +238,21 @@ class TriangleIndex:
         strip = _Strips(corners)
         m = len(tris)
         budget = _PIECES_PER_FACE * m + _MIN_PIECES
-
-        def split(target):
-            """(levels, strips, which faces are cut into strips, pieces in all) for a piece radius target."""
-            levels = np.maximum(np.ceil(radius / target), 1).astype(np.int64)
-            strips = strip.count(target)
-            cut = strips < levels**2  # thin faces: fewer pieces as strips than as a regular subdivision
-            return levels, strips, cut, float(np.where(cut, strips, levels.astype(np.float64) ** 2).sum())
-
         # Piece radius about as small as the budget allows (count ~ m + sum (r / R)^2), grown until it fits.
-        target = float(np.sqrt((radius**2).sum() / max(budget - m, 1.0))) or 1.0
+        first = float(np.sqrt((radius**2).sum() / max(budget - m, 1.0))) or 1.0
+        target = first
         while True:
-            levels, strips, cut, total = split(target)
-            if total <= budget:
+            levels = np.maximum(np.ceil(radius / target), 1).astype(np.int64)
+            if float((levels.astype(np.float64) ** 2).sum()) <= budget:
                 break
             target *= 1.25
-        # With thin faces cut into strips the count no longer follows sum (r / R)^2, and the first guess may
-        # leave most of the budget unspent: shrink the radius while the pieces still fit.
-        while cut.any():
-            smaller = split(target / 1.25)
-            if smaller[3] > budget:
-                break
-            target /= 1.25
-            levels, strips, cut, _ = smaller
+        cut, strips = np.zeros(m, bool), None
+        thin = _thin_split(strip, radius, budget, first)
+        # Strips only where they at least halve the widest piece (a mesh of long thin triangles): on meshes of
+        # ordinary triangles they narrow it by a fifth to a third, too little to pay for a different index,
+        # which would change which of two equally near faces a query reports (`attribute_deviation` reads it).
+        if thin is not None and thin[3] <= STRIP_GAIN * float((radius / levels).max()):
+            levels, strips, cut = thin[:3]
         cents, radii, parents = _pieces(tris, radius, np.where(cut, 0, levels))
         if cut.any():
             c, r, f = strip.pieces(np.flatnonzero(cut), strips[cut].astype(np.int64))
