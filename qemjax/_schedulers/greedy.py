@@ -197,11 +197,9 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
             continue
         if wedges is not None:  # the corners' wedges, before the vertex moves and the faces relink
             wedges.contract(faces, VQ, a, b, x)
-        merged = start_merge(model, VQd, P, x[None], params)()
-        row = np.concatenate([x[None], merged], 1)
-        VQ[a] = row[0]
-        if model.refresh is None:  # else the refresh below writes row a to the device with its 1-ring
-            VQd = set_rows(VQd, np.array([a]), row, size=1)
+        # the merge runs on the device while the host relinks the faces and pairs (which read no state
+        # row); its result is waited for just before the rows are next read
+        merged = start_merge(model, VQd, P, x[None], params)
         branches[br] += 1
         _locks.carry(weights, np.array([a]), np.array([b]))
         max_cost_used = max(max_cost_used, float(cost))
@@ -223,6 +221,10 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         nbr[a].discard(b)
         nbr[b] = set()
         q.forget((a, b))
+        row = np.concatenate([x[None], merged()], 1)
+        VQ[a] = row[0]
+        if model.refresh is None:  # else the refresh below writes row a to the device with its 1-ring
+            VQd = set_rows(VQd, np.array([a]), row, size=1)
         ring = sorted(nbr[a])
         if model.support == "ring" or model.refresh is not None:
             around = np.unique(np.take(faces.F, faces.around(np.array([a]))[1], axis=0))
