@@ -156,7 +156,7 @@ class _Strips:
     across AB give k strips, each inside a ball of radius ½·sqrt((L/k)² + h²) around its rectangle's
     centre. For a sliver (h small beside L) that is about L / 2R pieces of radius R where the regular
     subdivision needs (L / 2R)²; there, the pieces had to stay wide to fit the budget, and every query's
-    ball (its radius grows with the widest piece) then held hundreds of candidates."""
+    ball (its radius grows with the widest piece) then held many faces' pieces as candidates."""
 
     def __init__(self, corners: np.ndarray):
         sides = np.stack([_sq_norm(corners[(j + 1) % 3] - corners[j]) for j in range(3)])  # (3, m)
@@ -249,8 +249,8 @@ class TriangleIndex:
         cut, strips = np.zeros(m, bool), None
         thin = _thin_split(strip, radius, budget, first)
         # Strips only where they at least halve the widest piece (a mesh of long thin triangles): on meshes of
-        # ordinary triangles they narrow it by a fifth to a third, too little to pay for a different index,
-        # which would change which of two equally near faces a query reports (`attribute_deviation` reads it).
+        # ordinary triangles they narrow it a little, too little to pay for a different index, which would
+        # change which of two equally near faces a query reports (`attribute_deviation` reads it).
         if thin is not None and thin[3] <= STRIP_GAIN * float((radius / levels).max()):
             levels, strips, cut = thin[:3]
         cents, radii, parents = _pieces(tris, radius, np.where(cut, 0, levels))
