@@ -194,6 +194,43 @@ def test_nearest_triangles_exact(structure, mixed_size_case):
     np.testing.assert_allclose(got, dist, rtol=1e-12, atol=1e-15)
 
 
+def thin_tube(n_around=256, n_along=8, length=4.0, radius=0.5):
+    """An open tube of long thin triangles: each quad of the n_around-by-n_along band is split in two, so the
+    faces are length / n_along long and about 2πr / n_around wide (aspect ratio ~80 here)."""
+    t = np.arange(n_around) * 2 * np.pi / n_around
+    z = np.linspace(0.0, length, n_along + 1)
+    v = np.stack([np.tile(radius * np.cos(t), n_along + 1), np.tile(radius * np.sin(t), n_along + 1),
+                  np.repeat(z, n_around)], axis=1)
+    i, j = np.meshgrid(np.arange(n_along), np.arange(n_around), indexing="ij")
+    a = (i * n_around + j).ravel()
+    b = (i * n_around + (j + 1) % n_around).ravel()
+    return v, np.concatenate([np.stack([a, b, b + n_around], 1), np.stack([a, b + n_around, a + n_around], 1)])
+
+
+def test_nearest_triangles_exact_on_long_thin_triangles():
+    """Slivers are cut into strips across their long side: the KD-tree's answers stay the brute-force float64
+    distances (the same kernel: the same bits), and its pieces stay narrow, so a query's candidate ball does
+    not grow with the faces' length (the regular subdivision's pieces, within this budget, were a third of a
+    face's length across)."""
+    rng = np.random.default_rng(11)
+    v, f = thin_tube()
+    mesh = metrics._common.as_mesh((v, f))
+    on = _distance.sample_points(mesh, 1500, rng)
+    pts = np.concatenate([on + rng.normal(scale=s, size=on.shape) for s in (0.0, 1e-3, 0.05)])
+    pts = np.concatenate([pts, rng.uniform(-1.5, 5.5, size=(300, 3)), v[rng.integers(0, len(v), 200)]])
+    tris = _nearest.Triangles(mesh.corners)
+    tree = _nearest.TriangleIndex(tris)
+    length = 4.0 / 8
+    assert tree.max_radius < length / 4
+    want = brute_force(pts, v, f)
+    for dist, face in (tree.query(pts), _nearest.nearest_triangles(mesh.corners, pts)):
+        np.testing.assert_allclose(dist, want, rtol=1e-9, atol=1e-13)
+        np.testing.assert_array_equal(dist, np.sqrt(_all_pairs_sq(tris, pts).min(axis=1)))
+        tri = v[f[face]]
+        got = metrics.point_triangle_distance(pts, tri[:, 0], tri[:, 1], tri[:, 2])
+        np.testing.assert_allclose(got, dist, rtol=1e-12, atol=1e-15)
+
+
 def test_nearest_triangles_picks_grid_for_dense_points():
     rng = np.random.default_rng(3)
     v, f = sphere(2)  # 320 faces

@@ -106,6 +106,13 @@ def _price_at_kept(VS, pairs):
     return jnp.concatenate([out, out[3:4], ke[None]], 0)
 
 
+@kernel
+def _with_curvature_columns(q):
+    """Merged quadrics q (K,10) with the K, A columns appended as zeros: one compiled call, where two
+    eager operations per contraction were a large share of the greedy queue's device calls."""
+    return jnp.concatenate([q, jnp.zeros((q.shape[0], 2), q.dtype)], 1)
+
+
 def ring_corners(faces: FaceLists, verts: np.ndarray):
     """The live faces around each of ``verts`` (k,) rotated so that the vertex comes first: (owner
     position in verts (r,) non-decreasing, corners (r,3) int32 ``[v, c1, c2]``), and (k,) bool: which of
@@ -190,8 +197,7 @@ class ESQEM(QEM):
         return _price_at_kept(VS, pairs)
 
     def merge(self, VS, pairs, x, params):
-        q = super().merge(VS, pairs, x, params)
-        return jnp.concatenate([q, jnp.zeros((q.shape[0], 2), q.dtype)], 1)  # K, A: `refresh` writes them
+        return _with_curvature_columns(super().merge(VS, pairs, x, params))  # K, A: `refresh` writes them
 
     def refresh(self, view, verts):
         verts = np.asarray(verts, np.int64)

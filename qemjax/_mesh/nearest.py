@@ -10,6 +10,12 @@ face closer than U has a piece centroid within U + R of p. So the k nearest cent
 k-th lies at least U + R away; otherwise a ball query of radius U + R lists every candidate. Candidates
 whose lower bound |p - centroid| - radius is not below U are skipped before the exact test. Splitting the
 few large triangles keeps R close to the typical piece size (otherwise one huge face would widen every ball).
+A thin triangle is cut into strips across its longest side instead (`_Strips`: pieces are balls around
+rectangles that cover the face, not sub-triangles), where that takes fewer pieces: a sliver of length L
+needs about L / 2R strips but (L / 2R)^2 sub-triangles, so within the same piece budget a mesh of long
+thin triangles (a finely subdivided capsule) keeps R near its faces' width instead of their length. That
+is done only when it at least halves the widest piece (`STRIP_GAIN`); other meshes keep the regular
+subdivision, and with it the same index and the same answers as without strips.
 
 Grid (`GridIndex`), for many points near a coarser mesh. A cell (a cube of side h, about 2/5 of the median
 edge) lists every face that a point of the cube can lie within delta of: the faces whose box and plane,
@@ -53,6 +59,7 @@ _GRID_MAX_LIST = 32  # mean faces per cell above which the grid is not used
 _GRID_CELLS_PER_EDGE = 2.5  # grid cell size: the median edge length over this (or delta / 2 if larger)
 _DENSE_PER_PAIR = 8  # grid cells per listed (face, cell) pair up to which lookups use a dense table
 _CELL_PAD = 1e-6  # cells (fraction of a cell) added to each side of a computed range against rounding
+STRIP_GAIN = 0.5  # thin faces are cut into strips only when that makes the widest piece this much narrower
 
 
 class Triangles:
@@ -119,10 +126,10 @@ def _segment_argmin(d2: np.ndarray, faces: np.ndarray, counts: np.ndarray):
 
 def _pieces(tris: Triangles, radius: np.ndarray, levels: np.ndarray):
     """Centroids (P, 3), radii (P,) and parent faces (P,) of the regular subdivision of each face f into
-    levels[f]^2 pieces."""
+    levels[f]^2 pieces (none for a face whose level is 0: it is cut into `_Strips`)."""
     c = tris.corners
-    cents, radii, parents = [], [], []
-    for n in np.unique(levels):  # a handful of distinct levels, not a loop over faces
+    cents, radii, parents = [np.zeros((0, 3))], [np.zeros(0)], [np.zeros(0, np.int64)]
+    for n in np.unique(levels[levels > 0]):  # a handful of distinct levels, not a loop over faces
         faces = np.flatnonzero(levels == n)
         a = np.take(c[0], faces, axis=1).T  # (k, 3)
         ab = np.take(c[1], faces, axis=1).T - a
@@ -143,6 +150,79 @@ def _pieces(tris: Triangles, radius: np.ndarray, levels: np.ndarray):
     return np.concatenate(cents), np.concatenate(radii), np.concatenate(parents)
 
 
+class _Strips:
+    """Thin faces cut across their longest side: a face with longest side AB (length L) and height h above
+    it lies in the rectangle [0, L] x [0, h] of its plane (AB longest: the apex projects onto AB), so k cuts
+    across AB give k strips, each inside a ball of radius ½·sqrt((L/k)² + h²) around its rectangle's
+    centre. For a sliver (h small beside L) that is about L / 2R pieces of radius R where the regular
+    subdivision needs (L / 2R)²; there, the pieces had to stay wide to fit the budget, and every query's
+    ball (its radius grows with the widest piece) then held many faces' pieces as candidates."""
+
+    def __init__(self, corners: np.ndarray):
+        sides = np.stack([_sq_norm(corners[(j + 1) % 3] - corners[j]) for j in range(3)])  # (3, m)
+        self.j = np.argmax(sides, axis=0)  # the longest side runs from corner j to corner j + 1
+        cols = np.arange(corners.shape[2])
+        self.a = corners[self.j, :, cols].T  # (3, m)
+        self.ab = corners[(self.j + 1) % 3, :, cols].T - self.a
+        self.length = np.sqrt(_sq_norm(self.ab))
+        ac = corners[(self.j + 2) % 3, :, cols].T - self.a
+        along = np.divide(_dot3(ac, self.ab), self.length**2, out=np.zeros_like(self.length), where=self.length > 0)
+        self.up = ac - along * self.ab  # from the apex's foot on AB to the apex: the height vector
+        self.height = np.sqrt(_sq_norm(self.up))
+
+    def count(self, target: float) -> np.ndarray:
+        """(m,) float64 strips per face for pieces of radius at most ``target`` (inf where the face is too
+        wide for strips of that radius)."""
+        room = 4.0 * target * target - self.height**2
+        with np.errstate(divide="ignore"):
+            k = np.ceil(self.length / np.sqrt(np.maximum(room, 0.0)))
+        return np.where(room > 2.0 * target * target, np.maximum(k, 1.0), np.inf)
+
+    def radius(self, k: np.ndarray) -> np.ndarray:
+        """(m,) the radius of each face's strips when it is cut into k (m,) of them."""
+        with np.errstate(invalid="ignore"):
+            return 0.5 * np.sqrt((self.length / k) ** 2 + self.height**2)
+
+    def pieces(self, faces: np.ndarray, k: np.ndarray):
+        """Centres (P, 3), radii (P,) and parent faces (P,) of faces (f,) cut into k (f,) strips each."""
+        owner, local = _ragged_arange(k)
+        f = faces[owner]
+        t = (local + 0.5) / k[owner]
+        cents = (np.take(self.a, f, axis=1) + t * np.take(self.ab, f, axis=1) + 0.5 * np.take(self.up, f, axis=1)).T
+        radii = 0.5 * np.sqrt((self.length[f] / k[owner]) ** 2 + self.height[f] ** 2)  # as `radius`
+        return cents, radii, f
+
+
+def _thin_split(strip: _Strips, radius: np.ndarray, budget: float, target: float):
+    """The pieces when thin faces may be cut into strips: (levels (m,), strips (m,), which faces are cut
+    (m,) bool, the widest piece's radius), for the smallest radius (from ``target`` in steps of 1.25) whose
+    pieces fit the budget; None when no face is cut then."""
+
+    def split(target):
+        levels = np.maximum(np.ceil(radius / target), 1).astype(np.int64)
+        strips = strip.count(target)
+        cut = strips < levels**2  # thin faces: fewer pieces as strips than as a regular subdivision
+        return levels, strips, cut, float(np.where(cut, strips, levels.astype(np.float64) ** 2).sum())
+
+    while True:
+        levels, strips, cut, total = split(target)
+        if total <= budget:
+            break
+        target *= 1.25
+    # with faces cut into strips the count no longer follows sum (r / R)^2, and the first guess may leave
+    # most of the budget unspent: shrink the radius while the pieces still fit
+    while cut.any():
+        smaller = split(target / 1.25)
+        if smaller[3] > budget:
+            break
+        target /= 1.25
+        levels, strips, cut, _ = smaller
+    if not cut.any():
+        return None
+    widest = max(float((radius / levels)[~cut].max(initial=0.0)), float(strip.radius(strips)[cut].max()))
+    return levels, strips, cut, widest
+
+
 class TriangleIndex:
     """Exact closest-face search over one mesh with a KD-tree of face pieces (see the module notes).
 
@@ -155,16 +235,28 @@ class TriangleIndex:
         corners = tris.corners
         centroid = corners.mean(axis=0)  # (3, m)
         radius = np.sqrt(np.max([((corners[k] - centroid) ** 2).sum(axis=0) for k in range(3)], axis=0))
+        strip = _Strips(corners)
         m = len(tris)
         budget = _PIECES_PER_FACE * m + _MIN_PIECES
         # Piece radius about as small as the budget allows (count ~ m + sum (r / R)^2), grown until it fits.
-        target = float(np.sqrt((radius**2).sum() / max(budget - m, 1.0))) or 1.0
+        first = float(np.sqrt((radius**2).sum() / max(budget - m, 1.0))) or 1.0
+        target = first
         while True:
             levels = np.maximum(np.ceil(radius / target), 1).astype(np.int64)
             if float((levels.astype(np.float64) ** 2).sum()) <= budget:
                 break
             target *= 1.25
-        cents, radii, parents = _pieces(tris, radius, levels)
+        cut, strips = np.zeros(m, bool), None
+        thin = _thin_split(strip, radius, budget, first)
+        # Strips only where they at least halve the widest piece (a mesh of long thin triangles): on meshes of
+        # ordinary triangles they narrow it a little, too little to pay for a different index, which would
+        # change which of two equally near faces a query reports (`attribute_deviation` reads it).
+        if thin is not None and thin[3] <= STRIP_GAIN * float((radius / levels).max()):
+            levels, strips, cut = thin[:3]
+        cents, radii, parents = _pieces(tris, radius, np.where(cut, 0, levels))
+        if cut.any():
+            c, r, f = strip.pieces(np.flatnonzero(cut), strips[cut].astype(np.int64))
+            cents, radii, parents = np.concatenate([cents, c]), np.concatenate([radii, r]), np.concatenate([parents, f])
         self.centroid = cents
         self.piece_radius = radii * (1 + _SLACK)
         self.max_radius = float(self.piece_radius.max())

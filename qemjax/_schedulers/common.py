@@ -117,21 +117,24 @@ def _put(pr: Priced, at, o: np.ndarray) -> None:
     pr.branch[at], pr.parts[:, at] = o[4].astype(np.int8), o[5:]
 
 
-def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 0, at_kept: bool = False):
+def start_price(model, VSd, P: np.ndarray, params: dict, faces=None, pad: int = 0, at_kept: bool = False,
+                size: int | None = None):
     """Start pricing pairs P (K,2) with ``model`` over device rows VSd (kernel calls are asynchronous).
     Returns a function that waits for the kernels and gives a `Priced`. Ring models (``uses_ring``) also
     need the `FaceLists` ``faces`` and a ``pad`` vertex row (zeros) for ring padding. ``at_kept``: price
-    each pair contracted onto its kept vertex (``model.price_at_kept``; locked vertices, `qemjax._schedulers.locks`)."""
+    each pair contracted onto its kept vertex (``model.price_at_kept``; locked vertices, `qemjax._schedulers.locks`).
+    ``size``: one fixed piece shape (else `chunks`' shapes)."""
     rows = 5 + len(model.parts)
     price = model.price_at_kept if at_kept else model.price
     if not model.uses_ring:  # (no pairs: no call, whose one piece would price padding alone)
-        return _joined([price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32))]
+        return _joined([price(VSd, part, _params(params, part)) for _, part in chunks(P.astype(np.int32), size=size)]
                        if len(P) else [], len(P), rows)
     pieces = []  # (indices into P, device output)
     for b0 in range(0, len(P), RING_BLOCK):
         block = P[b0:b0 + RING_BLOCK]
         for idx, rg in ring.gather_groups(faces, block, pad, model.ring_dead):
-            parts = zip(chunks(block[idx].astype(np.int32)), chunks(rg.corners, fill=pad), chunks(rg.mask))
+            parts = zip(chunks(block[idx].astype(np.int32), size=size), chunks(rg.corners, fill=pad, size=size),
+                        chunks(rg.mask, size=size))
             for (s, pp), (_, cc), (_, mm) in parts:
                 sel = idx[s:s + len(pp)]
                 pieces.append((b0 + sel, price(VSd, pp, _params(params, pp), ring.Rings(cc, mm))))

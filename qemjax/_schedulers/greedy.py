@@ -37,6 +37,10 @@ from .queue import Queue as _Queue, stop_report as _stop
 
 
 
+SMALL = 64  # a contraction's re-pricing (a 1-ring's pairs) goes in pieces of this shape, not the smallest of
+# `batching.CHUNKS`: the kernels then price a few dozen pairs, not mostly padding
+
+
 def _link_ok(faces: FaceLists, a: int, b: int, nshared: int) -> bool:
     """`topo.link_ok` for the one pair (a, b) with ``nshared`` faces, on Python sets of its neighbourhood
     (a scalar check costs a few microseconds where the vectorised one costs hundreds): a manifold edge
@@ -112,7 +116,7 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         if plist:
             pa = np.array(plist, np.int64)
             d = VQ[pa[:, 0], :3] - VQ[pa[:, 1], :3]
-            priced = start_price(model, VQd, pa, params, faces, n)()
+            priced = start_price(model, VQd, pa, params, faces, n, size=SMALL if len(pa) <= SMALL else None)()
             if locks is not None:  # locked kept vertices priced where they stand, and the weights
                 priced = _locks.adjust(locks, weights, model, VQ, VQd, pa, priced, params, faces, n)
             if wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
@@ -197,10 +201,9 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
             continue
         if wedges is not None:  # the corners' wedges, before the vertex moves and the faces relink
             wedges.contract(faces, VQ, a, b, x)
-        merged = start_merge(model, VQd, P, x[None], params)()
-        row = np.concatenate([x[None], merged], 1)
-        VQ[a] = row[0]
-        VQd = set_rows(VQd, np.array([a]), row, size=1)
+        # the merge runs on the device while the host relinks the faces and pairs (which read no state
+        # row); its result is waited for just before the rows are next read
+        merged = start_merge(model, VQd, P, x[None], params)
         branches[br] += 1
         _locks.carry(weights, np.array([a]), np.array([b]))
         max_cost_used = max(max_cost_used, float(cost))
@@ -222,6 +225,10 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         nbr[a].discard(b)
         nbr[b] = set()
         q.forget((a, b))
+        row = np.concatenate([x[None], merged()], 1)
+        VQ[a] = row[0]
+        if model.refresh is None:  # else the refresh below writes row a to the device with its 1-ring
+            VQd = set_rows(VQd, np.array([a]), row, size=1)
         ring = sorted(nbr[a])
         if model.support == "ring" or model.refresh is not None:
             around = np.unique(np.take(faces.F, faces.around(np.array([a]))[1], axis=0))

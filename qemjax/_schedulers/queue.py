@@ -36,27 +36,38 @@ class Queue:
         # stamps from one counter, never reused: an entry whose stamp a rollback restored stays unique
         self.stamps = itertools.count(1)
 
-    def _key(self, cost, parts):
+    def _keys(self, cost: np.ndarray, parts: np.ndarray) -> list:
+        """The ranks of entries with costs (k,) and parts (k, p), as Python floats: the cost, or with
+        weights cost + parts @ weights (in float64, left to right) rounded to float32. One vectorised call
+        per push: per entry, numpy's per-call overhead was most of a ring model's queue time, and each
+        element's arithmetic is the same."""
+        cost = np.asarray(cost, np.float64)
         if self.weights is None:
-            return cost
-        return float(np.float32(cost + float(weighted_sum(np.asarray(parts)[None], self.weights)[0])))
+            return cost.tolist()
+        if len(cost) == 0:
+            return []
+        return (cost + weighted_sum(parts, self.weights)).astype(np.float32).tolist()
 
     def push(self, pairs, priced, length2):
         # each entry's own copies of its rows: a view would keep the whole pushed block alive while one of
         # its pairs stays current (a vertex of valence d re-prices d pairs per contraction: d² rows)
         X, parts_t = np.asarray(priced.x), np.asarray(priced.parts).T
-        for k, ((a, b), c, l2) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist())):
+        keys = self._keys(priced.cost, parts_t)
+        branch = np.asarray(priced.branch).tolist()
+        for k, ((a, b), c, l2, key) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist(), keys)):
             s = self.stamp[(a, b)] = next(self.stamps)
-            parts = parts_t[k].copy()
-            self.placed[(a, b)] = (X[k].copy(), int(priced.branch[k]), c, parts, l2)
+            self.placed[(a, b)] = (X[k].copy(), branch[k], c, parts_t[k].copy(), l2)
             self.blocked.pop((a, b), None)
-            heapq.heappush(self.heap, (self._key(c, parts), l2, tie(a, b), a, b, s))
+            heapq.heappush(self.heap, (key, l2, tie(a, b), a, b, s))
 
     def reweigh(self, weights):
         """New ranking weights: every current, unblocked entry is ranked again (the heap is rebuilt)."""
         self.weights = weights
-        self.heap = [(self._key(c, parts), l2, tie(a, b), a, b, self.stamp[(a, b)])
-                     for (a, b), (_, _, c, parts, l2) in self.placed.items() if (a, b) not in self.blocked]
+        live = [(pair, e) for pair, e in self.placed.items() if pair not in self.blocked]
+        cost = np.array([e[2] for _, e in live], np.float64)
+        parts = np.array([e[3] for _, e in live]).reshape(len(live), -1)
+        keys = self._keys(cost, parts)
+        self.heap = [(key, e[4], tie(a, b), a, b, self.stamp[(a, b)]) for key, ((a, b), e) in zip(keys, live)]
         heapq.heapify(self.heap)
 
     def compact(self):
