@@ -32,6 +32,7 @@ def run_all(demo: bool = True) -> None:
             qemjax.simplify("textured.obj", ratio=0.1, scheduler="greedy")
             qemjax.simplify("bumpy.ply", ratio=0.2, feature_edges=np.loadtxt("creases.txt", dtype=np.int64))
             qemjax.lod_chain("bumpy.obj", ratios=[0.5, 0.1])
+            qemjax.simplify("bumpy.obj", max_distance_rel=0.005)
             example = sweep_config.load("sweep_example.toml", out=os.path.join(tmp, "sweep.csv"))
             sweep_config.run(example, progress=False)
             if demo:
