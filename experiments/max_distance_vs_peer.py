@@ -30,7 +30,8 @@ from qemjax import peers, shapes
 from qemjax.metrics import surface_distance
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
-REAL = ("cow.obj", "fandisk.obj", "homer.obj")  # small enough for a quick run, of different kinds
+REAL = ("cow.obj", "fandisk.obj", "homer.obj", "rocker-arm.obj", "max-planck-10k.obj", "3holes.off",
+        "fertility.off", "stanford-bunny.obj")  # of different kinds: with the two made in code, 10 meshes
 BOUNDS = (0.001, 0.005, 0.01)
 
 

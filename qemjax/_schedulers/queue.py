@@ -65,7 +65,7 @@ class Queue:
         self.weights = weights
         live = [(pair, e) for pair, e in self.placed.items() if pair not in self.blocked]
         cost = np.array([e[2] for _, e in live], np.float64)
-        parts = np.array([e[3] for _, e in live]).reshape(len(live), -1)
+        parts = np.array([e[3] for _, e in live]).reshape(len(live), -1) if live else np.zeros((0, 0))
         keys = self._keys(cost, parts)
         self.heap = [(key, e[4], tie(a, b), a, b, self.stamp[(a, b)]) for key, ((a, b), e) in zip(keys, live)]
         heapq.heapify(self.heap)
