@@ -19,6 +19,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from machine import cpu_model  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,16 +37,6 @@ CASES = [  # (label, argv after the venv's bin/): in this order, as the issue's 
     ("a textured mesh: qemjax simplify textured.obj", ["qemjax", "simplify", "textured.obj", "t.obj", "--ratio", "0.1"]),
     ("the README's Python example", ["python", "readme_example.py"]),
 ]
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
 
 
 def timed(cmd, **kw) -> tuple[float, str]:
@@ -88,7 +79,7 @@ def main() -> None:
         again, out2 = timed(cmd, env=env, cwd=work)
         rows.append((label, first, split(out1), again, split(out2)))
         print(f"  {label}: {first:.1f} s, again {again:.1f} s", file=sys.stderr, flush=True)
-    print(f"# first contact at {rev}: fresh venv, empty JAX and numba caches; {cpu_name()}, {os.cpu_count()} cores")
+    print(f"# first contact at {rev}: fresh venv, empty JAX and numba caches; {cpu_model()}, {os.cpu_count()} cores")
     print(f"# pip install . (dependencies from pip's cache): {install:.1f} s")
     print("| first contact | first run | the summary says | the same command again | the summary says |")
     print("|---|---|---|---|---|")

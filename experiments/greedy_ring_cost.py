@@ -32,6 +32,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent), str(HERE)]  # this checkout's qemjax
 
 import qemjax  # noqa: E402
+from machine import cpu_model  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "meshes"
 METHODS = {  # label -> method, built from the package that runs it
@@ -43,17 +44,6 @@ METHODS = {  # label -> method, built from the package that runs it
     "qem(regularize=1.0)": lambda q: q.QEM(regularize=1.0),
     "qem(area_weight=1.0)": lambda q: q.QEM(area_weight=1.0),
 }
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    import platform
-    return platform.processor() or "unknown"
 
 
 def mesh_of(name: str):

@@ -18,7 +18,6 @@ real ones. Prints a markdown table and the CPU model.
 from __future__ import annotations
 
 import argparse
-import platform
 import time
 import warnings
 from pathlib import Path
@@ -28,21 +27,12 @@ import numpy as np
 import qemjax
 from qemjax import peers, shapes
 from qemjax.metrics import surface_distance
+from machine import cpu_model  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 REAL = ("cow.obj", "fandisk.obj", "homer.obj", "rocker-arm.obj", "max-planck-10k.obj", "3holes.off",
         "fertility.off", "stanford-bunny.obj")  # of different kinds: with the two made in code, 10 meshes
 BOUNDS = (0.001, 0.005, 0.01)
-
-
-def cpu_model() -> str:
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def meshes(quick: bool) -> dict:
