@@ -28,13 +28,12 @@ MANIFEST = Path(__file__).with_name("signatures.txt")
 _PACKAGE = Path(__file__).resolve().parents[1]  # qemjax/
 
 
-def _dispatchers(modules=None) -> dict:
-    """{(module, name): numba dispatcher} of the qemjax modules imported so far (or of ``modules``)."""
+def _dispatchers() -> dict:
+    """{(module, name): numba dispatcher} of the qemjax modules imported so far."""
     from numba.core.registry import CPUDispatcher
 
     out = {}
-    names = modules if modules is not None else [m for m in list(sys.modules) if m.startswith("qemjax.")]
-    for mod_name in names:
+    for mod_name in [m for m in list(sys.modules) if m.startswith("qemjax.")]:
         mod = sys.modules.get(mod_name)
         for name, obj in list(vars(mod).items()) if mod is not None else ():
             if isinstance(obj, CPUDispatcher) and getattr(obj.py_func, "__module__", None) == mod_name:
@@ -46,7 +45,7 @@ def used_signatures() -> dict:
     """{(module, name): sorted signature texts} that the dispatchers of this process have compiled or loaded."""
     out = {}
     for key, disp in _dispatchers().items():
-        if getattr(disp, "_ahead_skip", False) or disp.targetoptions.get("inline") == "always":
+        if disp.targetoptions.get("inline") == "always":
             continue  # an inlined helper is compiled into its callers, never called on its own
         sigs = sorted({_sig_text(s) for s in disp.signatures})
         if sigs:

@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     ap.add_argument("--build", action="store_true", help="compile without importing the packages' __init__")
     ap.add_argument("--no-demo", action="store_true", help="--record: leave out the 327,680-face demo")
     ap.add_argument("--jobs", type=int, default=0, help="processes to compile in (default: one per core)")
-    ap.add_argument("--slice", help=argparse.SUPPRESS)  # "i/n": this process's share (see `_parallel`)
+    ap.add_argument("--slice", help=argparse.SUPPRESS)  # "i/n": this process's share (see `compile_ahead`)
     args = ap.parse_args(argv)
     if args.check:
         return _check(demo=not args.no_demo)
