@@ -6,9 +6,7 @@ them (`qemjax._mesh.bounds_jit.row_bounds`), warm medians, and whether they agre
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -17,16 +15,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent), str(HERE)]
 
 import meshes as bench_meshes  # noqa: E402
-
-
-def median_s(fn, repeats):
-    fn()
-    out = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        out.append(time.perf_counter() - t)
-    return statistics.median(out)
+from machine import median_time  # noqa: E402
 
 
 def main():
@@ -41,8 +30,8 @@ def main():
     print("|---|---|---|---|---|---|")
     for name in args.meshes:
         V = np.ascontiguousarray(bench_meshes.load(name).V, np.float64)
-        t_np = median_s(lambda: (V.min(0), V.max(0)), args.repeats)
-        t_jit = median_s(lambda: row_bounds(V), args.repeats)
+        t_np = median_time(lambda: (V.min(0), V.max(0)), args.repeats)
+        t_jit = median_time(lambda: row_bounds(V), args.repeats)
         lo, hi = row_bounds(V)
         same = all(np.array_equal(a.view(np.int64), b.view(np.int64))  # bits: signed zeros and NaNs too
                    for a, b in ((lo, V.min(0)), (hi, V.max(0))))

@@ -16,25 +16,16 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+from machine import median_time  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 SHARED = HERE.parent.parent / "shared" / "meshes"
 CASES = [("stanford-bunny", 0.01), ("fandisk", 0.02), ("cow", 0.1), ("armadillo", 0.01), ("homer", 0.01)]
-
-
-def _median_time(fn, repeats):
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
 
 
 def main(argv=None) -> int:
@@ -72,8 +63,8 @@ def main(argv=None) -> int:
                 qemjax.simplify(mesh, ratio=ratio, method=method, measure=measure)  # warm
             for i in range(args.repeats):  # interleaved, in alternating order: the machine's state is shared
                 for measure in ((False, True) if i % 2 == 0 else (True, False)):
-                    runs[measure].append(_median_time(
-                        lambda: qemjax.simplify(mesh, ratio=ratio, method=method, measure=measure), 1))
+                    runs[measure].append(median_time(
+                        lambda: qemjax.simplify(mesh, ratio=ratio, method=method, measure=measure), 1, warm=False))
             for measure in (False, True):
                 t[method, measure] = statistics.median(runs[measure])
         lines.append(

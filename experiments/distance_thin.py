@@ -16,9 +16,7 @@ with this checkout's, and the script checks that both give the same values.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +25,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent), str(HERE)]  # this checkout's qemjax
 
 import qemjax  # noqa: E402
-from machine import cpu_model  # noqa: E402
+from machine import cpu_model, median_time  # noqa: E402
 
 
 def subdivide(V, F):
@@ -75,17 +73,6 @@ def tube(n_around=1024, n_along=64, length=10.0, radius=0.5):
     a = (i * n_around + j).ravel()
     b = (i * n_around + (j + 1) % n_around).ravel()
     return V, np.concatenate([np.stack([a, b, b + n_around], 1), np.stack([a, b + n_around, a + n_around], 1)])
-
-
-def median_time(fn, repeats, warm=True):
-    if warm:
-        fn()
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
 
 
 def main(argv=None) -> int:
