@@ -46,9 +46,13 @@ OPTIONS = {
     "method": dict(choices=_api.methods,  # called: methods registered later are included
                    help="the cost model by name (qemjax.methods()); its settings are the options below "
                         "(--boundary-weight, --curvature-weight, ...): each given one replaces that field"),
-    "scheduler": dict(choices=_schedulers.names,
+    "scheduler": dict(type=lambda text: _scheduler_arg(text), metavar="{" + ",".join(_schedulers.names()) + "}",
                       help="'parallel': rounds of many non-interacting contractions; 'greedy': the "
-                           "paper's priority queue, one contraction at a time"),
+                           "paper's priority queue, one contraction at a time; with --partition, a Dask "
+                           "scheduler's ADDRESS (tcp://host:8786) runs the parts on its workers"),
+    "partition": dict(help="read the input in chunks and simplify it in parts on every core (or a Dask "
+                      "cluster: --scheduler ADDRESS), with their borders locked, level by level: for meshes "
+                      "larger than one process (docs/large-meshes.md)", shown="off"),
     "placement": dict(choices=lambda: _api.PLACEMENTS),
     "feature_edges": dict(metavar="FILE", help="vertex-index pairs (k,2) constrained like boundary edges, "
                           "read from FILE: .npy, or text with two integers per line (indices of the input "
@@ -243,6 +247,48 @@ def _number_or_none(flag: str, text: str):
         raise CliError(f"{flag} takes a number or 'none', got {text!r}") from None
 
 
+def _scheduler_arg(text: str) -> str:
+    """--scheduler: a scheduler's name, or a Dask scheduler's address (checked with --partition)."""
+    if text in _schedulers.names() or "://" in text or ":" in text:
+        return text
+    raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from "
+                                     f"{', '.join(map(repr, _schedulers.names()))}, or a Dask scheduler's address)")
+
+
+def _partition_kwargs(args, kw: dict) -> None:
+    """--partition and its options as ``kw["partition"]`` (a `qemjax.Partition`; a Dask client for an
+    address given as --scheduler)."""
+    extra = [f for f, v in (("--part-faces", args.part_faces), ("--workers", args.workers),
+                            ("--scratch", args.scratch)) if v is not None]
+    address = kw.get("scheduler") if kw.get("scheduler") not in (None, *_schedulers.names()) else None
+    if not kw.get("partition"):
+        if extra or address:
+            raise CliError(f"{(extra or ['--scheduler ADDRESS'])[0]} needs --partition")
+        kw.pop("partition", None)
+        return
+    from ._partition.settings import Partition
+
+    if address is not None and args.workers is not None:
+        raise CliError("give --workers N (local processes) or --scheduler ADDRESS (a Dask cluster), not both")
+    client = None
+    if address is not None:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise CliError("--scheduler ADDRESS needs dask.distributed: pip install 'qemjax[dask]'") from None
+        try:
+            client = Client(address, timeout="10s")
+        except OSError as exc:
+            raise CliError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+        kw.pop("scheduler")
+    options = {k: v for k, v in (("part_faces", args.part_faces), ("workers", args.workers),
+                                 ("scratch", args.scratch)) if v is not None}
+    try:
+        kw["partition"] = Partition(client=client, **options)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
 def _simplify_kwargs(args) -> dict:
     """The options given on the command line, as keywords of `simplify` (settings by their flat names)."""
     kw = {name: getattr(args, name) for name in TARGETS if getattr(args, name, None) is not None}
@@ -265,6 +311,10 @@ def _simplify_kwargs(args) -> dict:
         kw["attributes"] = None if text == "none" else "auto" if text == "auto" else \
             tuple(k.strip() for k in text.split(",") if k.strip())
     kw["progress"] = not args.quiet
+    if hasattr(args, "part_faces"):
+        _partition_kwargs(args, kw)
+    elif kw.get("scheduler") not in (None, *_schedulers.names()):
+        raise CliError(f"--scheduler {kw['scheduler']}: a Dask scheduler's address needs qemjax simplify --partition")
     return kw
 
 
@@ -419,6 +469,12 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
                    "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
                    "integer per line)")
+    s.add_argument("--part-faces", dest="part_faces", type=_faces, metavar="K", help="with --partition: the most "
+                   "faces one task reads (default 100000)")
+    s.add_argument("--workers", type=_faces, metavar="N", help="with --partition: local worker processes (default: "
+                   "every core)")
+    s.add_argument("--scratch", metavar="DIR", help="with --partition: the folder for the parts (kept; a run of "
+                   "the same input and options resumes from it); default: a temporary folder, removed at the end")
     s.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0) "
                    "per input vertex (.npy or text, one number per line): each pair's cost is multiplied by "
                    "the larger weight of its vertices, so heavy regions keep more detail")
@@ -434,7 +490,7 @@ def _parser() -> argparse.ArgumentParser:
                      "by side along x (1.2 × the mesh's x-extent apart, level 0 at the origin)")
     lod.add_argument("--record", action="store_true", help="also write NAME-record.npz, the progressive "
                      "record every level can be replayed from (qemjax.load_record)")
-    _add_options(lod, hidden=LOD_REFUSED)
+    _add_options(lod, hidden=LOD_REFUSED + ("partition",))
     sw = sub.add_parser("sweep", help="a parameter sweep described in a TOML (or YAML) file; writes its table",
                         description="Run qemjax.sweep as CONFIG describes: meshes, grid, targets, out (default: "
                         "CONFIG's name with .parquet), metrics, executor. See docs/cli.md, 'Sweep config files'.")
@@ -589,6 +645,9 @@ def _lod(args, kwargs) -> int:
     """``qemjax lod``: one run, every level written (each file under a temporary name, then renamed)."""
     from ._pipeline.lod import lod_chain
 
+    if kwargs.pop("partition", None):
+        raise CliError("qemjax lod: --partition is offered by qemjax simplify only (a partitioned run keeps no "
+                       "record to replay the levels from)")
     refused = ["--" + name.replace("_", "-") for name in LOD_REFUSED if kwargs.get(name) is not None]
     if refused:
         raise CliError(f"qemjax lod keeps positions only: its levels are replayed from contractions "

@@ -3,6 +3,7 @@ stages of a run (`_stages`: setup, geometry, job, run, finish), batching the run
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import inspect
 import math
@@ -32,7 +33,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
              max_error: float | None = None, max_distance: float | None = None,
              max_distance_rel: float | None = None, method: Any = "default", scheduler: Any = "parallel",
              topology: Topology | None = None, attributes: Any = "auto", feature_edges=None,
-             progress: bool = False, measure: bool | None = None, **settings) -> SimplifyResult:
+             progress: bool = False, measure: bool | None = None, partition=None, **settings) -> SimplifyResult:
     """Simplify a triangle mesh by iterative pair contraction (Garland & Heckbert 1997).
 
     mesh: a path (any format trimesh reads), a `trimesh.Trimesh`, ``(vertices, faces)`` arrays, or an
@@ -98,6 +99,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         each pair's cost is multiplied by the larger weight of its two vertices (a kept vertex takes the
         larger weight of the pair), so heavy regions keep more detail. A run the locks stop short of the
         target ends with ``stop_reason="locked"`` and ``stats["blocked_by"]["locked"]``.
+    partition: a `qemjax.Partition` (or True: its defaults): a mesh too large for one process, read in chunks
+        from its file, cut into parts simplified in parallel with their borders locked, regrouped level by
+        level until one group meets the target (`qemjax._partition`; docs/large-meshes.md). The result holds
+        the output and its stats (``stats["partition"]``), not the input, record or history.
     settings: any field of the method, `Topology` or `Attributes` by its name (``boundary_weight=10``,
         ``flip_angle=None``, ``attribute_weights=0.1``) or dotted (``**{"method.refit": 0}``); each
         replaces that field of the object given (so ``method="accurate", refit=0`` is the preset without
@@ -111,6 +116,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
     from . import stages
 
+    if partition is not None and partition is not False:
+        return _partitioned(mesh, target_faces, ratio, partition, progress, measure, attributes, settings,
+                            dict(max_error=max_error, max_distance=max_distance, max_distance_rel=max_distance_rel,
+                                 method=method, scheduler=scheduler, topology=topology, feature_edges=feature_edges))
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
     settings = dict(settings)
@@ -127,6 +136,25 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     _bound.supported(job)
     return _bound.finish(job, stages.run(job), bound, t_start, c0, s0, stacklevel=3)
 
+
+
+def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attributes, settings, named):
+    """`simplify` with ``partition=``: its keywords checked and handed to `_partition.run`."""
+    from .._partition.run import simplify_partitioned
+    from .._partition.settings import Partition
+
+    if partition is True:
+        partition = Partition()
+    if not isinstance(partition, Partition):
+        raise ValueError(f"partition: expected a qemjax.Partition or True, got {type(partition).__name__}")
+    if measure is not None:
+        partition = dataclasses.replace(partition, measure=bool(measure))
+    if attributes not in ("auto", None):
+        raise ValueError("partition: a partitioned run keeps positions only; attributes=None")
+    kwargs = {k: v for k, v in named.items() if v is not None} | dict(settings)
+    kwargs.pop("attributes", None)
+    return simplify_partitioned(mesh, target_faces=target_faces, ratio=ratio, partition=partition, kwargs=kwargs,
+                                progress=progress, stacklevel=4)
 
 
 def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> list:

@@ -197,6 +197,11 @@ class SimplifyResult:
         if s.get("refit_skipped"):  # the method's re-fit did not run: say so where the distance is read
             hint = "; attributes=None re-fits" if s["refit_skipped"] == "uv kept" else ""
             dist += f" (re-fit skipped: {s['refit_skipped']}{hint})"
+        if s.get("partition"):  # no rounds or contraction costs of its own: its parts and levels
+            p = s["partition"]
+            return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
+                    f"in {s['total_s']:.2f} s, partitioned: {p['parts']} parts, {p['levels']} levels on "
+                    f"{p['where']} (largest worker {p['peak_rss_workers'] / 2**30:.2f} GiB); {dist}")
         return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
                 f"in {s['total_s']:.2f} s (compile {s['compile_s']:.2f} s, run {s['run_s']:.2f} s), "
                 f"{s['rounds']} rounds; {dist}; largest contraction cost {self.max_error:.3g} "

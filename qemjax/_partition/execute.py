@@ -1,0 +1,162 @@
+"""Where a partitioned run's tasks run: on a ``dask.distributed`` client's workers, on local worker
+processes, or in this process. `Runner.map` yields each task's result as it finishes (in any order: each
+task writes its own file, so the output does not depend on the order), runs again a task whose worker
+died, and on Ctrl-C stops the workers at once."""
+from __future__ import annotations
+
+import os
+import queue
+import subprocess
+import sys
+import threading
+from typing import Iterator
+
+from . import task as _task
+from . import worker as _worker
+from .settings import Partition
+
+
+class TaskError(RuntimeError):
+    """A task raised: its message and the worker's traceback."""
+
+
+class Runner:
+    """Runs the tasks in this process (``Partition(workers=1)``)."""
+
+    name = "this process"
+    workers = 1
+
+    def map(self, name: str, specs: list) -> Iterator[tuple[int, dict]]:
+        for i, spec in enumerate(specs):
+            yield i, getattr(_task, name)(spec)
+
+    def close(self, cancel: bool = False) -> None:
+        pass
+
+
+def _worker_env() -> dict:
+    """A worker's environment: one compute thread (the workers, not threads inside one, share the cores;
+    JAX and numba give the same bits with any thread count)."""
+    env = dict(os.environ)
+    env.setdefault("NUMBA_NUM_THREADS", "1")
+    flags = env.get("XLA_FLAGS", "")
+    if "intra_op_parallelism_threads" not in flags:
+        env["XLA_FLAGS"] = (flags + " --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1").strip()
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(name, "1")
+    return env
+
+
+class LocalRunner(Runner):
+    """``workers`` local processes (`worker`), started once per run so each compiles its kernels once, each
+    fed by a thread of this process. A worker that dies (killed, out of memory) is started again and its
+    task run again, up to ``retries`` times per task."""
+
+    def __init__(self, workers: int, retries: int):
+        self.workers, self.retries = workers, retries
+        self.name = f"{workers} local worker processes"
+        self.procs: list = [None] * workers
+        self.lock = threading.Lock()
+        self.closed = False
+
+    def _start(self, k: int):
+        cmd = [sys.executable, "-m", "qemjax._partition.worker"]
+        p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=_worker_env())
+        self.procs[k] = p
+        return p
+
+    def _serve(self, k: int, todo: queue.Queue, done: queue.Queue, name: str):
+        while not self.closed:
+            try:
+                i, spec, tries = todo.get_nowait()
+            except queue.Empty:
+                return
+            with self.lock:
+                p = self.procs[k]
+                if p is None or p.poll() is not None:
+                    p = self._start(k)
+            try:
+                _worker.send(p.stdin, (name, spec))
+                ok, value = _worker.receive(p.stdout)
+            except (EOFError, BrokenPipeError, OSError):
+                if self.closed:
+                    return
+                p.kill()
+                if tries >= self.retries:
+                    done.put((i, False, f"a worker died {tries + 1} times running this task (out of memory? "
+                                        "a smaller Partition(part_faces=...) or fewer workers)"))
+                    return
+                todo.put((i, spec, tries + 1))
+                continue
+            done.put((i, ok, value))
+
+    def map(self, name, specs):
+        todo, done = queue.Queue(), queue.Queue()
+        for i, spec in enumerate(specs):
+            todo.put((i, spec, 0))
+        threads = [threading.Thread(target=self._serve, args=(k, todo, done, name), daemon=True)
+                   for k in range(min(self.workers, len(specs)))]
+        for t in threads:
+            t.start()
+        for _ in range(len(specs)):
+            while True:  # short waits: Ctrl-C reaches this thread within a fraction of a second
+                try:
+                    i, ok, value = done.get(timeout=0.2)
+                    break
+                except queue.Empty:
+                    if not any(t.is_alive() for t in threads) and done.empty():
+                        raise TaskError("partition: the workers stopped with tasks left")
+            if not ok:
+                raise TaskError(f"partition: a task failed: {value}")
+            yield i, value
+        for t in threads:
+            t.join()
+
+    def close(self, cancel: bool = False):
+        self.closed = True
+        for p in self.procs:
+            if p is None:
+                continue
+            if cancel:
+                p.kill()
+            else:
+                try:
+                    p.stdin.close()
+                    p.wait(timeout=10)
+                except Exception:
+                    p.kill()
+
+
+class DaskRunner(Runner):
+    """Tasks submitted to a ``dask.distributed`` client (``retries``: the scheduler runs again a task whose
+    worker died); results taken as they complete."""
+
+    def __init__(self, client, retries: int):
+        self.client, self.retries = client, retries
+        self.workers = max(len(client.scheduler_info().get("workers", {})), 1)
+        self.name = f"dask ({self.workers} workers)"
+        self.futures = []
+
+    def map(self, name, specs):
+        from dask.distributed import as_completed
+
+        fn = getattr(_task, name)
+        futures = [self.client.submit(fn, spec, pure=False, retries=self.retries) for spec in specs]
+        self.futures = futures
+        index = {f.key: i for i, f in enumerate(futures)}
+        for fut in as_completed(futures):
+            yield index[fut.key], fut.result()
+        self.futures = []
+
+    def close(self, cancel: bool = False):
+        if cancel and self.futures:
+            self.client.cancel(self.futures, force=True)
+        self.futures = []
+
+
+def open_runner(p: Partition) -> Runner:
+    if p.client is not None:
+        return DaskRunner(p.client, p.retries)
+    if p.n_workers <= 1:
+        return Runner()
+    return LocalRunner(p.n_workers, p.retries)

@@ -1,0 +1,71 @@
+"""A piece of a partitioned run on disk: a level-0 part (`scatter`) or a group's output. Each is an ``.npz``
+of ``V`` (k,3) float64, ``F`` (m,3) int32 into ``V`` and ``gid`` (k,) int64, the global id of each vertex
+another piece may share (-1 for a vertex no other piece can hold: a new or interior one). Level-0 parts also
+carry ``border`` (k,) bool (shared with another part); a group's output carries ``borders``, its sorted
+global ids, the only ones the next level must know."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+def save(path, **arrays) -> None:
+    """Write ``arrays`` to ``path`` whole or not at all (a temporary name, then a rename), so that a task
+    killed while writing leaves no piece a resumed run would trust."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+    os.replace(tmp, path)
+
+
+def save_json(path, data: dict) -> None:
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(data, sort_keys=True))
+    os.replace(tmp, path)
+
+
+def load(path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """(V, F, gid, border or None) of a piece."""
+    with np.load(path) as z:
+        border = z["border"] if "border" in z.files else None
+        return z["V"], z["F"].astype(np.int64), z["gid"], border
+
+
+def borders(path) -> np.ndarray:
+    """The sorted global ids a piece holds (read without its vertices and faces)."""
+    with np.load(path) as z:
+        if "borders" in z.files:
+            return z["borders"]
+        gid = z["gid"]
+        return np.unique(gid[gid >= 0])
+
+
+def stitch(paths: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pieces at ``paths`` as one mesh: a global id held by several pieces becomes one vertex (its first
+    holder's: locked, every holder has the same bits). Returns (V, F, gid, border) with border False where
+    the pieces carry none."""
+    Vs, Fs, gids, bs, base = [], [], [], [], 0
+    for p in paths:
+        V, F, gid, border = load(p)
+        Vs.append(V)
+        Fs.append(F + base)
+        gids.append(gid)
+        bs.append(np.zeros(len(V), bool) if border is None else border)
+        base += len(V)
+    V, F, gid, border = np.concatenate(Vs), np.concatenate(Fs), np.concatenate(gids), np.concatenate(bs)
+    if len(paths) == 1:
+        return V, F, gid, border
+    held = np.flatnonzero(gid >= 0)
+    _, first, inverse = np.unique(gid[held], return_index=True, return_inverse=True)
+    to = np.arange(len(V))
+    to[held] = held[first][inverse]  # every holder of a global id -> its first holder
+    keep = to == np.arange(len(V))
+    if not np.array_equal(V[to[held]], V[held]):
+        raise RuntimeError("partition: a shared vertex moved in one of its pieces (a lock was not kept)")
+    new = np.cumsum(keep) - 1
+    return V[keep], new[to][F], gid[keep], border[keep]

@@ -1,0 +1,67 @@
+"""Which pieces each level groups and how many faces each group keeps: pure functions of the pieces' face
+counts, so that a resumed run plans the same levels."""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .settings import Partition
+
+
+class Group(NamedTuple):
+    """One task of a level: the pieces it reads (indices into the previous level's outputs, consecutive in
+    Morton order, so spatially close), their faces and the faces it keeps."""
+
+    members: tuple
+    faces: int
+    target: int
+
+
+def shares(faces: np.ndarray, total: int) -> np.ndarray:
+    """``total`` split over groups in proportion to their faces, as integers summing to ``total`` (largest
+    remainders first, ties to the lower index: deterministic)."""
+    faces = np.asarray(faces, np.int64)
+    exact = faces * (total / max(int(faces.sum()), 1))
+    out = np.floor(exact).astype(np.int64)
+    rest = int(total - out.sum())
+    if rest > 0:
+        order = np.lexsort((np.arange(len(exact)), -(exact - out)))
+        out[order[:rest]] += 1
+    return np.minimum(out, faces)
+
+
+def consecutive(faces: np.ndarray, limit: int) -> list[tuple]:
+    """Consecutive runs of pieces whose faces sum to at most ``limit`` (each run at least one piece)."""
+    groups, cur, acc = [], [], 0
+    for i, f in enumerate(np.asarray(faces, np.int64).tolist()):
+        if cur and acc + f > limit:
+            groups.append(tuple(cur))
+            cur, acc = [], 0
+        cur.append(i)
+        acc += f
+    if cur:
+        groups.append(tuple(cur))
+    return groups
+
+
+def level(faces: np.ndarray, target: int, p: Partition, first: bool, stalled: bool = False) -> tuple[list[Group], bool]:
+    """The next level's groups for pieces of ``faces`` faces (Morton order), and whether it is the last: one
+    group, nothing locked, run to ``target``; or, when that group would read more than ``final_faces``, the
+    groups of at most ``part_faces`` run to their shares of ``target`` with their borders locked. The first
+    level runs each part alone. Any other level keeps ``max(faces / reduction, budget * target)`` faces in
+    all, shared in proportion to the groups' faces. ``stalled``: the level before removed almost nothing (its
+    groups' locked borders held their faces): the next is the last."""
+    faces = np.asarray(faces, np.int64)
+    total = int(faces.sum())
+    # within a quarter of the budget: another level would remove little and lock the same borders again
+    near = total <= p.part_faces or total <= 1.25 * p.budget * target or len(faces) == 1 or stalled
+    if total <= p.final_faces and near:
+        return [Group(tuple(range(len(faces))), total, min(target, total))], True
+    members = [(i,) for i in range(len(faces))] if first else consecutive(faces, p.part_faces)
+    keep = max(int(np.ceil(total / p.reduction)), int(np.ceil(p.budget * target)), target)
+    last = stalled or keep >= total  # too large for one process, and no level can reduce it further
+    if last:
+        keep = target
+    sums = np.array([faces[list(m)].sum() for m in members], np.int64)
+    return [Group(m, int(s), int(t)) for m, s, t in zip(members, sums, shares(sums, min(keep, total)))], last

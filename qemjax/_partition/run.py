@@ -1,0 +1,257 @@
+"""A partitioned run, as the client drives it: cut the input into parts (`scatter`), then level by level
+plan the groups (`plan.level`), write the level's locks, run the groups (`task.run_group`) on the runner
+(`execute`), until the last level; then measure the output against every part (`task.measure_part`) and
+build the result. The client reads only the pieces' border ids and the output, never the whole input."""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from . import execute, pieces, plan, task
+from .settings import Partition
+
+UNSUPPORTED = ("max_error", "max_distance", "max_distance_rel", "feature_edges", "locked", "vertex_weights")
+
+
+def _scratch(p: Partition) -> tuple[Path, bool]:
+    """The scratch folder and whether to remove it at the end (a temporary one)."""
+    if p.scratch is None:
+        return Path(tempfile.mkdtemp(prefix="qemjax-parts-")), True
+    path = Path(p.scratch)
+    path.mkdir(parents=True, exist_ok=True)
+    return path, False
+
+
+def _input_key(mesh) -> str:
+    """What identifies the input for a resumed run: a file by its path, size and time; arrays by a hash."""
+    import os
+
+    if isinstance(mesh, (str, os.PathLike)):
+        st = Path(mesh).stat()
+        return f"{Path(mesh).resolve()}:{st.st_size}:{st.st_mtime_ns}"
+    from .._io.mesh import as_arrays
+
+    V, F = as_arrays(mesh)[:2]
+    return hashlib.sha256(np.ascontiguousarray(V, np.float64).tobytes() +
+                          np.ascontiguousarray(F, np.int64).tobytes()).hexdigest()
+
+
+def _fresh(folder: Path, key: dict) -> None:
+    """Remove what an earlier run with other inputs or settings left in ``folder`` (only its own files)."""
+    meta = folder / "run.json"
+    if meta.exists() and json.loads(meta.read_text()) == key:
+        return
+    for sub in folder.glob("level*"):
+        shutil.rmtree(sub, ignore_errors=True)
+    for name in ("manifest.json", "run.json", "input.ply", "vertices.f64", "faces.i64"):
+        (folder / name).unlink(missing_ok=True)
+    pieces.save_json(meta, key)
+
+
+def _as_file(mesh, folder: Path) -> Path:
+    """A path as given; arrays (or a mesh object) written to the scratch folder as a binary PLY."""
+    import os
+
+    if isinstance(mesh, (str, os.PathLike)):
+        return Path(mesh)
+    from .._io.mesh import as_arrays
+    from .scatter import write_binary_ply
+
+    V, F = as_arrays(mesh)[:2]
+    path = folder / "input.ply"
+    if not path.exists():
+        write_binary_ply(path, np.asarray(V, np.float64), np.asarray(F, np.int64))
+    return path
+
+
+def _locks(level_dir: Path, groups: list, borders: list) -> Path:
+    """The global ids that two or more of this level's groups hold (sorted, written as ``locks.npy``)."""
+    ids, owner = [], []
+    for g, grp in enumerate(groups):
+        held = np.unique(np.concatenate([borders[i] for i in grp.members])) if grp.members else np.zeros(0, np.int64)
+        ids.append(held)
+        owner.append(np.full(len(held), g))
+    ids = np.concatenate(ids) if ids else np.zeros(0, np.int64)
+    uniq, count = np.unique(ids, return_counts=True)
+    path = level_dir / "locks.npy"
+    np.save(path, uniq[count >= 2].astype(np.int64))
+    return path
+
+
+def _bar(progress: bool, total: int, desc: str):
+    if not progress:
+        return None
+    from tqdm.auto import tqdm
+    return tqdm(total=total, desc=desc, unit="task", leave=False)
+
+
+def _run_level(runner, name, specs, progress, desc) -> list:
+    out, bar = [None] * len(specs), _bar(progress, len(specs), desc)
+    try:
+        for i, res in runner.map(name, specs):
+            out[i] = res
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return out
+
+
+def _distance(results: list, diag: float, unit: float) -> dict:
+    """The measured-distance stats (as `_pipeline.measure`) from the parts' maxima, sums and histograms."""
+    from .._pipeline.measure import PERCENTILES
+
+    d_max = max(r["max"] for r in results)
+    d_rms = float(np.sqrt(sum(r["sum_sq"] for r in results) / sum(r["weight"] for r in results)))
+    hist = np.sum([np.asarray(r["hist"]) for r in results], axis=0)
+    cum = np.cumsum(hist) / hist.sum()
+    edges = np.logspace(task.HIST_LO, task.HIST_HI, task.HIST_BINS + 1) * unit
+    out = dict(distance_max=d_max, distance_rms=d_rms)
+    for p in PERCENTILES:  # the upper edge of the bin where the weight reaches p %: within 1 % above
+        k = int(np.searchsorted(cum, p / 100 - 1e-12))
+        out[f"distance_p{p}"] = float(min(edges[min(k, task.HIST_BINS)], d_max))
+    out.update({f"{k}_rel": (v / diag if diag > 0 else None) for k, v in list(out.items())})
+    return out | dict(distance_samples=int(sum(r["samples"] for r in results)))
+
+
+def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwargs: dict, progress: bool,
+                         stacklevel: int = 3):
+    """`simplify` with ``partition=``: the module docstring. ``kwargs``: the method and its settings, as
+    `simplify` takes them."""
+    from .._pipeline import stages
+    from .._record.result import Contractions, SimplifyResult
+    from .scatter import scatter
+
+    bad = [k for k in UNSUPPORTED if kwargs.get(k) is not None]
+    if bad:
+        raise ValueError(f"partition: {', '.join(bad)} cannot be combined with a partitioned run")
+    stages._resolve_target(1, target_faces, ratio, None, False)
+    p = partition
+    t0 = time.perf_counter()
+    folder, temporary = _scratch(p)
+    runner = None
+    try:
+        if isinstance(mesh, (str, Path)) and not Path(mesh).exists():
+            from .._io.mesh import MissingFileError
+            raise MissingFileError(f"no such file: {mesh}")
+        key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
+                   final_faces=p.final_faces, target=[target_faces, ratio], kwargs=repr(sorted(kwargs.items())))
+        _fresh(folder, key)
+        source = _as_file(mesh, folder)
+        manifest_path = folder / "manifest.json"
+        if manifest_path.exists():
+            manifest = json.loads(manifest_path.read_text())
+        else:
+            manifest = scatter(source, folder, p.part_faces)
+        t_scatter = time.perf_counter() - t0
+        n_faces = int(manifest["n_faces"])
+        target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
+        target = min(target, n_faces)
+        runner = execute.open_runner(p)
+        paths = [str(folder / part["file"]) for part in manifest["parts"]]
+        faces = np.array([part["faces"] for part in manifest["parts"]], np.int64)
+        borders = None
+        levels, first = [], True
+        while True:
+            t_level = time.perf_counter()
+            stalled = bool(levels) and levels[-1]["faces_out"] > 0.9 * levels[-1]["faces_in"]
+            groups, last = plan.level(faces, target, p, first, stalled)
+            level_dir = folder / f"level{len(levels) + 1}"
+            level_dir.mkdir(exist_ok=True)
+            if len(groups) == 1:
+                locks = None
+            elif first:
+                locks = "border"
+            else:
+                locks = str(_locks(level_dir, groups, borders))
+            specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=kwargs,
+                          out=str(level_dir / f"group_{k:05d}.npz")) for k, g in enumerate(groups)]
+            stats = _run_level(runner, "run_group", specs, progress, f"level {len(levels) + 1}")
+            paths = [s["out"] for s in specs]
+            faces = np.array([s["faces_out"] for s in stats], np.int64)
+            levels.append(dict(groups=len(groups), faces_in=int(sum(g.faces for g in groups)),
+                               faces_out=int(faces.sum()), target=int(sum(g.target for g in groups)),
+                               locked=int(sum(s["locked"] for s in stats)), seconds=time.perf_counter() - t_level,
+                               stats=stats))
+            if last:
+                break
+            borders = [pieces.borders(path) for path in paths]
+            first = False
+        V, F, gid, _ = pieces.stitch(paths)
+        locked_share = float(np.mean(gid >= 0)) if len(paths) > 1 and len(gid) else 0.0
+        t_measure = time.perf_counter()
+        dist = {}
+        if p.measure and len(F):
+            final = folder / "output.npz"
+            pieces.save(final, V=V, F=F.astype(np.int32), gid=gid)
+            lo, hi = np.array(manifest["bbox"][0]), np.array(manifest["bbox"][1])
+            centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
+            mspecs = [dict(part=str(folder / part["file"]), final=str(final), centre=centre.tolist(), unit=unit)
+                      for part in manifest["parts"]]
+            dist = _distance(_run_level(runner, "measure_part", mspecs, progress, "distance"),
+                             float(np.linalg.norm(hi - lo)), unit)
+        t_measure = time.perf_counter() - t_measure
+    except BaseException:
+        if runner is not None:
+            runner.close(cancel=True)
+            runner = None
+        raise
+    finally:
+        if runner is not None:
+            runner.close()
+        if temporary:
+            shutil.rmtree(folder, ignore_errors=True)
+    return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
+                   t_measure, folder if not temporary else None, kwargs, stacklevel)
+
+
+def runner_name(p: Partition) -> str:
+    return "dask" if p.client is not None else ("this process" if p.n_workers <= 1 else f"{p.n_workers} local processes")
+
+
+def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, t0, t_scatter, t_measure, folder,
+            kwargs, stacklevel):
+    from .._pipeline.measure import not_measured
+    from .._record.result import Contractions, SimplifyResult
+
+    all_stats = [s for lv in levels for s in lv["stats"]]
+    per_worker = {}
+    for s in all_stats:
+        per_worker[s["pid"]] = per_worker.get(s["pid"], 0.0) + s["compile_s"]
+    compile_s = max(per_worker.values(), default=0.0)
+    total = time.perf_counter() - t0
+    reached = len(F) <= target or (len(F) == target + 1)
+    stop = "target" if len(F) <= target + 1 else ("locked" if locked_share > 0 else "blocked")
+    msgs = sorted({m for s in levels[-1]["stats"] for m in s["warnings"]})
+    part = dict(parts=len(manifest["parts"]), levels=len(levels), where=where,
+                faces_per_level=[lv["faces_out"] for lv in levels], groups_per_level=[lv["groups"] for lv in levels],
+                locked_per_level=[lv["locked"] for lv in levels], seconds_per_level=[lv["seconds"] for lv in levels],
+                locked_share=locked_share, scatter_s=t_scatter, measure_s=t_measure,
+                peak_rss_workers=max((s["peak_rss"] for s in all_stats), default=0), peak_rss_client=task.peak_rss(),
+                reused=sum(1 for s in all_stats if s.get("reused")), scratch=None if folder is None else str(folder),
+                format=manifest.get("format"), welded=manifest.get("welded"))
+    stats = dict(faces_in=n_faces, faces_out=int(len(F)), vertices_in=int(manifest["n_vertices"]),
+                 vertices_out=int(len(V)), target_faces=target, max_error_limit=None, rounds=0,
+                 method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
+                 total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part, dropped=["record"],
+                 **(not_measured() | dist))
+    if locked_share > 0:
+        warnings.warn(f"partition: the output is too large for one process (Partition.final_faces), so "
+                      f"{100 * locked_share:.2g} % of its vertices stayed locked at part borders", stacklevel=stacklevel)
+    if stop != "target":
+        warnings.warn(f"partition: stopped at {len(F)} faces, above the target {target} ({'; '.join(msgs) or stop})",
+                      stacklevel=stacklevel)
+    empty = np.zeros(0, np.int64)
+    return SimplifyResult(vertices=V, faces=np.asarray(F, np.int64), vertex_error=np.full(len(V), np.nan),
+                          max_error=float("nan"), source_vertices=empty, source_faces=empty,
+                          input_vertices=np.zeros((0, 3)), input_faces=np.zeros((0, 3), np.int64),
+                          history=Contractions(np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)),
+                          stats=stats, stop_reason=stop)

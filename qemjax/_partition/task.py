@@ -1,0 +1,126 @@
+"""The two tasks of a partitioned run, as a worker runs them: simplify a group of pieces with the vertices
+it shares with other groups locked (`run_group`), and measure a level-0 part's distance from the output
+(`measure_part`). Each reads its inputs from the scratch folder and writes its output there (whole or not at
+all), so a task run twice (a retry, a resumed run) gives the same file. Importing this module is light (JAX
+and numba are imported by the tasks)."""
+from __future__ import annotations
+
+import json
+import os
+import resource
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from . import pieces
+
+# on histograms of the distances, the percentiles: log-spaced bins over the unit frame's extent
+HIST_LO, HIST_HI, HIST_BINS = -13.0, 1.0, 4096
+
+
+def peak_rss() -> int:
+    """This process's peak resident memory so far, bytes."""
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+def _done(out: Path) -> dict | None:
+    """The stats of a task whose output is already written (a retry or a resumed run), else None."""
+    meta = out.with_suffix(".json")
+    if out.exists() and meta.exists():
+        return json.loads(meta.read_text()) | {"reused": True}
+    return None
+
+
+def _gids_out(res, V, gid, locked) -> np.ndarray:
+    """Each output vertex's global id: a locked vertex keeps its own (it is where it was, bit for bit), any
+    other gets -1 (no other group holds it)."""
+    src = np.asarray(res.source_vertices)
+    if len(res.input_vertices) == len(V) and np.array_equal(res.input_vertices, V):
+        return np.where(locked[src], gid[src], -1)
+    # the run welded coincident vertices: find the locked ones by their position
+    lv = np.ascontiguousarray(V[locked]).view(np.dtype((np.void, 24))).ravel()
+    order = np.argsort(lv, kind="stable")
+    ov = np.ascontiguousarray(res.vertices).view(np.dtype((np.void, 24))).ravel()
+    at = np.clip(np.searchsorted(lv[order], ov), 0, max(len(lv) - 1, 0))
+    hit = (lv[order][at] == ov) if len(lv) else np.zeros(len(ov), bool)
+    return np.where(hit, gid[locked][order][at], -1)
+
+
+def run_group(spec: dict) -> dict:
+    """Simplify the pieces ``spec["inputs"]`` stitched into one mesh to ``spec["target"]`` faces, locking the
+    vertices whose global ids are in ``spec["locks"]`` (a sorted ``.npy`` of this level) or, on the first
+    level, those marked ``border``; write ``spec["out"]`` and its stats beside it (``.json``)."""
+    out = Path(spec["out"])
+    done = _done(out)
+    if done is not None:
+        return done
+    t0 = time.perf_counter()
+    from .._pipeline.api import simplify  # JAX and numba: only in the worker
+
+    V, F, gid, border = pieces.stitch(spec["inputs"])
+    if spec["locks"] == "border":
+        locked = border
+    elif spec["locks"] is None:
+        locked = np.zeros(len(V), bool)
+    else:
+        locks = np.load(spec["locks"])
+        locked = (gid >= 0) & np.isin(gid, locks, assume_unique=False)
+    kw = dict(spec["kwargs"])
+    if locked.any():
+        kw["locked"] = locked
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = simplify((V, F), target_faces=int(spec["target"]), measure=False, progress=False,
+                       attributes=None, **kw)
+    g = _gids_out(res, V, gid, locked)
+    held = np.unique(g[g >= 0])
+    pieces.save(out, V=res.vertices, F=res.faces.astype(np.int32), gid=g, borders=held)
+    stats = dict(faces_in=int(len(F)), faces_out=int(len(res.faces)), target=int(spec["target"]),
+                 locked=int(locked.sum()), vertices_in=int(len(V)), stop_reason=res.stop_reason,
+                 seconds=time.perf_counter() - t0, compile_s=float(res.stats.get("compile_s") or 0.0),
+                 peak_rss=peak_rss(), pid=os.getpid(),
+                 warnings=sorted({str(w.message) for w in caught}))
+    pieces.save_json(out.with_suffix(".json"), stats)
+    return stats
+
+
+def _crop(X: np.ndarray, G: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The faces of G whose bounding boxes meet the box [lo, hi]."""
+    T = X[G]
+    return np.flatnonzero(np.all(T.min(1) <= hi, axis=1) & np.all(T.max(1) >= lo, axis=1))
+
+
+def measure_part(spec: dict) -> dict:
+    """The distances of a level-0 part's samples (every vertex, a third of its faces' area each, and every
+    face centroid, its area: `_pipeline.refit.samples` before scaling, so that the weights of a vertex two
+    parts hold add up to its weight in the whole) from the output ``spec["final"]``, exactly: the output is
+    cropped to the part's box grown by a margin, and searched whole where a distance exceeds the margin.
+    Returns the maximum, the weighted sum of squares, the total weight and a weighted histogram."""
+    from .._mesh.grid_nearest import nearest
+    from .._pipeline.refit import _sample_rows
+
+    V, F, _, _ = pieces.load(spec["part"])
+    with np.load(spec["final"]) as z:
+        X, G = z["V"], z["F"].astype(np.int64)
+    centre, unit = np.asarray(spec["centre"]), float(spec["unit"])
+    P, w, _ = _sample_rows((V - centre) / unit, F, np.zeros(len(V), np.int64))
+    keep = w > 0
+    P, w = P[keep], w[keep]
+    Xu = (X - centre) / unit
+    lo, hi = P.min(0), P.max(0)
+    margin = 0.02
+    while True:
+        sel = _crop(Xu, G, lo - margin, hi + margin) if margin < np.inf else np.arange(len(G))
+        if len(sel):
+            _, d = nearest(Xu, G[sel], P)
+            if d.max() <= margin:
+                break
+        if margin == np.inf:
+            break
+        margin = np.inf if len(sel) == len(G) else max(2 * float(d.max()) if len(sel) else 0.0, 4 * margin)
+    edges = np.logspace(HIST_LO, HIST_HI, HIST_BINS + 1)
+    hist = np.bincount(np.clip(np.searchsorted(edges, d), 0, HIST_BINS), weights=w, minlength=HIST_BINS + 1)
+    return dict(max=float(d.max()) * unit, sum_sq=float(np.sum(w * d * d)) * unit * unit, weight=float(w.sum()),
+                hist=hist.tolist(), samples=int(len(P)), peak_rss=peak_rss())

@@ -1,0 +1,53 @@
+"""A local worker process (``python -m qemjax._partition.worker``): reads tasks from stdin and writes their
+results to stdout, each a length-prefixed pickle. Started as a fresh interpreter, not through
+multiprocessing, so that a user's script needs no ``if __name__ == "__main__"`` guard and a worker's death
+is an end of file the pool sees at once."""
+from __future__ import annotations
+
+import os
+import pickle
+import struct
+import sys
+import traceback
+
+HEADER = struct.Struct("<Q")
+
+
+def send(stream, obj) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(HEADER.pack(len(data)) + data)
+    stream.flush()
+
+
+def receive(stream):
+    """The next object on ``stream``, or raises EOFError when the other side is gone."""
+    head = stream.read(HEADER.size)
+    if len(head) < HEADER.size:
+        raise EOFError
+    n = HEADER.unpack(head)[0]
+    data = stream.read(n)
+    if len(data) < n:
+        raise EOFError
+    return pickle.loads(data)
+
+
+def main() -> None:
+    # the protocol owns the real stdout; anything a library prints goes to stderr
+    out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    inp = sys.stdin.buffer
+    from . import task
+
+    while True:
+        try:
+            name, spec = receive(inp)
+        except EOFError:
+            return
+        try:
+            send(out, (True, getattr(task, name)(spec)))
+        except Exception as exc:  # the task's error goes back to the client, which raises it there
+            send(out, (False, f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+
+
+if __name__ == "__main__":
+    main()

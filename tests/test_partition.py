@@ -1,0 +1,202 @@
+"""Partitioned simplification (`qemjax._partition`): the plan, the stitch, and whole runs of a 327,680-face
+mesh made in code cut into parts of 20,000 faces, in this process, on two local worker processes and on a
+two-process Dask `LocalCluster`: the exact target, a valid closed mesh with no crack where parts met, the
+same bits everywhere, a resumed run and a run whose worker is killed."""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import Partition, shapes
+from qemjax._partition import execute, pieces, plan
+
+RATIO, PART = 0.02, 20_000
+
+
+def digest(res) -> str:
+    return hashlib.sha256(res.vertices.tobytes() + res.faces.tobytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    m = shapes.bumpy_sphere(7)
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+@pytest.fixture(scope="module")
+def in_process(mesh):
+    return qemjax.simplify(mesh, ratio=RATIO, partition=Partition(part_faces=PART, workers=1))
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory):
+    return tmp_path_factory.mktemp("parts")
+
+
+@pytest.fixture(scope="module")
+def two_workers(mesh, scratch):
+    return qemjax.simplify(mesh, ratio=RATIO, partition=Partition(part_faces=PART, workers=2, scratch=scratch))
+
+
+# --- the plan -------------------------------------------------------------------------------------------------
+def test_shares_sum_to_the_total_in_proportion():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        faces = rng.integers(1, 10_000, rng.integers(1, 40))
+        total = int(rng.integers(1, faces.sum() + 1))
+        s = plan.shares(faces, total)
+        assert s.sum() == total and np.all(s <= faces) and np.all(s >= 0)
+        assert np.all(np.abs(s - faces * total / faces.sum()) < 1 + 1e-9)
+
+
+def test_levels_reduce_until_one_group_meets_the_target():
+    p = Partition(part_faces=100_000)
+    faces, first, levels = np.full(55, 100_000), True, []
+    while True:
+        groups, last = plan.level(faces, 55_000, p, first)
+        assert all(g.faces <= p.part_faces or len(g.members) == 1 for g in groups) or last
+        assert sorted(i for g in groups for i in g.members) == list(range(len(faces)))
+        levels.append(groups)
+        faces, first = np.array([g.target for g in groups]), False
+        if last:
+            break
+    assert len(levels[-1]) == 1 and levels[-1][0].target == 55_000
+    assert [sum(g.target for g in lv) for lv in levels][:2] == [1_375_000, 343_750]
+
+
+def test_a_level_too_large_for_one_process_ends_with_locked_groups():
+    p = Partition(part_faces=10_000, final_faces=50_000)
+    groups, last = plan.level(np.full(20, 10_000), 60_000, p, first=False)
+    assert last and len(groups) > 1 and sum(g.target for g in groups) == 60_000
+
+
+def test_stitch_merges_shared_ids_and_refuses_a_moved_one(tmp_path):
+    V = np.random.default_rng(1).random((5, 3))
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    pieces.save(a, V=V[[0, 1, 2]], F=np.array([[0, 1, 2]], np.int32), gid=np.array([10, 11, -1]))
+    pieces.save(b, V=V[[1, 0, 3]], F=np.array([[0, 1, 2]], np.int32), gid=np.array([11, 10, -1]))
+    W, F, gid, _ = pieces.stitch([a, b])
+    assert len(W) == 4 and np.array_equal(W[F[1]], V[[1, 0, 3]]) and list(gid) == [10, 11, -1, -1]
+    pieces.save(b, V=V[[4, 0, 3]], F=np.array([[0, 1, 2]], np.int32), gid=np.array([11, 10, -1]))
+    with pytest.raises(RuntimeError, match="moved"):
+        pieces.stitch([a, b])
+
+
+def test_partition_settings_are_checked():
+    with pytest.raises(ValueError, match="part_faces"):
+        Partition(part_faces=10)
+    with pytest.raises(ValueError, match="workers"):
+        Partition(workers=0)
+
+
+# --- whole runs -----------------------------------------------------------------------------------------------
+def closed_and_consistent(F: np.ndarray) -> bool:
+    """Every directed edge once and its reverse once: closed (no crack), manifold, consistently oriented."""
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    key = e[:, 0] * (F.max() + 1) + e[:, 1]
+    rev = e[:, 1] * (F.max() + 1) + e[:, 0]
+    return len(np.unique(key)) == len(key) and np.array_equal(np.sort(key), np.sort(rev))
+
+
+def test_target_exact_valid_closed_and_measured(mesh, in_process):
+    V, F = mesh
+    r = in_process
+    target = round(RATIO * len(F))
+    assert len(r.faces) == target and r.stop_reason == "target"
+    G = r.faces
+    assert G.min() >= 0 and G.max() < len(r.vertices) and len(np.unique(G)) == len(r.vertices)
+    assert np.all((G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2]))
+    assert len(np.unique(np.sort(G, 1), axis=0)) == len(G)
+    assert closed_and_consistent(G)  # a border vertex is one vertex: no crack where parts met
+    # a single vertex per position (parts never duplicate one) and the orientation of the input (volume > 0)
+    assert len(np.unique(r.vertices, axis=0)) == len(r.vertices)
+    T = r.vertices[G]
+    assert np.einsum("ij,ij->i", T[:, 0], np.cross(T[:, 1], T[:, 2])).sum() > 0
+    part = r.stats["partition"]
+    assert part["parts"] >= 16 and part["levels"] >= 2 and part["locked_share"] == 0.0
+    assert part["faces_per_level"][-1] == target and part["locked_per_level"][0] > 0
+    # the distance the run measured part by part is the one the in-core measure gives for the whole input
+    from qemjax._pipeline.measure import distance
+    d = distance(V, F, r.vertices, r.faces)
+    assert r.stats["distance_max"] == pytest.approx(d["distance_max"], rel=1e-6)
+    assert r.stats["distance_rms"] == pytest.approx(d["distance_rms"], rel=1e-6)
+    assert d["distance_p95"] <= r.stats["distance_p95"] <= 1.01 * d["distance_p95"]
+
+
+def test_quality_near_the_in_core_run(mesh, in_process):
+    whole = qemjax.simplify(mesh, ratio=RATIO)
+    assert in_process.stats["distance_rms"] <= 1.1 * whole.stats["distance_rms"]
+    assert in_process.stats["distance_max"] <= 1.5 * whole.stats["distance_max"]
+
+
+def test_same_bits_on_two_local_workers(in_process, two_workers):
+    assert digest(two_workers) == digest(in_process)
+    assert two_workers.stats["partition"]["where"] == "2 local processes"
+
+
+def test_resumed_run_reuses_the_parts_written(mesh, scratch, two_workers):
+    for path in (scratch / "level2").glob("group_0000[0-1].*"):
+        path.unlink()
+    again = qemjax.simplify(mesh, ratio=RATIO, partition=Partition(part_faces=PART, workers=2, scratch=scratch))
+    assert digest(again) == digest(two_workers)
+    first = two_workers.stats["partition"]
+    assert again.stats["partition"]["reused"] == sum(first["groups_per_level"]) - 2
+
+
+def test_other_inputs_or_settings_start_afresh(tmp_path):
+    from qemjax._partition.run import _fresh
+
+    (tmp_path / "level1").mkdir()
+    (tmp_path / "level1" / "group_00000.npz").write_bytes(b"x")
+    _fresh(tmp_path, {"input": "a", "target": 1})
+    assert not (tmp_path / "level1").exists()  # no key yet: whatever is there is not trusted
+    (tmp_path / "level1").mkdir()
+    _fresh(tmp_path, {"input": "a", "target": 1})
+    assert (tmp_path / "level1").exists()  # the same key: resumed
+    _fresh(tmp_path, {"input": "a", "target": 2})
+    assert not (tmp_path / "level1").exists()
+
+
+def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tmp_path):
+    runners = []
+    original = execute.open_runner
+    monkeypatch.setattr(execute, "open_runner", lambda p: runners.append(original(p)) or runners[-1])
+
+    def kill_one():
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # the first worker, once it has written a part
+            if runners and runners[0].procs[0] is not None and list((tmp_path / "level1").glob("*.npz")):
+                runners[0].procs[0].kill()
+                return
+            time.sleep(0.05)
+
+    killer = threading.Thread(target=kill_one)
+    killer.start()
+    r = qemjax.simplify(mesh, ratio=RATIO, partition=Partition(part_faces=PART, workers=2, scratch=tmp_path))
+    killer.join()
+    assert runners[0].procs[0].returncode is not None  # it was killed (and a new one started in its place)
+    assert digest(r) == digest(in_process)
+
+
+def test_same_bits_on_a_dask_local_cluster(mesh, in_process):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+            distributed.Client(cl) as client:
+        r = qemjax.simplify(mesh, ratio=RATIO, partition=Partition(part_faces=PART, client=client))
+    assert digest(r) == digest(in_process) and r.stats["partition"]["where"] == "dask"
+
+
+def test_what_a_partitioned_run_does_not_offer(mesh):
+    with pytest.raises(ValueError, match="max_error"):
+        qemjax.simplify(mesh, ratio=0.1, max_error=1.0, partition=True)
+    with pytest.raises(ValueError, match="locked"):
+        qemjax.simplify(mesh, ratio=0.1, locked=[0], partition=True)
+    with pytest.raises(ValueError, match="positions only"):
+        qemjax.simplify(mesh, ratio=0.1, attributes="uv", partition=True)
