@@ -117,21 +117,19 @@ def test_binary_ply_with_other_properties(tmp_path, order):
 
 
 def test_polygons_are_fanned(tmp_path):
-    """Binary PLY of quads and triangles (streamed, not mapped), ASCII PLY with an extra element."""
+    """Binary PLY of quads and triangles (streamed, not mapped: from the start when the first face is a
+    quad, else once a quad is met), ASCII PLY with an extra element."""
     V, Q, T = _torus_quads()
-    fd = np.dtype([("n", "u1"), ("i", "<i4", (4,))])
-    f = np.zeros(len(Q) - 100, fd)
-    f["n"], f["i"] = 4, Q[100:]
-    tail = np.zeros(100, [("n", "u1"), ("i", "<i4", (3,))])
-    tail["n"], tail["i"] = 3, T.reshape(2, -1, 3)[0][:100]  # quads 0..99 as their two triangles
-    tail2 = np.zeros(100, [("n", "u1"), ("i", "<i4", (3,))])
-    tail2["n"], tail2["i"] = 3, T.reshape(2, -1, 3)[1][:100]
+    quads = np.zeros(len(Q) - 100, [("n", "u1"), ("i", "<i4", (4,))])
+    quads["n"], quads["i"] = 4, Q[100:]
+    tris = np.zeros(200, [("n", "u1"), ("i", "<i4", (3,))])
+    tris["n"], tris["i"] = 3, T.reshape(2, -1, 3)[:, :100].reshape(-1, 3)  # quads 0..99 as triangles
     header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(V)}\nproperty double x\n"
-              f"property double y\nproperty double z\nelement face {len(f) + 200}\n"
+              f"property double y\nproperty double z\nelement face {len(quads) + 200}\n"
               "property list uchar int vertex_index\nend_header\n")
-    path = tmp_path / "q.ply"
-    _write_ply_records(path, header, V, f.tobytes() + tail.tobytes() + tail2.tobytes())
-    _check(path, 1000, V, T, welded=False, chunk_faces=999)
+    for name, data in (("q.ply", quads.tobytes() + tris.tobytes()), ("t.ply", tris.tobytes() + quads.tobytes())):
+        _write_ply_records(tmp_path / name, header, V, data)
+        _check(tmp_path / name, 1000, V, T, welded=False, chunk_faces=999)
 
     lines = [f"{x!r} {y!r} {z!r} 1 2" for x, y, z in V.tolist()]
     faces = [f"4 {a} {b} {c} {d} 0.5" for a, b, c, d in Q.tolist()]
@@ -144,6 +142,21 @@ def test_polygons_are_fanned(tmp_path):
     path.write_text(text)
     manifest, _, _ = _check(path, 1000, V, T, welded=False)
     assert manifest["format"] == "ply"
+
+
+def test_ply_elements_in_any_order(tmp_path):
+    """A list element before the faces, the faces before the vertices, an element after them."""
+    V, F = shapes.icosphere(3)
+    extra = b"\x02" + np.float32([1, 2]).tobytes() + b"\x00"
+    rec = np.zeros(len(F), [("n", "u1"), ("i", "<i4", (3,))])
+    rec["n"], rec["i"] = 3, F
+    header = ("ply\nformat binary_little_endian 1.0\nelement extra 2\nproperty list uchar float values\n"
+              f"element face {len(F)}\nproperty list uchar int vertex_indices\nelement vertex {len(V)}\n"
+              "property double x\nproperty double y\nproperty double z\nelement tail 1\nproperty int k\n"
+              "end_header\n")
+    path = tmp_path / "o.ply"
+    path.write_bytes(header.encode() + extra + rec.tobytes() + V.tobytes() + b"\0" * 4)
+    _check(path, 300, V, F, welded=False)
 
 
 def test_obj_corner_forms_negative_indices_and_welding(tmp_path):
@@ -195,6 +208,36 @@ def test_same_bytes_whatever_the_chunk(tmp_path):
         manifest = scatter(path, scratch, 1500, chunk_faces=chunk)
         files.append([(scratch / p["file"]).read_bytes() for p in manifest["parts"]])
     assert files[0] == files[1] == files[2] and len(files[0]) > 10
+
+
+def test_same_bytes_whatever_the_read_size(tmp_path, monkeypatch):
+    """Text read in blocks of a few lines and a polygon PLY streamed in small reads give the same parts:
+    lines, rows and face records cut at block ends are carried over."""
+    from qemjax._partition import ply, text
+
+    V, Q, T = _torus_quads()
+    tm = trimesh.Trimesh(V, T, process=False)
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in V.tolist()] + ["vn 0 0 1"]
+    lines += ["f " + " ".join(f"{v + 1}//1" for v in quad) for quad in Q.tolist()]
+    (tmp_path / "t.obj").write_text("\n".join(lines))  # no newline at the end
+    tm.export(tmp_path / "a.stl", file_type="stl_ascii")
+    tm.export(tmp_path / "a.ply", encoding="ascii")
+    rec = np.zeros(len(Q), [("n", "u1"), ("i", "<i4", (4,))])
+    rec["n"], rec["i"] = 4, Q
+    _write_ply_records(tmp_path / "q.ply", f"ply\nformat binary_little_endian 1.0\nelement vertex {len(V)}\n"
+                       "property double x\nproperty double y\nproperty double z\n"
+                       f"element face {len(Q)}\nproperty list uchar int vertex_indices\nend_header\n",
+                       V, rec.tobytes())
+    for name in ("t.obj", "a.stl", "a.ply", "q.ply"):
+        seen = []
+        for size in (1 << 24, 1000):
+            monkeypatch.setattr(text, "BLOCK", size)
+            monkeypatch.setattr(ply, "_STREAM_BYTES", size)
+            scratch = tmp_path / f"{name}.{size}"
+            manifest = scatter(tmp_path / name, scratch, 500)
+            seen.append([(scratch / p["file"]).read_bytes() for p in manifest["parts"]])
+            assert manifest["n_faces"] == len(T) and manifest["n_vertices"] == len(V), name
+        assert seen[0] == seen[1], name
 
 
 def test_coincident_centroids_are_split_in_input_order(tmp_path):

@@ -131,11 +131,12 @@ def _stream(path: Path, at: int, e: _ply.Element, layout, out: Appender | None) 
 
 
 def _offsets(path: Path, h: _ply.Header, order: str, size: int) -> dict:
-    """Byte offset of each element up to the face element (list elements before it streamed over)."""
+    """Byte offsets of the elements up to the later of vertex and face (list elements before it
+    streamed over)."""
     at, where = h.body, {}
     for e in h.elements:
         where[e.name] = at
-        if e.name == "face":
+        if "vertex" in where and "face" in where:
             break
         if all(p.count is None for p in e.props):
             at += e.rows * sum(_ply.type_size(p.type) for p in e.props)

@@ -16,6 +16,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from .plan import Bins, Plan, codes, quantize
 from .readers import open_source
@@ -73,12 +74,19 @@ def _histogram(src: Source, cells, part_faces: int, step: int, name: str) -> Bin
     return bins
 
 
-def _note_owner(owner: np.ndarray, v: np.ndarray, p: np.ndarray) -> None:
-    """Records that parts p use vertices v: a vertex's first part, or SHARED once a second one uses it."""
-    fresh = owner[v] == UNSEEN
-    owner[v[fresh]] = p[fresh]
-    now = owner[v]
-    owner[v[now != p]] = SHARED
+@njit(cache=True)
+def _note_owner(owner, F, part):
+    """Records that faces F of parts ``part`` use their vertices: a vertex's first part, or SHARED once a
+    second one uses it (the same whatever the order of the records)."""
+    for f in range(len(F)):
+        p = part[f]
+        for c in range(3):
+            v = F[f, c]
+            o = owner[v]
+            if o == UNSEEN:
+                owner[v] = p
+            elif o != p:
+                owner[v] = SHARED
 
 
 def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progress) -> np.ndarray:
@@ -87,7 +95,7 @@ def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progr
     for a, b in _spans(src.n_faces, step):
         F = src.faces(a, b)
         part = plan.assign(codes(cells, F)).astype(np.int32)
-        _note_owner(owner, F.ravel(), np.repeat(part, 3))
+        _note_owner(owner, F, part)
         order = np.argsort(part, kind="stable")
         sorted_part = part[order]
         cuts = np.flatnonzero(np.diff(sorted_part)) + 1
@@ -118,6 +126,7 @@ def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path,
 
 def _prepare(scratch: Path) -> tuple[Path, Path]:
     level, tmp = scratch / "level0", scratch / "tmp"
+    remove(scratch / "manifest.json")  # a failed run leaves no manifest of an earlier one's parts
     for old in level.glob("part_*.npz") if level.exists() else ():
         old.unlink()
     shutil.rmtree(tmp, ignore_errors=True)

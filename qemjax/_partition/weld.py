@@ -44,6 +44,8 @@ def _hash(bits: np.ndarray) -> np.ndarray:
 def _spread(path_of, keys: np.ndarray, rows: np.ndarray, files: dict) -> None:
     """Appends each row to the file of its key (files opened on first use, kept in ``files``), rows of
     one key keeping their order."""
+    if len(keys) == 0:
+        return
     order = np.argsort(keys, kind="stable")
     k = keys[order]
     cuts = np.flatnonzero(np.diff(k)) + 1
