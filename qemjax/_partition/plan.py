@@ -26,7 +26,9 @@ def quantize(V: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Packed cells (x | y << 21 | z << 42) of float64 (n,3) positions in the box lo..hi."""
     span = hi - lo
     scale = np.divide(float(_MASK), span, out=np.zeros(3), where=span > 0)
-    q = np.clip(np.floor((V - lo) * scale), 0, float(_MASK)).astype(np.uint64)
+    with np.errstate(invalid="ignore"):  # a non-finite vertex gets some cell: it is refused if a face uses it
+        cell = np.nan_to_num((V - lo) * scale, nan=0.0, posinf=_MASK, neginf=0.0)
+    q = np.clip(np.floor(cell), 0, _MASK).astype(np.uint64)
     return q[:, 0] | q[:, 1] << np.uint64(BITS) | q[:, 2] << np.uint64(2 * BITS)
 
 

@@ -31,17 +31,13 @@ def _spans(n: int, step: int):
         yield lo, min(lo + step, n)
 
 
-def _bounds(src: Source, step: int, name: str, keep: np.ndarray | None = None):
-    """The bounding box of the vertices (those ``keep`` marks, when given); non-finite ones refused."""
+def _bounds(src: Source, step: int, keep: np.ndarray | None = None):
+    """The bounding box of the vertices with finite coordinates (of those ``keep`` marks, when given):
+    a non-finite vertex is refused only if a face uses it (`_write_parts`)."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for a, b in _spans(src.n_vertices, step):
         V = src.vertices(a, b)
-        if keep is not None:
-            V = V[keep[a:b]]
-        bad = ~np.isfinite(V).all(1)
-        if bad.any():
-            raise ValueError(f"{name}: vertex {a + int(np.flatnonzero(bad)[0])} has a coordinate that is not a "
-                             "finite number")
+        V = V[np.isfinite(V).all(1) if keep is None else keep[a:b] & np.isfinite(V).all(1)]
         if len(V):
             lo, hi = np.minimum(lo, V.min(0)), np.maximum(hi, V.max(0))
     return lo, hi
@@ -108,7 +104,7 @@ def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progr
     return owner
 
 
-def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type) -> list:
+def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str) -> list:
     parts = []
     for p in range(plan.parts):
         raw = np.fromfile(tmp / f"{p}.bin", index_type)
@@ -116,10 +112,13 @@ def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path,
         used, inverse = np.unique(raw, return_inverse=True)
         gid = (used if new_id is None else new_id[used]).astype(np.int64)
         border = owner[used] == SHARED
-        name = f"part_{p:05d}.npz"
-        write_npz(level / name, gid=gid, V=src.gather(used), F=inverse.reshape(-1, 3).astype(np.int32),
-                  border=border)
-        parts.append({"file": f"level0/{name}", "faces": len(raw) // 3, "vertices": len(used),
+        V = src.gather(used)
+        bad = ~np.isfinite(V).all(1)
+        if bad.any():
+            raise ValueError(f"{name}: vertex {used[bad][0]} has a coordinate that is not a finite number")
+        file = f"part_{p:05d}.npz"
+        write_npz(level / file, gid=gid, V=V, F=inverse.reshape(-1, 3).astype(np.int32), border=border)
+        parts.append({"file": f"level0/{file}", "faces": len(raw) // 3, "vertices": len(used),
                       "border": int(border.sum())})
     return parts
 
@@ -141,7 +140,7 @@ def _read(path, scratch: Path, part_faces: int, step: int, name: str):
     src = open_source(path, scratch)
     if src.n_faces == 0:
         raise ValueError(f"{name}: the mesh has no faces")
-    box = _bounds(src, step, name)
+    box = _bounds(src, step)
     cells = _cells(src, *box, step)
     try:
         return src, box, cells, _histogram(src, cells, part_faces, step, name)
@@ -179,9 +178,9 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
         new_id = None
         if n_kept < src.n_vertices:  # unused vertices: the others renumbered in order
             new_id = np.cumsum(kept, dtype=index_type) - 1
-            lo, hi = _bounds(src, step, name, kept)
+            lo, hi = _bounds(src, step, kept)
         del kept
-        parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type)
+        parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name)
         manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": src.n_faces,
                     "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts}
     finally:

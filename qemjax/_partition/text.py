@@ -91,8 +91,8 @@ def _finish_weld(welder: Welder, scratch: Path, fmt: str, raw: Appender | None, 
         out = Appender(scratch / FACES)
         step = BLOCK // 24
         for lo in range(0, raw.rows, step):
-            out.add(mapping[rows(raw.path, np.dtype(np.int64), 0, 3 * lo, 3 * min(lo + step, raw.rows))]
-                    .astype(np.int64))
+            flat = rows(raw.path, np.dtype(np.int64), 0, 3 * lo, 3 * min(lo + step, raw.rows))
+            out.add(mapping[flat].astype(np.int64).reshape(-1, 3))
         out.close()
         remove(raw.path)
     remove(ids)
