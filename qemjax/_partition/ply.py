@@ -1,7 +1,7 @@
 """Binary PLY as a `Source`: the vertex block and, when every face is a triangle, the face block mapped as
 fixed-size records; other face blocks are streamed once (`_walk`, compiled) into scratch triangles.
 
-The header is parsed by `qemjax._io.ply.parse_header`. ASCII PLY goes to `text.read_ascii_ply`.
+The header is parsed by `qemjax._io.ply.parse_header`; ASCII PLY is read by `text.read_ascii_ply`.
 """
 from __future__ import annotations
 
@@ -207,14 +207,3 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
             return Source("ply", False, vblock, Block(path, at["face"], fixed[0], face.rows), xyz, fixed[1],
                           retriangulate)
     return retriangulate()
-
-
-def read(path: Path, scratch: Path) -> Source:
-    h = header(path)
-    if h.format == "ascii":
-        from .text import read_ascii_ply
-        return read_ascii_ply(path, h, scratch)
-    return read_binary(path, h, scratch)
-
-
-__all__ = ["read", "Ragged", "scratch_source"]

@@ -55,7 +55,8 @@ def open_source(path, scratch: Path) -> Source:
             raise ValueError(f"{name}: not a mesh file this reader knows (PLY, OBJ or STL)")
     try:
         if fmt == "ply":
-            return ply.read(path, scratch)
+            h = ply.header(path)
+            return text.read_ascii_ply(path, h, scratch) if h.format == "ascii" else ply.read_binary(path, h, scratch)
         if fmt == "stl":
             return _stl(path, scratch)
         return text.read_obj(path, scratch)
