@@ -26,7 +26,12 @@ def _torus_quads():
     V, F = shapes.torus(n_major=60, n_minor=30)
     T = F.reshape(2, -1, 3)
     Q = np.concatenate([T[0], T[1][:, 2:]], 1)  # (i0,i1,i2) + (i0,i2,i3) -> (i0,i1,i2,i3)
-    return V, Q, F
+    return V, Q, _fans(Q)
+
+
+def _fans(Q):
+    """The triangles of polygons (k,n) fanned from their first corner, in order."""
+    return np.stack([Q[:, [0, j, j + 1]] for j in range(1, Q.shape[1] - 1)], 1).reshape(-1, 3)
 
 
 def _reference(P, F):
@@ -77,6 +82,10 @@ def _check(path, part_faces, P, F, welded, **kw):
     assert np.array_equal(_rows(Fg), _rows(Fr))
     assert np.allclose(manifest["bbox"], [Vr.min(0), Vr.max(0)])
     assert all(len(p["F"]) <= part_faces for p in parts)
+    where = {tuple(f): k for k, f in enumerate(Fr.tolist())}
+    if len(where) == len(Fr):  # faces all different: each part holds them in input order
+        for p in parts:
+            assert np.all(np.diff([where[tuple(f)] for f in p["gid"][p["F"]].tolist()]) > 0)
     count = np.bincount(np.concatenate([p["gid"] for p in parts]), minlength=len(V))
     for p in parts:
         assert np.array_equal(p["border"], count[p["gid"]] >= 2)
@@ -123,13 +132,14 @@ def test_polygons_are_fanned(tmp_path):
     quads = np.zeros(len(Q) - 100, [("n", "u1"), ("i", "<i4", (4,))])
     quads["n"], quads["i"] = 4, Q[100:]
     tris = np.zeros(200, [("n", "u1"), ("i", "<i4", (3,))])
-    tris["n"], tris["i"] = 3, T.reshape(2, -1, 3)[:, :100].reshape(-1, 3)  # quads 0..99 as triangles
+    tris["n"], tris["i"] = 3, T[:200]  # quads 0..99 as triangles
     header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(V)}\nproperty double x\n"
               f"property double y\nproperty double z\nelement face {len(quads) + 200}\n"
               "property list uchar int vertex_index\nend_header\n")
-    for name, data in (("q.ply", quads.tobytes() + tris.tobytes()), ("t.ply", tris.tobytes() + quads.tobytes())):
+    for name, data, order in (("q.ply", quads.tobytes() + tris.tobytes(), np.r_[200:len(T), :200]),
+                              ("t.ply", tris.tobytes() + quads.tobytes(), np.arange(len(T)))):
         _write_ply_records(tmp_path / name, header, V, data)
-        _check(tmp_path / name, 1000, V, T, welded=False, chunk_faces=999)
+        _check(tmp_path / name, 1000, V, T[order], welded=False, chunk_faces=999)
 
     lines = [f"{x!r} {y!r} {z!r} 1 2" for x, y, z in V.tolist()]
     faces = [f"4 {a} {b} {c} {d} 0.5" for a, b, c, d in Q.tolist()]
@@ -294,3 +304,18 @@ def test_truncated_binary_ply(tmp_path):
     bad.write_bytes(bytes(data))
     with pytest.raises(ValueError, match=f"uses vertex {len(V) + 5}, but the file has {len(V)} vertices"):
         scatter(bad, tmp_path / "s", 1000)
+
+
+def test_write_binary_ply_in_chunks(tmp_path):
+    """Chunks from generators, counts not given (written in afterwards), big-endian: trimesh and scatter
+    read back the same mesh."""
+    V, F = _mesh()
+    path = tmp_path / "w.ply"
+    counts = write_binary_ply(path, (V[i:i + 1000] for i in range(0, len(V), 1000)),
+                              (F[i:i + 3000] for i in range(0, len(F), 3000)), big_endian=True)
+    assert counts == (len(V), len(F))
+    back = trimesh.load(path, process=False)
+    assert np.array_equal(back.vertices, V) and np.array_equal(back.faces, F)
+    _check(path, 5000, V, F, welded=False)
+    with pytest.raises(ValueError, match="outside"):
+        write_binary_ply(tmp_path / "x.ply", V, F + len(V))
