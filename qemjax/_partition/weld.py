@@ -5,9 +5,10 @@ numbered by first appearance, so that the result does not depend on how the inpu
 
 1. each position goes, with its number, to one of B bucket files by a hash of its bits (equal values
    meet in one bucket, in number order);
-2. a bucket is grouped by value (a stable sort): a group's first number is the value's first
-   appearance; that number is marked in a bitmap over all numbers, each position's (number, first) pair
-   goes to the range file of its number, each value's (first, bits) to the range file of its first;
+2. a bucket is grouped by value (a hash table of first rows, filled in number order): a value's first
+   number is its first appearance; that number is marked in a bitmap over all numbers, each position's
+   (number, first) pair goes to the range file of its number, each value's (first, bits) to the range
+   file of its first;
 3. ranges in order: a value's id is the rank of its first appearance among all first appearances (the
    bitmap's count below it), written for every number of the range in order (the map), and the values
    first seen in the range are written out in that order (the welded vertices).
@@ -19,13 +20,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from .source import Appender, remove
 
 BUCKET = np.dtype([("p", "<u8", (3,)), ("i", "<i8")])
 PAIR = np.dtype([("i", "<i8"), ("g", "<i8")])
 VALUE = np.dtype([("g", "<i8"), ("p", "<u8", (3,))])
-RANGE = 1 << 22  # numbers per range file
+RANGE = 1 << 21  # numbers per range file
 _BUCKET_ROWS = 1 << 21
 _MAX_FILES = 256
 
@@ -46,14 +48,28 @@ def _spread(path_of, keys: np.ndarray, rows: np.ndarray, files: dict) -> None:
     one key keeping their order."""
     if len(keys) == 0:
         return
-    order = np.argsort(keys, kind="stable")
-    k = keys[order]
-    cuts = np.flatnonzero(np.diff(k)) + 1
-    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(k)]):
-        key = int(k[lo])
+    order, starts = _counting_order(keys.astype(np.int64), int(keys.max()) + 1)
+    words = rows.view(np.uint64).reshape(len(rows), -1).take(order, axis=0)  # records are whole words
+    for key in np.flatnonzero(np.diff(starts)):
         if key not in files:
             files[key] = open(path_of(key), "ab")
-        files[key].write(rows[order[lo:hi]].tobytes())
+        files[key].write(words[starts[key]:starts[key + 1]].tobytes())
+
+
+@njit(cache=True)
+def _counting_order(keys, n):
+    """A stable order of rows by small integer keys, and where each key's rows start in it."""
+    starts = np.zeros(n + 1, np.int64)
+    for k in keys:
+        starts[k + 1] += 1
+    for k in range(n):
+        starts[k + 1] += starts[k]
+    at = starts[:-1].copy()
+    order = np.empty(len(keys), np.int64)
+    for i in range(len(keys)):
+        order[at[keys[i]]] = i
+        at[keys[i]] += 1
+    return order, starts
 
 
 def _close(files: dict) -> None:
@@ -112,33 +128,69 @@ class Welder:
             return
         rows = np.fromfile(path, BUCKET)
         remove(path)
-        p = rows["p"]
-        order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))  # stable: numbers ascend within a value
-        p, num = p[order], rows["i"][order]
-        new = np.ones(len(p), bool)
-        new[1:] = np.any(p[1:] != p[:-1], axis=1)
-        starts = np.flatnonzero(new)
-        first = num[starts]
-        np.bitwise_or.at(words, first >> 6, np.left_shift(np.uint64(1), (first & 63).astype(np.uint64)))
-        pair = np.empty(len(p), PAIR)
-        pair["i"], pair["g"] = num, first[np.cumsum(new) - 1]
+        num = rows["i"]
+        first, is_first = _first_seen(np.ascontiguousarray(rows["p"]), num)
+        new = num[is_first]
+        np.bitwise_or.at(words, new >> 6, np.left_shift(np.uint64(1), (new & 63).astype(np.uint64)))
+        pair = np.empty(len(rows), PAIR)
+        pair["i"], pair["g"] = num, first
         _spread(lambda r: self._path("pairs", r), num // RANGE, pair, pairs)
-        value = np.empty(len(starts), VALUE)
-        value["g"], value["p"] = first, p[starts]
-        _spread(lambda r: self._path("values", r), first // RANGE, value, values)
+        value = np.empty(len(new), VALUE)
+        value["g"], value["p"] = new, rows["p"][is_first]
+        _spread(lambda r: self._path("values", r), new // RANGE, value, values)
 
     def _write_range(self, r: int, words, below, ids: Appender, vertices: Appender) -> None:
         pair = np.fromfile(self._path("pairs", r), PAIR)
         remove(self._path("pairs", r))
-        g = pair["g"]
-        w = words[g >> 6]
-        mask = np.left_shift(np.uint64(1), (g & 63).astype(np.uint64)) - np.uint64(1)
-        out = np.empty(len(pair), np.int64)
-        out[pair["i"] - r * RANGE] = below[g >> 6] + np.bitwise_count(w & mask)
-        ids.add(out)
+        ids.add(_ranks(words, below, pair["i"] - r * RANGE, pair["g"]))
         path = self._path("values", r)
         if path.exists():
             value = np.fromfile(path, VALUE)
             remove(path)
             value = value[np.argsort(value["g"])]
             vertices.add(value["p"].view(np.float64))
+
+
+@njit(cache=True)
+def _first_seen(p, num):
+    """For rows of bits p (n,3) numbered ``num`` in increasing order: the number of each row's value's
+    first row, and whether the row is that first one (an open-addressing table of first rows)."""
+    n = len(p)
+    cap = 1
+    while cap < 2 * n:
+        cap *= 2
+    table = np.full(cap, -1, np.int64)
+    first = np.empty(n, np.int64)
+    is_first = np.zeros(n, np.bool_)
+    for r in range(n):
+        h = p[r, 0] * np.uint64(0x9E3779B97F4A7C15) ^ p[r, 1] * np.uint64(0xC2B2AE3D27D4EB4F) \
+            ^ p[r, 2] * np.uint64(0x165667B19E3779F9)
+        k = np.int64((h ^ (h >> np.uint64(29))) & np.uint64(cap - 1))
+        while True:
+            s = table[k]
+            if s < 0:
+                table[k], first[r], is_first[r] = r, num[r], True
+                break
+            if p[s, 0] == p[r, 0] and p[s, 1] == p[r, 1] and p[s, 2] == p[r, 2]:
+                first[r] = num[s]
+                break
+            k = (k + 1) & (cap - 1)
+    return first, is_first
+
+
+@njit(cache=True)
+def _ranks(words, below, at, g):
+    """out[at[k]] = the rank of number g[k] among the marked numbers (the bitmap ``words``, with
+    ``below`` marked numbers before each word)."""
+    out = np.empty(len(at), np.int64)
+    one = np.uint64(1)
+    for k in range(len(at)):
+        w = g[k] >> 6
+        mask = (one << np.uint64(g[k] & 63)) - one
+        x = words[w] & mask
+        c = 0
+        while x:  # popcount
+            x &= x - one
+            c += 1
+        out[at[k]] = below[w] + c
+    return out
