@@ -221,9 +221,10 @@ def test_same_bytes_whatever_the_chunk(tmp_path):
 
 
 def test_same_bytes_whatever_the_read_size(tmp_path, monkeypatch):
-    """Text read in blocks of a few lines and a polygon PLY streamed in small reads give the same parts:
-    lines, rows and face records cut at block ends are carried over."""
-    from qemjax._partition import ply, text
+    """Text read in blocks of a few lines, a polygon PLY streamed in small reads, welds over many small
+    buckets and ranges give the same parts: lines, rows and face records cut at block ends are carried
+    over, and ids do not depend on how the weld splits its work."""
+    from qemjax._partition import ply, text, weld
 
     V, Q, T = _torus_quads()
     tm = trimesh.Trimesh(V, T, process=False)
@@ -243,6 +244,8 @@ def test_same_bytes_whatever_the_read_size(tmp_path, monkeypatch):
         for size in (1 << 24, 1000):
             monkeypatch.setattr(text, "BLOCK", size)
             monkeypatch.setattr(ply, "_STREAM_BYTES", size)
+            monkeypatch.setattr(weld, "_BUCKET_ROWS", size)
+            monkeypatch.setattr(weld, "RANGE", size + 24)
             scratch = tmp_path / f"{name}.{size}"
             manifest = scatter(tmp_path / name, scratch, 500)
             seen.append([(scratch / p["file"]).read_bytes() for p in manifest["parts"]])
