@@ -272,7 +272,8 @@ def test_coincident_centroids_are_split_in_input_order(tmp_path):
 @pytest.mark.parametrize("name, data, words", [
     ("missing.ply", None, "no such file"),
     ("notes.ply", b"hello, this is text\n", "not a PLY file"),
-    ("data.bin", bytes(range(256)) * 4, "not a mesh file"),
+    ("data.bin", bytes(range(256)) * 4, "unsupported format: a .bin file"),
+    ("m.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "unsupported format: a .off file"),
     ("nox.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float a\nend_header\n0\n", "x, y and z"),
     ("bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "line 4"),
     ("far.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "vertex 4"),

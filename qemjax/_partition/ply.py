@@ -13,7 +13,7 @@ from numba import njit
 
 from .._io import ply as _ply
 from .scan import _grow
-from .source import Appender, Block, Ragged, Refusal, Source, TRI, FACES, scratch_source
+from .source import FACES, TRI, Appender, Block, Refusal, Source
 
 INDEX_NAMES = ("vertex_indices", "vertex_index")
 _INTS = {"i1", "u1", "i2", "u2", "i4", "u4"}

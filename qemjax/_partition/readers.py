@@ -52,7 +52,8 @@ def open_source(path, scratch: Path) -> Source:
         with open(path, "rb") as f:
             fmt = _sniff(f.read(1 << 12))
         if fmt is None:
-            raise ValueError(f"{name}: not a mesh file this reader knows (PLY, OBJ or STL)")
+            kind = f"a {path.suffix} file" if path.suffix else "a file"
+            raise ValueError(f"{name}: unsupported format: {kind} that is not PLY, OBJ or STL (what is read here)")
     try:
         if fmt == "ply":
             h = ply.header(path)
