@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from .plan import Bins, Plan, codes, quantize
+from .cells import Bins, Plan, codes, quantize
 from .readers import open_source
 from .source import FACES, VERTICES, Ragged, Source, remove
 from .write import replace_atomically, write_npz
