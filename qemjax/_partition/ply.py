@@ -1,0 +1,209 @@
+"""Binary PLY as a `Source`: the vertex block and, when every face is a triangle, the face block mapped as
+fixed-size records; other face blocks are streamed once (`_walk`, compiled) into scratch triangles.
+
+The header is parsed by `qemjax._io.ply.parse_header`; ASCII PLY is read by `text.read_ascii_ply`.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from .._io import ply as _ply
+from .scan import _grow
+from .source import FACES, TRI, Appender, Block, Refusal, Source
+
+INDEX_NAMES = ("vertex_indices", "vertex_index")
+_INTS = {"i1", "u1", "i2", "u2", "i4", "u4"}
+_STREAM_BYTES = 1 << 24
+
+
+def header(path: Path) -> _ply.Header:
+    with open(path, "rb") as f:
+        head = f.read(1 << 20)
+    try:
+        return _ply.parse_header(head)
+    except _ply.PlyError as exc:
+        raise Refusal(str(exc)) from None
+
+
+def _code(t: str) -> str:
+    return _ply.TYPES[t]
+
+
+def _index_prop(face: _ply.Element) -> int:
+    for j, p in enumerate(face.props):
+        if p.name in INDEX_NAMES and p.count is not None:
+            if _code(p.count) not in _INTS or _code(p.type) not in _INTS:
+                raise Refusal(f"the PLY face list {p.name!r} is not made of integers ({p.count} {p.type})")
+            return j
+    raise Refusal("the PLY face element has no vertex_indices list")
+
+
+def _layout(e: _ply.Element, order: str, index: int = -1):
+    """Arrays describing a list element's properties to `_walk`: kind (0 scalar, 1 list), item size,
+    count size, count signed; ``index``: the list of vertex indices (its items' signedness last)."""
+    kinds, sizes, csizes, csigned = (np.zeros(len(e.props), np.int64) for _ in range(4))
+    for j, p in enumerate(e.props):
+        sizes[j] = _ply.type_size(p.type)
+        if p.count is not None:
+            if _code(p.count) not in _INTS:
+                raise Refusal(f"the PLY {e.name} list {p.name!r} has a count of type {p.count}")
+            kinds[j], csizes[j], csigned[j] = 1, _ply.type_size(p.count), _code(p.count)[0] == "i"
+    isigned = index >= 0 and _code(e.props[index].type)[0] == "i"
+    return kinds, sizes, csizes, csigned, index, isigned, order == ">"
+
+
+@njit(cache=True)
+def _int(buf, p, size, signed, big):
+    v = 0
+    for k in range(size):
+        v = (v << 8) | np.int64(buf[p + k] if big else buf[p + size - 1 - k])
+    if signed and v >= np.int64(1) << (8 * size - 1):
+        v -= np.int64(1) << (8 * size)
+    return v
+
+
+@njit(cache=True)
+def _walk(buf, rows, kinds, sizes, csizes, csigned, index, isigned, big):
+    """Whole rows of a list element from the start of ``buf`` (at most ``rows``): (bytes used, rows
+    read, triangles fanned from the ``index`` list, a negative count's row or -1)."""
+    n = len(buf)
+    tris = np.empty((max(16, n // 8), 3), np.int64)
+    nt, pos, done = 0, 0, 0
+    while done < rows:
+        p, nt0, fits = pos, nt, True
+        for j in range(len(kinds)):
+            if kinds[j] == 0:
+                p += sizes[j]
+                continue
+            if p + csizes[j] > n:
+                fits = False
+                break
+            c = _int(buf, p, csizes[j], csigned[j], big)
+            p += csizes[j]
+            if c < 0:
+                return pos, done, tris[:nt], done
+            if p + c * sizes[j] > n:
+                fits = False
+                break
+            if j == index and c >= 3:
+                tris = _grow(tris, nt, c)
+                first = _int(buf, p, sizes[j], isigned, big)
+                prev = _int(buf, p + sizes[j], sizes[j], isigned, big)
+                for k in range(2, c):
+                    cur = _int(buf, p + k * sizes[j], sizes[j], isigned, big)
+                    tris[nt, 0], tris[nt, 1], tris[nt, 2] = first, prev, cur
+                    nt += 1
+                    prev = cur
+            p += c * sizes[j]
+        if not fits or p > n:
+            nt = nt0
+            break
+        pos, done = p, done + 1
+    return pos, done, tris[:nt], -1
+
+
+def _stream(path: Path, at: int, e: _ply.Element, layout, out: Appender | None) -> int:
+    """Reads element ``e``'s rows from byte ``at`` (triangles to ``out`` when given); its end offset."""
+    left, big_row = e.rows, 0
+    with open(path, "rb") as f:
+        f.seek(at)
+        carry = b""
+        while left:
+            data = f.read(max(_STREAM_BYTES, 2 * big_row))
+            buf = np.frombuffer(carry + data, np.uint8)
+            used, done, tris, bad = _walk(buf, left, *layout)
+            if bad >= 0:
+                raise Refusal(f"the PLY {e.name} data holds a list with a negative count: the file is damaged")
+            if done == 0 and not data:
+                raise Refusal(f"truncated binary PLY: the file ends inside its {_ply.rows_name(e)} (the "
+                              f"header declares {e.rows} of them)")
+            if out is not None:
+                out.add(tris)
+            big_row = len(buf) if done == 0 else 0  # a row longer than a read: read more at once
+            left -= done
+            at += used
+            carry = buf[used:].tobytes()
+    return at
+
+
+def _offsets(path: Path, h: _ply.Header, order: str, size: int) -> dict:
+    """Byte offsets of the elements up to the later of vertex and face (list elements before it
+    streamed over)."""
+    at, where = h.body, {}
+    for e in h.elements:
+        where[e.name] = at
+        if "vertex" in where and "face" in where:
+            break
+        if all(p.count is None for p in e.props):
+            at += e.rows * sum(_ply.type_size(p.type) for p in e.props)
+        else:
+            at = _stream(path, at, e, _layout(e, order), None)
+        if at > size:
+            raise Refusal(f"truncated binary PLY: the file ends inside its {_ply.rows_name(e)} (the header "
+                          f"declares {e.rows} of them)")
+    return where
+
+
+def _fixed_dtype(path: Path, at: int, face: _ply.Element, order: str, index: int):
+    """The record dtype of face rows that all look like the first one (lists of its lengths), and the
+    (count field, length) checks; None when the first row is not a triangle."""
+    fields, checks, pos = [], [], at
+    with open(path, "rb") as f:
+        f.seek(at)
+        first = f.read(1 << 16)
+    for j, p in enumerate(face.props):
+        if p.count is None:
+            fields.append((f"p{j}", order + _code(p.type)))
+            pos += _ply.type_size(p.type)
+            continue
+        cs, off = _ply.type_size(p.count), pos - at
+        if off + cs > len(first):
+            return None
+        c = int(np.frombuffer(first, order + _code(p.count), 1, off)[0])
+        if c < 0 or (j == index and c != 3):
+            return None
+        fields.append((f"c{j}", order + _code(p.count)))
+        checks.append((f"c{j}", c))
+        if c:
+            fields.append(("i" if j == index else f"p{j}", order + _code(p.type), (c,)))
+        pos += cs + c * _ply.type_size(p.type)
+    return np.dtype(fields), checks
+
+
+def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
+    order, size = _ply.FORMATS[h.format], os.path.getsize(path)
+    vertex, face = h.element("vertex"), h.element("face")
+    if face is None:
+        raise Refusal("the PLY header declares no face element")
+    if any(p.count is not None for p in vertex.props):
+        raise Refusal("the PLY vertex element has list properties, which are not read")
+    index = _index_prop(face)
+    at = _offsets(path, h, order, size)
+    names = [p.name for p in vertex.props]
+    vdtype = np.dtype([(f"p{j}", order + _code(p.type)) for j, p in enumerate(vertex.props)])
+    xyz = tuple(f"p{names.index(c)}" for c in "xyz")
+    if at["vertex"] + vertex.rows * vdtype.itemsize > size:
+        raise Refusal(f"truncated binary PLY: the file ends inside its vertices (the header declares "
+                      f"{vertex.rows} of them)")
+    vblock = Block(path, at["vertex"], vdtype, vertex.rows)
+
+    def retriangulate() -> Source:
+        out = Appender(scratch / FACES)
+        try:
+            _stream(path, at["face"], face, _layout(face, order, index), out)
+        finally:
+            out.close()
+        return Source("ply", False, vblock, Block(scratch / FACES, 0, TRI, out.rows), xyz)
+
+    fixed = _fixed_dtype(path, at["face"], face, order, index) if face.rows else (np.dtype(TRI), [])
+    if fixed is not None:
+        later = h.elements[h.elements.index(face) + 1:]
+        least = sum(e.rows * sum(_ply.type_size(p.count or p.type) for p in e.props) for e in later)
+        if at["face"] + face.rows * fixed[0].itemsize + least <= size:
+            return Source("ply", False, vblock, Block(path, at["face"], fixed[0], face.rows), xyz, fixed[1],
+                          retriangulate)
+    return retriangulate()

@@ -1,0 +1,65 @@
+"""Which reader a mesh file goes to (by its name's extension, else by its first bytes), and the errors
+it raises: one-line ``ValueError`` messages that start with the file's path."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .._io.text import is_binary
+from . import ply, text
+from .source import Refusal, Source
+
+FORMATS = ("ply", "obj", "stl")
+
+
+def _sniff(head: bytes) -> str | None:
+    if head.startswith(b"ply") and head[3:4] in (b"\n", b"\r"):
+        return "ply"
+    if head.lstrip()[:5].lower() == b"solid":
+        return "stl"
+    if not is_binary(head) and any(line.split()[:1] in ([b"v"], [b"f"]) for line in head.split(b"\n")):
+        return "obj"
+    return None
+
+
+def _stl(path: Path, scratch: Path) -> Source:
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        head = f.read(84)
+    count = int.from_bytes(head[80:84], "little") if len(head) == 84 else -1
+    if size == 84 + 50 * count:
+        return text.read_binary_stl(path, scratch, count)
+    if head.lstrip()[:5].lower() == b"solid" and not is_binary(head[:80]):
+        return text.read_ascii_stl(path, scratch)
+    if count < 0:
+        raise Refusal(f"truncated binary STL: {size} bytes, fewer than the 84 its header alone takes")
+    if size < 84 + 50 * count:
+        raise Refusal(f"truncated binary STL: its header says {count} triangles, the file holds "
+                      f"{(size - 84) // 50}")
+    raise Refusal(f"damaged binary STL: its header says {count} triangles ({84 + 50 * count} bytes), but "
+                  f"the file holds {size} bytes")
+
+
+def open_source(path, scratch: Path) -> Source:
+    """The mesh in ``path`` as a `Source` (text formats converted into ``scratch``); ValueError naming
+    the file and what is wrong with it."""
+    name = os.fspath(path)
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{name}: no such file" if not path.exists() else f"{name}: not a file")
+    fmt = path.suffix.lower().lstrip(".")
+    if fmt not in FORMATS:
+        with open(path, "rb") as f:
+            fmt = _sniff(f.read(1 << 12))
+        if fmt is None:
+            kind = f"a {path.suffix} file" if path.suffix else "a file"
+            raise ValueError(f"{name}: unsupported format: {kind} that is not PLY, OBJ or STL (what is read here)")
+    try:
+        if fmt == "ply":
+            h = ply.header(path)
+            return text.read_ascii_ply(path, h, scratch) if h.format == "ascii" else ply.read_binary(path, h, scratch)
+        if fmt == "stl":
+            return _stl(path, scratch)
+        return text.read_obj(path, scratch)
+    except Refusal as exc:
+        raise ValueError(f"{name}: {exc}") from None

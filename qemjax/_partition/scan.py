@@ -1,0 +1,271 @@
+"""Compiled scanners of text mesh blocks (numba). Each takes a block of bytes ending with a newline and
+returns the bytes of the coordinates it found, joined by spaces (numpy's own parser turns them into
+float64, correctly rounded), and the triangles it fanned; an error code and the line it is on, else 0.
+
+Lines end at '\\n'; spaces, tabs and '\\r' separate words.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+OK, BAD_VERTEX, BAD_CORNER, ZERO_INDEX, BEFORE_FIRST, FEW_CORNERS, BAD_FACET, FEW_VALUES, BAD_INT = range(9)
+NL = 10
+
+
+@njit(cache=True)
+def _ws(c):
+    return c == 32 or c == 9 or c == 13 or c == 11 or c == 12
+
+
+@njit(cache=True)
+def _digit(c):
+    return 48 <= c <= 57
+
+
+@njit(cache=True)
+def _skip_ws(buf, i):
+    while _ws(buf[i]):
+        i += 1
+    return i
+
+
+@njit(cache=True)
+def _word_end(buf, i):
+    while not _ws(buf[i]) and buf[i] != NL:
+        i += 1
+    return i
+
+
+@njit(cache=True)
+def _copy(buf, i, j, out, no):
+    """Appends buf[i:j] and a space to out at no; the new length."""
+    for k in range(i, j):
+        out[no] = buf[k]
+        no += 1
+    out[no] = 32
+    return no + 1
+
+
+@njit(cache=True)
+def _is(buf, i, j, word):
+    if j - i != len(word):
+        return False
+    for k in range(len(word)):
+        if buf[i + k] != word[k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _grow(tris, nt, extra):
+    if nt + extra <= len(tris):
+        return tris
+    grown = np.empty((2 * len(tris) + extra, 3), np.int64)
+    for r in range(nt):  # an explicit loop: a 2-d slice assignment takes seconds to compile
+        for c in range(3):
+            grown[r, c] = tris[r, c]
+    return grown
+
+
+@njit(cache=True)
+def _coords(buf, i, out, no):
+    """Copies the three words from buf[i] on to out at no: (offset after them, new length), offset -1
+    when the line ends sooner."""
+    for _ in range(3):
+        i = _skip_ws(buf, i)
+        j = _word_end(buf, i)
+        if j == i:
+            return -1, no
+        no = _copy(buf, i, j, out, no)
+        i = j
+    return i, no
+
+
+@njit(cache=True)
+def _corner(buf, i):
+    """An OBJ corner word from buf[i]: (offset after it, its vertex number (negative: counted back),
+    error code)."""
+    neg = buf[i] == 45
+    k = i + 1 if neg else i
+    if not _digit(buf[k]):
+        return k, 0, BAD_CORNER
+    v = 0
+    while _digit(buf[k]):
+        v = v * 10 + np.int64(buf[k] - 48)
+        k += 1
+    while not _ws(buf[k]) and buf[k] != NL:  # the UV and normal numbers: checked, not kept
+        if not (_digit(buf[k]) or buf[k] == 47 or buf[k] == 45):
+            return k, 0, BAD_CORNER
+        k += 1
+    if v == 0:
+        return k, 0, ZERO_INDEX
+    return k, -v if neg else v, OK
+
+
+@njit(cache=True)
+def _face(buf, i, tris, nt, nv):
+    """Fans the corners of an OBJ face line from buf[i] (``nv`` vertices so far) into tris at nt:
+    (offset at the line's end, triangles, new count, error code)."""
+    k, first, prev = 0, 0, 0
+    while True:
+        i = _skip_ws(buf, i)
+        if buf[i] == NL:
+            break
+        i, v, err = _corner(buf, i)
+        if err:
+            return i, tris, nt, err
+        v = nv + v if v < 0 else v - 1
+        if v < 0:
+            return i, tris, nt, BEFORE_FIRST
+        if k == 0:
+            first = v
+        elif k >= 2:
+            tris = _grow(tris, nt, 1)
+            tris[nt, 0], tris[nt, 1], tris[nt, 2] = first, prev, v
+            nt += 1
+        prev, k = v, k + 1
+    return i, tris, nt, FEW_CORNERS if k < 3 else OK
+
+
+@njit(cache=True)
+def obj(buf, nv0):
+    """OBJ: `v` lines' first three words; `f` lines' corners (the vertex number before any '/'),
+    1-based or negative (counted back from the last vertex so far, ``nv0`` before this block) made
+    0-based, fanned. Returns (coordinate bytes, vertices, triangles, error, error line)."""
+    n = len(buf)
+    out = np.empty(n + 1, np.uint8)
+    tris = np.empty((max(16, n // 16), 3), np.int64)
+    no, nt, nv, line, i, err = 0, 0, 0, 0, 0, OK
+    while i < n and err == OK:
+        line += 1
+        i = _skip_ws(buf, i)
+        j = _word_end(buf, i)
+        if j - i == 1 and buf[i] == 118:  # v
+            i, no = _coords(buf, j, out, no)
+            nv += 1
+            if i < 0:
+                err = BAD_VERTEX
+                break
+        elif j - i == 1 and buf[i] == 102:  # f
+            i, tris, nt, err = _face(buf, j, tris, nt, nv0 + nv)
+        while buf[i] != NL:
+            i += 1
+        i += 1
+    return out[:no], nv, tris[:nt], err, line
+
+
+@njit(cache=True)
+def stl(buf, pending):
+    """ASCII STL: the three words after each `vertex`; ``pending`` vertices of an open facet before
+    the block. A facet (at `endloop`) must have three. Returns (coordinate bytes, vertices, lines,
+    vertices of the facet still open, error, error line)."""
+    n = len(buf)
+    out = np.empty(n + 1, np.uint8)
+    vertex = np.array([118, 101, 114, 116, 101, 120], np.uint8)
+    endloop = np.array([101, 110, 100, 108, 111, 111, 112], np.uint8)
+    no, nv, line, i = 0, 0, 0, 0
+    while i < n:
+        line += 1
+        i = _skip_ws(buf, i)
+        j = _word_end(buf, i)
+        if _is(buf, i, j, vertex):
+            i = j
+            for _ in range(3):
+                i = _skip_ws(buf, i)
+                j = _word_end(buf, i)
+                if j == i:
+                    return out[:no], nv, line, pending, BAD_VERTEX, line
+                no = _copy(buf, i, j, out, no)
+                i = j
+            nv += 1
+            pending += 1
+        elif _is(buf, i, j, endloop):
+            if pending != 3:
+                return out[:no], nv, line, pending, BAD_FACET, line
+            pending = 0
+        while buf[i] != NL:
+            i += 1
+        i += 1
+    return out[:no], nv, line, pending, OK, 0
+
+
+@njit(cache=True)
+def _int_word(buf, i, j):
+    """The integer written in buf[i:j], and whether it is one."""
+    neg = buf[i] == 45
+    k = i + (neg or buf[i] == 43)
+    if k == j:
+        return 0, False
+    v = 0
+    for m in range(k, j):
+        if not _digit(buf[m]):
+            return 0, False
+        v = v * 10 + (buf[m] - 48)
+    return -v if neg else v, True
+
+
+@njit(cache=True)
+def ply_rows(buf, pos, rows, mode, cols, kinds, index):
+    """ASCII PLY rows of one element from byte ``pos``, one non-empty line each, at most ``rows``.
+    mode 0: skipped; 1: vertices, whose words at ``cols`` (x, y, z) are kept; 2: faces, walked by
+    ``kinds`` (0 a scalar, 1 a list) with the ``index`` list fanned. Returns (end offset, rows read,
+    coordinate bytes, triangles, lines passed, error, error line)."""
+    n = len(buf)
+    out = np.empty(n + 1, np.uint8)
+    tris = np.empty((max(16, n // 16) if mode == 2 else 0, 3), np.int64)
+    no, nt, done, line, i = 0, 0, 0, 0, pos
+    spans = np.zeros((3, 2), np.int64)
+    while i < n and done < rows:
+        line += 1
+        i = _skip_ws(buf, i)
+        if buf[i] == NL:
+            i += 1
+            continue
+        if mode == 1:
+            w = 0
+            while buf[i] != NL:
+                j = _word_end(buf, i)
+                for c in range(3):
+                    if cols[c] == w:
+                        spans[c, 0], spans[c, 1] = i, j
+                w += 1
+                i = _skip_ws(buf, j)
+            if w < len(kinds):
+                return i, done, out[:no], tris[:nt], line, FEW_VALUES, line
+            for c in range(3):
+                no = _copy(buf, spans[c, 0], spans[c, 1], out, no)
+        elif mode == 2:
+            for p in range(len(kinds)):
+                count = 1
+                if kinds[p] == 1:
+                    j = _word_end(buf, i)
+                    count, ok = _int_word(buf, i, j)
+                    if j == i:
+                        return i, done, out[:no], tris[:nt], line, FEW_VALUES, line
+                    if not ok or count < 0:
+                        return i, done, out[:no], tris[:nt], line, BAD_INT, line
+                    i = _skip_ws(buf, j)
+                    if p == index:
+                        tris = _grow(tris, nt, max(count - 2, 0))
+                first, prev = 0, 0
+                for k in range(count):
+                    j = _word_end(buf, i)
+                    if j == i:
+                        return i, done, out[:no], tris[:nt], line, FEW_VALUES, line
+                    if p == index:
+                        v, ok = _int_word(buf, i, j)
+                        if not ok:
+                            return i, done, out[:no], tris[:nt], line, BAD_INT, line
+                        if k == 0:
+                            first = v
+                        elif k >= 2:
+                            tris[nt, 0], tris[nt, 1], tris[nt, 2] = first, prev, v
+                            nt += 1
+                        prev = v
+                    i = _skip_ws(buf, j)
+        while buf[i] != NL:
+            i += 1
+        i += 1
+        done += 1
+    return i, done, out[:no], tris[:nt], line, OK, 0

@@ -1,0 +1,195 @@
+"""The first stage of partitioned simplification: a mesh file, read in chunks, binned into spatially compact
+parts on disk (`scatter`).
+
+Passes, none holding the mesh: the vertices twice (bounding box, then each vertex's cell), the faces
+twice or more (a histogram of centroid codes, refined where a bin overflows, `plan`; then each chunk's
+faces appended to its part's file, noting per vertex the first part that used it or that several did),
+then each part once (its vertices gathered, written as ``level0/part_NNNNN.npz``). What stays in memory
+across passes is per vertex: its packed cell (8 bytes), its part or 'shared' (4 bytes) and, when some
+vertices are unused, its new number (4 bytes).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from .cells import Bins, Plan, codes, quantize
+from .readers import open_source
+from .source import FACES, VERTICES, Ragged, Source, remove
+from .write import replace_atomically, write_npz
+
+UNSEEN, SHARED = -1, -2  # owner values besides a part number
+
+
+def _spans(n: int, step: int):
+    for lo in range(0, n, step):
+        yield lo, min(lo + step, n)
+
+
+def _bounds(src: Source, step: int, keep: np.ndarray | None = None):
+    """The bounding box of the vertices with finite coordinates (of those ``keep`` marks, when given):
+    a non-finite vertex is refused only if a face uses it (`_write_parts`)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for a, b in _spans(src.n_vertices, step):
+        V = src.vertices(a, b)
+        V = V[np.isfinite(V).all(1) if keep is None else keep[a:b] & np.isfinite(V).all(1)]
+        if len(V):
+            lo, hi = np.minimum(lo, V.min(0)), np.maximum(hi, V.max(0))
+    return lo, hi
+
+
+def _cells(src: Source, lo, hi, step: int) -> np.ndarray:
+    cells = np.empty(src.n_vertices, np.uint64)
+    for a, b in _spans(src.n_vertices, step):
+        cells[a:b] = quantize(src.vertices(a, b), lo, hi)
+    return cells
+
+
+def _checked(F: np.ndarray, at: int, n: int, name: str) -> np.ndarray:
+    bad = (F < 0) | (F >= n)
+    if bad.any():
+        k = int(np.flatnonzero(bad.any(1))[0])
+        raise ValueError(f"{name}: face {at + k} uses vertex {F[k][bad[k]][0]}, but the file has {n} vertices")
+    return F
+
+
+def _histogram(src: Source, cells, part_faces: int, step: int, name: str) -> Bins:
+    bins = Bins(src.n_faces, part_faces)
+    for a, b in _spans(src.n_faces, step):
+        bins.add_prefix(codes(cells, _checked(src.faces(a, b), a, src.n_vertices, name)))
+    while len(bins.overfull(part_faces)):
+        refiner = bins.refiner(part_faces)
+        for a, b in _spans(src.n_faces, step):
+            refiner.add(codes(cells, src.faces(a, b)))
+        refiner.apply()
+    return bins
+
+
+@njit(cache=True)
+def _note_owner(owner, F, part):
+    """Records that faces F of parts ``part`` use their vertices: a vertex's first part, or SHARED once a
+    second one uses it (the same whatever the order of the records)."""
+    for f in range(len(F)):
+        p = part[f]
+        for c in range(3):
+            v = F[f, c]
+            o = owner[v]
+            if o == UNSEEN:
+                owner[v] = p
+            elif o != p:
+                owner[v] = SHARED
+
+
+def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progress) -> np.ndarray:
+    """Appends each face to its part's file (input order kept within a part); returns the owners."""
+    owner = np.full(src.n_vertices, UNSEEN, np.int32)
+    for a, b in _spans(src.n_faces, step):
+        F = src.faces(a, b)
+        part = plan.assign(codes(cells, F)).astype(np.int32)
+        _note_owner(owner, F, part)
+        order = np.argsort(part, kind="stable")
+        sorted_part = part[order]
+        cuts = np.flatnonzero(np.diff(sorted_part)) + 1
+        F = F.astype(index_type)
+        for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(order)]):
+            with open(tmp / f"{sorted_part[lo]}.bin", "ab") as f:
+                f.write(F[order[lo:hi]].tobytes())
+        if progress is not None:
+            progress(b, src.n_faces)
+    return owner
+
+
+def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str) -> list:
+    parts = []
+    for p in range(plan.parts):
+        raw = np.fromfile(tmp / f"{p}.bin", index_type)
+        remove(tmp / f"{p}.bin")
+        used, inverse = np.unique(raw, return_inverse=True)
+        gid = (used if new_id is None else new_id[used]).astype(np.int64)
+        border = owner[used] == SHARED
+        V = src.gather(used)
+        bad = ~np.isfinite(V).all(1)
+        if bad.any():
+            raise ValueError(f"{name}: vertex {used[bad][0]} has a coordinate that is not a finite number")
+        file = f"part_{p:05d}.npz"
+        write_npz(level / file, gid=gid, V=V, F=inverse.reshape(-1, 3).astype(np.int32), border=border)
+        parts.append({"file": f"level0/{file}", "faces": len(raw) // 3, "vertices": len(used),
+                      "border": int(border.sum())})
+    return parts
+
+
+def _prepare(scratch: Path) -> tuple[Path, Path]:
+    level, tmp = scratch / "level0", scratch / "tmp"
+    remove(scratch / "manifest.json")  # a failed run leaves no manifest of an earlier one's parts
+    for old in level.glob("part_*.npz") if level.exists() else ():
+        old.unlink()
+    shutil.rmtree(tmp, ignore_errors=True)
+    level.mkdir(parents=True, exist_ok=True)
+    tmp.mkdir()
+    return level, tmp
+
+
+def _read(path, scratch: Path, part_faces: int, step: int, name: str):
+    """The source, its vertex cells and its code histogram; a face block that turns out to hold other
+    polygons than triangles is streamed into scratch triangles and counted again."""
+    src = open_source(path, scratch)
+    if src.n_faces == 0:
+        raise ValueError(f"{name}: the mesh has no faces")
+    box = _bounds(src, step)
+    cells = _cells(src, *box, step)
+    try:
+        return src, box, cells, _histogram(src, cells, part_faces, step, name)
+    except Ragged:
+        src = src.retriangulate()
+        return src, box, cells, _histogram(src, cells, part_faces, step, name)
+
+
+def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progress=None) -> dict:
+    """Reads the mesh file ``path`` (PLY, OBJ or STL) in chunks of ``chunk_faces`` faces and bins its
+    triangles into spatially compact parts of at most ``part_faces`` faces, written to
+    ``scratch/level0/part_NNNNN.npz`` (arrays ``gid``: sorted global vertex ids, ``V``: their float64
+    positions, ``F``: int32 triangles over them in input order, ``border``: whether another part also
+    uses the vertex), and returns the manifest (also written to ``scratch/manifest.json``): format,
+    n_vertices, n_faces, bbox, welded, parts (file, faces, vertices, border for each).
+
+    STL and OBJ positions are welded by exact value; PLY is taken as indexed. Unused vertices are
+    dropped, the others keep their order. ``progress(done_faces, total_faces)`` is called after each
+    chunk of the binning pass. The same file gives the same bytes whatever ``chunk_faces``.
+    """
+    if int(part_faces) < 1 or int(chunk_faces) < 1:
+        raise ValueError(f"part_faces and chunk_faces must be at least 1 (got {part_faces} and {chunk_faces})")
+    part_faces, step, name = int(part_faces), int(chunk_faces), os.fspath(path)
+    scratch = Path(scratch)
+    scratch.mkdir(parents=True, exist_ok=True)
+    level, tmp = _prepare(scratch)
+    try:
+        src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name)
+        plan = Plan.from_bins(bins, part_faces)
+        index_type = np.int32 if src.n_vertices < 2**31 else np.int64
+        owner = _bin(src, cells, plan, tmp, index_type, step, progress)
+        del cells, bins
+        kept = owner != UNSEEN
+        n_kept = int(np.count_nonzero(kept))
+        new_id = None
+        if n_kept < src.n_vertices:  # unused vertices: the others renumbered in order
+            new_id = np.cumsum(kept, dtype=index_type) - 1
+            lo, hi = _bounds(src, step, kept)
+        del kept
+        parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name)
+        manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": src.n_faces,
+                    "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts}
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(scratch / "weld", ignore_errors=True)
+        for leftover in (VERTICES, FACES, "faces_raw.i64", "ids.i64"):
+            remove(scratch / leftover)
+
+    def write(p):
+        p.write_text(json.dumps(manifest, indent=1) + "\n")
+    replace_atomically(scratch / "manifest.json", write)
+    return manifest

@@ -1,0 +1,202 @@
+"""Text formats (OBJ, ASCII STL, ASCII PLY) and binary STL, converted in one streaming pass into the
+scratch arrays (`source.VERTICES`, `source.FACES`): blocks of whole lines go through the compiled
+scanners (`scan`), their coordinates through numpy's parser (correctly rounded float64).
+
+OBJ and STL positions are welded by exact value (`weld`); STL is always a soup, and OBJ files repeat
+positions (at UV seams, or written per face).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .._io import ply as _ply
+from .._io.text import is_binary, quote
+from . import scan
+from .ply import _index_prop
+from .source import Appender, FACES, Refusal, VERTICES, remove, rows, scratch_source
+from .weld import Welder
+
+BLOCK = 1 << 24  # bytes of text scanned at once
+_STL_RECORD = np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
+_MESSAGES = {
+    scan.BAD_VERTEX: "is a vertex line without x, y and z",
+    scan.BAD_CORNER: "has a face corner that is not a vertex number",
+    scan.ZERO_INDEX: "has a face corner numbered 0 (OBJ numbers vertices from 1)",
+    scan.BEFORE_FIRST: "has a face corner counting back past the first vertex",
+    scan.FEW_CORNERS: "has a face with fewer than 3 corners",
+    scan.BAD_FACET: "ends a facet that does not have 3 vertices",
+    scan.FEW_VALUES: "holds too few values for a {what} row",
+    scan.BAD_INT: "holds a list count or vertex number that is not a whole number",
+}
+
+
+def blocks(path: Path, start: int = 0):
+    """Blocks of whole lines (bytes ending with a newline) from byte ``start``."""
+    with open(path, "rb") as f:
+        f.seek(start)
+        carry = b""
+        while True:
+            data = f.read(BLOCK)
+            if not data:
+                if carry:
+                    yield carry + b"\n"
+                return
+            data = carry + data
+            cut = data.rfind(b"\n") + 1
+            carry = data[cut:]
+            if cut:
+                yield data[:cut]
+
+
+def _line(block: bytes, k: int) -> str:
+    return block.split(b"\n")[k - 1].decode("latin-1")
+
+
+def _refuse(code: int, block: bytes, k: int, line0: int, what: str = "") -> Refusal:
+    return Refusal(f"line {line0 + k} {_MESSAGES[code].format(what=what)}: {quote(_line(block, k))}")
+
+
+def _floats(coords: np.ndarray, count: int, block: bytes, line0: int, pick) -> np.ndarray:
+    """The (count,3) float64 coordinates in ``coords``; else a refusal naming the first line whose
+    coordinate words (``pick(line number in block, words)``, None for other lines) are not numbers."""
+    try:
+        v = np.fromstring(coords.tobytes(), np.float64, sep=" ")
+        if len(v) == 3 * count:
+            return v.reshape(count, 3)
+    except ValueError:
+        pass
+    for k, line in enumerate(block.split(b"\n"), 1):
+        try:
+            [float(w) for w in pick(k, line.split()) or ()]
+        except ValueError:
+            raise Refusal(f"line {line0 + k} holds a coordinate that is not a number: "
+                          f"{quote(line.decode('latin-1'))}") from None
+    raise Refusal(f"after line {line0} a coordinate is not a number")
+
+
+def _finish_weld(welder: Welder, scratch: Path, fmt: str, raw: Appender | None, n_raw: int) -> object:
+    """The welded source: STL's ids are its faces; OBJ's faces are mapped through the ids."""
+    if raw is None:
+        n = welder.finish(scratch / FACES, scratch / VERTICES)
+        return scratch_source(scratch, fmt, True, n, welder.count // 3)
+    ids = scratch / "ids.i64"
+    n = welder.finish(ids, scratch / VERTICES)
+    if n == n_raw:  # no position repeats: the ids are 0, 1, …
+        os.replace(raw.path, scratch / FACES)
+    else:
+        mapping = np.fromfile(ids, np.int64).astype(np.int32 if n < 2**31 else np.int64)
+        out = Appender(scratch / FACES)
+        step = BLOCK // 24
+        for lo in range(0, raw.rows, step):
+            flat = rows(raw.path, np.dtype(np.int64), 0, 3 * lo, 3 * min(lo + step, raw.rows))
+            out.add(mapping[flat].astype(np.int64).reshape(-1, 3))
+        out.close()
+        remove(raw.path)
+    remove(ids)
+    return scratch_source(scratch, fmt, True, n, raw.rows)
+
+
+def read_obj(path: Path, scratch: Path):
+    welder = Welder(scratch / "weld", os.path.getsize(path) // 16)
+    raw = Appender(scratch / "faces_raw.i64")
+    nv = line0 = 0
+    top = (-1, 0)  # the largest vertex number a face uses, and its block's first line
+    try:
+        for block in blocks(path):
+            if line0 == 0 and is_binary(block[:1024]):
+                raise Refusal("it holds binary data, not OBJ text: the file is damaged or not an OBJ file")
+            coords, k, tris, err, at = scan.obj(np.frombuffer(block, np.uint8), nv)
+            if err:
+                raise _refuse(err, block, at, line0)
+            welder.add(_floats(coords, k, block, line0, lambda _, w: w[1:4] if w[:1] == [b"v"] else None))
+            raw.add(tris)
+            if len(tris) and tris.max() > top[0]:
+                top = (int(tris.max()), line0)
+            nv += k
+            line0 += block.count(b"\n")
+    finally:
+        raw.close()
+    if top[0] >= nv:
+        raise Refusal(f"a face (after line {top[1]}) uses vertex {top[0] + 1}, but the file has {nv} vertices")
+    if raw.rows == 0:
+        raise Refusal("the OBJ file has no faces (no 'f' lines)")
+    return _finish_weld(welder, scratch, "obj", raw, nv)
+
+
+def read_ascii_stl(path: Path, scratch: Path):
+    welder = Welder(scratch / "weld", os.path.getsize(path) // 40)
+    pending = line0 = 0
+    for block in blocks(path):
+        coords, k, _, pending, err, at = scan.stl(np.frombuffer(block, np.uint8), pending)
+        if err:
+            raise _refuse(err, block, at, line0)
+        welder.add(_floats(coords, k, block, line0, lambda _, w: w[1:4] if w[:1] == [b"vertex"] else None))
+        line0 += block.count(b"\n")
+    if welder.count % 3:
+        raise Refusal("the file ends in the middle of a facet: it is truncated")
+    if welder.count == 0:
+        raise Refusal("the STL file has no facets")
+    return _finish_weld(welder, scratch, "stl", None, 0)
+
+
+def read_binary_stl(path: Path, scratch: Path, n: int):
+    welder = Welder(scratch / "weld", 3 * n)
+    step = BLOCK // _STL_RECORD.itemsize
+    for lo in range(0, n, step):
+        welder.add(rows(path, _STL_RECORD, 84, lo, min(lo + step, n))["v"].reshape(-1, 3))
+    if n == 0:
+        raise Refusal("the STL file has no facets")
+    return _finish_weld(welder, scratch, "stl", None, 0)
+
+
+def _element_args(h: _ply.Header, e: _ply.Element):
+    """(mode, x y z columns, property kinds, index list) of an ASCII element for `scan.ply_rows`."""
+    kinds = np.array([p.count is not None for p in e.props], np.int64)
+    if e.name == "vertex":
+        if kinds.any():
+            raise Refusal("the PLY vertex element has list properties, which are not read")
+        names = [p.name for p in e.props]
+        return 1, np.array([names.index(c) for c in "xyz"], np.int64), kinds, -1
+    if e.name == "face":
+        return 2, np.zeros(3, np.int64), kinds, _index_prop(e)
+    return 0, np.zeros(3, np.int64), kinds, -1
+
+
+def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
+    if h.element("face") is None:
+        raise Refusal("the PLY header declares no face element")
+    with open(path, "rb") as f:
+        line0 = f.read(h.body).count(b"\n")
+    vertices, faces = Appender(scratch / VERTICES), Appender(scratch / FACES)
+    todo = [(e, e.rows) for e in h.elements if e.rows]
+    try:
+        for block in blocks(path, h.body):
+            buf, pos = np.frombuffer(block, np.uint8), 0
+            while todo and pos < len(buf):
+                e, left = todo[0]
+                mode, cols, kinds, index = _element_args(h, e)
+                pos, done, coords, tris, lines, err, at = scan.ply_rows(buf, pos, left, mode, cols, kinds, index)
+                if err:
+                    k = block[:pos].count(b"\n") + 1
+                    raise _refuse(err, block, k, line0, e.name)
+                if mode == 1:
+                    first = block[:pos].count(b"\n") - lines  # lines before this call in the block
+                    last = first + lines
+                    vertices.add(_floats(coords, done, block, line0, lambda k, w: [w[c] for c in cols]
+                                         if first < k <= last and w else None))
+                faces.add(tris)
+                todo[0] = (e, left - done)
+                if left == done:
+                    todo.pop(0)
+            line0 += block.count(b"\n")
+    finally:
+        vertices.close()
+        faces.close()
+    if todo:
+        e, left = todo[0]
+        raise Refusal(f"the header declares {h.declares()}, but the file ends {left} {_ply.rows_name(e)} "
+                      "short: it is truncated")
+    return scratch_source(scratch, "ply", False, vertices.rows, faces.rows)
