@@ -29,7 +29,7 @@ _PUBLIC = {
     "Attributes": ("._options", "Attributes"),
     "Schedule": ("._options", "Schedule"),
     "Topology": ("._options", "Topology"),
-    "Partition": ("._partition.settings", "Partition"),
+    "Partition": ("._options", "Partition"),
     "pareto_front": ("._sweep.pareto", "pareto_front"),
     "Level": ("._record.history", "Level"),
     "Record": ("._record.history", "Record"),

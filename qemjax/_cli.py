@@ -266,7 +266,7 @@ def _partition_kwargs(args, kw: dict) -> None:
             raise CliError(f"{(extra or ['--scheduler ADDRESS'])[0]} needs --partition")
         kw.pop("partition", None)
         return
-    from ._partition.settings import Partition
+    from ._options import Partition
 
     if address is not None and args.workers is not None:
         raise CliError("give --workers N (local processes) or --scheduler ADDRESS (a Dask cluster), not both")

@@ -7,8 +7,11 @@ import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "qemjax"
-LAYERS = ["_mesh", "_io", "_options", "_kernels", "_costs", "_schedulers", "_record", "_pipeline", "metrics",
-          "peers", "shapes", "render", "_sweep", "__init__", "_ahead", "_cli", "__main__"]
+LAYERS = ["_mesh", "_io", "_options", "_kernels", "_costs", "_schedulers", "_record", "_pipeline", "_partition",
+          "metrics", "peers", "shapes", "render", "_sweep", "__init__", "_ahead", "_cli", "__main__"]
+# the one import against the layers: `simplify(partition=...)` hands the run to the partitioned driver, which
+# runs `simplify` on each part (imported inside the function that dispatches, so importing either stays light)
+DISPATCH = {("qemjax._pipeline.api", "qemjax._partition.run")}
 
 
 def _modules() -> dict[str, tuple[Path, list[str]]]:
@@ -43,7 +46,7 @@ def _imports() -> dict[str, set[str]]:
                 else:
                     continue
                 deps |= {f"{base}.{a.name}" if f"{base}.{a.name}" in mods else base for a in node.names}
-        out[name] = deps - {name}
+        out[name] = {d for d in deps - {name} if (name, d) not in DISPATCH}
     return out
 
 

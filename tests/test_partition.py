@@ -200,3 +200,31 @@ def test_what_a_partitioned_run_does_not_offer(mesh):
         qemjax.simplify(mesh, ratio=0.1, locked=[0], partition=True)
     with pytest.raises(ValueError, match="positions only"):
         qemjax.simplify(mesh, ratio=0.1, attributes="uv", partition=True)
+
+
+def test_ctrl_c_stops_the_command_and_its_workers(mesh, tmp_path):
+    psutil = pytest.importorskip("psutil")
+    import signal
+    import subprocess
+    import sys
+    from qemjax._partition.write import write_binary_ply
+
+    src = tmp_path / "in.ply"
+    write_binary_ply(src, *mesh)
+    scratch = tmp_path / "scratch"
+    proc = subprocess.Popen([sys.executable, "-m", "qemjax", "simplify", str(src), str(tmp_path / "out.ply"),
+                             "--ratio", str(RATIO), "--partition", "--workers", "2", "--part-faces", str(PART),
+                             "--scratch", str(scratch), "--quiet"], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not list((scratch / "level1").glob("*.npz")):
+        time.sleep(0.05)
+    workers = psutil.Process(proc.pid).children()
+    assert len(workers) == 2
+    t = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=30)
+    assert proc.returncode == 130 and time.monotonic() - t < 10
+    assert "interrupted" in proc.stderr.read()
+    gone, alive = psutil.wait_procs(workers, timeout=5)
+    assert not alive and not (tmp_path / "out.ply").exists()
+    assert list((scratch / "level1").glob("*.npz"))  # a scratch folder given is kept: the next run resumes

@@ -13,7 +13,7 @@ from typing import Iterator
 
 from . import task as _task
 from . import worker as _worker
-from .settings import Partition
+from .._options import Partition
 
 
 class TaskError(RuntimeError):
@@ -71,7 +71,9 @@ class LocalRunner(Runner):
                 i, spec, tries = todo.get_nowait()
             except queue.Empty:
                 return
-            with self.lock:
+            with self.lock:  # close() holds it too: no worker starts after the run was stopped
+                if self.closed:
+                    return
                 p = self.procs[k]
                 if p is None or p.poll() is not None:
                     p = self._start(k)
@@ -113,7 +115,8 @@ class LocalRunner(Runner):
             t.join()
 
     def close(self, cancel: bool = False):
-        self.closed = True
+        with self.lock:
+            self.closed = True
         for p in self.procs:
             if p is None:
                 continue

@@ -6,27 +6,21 @@ global ids, the only ones the next level must know."""
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from .write import replace_atomically, write_npz
+
 
 def save(path, **arrays) -> None:
-    """Write ``arrays`` to ``path`` whole or not at all (a temporary name, then a rename), so that a task
-    killed while writing leaves no piece a resumed run would trust."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-    os.replace(tmp, path)
+    """Write ``arrays`` to ``path`` whole or not at all, with bytes that depend only on the arrays (a task
+    killed while writing leaves no piece a resumed run would trust; a retry writes the same file)."""
+    write_npz(Path(path), **arrays)
 
 
 def save_json(path, data: dict) -> None:
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(data, sort_keys=True))
-    os.replace(tmp, path)
+    replace_atomically(Path(path), lambda tmp: Path(tmp).write_text(json.dumps(data, sort_keys=True)))
 
 
 def load(path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:

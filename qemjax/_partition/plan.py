@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .settings import Partition
+from .._options import Partition
 
 
 class Group(NamedTuple):

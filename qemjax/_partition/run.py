@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from . import execute, pieces, plan, task
-from .settings import Partition
+from .._options import Partition
 
 UNSUPPORTED = ("max_error", "max_distance", "max_distance_rel", "feature_edges", "locked", "vertex_weights")
 
@@ -62,7 +62,7 @@ def _as_file(mesh, folder: Path) -> Path:
     if isinstance(mesh, (str, os.PathLike)):
         return Path(mesh)
     from .._io.mesh import as_arrays
-    from .scatter import write_binary_ply
+    from .write import write_binary_ply
 
     V, F = as_arrays(mesh)[:2]
     path = folder / "input.ply"
@@ -249,6 +249,8 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
     if stop != "target":
         warnings.warn(f"partition: stopped at {len(F)} faces, above the target {target} ({'; '.join(msgs) or stop})",
                       stacklevel=stacklevel)
+    if folder is not None:  # a kept scratch folder also keeps what the run did
+        pieces.save_json(folder / "stats.json", stats)
     empty = np.zeros(0, np.int64)
     return SimplifyResult(vertices=V, faces=np.asarray(F, np.int64), vertex_error=np.full(len(V), np.nan),
                           max_error=float("nan"), source_vertices=empty, source_faces=empty,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import struct
 import sys
 import traceback
@@ -32,6 +33,8 @@ def receive(stream):
 
 
 def main() -> None:
+    # Ctrl-C in a terminal reaches the whole process group: the client decides what stops (it kills workers)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # the protocol owns the real stdout; anything a library prints goes to stderr
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)

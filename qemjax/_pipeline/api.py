@@ -141,7 +141,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
 def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attributes, settings, named):
     """`simplify` with ``partition=``: its keywords checked and handed to `_partition.run`."""
     from .._partition.run import simplify_partitioned
-    from .._partition.settings import Partition
+    from .._options import Partition
 
     if partition is True:
         partition = Partition()
