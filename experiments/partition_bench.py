@@ -22,7 +22,6 @@ import argparse
 import csv
 import hashlib
 import json
-import os
 import resource
 import statistics
 import subprocess

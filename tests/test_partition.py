@@ -5,8 +5,6 @@ same bits everywhere, a resumed run and a run whose worker is killed."""
 from __future__ import annotations
 
 import hashlib
-import os
-import shutil
 import threading
 import time
 

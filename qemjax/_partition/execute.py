@@ -55,9 +55,12 @@ class LocalRunner(Runner):
     def __init__(self, workers: int, retries: int):
         self.workers, self.retries = workers, retries
         self.name = f"{workers} local worker processes"
-        self.procs: list = [None] * workers
         self.lock = threading.Lock()
         self.closed = False
+        # started now: their imports overlap the client's reading of the input
+        self.procs: list = [None] * workers
+        for k in range(workers):
+            self._start(k)
 
     def _start(self, k: int):
         cmd = [sys.executable, "-m", "qemjax._partition.worker"]

@@ -127,7 +127,6 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
     """`simplify` with ``partition=``: the module docstring. ``kwargs``: the method and its settings, as
     `simplify` takes them."""
     from .._pipeline import stages
-    from .._record.result import Contractions, SimplifyResult
     from .scatter import scatter
 
     bad = [k for k in UNSUPPORTED if kwargs.get(k) is not None]
@@ -146,6 +145,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                    final_faces=p.final_faces, target=[target_faces, ratio], kwargs=repr(sorted(kwargs.items())))
         _fresh(folder, key)
         source = _as_file(mesh, folder)
+        runner = execute.open_runner(p)
         manifest_path = folder / "manifest.json"
         if manifest_path.exists():
             manifest = json.loads(manifest_path.read_text())
@@ -155,7 +155,6 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         n_faces = int(manifest["n_faces"])
         target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
         target = min(target, n_faces)
-        runner = execute.open_runner(p)
         paths = [str(folder / part["file"]) for part in manifest["parts"]]
         faces = np.array([part["faces"] for part in manifest["parts"]], np.int64)
         borders = None
@@ -228,9 +227,12 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
         per_worker[s["pid"]] = per_worker.get(s["pid"], 0.0) + s["compile_s"]
     compile_s = max(per_worker.values(), default=0.0)
     total = time.perf_counter() - t0
-    reached = len(F) <= target or (len(F) == target + 1)
-    stop = "target" if len(F) <= target + 1 else ("locked" if locked_share > 0 else "blocked")
-    msgs = sorted({m for s in levels[-1]["stats"] for m in s["warnings"]})
+    final = levels[-1]["stats"]
+    if len(final) == 1:  # one group, nothing locked: its own reason (the parity of a closed mesh is "target")
+        stop = final[0]["stop_reason"]
+    else:
+        stop = "target" if len(F) <= target else "locked"
+    msgs = sorted({m for s in final for m in s["warnings"]})
     part = dict(parts=len(manifest["parts"]), levels=len(levels), where=where,
                 faces_per_level=[lv["faces_out"] for lv in levels], groups_per_level=[lv["groups"] for lv in levels],
                 locked_per_level=[lv["locked"] for lv in levels], seconds_per_level=[lv["seconds"] for lv in levels],
@@ -247,8 +249,8 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
         warnings.warn(f"partition: the output is too large for one process (Partition.final_faces), so "
                       f"{100 * locked_share:.2g} % of its vertices stayed locked at part borders", stacklevel=stacklevel)
     if stop != "target":
-        warnings.warn(f"partition: stopped at {len(F)} faces, above the target {target} ({'; '.join(msgs) or stop})",
-                      stacklevel=stacklevel)
+        warnings.warn(f"partition: stopped at {len(F)} faces, above the target {target} ({stop}: "
+                      f"{'; '.join(msgs) or 'the last level could not go further'})", stacklevel=stacklevel)
     if folder is not None:  # a kept scratch folder also keeps what the run did
         pieces.save_json(folder / "stats.json", stats)
     empty = np.zeros(0, np.int64)

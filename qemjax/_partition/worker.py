@@ -40,6 +40,8 @@ def main() -> None:
     os.dup2(2, 1)
     inp = sys.stdin.buffer
     from . import task
+    # what every task needs, imported while the client is still reading the input
+    from .._pipeline import api, stages  # noqa: F401
 
     while True:
         try:
