@@ -1,6 +1,6 @@
 """A partitioned run, as the client drives it: cut the input into parts (`scatter`), then level by level
 plan the groups (`plan.level`), write the level's locks, run the groups (`task.run_group`) on the runner
-(`execute`), until the last level; then measure the output against every part (`task.measure_part`) and
+(`execute`), until the last level; then measure the output against every part (`task.measure_parts`) and
 build the result. The client reads only the pieces' border ids and the output, never the whole input."""
 from __future__ import annotations
 
@@ -193,9 +193,11 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             pieces.save(final, V=V, F=F.astype(np.int32), gid=gid)
             lo, hi = np.array(manifest["bbox"][0]), np.array(manifest["bbox"][1])
             centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
-            mspecs = [dict(part=str(folder / part["file"]), final=str(final), centre=centre.tolist(), unit=unit)
-                      for part in manifest["parts"]]
-            dist = _distance(_run_level(runner, "measure_part", mspecs, progress, "distance"),
+            files = [str(folder / part["file"]) for part in manifest["parts"]]
+            batches = np.array_split(np.arange(len(files)), min(len(files), 4 * runner.workers))
+            mspecs = [dict(parts=[files[i] for i in b], final=str(final), centre=centre.tolist(), unit=unit)
+                      for b in batches]
+            dist = _distance(_run_level(runner, "measure_parts", mspecs, progress, "distance"),
                              float(np.linalg.norm(hi - lo)), unit)
         t_measure = time.perf_counter() - t_measure
     except BaseException:

@@ -1,6 +1,6 @@
 """The two tasks of a partitioned run, as a worker runs them: simplify a group of pieces with the vertices
-it shares with other groups locked (`run_group`), and measure a level-0 part's distance from the output
-(`measure_part`). Each reads its inputs from the scratch folder and writes its output there (whole or not at
+it shares with other groups locked (`run_group`), and measure level-0 parts' distance from the output
+(`measure_parts`). Each reads its inputs from the scratch folder and writes its output there (whole or not at
 all), so a task run twice (a retry, a resumed run) gives the same file. Importing this module is light (JAX
 and numba are imported by the tasks)."""
 from __future__ import annotations
@@ -65,8 +65,9 @@ def run_group(spec: dict) -> dict:
     elif spec["locks"] is None:
         locked = np.zeros(len(V), bool)
     else:
-        locks = np.load(spec["locks"])
-        locked = (gid >= 0) & np.isin(gid, locks, assume_unique=False)
+        locks = np.load(spec["locks"])  # sorted, the whole level's: a binary search per vertex, no hashing
+        at = np.minimum(np.searchsorted(locks, gid), max(len(locks) - 1, 0))
+        locked = (gid >= 0) & (locks[at] == gid) if len(locks) else np.zeros(len(V), bool)
     kw = dict(spec["kwargs"])
     if locked.any():
         kw["locked"] = locked
@@ -86,41 +87,45 @@ def run_group(spec: dict) -> dict:
     return stats
 
 
-def _crop(X: np.ndarray, G: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """The faces of G whose bounding boxes meet the box [lo, hi]."""
-    T = X[G]
-    return np.flatnonzero(np.all(T.min(1) <= hi, axis=1) & np.all(T.max(1) >= lo, axis=1))
-
-
-def measure_part(spec: dict) -> dict:
-    """The distances of a level-0 part's samples (every vertex, a third of its faces' area each, and every
-    face centroid, its area: `_pipeline.refit.samples` before scaling, so that the weights of a vertex two
-    parts hold add up to its weight in the whole) from the output ``spec["final"]``, exactly: the output is
-    cropped to the part's box grown by a margin, and searched whole where a distance exceeds the margin.
-    Returns the maximum, the weighted sum of squares, the total weight and a weighted histogram."""
+def measure_parts(spec: dict) -> dict:
+    """The distances of level-0 parts' samples (every vertex, a third of its faces' area each, and every face
+    centroid, its area: `_pipeline.refit.samples` before scaling, so that the weights of a vertex two parts
+    hold add up to its weight in the whole) from the output ``spec["final"]``, exactly: for each part the
+    output is cropped to the part's box grown by a margin, and searched whole where a distance exceeds the
+    margin. Returns, over the parts ``spec["parts"]``, the maximum, the weighted sum of squares, the total
+    weight and a weighted histogram."""
     from .._mesh.grid_nearest import nearest
     from .._pipeline.refit import _sample_rows
 
-    V, F, _, _ = pieces.load(spec["part"])
     with np.load(spec["final"]) as z:
         X, G = z["V"], z["F"].astype(np.int64)
     centre, unit = np.asarray(spec["centre"]), float(spec["unit"])
-    P, w, _ = _sample_rows((V - centre) / unit, F, np.zeros(len(V), np.int64))
-    keep = w > 0
-    P, w = P[keep], w[keep]
     Xu = (X - centre) / unit
-    lo, hi = P.min(0), P.max(0)
-    margin = 0.02
-    while True:
-        sel = _crop(Xu, G, lo - margin, hi + margin) if margin < np.inf else np.arange(len(G))
-        if len(sel):
-            _, d = nearest(Xu, G[sel], P)
-            if d.max() <= margin:
-                break
-        if margin == np.inf:
-            break
-        margin = np.inf if len(sel) == len(G) else max(2 * float(d.max()) if len(sel) else 0.0, 4 * margin)
+    T = Xu[G]
+    flo, fhi = T.min(1), T.max(1)  # each output face's box, once for all the parts
+    del T
     edges = np.logspace(HIST_LO, HIST_HI, HIST_BINS + 1)
-    hist = np.bincount(np.clip(np.searchsorted(edges, d), 0, HIST_BINS), weights=w, minlength=HIST_BINS + 1)
-    return dict(max=float(d.max()) * unit, sum_sq=float(np.sum(w * d * d)) * unit * unit, weight=float(w.sum()),
-                hist=hist.tolist(), samples=int(len(P)), peak_rss=peak_rss())
+    out = dict(max=0.0, sum_sq=0.0, weight=0.0, hist=np.zeros(HIST_BINS + 1), samples=0)
+    for part in spec["parts"]:
+        V, F, _, _ = pieces.load(part)
+        P, w, _ = _sample_rows((V - centre) / unit, F, np.zeros(len(V), np.int64))
+        keep = w > 0
+        P, w = P[keep], w[keep]
+        if not len(P):
+            continue
+        lo, hi = P.min(0), P.max(0)
+        margin = 0.02
+        while True:  # exact when every distance is within the margin the crop was grown by
+            sel = np.flatnonzero(np.all(flo <= hi + margin, axis=1) & np.all(fhi >= lo - margin, axis=1))
+            d = nearest(Xu, G[sel], P)[1] if len(sel) else None
+            if len(sel) == len(G) or (d is not None and d.max() <= margin):
+                break
+            margin = max(2 * float(d.max()), 4 * margin) if d is not None else 4 * margin
+        out["max"] = max(out["max"], float(d.max()) * unit)
+        out["sum_sq"] += float(np.sum(w * d * d)) * unit * unit
+        out["weight"] += float(w.sum())
+        out["hist"] += np.bincount(np.clip(np.searchsorted(edges, d), 0, HIST_BINS), weights=w,
+                                   minlength=HIST_BINS + 1)
+        out["samples"] += int(len(P))
+    out["hist"] = out["hist"].tolist()
+    return out | dict(peak_rss=peak_rss())
