@@ -17,13 +17,14 @@ from qemjax._kernels.batching import chunks, pad_rows
 from qemjax._mesh.arrays import put_rows
 from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import common, parallel, round_glue_jit as glue, round_jit
+from qemjax._schedulers.outcome import LOCKED
 from qemjax._schedulers.select import fits_target, sort_keys
 from test_attributes import atlas_sphere
 from test_greedy_compiled import _two_spheres
 from test_round_jit import _assert_same, _selected_pairs
 
 
-def _carry_numpy(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold):
+def _carry_numpy(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold, locked):
     """`_Run.update`, `_Run.cost` (the fused path) and `_Run.candidates`, as numpy runs them."""
     idx = np.flatnonzero(kept)
     x, cost, branch, parts, bad = (np.take(a, idx, axis=0) for a in (x0, cost0, branch0, parts0, bad0))
@@ -31,6 +32,8 @@ def _carry_numpy(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, l
     cost[d], branch[d] = out[3, : len(d)], out[4, : len(d)].astype(np.int8)
     if parts.shape[1]:
         put_rows(parts, d, np.ascontiguousarray(out[5:, : len(d)].T))
+    if len(locked):  # pairs of two locked vertices (`locks.both_locked`)
+        bad[locked[E[:, 0]] & locked[E[:, 1]]] = LOCKED
     bvert = np.zeros(n, bool)
     bvert[E[ecount == 1].reshape(-1)] = True
     valid = (cost <= limit) & (bad == 0) & (ecount <= need)
@@ -39,9 +42,10 @@ def _carry_numpy(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, l
     return x, cost, branch, parts, bad, bvert, valid
 
 
+@pytest.mark.parametrize("locks", [False, True])
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("limit", [np.inf, 0.1, np.float64(0.1), 1e300])
-def test_carry_is_the_numpy_update_cost_and_candidates(seed, limit):
+def test_carry_is_the_numpy_update_cost_and_candidates(seed, limit, locks):
     rng = np.random.default_rng(seed)
     n, P0, p = 300, 900, seed % 3  # models with 0, 1 and 2 cost parts
     kept = rng.random(P0) < 0.8
@@ -58,14 +62,17 @@ def test_carry_is_the_numpy_update_cost_and_candidates(seed, limit):
     branch0 = rng.integers(0, 4, P0).astype(np.int8)
     parts0 = rng.random((P0, p)).astype(np.float32)
     bad0 = np.where(rng.random(P0) < 0.2, rng.integers(1, 6, P0), 0).astype(np.int8)
+    locked = rng.random(n) < 0.4 if locks else np.zeros(0, bool)
     for manifold in (True, False):
         args = (kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n)
         with np.errstate(over="ignore"):  # (1e300 in float32)
-            want = _carry_numpy(*args, limit, 2, manifold)
-        got = glue.carry(*args, glue.bound(limit, np.float32), 2, manifold)
+            want = _carry_numpy(*args, limit, 2, manifold, locked)
+        got = glue.carry(*args, glue.bound(limit, np.float32), 2, manifold, locked)
         for w, g, name in zip(want, got, ("x", "cost", "branch", "parts", "bad", "bvert", "valid")):
             assert g.dtype == w.dtype and np.array_equal(g, w), name
         assert got[7] == want[6].sum()
+        if locks:
+            assert (got[4] == LOCKED).any()
 
 
 @pytest.mark.parametrize("gate", [1.2, 2, np.float64(1.2), np.float32(1.7)])

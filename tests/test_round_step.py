@@ -31,9 +31,9 @@ def _spy(monkeypatch):
         calls.append((len(P), len(Pn), size, price_size))
         return step(model, VSd, P, x, Pn, params, size, price_size, **kw)
 
-    def spy_one(model, VSd, rows_at, P, x, Pn, params, K):
+    def spy_one(model, VSd, rows_at, P, x, Pn, params, K, **kw):
         calls.append((K, int(np.count_nonzero(Pn[:, 0] != Pn[:, 1])), len(P), len(Pn)))
-        return one(model, VSd, rows_at, P, x, Pn, params, K)
+        return one(model, VSd, rows_at, P, x, Pn, params, K, **kw)
     monkeypatch.setattr(parallel, "start_step", spy)
     monkeypatch.setattr(parallel, "step_one", spy_one)
     return calls

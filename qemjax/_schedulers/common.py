@@ -185,7 +185,7 @@ def _step(merge, price, VS, rows_at, P, x, merge_params, Pn, price_params):
 
 
 def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, size: int, price_size: int,
-               raw: bool = False):
+               raw: bool = False, kept: np.ndarray | None = None):
     """A round's device work in one call (`fuses`): contract pairs P (K,2) at x (K,3), i.e. write
     [x, merged state] into their kept vertices' rows, and start pricing the next round's stale pairs Pn
     (J,2) on the new rows. The merges go in pieces of ``size`` rows, one call each, and the first
@@ -195,32 +195,71 @@ def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params,
     same rows whatever their order, and the values are those of `start_merge`, `set_rows` and
     `start_price`. Returns (the new device rows (VSd is donated), a function giving the (K, width) merged
     states, and one giving the `Priced` of Pn, or with ``raw`` its (5 + p, J) columns as the kernel gives
-    them, as `step_one` does)."""
+    them, as `step_one` does). ``kept`` (k,2): pairs also priced at their kept vertex in the last piece's
+    call (`kept_fuses`; locked vertices), then a fourth function gives their `Priced`."""
     Pi, Pn = P.astype(np.int32), Pn.astype(np.int32)
     pieces = list(zip(chunks(Pi, size=size), chunks(x, size=size), chunks(Pi[:, 0], fill=len(VSd), size=size)))
     head, idle = pad_rows(Pn[:price_size], price_size), np.zeros((price_size, 2), np.int32)
     merged = []
     for i, ((_, pp), (_, xx), (_, ii)) in enumerate(pieces):
-        qq = head if i == len(pieces) - 1 else idle
-        VSd, m, first = _step(model.merge_kernel, model.price_kernel, VSd, ii, pp, xx, _params(params, pp), qq,
-                              _params(params, qq))
+        last = i == len(pieces) - 1
+        qq = head if last else idle
+        if last and kept is not None:
+            VSd, m, first, at = _step_with(model, VSd, ii, pp, xx, qq, params, kept)
+        else:
+            VSd, m, first = _step(model.merge_kernel, model.price_kernel, VSd, ii, pp, xx, _params(params, pp), qq,
+                                  _params(params, qq))
         merged.append(m)
     outs = [first] + ([model.price(VSd, part, _params(params, part)) for _, part in chunks(Pn[price_size:])]
                       if len(Pn) > price_size else [])
     priced = ((lambda: np.concatenate([to_host(o) for o in outs], 1)[:, : len(Pn)]) if raw
               else _joined(outs, len(Pn), 5 + len(model.parts)))
-    return VSd, lambda: np.concatenate([to_host(o) for o in merged])[: len(P)], priced
+    out = VSd, lambda: np.concatenate([to_host(o) for o in merged])[: len(P)], priced
+    return out if kept is None else (*out, at)
 
 
-def step_one(model, VSd, rows_at: np.ndarray, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, K: int):
+def step_one(model, VSd, rows_at: np.ndarray, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, K: int,
+             kept: np.ndarray | None = None):
     """`start_step` for a round that one piece holds, its inputs already padded to the piece's shapes
     (`round_glue_jit.contract`): the merges of pairs P at x into rows ``rows_at`` (padding past the end),
     and the price of the stale pairs Pn. Returns (the new device rows (VSd is donated), a function giving
     the K pairs' (K, width) merged states, and one giving the raw price, (5 + p, len(Pn)) as the kernel
-    gives it)."""
+    gives it), and with ``kept`` as `start_step` has it, a fourth."""
+    if kept is not None:
+        VSd, merged, priced, at = _step_with(model, VSd, rows_at, P, x, Pn, params, kept)
+        return VSd, (lambda: to_host(merged)[:K]), (lambda: to_host(priced)), at
     VSd, merged, priced = _step(model.merge_kernel, model.price_kernel, VSd, rows_at, P, x, _params(params, P), Pn,
                                 _params(params, Pn))
     return VSd, (lambda: to_host(merged)[:K]), (lambda: to_host(priced))
+
+
+def kept_fuses(model) -> bool:
+    """Whether a round's one device call (`start_step`, `step_one`) can also price pairs at their kept vertex
+    (``kept``: locked vertices, `qemjax._schedulers.locks`): a model that `fuses` whose ``price_at_kept`` is
+    its static ``at_kept_kernel``, so the values are those of `start_price` with ``at_kept``, and that does not
+    price them on the host (``cost_at``)."""
+    from .._costs.base import CostModel
+
+    return (fuses(model) and getattr(model, "at_kept_kernel", None) is not None
+            and getattr(model, "cost_at", None) is None and type(model).price_at_kept is CostModel.price_at_kept)
+
+
+@kernel(static_argnums=(0, 1, 2), donate_argnums=3)
+def _step_kept(merge, price, at_kept, VS, rows_at, P, x, merge_params, Pn, price_params, Pk, kept_params):
+    """`_step`, and the price of pairs Pk at their kept vertex (``at_kept``, a model's ``at_kept_kernel``) on
+    the new rows."""
+    VS, merged, priced = _step(merge, price, VS, rows_at, P, x, merge_params, Pn, price_params)
+    return VS, merged, priced, at_kept(VS, Pk, kept_params)
+
+
+def _step_with(model, VSd, rows_at, P, x, Pn, params, kept):
+    """`_step` with the pairs ``kept`` (k,2) priced at their kept vertex, padded to `chunk_size` (a round's are
+    few: mostly the smallest shape). Returns `_step`'s three and a function giving their `Priced`."""
+    k = len(kept)
+    Pk = pad_rows(np.asarray(kept, np.int32), chunk_size(k))
+    VSd, merged, priced, at = _step_kept(model.merge_kernel, model.price_kernel, model.at_kept_kernel, VSd, rows_at,
+                                         P, x, _params(params, P), Pn, _params(params, Pn), Pk, _params(params, Pk))
+    return VSd, merged, priced, _joined([at], k, 5 + len(model.parts))
 
 
 def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: int | None = None):

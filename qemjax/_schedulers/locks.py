@@ -180,15 +180,39 @@ def both_locked(locks: RunLocks, E: np.ndarray) -> np.ndarray:
     return np.take(locks.locked, E[:, 0]) & np.take(locks.locked, E[:, 1])
 
 
-def adjust(locks: RunLocks, weights, model, VQ, VQd, P: np.ndarray, priced, params, faces=None, pad: int = 0):
+def _kept_one(locks: RunLocks, P: np.ndarray) -> np.ndarray:
+    """The rows of pairs P (K,2) with a locked kept vertex and an unlocked other one (priced at the kept)."""
+    return np.flatnonzero(np.take(locks.locked, P[:, 0]) & ~np.take(locks.locked, P[:, 1]))
+
+
+def at_kept_pairs(locks: RunLocks, P: np.ndarray) -> np.ndarray:
+    """The pairs of P (K,2) that `adjust` prices at their kept vertex, in order."""
+    return P[_kept_one(locks, P)]
+
+
+def start_at_kept(locks: RunLocks, model, VQd, P: np.ndarray, params, faces=None, pad: int = 0):
+    """The device price at their kept vertex of the pairs of P (K,2) that `adjust` prices there, started now
+    on the device rows VQd (asynchronous), for `adjust`'s ``at``; None where `adjust` prices them on the
+    host (a model with ``cost_at``) or none has a locked kept vertex."""
+    from .common import start_price
+
+    if getattr(model, "cost_at", None) is not None:
+        return None
+    one = _kept_one(locks, P)
+    return start_price(model, VQd, P[one], params, faces, pad, at_kept=True) if one.size else None
+
+
+def adjust(locks: RunLocks, weights, model, VQ, VQd, P: np.ndarray, priced, params, faces=None, pad: int = 0,
+           at=None):
     """``priced`` (`common.Priced` of pairs P (K,2)) with the pairs that have a locked kept vertex priced
     there (``model.price_at_kept``; a model without it but with a host ``cost_at`` (attributes): on the
     host) and every cost and part multiplied by the larger weight of the pair's endpoints (``weights``: the
-    run's current weights, or None). The run's numbering puts a locked endpoint first in its pair."""
+    run's current weights, or None). The run's numbering puts a locked endpoint first in its pair.
+    ``at``: that device price, started before on the same device rows (`start_at_kept` of P), or None."""
     from .common import start_price
 
     x, cost, branch, parts = priced.x, priced.cost, priced.branch, priced.parts
-    one = np.flatnonzero(np.take(locks.locked, P[:, 0]) & ~np.take(locks.locked, P[:, 1]))
+    one = _kept_one(locks, P)
     if one.size:
         x, cost, branch, parts = x.copy(), cost.copy(), branch.copy(), parts.copy()
         Q = P[one]
@@ -197,7 +221,7 @@ def adjust(locks: RunLocks, weights, model, VQ, VQd, P: np.ndarray, priced, para
             cost[one] = [max(model.cost_at(VQ[a], VQ[b], VQ[a, :3]), 0.0) for a, b in Q.tolist()]
             branch[one] = 2
         else:
-            at = start_price(model, VQd, Q, params, faces, pad, at_kept=True)()
+            at = (at or start_price(model, VQd, Q, params, faces, pad, at_kept=True))()
             x[one], cost[one], branch[one] = at.x, at.cost, at.branch
             if parts.shape[0]:
                 parts[:, one] = at.parts

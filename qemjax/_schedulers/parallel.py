@@ -46,8 +46,8 @@ from .._mesh.incidence import FaceLists
 from .._mesh import rows_jit
 from . import outcome, round_glue_jit, round_jit
 from .._kernels.flips import SLIVER
-from .common import (DTYPE, Options, Timer, bucket, face_normals, fuses, on_device, pad_rows, set_rows, start_flips,
-                     start_merge, start_price, start_step, step_one)
+from .common import (DTYPE, Options, Priced, Timer, bucket, face_normals, fuses, kept_fuses, on_device, pad_rows,
+                     set_rows, start_flips, start_merge, start_price, start_step, step_one)
 from .select import fits_target, gate_rank, independent_sets, sort_keys, submit
 
 MERGE_CHUNK = 4096  # the piece shape of a round's merge and device row update (one compilation) ...
@@ -287,8 +287,10 @@ class _Run:
         self.N0d = jnp.asarray(pad_rows(N0, bucket(m)))  # padded: one compilation per size class
         # the common case's rounds run as compiled loops (`round_jit`), with the flip test on the host
         self.compiled = round_jit.fits(self.manifold, self.incremental, locks, m)
-        # a round's merge, row update and the next round's price in one device call (`start_step`)
-        self.fused = self.incremental and locks is None and fuses(model)
+        # a round's merge, row update and the next round's price in one device call (`start_step`); with locks
+        # only on the compiled path (`carry` applies the locks to the device's price there), so that a locked run
+        # on the numpy stages stays the reference it is for the compiled one
+        self.fused = self.incremental and (locks is None or self.compiled) and fuses(model)
         self.merged = None  # (kept vertices, their merged states) not yet in VQ: `settle`
         if self.incremental:
             self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
@@ -303,11 +305,16 @@ class _Run:
             # kept attributes: the wedge of each face corner and the seam vertices, for the seam rule
             self.seams = ((np.zeros((0, 3), np.int64), np.zeros(self.n, bool)) if wedges is None
                           else (wedges.C, wedges.multi))
+            # locked vertices and the scratch of their rule (`round_jit._all_dying`); empty: no locks
+            self.lock_rule = ((np.zeros(0, bool), np.zeros(0, np.int32)) if locks is None
+                              else (np.ascontiguousarray(locks.locked, bool), np.full(self.n, -1, np.int32)))
         # and the glue between those loops and the device call compiled too (`round_glue_jit`): one run
         # whose rounds are the compiled loops with the fused device call (a batch sets it False: its gates
         # and budgets are per copy)
         self.fast = self.compiled and self.fused
         if self.fast:
+            self.at_kept = None  # (`contract_fast`) the next round's price at locked kept vertices, started
+            self.kept_fuses = locks is not None and kept_fuses(model)  # ... in the round's device call
             self.limit = round_glue_jit.bound(options.max_cost, DTYPE)  # as `candidates` compares it
             # the free cost at each vertex's part scale, as `select` takes it per pair (empty: one part)
             self.free_at = (np.zeros(0) if part_scale is None
@@ -370,11 +377,20 @@ class _Run:
         out = raw()
         t1 = time.perf_counter()
         st = RoundState(E, ecount, deg)
+        if self.locks is not None:  # locked kept vertices and the weights, as `cost` applies them
+            out = self.locked_raw(out, _take(E, d), self.at_kept)
+            self.at_kept = None
         st.x, st.cost, st.branch, st.parts, st.bad, st.bvert, valid, _ = round_glue_jit.carry(
             kept, d, out, prev.x, prev.cost, prev.branch, prev.parts, prev.bad, E, ecount, self.n, self.limit,
-            need, self.manifold)
+            need, self.manifold, self.lock_rule[0])
         if self.wedges is not None:  # stale pairs at seam vertices: placed at an allowed endpoint (as `cost`)
             self.place_at_seams(st, d)
+            if self.locks is not None:  # as `cost`: two locked vertices stay LOCKED, a locked kept one pinned
+                Pd = _take(E, d)
+                st.bad[d[_locks.both_locked(self.locks, Pd)]] = outcome.LOCKED
+                xd = _take(st.x, d)
+                _locks.pin(self.locks, self.VQ, Pd, xd)
+                put_rows(st.x, d, xd)
             valid[d] = self.candidates_of(st.cost[d], st.bad[d], ecount[d], need)  # their candidate test again
         self.timer.add("kernels_s", t1 - t0)
         self.timer.add("topology_s", time.perf_counter() - t1)
@@ -442,6 +458,19 @@ class _Run:
             a, merged = self.merged
             self.merged = None
             self.VQ[a, 3:] = merged()
+
+    def locked_raw(self, out, P, at=None):
+        """The device's raw price ``out`` (5 + p, ≥ K) of pairs P (K,2) (`common.step_one`) with locked kept
+        vertices and the weights applied (`_locks.adjust`, on the `Priced` that `cost` would make of it;
+        ``at``: its price at the kept vertices, started with the device call, or None): (5 + p, K), the same
+        values in the same dtypes."""
+        K = len(P)
+        pr = Priced(out[:3, :K].T, out[3, :K], out[4, :K].astype(np.int8), out[5:, :K])
+        at = _locks.adjust(self.locks, self.weights, self.model, self.VQ, self.VQd, P, pr, self.params, self.faces,
+                           self.pad, at=at)
+        res = np.empty((out.shape[0], K), out.dtype)
+        res[:3], res[3], res[4], res[5:] = at.x.T, at.cost, at.branch, at.parts
+        return res
 
     def locked_prices(self, pending, P):
         """``pending`` (a price of pairs P) with locked kept vertices and the weights applied (`_locks.adjust`)."""
@@ -551,7 +580,7 @@ class _Run:
             (self.rounds * 7919) & 0xFFFFFFFF, vcopy, needs, sch.max_passes, float(sch.pass_yield),
             bool(self.options.keep_parts), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, self.V3,
             self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, keys, rows, verts,
-            *self.seams)
+            *self.seams, *self.lock_rule)
         return acc, bad, why, None, ~free, apex
 
     def scratch(self, P: int):
@@ -674,13 +703,23 @@ class _Run:
         faces.count -= len(dead)
         self.dead.append(dead)
         self.max_cost_used = max(self.max_cost_used, top)
+        _locks.carry(self.weights, a, b)
         self.record(st, acc, a, b, xs, costs)
+        Pd = one[3][: len(d)] if len(one[0]) else _take(st.edges_next[0], d)  # the stale pairs
+        # with locks, those at a locked kept vertex are priced there too, in the same device call (a small share
+        # of the stale pairs: the smallest shape holds them, else they go beside it)
+        kept = _locks.at_kept_pairs(self.locks, Pd) if self.kept_fuses else None
+        if kept is not None and not 0 < len(kept) <= CHUNKS[1]:
+            kept = None
         if len(one[0]):
-            self.VQd, merged, priced = step_one(self.model, self.VQd, *one, self.params, len(acc))
+            self.VQd, merged, priced, *at = step_one(self.model, self.VQd, *one, self.params, len(acc), kept=kept)
         else:
-            self.VQd, merged, priced = start_step(self.model, self.VQd, P, xs, _take(st.edges_next[0], d), self.params,
-                                                  self.merge_chunk, _holding(self.price_sizes, len(d)), raw=True)
+            self.VQd, merged, priced, *at = start_step(self.model, self.VQd, P, xs, Pd, self.params, self.merge_chunk,
+                                                       _holding(self.price_sizes, len(d)), raw=True, kept=kept)
         self.started(st, a, xs, d, merged, priced, moved=True)
+        if self.locks is not None:
+            self.at_kept = at[0] if at else _locks.start_at_kept(self.locks, self.model, self.VQd, Pd, self.params,
+                                                                 faces, self.pad)
         self.faces_per_round.append(faces.count)
         self.timer.add("contract_s", time.perf_counter() - t0)
 

@@ -9,8 +9,9 @@ inputs. They serve one run on the compiled path (`parallel._Run.fast`): a batch'
 copy (`batched`).
 
 * `carry`: stages 1 and 2 and the candidate test (`_Run.update`, `_Run.cost`, `_Run.candidates`): the pairs
-  that stay take their last prices and rules, the stale ones the device's new prices, and the boundary
-  vertices and the candidates are marked;
+  that stay take their last prices and rules, the stale ones the device's new prices (with locks: as
+  `locks.adjust` leaves them), pairs of two locked vertices are refused, and the boundary vertices and the
+  candidates are marked;
 * `under_gate`: the round's gate (`_Run.select`), the candidates at most gate × the k-th cheapest valid key
   (or the free cost);
 * `order_fit`: the accepted pairs in key order, cut to the face target (`select.sort_keys`,
@@ -23,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .outcome import LOCKED
 from .round_jit import _key, clear_bad, contract_edges, contract_faces
 
 
@@ -34,13 +36,15 @@ def bound(limit, dtype) -> np.generic:
 
 
 @njit(cache=True, nogil=True)
-def carry(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold):
+def carry(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold, locked):
     """The new pairs' prices, rules, boundary vertices and candidates.
 
     kept (P0,) bool: which of the last round's pairs stay, in order (`round_jit.contract_edges`); d (K,):
     the rows of the new pairs E (P,2) whose price is stale; out (5 + p, ≥ K): the device's price of them
-    ([x (3), cost, branch, parts] per column, `common.start_step`); x0, cost0, branch0, parts0 (P0, p),
-    bad0: the last round's. limit: max_error's cost bound (`bound`); need: the faces still to remove.
+    ([x (3), cost, branch, parts] per column, `common.start_step`; a run with locks: as `locks.adjust`
+    leaves it); x0, cost0, branch0, parts0 (P0, p), bad0: the last round's. limit: max_error's cost bound
+    (`bound`); need: the faces still to remove; locked (n,) bool (empty: no locks): a pair of two locked
+    vertices is marked `outcome.LOCKED` (`locks.both_locked`, as `_Run.cost` marks every pair each round).
     Returns x, cost, branch, parts, bad, the boundary vertices (n,) bool, the candidates (P,) bool
     (`_Run.candidates`) and how many there are."""
     P = len(E)
@@ -68,7 +72,10 @@ def carry(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, n
     bvert = np.zeros(n, np.bool_)
     valid = np.empty(P, np.bool_)
     nv = 0
+    locks = len(locked) > 0
     for i in range(P):
+        if locks and locked[E[i, 0]] and locked[E[i, 1]]:
+            bad[i] = LOCKED
         c = ecount[i]
         if c == 1:
             bvert[E[i, 0]] = True

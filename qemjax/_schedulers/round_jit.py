@@ -3,16 +3,16 @@
 `parallel._Run` spends a round in hundreds of numpy calls on small arrays (about 1 ms a round on a 6 k-face
 mesh); the same steps as two loops over integer arrays take a few tens of µs. This module holds those two
 loops, for the common case (`fits`): manifold mode with the pairs updated through the contractions (no
-non-edge pairs), no locks, at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through
-`wedges_jit`). They make exactly the choices of the numpy stages they
+non-edge pairs), at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through `wedges_jit`, and
+locked vertices' rule, `_all_dying`). They make exactly the choices of the numpy stages they
 replace (`select.independent_sets` with `parallel._Run.validate`, then `FaceLists.contract_touched` and
 `topology.contract_edges`): the golden outputs are the same bits, and tests/test_round_jit.py compares each
 loop with the numpy code on random meshes.
 
 * `select_validate`: the independent-set passes (each pair that holds the smallest key among the
   candidates touching its endpoints' closed 1-rings), each selected pair's rules (link condition,
-  coincident faces, the part rule, the seam rule, the flip test with the device kernel's float32
-  operations, `greedy_rules_jit.flips`), the locking of accepted 1-rings and each copy's pass rule
+  coincident faces, the part rule, the locks' rule, the seam rule, the flip test with the device kernel's
+  float32 operations, `greedy_rules_jit.flips`), the locking of accepted 1-rings and each copy's pass rule
   (`select._copies_staying`; one run is one copy).
 * `contract`: the accepted pairs' faces (dead ones out, b's corners to a, new runs in the pool) and
   pairs (merged, moved, counted, compacted), with the degrees after and which pairs are stale.
@@ -27,7 +27,7 @@ from numba import njit
 
 from .._mesh import wedges_jit
 from .greedy_rules_jit import flips
-from .outcome import COINCIDENT, FLIP, PART, SEAM, TOPOLOGY
+from .outcome import COINCIDENT, FLIP, LOCKED, PART, SEAM, TOPOLOGY
 
 NO_KEY = np.iinfo(np.int64).max
 _SCRAMBLE = np.uint32(0x9E3779B1)
@@ -43,8 +43,14 @@ def fits(manifold: bool, incremental: bool, locks, faces: int) -> bool:
     whole-array gathers keep many in flight (and share the round with a worker thread): warm, with the numpy
     stages and with the loops, the cow (5.8 k faces) to 10 % took 0.046 and 0.019 s, the bunny (69 k) 0.174
     and 0.149 s, armadillo (86 k) 0.204 and 0.199 s, armadillo x16 (1.38 M) to 1 % 3.25 and 4.65 s, the
-    same bits (python experiments/round_paths.py, experiments/results/round_paths_1128g.txt)."""
-    return manifold and incremental and locks is None and faces <= MAX_FACES
+    same bits (python experiments/round_paths.py, experiments/results/round_paths_1128g.txt).
+
+    ``locks`` (a `locks.RunLocks` or None) does not change the answer: locked vertices' rule runs inside the
+    loops (`_rules`), and the prices' part of them (`locks.adjust`, pairs of two locked vertices,
+    seam placements pinned at a locked vertex) is applied around the compiled calls (`parallel._Run`), with
+    the same bits as the numpy stages (tests/test_locks_compiled.py). The parameter stays so that callers
+    need not know."""
+    return manifold and incremental and faces <= MAX_FACES
 
 
 @njit(cache=True, inline="always")
@@ -55,14 +61,33 @@ def _key(kbits, idx, local, salt):
 
 
 @njit(cache=True)
+def _all_dying(c, F, alive, cnt, off, pool, partner):
+    """Whether every live face at vertex c dies in this pass: holds both endpoints of one of its selected
+    pairs (``partner``: each selected pair's endpoints name each other, -1 elsewhere). This is
+    `locks.strands`' count (the dying faces at c, over the pass's pairs, at least c's live faces): the faces
+    a pair removes are the live ones holding both its endpoints."""
+    for i in range(off[c], off[c] + cnt[c]):
+        f = pool[i]
+        if not alive[f]:
+            continue
+        g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
+        u, v = (g1, g2) if g0 == c else ((g0, g2) if g1 == c else (g0, g1))
+        if partner[u] != v:
+            return False
+    return True
+
+
+@njit(cache=True)
 def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-           mark, nb, fa, apex, s, C, multi, T):
+           mark, nb, fa, apex, s, C, multi, T, locked, partner):
     """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
-    override each other in that order; the flip test counts only for a pair that passes the rest.
+    override each other in that order; the locks' rule, the seam rule and then the flip test count only
+    for a pair that passes the rest.
     Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s].
     ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested.
-    T (12, ≥ the faces at a and b): the seam rule's scratch."""
+    T (12, ≥ the faces at a and b): the seam rule's scratch. locked (n,) bool (empty: no locks) and
+    partner (n,): the locks' rule (`locks.vanishing`, `locks.strands`; ``partner`` as `_all_dying` reads it)."""
     # one scan of each endpoint's faces: the link condition (the common neighbours are the apexes of the
     # pair's faces) and the faces that stay (not holding both endpoints), each with the corner that moves
     ka = nk = 0
@@ -83,11 +108,16 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
     ncommon = 0
     c0, c1 = -1, -1
     bad_apex = False
+    stranded = False  # a locked third vertex of a face that dies would be left in no face
     for i in range(off[b], off[b] + cnt[b]):
         f = pool[i]
         if not alive[f]:
             continue
         g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
+        if len(locked) and (g0 == a or g1 == a or g2 == a):  # a face that dies: its third vertex
+            c = g0 if (g0 != a and g0 != b) else (g1 if (g1 != a and g1 != b) else g2)
+            if locked[c] and not stranded:
+                stranded = _all_dying(c, F, alive, cnt, off, pool, partner)
         for u in (g0, g1, g2):
             if u != b and u != a and mark[u] == 1:
                 mark[u] = 2  # counted once
@@ -130,6 +160,9 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
         why = PART
     if not linked:
         why = TOPOLOGY
+    # a locked vertex never leaves the mesh: not as an endpoint with no face staying, nor as a stranded third
+    if why == 0 and len(locked) and ((nk == 0 and (locked[a] or locked[b])) or stranded):
+        why = LOCKED
     if why == 0 and (multi[a] or multi[b]):  # kept attributes: the seam rule (`wedges.Tracker.allowed`)
         free, nba, nab, _, _ = wedges_jit.modes(F, alive, cnt, off, pool, C, multi, a, b, T)
         if not free and not ((nba >= 0 and wedges_jit._at(VQ, a, x)) or (nab >= 0 and wedges_jit._at(VQ, b, x))):
@@ -145,8 +178,8 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
 @njit(cache=True)
 def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes, pass_yield, keep_parts,
                     F, alive, cnt, off, pool, VQ, N0, X, bvert, deg, cos_max, sliver, free, active, mark,
-                    keys, rows, verts, corner_wedge, multi):
-    """`select.independent_sets` with `parallel._Run.validate` (manifold mode, no locks).
+                    keys, rows, verts, corner_wedge, multi, locked, partner):
+    """`select.independent_sets` with `parallel._Run.validate` (manifold mode).
 
     E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
     kbits (P,) int32: the float32 bits of each pair's ranking key; local (P,): each pair's index within its
@@ -156,7 +189,8 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     back with the locked vertices False); keys (≥ P,) int64, rows (2, ≥ P) int32 and verts (2, n) int64:
     working arrays, kept from round to round (fresh arrays this large would be mapped and faulted in anew on
     every call). corner_wedge (m,3) and multi (n,): the wedge of each face corner and the vertices on a
-    seam, when attributes are kept (else (0,3) and all False).
+    seam, when attributes are kept (else (0,3) and all False). locked (n,) bool: the locked vertices (empty:
+    none), and partner (n,) int32 all -1 (left so): scratch of their rule (`_all_dying`).
     Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices and their
     rules)."""
     P = len(E)
@@ -234,6 +268,10 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
         g[:] = 0
         tried[:] = False
         first = na
+        if len(locked):  # the pass's pairs, for the faces they remove together (`_all_dying`)
+            for t in range(ns):
+                u, v = E[sel[t], 0], E[sel[t], 1]
+                partner[u], partner[v] = v, u
         for t in range(ns):
             i = sel[t]
             a, b = E[i, 0], E[i, 1]
@@ -243,7 +281,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
                 fa = np.empty((4 * (cnt[a] + cnt[b]), 2), np.int64)
                 T = np.empty((12, 4 * (cnt[a] + cnt[b])), np.int64)
             w = _rules(a, b, nf, X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-                       mark, nb, fa, apex, na, corner_wedge, multi, T)
+                       mark, nb, fa, apex, na, corner_wedge, multi, T, locked, partner)
             c = vcopy[a]
             tried[c] = True
             if w == 0:
@@ -256,6 +294,9 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
                 rej[nr] = i
                 why[nr] = w
                 nr += 1
+        if len(locked):  # (undone)
+            for t in range(ns):
+                partner[E[sel[t], 0]] = partner[E[sel[t], 1]] = -1
         # lock the closed 1-rings of this pass's accepted pairs (every pair at them is in the working set);
         # their endpoints are marked -1 meanwhile
         for t in range(first, na):
