@@ -142,7 +142,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             from .._io.mesh import MissingFileError
             raise MissingFileError(f"no such file: {mesh}")
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
-                   final_faces=p.final_faces, target=[target_faces, ratio], kwargs=repr(sorted(kwargs.items())))
+                   final_faces=p.final_faces, refit=p.refit, target=[target_faces, ratio], kwargs=repr(sorted(kwargs.items())))
         _fresh(folder, key)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -171,7 +171,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 locks = "border"
             else:
                 locks = str(_locks(level_dir, groups, borders))
-            specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=kwargs,
+            level_kw = kwargs if last or p.refit == "all" else kwargs | {"refit": 0}
+            specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
                           out=str(level_dir / f"group_{k:05d}.npz")) for k, g in enumerate(groups)]
             stats = _run_level(runner, "run_group", specs, progress, f"level {len(levels) + 1}")
             paths = [s["out"] for s in specs]
