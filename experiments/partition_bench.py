@@ -10,8 +10,9 @@ speed: a shared mesh written as a binary PLY (float32, as scans are), then `qemj
 --partition --workers N`, the same in core (no --partition) and meshoptimizer single-threaded file to file
 (trimesh reads the PLY, `meshopt_simplify` to the same face count, trimesh writes it), alternating, each
 ``--repeats`` times; the medians and the ratios against meshoptimizer. quality: partitioned (2 workers) and in
-core to the same target, two-way rms and Hausdorff (`qemjax.metrics.surface_distance`, 200,000 samples each
-way, relative to the diagonal) and their ratios. scale: meshes made in code (`big_mesh.py`: a bumpy torus,
+core to the same target (``--refit``: each `Partition.refit` value), two-way rms and Hausdorff
+(`qemjax.metrics.surface_distance`, 200,000 samples each way, relative to the diagonal) and their ratios, with
+the seconds of each run (in this process; the workers warm after the first mesh). scale: meshes made in code (`big_mesh.py`: a bumpy torus,
 binary PLY written in bands) of each size to 1 %, partitioned: seconds, microseconds per input face, peak
 memory of the client and of the largest worker. workers: one input, the output file's sha256 with each
 worker count. Appends to results/partition_bench.csv; prints a markdown table.
@@ -126,21 +127,28 @@ def quality(args, folder: Path) -> None:
     from qemjax.metrics import surface_distance
 
     rows = []
-    print("| mesh | faces | rms part./in core | Hausdorff part./in core | rms, Hausdorff (rel.) partitioned | in core |")
-    print("|---|---|---|---|---|---|")
+    print("| mesh | faces | re-fit | rms part./in core | Hausdorff part./in core | partitioned s | in core s |")
+    print("|---|---|---|---|---|---|---|")
     for name in args.meshes:
         bm = meshes.load(name)
-        part = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, partition=qemjax.Partition(workers=args.workers),
-                               measure=False)
+        t = time.perf_counter()
         core = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False)
-        dp = surface_distance((bm.V, bm.F), (part.vertices, part.faces), n_samples=200_000)
+        t_core = time.perf_counter() - t
         dc = surface_distance((bm.V, bm.F), (core.vertices, core.faces), n_samples=200_000)
-        r_rms, r_h = dp["rms_rel"] / dc["rms_rel"], dp["hausdorff_rel"] / dc["hausdorff_rel"]
-        print(f"| {name} | {len(bm.F)} → {len(part.faces)} | {r_rms:.3f} | {r_h:.3f} | {dp['rms_rel']:.3e}, "
-              f"{dp['hausdorff_rel']:.3e} | {dc['rms_rel']:.3e}, {dc['hausdorff_rel']:.3e} |", flush=True)
-        rows += [dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="rms ratio", value=r_rms,
-                      note=f"levels={part.stats['partition']['levels']}"),
-                 dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="hausdorff ratio", value=r_h)]
+        for refit in args.refit:
+            t = time.perf_counter()
+            part = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False,
+                                   partition=qemjax.Partition(workers=args.workers, refit=refit))
+            t_part = time.perf_counter() - t
+            dp = surface_distance((bm.V, bm.F), (part.vertices, part.faces), n_samples=200_000)
+            r_rms, r_h = dp["rms_rel"] / dc["rms_rel"], dp["hausdorff_rel"] / dc["hausdorff_rel"]
+            print(f"| {name} | {len(bm.F)} → {len(part.faces)} | {refit} | {r_rms:.3f} | {r_h:.3f} | {t_part:.1f} | "
+                  f"{t_core:.1f} |", flush=True)
+            note = f"refit={refit} levels={part.stats['partition']['levels']}"
+            rows += [dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="rms ratio", value=r_rms,
+                          seconds=t_part, note=note),
+                     dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="hausdorff ratio",
+                          value=r_h, seconds=t_core, note=note)]
     append(rows)
 
 
@@ -200,6 +208,7 @@ def main(argv=None):
     ap.add_argument("--ratio", type=float, default=0.01)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--part-faces", type=int, default=None)
+    ap.add_argument("--refit", nargs="+", default=["last", "all"], help="quality: Partition(refit=...) values")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-in-core", action="store_true")
     ap.add_argument("--keep", action="store_true", help="scale: keep the generated PLY files")
