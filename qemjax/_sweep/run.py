@@ -44,9 +44,17 @@ def is_grid_key(key: str) -> bool:
     except KeyError:
         return False
     return True
-BATCH_FACES = 400_000  # an in-process batch holds at most this many faces in all: a few seconds of work, so
-# rows reach the file and the bar as cells finish (64 cow configurations are one batch; 100 k-face meshes 4)
-BATCH_CELLS = 128  # and at most this many cells
+BATCH_FACES = 400_000  # a batch of ``batch_size`` cells holds at most this many faces in all (`batches`)
+BATCH_CELLS = 128  # and a piece or batch at most this many cells
+PIECE_FACES = 1 << 17  # a piece's distinct runs hold at most this many faces in all (a mesh larger than that:
+# a piece of its own): a few seconds of work at most, so rows reach the file and the bar as pieces finish,
+# and the union of copies is small enough for the compiled rounds (`round_jit.MAX_FACES`)
+PIECE_RUNS = 16  # and at most this many distinct runs: 64 configurations of the cow are 4 pieces
+PLAN_FACES = 200_000  # meshes up to this size are planned (`pieces`); a larger one's cells run one per piece
+RING_COST = 4  # a run whose model prices pairs from their faces (``regularize``) costs about this many plain ones
+POOL_WORK = 150_000  # the weighted faces of a sweep's distinct runs (about 1 s of work, in one process) from
+# which a default sweep starts helper processes; a sweep finding them started uses them for any work
+HERE_TOO = True  # this process runs pieces too (beside its helpers)
 SAVE_EVERY_S = 1.0  # in process, the table is rewritten after each batch and while one yields rows, at most this often
 RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
@@ -324,6 +332,70 @@ def row(mesh, cell: Cell, res, metrics) -> dict:
     return out
 
 
+@dataclasses.dataclass
+class Piece:
+    """Cells that run together (one `run_cells` call: `simplify_cells`), and an estimate of their work (the
+    faces of their distinct runs, a ring model's `RING_COST` times)."""
+
+    cells: list
+    work: float
+
+
+def pieces(cells: list[Cell], loaded: dict, faces: dict) -> list[Piece]:
+    """The cells cut into pieces, in this order: each group of cells that can share rounds (`api.plan_cells`:
+    the same kernels, flip angle, topology mode and schedule, of any mesh), in the order of its first cell,
+    cut into pieces of about equal work, each of at most `PIECE_FACES` faces and `PIECE_RUNS` distinct runs
+    and `BATCH_CELLS` cells; the cells that would run exactly alike (a closed mesh's boundary weights) stay in
+    one piece, where they run once. The cut depends on the cells alone, never on how many processes run
+    them: the same pieces, the same rows (``batch_size``, ``same_run``). Peer cells, cells of meshes over
+    `PLAN_FACES` faces and cells that cannot share rounds are runs of their own."""
+    from .._pipeline.api import plan_cells
+
+    planned = [i for i, c in enumerate(cells) if _peer(c) is None and faces[c.mesh] <= PLAN_FACES]
+    plan = dict(zip(planned, plan_cells([(loaded[cells[i].mesh], cells[i].kwargs()) for i in planned])))
+    groups: dict = {}  # group -> run -> [cell indices], each in order of first appearance
+    cost: dict = {}  # (group, run) -> its work
+    for i, c in enumerate(cells):
+        if i in plan and plan[i][0] is not None:
+            group, run, f, ring = plan[i]
+            group = ("batch", group)
+        elif i in plan:  # runs alone (another scheduler, a method that splits, a bad configuration)
+            group, run, f, ring = ("alone", c.mesh), ("cell", i), plan[i][2], plan[i][3]
+        else:
+            group, run, f, ring = ("alone", c.mesh), ("cell", i), faces[c.mesh], False
+        groups.setdefault(group, {}).setdefault(run, []).append(i)
+        cost[group, run] = max(f, 1) * (RING_COST if ring else 1)
+    out = []
+    for group, runs in groups.items():
+        units = []  # (cells, faces, work) per run; a run of more than BATCH_CELLS cells is split
+        for run, idx in runs.items():
+            f = faces[cells[idx[0]].mesh]
+            for k in range(0, len(idx), BATCH_CELLS):
+                units.append((idx[k:k + BATCH_CELLS], f, cost[group, run]))
+        out += [Piece([cells[i] for u in part for i in u[0]], sum(u[2] for u in part)) for part in _cut(units)]
+    return out
+
+
+def _cut(units: list) -> list[list]:
+    """Runs (cells, faces, work) in order, cut into the fewest contiguous parts of about equal work that keep
+    every part within `PIECE_FACES` faces (or one run), `PIECE_RUNS` runs and `BATCH_CELLS` cells."""
+    total = sum(u[2] for u in units) or 1.0
+    n = max(1, math.ceil(sum(u[1] for u in units) / PIECE_FACES), math.ceil(len(units) / PIECE_RUNS))
+    while True:
+        parts: list = [[] for _ in range(n)]
+        before = 0.0
+        for u in units:  # each run to the part its work's midpoint falls in
+            parts[min(n - 1, int((before + u[2] / 2) / total * n))].append(u)
+            before += u[2]
+        parts = [p for p in parts if p]
+        if n >= len(units):
+            return [[u] for u in units]
+        if all(len(p) == 1 or (sum(u[1] for u in p) <= PIECE_FACES and len(p) <= PIECE_RUNS
+                                                  and sum(len(u[0]) for u in p) <= BATCH_CELLS) for p in parts):
+            return parts
+        n += 1
+
+
 def batches(cells: list[Cell], faces: dict, size: int | None) -> list[list[Cell]]:
     """Cells, in order, cut into batches of at most ``size`` cells (None: as many as `BATCH_FACES` faces
     and `BATCH_CELLS` cells allow, with ``faces`` the face count of each mesh by name; a larger mesh is a batch of one)."""
@@ -364,7 +436,7 @@ class SweepInterrupted(KeyboardInterrupt):
 
 
 def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True,
-          batch_size: int | None = None):
+          batch_size: int | None = None, workers: int | None = None):
     """Run every (mesh, grid configuration, target) cell with `qemjax.simplify`; a pandas DataFrame, one
     row per cell.
 
@@ -433,6 +505,11 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, numbers.Integral)
                                    or batch_size < 1):
         raise ValueError(f"batch_size must be an int >= 1 or None, got {batch_size!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, numbers.Integral)
+                                or workers < 1):
+        raise ValueError(f"workers must be an int >= 1 or None, got {workers!r}")
+    if workers is not None and executor is not None:
+        raise ValueError("give executor= or workers=, not both (an executor's workers are its own)")
     metrics = {} if metrics is True else dict(metrics) if isinstance(metrics, dict) else False
     submit = None if executor is None else _submitter(executor)
     named = name_meshes(meshes)
@@ -518,17 +595,14 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         saved[:] = now, n
 
     faces = {name: len(loaded[name][1]) for name in loaded}
-    size = batch_size if batch_size is not None or submit is None else EXECUTOR_BATCH
-    work = batches(todo, faces, size)
     stopped = False
     try:
         if submit is None:
-            for b in work:
-                for r in iter_rows([(loaded[c.mesh], c) for c in b], metrics):
-                    finish([r])
-                    save(force=False)
-                save()
+            work = pieces(todo, loaded, faces) if batch_size is None else [
+                Piece(b, float(sum(faces[c.mesh] for c in b))) for b in batches(todo, faces, batch_size)]
+            _run_pieces(work, _helpers(workers, work), loaded, metrics, finish, save)
         else:
+            work = batches(todo, faces, batch_size if batch_size is not None else EXECUTOR_BATCH)
             _run_on(executor, submit, work, loaded, metrics, finish, save)
     except KeyboardInterrupt:
         stopped = True
@@ -543,6 +617,102 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     df.attrs["sweep"] = {"requested": requested, "cells": len(cells), "skipped": skipped, "ran": len(ran),
                          "collapsed": collapsed}
     return df
+
+
+def _helpers(workers: int | None, work: list[Piece]) -> int:
+    """How many helper processes run a sweep's pieces beside this process: ``workers`` − 1 (None: the cores
+    this process may use, less one, once the distinct runs' work reaches `POOL_WORK` or the helpers are
+    started already), no more than there are pieces to share, and none while another sweep uses them."""
+    share = len(work) - 1 if HERE_TOO else len(work)
+    if workers is None:
+        from .pool import HELPERS, cores
+
+        want = cores() - 1
+        if HELPERS.size() == 0 and sum(p.work for p in work) < POOL_WORK:
+            want = 0
+    else:
+        want = workers - 1
+    return max(0, min(want, share))
+
+
+def _run_pieces(work: list[Piece], helpers: int, loaded, metrics, finish, save) -> None:
+    """The pieces in this process and on ``helpers`` helper processes (`pool`), rows to ``finish`` as they
+    come, the table written at most every `SAVE_EVERY_S` while they do and after each piece run here. The
+    helpers and this process take the pieces, largest first, from one queue, each as it is free; this one
+    starts at once, the helpers once started (a few seconds, the first time: `pool`). A piece whose helper
+    died is run again (`RETRIES` times), then here. Ctrl-C (or an error) stops the helpers: their pieces in
+    flight are dropped."""
+    if helpers == 0:
+        for piece in work:
+            for r in iter_rows([(loaded[c.mesh], c) for c in piece.cells], metrics):
+                finish([r])
+                save(force=False)
+            save()
+        return
+    import collections
+    import queue
+    import threading
+
+    from . import pool as _pool
+
+    if not _pool.HELPERS.busy.acquire(blocking=False):  # another thread's sweep has them: here alone
+        return _run_pieces(work, 0, loaded, metrics, finish, save)
+    try:
+        _pool.HELPERS.grow(helpers)
+        todo = collections.deque(sorted(work, key=lambda p: -p.work))
+        lock = threading.Lock()
+        ids = {id(p): k for k, p in enumerate(work)}
+        dispatch = _pool.Dispatch(_pool.HELPERS, todo, lock, lambda p: (ids[id(p)], [
+            (loaded[c.mesh], c) for c in p.cells], metrics), RETRIES, helpers)
+        dispatch.start()
+        here, done = [], False
+
+        def handle(msg) -> bool:
+            if msg[0] == "rows":
+                _pool.warn_again(msg[3])
+                finish(msg[2])
+                save(force=False)
+            elif msg[0] == "here":
+                here.append(msg[1])
+            return msg[0] == "done"
+
+        def drain() -> bool:
+            got = False
+            while True:
+                try:
+                    got = handle(dispatch.results.get_nowait()) or got
+                except queue.Empty:
+                    return got
+
+        try:
+            while True:
+                done = drain() or done
+                piece = here.pop(0) if here else None
+                if piece is None and (HERE_TOO or dispatch.error is not None or not dispatch.is_alive()):
+                    with lock:
+                        piece = todo.popleft() if todo else None
+                if piece is not None:
+                    for r in iter_rows([(loaded[c.mesh], c) for c in piece.cells], metrics):
+                        finish([r])
+                        save(force=False)
+                        done = drain() or done
+                    save()
+                    continue
+                if done:
+                    break
+                try:
+                    done = handle(dispatch.results.get(timeout=_pool.POLL_S)) or done
+                except queue.Empty:
+                    save(force=False)
+        except BaseException:
+            dispatch.stop()
+            _pool.HELPERS.shutdown()  # the pieces in flight are dropped
+            drain()  # rows that came in meanwhile are finished rows: kept
+            raise
+        if dispatch.error is not None:
+            raise dispatch.error
+    finally:
+        _pool.HELPERS.busy.release()
 
 
 def _run_on(executor, submit, work, loaded, metrics, finish, save) -> None:
