@@ -15,8 +15,7 @@ distance (the default's passes over every input sample, which batching cannot sh
 that all differ on the cow; ``--grid crossed``: boundary weight, regularisation, flip angle, area weighting
 and placement crossed). The default sweep runs on every core (``workers=None``: this process and a helper
 process per other core, `qemjax._sweep.pool`); the warm-up sweeps start its helpers, so the timed sweeps
-find them warm; its CPU time is this process's only, not the helpers'. ``workers=1`` is the sweep in this
-process alone. ``--pool N`` adds the sweep on N warm worker processes (a `ProcessPoolExecutor` as
+find them warm; CPU times count the helpers' too. ``workers=1`` is the sweep in this process alone. ``--pool N`` adds the sweep on N warm worker processes (a `ProcessPoolExecutor` as
 ``executor=``, the cells cut into N batches; the workers' start and first compilations are not timed).
 The rows "x loop" divide each sweep's median by the `simplify` loop's, same run.
 
@@ -54,6 +53,7 @@ import peers  # noqa: E402
 
 import qemjax  # noqa: E402
 from qemjax._io import mesh as _io  # noqa: E402
+from qemjax._sweep.pool import HELPERS  # noqa: E402
 from qemjax._sweep.run import expand_grid  # noqa: E402
 
 RESULTS = HERE / "results"
@@ -83,16 +83,31 @@ FIELDS = ("date", "mesh", "faces_in", "ratio", "grid", "configs", "method", "rep
           "vs_loop", "cores", "load_avg_end")
 LOOP = "loop simplify"
 # --fresh: what each fresh process runs (after `import qemjax`), timed from the interpreter's start to its exit
-FRESH = {"qemjax.sweep (default: every core)": "qemjax.sweep({{'m': path}}, grid, [ratio], metrics=False, progress=False)",
+FRESH = {"qemjax.sweep (default: every core)": "qemjax.sweep({'m': path}, grid, [ratio], metrics=False, progress=False)",
          "qemjax.sweep workers=1 (this process)":
-             "qemjax.sweep({{'m': path}}, grid, [ratio], metrics=False, progress=False, workers=1)",
+             "qemjax.sweep({'m': path}, grid, [ratio], metrics=False, progress=False, workers=1)",
          LOOP: "[qemjax.simplify(path, ratio=ratio, **dict(p)) for p in expand_grid(grid)]"}
 
 
+def _helpers_cpu() -> float:
+    """The CPU seconds the sweep's helper processes have used so far (Linux: /proc; else 0)."""
+    total = 0.0
+    with HELPERS.lock:
+        pids = [h.proc.pid for h in HELPERS.helpers]
+    for pid in pids:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        except (OSError, IndexError, ValueError):
+            pass
+    return total
+
+
 def _clock(fn):
-    w, c = time.perf_counter(), time.process_time()
+    """(wall, CPU) seconds of fn(): the CPU of this process and of the sweep's helper processes."""
+    w, c, h = time.perf_counter(), time.process_time(), _helpers_cpu()
     fn()
-    return time.perf_counter() - w, time.process_time() - c
+    return time.perf_counter() - w, time.process_time() - c + _helpers_cpu() - h
 
 
 def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: int = 0) -> list[dict]:
@@ -104,10 +119,13 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: in
     meshes = {n: qemjax.load(p) for n, p in paths.items()}
     warm = qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, workers=1)  # compiles every kernel
     qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, batch_size=1, workers=1)
-    for _ in range(2):  # the default's helpers start, then compile (which helper takes which piece varies)
+    for _ in range(3):  # the default starts its helpers in the second (after one sweep of this much work), then they compile
         if not qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False)["result_sha256"].equals(
                 warm["result_sha256"]):
             raise AssertionError("the default sweep (every core) differs from the one in this process")
+        t0 = time.monotonic()
+        while HELPERS.ready() < HELPERS.size() and time.monotonic() - t0 < 120:
+            time.sleep(0.1)
     targets = {n: int(warm.loc[warm["mesh"] == n, "target_faces"].iloc[0]) for n in names}
     # distinct output meshes, and distinct runs (cells that would run alike run once: `simplify_cells`)
     distinct, runs = warm["result_sha256"].nunique(), int((1 / warm["same_run"]).sum().round())
@@ -193,13 +211,13 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: in
 
 def _rows(names, cleaned, ratio, grid_name, cells, times, one, one_cpu, distinct, runs, load) -> list[dict]:
     rows = []
-    loop = statistics.median(t[0] for t in times[LOOP]) if LOOP in times else float("nan")
+    loop = next((statistics.median(t[0] for t in ts) for m, ts in times.items() if m.endswith(LOOP)), float("nan"))
     for method, ts in times.items():
         med = statistics.median(t[0] for t in ts)
         cpu = statistics.median(t[1] for t in ts)
         n = len(names) if method.startswith(("one", "load")) else cells  # the rest cover every cell
         per_mesh = len(names) if n == len(names) else 1  # the baseline and load rows: per mesh
-        sweep = method.startswith("qemjax.sweep")
+        sweep = "qemjax.sweep" in method
         rows.append(dict(vs_loop=round(med / loop, 3) if sweep else "", cores=len(os.sched_getaffinity(0)),
                          load_avg_end=round(os.getloadavg()[0], 2), date=time.strftime("%Y-%m-%d"), mesh="+".join(names),
                          faces_in=sum(len(c[1]) for c in cleaned.values()), ratio=ratio, grid=grid_name,
@@ -221,13 +239,13 @@ def fresh(name: str, ratio: float, repeats: int, grid_name: str) -> list[dict]:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(HERE.parent), os.environ.get("PYTHONPATH", "")]))
     code = ("import warnings; warnings.filterwarnings('ignore', 'stopped at'); import qemjax; "
             "from qemjax._sweep.run import expand_grid; "
-            f"path, grid, ratio = {path!r}, {grid!r}, {ratio!r}; " + "{}")
+            f"path, grid, ratio = {path!r}, {grid!r}, {ratio!r}; ")
     times = {method: [] for method in FRESH}
     load = os.getloadavg()[0]
     for rep in range(repeats):
         for method in (list(FRESH) if rep % 2 == 0 else list(FRESH)[::-1]):
             t = time.perf_counter()
-            subprocess.run([sys.executable, "-c", code.format(FRESH[method].format())], check=True, env=env)
+            subprocess.run([sys.executable, "-c", code + FRESH[method]], check=True, env=env)
             times[method].append((time.perf_counter() - t, float("nan")))
             print(f"  {method}: {times[method][-1][0]:.2f} s", flush=True)
     V, F = _io.prepare(qemjax.load(path))[0]
@@ -266,7 +284,8 @@ def main(argv=None) -> int:
         print(f"\n{rows[0]['mesh']} ({rows[0]['faces_in']} faces) -> {args.ratio:g}, grid {grid!r}: "
               f"{len(expand_grid(GRIDS[grid]))} configurations per mesh, {rows[0]['distinct_results']} distinct "
               f"results, {rows[0]['runs']} runs (cells that run alike run once); {rows[0]['cores']} cores, "
-              f"load average {rows[0]['load_avg']} at the start, {rows[0]['load_avg_end']} at the end")
+              f"load average {rows[0]['load_avg']} at the start, {rows[0]['load_avg_end']} at the end; "
+              f"{HELPERS.size()} helper processes")
         print(f"{'method':52s} {'median s':>9s} {'per cell':>9s} {'x one warm':>11s} {'cpu s':>8s} {'cpu x one':>10s} "
               f"{'x loop':>7s}")
         for r in rows:

@@ -387,7 +387,8 @@ def test_workers_give_the_same_table_as_this_process(meshes, reference, tmp_path
         assert pool.HELPERS.ready() >= 2
         monkeypatch.setattr(sw, "HERE_TOO", True)
         two = qemjax.sweep(meshes, grid, TARGETS, metrics=False, progress=False, workers=2)
-        default = qemjax.sweep(meshes, grid, TARGETS, metrics=False, progress=False)  # finds them started
+        monkeypatch.delenv("QEMJAX_WORKERS", raising=False)  # automatic: finds them started, uses them
+        default = qemjax.sweep(meshes, grid, TARGETS, metrics=False, progress=False)
     finally:
         pool.HELPERS.shutdown()
     assert _table_bytes(away) == _table_bytes(one) == _table_bytes(two) == _table_bytes(default)
@@ -427,6 +428,31 @@ def test_a_helper_that_dies_loses_no_row(meshes, tmp_path, monkeypatch):
     assert killed
     want = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, progress=False, workers=1)
     assert _table_bytes(df) == _table_bytes(want)
+
+
+def test_the_default_stays_here_for_little_work_and_starts_helpers_for_the_next_sweeps(meshes, monkeypatch):
+    """Automatic workers: no helper for a small sweep (it would start slower); once this process's sweeps
+    add up to SWEPT_WORK, the next sweep starts them; $QEMJAX_WORKERS sets the default."""
+    from qemjax._sweep import pool
+
+    monkeypatch.delenv("QEMJAX_WORKERS", raising=False)
+    assert sw.default_workers() is None
+    monkeypatch.setattr(pool, "cores", lambda: 4)
+    work = [sw.Piece([], 1000.0)] * 3
+    assert pool.HELPERS.size() == 0 and sw._helpers(None, work) == 0  # little work, none started
+    assert sw._helpers(None, [sw.Piece([], float(sw.START_WORK))] * 3) == 2  # at most one per piece but one
+    assert sw._helpers(3, work) == 2 and sw._helpers(1, work) == 0
+    monkeypatch.setattr(sw, "_SWEPT", [0.0])
+    monkeypatch.setattr(sw, "SWEPT_WORK", 1)
+    assert sw._helpers(None, work) == 0
+    qemjax.sweep(meshes["sphere"], {}, [0.5], metrics=False, progress=False)
+    assert pool.HELPERS.size() == 0 and sw._SWEPT[0] > 0  # not for a sweep that ended ...
+    assert sw._helpers(None, work) == 2  # ... but for the next one
+    monkeypatch.setenv("QEMJAX_WORKERS", "2")
+    assert sw.default_workers() == 2
+    monkeypatch.setenv("QEMJAX_WORKERS", "zero")
+    with pytest.raises(ValueError, match="QEMJAX_WORKERS must be"):
+        sw.default_workers()
 
 
 @pytest.mark.parametrize("kw, message", [({"workers": 0}, "workers must be"), ({"workers": True}, "workers must be"),

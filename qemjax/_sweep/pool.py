@@ -29,6 +29,7 @@ from multiprocessing import connection
 _BOOT = ("import sys, pickle; sys.path[:] = pickle.load(sys.stdin.buffer); "
          "from qemjax._sweep.pool import serve; serve()")
 POLL_S = 0.05  # how often the dispatcher looks for helpers that became ready or died
+IDLE_S = 600.0  # a helper sent nothing for this long exits (a later sweep starts a new one)
 
 
 def cores() -> int:
@@ -195,6 +196,8 @@ def serve() -> None:
     conn.send(os.getpid())
     while True:
         try:
+            if not conn.poll(IDLE_S):
+                return
             piece_id, items, metrics = conn.recv()
         except (EOFError, OSError):
             return

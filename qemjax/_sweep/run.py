@@ -1,10 +1,11 @@
 """Parameter sweeps: meshes × a grid of `simplify` keywords × targets, one table row per cell.
 
 A pipeline of small stages: name and load the meshes (once each), cross the grid into cells, drop the
-cells already in ``out`` (resume), run the rest in small batches (in process or on an executor), write the
-table as rows come in (table.py), keep every finished row on Ctrl-C. A batch of cells runs through `simplify_cells`: the cells that can share rounds (of
-one mesh or several) run as one disjoint union of copies, the rest alone; either way each cell's mesh is the one
-`simplify` gives alone (tested).
+cells already in ``out`` (resume), cut the rest into pieces (`pieces`) and run them on this process and its
+helper processes (`pool`; or in batches on an executor), write the table as rows come in (table.py), keep
+every finished row on Ctrl-C. A piece of cells runs through `simplify_cells`: the cells that can share rounds
+(of one mesh or several) run as one disjoint union of copies, the rest alone; either way each cell's mesh is
+the one `simplify` gives alone (tested), in whichever process it ran.
 """
 from __future__ import annotations
 
@@ -44,18 +45,29 @@ def is_grid_key(key: str) -> bool:
     except KeyError:
         return False
     return True
-BATCH_FACES = 400_000  # a batch of ``batch_size`` cells holds at most this many faces in all (`batches`)
-BATCH_CELLS = 128  # and a piece or batch at most this many cells
+
+
+BATCH_CELLS = 128  # a piece holds at most this many cells
 PIECE_FACES = 1 << 17  # a piece's distinct runs hold at most this many faces in all (a mesh larger than that:
 # a piece of its own): a few seconds of work at most, so rows reach the file and the bar as pieces finish,
 # and the union of copies is small enough for the compiled rounds (`round_jit.MAX_FACES`)
 PIECE_RUNS = 16  # and at most this many distinct runs: 64 configurations of the cow are 4 pieces
-PLAN_FACES = 200_000  # meshes up to this size are planned (`pieces`); a larger one's cells run one per piece
+PLAN_FACES = 200_000  # meshes up to this size are planned (`pieces`); a larger one's cells run one per piece (the
+# planning reads and cleans each mesh and builds its vertex states once more than the run does)
 RING_COST = 4  # a run whose model prices pairs from their faces (``regularize``) costs about this many plain ones
-POOL_WORK = 150_000  # the weighted faces of a sweep's distinct runs (about 1 s of work, in one process) from
-# which a default sweep starts helper processes; a sweep finding them started uses them for any work
+# A default sweep's helper processes (`_helpers`), in the work of its distinct runs (`Piece.work`: faces, a ring
+# model's RING_COST times; about 200 000 are a second of work in one process). A helper's start (a fresh
+# Python importing JAX and loading the compiled kernels) costs a core about 4 s: a sweep finding helpers
+# started uses them for any work of two pieces or more; one that must start them does so from START_WORK
+# on (about 8 s of work: they pay back within it), or once this process's earlier default sweeps add up to
+# SWEPT_WORK (a process that sweeps again and again: the helpers join this sweep as they come up and serve
+# the next ones; a script of one small sweep never starts them)
+START_WORK = 1_600_000
+SWEPT_WORK = 200_000
+WORKERS_ENV = "QEMJAX_WORKERS"  # the default of ``workers`` when set (an integer >= 1)
 HERE_TOO = True  # this process runs pieces too (beside its helpers)
-SAVE_EVERY_S = 1.0  # in process, the table is rewritten after each batch and while one yields rows, at most this often
+_SWEPT = [0.0]  # the work of this process's default sweeps so far
+SAVE_EVERY_S = 1.0  # the table is rewritten after each piece run here, and while rows come in at most this often
 RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
 _PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
@@ -396,19 +408,9 @@ def _cut(units: list) -> list[list]:
         n += 1
 
 
-def batches(cells: list[Cell], faces: dict, size: int | None) -> list[list[Cell]]:
-    """Cells, in order, cut into batches of at most ``size`` cells (None: as many as `BATCH_FACES` faces
-    and `BATCH_CELLS` cells allow, with ``faces`` the face count of each mesh by name; a larger mesh is a batch of one)."""
-    out, cur, total = [], [], 0
-    for c in cells:
-        f = faces[c.mesh]
-        full = len(cur) >= size if size else cur and (total + f > BATCH_FACES or len(cur) >= BATCH_CELLS)
-        if full:
-            out.append(cur)
-            cur, total = [], 0
-        cur.append(c)
-        total += f
-    return out + ([cur] if cur else [])
+def batches(cells: list[Cell], size: int) -> list[list[Cell]]:
+    """Cells, in order, cut into batches of ``size`` cells (the last one fewer): ``batch_size``'s cut."""
+    return [cells[k:k + size] for k in range(0, len(cells), size)]
 
 
 def _submitter(executor):
@@ -457,22 +459,33 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     targets: ratios (floats in (0, 1)) and/or face counts (ints).
     metrics: True: every column of `qemjax.metrics.evaluate` (original = the mesh as given); a dict:
         the same with these keywords to `evaluate` (e.g. ``{"n_samples": 10_000}``); False: none.
-    executor: None (in this process, in order), a `concurrent.futures.Executor` or a
-        `dask.distributed.Client`: one task per batch. A task that is lost (its worker died) is submitted
-        again (`RETRIES` times), then run in this process.
+    executor: None (the cells run in pieces on this process and its helper processes: ``workers``), a
+        `concurrent.futures.Executor` or a `dask.distributed.Client`: one task per batch. A task that is lost
+        (its worker died) is submitted again (`RETRIES` times), then run in this process.
+    workers: the processes that run the pieces, this one included: 1 runs them all here; N also starts
+        N − 1 helper processes (`qemjax._sweep.pool`: fresh Pythons, never forked, started once and kept
+        for the process's later sweeps); every process takes the next piece, largest first, as it is
+        free, so the helpers join as they come up. None (default; ``$QEMJAX_WORKERS`` overrides it): every
+        core this process may use when helpers are started already or the sweep's work is large enough to
+        pay for starting them (`START_WORK`: a few seconds of work) or the process's earlier default sweeps
+        add up to some work (`SWEPT_WORK`), else this process alone. The table does not depend on it (but for the timings): the pieces are cut from the cells
+        alone (`pieces`). Not with ``executor``.
     out: a ``.parquet`` (needs pyarrow: ``pip install 'qemjax[sweep]'``) or ``.csv`` path, rewritten
-        (temporary file, fsync, rename) as cells finish: after each batch in process (a few seconds of work:
-        `BATCH_FACES`) and while a batch yields rows, at most every `SAVE_EVERY_S`; on an executor as tasks
-        end, at most every `SAVE_EVERY_S` and within it of a row coming in. Rows in row order (the rows of other grids already in the file first). Cells whose key
+        (temporary file, fsync, rename) as cells finish: after each piece run here (a few seconds of work at
+        most: `PIECE_FACES`), while a piece yields rows and as a helper's pieces come in, at most every
+        `SAVE_EVERY_S`; on an executor as tasks end, at most every `SAVE_EVERY_S` and within it of a row
+        coming in. Rows in row order (the rows of other grids already in the file first). Cells whose key
         is already there without an error are not run again (an interrupted sweep resumes; a CSV's rows
         already there are written back as the same text); rows of other cells in the file are kept. Ctrl-C
         writes every finished row and raises `SweepInterrupted` (a KeyboardInterrupt) saying how many.
     progress: a tqdm bar counting cells, moving as each cell's row is final; a line saying how many cells
         were already in ``out`` (skipped) and a warning about collapsed cells.
-    batch_size: at most this many cells per batch (`simplify_cells`: cells that can share rounds, of one
-        mesh or several, run together as one disjoint union of copies); None: in process, as many as
-        `BATCH_FACES` faces and `BATCH_CELLS` cells allow; on an executor, `EXECUTOR_BATCH`. 1: every cell
-        alone (then every cell's timings are its own, measured).
+    batch_size: at most this many cells per batch, cut in cell order (`simplify_cells`: cells that can
+        share rounds, of one mesh or several, run together as one disjoint union of copies); None: without
+        an executor, the pieces of `pieces` (cells that can share rounds together, each piece within
+        `PIECE_FACES` faces, `PIECE_RUNS` distinct runs and `BATCH_CELLS` cells, cells that run alike in one
+        piece); on an executor, `EXECUTOR_BATCH`. 1: every cell alone (then every cell's timings are its
+        own, measured).
 
     Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key ("n/a"
     where the cell's method does not have that setting; empty/NaN is None), ``target`` (as given: face
@@ -493,7 +506,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     as ``metrics_s``: the evaluation's own wall time); ``cell_s`` = ``share_s`` + ``metrics_s`` (the
     cell's time in the sweep, apportioned when batched). Rows come in cell order (mesh, then grid, last key
     fastest, then target), however the cells finished. Raises ValueError for unknown grid keys, bad targets
-    or a bad ``out``/``executor``. ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``,
+    or a bad ``out``/``executor``/``workers``. ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``,
     ``collapsed`` (reason → cells).
     """
     import pandas as pd
@@ -512,6 +525,11 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         raise ValueError("give executor= or workers=, not both (an executor's workers are its own)")
     metrics = {} if metrics is True else dict(metrics) if isinstance(metrics, dict) else False
     submit = None if executor is None else _submitter(executor)
+    if workers is None and executor is None:
+        workers = default_workers()
+        auto = workers is None
+    else:
+        auto = False
     named = name_meshes(meshes)
     cells = [Cell(name, params, t) for name in named for params in configs for t in targets]
     keys = [c.key for c in cells]
@@ -599,10 +617,12 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     try:
         if submit is None:
             work = pieces(todo, loaded, faces) if batch_size is None else [
-                Piece(b, float(sum(faces[c.mesh] for c in b))) for b in batches(todo, faces, batch_size)]
+                Piece(b, float(sum(faces[c.mesh] for c in b))) for b in batches(todo, batch_size)]
             _run_pieces(work, _helpers(workers, work), loaded, metrics, finish, save)
+            if auto:  # this process's default sweeps so far (`_helpers`)
+                _SWEPT[0] += sum(p.work for p in work)
         else:
-            work = batches(todo, faces, batch_size if batch_size is not None else EXECUTOR_BATCH)
+            work = batches(todo, batch_size if batch_size is not None else EXECUTOR_BATCH)
             _run_on(executor, submit, work, loaded, metrics, finish, save)
     except KeyboardInterrupt:
         stopped = True
@@ -619,16 +639,31 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     return df
 
 
+def default_workers() -> int | None:
+    """``workers`` when a sweep gives none: $QEMJAX_WORKERS (an integer >= 1), else None (automatic)."""
+    value = os.environ.get(WORKERS_ENV, "").strip()
+    if not value or value == "auto":
+        return None
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"${WORKERS_ENV} must be an integer >= 1 or 'auto', got {value!r}")
+    return n
+
+
 def _helpers(workers: int | None, work: list[Piece]) -> int:
-    """How many helper processes run a sweep's pieces beside this process: ``workers`` − 1 (None: the cores
-    this process may use, less one, once the distinct runs' work reaches `POOL_WORK` or the helpers are
-    started already), no more than there are pieces to share, and none while another sweep uses them."""
+    """How many helper processes run a sweep's pieces beside this process: ``workers`` − 1; None: the
+    cores this process may use, less one, when helpers are started already (`pool.HELPERS`), the distinct
+    runs' work reaches `START_WORK` or this process's earlier default sweeps reach `SWEPT_WORK`, else none.
+    No more than there are pieces to share."""
     share = len(work) - 1 if HERE_TOO else len(work)
     if workers is None:
         from .pool import HELPERS, cores
 
         want = cores() - 1
-        if HELPERS.size() == 0 and sum(p.work for p in work) < POOL_WORK:
+        if HELPERS.size() == 0 and sum(p.work for p in work) < START_WORK and _SWEPT[0] < SWEPT_WORK:
             want = 0
     else:
         want = workers - 1
