@@ -15,8 +15,9 @@ distance (the default's passes over every input sample, which batching cannot sh
 that all differ on the cow; ``--grid crossed``: boundary weight, regularisation, flip angle, area weighting
 and placement crossed). The default sweep runs on every core (``workers=None``: this process and a helper
 process per other core, `qemjax._sweep.pool`); the warm-up sweeps start its helpers, so the timed sweeps
-find them warm; CPU times count the helpers' too. ``workers=1`` is the sweep in this process alone. ``--pool N`` adds the sweep on N warm worker processes (a `ProcessPoolExecutor` as
-``executor=``, the cells cut into N batches; the workers' start and first compilations are not timed).
+find them warm; CPU times count the helpers' too. ``workers=1`` is the sweep in this process alone.
+``--pool N`` adds the sweep on N warm worker processes (a `ProcessPoolExecutor` as ``executor=``, the cells
+cut into N batches; the workers' start and first compilations are not timed).
 The rows "x loop" divide each sweep's median by the `simplify` loop's, same run.
 
 ``--fresh N``: instead, the first sweep in a fresh process, N times each, alternating: ``python -c`` runs
@@ -83,7 +84,8 @@ FIELDS = ("date", "mesh", "faces_in", "ratio", "grid", "configs", "method", "rep
           "vs_loop", "cores", "load_avg_end")
 LOOP = "loop simplify"
 # --fresh: what each fresh process runs (after `import qemjax`), timed from the interpreter's start to its exit
-FRESH = {"qemjax.sweep (default: every core)": "qemjax.sweep({'m': path}, grid, [ratio], metrics=False, progress=False)",
+FRESH = {"qemjax.sweep (default: every core)":
+             "qemjax.sweep({'m': path}, grid, [ratio], metrics=False, progress=False)",
          "qemjax.sweep workers=1 (this process)":
              "qemjax.sweep({'m': path}, grid, [ratio], metrics=False, progress=False, workers=1)",
          LOOP: "[qemjax.simplify(path, ratio=ratio, **dict(p)) for p in expand_grid(grid)]"}
@@ -119,7 +121,7 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: in
     meshes = {n: qemjax.load(p) for n, p in paths.items()}
     warm = qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, workers=1)  # compiles every kernel
     qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False, batch_size=1, workers=1)
-    for _ in range(3):  # the default starts its helpers in the second (after one sweep of this much work), then they compile
+    for _ in range(3):  # the default starts its helpers in the second (after a sweep of this much work)
         if not qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False)["result_sha256"].equals(
                 warm["result_sha256"]):
             raise AssertionError("the default sweep (every core) differs from the one in this process")
@@ -219,7 +221,8 @@ def _rows(names, cleaned, ratio, grid_name, cells, times, one, one_cpu, distinct
         per_mesh = len(names) if n == len(names) else 1  # the baseline and load rows: per mesh
         sweep = "qemjax.sweep" in method
         rows.append(dict(vs_loop=round(med / loop, 3) if sweep else "", cores=len(os.sched_getaffinity(0)),
-                         load_avg_end=round(os.getloadavg()[0], 2), date=time.strftime("%Y-%m-%d"), mesh="+".join(names),
+                         load_avg_end=round(os.getloadavg()[0], 2), date=time.strftime("%Y-%m-%d"),
+                         mesh="+".join(names),
                          faces_in=sum(len(c[1]) for c in cleaned.values()), ratio=ratio, grid=grid_name,
                          configs=n, method=method, repeats=len(ts), median_s=round(med, 4),
                          per_config_s=round(med / n, 4), vs_one_warm=round(med / per_mesh / one, 2),

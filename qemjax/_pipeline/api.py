@@ -227,28 +227,45 @@ def plan_cells(cells: list) -> list:
     ``ring`` says whether its model prices pairs from their faces (``uses_ring``: a round costs several
     times more). A sweep cuts its cells into pieces with it (`qemjax._sweep.run.pieces`). Reads and
     cleans each mesh and builds each vertex state, as the run will (the run builds them again)."""
-    with warnings.catch_warnings():  # the run says them again (clean-up, targets), where they belong
-        warnings.simplefilter("ignore")
-        jobs, _, _ = _jobs(cells, True, 3)
     plan = [(None, ("error", i), 0, False) for i in range(len(cells))]
     geos: dict = {}
-    for i, job in jobs:
+
+    def each(i, job):  # its keys only: the job (and its vertex state) is let go
         group = _batch_key(job)
         if group is None:
             plan[i] = (None, ("alone", i), len(job.geo.F), bool(job.model.uses_ring))
-            continue
-        geo = geos.setdefault(id(job.geo), len(geos))  # (the geometries live as long as `jobs`)
+            return
+        geo = geos.setdefault(id(job.geo), (len(geos), job.geo))[0]  # (each geometry held, so its id stays its own)
         plan[i] = (group, _run_key(job, geo), len(job.geo.F), bool(job.model.uses_ring))
+
+    with warnings.catch_warnings():  # the run says them again (clean-up, targets), where they belong
+        warnings.simplefilter("ignore")
+        _jobs(cells, True, 3, each=each, states=_Held())
     return plan
 
 
-def _jobs(cells: list, errors: bool, stacklevel: int):
+class _Held(dict):
+    """Vertex states by key (`stages.job`'s cache) for planning: all let go once they would hold more than
+    `PLAN_BYTES` (a state is then built again for a later cell that needs it)."""
+
+    def __setitem__(self, key, value):
+        if sum(v.nbytes for v in self.values()) + np.asarray(value).nbytes > PLAN_BYTES:
+            self.clear()
+        super().__setitem__(key, value)
+
+
+PLAN_BYTES = 1 << 28  # 256 MiB
+
+
+def _jobs(cells: list, errors: bool, stacklevel: int, each=None, states=None):
     """Each cell's `stages.Job` (its setup, geometry and vertex state; geometries shared per mesh and
     cleaning settings, states per model state): ([(index, job)], per cell None or its ValueError (with
-    ``errors``; else raised), {index: its max_distance bound})."""
+    ``errors``; else raised), {index: its max_distance bound}). ``each(index, job)``: called for each
+    instead of keeping the jobs (the list is then empty); ``states``: the vertex states' cache."""
     from . import stages
 
-    geos, states, jobs, out, bounds = {}, {}, [], [None] * len(cells), {}
+    geos, jobs, out, bounds = {}, [], [None] * len(cells), {}
+    states = {} if states is None else states
     for i, (mesh, cfg) in enumerate(cells):
         try:
             if "progress" in cfg:
@@ -272,7 +289,10 @@ def _jobs(cells: list, errors: bool, stacklevel: int):
             if bound is not None:
                 _bound.supported(job)
                 bounds[i] = bound
-            jobs.append((i, job))
+            if each is None:
+                jobs.append((i, job))
+            else:
+                each(i, job)
         except ValueError as exc:
             if not errors:
                 raise

@@ -468,8 +468,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         free, so the helpers join as they come up. None (default; ``$QEMJAX_WORKERS`` overrides it): every
         core this process may use when helpers are started already or the sweep's work is large enough to
         pay for starting them (`START_WORK`: a few seconds of work) or the process's earlier default sweeps
-        add up to some work (`SWEPT_WORK`), else this process alone. The table does not depend on it (but for the timings): the pieces are cut from the cells
-        alone (`pieces`). Not with ``executor``.
+        add up to some work (`SWEPT_WORK`), else this process alone. The table does not depend on it
+        (but for the timings): the pieces are cut from the cells alone (`pieces`). Not with ``executor``.
     out: a ``.parquet`` (needs pyarrow: ``pip install 'qemjax[sweep]'``) or ``.csv`` path, rewritten
         (temporary file, fsync, rename) as cells finish: after each piece run here (a few seconds of work at
         most: `PIECE_FACES`), while a piece yields rows and as a helper's pieces come in, at most every
