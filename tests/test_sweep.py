@@ -373,6 +373,7 @@ def test_pieces_keep_runs_together_and_stay_within_their_caps(meshes, monkeypatc
         assert len(runs) <= sw.PIECE_RUNS
 
 
+@pytest.mark.slow  # starts helper processes
 def test_workers_give_the_same_table_as_this_process(meshes, reference, tmp_path, monkeypatch):
     """workers=2 (this process and a helper, taking pieces as each is free) and every piece on helpers give
     the same table as workers=1, byte for byte but the timings, and rows in cell order; the file too."""
@@ -397,6 +398,7 @@ def test_workers_give_the_same_table_as_this_process(meshes, reference, tmp_path
     assert list(ref["result_sha256"]) == list(reference["result_sha256"])
 
 
+@pytest.mark.slow  # starts helper processes
 def test_a_helper_that_dies_loses_no_row(meshes, tmp_path, monkeypatch):
     """A helper killed while it runs a piece: the piece runs again (on a helper, or here), every row is there."""
     import threading
@@ -439,15 +441,15 @@ def test_the_default_stays_here_for_little_work_and_starts_helpers_for_the_next_
     assert sw.default_workers() is None
     monkeypatch.setattr(pool, "cores", lambda: 4)
     work = [sw.Piece([], 1000.0)] * 3
-    assert pool.HELPERS.size() == 0 and sw._helpers(None, work) == 0  # little work, none started
-    assert sw._helpers(None, [sw.Piece([], float(sw.START_WORK))] * 3) == 2  # at most one per piece but one
-    assert sw._helpers(3, work) == 2 and sw._helpers(1, work) == 0
+    assert pool.HELPERS.size() == 0 and sw._helpers(None, work, []) == 0  # little work, none started
+    assert sw._helpers(None, [sw.Piece([], float(sw.START_WORK))] * 3, []) == 2  # at most one per piece but one
+    assert sw._helpers(3, work, []) == 2 and sw._helpers(1, work, []) == 0
     monkeypatch.setattr(sw, "_SWEPT", [0.0])
     monkeypatch.setattr(sw, "SWEPT_WORK", 1)
-    assert sw._helpers(None, work) == 0
+    assert sw._helpers(None, work, []) == 0
     qemjax.sweep(meshes["sphere"], {}, [0.5], metrics=False, progress=False)
     assert pool.HELPERS.size() == 0 and sw._SWEPT[0] > 0  # not for a sweep that ended ...
-    assert sw._helpers(None, work) == 2  # ... but for the next one
+    assert sw._helpers(None, work, []) == 2  # ... but for the next one
     monkeypatch.setenv("QEMJAX_WORKERS", "2")
     assert sw.default_workers() == 2
     monkeypatch.setenv("QEMJAX_WORKERS", "zero")
@@ -461,3 +463,58 @@ def test_the_default_stays_here_for_little_work_and_starts_helpers_for_the_next_
 def test_workers_validation(kw, message):
     with pytest.raises(ValueError, match=message):
         qemjax.sweep(shapes.icosphere(1), {}, [0.5], progress=False, **kw)
+
+
+@pytest.mark.slow  # starts helper processes
+def test_what_a_helper_cannot_import_runs_here(meshes, monkeypatch):
+    """A method class from the caller's script (``__main__``: a helper does not run the script): the default
+    keeps such a sweep in this process, and workers=2 runs those pieces here; the rows are simplify's."""
+    import dataclasses
+
+    from qemjax._sweep import pool
+
+    @dataclasses.dataclass(frozen=True)
+    class ScriptQEM(qemjax.QEM):
+        pass
+
+    monkeypatch.setattr(ScriptQEM, "__module__", "__main__")
+    grid = {"method": [ScriptQEM(boundary_weight=2.0), "qem"]}
+    configs = sw.expand_grid(grid)
+    assert pool.from_main(configs[0][0][1]) and not pool.from_main(configs[1][0][1])
+    monkeypatch.setattr(pool, "cores", lambda: 4)
+    assert sw._helpers(None, [sw.Piece([], float(sw.START_WORK))] * 3, configs) == 0
+    monkeypatch.setattr(sw, "HERE_TOO", False)
+    try:
+        df = qemjax.sweep(meshes["sheet"], grid, [0.5], metrics=False, progress=False, workers=2)
+    finally:
+        pool.HELPERS.shutdown()
+    assert (df["error"] == "").all()
+    res = qemjax.simplify(meshes["sheet"], method=ScriptQEM(boundary_weight=2.0), ratio=0.5)
+    assert df["result_sha256"].iloc[0] == own_hash(res)
+
+
+@__import__("dataclasses").dataclass(frozen=True)
+class ShippedQEM(qemjax.QEM):
+    """A method registered by this process (`test_a_method_registered_here_runs_on_the_helpers`)."""
+
+    boundary_weight: float = 3.0
+
+
+@pytest.mark.slow  # starts helper processes
+def test_a_method_registered_here_runs_on_the_helpers(meshes, monkeypatch):
+    """The methods this process registered (from a module a helper can import) are registered in the helpers
+    too: a grid may name them."""
+    from qemjax import _costs
+    from qemjax._sweep import pool
+
+    monkeypatch.setitem(_costs.REGISTRY, "shipped", ShippedQEM)
+    assert pool.registered()["methods"] == {"shipped": ShippedQEM} and pool.shippable()
+    monkeypatch.setattr(sw, "HERE_TOO", False)
+    try:
+        df = qemjax.sweep(meshes["sheet"], {"method": ["shipped"]}, [0.5, 0.25], metrics=False, progress=False,
+                          workers=2)
+        assert pool.HELPERS.ready() == 1
+    finally:
+        pool.HELPERS.shutdown()
+    assert (df["error"] == "").all()
+    assert df["result_sha256"].iloc[1] == own_hash(qemjax.simplify(meshes["sheet"], method=ShippedQEM(), ratio=0.25))

@@ -110,12 +110,18 @@ class Pool:
         if missing <= 0:
             return
         self._listen()
-        settings = _settings()
+        try:
+            settings = pickle.dumps(_settings())
+        except Exception:  # noqa: BLE001 - something registered here that cannot be pickled: no helpers
+            return
         for _ in range(missing):
-            proc = subprocess.Popen([_executable(), "-c", _BOOT], stdin=subprocess.PIPE, close_fds=True)
+            try:
+                proc = subprocess.Popen([_executable(), "-c", _BOOT], stdin=subprocess.PIPE, close_fds=True)
+            except OSError:  # no Python to start (an embedded interpreter): this process runs the pieces
+                return
             try:
                 pickle.dump(list(sys.path), proc.stdin)
-                pickle.dump((self._listener.address, self._key, settings), proc.stdin)
+                pickle.dump((self._listener.address, self._key, settings), proc.stdin)  # settings: bytes
                 proc.stdin.close()
             except OSError:  # it died at once: it will be seen dead
                 pass
@@ -156,10 +162,34 @@ def _executable() -> str:
     return spawn.get_executable()
 
 
+def registered() -> dict:
+    """The methods and schedulers this process registered (`qemjax.register_method`, `_schedulers.register`)
+    beyond the built-in ones: {"methods": {name: class}, "schedulers": {name: run}}, empty dicts when none."""
+    from .. import _costs, _schedulers
+
+    return {"methods": {k: v for k, v in _costs.REGISTRY.items() if k not in _costs.BUILT_IN},
+            "schedulers": {k: v for k, v in _schedulers._REGISTRY.items() if k not in _schedulers.BUILT_IN}}
+
+
+def from_main(value) -> bool:
+    """Whether ``value`` (a class, a function or an object of a class) comes from the caller's ``__main__``,
+    which a helper cannot import (it does not run the caller's script)."""
+    owner = value if isinstance(value, type) or callable(value) and hasattr(value, "__module__") else type(value)
+    return getattr(owner, "__module__", None) == "__main__"
+
+
+def shippable() -> bool:
+    """Whether helpers can take what this process registered (`registered`: nothing from ``__main__``)."""
+    reg = registered()
+    return not any(from_main(v) for kind in reg.values() for v in kind.values())
+
+
 def _settings() -> dict:
     """What a helper must do as this process does: JAX's float64 mode and qemjax's compilation cache (when
-    this process has set them; otherwise the helper takes the same defaults from the same environment)."""
-    out = {}
+    this process has set them; otherwise the helper takes the same defaults from the same environment), and
+    the methods and schedulers registered here (`registered`: sent by reference, so a helper can take them
+    only from a module it can import, not from a script's ``__main__``)."""
+    out = {"registered": registered()}
     jax = sys.modules.get("jax")
     if jax is not None:
         out["x64"] = bool(jax.config.jax_enable_x64)
@@ -174,8 +204,14 @@ def _settings() -> dict:
 def serve() -> None:
     """A helper's life (started by `Pool.grow`): settings from stdin, imports, connect, run pieces until the
     connection closes."""
-    address, key, settings = pickle.load(sys.stdin.buffer)
+    address, key, raw = pickle.load(sys.stdin.buffer)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the sweep's process handles Ctrl-C and stops us
+    try:
+        settings = pickle.loads(raw)
+    except Exception as exc:  # noqa: BLE001 - e.g. a method registered from a script's __main__
+        sys.stderr.write(f"qemjax sweep helper: cannot take this process's settings ({exc}); its pieces run "
+                         "in the sweep's process\n")
+        return
     if "x64" in settings:
         import jax
 
@@ -187,6 +223,11 @@ def serve() -> None:
             _cache.disable()
         else:
             _cache.enable(settings["cache"])
+    from .. import _costs, _schedulers
+
+    _costs.REGISTRY.update(settings["registered"]["methods"])
+    for name, run in settings["registered"]["schedulers"].items():
+        _schedulers._REGISTRY[name] = run
     from .._pipeline import stages  # noqa: F401 - the run's modules (JAX, numba's cached loops), before "ready"
     from .._schedulers import batched  # noqa: F401
     from . import run as _run
@@ -197,9 +238,17 @@ def serve() -> None:
         try:
             if not conn.poll(IDLE_S):
                 return
-            piece_id, items, metrics = conn.recv()
+            data = conn.recv_bytes()
         except (EOFError, OSError):
             return
+        try:
+            piece_id, items, metrics = pickle.loads(data)
+        except Exception:  # noqa: BLE001 - e.g. a method object of a class in the caller's __main__
+            try:
+                conn.send(("unreadable", None, traceback.format_exc(), []))
+                continue
+            except (OSError, EOFError):
+                return
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
@@ -283,7 +332,12 @@ class Dispatch(threading.Thread):
                 if piece is None:
                     break
                 try:
-                    h.conn.send(self.payload(piece))
+                    data = pickle.dumps(self.payload(piece))
+                except Exception:  # noqa: BLE001 - its cells hold something that does not pickle: run here
+                    self.results.put(("here", piece))
+                    continue
+                try:
+                    h.conn.send_bytes(data)
                     h.piece = piece
                 except (OSError, EOFError, ValueError):
                     h.stop()
@@ -309,5 +363,7 @@ class Dispatch(threading.Thread):
                     continue
                 if msg[0] == "rows":
                     self.results.put(("rows", piece, msg[2], msg[3]))
+                elif msg[0] == "unreadable":  # what the helper cannot import (a script's class): run here
+                    self.results.put(("here", piece))
                 else:  # the piece failed as a whole in the helper: lost, as if it had died
                     self._lost(piece)

@@ -618,7 +618,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         if submit is None:
             work = pieces(todo, loaded, faces) if batch_size is None else [
                 Piece(b, float(sum(faces[c.mesh] for c in b))) for b in batches(todo, batch_size)]
-            _run_pieces(work, _helpers(workers, work), loaded, metrics, finish, save)
+            _run_pieces(work, _helpers(workers, work, configs), loaded, metrics, finish, save)
             if auto:  # this process's default sweeps so far (`_helpers`)
                 _SWEPT[0] += sum(p.work for p in work)
         else:
@@ -653,17 +653,21 @@ def default_workers() -> int | None:
     return n
 
 
-def _helpers(workers: int | None, work: list[Piece]) -> int:
+def _helpers(workers: int | None, work: list[Piece], configs: list) -> int:
     """How many helper processes run a sweep's pieces beside this process: ``workers`` − 1; None: the
     cores this process may use, less one, when helpers are started already (`pool.HELPERS`), the distinct
-    runs' work reaches `START_WORK` or this process's earlier default sweeps reach `SWEPT_WORK`, else none.
-    No more than there are pieces to share."""
+    runs' work reaches `START_WORK` or this process's earlier default sweeps reach `SWEPT_WORK`, else none;
+    none either when the grid's values or this process's registered methods come from the caller's script
+    (``__main__``: a helper cannot import them; ``workers=N`` tries, and runs here what they cannot). No
+    more than there are pieces to share."""
     share = len(work) - 1 if HERE_TOO else len(work)
     if workers is None:
-        from .pool import HELPERS, cores
+        from .pool import HELPERS, cores, from_main, shippable
 
         want = cores() - 1
         if HELPERS.size() == 0 and sum(p.work for p in work) < START_WORK and _SWEPT[0] < SWEPT_WORK:
+            want = 0
+        if not shippable() or any(from_main(v) for params in configs for _, v in params):
             want = 0
     else:
         want = workers - 1
