@@ -8,7 +8,8 @@ imported again: a script without ``if __name__ == "__main__":`` works as it is. 
 first needs them (`HELPERS`: the process's pool), in the background, while this process already runs
 pieces itself, and stay for the process's later sweeps; each takes pieces only once it has imported
 qemjax (its first piece also loads the compiled kernels from the caches on disk). A helper ignores Ctrl-C
-(the sweep stops it) and exits when this process closes the connection or goes away.
+(the sweep stops it) and exits when this process closes the connection or goes away, or after `IDLE_S`
+idle.
 """
 from __future__ import annotations
 
@@ -202,8 +203,8 @@ def _settings() -> dict:
 
 
 def serve() -> None:
-    """A helper's life (started by `Pool.grow`): settings from stdin, imports, connect, run pieces until the
-    connection closes."""
+    """A helper's life (started by `Pool.grow`): settings from stdin, imports, connect, then run what it is
+    sent, (piece id, function, arguments), until the connection closes (or stays idle `IDLE_S`)."""
     address, key, raw = pickle.load(sys.stdin.buffer)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the sweep's process handles Ctrl-C and stops us
     try:
@@ -230,7 +231,6 @@ def serve() -> None:
         _schedulers._REGISTRY[name] = run
     from .._pipeline import stages  # noqa: F401 - the run's modules (JAX, numba's cached loops), before "ready"
     from .._schedulers import batched  # noqa: F401
-    from . import run as _run
 
     conn = connection.Client(address, authkey=key)
     conn.send(os.getpid())
@@ -242,7 +242,7 @@ def serve() -> None:
         except (EOFError, OSError):
             return
         try:
-            piece_id, items, metrics = pickle.loads(data)
+            piece_id, fn, args = pickle.loads(data)  # fn by reference (`run.run_cells`): imported here
         except Exception:  # noqa: BLE001 - e.g. a method object of a class in the caller's __main__
             try:
                 conn.send(("unreadable", None, traceback.format_exc(), []))
@@ -252,7 +252,7 @@ def serve() -> None:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                reply = ("rows", piece_id, _run.run_cells(items, metrics))
+                reply = ("rows", piece_id, fn(*args))
             except Exception:  # noqa: BLE001 - not a cell's error (those are rows): the piece is lost
                 reply = ("failed", piece_id, traceback.format_exc())
         said = [(w.category.__module__, w.category.__qualname__, str(w.message)) for w in caught]
@@ -278,8 +278,9 @@ class Dispatch(threading.Thread):
     thread, which takes pieces from it too) for each helper that is ready and idle, and puts what comes
     back on ``results``: ("rows", piece, rows, warnings), ("here", piece) for a piece to run in this process
     (lost `retries` times: its helper died, or no helper is left), and ("done",) once ``todo`` is empty and
-    nothing is in flight; ``payload(piece)``: what a helper is sent for it, ``limit``: how many of the pool's
-    helpers to use. ``stop()``: stop handing out pieces (the caller then stops the helpers)."""
+    nothing is in flight; ``payload(piece)``: what a helper is sent for it, (piece id, a module-level
+    function, its arguments), the function's return value coming back as the rows; ``limit``: how many of
+    the pool's helpers to use. ``stop()``: stop handing out pieces (the caller then stops the helpers)."""
 
     def __init__(self, pool: Pool, todo: collections.deque, lock: threading.Lock, payload, retries: int,
                  limit: int):

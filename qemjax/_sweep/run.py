@@ -701,8 +701,8 @@ def _run_pieces(work: list[Piece], helpers: int, loaded, metrics, finish, save) 
         todo = collections.deque(sorted(work, key=lambda p: -p.work))
         lock = threading.Lock()
         ids = {id(p): k for k, p in enumerate(work)}
-        dispatch = _pool.Dispatch(_pool.HELPERS, todo, lock, lambda p: (ids[id(p)], [
-            (loaded[c.mesh], c) for c in p.cells], metrics), RETRIES, helpers)
+        dispatch = _pool.Dispatch(_pool.HELPERS, todo, lock, lambda p: (ids[id(p)], run_cells, (
+            [(loaded[c.mesh], c) for c in p.cells], metrics)), RETRIES, helpers)
         dispatch.start()
         here, done = [], False
 
