@@ -74,7 +74,7 @@ def main(argv=None) -> int:
                     "_sweep._ship); arrays: the mesh arrays go with every cell's task (the way before)")
     ap.add_argument("--batch-size", type=int, default=None,
                     help="qemjax.sweep's batch_size (default: its own: EXECUTOR_BATCH cells per task, "
-                    "BATCH_FACES in process); 1: one cell per task, as before batching")
+                    "its pieces in process); 1: one cell per task, as before batching")
     ap.add_argument("--out", default=str(RESULTS / "dask_speedup.csv"))
     args = ap.parse_args(argv)
     if args.ship == "arrays":

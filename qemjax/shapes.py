@@ -262,8 +262,8 @@ split_factor = ["none", 1.3333333]    # "none" is None (TOML has no null); an ES
 [metrics]                             # or: metrics = false (none), true (the default: all, 100 000 samples)
 n_samples = 5000                      # qemjax.metrics.evaluate's keywords: n_samples, seed
 
-[executor]                            # leave out to run in this process
-workers = 2                           # a local process pool of 2 (spawn) ...
+[executor]                            # leave out: every core, when the work pays (docs/sweeps.md)
+workers = 2                           # 2 processes: the command's and a helper (1: the command's alone) ...
 # scheduler = "dask"                  # ... or a Dask LocalCluster of 2 single-threaded worker processes
 # address = "tcp://scheduler:8786"    # or a running Dask cluster (instead of workers)
 """

@@ -13,6 +13,11 @@ import pytest
 # own, shared by their runs, never the user's ~/.cache/qemjax (tests that check the cache set their own)
 os.environ.setdefault("QEMJAX_CACHE_DIR", os.path.join(tempfile.gettempdir(), "qemjax-test-cache"))
 
+# sweeps run in the test's process unless a test asks for helper processes (workers=): a default sweep would
+# start them once the session's sweeps add up (`qemjax._sweep.run.SWEPT_WORK`), and tests that count what
+# runs here would then see pieces go elsewhere
+os.environ.setdefault("QEMJAX_WORKERS", "1")
+
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 
 

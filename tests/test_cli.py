@@ -391,14 +391,16 @@ def test_sweep_command_bad_files(tmp_path, monkeypatch, capsys):
 
 
 def test_sweep_config_executors(sweep_dir):
-    """workers = N is a spawn process pool of N (not started here: nothing is submitted)."""
+    """workers = N is the sweep's own pool: N processes (this one and N - 1 helpers), no executor."""
     from qemjax._sweep import config as _sweep_config
 
     (sweep_dir / "c.toml").write_text('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nworkers = 3')
     config = _sweep_config.load(sweep_dir / "c.toml", out=str(sweep_dir / "x.csv"))
     assert config.out == str(sweep_dir / "x.csv") and config.executor == {"workers": 3}
+    assert _sweep_config.local(config.executor) and not _sweep_config.local({})
+    assert not _sweep_config.local({"workers": 2, "scheduler": "dask"})
     with _sweep_config.executor(config.executor) as pool:
-        assert pool._max_workers == 3 and pool._mp_context.get_start_method() == "spawn"
+        assert pool is None
     with _sweep_config.executor({}) as none:
         assert none is None
 

@@ -134,11 +134,13 @@ def test_quality_near_the_in_core_run(mesh, in_process):
     assert in_process.stats["distance_max"] <= 1.5 * whole.stats["distance_max"]
 
 
+@pytest.mark.slow  # starts worker processes
 def test_same_bits_on_two_local_workers(in_process, two_workers):
     assert digest(two_workers) == digest(in_process)
     assert two_workers.stats["partition"]["where"] == "2 local processes"
 
 
+@pytest.mark.slow
 def test_resumed_run_reuses_the_parts_written(mesh, scratch, two_workers):
     for path in (scratch / "level2").glob("group_0000[0-1].*"):
         path.unlink()
@@ -162,6 +164,7 @@ def test_other_inputs_or_settings_start_afresh(tmp_path):
     assert not (tmp_path / "level1").exists()
 
 
+@pytest.mark.slow
 def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tmp_path):
     runners = []
     original = execute.open_runner
@@ -183,6 +186,7 @@ def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tm
     assert digest(r) == digest(in_process)
 
 
+@pytest.mark.slow
 def test_same_bits_on_a_dask_local_cluster(mesh, in_process):
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
@@ -200,6 +204,7 @@ def test_what_a_partitioned_run_does_not_offer(mesh):
         qemjax.simplify(mesh, ratio=0.1, attributes="uv", partition=True)
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_the_command_and_its_workers(mesh, tmp_path):
     psutil = pytest.importorskip("psutil")
     import signal

@@ -334,3 +334,187 @@ def test_config_grid_takes_integers_and_untyped_keywords(tmp_path):
     config = _sweep_config.load(cfg)
     df = qemjax.sweep(config.meshes, config.grid, config.targets, metrics=False, progress=False)
     assert len(df) == 4 and sorted(df["refit"].tolist()) == [0, 0, 1, 1]
+
+
+# ---- pieces and helper processes (workers=) -------------------------------------------------------------
+
+TIMINGS = ["compile_s", "run_s", "total_s", "batch_wall_s", "share_s", "cell_s"]  # the only columns that vary
+
+
+def _table_bytes(df) -> bytes:
+    """The table as CSV text without its timing columns (everything else is deterministic)."""
+    return df.drop(columns=[c for c in TIMINGS if c in df.columns]).to_csv(index=False).encode()
+
+
+def test_pieces_keep_runs_together_and_stay_within_their_caps(meshes, monkeypatch):
+    """Cells that would run alike (every boundary weight on the closed sphere) are in one piece, where they
+    run once; cells that cannot share rounds (another flip angle, the ring term) are in other pieces; each
+    piece is within its caps; the cut depends on the cells alone."""
+    monkeypatch.setattr(sw, "PIECE_RUNS", 2)
+    grid = {"boundary_weight": [0.5, 2.0], "regularize": [0.0, 0.05], "flip_angle": [60.0, 90.0],
+            "placement": ["optimal", "endpoints", "rank"]}
+    cells = [sw.Cell(m, p, 0.5) for m in meshes for p in sw.expand_grid(grid)]
+    loaded = {m: sw.load_mesh(v) for m, v in meshes.items()}
+    faces = {m: len(v[1]) for m, v in loaded.items()}
+    work = sw.pieces(cells, loaded, faces)
+    assert sorted(c.key for p in work for c in p.cells) == sorted(c.key for c in cells)  # each cell once
+    assert [[c.key for c in p.cells] for p in work] == \
+        [[c.key for c in p.cells] for p in sw.pieces(cells, loaded, faces)]
+    where = {c.key: k for k, p in enumerate(work) for c in p.cells}
+    for c in cells:  # the sphere's boundary weights: the same run, in the same piece
+        if c.mesh == "sphere" and dict(c.params)["boundary_weight"] == 0.5:
+            twin = sw.Cell("sphere", tuple((k, 2.0 if k == "boundary_weight" else v) for k, v in c.params), 0.5)
+            assert where[c.key] == where[twin.key]
+    for p in work:
+        kinds = {(dict(c.params)["flip_angle"], dict(c.params)["regularize"] > 0) for c in p.cells}
+        assert len(kinds) == 1  # one group per piece: it shares its rounds
+        runs = {(c.mesh, tuple((k, v) for k, v in c.params if not (c.mesh == "sphere" and k == "boundary_weight")))
+                for c in p.cells}
+        assert len(runs) <= sw.PIECE_RUNS
+
+
+@pytest.mark.slow  # starts helper processes
+def test_workers_give_the_same_table_as_this_process(meshes, reference, tmp_path, monkeypatch):
+    """workers=2 (this process and a helper, taking pieces as each is free) and every piece on helpers give
+    the same table as workers=1, byte for byte but the timings, and rows in cell order; the file too."""
+    from qemjax._sweep import pool
+
+    grid = {**GRID, "regularize": [0.0, 0.05]}
+    try:
+        one = qemjax.sweep(meshes, grid, TARGETS, metrics=False, progress=False, workers=1, out=tmp_path / "1.csv")
+        monkeypatch.setattr(sw, "HERE_TOO", False)  # every piece to the helpers
+        away = qemjax.sweep(meshes, grid, TARGETS, metrics=False, progress=False, workers=3,
+                            out=tmp_path / "3.csv")
+        assert pool.HELPERS.ready() >= 2
+        monkeypatch.setattr(sw, "HERE_TOO", True)
+        two = qemjax.sweep(meshes, grid, TARGETS, metrics=False, progress=False, workers=2)
+        monkeypatch.delenv("QEMJAX_WORKERS", raising=False)  # automatic: finds them started, uses them
+        default = qemjax.sweep(meshes, grid, TARGETS, metrics=False, progress=False)
+    finally:
+        pool.HELPERS.shutdown()
+    assert _table_bytes(away) == _table_bytes(one) == _table_bytes(two) == _table_bytes(default)
+    assert _table_bytes(sw.read_table(tmp_path / "3.csv")) == _table_bytes(sw.read_table(tmp_path / "1.csv"))
+    ref = one[one["regularize"] == 0.0]
+    assert list(ref["result_sha256"]) == list(reference["result_sha256"])
+
+
+@pytest.mark.slow  # starts helper processes
+def test_a_helper_that_dies_loses_no_row(meshes, tmp_path, monkeypatch):
+    """A helper killed while it runs a piece: the piece runs again (on a helper, or here), every row is there."""
+    import threading
+    import time
+
+    from qemjax._sweep import pool
+
+    monkeypatch.setattr(sw, "HERE_TOO", False)
+    monkeypatch.setattr(sw, "PIECE_RUNS", 1)  # many pieces
+    killed = []
+
+    def killer():
+        t0 = time.monotonic()
+        while not killed and time.monotonic() - t0 < 120:
+            with pool.HELPERS.lock:
+                busy = [h for h in pool.HELPERS.helpers if h.piece is not None]
+            if busy:
+                busy[0].proc.kill()
+                killed.append(busy[0].proc.pid)
+            time.sleep(0.001)
+
+    side = threading.Thread(target=killer)
+    try:
+        side.start()
+        df = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, progress=False, workers=3)
+        side.join()
+    finally:
+        pool.HELPERS.shutdown()
+    assert killed
+    want = qemjax.sweep(meshes, GRID, TARGETS, metrics=False, progress=False, workers=1)
+    assert _table_bytes(df) == _table_bytes(want)
+
+
+def test_the_default_stays_here_for_little_work_and_starts_helpers_for_the_next_sweeps(meshes, monkeypatch):
+    """Automatic workers: no helper for a small sweep (it would start slower); once this process's sweeps
+    add up to SWEPT_WORK, the next sweep starts them; $QEMJAX_WORKERS sets the default."""
+    from qemjax._sweep import pool
+
+    monkeypatch.delenv("QEMJAX_WORKERS", raising=False)
+    assert sw.default_workers() is None
+    monkeypatch.setattr(pool, "cores", lambda: 4)
+    work = [sw.Piece([], 1000.0)] * 3
+    assert pool.HELPERS.size() == 0 and sw._helpers(None, work, []) == 0  # little work, none started
+    assert sw._helpers(None, [sw.Piece([], float(sw.START_WORK))] * 3, []) == 2  # at most one per piece but one
+    assert sw._helpers(3, work, []) == 2 and sw._helpers(1, work, []) == 0
+    monkeypatch.setattr(sw, "_SWEPT", [0.0])
+    monkeypatch.setattr(sw, "SWEPT_WORK", 1)
+    assert sw._helpers(None, work, []) == 0
+    qemjax.sweep(meshes["sphere"], {}, [0.5], metrics=False, progress=False)
+    assert pool.HELPERS.size() == 0 and sw._SWEPT[0] > 0  # not for a sweep that ended ...
+    assert sw._helpers(None, work, []) == 2  # ... but for the next one
+    monkeypatch.setenv("QEMJAX_WORKERS", "2")
+    assert sw.default_workers() == 2
+    monkeypatch.setenv("QEMJAX_WORKERS", "zero")
+    with pytest.raises(ValueError, match="QEMJAX_WORKERS must be"):
+        sw.default_workers()
+
+
+@pytest.mark.parametrize("kw, message", [({"workers": 0}, "workers must be"), ({"workers": True}, "workers must be"),
+                                         ({"workers": 2, "executor": concurrent.futures.ThreadPoolExecutor(1)},
+                                          "not both")])
+def test_workers_validation(kw, message):
+    with pytest.raises(ValueError, match=message):
+        qemjax.sweep(shapes.icosphere(1), {}, [0.5], progress=False, **kw)
+
+
+@pytest.mark.slow  # starts helper processes
+def test_what_a_helper_cannot_import_runs_here(meshes, monkeypatch):
+    """A method class from the caller's script (``__main__``: a helper does not run the script): the default
+    keeps such a sweep in this process, and workers=2 runs those pieces here; the rows are simplify's."""
+    import dataclasses
+
+    from qemjax._sweep import pool
+
+    @dataclasses.dataclass(frozen=True)
+    class ScriptQEM(qemjax.QEM):
+        pass
+
+    monkeypatch.setattr(ScriptQEM, "__module__", "__main__")
+    grid = {"method": [ScriptQEM(boundary_weight=2.0), "qem"]}
+    configs = sw.expand_grid(grid)
+    assert pool.from_main(configs[0][0][1]) and not pool.from_main(configs[1][0][1])
+    monkeypatch.setattr(pool, "cores", lambda: 4)
+    assert sw._helpers(None, [sw.Piece([], float(sw.START_WORK))] * 3, configs) == 0
+    monkeypatch.setattr(sw, "HERE_TOO", False)
+    try:
+        df = qemjax.sweep(meshes["sheet"], grid, [0.5], metrics=False, progress=False, workers=2)
+    finally:
+        pool.HELPERS.shutdown()
+    assert (df["error"] == "").all()
+    res = qemjax.simplify(meshes["sheet"], method=ScriptQEM(boundary_weight=2.0), ratio=0.5)
+    assert df["result_sha256"].iloc[0] == own_hash(res)
+
+
+@__import__("dataclasses").dataclass(frozen=True)
+class ShippedQEM(qemjax.QEM):
+    """A method registered by this process (`test_a_method_registered_here_runs_on_the_helpers`)."""
+
+    boundary_weight: float = 3.0
+
+
+@pytest.mark.slow  # starts helper processes
+def test_a_method_registered_here_runs_on_the_helpers(meshes, monkeypatch):
+    """The methods this process registered (from a module a helper can import) are registered in the helpers
+    too: a grid may name them."""
+    from qemjax import _costs
+    from qemjax._sweep import pool
+
+    monkeypatch.setitem(_costs.REGISTRY, "shipped", ShippedQEM)
+    assert pool.registered()["methods"] == {"shipped": ShippedQEM} and pool.shippable()
+    monkeypatch.setattr(sw, "HERE_TOO", False)
+    try:
+        df = qemjax.sweep(meshes["sheet"], {"method": ["shipped"]}, [0.5, 0.25], metrics=False, progress=False,
+                          workers=2)
+        assert pool.HELPERS.ready() == 1
+    finally:
+        pool.HELPERS.shutdown()
+    assert (df["error"] == "").all()
+    assert df["result_sha256"].iloc[1] == own_hash(qemjax.simplify(meshes["sheet"], method=ShippedQEM(), ratio=0.25))

@@ -42,11 +42,11 @@ def test_rows_reach_the_file_batch_by_batch(ball, tmp_path, monkeypatch, ext):
     if ext == ".parquet":
         pytest.importorskip("pyarrow")
     seen = _saves(monkeypatch)
-    monkeypatch.setattr(sw, "BATCH_CELLS", 2)  # 6 cells: 3 batches
-    monkeypatch.setattr(sw, "SAVE_EVERY_S", 1e9)  # no writes within a batch
+    monkeypatch.setattr(sw, "BATCH_CELLS", 2)  # 6 distinct cells: 3 pieces
+    monkeypatch.setattr(sw, "SAVE_EVERY_S", 1e9)  # no writes within a piece
     out = tmp_path / f"s{ext}"
-    df = qemjax.sweep({"ball": ball}, {"boundary_weight": [1.0, 2.0, 3.0]}, [0.5, 40], metrics=False, out=out,
-                      progress=False)
+    df = qemjax.sweep({"ball": ball}, {"placement": ["optimal", "endpoints", "rank"]}, [0.5, 40], metrics=False,
+                      out=out, progress=False, workers=1)
     assert seen == [2, 4, 6]  # written after each batch, not once at the end
     assert list(sw.read_table(out)["cell"]) == list(df["cell"])
 
@@ -69,12 +69,12 @@ def test_ctrl_c_during_a_write_still_keeps_every_finished_row(ball, tmp_path, mo
         return write
     monkeypatch.setattr(sw, "write_text", interrupted_once(real_text))
     monkeypatch.setattr(sw, "write_table", interrupted_once(real_table))
-    monkeypatch.setattr(sw, "BATCH_CELLS", 2)  # 6 cells: a write after each batch of 2 ...
-    monkeypatch.setattr(sw, "SAVE_EVERY_S", 1e9)  # ... and none within a batch
+    monkeypatch.setattr(sw, "BATCH_CELLS", 2)  # 6 distinct cells: a write after each piece of 2 ...
+    monkeypatch.setattr(sw, "SAVE_EVERY_S", 1e9)  # ... and none within a piece
     out = tmp_path / f"s{ext}"
     with pytest.raises(sw.SweepInterrupted, match="4 of 6 cells finished this run"):
-        qemjax.sweep({"ball": ball}, {"boundary_weight": [1.0, 2.0, 3.0]}, [0.5, 40], metrics=False, out=out,
-                     progress=False)
+        qemjax.sweep({"ball": ball}, {"placement": ["optimal", "endpoints", "rank"]}, [0.5, 40], metrics=False,
+                     out=out, progress=False, workers=1)
     assert len(sw.read_table(out)) == 4  # every finished row, though the write that held the last two failed
 
 
@@ -180,8 +180,8 @@ n_samples = 2000
 """
 N_CELLS = 2 * 4 * 2 * 2
 
-# the command with batches of one cell (so the test needs only small meshes to have many batches)
-SCRIPT = ("import sys, qemjax._sweep.run as sw; sw.BATCH_FACES = 1; from qemjax import _cli; "
+# the command with pieces of one run (so the test needs only small meshes to have many pieces)
+SCRIPT = ("import sys, qemjax._sweep.run as sw; sw.PIECE_RUNS = 1; from qemjax import _cli; "
           "sys.exit(_cli.main(sys.argv[1:]))")
 
 
@@ -204,8 +204,9 @@ def _wait_for_rows(proc, path: Path, n: int, timeout: float = 240) -> None:
         time.sleep(0.05)
 
 
-# where the cells run: in the command's process, in a process pool, on a local Dask cluster (config lines)
-EXECUTORS = {"in-process": "", "process-pool": "[executor]\nworkers = 2\n",
+# where the cells run: in the command's process (workers = 1), in it and a helper process (workers = 2), on a
+# local Dask cluster (config lines)
+EXECUTORS = {"in-process": "[executor]\nworkers = 1\n", "process-pool": "[executor]\nworkers = 2\n",
              "dask": "[executor]\nworkers = 2\nscheduler = \"dask\"\n"}
 
 

@@ -29,6 +29,7 @@ REGISTRY: dict[str, type[Method]] = {
     "line": LineQEM,
     "probabilistic": ProbabilisticQEM,
 }
+BUILT_IN = tuple(REGISTRY)  # the methods every process has; `register` adds to REGISTRY in its own process only
 # named configurations of a method: ``method="accurate"`` is ``QEM.accurate()``
 PRESETS = {
     "default": QEM.default,

@@ -8,6 +8,7 @@ import hashlib
 import inspect
 import math
 import time
+import warnings
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -199,35 +200,7 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
     from . import stages
 
     t_start = time.perf_counter()
-    geos, states, jobs, out, bounds = {}, {}, [], [None] * len(cells), {}
-    for i, (mesh, cfg) in enumerate(cells):
-        try:
-            if "progress" in cfg:
-                raise ValueError("simplify_batch: progress is not offered here (a sweep shows its own bar)")
-            kw = {**_RUN_DEFAULTS, **{k: v for k, v in cfg.items() if k in _RUN_DEFAULTS}}
-            rest = {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS}
-            locks = _locks.pop_settings(rest)
-            try:
-                setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest,
-                                     kw["measure"])
-            except TypeError as exc:
-                raise ValueError(f"simplify_batch: {exc}") from None
-            bound = _bound.check(kw["max_distance"], kw["max_distance_rel"])
-            stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"], bound is not None)
-            gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
-            if gk not in geos:
-                geos[gk] = stages.geometry(mesh, setup, stacklevel=stacklevel)
-            job = stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
-                             kw["max_error"], stacklevel=stacklevel, states=states, locks=locks,
-                             bounded=bound is not None)
-            if bound is not None:
-                _bound.supported(job)
-                bounds[i] = bound
-            jobs.append((i, job))
-        except ValueError as exc:
-            if not errors:
-                raise
-            out[i] = exc
+    jobs, out, bounds = _jobs(cells, errors, stacklevel + 1)
     for i, exc in enumerate(out):
         if exc is not None:
             yield i, exc
@@ -274,6 +247,87 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
             yield i, out[i]
 
 
+def plan_cells(cells: list) -> list:
+    """How `simplify_cells` would run each (mesh, configuration) cell, without running it: per cell,
+    (group, run, faces, ring), where cells of one group (a hashable key; None: the cell runs alone, as a
+    bad configuration does) can share rounds, cells of one run (a hashable key, within the group) would run
+    exactly alike (`_same_runs`' key; the run is computed once), ``faces`` are the cleaned mesh's and
+    ``ring`` says whether its model prices pairs from their faces (``uses_ring``: a round costs several
+    times more). A sweep cuts its cells into pieces with it (`qemjax._sweep.run.pieces`). Reads and
+    cleans each mesh and builds each vertex state, as the run will (the run builds them again)."""
+    plan = [(None, ("error", i), 0, False) for i in range(len(cells))]
+    geos: dict = {}
+
+    def each(i, job):  # its keys only: the job (and its vertex state) is let go
+        group = _batch_key(job)
+        if group is None:
+            plan[i] = (None, ("alone", i), len(job.geo.F), bool(job.model.uses_ring))
+            return
+        geo = geos.setdefault(id(job.geo), (len(geos), job.geo))[0]  # (each geometry held, so its id stays its own)
+        plan[i] = (group, _run_key(job, geo), len(job.geo.F), bool(job.model.uses_ring))
+
+    with warnings.catch_warnings():  # the run says them again (clean-up, targets), where they belong
+        warnings.simplefilter("ignore")
+        _jobs(cells, True, 3, each=each, states=_Held())
+    return plan
+
+
+class _Held(dict):
+    """Vertex states by key (`stages.job`'s cache) for planning: all let go once they would hold more than
+    `PLAN_BYTES` (a state is then built again for a later cell that needs it)."""
+
+    def __setitem__(self, key, value):
+        if sum(v.nbytes for v in self.values()) + np.asarray(value).nbytes > PLAN_BYTES:
+            self.clear()
+        super().__setitem__(key, value)
+
+
+PLAN_BYTES = 1 << 28  # 256 MiB
+
+
+def _jobs(cells: list, errors: bool, stacklevel: int, each=None, states=None):
+    """Each cell's `stages.Job` (its setup, geometry and vertex state; geometries shared per mesh and
+    cleaning settings, states per model state): ([(index, job)], per cell None or its ValueError (with
+    ``errors``; else raised), {index: its max_distance bound}). ``each(index, job)``: called for each
+    instead of keeping the jobs (the list is then empty); ``states``: the vertex states' cache."""
+    from . import stages
+
+    geos, jobs, out, bounds = {}, [], [None] * len(cells), {}
+    states = {} if states is None else states
+    for i, (mesh, cfg) in enumerate(cells):
+        try:
+            if "progress" in cfg:
+                raise ValueError("simplify_batch: progress is not offered here (a sweep shows its own bar)")
+            kw = {**_RUN_DEFAULTS, **{k: v for k, v in cfg.items() if k in _RUN_DEFAULTS}}
+            rest = {k: v for k, v in cfg.items() if k not in _RUN_DEFAULTS}
+            locks = _locks.pop_settings(rest)
+            try:
+                setup = stages.setup(kw["method"], kw["scheduler"], kw["topology"], kw["attributes"], False, rest,
+                                     kw["measure"])
+            except TypeError as exc:
+                raise ValueError(f"simplify_batch: {exc}") from None
+            bound = _bound.check(kw["max_distance"], kw["max_distance_rel"])
+            stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"], bound is not None)
+            gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
+            if gk not in geos:
+                geos[gk] = stages.geometry(mesh, setup, stacklevel=stacklevel)
+            job = stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
+                             kw["max_error"], stacklevel=stacklevel, states=states, locks=locks,
+                             bounded=bound is not None)
+            if bound is not None:
+                _bound.supported(job)
+                bounds[i] = bound
+            if each is None:
+                jobs.append((i, job))
+            else:
+                each(i, job)
+        except ValueError as exc:
+            if not errors:
+                raise
+            out[i] = exc
+    return jobs, out, bounds
+
+
 def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
     """Which jobs of one batch would run exactly alike: the same geometry, vertex state (by value: on a
     closed mesh every ``boundary_weight`` gives the same quadrics, without area weighting every
@@ -281,13 +335,9 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
     job of each run); such jobs run once (`simplify_cells`)."""
     which, firsts, seen = np.zeros(len(jobs), np.int64), [], {}
     for k, job in enumerate(jobs):
-        S = np.ascontiguousarray(job.S)
-        params = sorted((name, np.asarray(v).dtype.str, np.asarray(v).tobytes())
-                        for name, v in job.model.kernel_params().items())
-        key = (id(job.geo), S.shape, S.dtype.str, hashlib.blake2b(S.tobytes(), digest_size=16).digest(),
-               tuple(params), max(job.target, 1), job.options.max_cost)
+        key = _run_key(job, id(job.geo))
         run = seen.get(key)
-        if run is not None and not np.array_equal(jobs[firsts[run]].S, S):
+        if run is not None and not np.array_equal(jobs[firsts[run]].S, job.S):
             run = None  # equal digests of different states: a run of its own
         if run is None:
             run = len(firsts)
@@ -295,6 +345,16 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
             firsts.append(k)
         which[k] = run
     return which, firsts
+
+
+def _run_key(job: "Job", geo) -> tuple:
+    """What makes two jobs of one batch run exactly alike (`_same_runs`): ``geo`` (their geometry's
+    identity), a digest of the vertex state, the kernel settings, the face target and the max error."""
+    S = np.ascontiguousarray(job.S)
+    params = sorted((name, np.asarray(v).dtype.str, np.asarray(v).tobytes())
+                    for name, v in job.model.kernel_params().items())
+    return (geo, S.shape, S.dtype.str, hashlib.blake2b(S.tobytes(), digest_size=16).digest(), tuple(params),
+            max(job.target, 1), job.options.max_cost)
 
 
 def _batch_key(job: "Job"):

@@ -26,6 +26,7 @@ import importlib
 # module names relative to this package, so that a copy imported under another name (the A/B scripts'
 # `load_old`) runs its own schedulers, not the installed package's
 _REGISTRY: dict = {"parallel": f"{__name__}.parallel", "greedy": f"{__name__}.greedy"}
+BUILT_IN = tuple(_REGISTRY)  # the schedulers every process has (`register` adds to this process's only)
 
 
 def names() -> tuple[str, ...]:

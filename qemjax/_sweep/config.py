@@ -259,41 +259,34 @@ def _check_out(out: str, fail):
             fail(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), or give a .csv out")
 
 
+def local(settings: dict) -> bool:
+    """Whether the executor settings ask for a local process pool (``workers`` without Dask): the sweep's
+    own helper processes run the cells then (``sweep(workers=N)``: this process and N - 1 helpers)."""
+    return bool(settings) and "address" not in settings and settings.get("scheduler", "process") == "process"
+
+
 @contextlib.contextmanager
 def executor(settings: dict):
-    """The executor the settings describe (None: in this process), shut down on exit."""
-    if not settings:
+    """The executor the settings describe, shut down on exit: a Dask client; None in this process and for a
+    local pool (`local`: the sweep's own helpers, ``workers=``)."""
+    if not settings or local(settings):
         yield None
     elif "address" in settings:
         from distributed import Client
 
         with Client(settings["address"]) as client:
             yield client
-    elif settings.get("scheduler") == "dask":
+    else:
         from distributed import Client, LocalCluster
 
         with LocalCluster(n_workers=settings["workers"], threads_per_worker=1, processes=True) as cluster, \
                 Client(cluster) as client:
             yield client
-    else:
-        import concurrent.futures
-        import multiprocessing
-
-        # spawn: JAX's threads do not survive fork
-        pool = concurrent.futures.ProcessPoolExecutor(settings["workers"],
-                                                      mp_context=multiprocessing.get_context("spawn"))
-        try:
-            yield pool
-        except BaseException:  # Ctrl-C (or an error): stop the cells in flight now rather than wait for them
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):  # no public way before 3.14
-                proc.terminate()
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
-        pool.shutdown(wait=True)
 
 
 def run(config: SweepConfig, progress: bool = True) -> Any:
     """Run the sweep the config describes; the DataFrame (also written to ``config.out``)."""
+    workers = config.executor["workers"] if local(config.executor) else None
     with executor(config.executor) as ex:
         return _sweep.sweep(config.meshes, config.grid, config.targets, metrics=config.metrics, executor=ex,
-                            out=config.out, progress=progress)
+                            workers=workers, out=config.out, progress=progress)

@@ -1,10 +1,11 @@
 """Parameter sweeps: meshes × a grid of `simplify` keywords × targets, one table row per cell.
 
 A pipeline of small stages: name and load the meshes (once each), cross the grid into cells, drop the
-cells already in ``out`` (resume), run the rest in small batches (in process or on an executor), write the
-table as rows come in (table.py), keep every finished row on Ctrl-C. A batch of cells runs through `simplify_cells`: the cells that can share rounds (of
-one mesh or several) run as one disjoint union of copies, the rest alone; either way each cell's mesh is the one
-`simplify` gives alone (tested).
+cells already in ``out`` (resume), cut the rest into pieces (`pieces`) and run them on this process and its
+helper processes (`pool`; or in batches on an executor), write the table as rows come in (table.py), keep
+every finished row on Ctrl-C. A piece of cells runs through `simplify_cells`: the cells that can share rounds
+(of one mesh or several) run as one disjoint union of copies, the rest alone; either way each cell's mesh is
+the one `simplify` gives alone (tested), in whichever process it ran.
 """
 from __future__ import annotations
 
@@ -44,10 +45,29 @@ def is_grid_key(key: str) -> bool:
     except KeyError:
         return False
     return True
-BATCH_FACES = 400_000  # an in-process batch holds at most this many faces in all: a few seconds of work, so
-# rows reach the file and the bar as cells finish (64 cow configurations are one batch; 100 k-face meshes 4)
-BATCH_CELLS = 128  # and at most this many cells
-SAVE_EVERY_S = 1.0  # in process, the table is rewritten after each batch and while one yields rows, at most this often
+
+
+BATCH_CELLS = 128  # a piece holds at most this many cells
+PIECE_FACES = 1 << 17  # a piece's distinct runs hold at most this many faces in all (a mesh larger than that:
+# a piece of its own): a few seconds of work at most, so rows reach the file and the bar as pieces finish,
+# and the union of copies is small enough for the compiled rounds (`round_jit.MAX_FACES`)
+PIECE_RUNS = 16  # and at most this many distinct runs: 64 configurations of the cow are 4 pieces
+PLAN_FACES = 200_000  # meshes up to this size are planned (`pieces`); a larger one's cells run one per piece (the
+# planning reads and cleans each mesh and builds its vertex states once more than the run does)
+RING_COST = 4  # a run whose model prices pairs from their faces (``regularize``) costs about this many plain ones
+# A default sweep's helper processes (`_helpers`), in the work of its distinct runs (`Piece.work`: faces, a ring
+# model's RING_COST times; about 200 000 are a second of work in one process). A helper's start (a fresh
+# Python importing JAX and loading the compiled kernels) costs a core about 4 s: a sweep finding helpers
+# started uses them for any work of two pieces or more; one that must start them does so from START_WORK
+# on (about 8 s of work: they pay back within it), or once this process's earlier default sweeps add up to
+# SWEPT_WORK (a process that sweeps again and again: the helpers join this sweep as they come up and serve
+# the next ones; a script of one small sweep never starts them)
+START_WORK = 1_600_000
+SWEPT_WORK = 200_000
+WORKERS_ENV = "QEMJAX_WORKERS"  # the default of ``workers`` when set (an integer >= 1)
+HERE_TOO = True  # this process runs pieces too (beside its helpers)
+_SWEPT = [0.0]  # the work of this process's default sweeps so far
+SAVE_EVERY_S = 1.0  # the table is rewritten after each piece run here, and while rows come in at most this often
 RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
 _PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
@@ -324,19 +344,73 @@ def row(mesh, cell: Cell, res, metrics) -> dict:
     return out
 
 
-def batches(cells: list[Cell], faces: dict, size: int | None) -> list[list[Cell]]:
-    """Cells, in order, cut into batches of at most ``size`` cells (None: as many as `BATCH_FACES` faces
-    and `BATCH_CELLS` cells allow, with ``faces`` the face count of each mesh by name; a larger mesh is a batch of one)."""
-    out, cur, total = [], [], 0
-    for c in cells:
-        f = faces[c.mesh]
-        full = len(cur) >= size if size else cur and (total + f > BATCH_FACES or len(cur) >= BATCH_CELLS)
-        if full:
-            out.append(cur)
-            cur, total = [], 0
-        cur.append(c)
-        total += f
-    return out + ([cur] if cur else [])
+@dataclasses.dataclass
+class Piece:
+    """Cells that run together (one `run_cells` call: `simplify_cells`), and an estimate of their work (the
+    faces of their distinct runs, a ring model's `RING_COST` times)."""
+
+    cells: list
+    work: float
+
+
+def pieces(cells: list[Cell], loaded: dict, faces: dict) -> list[Piece]:
+    """The cells cut into pieces, in this order: each group of cells that can share rounds (`api.plan_cells`:
+    the same kernels, flip angle, topology mode and schedule, of any mesh), in the order of its first cell,
+    cut into pieces of about equal work, each of at most `PIECE_FACES` faces and `PIECE_RUNS` distinct runs
+    and `BATCH_CELLS` cells; the cells that would run exactly alike (a closed mesh's boundary weights) stay in
+    one piece, where they run once. The cut depends on the cells alone, never on how many processes run
+    them: the same pieces, the same rows (``batch_size``, ``same_run``). Peer cells, cells of meshes over
+    `PLAN_FACES` faces and cells that cannot share rounds are runs of their own."""
+    from .._pipeline.api import plan_cells
+
+    planned = [i for i, c in enumerate(cells) if _peer(c) is None and faces[c.mesh] <= PLAN_FACES]
+    plan = dict(zip(planned, plan_cells([(loaded[cells[i].mesh], cells[i].kwargs()) for i in planned])))
+    groups: dict = {}  # group -> run -> [cell indices], each in order of first appearance
+    cost: dict = {}  # (group, run) -> its work
+    for i, c in enumerate(cells):
+        if i in plan and plan[i][0] is not None:
+            group, run, f, ring = plan[i]
+            group = ("batch", group)
+        elif i in plan:  # runs alone (another scheduler, a method that splits, a bad configuration)
+            group, run, f, ring = ("alone", c.mesh), ("cell", i), plan[i][2], plan[i][3]
+        else:
+            group, run, f, ring = ("alone", c.mesh), ("cell", i), faces[c.mesh], False
+        groups.setdefault(group, {}).setdefault(run, []).append(i)
+        cost[group, run] = max(f, 1) * (RING_COST if ring else 1)
+    out = []
+    for group, runs in groups.items():
+        units = []  # (cells, faces, work) per run; a run of more than BATCH_CELLS cells is split
+        for run, idx in runs.items():
+            f = faces[cells[idx[0]].mesh]
+            for k in range(0, len(idx), BATCH_CELLS):
+                units.append((idx[k:k + BATCH_CELLS], f, cost[group, run]))
+        out += [Piece([cells[i] for u in part for i in u[0]], sum(u[2] for u in part)) for part in _cut(units)]
+    return out
+
+
+def _cut(units: list) -> list[list]:
+    """Runs (cells, faces, work) in order, cut into the fewest contiguous parts of about equal work that keep
+    every part within `PIECE_FACES` faces (or one run), `PIECE_RUNS` runs and `BATCH_CELLS` cells."""
+    total = sum(u[2] for u in units) or 1.0
+    n = max(1, math.ceil(sum(u[1] for u in units) / PIECE_FACES), math.ceil(len(units) / PIECE_RUNS))
+    while True:
+        parts: list = [[] for _ in range(n)]
+        before = 0.0
+        for u in units:  # each run to the part its work's midpoint falls in
+            parts[min(n - 1, int((before + u[2] / 2) / total * n))].append(u)
+            before += u[2]
+        parts = [p for p in parts if p]
+        if n >= len(units):
+            return [[u] for u in units]
+        if all(len(p) == 1 or (sum(u[1] for u in p) <= PIECE_FACES and len(p) <= PIECE_RUNS
+                                                  and sum(len(u[0]) for u in p) <= BATCH_CELLS) for p in parts):
+            return parts
+        n += 1
+
+
+def batches(cells: list[Cell], size: int) -> list[list[Cell]]:
+    """Cells, in order, cut into batches of ``size`` cells (the last one fewer): ``batch_size``'s cut."""
+    return [cells[k:k + size] for k in range(0, len(cells), size)]
 
 
 def _submitter(executor):
@@ -364,7 +438,7 @@ class SweepInterrupted(KeyboardInterrupt):
 
 
 def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True,
-          batch_size: int | None = None):
+          batch_size: int | None = None, workers: int | None = None):
     """Run every (mesh, grid configuration, target) cell with `qemjax.simplify`; a pandas DataFrame, one
     row per cell.
 
@@ -385,22 +459,33 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     targets: ratios (floats in (0, 1)) and/or face counts (ints).
     metrics: True: every column of `qemjax.metrics.evaluate` (original = the mesh as given); a dict:
         the same with these keywords to `evaluate` (e.g. ``{"n_samples": 10_000}``); False: none.
-    executor: None (in this process, in order), a `concurrent.futures.Executor` or a
-        `dask.distributed.Client`: one task per batch. A task that is lost (its worker died) is submitted
-        again (`RETRIES` times), then run in this process.
+    executor: None (the cells run in pieces on this process and its helper processes: ``workers``), a
+        `concurrent.futures.Executor` or a `dask.distributed.Client`: one task per batch. A task that is lost
+        (its worker died) is submitted again (`RETRIES` times), then run in this process.
+    workers: the processes that run the pieces, this one included: 1 runs them all here; N also starts
+        N − 1 helper processes (`qemjax._sweep.pool`: fresh Pythons, never forked, started once and kept
+        for the process's later sweeps); every process takes the next piece, largest first, as it is
+        free, so the helpers join as they come up. None (default; ``$QEMJAX_WORKERS`` overrides it): every
+        core this process may use when helpers are started already or the sweep's work is large enough to
+        pay for starting them (`START_WORK`: a few seconds of work) or the process's earlier default sweeps
+        add up to some work (`SWEPT_WORK`), else this process alone. The table does not depend on it
+        (but for the timings): the pieces are cut from the cells alone (`pieces`). Not with ``executor``.
     out: a ``.parquet`` (needs pyarrow: ``pip install 'qemjax[sweep]'``) or ``.csv`` path, rewritten
-        (temporary file, fsync, rename) as cells finish: after each batch in process (a few seconds of work:
-        `BATCH_FACES`) and while a batch yields rows, at most every `SAVE_EVERY_S`; on an executor as tasks
-        end, at most every `SAVE_EVERY_S` and within it of a row coming in. Rows in row order (the rows of other grids already in the file first). Cells whose key
+        (temporary file, fsync, rename) as cells finish: after each piece run here (a few seconds of work at
+        most: `PIECE_FACES`), while a piece yields rows and as a helper's pieces come in, at most every
+        `SAVE_EVERY_S`; on an executor as tasks end, at most every `SAVE_EVERY_S` and within it of a row
+        coming in. Rows in row order (the rows of other grids already in the file first). Cells whose key
         is already there without an error are not run again (an interrupted sweep resumes; a CSV's rows
         already there are written back as the same text); rows of other cells in the file are kept. Ctrl-C
         writes every finished row and raises `SweepInterrupted` (a KeyboardInterrupt) saying how many.
     progress: a tqdm bar counting cells, moving as each cell's row is final; a line saying how many cells
         were already in ``out`` (skipped) and a warning about collapsed cells.
-    batch_size: at most this many cells per batch (`simplify_cells`: cells that can share rounds, of one
-        mesh or several, run together as one disjoint union of copies); None: in process, as many as
-        `BATCH_FACES` faces and `BATCH_CELLS` cells allow; on an executor, `EXECUTOR_BATCH`. 1: every cell
-        alone (then every cell's timings are its own, measured).
+    batch_size: at most this many cells per batch, cut in cell order (`simplify_cells`: cells that can
+        share rounds, of one mesh or several, run together as one disjoint union of copies); None: without
+        an executor, the pieces of `pieces` (cells that can share rounds together, each piece within
+        `PIECE_FACES` faces, `PIECE_RUNS` distinct runs and `BATCH_CELLS` cells, cells that run alike in one
+        piece); on an executor, `EXECUTOR_BATCH`. 1: every cell alone (then every cell's timings are its
+        own, measured).
 
     Columns: ``cell`` (the key: JSON of mesh, sorted parameters, target), ``mesh``, one per grid key ("n/a"
     where the cell's method does not have that setting; empty/NaN is None), ``target`` (as given: face
@@ -421,7 +506,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     as ``metrics_s``: the evaluation's own wall time); ``cell_s`` = ``share_s`` + ``metrics_s`` (the
     cell's time in the sweep, apportioned when batched). Rows come in cell order (mesh, then grid, last key
     fastest, then target), however the cells finished. Raises ValueError for unknown grid keys, bad targets
-    or a bad ``out``/``executor``. ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``,
+    or a bad ``out``/``executor``/``workers``. ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``,
     ``collapsed`` (reason → cells).
     """
     import pandas as pd
@@ -433,8 +518,18 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, numbers.Integral)
                                    or batch_size < 1):
         raise ValueError(f"batch_size must be an int >= 1 or None, got {batch_size!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, numbers.Integral)
+                                or workers < 1):
+        raise ValueError(f"workers must be an int >= 1 or None, got {workers!r}")
+    if workers is not None and executor is not None:
+        raise ValueError("give executor= or workers=, not both (an executor's workers are its own)")
     metrics = {} if metrics is True else dict(metrics) if isinstance(metrics, dict) else False
     submit = None if executor is None else _submitter(executor)
+    if workers is None and executor is None:
+        workers = default_workers()
+        auto = workers is None
+    else:
+        auto = False
     named = name_meshes(meshes)
     cells = [Cell(name, params, t) for name in named for params in configs for t in targets]
     keys = [c.key for c in cells]
@@ -518,17 +613,16 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         saved[:] = now, n
 
     faces = {name: len(loaded[name][1]) for name in loaded}
-    size = batch_size if batch_size is not None or submit is None else EXECUTOR_BATCH
-    work = batches(todo, faces, size)
     stopped = False
     try:
         if submit is None:
-            for b in work:
-                for r in iter_rows([(loaded[c.mesh], c) for c in b], metrics):
-                    finish([r])
-                    save(force=False)
-                save()
+            work = pieces(todo, loaded, faces) if batch_size is None else [
+                Piece(b, float(sum(faces[c.mesh] for c in b))) for b in batches(todo, batch_size)]
+            _run_pieces(work, _helpers(workers, work, configs), loaded, metrics, finish, save)
+            if auto:  # this process's default sweeps so far (`_helpers`)
+                _SWEPT[0] += sum(p.work for p in work)
         else:
+            work = batches(todo, batch_size if batch_size is not None else EXECUTOR_BATCH)
             _run_on(executor, submit, work, loaded, metrics, finish, save)
     except KeyboardInterrupt:
         stopped = True
@@ -543,6 +637,121 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     df.attrs["sweep"] = {"requested": requested, "cells": len(cells), "skipped": skipped, "ran": len(ran),
                          "collapsed": collapsed}
     return df
+
+
+def default_workers() -> int | None:
+    """``workers`` when a sweep gives none: $QEMJAX_WORKERS (an integer >= 1), else None (automatic)."""
+    value = os.environ.get(WORKERS_ENV, "").strip()
+    if not value or value == "auto":
+        return None
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"${WORKERS_ENV} must be an integer >= 1 or 'auto', got {value!r}")
+    return n
+
+
+def _helpers(workers: int | None, work: list[Piece], configs: list) -> int:
+    """How many helper processes run a sweep's pieces beside this process: ``workers`` − 1; None: the
+    cores this process may use, less one, when helpers are started already (`pool.HELPERS`), the distinct
+    runs' work reaches `START_WORK` or this process's earlier default sweeps reach `SWEPT_WORK`, else none;
+    none either when the grid's values or this process's registered methods come from the caller's script
+    (``__main__``: a helper cannot import them; ``workers=N`` tries, and runs here what they cannot). No
+    more than there are pieces to share."""
+    share = len(work) - 1 if HERE_TOO else len(work)
+    if workers is None:
+        from .pool import HELPERS, cores, from_main, shippable
+
+        want = cores() - 1
+        if HELPERS.size() == 0 and sum(p.work for p in work) < START_WORK and _SWEPT[0] < SWEPT_WORK:
+            want = 0
+        if not shippable() or any(from_main(v) for params in configs for _, v in params):
+            want = 0
+    else:
+        want = workers - 1
+    return max(0, min(want, share))
+
+
+def _run_pieces(work: list[Piece], helpers: int, loaded, metrics, finish, save) -> None:
+    """The pieces in this process and on ``helpers`` helper processes (`pool`), rows to ``finish`` as they
+    come, the table written at most every `SAVE_EVERY_S` while they do and after each piece run here. The
+    helpers and this process take the pieces, largest first, from one queue, each as it is free; this one
+    starts at once, the helpers once started (a few seconds, the first time: `pool`). A piece whose helper
+    died is run again (`RETRIES` times), then here. Ctrl-C (or an error) stops the helpers: their pieces in
+    flight are dropped."""
+    if helpers == 0:
+        for piece in work:
+            for r in iter_rows([(loaded[c.mesh], c) for c in piece.cells], metrics):
+                finish([r])
+                save(force=False)
+            save()
+        return
+    import collections
+    import queue
+    import threading
+
+    from . import pool as _pool
+
+    if not _pool.HELPERS.busy.acquire(blocking=False):  # another thread's sweep has them: here alone
+        return _run_pieces(work, 0, loaded, metrics, finish, save)
+    try:
+        _pool.HELPERS.grow(helpers)
+        todo = collections.deque(sorted(work, key=lambda p: -p.work))
+        lock = threading.Lock()
+        ids = {id(p): k for k, p in enumerate(work)}
+        dispatch = _pool.Dispatch(_pool.HELPERS, todo, lock, lambda p: (ids[id(p)], run_cells, (
+            [(loaded[c.mesh], c) for c in p.cells], metrics)), RETRIES, helpers)
+        dispatch.start()
+        here, done = [], False
+
+        def handle(msg) -> bool:
+            if msg[0] == "rows":
+                _pool.warn_again(msg[3])
+                finish(msg[2])
+                save(force=False)
+            elif msg[0] == "here":
+                here.append(msg[1])
+            return msg[0] == "done"
+
+        def drain() -> bool:
+            got = False
+            while True:
+                try:
+                    got = handle(dispatch.results.get_nowait()) or got
+                except queue.Empty:
+                    return got
+
+        try:
+            while True:
+                done = drain() or done
+                piece = here.pop(0) if here else None
+                if piece is None and (HERE_TOO or dispatch.error is not None or not dispatch.is_alive()):
+                    with lock:
+                        piece = todo.popleft() if todo else None
+                if piece is not None:
+                    for r in iter_rows([(loaded[c.mesh], c) for c in piece.cells], metrics):
+                        finish([r])
+                        save(force=False)
+                        done = drain() or done
+                    save()
+                    continue
+                if done:
+                    break
+                try:
+                    done = handle(dispatch.results.get(timeout=_pool.POLL_S)) or done
+                except queue.Empty:
+                    save(force=False)
+        except BaseException:
+            dispatch.stop()
+            _pool.HELPERS.shutdown()  # the pieces in flight are dropped
+            drain()  # rows that came in meanwhile are finished rows: kept
+            raise
+        if dispatch.error is not None:
+            raise dispatch.error
+    finally:
+        _pool.HELPERS.busy.release()
 
 
 def _run_on(executor, submit, work, loaded, metrics, finish, save) -> None:
