@@ -43,6 +43,16 @@ def run_all(demo: bool = True) -> None:
             qemjax.lod_chain(m, ratios=[0.5, 0.25, 0.1])
             qemjax.sweep(["bumpy.obj"], {"method": ["default", "classic", "line"]}, [0.1, 0.02],
                          metrics={"n_samples": 10_000}, progress=False)
+            # a partitioned run (in this process: the workers compile in their own) and each format's reader
+            part = qemjax.Partition(part_faces=1000, workers=1)
+            qemjax.simplify("bumpy.ply", ratio=0.1, partition=part)
+            qemjax.simplify("bumpy.obj", ratio=0.1, partition=part)
+            tm = qemjax.load("bumpy.ply")
+            import trimesh
+            trimesh.Trimesh(tm.vertices, tm.faces, process=False).export("bumpy.stl")
+            trimesh.Trimesh(tm.vertices, tm.faces, process=False).export("ascii.ply", encoding="ascii")
+            qemjax.simplify("bumpy.stl", ratio=0.1, partition=part)
+            qemjax.simplify("ascii.ply", ratio=0.1, partition=part)
             # each method and scheduler, open and closed meshes, locks, modes
             meshes = [shapes.bumpy_sphere(3), shapes.grid(24, hole=True), shapes.torus(n_major=24, n_minor=12)]
             for mesh in meshes:
