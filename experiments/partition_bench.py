@@ -130,7 +130,12 @@ def quality(args, folder: Path) -> None:
     print("| mesh | faces | re-fit | rms part./in core | Hausdorff part./in core | partitioned s | in core s |")
     print("|---|---|---|---|---|---|---|")
     for name in args.meshes:
-        bm = meshes.load(name)
+        if name.startswith("bumpy-sphere-"):  # made in code: qemjax.shapes.bumpy_sphere(N)
+            from types import SimpleNamespace
+            m = qemjax.shapes.bumpy_sphere(int(name.rsplit("-", 1)[1]))
+            bm = SimpleNamespace(V=np.asarray(m.vertices), F=np.asarray(m.faces))
+        else:
+            bm = meshes.load(name)
         t = time.perf_counter()
         core = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False)
         t_core = time.perf_counter() - t
@@ -138,7 +143,8 @@ def quality(args, folder: Path) -> None:
         for refit in args.refit:
             t = time.perf_counter()
             part = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False,
-                                   partition=qemjax.Partition(workers=args.workers, refit=refit))
+                                   partition=qemjax.Partition(workers=args.workers, refit=refit,
+                                                              **({"part_faces": args.part_faces} if args.part_faces else {})))
             t_part = time.perf_counter() - t
             dp = surface_distance((bm.V, bm.F), (part.vertices, part.faces), n_samples=200_000)
             r_rms, r_h = dp["rms_rel"] / dc["rms_rel"], dp["hausdorff_rel"] / dc["hausdorff_rel"]

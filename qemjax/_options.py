@@ -176,8 +176,9 @@ class Partition:
     retries: how often a task whose worker died is run again.
     measure: measure the distance of the output from every input vertex and face centroid, part by part.
     refit: which levels re-fit their output to their input, for a method that re-fits (the default):
-        ``"last"`` (the levels before it skip it: about a quarter less work per part, and in the measured
-        cases no worse: docs/benchmarks.md, "Partitioned runs") or ``"all"``.
+        ``"all"``, or ``"last"`` (the levels before it skip it: about a quarter less work per part; closer
+        to the input on the subdivided armadillo, farther on a bumpy sphere: docs/benchmarks.md,
+        "Partitioned runs").
     """
 
     part_faces: int = 100_000
@@ -189,7 +190,7 @@ class Partition:
     scratch: str | os.PathLike | None = None
     retries: int = 2
     measure: bool = True
-    refit: str = "last"
+    refit: str = "all"
 
     def __post_init__(self):
         if self.refit not in ("all", "last"):

@@ -133,7 +133,8 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
 
 # `simplify`'s keywords besides the settings (tests/test_first_use.py checks them against its signature)
 KEYWORDS = ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel", "method", "scheduler",
-            "topology", "attributes", "feature_edges", "progress", "measure", "locked", "vertex_weights", "preset")
+            "topology", "attributes", "feature_edges", "progress", "measure", "partition", "locked", "vertex_weights",
+            "preset")
 
 
 def did_you_mean(key: str, names, show=repr) -> str:
