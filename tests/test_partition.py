@@ -166,7 +166,7 @@ def test_other_inputs_or_settings_start_afresh(tmp_path):
 
 @pytest.mark.slow
 def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tmp_path):
-    runners = []
+    runners, killed = [], []
     original = execute.open_runner
     monkeypatch.setattr(execute, "open_runner", lambda p: runners.append(original(p)) or runners[-1])
 
@@ -174,7 +174,8 @@ def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tm
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:  # the first worker, once it has written a part
             if runners and runners[0].procs[0] is not None and list((tmp_path / "level1").glob("*.npz")):
-                runners[0].procs[0].kill()
+                killed.append(runners[0].procs[0])
+                killed[0].kill()
                 return
             time.sleep(0.05)
 
@@ -182,7 +183,7 @@ def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tm
     killer.start()
     r = qemjax.simplify(mesh, ratio=RATIO, partition=Partition(part_faces=PART, workers=2, scratch=tmp_path))
     killer.join()
-    assert runners[0].procs[0].returncode is not None  # it was killed (and a new one started in its place)
+    assert killed and killed[0].wait(timeout=10) != 0  # it was killed (and a new one started in its place)
     assert digest(r) == digest(in_process)
 
 

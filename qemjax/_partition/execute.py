@@ -87,6 +87,10 @@ class LocalRunner(Runner):
                 if self.closed:
                     return
                 p.kill()
+                p.wait()  # reaped: a killed process can still poll as running for a moment
+                with self.lock:
+                    if self.procs[k] is p:
+                        self.procs[k] = None
                 if tries >= self.retries:
                     done.put((i, False, f"a worker died {tries + 1} times running this task (out of memory? "
                                         "a smaller Partition(part_faces=...) or fewer workers)"))
