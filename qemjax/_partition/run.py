@@ -73,13 +73,8 @@ def _as_file(mesh, folder: Path) -> Path:
 
 def _locks(level_dir: Path, groups: list, borders: list) -> Path:
     """The global ids that two or more of this level's groups hold (sorted, written as ``locks.npy``)."""
-    ids, owner = [], []
-    for g, grp in enumerate(groups):
-        held = np.unique(np.concatenate([borders[i] for i in grp.members])) if grp.members else np.zeros(0, np.int64)
-        ids.append(held)
-        owner.append(np.full(len(held), g))
-    ids = np.concatenate(ids) if ids else np.zeros(0, np.int64)
-    uniq, count = np.unique(ids, return_counts=True)
+    held = [np.unique(np.concatenate([borders[i] for i in grp.members])) for grp in groups]  # once per group
+    uniq, count = np.unique(np.concatenate(held) if held else np.zeros(0, np.int64), return_counts=True)
     path = level_dir / "locks.npy"
     np.save(path, uniq[count >= 2].astype(np.int64))
     return path
