@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import threading
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -232,3 +233,29 @@ def test_ctrl_c_stops_the_command_and_its_workers(mesh, tmp_path):
     gone, alive = psutil.wait_procs(workers, timeout=5)
     assert not alive and not (tmp_path / "out.ply").exists()
     assert list((scratch / "level1").glob("*.npz"))  # a scratch folder given is kept: the next run resumes
+
+
+def test_what_a_file_holds_besides_positions_is_named_when_dropped(tmp_path):
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    ply = tmp_path / "coloured.ply"
+    head = (f"ply\nformat ascii 1.0\nelement vertex {len(V)}\nproperty float x\nproperty float y\n"
+            f"property float z\nproperty float nx\nproperty uchar red\nelement face {len(F)}\n"
+            "property list uchar int vertex_indices\nproperty uchar quality\nend_header\n")
+    rows = [f"{x} {y} {z} 0.5 200" for x, y, z in V] + [f"3 {a} {b} {c} 7" for a, b, c in F]
+    ply.write_text(head + "\n".join(rows) + "\n")
+    obj = tmp_path / "textured.obj"
+    lines = [f"v {x} {y} {z}" for x, y, z in V] + ["vt 0.5 0.5"] + [f"f {a+1}/1 {b+1}/1 {c+1}/1" for a, b, c in F]
+    obj.write_text("\n".join(lines) + "\n")
+    settings = Partition(part_faces=1000, workers=1)
+    with pytest.warns(UserWarning, match="positions only.*vertex properties nx, red; face properties quality"):
+        res = qemjax.simplify(ply, ratio=0.2, partition=settings)
+    assert res.stats["dropped"] == ["record", "vertex properties nx, red", "face properties quality"]
+    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\)"):
+        res = qemjax.simplify(obj, ratio=0.2, partition=settings)
+    assert res.stats["dropped"] == ["record", "texture coordinates (vt)"]
+    plain = tmp_path / "plain.obj"
+    plain.write_text("\n".join(l for l in lines if not l.startswith("vt")).replace("/1", "") + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert qemjax.simplify(plain, ratio=0.2, partition=settings).stats["dropped"] == ["record"]

@@ -174,6 +174,21 @@ def _fixed_dtype(path: Path, at: int, face: _ply.Element, order: str, index: int
     return np.dtype(fields), checks
 
 
+def dropped(h: _ply.Header) -> tuple:
+    """What a partitioned run does not carry over from this PLY: every property but x, y, z and the face
+    indices, and every element but vertices and faces, named as the header names them."""
+    out = []
+    for e in h.elements:
+        if e.name not in ("vertex", "face"):
+            out.append(f"the {e.name!r} element")
+            continue
+        skip = {"x", "y", "z"} if e.name == "vertex" else {e.props[_index_prop(e)].name}
+        names = [p.name for p in e.props if p.name not in skip]
+        if names:
+            out.append(f"{e.name} properties {', '.join(names)}")
+    return tuple(out)
+
+
 def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
     order, size = _ply.FORMATS[h.format], os.path.getsize(path)
     vertex, face = h.element("vertex"), h.element("face")

@@ -57,7 +57,9 @@ def open_source(path, scratch: Path) -> Source:
     try:
         if fmt == "ply":
             h = ply.header(path)
-            return text.read_ascii_ply(path, h, scratch) if h.format == "ascii" else ply.read_binary(path, h, scratch)
+            src = text.read_ascii_ply(path, h, scratch) if h.format == "ascii" else ply.read_binary(path, h, scratch)
+            src.dropped = ply.dropped(h)
+            return src
         if fmt == "stl":
             return _stl(path, scratch)
         return text.read_obj(path, scratch)

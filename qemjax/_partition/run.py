@@ -241,8 +241,12 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
     stats = dict(faces_in=n_faces, faces_out=int(len(F)), vertices_in=int(manifest["n_vertices"]),
                  vertices_out=int(len(V)), target_faces=target, max_error_limit=None, rounds=0,
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
-                 total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part, dropped=["record"],
+                 total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part,
+                 dropped=["record", *manifest.get("dropped", [])],
                  **(not_measured() | dist))
+    if manifest.get("dropped"):
+        warnings.warn(f"partition: the output keeps positions only; not carried over from the input: "
+                      f"{'; '.join(manifest['dropped'])}", stacklevel=stacklevel)
     if locked_share > 0:
         warnings.warn(f"partition: the output is too large for one process (Partition.final_faces), so "
                       f"{100 * locked_share:.2g} % of its vertices stayed locked at part borders", stacklevel=stacklevel)

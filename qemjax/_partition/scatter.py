@@ -145,7 +145,8 @@ def _read(path, scratch: Path, part_faces: int, step: int, name: str):
     try:
         return src, box, cells, _histogram(src, cells, part_faces, step, name)
     except Ragged:
-        src = src.retriangulate()
+        dropped, src = src.dropped, src.retriangulate()
+        src.dropped = dropped
         return src, box, cells, _histogram(src, cells, part_faces, step, name)
 
 
@@ -155,7 +156,8 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     ``scratch/level0/part_NNNNN.npz`` (arrays ``gid``: sorted global vertex ids, ``V``: their float64
     positions, ``F``: int32 triangles over them in input order, ``border``: whether another part also
     uses the vertex), and returns the manifest (also written to ``scratch/manifest.json``): format,
-    n_vertices, n_faces, bbox, welded, parts (file, faces, vertices, border for each).
+    n_vertices, n_faces, bbox, welded, parts (file, faces, vertices, border for each), dropped (what the file
+    holds besides positions and triangles, which the parts do not carry).
 
     STL and OBJ positions are welded by exact value; PLY is taken as indexed. Unused vertices are
     dropped, the others keep their order. ``progress(done_faces, total_faces)`` is called after each
@@ -182,7 +184,8 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
         del kept
         parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name)
         manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": src.n_faces,
-                    "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts}
+                    "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts,
+                    "dropped": list(src.dropped)}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(scratch / "weld", ignore_errors=True)

@@ -71,6 +71,7 @@ class Source:
     xyz: tuple = ("x", "y", "z")
     checks: list = field(default_factory=list)
     retriangulate: object = None  # () -> Source whose faces were streamed to scratch, for `Ragged`
+    dropped: tuple = ()  # what the file holds besides positions and triangles, in the file's own words
 
     @property
     def n_vertices(self) -> int:

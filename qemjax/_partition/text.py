@@ -104,8 +104,12 @@ def read_obj(path: Path, scratch: Path):
     raw = Appender(scratch / "faces_raw.i64")
     nv = line0 = 0
     top = (-1, 0)  # the largest vertex number a face uses, and its block's first line
+    extra = {"texture coordinates (vt)": b"vt", "normals (vn)": b"vn"}
+    seen = set()
     try:
         for block in blocks(path):
+            seen.update(k for k, tag in extra.items() if k not in seen and
+                        (block.startswith(tag + b" ") or b"\n" + tag + b" " in block))
             if line0 == 0 and is_binary(block[:1024]):
                 raise Refusal("it holds binary data, not OBJ text: the file is damaged or not an OBJ file")
             coords, k, tris, err, at = scan.obj(np.frombuffer(block, np.uint8), nv)
@@ -123,7 +127,9 @@ def read_obj(path: Path, scratch: Path):
         raise Refusal(f"a face (after line {top[1]}) uses vertex {top[0] + 1}, but the file has {nv} vertices")
     if raw.rows == 0:
         raise Refusal("the OBJ file has no faces (no 'f' lines)")
-    return _finish_weld(welder, scratch, "obj", raw, nv)
+    src = _finish_weld(welder, scratch, "obj", raw, nv)
+    src.dropped = tuple(k for k in extra if k in seen)
+    return src
 
 
 def read_ascii_stl(path: Path, scratch: Path):
