@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
 import tempfile
 import time
@@ -29,18 +30,23 @@ def _scratch(p: Partition) -> tuple[Path, bool]:
     return path, False
 
 
-def _input_key(mesh) -> str:
-    """What identifies the input for a resumed run: a file by its path, size and time; arrays by a hash."""
-    import os
-
+def _arrays(mesh):
+    """A path as given; anything else as (float64 vertices, int64 faces), converted once."""
     if isinstance(mesh, (str, os.PathLike)):
-        st = Path(mesh).stat()
-        return f"{Path(mesh).resolve()}:{st.st_size}:{st.st_mtime_ns}"
+        return mesh
     from .._io.mesh import as_arrays
 
     V, F = as_arrays(mesh)[:2]
-    return hashlib.sha256(np.ascontiguousarray(V, np.float64).tobytes() +
-                          np.ascontiguousarray(F, np.int64).tobytes()).hexdigest()
+    return np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64)
+
+
+def _input_key(mesh) -> str:
+    """What identifies the input for a resumed run: a file by its path, size and time; arrays (`_arrays`)
+    by a hash."""
+    if isinstance(mesh, (str, os.PathLike)):
+        st = Path(mesh).stat()
+        return f"{Path(mesh).resolve()}:{st.st_size}:{st.st_mtime_ns}"
+    return hashlib.sha256(mesh[0].tobytes() + mesh[1].tobytes()).hexdigest()
 
 
 def _fresh(folder: Path, key: dict) -> None:
@@ -56,18 +62,14 @@ def _fresh(folder: Path, key: dict) -> None:
 
 
 def _as_file(mesh, folder: Path) -> Path:
-    """A path as given; arrays (or a mesh object) written to the scratch folder as a binary PLY."""
-    import os
-
+    """A path as given; arrays (`_arrays`) written to the scratch folder as a binary PLY."""
     if isinstance(mesh, (str, os.PathLike)):
         return Path(mesh)
-    from .._io.mesh import as_arrays
     from .write import write_binary_ply
 
-    V, F = as_arrays(mesh)[:2]
     path = folder / "input.ply"
     if not path.exists():
-        write_binary_ply(path, np.asarray(V, np.float64), np.asarray(F, np.int64))
+        write_binary_ply(path, *mesh)
     return path
 
 
@@ -133,9 +135,10 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
     folder, temporary = _scratch(p)
     runner = None
     try:
-        if isinstance(mesh, (str, Path)) and not Path(mesh).exists():
+        if isinstance(mesh, (str, os.PathLike)) and not Path(mesh).exists():
             from .._io.mesh import MissingFileError
             raise MissingFileError(f"no such file: {mesh}")
+        mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
                    final_faces=p.final_faces, refit=p.refit, target=[target_faces, ratio], kwargs=repr(sorted(kwargs.items())))
         _fresh(folder, key)
