@@ -157,7 +157,7 @@ class Options:
 class Partition:
     """Settings of a partitioned run (``simplify(path, ratio=..., partition=Partition(...))``, the command
     line's ``--partition``): the input is read in chunks and cut into parts of at most ``part_faces`` faces
-    along the Morton order of the face centroids; each level simplifies groups of neighbouring parts in
+    along the Hilbert order of the face centroids; each level simplifies groups of neighbouring parts in
     parallel with the vertices they share with other groups locked, then regroups so that those borders
     lie inside the next level's groups; the last level is one group, unlocked, run to the exact target.
 
@@ -179,6 +179,11 @@ class Partition:
         ``"all"``, or ``"last"`` (the levels before it skip it: about a quarter less work per part; closer
         to the input on the subdivided armadillo, farther on a bumpy sphere: docs/benchmarks.md,
         "Partitioned runs").
+    share: how a level before the last splits its faces among its groups: ``"faces"``, in proportion to the
+        faces each reads; or ``"cost"``, a common contraction cost: a few groups spread over the mesh run
+        first in proportion, the median of the largest cost they reached becomes every group's
+        ``max_error``, so that detailed groups keep more faces and flat ones fewer (the level's total is
+        then near, not at, its goal; the last level meets the target exactly either way).
     """
 
     part_faces: int = 100_000
@@ -191,10 +196,13 @@ class Partition:
     retries: int = 2
     measure: bool = True
     refit: str = "all"
+    share: str = "faces"
 
     def __post_init__(self):
         if self.refit not in ("all", "last"):
             raise ValueError(f"Partition: refit must be 'all' or 'last', got {self.refit!r}")
+        if self.share not in ("faces", "cost"):
+            raise ValueError(f"Partition: share must be 'faces' or 'cost', got {self.share!r}")
         def positive(name, value, kind=int, least=1):
             if not isinstance(value, (int, float)) or isinstance(value, bool) or value < least or \
                     (kind is int and value != int(value)):

@@ -259,3 +259,16 @@ def test_what_a_file_holds_besides_positions_is_named_when_dropped(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert qemjax.simplify(plain, ratio=0.2, partition=settings).stats["dropped"] == ["record"]
+
+
+def test_a_common_cost_share_meets_the_target_and_spreads_the_pilots():
+    assert plan.pilots(3) == [0, 1, 2]
+    assert plan.pilots(100) == [0, 14, 28, 42, 57, 71, 85, 99]
+    assert plan.common_cost([3.0, 1.0, 2.0, 10.0]) == 2.5
+    m = shapes.bumpy_sphere(5)
+    res = qemjax.simplify(m, ratio=0.05, partition=Partition(part_faces=2000, workers=1, share="cost"))
+    assert len(res.faces) == res.stats["target_faces"] and closed_and_consistent(res.faces)
+    costs = res.stats["partition"]["cost_per_level"]
+    assert costs[0] > 0 and costs[-1] is None  # the levels before the last share one cost; the last none
+    with pytest.raises(ValueError, match="share must be"):
+        Partition(share="area")

@@ -11,7 +11,7 @@ from .._options import Partition
 
 class Group(NamedTuple):
     """One task of a level: the pieces it reads (indices into the previous level's outputs, consecutive in
-    Morton order, so spatially close), their faces and the faces it keeps."""
+    Hilbert order, so spatially close), their faces and the faces it keeps."""
 
     members: tuple
     faces: int
@@ -46,7 +46,7 @@ def consecutive(faces: np.ndarray, limit: int) -> list[tuple]:
 
 
 def level(faces: np.ndarray, target: int, p: Partition, first: bool, stalled: bool = False) -> tuple[list[Group], bool]:
-    """The next level's groups for pieces of ``faces`` faces (Morton order), and whether it is the last: one
+    """The next level's groups for pieces of ``faces`` faces (Hilbert order), and whether it is the last: one
     group, nothing locked, run to ``target``; or, when that group would read more than ``final_faces``, the
     groups of at most ``part_faces`` run to their shares of ``target`` with their borders locked. The first
     level runs each part alone. Any other level keeps ``max(faces / reduction, budget * target)`` faces in
@@ -65,3 +65,14 @@ def level(faces: np.ndarray, target: int, p: Partition, first: bool, stalled: bo
         keep = target
     sums = np.array([faces[list(m)].sum() for m in members], np.int64)
     return [Group(m, int(s), int(t)) for m, s, t in zip(members, sums, shares(sums, min(keep, total)))], last
+
+
+def pilots(n: int, k: int = 8) -> list[int]:
+    """Up to ``k`` of ``n`` groups spread evenly along the Hilbert order: those that set a level's common
+    cost (``Partition(share="cost")``)."""
+    return sorted(set(np.linspace(0, n - 1, min(k, n)).round().astype(int).tolist()))
+
+
+def common_cost(costs) -> float:
+    """The cost every group of a level stops at: the median of the pilots' largest contraction costs."""
+    return float(np.median(np.asarray(costs, np.float64)))

@@ -119,6 +119,17 @@ def _distance(results: list, diag: float, unit: float) -> dict:
     return out | dict(distance_samples=int(sum(r["samples"] for r in results)))
 
 
+def _common_cost(runner, specs: list, p: Partition, progress, label: str):
+    """``Partition(share="cost")``: the pilot groups (`plan.pilots`) run in proportion first; every group of
+    the level then stops at their common cost (`plan.common_cost`), or at a quarter of its proportional
+    share, whichever comes first. Returns (the cost, the level's specs)."""
+    chosen = plan.pilots(len(specs))
+    pilot_specs = [specs[i] | dict(out=specs[i]["out"].replace("group_", "pilot_")) for i in chosen]
+    cost = plan.common_cost([s["max_error"] for s in _run_level(runner, "run_group", pilot_specs, progress, label)])
+    return cost, [s | dict(target=max(1, s["target"] // 4), kwargs=s["kwargs"] | {"max_error": cost})
+                  for s in specs]
+
+
 def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwargs: dict, progress: bool,
                          stacklevel: int = 3):
     """`simplify` with ``partition=``: the module docstring. ``kwargs``: the method and its settings, as
@@ -140,7 +151,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             raise MissingFileError(f"no such file: {mesh}")
         mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
-                   final_faces=p.final_faces, refit=p.refit, target=[target_faces, ratio], kwargs=repr(sorted(kwargs.items())))
+                   final_faces=p.final_faces, refit=p.refit, share=p.share, target=[target_faces, ratio],
+                   kwargs=repr(sorted(kwargs.items())))
         _fresh(folder, key)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -172,13 +184,16 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             level_kw = kwargs if last or p.refit == "all" else kwargs | {"refit": 0}
             specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
                           out=str(level_dir / f"group_{k:05d}.npz")) for k, g in enumerate(groups)]
+            cost = None
+            if p.share == "cost" and not last and len(groups) > 1:
+                cost, specs = _common_cost(runner, specs, p, progress, f"level {len(levels) + 1} pilots")
             stats = _run_level(runner, "run_group", specs, progress, f"level {len(levels) + 1}")
             paths = [s["out"] for s in specs]
             faces = np.array([s["faces_out"] for s in stats], np.int64)
             levels.append(dict(groups=len(groups), faces_in=int(sum(g.faces for g in groups)),
                                faces_out=int(faces.sum()), target=int(sum(g.target for g in groups)),
                                locked=int(sum(s["locked"] for s in stats)), seconds=time.perf_counter() - t_level,
-                               stats=stats))
+                               cost=cost, stats=stats))
             if last:
                 break
             borders = [pieces.borders(path) for path in paths]
@@ -237,6 +252,7 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
     part = dict(parts=len(manifest["parts"]), levels=len(levels), where=where,
                 faces_per_level=[lv["faces_out"] for lv in levels], groups_per_level=[lv["groups"] for lv in levels],
                 locked_per_level=[lv["locked"] for lv in levels], seconds_per_level=[lv["seconds"] for lv in levels],
+                cost_per_level=[lv["cost"] for lv in levels],
                 locked_share=locked_share, scatter_s=t_scatter, measure_s=t_measure,
                 peak_rss_workers=max((s["peak_rss"] for s in all_stats), default=0), peak_rss_client=task.peak_rss(),
                 reused=sum(1 for s in all_stats if s.get("reused")), scratch=None if folder is None else str(folder),

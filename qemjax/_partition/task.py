@@ -80,6 +80,7 @@ def run_group(spec: dict) -> dict:
     pieces.save(out, V=res.vertices, F=res.faces.astype(np.int32), gid=g, borders=held)
     stats = dict(faces_in=int(len(F)), faces_out=int(len(res.faces)), target=int(spec["target"]),
                  locked=int(locked.sum()), vertices_in=int(len(V)), stop_reason=res.stop_reason,
+                 max_error=float(res.max_error),
                  seconds=time.perf_counter() - t0, compile_s=float(res.stats.get("compile_s") or 0.0),
                  peak_rss=peak_rss(), pid=os.getpid(),
                  warnings=sorted({str(w.message) for w in caught}))
