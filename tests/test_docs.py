@@ -48,6 +48,28 @@ def test_code_names_no_development_history():
     assert not found, "\n".join(found)
 
 
+def test_every_experiment_is_listed():
+    """experiments/README.md names every script of experiments/ (the figures', the probes', the shared modules)."""
+    readme = (ROOT / "experiments" / "README.md").read_text()
+    scripts = sorted((ROOT / "experiments").rglob("*.py"))
+    assert {p.parent.name for p in scripts} == {"experiments", "figures", "probes"}
+    assert not [p.name for p in scripts if p.name not in readme]
+
+
+def test_named_experiments_and_results_exist():
+    """Every script and results file that the pages, the README, the changelog, the tests and the package's
+    comments name under experiments/ is there (a moved or deleted one leaves no stale command behind)."""
+    import re
+
+    texts = [*PAGES, ROOT / "README.md", ROOT / "CHANGELOG.md", ROOT / "experiments" / "README.md",
+             *(ROOT / "tests").glob("*.py"),
+             *[p for p in (ROOT / "qemjax").rglob("*.py") if not str(p.relative_to(ROOT)).startswith(CODE_LOG_PENDING)]]
+    named = {(t.name, m) for t in texts for m in re.findall(r"experiments/[a-z0-9_/.-]*[a-z0-9]\.(?:py|txt|csv|md|png)\b",
+                                                           t.read_text())}
+    assert len(named) > 50
+    assert not sorted(f"{t}: {m}" for t, m in named if not (ROOT / m).is_file())
+
+
 def test_the_config_shown_is_the_example_config():
     (_, shown), = blocks(DOCS / "cli.md", "toml")
     assert tomllib.loads(shown) == tomllib.loads(qemjax.shapes.EXAMPLE_SWEEP)  # what `qemjax examples` writes

@@ -126,7 +126,7 @@ def from_trimesh(obj, report: dict | None = None) -> tuple[dict, object]:
     return vals, material
 
 
-# What attributes='auto' keeps (measured: `python experiments/attribute_defaults.py`, README "Appearance
+# What attributes='auto' keeps (measured: `python experiments/figures/attribute_defaults.py`, README "Appearance
 # attributes"): each kind whose values are continuous over the welded mesh. A kind with seams (UV chart
 # borders, colour discontinuities, hard normal edges) holds its seam vertices in place, which costs
 # geometric rms there: it is kept only when asked for, except UVs whose file names a texture image (or
@@ -247,7 +247,7 @@ def _unique_rows(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ks[new], inv
 
 
-# default weights per kind (`python experiments/attribute_defaults.py`, README "Appearance attributes"): for
+# default weights per kind (`python experiments/figures/attribute_defaults.py`, README "Appearance attributes"): for
 # colours and normals, the largest weight (with every smaller one) whose runs keep the rule on every seamless
 # case: rms and warm time within docs/attributes.md's bounds ("The cost") of attributes=None. Any weight > 0
 # costs more time than that (the 23-float attribute state), so both are 0: the cost is the positions' and

@@ -69,7 +69,7 @@ HERE_TOO = True  # this process runs pieces too (beside its helpers)
 _SWEPT = [0.0]  # the work of this process's default sweeps so far
 SAVE_EVERY_S = 1.0  # the table is rewritten after each piece run here, and while rows come in at most this often
 RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
-EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
+EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/figures/dask_speedup.py)
 _PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
