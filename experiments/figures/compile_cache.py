@@ -63,7 +63,7 @@ def run_cli(mesh: Path, out: Path, cache: Path, ratio: float, extra=()) -> dict:
     """One `qemjax simplify` in a fresh process; its compile_s and total_s (from the summary), wall time."""
     env = dict(os.environ, QEMJAX_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
     env.pop("QEMJAX_NO_CACHE", None)
-    cmd = [sys.executable, "-m", "qemjax._cli", "simplify", str(mesh), str(out), "--ratio", str(ratio),
+    cmd = [sys.executable, "-m", "qemjax", "simplify", str(mesh), str(out), "--ratio", str(ratio),
            "--quiet", *extra]
     t0 = time.perf_counter()
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)

@@ -41,7 +41,7 @@ def _rows(path: Path) -> list[str]:
 
 def run(folder: Path, env: dict, stop_at: float | None) -> dict:
     table = folder / "big.csv"
-    cmd = [sys.executable, "-m", "qemjax._cli", "sweep", str(folder / "big.toml"), "--quiet"]
+    cmd = [sys.executable, "-m", "qemjax", "sweep", str(folder / "big.toml"), "--quiet"]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     first, sent, before = None, None, len(_rows(table))
