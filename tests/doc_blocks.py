@@ -139,7 +139,7 @@ DEV_LOG = [
 # top of DEV_LOG, no timings, speed ratios, results files, dates or the pipeline's old module names.
 CODE_LOG = DEV_LOG + [
     (r"\d\s?(ms|µs|us|ns)\b|\d\s(s|sec|seconds|minutes|min)\b", "a timing"),
-    (r"\d[x×](?![\d\w])", "a speed ratio"),  # 1.4×, 0.69x (not 3×3, nor a mesh's name like armadillo x16)
+    (r"\d[x×](?![\d\w])|\d ?% (faster|slower)", "a speed ratio"),  # 1.4×, 0.69x (not 3×3, nor armadillo x16)
     (r"\bresults/\w|_\d{4}[a-z]?\b", "a results file"),  # experiments/results/..., a day tag (_1128g)
     (r"\b20\d\d-\d\d-\d\d\b|\b(January|February|March|April|May|June|July|August|September|October|November"
      r"|December) \d{1,2}\b", "a date"),
