@@ -135,11 +135,44 @@ DEV_LOG = [
 ]
 
 
+# The code's comments and docstrings say why; the figures that back them live in docs/ (benchmarks.md): on
+# top of DEV_LOG, no timings, speed ratios, results files, dates or the pipeline's old module names.
+CODE_LOG = DEV_LOG + [
+    (r"\d\s?(ms|µs|us|ns)\b|\d\s(s|sec|seconds|minutes|min)\b", "a timing"),
+    (r"\d[x×](?![\d\w])|\d ?% (faster|slower)", "a speed ratio"),  # 1.4×, 0.69x (not 3×3, nor armadillo x16)
+    (r"\bresults/\w|_\d{4}[a-z]?\b", "a results file"),  # experiments/results/..., a day tag (_1128g)
+    (r"\b20\d\d-\d\d-\d\d\b|\b(January|February|March|April|May|June|July|August|September|October|November"
+     r"|December) \d{1,2}\b", "a date"),
+    (r"(?<![\w.])_(stages|setup)\b", "a stale module name"),
+]
+
+
+def _matches(name: str, lines, patterns) -> list[str]:
+    return [f"{name}:{number}: {what}: {line.strip()[:100]}"
+            for number, line in lines for pattern, what in patterns if re.search(pattern, line, re.I)]
+
+
 def dev_log_references(path: Path) -> list[str]:
     """Lines of ``path`` that point into the project's development history rather than at the user."""
-    found = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
-        for pattern, what in DEV_LOG:
-            if re.search(pattern, line, re.I):
-                found.append(f"{path.name}:{number}: {what}: {line.strip()[:100]}")
-    return found
+    return _matches(path.name, enumerate(path.read_text().splitlines(), 1), DEV_LOG)
+
+
+def commentary(source: str) -> list[tuple[int, str]]:
+    """(line number, text) of the comments and the docstrings (every string standing alone as a statement)
+    of a Python source, in line order; code and the strings it uses are left out."""
+    import ast
+    import io
+    import tokenize
+
+    found = [(t.start[0], t.string) for t in tokenize.generate_tokens(io.StringIO(source).readline)
+             if t.type == tokenize.COMMENT]
+    lines = source.splitlines()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
+            found += [(n, lines[n - 1]) for n in range(node.lineno, node.end_lineno + 1)]
+    return sorted(found)
+
+
+def code_log_references(path: Path) -> list[str]:
+    """Comment and docstring lines of the Python file ``path`` that quote development history (`CODE_LOG`)."""
+    return _matches(str(path.relative_to(ROOT)), commentary(path.read_text()), CODE_LOG)

@@ -304,7 +304,7 @@ def test_area_max_error_is_an_area_in_mesh_units(scheduler):
 @pytest.mark.shared
 @pytest.mark.slow
 def test_area_keeps_surface_area_closer_than_qem_on_max_planck():
-    """The issue's criterion, on one shared mesh (all three: experiments/area_paper.py): at 80 % and 90 %
+    """The issue's criterion, on one shared mesh (all three: experiments/figures/area_paper.py): at 80 % and 90 %
     reduction the area method's |A' − A| is below QEM's."""
     mesh = qemjax.load(shared_mesh("max-planck-10k.obj"))
     for ratio in (0.2, 0.1):

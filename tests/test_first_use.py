@@ -122,7 +122,9 @@ def test_the_public_names_are_the_modules_objects():
 
     for name, (module, attr) in qemjax._PUBLIC.items():
         assert getattr(qemjax, name) is getattr(importlib.import_module(module, "qemjax"), attr), name
-    assert set(qemjax._PUBLIC) <= set(dir(qemjax)) and {"metrics", "shapes", "render"} <= set(dir(qemjax))
+    assert set(qemjax._PUBLIC) <= set(dir(qemjax)) and set(qemjax._MODULES) <= set(dir(qemjax))
+    assert qemjax.__all__ == [*qemjax._PUBLIC, *qemjax._MODULES]  # in their groups (qemjax/__init__.py)
+    assert all(getattr(qemjax.costs, n) is getattr(qemjax, n) for n in qemjax.costs.__all__)
     namespace = {}
     exec("from qemjax import *", namespace)
     assert set(qemjax._PUBLIC) <= set(namespace)

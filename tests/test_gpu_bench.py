@@ -1,11 +1,11 @@
-"""`experiments/gpu_bench.py` keeps working (issue 42): on a machine without an accelerator it reports the CPU
+"""`experiments/figures/gpu_bench.py` keeps working (issue 42): on a machine without an accelerator it reports the CPU
 column alone, with the kernel's rows and whole runs whose outputs are the same bits run to run."""
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments" / "figures"
 
 
 def test_gpu_bench_reports_kernels_and_runs(tmp_path, monkeypatch):

@@ -8,7 +8,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "qemjax"
 LAYERS = ["_mesh", "_io", "_options", "_kernels", "_costs", "_schedulers", "_record", "_pipeline", "_partition",
-          "metrics", "peers", "shapes", "render", "_sweep", "__init__", "_ahead", "_cli", "__main__"]
+          "metrics", "costs", "peers", "shapes", "render", "_sweep", "__init__", "_ahead", "_cli", "__main__"]
 # the one import against the layers: `simplify(partition=...)` hands the run to the partitioned driver, which
 # runs `simplify` on each part (imported inside the function that dispatches, so importing either stays light)
 DISPATCH = {("qemjax._pipeline.api", "qemjax._partition.run")}

@@ -4,7 +4,7 @@ The input check keeps int64 faces as given (no 127 MiB copy on a 5.5 M-face mesh
 scheduler's first round uses the geometry's int32 edge table as it is. Both are safe only while nothing
 writes into those arrays: these tests check the sharing itself and that a run leaves the shared arrays as
 they were (both schedulers, both topology modes, the compiled and the numpy rounds). The peak itself is
-measured by ``python experiments/memory_peak.py`` and located by ``python experiments/memory_profile.py``.
+measured by ``python experiments/figures/memory_peak.py`` and located by ``python experiments/figures/memory_profile.py``.
 """
 from __future__ import annotations
 

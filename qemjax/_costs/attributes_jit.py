@@ -2,7 +2,8 @@
 for operation (einsum's sums start at +0.0 and add the channels in order; numpy's sum of squares adds them
 in order; bincount adds the corners k-major, face by face), so the states are the same bits
 (tests/test_attributes.py compares them). The numpy code built a (3f, 11 + 4m) matrix of columns and
-scattered each with a bincount: 6.9 ms of a textured 5.8 k-face mesh's 59 ms run (spot with its UVs).
+scattered each with a bincount, a sizeable part of a small textured mesh's run (docs/benchmarks.md,
+"Measured choices inside a run").
 
 Up to `MAX_CHANNELS` channels: with three or more, numpy's einsum adds them in an order of its own (its
 vector code pairs them: the bits differed in the test), so colours and normals keep the numpy code."""

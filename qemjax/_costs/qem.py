@@ -160,8 +160,8 @@ class QEM(Method):
         """What `simplify` runs when no method is given (``method="default"``): summed quadrics with face
         planes weighted by (area / mean area)^0.6, boundary planes at weight 10, then one round of
         re-fitting the positions to the input (``refit=1``). Chosen by ranking every candidate against the
-        peers on the benchmark meshes at 10 % and 1 % (``experiments/rank_peers.py``; docs/methods.md, "QEM and
-        its presets"): the best ranks at about 1.4× `classic`'s time."""
+        peers on the benchmark meshes at 10 % and 1 % (``experiments/figures/rank_peers.py``; docs/methods.md, "QEM and
+        its presets", which gives its time against `classic`'s)."""
         return cls(area_power=0.6, boundary_weight=10.0, refit=1)
 
     @classmethod
@@ -170,8 +170,8 @@ class QEM(Method):
         rank-aware placement with loose limits (``rank_eps=1e-3``, ``max_shift=0.5``), face planes weighted
         by (area / mean area)^0.6, boundary planes at weight 10, then one round of re-fitting the positions
         to the input (``refit=1``). Chosen on the benchmark meshes against meshoptimizer, fast-simplification,
-        pyfqmr, pymeshlab and libigl (``experiments/rank_peers.py``; docs/methods.md, "QEM and its
-        presets"); it costs 1.3–6.5× the default's time. ``method="accurate"`` names it, and
+        pyfqmr, pymeshlab and libigl (``experiments/figures/rank_peers.py``; docs/methods.md, "QEM and its
+        presets", with its time against the default's). ``method="accurate"`` names it, and
         ``dataclasses.replace(QEM.accurate(), refit=0)`` is it without the re-fit."""
         return cls(memoryless=True, memory_weight=0.3, placement="rank", area_power=0.6, boundary_weight=10.0,
                    rank_eps=1e-3, max_shift=0.5, refit=1)

@@ -7,7 +7,7 @@ vertex ids rotated so that the moving corner comes first, ``[v, c1, c2]``: befor
 
 Ring sizes vary (about 10 on a regular mesh, hundreds at a high-valence vertex), so pairs are grouped by
 the power of two that holds their ring (RING_MIN at least): each group is padded only to its own size,
-padding is bounded by 2×, and a run compiles one kernel per (batch shape, ring size) it meets.
+padding at most doubles a ring, and a run compiles one kernel per (batch shape, ring size) it meets.
 
 With ``with_dead=True`` (models whose ``ring_dead`` is set) the ring also holds the faces that hold both
 a and b, which the contraction removes, as rows ``[b, ·, ·]`` (rotated to start at b): a kernel that

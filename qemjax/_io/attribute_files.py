@@ -1,6 +1,6 @@
 """Mesh files with stored appearance attributes, written from generated meshes (no files needed).
 
-For the tests and `experiments/attribute_defaults.py`: each writer takes a `Mesh` and a path and writes the
+For the tests and `experiments/figures/attribute_defaults.py`: each writer takes a `Mesh` and a path and writes the
 file an exporter would (PLY with ``nx ny nz`` or ``red green blue``, OBJ with ``vn`` or ``vt`` per corner).
 """
 from __future__ import annotations

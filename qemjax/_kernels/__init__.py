@@ -15,9 +15,9 @@ from .lazy import jax  # imported on first use: importing qemjax stays light
 # On the CPU, XLA's newer fusion emitter compiles a loop fusion that it splits over several threads into
 # different machine code than the unsplit loop (other multiply-adds become FMAs), and it splits by the
 # number of cores the process may use: results then depend on the core count (`taskset -c 0` changed the
-# parallel scheduler's output; experiments/results/determinism.md). The older emitter gives the same
-# bits either way, and was faster for the placement kernel here (the flip kernel, 4× slower with it, keeps
-# the default: `flips.face_flips_at`). Set per kernel, never process-wide.
+# parallel scheduler's output; docs/design.md, "Determinism"). The older emitter gives the same bits
+# either way, and was faster for the placement kernel here (the flip kernel, much slower with it, keeps the
+# default: `flips.face_flips_at`). Set per kernel, never process-wide.
 CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
@@ -44,8 +44,8 @@ def kernel(fn=None, **jit_kwargs):
 
 def _tracing():
     """A function of a call's (args, kwargs) telling whether it runs inside a JAX trace: JAX's own flag
-    where this JAX has it (a fraction of a µs), else whether an argument is a tracer (walking the arguments
-    took ~10 µs a call, a sixth of a small mesh's device call)."""
+    where this JAX has it (next to free), else whether an argument is a tracer (walking the arguments costs
+    a noticeable part of a small mesh's device call, every call)."""
     clean = _trace_flag()
     if clean is None:  # another JAX: look at the arguments
         return lambda args, kwargs: any(isinstance(a, jax.core.Tracer)

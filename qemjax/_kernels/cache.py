@@ -1,6 +1,6 @@
-"""JAX's persistent compilation cache, on by default for the library and the command (issue 41).
+"""JAX's persistent compilation cache, on by default for the library and the command.
 
-Each process otherwise compiles its kernels afresh (2-4 s on a CPU for each new mesh size class). The cache
+Each process otherwise compiles its kernels afresh (seconds on a CPU for each new mesh size class). The cache
 keeps the compiled kernels on disk, keyed by their shapes, so a later process, a sweep's worker or a new
 mesh of a size seen before loads them. qemjax's first compilation (or a first ``qemjax.cache()``) turns it
 on (`ensure_default`: importing qemjax itself does not start JAX) unless
@@ -42,7 +42,7 @@ def enable(path: str | None = None) -> str | None:
         return None
     jax.config.update("jax_enable_compilation_cache", True)
     jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # default 1 s: ours take less
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # JAX's default skips quick compilations: ours are
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)  # no size limit, no overrides
     _reset()
     _OWN[:] = [path]

@@ -117,7 +117,7 @@ def face_flips(p, k, x, mask, ref, cos_max):
     return moved_corner_flips(p, k, x, cos_max, ref) & mask
 
 
-@jax.jit  # not `kernel`: the older emitter ran this 4× slower (30 vs 7.6 ms at 65,536 rows); see below
+@jax.jit  # not `kernel`: the older emitter runs this several times slower (docs/benchmarks.md); see below
 def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     """`face_flips` with the inputs gathered here: faces (K,3) index rows of V (N,≥3) (columns 0-2 are
     positions); k (K,) the moving corner, x (K,3) where it goes; the reference normal of face i is
@@ -125,8 +125,9 @@ def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     Returns (K,) bool.
 
     Everything gathered is packed into one (15,K) array and materialised before the arithmetic: with the
-    gathers left apart (one per corner, as separate arrays), XLA's CPU fusion took 2.4× the CPU time
-    at 65 536 rows (measured on 2 cores; same results bit for bit).
+    gathers left apart (one per corner, as separate arrays), XLA's CPU fusion recomputes them and takes
+    more than twice the CPU time (same results bit for bit; docs/benchmarks.md, "Measured choices inside a
+    run").
 
     Its output is a sign test, so a core-count-dependent FMA contraction could change it only for a face
     within a rounding step of the threshold; the golden cases agree on 1 and 2 cores

@@ -2,9 +2,8 @@
 
 A round's device call on a small mesh takes about a tenth of a millisecond. Blocking on its result puts
 the calling thread to sleep, and waking it again when the result is in costs about as much as the call on
-a virtual machine whose idle core halts: on the cow to 10 % (45 rounds) the wait for the rounds' calls
-fell from 5.7 to 4.3 ms, and the whole run from 26.7 to 23.8 ms, when the host polled for the result
-instead (``python experiments/device_wait.py``, experiments/results/device_wait_1128.txt). Only small results are polled for (at most `POLL_SIZE` values:
+a virtual machine whose idle core halts; polling for the result instead shortens a small mesh's whole run
+(docs/benchmarks.md, "Measured choices inside a run"). Only small results are polled for (at most `POLL_SIZE` values:
 a small call's). A larger call may spread over every core, and a polling thread would take one from it (the
 bunny's rounds, 4096 pairs a call, took longer polled), so it is waited for by blocking, as before; and
 polling stops after `SPIN_S`. The values are the same either way: only how the thread waits changes.

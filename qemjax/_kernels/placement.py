@@ -20,7 +20,7 @@ Branches, reported per pair:
 The arithmetic is written on lists of component arrays (one array per coordinate or quadric entry).
 On the CPU this matters: XLA then fuses the whole computation into one loop over contiguous rows, while
 column slices of (K,10) arrays or several separate outputs make it recompute shared terms per output
-(measured 4-8× slower). `place_pairs` therefore returns a single stacked (5,K) array. The truncated
+(several times slower). `place_pairs` therefore returns a single stacked (5,K) array. The truncated
 solve costs more arithmetic (docs/methods.md, "QEM and its presets"), so each mode is its own kernel (`place_pairs`,
 `place_pairs_rank`): the default's compiled code is the one it always was.
 """

@@ -1,14 +1,14 @@
-"""Fast numpy idioms for the host-side scheduler's large arrays (measured on 2 M edges).
+"""Fast numpy idioms for the host-side scheduler's large arrays.
 
-numpy's general calls are several times slower than these specialised ones: on rows, ``A[idx]`` 4-15×
-and ``A[idx] = rows`` 3×; ``mask[E].any(1)`` 5×; ``np.sort(F, axis=1)`` on (m,3) rows 2×; ``V.min(0)`` on
-(n,3) rows 20×. Likewise ``np.compress(mask, a)`` is 2-4× faster than ``a[mask]`` when the mask is dense
-and irregular, and one ``np.flatnonzero`` serves several ``np.take`` where one mask compacts several
-arrays.
+numpy's general calls are several times slower than these specialised ones on large arrays (on rows
+``A[idx]``, ``A[idx] = rows``, ``mask[E].any(1)``, ``np.sort(F, axis=1)`` on (m,3) rows, ``V.min(0)`` on
+(n,3) rows; docs/benchmarks.md, "Measured choices inside a run"). Likewise ``np.compress(mask, a)`` is
+faster than ``a[mask]`` when the mask is dense and irregular, and one ``np.flatnonzero`` serves several
+``np.take`` where one mask compacts several arrays.
 
 On the small arrays of a small mesh's rounds the cost is the call itself: the methods ``a.take(idx)`` and
-``a.compress(mask)`` skip the Python wrappers of ``np.take`` / ``np.compress`` (about 2 µs a call, of 3-5; the
-scheduler makes thousands a run), with the same results.
+``a.compress(mask)`` skip the Python wrappers of ``np.take`` / ``np.compress`` (most of a small call's
+cost; the scheduler makes thousands a run), with the same results.
 """
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
 """Bounding boxes, compiled: numpy's ``V.min(0)`` / ``V.max(0)`` without its cost on (n,3) rows.
 
-numpy reduces an (n,3) array over its first axis three values at a time: a minimum and a maximum took
-0.13 ms on the cow's 2.9 k vertices and 31 ms on armadillo ×16's 0.69 M, against 0.011 and 2.5 ms here
-(``python experiments/bounds_cost.py``). A run took three on its input (the re-fit's frame, the measured
+numpy reduces an (n,3) array over its first axis three values at a time: these loops take about a tenth
+of its time (docs/benchmarks.md, "Measured choices inside a run"). A run took three on its input (the re-fit's frame, the measured
 distance's frame and diagonal) and more in each nearest search's grid. These loops give the same values, signed
 zeros and NaNs included: numpy's reduction keeps the running value only where it is strictly smaller (for
 the minimum; larger for the maximum) or NaN, and otherwise takes the new one. tests/test_fixed_order.py

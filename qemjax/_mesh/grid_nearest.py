@@ -314,8 +314,8 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
     flat = slivers(X, G)
     # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
     # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried
-    # in the order of their cubes instead, 2 M points took 0.80x as long but whole runs no less:
-    # experiments/results/nearest_order_1128.txt)
+    # in the order of their cubes instead, the search alone is faster but whole runs are not: the points
+    # keep their own order; docs/benchmarks.md, "Measured choices inside a run")
     k = max(-(-len(P) // BLOCK), min(_threads(), len(P) // MIN_BLOCK), 1)
     if k == 1:
         f, d2 = _query(P, X, G, B, flat, lo, h, dims, start, faces, seed)

@@ -126,12 +126,12 @@ def from_trimesh(obj, report: dict | None = None) -> tuple[dict, object]:
     return vals, material
 
 
-# What attributes='auto' keeps (measured: `python experiments/attribute_defaults.py`, README "Appearance
+# What attributes='auto' keeps (measured: `python experiments/figures/attribute_defaults.py`, README "Appearance
 # attributes"): each kind whose values are continuous over the welded mesh. A kind with seams (UV chart
-# borders, colour discontinuities, hard normal edges) holds its seam vertices in place, which cost up to
-# 2.1x the geometric rms of attributes=None there: it is kept only when asked for, except UVs whose file
-# names a texture image (or given texture=): a texture without its UVs is lost, and keeping them costs
-# 1.3x the time (`python experiments/texture_cost.py`, spot at 10 %; 5.4x before the seam rule was compiled).
+# borders, colour discontinuities, hard normal edges) holds its seam vertices in place, which costs
+# geometric rms there: it is kept only when asked for, except UVs whose file names a texture image (or
+# given texture=): a texture without its UVs is lost, which weighs more than the time keeping them costs
+# (docs/attributes.md, "What is kept").
 AUTO_RULE = "kinds without seams, and UVs with a texture image"
 
 
@@ -247,13 +247,13 @@ def _unique_rows(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ks[new], inv
 
 
-# default weights per kind (`python experiments/attribute_defaults.py`, README "Appearance attributes"): for
+# default weights per kind (`python experiments/figures/attribute_defaults.py`, README "Appearance attributes"): for
 # colours and normals, the largest weight (with every smaller one) whose runs keep the rule on every seamless
-# case: rms <= 1.1x and warm time <= 1.5x attributes=None. Any weight > 0 costs 1.4-2.2x the time (the
-# 23-float attribute state), so both are 0: the cost is the positions' and the values are interpolated
-# along each contraction. UVs always come with seams here, so they are kept only when asked for; when
-# they are, 0.03 is spot's measured best (issue 21: the geometric rms of weight 0 with a fifth lower UV
-# deviation, lower both than 0.1 or 0.3).
+# case: rms and warm time within docs/attributes.md's bounds ("The cost") of attributes=None. Any weight > 0
+# costs more time than that (the 23-float attribute state), so both are 0: the cost is the positions' and
+# the values are interpolated along each contraction. UVs always come with seams here, so they are kept
+# only when asked for; when they are, 0.03 is spot's measured best (the geometric rms of weight 0 with a
+# lower UV deviation, lower both than 0.1 or 0.3).
 DEFAULT_WEIGHTS = {"uv": 0.03, "color": 0.0, "normal": 0.0}
 
 

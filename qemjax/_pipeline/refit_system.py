@@ -3,11 +3,11 @@
 The least-squares problem of `refit` (its step 3) has one row per sample: the sample's barycentric
 coordinates b on its output face, times the square root of its weight, in the columns of the face's
 corners. Its normal equations are N = AᵀA + λI and R = Aᵀ(targets) + λX. Building A as a scipy matrix and
-multiplying it out cost a (q,3) CSR matrix, its transpose and two sparse products per round (the re-fit of
-armadillo x16 to 1 % took 0.69x as long without them: experiments/results/refit_system_1128.txt). Here the same sums are made directly: every entry
-of N and R is a sum over the samples in increasing order, as scipy's products made it, so the system is
-the same bit for bit (experiments/results/refit_system_1128.txt: the same re-fits as with scipy 1.17;
-tests/test_refit.py compares the sums with numpy's in sample order), and it depends on no library's kernels.
+multiplying it out cost a (q,3) CSR matrix, its transpose and two sparse products per round, a large part
+of a big mesh's re-fit (docs/benchmarks.md, "Measured choices inside a run"). Here the same sums are made
+directly: every entry of N and R is a sum over the samples in increasing order, as scipy's products made
+it, so the system is the same bit for bit (the same re-fits as with scipy's products; tests/test_refit.py
+compares the sums with numpy's in sample order), and it depends on no library's kernels.
 The loops release the GIL: a batch's re-fits run side by side on threads (`stages.refit_all`).
 
 * `regions`: each sample's barycentric coordinates on its face (Ericson's regions), in numpy's arithmetic

@@ -56,10 +56,10 @@ PLAN_FACES = 200_000  # meshes up to this size are planned (`pieces`); a larger 
 # planning reads and cleans each mesh and builds its vertex states once more than the run does)
 RING_COST = 4  # a run whose model prices pairs from their faces (``regularize``) costs about this many plain ones
 # A default sweep's helper processes (`_helpers`), in the work of its distinct runs (`Piece.work`: faces, a ring
-# model's RING_COST times; about 200 000 are a second of work in one process). A helper's start (a fresh
-# Python importing JAX and loading the compiled kernels) costs a core about 4 s: a sweep finding helpers
-# started uses them for any work of two pieces or more; one that must start them does so from START_WORK
-# on (about 8 s of work: they pay back within it), or once this process's earlier default sweeps add up to
+# model's RING_COST times; SWEPT_WORK is about a second of work in one process). A helper's start (a fresh
+# Python importing JAX and loading the compiled kernels) costs a core about half of START_WORK: a sweep
+# finding helpers started uses them for any work of two pieces or more; one that must start them does so
+# from START_WORK on (they pay back within it), or once this process's earlier default sweeps add up to
 # SWEPT_WORK (a process that sweeps again and again: the helpers join this sweep as they come up and serve
 # the next ones; a script of one small sweep never starts them)
 START_WORK = 1_600_000
@@ -69,7 +69,7 @@ HERE_TOO = True  # this process runs pieces too (beside its helpers)
 _SWEPT = [0.0]  # the work of this process's default sweeps so far
 SAVE_EVERY_S = 1.0  # the table is rewritten after each piece run here, and while rows come in at most this often
 RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
-EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/dask_speedup.py)
+EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/figures/dask_speedup.py)
 _PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 

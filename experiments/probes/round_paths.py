@@ -1,0 +1,88 @@
+"""The parallel round's two paths on the same meshes: the compiled loops (`round_jit`, which `fits` gives runs
+on at most `round_jit.MAX_FACES` faces) against the numpy stages, in one process, alternating, warm medians
+of wall and CPU time, and whether the outputs are the same bits (they must be: tests/test_round_jit.py).
+
+Each path is forced for every run of this script (`round_jit.MAX_FACES` raised above the mesh, or `fits`
+answering no), so a mesh on either side of the limit shows what the other path would cost there.
+
+    python experiments/probes/round_paths.py --meshes cow stanford-bunny armadillo --ratio 0.1 --repeats 7
+    python experiments/probes/round_paths.py --meshes armadillo-x16 --ratio 0.01 --repeats 3
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules and results/
+sys.path[:0] = [str(EXPERIMENTS.parent), str(EXPERIMENTS)]
+
+import meshes as bench_meshes  # noqa: E402
+from ab_compare import digest  # noqa: E402
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--meshes", nargs="+", default=["cow", "stanford-bunny", "armadillo"])
+    ap.add_argument("--ratio", type=float, default=0.1)
+    ap.add_argument("--repeats", type=int, default=7)
+    args = ap.parse_args()
+    import qemjax
+    from qemjax._schedulers import parallel, round_jit
+
+    fits, most = round_jit.fits, round_jit.MAX_FACES
+    taken = []
+    init = parallel._Run.__init__
+
+    def recording_init(self, *a, **k):
+        init(self, *a, **k)
+        taken.append(self.compiled)
+    parallel._Run.__init__ = recording_init
+
+    def use(path: str, faces: int):
+        round_jit.fits, round_jit.MAX_FACES = fits, most
+        if path == "compiled":
+            round_jit.MAX_FACES = max(most, faces)
+        else:
+            round_jit.fits = lambda *a: False
+
+    print(f"# python experiments/probes/round_paths.py --meshes {' '.join(args.meshes)} --ratio {args.ratio} "
+          f"--repeats {args.repeats}")
+    print("| mesh | faces | path of its own | compiled s | numpy stages s | compiled CPU s | numpy CPU s | "
+          "numpy / compiled | same bits |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in args.meshes:
+        bm = bench_meshes.load(name)
+        mesh = (bm.V, bm.F)
+        wall = {"compiled": [], "numpy": []}
+        cpu = {"compiled": [], "numpy": []}
+        digests = {}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for path in wall:  # warm: each path's compilations
+                use(path, len(bm.F))
+                qemjax.simplify(mesh, ratio=args.ratio)
+            taken.clear()
+            for _ in range(args.repeats):
+                for path in wall:
+                    use(path, len(bm.F))
+                    t, c = time.perf_counter(), time.process_time()
+                    r = qemjax.simplify(mesh, ratio=args.ratio)
+                    wall[path].append(time.perf_counter() - t)
+                    cpu[path].append(time.process_time() - c)
+                    digests.setdefault(path, digest(r))
+        round_jit.fits, round_jit.MAX_FACES = fits, most
+        assert taken == [True, False] * args.repeats, "a run did not take the path it was given"
+        own = "compiled" if fits(True, True, None, len(bm.F)) else "numpy stages"
+        med = {p: statistics.median(v) for p, v in wall.items()}
+        cmed = {p: statistics.median(v) for p, v in cpu.items()}
+        print(f"| {name} | {len(bm.F)} | {own} | {med['compiled']:.3f} | {med['numpy']:.3f} | "
+              f"{cmed['compiled']:.3f} | {cmed['numpy']:.3f} | {med['numpy'] / med['compiled']:.2f} | "
+              f"{'yes' if digests['compiled'] == digests['numpy'] else 'NO'} |")
+
+
+if __name__ == "__main__":
+    main()
