@@ -7,7 +7,8 @@
   corners of teapot / beetle / face). Every method gets the welded mesh, so this is a geometry-only benchmark;
   the raw arrays stay on the record as ``V_raw`` / ``F_raw``.
 - ``armadillo-x16`` (~1.38 M faces) and ``armadillo-x64`` (~5.5 M faces) are ``armadillo.obj`` Loop-subdivided
-  two and three times with ``trimesh.remesh.subdivide_loop``; they are cached as ``.npz`` under
+  two and three times with ``trimesh.remesh.subdivide_loop`` (``stanford-bunny-x16``, ``fertility-x16`` and
+  ``rocker-arm-x16`` likewise, twice); they are cached as ``.npz`` under
   ``experiments/results/cache/`` (git-ignored) because subdivision takes a while.
 """
 
@@ -25,7 +26,10 @@ CACHE = ROOT / "experiments" / "results" / "cache"
 MESH_SUFFIXES = (".obj", ".off", ".ply", ".stl")
 
 # name -> (base mesh, Loop subdivision iterations); each iteration multiplies the face count by 4
-SUBDIVIDED = {"armadillo-x16": ("armadillo", 2), "armadillo-x64": ("armadillo", 3)}
+SUBDIVIDED = {"armadillo-x16": ("armadillo", 2), "armadillo-x64": ("armadillo", 3),
+              # more large inputs of other shapes, for the partitioned runs' quality
+              "stanford-bunny-x16": ("stanford-bunny", 2), "fertility-x16": ("fertility", 2),
+              "rocker-arm-x16": ("rocker-arm", 2)}
 
 
 @dataclass

@@ -14,8 +14,8 @@ module, and where each validity rule is written.
 
 Runs on whichever ``qemjax`` is imported (``PYTHONPATH=TREE`` for another checkout)::
 
-    python experiments/structure.py
-    PYTHONPATH=/tmp/old python experiments/structure.py --show
+    python experiments/figures/structure.py
+    PYTHONPATH=/tmp/old python experiments/figures/structure.py --show
 """
 from __future__ import annotations
 
