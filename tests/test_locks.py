@@ -1,4 +1,4 @@
-"""Locked vertices and importance weights (`qemjax._schedulers.locks`): ``simplify(locked=..., vertex_weights=...)``."""
+"""Locked vertices and importance weights (`qemjax._pipeline.locks`): ``simplify(locked=..., vertex_weights=...)``."""
 from __future__ import annotations
 
 import warnings
@@ -315,3 +315,44 @@ def test_feature_edges_with_locks_are_checked_as_given():
         qemjax.simplify((V, F), ratio=0.1, locked=np.arange(0, len(V), 13), feature_edges=[[0, 11]])
     res = qemjax.simplify((V, F), ratio=0.1, locked=np.arange(0, len(V), 13), feature_edges=F[:3, :2])
     assert res.stop_reason == "target"
+
+
+def test_the_run_numbering_puts_locked_vertices_first_and_maps_back():
+    """`_pipeline.locks`: the run's geometry numbers the locked vertices first, and its outcome goes back to
+    the cleaned input's numbering."""
+    from qemjax._pipeline import locks as _locks
+    from qemjax._pipeline import stages
+    from qemjax._schedulers import outcome
+
+    V, F = _mesh()
+    setup = stages.setup("default", "parallel", None, None, False, {})
+    geo = stages.geometry((V, F), setup, stacklevel=2)
+    lk = _locks.resolve(_locked(len(V)), None, geo, stacklevel=2)
+    run = lk.geometry()
+    assert run.vertex_map is None and np.array_equal(run.V, geo.V[lk.perm])
+    assert np.array_equal(run.V[run.F], geo.V[geo.F])  # the same faces, in order
+    assert lk.run().locked[: lk.stats["locked"]].all() and not lk.run().locked[lk.stats["locked"]:].any()
+    pairs = np.array([[0, len(V) - 1]])
+    out = outcome.Outcome(run.Vn, np.zeros((len(V), 1)), run.F, np.ones(len(F), bool),
+                          outcome.History(pairs, np.zeros((1, 3)), np.zeros(1)), "target", {}, {})
+    back, g, locked = _locks.back(lk, out, run)
+    assert g is geo and locked is lk.locked and np.array_equal(back.faces, geo.F)
+    assert np.array_equal(back.positions, geo.Vn) and back.history.pairs.tolist() == [lk.perm[pairs[0]].tolist()]
+    assert _locks.back(None, out, run) == (out, run, None)
+
+
+def test_the_pipeline_reaches_the_locks_through_one_module():
+    """Only `_pipeline.locks` hands the schedulers their locks (`RunLocks`); the stages call it."""
+    import ast
+    from pathlib import Path
+
+    import qemjax._pipeline as pipeline
+
+    users = set()
+    for path in Path(pipeline.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.endswith("_schedulers.locks"):
+                users.add(path.name)
+            elif isinstance(node, ast.ImportFrom) and node.module and "_schedulers" in node.module:
+                assert "locks" not in [a.name for a in node.names], path.name
+    assert users == {"locks.py"}

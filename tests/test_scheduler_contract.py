@@ -107,3 +107,59 @@ def test_a_scheduler_registered_from_outside_runs_through_simplify():
         del _schedulers._REGISTRY["idle"]
     with pytest.raises(ValueError, match="unknown scheduler 'idle'"):
         qemjax.simplify(shapes.icosphere(1), ratio=0.5, scheduler="idle")
+
+
+def test_the_outcome_gives_its_surviving_mesh():
+    """`Outcome.output`: the live faces, numbered into the vertices they use, and both their run ids."""
+    V = np.arange(18, dtype=np.float32).reshape(6, 3)
+    F = np.array([[0, 1, 2], [2, 3, 4], [3, 4, 5]])
+    out = outcome.Outcome(V, np.zeros((6, 1)), F, np.array([False, True, True]), outcome.History.empty(),
+                          "target", {}, {})
+    o = out.output()
+    assert o.source_faces.tolist() == [1, 2] and o.source_vertices.tolist() == [2, 3, 4, 5]
+    assert o.faces.tolist() == [[0, 1, 2], [1, 2, 3]]
+    assert np.array_equal(o.positions, V[2:]) and np.array_equal(o.positions[o.faces], V[F[1:]])
+
+
+@pytest.mark.parametrize("stop, blocked, closed, faces, want", [
+    ("blocked", {}, True, 11, "target"),  # a closed mesh one face above: the documented parity case
+    ("target", {}, True, 11, "target"),
+    ("max_error", {}, True, 11, "max_error"),  # the cost limit, not the parity, stopped it
+    ("target", {}, False, 11, "blocked"),  # met by the run, then faces added back (splitting)
+    ("blocked", {"locked": 3, "flip": 3}, True, 12, "locked"),  # locks hold back at least half of the rest
+    ("blocked", {"locked": 3, "flip": 4}, True, 12, "blocked"),
+    ("max_error", {"locked": 9}, True, 12, "max_error"),
+])
+def test_the_stop_reason_above_the_target(stop, blocked, closed, faces, want):
+    V, F = shapes.icosphere(0)
+    out = outcome.Outcome(V, np.zeros((len(V), 1)), F, np.ones(len(F), bool), outcome.History.empty(), stop,
+                          blocked, {})
+    assert out.stop_above(faces, 10, closed) == want
+
+
+def test_the_run_reports_its_counts_in_the_stats(monkeypatch):
+    seen = _capture(monkeypatch, "parallel")
+    res = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.1)
+    counts = seen[0][0].counts(("a", "b", "c", "d")[:len(seen[0][0].branches)])
+    assert list(counts) == ["contractions", "rejected", "rounds", "branches", "rejected_by", "blocked_by"]
+    for k in ("contractions", "rejected", "rounds", "rejected_by", "blocked_by"):
+        assert res.stats[k] == counts[k]
+    assert list(res.stats["branches"].values()) == list(counts["branches"].values())
+
+
+def test_the_pipeline_reads_the_outcome_only():
+    """The stages read a scheduler's `Outcome` through its fields and methods: no scheduler internals."""
+    import ast
+    from pathlib import Path
+
+    import qemjax._pipeline as pipeline
+
+    reached = []
+    for path in Path(pipeline.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and "_schedulers" in node.module:
+                reached += [f"{path.name}: {a.name}" for a in node.names
+                            if a.name not in ("outcome", "locks", "RunLocks", "batched")]
+            elif isinstance(node, ast.Attribute) and node.attr in ("compact_output", "parity_only", "hold_back"):
+                reached.append(f"{path.name}: {node.attr}")
+    assert not reached, reached

@@ -106,7 +106,7 @@ def main(argv=None):
     del bm
     import qemjax
     from qemjax._pipeline import measure, refit, stages
-    from qemjax._schedulers import common, parallel
+    from qemjax._schedulers import outcome, parallel
 
     for attr in ("geometry", "job", "run", "finish"):
         prof.wrap(stages, attr)
@@ -116,7 +116,7 @@ def main(argv=None):
         prof.wrap(refit, attr, "refit." + attr.strip("_"))
     from qemjax._mesh import grid_nearest
     prof.wrap(grid_nearest, "nearest", "nearest (measure)")  # refit's own name is wrapped by "refit.attach"
-    prof.wrap(common, "compact_output")
+    prof.wrap(outcome, "compact_output")
     prof.wrap(parallel._Run, "__init__", "run.setup")
     for attr in ("update", "cost", "candidates", "rank", "select", "contract"):
         prof.wrap(parallel._Run, attr, "round." + attr)

@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import _costs
 from . import bound as _bound
-from .._schedulers import locks as _locks
+from . import locks as _locks
 from .._options import Topology
 from .._record.result import SimplifyResult
 
@@ -93,7 +93,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         output depend on the input's samples), else not (``measure=True`` there costs one nearest-surface
         query over 1.5× the input's faces in points; ``experiments/distance_check.py`` times it).
     locked, vertex_weights (given by name, with the settings): per-vertex constraints, numbered as the
-        vertices were given (before welding; `qemjax._schedulers.locks`; docs/methods.md, "Locking vertices and
+        vertices were given (before welding; `qemjax._pipeline.locks`; docs/methods.md, "Locking vertices and
         weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
         output, and at every level of ``res.record``, exactly where they are (bit for bit); a pair with
         one locked vertex contracts onto it, a pair of two never. ``vertex_weights``: (n,) finite, >= 0;

@@ -26,11 +26,11 @@ import numpy as np
 from .._kernels import compilation as _compilation
 from .. import _costs
 from . import flat as _flat
+from . import locks as _locks
 from .._io import mesh as _io
 from . import measure as _measure
 from . import refit as _refit
 from .. import _schedulers
-from .._schedulers import locks as _locks
 from . import split as _split
 from .._mesh import topology as topo
 from .._mesh import units as _units
@@ -39,7 +39,8 @@ from .._mesh.arrays import face_normals, release_free_memory
 from .._options import Attributes, Options, Schedule, Topology
 from .._record.history import Record
 from .._record.result import Contractions, SimplifyResult
-from .._schedulers import common, outcome
+from .._kernels.batching import DTYPE
+from .._schedulers import outcome
 
 _REFIT_ALONE = 1 << 17  # input faces from which a re-fit runs by itself (its nearest search is threaded)
 LARGE_RUN = 1 << 20  # inputs of this many faces hand freed heap pages back between stages (`finish`)
@@ -186,7 +187,7 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
     vertex_map = report.pop("vertex_map")
     extra = topo.close_pairs(V, F, setup.pair_threshold)
     parts = topo.parts(F, len(V), extra)
-    Vn, frame = _units.normalize(V, common.DTYPE, parts)
+    Vn, frame = _units.normalize(V, DTYPE, parts)
     E, ecount, be, bf = topo.edge_table(F, len(V))  # one sort for the boundary and the first edges
     if len(V) < 2**31:  # held for the whole call (and a batch's): half the memory, as the scheduler uses it
         E, ecount = E.astype(np.int32), ecount.astype(np.int32)
@@ -200,11 +201,10 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     """The face target, the model's initial vertex state and the scheduler's options for one run.
     ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch.
     ``locks``: the user's (locked, vertex_weights) (`_locks`); with any, the run works on the geometry
-    renumbered with the locked vertices first (`_locks.permuted_geometry`)."""
+    renumbered with the locked vertices first (`_locks.Locks.geometry`)."""
     lk = _locks.resolve(*locks, geo, stacklevel=stacklevel + 1)
-    if lk is not None:
-        geo = _locks.permuted_geometry(geo, lk)
-        states = None
+    if lk is not None:  # a numbering of its own: no vertex state shared with a batch's other runs
+        geo, states = lk.geometry(), None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
     if attrs is not None and (_costs.name_of(setup.method_obj) != "qem" or setup.split is not None or
                               getattr(model, "memoryless", False)):
@@ -221,9 +221,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
     if lk is not None and feature_edges is not None:
-        if len(feature_edges):  # checked as given: an error names the user's indices, not the run's
-            topo.feature_edges_with_faces(lk.geo.F, len(lk.geo.V), feature_edges)
-        feature_edges = lk.inv[feature_edges]
+        feature_edges = lk.feature_edges(feature_edges)
     if attrs is not None and attrs.has_seams():  # seams are constrained like boundaries: feature-edge planes
         seams = _wedges.seam_edges(geo.F, attrs.corners)
         if len(seams):
@@ -292,9 +290,9 @@ def run(job: Job):
             last = faces_now
     run_target, planned = target, None
     try:  # from the bar's first line on: an interrupt anywhere below still ends its line
-        more = {} if job.locks is None else {"locks": job.locks.run()}
         run = functools.partial(_schedulers.get(setup.scheduler), edges=g.edges[:2],
-                                part_scale=g.frame.part_scale2(), wedges=job.tracker, **more)
+                                part_scale=g.frame.part_scale2(), wedges=job.tracker,
+                                **_locks.scheduler_settings(job.locks))
         if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
             run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
                                               setup.split, progress_cb)
@@ -321,105 +319,190 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     a warning when it ends above the target), history, record and stats. ``batch``: for a run that went
     through `simplify_batch`, what stats say of the batch. ``later``: a list to which the re-fit is
     appended as ``(result, RefitTask)`` instead of running here (the result then holds the contractions'
-    positions until `refit_all` runs the list: a batch's re-fits run side by side)."""
-    setup, g, model, target, err = job.setup, job.geo, job.model, job.target, job.err
+    positions until `refit_all` runs the list: a batch's re-fits run side by side).
+
+    The steps, in order: the outcome in the cleaned input's numbering (`_locks.back`), the output mesh
+    (`_output`), its attributes (`_appearance`), splitting (`_split_faces`), the re-fit and the measured
+    distance (`_refit_and_measure`), the stop reason (`_stop_reason`), the history (`_history`) and the stats
+    (`_stats`)."""
     out, run_target, planned = ran
-    if len(g.F) >= LARGE_RUN:  # the rounds' freed arrays, back to the system before the re-fit's
+    run_target = job.target if run_target is None else run_target
+    if len(job.geo.F) >= LARGE_RUN:  # the rounds' freed arrays, back to the system before the re-fit's
         release_free_memory()
-    if run_target is None:
-        run_target = target
-    locked = None
-    if job.locks is not None:  # back to the cleaned input's numbering (`_locks`)
-        out, g, locked = _locks.outcome_back(out, job.locks), job.locks.geo, job.locks.locked
-    V, F, frame, split = g.V, g.F, g.frame, setup.split
-    m = len(F)
-    Vout, Fout, ids, fids = common.compact_output(out.positions, out.faces, out.alive)
-    vout = frame.positions_to_mesh(Vout, ids)
-    unmoved = np.ones(len(V), bool)
+    out, g, locked = _locks.back(job.locks, out, job.geo)
+    mesh = _output(out, g, job.model, locked)
+    appearance = _appearance(job, mesh)
+    split_stats = None
+    if job.setup.split is not None:
+        mesh, out, split_stats = _split_faces(job, out, mesh, run_target, planned)
+    mesh, refit = _refit_and_measure(job, g, mesh, appearance, later)
+    stop = _stop_reason(job, out, mesh, g.nonmanifold, stacklevel + 1)
+    history = _history(out, g, job.model, locked)
+    stats = _stats(job, out, g, mesh, refit, _times(t_start, c0, s0), dict(split=split_stats, batch=batch))
+    m = len(g.F)
+    record = Record(g.V, g.F, history, np.full(m, -1, np.int64) if out.removed_at is None else out.removed_at,
+                    np.zeros(m, bool) if out.coincident is None else out.coincident, g.frame, job.setup.scheduler,
+                    run_target, locked=locked)
+    res = SimplifyResult(
+        vertices=mesh.vertices, faces=mesh.faces.astype(np.int64), vertex_error=mesh.vertex_error,
+        max_error=float(g.frame.errors_to_mesh(out.worst_cost)),
+        source_vertices=mesh.source_vertices.astype(np.int64), source_faces=mesh.source_faces.astype(np.int64),
+        input_vertices=g.V, input_faces=g.F, history=history, stats=stats, stop_reason=stop, record=record,
+        **appearance)
+    if later is not None and refit.task is not None:
+        later.append((res, refit.task))
+    return res
+
+
+class _Mesh(NamedTuple):
+    """The output while `finish` builds it: positions (k,3) float64 in mesh units, faces (f,3), each vertex's
+    and face's source in the cleaned input, each vertex's error (mesh units²) and the vertices that keep
+    their input position exactly (locked ones; None: no locks)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    source_vertices: np.ndarray
+    source_faces: np.ndarray
+    vertex_error: np.ndarray
+    fixed: np.ndarray | None
+
+
+def _output(out: outcome.Outcome, g: Geometry, model, locked) -> _Mesh:
+    """The run's surviving mesh (`Outcome.output`) in mesh units. A vertex never contracted keeps the
+    input's float64 position exactly, a locked one always (`_locks.keep_exact`)."""
+    o, frame = out.output(), g.frame
+    ids = o.source_vertices
+    vout = frame.positions_to_mesh(o.positions, ids)
+    unmoved = np.ones(len(g.V), bool)
     unmoved[out.history.pairs[:, 0]] = False  # kept vertices moved; removed ones are gone
     same = np.flatnonzero(unmoved[ids])
-    vout[same] = V[ids[same]]  # never contracted: the input's float64 position, exactly
-    flat = np.flatnonzero(~np.any(face_normals(vout, Fout) != 0, axis=1))
+    vout[same] = g.V[ids[same]]
+    flat = np.flatnonzero(~np.any(face_normals(vout, o.faces) != 0, axis=1))
     if flat.size:  # an input face with exactly collinear corners: keep the rounded positions there
-        w = np.unique(Fout[flat])
-        if locked is not None:
-            w = w[~locked[ids[w]]]
-        vout[w] = frame.positions_to_mesh(Vout[w], ids[w])
-    fixed = None
-    if locked is not None:  # locked vertices: the input's position, exactly (contractions onto them too)
-        fixed = locked[ids]
-        vout[fixed] = V[ids[fixed]]
+        w = np.unique(o.faces[flat])
+        vout[w] = frame.positions_to_mesh(o.positions[w], ids[w])
+    fixed = _locks.keep_exact(locked, vout, ids, g.V)
     verr = frame.errors_to_mesh(model.vertex_error(out.states[ids]))
-    appearance = {}
-    if job.tracker is not None:
-        attrs = job.attrs
-        wf, wv, wval = _wedges.output(job.tracker.C, job.tracker.val, Fout, fids, ids)
-        vals = attrs.split(wval)
-        if "normal" in vals:
-            nn = np.linalg.norm(vals["normal"], axis=1, keepdims=True)
-            vals["normal"] = vals["normal"] / np.where(nn > 0, nn, 1.0)
-        appearance = dict(uv=vals.get("uv"), colors=vals.get("color"), normals=vals.get("normal"),
-                          wedge_faces=wf, wedge_vertex=wv, material=attrs.material,
-                          input_wedge_faces=attrs.corners)
-    if split is not None:
-        vout, Fout, ids, fids, verr, split_stats = _split.apply(vout, Fout, ids, fids, verr, split, target)
-        if fixed is not None:  # the midpoints it adds are free
-            fixed = np.concatenate([fixed, np.zeros(len(vout) - len(fixed), bool)])
-        split_stats.update(planned=planned, run_target=run_target if target else None,
-                           run_stop_reason=out.stop_reason)
-        if target and len(Fout) <= target and out.stop_reason == "blocked":
-            out = dataclasses.replace(out, stop_reason="target")  # splitting spent what contractions could not reach
-    refit_rounds, refit_skipped, refit_s, task = setup.refit, None, 0.0, None
-    if refit_rounds and appearance and appearance.get("uv") is not None:
+    return _Mesh(vout, o.faces, ids, o.source_faces, verr, fixed)
+
+
+def _appearance(job: Job, mesh: _Mesh) -> dict:
+    """The kept attributes on the output (the `SimplifyResult`'s uv, colors, normals and wedges), or {}."""
+    if job.tracker is None:
+        return {}
+    attrs = job.attrs
+    wf, wv, wval = _wedges.output(job.tracker.C, job.tracker.val, mesh.faces, mesh.source_faces,
+                                  mesh.source_vertices)
+    vals = attrs.split(wval)
+    if "normal" in vals:
+        nn = np.linalg.norm(vals["normal"], axis=1, keepdims=True)
+        vals["normal"] = vals["normal"] / np.where(nn > 0, nn, 1.0)
+    return dict(uv=vals.get("uv"), colors=vals.get("color"), normals=vals.get("normal"), wedge_faces=wf,
+                wedge_vertex=wv, material=attrs.material, input_wedge_faces=attrs.corners)
+
+
+def _split_faces(job: Job, out: outcome.Outcome, mesh: _Mesh, run_target: int, planned):
+    """The output split (`_split.apply`): (the mesh, the outcome, the split's stats). Splitting that reached
+    the target the contractions could not makes the run's stop reason ``"target"``."""
+    target = job.target
+    vout, Fout, ids, fids, verr, stats = _split.apply(mesh.vertices, mesh.faces, mesh.source_vertices,
+                                                      mesh.source_faces, mesh.vertex_error, job.setup.split, target)
+    fixed = mesh.fixed
+    if fixed is not None:  # the midpoints it adds are free
+        fixed = np.concatenate([fixed, np.zeros(len(vout) - len(fixed), bool)])
+    stats.update(planned=planned, run_target=run_target if target else None, run_stop_reason=out.stop_reason)
+    if target and len(Fout) <= target and out.stop_reason == "blocked":
+        out = dataclasses.replace(out, stop_reason="target")
+    return _Mesh(vout, Fout, ids, fids, verr, fixed), out, stats
+
+
+class _Refit(NamedTuple):
+    """What `_refit_and_measure` did: its rounds (0: none), why it was skipped (or None), its seconds, the measured
+    distance's stats and the `RefitTask` (None: nothing to re-fit or measure)."""
+
+    rounds: int
+    skipped: str | None
+    seconds: float
+    distance: dict
+    task: Any
+
+
+def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, later: list | None) -> tuple[_Mesh, _Refit]:
+    """The re-fit of the output's positions and the measure of its distance from the input (`RefitTask`):
+    run here, or left to ``later`` (`finish`). Locked vertices, and with attributes the seam vertices, keep
+    their positions."""
+    setup = job.setup
+    rounds, skipped, seconds, task = setup.refit, None, 0.0, None
+    if rounds and appearance and appearance.get("uv") is not None:
         # moved positions would leave their texture coordinates behind (the textured example's UV deviation
         # 0.0011 -> 0.016, experiments/refit_uv.py): with UVs kept, positions stay where the contractions put them
-        refit_rounds, refit_skipped = 0, "uv kept"
-    refits = bool(refit_rounds and len(Fout) < m)
+        rounds, skipped = 0, "uv kept"
+    refits = bool(rounds and len(mesh.faces) < len(g.F))
     distance = _measure.not_measured()
     if refits or setup.measures:
-        held = fixed
+        held = mesh.fixed
         if refits and appearance:  # seam vertices (two or more wedges) stay on the input's seams
-            seam = np.bincount(appearance["wedge_vertex"], minlength=len(vout)) > 1
+            seam = np.bincount(appearance["wedge_vertex"], minlength=len(mesh.vertices)) > 1
             held = seam if held is None else (held | seam)
-        task = RefitTask(V, F, vout, Fout, refit_rounds if refits else 0, setup.cos_max, g.parts[1], fids, held,
-                         setup.measures)
+        task = RefitTask(g.V, g.F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, g.parts[1],
+                         mesh.source_faces, held, setup.measures)
         if later is None:
-            vout, refit_s, distance = task()
-    stop = out.stop_reason
-    if target and len(Fout) > target:  # a face target was asked for and not met
-        closed = len(topo.boundary_edges(Fout, len(vout))[0]) == 0
-        if outcome.parity_only(len(Fout), target, closed) and stop in ("target", "blocked"):
-            stop = "target"  # documented: a closed mesh loses faces in pairs
-        else:
-            stop = "blocked" if stop == "target" else stop
-            if stop == "blocked" and _locks.hold_back(out.blocked_by):
-                stop = "locked"
-            warnings.warn(_above_target_message(len(Fout), target, stop, out.blocked_by, g.nonmanifold,
-                                                setup.preserve_topology), stacklevel=stacklevel)
-    h = out.history
-    hp, hx, hc = h.pairs, frame.positions_to_mesh(h.positions, h.pairs[:, 0]), frame.errors_to_mesh(h.costs)
-    if locked is not None:  # contractions onto a locked vertex: its input position, exactly
-        k = np.flatnonzero(locked[hp[:, 0]])
-        hx[k] = V[hp[k, 0]]
+            vout, seconds, distance = task()
+            mesh = mesh._replace(vertices=vout)
+    return mesh, _Refit(rounds, skipped, seconds, distance, task)
+
+
+def _stop_reason(job: Job, out: outcome.Outcome, mesh: _Mesh, nonmanifold: int, stacklevel: int) -> str:
+    """The result's stop reason: the run's, or where the output ends above the face target asked for,
+    `Outcome.stop_above`'s, with a warning that says why (none for the parity case, whose reason is
+    ``"target"``; ``stacklevel`` as this function's caller sees it)."""
+    target, faces = job.target, len(mesh.faces)
+    if not (target and faces > target):
+        return out.stop_reason
+    closed = len(topo.boundary_edges(mesh.faces, len(mesh.vertices))[0]) == 0
+    stop = out.stop_above(faces, target, closed)
+    if stop != "target":
+        warnings.warn(_above_target_message(faces, target, stop, out.blocked_by, nonmanifold,
+                                            job.setup.preserve_topology), stacklevel=stacklevel)
+    return stop
+
+
+def _history(out: outcome.Outcome, g: Geometry, model, locked) -> Contractions:
+    """The contractions in mesh units (a contraction onto a locked vertex: its input position, exactly), with
+    their cost parts where the model gives the parts' units."""
+    h, frame = out.history, g.frame
+    hx = frame.positions_to_mesh(h.positions, h.pairs[:, 0])
+    _locks.keep_exact(locked, hx, h.pairs[:, 0], g.V)
     hparts = {}
-    if out.parts is not None and len(model.part_units) == len(model.parts):  # in mesh units
+    if out.parts is not None and len(model.part_units) == len(model.parts):
         for name, unit, col in zip(model.parts + ("rank",), model.part_units + (2,), out.parts.T):
             hparts[name] = np.asarray(col, np.float64) * frame.scale ** unit
+    return Contractions(h.pairs, hx, frame.errors_to_mesh(h.costs), hparts,
+                        np.zeros(0, np.int64) if out.history_rounds is None else out.history_rounds)
+
+
+def _times(t_start: float, c0, s0) -> dict:
+    """The run's compilations and seconds since ``t_start`` (compiling, running, in all), for its stats."""
     c1, s1 = _compilation.snapshot()
     total = time.perf_counter() - t_start
+    return dict(compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
+                total_s=total)
+
+
+def _stats(job: Job, out: outcome.Outcome, g: Geometry, mesh: _Mesh, refit: _Refit, times: dict,
+           extra: dict) -> dict:
+    """The result's stats (`SimplifyResult`): the clean-up's report, the run's counts, sizes, times and
+    settings; ``extra``'s entries where they are not None."""
+    setup, model, frame, err = job.setup, job.model, g.frame, job.err
     stats = dict(job.report)
     stats.update(
-        method=setup.method, scheduler=setup.scheduler, faces_in=m, faces_out=len(Fout), target_faces=target,
-        vertices_in=len(V), vertices_out=len(vout), close_pairs=len(g.extra), contractions=out.contractions,
-        rejected=out.rejected, rounds=out.rounds,
-        branches={name: int(c) for name, c in zip(model.branches, out.branches)},
-        rejected_by=out.rejected_by, blocked_by=out.blocked_by, model=model.describe(),
-        compilations=c1 - c0, compile_s=min(s1 - s0, total), run_s=max(total - (s1 - s0), 0.0),
-        total_s=total, scale=frame.scale, parts_in=g.parts[0], non_manifold_edges_in=g.nonmanifold,
-        max_error_limit=err if math.isfinite(err) else None, refit=refit_rounds, refit_s=refit_s,
-        error_unit=model.error_unit, **distance)
-    if refit_skipped:
-        stats["refit_skipped"] = refit_skipped
+        method=setup.method, scheduler=setup.scheduler, faces_in=len(g.F), faces_out=len(mesh.faces),
+        target_faces=job.target, vertices_in=len(g.V), vertices_out=len(mesh.vertices), close_pairs=len(g.extra),
+        **out.counts(model.branches), model=model.describe(), **times, scale=frame.scale, parts_in=g.parts[0],
+        non_manifold_edges_in=g.nonmanifold, max_error_limit=err if math.isfinite(err) else None,
+        refit=refit.rounds, refit_s=refit.seconds, error_unit=model.error_unit, **refit.distance)
+    if refit.skipped:
+        stats["refit_skipped"] = refit.skipped
     if job.tracker is not None:
         stats.update(attributes=list(job.attrs.values), seam_vertices_in=job.tracker.seam_in)
     stats.update(out.stage_times)
@@ -428,24 +511,8 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     if out.reweights:  # (faces, weights of the parts in mesh units) each time they were set
         stats["reweights"] = [(f, [float(x) * frame.scale ** (2 - u) for x, u in zip(w, model.part_units)])
                               for f, w in out.reweights]
-    if split is not None:
-        stats["split"] = split_stats
-    if batch is not None:
-        stats["batch"] = batch
-    history = Contractions(hp, hx, hc, hparts,
-                           np.zeros(0, np.int64) if out.history_rounds is None else out.history_rounds)
-    record = Record(V, F, history, np.full(m, -1, np.int64) if out.removed_at is None else out.removed_at,
-                    np.zeros(m, bool) if out.coincident is None else out.coincident, frame, setup.scheduler,
-                    run_target, locked=locked)
-    res = SimplifyResult(
-        vertices=vout, faces=Fout.astype(np.int64), vertex_error=verr,
-        max_error=float(frame.errors_to_mesh(out.worst_cost)), source_vertices=ids.astype(np.int64),
-        source_faces=fids.astype(np.int64),
-        input_vertices=V, input_faces=F, history=history, stats=stats, stop_reason=stop, record=record,
-        **appearance)
-    if later is not None and task is not None:
-        later.append((res, task))
-    return res
+    stats.update({k: v for k, v in extra.items() if v is not None})
+    return stats
 
 
 class RefitTask(NamedTuple):

@@ -303,13 +303,3 @@ def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
         return res
     return result
 
-
-def compact_output(V: np.ndarray, F: np.ndarray, alive_faces: np.ndarray):
-    """Keep live faces and the vertices they use. Returns (V', F', kept vertex ids, kept face ids)."""
-    fids = np.flatnonzero(alive_faces)
-    F = F[fids]
-    used = np.zeros(len(V), bool)
-    used[F.reshape(-1)] = True
-    ids = np.flatnonzero(used)
-    newidx = np.cumsum(used) - 1
-    return V[ids], newidx[F], ids, fids

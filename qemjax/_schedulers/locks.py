@@ -1,35 +1,18 @@
-"""Locked vertices and importance weights (``simplify(locked=..., vertex_weights=...)``).
+"""The rules a scheduler applies to locked vertices and importance weights (`RunLocks`, in the run's
+numbering, where the locked vertices come first: `qemjax._pipeline.locks` resolves the user's settings, and
+says what locks and weights mean).
 
-**Locks.** A locked vertex is in the output exactly where the input has it (the same float64 values the
-cleaned input holds, which are the values the user passed), and at every level of the record. A pair with
-one locked endpoint may only contract onto it, and is priced there (``model.price_at_kept``, `_costs.at_kept`);
-a pair of two locked vertices never contracts (`outcome.LOCKED`), nor does a pair whose contraction would
-leave a locked vertex in no face (a small part vanishing under ``prune=True``).
-
-The schedulers always keep a pair's lower-numbered vertex. So that the locked endpoint is always the kept
-one, a run with locks numbers the locked vertices first (`permutation`: locked ones in input order, then
-the others in input order), runs on that numbering (`permuted_geometry`) and maps the scheduler's outcome
-back (`outcome_back`) before the result is built, so everything the user sees is numbered as the cleaned
-input. (Ties between equal costs are broken by pair index, so a run with locks can order ties differently
-from one without, even where no lock is near.)
-
-**Weights.** Each pair's cost (and its cost parts, so the ranking of models with weighted parts scales
-alike) is multiplied by the larger weight of its endpoints: weight 0 makes a vertex's pairs free, a large
-weight keeps detail near it. The weighted cost is what ranks the pairs, what ``max_error`` limits and what
-the history records. Through a contraction the kept vertex takes the larger of the two weights, so a heavy
-vertex's weight spreads to what absorbs it and never dilutes.
+A pair of two locked vertices never contracts (`both_locked`, `outcome.LOCKED`), nor does a pair whose
+contraction would leave a locked vertex in no face (`vanishing`, `strands`). A pair with one locked endpoint
+has it first, as its kept vertex: it contracts onto it (`pin`) and is priced there (`adjust`,
+``model.price_at_kept``, `_costs.at_kept`). Every cost is multiplied by the larger weight of the pair's
+endpoints (`adjust`), and the kept vertex takes the larger of the two weights (`carry`).
 """
 from __future__ import annotations
 
-import dataclasses
-import warnings
 from typing import Any, NamedTuple
 
 import numpy as np
-
-from .._mesh.units import Frame
-
-KEYS = ("locked", "vertex_weights")  # the per-vertex settings `simplify` takes through its **settings
 
 
 class RunLocks(NamedTuple):
@@ -39,141 +22,6 @@ class RunLocks(NamedTuple):
     locked: np.ndarray
     weights: Any = None
 
-
-@dataclasses.dataclass(frozen=True)
-class Locks:
-    """A run's locks and weights, resolved on the cleaned mesh: locked (n,) bool and weights (n,) float64 or
-    None in the cleaned input's numbering; perm (n,) the run's numbering (run vertex i is cleaned vertex
-    perm[i]) and inv its inverse; geo: the cleaned `Geometry` (the result is built on it); stats."""
-
-    locked: np.ndarray
-    weights: Any
-    perm: np.ndarray
-    inv: np.ndarray
-    geo: Any
-    stats: dict
-
-    def run(self) -> RunLocks:
-        return RunLocks(self.locked[self.perm], None if self.weights is None else self.weights[self.perm])
-
-
-def hold_back(blocked_by: dict) -> bool:
-    """Whether a blocked run stopped because of its locks: they hold back at least as many of the pairs
-    left as every other rule together (the stop reason is then ``"locked"``)."""
-    n = blocked_by.get("locked", 0)
-    return n > 0 and n >= sum(v for k, v in blocked_by.items() if k != "locked")
-
-
-def pop_settings(settings: dict) -> tuple:
-    """(locked, vertex_weights) taken out of ``simplify``'s settings (None when not given)."""
-    return tuple(settings.pop(k, None) for k in KEYS)
-
-
-def _vector(name: str, x) -> np.ndarray:
-    try:
-        a = np.asarray(x)
-    except (ValueError, TypeError):
-        a = None
-    if a is None or a.dtype == object:
-        raise ValueError(f"{name} must be a flat array, got {type(x).__name__}")
-    if a.ndim != 1:
-        raise ValueError(f"{name} must be one-dimensional, got shape {a.shape}")
-    return a
-
-
-def check(locked, vertex_weights, n: int) -> tuple:
-    """(indices (k,) int64 of the locked given vertices, weights (n,) float64 or None), ValueError in the
-    user's terms. n: the number of vertices the user passed."""
-    idx = np.zeros(0, np.int64)
-    if locked is not None:
-        a = _vector("locked", locked)
-        if a.dtype == np.bool_:
-            if len(a) != n:
-                raise ValueError(f"locked: a boolean mask needs one entry per input vertex ({n}), got {len(a)}")
-            idx = np.flatnonzero(a)
-        elif a.size == 0:
-            pass
-        elif np.issubdtype(a.dtype, np.integer):
-            lo, hi = int(a.min()), int(a.max())
-            if lo < 0 or hi >= n:
-                raise ValueError(f"locked: vertex indices out of range: found [{lo}, {hi}] for {n} input "
-                                 "vertices (indices refer to the vertices as passed)")
-            idx = np.unique(a.astype(np.int64))
-        else:
-            raise ValueError(f"locked must be a boolean mask or integer vertex indices, got dtype {a.dtype}")
-    w = None
-    if vertex_weights is not None:
-        w = _vector("vertex_weights", vertex_weights)
-        if not (np.issubdtype(w.dtype, np.number) and not np.iscomplexobj(w)) or w.dtype == np.bool_:
-            raise ValueError(f"vertex_weights must be numbers, got dtype {w.dtype}")
-        if len(w) != n:
-            raise ValueError(f"vertex_weights needs one weight per input vertex ({n}), got {len(w)}")
-        w = w.astype(np.float64)
-        bad = ~(np.isfinite(w) & (w >= 0))
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"vertex_weights must be finite and >= 0; vertex {i} has {w[i]!r} "
-                             f"({int(bad.sum())} such)")
-    return idx, w
-
-
-def resolve(locked, vertex_weights, geo, stacklevel: int) -> Locks | None:
-    """The run's `Locks` on the cleaned `Geometry` ``geo`` (its ``vertex_map`` maps the given vertices),
-    or None when nothing is locked and no weight differs from 1 (the run is then the run without them).
-    Warns when locked vertices are in no face (they cannot be kept)."""
-    if locked is None and vertex_weights is None:
-        return None
-    vmap = geo.vertex_map
-    n_user, n = len(vmap), len(geo.V)
-    idx, w = check(locked, vertex_weights, n_user)
-    clean = vmap[idx]
-    gone = int(np.count_nonzero(clean < 0))
-    if gone:
-        warnings.warn(f"{gone} locked vertices are used by no face of the cleaned mesh (unreferenced, or only "
-                      "in degenerate faces): they cannot be kept (stats['locked_unreferenced'])",
-                      stacklevel=stacklevel)
-    mask = np.zeros(n, bool)
-    mask[clean[clean >= 0]] = True
-    weights = None
-    if w is not None:
-        keep = vmap >= 0
-        weights = np.zeros(n)
-        np.maximum.at(weights, vmap[keep], w[keep])  # welded copies: the largest of their weights
-        if np.all(weights == 1.0):
-            weights = None
-    if not mask.any() and weights is None:
-        return None
-    perm = np.concatenate([np.flatnonzero(mask), np.flatnonzero(~mask)])
-    inv = np.empty(n, np.int64)
-    inv[perm] = np.arange(n)
-    stats = {"locked_in": int(len(idx)), "locked": int(mask.sum()), "locked_unreferenced": gone,
-             "vertex_weights": weights is not None}
-    return Locks(mask, weights, perm, inv, geo, stats)
-
-
-def permuted_geometry(geo, locks: Locks):
-    """``geo`` in the run's numbering (`Locks.perm`): the same mesh, vertices renumbered, faces in order."""
-    from .._mesh import topology as topo
-
-    perm, inv = locks.perm, locks.inv
-    F = inv[geo.F]
-    extra = np.sort(inv[geo.extra], axis=1) if len(geo.extra) else geo.extra
-    fr = geo.frame
-    frame = Frame(fr.centers, fr.scale, None if fr.part is None else fr.part[perm], fr.sizes)
-    parts = (geo.parts[0], geo.parts[1][perm])
-    return geo._replace(V=geo.V[perm], F=F, extra=extra, parts=parts, Vn=geo.Vn[perm], frame=frame,
-                        edges=topo.edge_table(F, len(geo.V)), vertex_map=None)
-
-
-def outcome_back(out, locks: Locks):
-    """A scheduler's `outcome.Outcome` of the permuted run, numbered as the cleaned input."""
-    perm, inv = locks.perm, locks.inv
-    h = out.history
-    return dataclasses.replace(out, positions=out.positions[inv], states=out.states[inv], faces=perm[out.faces],
-                               history=h._replace(pairs=perm[h.pairs]))
-
-
-# -- in the schedulers -----------------------------------------------------------------------------------
 
 def both_locked(locks: RunLocks, E: np.ndarray) -> np.ndarray:
     """(P,) bool: pairs of E (P,2) whose endpoints are both locked (they never contract)."""

@@ -8,8 +8,12 @@ A pair found invalid carries the first rule it broke (``REJECT``); a run ends wi
 - ``"max_error"``: the cheapest remaining contraction costs more than ``max_error``;
 - ``"blocked"``: no valid contraction is left (`blocked_by` says which rules hold the rest back);
 - ``"unchanged"``: nothing was asked to be removed (the target is not below the input's faces);
-- ``"locked"``: blocked, and locked vertices hold back most of what is left (set by `_stages.finish` from
-  ``blocked_by``; `qemjax._schedulers.locks.hold_back`).
+- ``"locked"``: blocked, and locked vertices hold back most of what is left (`hold_back`; given by
+  `Outcome.stop_above` from ``blocked_by``).
+
+The pipeline reads an `Outcome` through its fields and three methods: `Outcome.output` (the surviving
+mesh, compacted), `Outcome.stop_above` (the stop reason of a run that ended above its face target) and
+`Outcome.counts` (what the run reports in the result's stats).
 """
 from __future__ import annotations
 
@@ -57,6 +61,35 @@ def parity_only(faces_left: int, target: int, closed: bool) -> bool:
     """True for the documented case: a closed mesh one face above the target (every edge contraction
     there removes two faces, so none fits)."""
     return closed and faces_left == target + 1
+
+
+def hold_back(blocked_by: dict) -> bool:
+    """Whether a blocked run stopped because of its locks: they hold back at least as many of the pairs
+    left as every other rule together (the stop reason is then ``"locked"``)."""
+    n = blocked_by.get("locked", 0)
+    return n > 0 and n >= sum(v for k, v in blocked_by.items() if k != "locked")
+
+
+def compact_output(V: np.ndarray, F: np.ndarray, alive_faces: np.ndarray):
+    """Keep live faces and the vertices they use. Returns (V', F', kept vertex ids, kept face ids)."""
+    fids = np.flatnonzero(alive_faces)
+    F = F[fids]
+    used = np.zeros(len(V), bool)
+    used[F.reshape(-1)] = True
+    ids = np.flatnonzero(used)
+    newidx = np.cumsum(used) - 1
+    return V[ids], newidx[F], ids, fids
+
+
+class Output(NamedTuple):
+    """The surviving mesh of a run (`Outcome.output`): positions (k,3) of the vertices live faces use
+    (normalised units), faces (f,3) numbered into them, and the run's ids of those vertices (k,) and faces
+    (f,)."""
+
+    positions: np.ndarray
+    faces: np.ndarray
+    source_vertices: np.ndarray
+    source_faces: np.ndarray
 
 
 class History(NamedTuple):
@@ -128,6 +161,28 @@ class Outcome:
     @property
     def contractions(self) -> int:
         return len(self.history.pairs)
+
+    def output(self) -> Output:
+        """The live faces and the vertices they use (`compact_output`)."""
+        return Output(*compact_output(self.positions, self.faces, self.alive))
+
+    def stop_above(self, faces_left: int, target: int, closed: bool) -> str:
+        """The stop reason of a run whose output ends above its face target (``faces_left`` > ``target``;
+        ``closed``: the output has no boundary): ``"target"`` for the documented parity case
+        (`parity_only`), else ``"blocked"`` where the run reported its target met (splitting added faces
+        back), and then ``"locked"`` where locks hold back most of the pairs left (`hold_back`)."""
+        stop = self.stop_reason
+        if parity_only(faces_left, target, closed) and stop in ("target", "blocked"):
+            return "target"
+        stop = "blocked" if stop == "target" else stop
+        return "locked" if stop == "blocked" and hold_back(self.blocked_by) else stop
+
+    def counts(self, branch_names) -> dict:
+        """The run's counts for the result's stats: contractions, refusals, rounds, contractions per
+        placement branch (by the model's ``branch_names``), refusals and blocked pairs per rule."""
+        return dict(contractions=self.contractions, rejected=self.rejected, rounds=self.rounds,
+                    branches={name: int(c) for name, c in zip(branch_names, self.branches)},
+                    rejected_by=self.rejected_by, blocked_by=self.blocked_by)
 
     @classmethod
     def unchanged(cls, positions, states, faces, branches: int) -> "Outcome":
