@@ -159,8 +159,9 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
 
     faces, counts, label = FaceLists(F, n), np.zeros(4, np.int64), np.full(n, -1, np.int32)
     faces.reserve(room)
-    got = glue.contract(E, ecount, deg, bad, touched, acc, apex.astype(np.int64), x, cost, branch, counts, V3, VQ,
-                        faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, label, 4096, 256, 1024)
+    lists = (faces.F, faces.alive, faces.cnt, faces.off, faces.pool)
+    got = glue.contract((E, ecount, deg, bad, x, cost, branch), lists, faces.end, (V3, VQ),
+                        (touched, acc, apex.astype(np.int64)), counts, label, (4096, 256, 1024))
     ga, gb, gx, gc, top, gend, gdead, gedges, gd, (rows, pp, xx, qq) = got
     assert np.array_equal(bad, ref_bad) and np.array_equal(V3, ref_V3) and np.array_equal(VQ, ref_VQ)
     assert np.array_equal(ga, a) and np.array_equal(gb, b) and np.array_equal(gx, x[acc])
@@ -180,9 +181,10 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
     # more contractions than one piece holds: no padded inputs (the caller takes `start_step`)
     faces = FaceLists(F, n)
     faces.reserve(room)
-    more = glue.contract(E, ecount, deg, bad.copy(), touched, acc, apex.astype(np.int64), x, cost, branch,
-                         counts, V3.copy(), VQ.copy(), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end,
-                         np.full(n, -1, np.int32), 4096, len(acc) - 1, 1024)[-1]
+    lists = (faces.F, faces.alive, faces.cnt, faces.off, faces.pool)
+    more = glue.contract((E, ecount, deg, bad.copy(), x, cost, branch), lists, faces.end, (V3.copy(), VQ.copy()),
+                         (touched, acc, apex.astype(np.int64)), counts, np.full(n, -1, np.int32),
+                         (4096, len(acc) - 1, 1024))[-1]
     assert all(len(t) == 0 for t in more)
 
 

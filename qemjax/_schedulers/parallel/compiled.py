@@ -14,6 +14,7 @@ from ..._mesh.arrays import put_rows, take_rows as _take
 from .. import locks as _locks
 from .. import outcome, round_glue_jit, round_jit
 from ..device import Priced, kept_fuses, start_step, step_one
+from ..round_glue_jit import FaceArrays, PairArrays
 from ..select import gate_rank
 from .stages import Round
 from .state import RoundState, Run, holding
@@ -191,10 +192,11 @@ class GlueRound(LoopRound):
         if run.wedges is not None:  # the corners' wedges, before the faces are relinked
             run.wedges.contract_many(faces, run.VQ, P, _take(st.x, acc))
         faces.reserve(int(room))  # the kept vertices' new runs
+        pairs = PairArrays(st.E, st.ecount, st.deg, st.bad, st.x, st.cost, st.branch)
+        lists = FaceArrays(faces.F, faces.alive, faces.cnt, faces.off, faces.pool)
         a, b, xs, costs, top, faces.end, dead, st.edges_next, d, one = round_glue_jit.contract(
-            st.E, st.ecount, st.deg, st.bad, touched, acc, apex, st.x, st.cost, st.branch, t.branches, self.V3,
-            run.VQ, faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, run.label, len(run.VQd),
-            run.merge_chunk, run.price_sizes[0])
+            tuple(pairs), tuple(lists), faces.end, (self.V3, run.VQ), (touched, acc, apex), t.branches, run.label,
+            (len(run.VQd), run.merge_chunk, run.price_sizes[0]))
         faces.count -= len(dead)
         t.dead.append(dead)
         t.max_cost_used = max(t.max_cost_used, top)
