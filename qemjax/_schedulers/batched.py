@@ -1,14 +1,16 @@
 """Many runs of one mesh in the same rounds: the parallel scheduler on a disjoint union of copies.
 
 A sweep's configurations of one mesh differ in their vertex state (quadrics built with another boundary
-weight or area weighting), their numeric kernel settings (passed per pair, `common.PerCopy`: never a
+weight or area weighting), their numeric kernel settings (passed per pair, `device.PerCopy`: never a
 new compilation), their face target and their ``max_error``. Copy c holds vertices c·n … c·n + n − 1 and
 faces c·m … c·m + m − 1, so every stage of a round runs once for all copies, on arrays C times longer, and
 the fixed cost of a round (kernel launches, hundreds of small numpy calls) is paid once instead of C
 times.
 
 Each copy makes exactly the choices it makes alone (`simplify_batch` results equal `simplify`'s, bit for
-bit; tested): everything a round decides globally in a single run (`parallel.driver.rounds`) is decided per copy here:
+bit; tested): the rounds go through the round implementation a single run would take (`parallel.choose`,
+without the compiled glue), and everything a round decides globally in a single run
+(`parallel.driver.rounds`) is decided per copy here:
 
 - the face budget (``need``) and ``max_error`` of the candidates;
 - the gate (the k-th cheapest candidate of the copy);
