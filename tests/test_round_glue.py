@@ -68,7 +68,8 @@ def test_carry_is_the_numpy_update_cost_and_candidates(seed, limit, locks):
         args = (kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n)
         with np.errstate(over="ignore"):  # (1e300 in float32)
             want = _carry_numpy(*args, limit, 2, manifold, locked)
-        got = glue.carry(*args, glue.bound(limit, np.float32), 2, manifold, locked)
+        got = glue.carry(kept, d, out, (x0, cost0, branch0, parts0, bad0), E, ecount, n,
+                         (glue.bound(limit, np.float32), 2, manifold), locked)
         for w, g, name in zip(want, got, ("x", "cost", "branch", "parts", "bad", "bvert", "valid")):
             assert g.dtype == w.dtype and np.array_equal(g, w), name
         assert got[7] == want[6].sum()

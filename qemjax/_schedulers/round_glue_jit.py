@@ -38,18 +38,31 @@ def bound(limit, dtype) -> np.generic:
         return np.asarray(limit, np.result_type(dtype, limit))[()]
 
 
+class Known(NamedTuple):
+    """What the last round knew of its pairs, as `carry` takes it: x (P0,3), cost (P0,), branch (P0,) int8,
+    parts (P0, p), bad (P0,) int8."""
+
+    x: np.ndarray
+    cost: np.ndarray
+    branch: np.ndarray
+    parts: np.ndarray
+    bad: np.ndarray
+
+
 @njit(cache=True, nogil=True)
-def carry(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold, locked):
+def carry(kept, d, out, last, E, ecount, n, test, locked):
     """The new pairs' prices, rules, boundary vertices and candidates.
 
     kept (P0,) bool: which of the last round's pairs stay, in order (`round_jit.contract_edges`); d (K,):
     the rows of the new pairs E (P,2) whose price is stale; out (5 + p, ≥ K): the device's price of them
     ([x (3), cost, branch, parts] per column, `device.start_step`; a run with locks: as `locks.adjust`
-    leaves it); x0, cost0, branch0, parts0 (P0, p), bad0: the last round's. limit: max_error's cost bound
-    (`bound`); need: the faces still to remove; locked (n,) bool (empty: no locks): a pair of two locked
-    vertices is marked `outcome.LOCKED` (`locks.both_locked`, as `parallel.Round.cost` marks every pair each round).
-    Returns x, cost, branch, parts, bad, the boundary vertices (n,) bool, the candidates (P,) bool
-    (`parallel.Round.candidates`) and how many there are."""
+    leaves it); last: the last round's arrays (a `Known`, passed as a plain tuple); test: the candidate
+    test's (max_error's cost bound (`bound`), the faces still to remove, manifold mode); locked (n,) bool
+    (empty: no locks): a pair of two locked vertices is marked `outcome.LOCKED` (`locks.both_locked`, as
+    `parallel.Round.cost` marks every pair each round). Returns x, cost, branch, parts, bad, the boundary
+    vertices (n,) bool, the candidates (P,) bool (`parallel.Round.candidates`) and how many there are."""
+    x0, cost0, branch0, parts0, bad0 = last
+    limit, need, manifold = test
     P = len(E)
     p = parts0.shape[1]
     x = np.empty((P, 3), x0.dtype)

@@ -14,7 +14,7 @@ from ..._mesh.arrays import put_rows, take_rows as _take
 from .. import locks as _locks
 from .. import outcome, round_glue_jit, round_jit
 from ..device import Priced, kept_fuses, start_step, step_one
-from ..round_glue_jit import FaceArrays, PairArrays
+from ..round_glue_jit import FaceArrays, Known, PairArrays
 from ..select import gate_rank
 from .stages import Round
 from .state import RoundState, Run, holding
@@ -130,9 +130,9 @@ class GlueRound(LoopRound):
         if run.locks is not None:  # locked kept vertices and the weights, as `cost` applies them
             out = self.locked_raw(out, _take(E, d), self.at_kept)
             self.at_kept = None
+        last = Known(prev.x, prev.cost, prev.branch, prev.parts, prev.bad)
         st.x, st.cost, st.branch, st.parts, st.bad, st.bvert, valid, _ = round_glue_jit.carry(
-            kept, d, out, prev.x, prev.cost, prev.branch, prev.parts, prev.bad, E, ecount, run.n, self.limit,
-            need, run.manifold, self.lock_rule[0])
+            kept, d, out, tuple(last), E, ecount, run.n, (self.limit, need, run.manifold), self.lock_rule[0])
         if run.wedges is not None:  # stale pairs at seam vertices: placed at an allowed endpoint (as `cost`)
             self.place_at_seams(st, d)
             if run.locks is not None:  # as `cost`: two locked vertices stay LOCKED, a locked kept one pinned

@@ -114,43 +114,12 @@ class Round:
         on), the last round's for the rest, and what is known to be invalid."""
         run = self.run
         t0 = time.perf_counter()
-        model, VQd = run.model, run.VQd
-        if prev is None:
-            pending = run.first or start_price(model, VQd, st.E, run.params, run.faces, run.pad)
-            run.first = None
-            st.bad = np.zeros(len(st.E), np.int8)
-            if run.locks is not None:
-                pending = self.locked_prices(pending, st.E)
-        else:
-            if prev.next_price is not None:  # started with the last round's merge (`OneCall`)
-                d, pending = prev.next_price
-                prev.next_price = None
-            else:
-                d = np.flatnonzero(stale)
-                pending = start_price(model, VQd, _take(st.E, d), run.params, run.faces, run.pad)
-            if run.locks is not None:
-                pending = self.locked_prices(pending, _take(st.E, d))
-            st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
-            if same is not None:
-                st.bad = st.bad * same
-        st.bvert = endpoints(st.E, st.ecount == 1, run.n)
+        d, pending = self.start_prices(st, prev, follow, stale, same)
         run.timer.add("topology_s", time.perf_counter() - t0)
 
         t0 = time.perf_counter()
         self.settle()
-        if prev is None:
-            st.x, st.cost, st.branch, parts = pending()
-            st.parts = np.ascontiguousarray(parts.T)
-        else:
-            # separate arrays, each under 32 MB at 2 M edges: glibc maps larger ones afresh every time
-            # (page faults on every round; one (E,5) array was slower to gather here)
-            st.x, st.cost, st.branch = follow(prev.x), follow(prev.cost), follow(prev.branch)
-            xd, st.cost[d], st.branch[d], parts = pending()
-            put_rows(st.x, d, xd)
-            # (a model without cost parts: no take of P empty rows, which numpy still spends P checks on)
-            st.parts = follow(prev.parts) if prev.parts.shape[1] else prev.parts[:0].reshape(len(st.E), 0)
-            if len(parts):  # a model with cost parts
-                put_rows(st.parts, d, np.ascontiguousarray(parts.T))
+        self.fill_prices(st, prev, follow, d, pending)
         if run.wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
             self.place_at_seams(st, np.arange(len(st.E)) if prev is None else d)
         if run.locks is not None:  # pairs of two locked vertices never contract
@@ -158,6 +127,49 @@ class Round:
             if run.wedges is not None:  # a seam placement never moves a locked vertex
                 _locks.pin(run.locks, run.VQ, st.E, st.x)
         run.timer.add("kernels_s", time.perf_counter() - t0)
+
+    def start_prices(self, st: RoundState, prev, follow, stale, same):
+        """The new prices of `cost`, started: (the stale rows d (None on the first round: every pair), a function
+        giving their `Priced`). Meanwhile the rules known to be broken are carried over, and the boundary
+        vertices marked."""
+        run = self.run
+        if prev is None:
+            d, pending = None, run.first or start_price(run.model, run.VQd, st.E, run.params, run.faces, run.pad)
+            run.first = None
+            st.bad = np.zeros(len(st.E), np.int8)
+            if run.locks is not None:
+                pending = self.locked_prices(pending, st.E)
+        else:
+            if prev.next_price is not None:  # started with the last round's device call (`OneCall`)
+                d, pending = prev.next_price
+                prev.next_price = None
+            else:
+                d = np.flatnonzero(stale)
+                pending = start_price(run.model, run.VQd, _take(st.E, d), run.params, run.faces, run.pad)
+            if run.locks is not None:
+                pending = self.locked_prices(pending, _take(st.E, d))
+            st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
+            if same is not None:
+                st.bad = st.bad * same
+        st.bvert = endpoints(st.E, st.ecount == 1, run.n)
+        return d, pending
+
+    def fill_prices(self, st: RoundState, prev, follow, d, pending):
+        """The prices into ``st``: every pair's from ``pending`` on the first round; else the last round's,
+        carried over by ``follow``, with the stale rows d from ``pending``."""
+        if prev is None:
+            st.x, st.cost, st.branch, parts = pending()
+            st.parts = np.ascontiguousarray(parts.T)
+            return
+        # separate arrays, each under 32 MB at 2 M edges: glibc maps larger ones afresh every time
+        # (page faults on every round; one (E,5) array was slower to gather here)
+        st.x, st.cost, st.branch = follow(prev.x), follow(prev.cost), follow(prev.branch)
+        xd, st.cost[d], st.branch[d], parts = pending()
+        put_rows(st.x, d, xd)
+        # (a model without cost parts: no take of P empty rows, which numpy still spends P checks on)
+        st.parts = follow(prev.parts) if prev.parts.shape[1] else prev.parts[:0].reshape(len(st.E), 0)
+        if len(parts):  # a model with cost parts
+            put_rows(st.parts, d, np.ascontiguousarray(parts.T))
 
     def place_at_seams(self, st: RoundState, d):
         """Newly priced pairs d at seam vertices (kept attributes): placed at an allowed endpoint, and marked
