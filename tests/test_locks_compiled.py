@@ -11,7 +11,8 @@ import pytest
 import qemjax
 from qemjax import shapes
 from qemjax._mesh import topology as topo
-from qemjax._schedulers import common, parallel
+from qemjax._schedulers import device, parallel
+from qemjax._schedulers.parallel import driver
 from qemjax._schedulers import locks as _locks
 from test_attributes import atlas_sphere
 from test_round_jit import _assert_same, _run
@@ -94,17 +95,18 @@ def _both(mesh, kw, monkeypatch, fast=True):
     """The run on its own path and on the numpy stages: the same bits, and each took the path it should (a
     fast run with its prices at locked kept vertices in the round's device call, when it has such pairs)."""
     seen, fused = [], []
-    init, step_with = parallel._Run.__init__, common._step_with
+    choose, step_with = driver.choose, device._step_with
 
-    def recording_init(self, *a, **k):
-        init(self, *a, **k)
-        seen.append((self.compiled, self.fast))
+    def recording(run, glue=True):
+        rnd = choose(run, glue)
+        seen.append((isinstance(rnd, parallel.LoopRound), isinstance(rnd, parallel.GlueRound)))
+        return rnd
 
     def recording_step(*a):
         fused.append(len(a[-1]))
         return step_with(*a)
-    monkeypatch.setattr(parallel._Run, "__init__", recording_init)
-    monkeypatch.setattr(common, "_step_with", recording_step)
+    monkeypatch.setattr(driver, "choose", recording)
+    monkeypatch.setattr(device, "_step_with", recording_step)
     new, _ = _run(mesh, kw, monkeypatch, True)
     old, _ = _run(mesh, kw, monkeypatch, False)
     assert seen == [(True, fast), (False, False)], seen
@@ -189,7 +191,7 @@ def test_locks_with_kept_uvs(weights, monkeypatch):
 
 @pytest.mark.parametrize("method", ["classic", "default", "line", "probabilistic"])
 def test_prices_at_kept_vertices_in_the_round_call_are_start_prices(method):
-    """The round's device call with pairs priced at their kept vertex (`common.start_step` and `step_one` with
+    """The round's device call with pairs priced at their kept vertex (`device.start_step` and `step_one` with
     ``kept``) gives the rows, merges and prices it gives without them, and for those pairs `start_price`'s
     price at the kept vertex on the new rows, bit for bit."""
     import jax.numpy as jnp
@@ -199,7 +201,7 @@ def test_prices_at_kept_vertices_in_the_round_call_are_start_prices(method):
 
     rng = np.random.default_rng(3)
     model = build(resolve(method))
-    assert common.kept_fuses(model)
+    assert device.kept_fuses(model)
     n, K, J, k = 3000, 90, 700, 60
     rows = np.zeros((4096, 3 + model.width), np.float32)
     rows[:n] = rng.normal(size=(n, 3 + model.width)).astype(np.float32)
@@ -208,24 +210,24 @@ def test_prices_at_kept_vertices_in_the_round_call_are_start_prices(method):
     x = rng.normal(size=(K, 3)).astype(np.float32)
     Pn = np.sort(rng.integers(0, n, (J, 2)), axis=1).astype(np.int32)
     Pk = Pn[rng.choice(J, k, replace=False)]
-    params = common.on_device(model.kernel_params())
-    ref_VS, ref_merged, ref_priced = common.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024)
+    params = device.on_device(model.kernel_params())
+    ref_VS, ref_merged, ref_priced = device.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024)
     ref_VS = np.asarray(ref_VS)
-    ref_at = common.start_price(model, jnp.asarray(ref_VS), Pk, params, at_kept=True)()
+    ref_at = device.start_price(model, jnp.asarray(ref_VS), Pk, params, at_kept=True)()
     ref_priced, ref_merged = ref_priced(), ref_merged()
     calls = {
-        "start_step": lambda: common.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024, kept=Pk),
-        "step_one": lambda: common.step_one(model, jnp.asarray(rows), pad_rows(P[:, 0], 256, 4096), pad_rows(P, 256),
+        "start_step": lambda: device.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024, kept=Pk),
+        "step_one": lambda: device.step_one(model, jnp.asarray(rows), pad_rows(P[:, 0], 256, 4096), pad_rows(P, 256),
                                             pad_rows(x, 256), pad_rows(Pn, 1024), params, K, kept=Pk)}
     for name, call in calls.items():
         VS, merged, priced, at = call()
         assert np.array_equal(np.asarray(VS), ref_VS) and np.array_equal(merged(), ref_merged), name
         got = priced()
         if name == "step_one":  # (its raw columns, as the kernel gives them)
-            got = common.Priced(got[:3, :J].T, got[3, :J], got[4, :J].astype(np.int8), got[5:, :J])
-        for field, want in zip(common.Priced._fields, ref_priced):
+            got = device.Priced(got[:3, :J].T, got[3, :J], got[4, :J].astype(np.int8), got[5:, :J])
+        for field, want in zip(device.Priced._fields, ref_priced):
             assert np.array_equal(getattr(got, field), want, equal_nan=True), (name, field)
         at = at()
-        for field, want in zip(common.Priced._fields, ref_at):
+        for field, want in zip(device.Priced._fields, ref_at):
             g = getattr(at, field)
             assert g.dtype == want.dtype and np.array_equal(g, want, equal_nan=True), (name, field)

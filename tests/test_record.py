@@ -11,7 +11,7 @@ from conftest import one_pair_per_round, shared_mesh
 
 import qemjax
 from qemjax import shapes
-from qemjax._schedulers import parallel
+from qemjax._schedulers.parallel import driver
 from qemjax._mesh.pointtri import point_triangle_distance
 
 
@@ -61,13 +61,20 @@ def test_parallel_replay_is_the_run_at_round_boundaries(monkeypatch):
     """The mesh after each round, captured inside the run, is what the record replays there."""
     snaps = []
 
-    class Spy(parallel._Run):
-        def contract(self, *a):
-            super().contract(*a)
-            alive = self.faces.alive.copy()
-            snaps.append((alive, self.faces.F[alive].copy(), self.VQ[: self.n, :3].copy()))
+    choose = driver.choose
 
-    monkeypatch.setattr(parallel, "_Run", Spy)
+    def spying(run, glue=True):
+        rnd = choose(run, glue)
+        contract = rnd.contract
+
+        def spy(*a):
+            contract(*a)
+            alive = run.faces.alive.copy()
+            snaps.append((alive, run.faces.F[alive].copy(), run.VQ[: run.n, :3].copy()))
+        rnd.contract = spy
+        return rnd
+
+    monkeypatch.setattr(driver, "choose", spying)
     res = qemjax.simplify(shared_mesh("cow.obj"), ratio=0.05, refit=0)
     monkeypatch.undo()
     rec = res.record

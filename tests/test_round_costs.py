@@ -1,6 +1,6 @@
 """The parallel scheduler's per-round costs cut without changing outputs: a round's merge and device row
 update in pieces sized to the mesh (`parallel.merge_size`), and kernel settings and the flip threshold
-copied to the device once per run (`common.on_device`). Each must give the same bits as before."""
+copied to the device once per run (`device.on_device`). Each must give the same bits as before."""
 from __future__ import annotations
 
 import jax
@@ -10,7 +10,7 @@ import pytest
 
 import qemjax
 from qemjax._kernels.batching import set_rows
-from qemjax._schedulers import common, parallel
+from qemjax._schedulers import device, parallel
 
 MODELS = [qemjax.QEM(), qemjax.QEM(placement="rank"), qemjax.QEM(memoryless=True), qemjax.ProbabilisticQEM(),
           qemjax.LineQEM()]
@@ -30,60 +30,60 @@ def test_merge_bits_do_not_depend_on_the_piece_shape(model):
     scheduler now picks the piece shape from the mesh's size)."""
     VS, P, x = _rows(model, np.random.default_rng(0))
     VSd, params = jnp.asarray(VS), model.kernel_params()
-    small = common.start_merge(model, VSd, P, x, params, size=parallel.SMALL_CHUNK)()
-    large = common.start_merge(model, VSd, P, x, params, size=parallel.MERGE_CHUNK)()
+    small = device.start_merge(model, VSd, P, x, params, size=parallel.SMALL_CHUNK)()
+    large = device.start_merge(model, VSd, P, x, params, size=parallel.MERGE_CHUNK)()
     assert small.shape == (len(P), model.width)
     assert np.array_equal(small, large, equal_nan=True)
 
 
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__ + str(getattr(m, "placement", "")))
 def test_settings_on_the_device_price_as_numpy_settings(model):
-    """`common.on_device` keeps each setting's dtype and shape: the same kernel, the same prices."""
+    """`device.on_device` keeps each setting's dtype and shape: the same kernel, the same prices."""
     if model.uses_ring:
         pytest.skip("ring models price through the faces")
     VS, P, _ = _rows(model, np.random.default_rng(1))
     VSd, params = jnp.asarray(VS), model.kernel_params()
-    dev = common.on_device(params)
+    dev = device.on_device(params)
     assert all(np.asarray(dev[k]).dtype == np.asarray(v).dtype and np.shape(dev[k]) == np.shape(v)
                for k, v in params.items())
-    a, b = common.start_price(model, VSd, P, params)(), common.start_price(model, VSd, P, dev)()
+    a, b = device.start_price(model, VSd, P, params)(), device.start_price(model, VSd, P, dev)()
     for u, v in zip(a, b):
         assert np.array_equal(u, v, equal_nan=True)
 
 
 def test_pricing_no_pairs_calls_no_kernel(monkeypatch):
-    """`common.start_price` of no pairs (a round after one that only rejected: nothing is stale) gives an
+    """`device.start_price` of no pairs (a round after one that only rejected: nothing is stale) gives an
     empty price without a device call (its one piece would have priced padding alone)."""
     model = MODELS[0]
     VS, P, _ = _rows(model, np.random.default_rng(2))
     calls = []
     price = type(model).price
     monkeypatch.setattr(type(model), "price", lambda self, *a, **k: calls.append(1) or price(self, *a, **k))
-    pr = common.start_price(model, jnp.asarray(VS), P[:0], model.kernel_params())()
+    pr = device.start_price(model, jnp.asarray(VS), P[:0], model.kernel_params())()
     assert not calls
     assert pr.x.shape == (0, 3) and pr.cost.shape == (0,) and pr.branch.shape == (0,) and pr.branch.dtype == np.int8
     assert pr.parts.shape == (len(model.parts), 0)
-    common.start_price(model, jnp.asarray(VS), P[:3], model.kernel_params())()
+    device.start_price(model, jnp.asarray(VS), P[:3], model.kernel_params())()
     assert calls  # (the spy sees real calls)
 
 
 def test_small_settings_copies_are_kept_for_the_next_run():
-    """`common.on_device` reuses its device copy of a small setting with the same value, dtype and shape (a
+    """`device.on_device` reuses its device copy of a small setting with the same value, dtype and shape (a
     run's set-up made four copies), and never mixes values whose bytes are equal under another dtype."""
     p1 = {"a": np.asarray(0.25, np.float32), "b": np.asarray(False), "c": np.asarray(0, np.int32), "s": "x"}
     p2 = {"a": np.asarray(0.25, np.float32), "b": np.asarray(0, np.int8), "c": np.asarray(0.0, np.float32),
           "s": "x"}
-    d1, d2 = common.on_device(p1), common.on_device(p2)
+    d1, d2 = device.on_device(p1), device.on_device(p2)
     assert d1["a"] is d2["a"] and d1["s"] == d2["s"] == "x"
     for k in ("b", "c"):  # same bytes, other dtypes: their own copies
         assert d1[k] is not d2[k] and d1[k].dtype == p1[k].dtype and d2[k].dtype == p2[k].dtype
         assert np.array_equal(np.asarray(d2[k]), p2[k])
     big = np.arange(17.0)
-    assert common.on_device({"w": big})["w"] is not common.on_device({"w": big})["w"]  # large: copied each time
+    assert device.on_device({"w": big})["w"] is not device.on_device({"w": big})["w"]  # large: copied each time
     f64 = {"e": np.asarray(0.5, np.float64)}  # its device dtype follows x64 mode: a copy per mode
-    plain = common.on_device(f64)["e"]
+    plain = device.on_device(f64)["e"]
     with jax.enable_x64(True):
-        wide = common.on_device(f64)["e"]
+        wide = device.on_device(f64)["e"]
     assert plain.dtype == jnp.float32 and wide.dtype == jnp.float64
 
 
@@ -111,8 +111,8 @@ def test_flip_threshold_on_the_device_gives_the_host_thresholds_answers():
     x = rng.normal(size=(40, 3)).astype(np.float32)
     Vd, N0d = jnp.asarray(V), jnp.asarray(N0)
     for cos_max in (0.0, 0.3, -1.0):
-        a = common.start_flips(Vd, N0d, F, np.arange(200), corner, owner, x, 40, cos_max)()
-        b = common.start_flips(Vd, N0d, F, np.arange(200), corner, owner, x, 40,
+        a = device.start_flips(Vd, N0d, F, np.arange(200), corner, owner, x, 40, cos_max)()
+        b = device.start_flips(Vd, N0d, F, np.arange(200), corner, owner, x, 40,
                                jnp.asarray(np.float32(cos_max)))()
         assert np.array_equal(a, b) and (a.sum() > 0) == (cos_max >= 0) and a.sum() < 40
 

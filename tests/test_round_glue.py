@@ -1,5 +1,5 @@
 """The round's compiled glue (`_schedulers.round_glue_jit`) answers as the numpy code it replaces in
-`parallel._Run`, bit for bit, on random inputs: the carried prices and candidates, the gate with numpy's
+`parallel.LoopRound`, bit for bit, on random inputs: the carried prices and candidates, the gate with numpy's
 promotion of its scalars, the order and face target, the contraction with its device inputs, and the one-piece
 device call. Whole runs against the numpy rounds: tests/test_round_jit.py and tests/test_round_step.py."""
 from __future__ import annotations
@@ -16,7 +16,8 @@ from qemjax._costs import build, resolve
 from qemjax._kernels.batching import chunks, pad_rows
 from qemjax._mesh.arrays import put_rows
 from qemjax._mesh.incidence import FaceLists
-from qemjax._schedulers import common, parallel, round_glue_jit as glue, round_jit
+from qemjax._schedulers import device, parallel, round_glue_jit as glue, round_jit
+from qemjax._schedulers.parallel import driver
 from qemjax._schedulers.outcome import LOCKED
 from qemjax._schedulers.select import fits_target, sort_keys
 from test_attributes import atlas_sphere
@@ -25,7 +26,7 @@ from test_round_jit import _assert_same, _selected_pairs
 
 
 def _carry_numpy(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold, locked):
-    """`_Run.update`, `_Run.cost` (the fused path) and `_Run.candidates`, as numpy runs them."""
+    """`Round.update`, `Round.cost` (the fused path) and `Round.candidates`, as numpy runs them."""
     idx = np.flatnonzero(kept)
     x, cost, branch, parts, bad = (np.take(a, idx, axis=0) for a in (x0, cost0, branch0, parts0, bad0))
     put_rows(x, d, out[:3, : len(d)].T)
@@ -67,7 +68,8 @@ def test_carry_is_the_numpy_update_cost_and_candidates(seed, limit, locks):
         args = (kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n)
         with np.errstate(over="ignore"):  # (1e300 in float32)
             want = _carry_numpy(*args, limit, 2, manifold, locked)
-        got = glue.carry(*args, glue.bound(limit, np.float32), 2, manifold, locked)
+        got = glue.carry(kept, d, out, (x0, cost0, branch0, parts0, bad0), E, ecount, n,
+                         (glue.bound(limit, np.float32), 2, manifold), locked)
         for w, g, name in zip(want, got, ("x", "cost", "branch", "parts", "bad", "bvert", "valid")):
             assert g.dtype == w.dtype and np.array_equal(g, w), name
         assert got[7] == want[6].sum()
@@ -127,7 +129,7 @@ def test_order_fit_is_sort_keys_and_fits_target(need):
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
-    """One call against its parts in `_Run.contract`'s order: `clear_bad`, `contract_faces`,
+    """One call against its parts in `LoopRound.contract`'s order: `clear_bad`, `contract_faces`,
     `contract_edges`, the positions, the stale rows, and the device inputs padded as `chunks` pads them."""
     V, F = shapes.bumpy_sphere(2)
     n = len(V)
@@ -158,8 +160,9 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
 
     faces, counts, label = FaceLists(F, n), np.zeros(4, np.int64), np.full(n, -1, np.int32)
     faces.reserve(room)
-    got = glue.contract(E, ecount, deg, bad, touched, acc, apex.astype(np.int64), x, cost, branch, counts, V3, VQ,
-                        faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end, label, 4096, 256, 1024)
+    lists = (faces.F, faces.alive, faces.cnt, faces.off, faces.pool)
+    got = glue.contract((E, ecount, deg, bad, x, cost, branch), lists, faces.end, (V3, VQ),
+                        (touched, acc, apex.astype(np.int64)), counts, label, (4096, 256, 1024))
     ga, gb, gx, gc, top, gend, gdead, gedges, gd, (rows, pp, xx, qq) = got
     assert np.array_equal(bad, ref_bad) and np.array_equal(V3, ref_V3) and np.array_equal(VQ, ref_VQ)
     assert np.array_equal(ga, a) and np.array_equal(gb, b) and np.array_equal(gx, x[acc])
@@ -179,9 +182,10 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
     # more contractions than one piece holds: no padded inputs (the caller takes `start_step`)
     faces = FaceLists(F, n)
     faces.reserve(room)
-    more = glue.contract(E, ecount, deg, bad.copy(), touched, acc, apex.astype(np.int64), x, cost, branch,
-                         counts, V3.copy(), VQ.copy(), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, faces.end,
-                         np.full(n, -1, np.int32), 4096, len(acc) - 1, 1024)[-1]
+    lists = (faces.F, faces.alive, faces.cnt, faces.off, faces.pool)
+    more = glue.contract((E, ecount, deg, bad.copy(), x, cost, branch), lists, faces.end, (V3.copy(), VQ.copy()),
+                         (touched, acc, apex.astype(np.int64)), counts, np.full(n, -1, np.int32),
+                         (4096, len(acc) - 1, 1024))[-1]
     assert all(len(t) == 0 for t in more)
 
 
@@ -197,10 +201,10 @@ def test_step_one_is_start_step(method):
     P = np.stack([verts[:K], verts[K:2 * K]], 1).astype(np.int32)
     x = rng.normal(size=(K, 3)).astype(np.float32)
     Pn = np.sort(rng.integers(0, n, (J, 2)), axis=1).astype(np.int32)
-    params = common.on_device(model.kernel_params())
-    VS, merged, priced = common.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024)
+    params = device.on_device(model.kernel_params())
+    VS, merged, priced = device.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024)
     ref_VS, ref_merged, ref = np.asarray(VS), merged(), priced()
-    VS1, merged1, raw = common.step_one(model, jnp.asarray(rows), pad_rows(P[:, 0], 256, 4096), pad_rows(P, 256),
+    VS1, merged1, raw = device.step_one(model, jnp.asarray(rows), pad_rows(P[:, 0], 256, 4096), pad_rows(P, 256),
                                         pad_rows(x, 256), pad_rows(Pn, 1024), params, K)
     out = raw()[:, :J]
     assert np.array_equal(np.asarray(VS1), ref_VS) and np.array_equal(merged1(), ref_merged)
@@ -225,23 +229,24 @@ def test_runs_with_the_compiled_glue_give_the_numpy_glues_result(case, monkeypat
     make, kw = RUNS[case]
     mesh = make()
     seen = []
-    init = parallel._Run.__init__
+    choose = driver.choose
 
-    def fast_off(self, *a, **k):
-        init(self, *a, **k)
-        seen.append(self.fast)
-        self.fast = False
+    def fast_off(run, glue=True):  # the compiled loops with the one device call, the glue in numpy
+        rnd = choose(run, glue=False)
+        seen.append(isinstance(rnd, parallel.LoopRound) and isinstance(rnd.device, parallel.OneCall))
+        return rnd
 
-    def recording(self, *a, **k):
-        init(self, *a, **k)
-        seen.append(self.fast)
+    def recording(run, glue=True):
+        rnd = choose(run, glue)
+        seen.append(isinstance(rnd, parallel.GlueRound))
+        return rnd
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with monkeypatch.context() as m:
-            m.setattr(parallel._Run, "__init__", recording)
+            m.setattr(driver, "choose", recording)
             new = qemjax.simplify(mesh, **kw)
         with monkeypatch.context() as m:
-            m.setattr(parallel._Run, "__init__", fast_off)
+            m.setattr(driver, "choose", fast_off)
             old = qemjax.simplify(mesh, **kw)
     assert seen == [True, True]
     _assert_same(new, old)

@@ -15,6 +15,8 @@ from qemjax._mesh import topology as topo
 from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import greedy_rules_jit as rules_jit
 from qemjax._schedulers import parallel, round_jit
+from qemjax._schedulers.parallel import driver
+from edges_reference import contract_edges
 from test_attributes import atlas_sphere
 from test_greedy_compiled import CASES, _bipyramid, _jittered_sphere, _same, _two_spheres
 
@@ -57,14 +59,15 @@ RUNS.update({
 
 def _run(mesh, kw, monkeypatch, compiled: bool, batch=None):
     seen = []
-    init = parallel._Run.__init__
+    choose = driver.choose
 
-    def recording_init(self, *a, **k):
-        init(self, *a, **k)
-        seen.append(self.compiled)
+    def recording(run, glue=True):
+        rnd = choose(run, glue)
+        seen.append(isinstance(rnd, parallel.LoopRound))
+        return rnd
 
     with monkeypatch.context() as m:
-        m.setattr(parallel._Run, "__init__", recording_init)
+        m.setattr(driver, "choose", recording)
         if not compiled:
             m.setattr(round_jit, "fits", lambda *a: False)
         with warnings.catch_warnings():
@@ -170,7 +173,7 @@ def test_contraction_loops_match_the_numpy_code(seed):
     assert len(P) > 5
     a, b = P[:, 0].copy(), P[:, 1].copy()
     # pairs: the numpy update against the compiled one
-    want = topo.contract_edges(E, ecount, a, b, apex, n, deg)
+    want = contract_edges(E, ecount, a, b, apex, n, deg)
     label = np.full(n, -1, np.int32)
     got = round_jit.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), label)
     for w, g, name in zip(want, got, ("E", "ecount", "keep", "degree", "stale")):
@@ -209,11 +212,11 @@ def test_large_runs_keep_the_numpy_stages(monkeypatch):
 @pytest.mark.parametrize("threads", ["inline", "worker"])
 @pytest.mark.parametrize("seed", [0, 2])
 def test_edge_update_on_two_threads_is_contract_edges(seed, threads, monkeypatch):
-    """`parallel.EdgeUpdate` (the pairs' update with its passes split between the worker and the calling
+    """`parallel.pairs.EdgeUpdate` (the pairs' update with its passes split between the worker and the calling
     thread) returns `round_jit.contract_edges`' arrays, dtypes included, and leaves the labels cleared;
     ``worker``: the halves really run on the worker (no size is too small to hand over)."""
     from qemjax._schedulers import select
-    from qemjax._schedulers.parallel import EdgeUpdate
+    from qemjax._schedulers.parallel.pairs import EdgeUpdate
 
     if threads == "worker":
         monkeypatch.setattr(select, "INLINE_ROWS", 0)

@@ -1,4 +1,4 @@
-"""A round's device work in one call (`common.start_step`: the merge, the row update and the next round's
+"""A round's device work in one call (`device.start_step`: the merge, the row update and the next round's
 price together) gives what the separate calls give: the same values on random rows, and whole runs
 (alone and batched, small and large meshes, several cost models) bit for bit."""
 from __future__ import annotations
@@ -12,20 +12,22 @@ import pytest
 import qemjax
 from qemjax import shapes
 from qemjax._costs import build, resolve
-from qemjax._schedulers import common, parallel
+from qemjax._kernels.batching import set_rows
+from qemjax._schedulers import device, parallel
+from qemjax._schedulers.parallel import compiled, driver, stages
 from test_attributes import atlas_sphere
 from test_round_jit import _assert_same
 
 
 def _unfused(monkeypatch):
-    monkeypatch.setattr(parallel, "fuses", lambda model: False)
+    monkeypatch.setattr(driver, "fuses", lambda model: False)
 
 
 def _spy(monkeypatch):
     """Record each round's device call, (contractions, stale pairs, merge piece, price shape): `start_step`,
     or `step_one` where the compiled glue padded one piece (its padding pairs are (0, 0))."""
     calls = []
-    step, one = parallel.start_step, parallel.step_one
+    step, one = device.start_step, device.step_one
 
     def spy(model, VSd, P, x, Pn, params, size, price_size, **kw):
         calls.append((len(P), len(Pn), size, price_size))
@@ -34,8 +36,9 @@ def _spy(monkeypatch):
     def spy_one(model, VSd, rows_at, P, x, Pn, params, K, **kw):
         calls.append((K, int(np.count_nonzero(Pn[:, 0] != Pn[:, 1])), len(P), len(Pn)))
         return one(model, VSd, rows_at, P, x, Pn, params, K, **kw)
-    monkeypatch.setattr(parallel, "start_step", spy)
-    monkeypatch.setattr(parallel, "step_one", spy_one)
+    for module in (stages, compiled):
+        monkeypatch.setattr(module, "start_step", spy)
+    monkeypatch.setattr(compiled, "step_one", spy_one)
     return calls
 
 
@@ -66,20 +69,20 @@ def test_step_gives_the_separate_calls_values(method, K, J):
     P = np.stack([verts[:K], verts[K:2 * K]], 1)  # vertex-disjoint, as a round's contractions are
     x = (0.5 * (V[P[:, 0]] + V[P[:, 1]]) + 0.01 * rng.normal(size=(K, 3))).astype(np.float32)
     Pn = np.sort(rng.integers(0, n, (J, 2)), axis=1)
-    params = common.on_device(model.kernel_params())
+    params = device.on_device(model.kernel_params())
 
-    merged_ref = common.start_merge(model, jnp.asarray(rows), P, x, params, size=256)()
-    VSref = common.set_rows(jnp.asarray(rows), P[:, 0], np.concatenate([x, merged_ref], 1), size=256)
-    priced_ref = common.start_price(model, VSref, Pn, params)()
+    merged_ref = device.start_merge(model, jnp.asarray(rows), P, x, params, size=256)()
+    VSref = set_rows(jnp.asarray(rows), P[:, 0], np.concatenate([x, merged_ref], 1), size=256)
+    priced_ref = device.start_price(model, VSref, Pn, params)()
 
-    VS, merged, priced = common.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024)
+    VS, merged, priced = device.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024)
     assert np.array_equal(merged(), merged_ref)
     assert np.array_equal(np.asarray(VS), np.asarray(VSref))
     got = priced()  # (waits once)
     for name in ("x", "cost", "branch", "parts"):
         assert np.array_equal(getattr(got, name), getattr(priced_ref, name), equal_nan=True), name
     # the same price as the kernel's columns (`raw`: what a fast run's carry reads), every piece joined
-    _, _, raw = common.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024, raw=True)
+    _, _, raw = device.start_step(model, jnp.asarray(rows), P, x, Pn, params, 256, 1024, raw=True)
     out = raw()
     assert out.shape == (5 + len(model.parts), J)
     assert np.array_equal(out[:3].T, got.x) and np.array_equal(out[3], got.cost, equal_nan=True)
@@ -145,8 +148,8 @@ def test_a_batch_with_one_call_a_round_gives_the_separate_calls_result(monkeypat
 def test_models_that_read_more_than_the_pair_are_not_fused():
     """A ring model's price reads the faces around the pair, and a refresh changes rows between the merge
     and the price: those keep the separate calls."""
-    assert common.fuses(build(resolve("classic")))
-    assert not common.fuses(build(resolve("esqem")))
-    assert not common.fuses(build(resolve("area")))
-    assert not common.fuses(build(qemjax.QEM(memoryless=True)))
-    assert not common.fuses(build(qemjax.QEM(regularize=0.1)))
+    assert device.fuses(build(resolve("classic")))
+    assert not device.fuses(build(resolve("esqem")))
+    assert not device.fuses(build(resolve("area")))
+    assert not device.fuses(build(qemjax.QEM(memoryless=True)))
+    assert not device.fuses(build(qemjax.QEM(regularize=0.1)))

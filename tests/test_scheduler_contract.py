@@ -163,3 +163,27 @@ def test_the_pipeline_reads_the_outcome_only():
             elif isinstance(node, ast.Attribute) and node.attr in ("compact_output", "parity_only", "hold_back"):
                 reached.append(f"{path.name}: {node.attr}")
     assert not reached, reached
+
+
+def test_a_parallel_run_picks_its_round_implementation_once(monkeypatch):
+    """`parallel.choose` once per run: the compiled loops and glue where they apply, the compiled loops alone
+    for a batch (its gates are per copy), the numpy stages where the loops do not apply."""
+    from qemjax._schedulers import parallel, round_jit
+    from qemjax._schedulers.parallel import driver
+
+    picked, choose = [], driver.choose
+
+    def recording(run, glue=True):
+        rnd = choose(run, glue)
+        picked.append(type(rnd).__name__)
+        return rnd
+    monkeypatch.setattr(driver, "choose", recording)
+    mesh = shapes.bumpy_sphere(3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        qemjax.simplify(mesh, ratio=0.1)
+        qemjax.simplify_batch(mesh, [{"ratio": 0.1}, {"ratio": 0.2}])
+        monkeypatch.setattr(round_jit, "fits", lambda *a: False)
+        qemjax.simplify(mesh, ratio=0.1)
+    assert picked == ["GlueRound", "LoopRound", "StagedRound"]
+    assert issubclass(parallel.GlueRound, parallel.LoopRound)

@@ -76,12 +76,13 @@ def main():
         kw["vertex_weights"] = np.random.default_rng(0).uniform(0.5, 2.0, len(V))
     fits = round_jit.fits
     taken = []
-    init = parallel._Run.__init__
+    choose = parallel.driver.choose
 
-    def recording_init(self, *a, **k):
-        init(self, *a, **k)
-        taken.append(self.compiled)
-    parallel._Run.__init__ = recording_init
+    def recording(run, glue=True):
+        rnd = choose(run, glue)
+        taken.append(isinstance(rnd, parallel.LoopRound))
+        return rnd
+    parallel.driver.choose = recording
 
     def run(name):
         round_jit.fits = (lambda *a: False) if name == "locked, numpy stages" else fits

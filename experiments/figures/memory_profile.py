@@ -107,6 +107,7 @@ def main(argv=None):
     import qemjax
     from qemjax._pipeline import measure, refit, stages
     from qemjax._schedulers import outcome, parallel
+    from qemjax._schedulers.parallel import driver
 
     for attr in ("geometry", "job", "run", "finish"):
         prof.wrap(stages, attr)
@@ -117,11 +118,13 @@ def main(argv=None):
     from qemjax._mesh import grid_nearest
     prof.wrap(grid_nearest, "nearest", "nearest (measure)")  # refit's own name is wrapped by "refit.attach"
     prof.wrap(outcome, "compact_output")
-    prof.wrap(parallel._Run, "__init__", "run.setup")
-    for attr in ("update", "cost", "candidates", "rank", "select", "contract"):
-        prof.wrap(parallel._Run, attr, "round." + attr)
-    for attr in ("_history_columns", "_removal_steps"):
-        prof.wrap(parallel, attr, "run." + attr.strip("_"))
+    prof.wrap(parallel.Run, "__init__", "run.setup")
+    for cls in (parallel.Round, parallel.StagedRound, parallel.LoopRound, parallel.GlueRound):
+        for attr in ("update", "cost", "candidates", "rank", "select", "contract"):
+            if attr in vars(cls):  # each implementation's own stages, under one name per stage
+                prof.wrap(cls, attr, "round." + attr)
+    for attr in ("history_columns", "removal_steps"):  # as the driver calls them
+        prof.wrap(driver, attr, "run." + attr)
     simplify = prof.stage("simplify", qemjax.simplify)
     t0 = time.perf_counter()
     r = simplify((V, F), ratio=args.ratio, scheduler=args.scheduler, measure=False if args.no_measure else None)

@@ -27,10 +27,13 @@ import ab_compare  # noqa: E402
 import meshes as bench_meshes  # noqa: E402
 
 # (module, object or None, function name)
-WRAPPED = [("_schedulers.parallel", "_Run", n) for n in ("cost", "select", "validate", "contract")] + \
-    [("_schedulers.parallel", None, "independent_sets"), ("_schedulers.parallel", None, "_accepted")] + \
-    [("_schedulers.parallel", None, n) for n in ("start_price", "start_flips", "start_merge", "set_rows")] + \
-    [("_mesh.topology", None, n) for n in ("link_ok", "coincidence_count", "contract_edges")] + \
+WRAPPED = [("_schedulers.parallel.stages", "Round", n) for n in ("cost", "select", "contract")] + \
+    [("_schedulers.parallel.staged", "StagedRound", "validate")] + \
+    [("_schedulers.parallel.compiled", "LoopRound", "passes")] + \
+    [("_schedulers.parallel.compiled", "GlueRound", n) for n in ("carry", "select", "contract")] + \
+    [("_schedulers.parallel.staged", None, n) for n in ("independent_sets", "accepted", "start_flips")] + \
+    [("_schedulers.parallel.stages", None, n) for n in ("start_price", "start_merge", "set_rows")] + \
+    [("_mesh.topology", None, n) for n in ("link_ok", "coincidence_count")] + \
     [("_mesh.incidence", "FaceLists", n) for n in ("touched_with_dead", "contract_touched")]
 OLD_NAMES = {"_mesh.topology": "_topology", "_mesh.incidence": "_incidence"}  # before the layout regroup (61c71ce)
 

@@ -35,12 +35,13 @@ def main():
 
     fits, most = round_jit.fits, round_jit.MAX_FACES
     taken = []
-    init = parallel._Run.__init__
+    choose = parallel.driver.choose
 
-    def recording_init(self, *a, **k):
-        init(self, *a, **k)
-        taken.append(self.compiled)
-    parallel._Run.__init__ = recording_init
+    def recording(run, glue=True):
+        rnd = choose(run, glue)
+        taken.append(isinstance(rnd, parallel.LoopRound))
+        return rnd
+    parallel.driver.choose = recording
 
     def use(path: str, faces: int):
         round_jit.fits, round_jit.MAX_FACES = fits, most

@@ -86,7 +86,7 @@ class CostModel:
         """(K, width) state of the kept vertices after contracting pairs (K,2) to x (K,3). A model may also
         offer it as ``model.merge_kernel(VS, pairs, x, params)``, a static function of its arrays (as
         ``price_kernel``): then a round's merge and the next round's price can share one jit-compiled call
-        that does not recompile for new settings (`qemjax._schedulers.common.start_step`)."""
+        that does not recompile for new settings (`qemjax._schedulers.device.start_step`)."""
         raise NotImplementedError
 
     # a static function (VS, pairs, params) -> `price`'s rows with each pair placed at its kept vertex

@@ -1,14 +1,16 @@
 """Many runs of one mesh in the same rounds: the parallel scheduler on a disjoint union of copies.
 
 A sweep's configurations of one mesh differ in their vertex state (quadrics built with another boundary
-weight or area weighting), their numeric kernel settings (passed per pair, `common.PerCopy`: never a
+weight or area weighting), their numeric kernel settings (passed per pair, `device.PerCopy`: never a
 new compilation), their face target and their ``max_error``. Copy c holds vertices c·n … c·n + n − 1 and
 faces c·m … c·m + m − 1, so every stage of a round runs once for all copies, on arrays C times longer, and
 the fixed cost of a round (kernel launches, hundreds of small numpy calls) is paid once instead of C
 times.
 
 Each copy makes exactly the choices it makes alone (`simplify_batch` results equal `simplify`'s, bit for
-bit; tested): everything a round decides globally in `parallel._Run` is decided per copy here:
+bit; tested): the rounds go through the round implementation a single run would take (`parallel.choose`,
+without the compiled glue), and everything a round decides globally in a single run
+(`parallel.driver.rounds`) is decided per copy here:
 
 - the face budget (``need``) and ``max_error`` of the candidates;
 - the gate (the k-th cheapest candidate of the copy);
@@ -32,8 +34,11 @@ import numpy as np
 from .._mesh.arrays import face_normals, keep_rows as _keep
 from .._kernels.batching import DTYPE
 from . import outcome
-from .common import Options, PerCopy
-from .parallel import RoundState, _Run, _history_arrays, _history_columns, _removal_steps, _ring_vertices
+from .._options import Options
+from .device import PerCopy
+from .parallel import Round, RoundState, Run, driver
+from .parallel.history import history_arrays, history_columns, removal_steps
+from .parallel.pairs import ring_vertices
 from .select import fits_target, gate_rank, sort_keys
 
 
@@ -44,8 +49,9 @@ def batchable(model) -> bool:
             and getattr(model, "split_factor", None) is None)
 
 
-class _Batch(_Run):
-    """C copies (of one mesh or of several) in one `parallel._Run`, with the per-copy decisions of the
+class _Batch:
+    """C copies (of one mesh or of several) in one `parallel.Run`, whose rounds go through a round
+    implementation (`parallel.choose` without the compiled glue: ``rnd``) with the per-copy decisions of the
     module docstring. Copy c holds vertices voff[c] … voff[c+1] − 1 and faces foff[c] … foff[c+1] − 1."""
 
     def __init__(self, Vs, states, Fs, targets, max_costs, model, params, options: Options, edges, part_scales):
@@ -68,11 +74,12 @@ class _Batch(_Run):
         for V, F in zip(Vs, Fs):
             if (id(V), id(F)) not in normals:
                 normals[id(V), id(F)] = face_normals(np.asarray(V, DTYPE), F)
-        super().__init__(np.concatenate(Vs), np.concatenate(states), Fu, np.zeros((0, 2), np.int32),
-                         int(np.sum(targets)), model, options, None,
-                         (Eu, np.concatenate([ec for _, ec in edges])), None, PerCopy(stacked, self.vcopy),
-                         normals=np.concatenate([normals[id(V), id(F)] for V, F in zip(Vs, Fs)]))
-        self.fast = False  # its copies' gates, budgets and targets are their own (`select_batch`)
+        self.run = Run(np.concatenate(Vs), np.concatenate(states), Fu, np.zeros((0, 2), np.int32),
+                       int(np.sum(targets)), model, options, None, (Eu, np.concatenate([ec for _, ec in edges])),
+                       None, PerCopy(stacked, self.vcopy),
+                       normals=np.concatenate([normals[id(V), id(F)] for V, F in zip(Vs, Fs)]))
+        # its copies' gates, budgets and targets are their own (`select_batch`): no compiled glue
+        self.rnd: Round = driver.choose(self.run, glue=False)
         self.targets = np.asarray(targets, np.int64)
         self.max_costs = np.asarray(max_costs, np.float64)
         self.active = np.ones(C, bool)
@@ -87,7 +94,7 @@ class _Batch(_Run):
     # -- per-copy views ----------------------------------------------------------------------------
     def counts(self) -> np.ndarray:
         """(C,) live faces of each copy."""
-        return np.add.reduceat(self.faces.alive[: self.foff[-1]], self.foff[:-1], dtype=np.int64)
+        return np.add.reduceat(self.run.faces.alive[: self.foff[-1]], self.foff[:-1], dtype=np.int64)
 
     def pair_copies(self, st: RoundState):
         """(each pair's copy (P,), each copy's first pair (C + 1,)): E is grouped by copy."""
@@ -97,14 +104,14 @@ class _Batch(_Run):
 
     def _end(self, c: int, st: RoundState, s: slice, need: int):
         """Copy c stops in this round (no valid pair, or nothing it selected was valid); s: its pairs."""
-        ok = ((st.ecount[s] >= 1) & (st.ecount[s] <= 2)) if self.manifold else np.ones(s.stop - s.start, bool)
+        ok = ((st.ecount[s] >= 1) & (st.ecount[s] <= 2)) if self.run.manifold else np.ones(s.stop - s.start, bool)
         self.stops[c] = outcome.classify(need + int(self.targets[c]), int(self.targets[c]), st.bad[s],
                                          st.ecount[s], st.cost[s] > self.max_costs[c], ok)
         self.active[c] = False
-        self.copy_rounds[c] = self.rounds
+        self.copy_rounds[c] = self.run.rounds
 
     def _without_stopped(self, edges_next):
-        """The next round's pairs (`topo.contract_edges`' (E', ecount', keep, degree', stale')) without
+        """The next round's pairs (`round_jit.contract_edges`' (E', ecount', keep, degree', stale')) without
         those of copies that have stopped: they are never candidates again, and every per-pair pass of
         the rounds left would carry them. Order is kept, so each copy's pairs and their indices within
         it are unchanged."""
@@ -117,25 +124,25 @@ class _Batch(_Run):
 
     # -- stages ------------------------------------------------------------------------------------
     def select_batch(self, st: RoundState, need: np.ndarray, valid: np.ndarray, n_valid: np.ndarray, cp, starts):
-        """`_Run.select` per copy: the gate, the passes and the face target of each copy its own (n_valid:
+        """`parallel.Round.select` per copy: the gate, the passes and the face target of each copy its own (n_valid:
         each copy's valid pairs). Returns (accepted indices, per copy: selected, rejected; the locked
         vertices, what validation found)."""
         t0 = time.perf_counter()
-        sch = self.options.schedule
+        sch = self.run.options.schedule
         thresh = np.zeros(self.C, np.float32)
         vkeys = np.compress(valid, st.key)  # grouped by copy, as E
         vstart = np.concatenate([[0], np.cumsum(n_valid)])
         for c in np.flatnonzero(self.active):
             k = gate_rank(int(need[c]), int(n_valid[c]), int(starts[c + 1] - starts[c]), sch)
             thresh[c] = np.partition(vkeys[vstart[c]:vstart[c + 1]], k - 1)[k - 1]
-        salt = self.rounds * 7919
+        salt = self.run.rounds * 7919
         offset = np.take(starts, cp)
 
         def key_of(idx):
             return sort_keys(st.key, idx, salt, offset)
         free = sch.free_cost if self.free_v is None else np.take(self.free_v, st.E[:, 0])
         cand = valid & (st.key <= np.maximum(sch.gate * np.take(thresh, cp), free))
-        acc, bad, why, extra, locked, found = self.passes(st, key_of, cand, 0, (self.vcopy, need, cp),
+        acc, bad, why, extra, locked, found = self.rnd.passes(st, key_of, cand, 0, (self.vcopy, need, cp),
                                                           np.arange(len(st.E)) - offset)
         self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
                                           minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
@@ -146,20 +153,19 @@ class _Batch(_Run):
         n_sel = np.bincount(ca, minlength=self.C)
         fit = _fits_targets(ca, st.ecount[acc] + (0 if extra is None else extra[acc]), need, self.C)
         acc = acc[fit]
-        if self.compiled:  # the apexes of the accepted pairs, in the same order
-            found = found[order][fit]
-        self.timer.add("select_s", time.perf_counter() - t0)
+        found = self.rnd.ordered(found, order[fit])
+        self.run.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why
         return acc, n_sel, n_bad, locked, found
 
     def touched(self, locked, acc, n_sel, P):
-        """Per copy: the locked 1-rings, or the rings of what contracted where the target cut it short."""
+        """Per copy (`parallel.pairs.touched`): the locked 1-rings, or the rings of what contracted (P, rows
+        ``acc`` of the round's pairs) where the target cut it short."""
         cut = np.bincount(np.take(self.vcopy, P[:, 0]), minlength=self.C) != n_sel
         if not cut.any():
             return locked
         mine = np.take(cut, np.take(self.vcopy, P[:, 0]))
-        return (locked & ~np.take(cut, self.vcopy)) | _ring_vertices(self.faces, P[mine].reshape(-1),
-                                                                    self.n)
+        return (locked & ~np.take(cut, self.vcopy)) | ring_vertices(self.run.faces, P[mine].reshape(-1), self.run.n)
 
     def contract_batch(self, st: RoundState, acc, n_sel, locked, found, cp):
         ca = np.take(cp, acc)
@@ -167,10 +173,10 @@ class _Batch(_Run):
         self.copy_branches += np.bincount(ca.astype(np.int64) * nb + st.branch[acc],
                                           minlength=self.copy_branches.size).reshape(self.copy_branches.shape)
         np.maximum.at(self.copy_max_cost, ca, st.cost[acc].astype(np.float64))
-        self.contract(st, acc, n_sel, locked, found)
+        self.rnd.contract(st, acc, self.touched(locked, acc, n_sel, np.take(st.E, acc, axis=0)), found)
 
     def candidates_batch(self, st: RoundState, need: np.ndarray, cp) -> np.ndarray:
-        """`_Run.candidates` with each copy's face budget and max_error, among the active copies. A
+        """`parallel.Round.candidates` with each copy's face budget and max_error, among the active copies. A
         setting that is the same for every active copy (or, for the budget, above every pair's face
         count) is passed as one number: the same test without a per-pair gather."""
         act = self.active
@@ -178,30 +184,31 @@ class _Batch(_Run):
         budget = int(need[act].min()) if np.all(need[act] >= big) else np.take(need, cp)
         mc = self.max_costs[act]
         limit = mc[0] if np.all(mc == mc[0]) else np.take(self.max_costs, cp)
-        valid = self.candidates(st, budget, limit)
+        valid = self.rnd.candidates(st, budget, limit)
         return valid if act.all() else valid & np.take(act, cp)
 
     # -- the loop ----------------------------------------------------------------------------------
-    def run(self):
+    def rounds(self):
+        """Rounds until every copy has stopped (`parallel.driver.rounds` per copy)."""
         prev = None
         while True:
             counts = self.counts()
             reached = self.active & (counts <= self.targets)
             for c in np.flatnonzero(reached):
                 self.stops[c] = ("target", {})
-                self.copy_rounds[c] = self.rounds
+                self.copy_rounds[c] = self.run.rounds
             self.active &= ~reached
             if not self.active.any():
                 break
-            self.rounds += 1
+            self.run.tally.rounds += 1
             t0 = time.perf_counter()
             if prev is not None and prev.edges_next is not None and self.active.sum() < self.n_in_rounds:
                 prev.edges_next = self._without_stopped(prev.edges_next)
                 prev.next_price = None  # started for the pairs before: priced again, without the stopped copies
                 self.n_in_rounds = int(self.active.sum())
-            st, follow, stale, same = self.update(prev)
-            self.timer.add("topology_s", time.perf_counter() - t0)
-            self.cost(st, prev, follow, stale, same)
+            st, follow, stale, same = self.rnd.update(prev)
+            self.run.timer.add("topology_s", time.perf_counter() - t0)
+            self.rnd.cost(st, prev, follow, stale, same)
             cp, starts = self.pair_copies(st)
             need = counts - self.targets
             valid = self.candidates_batch(st, need, cp)
@@ -216,9 +223,7 @@ class _Batch(_Run):
             for c in np.flatnonzero(self.active & (n_acc == 0) & (n_bad == 0)):
                 self._end(c, st, slice(starts[c], starts[c + 1]), int(need[c]))
             if acc.size == 0:  # the invalid ones are out now: select again among the rest (same pairs)
-                st.changed = np.zeros(self.n, bool)
-                if self.incremental:
-                    st.edges_next = (st.E, st.ecount, np.ones(len(st.E), bool), st.deg, np.zeros(len(st.E), bool))
+                self.rnd.retry(st)
                 prev = st
                 if not self.active.any():
                     break
@@ -226,40 +231,41 @@ class _Batch(_Run):
             self.contract_batch(st, acc, n_sel, locked, found, cp)
             self.copy_faces.append((n_acc > 0, self.counts()))
             prev = st
-        self.settle()
+        self.rnd.settle()
 
     # -- per-copy outputs --------------------------------------------------------------------------
     def outputs(self):
         """Each copy's `outcome.Outcome`."""
         voff, foff, C = self.voff, self.foff, self.C
         # every contraction once, then each copy's rows (record order within a copy is kept)
-        rounds, a, b, x, cost = _history_columns(self.history)
+        t = self.run.tally
+        rounds, a, b, x, cost = history_columns(t.history)
         order, bounds = _grouped(np.take(self.vcopy, a), C)
         parts = [None] * C
-        if self.history_parts:
-            allp = np.concatenate(self.history_parts)
+        if t.history_parts:
+            allp = np.concatenate(t.history_parts)
             parts = [np.take(allp, order[bounds[c]:bounds[c + 1]], axis=0) for c in range(C)]
-        dead = np.concatenate(self.dead) if self.dead else np.zeros(0, np.int64)
+        dead = np.concatenate(t.dead) if t.dead else np.zeros(0, np.int64)
         dead = np.sort(dead)
         dead_c = np.split(dead, np.searchsorted(dead, foff[1:-1]))
-        dropped = _by_copy(self.dropped, foff, lambda d: d)
+        dropped = _by_copy(t.dropped, foff, lambda d: d)
         out = []
         for c in range(C):
             lo, hi, f0, f1 = voff[c], voff[c + 1], foff[c], foff[c + 1]
             mine = order[bounds[c]:bounds[c + 1]]
             ac, bc = np.take(a, mine) - lo, np.take(b, mine) - lo
-            F = self.faces.F[f0:f1] - lo
-            removed_at, coincident, rc = _removal_steps(F, np.take(rounds, mine), ac, bc, [dead_c[c] - f0],
+            F = self.run.faces.F[f0:f1] - lo
+            removed_at, coincident, rc = removal_steps(F, np.take(rounds, mine), ac, bc, [dead_c[c] - f0],
                                                         [(r, d - f0) for r, d in dropped[c]])
             stop, blocked = self.stops[c]
             out.append(outcome.Outcome(
-                self.VQ[lo:hi, :3], self.VQ[lo:hi, 3:], F, self.faces.alive[f0:f1],
-                outcome.History(*_history_arrays(ac, bc, np.take(x, mine, axis=0), np.take(cost, mine))),
+                self.run.VQ[lo:hi, :3], self.run.VQ[lo:hi, 3:], F, self.run.faces.alive[f0:f1],
+                outcome.History(*history_arrays(ac, bc, np.take(x, mine, axis=0), np.take(cost, mine))),
                 stop, blocked, outcome.count_reasons(np.repeat(np.arange(self.copy_rejected.shape[1]),
                                                                self.copy_rejected[c])),
                 rejected=int(self.copy_rejected[c, 1:].sum()), rounds=int(self.copy_rounds[c]),
                 worst_cost=float(self.copy_max_cost[c]), branches=self.copy_branches[c].copy(),
-                stage_times=outcome.stage_times(self.timer.t),
+                stage_times=outcome.stage_times(self.run.timer.t),
                 faces_per_round=[int(f[c]) for took, f in self.copy_faces if took[c]],
                 parts=parts[c] if parts[c] is not None and len(parts[c]) else None,
                 history_rounds=rc, removed_at=removed_at, coincident=coincident))
@@ -322,5 +328,5 @@ def run(Vs, states, Fs, targets, max_costs, model, params, options: Options, edg
     if not len(states):
         return []
     b = _Batch(Vs, states, Fs, targets, max_costs, model, params, options, edges, part_scales)
-    b.run()
+    b.rounds()
     return b.outputs()

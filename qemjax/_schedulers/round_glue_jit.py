@@ -5,21 +5,24 @@ On a small mesh a round's own work is a few tens of µs, and the numpy calls aro
 put, compress, bincount, ...) cost more than the work (the cow's 45 rounds spent about 7 ms in them:
 experiments/round_floor.py). These loops take the same values from the same arrays, so the golden outputs
 stay the same bits; tests/test_round_glue.py compares each with the numpy code it replaces on random
-inputs. They serve one run on the compiled path (`parallel._Run.fast`): a batch's gates and budgets are per
+inputs. They serve one run on the compiled path (`parallel.GlueRound`): a batch's gates and budgets are per
 copy (`batched`).
 
-* `carry`: stages 1 and 2 and the candidate test (`_Run.update`, `_Run.cost`, `_Run.candidates`): the pairs
+* `carry`: stages 1 and 2 and the candidate test (`parallel.Round.update`, `.cost`, `.candidates`): the pairs
   that stay take their last prices and rules, the stale ones the device's new prices (with locks: as
   `locks.adjust` leaves them), pairs of two locked vertices are refused, and the boundary vertices and the
   candidates are marked;
-* `under_gate`: the round's gate (`_Run.select`), the candidates at most gate × the k-th cheapest valid key
+* `under_gate`: the round's gate (`parallel.Round.select`), the candidates at most gate × the k-th cheapest valid key
   (or the free cost);
 * `order_fit`: the accepted pairs in key order, cut to the face target (`select.sort_keys`,
   `select.fits_target`);
 * `contract`: the rejections cleared around the round, the faces and pairs contracted (`round_jit`), the
-  positions written, the stale pairs listed, and the device call's inputs padded to their shapes.
+  positions written, the stale pairs listed, and the device call's inputs padded to their shapes; it takes
+  the round's arrays bundled (`PairArrays`, `FaceArrays`).
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -35,18 +38,31 @@ def bound(limit, dtype) -> np.generic:
         return np.asarray(limit, np.result_type(dtype, limit))[()]
 
 
+class Known(NamedTuple):
+    """What the last round knew of its pairs, as `carry` takes it: x (P0,3), cost (P0,), branch (P0,) int8,
+    parts (P0, p), bad (P0,) int8."""
+
+    x: np.ndarray
+    cost: np.ndarray
+    branch: np.ndarray
+    parts: np.ndarray
+    bad: np.ndarray
+
+
 @njit(cache=True, nogil=True)
-def carry(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold, locked):
+def carry(kept, d, out, last, E, ecount, n, test, locked):
     """The new pairs' prices, rules, boundary vertices and candidates.
 
     kept (P0,) bool: which of the last round's pairs stay, in order (`round_jit.contract_edges`); d (K,):
     the rows of the new pairs E (P,2) whose price is stale; out (5 + p, ≥ K): the device's price of them
-    ([x (3), cost, branch, parts] per column, `common.start_step`; a run with locks: as `locks.adjust`
-    leaves it); x0, cost0, branch0, parts0 (P0, p), bad0: the last round's. limit: max_error's cost bound
-    (`bound`); need: the faces still to remove; locked (n,) bool (empty: no locks): a pair of two locked
-    vertices is marked `outcome.LOCKED` (`locks.both_locked`, as `_Run.cost` marks every pair each round).
-    Returns x, cost, branch, parts, bad, the boundary vertices (n,) bool, the candidates (P,) bool
-    (`_Run.candidates`) and how many there are."""
+    ([x (3), cost, branch, parts] per column, `device.start_step`; a run with locks: as `locks.adjust`
+    leaves it); last: the last round's arrays (a `Known`, passed as a plain tuple); test: the candidate
+    test's (max_error's cost bound (`bound`), the faces still to remove, manifold mode); locked (n,) bool
+    (empty: no locks): a pair of two locked vertices is marked `outcome.LOCKED` (`locks.both_locked`, as
+    `parallel.Round.cost` marks every pair each round). Returns x, cost, branch, parts, bad, the boundary
+    vertices (n,) bool, the candidates (P,) bool (`parallel.Round.candidates`) and how many there are."""
+    x0, cost0, branch0, parts0, bad0 = last
+    limit, need, manifold = test
     P = len(E)
     p = parts0.shape[1]
     x = np.empty((P, 3), x0.dtype)
@@ -142,17 +158,49 @@ def order_fit(acc, apex, key, ecount, salt, need, cnt, E):
     return out, ap, room
 
 
+class PairArrays(NamedTuple):
+    """A round's pairs and what is known of them, as `contract` takes them (`RoundState`'s arrays): E (P,2),
+    ecount (P,), deg (n,), bad (P,) int8, and the prices x (P,3), cost (P,), branch (P,) int8."""
+
+    E: np.ndarray
+    ecount: np.ndarray
+    deg: np.ndarray
+    bad: np.ndarray
+    x: np.ndarray
+    cost: np.ndarray
+    branch: np.ndarray
+
+
+class FaceArrays(NamedTuple):
+    """The vertex->face lists' arrays (`FaceLists`: F, alive, cnt, off, pool), as `contract` takes them."""
+
+    F: np.ndarray
+    alive: np.ndarray
+    cnt: np.ndarray
+    off: np.ndarray
+    pool: np.ndarray
+
+
 @njit(cache=True, nogil=True)
-def contract(E, ecount, deg, bad, touched, acc, apex, x, cost, branch, counts, V3, VQ, F, alive, cnt, off, pool,
-             end, label, n_rows, size, price_size):
-    """The round's contraction of pairs ``acc`` (apexes (S,2)) placed at x[acc]: known rejections cleared
-    where ``touched`` (`round_jit.clear_bad`), the faces (`round_jit.contract_faces`; the pool must have
-    room) and the pairs (`round_jit.contract_edges`) contracted, the kept rows moved in V3 and in the first
-    three columns of VQ (the host rows: their states follow with the device call), branch counts
-    added to ``counts``. Returns the kept and removed vertices, their positions, costs (float64) and
-    the largest, the pool's new end, the dead faces, `contract_edges`' result, the stale rows d of the new
-    pairs, and the device call's inputs when one piece holds them (``size`` merges, ``price_size`` stale
-    pairs: `common.step_one`): kept rows padded with n_rows, pairs, positions, stale pairs (else empty)."""
+def contract(pairs, faces, end, rows, taken, counts, label, shapes):
+    """The round's contraction of the accepted pairs, in one call. ``pairs``: a `PairArrays`, ``faces`` a
+    `FaceArrays` (each passed as a plain tuple: numba types it by its fields) and the pool's ``end`` (the
+    pool must have room); ``rows``: the host's rows (V3 positions, VQ [position, state]); ``taken``: the
+    vertices whose rejections are cleared (touched (n,) bool), the accepted pairs' rows (acc (S,)) and their
+    apexes (S,2); ``counts``: the branch counts to add to; ``label``: `round_jit.contract_edges`' scratch;
+    ``shapes``: (the device rows, the merge piece, the smallest price shape).
+
+    Known rejections are cleared where touched (`round_jit.clear_bad`), the faces (`round_jit.contract_faces`)
+    and the pairs (`round_jit.contract_edges`) contracted, the kept rows moved in V3 and in the first three
+    columns of VQ (their states follow with the device call). Returns the kept and removed vertices, their
+    positions, costs (float64) and the largest, the pool's new end, the dead faces, `contract_edges`' result,
+    the stale rows d of the new pairs, and the device call's inputs when one piece holds them (`device.step_one`):
+    kept rows padded with the device rows' count, pairs, positions, stale pairs (else empty)."""
+    E, ecount, deg, bad, x, cost, branch = pairs
+    F, alive, cnt, off, pool = faces
+    V3, VQ = rows
+    touched, acc, apex = taken
+    n_rows, size, price_size = shapes
     clear_bad(E, bad, touched)
     S = len(acc)
     a = np.empty(S, E.dtype)
