@@ -1,4 +1,4 @@
-"""Locked vertices and importance weights (`qemjax._schedulers.locks`): what locks cost in time, and what weights do to
+"""Locked vertices and importance weights (`qemjax._pipeline.locks`): what locks cost in time, and what weights do to
 the local error, in one run.
 
 1. Time: ``simplify`` with no locks, 1 % and 10 % of the vertices locked (random, fixed seed), per

@@ -1,7 +1,7 @@
 """Pricing a pair at a fixed position: its kept vertex's (``pairs[:, 0]``), for locked vertices (`qemjax._schedulers.locks`).
 
 A locked vertex never moves, so a pair with one locked endpoint may only contract onto it. The run numbers
-the locked vertices first (`_locks.permutation`), so the locked endpoint of such a pair is always its kept
+the locked vertices first (`qemjax._pipeline.locks.Locks.geometry`), so the locked endpoint of such a pair is always its kept
 one, and the price a lock needs is "the cost of contracting onto the kept vertex where it stands". Each cost
 model offers it as ``model.price_at_kept(VS, pairs, params, rings=None)`` with the output of its ``price``
 ((5 + len(parts), K): position, cost, branch, parts); the position rows are the kept vertex's row, copied,

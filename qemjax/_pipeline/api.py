@@ -1,5 +1,5 @@
 """`simplify`: the one entry point, and `simplify_cells` / `simplify_batch` for many runs: they drive the
-stages of a run (`_stages`: setup, geometry, job, run, finish), batching the runs that can share rounds."""
+stages of a run (`stages`: setup, geometry, job, run, finish), batching the runs that can share rounds."""
 from __future__ import annotations
 
 import copy
@@ -91,7 +91,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         ``["distance_rms"]`` (mesh units) and their ``_rel`` forms (over the bounding-box diagonal). None
         (default): measured when the method re-fits (the default method; the re-fit already makes the
         output depend on the input's samples), else not (``measure=True`` there costs one nearest-surface
-        query over 1.5× the input's faces in points; ``experiments/distance_check.py`` times it).
+        query over one and a half times the input's faces in points; ``experiments/figures/distance_check.py``
+        times it).
     locked, vertex_weights (given by name, with the settings): per-vertex constraints, numbered as the
         vertices were given (before welding; `qemjax._pipeline.locks`; docs/methods.md, "Locking vertices and
         weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the

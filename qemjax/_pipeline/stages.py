@@ -91,7 +91,7 @@ def _resolve_target(m: int, target_faces, ratio, max_error, bounded: bool = Fals
 
 @dataclasses.dataclass(frozen=True)
 class Setup:
-    """A run's settings, checked and resolved before the mesh is read (`_setup`): the method object and
+    """A run's settings, checked and resolved before the mesh is read (`setup`): the method object and
     its name as shown (`_costs.shown_name`: ``"default"`` when the call named none), the scheduler and its
     `Schedule`, the model it prices with (`_costs.build`), `Topology`, `Attributes` (with the checked weights
     per kind) and whether to show progress."""
@@ -434,8 +434,8 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
     setup = job.setup
     rounds, skipped, seconds, task = setup.refit, None, 0.0, None
     if rounds and appearance and appearance.get("uv") is not None:
-        # moved positions would leave their texture coordinates behind (the textured example's UV deviation
-        # 0.0011 -> 0.016, experiments/refit_uv.py): with UVs kept, positions stay where the contractions put them
+        # moved positions would leave their texture coordinates behind (measured by
+        # experiments/figures/refit_uv.py): with UVs kept, positions stay where the contractions put them
         rounds, skipped = 0, "uv kept"
     refits = bool(rounds and len(mesh.faces) < len(g.F))
     distance = _measure.not_measured()
@@ -547,8 +547,8 @@ def refit_all(later: list) -> None:
     """Run the re-fits `finish` left in ``later`` and put their positions and ``refit_s`` into their results.
     Each is independent of the others (the same arithmetic as alone, bit for bit), so they run side by side
     on threads (`nearest.each_on_threads`: one per core up to four): their compiled nearest-face search,
-    assembly (`refit_system`) and solver release the GIL, as numpy does (a batch of 64 cow re-fits: `experiments/sweep_bench.py --grid
-    distinct`). A
+    assembly (`refit_system`) and solver release the GIL, as numpy does (a batch of 64 cow re-fits: `experiments/figures/sweep_bench.py
+    --grid distinct`). A
     re-fit of a large input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already
     uses the cores, and side by side the large ones would hold their memory at once."""
     from .._mesh.nearest import each_on_threads  # lazily, as the re-fit imports it (scipy.spatial)

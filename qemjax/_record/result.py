@@ -73,7 +73,7 @@ class SimplifyResult:
     with attributes kept,
     ``attributes`` (their kinds) and the input's seams: ``seams_in`` (connected pieces), ``seam_edges_in``
     and ``seam_vertices_in``.
-    With ``locked=`` / ``vertex_weights=`` (`qemjax._schedulers.locks`): ``locked_in`` (the vertices given),
+    With ``locked=`` / ``vertex_weights=`` (`qemjax._pipeline.locks`): ``locked_in`` (the vertices given),
     ``locked`` (the cleaned vertices they are), ``locked_unreferenced`` (given ones no face uses: not
     kept) and ``vertex_weights`` (whether any weight differs from 1).
 

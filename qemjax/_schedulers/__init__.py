@@ -12,11 +12,11 @@ reference). `batched` runs many parallel runs as one disjoint union.
 given the cleaned mesh in normalised units (V (n,3) float32 positions at unit extent, S (n, width) the
 cost model's vertex state, F (m,3) int64 faces), extra non-edge pairs that may contract (k,2), the face
 target, the cost model (`qemjax._costs`: it prices and merges), the rules every scheduler applies
-(`common.Options`: flip angle, topology mode, the cost limit ``max_cost``, the parallel `Schedule`), a
+(`qemjax._options.Options`: flip angle, topology mode, the cost limit ``max_cost``, the parallel `Schedule`), a
 progress callback (faces left), the seam tracker of kept attributes (or None) and, when the caller has
 them, the edge table and the per-part scale. It returns an `outcome.Outcome` (positions, states, faces,
-alive mask, history, stop reason, blocked_by and counts; built by the scheduler, read by `_stages.finish`
-only). A new scheduler is one module with such a ``run`` and one `register` call; `simplify(scheduler=NAME)`
+alive mask, history, stop reason, blocked_by and counts; built by the scheduler, read by `stages.finish`
+through its fields and its `output`, `stop_above` and `counts`). A new scheduler is one module with such a ``run`` and one `register` call; `simplify(scheduler=NAME)`
 then runs it.
 """
 from __future__ import annotations

@@ -2,8 +2,7 @@
 its one device call, as four calls instead of dozens of numpy calls on small arrays.
 
 On a small mesh a round's own work is a few tens of µs, and the numpy calls around it (each a few µs: take,
-put, compress, bincount, ...) cost more than the work (the cow's 45 rounds spent about 7 ms in them:
-experiments/round_floor.py). These loops take the same values from the same arrays, so the golden outputs
+put, compress, bincount, ...) cost more than the work (docs/benchmarks.md; `experiments/figures/round_floor.py` measures it). These loops take the same values from the same arrays, so the golden outputs
 stay the same bits; tests/test_round_glue.py compares each with the numpy code it replaces on random
 inputs. They serve one run on the compiled path (`parallel.GlueRound`): a batch's gates and budgets are per
 copy (`batched`).

@@ -10,7 +10,7 @@ import gc
 def gc_paused():
     """Python's cyclic garbage collector off for the block (as it was after). The greedy queue allocates
     small tuples and sets by the million and keeps many alive, so the collector ran thousands of times
-    and traversed them: about 40 % of a greedy run's CPU time on the bunny (experiments/greedy_gc.py). The
+    and traversed them, for a large share of a greedy run's CPU time (experiments/probes/greedy_gc.py). The
     queue makes no reference cycles; whatever else the block leaves behind is collected once the
     collector is back."""
     was = gc.isenabled()

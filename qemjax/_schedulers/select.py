@@ -15,7 +15,7 @@ from .._options import Schedule
 NO_KEY = np.iinfo(np.int64).max
 SPLIT_ROWS = 1 << 18  # array passes at least this long are shared with the worker thread
 # work on fewer rows than this runs on the calling thread: waking the worker on another core costs more
-# than the little it would overlap (experiments/inline_rows.py)
+# than the little it would overlap (experiments/probes/inline_rows.py)
 INLINE_ROWS = 1 << 15
 _worker = None  # one host thread beside the caller's: numpy releases the GIL in its large array passes
 

@@ -18,7 +18,7 @@ from ..select import submit
 
 MERGE_CHUNK = 4096  # the piece shape of a round's merge and device row update (one compilation) ...
 SMALL_CHUNK = CHUNKS[0]  # ... or, for a mesh of at most SMALL_MESH faces, this one: such a mesh's rounds
-SMALL_MESH = 1 << 14  # contract ~100 pairs, and a 4096-row scatter costs ~12x a 256-row one. Chosen per run,
+SMALL_MESH = 1 << 14  # contract about 100 pairs, and a 4096-row scatter costs far more than a 256-row one. Chosen per run,
 # from the mesh's size, so that meshes of similar size compile the same shapes whatever their rounds
 
 # the shapes of the stale pairs priced in a round's one device call (`device.start_step`), by merge piece:
