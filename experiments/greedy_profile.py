@@ -1,6 +1,6 @@
 """Where a greedy run's time goes, per contraction: process CPU time of the verified batches' stages,
 each timed by wrapping it, in µs per contraction, with the device calls (merge, price, row updates: the
-JAX dispatch and the wait) apart: the compiled loop (`qemjax._schedulers.greedy_compiled`; its Python
+JAX dispatch and the wait) apart: the compiled loop (`qemjax._schedulers.greedy.batches`; its Python
 twin, `greedy_batches`, was retired at 2026-11-27: ``git show eee561e:experiments/greedy_profile.py`` for
 its stages). ``--non-manifold``: with ``preserve_topology=False``.
 
@@ -23,8 +23,8 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent)]  # this checkout's qemjax
 
 import qemjax  # noqa: E402
-from qemjax._schedulers import greedy_compiled as gc  # noqa: E402
-from qemjax._schedulers import greedy_jit as jit  # noqa: E402
+from qemjax._schedulers.greedy import batches as gc  # noqa: E402
+from qemjax._schedulers.greedy import speculate as jit  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "meshes"
 COMPILED = [  # (name, depth): methods of greedy_compiled._Compiled, kernels of greedy_jit, device calls

@@ -1,13 +1,13 @@
-"""The host side of the greedy queue's verified batches (`greedy_compiled`), compiled (numba): pops,
-rules (`greedy_rules_jit`), contractions, journal and commits on integer arrays, giving the contractions of
-the one-at-a-time loop (`greedy._run`) in its order.
+"""The host side of the greedy queue's verified batches (`batches`), compiled (numba): pops,
+rules (`checks`), contractions, journal and commits on integer arrays, giving the contractions of
+the one-at-a-time loop (`loop._run`) in its order.
 
 Why: after the batching, a greedy run was Python bookkeeping (~150 µs per contraction on the bunny, no
 stage above a fifth of it: experiments/results/greedy_where.md); the same steps over arrays take a few
-µs. What stays in Python (`greedy_compiled`) is what needs the device: merging the batch's kept vertices
+µs. What stays in Python (`batches`) is what needs the device: merging the batch's kept vertices
 and pricing its stale intervals, and the history. Both modes: in manifold mode a contraction removes the
 faces holding both its vertices; in non-manifold mode it also drops the faces it makes coincide
-(`greedy_rules_jit.coincident_drop`).
+(`rules.coincident_drop`).
 
 Layout (one `State`, every field an array so that the kernels compile once and cache):
 * faces: ``T`` (m,3) corners, ``alive``; per vertex its faces and its pair partners as lists in a pool
@@ -30,9 +30,10 @@ import numpy as np
 from numba import njit, types
 from numba.typed import Dict
 
-from . import greedy_wedges_jit as gw
-from .greedy_rules_jit import has, rules_head, rules_tail
-from .outcome import LOCKED, SEAM
+from . import wedges as gw
+from ..outcome import LOCKED, SEAM
+from ..rules import has
+from .checks import rules_head, rules_tail
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
 S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_RM, S_NDROP = range(10)  # columns of ``steps``
@@ -185,7 +186,7 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
     (the caller grows them; a shorter batch gives the same run), and the lengths that step wanted in
     ctr[C_WJ:C_WK + 1] (the pools: the slots it wanted, where short).
 
-    ``wed``: kept attributes (`greedy_wedges_jit`): the tracker's corners' wedges C, values val, seam flags
+    ``wed``: kept attributes (`wedges`): the tracker's corners' wedges C, values val, seam flags
     multi (changed in place, journaled; VJ (depth + 1, k): old values), the model's channels m (-1: none)
     and the solved channels (m_solved, solved, weights) as `wedges.Tracker` holds them; RP: each stamp's
     price before the seam constraint (x, cost)."""
@@ -223,8 +224,8 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             size = 2 * max(fl[a], fl[b])
             A, B, D, R = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64), \
                 np.empty(2 * size, np.int64)
-        code = rules_head(a, b, ctr[C_FACES], target, manifold, simple, keep_parts, has_locks, locked, T, fs, fl,
-                          fpool, cnt, A, B, D, common, info)
+        code = rules_head(a, b, ctr[C_FACES], target, manifold, simple, keep_parts, has_locks, locked, T, alive, fs,
+                          fl, fpool, cnt, A, B, D, common, info)
         if code < 0 and wed and (multi[a] or multi[b]):  # the seam rule, where the loop applies it
             TS = gw.fit(TS, max(fl[a], fl[b]))
             if not gw.seam_ok(T, alive, fs, fl, fpool, C, multi, VQ, a, b, X[s], TS, J, ctr, C_JLEN):
@@ -242,7 +243,7 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             continue
         need_j, need_f, need_n, unb, need_buf = _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat)
         nst = unb
-        if wed:  # the wedges' journal rows (`greedy_wedges_jit.contract`, a flag pair per pushed pair), and
+        if wed:  # the wedges' journal rows (`wedges.contract`, a flag pair per pushed pair), and
             # the blocked pairs of two locked vertices around a, priced again (a stamp each)
             need_j += fl[a] + fl[b] + 3 + 2 * (nl[a] + nl[b] + 2 * unb) + unb
             nst = 2 * unb
@@ -487,7 +488,7 @@ def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpoo
 @njit(cache=True)
 def undo(mark, T, alive, fs, fl, ns, nl, heap, K, cur, blocked, bat, J, ctr, C, val, multi, VJ):
     """Every change journaled since ``mark``, undone (last first); C, val, multi, VJ: the wedges'
-    (`greedy_wedges_jit`)."""
+    (`wedges`)."""
     for j in range(ctr[C_JLEN] - 1, mark - 1, -1):
         kind, i, o0, o1 = J[j, 0], J[j, 1], J[j, 2], J[j, 3]
         if kind == J_HEAP:
