@@ -670,7 +670,7 @@ def test_an_undone_batch_restores_the_wedges(case, monkeypatch):
     real_spec, real_first, real_undo = jit.speculate, jit.first_wrong, jit.undo
 
     def speculate(*a):
-        snaps.append([np.array(x, copy=True) for x in a[12:15]])  # C, val, multi
+        snaps.append([np.array(x, copy=True) for x in (a[2].C, a[2].val, a[2].multi)])  # the seams' arrays
         return real_spec(*a)
 
     def first_wrong(*a):

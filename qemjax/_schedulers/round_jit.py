@@ -22,15 +22,59 @@ such edge is a pair (`topology.contract_edges` keeps exactly those).
 """
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numpy as np
 from numba import njit
 
 from .._mesh import wedges_jit
 from . import rules as rule
+from .rules import Faces
 from .outcome import COINCIDENT, FLIP, LOCKED, PART, SEAM, TOPOLOGY
 
 NO_KEY = np.iinfo(np.int64).max
 _SCRAMBLE = np.uint32(0x9E3779B1)
+
+
+class Mesh(NamedTuple):
+    """What `_rules` reads of the mesh besides its faces: positions VQ (n, ≥3), the input faces' reference
+    normals N0, which vertices are on a boundary and each vertex's degree."""
+    VQ: Any
+    N0: Any
+    bvert: Any
+    deg: Any
+
+
+class Limits(NamedTuple):
+    """The flip test's limits (float32 cos_max and sliver) and whether parts are kept."""
+    cos_max: Any
+    sliver: Any
+    keep_parts: bool
+
+
+class Seams(NamedTuple):
+    """Kept attributes: the wedge of each face corner (m,3) and the seam vertices (n,) ((0,3) and all False
+    without attributes)."""
+    corner_wedge: Any
+    multi: Any
+
+
+class Locks(NamedTuple):
+    """Locked vertices (n,) bool (empty: none) and ``partner`` (n,): each selected pair's endpoints name
+    each other in a pass, -1 elsewhere (`rules.stranded_by_pass`)."""
+    locked: Any
+    partner: Any
+
+
+class Scratch(NamedTuple):
+    """`_rules`' working arrays: ``mark`` (n,) zeros, left so (a's neighbours marked 1, common ones 2 while a
+    pair is tested); nb, fk, fc (≥ the faces at a and b): a's neighbours, the faces that stay and their
+    moving corners; T (12, ≥ the faces at a and b): the seam rule's."""
+    mark: Any
+    nb: Any
+    fk: Any
+    fc: Any
+    T: Any
 
 
 MAX_FACES = 1 << 17  # runs on more faces keep the numpy stages: see `fits`
@@ -61,17 +105,20 @@ def _key(kbits, idx, local, salt):
 
 
 @njit(cache=True)
-def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-           mark, nb, fk, fc, apex, s, C, multi, T, locked, partner):
+def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
     """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
     override each other in that order; the locks' rule, the seam rule and then the flip test count only
     for a pair that passes the rest.
     Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s].
-    ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested.
-    nb, fk, fc (≥ the faces at a and b): scratch for a's neighbours, the faces that stay and their moving
-    corners. T (12, ≥ the faces at a and b): the seam rule's scratch. locked (n,) bool (empty: no locks) and
-    partner (n,): the locks' rule (`locks.vanishing`, `locks.strands`; ``partner`` as `rules.stranded_by_pass` reads it)."""
+    The bundles: ``faces`` (`rules.Faces`), ``mesh`` (`Mesh`), ``limits`` (`Limits`), ``seams`` (`Seams`),
+    ``locks`` (`Locks`), ``scratch`` (`Scratch`)."""
+    F, alive, off, cnt, pool = faces
+    VQ, N0, bvert, deg = mesh
+    cos_max, sliver, keep_parts = limits
+    C, multi = seams
+    locked, partner = locks
+    mark, nb, fk, fc, T = scratch
     # one scan of each endpoint's faces: the link condition (the common neighbours are the apexes of the
     # pair's faces) and the faces that stay (not holding both endpoints), each with the corner that moves
     ka = nk = 0
@@ -167,6 +214,8 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     C = len(need)
     K, one, bo = keys, rows[0], rows[1]  # each pair's key (NO_KEY: not a candidate, or rejected)
     m1, m2 = verts[0], verts[1]
+    faces, mesh = Faces(F, alive, off, cnt, pool), Mesh(VQ, N0, bvert, deg)
+    limits, seams, locks = Limits(cos_max, sliver, keep_parts), Seams(corner_wedge, multi), Locks(locked, partner)
     ncand = 0
     for i in range(P):
         if cand[i]:
@@ -249,8 +298,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
                 nb = np.empty(4 * (cnt[a] + cnt[b]), np.int64)
                 fk, fc = np.empty(4 * (cnt[a] + cnt[b]), np.int64), np.empty(4 * (cnt[a] + cnt[b]), np.int64)
                 T = np.empty((12, 4 * (cnt[a] + cnt[b])), np.int64)
-            w = _rules(a, b, nf, X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-                       mark, nb, fk, fc, apex, na, corner_wedge, multi, T, locked, partner)
+            w = _rules(a, b, nf, X[i], faces, mesh, limits, seams, locks, Scratch(mark, nb, fk, fc, T), apex, na)
             c = vcopy[a]
             tried[c] = True
             if w == 0:

@@ -31,10 +31,23 @@ Faces are the corner array ``T`` (or ``F``) and each vertex's face list (``fs``/
 the device kernel in its order (products, then sums x + y, then + z, each rounded to float32)."""
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numpy as np
 from numba import njit
 
 from .._mesh import wedges_jit
+
+
+class Faces(NamedTuple):
+    """The faces as the schedulers' compiled loops hold them: corners T (m,3), which are alive, and each
+    vertex's faces as a list in a pool (start, length into ``pool``; `_mesh.incidence.FaceLists`' ``off``,
+    ``cnt``, ``pool``)."""
+    T: Any
+    alive: Any
+    start: Any
+    count: Any
+    pool: Any
 
 
 @njit(cache=True, inline="always")

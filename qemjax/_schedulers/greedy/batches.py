@@ -54,6 +54,7 @@ from . import wedges as gw
 from .. import locks as _locks
 from ..._mesh import wedges_jit
 from .. import outcome
+from ..rules import Faces
 from ..._kernels.flips import SLIVER
 from ..common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
 from .queue import stop_report
@@ -203,12 +204,6 @@ class _Compiled:
         self.depth = FIRST_BATCH
         self.batches = self.failed = 0
 
-    def arrays(self):
-        """The arrays and dicts `speculate.speculate` takes after its settings, in its order."""
-        return (self.T, self.alive, self.fs, self.fl, self.fpool, self.ns, self.nl, self.npool, self.VQ, self.N0,
-                self.cnt, self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur,
-                self.blocked, self.bat)
-
     def push_all(self):
         """Every pair into the queue, stamps in row order (pairs sorted)."""
         P = self.P0
@@ -308,10 +303,15 @@ class _Compiled:
             jit.rebuild(self.heap, ctr, self.K, self.cur, self.blocked)
         held, gone = _dict(), _dict()
         opt = self.options  # (scalars of fixed types: one compiled specialisation)
-        jit.speculate(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
-                      bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch), self.locks is not None,
-                      self.locked, *self.wed, *self.arrays(), self.steps,
-                      self.iv, held, gone, self.ver, self.orig, self.J, self.rm, ctr)
+        settings = jit.Settings(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
+                                bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch),
+                                self.locks is not None)
+        faces = Faces(self.T, self.alive, self.fs, self.fl, self.fpool)
+        queue = jit.Queue(self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur,
+                          self.blocked, self.bat)
+        batch = jit.Batch(self.steps, self.iv, held, gone, self.ver, self.orig, self.J, self.rm, ctr)
+        jit.speculate(settings, self.locked, jit.Seams(*self.wed), faces, jit.Partners(self.ns, self.nl, self.npool),
+                      self.VQ, self.N0, self.cnt, queue, batch)
         ns = int(ctr[jit.C_NSTEPS])
         steps = self.steps[:ns].copy()
         contracted = steps[steps[:, jit.S_KIND] == jit.CONTRACT]

@@ -26,13 +26,15 @@ Layout (one `State`, every field an array so that the kernels compile once and c
 """
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numpy as np
 from numba import njit, types
 from numba.typed import Dict
 
 from . import wedges as gw
 from ..outcome import LOCKED, SEAM
-from ..rules import has
+from ..rules import Faces, has
 from .checks import rules_head, rules_tail
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
@@ -48,6 +50,85 @@ NCTR = 18
 J_HEAP, J_ALIVE, J_AT, J_NBR, J_TRI, J_COUNT, J_CUR, J_BLOCKED = range(8)
 OPEN = 1 << 62
 M32 = 0xFFFFFFFF
+
+
+class Settings(NamedTuple):
+    """A batch's scalars: how many steps at most, the face target, the cost limit, the mode (manifold, a
+    `batches.simple` mesh, parts kept), the flip test's limits (float32), the first scratch row of VQ, and
+    whether there are locks."""
+    depth: int
+    target: int
+    max_cost: float
+    manifold: bool
+    simple: bool
+    keep_parts: bool
+    cos_max: Any
+    sliver: Any
+    scratch: int
+    has_locks: bool
+
+
+class Partners(NamedTuple):
+    """Each vertex's pair partners as a list in a pool (start, length into ``pool``)."""
+    start: Any
+    count: Any
+    pool: Any
+
+
+class Queue(NamedTuple):
+    """The queue: the heap of stamps, each stamp's key, price, cost, branch, parts and price before the seam
+    constraint (RP); ``cur`` {pair: current stamp}, ``blocked`` {pair: rule} and ``bat`` (blocked pairs per
+    vertex)."""
+    heap: Any
+    K: Any
+    X: Any
+    cost: Any
+    branch: Any
+    parts: Any
+    RP: Any
+    cur: Any
+    blocked: Any
+    bat: Any
+
+
+class Batch(NamedTuple):
+    """One batch's record: its steps, stale intervals, held and gone pairs, the scratch row of each vertex
+    kept in it (``ver``) and its row before (``orig``), the journal, the removed faces and the counters."""
+    steps: Any
+    iv: Any
+    held: Any
+    gone: Any
+    ver: Any
+    orig: Any
+    J: Any
+    rm: Any
+    ctr: Any
+
+
+class Seams(NamedTuple):
+    """Kept attributes (`wedges`): whether any (``wed``), the corners' wedges C, the wedge values, the seam
+    flags, the journal's old values VJ, the model's channels m (-1: none) and the solved channels."""
+    wed: bool
+    C: Any
+    val: Any
+    multi: Any
+    VJ: Any
+    m: int
+    m_solved: int
+    solved: Any
+    weights: Any
+
+
+class Step(NamedTuple):
+    """What the rules leave of one popped pair (`checks.rules_head`, `checks.rules_tail`): the counts
+    ``info``, the faces kept at a (A) and at b (B), the dead faces D, the dropped ones R; ``buf``: room for
+    the longest list `_contract` writes."""
+    info: Any
+    A: Any
+    B: Any
+    D: Any
+    R: Any
+    buf: Any
 
 
 @njit(cache=True, inline="always")
@@ -176,11 +257,7 @@ def _restamp(p, ctr, J, K, X, cost, branch, parts, RP, cur):
 
 
 @njit(cache=True)
-def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks, locked,
-              wed, C, val, multi, VJ, m, m_solved, solved, weights,
-              T, alive, fs, fl, fpool, ns, nl, npool, VQ, N0, cnt,
-              heap, K, X, cost, branch, parts, RP, cur, blocked, bat,
-              steps, iv, held, gone, ver, orig, J, rm, ctr):
+def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batch):
     """Pop and apply up to ``depth`` steps on the host into ``steps``; ctr[C_NSTEPS] of them. Pairs the
     steps stale are ``held`` out of the queue, pairs they remove are ``gone``. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
     (the caller grows them; a shorter batch gives the same run), and the lengths that step wanted in
@@ -189,7 +266,17 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
     ``wed``: kept attributes (`wedges`): the tracker's corners' wedges C, values val, seam flags
     multi (changed in place, journaled; VJ (depth + 1, k): old values), the model's channels m (-1: none)
     and the solved channels (m_solved, solved, weights) as `wedges.Tracker` holds them; RP: each stamp's
-    price before the seam constraint (x, cost)."""
+    price before the seam constraint (x, cost).
+
+    The bundles: ``settings`` (`Settings`), ``seams`` (`Seams`), ``faces`` (`rules.Faces`), ``partners``
+    (`Partners`), ``queue`` (`Queue`), ``batch`` (`Batch`); ``locked`` (n,) bool, VQ the host rows, N0 the
+    reference normals, ``cnt`` (n,3) zeros: the link condition's scratch."""
+    depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks = settings
+    wed, C, val, multi, VJ, m, m_solved, solved, weights = seams
+    T, alive, fs, fl, fpool = faces
+    ns, nl, npool = partners
+    heap, K, X, cost, branch, parts, RP, cur, blocked, bat = queue
+    steps, iv, held, gone, ver, orig, J, rm, ctr = batch
     ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = ctr[C_NRM] = 0
     ctr[C_WJ:C_WK + 1] = 0
     ctr[C_WRM] = 0
@@ -275,12 +362,10 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             gw.contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, X[s], X64, m_solved, solved, weights, TS, W,
                         VJ, ctr[C_DONE], J, ctr, C_JLEN)
         iv0 = ctr[C_NIV]
-        nub = _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
-                        locked, heap, K, cost, branch, parts, RP, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr,
+        nub = _contract(a, b, s, k, scratch, Step(info, A, B, D, R, buf), faces, partners, VQ, locked, queue, batch,
                         wed, UB)
         if wed:
-            TS = _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K, X, cost, RP,
-                             has_locks, locked, m, W, TS, J, ctr)
+            TS = _push_modes(iv0, nub, UB, faces, seams, VQ, queue, batch, has_locks, locked, W, TS)
         step[S_KIND], step[S_LEFT], step[S_ND], step[S_RM], step[S_NDROP] = CONTRACT, ctr[C_FACES], info[0], \
             r0, info[3]
         ctr[C_NSTEPS] = k + 1
@@ -298,13 +383,16 @@ def _pushed_pair(i, niv, iv, iv0, UB, K):
 
 
 @njit(cache=True)
-def _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K, X, cost, RP, has_locks, locked,
-                m, W, TS, J, ctr):
+def _push_modes(iv0, nub, UB, faces, seams, VQ, queue, batch, has_locks, locked, W, TS):
     """Kept attributes: what the loop's push after a contraction does with the seam constraint
     (`wedges.Tracker.constrain`), for the pairs it pushes: the new stale intervals iv[iv0:] (their mode,
     priced after the batch) and the stamps in UB[:nub] (pairs back from blocked, priced now and into the
     heap; ``-s - 1``: a pair of two locked vertices, priced and left blocked). The seam flags are read for
     all of them first, as `constrain` does. Returns the wedge scratch (grown where needed)."""
+    T, alive, fs, fl, fpool = faces
+    C, multi, m = seams.C, seams.multi, seams.m
+    heap, K, X, cost, RP = queue.heap, queue.K, queue.X, queue.cost, queue.RP
+    iv, J, ctr = batch.iv, batch.J, batch.ctr
     niv = ctr[C_NIV] - iv0
     total = niv + nub
     seam = np.empty(total, np.bool_)
@@ -374,14 +462,18 @@ def _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat):
 
 
 @njit(cache=True)
-def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
-              heap, K, cost, branch, parts, RP, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr, wed, UB):
+def _contract(a, b, s, k, scratch, step, faces, partners, VQ, locked, queue, batch, wed, UB):
     """Contract b into a at X[s] as step k (journaled): its dead faces D and dropped faces R leave the
     mesh, b's other faces use a; its pairs at b are gone, those at a stale (a new interval each), blocked
-    pairs around a back in the queue. ``info``, A, B, D, R: from `rules`; ``buf``: room for the longest
+    pairs around a back in the queue. ``step``: what `checks.rules_head` left (`Step`); its ``buf``: room for the longest
     list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never contract).
     ``wed`` (kept attributes): the pairs back from blocked are not pushed here but listed in UB (with the
     pairs of two locked vertices around a, new stamps: ``-s - 1``) for `_push_modes`; returns how many."""
+    info, A, B, D, R, buf = step
+    T, alive, fs, fl, fpool = faces
+    ns, nl, npool = partners
+    heap, K, X, cost, branch, parts, RP, cur, blocked, bat = queue
+    iv, held, gone, ver, orig, J, ctr = batch.iv, batch.held, batch.gone, batch.ver, batch.orig, batch.J, batch.ctr
     nd, nka, nkb, ndrop = info[0], info[1], info[2], info[3]
     for i in range(nd):
         f = D[i]
