@@ -307,11 +307,10 @@ class _Compiled:
                                 bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch),
                                 self.locks is not None)
         faces = Faces(self.T, self.alive, self.fs, self.fl, self.fpool)
-        queue = jit.Queue(self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur,
-                          self.blocked, self.bat)
-        batch = jit.Batch(self.steps, self.iv, held, gone, self.ver, self.orig, self.J, self.rm, ctr)
+        queue = jit.Queue(self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.bat)
+        batch = jit.Batch(self.steps, self.iv, self.ver, self.orig, self.J, self.rm, ctr)
         jit.speculate(settings, self.locked, jit.Seams(*self.wed), faces, jit.Partners(self.ns, self.nl, self.npool),
-                      self.VQ, self.N0, self.cnt, queue, batch)
+                      self.VQ, self.N0, self.cnt, queue, batch, self.cur, self.blocked, held, gone)
         ns = int(ctr[jit.C_NSTEPS])
         steps = self.steps[:ns].copy()
         contracted = steps[steps[:, jit.S_KIND] == jit.CONTRACT]

@@ -76,9 +76,8 @@ class Partners(NamedTuple):
 
 
 class Queue(NamedTuple):
-    """The queue: the heap of stamps, each stamp's key, price, cost, branch, parts and price before the seam
-    constraint (RP); ``cur`` {pair: current stamp}, ``blocked`` {pair: rule} and ``bat`` (blocked pairs per
-    vertex)."""
+    """The queue's arrays: the heap of stamps, each stamp's key, price, cost, branch, parts and price before
+    the seam constraint (RP), and the blocked pairs per vertex (``bat``)."""
     heap: Any
     K: Any
     X: Any
@@ -86,23 +85,29 @@ class Queue(NamedTuple):
     branch: Any
     parts: Any
     RP: Any
-    cur: Any
-    blocked: Any
     bat: Any
 
 
 class Batch(NamedTuple):
-    """One batch's record: its steps, stale intervals, held and gone pairs, the scratch row of each vertex
-    kept in it (``ver``) and its row before (``orig``), the journal, the removed faces and the counters."""
+    """One batch's arrays: its steps, stale intervals, the scratch row of each vertex kept in it (``ver``)
+    and its row before (``orig``), the journal, the removed faces and the counters."""
     steps: Any
     iv: Any
-    held: Any
-    gone: Any
     ver: Any
     orig: Any
     J: Any
     rm: Any
     ctr: Any
+
+
+class Maps(NamedTuple):
+    """The typed dicts: ``cur`` {pair: current stamp}, ``blocked`` {pair: rule}, and the batch's ``held``
+    {pair: its open interval} and ``gone`` {pair: the step that removed it}. Passed apart from the arrays'
+    bundles from Python: a typed dict inside a tuple takes numba's slow argument typing at each call."""
+    cur: Any
+    blocked: Any
+    held: Any
+    gone: Any
 
 
 class Seams(NamedTuple):
@@ -257,7 +262,7 @@ def _restamp(p, ctr, J, K, X, cost, branch, parts, RP, cur):
 
 
 @njit(cache=True)
-def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batch):
+def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batch, cur, blocked, held, gone):
     """Pop and apply up to ``depth`` steps on the host into ``steps``; ctr[C_NSTEPS] of them. Pairs the
     steps stale are ``held`` out of the queue, pairs they remove are ``gone``. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
     (the caller grows them; a shorter batch gives the same run), and the lengths that step wanted in
@@ -269,14 +274,15 @@ def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batc
     price before the seam constraint (x, cost).
 
     The bundles: ``settings`` (`Settings`), ``seams`` (`Seams`), ``faces`` (`rules.Faces`), ``partners``
-    (`Partners`), ``queue`` (`Queue`), ``batch`` (`Batch`); ``locked`` (n,) bool, VQ the host rows, N0 the
-    reference normals, ``cnt`` (n,3) zeros: the link condition's scratch."""
+    (`Partners`), ``queue`` (`Queue`), ``batch`` (`Batch`), and the dicts of `Maps`; ``locked`` (n,) bool, VQ
+    the host rows, N0 the reference normals, ``cnt`` (n,3) zeros: the link condition's scratch."""
     depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks = settings
     wed, C, val, multi, VJ, m, m_solved, solved, weights = seams
     T, alive, fs, fl, fpool = faces
     ns, nl, npool = partners
-    heap, K, X, cost, branch, parts, RP, cur, blocked, bat = queue
-    steps, iv, held, gone, ver, orig, J, rm, ctr = batch
+    heap, K, X, cost, branch, parts, RP, bat = queue
+    steps, iv, ver, orig, J, rm, ctr = batch
+    maps = Maps(cur, blocked, held, gone)
     ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = ctr[C_NRM] = 0
     ctr[C_WJ:C_WK + 1] = 0
     ctr[C_WRM] = 0
@@ -363,7 +369,7 @@ def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batc
                         VJ, ctr[C_DONE], J, ctr, C_JLEN)
         iv0 = ctr[C_NIV]
         nub = _contract(a, b, s, k, scratch, Step(info, A, B, D, R, buf), faces, partners, VQ, locked, queue, batch,
-                        wed, UB)
+                        maps, wed, UB)
         if wed:
             TS = _push_modes(iv0, nub, UB, faces, seams, VQ, queue, batch, has_locks, locked, W, TS)
         step[S_KIND], step[S_LEFT], step[S_ND], step[S_RM], step[S_NDROP] = CONTRACT, ctr[C_FACES], info[0], \
@@ -462,18 +468,19 @@ def _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat):
 
 
 @njit(cache=True)
-def _contract(a, b, s, k, scratch, step, faces, partners, VQ, locked, queue, batch, wed, UB):
+def _contract(a, b, s, k, scratch, step, faces, partners, VQ, locked, queue, batch, maps, wed, UB):
     """Contract b into a at X[s] as step k (journaled): its dead faces D and dropped faces R leave the
     mesh, b's other faces use a; its pairs at b are gone, those at a stale (a new interval each), blocked
-    pairs around a back in the queue. ``step``: what `checks.rules_head` left (`Step`); its ``buf``: room for the longest
-    list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never contract).
-    ``wed`` (kept attributes): the pairs back from blocked are not pushed here but listed in UB (with the
+    pairs around a back in the queue. ``step``: what `checks.rules_head` left (`Step`); its ``buf``: room for
+    the longest list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never
+    contract). ``maps``: the dicts (`Maps`). ``wed`` (kept attributes): the pairs back from blocked are not pushed here but listed in UB (with the
     pairs of two locked vertices around a, new stamps: ``-s - 1``) for `_push_modes`; returns how many."""
     info, A, B, D, R, buf = step
     T, alive, fs, fl, fpool = faces
     ns, nl, npool = partners
-    heap, K, X, cost, branch, parts, RP, cur, blocked, bat = queue
-    iv, held, gone, ver, orig, J, ctr = batch.iv, batch.held, batch.gone, batch.ver, batch.orig, batch.J, batch.ctr
+    heap, K, X, cost, branch, parts, RP, bat = queue
+    iv, ver, orig, J, ctr = batch.iv, batch.ver, batch.orig, batch.J, batch.ctr
+    cur, blocked, held, gone = maps
     nd, nka, nkb, ndrop = info[0], info[1], info[2], info[3]
     for i in range(nd):
         f = D[i]
