@@ -27,7 +27,7 @@ from qemjax._schedulers.greedy import batches as gc  # noqa: E402
 from qemjax._schedulers.greedy import speculate as jit  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "meshes"
-COMPILED = [  # (name, depth): methods of greedy_compiled._Compiled, kernels of greedy_jit, device calls
+COMPILED = [  # (name, depth): methods of batches._Compiled, kernels of speculate, device calls
     ("batch", 0), ("jit: speculate", 1), ("price_intervals", 1), ("jit: first_wrong", 1), ("jit: undo", 1),
     ("jit: forget_gone", 1), ("jit: last_intervals", 1), ("push", 1), ("jit: push", 2), ("record", 1),
     ("room", 1), ("jit: rebuild", 1), ("device: merge", 1), ("device: price", 1), ("device: set_rows", 1)]

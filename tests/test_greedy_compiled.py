@@ -475,7 +475,7 @@ def _entry(P, cost, l2, stamps):
 
 
 def test_heap_pops_in_key_then_stamp_order():
-    """`greedy_jit.heap_push`/`heap_pop` with `greedy_compiled.queue_keys` pop in the order of the
+    """`speculate.heap_push`/`heap_pop` with `batches.queue_keys` pop in the order of the
     one-at-a-time queue's tuples (cost, squared length, tie, a, b, stamp) from `heapq`: ties in cost and
     length, zeros of both signs, negative and infinite costs, repeated pairs, interleaved pushes and pops."""
     rng = np.random.default_rng(2)
@@ -513,7 +513,7 @@ def _first_wrong(orders, keys, start, end):
 
 
 def test_order_check_matches_python():
-    """`greedy_jit.first_wrong` = the order check in Python on random steps and intervals."""
+    """`speculate.first_wrong` = the order check in Python on random steps and intervals."""
     rng = np.random.default_rng(3)
     for _ in range(300):
         n, niv = int(rng.integers(1, 30)), int(rng.integers(0, 40))

@@ -354,8 +354,8 @@ def test_indexed_flips_match_numpy_reference():
 
 
 def test_host_flip_test_agrees_with_the_kernel_in_float32():
-    """flips_host (the greedy queue's numpy twin) decides as face_flips_at does, one contraction at a
-    time, on float32 inputs that include near-threshold turns and slivers."""
+    """flips_host (the device kernel's numpy twin, tests/reference_rules.py) decides as face_flips_at does,
+    one contraction at a time, on float32 inputs that include near-threshold turns and slivers."""
     n = 40
     V = rng.normal(size=(n, 3)).astype(np.float32)
     N0 = rng.normal(size=(60, 3)).astype(np.float32)

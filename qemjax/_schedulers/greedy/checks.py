@@ -9,19 +9,38 @@ contraction drops the faces it makes coincide, or a mesh with repeated corners o
 run. The same answers as the loop (tests/test_greedy_compiled.py compares whole runs)."""
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 from numba import njit
 
 from .. import rules as rule
 from ..outcome import BUDGET, COINCIDENT, FLIP, LOCKED, PART, TOPOLOGY
 
 
+class Step(NamedTuple):
+    """What the rules leave of one popped pair (`checks.rules_head`, `checks.rules_tail`): the counts
+    ``info``, the faces kept at a (A) and at b (B), the dead faces D, the dropped ones R; ``buf``: room for
+    the longest list `_contract` writes."""
+    info: Any
+    A: Any
+    B: Any
+    D: Any
+    R: Any
+    buf: Any
+
+
 @njit(cache=True)
-def rules_head(a, b, faces, target, manifold, simple, keep_parts, has_locks, locked, T, alive, fs, fl, fpool, cnt,
-               A, B, D, common, info):
-    """The code of the first rule up to the lock rule that contracting b into a breaks, or -1. Leaves
-    what the contraction would change: info = (number of dead faces, of faces kept at a, at b, of faces
-    dropped as coincident (set by `rules_tail`), of common neighbours), A and B the faces kept at a and at
-    b (room for fl[a] and fl[b]), D the dead faces (room for fl[a])."""
+def rules_head(a, b, faces_left, settings, locked, faces, cnt, step, common):
+    """The code of the first rule up to the lock rule that contracting b into a breaks, or -1, with
+    ``faces_left`` faces in the mesh. Leaves in ``step`` (`Step`) what the contraction would change: info =
+    (number of dead faces, of faces kept at a, at b, of faces dropped as coincident (set by `rules_tail`), of
+    common neighbours), A and B the faces kept at a and at b (room for fl[a] and fl[b]), D the dead faces
+    (room for fl[a]); the common neighbours in ``common``. ``settings``: `speculate.Settings`; ``faces``:
+    `rules.Faces`; ``cnt`` (n,3) zeros: the link condition's scratch."""
+    info, A, B, D = step.info, step.A, step.B, step.D
+    T, alive, fs, fl, fpool = faces
+    target, manifold, simple, keep_parts, has_locks = (settings.target, settings.manifold, settings.simple,
+                                                       settings.keep_parts, settings.has_locks)
     nd = nka = nkb = 0
     for i in range(fs[a], fs[a] + fl[a]):
         f = fpool[i]
@@ -37,7 +56,7 @@ def rules_head(a, b, faces, target, manifold, simple, keep_parts, has_locks, loc
             B[nkb] = f
             nkb += 1
     info[0], info[1], info[2], info[3] = nd, nka, nkb, 0
-    if faces - nd < target:
+    if faces_left - nd < target:
         return BUDGET
     ncommon = 0
     if manifold:
@@ -54,10 +73,14 @@ def rules_head(a, b, faces, target, manifold, simple, keep_parts, has_locks, loc
 
 
 @njit(cache=True)
-def rules_tail(a, b, x, faces, target, manifold, simple, cos_max, sliver, T, VQ, N0, A, B, R, common, info):
+def rules_tail(a, b, x, faces_left, settings, faces, VQ, N0, step, common):
     """After `rules_head` (and the seam rule): the flip test, then the coincident faces; the code of the
-    first that contracting b into a at x breaks, or -1. R: the faces dropped as coincident (non-manifold
-    mode; room for fl[a] + fl[b]), their number in info[3]."""
+    first that contracting b into a at x breaks, or -1. ``step``.R: the faces dropped as coincident
+    (non-manifold mode; room for fl[a] + fl[b]), their number in info[3]."""
+    info, A, B, R = step.info, step.A, step.B, step.R
+    T = faces.T
+    target, manifold, simple, cos_max, sliver = (settings.target, settings.manifold, settings.simple,
+                                                 settings.cos_max, settings.sliver)
     nd, nka, nkb, ncommon = info[0], info[1], info[2], info[4]
     for i in range(nka + nkb):
         f = A[i] if i < nka else B[i - nka]
@@ -70,7 +93,7 @@ def rules_tail(a, b, x, faces, target, manifold, simple, cos_max, sliver, T, VQ,
             return COINCIDENT
         return -1
     ndrop = rule.coincident_drop(a, b, T, A, nka, B, nkb, R)
-    if ndrop and (manifold or faces - nd - ndrop < target):  # forbidden in manifold mode, else dropped
+    if ndrop and (manifold or faces_left - nd - ndrop < target):  # forbidden in manifold mode, else dropped
         return COINCIDENT if manifold else BUDGET
     info[3] = ndrop
     return -1

@@ -35,7 +35,7 @@ from numba.typed import Dict
 from . import wedges as gw
 from ..outcome import LOCKED, SEAM
 from ..rules import Faces, has
-from .checks import rules_head, rules_tail
+from .checks import Step, rules_head, rules_tail
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
 S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_RM, S_NDROP = range(10)  # columns of ``steps``
@@ -122,18 +122,6 @@ class Seams(NamedTuple):
     m_solved: int
     solved: Any
     weights: Any
-
-
-class Step(NamedTuple):
-    """What the rules leave of one popped pair (`checks.rules_head`, `checks.rules_tail`): the counts
-    ``info``, the faces kept at a (A) and at b (B), the dead faces D, the dropped ones R; ``buf``: room for
-    the longest list `_contract` writes."""
-    info: Any
-    A: Any
-    B: Any
-    D: Any
-    R: Any
-    buf: Any
 
 
 @njit(cache=True, inline="always")
@@ -317,15 +305,14 @@ def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batc
             size = 2 * max(fl[a], fl[b])
             A, B, D, R = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64), \
                 np.empty(2 * size, np.int64)
-        code = rules_head(a, b, ctr[C_FACES], target, manifold, simple, keep_parts, has_locks, locked, T, alive, fs,
-                          fl, fpool, cnt, A, B, D, common, info)
+        code = rules_head(a, b, ctr[C_FACES], settings, locked, faces, cnt, Step(info, A, B, D, R, buf), common)
         if code < 0 and wed and (multi[a] or multi[b]):  # the seam rule, where the loop applies it
             TS = gw.fit(TS, max(fl[a], fl[b]))
             if not gw.seam_ok(T, alive, fs, fl, fpool, C, multi, VQ, a, b, X[s], TS, J, ctr, C_JLEN):
                 code = SEAM
         if code < 0:
-            code = rules_tail(a, b, X[s], ctr[C_FACES], target, manifold, simple, cos_max, sliver, T, VQ, N0, A, B,
-                              R, common, info)
+            code = rules_tail(a, b, X[s], ctr[C_FACES], settings, faces, VQ, N0, Step(info, A, B, D, R, buf),
+                              common)
         if code >= 0:
             _journal(J, ctr, J_BLOCKED, p, -1, 0)
             blocked[p] = code
