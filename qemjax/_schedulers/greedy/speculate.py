@@ -34,7 +34,7 @@ from numba.typed import Dict
 
 from . import wedges as gw
 from ..outcome import LOCKED, SEAM
-from ..rules import Faces, has
+from ..rules import has
 from .checks import Step, rules_head, rules_tail
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
