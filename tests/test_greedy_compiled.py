@@ -1,5 +1,5 @@
-"""The greedy queue in verified batches with its host side compiled (`_schedulers.greedy_compiled`, kernels
-in `greedy_jit` and `greedy_rules_jit`) gives exactly what the one-at-a-time loop of `_schedulers.greedy`
+"""The greedy queue in verified batches with its host side compiled (`_schedulers.greedy.batches`, kernels
+in `greedy.speculate` and `rules`) gives exactly what the one-at-a-time loop of `_schedulers.greedy`
 gives: the same contractions in the same order, the same outputs and stats bit for bit, in manifold and
 non-manifold mode (coincident faces dropped), on simple meshes and on meshes with repeated corners or
 faces; and each kernel answers as the code it stands for (flip test, link rule, coincident faces, heap
@@ -25,10 +25,12 @@ from qemjax._kernels import flips as flips_mod  # noqa: E402
 from qemjax._mesh import topology as topo  # noqa: E402
 from qemjax._mesh.incidence import FaceLists  # noqa: E402
 from qemjax._options import Options  # noqa: E402
-from qemjax._schedulers import greedy, greedy_compiled  # noqa: E402
-from qemjax._schedulers import greedy_jit as jit  # noqa: E402
-from qemjax._schedulers import greedy_rules_jit as rules_jit  # noqa: E402
-from qemjax._schedulers.queue import tie  # noqa: E402
+from qemjax._schedulers import greedy, rules  # noqa: E402
+from qemjax._schedulers.greedy import batches as greedy_compiled  # noqa: E402
+from qemjax._schedulers.greedy import speculate as jit  # noqa: E402
+
+import reference_rules  # noqa: E402
+from qemjax._schedulers.greedy.queue import tie  # noqa: E402
 from test_attributes import atlas_sphere  # noqa: E402
 
 CASES = {
@@ -297,21 +299,21 @@ def test_simple_means_no_repeated_corners_or_faces():
 
 
 def test_flip_kernel_matches_numpy():
-    """`greedy_rules_jit.flips` per face = `flips.flips_host_faces`, bit for bit in its float32 decisions: random
+    """`rules.flips` per face = `reference_rules.flips_host_faces`, bit for bit in its float32 decisions: random
     faces and moves, near-degenerate ones (collinear, zero area, tiny), three thresholds."""
     rng = np.random.default_rng(1)
     V = rng.normal(size=(60, 3)).astype(np.float32)
     V[50:] = V[:10] + rng.normal(0, 1e-4, (10, 3)).astype(np.float32)  # near duplicates
     V[40:45] = np.linspace(0, 1, 5)[:, None] * np.float32([1, 2, 3])  # collinear
     F = np.array([rng.choice(60, 3, replace=False) for _ in range(3000)], np.int64)
-    N0 = flips_mod._cross3(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32)
+    N0 = reference_rules._cross3(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32)
     N0[::7] = rng.normal(size=N0[::7].shape).astype(np.float32)  # references far from the faces' own
     k = rng.integers(0, 3, len(F))
     X = np.where(rng.random((len(F), 1)) < 0.3, V[F[np.arange(len(F)), (k + 1) % 3]] * np.float32(1.0001),
                  rng.normal(size=(len(F), 3))).astype(np.float32)
     for cos_max in (0.0, float(np.cos(np.radians(45))), -2.0):
-        want = flips_mod.flips_host_faces(V, N0, F, np.arange(len(F)), k, X, cos_max)
-        got = [rules_jit.flips(V, N0, F, f, k[f], X[f], np.float32(cos_max), np.float32(flips_mod.SLIVER))
+        want = reference_rules.flips_host_faces(V, N0, F, np.arange(len(F)), k, X, cos_max)
+        got = [rules.flips(V, N0, F, f, k[f], X[f], np.float32(cos_max), np.float32(flips_mod.SLIVER))
                for f in range(len(F))]
         assert np.array_equal(np.array(got), want)
         assert 0 < want.sum() < len(F)
@@ -343,9 +345,10 @@ def _at(F, n):
                                   lambda: (np.zeros((5, 3)), TENT), lambda: _non_simple("faces-twice")],
                          ids=["grid-with-hole", "torus", "tent", "faces-twice"])
 def test_link_kernel_matches_the_loops_rule(make):
-    """`greedy_rules_jit.link_common` holds where the one-at-a-time loop's `greedy._link_ok` does, for
+    """`rules.link_common` holds where the set-based twin (`reference_rules.link_ok_sets`) does, for
     every edge of the mesh and of coarser versions, and gives the common neighbours of the pair; with
-    the simple-mesh shortcut where the mesh is simple, and without it (the same answers) anyway."""
+    the simple-mesh shortcut where the mesh is simple, and without it (the same answers) anyway; and so
+    on the one-at-a-time loop's face lists (`greedy.loop._link_ok`)."""
     V, F = make()
     seen = set()
     for Vm, Fm in _coarser(V, F):
@@ -353,14 +356,15 @@ def test_link_kernel_matches_the_loops_rule(make):
         n, E = len(Vm), _edges(Fm)
         faces, at = FaceLists(Fm, n), _at(Fm, n)
         fs, fl, fpool = _kernel_lists(Fm, n)
-        cnt, out = np.zeros((n, 3), np.int64), np.zeros(2, np.int64)
+        cnt, out, alive = np.zeros((n, 3), np.int64), np.zeros(2, np.int64), np.ones(len(Fm), bool)
         shortcuts = (True, False) if greedy_compiled.simple(Fm) else (False,)
         for a, b in E.tolist():
             nshared = len(at[a] & at[b])
-            want = greedy._link_ok(faces, a, b, nshared)
+            want = reference_rules.link_ok_sets(faces, a, b, nshared)
+            assert greedy.loop._link_ok(faces, a, b, nshared) == want, (a, b)
             common = ({v for f in at[a] for v in Fm[f]} & {v for f in at[b] for v in Fm[f]}) - {a, b}
             for simple in shortcuts:
-                got = rules_jit.link_common(Fm, fs, fl, fpool, cnt, a, b, nshared, out, simple)
+                got = rules.link_common(Fm, alive, fs, fl, fpool, cnt, a, b, nshared, out, simple)
                 assert (got >= 0) == want, (a, b, simple)
                 if want:
                     assert got == len(common) and set(out[:got].tolist()) == common, (a, b)
@@ -372,7 +376,7 @@ def test_link_kernel_matches_the_loops_rule(make):
 @pytest.mark.parametrize("make", [lambda: shapes.grid(7, hole=True), lambda: shapes.torus(1.0, 0.35, 10, 6)],
                          ids=["grid-with-hole", "torus"])
 def test_lock_rule_kernel_matches_the_loops(make):
-    """`greedy_rules_jit._strands` = the loop's LOCKED rule (`_locks.vanishing` or `_locks.strands`) for
+    """`rules.stranded_by_step` (with `rules.locked_endpoint_bare`) = the loop's LOCKED rule (`_locks.vanishing` or `_locks.strands`) for
     every edge of the mesh and of coarser versions, with a third, then two thirds of the vertices locked."""
     from qemjax._schedulers import locks as _locks
 
@@ -393,7 +397,8 @@ def test_lock_rule_kernel_matches_the_loops(make):
                 want = bool(_locks.vanishing(lk, P, np.array([len(fids)]))[0]
                             or _locks.strands(lk, faces, P, (dead, np.zeros(len(dead), np.int64)))[0])
                 D = np.array(sorted(at[a] & at[b]), np.int64)
-                got = rules_jit._strands(a, b, len(D), len(fids), locked, Fm, fl, D)
+                got = rules.locked_endpoint_bare(len(fids), locked, a, b) or \
+                    rules.stranded_by_step(a, b, len(D), locked, Fm, fl, D)
                 assert got == want, (a, b)
                 seen.add(want)
     assert seen == ({True, False} if len(F) != 120 else {False})  # (the closed torus strands no vertex)
@@ -406,7 +411,7 @@ def _kept(F, at, a, b):
 
 def _drop_kernel(F, a, b, ka, kb):
     R = np.zeros(len(ka) + len(kb) + 1, np.int64)
-    m = rules_jit.coincident_drop(a, b, F, ka, len(ka), kb, len(kb), R)
+    m = rules.coincident_drop(a, b, F, ka, len(ka), kb, len(kb), R)
     return R[:m].tolist()
 
 
@@ -422,8 +427,8 @@ def _drop_reference(F, a, b, ka, kb):
 @pytest.mark.parametrize("make", [lambda: shapes.grid(7, hole=True), lambda: shapes.torus(1.0, 0.35, 10, 6),
                                   lambda: (np.zeros((5, 3)), TENT)], ids=["grid-with-hole", "torus", "tent"])
 def test_coincident_kernels_match_the_general_rule(make):
-    """`greedy_rules_jit.coincident_drop` = `topo.coincident_removals` for every edge; on a simple mesh
-    where the link rule holds, the shortcut (`_coincide`) says whether that drops anything."""
+    """`rules.coincident_drop` = `topo.coincident_removals` for every edge; on a simple mesh
+    where the link rule holds, the shortcut (`rules.coincide_at_apexes`) says whether that drops anything."""
     V, F = make()
     seen = set()
     for Vm, Fm in _coarser(V, F):
@@ -436,9 +441,10 @@ def test_coincident_kernels_match_the_general_rule(make):
             ka, kb = _kept(Fm, at, a, b)
             want = _drop_reference(Fm, a, b, ka, kb)
             assert _drop_kernel(Fm, a, b, ka, kb) == want, (a, b)
-            nc = rules_jit.link_common(Fm, fs, fl, fpool, cnt, a, b, len(at[a] & at[b]), common, True)
+            nc = rules.link_common(Fm, np.ones(len(Fm), bool), fs, fl, fpool, cnt, a, b, len(at[a] & at[b]), common,
+                                   True)
             if nc >= 0:
-                got = nc == 2 and rules_jit._coincide(a, b, Fm, ka, len(ka), kb, len(kb), common)
+                got = nc == 2 and rules.coincide_at_apexes(Fm, ka, len(ka), kb, len(kb), common[0], common[1])
                 assert got == bool(want), (a, b)
                 seen.add(got)
     assert seen == ({True, False} if len(F) == len(TENT) else {False})  # the tent has a coinciding contraction
@@ -469,7 +475,7 @@ def _entry(P, cost, l2, stamps):
 
 
 def test_heap_pops_in_key_then_stamp_order():
-    """`greedy_jit.heap_push`/`heap_pop` with `greedy_compiled.queue_keys` pop in the order of the
+    """`speculate.heap_push`/`heap_pop` with `batches.queue_keys` pop in the order of the
     one-at-a-time queue's tuples (cost, squared length, tie, a, b, stamp) from `heapq`: ties in cost and
     length, zeros of both signs, negative and infinite costs, repeated pairs, interleaved pushes and pops."""
     rng = np.random.default_rng(2)
@@ -507,7 +513,7 @@ def _first_wrong(orders, keys, start, end):
 
 
 def test_order_check_matches_python():
-    """`greedy_jit.first_wrong` = the order check in Python on random steps and intervals."""
+    """`speculate.first_wrong` = the order check in Python on random steps and intervals."""
     rng = np.random.default_rng(3)
     for _ in range(300):
         n, niv = int(rng.integers(1, 30)), int(rng.integers(0, 40))
@@ -541,7 +547,7 @@ def test_compiled_queue_ends_in_the_loops_state(case, monkeypatch):
         loop(self)
         seen["compiled"] = self
 
-    queue_cls = greedy._Queue
+    queue_cls = greedy.loop._Queue
 
     class KeptQueue(queue_cls):
         def __init__(self):
@@ -549,7 +555,7 @@ def test_compiled_queue_ends_in_the_loops_state(case, monkeypatch):
             seen["loop"] = self
 
     monkeypatch.setattr(greedy_compiled._Compiled, "loop", kept_loop)
-    monkeypatch.setattr(greedy, "_Queue", KeptQueue)
+    monkeypatch.setattr(greedy.loop, "_Queue", KeptQueue)
     make, kw = COMPILED[case] if case in COMPILED else (UV[case][0], dict(UV[case][1], attributes="uv"))
     new, _ = _run(make(), kw, monkeypatch, True)
     old, _ = _run(make(), kw, monkeypatch, False)
@@ -589,7 +595,7 @@ def test_kernels_stay_in_bounds():
     assert " passed" in out.stdout
 
 
-# kept attributes (UV seams, `greedy_wedges_jit`): the seam rule at the pop, the wedge updates journaled (a
+# kept attributes (UV seams, `greedy.wedges`): the seam rule at the pop, the wedge updates journaled (a
 # batch undone restores them), pairs at seam vertices priced at an allowed endpoint where the loop pushes them
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "spot" / "spot.obj"
 _NA = len(atlas_sphere(3)[0].vertices)
@@ -637,13 +643,13 @@ def test_compiled_queue_keeps_the_loops_wedges(monkeypatch):
     """After a uv run, the tracker as the loop leaves it: every corner's wedge, every wedge value and the
     seam flags (which decide how pairs at vertices with no faces left are priced), and the queue's entries."""
     trackers = []
-    real = greedy._run
+    real = greedy.run
 
     def keep(*a, **k):
-        trackers.append(a[8])
+        trackers.append(k["wedges"])
         return real(*a, **k)
 
-    monkeypatch.setattr(greedy, "_run", keep)
+    monkeypatch.setattr(greedy, "run", keep)
     mesh = atlas_sphere(3)[0]
     kw = {"ratio": 0.02, "preserve_topology": False, "attributes": "uv"}
     _run(mesh, kw, monkeypatch, True)
@@ -664,7 +670,7 @@ def test_an_undone_batch_restores_the_wedges(case, monkeypatch):
     real_spec, real_first, real_undo = jit.speculate, jit.first_wrong, jit.undo
 
     def speculate(*a):
-        snaps.append([np.array(x, copy=True) for x in a[12:15]])  # C, val, multi
+        snaps.append([np.array(x, copy=True) for x in (a[2].C, a[2].val, a[2].multi)])  # the seams' arrays
         return real_spec(*a)
 
     def first_wrong(*a):

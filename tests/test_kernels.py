@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from qemjax._kernels import flips, placement
+
+import reference_rules
 from qemjax._kernels import quadrics as qd
 from qemjax._kernels.batching import DTYPE
 from qemjax._costs.qem import QEM, initial_quadrics
@@ -352,8 +354,8 @@ def test_indexed_flips_match_numpy_reference():
 
 
 def test_host_flip_test_agrees_with_the_kernel_in_float32():
-    """flips_host (the greedy queue's numpy twin) decides as face_flips_at does, one contraction at a
-    time, on float32 inputs that include near-threshold turns and slivers."""
+    """flips_host (the device kernel's numpy twin, tests/reference_rules.py) decides as face_flips_at does,
+    one contraction at a time, on float32 inputs that include near-threshold turns and slivers."""
     n = 40
     V = rng.normal(size=(n, 3)).astype(np.float32)
     N0 = rng.normal(size=(60, 3)).astype(np.float32)
@@ -371,7 +373,7 @@ def test_host_flip_test_agrees_with_the_kernel_in_float32():
             want = bool(np.any(np.asarray(flips.face_flips_at(
                 jnp.asarray(V), jnp.asarray(N0), jnp.asarray(faces), jnp.asarray(fids.astype(np.int32)),
                 jnp.asarray(k.astype(np.int32)), jnp.asarray(np.tile(x, (K, 1))), np.float32(cos_max)))))
-            got = flips.flips_host(V, N0, faces, fids, k, x, cos_max)
+            got = reference_rules.flips_host(V, N0, faces, fids, k, x, cos_max)
             assert got == want, (faces, k, x, cos_max)
             verdicts.append(got)
     assert 0 < sum(verdicts) < len(verdicts)
@@ -491,7 +493,7 @@ def test_fixed_order_arithmetic_matches_float64_and_ignores_the_batch():
 
 
 def test_flips_host_blocks_match_the_component_twin():
-    """`flips.flips_host` (numpy on (K,3) blocks, several contractions per pass in the greedy queue) gives
+    """`reference_rules.flips_host` (numpy on (K,3) blocks, several contractions per pass) gives
     the answers of `_flips` on component lists, face by face, near the thresholds too."""
     rng = np.random.default_rng(5)
     for t in range(400):
@@ -507,9 +509,9 @@ def test_flips_host_blocks_match_the_component_twin():
         N0 = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32) if t % 2 else \
             rng.normal(size=(K, 3)).astype(np.float32)
         cos_max = [0.0, -2.0, 0.7071067811865476, -0.5][t % 4]
-        per_face = flips.flips_host_faces(V, N0, F, np.arange(K), k, x.astype(np.float32), cos_max)
+        per_face = reference_rules.flips_host_faces(V, N0, F, np.arange(K), k, x.astype(np.float32), cos_max)
         for i in range(K):
-            one = flips.flips_host_reference(V, N0, F[i:i + 1], np.arange(K)[i:i + 1], k[i:i + 1],
+            one = reference_rules.flips_host_reference(V, N0, F[i:i + 1], np.arange(K)[i:i + 1], k[i:i + 1],
                                              x.astype(np.float32), cos_max)
             assert bool(per_face[i]) == one, (t, i)
 

@@ -13,11 +13,12 @@ from qemjax import shapes
 from qemjax._kernels import flips as flips_mod
 from qemjax._mesh import topology as topo
 from qemjax._mesh.incidence import FaceLists
-from qemjax._schedulers import greedy_rules_jit as rules_jit
+from qemjax._schedulers import rules
 from qemjax._schedulers import parallel, round_jit
 from qemjax._schedulers.parallel import driver
 from edges_reference import contract_edges
 from test_attributes import atlas_sphere
+import reference_rules
 from test_greedy_compiled import CASES, _bipyramid, _jittered_sphere, _same, _two_spheres
 
 def _finned_sphere(k=20, size=0.02):
@@ -121,20 +122,20 @@ def test_compiled_round_in_a_batch(monkeypatch):
 
 
 def test_flip_test_matches_the_kernel():
-    """`greedy_rules_jit.flips` (the rounds' flip test) against `flips.flips_host_faces` (the device
+    """`rules.flips` (the rounds' flip test) against `reference_rules.flips_host_faces` (the device
     kernel's host twin) on random faces, near-degenerate ones included, at the default threshold and 45°."""
     rng = np.random.default_rng(3)
     V = rng.normal(size=(60, 3)).astype(np.float32)
     V[50:] = V[:10] + rng.normal(0, 1e-4, (10, 3)).astype(np.float32)  # near-duplicates: slivers
     F = np.array([rng.choice(60, 3, replace=False) for _ in range(400)], np.int32)
-    N0 = flips_mod.np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32)
+    N0 = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32)
     N0[::7] = -N0[::7]  # some references disagree with the face
     corner = rng.integers(0, 3, 400)
     X = (V[F[np.arange(400), corner]] + rng.normal(0, 0.3, (400, 3))).astype(np.float32)
     VQ = np.concatenate([V, np.zeros((60, 4), np.float32)], 1)
     for cos_max in (0.0, np.cos(np.radians(45))):
-        want = flips_mod.flips_host_faces(VQ, N0, F, np.arange(400), corner, X, cos_max)
-        got = np.array([rules_jit.flips(VQ, N0, F, f, corner[f], X[f], np.float32(cos_max),
+        want = reference_rules.flips_host_faces(VQ, N0, F, np.arange(400), corner, X, cos_max)
+        got = np.array([rules.flips(VQ, N0, F, f, corner[f], X[f], np.float32(cos_max),
                                          np.float32(flips_mod.SLIVER)) for f in range(400)])
         assert want.any() and not want.all()
         np.testing.assert_array_equal(got, want)

@@ -111,7 +111,7 @@ def test_queue_stays_as_long_as_its_pairs():
     import heapq
     from types import SimpleNamespace
 
-    from qemjax._schedulers.queue import Queue
+    from qemjax._schedulers.greedy.queue import Queue
 
     rng = np.random.default_rng(0)
     pairs = [(i, i + 1) for i in range(300)]

@@ -2,7 +2,7 @@
 contraction at a time, against the default method's compiled batches, on the same meshes in one process.
 
 The default method prices a pair from its two state rows, so the queue runs in verified batches with its
-host side compiled (`qemjax._schedulers.greedy_compiled`). The others here re-price a contraction's whole
+host side compiled (`qemjax._schedulers.greedy.batches`). The others here re-price a contraction's whole
 1-ring or rebuild state around it (ESQEM's curvature, the area difference, memoryless QEM, and the
 ``regularize`` and ``area_weight`` terms), and run the loop of `qemjax._schedulers.greedy`: a few device
 calls and a few hundred host operations per contraction.

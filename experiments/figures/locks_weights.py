@@ -3,7 +3,7 @@ the local error, in one run.
 
 1. Time: ``simplify`` with no locks, 1 % and 10 % of the vertices locked (random, fixed seed), per
    scheduler, warm (one untimed run of each first), repeats interleaved; the median and its ratio to no
-   locks. The greedy scheduler takes locks in its compiled verified batches (`greedy_compiled`; before
+   locks. The greedy scheduler takes locks in its compiled verified batches (`greedy.batches`; before
    2026-11-27 it left them for its one-at-a-time loop, which is what results/locks_weights.md measured).
 2. Weights: the vertices of a cap (x > 0.5 of the mesh's half-extent along x) weighted 1 (none), 10 and 100;
    the distance from every input vertex to the output surface, rms and max, inside the cap and outside,

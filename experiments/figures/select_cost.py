@@ -38,6 +38,8 @@ def _rules_loop():
     from qemjax._schedulers import round_jit
 
     rules = round_jit._rules
+    Faces, Mesh, Limits, Seams, Locks, Scratch = (round_jit.Faces, round_jit.Mesh, round_jit.Limits, round_jit.Seams,
+                                                  round_jit.Locks, round_jit.Scratch)
 
     @njit(cache=False)
     def loop(pairs, E, ecount, X, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
@@ -45,14 +47,16 @@ def _rules_loop():
         width = 64
         for i in pairs:
             width = max(width, 4 * (cnt[E[i, 0]] + cnt[E[i, 1]]))
-        nb = np.empty(width, np.int64)
-        fa = np.empty((width, 2), np.int64)
-        T = np.empty((12, width), np.int64)
+        scratch = Scratch(mark, np.empty(width, np.int64), np.empty(width, np.int64), np.empty(width, np.int64),
+                          np.empty((12, width), np.int64))
+        faces, mesh, limits = Faces(F, alive, off, cnt, pool), Mesh(VQ, N0, bvert, deg), Limits(cos_max, sliver,
+                                                                                               keep_parts)
+        locks = Locks(np.zeros(0, np.bool_), np.zeros(0, np.int32))
         apex = np.empty((1, 2), np.int64)
         bad = 0
         for i in pairs:
-            bad += rules(E[i, 0], E[i, 1], ecount[i], X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max,
-                         sliver, keep_parts, mark, nb, fa, apex, 0, C, multi, T) != 0
+            bad += rules(E[i, 0], E[i, 1], ecount[i], X[i], faces, mesh, limits, Seams(C, multi), locks, scratch,
+                         apex, 0) != 0
         return bad
 
     _LOOP.append(loop)

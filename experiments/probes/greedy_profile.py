@@ -1,6 +1,6 @@
 """Where a greedy run's time goes, per contraction: process CPU time of the verified batches' stages,
 each timed by wrapping it, in µs per contraction, with the device calls (merge, price, row updates: the
-JAX dispatch and the wait) apart: the compiled loop (`qemjax._schedulers.greedy_compiled`; its Python
+JAX dispatch and the wait) apart: the compiled loop (`qemjax._schedulers.greedy.batches`; its Python
 twin, `greedy_batches`, was retired at 2026-11-27: ``git show eee561e:experiments/probes/greedy_profile.py`` for
 its stages). ``--non-manifold``: with ``preserve_topology=False``.
 
@@ -23,11 +23,11 @@ EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules and resu
 sys.path[:0] = [str(EXPERIMENTS.parent)]  # this checkout's qemjax
 
 import qemjax  # noqa: E402
-from qemjax._schedulers import greedy_compiled as gc  # noqa: E402
-from qemjax._schedulers import greedy_jit as jit  # noqa: E402
+from qemjax._schedulers.greedy import batches as gc  # noqa: E402
+from qemjax._schedulers.greedy import speculate as jit  # noqa: E402
 
 SHARED = EXPERIMENTS.parent.parent / "shared" / "meshes"
-COMPILED = [  # (name, depth): methods of greedy_compiled._Compiled, kernels of greedy_jit, device calls
+COMPILED = [  # (name, depth): methods of batches._Compiled, kernels of speculate, device calls
     ("batch", 0), ("jit: speculate", 1), ("price_intervals", 1), ("jit: first_wrong", 1), ("jit: undo", 1),
     ("jit: forget_gone", 1), ("jit: last_intervals", 1), ("push", 1), ("jit: push", 2), ("record", 1),
     ("room", 1), ("jit: rebuild", 1), ("device: merge", 1), ("device: price", 1), ("device: set_rows", 1)]

@@ -54,7 +54,26 @@ def used_signatures() -> dict:
 
 
 def _sig_text(sig) -> str:
-    return "(" + ", ".join(repr(t) for t in sig) + ("," if len(sig) == 1 else "") + ")"
+    return "(" + ", ".join(_type_text(t) for t in sig) + ("," if len(sig) == 1 else "") + ")"
+
+
+def _type_text(t) -> str:
+    """A numba type as text that `_sig_types` evaluates back: its repr, but a named tuple (whose repr does not
+    evaluate) as ``named('module.Class', member types...)``."""
+    from numba.core import types as nt
+
+    if isinstance(t, (nt.NamedTuple, nt.NamedUniTuple)):
+        cls = t.instance_class
+        return f"named('{cls.__module__}.{cls.__qualname__}', " + ", ".join(_type_text(m) for m in t.types) + ")"
+    return repr(t)
+
+
+def _named(path: str, *members):
+    """The named-tuple type ``named(...)`` in a signature's text stands for (`_type_text`)."""
+    from numba.core import types as nt
+
+    module, _, name = path.rpartition(".")
+    return nt.BaseTuple.from_types(members, getattr(importlib.import_module(module), name))
 
 
 def _sig_types(text: str) -> tuple:
@@ -63,6 +82,7 @@ def _sig_types(text: str) -> tuple:
 
     names = {k: getattr(nt, k) for k in dir(nt) if not k.startswith("_")}
     names["omitted"] = lambda default: nt.Omitted(default)
+    names["named"] = _named
     text = re.sub(r"Literal\[\w+\]\(", "literal(", text)  # Literal[int](0): a constant a caller passes
     return eval(text, {"__builtins__": {}}, names)  # noqa: S307 - our own manifest, written by `write`
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from . import kernel
 from . import quadrics as qd
@@ -33,8 +32,9 @@ def _normal(p0, p1, p2):
 
 def _flips(p, k, x, cos_max, ref, xp=jnp):
     """Core on component lists: p = [p0, p1, p2] corners, each [x, y, z]; k corner index array;
-    x [x, y, z]; ref [x, y, z] or None. Returns a bool array. ``xp``: jax.numpy, or numpy for the
-    host twin `flips_host` (same operations in the same order)."""
+    x [x, y, z]; ref [x, y, z] or None. Returns a bool array. ``xp``: jax.numpy, or numpy (the tests'
+    host reference). The host form of this test, with the same float32 operations in the same order, is
+    `_schedulers.rules.flips`."""
     n0 = _normal(*p)
     q = [[xp.where(k == c, x[i], p[c][i]) for i in range(3)] for c in range(3)]
     n1 = _normal(*q)
@@ -47,58 +47,6 @@ def _flips(p, k, x, cos_max, ref, xp=jnp):
     if ref is not None:
         bad = bad | (qd.dot(ref, n1) <= cos_max * xp.sqrt(qd.dot(ref, ref)) * l1)
     return bad
-
-
-def flips_host(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarray, k: np.ndarray,
-               x: np.ndarray, cos_max) -> bool:
-    """`face_flips_at` on the host, in numpy, for the few faces of one contraction (the greedy queue tests
-    one pair at a time, where a device call would cost more than the arithmetic): does moving corner k (K,)
-    of faces (K,3) (rows of V (N,≥3)) to x (3,) flip any of them against its own normal or its
-    reference N0[fids]? Same float32 operations as the kernel (`_flips`), each rounded alike, on (K,3)
-    blocks rather than component lists: a few dozen numpy calls instead of a hundred, same bits
-    (tests/test_kernels.py compares the two)."""
-    return bool(flips_host_faces(V, N0, faces, fids, k, x, cos_max).any())
-
-
-def flips_host_faces(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarray, k: np.ndarray,
-                     x: np.ndarray, cos_max) -> np.ndarray:
-    """`flips_host` per face: (K,) bool. x: (3,), or (K,3) where each face's corner goes (the faces of
-    several contractions tested in one pass)."""
-    g = V[faces, :3].astype(np.float32)  # (K,3,3)
-    cos_max = np.float32(cos_max)
-    q = g.copy()
-    q[np.arange(len(g)), k] = np.asarray(x, np.float32)
-    # rows: the two edges from corner 0 before and after, then the edges after the move, each (K,3)
-    u = np.stack([g[:, 1] - g[:, 0], q[:, 1] - q[:, 0]])
-    v = np.stack([g[:, 2] - g[:, 0], q[:, 2] - q[:, 0]])
-    n0, n1 = _cross3(u, v)
-    e0, e1, e2 = u[1], q[:, 2] - q[:, 1], q[:, 0] - q[:, 2]
-    ref = N0[fids].astype(np.float32)
-    # the eight dot products at once, each summed x + y, then + z, as `quadrics.dot`
-    m = np.stack([n1, n0, n0, e0, e1, e2, ref, ref]) * np.stack([n1, n1, n0, e0, e1, e2, n1, ref])
-    d11, d01, d00, de0, de1, de2, dr1, drr = m[..., 0] + m[..., 1] + m[..., 2]
-    l1 = np.sqrt(d11)
-    bad = d01 <= cos_max * np.sqrt(d00) * l1
-    longest2 = np.maximum(np.maximum(de0, de1), de2)
-    bad |= (l1 <= SLIVER * longest2) & (cos_max > -1.0)
-    bad |= dr1 <= cos_max * np.sqrt(drr) * l1
-    return bad
-
-
-def _cross3(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """`_cross` of (…,3) rows: each component u_i v_j - u_j v_i in the same order."""
-    uu, vv = np.concatenate([u, u], -1), np.concatenate([v, v], -1)  # [x y z x y z]: rotations as views
-    return uu[..., 1:4] * vv[..., 2:5] - uu[..., 2:5] * vv[..., 1:4]
-
-
-def flips_host_reference(V, N0, faces, fids, k, x, cos_max) -> bool:
-    """`flips_host` through `_flips` itself, on component lists (what tests compare it with)."""
-    g = V[faces, :3].astype(np.float32)  # (K,3,3)
-    p = [[g[:, j, i] for i in range(3)] for j in range(3)]
-    ref = N0[fids].astype(np.float32)
-    x = np.asarray(x, np.float32)
-    return bool(np.any(_flips(p, k, [x[i] for i in range(3)], np.float32(cos_max),
-                              [ref[:, i] for i in range(3)], np)))
 
 
 def moved_corner_flips(p, k, x, cos_max, ref=None):

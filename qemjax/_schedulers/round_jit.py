@@ -4,7 +4,7 @@
 mesh); the same steps as two loops over integer arrays take a few tens of µs. This module holds those two
 loops, for the common case (`fits`): manifold mode with the pairs updated through the contractions (no
 non-edge pairs), at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through `wedges_jit`, and
-locked vertices' rule, `_all_dying`). They make exactly the choices of the numpy stages they
+locked vertices' rule, `rules.stranded_by_pass`). They make exactly the choices of the numpy stages they
 replace (`select.independent_sets` with `parallel._Run.validate`, then `FaceLists.contract_touched` and
 `topology.contract_edges`): the golden outputs are the same bits, and tests/test_round_jit.py compares each
 loop with the numpy code on random meshes.
@@ -12,7 +12,7 @@ loop with the numpy code on random meshes.
 * `select_validate`: the independent-set passes (each pair that holds the smallest key among the
   candidates touching its endpoints' closed 1-rings), each selected pair's rules (link condition,
   coincident faces, the part rule, the locks' rule, the seam rule, the flip test with the device kernel's
-  float32 operations, `greedy_rules_jit.flips`), the locking of accepted 1-rings and each copy's pass rule
+  float32 operations, `rules.flips`), the locking of accepted 1-rings and each copy's pass rule
   (`select._copies_staying`; one run is one copy).
 * `contract`: the accepted pairs' faces (dead ones out, b's corners to a, new runs in the pool) and
   pairs (merged, moved, counted, compacted), with the degrees after and which pairs are stale.
@@ -22,15 +22,59 @@ such edge is a pair (`topology.contract_edges` keeps exactly those).
 """
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numpy as np
 from numba import njit
 
 from .._mesh import wedges_jit
-from .greedy_rules_jit import flips
+from . import rules as rule
+from .rules import Faces
 from .outcome import COINCIDENT, FLIP, LOCKED, PART, SEAM, TOPOLOGY
 
 NO_KEY = np.iinfo(np.int64).max
 _SCRAMBLE = np.uint32(0x9E3779B1)
+
+
+class Mesh(NamedTuple):
+    """What `_rules` reads of the mesh besides its faces: positions VQ (n, ≥3), the input faces' reference
+    normals N0, which vertices are on a boundary and each vertex's degree."""
+    VQ: Any
+    N0: Any
+    bvert: Any
+    deg: Any
+
+
+class Limits(NamedTuple):
+    """The flip test's limits (float32 cos_max and sliver) and whether parts are kept."""
+    cos_max: Any
+    sliver: Any
+    keep_parts: bool
+
+
+class Seams(NamedTuple):
+    """Kept attributes: the wedge of each face corner (m,3) and the seam vertices (n,) ((0,3) and all False
+    without attributes)."""
+    corner_wedge: Any
+    multi: Any
+
+
+class Locks(NamedTuple):
+    """Locked vertices (n,) bool (empty: none) and ``partner`` (n,): each selected pair's endpoints name
+    each other in a pass, -1 elsewhere (`rules.stranded_by_pass`)."""
+    locked: Any
+    partner: Any
+
+
+class Scratch(NamedTuple):
+    """`_rules`' working arrays: ``mark`` (n,) zeros, left so (a's neighbours marked 1, common ones 2 while a
+    pair is tested); nb, fk, fc (≥ the faces at a and b): a's neighbours, the faces that stay and their
+    moving corners; T (12, ≥ the faces at a and b): the seam rule's."""
+    mark: Any
+    nb: Any
+    fk: Any
+    fc: Any
+    T: Any
 
 
 MAX_FACES = 1 << 17  # runs on more faces keep the numpy stages: see `fits`
@@ -61,33 +105,20 @@ def _key(kbits, idx, local, salt):
 
 
 @njit(cache=True)
-def _all_dying(c, F, alive, cnt, off, pool, partner):
-    """Whether every live face at vertex c dies in this pass: holds both endpoints of one of its selected
-    pairs (``partner``: each selected pair's endpoints name each other, -1 elsewhere). This is
-    `locks.strands`' count (the dying faces at c, over the pass's pairs, at least c's live faces): the faces
-    a pair removes are the live ones holding both its endpoints."""
-    for i in range(off[c], off[c] + cnt[c]):
-        f = pool[i]
-        if not alive[f]:
-            continue
-        g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
-        u, v = (g1, g2) if g0 == c else ((g0, g2) if g1 == c else (g0, g1))
-        if partner[u] != v:
-            return False
-    return True
-
-
-@njit(cache=True)
-def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-           mark, nb, fa, apex, s, C, multi, T, locked, partner):
+def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
     """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
     override each other in that order; the locks' rule, the seam rule and then the flip test count only
     for a pair that passes the rest.
     Writes the pair's apexes (its first two common neighbours by vertex id, -1 where fewer) to apex[s].
-    ``mark`` (n,) zeros, left so: a's neighbours are marked 1 and common ones 2 while the pair is tested.
-    T (12, ≥ the faces at a and b): the seam rule's scratch. locked (n,) bool (empty: no locks) and
-    partner (n,): the locks' rule (`locks.vanishing`, `locks.strands`; ``partner`` as `_all_dying` reads it)."""
+    The bundles: ``faces`` (`rules.Faces`), ``mesh`` (`Mesh`), ``limits`` (`Limits`), ``seams`` (`Seams`),
+    ``locks`` (`Locks`), ``scratch`` (`Scratch`)."""
+    F, alive, off, cnt, pool = faces
+    VQ, N0, bvert, deg = mesh
+    cos_max, sliver, keep_parts = limits
+    C, multi = seams
+    locked, partner = locks
+    mark, nb, fk, fc, T = scratch
     # one scan of each endpoint's faces: the link condition (the common neighbours are the apexes of the
     # pair's faces) and the faces that stay (not holding both endpoints), each with the corner that moves
     ka = nk = 0
@@ -102,9 +133,9 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
                 nb[ka] = u
                 ka += 1
         if g0 != b and g1 != b and g2 != b:
-            fa[nk, 0], fa[nk, 1] = f, 0 if g0 == a else (1 if g1 == a else 2)
+            fk[nk], fc[nk] = f, 0 if g0 == a else (1 if g1 == a else 2)
             nk += 1
-    nka = nk  # fa's first nka rows are a's
+    nka = nk  # the first nka kept faces are a's
     ncommon = 0
     c0, c1 = -1, -1
     bad_apex = False
@@ -117,7 +148,7 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
         if len(locked) and (g0 == a or g1 == a or g2 == a):  # a face that dies: its third vertex
             c = g0 if (g0 != a and g0 != b) else (g1 if (g1 != a and g1 != b) else g2)
             if locked[c] and not stranded:
-                stranded = _all_dying(c, F, alive, cnt, off, pool, partner)
+                stranded = rule.stranded_by_pass(c, F, alive, cnt, off, pool, partner)
         for u in (g0, g1, g2):
             if u != b and u != a and mark[u] == 1:
                 mark[u] = 2  # counted once
@@ -129,47 +160,32 @@ def _rules(a, b, nf, x, F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, s
                 if nf == 2 and deg[u] <= 3:
                     bad_apex = True
         if g0 != a and g1 != a and g2 != a:
-            fa[nk, 0], fa[nk, 1] = f, 0 if g0 == b else (1 if g1 == b else 2)
+            fk[nk], fc[nk] = f, 0 if g0 == b else (1 if g1 == b else 2)
             nk += 1
     for i in range(ka):  # the marks of a's neighbours, undone
         mark[nb[i]] = 0
     apex[s, 0], apex[s, 1] = c0, c1
-    linked = nf >= 1 and nf <= 2 and ncommon == nf and not (bvert[a] and bvert[b] and nf == 2) and not bad_apex
-    # coincident faces: two surviving faces with the same three corners once b is a. Only asked of a pair
-    # that passes the link condition (one that fails is refused for that, whatever else holds). No two live
-    # faces share three corners (the input has no duplicates, and this rule keeps it so), so such faces are
-    # one of a's, (a, p, q), and one of b's, (b, p, q): p and q are common neighbours of a and b, which for
-    # a linked pair are its apexes. So: a pair with two faces whose apexes c0, c1 are a face with a and one
-    # with b
-    gone = False
-    if linked and nf == 2:
-        at_a = at_b = False
-        for i in range(nk):
-            f = fa[i, 0]
-            g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
-            both = ((g0 == c0) | (g1 == c0) | (g2 == c0)) & ((g0 == c1) | (g1 == c1) | (g2 == c1))
-            if i < nka:
-                at_a |= both
-            else:
-                at_b |= both
-        gone = at_a and at_b
+    linked = rule.link_holds(nf, ncommon, bvert[a] and bvert[b], bad_apex)
+    # coincident faces: only asked of a pair that passes the link condition (one that fails is refused for
+    # that, whatever else holds); no two live faces share three corners (the input has none, and this rule
+    # keeps it so), so only the apexes' faces can coincide
+    gone = linked and nf == 2 and rule.coincide_at_apexes(F, fk, nka, fk[nka:], nk - nka, c0, c1)
     why = 0
     if gone:
         why = COINCIDENT
-    if keep_parts and nk == 0:
+    if rule.part_vanishes(keep_parts, nk):
         why = PART
     if not linked:
         why = TOPOLOGY
-    # a locked vertex never leaves the mesh: not as an endpoint with no face staying, nor as a stranded third
-    if why == 0 and len(locked) and ((nk == 0 and (locked[a] or locked[b])) or stranded):
+    if why == 0 and len(locked) and (rule.locked_endpoint_bare(nk, locked, a, b) or stranded):
         why = LOCKED
-    if why == 0 and (multi[a] or multi[b]):  # kept attributes: the seam rule (`wedges.Tracker.allowed`)
+    if why == 0 and (multi[a] or multi[b]):  # kept attributes: the seam rule
         free, nba, nab, _, _ = wedges_jit.modes(F, alive, cnt, off, pool, C, multi, a, b, T)
-        if not free and not ((nba >= 0 and wedges_jit._at(VQ, a, x)) or (nab >= 0 and wedges_jit._at(VQ, b, x))):
+        if not rule.seam_allows(free, nba >= 0, nab >= 0, VQ, a, b, x):
             why = SEAM
     if why == 0:
         for i in range(nk):
-            if flips(VQ, N0, F, fa[i, 0], fa[i, 1], x, cos_max, sliver):
+            if rule.flips(VQ, N0, F, fk[i], fc[i], x, cos_max, sliver):
                 why = FLIP
                 break
     return why
@@ -190,7 +206,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     working arrays, kept from round to round (fresh arrays this large would be mapped and faulted in anew on
     every call). corner_wedge (m,3) and multi (n,): the wedge of each face corner and the vertices on a
     seam, when attributes are kept (else (0,3) and all False). locked (n,) bool: the locked vertices (empty:
-    none), and partner (n,) int32 all -1 (left so): scratch of their rule (`_all_dying`).
+    none), and partner (n,) int32 all -1 (left so): scratch of their rule (`rules.stranded_by_pass`).
     Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices and their
     rules)."""
     P = len(E)
@@ -198,6 +214,8 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     C = len(need)
     K, one, bo = keys, rows[0], rows[1]  # each pair's key (NO_KEY: not a candidate, or rejected)
     m1, m2 = verts[0], verts[1]
+    faces, mesh = Faces(F, alive, off, cnt, pool), Mesh(VQ, N0, bvert, deg)
+    limits, seams, locks = Limits(cos_max, sliver, keep_parts), Seams(corner_wedge, multi), Locks(locked, partner)
     ncand = 0
     for i in range(P):
         if cand[i]:
@@ -227,7 +245,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
     out = np.zeros(C, np.bool_)
     done = np.zeros(C, np.bool_)
     nb = np.empty(64, np.int64)
-    fa = np.empty((64, 2), np.int64)
+    fk, fc = np.empty(64, np.int64), np.empty(64, np.int64)
     T = np.empty((12, 64), np.int64)  # the seam rule's scratch
     na = nr = 0
     for p in range(max_passes):
@@ -268,7 +286,7 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
         g[:] = 0
         tried[:] = False
         first = na
-        if len(locked):  # the pass's pairs, for the faces they remove together (`_all_dying`)
+        if len(locked):  # the pass's pairs, for the faces they remove together (`rules.stranded_by_pass`)
             for t in range(ns):
                 u, v = E[sel[t], 0], E[sel[t], 1]
                 partner[u], partner[v] = v, u
@@ -276,12 +294,11 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
             i = sel[t]
             a, b = E[i, 0], E[i, 1]
             nf = ecount[i]
-            if 2 * (cnt[a] + cnt[b]) > len(fa):  # room for the faces of the busiest pair so far
+            if 2 * (cnt[a] + cnt[b]) > len(fk):  # room for the faces of the busiest pair so far
                 nb = np.empty(4 * (cnt[a] + cnt[b]), np.int64)
-                fa = np.empty((4 * (cnt[a] + cnt[b]), 2), np.int64)
+                fk, fc = np.empty(4 * (cnt[a] + cnt[b]), np.int64), np.empty(4 * (cnt[a] + cnt[b]), np.int64)
                 T = np.empty((12, 4 * (cnt[a] + cnt[b])), np.int64)
-            w = _rules(a, b, nf, X[i], F, alive, cnt, off, pool, VQ, N0, bvert, deg, cos_max, sliver, keep_parts,
-                       mark, nb, fa, apex, na, corner_wedge, multi, T, locked, partner)
+            w = _rules(a, b, nf, X[i], faces, mesh, limits, seams, locks, Scratch(mark, nb, fk, fc, T), apex, na)
             c = vcopy[a]
             tried[c] = True
             if w == 0:

@@ -1,13 +1,13 @@
-"""The host side of the greedy queue's verified batches (`greedy_compiled`), compiled (numba): pops,
-rules (`greedy_rules_jit`), contractions, journal and commits on integer arrays, giving the contractions of
-the one-at-a-time loop (`greedy._run`) in its order.
+"""The host side of the greedy queue's verified batches (`batches`), compiled (numba): pops,
+rules (`checks`), contractions, journal and commits on integer arrays, giving the contractions of
+the one-at-a-time loop (`loop._run`) in its order.
 
 Why: after the batching, a greedy run was Python bookkeeping (~150 µs per contraction on the bunny, no
 stage above a fifth of it: experiments/results/greedy_where.md); the same steps over arrays take a few
-µs. What stays in Python (`greedy_compiled`) is what needs the device: merging the batch's kept vertices
+µs. What stays in Python (`batches`) is what needs the device: merging the batch's kept vertices
 and pricing its stale intervals, and the history. Both modes: in manifold mode a contraction removes the
 faces holding both its vertices; in non-manifold mode it also drops the faces it makes coincide
-(`greedy_rules_jit.coincident_drop`).
+(`rules.coincident_drop`).
 
 Layout (one `State`, every field an array so that the kernels compile once and cache):
 * faces: ``T`` (m,3) corners, ``alive``; per vertex its faces and its pair partners as lists in a pool
@@ -26,13 +26,16 @@ Layout (one `State`, every field an array so that the kernels compile once and c
 """
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numpy as np
 from numba import njit, types
 from numba.typed import Dict
 
-from . import greedy_wedges_jit as gw
-from .greedy_rules_jit import has, rules_head, rules_tail
-from .outcome import LOCKED, SEAM
+from . import wedges as gw
+from ..outcome import LOCKED, SEAM
+from ..rules import has
+from .checks import Step, rules_head, rules_tail
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
 S_KIND, S_A, S_B, S_MARK, S_CODE, S_STAMP, S_LEFT, S_ND, S_RM, S_NDROP = range(10)  # columns of ``steps``
@@ -47,6 +50,78 @@ NCTR = 18
 J_HEAP, J_ALIVE, J_AT, J_NBR, J_TRI, J_COUNT, J_CUR, J_BLOCKED = range(8)
 OPEN = 1 << 62
 M32 = 0xFFFFFFFF
+
+
+class Settings(NamedTuple):
+    """A batch's scalars: how many steps at most, the face target, the cost limit, the mode (manifold, a
+    `batches.simple` mesh, parts kept), the flip test's limits (float32), the first scratch row of VQ, and
+    whether there are locks."""
+    depth: int
+    target: int
+    max_cost: float
+    manifold: bool
+    simple: bool
+    keep_parts: bool
+    cos_max: Any
+    sliver: Any
+    scratch: int
+    has_locks: bool
+
+
+class Partners(NamedTuple):
+    """Each vertex's pair partners as a list in a pool (start, length into ``pool``)."""
+    start: Any
+    count: Any
+    pool: Any
+
+
+class Queue(NamedTuple):
+    """The queue's arrays: the heap of stamps, each stamp's key, price, cost, branch, parts and price before
+    the seam constraint (RP), and the blocked pairs per vertex (``bat``)."""
+    heap: Any
+    K: Any
+    X: Any
+    cost: Any
+    branch: Any
+    parts: Any
+    RP: Any
+    bat: Any
+
+
+class Batch(NamedTuple):
+    """One batch's arrays: its steps, stale intervals, the scratch row of each vertex kept in it (``ver``)
+    and its row before (``orig``), the journal, the removed faces and the counters."""
+    steps: Any
+    iv: Any
+    ver: Any
+    orig: Any
+    J: Any
+    rm: Any
+    ctr: Any
+
+
+class Maps(NamedTuple):
+    """The typed dicts: ``cur`` {pair: current stamp}, ``blocked`` {pair: rule}, and the batch's ``held``
+    {pair: its open interval} and ``gone`` {pair: the step that removed it}. Passed apart from the arrays'
+    bundles from Python: a typed dict inside a tuple takes numba's slow argument typing at each call."""
+    cur: Any
+    blocked: Any
+    held: Any
+    gone: Any
+
+
+class Seams(NamedTuple):
+    """Kept attributes (`wedges`): whether any (``wed``), the corners' wedges C, the wedge values, the seam
+    flags, the journal's old values VJ, the model's channels m (-1: none) and the solved channels."""
+    wed: bool
+    C: Any
+    val: Any
+    multi: Any
+    VJ: Any
+    m: int
+    m_solved: int
+    solved: Any
+    weights: Any
 
 
 @njit(cache=True, inline="always")
@@ -175,20 +250,27 @@ def _restamp(p, ctr, J, K, X, cost, branch, parts, RP, cur):
 
 
 @njit(cache=True)
-def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks, locked,
-              wed, C, val, multi, VJ, m, m_solved, solved, weights,
-              T, alive, fs, fl, fpool, ns, nl, npool, VQ, N0, cnt,
-              heap, K, X, cost, branch, parts, RP, cur, blocked, bat,
-              steps, iv, held, gone, ver, orig, J, rm, ctr):
+def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batch, cur, blocked, held, gone):
     """Pop and apply up to ``depth`` steps on the host into ``steps``; ctr[C_NSTEPS] of them. Pairs the
     steps stale are ``held`` out of the queue, pairs they remove are ``gone``. Stops early, with ctr[C_FULL] = 1, before a step that would not fit the arrays
     (the caller grows them; a shorter batch gives the same run), and the lengths that step wanted in
     ctr[C_WJ:C_WK + 1] (the pools: the slots it wanted, where short).
 
-    ``wed``: kept attributes (`greedy_wedges_jit`): the tracker's corners' wedges C, values val, seam flags
+    ``wed``: kept attributes (`wedges`): the tracker's corners' wedges C, values val, seam flags
     multi (changed in place, journaled; VJ (depth + 1, k): old values), the model's channels m (-1: none)
     and the solved channels (m_solved, solved, weights) as `wedges.Tracker` holds them; RP: each stamp's
-    price before the seam constraint (x, cost)."""
+    price before the seam constraint (x, cost).
+
+    The bundles: ``settings`` (`Settings`), ``seams`` (`Seams`), ``faces`` (`rules.Faces`), ``partners``
+    (`Partners`), ``queue`` (`Queue`), ``batch`` (`Batch`), and the dicts of `Maps`; ``locked`` (n,) bool, VQ
+    the host rows, N0 the reference normals, ``cnt`` (n,3) zeros: the link condition's scratch."""
+    depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks = settings
+    wed, C, val, multi, VJ, m, m_solved, solved, weights = seams
+    T, alive, fs, fl, fpool = faces
+    ns, nl, npool = partners
+    heap, K, X, cost, branch, parts, RP, bat = queue
+    steps, iv, ver, orig, J, rm, ctr = batch
+    maps = Maps(cur, blocked, held, gone)
     ctr[C_NSTEPS] = ctr[C_NIV] = ctr[C_DONE] = ctr[C_FULL] = ctr[C_NRM] = 0
     ctr[C_WJ:C_WK + 1] = 0
     ctr[C_WRM] = 0
@@ -223,15 +305,14 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             size = 2 * max(fl[a], fl[b])
             A, B, D, R = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64), \
                 np.empty(2 * size, np.int64)
-        code = rules_head(a, b, ctr[C_FACES], target, manifold, simple, keep_parts, has_locks, locked, T, fs, fl,
-                          fpool, cnt, A, B, D, common, info)
+        code = rules_head(a, b, ctr[C_FACES], settings, locked, faces, cnt, Step(info, A, B, D, R, buf), common)
         if code < 0 and wed and (multi[a] or multi[b]):  # the seam rule, where the loop applies it
             TS = gw.fit(TS, max(fl[a], fl[b]))
             if not gw.seam_ok(T, alive, fs, fl, fpool, C, multi, VQ, a, b, X[s], TS, J, ctr, C_JLEN):
                 code = SEAM
         if code < 0:
-            code = rules_tail(a, b, X[s], ctr[C_FACES], target, manifold, simple, cos_max, sliver, T, VQ, N0, A, B,
-                              R, common, info)
+            code = rules_tail(a, b, X[s], ctr[C_FACES], settings, faces, VQ, N0, Step(info, A, B, D, R, buf),
+                              common)
         if code >= 0:
             _journal(J, ctr, J_BLOCKED, p, -1, 0)
             blocked[p] = code
@@ -242,7 +323,7 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             continue
         need_j, need_f, need_n, unb, need_buf = _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat)
         nst = unb
-        if wed:  # the wedges' journal rows (`greedy_wedges_jit.contract`, a flag pair per pushed pair), and
+        if wed:  # the wedges' journal rows (`wedges.contract`, a flag pair per pushed pair), and
             # the blocked pairs of two locked vertices around a, priced again (a stamp each)
             need_j += fl[a] + fl[b] + 3 + 2 * (nl[a] + nl[b] + 2 * unb) + unb
             nst = 2 * unb
@@ -274,12 +355,10 @@ def speculate(depth, target, max_cost, manifold, simple, keep_parts, cos_max, sl
             gw.contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, X[s], X64, m_solved, solved, weights, TS, W,
                         VJ, ctr[C_DONE], J, ctr, C_JLEN)
         iv0 = ctr[C_NIV]
-        nub = _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X,
-                        locked, heap, K, cost, branch, parts, RP, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr,
-                        wed, UB)
+        nub = _contract(a, b, s, k, scratch, Step(info, A, B, D, R, buf), faces, partners, VQ, locked, queue, batch,
+                        maps, wed, UB)
         if wed:
-            TS = _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K, X, cost, RP,
-                             has_locks, locked, m, W, TS, J, ctr)
+            TS = _push_modes(iv0, nub, UB, faces, seams, VQ, queue, batch, has_locks, locked, W, TS)
         step[S_KIND], step[S_LEFT], step[S_ND], step[S_RM], step[S_NDROP] = CONTRACT, ctr[C_FACES], info[0], \
             r0, info[3]
         ctr[C_NSTEPS] = k + 1
@@ -297,13 +376,16 @@ def _pushed_pair(i, niv, iv, iv0, UB, K):
 
 
 @njit(cache=True)
-def _push_modes(iv0, nub, UB, iv, T, alive, fs, fl, fpool, C, multi, VQ, heap, K, X, cost, RP, has_locks, locked,
-                m, W, TS, J, ctr):
+def _push_modes(iv0, nub, UB, faces, seams, VQ, queue, batch, has_locks, locked, W, TS):
     """Kept attributes: what the loop's push after a contraction does with the seam constraint
     (`wedges.Tracker.constrain`), for the pairs it pushes: the new stale intervals iv[iv0:] (their mode,
     priced after the batch) and the stamps in UB[:nub] (pairs back from blocked, priced now and into the
     heap; ``-s - 1``: a pair of two locked vertices, priced and left blocked). The seam flags are read for
     all of them first, as `constrain` does. Returns the wedge scratch (grown where needed)."""
+    T, alive, fs, fl, fpool = faces
+    C, multi, m = seams.C, seams.multi, seams.m
+    heap, K, X, cost, RP = queue.heap, queue.K, queue.X, queue.cost, queue.RP
+    iv, J, ctr = batch.iv, batch.J, batch.ctr
     niv = ctr[C_NIV] - iv0
     total = niv + nub
     seam = np.empty(total, np.bool_)
@@ -373,14 +455,19 @@ def _needs(a, b, info, D, R, T, fl, ns, nl, npool, bat):
 
 
 @njit(cache=True)
-def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpool, ns, nl, npool, VQ, X, locked,
-              heap, K, cost, branch, parts, RP, cur, blocked, bat, iv, held, gone, ver, orig, J, ctr, wed, UB):
+def _contract(a, b, s, k, scratch, step, faces, partners, VQ, locked, queue, batch, maps, wed, UB):
     """Contract b into a at X[s] as step k (journaled): its dead faces D and dropped faces R leave the
     mesh, b's other faces use a; its pairs at b are gone, those at a stale (a new interval each), blocked
-    pairs around a back in the queue. ``info``, A, B, D, R: from `rules`; ``buf``: room for the longest
-    list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never contract).
-    ``wed`` (kept attributes): the pairs back from blocked are not pushed here but listed in UB (with the
+    pairs around a back in the queue. ``step``: what `checks.rules_head` left (`Step`); its ``buf``: room for
+    the longest list written (`_needs`). ``locked``: pairs of two locked vertices stay blocked (they never
+    contract). ``maps``: the dicts (`Maps`). ``wed`` (kept attributes): the pairs back from blocked are not pushed here but listed in UB (with the
     pairs of two locked vertices around a, new stamps: ``-s - 1``) for `_push_modes`; returns how many."""
+    info, A, B, D, R, buf = step
+    T, alive, fs, fl, fpool = faces
+    ns, nl, npool = partners
+    heap, K, X, cost, branch, parts, RP, bat = queue
+    iv, ver, orig, J, ctr = batch.iv, batch.ver, batch.orig, batch.J, batch.ctr
+    cur, blocked, held, gone = maps
     nd, nka, nkb, ndrop = info[0], info[1], info[2], info[3]
     for i in range(nd):
         f = D[i]
@@ -487,7 +574,7 @@ def _contract(a, b, s, k, scratch, info, A, B, D, R, buf, T, alive, fs, fl, fpoo
 @njit(cache=True)
 def undo(mark, T, alive, fs, fl, ns, nl, heap, K, cur, blocked, bat, J, ctr, C, val, multi, VJ):
     """Every change journaled since ``mark``, undone (last first); C, val, multi, VJ: the wedges'
-    (`greedy_wedges_jit`)."""
+    (`wedges`)."""
     for j in range(ctr[C_JLEN] - 1, mark - 1, -1):
         kind, i, o0, o1 = J[j, 0], J[j, 1], J[j, 2], J[j, 3]
         if kind == J_HEAP:

@@ -1,4 +1,4 @@
-"""The greedy queue in verified batches, with its host side compiled (`greedy_jit`): the same
+"""The greedy queue in verified batches, with its host side compiled (`speculate`): the same
 contractions, in the same order, with the same outputs bit for bit, as the one-at-a-time loop of `greedy`
 (tests/test_greedy_compiled.py runs both on the same meshes). Used for the models whose price reads only
 the pair's two rows (`eligible`: QEM and its attribute form without memoryless, ring support, refresh or
@@ -35,7 +35,7 @@ host rows hold the same versions as the device rows (the kept vertices' rows fro
 scratch rows merged), so that prices computed on the host (the attribute model's ``cost_at`` at a locked
 vertex, the seam constraint) read each interval's rows too.
 
-Kept attributes (`greedy_wedges_jit`): the seam rule at the pop and the wedge updates at the contraction
+Kept attributes (`wedges`): the seam rule at the pop and the wedge updates at the contraction
 run during the speculation, journaled; at each push the loop places pairs at seam vertices at an allowed
 endpoint (`wedges.Tracker.constrain`), which depends on the faces and wedges of that moment: the batch
 takes each pushed pair's mode then, and prices the endpoint after the merge call from the interval's
@@ -49,13 +49,14 @@ from types import SimpleNamespace
 import jax.numpy as jnp
 import numpy as np
 
-from . import greedy_jit as jit
-from . import greedy_wedges_jit as gw
-from . import locks as _locks
-from .._mesh import wedges_jit
-from . import outcome
-from .._kernels.flips import SLIVER
-from .common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
+from . import speculate as jit
+from . import wedges as gw
+from .. import locks as _locks
+from ..._mesh import wedges_jit
+from .. import outcome
+from ..rules import Faces
+from ..._kernels.flips import SLIVER
+from ..common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
 from .queue import stop_report
 
 _M32 = 0xFFFFFFFF
@@ -137,7 +138,7 @@ def _grown(a: np.ndarray, size: int) -> np.ndarray:
 
 
 class _Compiled:
-    """The run's state (arrays and typed dicts, as `greedy_jit` describes) and its batch loop."""
+    """The run's state (arrays and typed dicts, as `speculate` describes) and its batch loop."""
 
     def __init__(self, V, S, F, pairs, target, model, options, progress, locks=None, wedges=None):
         n, m = len(V), len(F)
@@ -155,7 +156,7 @@ class _Compiled:
         self.weights = None if locks is None or locks.weights is None else _grown(
             np.array(locks.weights, np.float64), rows)
         self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
-        # kept attributes: the tracker's arrays, changed in place (`greedy_wedges_jit`); none: empty ones
+        # kept attributes: the tracker's arrays, changed in place (`wedges`); none: empty ones
         self.wedges = wedges
         if wedges is None:
             self.wed = (False, np.zeros((0, 3), np.int64), np.zeros((0, 1)), np.zeros(n, bool), np.zeros((1, 1)),
@@ -203,12 +204,6 @@ class _Compiled:
         self.depth = FIRST_BATCH
         self.batches = self.failed = 0
 
-    def arrays(self):
-        """The arrays and dicts `greedy_jit.speculate` takes after its settings, in its order."""
-        return (self.T, self.alive, self.fs, self.fl, self.fpool, self.ns, self.nl, self.npool, self.VQ, self.N0,
-                self.cnt, self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.cur,
-                self.blocked, self.bat)
-
     def push_all(self):
         """Every pair into the queue, stamps in row order (pairs sorted)."""
         P = self.P0
@@ -253,7 +248,7 @@ class _Compiled:
 
     def room(self, stamps=0, full=False):
         """Grow the arrays for ``stamps`` more pushes; with ``full`` (a batch stopped for room), grow each
-        array the step that did not fit wanted more of (`greedy_jit.speculate` leaves the lengths), so that
+        array the step that did not fit wanted more of (`speculate.speculate` leaves the lengths), so that
         the step fits from an empty batch. Memory stays O(input) whatever the valence: the journal and the
         stale intervals, a batch's own, grow only when a batch could not take its first step (a batch that
         took some runs on in the next one); the pools are packed with room for the step; the stamp arrays
@@ -292,7 +287,7 @@ class _Compiled:
                 setattr(self, pool, new)
 
     def renumber(self):
-        """`greedy_jit.renumber` when the stamps used pass twice the queue's pairs (and SLACK): old stamps'
+        """`speculate.renumber` when the stamps used pass twice the queue's pairs (and SLACK): old stamps'
         rows are reused, so the stamp arrays do not grow with the run's pushes (a vertex of valence d
         re-prices d pairs per contraction at it: d² pushes where it absorbs its neighbours)."""
         if self.ctr[jit.C_STAMP] > 2 * jit.size(self.cur) + SLACK:
@@ -308,10 +303,14 @@ class _Compiled:
             jit.rebuild(self.heap, ctr, self.K, self.cur, self.blocked)
         held, gone = _dict(), _dict()
         opt = self.options  # (scalars of fixed types: one compiled specialisation)
-        jit.speculate(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
-                      bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch), self.locks is not None,
-                      self.locked, *self.wed, *self.arrays(), self.steps,
-                      self.iv, held, gone, self.ver, self.orig, self.J, self.rm, ctr)
+        settings = jit.Settings(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
+                                bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch),
+                                self.locks is not None)
+        faces = Faces(self.T, self.alive, self.fs, self.fl, self.fpool)
+        queue = jit.Queue(self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.bat)
+        batch = jit.Batch(self.steps, self.iv, self.ver, self.orig, self.J, self.rm, ctr)
+        jit.speculate(settings, self.locked, jit.Seams(*self.wed), faces, jit.Partners(self.ns, self.nl, self.npool),
+                      self.VQ, self.N0, self.cnt, queue, batch, self.cur, self.blocked, held, gone)
         ns = int(ctr[jit.C_NSTEPS])
         steps = self.steps[:ns].copy()
         contracted = steps[steps[:, jit.S_KIND] == jit.CONTRACT]
@@ -432,7 +431,7 @@ class _Compiled:
 
     def output(self):
         """The faces as a `FaceLists`, and the queue as `queue.stop_report` reads it."""
-        from .._mesh.incidence import FaceLists
+        from ..._mesh.incidence import FaceLists
         faces = FaceLists(self.T.astype(np.int32), self.n)
         faces.alive = self.alive.copy()
         faces.count = int(self.ctr[jit.C_FACES])

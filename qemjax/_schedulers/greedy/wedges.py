@@ -1,6 +1,6 @@
-"""Kept attributes (wedges, `_mesh.wedges.Tracker`) in the greedy queue's verified batches (`greedy_jit`):
+"""Kept attributes (wedges, `_mesh.wedges.Tracker`) in the greedy queue's verified batches (`speculate`):
 the seam rule, the wedge updates and the pricing of pairs at seam vertices, where and as the one-at-a-time
-loop (`greedy._run`) applies them, with every change journaled so that a batch's undo restores it.
+loop (`loop._run`) applies them, with every change journaled so that a batch's undo restores it.
 
 The loop calls the tracker at three points, all of which read or change the corners' wedges ``C``, the
 wedge values ``val`` and the seam flags ``multi`` (`wedges_jit.modes` narrows a vertex's flag to whether it
@@ -18,16 +18,17 @@ the flags follow the loop's exactly):
 * at the contraction, before the faces relink: the corners' wedges and the kept wedge's value
   (`contract`, `wedges.Tracker.contract`).
 
-Journal rows (``J``, as `greedy_jit` writes them: kind, index, old, old): `J_MULTI` (vertex, old flag),
+Journal rows (``J``, as `speculate` writes them: kind, index, old, old): `J_MULTI` (vertex, old flag),
 `J_WC` (face, corner, old wedge), `J_VAL` (wedge, row of ``VJ`` holding its old value)."""
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from .._mesh import wedges_jit as wj
+from ..._mesh import wedges_jit as wj
+from ..rules import seam_allows
 
-J_MULTI, J_WC, J_VAL = 8, 9, 10  # journal kinds (after `greedy_jit`'s)
+J_MULTI, J_WC, J_VAL = 8, 9, 10  # journal kinds (after `speculate`'s)
 KEEP_A, KEEP_B = 1, 2  # mode bits: keeping the pair's first (second) vertex is allowed
 FREE = -1  # the mode of a pair of single-wedge vertices (no constraint; nor is there with mode 0: none allowed)
 M32 = 0xFFFFFFFF
@@ -69,9 +70,7 @@ def seam_ok(T, alive, fs, fl, fpool, C, multi, VQ, a, b, x, TS, J, ctr, jl):
     if not (multi[a] or multi[b]):
         return True
     mode = modes(T, alive, fs, fl, fpool, C, multi, a, b, TS, J, ctr, jl)
-    if mode == FREE:
-        return True
-    return ((mode & KEEP_A) != 0 and wj._at(VQ, a, x)) or ((mode & KEEP_B) != 0 and wj._at(VQ, b, x))
+    return seam_allows(mode == FREE, (mode & KEEP_A) != 0, (mode & KEEP_B) != 0, VQ, a, b, x)
 
 
 @njit(cache=True)
@@ -134,7 +133,7 @@ def constrain_rows(VQ, rows, mode, x, cost, m):
 
 @njit(cache=True)
 def ordered_bits(c):
-    """`greedy_compiled.ordered_bits` of one float32."""
+    """`batches.ordered_bits` of one float32."""
     buf = np.empty(1, np.float32)
     buf[0] = c + np.float32(0.0)
     u = np.uint64(buf.view(np.uint32)[0])

@@ -1,22 +1,8 @@
-"""Garland & Heckbert's algorithm as published: one priority queue of all valid pairs, contract the
-cheapest, re-cost the pairs whose cost changed. The quality reference for the parallel scheduler.
-
-It runs on the same rules as the parallel scheduler, one contraction at a time: the faces in
-`FaceLists`, the manifold rules of `topo.link_ok` (as a scalar check on the pair's neighbourhood), the
-coincident-face rule of `topo.coincident_removals`, the flip test (`flips.flips_host`, the flip kernel's
-numpy twin: one contraction's few faces cost less on the host than a device call), and the cost model's
-batched price and merge on the device rows.
-
-A run takes one of two paths, with the same contractions in the same order and the same outputs:
-* models whose price reads only the pair's two rows (`greedy_compiled.eligible`: QEM and its attribute
-  form without memoryless, ring support, refresh or ranking weights): the queue in verified speculative
-  batches with its host side compiled (`greedy_compiled`, `greedy_jit`, `greedy_rules_jit`): one merge and
-  one price call per few dozen contractions instead of per contraction, in both modes, on any mesh, with
-  or without locks and weights, and with kept attributes (the seam rule, the wedge updates and the seam
-  pricing at each push, journaled: `greedy_wedges_jit`);
-* everything else (ring-support, refreshed or rank-weighted models), and any run where numba is missing
-  (a core dependency: only a safety net): the loop below, one contraction and one device round trip at
-  a time. It is the reference the compiled path is tested against (tests/test_greedy_compiled.py).
+"""The greedy queue one contraction at a time: pop the cheapest pair, apply the rules (`.._schedulers.rules`,
+in this order: the face budget, the link condition, the part rule, the lock rule, the seam rule, the flip
+test, the coincident faces), contract it, re-price the pairs around it on the device. It runs the models
+the verified batches (`batches`) do not (ring-support, refreshed or rank-weighted ones), and is what the
+batches are tested against.
 """
 from __future__ import annotations
 
@@ -25,14 +11,15 @@ import heapq
 import jax.numpy as jnp
 import numpy as np
 
-from . import locks as _locks
-from .._mesh import topology as topo
-from .._costs import MeshView
-from .._mesh.incidence import FaceLists
-from . import outcome
-from .._kernels import flips
-from .common import DTYPE, Options, bucket, face_normals, gc_paused, set_rows, start_merge, start_price
-from .outcome import BUDGET
+from .. import locks as _locks
+from .. import outcome
+from .. import rules
+from ..._costs import MeshView
+from ..._kernels.flips import SLIVER
+from ..._mesh import topology as topo
+from ..._mesh.incidence import FaceLists
+from ..common import DTYPE, Options, bucket, face_normals, set_rows, start_merge, start_price
+from ..outcome import BUDGET
 from .queue import Queue as _Queue, stop_report as _stop
 
 
@@ -41,65 +28,26 @@ SMALL = 64  # a contraction's re-pricing (a 1-ring's pairs) goes in pieces of th
 # `batching.CHUNKS`: the kernels then price a few dozen pairs, not mostly padding
 
 
-def _link_ok(faces: FaceLists, a: int, b: int, nshared: int) -> bool:
-    """`topo.link_ok` for the one pair (a, b) with ``nshared`` faces, on Python sets of its neighbourhood
-    (a scalar check costs a few microseconds where the vectorised one costs hundreds): a manifold edge
-    whose endpoints' common neighbours are exactly the apexes of its faces, that does not pinch two
-    boundaries together through an interior edge, and no apex of an interior edge of degree 3."""
-    if not 1 <= nshared <= 2:
-        return False
-    w, f = faces.around(np.array([a, b]))
-    G = np.take(faces.F, f, axis=0)
-    ring_a, ring_b = G[w == 0], G[w == 1]
-    common = (set(ring_a.ravel().tolist()) & set(ring_b.ravel().tolist())) - {a, b}
-    if len(common) != nshared:
-        return False
-    if nshared == 2:
-        if _on_boundary(ring_a, a) and _on_boundary(ring_b, b):
-            return False
-        for c in common:
-            if len(set(np.take(faces.F, faces.around(np.array([c]))[1], axis=0).ravel().tolist())) - 1 <= 3:
-                return False
-    return True
+def _link_ok(faces: FaceLists, a: int, b: int, nshared: int, cnt=None) -> bool:
+    """The link condition (`rules.link_common`) for the one pair (a, b) with ``nshared`` faces, on the face
+    lists (which still list dead faces: the lists are not `batches.simple`'s). ``cnt`` (n,3) int64 zeros,
+    left so (a fresh one when None)."""
+    if cnt is None:
+        cnt = np.zeros((len(faces.cnt), 3), np.int64)
+    return rules.link_common(faces.F, faces.alive, faces.off, faces.cnt, faces.pool, cnt, a, b, nshared,
+                             np.empty(2, np.int64), False) >= 0
 
 
-def _on_boundary(ring: np.ndarray, v: int) -> bool:
-    """Whether v has an edge with one face, from its faces ``ring`` (k,3): a neighbour seen in one face."""
-    others = ring.ravel()
-    return bool(np.any(np.unique(others[others != v], return_counts=True)[1] == 1))
-
-
-def _compiled():
-    """`greedy_compiled`, or None without numba (a core dependency; then the loop below runs)."""
-    try:
-        from . import greedy_compiled
-    except ImportError:  # pragma: no cover
-        return None
-    return greedy_compiled
-
-
-def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
-        options: Options, progress=None, wedges=None, edges=None, part_scale=None, locks=None):
-    """`_run` with Python's garbage collector paused (`common.gc_paused`)."""
-    with gc_paused():
-        return _run(V, S, F, extra_pairs, target_faces, model, options, progress, wedges, locks)
-
-
-def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
-         options: Options, progress=None, wedges=None, locks=None):
-    """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
-    F (m,3) int64, extra_pairs (k,2) non-edge pairs that may also contract (aggregation). Returns the
-    `outcome.Outcome` (``wedges``: as in `parallel.run`; ``edges`` and ``part_scale``, which the parallel
-    scheduler uses, are not needed by the queue; ``locks``: a `_locks.RunLocks` or None, as there)."""
+def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_faces: int, model,
+        options: Options, progress=None, wedges=None, locks=None):
+    """Simplify (`greedy.run`, whose arguments these are; ``pairs`` (k,2): the edges, then the extra pairs,
+    each sorted). Returns the `outcome.Outcome`."""
     n = len(V)
     manifold = options.preserve_topology
     params = model.kernel_params()
     faces = FaceLists(F, n)
-    E, _ = topo.edges(F, n)
-    pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
-    compiled = _compiled()
-    if compiled is not None and compiled.eligible(model):  # the same run, in verified batches
-        return compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks, wedges)
+    cnt = np.zeros((n, 3), np.int64)  # the link condition's scratch
+    cos_max, sliver = np.float32(options.cos_max), np.float32(SLIVER)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)
@@ -177,20 +125,20 @@ def _run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, t
         if faces.count - nshared < target_faces:
             block((a, b), BUDGET)
             continue
-        if manifold and not _link_ok(faces, a, b, nshared):
+        if manifold and not _link_ok(faces, a, b, nshared, cnt):
             block((a, b), outcome.TOPOLOGY)
             continue
-        if manifold and options.keep_parts and len(fids) == 0:  # its faces are all its part has left
+        if manifold and rules.part_vanishes(options.keep_parts, len(fids)):
             block((a, b), outcome.PART)
             continue
-        if locks is not None and ((len(fids) == 0 and (locks.locked[a] or locks.locked[b])) or
+        if locks is not None and (rules.locked_endpoint_bare(len(fids), locks.locked, a, b) or
                                   _locks.strands(locks, faces, P, (dead, np.zeros(len(dead), np.int64)))[0]):
             block((a, b), outcome.LOCKED)  # a locked vertex never leaves the mesh with its last faces
             continue
         if wedges is not None and not wedges.allowed(faces, VQ, a, b, x):
             block((a, b), outcome.SEAM)
             continue
-        if len(fids) and flips.flips_host(VQ, N0, before, fids, corner, x, options.cos_max):
+        if len(fids) and rules.any_flip(VQ, N0, faces.F, fids, corner, np.asarray(x, DTYPE), cos_max, sliver):
             block((a, b), outcome.FLIP)
             continue
         # faces that would coincide after the contraction: forbidden in manifold mode, else dropped

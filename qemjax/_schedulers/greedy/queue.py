@@ -1,6 +1,6 @@
 """The greedy scheduler's priority queue (`Queue`, lazy deletion), its tie-break (`tie`) and the stop
 report from what is left in it (`stop_report`): shared by the one-at-a-time loop (`greedy`) and the verified
-batches (`greedy_compiled`)."""
+batches (`batches`)."""
 from __future__ import annotations
 
 import heapq
@@ -8,11 +8,11 @@ import itertools
 
 import numpy as np
 
-from .._mesh.incidence import FaceLists
-from . import outcome
-from .._mesh.fixed_order import weighted_sum
-from .common import Options
-from .outcome import BUDGET
+from ..._mesh.incidence import FaceLists
+from .. import outcome
+from ..._mesh.fixed_order import weighted_sum
+from ..common import Options
+from ..outcome import BUDGET
 
 
 def tie(a: int, b: int) -> int:
