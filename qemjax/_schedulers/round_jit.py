@@ -1,12 +1,12 @@
 """The parallel round's host side, compiled (numba): selection passes with validation, and the contraction.
 
-`parallel._Run` spends a round in hundreds of numpy calls on small arrays (about 1 ms a round on a 6 k-face
-mesh); the same steps as two loops over integer arrays take a few tens of µs. This module holds those two
+The numpy stages (`parallel.StagedRound`) spend a round in hundreds of numpy calls on small arrays; the same
+steps as two loops over integer arrays take a small fraction of that (docs/benchmarks.md). This module holds those two
 loops, for the common case (`fits`): manifold mode with the pairs updated through the contractions (no
 non-edge pairs), at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through `wedges_jit`, and
 locked vertices' rule, `rules.stranded_by_pass`). They make exactly the choices of the numpy stages they
-replace (`select.independent_sets` with `parallel._Run.validate`, then `FaceLists.contract_touched` and
-`topology.contract_edges`): the golden outputs are the same bits, and tests/test_round_jit.py compares each
+replace (`select.independent_sets` with `parallel.StagedRound.validate`, then `FaceLists.contract_touched` and
+the edge update of `parallel.pairs.EdgeUpdate`): the golden outputs are the same bits, and tests/test_round_jit.py compares each
 loop with the numpy code on random meshes.
 
 * `select_validate`: the independent-set passes (each pair that holds the smallest key among the
@@ -84,14 +84,13 @@ def fits(manifold: bool, incremental: bool, locks, faces: int) -> bool:
     """Whether a run's rounds take the compiled loops: the mode of the module docstring, on at most
     `MAX_FACES` faces. Both give the same bits; the choice is speed alone. The loops test one pair after
     another, and on a large mesh each pair's faces are cache misses that wait in turn, where numpy's
-    whole-array gathers keep many in flight (and share the round with a worker thread): warm, with the numpy
-    stages and with the loops, the cow (5.8 k faces) to 10 % took 0.046 and 0.019 s, the bunny (69 k) 0.174
-    and 0.149 s, armadillo (86 k) 0.204 and 0.199 s, armadillo x16 (1.38 M) to 1 % 3.25 and 4.65 s, the
-    same bits (python experiments/round_paths.py, experiments/results/round_paths_1128g.txt).
+    whole-array gathers keep many in flight (and share the round with a worker thread): the loops win on small
+    and mid-sized meshes and lose on meshes of millions of faces, with the same bits
+    (`python experiments/probes/round_paths.py`; the figures in docs/benchmarks.md).
 
     ``locks`` (a `locks.RunLocks` or None) does not change the answer: locked vertices' rule runs inside the
     loops (`_rules`), and the prices' part of them (`locks.adjust`, pairs of two locked vertices,
-    seam placements pinned at a locked vertex) is applied around the compiled calls (`parallel._Run`), with
+    seam placements pinned at a locked vertex) is applied around the compiled calls (`parallel.LoopRound`), with
     the same bits as the numpy stages (tests/test_locks_compiled.py). The parameter stays so that callers
     need not know."""
     return manifold and incremental and faces <= MAX_FACES
@@ -106,7 +105,7 @@ def _key(kbits, idx, local, salt):
 
 @njit(cache=True)
 def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
-    """The rule pair (a, b) with nf faces breaks (0: none), as `parallel._Run.validate` decides it in
+    """The rule pair (a, b) with nf faces breaks (0: none), as `parallel.StagedRound.validate` decides it in
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
     override each other in that order; the locks' rule, the seam rule and then the flip test count only
     for a pair that passes the rest.
@@ -195,7 +194,7 @@ def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
 def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes, pass_yield, keep_parts,
                     F, alive, cnt, off, pool, VQ, N0, X, bvert, deg, cos_max, sliver, free, active, mark,
                     keys, rows, verts, corner_wedge, multi, locked, partner):
-    """`select.independent_sets` with `parallel._Run.validate` (manifold mode).
+    """`select.independent_sets` with `parallel.StagedRound.validate` (manifold mode).
 
     E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
     kbits (P,) int32: the float32 bits of each pair's ranking key; local (P,): each pair's index within its

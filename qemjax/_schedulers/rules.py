@@ -1,6 +1,6 @@
 """The validity rules of a contraction (b into a at x), compiled (numba): each rule written once, used by
 both schedulers, the greedy queue's verified batches (`greedy.speculate`, in the order of `greedy.checks`),
-its one-at-a-time loop (`greedy.loop`) and the parallel round (`round_jit._rules`). A contraction is refused
+its one-at-a-time loop (`greedy.loop`) and the parallel round (`round_jit._rules`, called by `round_jit.select_validate`). A contraction is refused
 when it would break one of them:
 
 * **link condition** (`link_holds`): the pair is a manifold edge (one or two faces), its endpoints' common

@@ -27,8 +27,8 @@ class Queue:
     Keys: (rank, squared length, `_tie`); the rank is the cost, or for a model with `rank_weights`
     cost + parts @ ``weights``. Flat regions tie exactly (cost 0); taking the shortest pair first
     decimates them evenly. Breaking those ties by a scramble (or by index) alone made vertices absorb their
-    neighbours into fans whose slivers then refused contractions (a flat 50×50 grid: 9,021 refusals with
-    the scramble alone, 32 by length; `experiments/greedy_flat.py 50 --rev 4da4023`)."""
+    neighbours into fans whose slivers then refused contractions (on a flat grid, hundreds of times more
+    refusals than by length: `experiments/probes/greedy_flat.py`)."""
 
     def __init__(self):
         self.heap, self.stamp, self.placed, self.blocked = [], {}, {}, {}

@@ -2,9 +2,8 @@
 rules (`checks`), contractions, journal and commits on integer arrays, giving the contractions of
 the one-at-a-time loop (`loop._run`) in its order.
 
-Why: after the batching, a greedy run was Python bookkeeping (~150 µs per contraction on the bunny, no
-stage above a fifth of it: experiments/results/greedy_where.md); the same steps over arrays take a few
-µs. What stays in Python (`batches`) is what needs the device: merging the batch's kept vertices
+Why: after the batching, a greedy run was Python bookkeeping spread over many small stages, none
+dominant; the same steps over arrays take a small fraction of that time. What stays in Python (`batches`) is what needs the device: merging the batch's kept vertices
 and pricing its stale intervals, and the history. Both modes: in manifold mode a contraction removes the
 faces holding both its vertices; in non-manifold mode it also drops the faces it makes coincide
 (`rules.coincident_drop`).

@@ -39,7 +39,7 @@ class LoopRound(Round):
         # kept attributes: the wedge of each face corner and the seam vertices, for the seam rule
         self.seams = ((np.zeros((0, 3), np.int64), np.zeros(n, bool)) if run.wedges is None
                       else (run.wedges.C, run.wedges.multi))
-        # locked vertices and the scratch of their rule (`round_jit._all_dying`); empty: no locks
+        # locked vertices and the scratch of their rule (`rules.stranded_by_pass`); empty: no locks
         self.lock_rule = ((np.zeros(0, bool), np.zeros(0, np.int32)) if run.locks is None
                           else (np.ascontiguousarray(run.locks.locked, bool), np.full(n, -1, np.int32)))
 
