@@ -245,7 +245,7 @@ def coincident_drop(a, b, T, A, nka, B, nkb, R):
     return m
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)  # not inlined: the one-at-a-time loop calls it from Python too (`_ahead` lists it)
 def part_vanishes(keep_parts, nkept):
     """The part rule: with ``keep_parts``, no face of the pair stays (``nkept`` faces do): they are all its
     connected part has left."""
@@ -260,7 +260,7 @@ def seam_allows(free, keep_a, keep_b, VQ, a, b, x):
     return free or (keep_a and wedges_jit._at(VQ, a, x)) or (keep_b and wedges_jit._at(VQ, b, x))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)  # not inlined: the one-at-a-time loop calls it from Python too (`_ahead` lists it)
 def locked_endpoint_bare(nkept, locked, a, b):
     """The lock rule at the endpoints: a or b locked and no face of the pair staying."""
     return nkept == 0 and (locked[a] or locked[b])
