@@ -1,6 +1,6 @@
 """The pairs' update through a round's contractions in numpy, as it was written before it was compiled
-(`qemjax._schedulers.round_jit.contract_edges`), kept as the reference the compiled update is tested against
-(tests/test_topology.py, tests/test_round_jit.py)."""
+(`qemjax._schedulers.contraction.contract_edges`), kept as the reference the compiled update is tested against
+(tests/test_topology.py, tests/test_round_loops.py)."""
 from __future__ import annotations
 
 import numpy as np

@@ -15,7 +15,7 @@ import qemjax
 from qemjax._kernels import compilation as _compilation
 from qemjax import _costs, metrics, shapes
 from qemjax._costs import area, area_term, ring
-from qemjax._schedulers import common
+from qemjax._schedulers import device
 from qemjax._mesh.incidence import FaceLists
 
 SCHEDULERS = ["parallel", "greedy"]
@@ -222,7 +222,7 @@ def test_area_weight_reorders_and_never_recompiles():
     for lam in (10.0, 1000.0, 3.0):
         model = _costs.build(_costs.QEM(area_weight=lam))
         c0 = _compilation.snapshot()[0]
-        costs.append(common.start_price(model, jnp.asarray(VS), E, model.kernel_params(), fl, len(V))().cost)
+        costs.append(device.start_price(model, jnp.asarray(VS), E, model.kernel_params(), fl, len(V))().cost)
         if lam != 10.0:
             assert _compilation.snapshot()[0] == c0
     np.testing.assert_allclose(costs[1], 100 * costs[0], rtol=1e-5)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from qemjax._mesh.arrays import any_at, column_bounds, keep_rows, put_rows, sorted_triples, take_rows
-from qemjax._schedulers.common import face_normals
+from qemjax._mesh.arrays import face_normals
 
 rng = np.random.default_rng(3)
 

@@ -73,10 +73,10 @@ def test_seams_hold(scheduler):
 def test_seam_test_can_fail(monkeypatch):
     """With the seam rule switched off the same run welds charts together: `seam_report` sees it. (The
     numpy rounds, whose rule is these methods; the compiled rounds give the same results with it on:
-    tests/test_round_jit.py.)"""
-    from qemjax._schedulers import round_jit
+    tests/test_round_loops.py.)"""
+    from qemjax._schedulers.parallel import selection
 
-    monkeypatch.setattr(round_jit, "fits", lambda *a: False)
+    monkeypatch.setattr(selection, "fits", lambda *a: False)
     monkeypatch.setattr(_wedges.Tracker, "constrain", lambda self, faces, VQ, P, x, c: np.zeros(len(P), bool))
     monkeypatch.setattr(_wedges.Tracker, "allowed", lambda self, *a: True)
     monkeypatch.setattr(_wedges.Tracker, "refused", lambda self, faces, VQ, P, X, check: np.zeros(len(P), bool))

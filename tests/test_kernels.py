@@ -380,7 +380,7 @@ def test_host_flip_test_agrees_with_the_kernel_in_float32():
 
 
 def test_set_rows_updates_in_place_and_drops_padding():
-    from qemjax._schedulers.common import set_rows
+    from qemjax._kernels.batching import set_rows
 
     A = jnp.zeros((10, 4), jnp.float32)
     idx = np.array([7, 2])

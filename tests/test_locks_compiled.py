@@ -1,7 +1,7 @@
 """Runs with locked vertices and importance weights (`qemjax._schedulers.locks`) take the parallel round's compiled
-path (`round_jit`, and with a model that fuses its device call `round_glue_jit`) where a run without them would,
+path (`parallel.selection`, and with a model that fuses its device call `parallel.glue`) where a run without them would,
 and give exactly the result of the numpy stages for the same run: vertices, faces, history, stop reason and
-stats, bit for bit. The numpy stages are forced as tests/test_round_jit.py forces them (`round_jit.fits`
+stats, bit for bit. The numpy stages are forced as tests/test_round_loops.py forces them (`selection.fits`
 answering no)."""
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from qemjax._schedulers import device, parallel
 from qemjax._schedulers.parallel import driver
 from qemjax._schedulers import locks as _locks
 from test_attributes import atlas_sphere
-from test_round_jit import _assert_same, _run
+from test_round_loops import _assert_same, _run
 
 
 def _cap(subdivisions=4, keep=0.4):
@@ -135,7 +135,7 @@ def test_locked_runs_take_the_compiled_round_with_the_numpy_stages_bits(mesh_nam
 @pytest.mark.parametrize("method", ["classic", "line", "probabilistic", "area", "memoryless"])
 @pytest.mark.parametrize("weights", [False, True])
 def test_every_path_of_the_compiled_round_keeps_the_bits(method, weights, monkeypatch):
-    """Models that fuse their device call (`round_glue_jit`: the locks applied to its raw price) and models
+    """Models that fuse their device call (`glue`: the locks applied to its raw price) and models
     that do not (`area`, memoryless: the compiled loops with the numpy price stages)."""
     V, F = (np.asarray(x) for x in _cap())
     kw = {"ratio": 0.05, "method": qemjax.QEM(memoryless=True) if method == "memoryless" else method,

@@ -14,7 +14,7 @@ import pytest
 import qemjax
 from qemjax._io import mesh as _io
 from qemjax._pipeline import stages
-from qemjax._schedulers import round_jit
+from qemjax._schedulers.parallel import selection
 from qemjax.shapes import icosphere
 
 
@@ -47,7 +47,7 @@ def test_a_run_leaves_its_input_as_given(scheduler, preserve):
 def test_the_edge_table_is_read_only_to_a_run(compiled, preserve, monkeypatch):
     """The first round takes the geometry's int32 edge table without a copy; a batch's runs share it."""
     if not compiled:  # the numpy stages, as on a large mesh
-        monkeypatch.setattr(round_jit, "MAX_FACES", 0)
+        monkeypatch.setattr(selection, "MAX_FACES", 0)
     V, F = icosphere(3)
     setup = stages.setup("default", "parallel", qemjax.Topology(preserve_topology=preserve), None, False, {})
     geo = stages.geometry((V, F), setup, stacklevel=2)

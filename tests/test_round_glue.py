@@ -1,7 +1,7 @@
-"""The round's compiled glue (`_schedulers.round_glue_jit`) answers as the numpy code it replaces in
+"""The round's compiled glue (`_schedulers.glue`) answers as the numpy code it replaces in
 `parallel.LoopRound`, bit for bit, on random inputs: the carried prices and candidates, the gate with numpy's
 promotion of its scalars, the order and face target, the contraction with its device inputs, and the one-piece
-device call. Whole runs against the numpy rounds: tests/test_round_jit.py and tests/test_round_step.py."""
+device call. Whole runs against the numpy rounds: tests/test_round_loops.py and tests/test_round_step.py."""
 from __future__ import annotations
 
 import warnings
@@ -16,13 +16,14 @@ from qemjax._costs import build, resolve
 from qemjax._kernels.batching import chunks, pad_rows
 from qemjax._mesh.arrays import put_rows
 from qemjax._mesh.incidence import FaceLists
-from qemjax._schedulers import device, parallel, round_glue_jit as glue, round_jit
+from qemjax._schedulers import device, parallel
+from qemjax._schedulers.parallel import contraction, glue
 from qemjax._schedulers.parallel import driver
 from qemjax._schedulers.outcome import LOCKED
 from qemjax._schedulers.select import fits_target, sort_keys
 from test_attributes import atlas_sphere
 from test_greedy_compiled import _two_spheres
-from test_round_jit import _assert_same, _selected_pairs
+from test_round_loops import _assert_same, _selected_pairs
 
 
 def _carry_numpy(kept, d, out, x0, cost0, branch0, parts0, bad0, E, ecount, n, limit, need, manifold, locked):
@@ -150,10 +151,10 @@ def test_contract_is_the_compiled_loops_and_the_padded_step_inputs(seed):
     a, b = E[acc, 0], E[acc, 1]
     room = int(ref_faces.cnt[a].sum() + ref_faces.cnt[b].sum())
     ref_faces.reserve(room)
-    round_jit.clear_bad(E, ref_bad, touched)
-    end, dead = round_jit.contract_faces(a, b, ref_faces.F, ref_faces.alive, ref_faces.cnt, ref_faces.off,
+    contraction.clear_bad(E, ref_bad, touched)
+    end, dead = contraction.contract_faces(a, b, ref_faces.F, ref_faces.alive, ref_faces.cnt, ref_faces.off,
                                          ref_faces.pool, ref_faces.end)
-    want_edges = round_jit.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), np.full(n, -1, np.int32))
+    want_edges = contraction.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), np.full(n, -1, np.int32))
     put_rows(ref_V3, a, x[acc])
     ref_VQ[a, :3] = x[acc]
     d = np.flatnonzero(want_edges[4])

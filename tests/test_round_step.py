@@ -16,7 +16,7 @@ from qemjax._kernels.batching import set_rows
 from qemjax._schedulers import device, parallel
 from qemjax._schedulers.parallel import compiled, driver, stages
 from test_attributes import atlas_sphere
-from test_round_jit import _assert_same
+from test_round_loops import _assert_same
 
 
 def _unfused(monkeypatch):

@@ -168,7 +168,8 @@ def test_the_pipeline_reads_the_outcome_only():
 def test_a_parallel_run_picks_its_round_implementation_once(monkeypatch):
     """`parallel.choose` once per run: the compiled loops and glue where they apply, the compiled loops alone
     for a batch (its gates are per copy), the numpy stages where the loops do not apply."""
-    from qemjax._schedulers import parallel, round_jit
+    from qemjax._schedulers import parallel
+    from qemjax._schedulers.parallel import selection
     from qemjax._schedulers.parallel import driver
 
     picked, choose = [], driver.choose
@@ -183,7 +184,7 @@ def test_a_parallel_run_picks_its_round_implementation_once(monkeypatch):
         warnings.simplefilter("ignore")
         qemjax.simplify(mesh, ratio=0.1)
         qemjax.simplify_batch(mesh, [{"ratio": 0.1}, {"ratio": 0.2}])
-        monkeypatch.setattr(round_jit, "fits", lambda *a: False)
+        monkeypatch.setattr(selection, "fits", lambda *a: False)
         qemjax.simplify(mesh, ratio=0.1)
     assert picked == ["GlueRound", "LoopRound", "StagedRound"]
     assert issubclass(parallel.GlueRound, parallel.LoopRound)

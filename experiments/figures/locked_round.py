@@ -2,7 +2,7 @@
 a band of vertices along the cut locked (its boundary and the rings inside it, about 3 % of the vertices). Warm
 wall and CPU time (median of --repeats, after one untimed run of each) of
 
-* the locked run on the path it takes by itself (`round_jit.fits`),
+* the locked run on the path it takes by itself (`selection.fits`),
 * the same locked run forced onto the parallel scheduler's numpy stages (`fits` answering no: the path every
   locked run took before locks reached the compiled round),
 * the unlocked run, for reference,
@@ -27,6 +27,7 @@ import numpy as np
 EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules and results/
 sys.path[:0] = [str(EXPERIMENTS.parent), str(EXPERIMENTS)]
 
+import round_choice  # noqa: E402
 from machine import cpu_model  # noqa: E402
 
 
@@ -67,30 +68,19 @@ def main():
     ap.add_argument("--weights", action="store_true", help="also pass vertex_weights (random in [0.5, 2])")
     args = ap.parse_args()
     import qemjax
-    from qemjax._schedulers import parallel, round_jit
 
     V, F = part(args.subdivisions, args.keep)
     locked = band(V, F, args.rings)
     kw = dict(ratio=args.ratio, measure=False)
     if args.weights:
         kw["vertex_weights"] = np.random.default_rng(0).uniform(0.5, 2.0, len(V))
-    fits = round_jit.fits
-    taken = []
-    choose = parallel.driver.choose
-
-    def recording(run, glue=True):
-        rnd = choose(run, glue)
-        taken.append(isinstance(rnd, parallel.LoopRound))
-        return rnd
-    parallel.driver.choose = recording
 
     def run(name):
-        round_jit.fits = (lambda *a: False) if name == "locked, numpy stages" else fits
         lk = None if name == "unlocked" else locked
-        t, c = time.perf_counter(), time.process_time()
-        r = qemjax.simplify((V, F), locked=lk, **kw)
-        dt = (time.perf_counter() - t, time.process_time() - c)
-        round_jit.fits = fits
+        with round_choice.forced("numpy" if name == "locked, numpy stages" else None):
+            t, c = time.perf_counter(), time.process_time()
+            r = qemjax.simplify((V, F), locked=lk, **kw)
+            dt = (time.perf_counter() - t, time.process_time() - c)
         return r, dt
 
     names = ("locked", "locked, numpy stages", "unlocked")
@@ -98,8 +88,9 @@ def main():
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for name in names:  # warm: each path's compilations
-            out[name], _ = run(name)
+        with round_choice.recorded() as taken:
+            for name in names:  # warm: each path's compilations
+                out[name], _ = run(name)
         paths = dict(zip(names, taken))
         for _ in range(args.repeats):
             for name in names:

@@ -44,8 +44,8 @@ import meshes as bench_meshes  # noqa: E402
 RESULTS = EXPERIMENTS / "results"
 GREEDY_CACHE = bench_meshes.CACHE / "greedy_rows.csv"
 # globs in the qemjax package that is imported: everything the greedy scheduler runs
-GREEDY_SOURCES = ("_kernels/*.py", "_costs/*.py", "_schedulers/greedy.py", "_schedulers/common.py",
-                  "_schedulers/device.py", "_schedulers/runtime.py", "_schedulers/outcome.py", "_mesh/incidence.py",
+GREEDY_SOURCES = ("_kernels/*.py", "_costs/*.py", "_schedulers/greedy/*.py", "_schedulers/rules.py",
+                  "_schedulers/locks.py", "_schedulers/device.py", "_schedulers/runtime.py", "_schedulers/outcome.py", "_mesh/incidence.py",
                   "_kernels/batching.py", "_mesh/topology.py")
 MEASURED = ("faces", "rounds", "time_s", "rms_rel", "hausdorff_rel")
 WITHIN_PCT = 3.0

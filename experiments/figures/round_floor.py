@@ -1,11 +1,11 @@
 """What the default would still take with every line of Python and numpy glue in its rounds gone: the time
-inside the round's compiled loops (`round_jit`: selection with validation, the faces' and pairs'
-contraction, clearing the rejections; `round_glue_jit`: the prices carried, the gate, the order and the
+inside the round's compiled loops (`parallel.selection` and `.contraction`: selection with validation, the faces' and pairs'
+contraction, clearing the rejections; `glue`: the prices carried, the gate, the order and the
 contraction with the device call's inputs), the wait for the device (`stats["kernels_s"]`), the re-fit and the
 measured distance, summed, against the whole run and against a goal of G × a peer's time.
 
 Each compiled loop is wrapped with a timer; warm runs, medians. A run on more faces than the compiled loops
-take (`round_jit.MAX_FACES`) shows "-" there: its rounds run the numpy stages.
+take (`selection.MAX_FACES`) shows "-" there: its rounds run the numpy stages.
 
 A second table asks whether the parts every run of the design must have fit in the goal: the set-up (from
 the call until the first round: reading and cleaning the input, the quadrics, the pairs, the first prices
@@ -38,8 +38,8 @@ sys.path[:0] = [str(EXPERIMENTS.parent), str(EXPERIMENTS)]
 
 import meshes as bench_meshes  # noqa: E402
 
-LOOPS = ("select_validate", "contract_faces", "contract_edges", "clear_bad")  # round_jit's, called from Python
-GLUE = ("carry", "under_gate", "order_fit", "contract")  # round_glue_jit's (which call round_jit's inside)
+LOOPS = ("select_validate", "contract_faces", "contract_edges", "clear_bad")  # selection's and contraction's, called from Python
+GLUE = ("carry", "under_gate", "order_fit", "contract")  # glue's (which call contraction's inside)
 
 
 def _goals(spec: str):
@@ -59,13 +59,15 @@ def main():
     args = ap.parse_args()
     import qemjax
     from qemjax import peers
-    from qemjax._schedulers import parallel, round_glue_jit, round_jit
+    from qemjax._schedulers import parallel
+    from qemjax._schedulers.parallel import contraction, glue, selection
 
     from figures.select_cost import _copy, rules_alone
 
     spent = {"loops": 0.0, "rounds_from": 0.0}
-    select_validate = round_jit.select_validate  # (the compiled function, before it is wrapped)
-    for module, name in [(round_jit, n) for n in LOOPS] + [(round_glue_jit, n) for n in GLUE]:
+    select_validate = selection.select_validate  # (the compiled function, before it is wrapped)
+    loops = [(selection, LOOPS[0])] + [(contraction, n) for n in LOOPS[1:]]
+    for module, name in loops + [(glue, n) for n in GLUE]:
         fn = getattr(module, name)
 
         def timed(*a, _fn=fn):
@@ -145,14 +147,13 @@ def main():
 
 def _rule_checks(qemjax, bm, target, fn, copy, rules_alone):
     """(pairs tested, seconds the tests alone take, contractions) over one warm run through the compiled
-    loops: each call of ``fn`` (`round_jit.select_validate`) is run first on a copy of its inputs to find the
+    loops: each call of ``fn`` (`selection.select_validate`) is run first on a copy of its inputs to find the
     pairs it tests (accepted and rejected), which are then replayed through the rules alone."""
     import numpy as np
 
-    from qemjax._schedulers import round_jit
+    from qemjax._schedulers.parallel import selection
 
-    timed, most = round_jit.select_validate, round_jit.MAX_FACES
-    names = fn.py_func.__code__.co_varnames[: fn.py_func.__code__.co_argcount]
+    timed, most = selection.select_validate, selection.MAX_FACES
     got = {"checks": 0, "alone": 0.0}
 
     def spy(*a):
@@ -160,14 +161,14 @@ def _rule_checks(qemjax, bm, target, fn, copy, rules_alone):
         tested = np.concatenate([out[0], out[2]])
         got["checks"] += len(tested)
         if len(tested):
-            got["alone"] += rules_alone(copy(a), tested, names, repeats=3)
+            got["alone"] += rules_alone(copy(a), tested, repeats=3)
         return fn(*a)
-    round_jit.select_validate = spy
-    round_jit.MAX_FACES = max(most, len(bm.F))  # (the same contractions as the numpy stages)
+    selection.select_validate = spy
+    selection.MAX_FACES = max(most, len(bm.F))  # (the same contractions as the numpy stages)
     try:
         r = qemjax.simplify((bm.V, bm.F), target_faces=target)
     finally:
-        round_jit.select_validate, round_jit.MAX_FACES = timed, most
+        selection.select_validate, selection.MAX_FACES = timed, most
     return got["checks"], got["alone"], r.stats["contractions"]
 
 

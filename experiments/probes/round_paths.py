@@ -1,8 +1,8 @@
-"""The parallel round's two paths on the same meshes: the compiled loops (`round_jit`, which `fits` gives runs
-on at most `round_jit.MAX_FACES` faces) against the numpy stages, in one process, alternating, warm medians
-of wall and CPU time, and whether the outputs are the same bits (they must be: tests/test_round_jit.py).
+"""The parallel round's two paths on the same meshes: the compiled loops (`parallel.selection`, which `fits` gives runs
+on at most `selection.MAX_FACES` faces) against the numpy stages, in one process, alternating, warm medians
+of wall and CPU time, and whether the outputs are the same bits (they must be: tests/test_round_loops.py).
 
-Each path is forced for every run of this script (`round_jit.MAX_FACES` raised above the mesh, or `fits`
+Each path is forced for every run of this script (`selection.MAX_FACES` raised above the mesh, or `fits`
 answering no), so a mesh on either side of the limit shows what the other path would cost there.
 
     python experiments/probes/round_paths.py --meshes cow stanford-bunny armadillo --ratio 0.1 --repeats 7
@@ -21,6 +21,7 @@ EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules and resu
 sys.path[:0] = [str(EXPERIMENTS.parent), str(EXPERIMENTS)]
 
 import meshes as bench_meshes  # noqa: E402
+import round_choice  # noqa: E402
 from ab_compare import digest  # noqa: E402
 
 
@@ -31,24 +32,7 @@ def main():
     ap.add_argument("--repeats", type=int, default=7)
     args = ap.parse_args()
     import qemjax
-    from qemjax._schedulers import parallel, round_jit
-
-    fits, most = round_jit.fits, round_jit.MAX_FACES
-    taken = []
-    choose = parallel.driver.choose
-
-    def recording(run, glue=True):
-        rnd = choose(run, glue)
-        taken.append(isinstance(rnd, parallel.LoopRound))
-        return rnd
-    parallel.driver.choose = recording
-
-    def use(path: str, faces: int):
-        round_jit.fits, round_jit.MAX_FACES = fits, most
-        if path == "compiled":
-            round_jit.MAX_FACES = max(most, faces)
-        else:
-            round_jit.fits = lambda *a: False
+    from qemjax._schedulers.parallel.selection import fits
 
     print(f"# python experiments/probes/round_paths.py --meshes {' '.join(args.meshes)} --ratio {args.ratio} "
           f"--repeats {args.repeats}")
@@ -61,21 +45,20 @@ def main():
         wall = {"compiled": [], "numpy": []}
         cpu = {"compiled": [], "numpy": []}
         digests = {}
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), round_choice.recorded() as taken:
             warnings.simplefilter("ignore")
             for path in wall:  # warm: each path's compilations
-                use(path, len(bm.F))
-                qemjax.simplify(mesh, ratio=args.ratio)
+                with round_choice.forced(path, len(bm.F)):
+                    qemjax.simplify(mesh, ratio=args.ratio)
             taken.clear()
             for _ in range(args.repeats):
                 for path in wall:
-                    use(path, len(bm.F))
-                    t, c = time.perf_counter(), time.process_time()
-                    r = qemjax.simplify(mesh, ratio=args.ratio)
-                    wall[path].append(time.perf_counter() - t)
-                    cpu[path].append(time.process_time() - c)
+                    with round_choice.forced(path, len(bm.F)):
+                        t, c = time.perf_counter(), time.process_time()
+                        r = qemjax.simplify(mesh, ratio=args.ratio)
+                        wall[path].append(time.perf_counter() - t)
+                        cpu[path].append(time.process_time() - c)
                     digests.setdefault(path, digest(r))
-        round_jit.fits, round_jit.MAX_FACES = fits, most
         assert taken == [True, False] * args.repeats, "a run did not take the path it was given"
         own = "compiled" if fits(True, True, None, len(bm.F)) else "numpy stages"
         med = {p: statistics.median(v) for p, v in wall.items()}

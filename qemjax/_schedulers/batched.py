@@ -111,7 +111,7 @@ class _Batch:
         self.copy_rounds[c] = self.run.rounds
 
     def _without_stopped(self, edges_next):
-        """The next round's pairs (`round_jit.contract_edges`' (E', ecount', keep, degree', stale')) without
+        """The next round's pairs (`contraction.contract_edges`' (E', ecount', keep, degree', stale')) without
         those of copies that have stopped: they are never candidates again, and every per-pair pass of
         the rounds left would carry them. Order is kept, so each copy's pairs and their indices within
         it are unchanged."""

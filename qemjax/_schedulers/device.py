@@ -186,7 +186,7 @@ def start_step(model, VSd, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params,
 def step_one(model, VSd, rows_at: np.ndarray, P: np.ndarray, x: np.ndarray, Pn: np.ndarray, params, K: int,
              kept: np.ndarray | None = None):
     """`start_step` for a round that one piece holds, its inputs already padded to the piece's shapes
-    (`round_glue_jit.contract`): the merges of pairs P at x into rows ``rows_at`` (padding past the end),
+    (`glue.contract`): the merges of pairs P at x into rows ``rows_at`` (padding past the end),
     and the price of the stale pairs Pn. Returns (the new device rows (VSd is donated), a function giving
     the K pairs' (K, width) merged states, and one giving the raw price, (5 + p, len(Pn)) as the kernel
     gives it), and with ``kept`` as `start_step` has it, a fourth."""

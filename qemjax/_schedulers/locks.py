@@ -42,7 +42,7 @@ def start_at_kept(locks: RunLocks, model, VQd, P: np.ndarray, params, faces=None
     """The device price at their kept vertex of the pairs of P (K,2) that `adjust` prices there, started now
     on the device rows VQd (asynchronous), for `adjust`'s ``at``; None where `adjust` prices them on the
     host (a model with ``cost_at``) or none has a locked kept vertex."""
-    from .common import start_price
+    from .device import start_price
 
     if getattr(model, "cost_at", None) is not None:
         return None
@@ -57,7 +57,7 @@ def adjust(locks: RunLocks, weights, model, VQ, VQd, P: np.ndarray, priced, para
     host) and every cost and part multiplied by the larger weight of the pair's endpoints (``weights``: the
     run's current weights, or None). The run's numbering puts a locked endpoint first in its pair.
     ``at``: that device price, started before on the same device rows (`start_at_kept` of P), or None."""
-    from .common import start_price
+    from .device import start_price
 
     x, cost, branch, parts = priced.x, priced.cost, priced.branch, priced.parts
     one = _kept_one(locks, P)

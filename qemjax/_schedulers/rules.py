@@ -1,6 +1,6 @@
 """The validity rules of a contraction (b into a at x), compiled (numba): each rule written once, used by
 both schedulers, the greedy queue's verified batches (`greedy.speculate`, in the order of `greedy.checks`),
-its one-at-a-time loop (`greedy.loop`) and the parallel round (`round_jit._rules`, called by `round_jit.select_validate`). A contraction is refused
+its one-at-a-time loop (`greedy.loop`) and the parallel round (`selection._rules`, called by `selection.select_validate`). A contraction is refused
 when it would break one of them:
 
 * **link condition** (`link_holds`): the pair is a manifold edge (one or two faces), its endpoints' common
@@ -48,6 +48,11 @@ class Faces(NamedTuple):
     start: Any
     count: Any
     pool: Any
+
+
+def faces_of(lists) -> Faces:
+    """A `FaceLists`' arrays as `Faces` (the lists' arrays are replaced as they grow: bundle them per call)."""
+    return Faces(lists.F, lists.alive, lists.off, lists.cnt, lists.pool)
 
 
 @njit(cache=True, inline="always")

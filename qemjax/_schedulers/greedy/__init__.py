@@ -20,7 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..._mesh import topology as topo
-from ..common import Options, gc_paused
+from ..._options import Options
+from ..runtime import gc_paused
 from . import loop
 
 

@@ -56,7 +56,9 @@ from ..._mesh import wedges_jit
 from .. import outcome
 from ..rules import Faces
 from ..._kernels.flips import SLIVER
-from ..common import DTYPE, bucket, face_normals, set_rows, start_merge, start_price
+from ..._kernels.batching import DTYPE, bucket, set_rows
+from ..._mesh.arrays import face_normals
+from ..device import start_merge, start_price
 from .queue import stop_report
 
 _M32 = 0xFFFFFFFF

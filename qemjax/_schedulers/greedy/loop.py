@@ -18,7 +18,10 @@ from ..._costs import MeshView
 from ..._kernels.flips import SLIVER
 from ..._mesh import topology as topo
 from ..._mesh.incidence import FaceLists
-from ..common import DTYPE, Options, bucket, face_normals, set_rows, start_merge, start_price
+from ..._kernels.batching import DTYPE, bucket, set_rows
+from ..._mesh.arrays import face_normals
+from ..._options import Options
+from ..device import start_merge, start_price
 from ..outcome import BUDGET
 from .queue import Queue as _Queue, stop_report as _stop
 

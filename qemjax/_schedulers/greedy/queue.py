@@ -11,7 +11,7 @@ import numpy as np
 from ..._mesh.incidence import FaceLists
 from .. import outcome
 from ..._mesh.fixed_order import weighted_sum
-from ..common import Options
+from ..._options import Options
 from ..outcome import BUDGET
 
 

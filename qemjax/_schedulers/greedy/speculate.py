@@ -609,38 +609,18 @@ def first_wrong(steps, K, iv, ikeys, n):
     """The first of the ``n`` steps that a stale interval open at
     it (begun before it, not ended before it) ranks before; ``ikeys`` (niv,3) the intervals' keys."""
     niv = len(ikeys)
-    h = np.empty(niv, np.int64)  # a heap of interval indices by key
-    hn = 0
+    h = np.empty(niv, np.int64)  # a heap of interval indices by key (`heap_push`'s, its size in hc)
+    hc = np.zeros(C_FULL + 1, np.int64)
     i = 0
     for k in range(n):
         while i < niv and iv[i, I_START] < k:
-            j = hn
-            hn += 1
-            while j > 0:
-                up = (j - 1) >> 1
-                if not _key_less(ikeys, i, h[up]):
-                    break
-                h[j] = h[up]
-                j = up
-            h[j] = i
+            heap_push(h, hc, ikeys, i)
             i += 1
-        while hn > 0 and iv[h[0], I_END] < k:
-            hn -= 1
-            last = h[hn]
-            j = 0
-            while True:
-                c = 2 * j + 1
-                if c >= hn:
-                    break
-                if c + 1 < hn and _key_less(ikeys, h[c + 1], h[c]):
-                    c += 1
-                if not _key_less(ikeys, h[c], last):
-                    break
-                h[j] = h[c]
-                j = c
-            if hn > 0:
-                h[j] = last
-        if hn > 0:
+        # ended intervals leave when they reach the top: the top is then an open one of the smallest key
+        # (whichever of equal keys it is: only its key is compared)
+        while hc[C_HSIZE] > 0 and iv[h[0], I_END] < k:
+            heap_pop(h, hc, ikeys)
+        if hc[C_HSIZE] > 0:
             s, top = steps[k, S_STAMP], h[0]
             for c in range(3):
                 if ikeys[top, c] != K[s, c]:
@@ -648,14 +628,6 @@ def first_wrong(steps, K, iv, ikeys, n):
                         return k
                     break
     return n
-
-
-@njit(cache=True, inline="always")
-def _key_less(keys, i, j):
-    for c in range(3):
-        if keys[i, c] != keys[j, c]:
-            return keys[i, c] < keys[j, c]
-    return False
 
 
 @njit(cache=True)

@@ -3,7 +3,7 @@
 A round is five named stages over a `RoundState` (`driver.rounds`):
 
 1. **update** the candidate pairs after the last round's contractions (manifold mode: through the
-   contractions, `round_jit.contract_edges`; otherwise rebuilt from the faces and matched by key);
+   contractions, `contraction.contract_edges`; otherwise rebuilt from the faces and matched by key);
 2. **cost**: price the pairs whose cost is stale with the cost model's batched kernel (fixed-size
    chunks: one compilation per size); the rest keep their numbers. Which pairs go stale is the model's
    ``support``: the pairs at moved vertices, or (``"ring"``) every pair in their 1-rings;
@@ -26,11 +26,11 @@ run by `driver.choose`:
 - `StagedRound` (`staged`): the stages as numpy steps. Every mode, and the reference for the others. The link
   test and the edge update run on a host worker thread beside the main thread's face work; work on fewer
   than `select.INLINE_ROWS` rows runs on the main thread (waking the worker costs more than it overlaps).
-- `LoopRound` (`compiled`): stages 3 to 5 as compiled loops (`round_jit`) where they apply: manifold mode,
-  pairs updated in place, a mesh of at most `round_jit.MAX_FACES` faces. A batch of runs (`batched`) takes
+- `LoopRound` (`compiled`): stages 3 to 5 as compiled loops (`selection`, `contraction`) where they apply: manifold mode,
+  pairs updated in place, a mesh of at most `selection.MAX_FACES` faces. A batch of runs (`batched`) takes
   it there, with its per-copy gates and budgets.
 - `GlueRound` (`compiled`): `LoopRound` with the numpy glue between the loops compiled too
-  (`round_glue_jit`) and the round's device work as one call: a single run whose model `device.fuses`.
+  (`glue`) and the round's device work as one call: a single run whose model `device.fuses`.
   Its rounds hand over once the device's prices are in: the first round (and one after a round that only
   rejected) takes stages 1 and 2 as the numpy stages do (`Round.fresh`); every other round takes them in
   one compiled pass over the device's raw prices (`GlueRound.carry`).

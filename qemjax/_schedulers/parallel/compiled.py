@@ -1,6 +1,6 @@
-"""The round as compiled loops (`round_jit`): `LoopRound` runs the selection passes with validation and the
+"""The round as compiled loops (`selection`, `contraction`): `LoopRound` runs the selection passes with validation and the
 contraction as two loops, between the numpy stages' update, prices and ranking; `GlueRound` compiles that
-glue too (`round_glue_jit`) and sends a round's device work as one call. Both make the numpy stages'
+glue too (`glue`) and sends a round's device work as one call. Both make the numpy stages'
 choices (`StagedRound`), bit for bit."""
 from __future__ import annotations
 
@@ -12,9 +12,10 @@ from ..._kernels.batching import CHUNKS, DTYPE
 from ..._kernels.flips import SLIVER
 from ..._mesh.arrays import put_rows, take_rows as _take
 from .. import locks as _locks
-from .. import outcome, round_glue_jit, round_jit
+from .. import outcome, rules
+from . import contraction, glue, selection
 from ..device import Priced, kept_fuses, start_step, step_one
-from ..round_glue_jit import FaceArrays, Known, PairArrays
+from .glue import FaceArrays, Known, PairArrays
 from ..select import gate_rank
 from .stages import Round
 from .state import RoundState, Run, holding
@@ -22,7 +23,7 @@ from .state import RoundState, Run, holding
 
 class LoopRound(Round):
     """A round whose selection passes with validation and whose contraction are compiled loops
-    (`round_jit`; manifold mode with the pairs updated in place, `round_jit.fits`)."""
+    (`selection`, `contraction`; manifold mode with the pairs updated in place, `selection.fits`)."""
 
     counts_dtype = np.int32  # face counts are small: int32 halves the largest per-pair array but x
 
@@ -32,19 +33,19 @@ class LoopRound(Round):
         self.N0 = np.ascontiguousarray(run.normals, DTYPE)  # the input normals, for the host flip test
         # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
         self.V3 = np.ascontiguousarray(run.VQ[:, :3])
-        self.flip_limits = (np.float32(options.cos_max), np.float32(SLIVER))
-        self.mark = np.zeros(n, np.int32)  # scratch of `round_jit.select_validate`
+        self.limits = selection.Limits(np.float32(options.cos_max), np.float32(SLIVER), bool(options.keep_parts))
+        self.mark = np.zeros(n, np.int32)  # scratch of `selection.select_validate`
         self._rows = self._verts = None  # more of it (`scratch`)
         self.one_copy = np.zeros(n, np.int32)  # a run alone is one copy (`passes`)
         # kept attributes: the wedge of each face corner and the seam vertices, for the seam rule
-        self.seams = ((np.zeros((0, 3), np.int64), np.zeros(n, bool)) if run.wedges is None
-                      else (run.wedges.C, run.wedges.multi))
+        self.seams = (selection.Seams(np.zeros((0, 3), np.int64), np.zeros(n, bool)) if run.wedges is None
+                      else selection.Seams(run.wedges.C, run.wedges.multi))
         # locked vertices and the scratch of their rule (`rules.stranded_by_pass`); empty: no locks
-        self.lock_rule = ((np.zeros(0, bool), np.zeros(0, np.int32)) if run.locks is None
-                          else (np.ascontiguousarray(run.locks.locked, bool), np.full(n, -1, np.int32)))
+        self.lock_rule = (selection.Locks(np.zeros(0, bool), np.zeros(0, np.int32)) if run.locks is None
+                          else selection.Locks(np.ascontiguousarray(run.locks.locked, bool), np.full(n, -1, np.int32)))
 
     def passes(self, st: RoundState, key_of, cand, need, groups, local=None):
-        """`StagedRound.passes` as one compiled call (`round_jit.select_validate`; ``local``: each pair's
+        """`StagedRound.passes` as one compiled call (`selection.select_validate`; ``local``: each pair's
         index within its copy, for a batch). What validation found is the accepted pairs' apexes (S,2)."""
         run = self.run
         sch = run.options.schedule
@@ -54,13 +55,13 @@ class LoopRound(Round):
         else:
             vcopy, needs = groups[0], np.asarray(groups[1], np.int64)
         free, active = np.ones(run.n, bool), np.zeros(run.n, bool)
-        faces = run.faces
-        acc, apex, bad, why = round_jit.select_validate(
-            st.E, st.ecount, cand, np.ascontiguousarray(st.key, DTYPE).view(np.int32), local,
-            (run.rounds * 7919) & 0xFFFFFFFF, vcopy, needs, sch.max_passes, float(sch.pass_yield),
-            bool(run.options.keep_parts), faces.F, faces.alive, faces.cnt, faces.off, faces.pool, self.V3,
-            self.N0, st.x, st.bvert, st.deg, *self.flip_limits, free, active, self.mark, keys, rows, verts,
-            *self.seams, *self.lock_rule)
+        pairs = selection.Pairs(st.E, st.ecount, cand, np.ascontiguousarray(st.key, DTYPE).view(np.int32), local,
+                                st.x)
+        passes = selection.Passes(vcopy, needs, (run.rounds * 7919) & 0xFFFFFFFF, sch.max_passes,
+                                  float(sch.pass_yield))
+        acc, apex, bad, why = selection.select_validate(
+            pairs, passes, rules.faces_of(run.faces), selection.Mesh(self.V3, self.N0, st.bvert, st.deg),
+            self.limits, self.seams, self.lock_rule, selection.Work(free, active, self.mark, keys, rows, verts))
         return acc, bad, why, None, ~free, apex
 
     def ordered(self, found, order):
@@ -68,7 +69,7 @@ class LoopRound(Round):
         return found[order]
 
     def scratch(self, P: int):
-        """`round_jit.select_validate`'s working arrays for P pairs, (≥ P,) int64, (2, ≥ P) int32 and (2, n)
+        """`selection.select_validate`'s working arrays for P pairs, (≥ P,) int64, (2, ≥ P) int32 and (2, n)
         int64, and 0, 1, ... (≥ P): made once a run (its pairs only get fewer), so that no round maps
         megabytes afresh."""
         if self._rows is None or self._rows.shape[1] < P:
@@ -84,20 +85,20 @@ class LoopRound(Round):
         run = self.run
         faces = run.faces
         a, b = P[:, 0], P[:, 1]
-        round_jit.clear_bad(st.E, st.bad, touched)
+        contraction.clear_bad(st.E, st.bad, touched)
         if run.wedges is not None:  # the corners' wedges, before the faces are relinked
             run.wedges.contract_many(faces, run.VQ, np.stack([a, b], 1), xs)
         faces.reserve(int(faces.cnt.take(a).sum() + faces.cnt.take(b).sum()))  # the kept vertices' new runs
-        faces.end, dead = round_jit.contract_faces(a, b, faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
+        faces.end, dead = contraction.contract_faces(a, b, faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
                                                    faces.end)
         faces.count -= len(dead)
         run.tally.dead.append(dead)
-        st.edges_next = round_jit.contract_edges(st.E, st.ecount, st.deg, a, b, found, run.label)
+        st.edges_next = contraction.contract_edges(st.E, st.ecount, st.deg, a, b, found, run.label)
         put_rows(self.V3, a, xs)
 
 
 class GlueRound(LoopRound):
-    """`LoopRound` with its glue compiled too (`round_glue_jit`) and a round's device work as one call: a
+    """`LoopRound` with its glue compiled too (`glue`) and a round's device work as one call: a
     round after one that contracted takes the device's prices straight into its pairs (`carry`); a round
     without them (the first, or one after a round that only rejected) takes the numpy stages' `fresh`."""
 
@@ -105,7 +106,7 @@ class GlueRound(LoopRound):
         super().__init__(run)
         self.at_kept = None  # (`contract`) the next round's price at locked kept vertices, started
         self.kept_fuses = run.locks is not None and kept_fuses(run.model)  # ... in the round's device call
-        self.limit = round_glue_jit.bound(run.options.max_cost, DTYPE)  # as `candidates` compares it
+        self.limit = glue.bound(run.options.max_cost, DTYPE)  # as `candidates` compares it
         # the free cost at each vertex's part scale, as `select` takes it per pair (empty: one part)
         self.free_at = (np.zeros(0) if run.part_scale is None
                         else run.options.schedule.free_cost * np.asarray(run.part_scale))
@@ -117,7 +118,7 @@ class GlueRound(LoopRound):
 
     def carry(self, prev: RoundState, need: int):
         """Stages 1 and 2 and the candidates (`update`, `cost`, `candidates`) in one compiled pass once the
-        device's prices are in (`round_glue_jit.carry`). Returns the new state and its candidates."""
+        device's prices are in (`glue.carry`). Returns the new state and its candidates."""
         run = self.run
         t0 = time.perf_counter()
         E, ecount, kept, deg, stale = prev.edges_next
@@ -131,7 +132,7 @@ class GlueRound(LoopRound):
             out = self.locked_raw(out, _take(E, d), self.at_kept)
             self.at_kept = None
         last = Known(prev.x, prev.cost, prev.branch, prev.parts, prev.bad)
-        st.x, st.cost, st.branch, st.parts, st.bad, st.bvert, valid, _ = round_glue_jit.carry(
+        st.x, st.cost, st.branch, st.parts, st.bad, st.bvert, valid, _ = glue.carry(
             kept, d, out, tuple(last), E, ecount, run.n, (self.limit, need, run.manifold), self.lock_rule[0])
         if run.wedges is not None:  # stale pairs at seam vertices: placed at an allowed endpoint (as `cost`)
             self.place_at_seams(st, d)
@@ -162,7 +163,7 @@ class GlueRound(LoopRound):
 
     def select(self, st: RoundState, need: int, valid: np.ndarray):
         """`Round.select` with the gate, the order and the face target as compiled passes
-        (`round_glue_jit`), the threshold's arithmetic as numpy does it. What validation found is the
+        (`glue`), the threshold's arithmetic as numpy does it. What validation found is the
         accepted pairs' apexes and the pool room their contraction takes."""
         run = self.run
         t0 = time.perf_counter()
@@ -171,18 +172,18 @@ class GlueRound(LoopRound):
         thr = sch.gate * np.partition(st.key.compress(valid), k - 1)[k - 1]
         if not len(self.free_at):
             thr = np.maximum(thr, sch.free_cost)
-        cand = round_glue_jit.under_gate(st.key, valid, thr, st.E, self.free_at)
+        cand = glue.under_gate(st.key, valid, thr, st.E, self.free_at)
         acc, bad, why, _, locked, apex = self.passes(st, None, cand, need, None)
         self.count_rejected(why)
         n_sel = acc.size
-        acc, apex, room = round_glue_jit.order_fit(acc, apex, st.key, st.ecount, (run.rounds * 7919) & 0xFFFFFFFF,
+        acc, apex, room = glue.order_fit(acc, apex, st.key, st.ecount, (run.rounds * 7919) & 0xFFFFFFFF,
                                                    need, run.faces.cnt, st.E)
         run.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why
         return acc, n_sel, bad.size, locked, (apex, room)
 
     def contract(self, st: RoundState, acc, touched, found):
-        """`Round.contract` as one compiled pass (`round_glue_jit.contract`), then the device call (one
+        """`Round.contract` as one compiled pass (`glue.contract`), then the device call (one
         piece: `device.step_one`; else `device.start_step`)."""
         run, t = self.run, self.run.tally
         t0 = time.perf_counter()
@@ -194,7 +195,7 @@ class GlueRound(LoopRound):
         faces.reserve(int(room))  # the kept vertices' new runs
         pairs = PairArrays(st.E, st.ecount, st.deg, st.bad, st.x, st.cost, st.branch)
         lists = FaceArrays(faces.F, faces.alive, faces.cnt, faces.off, faces.pool)
-        a, b, xs, costs, top, faces.end, dead, st.edges_next, d, one = round_glue_jit.contract(
+        a, b, xs, costs, top, faces.end, dead, st.edges_next, d, one = glue.contract(
             tuple(pairs), tuple(lists), faces.end, (self.V3, run.VQ), (touched, acc, apex), t.branches, run.label,
             (len(run.VQd), run.merge_chunk, run.price_sizes[0]))
         faces.count -= len(dead)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import outcome, round_jit
+from .. import outcome
+from . import selection
 from ..device import fuses
 from .compiled import GlueRound, LoopRound
 from .history import history_arrays, history_columns, removal_steps
@@ -16,11 +17,11 @@ from .state import Run
 
 def choose(run: Run, glue: bool = True) -> Round:
     """The round implementation of a run, by what it runs on: the compiled loops where they apply
-    (`round_jit.fits`: manifold mode, pairs updated in place, a mesh they are fast on), else the numpy
+    (`selection.fits`: manifold mode, pairs updated in place, a mesh they are fast on), else the numpy
     stages; the device work as one call where the model allows it (`device.fuses`; with locks only on the
     compiled loops, so that a locked run on the numpy stages stays the reference it is for them); and with
     both, the compiled glue as well, unless ``glue`` is False (a batch: its gates and budgets are per copy)."""
-    compiled = round_jit.fits(run.manifold, run.incremental, run.locks, run.m)
+    compiled = selection.fits(run.manifold, run.incremental, run.locks, run.m)
     fused = run.incremental and (run.locks is None or compiled) and fuses(run.model)
     if compiled and fused and glue:
         rnd = GlueRound(run)

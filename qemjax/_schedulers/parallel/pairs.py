@@ -8,7 +8,7 @@ import numpy as np
 from ..._mesh import topology as topo
 from ..._mesh.arrays import keep_rows as _keep, take_rows as _take
 from ..._mesh.incidence import FaceLists
-from .. import round_jit
+from . import contraction
 from ..select import submit
 
 
@@ -77,36 +77,36 @@ def drop_coincident(faces: FaceLists, kept):
 
 
 class EdgeUpdate:
-    """`round_jit.contract_edges` with its two passes over every pair (listing the rows at an endpoint,
+    """`contraction.contract_edges` with its two passes over every pair (listing the rows at an endpoint,
     copying the rows that stay) each split between the worker thread and the calling one: the first half's
     listing starts on the worker when the update is made, the rest runs when its `result` is asked for.
     The threads write disjoint parts of the arrays; the steps and the result are `contract_edges`'
-    (tests/test_round_jit.py compares them). Before, the calling thread waited for the whole update on the
+    (tests/test_round_loops.py compares them). Before, the calling thread waited for the whole update on the
     worker once its own face update was done."""
 
     def __init__(self, E, ecount, deg, a, b, apex, label):
         self.args = (E, ecount, deg, a, b, apex, label)
         P = len(E)
         self.h = h = P // 2
-        round_jit.label_pairs(a, b, label)
-        self.lists = round_jit.listing(E, ecount, P)
-        self.first = submit(round_jit.list_rows, E, ecount, label, 0, h, *(x[:h] for x in self.lists), size=h)
+        contraction.label_pairs(a, b, label)
+        self.lists = contraction.listing(E, ecount, P)
+        self.first = submit(contraction.list_rows, E, ecount, label, 0, h, *(x[:h] for x in self.lists), size=h)
 
     def result(self):
-        """(E', ecount', keep, degree', stale'), as `round_jit.contract_edges` returns them."""
+        """(E', ecount', keep, degree', stale'), as `contraction.contract_edges` returns them."""
         E, ecount, deg, a, b, apex, label = self.args
         P, h = len(E), self.h
-        n_hi = round_jit.list_rows(E, ecount, label, h, P, *(x[h:] for x in self.lists))
+        n_hi = contraction.list_rows(E, ecount, label, h, P, *(x[h:] for x in self.lists))
         n_lo = self.first.result()
         listed = []
         for x in self.lists:  # the upper half's listed rows moved down after the lower half's
             x[n_lo:n_lo + n_hi] = x[h:h + n_hi]
             listed.append(x[: n_lo + n_hi])
         rows, lab, far, nu, nv, cnt = listed
-        keep, d2, m = round_jit.listed_rows(E, deg, a, b, apex, label, rows, lab, far, nu, nv, cnt)
+        keep, d2, m = contraction.listed_rows(E, deg, a, b, apex, label, rows, lab, far, nu, nv, cnt)
         E3, c3 = np.empty((m, 2), E.dtype), np.empty(m, ecount.dtype)
         k0 = h - int(np.count_nonzero(~keep.take(rows[:n_lo])))  # the rows kept before h
-        lower = submit(round_jit.copy_rows, E, ecount, keep, 0, h, E3, c3, 0, size=h)
-        round_jit.copy_rows(E, ecount, keep, h, P, E3, c3, k0)
+        lower = submit(contraction.copy_rows, E, ecount, keep, 0, h, E3, c3, 0, size=h)
+        contraction.copy_rows(E, ecount, keep, h, P, E3, c3, k0)
         lower.result()
-        return E3, c3, keep, d2, round_jit.rewrite_rows(rows, keep, nu, nv, cnt, E3, c3)
+        return E3, c3, keep, d2, contraction.rewrite_rows(rows, keep, nu, nv, cnt, E3, c3)

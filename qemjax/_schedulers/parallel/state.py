@@ -47,7 +47,7 @@ class RoundState:
     parts (P,p) float32: the model's cost parts (p may be 0); key (P,): what selection ranks (the cost,
     or for a model with `rank_weights` the cost plus its weighted parts);
     bad (P,) int8: the rule a pair broke when last validated (0: not known invalid); changed (n,) bool:
-    vertices whose pairs need a new price next round; edges_next: `round_jit.contract_edges`' result when
+    vertices whose pairs need a new price next round; edges_next: `contraction.contract_edges`' result when
     the pairs were updated through the contractions (manifold mode)."""
 
     E: np.ndarray
@@ -130,7 +130,7 @@ class Run:
         self.N0d = jnp.asarray(pad_rows(self.normals, bucket(m)))  # padded: one compilation per size class
         self.merged = None  # (kept vertices, their merged states) not yet in VQ: `Round.settle`
         if self.incremental:
-            self.label = np.full(self.n, -1, np.int32)  # scratch of `round_jit.contract_edges`
+            self.label = np.full(self.n, -1, np.int32)  # scratch of `contraction.contract_edges`
         self.faces = lists.result()
         self.timer = Timer()
         self.tally = Tally(model)

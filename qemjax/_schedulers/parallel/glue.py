@@ -1,4 +1,4 @@
-"""The parallel round's glue, compiled: what a run's round does between its compiled loops (`round_jit`) and
+"""The parallel round's glue, compiled: what a run's round does between its compiled loops (`selection`, `contraction`) and
 its one device call, as four calls instead of dozens of numpy calls on small arrays.
 
 On a small mesh a round's own work is a few tens of µs, and the numpy calls around it (each a few µs: take,
@@ -15,7 +15,7 @@ copy (`batched`).
   (or the free cost);
 * `order_fit`: the accepted pairs in key order, cut to the face target (`select.sort_keys`,
   `select.fits_target`);
-* `contract`: the rejections cleared around the round, the faces and pairs contracted (`round_jit`), the
+* `contract`: the rejections cleared around the round, the faces and pairs contracted (`contraction`), the
   positions written, the stale pairs listed, and the device call's inputs padded to their shapes; it takes
   the round's arrays bundled (`PairArrays`, `FaceArrays`).
 """
@@ -26,8 +26,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .outcome import LOCKED
-from .round_jit import _key, clear_bad, contract_edges, contract_faces
+from ..outcome import LOCKED
+from .contraction import clear_bad, contract_edges, contract_faces
+from .selection import _key
 
 
 def bound(limit, dtype) -> np.generic:
@@ -52,7 +53,7 @@ class Known(NamedTuple):
 def carry(kept, d, out, last, E, ecount, n, test, locked):
     """The new pairs' prices, rules, boundary vertices and candidates.
 
-    kept (P0,) bool: which of the last round's pairs stay, in order (`round_jit.contract_edges`); d (K,):
+    kept (P0,) bool: which of the last round's pairs stay, in order (`contraction.contract_edges`); d (K,):
     the rows of the new pairs E (P,2) whose price is stale; out (5 + p, ≥ K): the device's price of them
     ([x (3), cost, branch, parts] per column, `device.start_step`; a run with locks: as `locks.adjust`
     leaves it); last: the last round's arrays (a `Known`, passed as a plain tuple); test: the candidate
@@ -186,11 +187,11 @@ def contract(pairs, faces, end, rows, taken, counts, label, shapes):
     `FaceArrays` (each passed as a plain tuple: numba types it by its fields) and the pool's ``end`` (the
     pool must have room); ``rows``: the host's rows (V3 positions, VQ [position, state]); ``taken``: the
     vertices whose rejections are cleared (touched (n,) bool), the accepted pairs' rows (acc (S,)) and their
-    apexes (S,2); ``counts``: the branch counts to add to; ``label``: `round_jit.contract_edges`' scratch;
+    apexes (S,2); ``counts``: the branch counts to add to; ``label``: `contraction.contract_edges`' scratch;
     ``shapes``: (the device rows, the merge piece, the smallest price shape).
 
-    Known rejections are cleared where touched (`round_jit.clear_bad`), the faces (`round_jit.contract_faces`)
-    and the pairs (`round_jit.contract_edges`) contracted, the kept rows moved in V3 and in the first three
+    Known rejections are cleared where touched (`contraction.clear_bad`), the faces (`contraction.contract_faces`)
+    and the pairs (`contraction.contract_edges`) contracted, the kept rows moved in V3 and in the first three
     columns of VQ (their states follow with the device call). Returns the kept and removed vertices, their
     positions, costs (float64) and the largest, the pool's new end, the dead faces, `contract_edges`' result,
     the stale rows d of the new pairs, and the device call's inputs when one piece holds them (`device.step_one`):

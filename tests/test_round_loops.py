@@ -1,4 +1,4 @@
-"""The parallel round's compiled loops (`_schedulers.round_jit`) make exactly the choices of the numpy
+"""The parallel round's compiled loops (`_schedulers.parallel.selection` and `.contraction`) make exactly the choices of the numpy
 stages they replace: whole runs (alone and batched) give the same result bit for bit, and each loop
 answers as the numpy code it stands for (the flip test, the faces' and the pairs' contraction)."""
 from __future__ import annotations
@@ -14,7 +14,8 @@ from qemjax._kernels import flips as flips_mod
 from qemjax._mesh import topology as topo
 from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import rules
-from qemjax._schedulers import parallel, round_jit
+from qemjax._schedulers import parallel
+from qemjax._schedulers.parallel import contraction, selection
 from qemjax._schedulers.parallel import driver
 from edges_reference import contract_edges
 from test_attributes import atlas_sphere
@@ -70,7 +71,7 @@ def _run(mesh, kw, monkeypatch, compiled: bool, batch=None):
     with monkeypatch.context() as m:
         m.setattr(driver, "choose", recording)
         if not compiled:
-            m.setattr(round_jit, "fits", lambda *a: False)
+            m.setattr(selection, "fits", lambda *a: False)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if batch is not None:
@@ -176,7 +177,7 @@ def test_contraction_loops_match_the_numpy_code(seed):
     # pairs: the numpy update against the compiled one
     want = contract_edges(E, ecount, a, b, apex, n, deg)
     label = np.full(n, -1, np.int32)
-    got = round_jit.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), label)
+    got = contraction.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), label)
     for w, g, name in zip(want, got, ("E", "ecount", "keep", "degree", "stale")):
         np.testing.assert_array_equal(g, w, err_msg=name)
     assert (label == -1).all()
@@ -185,7 +186,7 @@ def test_contraction_loops_match_the_numpy_code(seed):
     dead_ref = ref.contract(a, b)
     k = int(new.cnt[a].sum() + new.cnt[b].sum())
     new._compact(k)
-    new.end, dead = round_jit.contract_faces(a, b, new.F, new.alive, new.cnt, new.off, new.pool, new.end)
+    new.end, dead = contraction.contract_faces(a, b, new.F, new.alive, new.cnt, new.off, new.pool, new.end)
     np.testing.assert_array_equal(np.sort(dead), np.sort(dead_ref))
     np.testing.assert_array_equal(new.F[new.alive], ref.F[ref.alive])
     np.testing.assert_array_equal(new.alive, ref.alive)
@@ -201,10 +202,10 @@ def test_contraction_loops_match_the_numpy_code(seed):
 
 
 def test_large_runs_keep_the_numpy_stages(monkeypatch):
-    """Above `round_jit.MAX_FACES` the rounds run the numpy stages (faster there), with the same result."""
+    """Above `selection.MAX_FACES` the rounds run the numpy stages (faster there), with the same result."""
     mesh = shapes.bumpy_sphere(3)
     small, seen_small = _run(mesh, {"ratio": 0.1}, monkeypatch, True)
-    monkeypatch.setattr(round_jit, "MAX_FACES", len(mesh[1]) - 1)
+    monkeypatch.setattr(selection, "MAX_FACES", len(mesh[1]) - 1)
     large, seen_large = _run(mesh, {"ratio": 0.1}, monkeypatch, True)
     assert seen_small == [True] and seen_large == [False]
     _assert_same(large, small)
@@ -214,7 +215,7 @@ def test_large_runs_keep_the_numpy_stages(monkeypatch):
 @pytest.mark.parametrize("seed", [0, 2])
 def test_edge_update_on_two_threads_is_contract_edges(seed, threads, monkeypatch):
     """`parallel.pairs.EdgeUpdate` (the pairs' update with its passes split between the worker and the calling
-    thread) returns `round_jit.contract_edges`' arrays, dtypes included, and leaves the labels cleared;
+    thread) returns `contraction.contract_edges`' arrays, dtypes included, and leaves the labels cleared;
     ``worker``: the halves really run on the worker (no size is too small to hand over)."""
     from qemjax._schedulers import select
     from qemjax._schedulers.parallel.pairs import EdgeUpdate
@@ -226,7 +227,7 @@ def test_edge_update_on_two_threads_is_contract_edges(seed, threads, monkeypatch
     E, ecount, deg, P, apex = _selected_pairs(F, n, seed)
     a, b = P[:, 0].copy(), P[:, 1].copy()
     label = np.full(n, -1, np.int32)
-    want = round_jit.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), label)
+    want = contraction.contract_edges(E, ecount, deg, a, b, apex.astype(np.int64), label)
     got = EdgeUpdate(E, ecount, deg, a, b, apex.astype(np.int64), label).result()
     for w, g, name in zip(want, got, ("E", "ecount", "keep", "degree", "stale")):
         assert g.dtype == w.dtype, name

@@ -1,24 +1,21 @@
-"""The parallel round's host side, compiled (numba): selection passes with validation, and the contraction.
+"""The parallel round's selection passes with validation as one compiled loop (numba), and when a run takes it.
 
 The numpy stages (`parallel.StagedRound`) spend a round in hundreds of numpy calls on small arrays; the same
-steps as two loops over integer arrays take a small fraction of that (docs/benchmarks.md). This module holds those two
-loops, for the common case (`fits`): manifold mode with the pairs updated through the contractions (no
-non-edge pairs), at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through `wedges_jit`, and
-locked vertices' rule, `rules.stranded_by_pass`). They make exactly the choices of the numpy stages they
-replace (`select.independent_sets` with `parallel.StagedRound.validate`, then `FaceLists.contract_touched` and
-the edge update of `parallel.pairs.EdgeUpdate`): the golden outputs are the same bits, and tests/test_round_jit.py compares each
-loop with the numpy code on random meshes.
+steps as loops over integer arrays (this one and `contraction`'s) take a small fraction of that
+(docs/benchmarks.md). They serve the common case (`fits`): manifold mode with the pairs updated through the
+contractions (no non-edge pairs), at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through
+`wedges_jit`, and locked vertices' rule, `rules.stranded_by_pass`). They make exactly the choices of the numpy
+stages they replace (`select.independent_sets` with `parallel.StagedRound.validate`): the golden outputs are
+the same bits, and tests/test_round_loops.py compares each loop with the numpy code on random meshes.
 
-* `select_validate`: the independent-set passes (each pair that holds the smallest key among the
-  candidates touching its endpoints' closed 1-rings), each selected pair's rules (link condition,
-  coincident faces, the part rule, the locks' rule, the seam rule, the flip test with the device kernel's
-  float32 operations, `rules.flips`), the locking of accepted 1-rings and each copy's pass rule
-  (`select._copies_staying`; one run is one copy).
-* `contract`: the accepted pairs' faces (dead ones out, b's corners to a, new runs in the pool) and
-  pairs (merged, moved, counted, compacted), with the degrees after and which pairs are stale.
+`select_validate` runs the independent-set passes (each pair that holds the smallest key among the candidates
+touching its endpoints' closed 1-rings), each selected pair's rules (link condition, coincident faces, the
+part rule, the locks' rule, the seam rule, the flip test with the device kernel's float32 operations,
+`rules.flips`), the locking of accepted 1-rings and each copy's pass rule (`select._copies_staying`; one run
+is one copy).
 
 A vertex's neighbours are read from its faces: in this mode every pair is an edge of a live face, and every
-such edge is a pair (`topology.contract_edges` keeps exactly those).
+such edge is a pair (the edge update keeps exactly those).
 """
 from __future__ import annotations
 
@@ -27,10 +24,9 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from .._mesh import wedges_jit
-from . import rules as rule
-from .rules import Faces
-from .outcome import COINCIDENT, FLIP, LOCKED, PART, SEAM, TOPOLOGY
+from ..._mesh import wedges_jit
+from .. import rules as rule
+from ..outcome import COINCIDENT, FLIP, LOCKED, PART, SEAM, TOPOLOGY
 
 NO_KEY = np.iinfo(np.int64).max
 _SCRAMBLE = np.uint32(0x9E3779B1)
@@ -75,6 +71,40 @@ class Scratch(NamedTuple):
     fk: Any
     fc: Any
     T: Any
+
+
+class Pairs(NamedTuple):
+    """A round's pairs for `select_validate`: E (P,2), their face counts ecount (P,), the candidates cand (P,)
+    bool, the float32 bits of each pair's ranking key kbits (P,) int32, each pair's index within its copy
+    ``local`` (P,) and its placement X (P,3)."""
+    E: Any
+    ecount: Any
+    cand: Any
+    kbits: Any
+    local: Any
+    X: Any
+
+
+class Passes(NamedTuple):
+    """The copies and the passes: each vertex's copy vcopy (n,), each copy's face budget need (C,), the round's
+    scramble ``salt``, and the schedule's max_passes and pass_yield."""
+    vcopy: Any
+    need: Any
+    salt: Any
+    max_passes: Any
+    pass_yield: Any
+
+
+class Work(NamedTuple):
+    """`select_validate`'s working arrays: free, active (n,) bool and mark (n,) int32 zeros (free comes back
+    with the locked vertices False); keys (≥ P,) int64, rows (2, ≥ P) int32 and verts (2, n) int64, kept from
+    round to round (fresh arrays this large would be mapped and faulted in anew on every call)."""
+    free: Any
+    active: Any
+    mark: Any
+    keys: Any
+    rows: Any
+    verts: Any
 
 
 MAX_FACES = 1 << 17  # runs on more faces keep the numpy stages: see `fits`
@@ -191,30 +221,23 @@ def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
 
 
 @njit(cache=True)
-def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes, pass_yield, keep_parts,
-                    F, alive, cnt, off, pool, VQ, N0, X, bvert, deg, cos_max, sliver, free, active, mark,
-                    keys, rows, verts, corner_wedge, multi, locked, partner):
-    """`select.independent_sets` with `parallel.StagedRound.validate` (manifold mode).
-
-    E (P,2) pairs, ecount (P,) their faces; cand (P,) bool: the candidates (rejected ones are cleared);
-    kbits (P,) int32: the float32 bits of each pair's ranking key; local (P,): each pair's index within its
-    copy; salt: the round's scramble; vcopy (n,): each vertex's copy, need (C,): each copy's face budget;
-    the faces (`FaceLists` arrays), positions VQ (n, ≥3) and reference normals N0, the pairs' placements X (P,3),
-    boundary vertices and degrees; free, active (n,) bool and mark (n,) int32 zeros: scratch (free comes
-    back with the locked vertices False); keys (≥ P,) int64, rows (2, ≥ P) int32 and verts (2, n) int64:
-    working arrays, kept from round to round (fresh arrays this large would be mapped and faulted in anew on
-    every call). corner_wedge (m,3) and multi (n,): the wedge of each face corner and the vertices on a
-    seam, when attributes are kept (else (0,3) and all False). locked (n,) bool: the locked vertices (empty:
-    none), and partner (n,) int32 all -1 (left so): scratch of their rule (`rules.stranded_by_pass`).
-    Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices and their
-    rules)."""
+def select_validate(pairs, passes, faces, mesh, limits, seams, locks, work):
+    """`select.independent_sets` with `parallel.StagedRound.validate` (manifold mode), on the round's pairs
+    (`Pairs`; the rejected candidates are cleared in ``pairs.cand``), its copies and passes (`Passes`), the
+    faces (`rules.Faces`, `FaceLists`' arrays), the mesh (`Mesh`, with the placements in ``pairs.X``), the flip
+    test's limits, the seams, the locks and the working arrays (`Work`; ``free`` comes back with the locked
+    vertices False). Returns (accepted pair indices in pass order, their apexes (S,2), the rejected indices
+    and their rules)."""
+    E, ecount, cand, kbits, local, X = pairs
+    vcopy, need, salt, max_passes, pass_yield = passes
+    free, active, mark, keys, rows, verts = work
+    cnt = faces.count
+    locked, partner = locks
     P = len(E)
     n = len(vcopy)
     C = len(need)
     K, one, bo = keys, rows[0], rows[1]  # each pair's key (NO_KEY: not a candidate, or rejected)
     m1, m2 = verts[0], verts[1]
-    faces, mesh = Faces(F, alive, off, cnt, pool), Mesh(VQ, N0, bvert, deg)
-    limits, seams, locks = Limits(cos_max, sliver, keep_parts), Seams(corner_wedge, multi), Locks(locked, partner)
     ncand = 0
     for i in range(P):
         if cand[i]:
@@ -356,185 +379,3 @@ def select_validate(E, ecount, cand, kbits, local, salt, vcopy, need, max_passes
                 nbo += pa & pb
             k1 = k2
     return acc[:na].copy(), apex[:na].copy(), rej[:nr].copy(), why[:nr].copy()
-
-
-@njit(cache=True)
-def contract_faces(a, b, F, alive, cnt, off, pool, end):
-    """`FaceLists.contract_touched` for vertex-disjoint pairs (a, b) two edges apart: the faces holding
-    both endpoints die, b's other faces take a, and a's run (its surviving faces, then b's) is written at
-    the pool's end (which must have room for cnt[a] + cnt[b] more entries). Returns the new end and the
-    faces that died, pair by pair."""
-    dead = np.empty(2 * len(a), np.int64)
-    nd = 0
-    for s in range(len(a)):
-        u, v = a[s], b[s]
-        for i in range(off[v], off[v] + cnt[v]):
-            f = pool[i]
-            if alive[f] and (F[f, 0] == u or F[f, 1] == u or F[f, 2] == u):
-                alive[f] = False
-                if nd == len(dead):
-                    dead = np.concatenate((dead, np.empty(len(dead), np.int64)))
-                dead[nd] = f
-                nd += 1
-        start = end
-        for i in range(off[u], off[u] + cnt[u]):
-            f = pool[i]
-            if alive[f]:
-                pool[end] = f
-                end += 1
-        for i in range(off[v], off[v] + cnt[v]):
-            f = pool[i]
-            if alive[f]:
-                for c in range(3):
-                    if F[f, c] == v:
-                        F[f, c] = u
-                pool[end] = f
-                end += 1
-        off[u] = start
-        cnt[u] = end - start
-        cnt[v] = 0
-    return end, dead[:nd].copy()
-
-
-@njit(cache=True, nogil=True)
-def contract_edges(E, ecount, deg, a, b, apex, label):
-    """`topology.contract_edges` for vertex-disjoint pairs (a, b) that passed the link test, with their
-    apexes (S,2) (-1 where a pair has one face): (b, c) merges into (a, c) for an apex c (which loses the
-    vanished face and gains (b, c)'s others), b's other pairs move to a, the contracted pair goes.
-    ``label`` (n,) int32 scratch, all -1 (left so). Returns (E', ecount', keep, degree', stale'): the
-    pairs that stay in their order, which old rows they continue, the degrees after, and which of them
-    are at a kept vertex (their cost is stale).
-
-    In five steps, which `parallel.EdgeUpdate` also runs with the two passes over every pair shared between
-    two threads: the endpoints labelled; the rows at an endpoint listed with their labels (`list_rows`);
-    what becomes of each listed row (`listed_rows`); every row that stays copied (`copy_rows`) and the
-    listed ones rewritten (`rewrite_rows`)."""
-    P = len(E)
-    label_pairs(a, b, label)
-    rows, lab, far, nu, nv, cnt = listing(E, ecount, P)
-    nr = list_rows(E, ecount, label, 0, P, rows, lab, far, nu, nv, cnt)
-    rows, nu, nv, cnt = rows[:nr], nu[:nr], nv[:nr], cnt[:nr]
-    keep, d2, m = listed_rows(E, deg, a, b, apex, label, rows, lab[:nr], far[:nr], nu, nv, cnt)
-    E3 = np.empty((m, 2), E.dtype)
-    c3 = np.empty(m, ecount.dtype)
-    copy_rows(E, ecount, keep, 0, P, E3, c3, 0)
-    s3 = rewrite_rows(rows, keep, nu, nv, cnt, E3, c3)
-    return E3, c3, keep, d2, s3
-
-
-@njit(cache=True, nogil=True)
-def label_pairs(a, b, label):
-    """label[a[s]] = s and label[b[s]] = S + s (``label`` all -1 before; `listed_rows` undoes it)."""
-    S = len(a)
-    for s in range(S):
-        label[a[s]] = s
-        label[b[s]] = S + s
-
-
-@njit(cache=True, nogil=True)
-def listing(E, ecount, P):
-    """Room for `list_rows` of P rows: (rows int64, lab int32, far, nu, nv in E's dtype, cnt in ecount's)."""
-    return (np.empty(P, np.int64), np.empty(P, np.int32), np.empty(P, E.dtype), np.empty(P, E.dtype),
-            np.empty(P, E.dtype), np.empty(P, ecount.dtype))
-
-
-@njit(cache=True, nogil=True)
-def list_rows(E, ecount, label, lo, hi, rows, lab, far, nu, nv, cnt):
-    """The rows of E in [lo, hi) with a labelled endpoint, ascending, written from rows[0], with what
-    `listed_rows` reads of each: the endpoint's label (lab; -1 for the contracted pair itself, both of
-    whose endpoints are labelled), the row's other vertex (far) and the row (nu, nv, cnt). Every row is
-    written, then the count moves past it or not (no branch: the rows at an endpoint follow no pattern), so
-    each array must have room for hi - lo entries. Returns how many."""
-    nr = 0
-    for i in range(lo, hi):
-        u, v = E[i, 0], E[i, 1]
-        l0, l1 = label[u], label[v]
-        rows[nr], nu[nr], nv[nr], cnt[nr] = i, u, v, ecount[i]
-        at0 = l0 >= 0
-        lab[nr] = -1 if (at0 and l1 >= 0) else (l0 if at0 else l1)
-        far[nr] = v if at0 else u
-        nr += at0 | (l1 >= 0)
-    return nr
-
-
-@njit(cache=True, nogil=True)
-def listed_rows(E, deg, a, b, apex, label, rows, lab, far, nu, nv, cnt):
-    """What becomes of the listed rows (`list_rows`' arrays, cut to the listed ones): their new (u, v, face
-    count) written over nu, nv, cnt, which rows stay (keep (P,) bool: all but dropped listed ones), the
-    degrees after, and how many rows stay. Unlabels the endpoints."""
-    S = len(a)
-    P = len(E)
-    nr = len(rows)
-    keep = np.ones(P, np.bool_)
-    delta = np.zeros((S, 2), np.int64)
-    m = P  # the rows that stay
-    for t in range(nr):  # pairs at a b: merge into (a, apex) or move to a
-        if lab[t] < 0:  # the contracted pair itself
-            keep[rows[t]] = False
-            m -= 1
-            continue
-        if lab[t] < S:
-            continue
-        s, c = lab[t] - S, far[t]
-        if c == apex[s, 0] or c == apex[s, 1]:
-            delta[s, 0 if c == apex[s, 0] else 1] = cnt[t] - 2
-            keep[rows[t]] = False
-            m -= 1
-        else:
-            u = a[s]
-            nu[t], nv[t] = min(u, c), max(u, c)
-    for t in range(nr):  # pairs (a, apex): their new face counts
-        s, c = lab[t], far[t]
-        if s < 0 or s >= S:
-            continue
-        if c == apex[s, 0] or c == apex[s, 1]:
-            cnt[t] += delta[s, 0 if c == apex[s, 0] else 1]
-            if cnt[t] <= 0:
-                keep[rows[t]] = False
-                m -= 1
-    d2 = deg.copy()
-    for s in range(S):
-        k = 0
-        for j in range(2):
-            if apex[s, j] >= 0:
-                k += 1
-                d2[apex[s, j]] -= 1
-        d2[a[s]] += deg[b[s]] - 2 - k
-        d2[b[s]] = 0
-        label[a[s]] = -1
-        label[b[s]] = -1
-    return keep, d2, m
-
-
-@njit(cache=True, nogil=True)
-def copy_rows(E, ecount, keep, lo, hi, E3, c3, k):
-    """The kept rows of E and ecount in [lo, hi) copied in order into E3 and c3 from row k (the kept rows
-    before lo)."""
-    for i in range(lo, hi):
-        if keep[i]:  # (a dropped row is rare: a predictable branch)
-            E3[k, 0], E3[k, 1], c3[k] = E[i, 0], E[i, 1], ecount[i]
-            k += 1
-
-
-@njit(cache=True, nogil=True)
-def rewrite_rows(rows, keep, nu, nv, cnt, E3, c3):
-    """The listed rows that stay take their new values, at their row less the rows dropped before; returns
-    which rows of E3 are at a kept vertex (stale)."""
-    s3 = np.zeros(len(E3), np.bool_)
-    gone = 0
-    for t in range(len(rows)):
-        i = rows[t]
-        if keep[i]:
-            k = i - gone
-            E3[k, 0], E3[k, 1], c3[k], s3[k] = nu[t], nv[t], cnt[t], True
-        else:
-            gone += 1
-    return s3
-
-
-@njit(cache=True)
-def clear_bad(E, bad, touched):
-    """Pairs known invalid get another chance where an endpoint is in ``touched`` (the round's rings)."""
-    for i in range(len(E)):
-        if bad[i] != 0 and (touched[E[i, 0]] or touched[E[i, 1]]):
-            bad[i] = 0
