@@ -60,6 +60,8 @@ OPTIONS = {
     "preserve_topology": dict(shown="on; off with --pair-threshold > 0"),
     "flip_angle": dict(metavar="DEG", help="forbid contractions that turn a face's normal by DEG "
                        "degrees or more; 'none' allows flips"),
+    "min_angle": dict(metavar="DEG", help="refuse contractions that leave a face they move with a "
+                      "smallest angle under about DEG degrees, unless the face was worse before; default off"),
     "split_factor": dict(metavar="B", help="with --method esqem, split edges longer than B × the "
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),

@@ -80,6 +80,12 @@ class Topology:
         (Garland–Heckbert's aggregation: separate parts can join). 0 = edge contraction only.
     flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or more
         (90: any sign flip or collapse to zero area); None allows flips.
+    min_angle: a triangle-quality guard, in degrees (None, the default: off). A contraction (and the
+        re-fit's move) is refused when a face it moves ends with 2·area / longest edge² below
+        sin(min_angle) and lower than before the move. A face that passes has its smallest angle at least
+        min_angle (2·area / longest² never exceeds the sine of the smallest angle), so faces made from
+        well-shaped ones are never slivers under min_angle; the guard may refuse some faces whose smallest
+        angle is up to about twice min_angle, and faces the input had worse may stay as they are.
     weld: merge vertices with identical coordinates first (G&H need shared corners).
     """
 
@@ -88,6 +94,7 @@ class Topology:
     pair_threshold: float = 0.0
     flip_angle: float | None = 90.0
     weld: bool = True
+    min_angle: float | None = None
 
     def __post_init__(self):
         _bool("Topology", "prune", self.prune)
@@ -104,6 +111,11 @@ class Topology:
             a = _number("Topology", "flip_angle", self.flip_angle)
             if not 0 < a <= 180:
                 raise ValueError(f"flip_angle must be in (0, 180] degrees or None, got {self.flip_angle}")
+        if self.min_angle is not None:
+            a = _number("Topology", "min_angle", self.min_angle)
+            if not 0 < a < 60:
+                raise ValueError(f"min_angle must be in (0, 60) degrees or None (a triangle's smallest angle is "
+                                 f"at most 60), got {self.min_angle}")
 
     @property
     def manifold(self) -> bool:
@@ -114,6 +126,11 @@ class Topology:
     def cos_max(self) -> float:
         """The cosine of the flip angle (-2: flips allowed)."""
         return -2.0 if self.flip_angle is None else math.cos(math.radians(self.flip_angle))
+
+    @property
+    def min_quality(self) -> float:
+        """The quality guard's bound on 2·area / longest edge² (0: off)."""
+        return 0.0 if self.min_angle is None else math.sin(math.radians(self.min_angle))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,6 +156,7 @@ class Options:
     """Resolved options of one run, in internal units (coordinates normalised to unit extent).
 
     cos_max: cosine of the flip angle (-2: flips allowed).
+    min_quality: the quality guard's bound on 2·area / longest edge² of a moved face (0: off).
     preserve_topology: link condition and no coincident faces (manifold mode).
     keep_parts: (manifold mode) forbid the contraction that would remove the last face of a part, so
         separate parts survive; False lets small parts vanish (``simplify(prune=True)``).
@@ -151,6 +169,7 @@ class Options:
     max_cost: float
     keep_parts: bool = True
     schedule: Schedule = Schedule()
+    min_quality: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)

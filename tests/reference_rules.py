@@ -10,18 +10,18 @@ from qemjax._mesh.incidence import FaceLists
 
 
 def flips_host(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarray, k: np.ndarray,
-               x: np.ndarray, cos_max) -> bool:
+               x: np.ndarray, cos_max, min_quality=0.0) -> bool:
     """`flips.face_flips_at` on the host, in numpy, for the few faces of one contraction: does moving
     corner k (K,) of faces (K,3) (rows of V (N,≥3)) to x (3,) flip any of them against its own normal or
     its reference N0[fids]? The kernel's float32 operations (`flips._flips`), each rounded alike, on (K,3)
     blocks rather than component lists."""
-    return bool(flips_host_faces(V, N0, faces, fids, k, x, cos_max).any())
+    return bool(flips_host_faces(V, N0, faces, fids, k, x, cos_max, min_quality).any())
 
 
 def flips_host_faces(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.ndarray, k: np.ndarray,
-                     x: np.ndarray, cos_max) -> np.ndarray:
+                     x: np.ndarray, cos_max, min_quality=0.0) -> np.ndarray:
     """`flips_host` per face: (K,) bool. x: (3,), or (K,3) where each face's corner goes (the faces of
-    several contractions tested in one pass)."""
+    several contractions tested in one pass). ``min_quality``: the quality guard (0: off)."""
     g = V[faces, :3].astype(np.float32)  # (K,3,3)
     cos_max = np.float32(cos_max)
     q = g.copy()
@@ -40,6 +40,13 @@ def flips_host_faces(V: np.ndarray, N0: np.ndarray, faces: np.ndarray, fids: np.
     longest2 = np.maximum(np.maximum(de0, de1), de2)
     bad |= (l1 <= flips.SLIVER * longest2) & (cos_max > -1.0)
     bad |= dr1 <= cos_max * np.sqrt(drr) * l1
+    # the quality guard: the edges before the move, their squared lengths summed as `quadrics.dot`
+    o = np.stack([g[:, 1] - g[:, 0], g[:, 2] - g[:, 1], g[:, 0] - g[:, 2]])
+    o = o * o
+    do0, do1, do2 = o[..., 0] + o[..., 1] + o[..., 2]
+    before2 = np.maximum(np.maximum(do0, do1), do2)
+    worse = l1 * before2 < np.sqrt(d00) * longest2
+    bad |= (l1 < np.float32(min_quality) * longest2) & worse
     return bad
 
 

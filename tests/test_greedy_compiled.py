@@ -300,7 +300,8 @@ def test_simple_means_no_repeated_corners_or_faces():
 
 def test_flip_kernel_matches_numpy():
     """`rules.flips` per face = `reference_rules.flips_host_faces`, bit for bit in its float32 decisions: random
-    faces and moves, near-degenerate ones (collinear, zero area, tiny), three thresholds."""
+    faces and moves, near-degenerate ones (collinear, zero area, tiny), three thresholds, and the quality
+    guard with and without the flip test."""
     rng = np.random.default_rng(1)
     V = rng.normal(size=(60, 3)).astype(np.float32)
     V[50:] = V[:10] + rng.normal(0, 1e-4, (10, 3)).astype(np.float32)  # near duplicates
@@ -311,10 +312,10 @@ def test_flip_kernel_matches_numpy():
     k = rng.integers(0, 3, len(F))
     X = np.where(rng.random((len(F), 1)) < 0.3, V[F[np.arange(len(F)), (k + 1) % 3]] * np.float32(1.0001),
                  rng.normal(size=(len(F), 3))).astype(np.float32)
-    for cos_max in (0.0, float(np.cos(np.radians(45))), -2.0):
-        want = reference_rules.flips_host_faces(V, N0, F, np.arange(len(F)), k, X, cos_max)
-        got = [rules.flips(V, N0, F, f, k[f], X[f], np.float32(cos_max), np.float32(flips_mod.SLIVER))
-               for f in range(len(F))]
+    for cos_max, q in ((0.0, 0.0), (float(np.cos(np.radians(45))), 0.0), (-2.0, 0.0), (0.0, 0.2), (-2.0, 0.4)):
+        want = reference_rules.flips_host_faces(V, N0, F, np.arange(len(F)), k, X, cos_max, q)
+        shape = (np.float32(flips_mod.SLIVER), np.float32(q))
+        got = [rules.flips(V, N0, F, f, k[f], X[f], np.float32(cos_max), shape) for f in range(len(F))]
         assert np.array_equal(np.array(got), want)
         assert 0 < want.sum() < len(F)
 

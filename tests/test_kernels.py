@@ -353,6 +353,36 @@ def test_indexed_flips_match_numpy_reference():
         assert 0 < got.sum() < K
 
 
+def test_quality_guard_matches_float64():
+    """The quality guard of face_flips_at (flips otherwise allowed) against numpy in float64: a face is
+    refused exactly when its 2·area / longest edge² ends below the bound and below what it was (random
+    faces, away from ties)."""
+    with jax.enable_x64(True):
+        n, K = 30, 2000
+        V = rng.normal(size=(n, 3))
+        faces = np.array([rng.choice(n, 3, replace=False) for _ in range(K)])
+        k = rng.integers(0, 3, K)
+        x = rng.normal(size=(K, 3))
+        N0 = rng.normal(size=(K, 3))
+
+        def quality(c):
+            nrm = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+            longest = np.max([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)], axis=0)
+            return nrm / longest
+        p = V[faces]
+        q = p.copy()
+        q[np.arange(K), k] = x
+        q0, q1 = quality(p), quality(q)
+        for bound in (0.1, 0.3, 0.6):
+            got = np.asarray(flips.face_flips_at(jnp.asarray(V), jnp.asarray(N0), jnp.asarray(faces),
+                                                 jnp.asarray(np.arange(K)), jnp.asarray(k), jnp.asarray(x), -2.0,
+                                                 bound))
+            ref = (q1 < bound) & (q1 < q0)
+            clear = (np.abs(q1 - bound) > 1e-9) & (np.abs(q1 - q0) > 1e-9)
+            assert np.array_equal(got[clear], ref[clear])
+            assert 0 < ref.sum() < K
+
+
 def test_host_flip_test_agrees_with_the_kernel_in_float32():
     """flips_host (the device kernel's numpy twin, tests/reference_rules.py) decides as face_flips_at does,
     one contraction at a time, on float32 inputs that include near-threshold turns and slivers."""
@@ -369,12 +399,13 @@ def test_host_flip_test_agrees_with_the_kernel_in_float32():
         p = V[faces]
         o1, o2 = p[np.arange(K), (k + 1) % 3], p[np.arange(K), (k + 2) % 3]
         x = (o1[0] + rng.normal() * (o2[0] - o1[0]) + 1e-3 * rng.normal(size=3)).astype(np.float32)
-        for cos_max in (0.0, 0.5, -2.0):
+        for cos_max, q in ((0.0, 0.0), (0.5, 0.0), (-2.0, 0.0), (-2.0, 0.3), (0.0, 0.5)):
             want = bool(np.any(np.asarray(flips.face_flips_at(
                 jnp.asarray(V), jnp.asarray(N0), jnp.asarray(faces), jnp.asarray(fids.astype(np.int32)),
-                jnp.asarray(k.astype(np.int32)), jnp.asarray(np.tile(x, (K, 1))), np.float32(cos_max)))))
-            got = reference_rules.flips_host(V, N0, faces, fids, k, x, cos_max)
-            assert got == want, (faces, k, x, cos_max)
+                jnp.asarray(k.astype(np.int32)), jnp.asarray(np.tile(x, (K, 1))), np.float32(cos_max),
+                np.float32(q)))))
+            got = reference_rules.flips_host(V, N0, faces, fids, k, x, cos_max, q)
+            assert got == want, (faces, k, x, cos_max, q)
             verdicts.append(got)
     assert 0 < sum(verdicts) < len(verdicts)
 

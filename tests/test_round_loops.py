@@ -124,7 +124,8 @@ def test_compiled_round_in_a_batch(monkeypatch):
 
 def test_flip_test_matches_the_kernel():
     """`rules.flips` (the rounds' flip test) against `reference_rules.flips_host_faces` (the device
-    kernel's host twin) on random faces, near-degenerate ones included, at the default threshold and 45°."""
+    kernel's host twin) on random faces, near-degenerate ones included, at the default threshold and 45°,
+    with and without the quality guard (alone, with flips allowed)."""
     rng = np.random.default_rng(3)
     V = rng.normal(size=(60, 3)).astype(np.float32)
     V[50:] = V[:10] + rng.normal(0, 1e-4, (10, 3)).astype(np.float32)  # near-duplicates: slivers
@@ -134,10 +135,10 @@ def test_flip_test_matches_the_kernel():
     corner = rng.integers(0, 3, 400)
     X = (V[F[np.arange(400), corner]] + rng.normal(0, 0.3, (400, 3))).astype(np.float32)
     VQ = np.concatenate([V, np.zeros((60, 4), np.float32)], 1)
-    for cos_max in (0.0, np.cos(np.radians(45))):
-        want = reference_rules.flips_host_faces(VQ, N0, F, np.arange(400), corner, X, cos_max)
-        got = np.array([rules.flips(VQ, N0, F, f, corner[f], X[f], np.float32(cos_max),
-                                         np.float32(flips_mod.SLIVER)) for f in range(400)])
+    for cos_max, q in ((0.0, 0.0), (np.cos(np.radians(45)), 0.0), (0.0, 0.3), (-2.0, 0.5)):
+        want = reference_rules.flips_host_faces(VQ, N0, F, np.arange(400), corner, X, cos_max, q)
+        shape = (np.float32(flips_mod.SLIVER), np.float32(q))
+        got = np.array([rules.flips(VQ, N0, F, f, corner[f], X[f], np.float32(cos_max), shape) for f in range(400)])
         assert want.any() and not want.all()
         np.testing.assert_array_equal(got, want)
 

@@ -38,6 +38,7 @@ Hausdorff comparison, added after some runs were written) without running anythi
 from __future__ import annotations
 
 import argparse
+import importlib
 import csv
 import dataclasses
 import inspect
@@ -54,7 +55,7 @@ import meshes as bench_meshes  # noqa: E402
 import peers as bench_peers  # noqa: E402
 
 RESULTS = EXPERIMENTS / "results"
-COLUMNS = ["mesh", "faces_in", "ratio", "target", "method", "faces_out", "rms_rel", "hausdorff_rel", "time_s",
+COLUMNS = ["mesh", "faces_in", "ratio", "target", "method", "faces_out", "rms_rel", "hausdorff_rel", "slivers", "time_s",
            "branches", "status"]
 
 
@@ -89,7 +90,10 @@ def variant_runner(label: str, rev: str | None, settings: dict):
     base_method = settings.pop("method", None)  # a registered method (its fields: the QEM ones it shares)
     # every setting of a method, Topology or Attributes by its name: `_pipeline.flat` (`_flat` before the
     # layout regroup, 61c71ce)
-    flat = getattr(getattr(package, "_pipeline", None), "flat", None) or getattr(package, "_flat", None)
+    try:
+        flat = importlib.import_module(f"{package.__name__}._pipeline.flat")
+    except ImportError:
+        flat = getattr(package, "_flat", None)
     if flat is not None:
         table = flat.options()
         unknown = set(settings) - set(table)
@@ -144,10 +148,11 @@ def variant_runner(label: str, rev: str | None, settings: dict):
 
 
 def distances(V, F, V2, F2) -> dict:
-    from qemjax.metrics import surface_distance
+    from qemjax.metrics import surface_distance, triangle_quality
 
     d = surface_distance((V, F), (V2, F2), seed=0)
-    return {"rms_rel": d["rms_rel"], "hausdorff_rel": d["hausdorff_rel"]}
+    return {"rms_rel": d["rms_rel"], "hausdorff_rel": d["hausdorff_rel"],
+            "slivers": triangle_quality((V2, F2))["sliver_fraction"]}
 
 
 def run_peers(mesh, ratio, target) -> list[dict]:
@@ -164,18 +169,20 @@ def run_peers(mesh, ratio, target) -> list[dict]:
 
 
 def summary(rows: list[dict], cases, labels: list[str]) -> str:
-    """One line per variant: cases at or below the best peer (rms, Hausdorff) and its time over the first
-    variant's (same run: median over the cases, and on the bunny and the armadillo at each ratio)."""
+    """One line per variant: cases at or below the best peer (rms, Hausdorff), cases whose fraction of
+    slivers (smallest angle under 10°) is at or below pymeshlab's (rows without it: "-"), cases that stopped
+    above the target, and its time over the first variant's (same run: median over the cases, and on the
+    bunny and the armadillo at each ratio)."""
     def row_of(mesh, ratio, label):
         return next((r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio and r["status"] == "ok"
                      and r["method"] == f"qemjax-{label}"), None)
 
     named = [(m, q) for m, q in cases if m in ("stanford-bunny", "armadillo")]
-    head = ("| variant | rms <= best peer | Hausdorff <= best peer | time / " + labels[0] + " (median) |"
-            + "".join(f" time / {labels[0]}, {m} @ {q:g} |" for m, q in named))
-    lines = ["## Summary", "", head, "|" + "---|" * (4 + len(named))]
+    head = ("| variant | rms <= best peer | Hausdorff <= best peer | slivers <= pymeshlab | above target | time / "
+            + labels[0] + " (median) |" + "".join(f" time / {labels[0]}, {m} @ {q:g} |" for m, q in named))
+    lines = ["## Summary", "", head, "|" + "---|" * (6 + len(named))]
     for label in labels:
-        n = n_r = n_h = 0
+        n = n_r = n_h = n_s = n_sc = above = 0
         times = []
         for mesh, ratio in cases:
             here = [r for r in rows if r["mesh"] == mesh and float(r["ratio"]) == ratio and r["status"] == "ok"]
@@ -186,13 +193,20 @@ def summary(rows: list[dict], cases, labels: list[str]) -> str:
             n += 1
             n_r += float(o["rms_rel"]) <= min(float(r["rms_rel"]) for r in peers)
             n_h += float(o["hausdorff_rel"]) <= min(float(r["hausdorff_rel"]) for r in peers)
+            above += int(o["faces_out"]) > int(o["target"])
+            pml = next((r for r in peers if r["method"] == "pymeshlab" and r.get("slivers") not in (None, "")), None)
+            if pml is not None and o.get("slivers") not in (None, ""):
+                n_sc += 1
+                n_s += float(o["slivers"]) <= float(pml["slivers"])
             if b is not None:
                 times.append(float(o["time_s"]) / float(b["time_s"]))
         at = []
         for m, q in named:
             o, b = row_of(m, q, label), row_of(m, q, labels[0])
             at.append(f"{float(o['time_s']) / float(b['time_s']):.2f}" if o and b else "-")
-        lines.append(f"| {label} | {n_r}/{n} | {n_h}/{n} | {np.median(times) if times else float('nan'):.2f} |"
+        sl = f"{n_s}/{n_sc}" if n_sc else "-"
+        lines.append(f"| {label} | {n_r}/{n} | {n_h}/{n} | {sl} | {above}/{n} | "
+                     f"{np.median(times) if times else float('nan'):.2f} |"
                      + "".join(f" {x} |" for x in at))
     return "\n".join(lines) + "\n"
 

@@ -30,11 +30,12 @@ def _normal(p0, p1, p2):
     return _cross(_sub(p1, p0), _sub(p2, p0))
 
 
-def _flips(p, k, x, cos_max, ref, xp=jnp):
+def _flips(p, k, x, cos_max, ref, xp=jnp, min_quality=None):
     """Core on component lists: p = [p0, p1, p2] corners, each [x, y, z]; k corner index array;
     x [x, y, z]; ref [x, y, z] or None. Returns a bool array. ``xp``: jax.numpy, or numpy (the tests'
-    host reference). The host form of this test, with the same float32 operations in the same order, is
-    `_schedulers.rules.flips`."""
+    host reference). ``min_quality``: the quality guard (`Topology.min_angle`; None or 0: off): a face
+    whose 2·area / longest edge² ends below it and below what it was counts as flipped. The host form of
+    this test, with the same float32 operations in the same order, is `_schedulers.rules.flips`."""
     n0 = _normal(*p)
     q = [[xp.where(k == c, x[i], p[c][i]) for i in range(3)] for c in range(3)]
     n1 = _normal(*q)
@@ -44,6 +45,11 @@ def _flips(p, k, x, cos_max, ref, xp=jnp):
     e = [_sub(q[1], q[0]), _sub(q[2], q[1]), _sub(q[0], q[2])]
     longest2 = xp.maximum(xp.maximum(qd.dot(e[0], e[0]), qd.dot(e[1], e[1])), qd.dot(e[2], e[2]))
     bad = bad | ((l1 <= SLIVER * longest2) & (cos_max > -1.0))
+    if min_quality is not None:
+        o = [_sub(p[1], p[0]), _sub(p[2], p[1]), _sub(p[0], p[2])]
+        before2 = xp.maximum(xp.maximum(qd.dot(o[0], o[0]), qd.dot(o[1], o[1])), qd.dot(o[2], o[2]))
+        worse = l1 * before2 < xp.sqrt(qd.dot(n0, n0)) * longest2
+        bad = bad | ((l1 < min_quality * longest2) & worse)
     if ref is not None:
         bad = bad | (qd.dot(ref, n1) <= cos_max * xp.sqrt(qd.dot(ref, ref)) * l1)
     return bad
@@ -66,11 +72,11 @@ def face_flips(p, k, x, mask, ref, cos_max):
 
 
 @jax.jit  # not `kernel`: the older emitter runs this several times slower (docs/benchmarks.md); see below
-def face_flips_at(V, N0, faces, fids, k, x, cos_max):
+def face_flips_at(V, N0, faces, fids, k, x, cos_max, min_quality=0.0):
     """`face_flips` with the inputs gathered here: faces (K,3) index rows of V (N,≥3) (columns 0-2 are
     positions); k (K,) the moving corner, x (K,3) where it goes; the reference normal of face i is
     N0[fids[i]]. Indices are clipped, not checked: padding rows give meaningless results to slice off.
-    Returns (K,) bool.
+    ``min_quality``: the quality guard (`_flips`; 0: off). Returns (K,) bool.
 
     Everything gathered is packed into one (15,K) array and materialised before the arithmetic: with the
     gathers left apart (one per corner, as separate arrays), XLA's CPU fusion recomputes them and takes
@@ -85,4 +91,5 @@ def face_flips_at(V, N0, faces, fids, k, x, cos_max):
     ref = jnp.take(N0, fids, axis=0, mode="clip")
     c = jax.lax.optimization_barrier(jnp.concatenate([g, ref.astype(g.dtype), x.astype(g.dtype)], 1).T)
     p = [[c[3 * j + i] for i in range(3)] for j in range(3)]
-    return _flips(p, k, [c[12 + i] for i in range(3)], cos_max, [c[9 + i] for i in range(3)])
+    return _flips(p, k, [c[12 + i] for i in range(3)], cos_max, [c[9 + i] for i in range(3)],
+                  min_quality=min_quality)

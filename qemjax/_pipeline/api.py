@@ -367,7 +367,7 @@ def _batch_key(job: "Job"):
             not batched.batchable(model) or not (
             job.target < len(job.geo.F) or job.err < math.inf):
         return None
-    return (_model_key(model), tuple(sorted(model.kernel_params())), s.cos_max,
+    return (_model_key(model), tuple(sorted(model.kernel_params())), s.cos_max, s.min_quality,
             s.preserve_topology, s.prune, s.schedule)
 
 

@@ -156,6 +156,18 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
     return finish(indptr, indices, data, lam), rhs
 
 
+def _worse_slivers(X: np.ndarray, Y: np.ndarray, G: np.ndarray, n0: np.ndarray, n1: np.ndarray,
+                   min_quality: float) -> np.ndarray:
+    """Faces (corners G) whose quality, 2·area / longest edge² (|n| / longest²), the move from X to Y takes
+    below ``min_quality`` and below what it was (the contractions' guard, `Topology.min_angle`)."""
+    def quality(P, n):
+        c = P[G]
+        longest = np.max(np.stack([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)]), axis=0)
+        return np.linalg.norm(n, axis=1) / np.where(longest > 0, longest, 1.0)
+    q0, q1 = quality(X, n0), quality(Y, n1)
+    return (q1 < min_quality) & (q1 < q0)
+
+
 def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
     """Faces whose normal turned by the flip angle or more (cos ≤ cos_max), or that lost all area."""
     l0, l1 = np.linalg.norm(n0, axis=1), np.linalg.norm(n1, axis=1)
@@ -173,7 +185,7 @@ def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, 
 
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
           part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
-          fixed: np.ndarray | None = None, sampled: list | None = None) -> np.ndarray:
+          fixed: np.ndarray | None = None, sampled: list | None = None, min_quality: float = 0.0) -> np.ndarray:
     """Positions X (k,3) of the output faces G (j,3) re-fitted to the input (V, F) in ``rounds`` rounds
     (module docstring); float64, the input's units. ``part``: a part label per input vertex and
     ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
@@ -181,7 +193,9 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     returned unchanged (a copy) when there is nothing to fit. ``sampled``: a list to which the input's
     samples are appended, (points in the input's unit frame, weights), once made, then the output face
     each was attached to in the last round (-1: none): the measured distance of the same run takes the
-    samples (`measure.distance`) instead of making them again, and starts each search at that face."""
+    samples (`measure.distance`) instead of making them again, and starts each search at that face.
+    ``min_quality``: the quality guard (`Topology.min_angle`; 0: off): a face's move is shortened as a
+    turned face's is when it would take the face's 2·area / longest² below it and below what it was."""
     X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
@@ -189,13 +203,13 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
         return X0
     X = (X0 - centre) / unit
-    Y = _fit((V - centre) / unit, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled)
+    Y = _fit((V - centre) / unit, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled, min_quality)
     out = Y * unit + centre
     moved = np.any(Y != X, axis=1) & np.all(np.isfinite(out), axis=1)  # the others keep X0 bit for bit
     return np.where(moved[:, None], out, X0)
 
 
-def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None) -> np.ndarray:
+def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None, min_quality=0.0) -> np.ndarray:
     """`refit` in the unit frame."""
     src = None if source_faces is None else F[np.asarray(source_faces, np.int64)]  # each output face's input face
     ns = None if src is None else face_normals(V, src)  # its normal
@@ -241,6 +255,8 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None) -
         while True:  # each pass only shortens moves, and an undone one stays undone: it ends
             n1 = face_normals(Y, G)
             bad = _turned(n0, n1, cos_max)
+            if min_quality > 0:
+                bad |= _worse_slivers(X, Y, G, n0, n1, min_quality)
             if ns is not None:  # nor may a face come to point against the input face it continues
                 bad |= agreed & (np.einsum("ij,ij->i", n1, ns) <= 0)
             new = np.unique(G[bad])

@@ -108,6 +108,7 @@ class Setup:
     measure: bool | None = None  # measure the output's distance from the input (`measure`); None: with a re-fit
 
     cos_max = property(lambda self: self.topology.cos_max)
+    min_quality = property(lambda self: self.topology.min_quality)
     pair_threshold = property(lambda self: float(self.topology.pair_threshold))
     preserve_topology = property(lambda self: self.topology.manifold)
     weld = property(lambda self: self.topology.weld)
@@ -246,7 +247,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
             states[key] = S
     options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
                       max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
-                      keep_parts=not setup.prune)
+                      keep_parts=not setup.prune, min_quality=setup.min_quality)
     tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(geo.V), geo.F, model,
                                                          None if corner_values is None else channel_weights > 0)
     if lk is not None:
@@ -445,7 +446,7 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
             seam = np.bincount(appearance["wedge_vertex"], minlength=len(mesh.vertices)) > 1
             held = seam if held is None else (held | seam)
         task = RefitTask(g.V, g.F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, g.parts[1],
-                         mesh.source_faces, held, setup.measures)
+                         mesh.source_faces, held, setup.measures, setup.min_quality)
         if later is None:
             vout, seconds, distance = task()
             mesh = mesh._replace(vertices=vout)
@@ -527,6 +528,7 @@ class RefitTask(NamedTuple):
     source_faces: np.ndarray
     fixed: np.ndarray | None
     measure: bool = False  # then measure the output's distance from the input (`_pipeline.measure`)
+    min_quality: float = 0.0  # the quality guard (`Topology.min_angle`)
 
     def __call__(self) -> tuple[np.ndarray, float, dict]:
         """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None)."""
@@ -535,7 +537,8 @@ class RefitTask(NamedTuple):
         sampled = []  # the input's samples, made once for the re-fit and the measured distance
         if self.rounds:
             X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
-                             self.source_faces, fixed=self.fixed, sampled=sampled if self.measure else None)
+                             self.source_faces, fixed=self.fixed, sampled=sampled if self.measure else None,
+                             min_quality=self.min_quality)
         refit_s = time.perf_counter() - t
         if not self.measure:
             return X, refit_s, _measure.not_measured()

@@ -235,7 +235,7 @@ def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: in
     return lambda: np.concatenate([to_host(o) for o in outs])[: len(P)]
 
 
-def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
+def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max, min_quality=0.0):
     """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
     fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
     Returns a function that waits for the kernel and gives (S,) bool per pair.
@@ -244,6 +244,7 @@ def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
     piece is a view: a pass tests a few dozen faces on a small mesh, where padding each array per piece
     cost half as much as the kernel."""
     cos_max = cos_max if isinstance(cos_max, jax.Array) else np.asarray(cos_max, DTYPE)
+    min_quality = min_quality if isinstance(min_quality, jax.Array) else np.asarray(min_quality, DTYPE)
     k = len(F)
     sizes = piece_sizes(k)
     total = sum(sizes)
@@ -258,7 +259,7 @@ def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max):
     for size in sizes:
         end = start + size
         outs.append(flips.face_flips_at(VQd, N0d, Fp[start:end], ints[0, start:end], ints[1, start:end],
-                                        xp[start:end], cos_max))
+                                        xp[start:end], cos_max, min_quality))
         start = end
 
     def result():

@@ -65,11 +65,13 @@ def has(pool, start, length, v):
 
 
 @njit(cache=True)
-def flips(VQ, N0, F, f, corner, x, cos_max, sliver):
+def flips(VQ, N0, F, f, corner, x, cos_max, shape):
     """The flip test for face f (corners F[f], positions VQ (n, ≥3), reference normal N0[f]) with its
-    corner ``corner`` moved to x (x, VQ, N0, cos_max and sliver float32): the device kernel's float32
-    operations in its order (`_kernels.flips`), on scalars (no small arrays per face: the parallel round
-    tests thousands)."""
+    corner ``corner`` moved to x (x, VQ, N0, cos_max float32): the device kernel's float32 operations in
+    its order (`_kernels.flips`), on scalars (no small arrays per face: the parallel round tests
+    thousands). ``shape``: float32 (collapse, min_quality), the bounds on the moved face's 2·area /
+    longest edge² (`_kernels.flips.SLIVER`: below it the face counts as collapsed; the quality guard of
+    `Topology.min_angle`, 0: off, refuses a face that ends below it and below what it was)."""
     i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
     g0x, g0y, g0z = VQ[i0, 0], VQ[i0, 1], VQ[i0, 2]
     g1x, g1y, g1z = VQ[i1, 0], VQ[i1, 1], VQ[i1, 2]
@@ -105,8 +107,19 @@ def flips(VQ, N0, F, f, corner, x, cos_max, sliver):
         return True
     longest2 = de0 if (de0 >= de1 or de0 != de0) else de1  # np.maximum: a NaN wins
     longest2 = longest2 if (longest2 >= de2 or longest2 != longest2) else de2
-    if l1 <= sliver * longest2 and cos_max > -1.0:
+    collapse, min_quality = shape
+    if l1 <= collapse * longest2 and cos_max > -1.0:
         return True
+    if l1 < min_quality * longest2:  # the quality guard: below the bound, and below the face before
+        o0 = u0x * u0x + u0y * u0y + u0z * u0z
+        o1x, o1y, o1z = g2x - g1x, g2y - g1y, g2z - g1z
+        o2x, o2y, o2z = g0x - g2x, g0y - g2y, g0z - g2z
+        o1 = o1x * o1x + o1y * o1y + o1z * o1z
+        o2 = o2x * o2x + o2y * o2y + o2z * o2z
+        before2 = o0 if (o0 >= o1 or o0 != o0) else o1
+        before2 = before2 if (before2 >= o2 or before2 != before2) else o2
+        if l1 * before2 < np.float32(np.sqrt(d00)) * longest2:
+            return True
     return dr1 <= cos_max * np.float32(np.sqrt(drr)) * l1
 
 
@@ -324,9 +337,9 @@ def coincide_at_apexes(T, A, nka, B, nkb, u, w):
 
 
 @njit(cache=True)
-def any_flip(VQ, N0, F, fids, corner, x, cos_max, sliver):
+def any_flip(VQ, N0, F, fids, corner, x, cos_max, shape):
     """`flips` for faces ``fids`` each with its moving corner, to x: whether any flips."""
     for i in range(len(fids)):
-        if flips(VQ, N0, F, fids[i], corner[i], x, cos_max, sliver):
+        if flips(VQ, N0, F, fids[i], corner[i], x, cos_max, shape):
             return True
     return False

@@ -195,7 +195,7 @@ class _Compiled:
         self.ctr = np.zeros(jit.NCTR, np.int64)
         self.ctr[jit.C_FACES] = m
         self.ctr[jit.C_FTOP], self.ctr[jit.C_NTOP] = 3 * m, 2 * len(P)  # the pools' ends
-        self.cos_max, self.sliver = np.float32(options.cos_max), np.float32(SLIVER)
+        self.cos_max, self.shape = np.float32(options.cos_max), (np.float32(SLIVER), np.float32(options.min_quality))
         self.history, self.history_parts = [], []
         self.removed_at = np.full(m, -1, np.int64)
         self.coincident = np.zeros(m, bool)
@@ -306,7 +306,7 @@ class _Compiled:
         held, gone = _dict(), _dict()
         opt = self.options  # (scalars of fixed types: one compiled specialisation)
         settings = jit.Settings(int(self.depth), int(self.target), float(opt.max_cost), self.manifold, self.simple,
-                                bool(opt.keep_parts), self.cos_max, self.sliver, int(self.scratch),
+                                bool(opt.keep_parts), self.cos_max, self.shape, int(self.scratch),
                                 self.locks is not None)
         faces = Faces(self.T, self.alive, self.fs, self.fl, self.fpool)
         queue = jit.Queue(self.heap, self.K, self.X, self.cost, self.branch, self.parts, self.RP, self.bat)

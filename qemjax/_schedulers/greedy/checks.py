@@ -79,14 +79,14 @@ def rules_tail(a, b, x, faces_left, settings, faces, VQ, N0, step, common):
     (non-manifold mode; room for fl[a] + fl[b]), their number in info[3]."""
     info, A, B, R = step.info, step.A, step.B, step.R
     T = faces.T
-    target, manifold, simple, cos_max, sliver = (settings.target, settings.manifold, settings.simple,
-                                                 settings.cos_max, settings.sliver)
+    target, manifold, simple, cos_max, shape = (settings.target, settings.manifold, settings.simple,
+                                                settings.cos_max, settings.shape)
     nd, nka, nkb, ncommon = info[0], info[1], info[2], info[4]
     for i in range(nka + nkb):
         f = A[i] if i < nka else B[i - nka]
         v = a if i < nka else b
         corner = 0 if T[f, 0] == v else (1 if T[f, 1] == v else 2)
-        if rule.flips(VQ, N0, T, f, corner, x, cos_max, sliver):
+        if rule.flips(VQ, N0, T, f, corner, x, cos_max, shape):
             return FLIP
     if manifold and simple:
         if ncommon == 2 and rule.coincide_at_apexes(T, A, nka, B, nkb, common[0], common[1]):

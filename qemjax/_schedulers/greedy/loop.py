@@ -50,7 +50,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
     params = model.kernel_params()
     faces = FaceLists(F, n)
     cnt = np.zeros((n, 3), np.int64)  # the link condition's scratch
-    cos_max, sliver = np.float32(options.cos_max), np.float32(SLIVER)
+    cos_max, shape = np.float32(options.cos_max), (np.float32(SLIVER), np.float32(options.min_quality))
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)
@@ -141,7 +141,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
         if wedges is not None and not wedges.allowed(faces, VQ, a, b, x):
             block((a, b), outcome.SEAM)
             continue
-        if len(fids) and rules.any_flip(VQ, N0, faces.F, fids, corner, np.asarray(x, DTYPE), cos_max, sliver):
+        if len(fids) and rules.any_flip(VQ, N0, faces.F, fids, corner, np.asarray(x, DTYPE), cos_max, shape):
             block((a, b), outcome.FLIP)
             continue
         # faces that would coincide after the contraction: forbidden in manifold mode, else dropped

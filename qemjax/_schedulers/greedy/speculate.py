@@ -62,7 +62,7 @@ class Settings(NamedTuple):
     simple: bool
     keep_parts: bool
     cos_max: Any
-    sliver: Any
+    shape: Any
     scratch: int
     has_locks: bool
 
@@ -263,7 +263,7 @@ def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batc
     The bundles: ``settings`` (`Settings`), ``seams`` (`Seams`), ``faces`` (`rules.Faces`), ``partners``
     (`Partners`), ``queue`` (`Queue`), ``batch`` (`Batch`), and the dicts of `Maps`; ``locked`` (n,) bool, VQ
     the host rows, N0 the reference normals, ``cnt`` (n,3) zeros: the link condition's scratch."""
-    depth, target, max_cost, manifold, simple, keep_parts, cos_max, sliver, scratch, has_locks = settings
+    depth, target, max_cost, manifold, simple, keep_parts, cos_max, shape, scratch, has_locks = settings
     wed, C, val, multi, VJ, m, m_solved, solved, weights = seams
     T, alive, fs, fl, fpool = faces
     ns, nl, npool = partners

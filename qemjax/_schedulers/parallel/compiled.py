@@ -33,7 +33,8 @@ class LoopRound(Round):
         self.N0 = np.ascontiguousarray(run.normals, DTYPE)  # the input normals, for the host flip test
         # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
         self.V3 = np.ascontiguousarray(run.VQ[:, :3])
-        self.limits = selection.Limits(np.float32(options.cos_max), np.float32(SLIVER), bool(options.keep_parts))
+        self.limits = selection.Limits(np.float32(options.cos_max),
+                                       (np.float32(SLIVER), np.float32(options.min_quality)), bool(options.keep_parts))
         self.mark = np.zeros(n, np.int32)  # scratch of `selection.select_validate`
         self._rows = self._verts = None  # more of it (`scratch`)
         self.one_copy = np.zeros(n, np.int32)  # a run alone is one copy (`passes`)

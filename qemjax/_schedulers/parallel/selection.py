@@ -42,9 +42,10 @@ class Mesh(NamedTuple):
 
 
 class Limits(NamedTuple):
-    """The flip test's limits (float32 cos_max and sliver) and whether parts are kept."""
+    """The flip test's limits (float32 cos_max, and ``shape``: `rules.flips`' float32 (collapse,
+    min_quality)) and whether parts are kept."""
     cos_max: Any
-    sliver: Any
+    shape: Any
     keep_parts: bool
 
 
@@ -144,7 +145,7 @@ def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
     ``locks`` (`Locks`), ``scratch`` (`Scratch`)."""
     F, alive, off, cnt, pool = faces
     VQ, N0, bvert, deg = mesh
-    cos_max, sliver, keep_parts = limits
+    cos_max, shape, keep_parts = limits
     C, multi = seams
     locked, partner = locks
     mark, nb, fk, fc, T = scratch
@@ -214,7 +215,7 @@ def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
             why = SEAM
     if why == 0:
         for i in range(nk):
-            if rule.flips(VQ, N0, F, fk[i], fc[i], x, cos_max, sliver):
+            if rule.flips(VQ, N0, F, fk[i], fc[i], x, cos_max, shape):
                 why = FLIP
                 break
     return why

@@ -51,7 +51,7 @@ class StagedRound(Round):
                           size=len(Efree))
         (fids, before, corner, owner, G), kept, dead = run.faces.touched_with_dead(P)
         flipped = start_flips(run.VQd, run.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
-                              run.cos_max)  # runs while the host tests the rest
+                              run.cos_max, run.min_quality)  # runs while the host tests the rest
         gone = topo.coincidence_count(G, owner, len(P))
         why = np.zeros(len(P), np.int8)
         apex = None
