@@ -38,8 +38,8 @@ def test_compile_all_fills_the_cache_that_a_later_process_loads(tmp_path):
     """A small manifest compiled in one process (in the build's mode: sub-packages bare) is loaded, not
     compiled, by the next one."""
     manifest = tmp_path / "m.txt"
-    manifest.write_text("qemjax._mesh.bounds_jit row_bounds (Array(float64, 2, 'C', False, aligned=True),)\n"
-                        "qemjax._mesh.bounds_jit nothing (int64,)\n")
+    manifest.write_text("qemjax._mesh.box_bounds row_bounds (Array(float64, 2, 'C', False, aligned=True),)\n"
+                        "qemjax._mesh.box_bounds nothing (int64,)\n")
     code = ("import json, sys; from pathlib import Path; from qemjax import _ahead; "
             "r = _ahead.compile_all(_ahead.read_manifest(Path(sys.argv[1])), bare=True); "
             "r.pop('seconds'); print(json.dumps(r))")

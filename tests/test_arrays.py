@@ -70,7 +70,7 @@ def test_face_normals_match_cross(dtype, fdtype):
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("seed", range(3))
 def test_face_stats_are_numpys_whole_array_arithmetic_bit_for_bit(seed, dtype):
-    """`arrays.face_stats` (per-face values compiled: `_mesh.faces_jit`) against the whole-array numpy
+    """`arrays.face_stats` (per-face values compiled: `_mesh.face_passes`) against the whole-array numpy
     expressions it replaced, in float64 and in float32: the same non-zero mask and the same bits of both
     means, with zero-area faces (repeated corners, collinear corners) among them."""
     from qemjax._mesh.arrays import face_stats
@@ -97,12 +97,12 @@ def test_face_stats_are_numpys_whole_array_arithmetic_bit_for_bit(seed, dtype):
 
 
 def test_vertex_runs_are_the_incidence_matrix_rows():
-    """`faces_jit.vertex_runs` against scipy's COO -> CSR conversion of the vertex-face incidence (what
+    """`face_passes.vertex_runs` against scipy's COO -> CSR conversion of the vertex-face incidence (what
     `FaceLists` used): each vertex's faces in face order, counts and offsets, a face that repeats a vertex
     listed once there; an index out of range fails."""
     import scipy.sparse
 
-    from qemjax._mesh.faces_jit import vertex_runs
+    from qemjax._mesh.face_passes import vertex_runs
 
     rng = np.random.default_rng(3)
     for n, m in ((1, 0), (5, 3), (40, 70), (300, 900), (6, 50)):
@@ -127,20 +127,20 @@ def test_vertex_runs_are_the_incidence_matrix_rows():
 @pytest.mark.parametrize("dtype,shape", [(np.float32, (500, 3)), (np.float32, (500,)), (np.int8, (500,)),
                                          (np.float32, (500, 4)), (np.float32, (500, 0)), (np.bool_, (500,))])
 def test_compact_in_place_is_take(dtype, shape):
-    """`rows_jit.compact`: numpy's take for ascending indices, as a view of the array's own first rows; a
+    """`row_compact.compact`: numpy's take for ascending indices, as a view of the array's own first rows; a
     read-only array is gathered into a new one and left as it was."""
-    from qemjax._mesh import rows_jit
+    from qemjax._mesh import row_compact
 
     A = (rng.standard_normal(shape) * 100).astype(dtype)
     for idx in (np.flatnonzero(rng.random(500) < 0.7), np.arange(500), np.zeros(0, np.int64)):
         B = A.copy()
         want = B.take(idx, axis=0)
-        got = rows_jit.compact(B, idx)
+        got = row_compact.compact(B, idx)
         assert got.dtype == want.dtype and got.shape == want.shape
         assert np.shares_memory(got, B) or not got.size
         assert np.array_equal(got.view(np.uint8), want.view(np.uint8))
     R = A.copy()
     R.flags.writeable = False
     idx = np.flatnonzero(rng.random(500) < 0.5)
-    got = rows_jit.compact(R, idx)
+    got = row_compact.compact(R, idx)
     assert not np.shares_memory(got, R) and np.array_equal(got, A.take(idx, axis=0)) and np.array_equal(R, A)

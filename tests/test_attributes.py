@@ -387,10 +387,10 @@ def test_skipped_refit_is_named_in_the_summary():
 
 @pytest.mark.parametrize("m", [1, 2])
 def test_attribute_state_compiled_is_the_numpy_sums_bit_for_bit(m, monkeypatch):
-    """`attributes_jit.corner_sums` against `attribute_state`'s numpy code (the compiled path switched off),
+    """`attribute_sums.corner_sums` against `attribute_state`'s numpy code (the compiled path switched off),
     on random faces with shared corners, zero and negative-zero values, thin faces and zero weights: every
     bit, signed zeros included."""
-    from qemjax._costs import attributes as A, attributes_jit
+    from qemjax._costs import attributes as A, attribute_sums
 
     rng = np.random.default_rng(m)
     n, f = 150, 400
@@ -403,7 +403,7 @@ def test_attribute_state_compiled_is_the_numpy_sums_bit_for_bit(m, monkeypatch):
     w = rng.random(f)
     w[::9] = 0.0
     got = A.attribute_state(V, F, S, w)
-    monkeypatch.setattr(attributes_jit, "MAX_CHANNELS", 0)  # the numpy code
+    monkeypatch.setattr(attribute_sums, "MAX_CHANNELS", 0)  # the numpy code
     want = A.attribute_state(V, F, S, w)
     assert got.shape == want.shape == (n, 11 + 4 * m)
     assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
@@ -448,9 +448,9 @@ def test_wedge_rows_are_every_corners_unique_rows():
 
 
 def test_face_systems_are_numpys():
-    """`attributes_jit.face_systems` against the numpy code it replaces (np.cross, np.linalg.norm, the
+    """`attribute_sums.face_systems` against the numpy code it replaces (np.cross, np.linalg.norm, the
     normal divided where non-zero), bit for bit: random faces, degenerate ones (zero normal), signed zeros."""
-    from qemjax._costs import attributes_jit
+    from qemjax._costs import attribute_sums
 
     rng = np.random.default_rng(9)
     for trial in range(20):
@@ -466,6 +466,6 @@ def test_face_systems_are_numpys():
         M[:, :3, :3], M[:, :3, 3], M[:, 3, :3] = P, 1.0, n
         rhs = np.zeros((f, 4, m))
         rhs[:, :3] = S
-        gM, grhs, gnn = attributes_jit.face_systems(P, S)
+        gM, grhs, gnn = attribute_sums.face_systems(P, S)
         for g, w in ((gM, M), (grhs, rhs), (gnn, nn[:, 0])):
             assert np.array_equal(g.view(np.int64), w.view(np.int64)), trial

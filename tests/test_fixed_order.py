@@ -215,10 +215,10 @@ def test_grid_nearest_slivers_are_pointtris_flat_triangles(seed):
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_bounds_are_numpys_min_and_max(dtype):
-    """`bounds_jit` against numpy's V.min(0)/V.max(0), X[np.unique(G)]'s and X[G].min(1)/max(1), bit for bit:
+    """`box_bounds` against numpy's V.min(0)/V.max(0), X[np.unique(G)]'s and X[G].min(1)/max(1), bit for bit:
     rows full of ties between 0.0 and -0.0 (numpy keeps whichever its reduction order gives), NaNs, one
     row, random values."""
-    from qemjax._mesh import bounds_jit
+    from qemjax._mesh import box_bounds
 
     def same(a, b):
         return np.array_equal(a, b, equal_nan=True) and np.array_equal(np.signbit(a), np.signbit(b)) \
@@ -229,14 +229,14 @@ def test_bounds_are_numpys_min_and_max(dtype):
         pool = [[0.0, -0.0, 1.0, -1.0, np.nan], [0.0, -0.0, 1.0, 2.0, -3.0], [0.0, -0.0]][trial % 3]
         n = int(rng.integers(1, 60))
         V = rng.choice(pool, size=(n, 3)).astype(dtype) if trial % 4 else rng.normal(size=(n, 3)).astype(dtype)
-        lo, hi = bounds_jit.row_bounds(V)
+        lo, hi = box_bounds.row_bounds(V)
         assert same(lo, V.min(0)) and same(hi, V.max(0)), trial
         G = rng.integers(0, n, size=(int(rng.integers(1, 40)), 3))
         used = V[np.unique(G)]
-        lo, hi = bounds_jit.used_bounds(V, G)
+        lo, hi = box_bounds.used_bounds(V, G)
         assert same(lo, used.min(0)) and same(hi, used.max(0)), trial
         T = V[G]
-        assert same(bounds_jit.face_boxes(V, G), np.concatenate([T.min(1), T.max(1)], 1)), trial
+        assert same(box_bounds.face_boxes(V, G), np.concatenate([T.min(1), T.max(1)], 1)), trial
         if dtype == np.float64 and trial % 4 == 0:  # the grid's edge lengths, likewise
             from qemjax._mesh.grid_nearest import edge_lengths
 

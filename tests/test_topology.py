@@ -151,7 +151,7 @@ def test_face_lists_follow_contractions(mesh, pool, apply):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_parts_are_scipys_connected_components_label_for_label(seed):
-    """The compiled union-find (`_mesh.parts_jit`) against scipy's weak components of the same graph: the
+    """The compiled union-find (`_mesh.part_labels`) against scipy's weak components of the same graph: the
     same count and the same labels (numbered by each part's lowest vertex), with isolated vertices and
     ``extra`` pairs joining parts."""
     from scipy.sparse import csr_matrix
@@ -305,10 +305,10 @@ def test_compiled_face_look_ups_are_numpys(seed, dtype):
 
 @pytest.mark.parametrize("dtype", [np.int32, np.int64])
 def test_compiled_degrees_endpoints_and_first_steps_are_numpys(dtype):
-    """`edges_jit.degrees` / `endpoints` and `faces_jit.first_step` against the numpy expressions they
+    """`edge_lists.degrees` / `endpoints` and `face_passes.first_step` against the numpy expressions they
     replaced (bincount, a scatter of the masked rows, the row-wise minimum of gathered steps)."""
-    from qemjax._mesh.edges_jit import degrees, endpoints
-    from qemjax._mesh.faces_jit import first_step
+    from qemjax._mesh.edge_lists import degrees, endpoints
+    from qemjax._mesh.face_passes import first_step
 
     rng = np.random.default_rng(5)
     n = 300

@@ -1,6 +1,6 @@
 """The seam rule and wedge updates as they were written in Python before they were compiled
-(`qemjax._mesh.wedges_jit`), kept as the reference the compiled kernels are tested against
-(tests/test_wedges_jit.py): `ReferenceTracker` is the former `wedges.Tracker`, per pair in numpy."""
+(`qemjax._mesh.seam_rule`), kept as the reference the compiled kernels are tested against
+(tests/test_seam_rule.py): `ReferenceTracker` is the former `wedges.Tracker`, per pair in numpy."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,5 +1,5 @@
 """numpy's ``V.min(0)`` and ``V.max(0)`` on a mesh's (n,3) vertices against the compiled loop that replaces
-them (`qemjax._mesh.bounds_jit.row_bounds`), warm medians, and whether they agree bit for bit.
+them (`qemjax._mesh.box_bounds.row_bounds`), warm medians, and whether they agree bit for bit.
 
     python experiments/figures/bounds_cost.py --meshes cow armadillo-x16
 """
@@ -23,7 +23,7 @@ def main():
     ap.add_argument("--meshes", nargs="+", default=["cow", "armadillo-x16"])
     ap.add_argument("--repeats", type=int, default=21)
     args = ap.parse_args()
-    from qemjax._mesh.bounds_jit import row_bounds
+    from qemjax._mesh.box_bounds import row_bounds
 
     print(f"# python experiments/figures/bounds_cost.py --meshes {' '.join(args.meshes)}")
     print("| mesh | vertices | numpy min(0) + max(0) ms | row_bounds ms | ns a value, numpy | same bits |")

@@ -136,11 +136,11 @@ def face_fields(P: np.ndarray, S: np.ndarray):
     """Per face, the linear attribute fields through its corners: P (f,3,3) corner positions, S (f,3,m)
     corner values -> g (f,m,3) gradients in the face's plane and d (f,m) with s(p) = g·p + d (float64).
     Faces too thin to fit get g = 0, d = the mean of their corners."""
-    from .._mesh import fixed_order_jit  # here: importing the cost models does not need numba
-    from . import attributes_jit
+    from .._mesh import fixed_order_solve  # here: importing the cost models does not need numba
+    from . import attribute_sums
 
-    M, rhs, nn = attributes_jit.face_systems(np.ascontiguousarray(P, np.float64), np.ascontiguousarray(S, np.float64))
-    X, det = fixed_order_jit.solve(M, rhs)  # not np.linalg: LAPACK's bits differ by CPU
+    M, rhs, nn = attribute_sums.face_systems(np.ascontiguousarray(P, np.float64), np.ascontiguousarray(S, np.float64))
+    X, det = fixed_order_solve.solve(M, rhs)  # not np.linalg: LAPACK's bits differ by CPU
     ok = np.abs(det) > 1e-12 * np.maximum(nn, 1e-300) ** 1.5
     sol = np.zeros_like(rhs)
     sol[ok] = X[ok]
@@ -153,10 +153,10 @@ def attribute_state(V: np.ndarray, F: np.ndarray, S: np.ndarray, w: np.ndarray) 
     its position quadric: V (n,3), F (f,3), corner values S (f,3,m), face weights w (f,)."""
     n, m = len(V), S.shape[2]
     g, d = face_fields(V[F], S)
-    from . import attributes_jit  # here: importing the cost models does not need numba
+    from . import attribute_sums  # here: importing the cost models does not need numba
 
-    if 1 <= m <= attributes_jit.MAX_CHANNELS and len(F):  # the same sums, compiled
-        return attributes_jit.corner_sums(np.ascontiguousarray(F, np.int64), np.ascontiguousarray(g, np.float64),
+    if 1 <= m <= attribute_sums.MAX_CHANNELS and len(F):  # the same sums, compiled
+        return attribute_sums.corner_sums(np.ascontiguousarray(F, np.int64), np.ascontiguousarray(g, np.float64),
                                           np.ascontiguousarray(S, np.float64), np.ascontiguousarray(w, np.float64), n)
     gg = np.einsum("fji,fjk->fik", g, g)  # Σ_j g gᵀ per face
     packed = gg[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]

@@ -59,11 +59,11 @@ def column_bounds(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Unnormalised normals (p1 − p0) × (p2 − p0) of faces F (m,3) over positions V (n,3), in V's dtype,
-    with np.cross's arithmetic. float32 and float64 positions take one compiled pass (`faces_jit.normals`:
+    with np.cross's arithmetic. float32 and float64 positions take one compiled pass (`face_passes.normals`:
     on 1.4 M faces the whole-array expressions gather (m,3) coordinates three times and make a dozen
     temporaries); other dtypes take those expressions, in blocks of faces."""
     if isinstance(V, np.ndarray) and V.dtype in (np.float32, np.float64) and np.asarray(F).dtype.kind in "iu":
-        from .faces_jit import normals  # numba: imported when first used
+        from .face_passes import normals  # numba: imported when first used
 
         return normals(V, np.asarray(F))
     if len(F) > _NORMAL_ROWS:
@@ -83,9 +83,9 @@ _NORMAL_ROWS = 1 << 19  # faces per block of `face_normals`
 def face_stats(V: np.ndarray, F: np.ndarray):
     """Which faces F (m,3) over V (n,3) have a non-zero area (m,) bool, and the mean area and mean squared
     edge length of those faces (float64; numpy's sums do not depend on the number of threads). The per-face
-    values come from one compiled pass (`faces_jit.face_rows`), in V's dtype (float32 or float64; others as
+    values come from one compiled pass (`face_passes.face_rows`), in V's dtype (float32 or float64; others as
     float64)."""
-    from .faces_jit import face_rows  # numba: imported when first used
+    from .face_passes import face_rows  # numba: imported when first used
 
     V = np.ascontiguousarray(V)
     if V.dtype not in (np.float32, np.float64):

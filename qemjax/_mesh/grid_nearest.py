@@ -26,7 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
-from .bounds_jit import face_boxes, used_bounds
+from .box_bounds import face_boxes, used_bounds
 from .pointtri import _FLAT_REL
 
 CUBE_EDGE = 0.5  # the cubes' side at first, times the triangles' median edge

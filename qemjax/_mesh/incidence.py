@@ -14,10 +14,10 @@ import numpy as np
 
 
 def _jit():
-    """The compiled loops (`faces_jit`), imported on first use: importing the cost models stays light."""
-    from . import faces_jit
+    """The compiled loops (`face_passes`), imported on first use: importing the cost models stays light."""
+    from . import face_passes
 
-    return faces_jit
+    return face_passes
 
 
 def _exclusive_cumsum(c: np.ndarray) -> np.ndarray:

@@ -79,7 +79,7 @@ def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
 def parts(F: np.ndarray, n: int, extra: np.ndarray | None = None) -> tuple[int, np.ndarray]:
     """Connected parts of the graph of the faces' edges (and the ``extra`` pairs (k,2), which join parts
     that may merge): (count, (n,) int64 label of each vertex; a vertex in no face is a part of its own)."""
-    from .parts_jit import labels  # numba: imported when first used
+    from .part_labels import labels  # numba: imported when first used
 
     a = [F[:, :2].reshape(-1)] + ([] if extra is None or not len(extra) else [extra[:, 0]])
     b = [F[:, 1:].reshape(-1)] + ([] if extra is None or not len(extra) else [extra[:, 1]])
@@ -92,12 +92,12 @@ def edge_table(F: np.ndarray, n: int):
     edges (B,2) as directed in their face, their face indices (B,))."""
     bits = int(3 * len(F)).bit_length()
     if n > 0 and (n * n) < (1 << (63 - bits)):  # pack the half-edge index under the key: one fast sort
-        from . import edges_jit  # numba: imported when first used
+        from . import edge_lists  # numba: imported when first used
 
         F = np.ascontiguousarray(F)
-        packed = edges_jit.packed_keys(F, n, bits)
+        packed = edge_lists.packed_keys(F, n, bits)
         packed.sort()  # in place: no second array of 3m keys
-        return edges_jit.tables(packed, F, n, bits)
+        return edge_lists.tables(packed, F, n, bits)
     return _edge_table_unpacked(F, n)
 
 
@@ -141,8 +141,8 @@ def feature_edges_with_faces(F: np.ndarray, n: int, feat: np.ndarray) -> tuple[n
 
 
 def vertex_degree(E: np.ndarray, n: int) -> np.ndarray:
-    """Number of edges at each vertex (n,) int64 (one compiled pass: `edges_jit.degrees`)."""
-    from .edges_jit import degrees  # numba: imported when first used
+    """Number of edges at each vertex (n,) int64 (one compiled pass: `edge_lists.degrees`)."""
+    from .edge_lists import degrees  # numba: imported when first used
 
     return degrees(np.asarray(E), n)
 

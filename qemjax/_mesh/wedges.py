@@ -16,7 +16,7 @@ Seam rule (as meshoptimizer without its Permissive flag): a contraction (a, b) i
 
 Anything else is refused with the reason ``"seam"`` (``stats['rejected_by']``). Pairs with a seam
 endpoint are priced at the allowed endpoint with the vertices' quadrics (so they rank by the error of the
-position they will really take). All of this runs on the host in compiled loops (`wedges_jit`), per pair,
+position they will really take). All of this runs on the host in compiled loops (`seam_rule`), per pair,
 and only for pairs that touch a seam vertex; runs without attributes never build a `Tracker`.
 """
 from __future__ import annotations
@@ -295,10 +295,10 @@ def load_texture(texture):
 
 
 def _jit():
-    """The compiled seam rule (`wedges_jit`), imported on first use: loading a mesh does not need numba."""
-    from . import wedges_jit
+    """The compiled seam rule (`seam_rule`), imported on first use: loading a mesh does not need numba."""
+    from . import seam_rule
 
-    return wedges_jit
+    return seam_rule
 
 
 class Tracker:
@@ -306,7 +306,7 @@ class Tracker:
 
     `constrain` prices pairs touching seams at their allowed endpoint, `allowed` / `refused` is the
     validity rule and `contract` / `contract_many` update the corners (and, between single-wedge vertices,
-    the kept wedge's value). The per-pair work runs in compiled loops (`wedges_jit`) over the faces' lists
+    the kept wedge's value). The per-pair work runs in compiled loops (`seam_rule`) over the faces' lists
     (`incidence.FaceLists`), with the float64 arithmetic of the rule as written in Python
     (tests/wedges_reference.py)."""
 
@@ -443,7 +443,7 @@ def seam_count(E: np.ndarray) -> int:
     """The number of seams: connected pieces of the seam edges E (k,2) (`seam_edges`)."""
     if not len(E):
         return 0
-    from .parts_jit import labels  # numba: imported when first used
+    from .part_labels import labels  # numba: imported when first used
 
     ids, E = np.unique(E, return_inverse=True)
     E = E.reshape(-1, 2).astype(np.int64)

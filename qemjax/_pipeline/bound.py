@@ -87,7 +87,7 @@ class Checker:
     """The two-way distance (module docstring) of meshes from the input (V, F), mesh units."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray):
-        from .._mesh.bounds_jit import row_bounds
+        from .._mesh.box_bounds import row_bounds
         from .refit import _sample_rows, unit_frame
 
         V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)

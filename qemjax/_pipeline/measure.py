@@ -42,7 +42,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
     the input's unit frame, weights), the same arrays as made here; ``seeds``: a face of G near each
     sample (the re-fit's last attachment), where each search starts (the same distances, found sooner:
     `grid_nearest.nearest`)."""
-    from .._mesh.bounds_jit import row_bounds  # numba, lazily
+    from .._mesh.box_bounds import row_bounds  # numba, lazily
     from .._mesh.grid_nearest import nearest
     from .._mesh.quantiles import quantiles
     from .refit import samples, unit_frame

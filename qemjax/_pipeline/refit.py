@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 from .._mesh.arrays import face_normals
-from .._mesh.bounds_jit import row_bounds
+from .._mesh.box_bounds import row_bounds
 from .._mesh.grid_nearest import nearest, slivers
 from .._mesh.pointtri import segment_closest
 from .._mesh.spd_solve import solve_csr

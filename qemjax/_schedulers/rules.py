@@ -36,7 +36,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from .._mesh import wedges_jit
+from .._mesh import seam_rule
 
 
 class Faces(NamedTuple):
@@ -272,10 +272,10 @@ def part_vanishes(keep_parts, nkept):
 
 @njit(cache=True, inline="always")
 def seam_allows(free, keep_a, keep_b, VQ, a, b, x):
-    """The seam rule (`_mesh.wedges.Tracker.allowed`) from the pair's wedge modes (`wedges_jit.modes`):
+    """The seam rule (`_mesh.wedges.Tracker.allowed`) from the pair's wedge modes (`seam_rule.modes`):
     ``free`` (both sides one wedge), else x must be at an endpoint whose keeping is allowed (``keep_a``,
     ``keep_b``)."""
-    return free or (keep_a and wedges_jit._at(VQ, a, x)) or (keep_b and wedges_jit._at(VQ, b, x))
+    return free or (keep_a and seam_rule._at(VQ, a, x)) or (keep_b and seam_rule._at(VQ, b, x))
 
 
 @njit(cache=True)  # not inlined: the one-at-a-time loop calls it from Python too (`_ahead` lists it)

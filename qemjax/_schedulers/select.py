@@ -85,7 +85,7 @@ def independent_sets(E, key_of, cand, need, n, validate, schedule: Schedule, gro
         return rows, _keep(Eo, k1), ae.compress(k1) == 0x0101
 
     def endpoints(mask):
-        from .._mesh.edges_jit import endpoints as marked  # numba: imported when first used
+        from .._mesh.edge_lists import endpoints as marked  # numba: imported when first used
 
         return marked(E, mask, n)
 

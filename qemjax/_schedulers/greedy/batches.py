@@ -52,7 +52,7 @@ import numpy as np
 from . import speculate as jit
 from . import wedges as gw
 from .. import locks as _locks
-from ..._mesh import wedges_jit
+from ..._mesh import seam_rule
 from .. import outcome
 from ..rules import Faces
 from ..._kernels.flips import SLIVER
@@ -214,7 +214,7 @@ class _Compiled:
         d = self.VQ[P[:, 0], :3] - self.VQ[P[:, 1], :3]
         raw = self.adjust(self.VQd, P, start_price(self.model, self.VQd, P, self.params, None, self.n)())
         w = self.wedges  # pairs at seam vertices: placed at an allowed endpoint (as the loop)
-        priced = self.seamed(raw, P, lambda x, cost: wedges_jit.constrain(
+        priced = self.seamed(raw, P, lambda x, cost: seam_rule.constrain(
             self.T, self.alive, self.fl, self.fs, self.fpool, w.C, w.multi, self.VQ, P, x, cost, w.m))
         self.push(P, priced, np.einsum("ij,ij->i", d, d), raw=raw)
 

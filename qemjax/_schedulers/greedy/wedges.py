@@ -3,13 +3,13 @@ the seam rule, the wedge updates and the pricing of pairs at seam vertices, wher
 loop (`loop._run`) applies them, with every change journaled so that a batch's undo restores it.
 
 The loop calls the tracker at three points, all of which read or change the corners' wedges ``C``, the
-wedge values ``val`` and the seam flags ``multi`` (`wedges_jit.modes` narrows a vertex's flag to whether it
+wedge values ``val`` and the seam flags ``multi`` (`seam_rule.modes` narrows a vertex's flag to whether it
 has two or more wedges now; a flag set on a vertex with no faces left changes how its pairs are priced, so
 the flags follow the loop's exactly):
 
 * at a push (the pairs re-priced after a contraction, and the first push of all pairs): `constrain`, which
   places a pair touching a seam vertex at its allowed endpoint of smaller price. The batches call
-  `wedges_jit.modes` at the same moment (`push_modes`, right after the step's contraction on the host) and
+  `seam_rule.modes` at the same moment (`push_modes`, right after the step's contraction on the host) and
   keep its answer (`mode`); the endpoint price needs the kept vertex's merged row, so it is computed after
   the batch's merge call, from each stale interval's own rows (`constrain_rows`). A blocked pair that comes
   back around the contraction is priced at once (its rows are current): its stored price before the
@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..._mesh import wedges_jit as wj
+from ..._mesh import seam_rule as wj
 from ..rules import seam_allows
 
 J_MULTI, J_WC, J_VAL = 8, 9, 10  # journal kinds (after `speculate`'s)
@@ -43,7 +43,7 @@ def _jw(J, ctr, jl, kind, i, o0, o1):
 
 @njit(cache=True)
 def fit(TS, need):
-    """The integer scratch of `wedges_jit` (12 rows) with room for face lists of ``need``."""
+    """The integer scratch of `seam_rule` (12 rows) with room for face lists of ``need``."""
     if TS.shape[1] >= need:
         return TS
     return np.empty((12, 2 * need), np.int64)
@@ -51,7 +51,7 @@ def fit(TS, need):
 
 @njit(cache=True)
 def modes(T, alive, fs, fl, fpool, C, multi, a, b, TS, J, ctr, jl):
-    """`wedges_jit.modes` of the pair (a, b) on the batch's face lists, its flag changes journaled; returns
+    """`seam_rule.modes` of the pair (a, b) on the batch's face lists, its flag changes journaled; returns
     the pair's mode (`FREE`, or `KEEP_A` | `KEEP_B` where allowed). TS: room for fl[a], fl[b]."""
     ma, mb = multi[a], multi[b]
     free, nba, nab, _, _ = wj.modes(T, alive, fl, fs, fpool, C, multi, a, b, TS)
@@ -112,7 +112,7 @@ def undo_one(kind, i, o0, o1, C, val, multi, VJ):
 
 @njit(cache=True)
 def place(VQ, ra, rb, mode, m, W):
-    """`wedges_jit.constrain`'s placement (`wedges_jit.endpoint`) of a pair whose rows are ra, rb (its first
+    """`seam_rule.constrain`'s placement (`seam_rule.endpoint`) of a pair whose rows are ra, rb (its first
     and second vertex) and whose mode (> 0) allows keeping one of them: (row of the endpoint taken, its price)."""
     return wj.endpoint(VQ, ra, rb, (mode & KEEP_A) != 0, (mode & KEEP_B) != 0, m, W)
 

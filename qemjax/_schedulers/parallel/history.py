@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._mesh.faces_jit import first_step
+from ..._mesh.face_passes import first_step
 
 
 def history_columns(history):

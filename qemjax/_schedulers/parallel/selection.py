@@ -4,7 +4,7 @@ The numpy stages (`parallel.StagedRound`) spend a round in hundreds of numpy cal
 steps as loops over integer arrays (this one and `contraction`'s) take a small fraction of that
 (docs/benchmarks.md). They serve the common case (`fits`): manifold mode with the pairs updated through the
 contractions (no non-edge pairs), at most `MAX_FACES` faces (kept attributes' seam rule runs inside, through
-`wedges_jit`, and locked vertices' rule, `rules.stranded_by_pass`). They make exactly the choices of the numpy
+`seam_rule`, and locked vertices' rule, `rules.stranded_by_pass`). They make exactly the choices of the numpy
 stages they replace (`select.independent_sets` with `parallel.StagedRound.validate`): the golden outputs are
 the same bits, and tests/test_round_loops.py compares each loop with the numpy code on random meshes.
 
@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from ..._mesh import wedges_jit
+from ..._mesh import seam_rule
 from .. import rules as rule
 from ..outcome import COINCIDENT, FLIP, LOCKED, PART, SEAM, TOPOLOGY
 
@@ -210,7 +210,7 @@ def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
     if why == 0 and len(locked) and (rule.locked_endpoint_bare(nk, locked, a, b) or stranded):
         why = LOCKED
     if why == 0 and (multi[a] or multi[b]):  # kept attributes: the seam rule
-        free, nba, nab, _, _ = wedges_jit.modes(F, alive, cnt, off, pool, C, multi, a, b, T)
+        free, nba, nab, _, _ = seam_rule.modes(F, alive, cnt, off, pool, C, multi, a, b, T)
         if not rule.seam_allows(free, nba >= 0, nab >= 0, VQ, a, b, x):
             why = SEAM
     if why == 0:

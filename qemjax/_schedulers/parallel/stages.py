@@ -9,10 +9,10 @@ import numpy as np
 
 from ..._costs import MeshView
 from ..._kernels.batching import DTYPE, set_rows
-from ..._mesh import rows_jit
+from ..._mesh import row_compact
 from ..._mesh import topology as topo
 from ..._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
-from ..._mesh.edges_jit import endpoints
+from ..._mesh.edge_lists import endpoints
 from ..._mesh.fixed_order import weighted_sum
 from .. import locks as _locks
 from .. import outcome
@@ -107,7 +107,7 @@ class Round:
             stale = stale | any_at(prev.changed, E)
         # several arrays follow, each moved down in place (the last round's arrays are not read again)
         idx = np.flatnonzero(kept)
-        return st, (lambda a: rows_jit.compact(a, idx)), stale, None
+        return st, (lambda a: row_compact.compact(a, idx)), stale, None
 
     def cost(self, st: RoundState, prev, follow, stale, same):
         """Fill the prices of ``st``: new ones for the stale pairs (the kernel runs while the host works

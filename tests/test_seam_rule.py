@@ -1,4 +1,4 @@
-"""The compiled seam rule (`qemjax._mesh.wedges_jit`) against the Python rule it replaced
+"""The compiled seam rule (`qemjax._mesh.seam_rule`) against the Python rule it replaced
 (tests/wedges_reference.py, and `_costs.attributes`' float64 host solves): the same bits on random inputs."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from qemjax import shapes
 from qemjax._costs import attributes as at
 from qemjax._mesh import wedges as _wedges
-from qemjax._mesh import wedges_jit as wj
+from qemjax._mesh import seam_rule as wj
 from qemjax._mesh.incidence import FaceLists
 
 from wedges_reference import ReferenceTracker, _quadric
@@ -183,9 +183,9 @@ def test_broken_seam_rule_is_an_error():
 
 @pytest.mark.parametrize("n,m", [(4, 2), (4, 9), (3, 1), (5, 3)])
 def test_compiled_solve_matches_fixed_order(n, m):
-    """`fixed_order_jit.solve` gives `fixed_order.solve`'s bits: random, near-singular, singular and NaN
+    """`fixed_order_solve.solve` gives `fixed_order.solve`'s bits: random, near-singular, singular and NaN
     systems, pivots that tie."""
-    from qemjax._mesh import fixed_order, fixed_order_jit
+    from qemjax._mesh import fixed_order, fixed_order_solve
 
     rng = np.random.default_rng(n * 10 + m)
     M = rng.normal(size=(400, n, n)) * 10.0 ** rng.integers(-4, 4, size=(400, 1, 1))
@@ -197,7 +197,7 @@ def test_compiled_solve_matches_fixed_order(n, m):
     rhs = rng.normal(size=(400, n, m))
     with np.errstate(all="ignore"):
         X0, d0 = fixed_order.solve(M, rhs)
-    X1, d1 = fixed_order_jit.solve(M, rhs)
+    X1, d1 = fixed_order_solve.solve(M, rhs)
     assert same_bits(X0, X1) and same_bits(d0, d1)
 
 
@@ -211,7 +211,7 @@ def test_face_fields_unchanged_by_the_compiled_solve(monkeypatch):
     P[:5, 2] = P[:5, 1]  # degenerate faces: the corners' mean
     S = rng.normal(size=(len(F), 3, 2))
     g, d = at.face_fields(P, S)
-    from qemjax._mesh import fixed_order_jit
-    monkeypatch.setattr(fixed_order_jit, "solve", fixed_order.solve)  # the numpy solve in its place
+    from qemjax._mesh import fixed_order_solve
+    monkeypatch.setattr(fixed_order_solve, "solve", fixed_order.solve)  # the numpy solve in its place
     g0, d0 = at.face_fields(P, S)
     assert same_bits(g, g0) and same_bits(d, d0)

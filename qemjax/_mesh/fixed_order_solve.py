@@ -1,5 +1,5 @@
 """`fixed_order.solve` compiled (numba): the same Gaussian elimination with partial pivoting, one system at
-a time, with the same operations in the same order, so the same bits (tests/test_wedges_jit.py compares
+a time, with the same operations in the same order, so the same bits (tests/test_seam_rule.py compares
 them); numba contracts no multiply-add. Used where a stack of small systems is solved on every run that keeps
 attributes (`_costs.attributes.face_fields`), where numpy's per-step calls over the stack dominated."""
 from __future__ import annotations

@@ -6,7 +6,7 @@ in its run of the pool), the wedges as the tracker's corner array C (m,3), value
 seam-candidate flags multi (n,). Rows VQ are [position, model state], float32.
 
 Float64 arithmetic repeats the Python rule's operations in its order, so the results are the same bits
-(tests/test_wedges_jit.py compares them with the Python reference on random inputs): the quadric error
+(tests/test_seam_rule.py compares them with the Python reference on random inputs): the quadric error
 (`wedges._quadric`), the attribute model's host solve (`_costs.attributes.solve_host`: cost and optimal
 values of the translated, summed states) and its batched twin (`optimal_attributes`), the interpolation
 parameter of a contraction (`fixed_order.dot`'s left-to-right sum from 0.0 per pair, numpy's elementwise
