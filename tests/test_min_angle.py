@@ -77,3 +77,24 @@ def test_a_batch_keeps_each_configs_guard():
 def test_a_bad_angle_is_named(value):
     with pytest.raises((ValueError, TypeError), match="min_angle"):
         qemjax.Topology(min_angle=value)
+
+
+def test_command_line_and_sweep_take_the_guard(tmp_path, capsys):
+    """``--min-angle`` on the command line and ``min_angle`` as a sweep key give `simplify`'s result."""
+    from qemjax import _cli
+
+    mesh = shapes.bumpy_sphere(3)
+    src, dst = tmp_path / "in.obj", tmp_path / "out.obj"
+    import trimesh
+
+    trimesh.Trimesh(*mesh, process=False).export(src)
+    assert _cli.main(["simplify", str(src), str(dst), "--ratio", "0.1", "--min-angle", "20", "--quiet"]) == 0
+    got = qemjax.load(dst)
+    want = _simplify(qemjax.load(src), ratio=0.1, min_angle=20.0)
+    np.testing.assert_allclose(got.vertices, want.vertices, rtol=1e-6, atol=1e-9)
+    np.testing.assert_array_equal(got.faces, want.faces)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        table = qemjax.sweep({"s": mesh}, {"min_angle": [None, 20.0]}, [0.1], progress=False, workers=1)
+    smallest = table["min_angle_min"].tolist()  # degrees
+    assert smallest[0] < smallest[1] and smallest[1] >= 20.0 - 1e-3
