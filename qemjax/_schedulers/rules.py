@@ -14,6 +14,8 @@ when it would break one of them:
   dropped (oppositely oriented ones cancel in pairs, lower index first; of what is left the first stays).
 * **flip test** (`flips`, `any_flip`): a face that stays turns its normal past the threshold against its
   own normal or against the input face it continues, or collapses to a sliver: the surface would fold.
+  With ``Topology.min_angle``, the same test refuses a face whose shape ends below the quality bound and
+  worse than it was (the triangle-quality guard).
 * **part rule** (`part_vanishes`): with ``keep_parts``, no face of the pair stays: the contraction would
   remove the last faces of a connected part.
 * **seam rule** (`seam_allows`): with kept attributes, a pair at a seam vertex contracts only onto an
