@@ -580,15 +580,21 @@ def test_kernels_stay_in_bounds():
     grown from near-empty sizes, rollbacks, high-degree vertices, dropped faces, non-simple meshes) with
     numba's bounds checks on, in a process of its own (a separately cached compilation), where an index
     past an array's end raises."""
+    import hashlib
     import os
     import subprocess
     import sys
     import tempfile
     from pathlib import Path
 
-    env = dict(os.environ, NUMBA_BOUNDSCHECK="1",
-               NUMBA_CACHE_DIR=str(Path(tempfile.gettempdir()) / "qemjax-numba-boundscheck"))
     here = Path(__file__).resolve()
+    # a cache of its own per state of the package's sources: numba checks a cached function against its own
+    # file only, so a cache kept from other sources could hold callees that were renamed or changed since
+    digest = hashlib.sha256()
+    for path in sorted((here.parent.parent / "qemjax").rglob("*.py")):
+        digest.update(path.read_bytes())
+    cache = Path(tempfile.gettempdir()) / f"qemjax-numba-boundscheck-{digest.hexdigest()[:16]}"
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(cache))
     out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(here), "-k",
                           "grows or bipyramid or grid-with-hole or two-parts or non_simple or nested or locks"],
                          cwd=here.parent.parent, env=env, capture_output=True, text=True, timeout=900)
