@@ -11,11 +11,18 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import kernel
 from . import quadrics as qd
 
 SLIVER = 1e-6  # |n|/longest² (≈ sine of the smallest angle) under which a moved face counts as collapsed
+
+
+def host_limits(cos_max: float, min_quality: float) -> tuple:
+    """The flip test's limits as the host rule (`_schedulers.rules.flips`) takes them: float32 cos_max, and
+    its ``shape``, float32 (`SLIVER`, min_quality)."""
+    return np.float32(cos_max), (np.float32(SLIVER), np.float32(min_quality))
 
 
 def _sub(u, v):
@@ -72,11 +79,12 @@ def face_flips(p, k, x, mask, ref, cos_max):
 
 
 @jax.jit  # not `kernel`: the older emitter runs this several times slower (docs/benchmarks.md); see below
-def face_flips_at(V, N0, faces, fids, k, x, cos_max, min_quality=0.0):
+def face_flips_at(V, N0, faces, fids, k, x, cos_max, min_quality=None):
     """`face_flips` with the inputs gathered here: faces (K,3) index rows of V (N,≥3) (columns 0-2 are
     positions); k (K,) the moving corner, x (K,3) where it goes; the reference normal of face i is
     N0[fids[i]]. Indices are clipped, not checked: padding rows give meaningless results to slice off.
-    ``min_quality``: the quality guard (`_flips`; 0: off). Returns (K,) bool.
+    ``min_quality``: the quality guard's bound (`_flips`), or None: off, and then not computed (a separate
+    trace, so that runs without the guard do not pay for its arithmetic). Returns (K,) bool.
 
     Everything gathered is packed into one (15,K) array and materialised before the arithmetic: with the
     gathers left apart (one per corner, as separate arrays), XLA's CPU fusion recomputes them and takes

@@ -235,16 +235,18 @@ def start_merge(model, VSd, P: np.ndarray, x: np.ndarray, params: dict, size: in
     return lambda: np.concatenate([to_host(o) for o in outs])[: len(P)]
 
 
-def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max, min_quality=0.0):
+def start_flips(VQd, N0d, F, fids, corner, owner, x, S, cos_max, min_quality=None):
     """Start the flip test: does moving the given corner of faces F (k,3) to x[owner] flip any of them?
-    fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks.
+    fids (k,): the input faces they continue (reference normals N0d[fids]). Fixed-size chunks; ``min_quality``:
+    the quality guard's bound (None: off).
     Returns a function that waits for the kernel and gives (S,) bool per pair.
 
     The inputs are padded once to the pieces' total (`piece_sizes`; zeros, as `chunks` pads) and each
     piece is a view: a pass tests a few dozen faces on a small mesh, where padding each array per piece
     cost half as much as the kernel."""
     cos_max = cos_max if isinstance(cos_max, jax.Array) else np.asarray(cos_max, DTYPE)
-    min_quality = min_quality if isinstance(min_quality, jax.Array) else np.asarray(min_quality, DTYPE)
+    if min_quality is not None and not isinstance(min_quality, jax.Array):  # (None: the guard is off)
+        min_quality = np.asarray(min_quality, DTYPE)
     k = len(F)
     sizes = piece_sizes(k)
     total = sum(sizes)

@@ -55,7 +55,7 @@ from .. import locks as _locks
 from ..._mesh import seam_rule
 from .. import outcome
 from ..rules import Faces
-from ..._kernels.flips import SLIVER
+from ..._kernels.flips import host_limits
 from ..._kernels.batching import DTYPE, bucket, set_rows
 from ..._mesh.arrays import face_normals
 from ..device import start_merge, start_price
@@ -195,7 +195,7 @@ class _Compiled:
         self.ctr = np.zeros(jit.NCTR, np.int64)
         self.ctr[jit.C_FACES] = m
         self.ctr[jit.C_FTOP], self.ctr[jit.C_NTOP] = 3 * m, 2 * len(P)  # the pools' ends
-        self.cos_max, self.shape = np.float32(options.cos_max), (np.float32(SLIVER), np.float32(options.min_quality))
+        self.cos_max, self.shape = host_limits(options.cos_max, options.min_quality)
         self.history, self.history_parts = [], []
         self.removed_at = np.full(m, -1, np.int64)
         self.coincident = np.zeros(m, bool)

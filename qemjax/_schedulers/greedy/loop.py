@@ -15,7 +15,7 @@ from .. import locks as _locks
 from .. import outcome
 from .. import rules
 from ..._costs import MeshView
-from ..._kernels.flips import SLIVER
+from ..._kernels.flips import host_limits
 from ..._mesh import topology as topo
 from ..._mesh.incidence import FaceLists
 from ..._kernels.batching import DTYPE, bucket, set_rows
@@ -50,7 +50,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
     params = model.kernel_params()
     faces = FaceLists(F, n)
     cnt = np.zeros((n, 3), np.int64)  # the link condition's scratch
-    cos_max, shape = np.float32(options.cos_max), (np.float32(SLIVER), np.float32(options.min_quality))
+    cos_max, shape = host_limits(options.cos_max, options.min_quality)
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ..._kernels.batching import CHUNKS, DTYPE
-from ..._kernels.flips import SLIVER
+from ..._kernels.flips import host_limits
 from ..._mesh.arrays import put_rows, take_rows as _take
 from .. import locks as _locks
 from .. import outcome, rules
@@ -33,8 +33,7 @@ class LoopRound(Round):
         self.N0 = np.ascontiguousarray(run.normals, DTYPE)  # the input normals, for the host flip test
         # the positions alone for the host flip test: a seventh of VQ's rows to pull through the caches
         self.V3 = np.ascontiguousarray(run.VQ[:, :3])
-        self.limits = selection.Limits(np.float32(options.cos_max),
-                                       (np.float32(SLIVER), np.float32(options.min_quality)), bool(options.keep_parts))
+        self.limits = selection.Limits(*host_limits(options.cos_max, options.min_quality), bool(options.keep_parts))
         self.mark = np.zeros(n, np.int32)  # scratch of `selection.select_validate`
         self._rows = self._verts = None  # more of it (`scratch`)
         self.one_copy = np.zeros(n, np.int32)  # a run alone is one copy (`passes`)

@@ -107,7 +107,8 @@ class Run:
         if isinstance(self.params, dict):  # the settings cross to the device once, not with every kernel call
             self.params = on_device(self.params)
         self.cos_max = jnp.asarray(np.asarray(options.cos_max, DTYPE))  # the flip threshold, likewise
-        self.min_quality = jnp.asarray(np.asarray(options.min_quality, DTYPE))  # the quality guard, likewise
+        # the quality guard's bound, likewise (None: off, and the device's flip test leaves it out)
+        self.min_quality = jnp.asarray(np.asarray(options.min_quality, DTYPE)) if options.min_quality else None
         self.target = target_faces
         self.manifold = options.preserve_topology
         self.extra_pairs = np.asarray(extra_pairs, np.int32).reshape(-1, 2)
