@@ -156,16 +156,12 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
     return finish(indptr, indices, data, lam), rhs
 
 
-def _worse_slivers(X: np.ndarray, Y: np.ndarray, G: np.ndarray, n0: np.ndarray, n1: np.ndarray,
-                   min_quality: float) -> np.ndarray:
-    """Faces (corners G) whose quality, 2·area / longest edge² (|n| / longest²), the move from X to Y takes
-    below ``min_quality`` and below what it was (the contractions' guard, `Topology.min_angle`)."""
-    def quality(P, n):
-        c = P[G]
-        longest = np.max(np.stack([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)]), axis=0)
-        return np.linalg.norm(n, axis=1) / np.where(longest > 0, longest, 1.0)
-    q0, q1 = quality(X, n0), quality(Y, n1)
-    return (q1 < min_quality) & (q1 < q0)
+def _quality(P: np.ndarray, G: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Each face's (corners G at positions P, normals n) 2·area / longest edge², |n| / longest², the shape
+    the contractions' quality guard bounds (`Topology.min_angle`)."""
+    c = P[G]
+    longest = np.max(np.stack([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)]), axis=0)
+    return np.linalg.norm(n, axis=1) / np.where(longest > 0, longest, 1.0)
 
 
 def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
@@ -251,12 +247,14 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None, m
             break
         n0 = face_normals(X, G)
         agreed = None if ns is None else np.einsum("ij,ij->i", n0, ns) > 0
+        q0 = _quality(X, G, n0) if min_quality > 0 else None  # the faces' shape before the moves
         cut = np.zeros(k, np.int64)  # times each vertex's move was halved (HALVINGS + 1: undone)
         while True:  # each pass only shortens moves, and an undone one stays undone: it ends
             n1 = face_normals(Y, G)
             bad = _turned(n0, n1, cos_max)
-            if min_quality > 0:
-                bad |= _worse_slivers(X, Y, G, n0, n1, min_quality)
+            if q0 is not None:  # nor may a face end below the quality bound and below its shape before
+                q1 = _quality(Y, G, n1)
+                bad |= (q1 < min_quality) & (q1 < q0)
             if ns is not None:  # nor may a face come to point against the input face it continues
                 bad |= agreed & (np.einsum("ij,ij->i", n1, ns) <= 0)
             new = np.unique(G[bad])
