@@ -9,7 +9,8 @@ faces, history).
     python experiments/ab_compare.py --rev HEAD --meshes armadillo-x16 --ratios 0.01 --repeats 7 --time
     python experiments/ab_compare.py --rev 02a1390 --meshes armadillo-x16 --ratios 0.01 --repeats 5 --time \
         --new-option placement=rank          # an option of the new code against the old default
-    (--new-option values: true/false are bools, numbers floats, anything else a string)
+    python experiments/ab_compare.py --rev HEAD --meshes cow --option method=accurate   # both run an option
+    (--option and --new-option values: true/false are bools, numbers floats, anything else a string)
 """
 from __future__ import annotations
 
@@ -99,8 +100,11 @@ def main():
     ap.add_argument("--out", default=None, help="append rows to this CSV")
     ap.add_argument("--new-option", nargs="*", default=[], metavar="KEY=VALUE",
                     help="keywords of simplify for the new code only (e.g. placement=rank)")
+    ap.add_argument("--option", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="keywords of simplify for both codes (e.g. method=accurate)")
     args = ap.parse_args()
-    new_kw = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.new_option)}
+    both_kw = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.option)}
+    new_kw = {**both_kw, **{k: _value(v) for k, v in (kv.split("=", 1) for kv in args.new_option)}}
     import warnings
 
     warnings.simplefilter("ignore")  # above-target warnings of the mesh/ratio cases are not the point here
@@ -119,7 +123,7 @@ def main():
             times = {"old": [], "new": []}
             cpus = {"old": [], "new": []}
             hashes = {}
-            kws = {"old": {}, "new": new_kw}
+            kws = {"old": both_kw, "new": new_kw}
             for tag, lib in (("old", old), ("new", new)):  # warm-up: compile both
                 lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler, **kws[tag])
             for rep in range(args.repeats):

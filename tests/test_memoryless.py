@@ -103,6 +103,49 @@ def test_refresh_matches_a_float64_reference(seed, area_power, boundary_weight):
             assert evaluate_packed(row[10:20], u) == pytest.approx(want, rel=1e-4, abs=1e-12)  # float32 storage
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+@pytest.mark.parametrize("area_power,boundary_weight", [(1.0, 100.0), (0.0, 1.0), (0.6, 10.0), (0.37, 0.0)])
+def test_compiled_rebuild_is_the_numpy_one_bit_for_bit(seed, area_power, boundary_weight):
+    """`current_quadrics` (compiled, `current_sums.rebuild`) gives its numpy twin's bits
+    (tests/reference_memoryless.py) after faces die and vertices are contracted, with vertices named twice,
+    vertices with no live face and one vertex with more faces than the compiled ring buffer starts with."""
+    from reference_memoryless import current_quadrics_numpy
+
+    V, F = random_mesh(seed)
+    rng = np.random.default_rng(200 + seed)
+    # a fan of 80 faces around one extra vertex (more than the ring buffer's first 64)
+    t = np.linspace(0, 2 * np.pi, 81)[:-1]
+    fan = np.c_[np.cos(t), np.sin(t), 0.1 * rng.random(80)] * 0.2 + [3.0, 0.0, 0.0]
+    hub = len(V) + len(fan)
+    ring = np.arange(len(V), len(V) + len(fan))
+    F = np.concatenate([F, np.c_[ring, np.roll(ring, -1), np.full(80, hub)]])
+    V = np.concatenate([V, fan, [[3.0, 0.0, 0.05]]]) * (1 + 1e-3 * rng.normal(size=(len(V) + 81, 3)))
+    faces = FaceLists(F, len(V))
+    faces.remove(rng.choice(len(F) - 80, size=len(F) // 6, replace=False))
+    live = faces.live()
+    near = [set() for _ in range(len(V))]  # each vertex's neighbours
+    for f in live:
+        for i in range(3):
+            near[f[i]].update(int(x) for x in f)
+    used, a, b = set(), [], []
+    for f in live[::7]:  # pairs no face joins to another pair: their endpoints' neighbourhoods disjoint
+        u, w = int(f[0]), int(f[1])
+        if u == hub or w == hub or (near[u] | near[w]) & used:
+            continue
+        used |= near[u] | near[w]
+        a.append(u)
+        b.append(w)
+    a, b = np.array(a, np.int64), np.array(b, np.int64)
+    faces.contract(a, b)
+    verts = np.r_[rng.choice(len(V), size=120, replace=False), hub, hub, b[:2]].astype(np.int64)
+    kw = dict(area_power=area_power, boundary_weight=boundary_weight, mean_area=0.003 * (1 + seed),
+              mean_e2=0.005)
+    got = ml.current_quadrics(V, faces, verts, **kw)
+    want = current_quadrics_numpy(V, faces, verts, **kw)
+    assert got.shape == want.shape == (len(verts), 13)
+    assert got.tobytes() == want.tobytes()
+
+
 def test_initial_state_is_the_default_quadrics_plus_g_and_means():
     """The memoryless start (a rebuild at every vertex, float64 on the host) agrees with the default's
     initial quadrics (the float32 kernel), as history and as current quadric, and carries g and the

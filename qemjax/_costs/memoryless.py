@@ -26,7 +26,7 @@ changes it by about (g(v1)·(x − v1) + g(v2)·(x − v2))/3 (the two faces hol
 the price adds λ·s(x)², s(x) = (g(v1)·(x − v1) + g(v2)·(x − v2)) / (mean face area of the input), to the
 merged quadric before placing: a squared length, like the quadric's costs. λ = 0 adds nothing.
 
-The rebuild runs on the host in float64 numpy (`current_quadrics`), for the vertices the schedulers name
+The rebuild runs on the host in float64, compiled (`current_quadrics`), for the vertices the schedulers name
 after each round (parallel) or contraction (greedy): one batched pass over the live faces around them.
 A memoryless row is [position (3), history quadric (10), current quadric (10), g (3), input mean face
 area, input mean squared edge length] (`CCOLS`, `GCOLS`, `MCOLS`): 25 floats of state instead of QEM's 10.
@@ -40,31 +40,16 @@ from .._kernels.lazy import jnp  # imported on first use (`_kernels.lazy`)
 import numpy as np
 
 from .._kernels.batching import DTYPE
-from .._mesh import fixed_order
 from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 from . import at_kept
+from .current_sums import rebuild
 
 WIDTH = 25  # state floats of a memoryless row (after the position)
 CCOLS = 13  # first column of the current quadric in a vertex row [position, history, current, g, means]
 GCOLS = (23, 24, 25)  # columns of g(v)
 MCOLS = (26, 27)  # columns of the input's mean face area and mean squared edge length
-
-
-def _power(r: np.ndarray, p: float) -> np.ndarray:
-    """r^p for r ≥ 0, exactly r at p = 1 and 1 at p = 0 (as `quadrics._power`)."""
-    if p == 1:
-        return r
-    if p == 0:
-        return np.ones_like(r)
-    return fixed_order.power(np.maximum(r, np.finfo(np.float64).tiny), p)  # not np.power: its bits vary by CPU
-
-
-def _planes(n: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """(k,6) upper triangle of w·n nᵀ for unit normals n (k,3), weights w (k,)."""
-    x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    return w[:, None] * np.stack([x * x, x * y, x * z, y * y, y * z, z * z], 1)
 
 
 def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area_power: float,
@@ -73,46 +58,11 @@ def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area
     the live faces around it (positions P (n,3)): the plane of each face weighted by
     (area / mean_area)^area_power, and for each boundary edge at the vertex (an edge in one live face only)
     the plane through it perpendicular to that face, weighted by boundary_weight·(|e|² / mean_e2)^area_power
-    (none when boundary_weight is 0); then g(v) (3): the sum of ½(c1 − v)×(c2 − v) over those faces."""
-    verts = np.asarray(verts, np.int64)
-    k = len(verts)
-    A = np.zeros((k, 6))
-    g = np.zeros((k, 3))
-    w, f = faces.around(verts)
-    if len(f):
-        G = np.take(faces.F, f, axis=0).astype(np.int64)
-        me = np.take(verts, w)
-        corner = np.where(G[:, 0] == me, 0, np.where(G[:, 1] == me, 1, 2))
-        rows = np.arange(len(G))
-        rot = np.stack([G[rows, corner], G[rows, (corner + 1) % 3], G[rows, (corner + 2) % 3]], 1)
-        P = np.asarray(P, np.float64)
-        p0, p1, p2 = P[rot[:, 0]], P[rot[:, 1]], P[rot[:, 2]]
-        cr = np.cross(p1 - p0, p2 - p0)
-        nrm = np.linalg.norm(cr, axis=1)
-        n = cr / np.where(nrm > 0, nrm, 1.0)[:, None]
-        wf = _power(0.5 * nrm / max(mean_area, np.finfo(np.float64).tiny), area_power)
-        contrib = [(w, _planes(n, wf))]
-        for i in range(3):
-            g[:, i] = np.bincount(w, weights=0.5 * cr[:, i], minlength=k)
-        if boundary_weight > 0:
-            # the edge (v, c) is a boundary edge when c is the other end of one live face edge at v only
-            m = len(P) + 1
-            key = np.concatenate([w * m + rot[:, 1], w * m + rot[:, 2]])
-            _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-            once = (cnt[inv] == 1).reshape(2, -1)
-            for j, c in ((0, rot[:, 1]), (1, rot[:, 2])):
-                s = np.flatnonzero(once[j])
-                e = P[c[s]] - p0[s]
-                mm = np.cross(e, n[s])
-                mn = np.linalg.norm(mm, axis=1)
-                mm = mm / np.where(mn > 0, mn, 1.0)[:, None]
-                wb = boundary_weight * _power(np.sum(e * e, 1) / max(mean_e2, np.finfo(np.float64).tiny),
-                                              area_power) * (mn > 0)
-                contrib.append((w[s], _planes(mm, wb)))
-        for owner, q in contrib:
-            for i in range(6):
-                A[:, i] += np.bincount(owner, weights=q[:, i], minlength=k)
-    return np.concatenate([A, np.zeros((k, 4)), g], 1)
+    (none when boundary_weight is 0); then g(v) (3): the sum of ½(c1 − v)×(c2 − v) over those faces.
+    Compiled (`current_sums.rebuild`; its numpy twin: tests/reference_memoryless.py)."""
+    return rebuild(np.ascontiguousarray(P, np.float64), faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
+                   np.ascontiguousarray(verts, np.int64), float(area_power), float(boundary_weight),
+                   float(mean_area), float(mean_e2))
 
 
 def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means, history=None) -> np.ndarray:
