@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from qemjax._mesh import fixed_order
+from qemjax._mesh.incidence import FaceLists  # noqa: F401 (the annotations)
 
 
 def _power(r: np.ndarray, p: float) -> np.ndarray:
