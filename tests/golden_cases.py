@@ -100,6 +100,12 @@ def cases() -> list[Case]:
         for scheduler in ("parallel", "greedy"):
             out.append(Case(f"default/{scheduler}/{shape}/0.1", shape,
                             {"ratio": 0.1, "scheduler": scheduler, "method": "default"}))
+    # the memoryless quadrics' rebuild (`method="accurate"`), closed and open, on both schedulers
+    for shape in ("bumpy-sphere-3", "grid-24-hole"):
+        for scheduler in ("parallel", "greedy"):
+            out.append(Case(f"accurate/{scheduler}/{shape}/0.1", shape,
+                            {"ratio": 0.1, "scheduler": scheduler, "method": "accurate"}))
+    out.append(Case("accurate/cow/0.1", "cow.obj", {"ratio": 0.1, "method": "accurate"}))
     ids = [c.id for c in out]
     assert len(set(ids)) == len(ids), "duplicate case ids"
     return out
