@@ -44,7 +44,6 @@ from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
 from .._kernels import quadrics as qd
 from . import at_kept
-from .current_sums import rebuild
 
 WIDTH = 25  # state floats of a memoryless row (after the position)
 CCOLS = 13  # first column of the current quadric in a vertex row [position, history, current, g, means]
@@ -60,6 +59,8 @@ def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area
     the plane through it perpendicular to that face, weighted by boundary_weight·(|e|² / mean_e2)^area_power
     (none when boundary_weight is 0); then g(v) (3): the sum of ½(c1 − v)×(c2 − v) over those faces.
     Compiled (`current_sums.rebuild`; its numpy twin: tests/reference_memoryless.py)."""
+    from .current_sums import rebuild  # numba, imported on first use: `qemjax --help` lists this model's fields
+
     return rebuild(np.ascontiguousarray(P, np.float64), faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
                    np.ascontiguousarray(verts, np.int64), float(area_power), float(boundary_weight),
                    float(mean_area), float(mean_e2))
