@@ -10,6 +10,10 @@ in the default. For each benchmark mesh at 10 % and 1 %: rms and Hausdorff over 
 `late_memoryless.py`), and warm times (the median of ``--repeats``) against the default's::
 
     python experiments/probes/memoryless_switch.py --switch 2 4 10
+    python experiments/probes/memoryless_switch.py --switch 1.5 2 2:refit=0 2:memory_weight=1   # other settings
+
+A switch is ``K`` or ``K:key=value,...``: ``memory_weight`` sets the memoryless model's weight (0.3 unless
+given), other keys are keywords of ``simplify`` for that variant (``refit=0``).
 """
 from __future__ import annotations
 
@@ -30,7 +34,8 @@ import meshes as bench_meshes  # noqa: E402
 from figures.rank_peers import distances  # noqa: E402
 from probes.late_memoryless import best_peers  # noqa: E402
 
-SWITCH = {"k": None}  # the factor K of the target at which the run switches (None: no switch)
+SWITCH = {"k": None, "memory_weight": 0.3}  # the factor K of the target at which the run switches (None: no
+# switch) and the memoryless model's weight
 
 
 def patch():
@@ -53,8 +58,8 @@ def patch():
         r = Run(V, S, F, extra_pairs, int(k * target_faces), model, options, progress, edges, part_scale,
                 wedges=wedges, locks=locks)
         stop, blocked = driver.rounds(r, driver.choose(r))
-        if stop == "target" and r.faces.count > target_faces:
-            m2 = dataclasses.replace(model, memoryless=True, memory_weight=0.3, refit=0)
+        if r.faces.count > target_faces:  # (an odd K × target on a closed mesh stops one face above it)
+            m2 = dataclasses.replace(model, memoryless=True, memory_weight=SWITCH["memory_weight"], refit=0)
             n = r.n
             means = face_stats(np.asarray(V, np.float64), np.asarray(F, np.int64))[1:]
             rows = ml.state_rows(m2, r.VQ[:n, :3].astype(np.float64), r.faces, np.arange(n), means,
@@ -74,7 +79,7 @@ def patch():
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--switch", nargs="+", type=float, default=[4.0])
+    ap.add_argument("--switch", nargs="+", default=["4"])
     ap.add_argument("--meshes", nargs="*", default=None)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--peers", default=str(EXPERIMENTS / "results" / "rank_min_angle.csv"))
@@ -84,7 +89,12 @@ def main() -> None:
 
     patch()
     best = best_peers(Path(args.peers))
-    labels = ["default"] + [f"switch {k:g}x" for k in args.switch]
+    labels = ["default"] + [f"switch {k}" for k in args.switch]
+    variants = [(None, 0.3, {})]
+    for spec in args.switch:
+        k, _, rest = spec.partition(":")
+        kw = {a: float(b) if "." in b else int(b) for a, b in (x.split("=") for x in filter(None, rest.split(",")))}
+        variants.append((float(k), float(kw.pop("memory_weight", 0.3)), kw))
     rows = []
     for name in args.meshes or bench_meshes.names():
         m = bench_meshes.load(name)
@@ -93,13 +103,13 @@ def main() -> None:
                 continue
             target = max(4, round(ratio * m.n_faces))
             row = []
-            for k in [None] + args.switch:
-                SWITCH["k"] = k
-                qemjax.simplify((m.V, m.F), target_faces=target)  # warm
+            for k, mw, kw in variants:
+                SWITCH["k"], SWITCH["memory_weight"] = k, mw
+                qemjax.simplify((m.V, m.F), target_faces=target, **kw)  # warm
                 secs = []
                 for _ in range(args.repeats):
                     t0 = time.perf_counter()
-                    res = qemjax.simplify((m.V, m.F), target_faces=target)
+                    res = qemjax.simplify((m.V, m.F), target_faces=target, **kw)
                     secs.append(time.perf_counter() - t0)
                 d = distances(m.V, m.F, np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64))
                 ref = best[(name, ratio)]
