@@ -30,6 +30,7 @@ from figures.rank_peers import distances  # noqa: E402
 
 
 def best_peers(path: Path) -> dict:
+    """{(mesh, ratio): {"rms_rel", "hausdorff_rel"}}: the lowest of the peers' rows (ok) of a `rank_peers.py` CSV."""
     best = {}
     for r in csv.DictReader(open(path)):
         if r["method"].startswith("qemjax") or r["status"] != "ok":
@@ -38,6 +39,16 @@ def best_peers(path: Path) -> dict:
         for k in b:
             b[k] = min(b[k], float(r[k]))
     return best
+
+
+def cases(names, best: dict):
+    """(name, mesh, ratio, target, the best peer's distances) of every benchmark mesh of ``names`` (None: all)
+    at 10 % and 1 % that ``best`` (`best_peers`) holds, the target as `figures/rank_peers.py` takes it."""
+    for name in names or bench_meshes.names():
+        m = bench_meshes.load(name)
+        for ratio in (0.1, 0.01):
+            if (name, ratio) in best:
+                yield name, m, ratio, max(4, round(ratio * m.n_faces)), best[(name, ratio)]
 
 
 def main() -> None:
@@ -55,38 +66,32 @@ def main() -> None:
     best = best_peers(Path(args.peers))
     labels = ["default"] + [f"restart {k:g}x" for k in args.restart] + (["memoryless"] if args.full else [])
     rows = []
-    for name in args.meshes or bench_meshes.names():
-        m = bench_meshes.load(name)
-        for ratio in (0.1, 0.01):
-            if (name, ratio) not in best:
-                continue
-            target = max(4, round(ratio * m.n_faces))
-            outs, secs = [], []
+    for name, m, ratio, target, ref in cases(args.meshes, best):
+        outs, secs = [], []
+        t0 = time.perf_counter()
+        res = qemjax.simplify((m.V, m.F), target_faces=target)
+        outs.append((res.vertices, res.faces))
+        secs.append(time.perf_counter() - t0)
+        for k in args.restart:
             t0 = time.perf_counter()
-            res = qemjax.simplify((m.V, m.F), target_faces=target)
+            a = qemjax.simplify((m.V, m.F), target_faces=int(k * target), refit=0)
+            b = qemjax.simplify((np.asarray(a.vertices), np.asarray(a.faces)), target_faces=target, refit=0,
+                                memoryless=True, memory_weight=0.3)
+            X = refit(m.V, m.F, np.asarray(b.vertices, np.float64), np.asarray(b.faces), 1, cos_max)
+            outs.append((X, b.faces))
+            secs.append(time.perf_counter() - t0)
+        if args.full:
+            t0 = time.perf_counter()
+            res = qemjax.simplify((m.V, m.F), target_faces=target, memoryless=True, memory_weight=0.3)
             outs.append((res.vertices, res.faces))
             secs.append(time.perf_counter() - t0)
-            for k in args.restart:
-                t0 = time.perf_counter()
-                a = qemjax.simplify((m.V, m.F), target_faces=int(k * target), refit=0)
-                b = qemjax.simplify((np.asarray(a.vertices), np.asarray(a.faces)), target_faces=target, refit=0,
-                                    memoryless=True, memory_weight=0.3)
-                X = refit(m.V, m.F, np.asarray(b.vertices, np.float64), np.asarray(b.faces), 1, cos_max)
-                outs.append((X, b.faces))
-                secs.append(time.perf_counter() - t0)
-            if args.full:
-                t0 = time.perf_counter()
-                res = qemjax.simplify((m.V, m.F), target_faces=target, memoryless=True, memory_weight=0.3)
-                outs.append((res.vertices, res.faces))
-                secs.append(time.perf_counter() - t0)
-            ref = best[(name, ratio)]
-            row = []
-            for (X, G), s in zip(outs, secs):
-                d = distances(m.V, m.F, np.asarray(X, np.float64), np.asarray(G, np.int64))
-                row.append((d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"], s))
-            rows.append(row)
-            print(f"{name:18s} {ratio:5g} " + "  ".join(f"{lab}: rms {a:.3f} H {b:.3f}"
-                                                         for lab, (a, b, _) in zip(labels, row)), flush=True)
+        row = []
+        for (X, G), s in zip(outs, secs):
+            d = distances(m.V, m.F, np.asarray(X, np.float64), np.asarray(G, np.int64))
+            row.append((d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"], s))
+        rows.append(row)
+        print(f"{name:18s} {ratio:5g} " + "  ".join(f"{lab}: rms {a:.3f} H {b:.3f}"
+                                                     for lab, (a, b, _) in zip(labels, row)), flush=True)
     print()
     for i, lab in enumerate(labels):
         print(f"{lab}: rms <= best peer in {sum(r[i][0] <= 1 for r in rows)}/{len(rows)}; Hausdorff <= best peer in "

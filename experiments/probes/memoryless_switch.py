@@ -30,9 +30,8 @@ import numpy as np
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(EXPERIMENTS))
 
-import meshes as bench_meshes  # noqa: E402
 from figures.rank_peers import distances  # noqa: E402
-from probes.late_memoryless import best_peers  # noqa: E402
+from probes.late_memoryless import best_peers, cases  # noqa: E402
 
 SWITCH = {"k": None, "memory_weight": 0.3}  # the factor K of the target at which the run switches (None: no
 # switch) and the memoryless model's weight
@@ -96,29 +95,23 @@ def main() -> None:
         kw = {a: float(b) if "." in b else int(b) for a, b in (x.split("=") for x in filter(None, rest.split(",")))}
         variants.append((float(k), float(kw.pop("memory_weight", 0.3)), kw))
     rows = []
-    for name in args.meshes or bench_meshes.names():
-        m = bench_meshes.load(name)
-        for ratio in (0.1, 0.01):
-            if (name, ratio) not in best:
-                continue
-            target = max(4, round(ratio * m.n_faces))
-            row = []
-            for k, mw, kw in variants:
-                SWITCH["k"], SWITCH["memory_weight"] = k, mw
-                qemjax.simplify((m.V, m.F), target_faces=target, **kw)  # warm
-                secs = []
-                for _ in range(args.repeats):
-                    t0 = time.perf_counter()
-                    res = qemjax.simplify((m.V, m.F), target_faces=target, **kw)
-                    secs.append(time.perf_counter() - t0)
-                d = distances(m.V, m.F, np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64))
-                ref = best[(name, ratio)]
-                row.append((d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"],
-                            statistics.median(secs), len(res.faces)))
-            rows.append(row)
-            print(f"{name:18s} {ratio:5g} " + "  ".join(
-                f"{lab}: rms {a:.3f} H {b:.3f} t/default {s / row[0][2]:.2f} faces {f}"
-                for lab, (a, b, s, f) in zip(labels, row)), flush=True)
+    for name, m, ratio, target, ref in cases(args.meshes, best):
+        row = []
+        for k, mw, kw in variants:
+            SWITCH["k"], SWITCH["memory_weight"] = k, mw
+            qemjax.simplify((m.V, m.F), target_faces=target, **kw)  # warm
+            secs = []
+            for _ in range(args.repeats):
+                t0 = time.perf_counter()
+                res = qemjax.simplify((m.V, m.F), target_faces=target, **kw)
+                secs.append(time.perf_counter() - t0)
+            d = distances(m.V, m.F, np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64))
+            row.append((d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"],
+                        statistics.median(secs), len(res.faces)))
+        rows.append(row)
+        print(f"{name:18s} {ratio:5g} " + "  ".join(
+            f"{lab}: rms {a:.3f} H {b:.3f} t/default {s / row[0][2]:.2f} faces {f}"
+            for lab, (a, b, s, f) in zip(labels, row)), flush=True)
     print()
     for i, lab in enumerate(labels):
         print(f"{lab}: rms <= best peer in {sum(r[i][0] <= 1 for r in rows)}/{len(rows)}; Hausdorff <= best peer in "

@@ -22,9 +22,8 @@ import numpy as np
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(EXPERIMENTS))
 
-import meshes as bench_meshes  # noqa: E402
 from figures.rank_peers import distances  # noqa: E402
-from probes.late_memoryless import best_peers  # noqa: E402
+from probes.late_memoryless import best_peers, cases  # noqa: E402
 
 WEIGHTING = {}  # the variant's p and floor, read by the patched assembly
 
@@ -63,21 +62,15 @@ def main() -> None:
     patch()
     best = best_peers(Path(args.peers))
     rows = {v: [] for v in args.variants}
-    for name in args.meshes or bench_meshes.names():
-        m = bench_meshes.load(name)
-        for ratio in (0.1, 0.01):
-            if (name, ratio) not in best:
-                continue
-            target = max(4, round(ratio * m.n_faces))
-            for v in args.variants:
-                items = dict(kv.split("=", 1) for kv in v.split(",")[1:])
-                WEIGHTING.clear()
-                WEIGHTING.update({k: float(items.pop(k)) for k in ("p", "floor") if k in items})
-                res = qemjax.simplify((m.V, m.F), target_faces=target, **{k: _value(x) for k, x in items.items()})
-                d = distances(m.V, m.F, np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64))
-                ref = best[(name, ratio)]
-                rows[v].append((d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"]))
-                print(f"{name:18s} {ratio:5g} {v:28s} rms {rows[v][-1][0]:.3f}  H {rows[v][-1][1]:.3f}", flush=True)
+    for name, m, ratio, target, ref in cases(args.meshes, best):
+        for v in args.variants:
+            items = dict(kv.split("=", 1) for kv in v.split(",")[1:])
+            WEIGHTING.clear()
+            WEIGHTING.update({k: float(items.pop(k)) for k in ("p", "floor") if k in items})
+            res = qemjax.simplify((m.V, m.F), target_faces=target, **{k: _value(x) for k, x in items.items()})
+            d = distances(m.V, m.F, np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64))
+            rows[v].append((d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"]))
+            print(f"{name:18s} {ratio:5g} {v:28s} rms {rows[v][-1][0]:.3f}  H {rows[v][-1][1]:.3f}", flush=True)
     print()
     for v, rr in rows.items():
         print(f"{v}: rms <= best peer in {sum(a <= 1 for a, _ in rr)}/{len(rr)}; Hausdorff <= best peer in "

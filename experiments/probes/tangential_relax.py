@@ -24,9 +24,8 @@ import numpy as np
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(EXPERIMENTS))
 
-import meshes as bench_meshes  # noqa: E402
 from figures.rank_peers import distances  # noqa: E402
-from probes.late_memoryless import best_peers  # noqa: E402
+from probes.late_memoryless import best_peers, cases  # noqa: E402
 
 
 def _normals(X, G):
@@ -78,26 +77,23 @@ def main() -> None:
            if r["method"] == "pymeshlab" and r.get("slivers")}
     cos_max = qemjax.Topology().cos_max
     totals = {}
-    for name in args.meshes or bench_meshes.names():
-        m = bench_meshes.load(name)
-        for ratio in (0.1, 0.01):
-            if (name, ratio) not in best or (name, ratio) not in pml:
-                continue
-            target = max(4, round(ratio * m.n_faces))
-            res = qemjax.simplify((m.V, m.F), target_faces=target)
-            X0, G = np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64)
-            outs = [("default", X0)]
-            for it in args.iters:
-                Xr = relax(X0, G, it, args.alpha)
-                outs += [(f"relax {it}, re-fit", refit(m.V, m.F, Xr, G, 1, cos_max)), (f"relax {it}", Xr)]
-            ref, line = best[(name, ratio)], f"{name:16s} {ratio:5g} pymeshlab slivers {pml[(name, ratio)]:.3f}"
-            for label, X in outs:
-                d = distances(m.V, m.F, X, G)
-                s = triangle_quality((X, G))["sliver_fraction"]
-                r = (d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"], s <= pml[(name, ratio)])
-                totals.setdefault(label, []).append(r)
-                line += f" | {label}: rms {r[0]:.3f} H {r[1]:.3f} slivers {s:.3f}"
-            print(line, flush=True)
+    for name, m, ratio, target, ref in cases(args.meshes, best):
+        if (name, ratio) not in pml:
+            continue
+        res = qemjax.simplify((m.V, m.F), target_faces=target)
+        X0, G = np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64)
+        outs = [("default", X0)]
+        for it in args.iters:
+            Xr = relax(X0, G, it, args.alpha)
+            outs += [(f"relax {it}, re-fit", refit(m.V, m.F, Xr, G, 1, cos_max)), (f"relax {it}", Xr)]
+        line = f"{name:16s} {ratio:5g} pymeshlab slivers {pml[(name, ratio)]:.3f}"
+        for label, X in outs:
+            d = distances(m.V, m.F, X, G)
+            s = triangle_quality((X, G))["sliver_fraction"]
+            r = (d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"], s <= pml[(name, ratio)])
+            totals.setdefault(label, []).append(r)
+            line += f" | {label}: rms {r[0]:.3f} H {r[1]:.3f} slivers {s:.3f}"
+        print(line, flush=True)
     print()
     for label, rr in totals.items():
         print(f"{label}: rms <= best peer in {sum(a <= 1 for a, _, _ in rr)}/{len(rr)}; Hausdorff <= best peer in "
