@@ -19,7 +19,7 @@ TINY = np.finfo(np.float64).tiny
 
 @njit(cache=True, nogil=True, inline="always")
 def _power(r, p):
-    """r^p for r ≥ 0, exactly r at p = 1 and 1 at p = 0 (`memoryless._power`)."""
+    """r^p for r ≥ 0, exactly r at p = 1 and 1 at p = 0 (the numpy twin's `_power`)."""
     if p == 1.0:
         return r
     if p == 0.0:
@@ -29,7 +29,7 @@ def _power(r, p):
 
 @njit(cache=True, nogil=True, inline="always")
 def _add_plane(S, s, w, x, y, z):
-    """S[s] += the packed upper triangle of w·n nᵀ, n = (x, y, z) (`memoryless._planes`)."""
+    """S[s] += the packed upper triangle of w·n nᵀ, n = (x, y, z) (the numpy twin's `_planes`)."""
     S[s, 0] += w * (x * x)
     S[s, 1] += w * (x * y)
     S[s, 2] += w * (x * z)
@@ -43,48 +43,44 @@ def rebuild(P, F, alive, cnt, off, pool, verts, area_power, boundary_weight, mea
     """(k, 13) float64: `memoryless.current_quadrics` of ``verts`` (k,) from the live faces around each (the
     `incidence.FaceLists` arrays F, alive, cnt, off, pool), positions P (n, 3) float64."""
     k = len(verts)
-    faces_q = np.zeros((k, 6))
-    second = np.zeros((k, 6))  # boundary edges (v, c1) of the rotated faces [v, c1, c2]
-    third = np.zeros((k, 6))  # boundary edges (v, c2)
     out = np.zeros((k, 13))
+    acc = np.empty((3, 6))  # one vertex's sums: its face planes, its boundary edges (v, c1), (v, c2)
     ma = max(mean_area, TINY)
     me2 = max(mean_e2, TINY)
-    ring = np.empty(64, np.int64)  # the live faces at one vertex, grown when a vertex has more
-    for s in range(k):
+    ends = np.empty((64, 2), np.int64)  # the other corners (c1, c2) of each live face [v, c1, c2] at one vertex,
+    for s in range(k):  # grown when a vertex has more faces
         v = verts[s]
         r = 0
         for i in range(cnt[v]):
             f = pool[off[v] + i]
             if alive[f]:
-                if r == len(ring):
-                    grown = np.empty(2 * len(ring), np.int64)
-                    grown[:r] = ring[:r]
-                    ring = grown
-                ring[r] = f
+                if r == len(ends):
+                    grown = np.empty((2 * len(ends), 2), np.int64)
+                    grown[:r] = ends[:r]
+                    ends = grown
+                c = 0 if F[f, 0] == v else (1 if F[f, 1] == v else 2)
+                ends[r, 0], ends[r, 1] = F[f, (c + 1) % 3], F[f, (c + 2) % 3]
                 r += 1
+        acc[:] = 0.0
         px, py, pz = P[v, 0], P[v, 1], P[v, 2]
         for t in range(r):
-            f = ring[t]
-            c = 0 if F[f, 0] == v else (1 if F[f, 1] == v else 2)
-            a, b = F[f, (c + 1) % 3], F[f, (c + 2) % 3]
+            a, b = ends[t, 0], ends[t, 1]
             ux, uy, uz = P[a, 0] - px, P[a, 1] - py, P[a, 2] - pz
             wx, wy, wz = P[b, 0] - px, P[b, 1] - py, P[b, 2] - pz
             cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
             nrm = np.sqrt((cx * cx + cy * cy) + cz * cz)
             d = nrm if nrm > 0 else 1.0
             nx, ny, nz = cx / d, cy / d, cz / d
-            _add_plane(faces_q, s, _power(0.5 * nrm / ma, area_power), nx, ny, nz)
+            _add_plane(acc, 0, _power(0.5 * nrm / ma, area_power), nx, ny, nz)
             out[s, 10] += 0.5 * cx
             out[s, 11] += 0.5 * cy
             out[s, 12] += 0.5 * cz
             if boundary_weight > 0:
                 for j in range(2):
-                    e_end = a if j == 0 else b
+                    e_end = ends[t, j]
                     seen = 0  # the edge (v, e_end) among the other ends of every live face at v
                     for u in range(r):
-                        g = ring[u]
-                        cu = 0 if F[g, 0] == v else (1 if F[g, 1] == v else 2)
-                        seen += (F[g, (cu + 1) % 3] == e_end) + (F[g, (cu + 2) % 3] == e_end)
+                        seen += (ends[u, 0] == e_end) + (ends[u, 1] == e_end)
                     if seen != 1:
                         continue
                     ex, ey, ez = (ux, uy, uz) if j == 0 else (wx, wy, wz)
@@ -93,10 +89,7 @@ def rebuild(P, F, alive, cnt, off, pool, verts, area_power, boundary_weight, mea
                     dm = mn if mn > 0 else 1.0
                     wb = boundary_weight * _power(((ex * ex + ey * ey) + ez * ez) / me2, area_power) \
                         * (1.0 if mn > 0 else 0.0)
-                    _add_plane(second if j == 0 else third, s, wb, mx / dm, my / dm, mz / dm)
+                    _add_plane(acc, 1 + j, wb, mx / dm, my / dm, mz / dm)
         for i in range(6):
-            q = faces_q[s, i]
-            if boundary_weight > 0:
-                q = (q + second[s, i]) + third[s, i]
-            out[s, i] = q
+            out[s, i] = (acc[0, i] + acc[1, i]) + acc[2, i] if boundary_weight > 0 else acc[0, i]
     return out
