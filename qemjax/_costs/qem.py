@@ -95,6 +95,12 @@ class QEM(Method):
     volume_weight: λ ≥ 0, memoryless only: add λ·(volume change / mean face area)² to each pair's quadric
         before placing (`memoryless`); 0 adds nothing.
     memory_weight: μ ≥ 0, memoryless only: price with Q_current + μ·Q_summed (0: memoryless alone).
+    late_memoryless: K ≥ 1, or 0 (off): summed quadrics until the faces fall to K × the face target, then
+        memoryless ones for the rest of the run (`_schedulers.late`), priced with Q_current +
+        late_memory_weight·Q_summed (and ``volume_weight``). No effect with ``memoryless=True`` (memoryless
+        throughout). The run stays summed without a face target (``max_error`` alone), with kept attributes
+        or feature edges, and with ``regularize`` or ``area_weight`` (stats["late_memoryless_off"] says why).
+    late_memory_weight: μ ≥ 0 of the late phase (1: the summed quadric at full weight).
     """
 
     name: ClassVar[str] = "qem"
@@ -111,6 +117,8 @@ class QEM(Method):
     memoryless: bool = False
     volume_weight: float = 0.0
     memory_weight: float = 0.0
+    late_memoryless: float = 0.0
+    late_memory_weight: float = 1.0
 
     # the memoryless mode's differences, as properties (ESQEM overrides all three as class attributes)
     width = property(lambda self: ml.WIDTH if self.memoryless else quadrics.QSIZE)
@@ -119,6 +127,9 @@ class QEM(Method):
     @property
     def error_measure(self) -> str:
         """What a cost is: a quadric error (memoryless: of the current faces, plus the weighted terms)."""
+        if self.switches_late:
+            return (f"quadric error (a sum of squared distances to planes); from {self.late_memoryless:g} × "
+                    f"the target on, that of the memoryless quadrics ({self.late_model().error_measure})")
         if not self.memoryless:
             return "quadric error (a sum of squared distances to planes)"
         return "quadric error of the current faces (a sum of squared distances to their planes)" + "".join(
@@ -135,10 +146,18 @@ class QEM(Method):
     def __post_init__(self):
         super().__post_init__()
         require_nonnegative(self, "volume_weight", "memory_weight", "boundary_weight")
-        if self.memoryless and self.memoryless_refused:
-            raise ValueError(f"memoryless=True works with method='qem' only ({self.memoryless_refused})")
-        if (self.volume_weight or self.memory_weight) and not self.memoryless:
-            raise ValueError("volume_weight or memory_weight > 0 needs memoryless=True (they weight terms of "
+        if (self.memoryless or self.late_memoryless) and self.memoryless_refused:
+            which = "memoryless=True" if self.memoryless else "late_memoryless"
+            raise ValueError(f"{which} works with method='qem' only ({self.memoryless_refused})")
+        require_nonnegative(self, "late_memoryless", "late_memory_weight")
+        if self.late_memoryless and self.late_memoryless < 1:
+            raise ValueError(f"late_memoryless must be 0 (off) or at least 1 (a multiple of the face target), "
+                             f"got {self.late_memoryless}")
+        if self.memory_weight and not self.memoryless:
+            raise ValueError("memory_weight > 0 needs memoryless=True (it weights a term of the memoryless cost; "
+                             "late_memory_weight is the late phase's)")
+        if self.volume_weight and not (self.memoryless or self.late_memoryless):
+            raise ValueError("volume_weight > 0 needs memoryless=True or late_memoryless (it weights a term of "
                              "the memoryless cost)")
         if self.memoryless and (self.regularize or self.area_weight):
             raise ValueError("memoryless=True works with method='qem' only, without regularize and "
@@ -175,6 +194,20 @@ class QEM(Method):
         ``dataclasses.replace(QEM.accurate(), refit=0)`` is it without the re-fit."""
         return cls(memoryless=True, memory_weight=0.3, placement="rank", area_power=0.6, boundary_weight=10.0,
                    rank_eps=1e-3, max_shift=0.5, refit=1)
+
+    @property
+    def switches_late(self) -> bool:
+        """Whether a run turns memoryless late (``late_memoryless``, not ``memoryless=True``)."""
+        return bool(self.late_memoryless) and not self.memoryless
+
+    def late_model(self) -> "QEM | None":
+        """The model of a run's last stretch (``late_memoryless``): this one memoryless with the late phase's
+        memory weight, without re-fit (the pipeline re-fits once, after the run); None when it does not
+        switch."""
+        if not self.switches_late:
+            return None
+        return dataclasses.replace(self, memoryless=True, memory_weight=self.late_memory_weight,
+                                   late_memoryless=0.0, refit=0)
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
         if self.memoryless and mesh.feature_edges is not None and len(mesh.feature_edges):

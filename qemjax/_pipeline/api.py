@@ -197,9 +197,11 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
     cell that runs alone when it ends, each batch's cells when the batch (and its re-fits) ends. A sweep
     writes each row as soon as it can. ``stacklevel``: where warnings point (4: at `simplify_cells`'s caller)."""
     from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
-    from .._schedulers import batched
+    from .. import _schedulers
+    from .._schedulers import batched, late
     from . import stages
 
+    parallel_run = _schedulers.get("parallel")
     t_start = time.perf_counter()
     jobs, out, bounds = _jobs(cells, errors, stacklevel + 1)
     for i, exc in enumerate(out):
@@ -223,7 +225,7 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
         which, firsts = _same_runs([j for _, j in members])
         js = [members[k][1] for k in firsts]  # one copy per distinct run
         ran = batched.run([j.geo.Vn for j in js], [j.S for j in js], [j.geo.F for j in js],
-                          [max(j.target, 1) for j in js], [j.options.max_cost for j in js], js[0].model,
+                          [_first_target(j) for j in js], [j.options.max_cost for j in js], js[0].model,
                           [j.model.kernel_params() for j in js], js[0].options, [j.geo.edges[:2] for j in js],
                           [j.geo.frame.part_scale2() for j in js])
         wall = time.perf_counter() - t0 + prep * len(members)
@@ -233,6 +235,9 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
         later: list = []  # the batch's re-fits, run side by side below
         for k, (i, job) in enumerate(members):
             r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
+            if getattr(job.model, "switches_late", False):  # its memoryless phase, alone
+                r = late.second(parallel_run, r, job.geo.Vn, job.geo.F, job.geo.extra, max(job.target, 1),
+                                job.model, job.options, part_scale=job.geo.frame.part_scale2())
             info = {"size": len(members), "copies": len(js), "same_run": int(served[which[k]]), "total_s": wall,
                     "compilations": c2 - c1}
             if i in bounds:  # its re-fit and check run here, on the level the bound picks
@@ -350,12 +355,21 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
 
 def _run_key(job: "Job", geo) -> tuple:
     """What makes two jobs of one batch run exactly alike (`_same_runs`): ``geo`` (their geometry's
-    identity), a digest of the vertex state, the kernel settings, the face target and the max error."""
+    identity), a digest of the vertex state, the kernel settings, the (first phase's) face target and the max
+    error."""
     S = np.ascontiguousarray(job.S)
     params = sorted((name, np.asarray(v).dtype.str, np.asarray(v).tobytes())
                     for name, v in job.model.kernel_params().items())
     return (geo, S.shape, S.dtype.str, hashlib.blake2b(S.tobytes(), digest_size=16).digest(), tuple(params),
-            max(job.target, 1), job.options.max_cost)
+            _first_target(job), job.options.max_cost)
+
+
+def _first_target(job: "Job") -> int:
+    """The face target of a batch copy's run: the job's, or for a model that turns memoryless late in the run
+    the first phase's (`_schedulers.late`; the second runs per job, after the batch)."""
+    from .._schedulers import late
+
+    return late.first_target(job.model, max(job.target, 1))
 
 
 def _batch_key(job: "Job"):

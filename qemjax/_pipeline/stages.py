@@ -106,6 +106,7 @@ class Setup:
     kind_weights: Any
     progress: bool
     measure: bool | None = None  # measure the output's distance from the input (`measure`); None: with a re-fit
+    late_asked: bool = False  # the call set late_memoryless itself (then a run that cannot apply it warns)
 
     cos_max = property(lambda self: self.topology.cos_max)
     min_quality = property(lambda self: self.topology.min_quality)
@@ -176,7 +177,9 @@ def setup(method, scheduler, topology, attributes, progress, settings: dict, mea
     model = _costs.build(method_obj)
     kind_weights = _wedges.check_weights(attrs.attribute_weights)
     return Setup(method_obj, _costs.shown_name(method_obj, named), sched_name, schedule, model, topology, attrs,
-                 kind_weights, _flag("progress", progress), None if measure is None else _flag("measure", measure))
+                 kind_weights, _flag("progress", progress), None if measure is None else _flag("measure", measure),
+                 "late_memoryless" in settings or (not isinstance(method, str) and
+                                                   bool(getattr(method_obj, "late_memoryless", 0))))
 
 
 def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
@@ -207,20 +210,29 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     if lk is not None:  # a numbering of its own: no vertex state shared with a batch's other runs
         geo, states = lk.geometry(), None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
-    if attrs is not None and (_costs.name_of(setup.method_obj) != "qem" or setup.split is not None or
-                              getattr(model, "memoryless", False)):
+    memoryless = getattr(model, "memoryless", False)
+    if attrs is not None and (_costs.name_of(setup.method_obj) != "qem" or setup.split is not None or memoryless):
         warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
-        what = "memoryless=True" if getattr(model, "memoryless", False) else f"method={setup.method!r}"
+        what = "memoryless=True" if memoryless else f"method={setup.method!r}"
         _wedges.warn_unsupported(warn, what, stacklevel=stacklevel)
         report["dropped"] = report["dropped"] + warn
         attrs = None
+    method_obj = setup.method_obj
+    feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
+    why = _late_off(method_obj, attrs, feature_edges)
+    if why:  # the whole run on the summed quadrics, and the stats say so
+        method_obj = dataclasses.replace(method_obj, late_memoryless=0.0, volume_weight=0.0)
+        model = _costs.build(method_obj)
+        report["late_memoryless_off"] = why
+        if setup.late_asked:
+            warnings.warn(f"late_memoryless is not applied: {why}; the run uses the summed quadrics throughout",
+                          stacklevel=stacklevel)
     corner_values = channel_weights = None
     if attrs is not None:
         channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
         if np.any(channel_weights > 0):  # the cost model over positions and attributes (`_costs.attributes`)
-            model = _costs.build(setup.method_obj, weights=np.maximum(channel_weights, 1e-30))
+            model = _costs.build(method_obj, weights=np.maximum(channel_weights, 1e-30))
             corner_values = attrs.matrix()[attrs.corners] * (channel_weights > 0)
-    feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
     if lk is not None and feature_edges is not None:
         feature_edges = lk.feature_edges(feature_edges)
     if attrs is not None and attrs.has_seams():  # seams are constrained like boundaries: feature-edge planes
@@ -253,6 +265,19 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     if lk is not None:
         report.update(lk.stats)
     return Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)
+
+
+def _late_off(method_obj, attrs, feature_edges) -> str | None:
+    """Why a method that turns memoryless late (`_schedulers.late`) stays summed in this run, or None."""
+    if not getattr(method_obj, "switches_late", False):
+        return None
+    if method_obj.regularize or method_obj.area_weight:
+        return "regularize or area_weight is set (its term prices the summed quadrics' placement)"
+    if attrs is not None:
+        return "attributes are kept (the memoryless quadrics have no attribute terms)"
+    if feature_edges is not None and len(feature_edges):
+        return "feature edges are given (the memoryless quadrics do not track them)"
+    return None
 
 
 def unchanged(job: Job):
@@ -291,8 +316,12 @@ def run(job: Job):
             last = faces_now
     run_target, planned = target, None
     try:  # from the bar's first line on: an interrupt anywhere below still ends its line
-        run = functools.partial(_schedulers.get(setup.scheduler), edges=g.edges[:2],
-                                part_scale=g.frame.part_scale2(), wedges=job.tracker,
+        scheduler = _schedulers.get(setup.scheduler)
+        if getattr(model, "switches_late", False):  # two phases
+            from .._schedulers import late
+
+            scheduler = functools.partial(late.run, scheduler)
+        run = functools.partial(scheduler, edges=g.edges[:2], part_scale=g.frame.part_scale2(), wedges=job.tracker,
                                 **_locks.scheduler_settings(job.locks))
         if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
             run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
@@ -507,6 +536,8 @@ def _stats(job: Job, out: outcome.Outcome, g: Geometry, mesh: _Mesh, refit: _Ref
     if job.tracker is not None:
         stats.update(attributes=list(job.attrs.values), seam_vertices_in=job.tracker.seam_in)
     stats.update(out.stage_times)
+    if getattr(model, "switches_late", False):  # the faces left when the run turned memoryless (None: it did not)
+        stats["memoryless_from_faces"] = out.switched_at
     if out.faces_per_round is not None:
         stats["faces_per_round"] = out.faces_per_round
     if out.reweights:  # (faces, weights of the parts in mesh units) each time they were set

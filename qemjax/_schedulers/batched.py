@@ -44,7 +44,8 @@ from .select import fits_target, gate_rank, sort_keys
 
 def batchable(model) -> bool:
     """Whether runs of ``model`` can share rounds: its kernels take per-pair settings
-    (`CostModel.per_pair_params`) and it neither refreshes state, ranks by weighted parts nor splits."""
+    (`CostModel.per_pair_params`) and it neither refreshes state, ranks by weighted parts nor splits. (A
+    model that turns memoryless late, `late`, batches its first phase; its caller runs the second.)"""
     return (model.per_pair_params and model.refresh is None and model.rank_weights is None
             and getattr(model, "split_factor", None) is None)
 

@@ -126,7 +126,8 @@ class Outcome:
     (``*_s``); faces_per_round, parts (k, p+1): the cost parts and the ranking key of each contraction
     (or None), reweights: (faces, weights) each time a model's rank weights were set; history_rounds
     (k,): each contraction's round; removed_at (m,): the contraction that removed each face (-1: none),
-    coincident (m,) bool: faces dropped as coincident (`_record`)."""
+    coincident (m,) bool: faces dropped as coincident (`_record`); switched_at: the faces left when a
+    two-phase run turned memoryless (`late`; None: it did not)."""
 
     positions: np.ndarray
     states: np.ndarray
@@ -147,6 +148,7 @@ class Outcome:
     history_rounds: np.ndarray | None = None
     removed_at: np.ndarray | None = None
     coincident: np.ndarray | None = None
+    switched_at: int | None = None
 
     def __post_init__(self):
         if self.stop_reason not in STOPS:

@@ -142,7 +142,7 @@ def _grown(a: np.ndarray, size: int) -> np.ndarray:
 class _Compiled:
     """The run's state (arrays and typed dicts, as `speculate` describes) and its batch loop."""
 
-    def __init__(self, V, S, F, pairs, target, model, options, progress, locks=None, wedges=None):
+    def __init__(self, V, S, F, pairs, target, model, options, progress, locks=None, wedges=None, normals=None):
         n, m = len(V), len(F)
         self.n, self.target, self.model, self.options, self.progress = n, target, model, options, progress
         self.params = model.kernel_params()
@@ -157,7 +157,7 @@ class _Compiled:
         self.row_locks = None if locks is None else _locks.RunLocks(_grown(self.locked, rows))
         self.weights = None if locks is None or locks.weights is None else _grown(
             np.array(locks.weights, np.float64), rows)
-        self.N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)
+        self.N0 = (face_normals(np.asarray(V, DTYPE), F) if normals is None else normals).astype(DTYPE)
         # kept attributes: the tracker's arrays, changed in place (`wedges`); none: empty ones
         self.wedges = wedges
         if wedges is None:
@@ -445,10 +445,10 @@ class _Compiled:
         return faces, q
 
 
-def run(V, S, F, pairs, target_faces, model, options, progress, locks=None, wedges=None):
+def run(V, S, F, pairs, target_faces, model, options, progress, locks=None, wedges=None, normals=None):
     """`greedy.run` for an `eligible` model; pairs (k,2): the candidate pairs (edges and extra pairs, each
     row sorted). Same return."""
-    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress, locks, wedges)
+    r = _Compiled(V, S, F, pairs, target_faces, model, options, progress, locks, wedges, normals)
     r.push_all()
     r.loop()
     faces, q = r.output()

@@ -42,7 +42,7 @@ def _link_ok(faces: FaceLists, a: int, b: int, nshared: int, cnt=None) -> bool:
 
 
 def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_faces: int, model,
-        options: Options, progress=None, wedges=None, locks=None):
+        options: Options, progress=None, wedges=None, locks=None, normals=None):
     """Simplify (`greedy.run`, whose arguments these are; ``pairs`` (k,2): the edges, then the extra pairs,
     each sorted). Returns the `outcome.Outcome`."""
     n = len(V)
@@ -54,7 +54,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
     VQ = np.zeros((bucket(n + 1), 3 + model.width), DTYPE)
     VQ[:n, :3], VQ[:n, 3:] = V, S
     VQd = jnp.asarray(VQ)
-    N0 = face_normals(np.asarray(V, DTYPE), F).astype(DTYPE)  # each input face's normal: the reference
+    # each input face's normal: the reference
+    N0 = (face_normals(np.asarray(V, DTYPE), F) if normals is None else normals).astype(DTYPE)
     nbr = [set() for _ in range(n)]  # pair partners (not a vertex itself: the edge of a face with a repeated
     for a, b in pairs.tolist():       # corner, which is no pair)
         if a != b:

@@ -61,16 +61,18 @@ def rounds(run: Run, rnd: Round):
 
 
 def run(V, S, F, extra_pairs, target_faces, model, options, progress=None, edges=None, part_scale=None,
-        wedges=None, locks=None):
+        wedges=None, locks=None, normals=None):
     """Simplify. V (n,3) float32 normalised positions, S (n, model.width) the model's vertex state,
     F (m,3) int64 faces, extra_pairs (k,2) non-edge pairs that may also contract (aggregation; k may be
     0); ``edges``: `topo.edges` of F when the caller has it; ``part_scale`` (n,): (extent of each vertex's
     part / the whole extent)², which scales ``Schedule.free_cost`` per pair (None: one part).
     Returns the `outcome.Outcome` (the schedulers' contract). ``wedges``: a `_wedges.Tracker`
     (attributes kept: the seam rule applies and its corners are updated), or None. ``locks``: a
-    `_locks.RunLocks` (locked vertices and weights; locked vertices numbered first), or None."""
+    `_locks.RunLocks` (locked vertices and weights; locked vertices numbered first), or None. ``normals``
+    (m,3): the flip test's reference normal of each face (None: F's normals at V; a run that continues
+    another gives the input faces' normals, `late`)."""
     r = Run(V, S, F, extra_pairs, target_faces, model, options, progress, edges, part_scale, wedges=wedges,
-            locks=locks)
+            locks=locks, normals=normals)
     stop, blocked = rounds(r, choose(r))
     return result(r, stop, blocked)
 

@@ -1,0 +1,126 @@
+"""A run in two phases (``QEM(late_memoryless=K)``): the model's summed quadrics until the faces fall to K × the
+target, then memoryless quadrics (`QEM.late_model`) to the target, on any scheduler.
+
+Why: summed quadrics keep the memory of the input, which is what holds the rms down; memoryless ones price a
+contraction by the surface as it is now, which holds the farthest point (the Hausdorff distance) down. Most of
+what the memoryless quadrics gain comes in the last stretch of a run (docs/benchmarks.md, "Quality"), where
+they cost little: the rounds there are few and the mesh small.
+
+The second phase is a run of its own, by the same scheduler, on the first phase's mesh: its faces alive (in
+input order), every vertex row (so that vertex numbers, locks and per-part scales stay as they are), the
+summed quadrics as the memoryless rows' history (``memory_weight`` weighs them), the input faces' normals as
+the flip test's reference (as if one run), the lock weights as the first phase carried them, and the extra
+pairs whose ends are still there. The two outcomes are joined into one (`join`): one history, the faces
+numbered as the input's, the states back to the summed quadrics' columns (what the rest of the pipeline reads).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .._costs import memoryless as ml
+from .._kernels.batching import DTYPE
+from .._mesh.arrays import face_normals, face_stats
+from .._mesh.incidence import FaceLists
+from . import outcome
+from .locks import RunLocks
+
+
+def switch_faces(model, target_faces: int) -> int | None:
+    """The face count at which a run of ``model`` turns memoryless (None: it does not)."""
+    if not getattr(model, "switches_late", False):
+        return None
+    return int(model.late_memoryless * target_faces)
+
+
+def first_target(model, target_faces: int) -> int:
+    """The face target of a run's first phase: K × the target (the target itself without a switch)."""
+    return max(switch_faces(model, target_faces) or 0, target_faces)
+
+
+def run(scheduler, V, S, F, extra_pairs, target_faces, model, options, progress=None, *, edges=None,
+        part_scale=None, wedges=None, locks=None):
+    """`scheduler` (a scheduler's ``run``) in two phases; the scheduler contract's arguments and return.
+    Kept attributes (``wedges``) are refused: the memoryless rows carry no attribute terms."""
+    if wedges is not None:
+        raise ValueError("late_memoryless keeps no attributes (the memoryless quadrics have no attribute terms)")
+    kw = {} if locks is None else {"locks": locks}
+    first = scheduler(V, S, F, extra_pairs, first_target(model, target_faces), model, options, progress,
+                      edges=edges, part_scale=part_scale, **kw)
+    return second(scheduler, first, V, F, extra_pairs, target_faces, model, options, progress,
+                  part_scale=part_scale, locks=locks)
+
+
+def second(scheduler, first: outcome.Outcome, V, F, extra_pairs, target_faces, model, options, progress=None,
+           *, part_scale=None, locks=None) -> outcome.Outcome:
+    """The second phase after ``first`` (the first phase's outcome on the run's V, F: `run`, or a batch's
+    copy), joined to it; ``first`` itself when it stopped short of its target or has no faces to remove."""
+    faces = np.flatnonzero(first.alive)
+    if switch_faces(model, target_faces) is None or first.stop_reason != "target" or len(faces) <= target_faces:
+        return first
+    late = model.late_model()
+    n = len(V)
+    F2 = np.ascontiguousarray(first.faces[faces])
+    P = np.asarray(first.positions, np.float64)
+    # the memoryless rows of every vertex: the summed quadrics as history, the current ones from the faces
+    # left, and the input's means (the memoryless model's normalisation)
+    means = face_stats(np.asarray(V, np.float64), np.asarray(F, np.int64))[1:]
+    S2 = ml.state_rows(late, P, FaceLists(F2, n), np.arange(n), means, history=first.states)
+    kept = _survivor(first.history.pairs, n)
+    extra = np.asarray(extra_pairs, np.int64).reshape(-1, 2)
+    if len(extra):
+        extra = np.unique(np.sort(kept[extra], axis=1), axis=0)
+        extra = extra[extra[:, 0] != extra[:, 1]]
+    kw = {}
+    if locks is not None:  # the weights as the first phase carried them (`locks.carry`: the largest)
+        w = None if locks.weights is None else np.array(locks.weights, np.float64)
+        if w is not None:
+            np.maximum.at(w, kept, np.asarray(locks.weights, np.float64))
+        kw["locks"] = RunLocks(locks.locked, w)
+    normals = face_normals(np.asarray(V, DTYPE), np.asarray(F, np.int64)[faces])
+    after = scheduler(first.positions, S2, F2, extra, target_faces, late, options, progress,
+                      part_scale=part_scale, normals=normals, **kw)
+    return join(first, after, faces)
+
+
+def _survivor(pairs: np.ndarray, n: int) -> np.ndarray:
+    """(n,) the vertex each vertex was merged into by the contractions ``pairs`` (k,2) (kept, removed), in
+    turn: itself when it survives. Each vertex is removed at most once, so following the links converges."""
+    to = np.arange(n)
+    to[pairs[:, 1]] = pairs[:, 0]
+    while True:
+        nxt = to[to]
+        if np.array_equal(nxt, to):
+            return to
+        to = nxt
+
+
+def join(first: outcome.Outcome, second: outcome.Outcome, faces: np.ndarray) -> outcome.Outcome:
+    """One outcome of the two phases: ``second`` ran on ``first``'s faces ``faces`` (input numbers, in order). Faces keep their input numbers; the second phase's contractions follow the
+    first's in the history (their rounds after the first's); the states are the summed quadrics."""
+    k1 = first.contractions
+    F = first.faces.copy()
+    F[faces] = second.faces
+    alive = np.zeros_like(first.alive)
+    alive[faces] = second.alive
+    removed_at = first.removed_at.copy()
+    removed_at[faces] = np.where(second.removed_at >= 0, second.removed_at + k1, -1)
+    coincident = first.coincident.copy()
+    coincident[faces] = second.coincident
+    h1, h2 = first.history, second.history
+    history = outcome.History(*(np.concatenate([a, b]) for a, b in zip(h1, h2)))
+    rounds = np.concatenate([first.history_rounds, second.history_rounds + first.rounds])
+    times = {k: first.stage_times.get(k, 0.0) + second.stage_times.get(k, 0.0)
+             for k in {**first.stage_times, **second.stage_times}}
+    per_round = None if first.faces_per_round is None else list(first.faces_per_round) + list(
+        second.faces_per_round or [])
+    return dataclasses.replace(
+        second, positions=second.positions, states=np.ascontiguousarray(second.states[:, :ml.CCOLS - 3]),
+        faces=F, alive=alive, history=history,
+        rejected_by={k: first.rejected_by.get(k, 0) + v for k, v in second.rejected_by.items()},
+        rejected=first.rejected + second.rejected, rounds=first.rounds + second.rounds,
+        worst_cost=max(first.worst_cost, second.worst_cost), branches=first.branches + second.branches,
+        stage_times=times, faces_per_round=per_round, parts=None if first.parts is None else np.concatenate(
+            [first.parts, second.parts]), reweights=first.reweights + second.reweights, history_rounds=rounds,
+        removed_at=removed_at, coincident=coincident, switched_at=len(faces))

@@ -1,0 +1,220 @@
+"""Memoryless quadrics for the last stretch of a run (``QEM(late_memoryless=K)``, `qemjax._schedulers.late`):
+the first phase is the summed run, bit for bit; the second is in effect and reported; the joined outcome
+replays, stays valid, keeps locks and their carried weights, is deterministic, and is refused where it cannot
+run."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from conftest import assert_valid
+
+import qemjax
+from qemjax import shapes
+from qemjax._kernels import compilation as _compilation
+from qemjax._schedulers import late
+from qemjax._schedulers import locks as _locks
+
+LATE = dict(late_memoryless=2)
+
+
+def holed_grid():
+    """An open, bumpy grid with a hole: boundaries on both sides of the switch."""
+    V, F = shapes.grid(24, hole=True)
+    V = V + np.random.default_rng(3).normal(scale=0.01, size=V.shape) * [0, 0, 1]
+    return V, F
+
+
+MESHES = {"sphere": lambda: shapes.bumpy_sphere(3), "grid": holed_grid}
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+@pytest.mark.parametrize("mesh", sorted(MESHES))
+def test_first_phase_is_the_summed_run_then_memoryless(scheduler, mesh):
+    """The contractions down to K × the target are those of the same model's run to that count (bit for
+    bit); the ones after it differ from the summed run's, and the stats say where it switched."""
+    V, F = MESHES[mesh]()
+    target = len(F) // 10
+    res = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler, refit=0, **LATE)
+    assert_valid(res, target, V, F)
+    switch = res.stats["memoryless_from_faces"]
+    summed = qemjax.simplify((V, F), target_faces=2 * target, scheduler=scheduler, refit=0)
+    assert switch == len(summed.faces) in (2 * target, 2 * target + 1)
+    k = len(summed.history.pairs)
+    assert np.array_equal(res.history.pairs[:k], summed.history.pairs)
+    assert res.history.positions[:k].tobytes() == summed.history.positions[:k].tobytes()
+    plain = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler, refit=0)
+    assert len(plain.faces) == len(res.faces) and plain.vertices.tobytes() != res.vertices.tobytes()
+    assert res.stats["model"]["late_memoryless"] == 2
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_joined_record_replays_the_result(scheduler):
+    """The two phases are one history: replaying all of it gives the result, byte for byte; a level above
+    the switch is a level of the summed phase."""
+    V, F = shapes.bumpy_sphere(3)
+    res = qemjax.simplify((V, F), ratio=0.05, scheduler=scheduler, refit=0, **LATE)
+    level = res.replay(contractions=len(res.history))
+    assert level.vertices.tobytes() == res.vertices.tobytes()
+    assert np.array_equal(level.faces, res.faces)
+    assert np.array_equal(level.source_faces, res.source_faces)
+    assert res.record.faces_out == len(res.faces)
+
+
+def test_deterministic_and_valid_with_the_refit():
+    V, F = holed_grid()
+    a = qemjax.simplify((V, F), ratio=0.1, **LATE)
+    b = qemjax.simplify((V, F), ratio=0.1, **LATE)
+    assert a.vertices.tobytes() == b.vertices.tobytes() and np.array_equal(a.faces, b.faces)
+    assert_valid(a, len(F) // 10, V, F)
+    assert a.stats["refit"] == 1  # the default's re-fit, once, after both phases
+
+
+def test_locks_hold_and_weights_carry_through_the_switch():
+    """Locked vertices keep their input positions through both phases; the second phase gets the weights
+    as the first carried them (the largest of each merged group, as `locks.carry` in contraction order)."""
+    V, F = shapes.bumpy_sphere(3)
+    locked = np.flatnonzero(V[:, 2] > 0.9)
+    res = qemjax.simplify((V, F), ratio=0.1, locked=locked, refit=0, **LATE)
+    assert_valid(res, None, V, F)
+    assert res.stats["memoryless_from_faces"] is not None
+    kept = res.source_vertices
+    where = {int(s): i for i, s in enumerate(kept)}
+    for v in locked:
+        assert int(v) in where and res.vertices[where[int(v)]].tolist() == V[v].tolist()
+    w = np.random.default_rng(0).random(len(V))
+    res_w = qemjax.simplify((V, F), ratio=0.1, vertex_weights=w, refit=0, **LATE)
+    assert_valid(res_w, len(F) // 10, V, F)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_survivors_and_carried_weights_against_a_sequential_replay(seed):
+    """`late._survivor` follows each removed vertex to the one it ended in; the carried weights then equal
+    `locks.carry` applied contraction by contraction."""
+    rng = np.random.default_rng(seed)
+    n = 60
+    alive, pairs = list(range(n)), []
+    for _ in range(45):
+        a, b = rng.choice(alive, 2, replace=False)
+        pairs.append((a, b))
+        alive.remove(b)
+    pairs = np.array(pairs, np.int64)
+    to = late._survivor(pairs, n)
+    w = rng.random(n)
+    seq = w.copy()
+    ref = np.arange(n)
+    for a, b in pairs:
+        _locks.carry(seq, np.array([a]), np.array([b]))
+        ref[ref == b] = a
+    assert np.array_equal(to, ref)
+    carried = w.copy()
+    np.maximum.at(carried, to, w)
+    assert np.array_equal(carried[alive], seq[alive])
+
+
+def test_no_target_no_switch_and_stats_say_so():
+    """A run bounded by max_error alone has no target to switch at: it stays summed and says so."""
+    V, F = shapes.bumpy_sphere(3)
+    res = qemjax.simplify((V, F), max_error=1e-4, **LATE)
+    plain = qemjax.simplify((V, F), max_error=1e-4)
+    assert res.stats["memoryless_from_faces"] is None
+    assert np.array_equal(res.faces, plain.faces)
+
+
+def test_target_above_the_switch_runs_summed_only():
+    """K × the target at or above the input's faces: the whole run is memoryless; a run that never gets to
+    K × the target (blocked first) is the summed run."""
+    V, F = shapes.bumpy_sphere(3)
+    res = qemjax.simplify((V, F), target_faces=len(F) // 2 + 2, late_memoryless=3, refit=0)
+    assert res.stats["memoryless_from_faces"] == len(F)
+    assert_valid(res, len(F) // 2 + 2, V, F)
+
+
+@pytest.mark.parametrize("rel", [0.002, 0.02])
+def test_max_distance_bound_holds(rel):
+    """The bound searches the joined record as any other: the level it returns lies within it."""
+    V, F = holed_grid()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # stopped above the target by the bound: the point of the test
+        res = qemjax.simplify((V, F), ratio=0.05, max_distance_rel=rel, **LATE)
+    diagonal = float(np.linalg.norm(V.max(0) - V.min(0)))
+    assert res.stats["distance_two_way_max"] <= rel * diagonal
+    assert res.stats["memoryless_from_faces"] == 2 * (len(F) // 20)
+    assert_valid(res, None, V, F)
+
+
+def test_batches_share_the_first_phase_with_the_same_results():
+    """A batch runs the first phases together (copies of one run where they agree up to the switch) and each
+    second phase alone: every result is its own call's, byte for byte, whatever it is batched with."""
+    V, F = shapes.bumpy_sphere(3)
+    configs = [dict(ratio=0.1, **LATE), dict(ratio=0.1, late_memoryless=2, late_memory_weight=0.3),
+               dict(ratio=0.1, late_memoryless=3), dict(ratio=0.1), dict(ratio=0.05, **LATE),
+               dict(ratio=0.1, max_error=1e-4, **LATE)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the max_error one stops above its target
+        out = qemjax.simplify_batch((V, F), configs)
+        alone = [qemjax.simplify((V, F), **c) for c in configs]
+    assert out[0].stats["batch"]["size"] == len(configs)
+    # the first two agree until their switch; the plain 10 % run is the first phase of the late 5 % one
+    assert out[0].stats["batch"]["copies"] == 4
+    for c, r, alone in zip(configs, out, alone):
+        assert r.vertices.tobytes() == alone.vertices.tobytes() and np.array_equal(r.faces, alone.faces)
+        assert r.stats.get("memoryless_from_faces") == alone.stats.get("memoryless_from_faces")
+
+
+def test_new_weights_do_not_recompile():
+    V, F = shapes.bumpy_sphere(3)
+    qemjax.simplify((V, F), target_faces=300, **LATE)
+    r = qemjax.simplify((V, F), target_faces=300, late_memoryless=2, late_memory_weight=0.3, volume_weight=0.1)
+    assert r.stats["compilations"] == 0, r.stats["compilations"]
+
+
+@pytest.mark.parametrize("what", ["uv", "feature_edges", "regularize"])
+def test_attributes_feature_edges_or_terms_keep_the_run_summed(what):
+    """The memoryless rows carry no attribute terms, do not track feature edges, and the regularisation and
+    area terms price the summed quadrics' placement: with any, the run is the summed one throughout
+    (attributes kept), the stats say why, and a call that asked for the switch is warned."""
+    import trimesh
+
+    V, F = shapes.grid(16)
+    V = V + np.random.default_rng(1).normal(scale=0.01, size=V.shape) * [0, 0, 1]
+    mesh, kw = (V, F), {}
+    if what == "uv":
+        mesh = trimesh.Trimesh(V, F, process=False, visual=trimesh.visual.TextureVisuals(uv=V[:, :2].copy()))
+    elif what == "feature_edges":
+        kw = dict(feature_edges=np.array([[0, 1], [1, 2]]))
+    else:
+        kw = dict(regularize=0.1)
+    with pytest.warns(UserWarning, match="late_memoryless is not applied"):
+        res = qemjax.simplify(mesh, ratio=0.2, **LATE, **kw)
+    plain = qemjax.simplify(mesh, ratio=0.2, late_memoryless=0, **kw)
+    assert res.vertices.tobytes() == plain.vertices.tobytes() and np.array_equal(res.faces, plain.faces)
+    assert "memoryless_from_faces" not in res.stats and res.stats["late_memoryless_off"]
+    assert res.stats["model"]["late_memoryless"] == 0
+    if what == "uv":
+        assert res.stats["attributes"] == ["uv"] and res.uv is not None
+
+
+@pytest.mark.parametrize("kw,match", [
+    (dict(late_memoryless=0.5), "late_memoryless must be 0"),
+    (dict(late_memoryless=-1), "late_memoryless must be finite"),
+    (dict(late_memoryless=2, late_memory_weight=-1), "late_memory_weight must be finite"),
+    (dict(late_memoryless=2, memory_weight=0.5), "memory_weight > 0 needs memoryless=True"),
+    (dict(late_memoryless=2, method="probabilistic"), "not a setting|method='qem' only"),
+])
+def test_bad_options_raise(kw, match):
+    V, F = shapes.bumpy_sphere(2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ValueError, match=match):
+            qemjax.simplify((V, F), ratio=0.2, **kw)
+
+
+def test_memoryless_true_is_memoryless_throughout():
+    """``memoryless=True`` wins over a late switch (a preset's): the run is memoryless from the start."""
+    V, F = shapes.bumpy_sphere(3)
+    a = qemjax.simplify((V, F), ratio=0.1, memoryless=True, late_memoryless=2)
+    b = qemjax.simplify((V, F), ratio=0.1, memoryless=True, late_memoryless=0)
+    assert a.vertices.tobytes() == b.vertices.tobytes() and np.array_equal(a.faces, b.faces)
+    assert "memoryless_from_faces" not in a.stats
