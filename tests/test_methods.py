@@ -120,7 +120,7 @@ def test_a_grid_crossing_methods_leaves_out_the_settings_a_method_lacks(ball):
 def _value(opt: _flat.Option):
     """A valid value other than the default, of the field's type."""
     special = {"placement": "endpoints", "attributes": ("uv",), "attribute_weights": 0.5, "texture": "t.png",
-               "preserve_topology": True}
+               "preserve_topology": True, "late_memoryless": 2.0}
     if opt.name in special:
         return special[opt.name]
     if opt.default is None or isinstance(opt.default, bool):

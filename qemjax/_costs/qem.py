@@ -126,10 +126,8 @@ class QEM(Method):
 
     @property
     def error_measure(self) -> str:
-        """What a cost is: a quadric error (memoryless: of the current faces, plus the weighted terms)."""
-        if self.switches_late:
-            return (f"quadric error (a sum of squared distances to planes); from {self.late_memoryless:g} × "
-                    f"the target on, that of the memoryless quadrics ({self.late_model().error_measure})")
+        """What a cost is: a quadric error (memoryless: of the current faces, plus the weighted terms; a late
+        switch's costs are both kinds, each a sum of squared distances to planes)."""
         if not self.memoryless:
             return "quadric error (a sum of squared distances to planes)"
         return "quadric error of the current faces (a sum of squared distances to their planes)" + "".join(
