@@ -70,7 +70,8 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     (`qemjax._record.history`): one run's cost instead of one per level. ``options`` are `simplify`'s keywords
     (not its targets, nor ``max_distance``: it bounds one result, not a chain). With the greedy scheduler each level equals a separate ``simplify(ratio=r)`` run
     whenever the run passes through exactly that face count; with the parallel scheduler (default) the
-    levels are the run's own intermediate meshes, not those of separate runs.
+    levels are the run's own intermediate meshes, not those of separate runs. With ``late_memoryless=K`` the
+    run turns memoryless at K × the smallest level's target: the levels above that are the summed phase's.
 
     ESQEM's edge splitting happens after all contractions and is not part of the record: with
     ``method="esqem"`` give ``split_factor=None``. When the run stops above a level's target (no valid

@@ -55,9 +55,12 @@ def run(scheduler, V, S, F, extra_pairs, target_faces, model, options, progress=
 def second(scheduler, first: outcome.Outcome, V, F, extra_pairs, target_faces, model, options, progress=None,
            *, part_scale=None, locks=None) -> outcome.Outcome:
     """The second phase after ``first`` (the first phase's outcome on the run's V, F: `run`, or a batch's
-    copy), joined to it; ``first`` itself when it stopped short of its target or has no faces to remove."""
+    copy), joined to it; ``first`` itself when the cost limit stopped it or it has no faces to remove. A first
+    phase held back short of its target still switches (a closed mesh stops one face above an odd target,
+    and one with a lone part may end two above it): the memoryless prices may place where the summed ones
+    could not, and the second phase reports its own stop."""
     faces = np.flatnonzero(first.alive)
-    if switch_faces(model, target_faces) is None or first.stop_reason != "target" or len(faces) <= target_faces:
+    if switch_faces(model, target_faces) is None or first.stop_reason == "max_error" or len(faces) <= target_faces:
         return first
     late = model.late_model()
     n = len(V)
