@@ -39,12 +39,12 @@ def test_first_phase_is_the_summed_run_then_memoryless(scheduler, mesh):
     res = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler, refit=0, **LATE)
     assert_valid(res, target, V, F)
     switch = res.stats["memoryless_from_faces"]
-    summed = qemjax.simplify((V, F), target_faces=2 * target, scheduler=scheduler, refit=0)
+    summed = qemjax.simplify((V, F), target_faces=2 * target, scheduler=scheduler, refit=0, late_memoryless=0)
     assert switch == len(summed.faces) in (2 * target, 2 * target + 1)
     k = len(summed.history.pairs)
     assert np.array_equal(res.history.pairs[:k], summed.history.pairs)
     assert res.history.positions[:k].tobytes() == summed.history.positions[:k].tobytes()
-    plain = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler, refit=0)
+    plain = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler, refit=0, late_memoryless=0)
     assert len(plain.faces) == len(res.faces) and plain.vertices.tobytes() != res.vertices.tobytes()
     assert res.stats["model"]["late_memoryless"] == 2
 
@@ -117,7 +117,7 @@ def test_no_target_no_switch_and_stats_say_so():
     """A run bounded by max_error alone has no target to switch at: it stays summed and says so."""
     V, F = shapes.bumpy_sphere(3)
     res = qemjax.simplify((V, F), max_error=1e-4, **LATE)
-    plain = qemjax.simplify((V, F), max_error=1e-4)
+    plain = qemjax.simplify((V, F), max_error=1e-4, late_memoryless=0)
     assert res.stats["memoryless_from_faces"] is None
     assert np.array_equal(res.faces, plain.faces)
 
@@ -149,7 +149,7 @@ def test_batches_share_the_first_phase_with_the_same_results():
     second phase alone: every result is its own call's, byte for byte, whatever it is batched with."""
     V, F = shapes.bumpy_sphere(3)
     configs = [dict(ratio=0.1, **LATE), dict(ratio=0.1, late_memoryless=2, late_memory_weight=0.3),
-               dict(ratio=0.1, late_memoryless=3), dict(ratio=0.1), dict(ratio=0.05, **LATE),
+               dict(ratio=0.1, late_memoryless=3), dict(ratio=0.1, late_memoryless=0), dict(ratio=0.05, **LATE),
                dict(ratio=0.1, max_error=1e-4, **LATE)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the max_error one stops above its target
@@ -228,10 +228,47 @@ def test_partitioned_runs_pass_it_to_every_group():
     m = shapes.bumpy_sphere(5)
     p = Partition(part_faces=2000, workers=1)
     res = qemjax.simplify(m, ratio=0.05, partition=p, **LATE)
-    plain = qemjax.simplify(m, ratio=0.05, partition=p)
+    plain = qemjax.simplify(m, ratio=0.05, partition=p, late_memoryless=0)
     assert len(res.faces) == res.stats["target_faces"] == len(plain.faces)
     assert_valid(res, len(plain.faces))
     e = np.concatenate([res.faces[:, [0, 1]], res.faces[:, [1, 2]], res.faces[:, [2, 0]]])
     assert len(np.unique(e, axis=0)) == len(e)  # each directed edge once ...
     assert np.array_equal(np.unique(e, axis=0), np.unique(e[:, ::-1], axis=0))  # ... and its reverse: closed
     assert res.vertices.tobytes() != plain.vertices.tobytes()
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_the_joined_outcome_keeps_the_contract(scheduler, monkeypatch):
+    """`late.join`: one outcome whose counts, faces, removal steps and rounds agree with each other and with
+    the result's stats, as a single run's do (tests/test_scheduler_contract.py)."""
+    seen = []
+    join = late.join
+
+    def kept(*a):
+        out = join(*a)
+        seen.append(out)
+        return out
+    monkeypatch.setattr(late, "join", kept)
+    V, F = holed_grid()
+    res = qemjax.simplify((V, F), ratio=0.05, scheduler=scheduler, **LATE)
+    (out,) = seen
+    k = out.contractions
+    assert k == len(out.history.costs) == len(out.history_rounds) == res.stats["contractions"]
+    assert int(out.alive.sum()) == len(res.faces) and sum(out.rejected_by.values()) == out.rejected
+    assert int(np.sum(out.branches)) == k and out.rounds == res.stats["rounds"]
+    assert np.all(np.diff(out.history_rounds) >= 0) and out.history_rounds[-1] < out.rounds
+    assert np.all(out.removed_at[out.alive] == -1)
+    assert np.all((out.removed_at[~out.alive] >= 0) & (out.removed_at[~out.alive] < k))
+    assert out.states.shape == (len(V), 10)  # the summed quadrics' columns, as the pipeline reads them
+    assert out.switched_at == res.stats["memoryless_from_faces"]
+    assert out.worst_cost == float(np.max(out.history.costs))
+
+
+def test_the_default_turns_memoryless_at_twice_the_target():
+    V, F = shapes.bumpy_sphere(3)
+    assert qemjax.QEM.default().late_memoryless == 2 and qemjax.QEM.default().late_memory_weight == 1
+    a = qemjax.simplify((V, F), ratio=0.1)
+    b = qemjax.simplify((V, F), ratio=0.1, method="qem", area_power=0.6, boundary_weight=10.0, refit=1,
+                        late_memoryless=2)
+    assert a.vertices.tobytes() == b.vertices.tobytes() and np.array_equal(a.faces, b.faces)
+    assert a.stats["memoryless_from_faces"] == 256

@@ -285,7 +285,7 @@ def test_new_numbers_do_not_recompile():
     (dict(memoryless="yes"), "memoryless must be True or False"),
     (dict(memoryless=True, volume_weight=-1.0), "volume_weight must be finite"),
     (dict(memoryless=True, volume_weight=float("nan")), "volume_weight must be finite"),
-    (dict(volume_weight=1.0), "needs memoryless=True"),
+    (dict(volume_weight=1.0, late_memoryless=0), "needs memoryless=True"),
     (dict(memory_weight=1.0), "needs memoryless=True"),
     (dict(memoryless=True, memory_weight=-0.5), "memory_weight must be finite"),
     (dict(memoryless=True, method="area"), "memoryless is not a setting of method 'area'"),

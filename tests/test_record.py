@@ -33,32 +33,38 @@ def reachable(record, ratio):
 @pytest.mark.shared
 @pytest.mark.parametrize("name", ["suzanne.obj", "rocker-arm-small.off"])
 def test_greedy_replay_equals_simplify(name):
+    """Each level of a greedy run is the run to that face count (summed quadrics throughout: the default's
+    memoryless last stretch starts at 2× each run's own target, so there the levels are the long run's)."""
     path = shared_mesh(name)
-    res = qemjax.simplify(path, ratio=0.05, scheduler="greedy", attributes=None, refit=0)
+    res = qemjax.simplify(path, ratio=0.05, scheduler="greedy", attributes=None, refit=0, late_memoryless=0)
     same_mesh(res.replay(contractions=len(res.history)), res)
     for ratio in (0.5, 0.2):
         k = reachable(res.record, ratio)
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # reached exactly: no warning (attributes: named already)
             warnings.filterwarnings("ignore", "suzanne.obj carries")
-            direct = qemjax.simplify(path, target_faces=k, scheduler="greedy", attributes=None, refit=0)
+            direct = qemjax.simplify(path, target_faces=k, scheduler="greedy", attributes=None, refit=0,
+                                     late_memoryless=0)
         assert len(direct.faces) == k
         same_mesh(res.replay(k), direct)
 
 
 def test_one_pair_per_round_replay_equals_simplify():
     """With one pair per round the parallel scheduler's choices do not depend on the target: every prefix
-    is a run of its own."""
+    is a run of its own (summed quadrics throughout, as above)."""
     V, F = shapes.bumpy_sphere(2)
-    res = qemjax.simplify((V, F), ratio=0.1, schedule=one_pair_per_round(), refit=0)
+    kw = dict(schedule=one_pair_per_round(), refit=0, late_memoryless=0)
+    res = qemjax.simplify((V, F), ratio=0.1, **kw)
     for ratio in (0.6, 0.3):
         k = reachable(res.record, ratio)
-        same_mesh(res.replay(k), qemjax.simplify((V, F), target_faces=k, schedule=one_pair_per_round(), refit=0))
+        same_mesh(res.replay(k), qemjax.simplify((V, F), target_faces=k, **kw))
 
 
 @pytest.mark.shared
 def test_parallel_replay_is_the_run_at_round_boundaries(monkeypatch):
-    """The mesh after each round, captured inside the run, is what the record replays there."""
+    """The mesh after each round, captured inside the run, is what the record replays there (one run: the
+    default's memoryless last stretch is a second run on renumbered faces; its record replays the result,
+    tests/test_late_memoryless.py)."""
     snaps = []
 
     choose = driver.choose
@@ -75,7 +81,7 @@ def test_parallel_replay_is_the_run_at_round_boundaries(monkeypatch):
         return rnd
 
     monkeypatch.setattr(driver, "choose", spying)
-    res = qemjax.simplify(shared_mesh("cow.obj"), ratio=0.05, refit=0)
+    res = qemjax.simplify(shared_mesh("cow.obj"), ratio=0.05, refit=0, late_memoryless=0)
     monkeypatch.undo()
     rec = res.record
     ends = np.flatnonzero(np.diff(np.append(rec.history.rounds, np.inf)) != 0) + 1  # prefix length per round

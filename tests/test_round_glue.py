@@ -249,7 +249,9 @@ def test_runs_with_the_compiled_glue_give_the_numpy_glues_result(case, monkeypat
         with monkeypatch.context() as m:
             m.setattr(driver, "choose", fast_off)
             old = qemjax.simplify(mesh, **kw)
-    assert seen == [True, True]
+    # the default's memoryless last stretch (`_schedulers.late`) is a second run, never on the glue
+    late = kw.get("method", "default") == "default" and "attributes" not in kw  # (with UVs it stays summed)
+    assert seen == ([True, False] if late else [True]) * 2
     _assert_same(new, old)
     assert new.stats["rounds"] > 2
     if "uv" in case:

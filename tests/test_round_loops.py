@@ -95,7 +95,9 @@ def test_compiled_round_gives_the_numpy_rounds_result(case, monkeypatch):
     mesh = make()
     new, seen = _run(mesh, kw, monkeypatch, True)
     old, seen_old = _run(mesh, kw, monkeypatch, False)
-    assert seen == [True] and seen_old == [False]
+    # the default's memoryless last stretch: a second run (not with UVs kept: it stays summed)
+    runs = 2 if kw.get("method") == "default" and "attributes" not in kw else 1
+    assert seen == [True] * runs and seen_old == [False] * runs
     _assert_same(new, old)
     assert new.stats["rounds"] > 1
     if "uv" in case:

@@ -113,8 +113,10 @@ def test_runs_with_one_call_a_round_give_the_separate_calls_result(case, monkeyp
     _assert_same(new, old)
     if "uv" in case:
         assert np.array_equal(new.uv, old.uv)
-    # every round that contracted made its one call (and started the next round's price there)
-    assert len(calls) == len(new.stats["faces_per_round"]) >= 2
+    # every round that contracted made its one call (and started the next round's price there), up to the
+    # default's memoryless last stretch (`_schedulers.late`), whose rounds price on their own
+    switch = new.stats.get("memoryless_from_faces") or 0
+    assert len(calls) == sum(f >= switch for f in new.stats["faces_per_round"]) >= 2
     if case == "icosphere-rank":  # a round with more contractions than one merge piece
         assert max(k for k, _, size, _ in calls) > calls[0][2]
     for _, j, _, price_size in calls:  # the smallest of the size class's shapes that holds the stale pairs

@@ -69,7 +69,8 @@ def test_batched_copies_return_outcomes(monkeypatch):
 
     monkeypatch.setattr(batched, "run", wrapped)
     mesh = shapes.bumpy_sphere(2)
-    res = qemjax.simplify_batch(mesh, [dict(target_faces=300), dict(target_faces=200, boundary_weight=1.0)])
+    res = qemjax.simplify_batch(mesh, [dict(target_faces=300, late_memoryless=0),
+                                       dict(target_faces=200, boundary_weight=1.0, late_memoryless=0)])
     assert len(seen) == 2 and all(isinstance(o, outcome.Outcome) for o in seen)
     for out, r in zip(seen, res):
         assert int(out.alive.sum()) == len(r.faces) and out.contractions == r.stats["contractions"]
@@ -139,7 +140,7 @@ def test_the_stop_reason_above_the_target(stop, blocked, closed, faces, want):
 
 def test_the_run_reports_its_counts_in_the_stats(monkeypatch):
     seen = _capture(monkeypatch, "parallel")
-    res = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.1)
+    res = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.1, late_memoryless=0)  # one run (`test_late_memoryless`)
     counts = seen[0][0].counts(("a", "b", "c", "d")[:len(seen[0][0].branches)])
     assert list(counts) == ["contractions", "rejected", "rounds", "branches", "rejected_by", "blocked_by"]
     for k in ("contractions", "rejected", "rounds", "rejected_by", "blocked_by"):
@@ -182,9 +183,9 @@ def test_a_parallel_run_picks_its_round_implementation_once(monkeypatch):
     mesh = shapes.bumpy_sphere(3)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        qemjax.simplify(mesh, ratio=0.1)
-        qemjax.simplify_batch(mesh, [{"ratio": 0.1}, {"ratio": 0.2}])
+        qemjax.simplify(mesh, ratio=0.1, late_memoryless=0)  # (the default's last stretch: a second run)
+        qemjax.simplify_batch(mesh, [{"ratio": 0.1, "late_memoryless": 0}, {"ratio": 0.2, "late_memoryless": 0}])
         monkeypatch.setattr(selection, "fits", lambda *a: False)
-        qemjax.simplify(mesh, ratio=0.1)
+        qemjax.simplify(mesh, ratio=0.1, late_memoryless=0)
     assert picked == ["GlueRound", "LoopRound", "StagedRound"]
     assert issubclass(parallel.GlueRound, parallel.LoopRound)

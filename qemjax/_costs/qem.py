@@ -179,7 +179,7 @@ class QEM(Method):
         re-fitting the positions to the input (``refit=1``). Chosen by ranking every candidate against the
         peers on the benchmark meshes at 10 % and 1 % (``experiments/figures/rank_peers.py``; docs/methods.md, "QEM and
         its presets", which gives its time against `classic`'s)."""
-        return cls(area_power=0.6, boundary_weight=10.0, refit=1)
+        return cls(area_power=0.6, boundary_weight=10.0, refit=1, late_memoryless=2.0)
 
     @classmethod
     def accurate(cls) -> "QEM":
