@@ -7,10 +7,10 @@ what the memoryless quadrics gain comes in the last stretch of a run (docs/bench
 they cost little: the rounds there are few and the mesh small.
 
 The second phase is a run of its own, by the same scheduler, on the first phase's mesh: its faces alive (in
-input order), every vertex row (so that vertex numbers, locks and per-part scales stay as they are), the
-summed quadrics as the memoryless rows' history (``memory_weight`` weighs them), the input faces' normals as
-the flip test's reference (as if one run), the lock weights as the first phase carried them, and the extra
-pairs whose ends are still there. The two outcomes are joined into one (`join`): one history, the faces
+input order) and the vertices they use (renumbered in order, with their locks and per-part scales), the
+summed quadrics as the memoryless rows' history (``late_memory_weight`` weighs them), the input faces'
+normals as the flip test's reference (as if one run), the lock weights as the first phase carried them, and
+the extra pairs whose ends are still there. The two outcomes are joined into one (`join`): one history, the faces
 numbered as the input's, the states back to the summed quadrics' columns (what the rest of the pipeline reads).
 """
 from __future__ import annotations
@@ -64,27 +64,36 @@ def second(scheduler, first: outcome.Outcome, V, F, extra_pairs, target_faces, m
         return first
     late = model.late_model()
     n = len(V)
-    F2 = np.ascontiguousarray(first.faces[faces])
-    P = np.asarray(first.positions, np.float64)
-    # the memoryless rows of every vertex: the summed quadrics as history, the current ones from the faces
-    # left, and the input's means (the memoryless model's normalisation)
+    # the second run holds the vertices the faces left use, renumbered in order (locked ones, numbered first,
+    # stay first): a run's per-round work and arrays grow with its vertices, and after a large first phase
+    # most of them are gone
+    keep = np.unique(first.faces[faces])
+    at = np.full(n, -1, np.int64)
+    at[keep] = np.arange(len(keep))
+    F2 = at[first.faces[faces]]
+    # the memoryless rows: the summed quadrics as history, the current ones from the faces left, and the
+    # input's means (the memoryless model's normalisation)
     means = face_stats(np.asarray(V, np.float64), np.asarray(F, np.int64))[1:]
-    S2 = ml.state_rows(late, P, FaceLists(F2, n), np.arange(n), means, history=first.states)
+    S2 = ml.state_rows(late, np.asarray(first.positions, np.float64)[keep], FaceLists(F2, len(keep)),
+                       np.arange(len(keep)), means, history=first.states[keep])
     kept = _survivor(first.history.pairs, n)
     extra = np.asarray(extra_pairs, np.int64).reshape(-1, 2)
     if len(extra):
-        extra = np.unique(np.sort(kept[extra], axis=1), axis=0)
+        extra = at[kept[extra]]
+        extra = np.unique(np.sort(extra[(extra >= 0).all(1)], axis=1), axis=0)
         extra = extra[extra[:, 0] != extra[:, 1]]
     kw = {}
     if locks is not None:  # the weights as the first phase carried them (`locks.carry`: the largest)
         w = None if locks.weights is None else np.array(locks.weights, np.float64)
         if w is not None:
             np.maximum.at(w, kept, np.asarray(locks.weights, np.float64))
-        kw["locks"] = RunLocks(locks.locked, w)
+            w = w[keep]
+        kw["locks"] = RunLocks(np.asarray(locks.locked)[keep], w)
     normals = face_normals(np.asarray(V, DTYPE), np.asarray(F, np.int64)[faces])
-    after = scheduler(first.positions, S2, F2, extra, target_faces, late, options, progress,
-                      part_scale=part_scale, normals=normals, **kw)
-    return join(first, after, faces)
+    after = scheduler(np.ascontiguousarray(first.positions[keep]), S2, F2, extra, target_faces, late, options,
+                      progress, part_scale=None if part_scale is None else np.asarray(part_scale)[keep],
+                      normals=normals, **kw)
+    return join(first, after, faces, keep)
 
 
 def _survivor(pairs: np.ndarray, n: int) -> np.ndarray:
@@ -99,19 +108,23 @@ def _survivor(pairs: np.ndarray, n: int) -> np.ndarray:
         to = nxt
 
 
-def join(first: outcome.Outcome, second: outcome.Outcome, faces: np.ndarray) -> outcome.Outcome:
-    """One outcome of the two phases: ``second`` ran on ``first``'s faces ``faces`` (input numbers, in order). Faces keep their input numbers; the second phase's contractions follow the
+def join(first: outcome.Outcome, second: outcome.Outcome, faces: np.ndarray, keep: np.ndarray) -> outcome.Outcome:
+    """One outcome of the two phases: ``second`` ran on ``first``'s faces ``faces`` (input numbers, in order)
+    over its vertices ``keep`` (second's vertex i is first's keep[i]). Faces keep their input numbers; the second phase's contractions follow the
     first's in the history (their rounds after the first's); the states are the summed quadrics."""
     k1 = first.contractions
     F = first.faces.copy()
-    F[faces] = second.faces
+    F[faces] = keep[second.faces]
+    positions, states = first.positions.copy(), first.states.copy()
+    positions[keep] = second.positions
+    states[keep] = second.states[:, :ml.CCOLS - 3]  # the summed quadrics' columns (the rows' history)
     alive = np.zeros_like(first.alive)
     alive[faces] = second.alive
     removed_at = first.removed_at.copy()
     removed_at[faces] = np.where(second.removed_at >= 0, second.removed_at + k1, -1)
     coincident = first.coincident.copy()
     coincident[faces] = second.coincident
-    h1, h2 = first.history, second.history
+    h1, h2 = first.history, second.history._replace(pairs=keep[second.history.pairs])
     history = outcome.History(*(np.concatenate([a, b]) for a, b in zip(h1, h2)))
     rounds = np.concatenate([first.history_rounds, second.history_rounds + first.rounds])
     times = {k: first.stage_times.get(k, 0.0) + second.stage_times.get(k, 0.0)
@@ -119,8 +132,7 @@ def join(first: outcome.Outcome, second: outcome.Outcome, faces: np.ndarray) -> 
     per_round = None if first.faces_per_round is None else list(first.faces_per_round) + list(
         second.faces_per_round or [])
     return dataclasses.replace(
-        second, positions=second.positions, states=np.ascontiguousarray(second.states[:, :ml.CCOLS - 3]),
-        faces=F, alive=alive, history=history,
+        second, positions=positions, states=states, faces=F, alive=alive, history=history,
         rejected_by={k: first.rejected_by.get(k, 0) + v for k, v in second.rejected_by.items()},
         rejected=first.rejected + second.rejected, rounds=first.rounds + second.rounds,
         worst_cost=max(first.worst_cost, second.worst_cost), branches=first.branches + second.branches,
