@@ -12,7 +12,6 @@ from conftest import assert_valid
 
 import qemjax
 from qemjax import shapes
-from qemjax._kernels import compilation as _compilation
 from qemjax._schedulers import late
 from qemjax._schedulers import locks as _locks
 

@@ -101,6 +101,7 @@ def test_a_scheduler_registered_from_outside_runs_through_simplify():
             res = qemjax.simplify((V, F), ratio=0.5, scheduler="idle")
         assert res.stop_reason == "blocked" and len(res.faces) == len(F)
         assert res.stats["scheduler"] == "idle" and res.stats["blocked_by"] == {"idle": 1}
+        assert "not a built-in" in res.stats["late_memoryless_off"]  # the default's last stretch: built-ins only
         assert any("stopped at" in str(w.message) for w in caught)
         with pytest.raises(ValueError, match="new, non-empty name"):
             _schedulers.register("idle", idle)

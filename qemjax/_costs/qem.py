@@ -99,7 +99,8 @@ class QEM(Method):
         memoryless ones for the rest of the run (`_schedulers.late`), priced with Q_current +
         late_memory_weight·Q_summed (and ``volume_weight``). No effect with ``memoryless=True`` (memoryless
         throughout). The run stays summed without a face target (``max_error`` alone), with kept attributes
-        or feature edges, and with ``regularize`` or ``area_weight`` (stats["late_memoryless_off"] says why).
+        or feature edges, with ``regularize`` or ``area_weight``, and on a scheduler registered from outside
+        (stats["late_memoryless_off"] says why).
     late_memory_weight: μ ≥ 0 of the late phase (1: the summed quadric at full weight).
     """
 

@@ -219,7 +219,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         attrs = None
     method_obj = setup.method_obj
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
-    why = _late_off(method_obj, attrs, feature_edges)
+    why = _late_off(method_obj, attrs, feature_edges, setup.scheduler)
     if why:  # the whole run on the summed quadrics, and the stats say so
         method_obj = dataclasses.replace(method_obj, late_memoryless=0.0, volume_weight=0.0)
         model = _costs.build(method_obj)
@@ -267,10 +267,12 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     return Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)
 
 
-def _late_off(method_obj, attrs, feature_edges) -> str | None:
+def _late_off(method_obj, attrs, feature_edges, scheduler: str) -> str | None:
     """Why a method that turns memoryless late (`_schedulers.late`) stays summed in this run, or None."""
     if not getattr(method_obj, "switches_late", False):
         return None
+    if scheduler not in _schedulers.BUILT_IN:
+        return f"the scheduler {scheduler!r} is not a built-in one (the switch runs the scheduler a second time)"
     if method_obj.regularize or method_obj.area_weight:
         return "regularize or area_weight is set (its term prices the summed quadrics' placement)"
     if attrs is not None:

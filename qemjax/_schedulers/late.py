@@ -110,8 +110,9 @@ def _survivor(pairs: np.ndarray, n: int) -> np.ndarray:
 
 def join(first: outcome.Outcome, second: outcome.Outcome, faces: np.ndarray, keep: np.ndarray) -> outcome.Outcome:
     """One outcome of the two phases: ``second`` ran on ``first``'s faces ``faces`` (input numbers, in order)
-    over its vertices ``keep`` (second's vertex i is first's keep[i]). Faces keep their input numbers; the second phase's contractions follow the
-    first's in the history (their rounds after the first's); the states are the summed quadrics."""
+    over its vertices ``keep`` (second's vertex i is first's keep[i]). Faces and vertices keep their input
+    numbers; the second phase's contractions follow the first's in the history (their rounds after the
+    first's); the states are the summed quadrics."""
     k1 = first.contractions
     F = first.faces.copy()
     F[faces] = keep[second.faces]
