@@ -12,6 +12,7 @@ from conftest import assert_valid
 
 import qemjax
 from qemjax import shapes
+from qemjax._mesh import topology as topo
 from qemjax._schedulers import late
 from qemjax._schedulers import locks as _locks
 
@@ -89,8 +90,8 @@ def test_locks_hold_and_weights_carry_through_the_switch():
 
 @pytest.mark.parametrize("seed", range(4))
 def test_survivors_and_carried_weights_against_a_sequential_replay(seed):
-    """`late._survivor` follows each removed vertex to the one it ended in; the carried weights then equal
-    `locks.carry` applied contraction by contraction."""
+    """`topology.contraction_roots` (which `late` uses) follows each removed vertex to the one it ended in; the
+    carried weights then equal `locks.carry` applied contraction by contraction."""
     rng = np.random.default_rng(seed)
     n = 60
     alive, pairs = list(range(n)), []
@@ -99,7 +100,7 @@ def test_survivors_and_carried_weights_against_a_sequential_replay(seed):
         pairs.append((a, b))
         alive.remove(b)
     pairs = np.array(pairs, np.int64)
-    to = late._survivor(pairs, n)
+    to = topo.contraction_roots(pairs, n)
     w = rng.random(n)
     seq = w.copy()
     ref = np.arange(n)

@@ -51,6 +51,19 @@ def edges(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 MAX_PAIRS_PER_VERTEX = 50  # pair_threshold may add at most this many close pairs per vertex
 
 
+def contraction_roots(pairs: np.ndarray, n: int) -> np.ndarray:
+    """(n,) int64: each vertex's representative after contracting pairs (k,2) (kept, removed) in order
+    (itself when it survives). Each vertex is removed at most once, into a vertex alive then: the removed ->
+    kept links form a forest, resolved by pointer jumping (log of the longest chain passes)."""
+    root = np.arange(n, dtype=np.int64)
+    root[pairs[:, 1]] = pairs[:, 0]
+    while True:
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            return root
+        root = nxt
+
+
 def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
     """Non-edge vertex pairs (k,2) int64 at distance <= t (mesh units), found with scipy's KD-tree.
 

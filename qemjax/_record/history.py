@@ -33,6 +33,7 @@ import zipfile
 
 import numpy as np
 
+from .._mesh import topology as topo
 from .._mesh.arrays import face_normals
 from .result import Contractions
 from .._mesh.units import Frame
@@ -160,7 +161,7 @@ class Record:
         V, F = self.input_vertices, self.input_faces
         n = len(V)
         pairs = self.history.pairs[:j]
-        root = _roots(pairs, n)
+        root = topo.contraction_roots(pairs, n)
         alive = (self.removed_at < 0) | (self.removed_at >= j)
         fids = np.flatnonzero(alive)
         G = root[F[fids]]
@@ -234,19 +235,6 @@ def load_record(path) -> Record:
     history = Contractions(a["pairs"], a["positions"], a["costs"], parts, a["rounds"])
     return Record(a["input_vertices"], a["input_faces"], history, a["removed_at"], a["coincident"], frame,
                   str(a["scheduler"]), int(a["target_faces"]), a.get("locked"))
-
-
-def _roots(pairs: np.ndarray, n: int) -> np.ndarray:
-    """(n,) int64: each vertex's representative after contracting pairs (k,2) (kept, removed) in order.
-    Each vertex is removed at most once, into a vertex alive then: the removed -> kept links form a forest,
-    resolved by pointer jumping (log of the longest chain passes)."""
-    root = np.arange(n, dtype=np.int64)
-    root[pairs[:, 1]] = pairs[:, 0]
-    while True:
-        nxt = root[root]
-        if np.array_equal(nxt, root):
-            return root
-        root = nxt
 
 
 def _internal(V: np.ndarray, verts: np.ndarray, frame: Frame) -> np.ndarray:

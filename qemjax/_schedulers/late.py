@@ -21,6 +21,7 @@ import numpy as np
 
 from .._costs import memoryless as ml
 from .._kernels.batching import DTYPE
+from .._mesh import topology as topo
 from .._mesh.arrays import face_normals, face_stats
 from .._mesh.incidence import FaceLists
 from . import outcome
@@ -76,7 +77,7 @@ def second(scheduler, first: outcome.Outcome, V, F, extra_pairs, target_faces, m
     means = face_stats(np.asarray(V, np.float64), np.asarray(F, np.int64))[1:]
     S2 = ml.state_rows(late, np.asarray(first.positions, np.float64)[keep], FaceLists(F2, len(keep)),
                        np.arange(len(keep)), means, history=first.states[keep])
-    kept = _survivor(first.history.pairs, n)
+    kept = topo.contraction_roots(first.history.pairs, n)
     extra = np.asarray(extra_pairs, np.int64).reshape(-1, 2)
     if len(extra):
         extra = at[kept[extra]]
@@ -94,18 +95,6 @@ def second(scheduler, first: outcome.Outcome, V, F, extra_pairs, target_faces, m
                       progress, part_scale=None if part_scale is None else np.asarray(part_scale)[keep],
                       normals=normals, **kw)
     return join(first, after, faces, keep)
-
-
-def _survivor(pairs: np.ndarray, n: int) -> np.ndarray:
-    """(n,) the vertex each vertex was merged into by the contractions ``pairs`` (k,2) (kept, removed), in
-    turn: itself when it survives. Each vertex is removed at most once, so following the links converges."""
-    to = np.arange(n)
-    to[pairs[:, 1]] = pairs[:, 0]
-    while True:
-        nxt = to[to]
-        if np.array_equal(nxt, to):
-            return to
-        to = nxt
 
 
 def join(first: outcome.Outcome, second: outcome.Outcome, faces: np.ndarray, keep: np.ndarray) -> outcome.Outcome:
