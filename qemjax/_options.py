@@ -162,6 +162,8 @@ class Options:
         separate parts survive; False lets small parts vanish (``simplify(prune=True)``).
     max_cost: largest contraction cost allowed (squared distance at unit extent; inf = no limit).
     schedule: the parallel scheduler's `Schedule`.
+    quality_threshold: the shape term of the parallel scheduler's ranking (a method's ``quality_threshold``;
+        0: none; `_schedulers.shape`).
     """
 
     cos_max: float
@@ -170,6 +172,7 @@ class Options:
     keep_parts: bool = True
     schedule: Schedule = Schedule()
     min_quality: float = 0.0
+    quality_threshold: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)

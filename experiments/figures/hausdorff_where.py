@@ -1,7 +1,7 @@
 """Where the Hausdorff distance peaks: qemjax (default) and the best peer, per shared mesh and ratio.
 
 For each shared mesh (welded, `meshes.load`) and ratio (10 % and 1 %): qemjax with its defaults and the
-peer with the lowest Hausdorff distance in ``results/rank_peers.csv`` simplify to ``max(4, round(ratio ·
+peer with the lowest Hausdorff distance in ``results/rank_default_final.csv`` (``--peers-csv``) simplify to ``max(4, round(ratio ·
 faces))`` faces. The two-way sampled distance is computed as `qemjax.metrics.surface_distance` does (same
 samples, seed 0: every vertex plus 100 000 area-weighted points per mesh, exact point-to-triangle
 distances), and the ``--top`` (100) samples with the largest distance, pooled over both directions, are
@@ -176,7 +176,7 @@ def main(argv=None) -> int:
     ap.add_argument("--meshes", nargs="+", default=None, help="shared mesh names (default: all)")
     ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
     ap.add_argument("--top", type=int, default=100, help="samples with the largest distance to class")
-    ap.add_argument("--peers-csv", default=str(RESULTS / "rank_peers.csv"),
+    ap.add_argument("--peers-csv", default=str(RESULTS / "rank_default_final.csv"),
                     help="rank_peers CSV naming the best peer (lowest Hausdorff) per case")
     ap.add_argument("--option", default="", metavar="K=V,...",
                     help="simplify keywords for qemjax (true/false: bools, numbers: floats)")

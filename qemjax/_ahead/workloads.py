@@ -68,5 +68,9 @@ def run_all(demo: bool = True) -> None:
                     for topology in (qemjax.Topology(preserve_topology=False), qemjax.Topology(pair_threshold=0.05)):
                         qemjax.simplify(mesh, ratio=0.3, scheduler=scheduler, topology=topology, progress=False)
                 qemjax.simplify_batch(mesh, [{"ratio": 0.3}, {"ratio": 0.2, "boundary_weight": 10.0}])
+                # the shape term: the compiled glue, the late phase's loops and a batch's copies
+                qemjax.simplify(mesh, ratio=0.3, quality_threshold=0.3, progress=False)
+                qemjax.simplify_batch(mesh, [{"ratio": 0.3, "quality_threshold": 0.3},
+                                             {"ratio": 0.2, "quality_threshold": 0.3}])
         finally:
             os.chdir(here)

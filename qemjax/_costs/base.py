@@ -123,15 +123,23 @@ class CostModel:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
+QUALITY_MAX = 3 ** 0.5 / 2  # 2·area / longest edge² of an equilateral triangle, the largest of any
+
+
 @dataclasses.dataclass(frozen=True)
 class Method(CostModel):
     """A cost model as a user chooses it (``simplify(method=...)``; `qemjax.QEM`, `qemjax.ESQEM`, ...): its
     fields are every setting of the method, with their defaults. Besides the model's own settings, every
-    method has three keyword-only fields that act around its cost:
+    method has four keyword-only fields that act around its cost:
 
     regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (`regularize`; 0: none).
     area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none).
     refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._pipeline.refit`).
+    quality_threshold: s in [0, √3/2), a triangle-shape term in the parallel scheduler's ranking (0: none): a
+        contraction that would leave a face with 2·area / longest edge² = q under s ranks as if it cost
+        s / q times more, so slivers form only where nothing cheaper is near (MeshLab's quality threshold;
+        `qemjax._schedulers.shape`). The cost (``max_error``, the stats) stays the model's, and nothing is
+        refused: the face target is reached as without it. The greedy queue ranks by cost alone (it warns).
 
     A new method is a frozen dataclass subclass of a method (or of this class) with fields of its own,
     registered with `qemjax.register_method`; nothing else needs editing.
@@ -140,12 +148,16 @@ class Method(CostModel):
     regularize: float = dataclasses.field(default=0.0, kw_only=True)
     area_weight: float = dataclasses.field(default=0.0, kw_only=True)
     refit: int = dataclasses.field(default=0, kw_only=True)
+    quality_threshold: float = dataclasses.field(default=0.0, kw_only=True)
 
     def __post_init__(self):
         _check_types(self)
         require_nonnegative(self, "regularize", "area_weight")
         if self.refit < 0:
             raise ValueError(f"refit must be an integer >= 0 (rounds), got {self.refit!r}")
+        if not 0 <= self.quality_threshold < QUALITY_MAX:
+            raise ValueError(f"quality_threshold must be in [0, {QUALITY_MAX:.3f}) (2·area / longest edge² of a "
+                             f"triangle is at most √3/2, an equilateral one's), got {self.quality_threshold!r}")
 
     def changed(self) -> dict:
         """{field: value} of the fields that differ from the class's defaults (for tables and labels)."""

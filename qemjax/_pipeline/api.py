@@ -355,13 +355,13 @@ def _same_runs(jobs: list) -> tuple[np.ndarray, list[int]]:
 
 def _run_key(job: "Job", geo) -> tuple:
     """What makes two jobs of one batch run exactly alike (`_same_runs`): ``geo`` (their geometry's
-    identity), a digest of the vertex state, the kernel settings, the (first phase's) face target and the max
-    error."""
+    identity), a digest of the vertex state, the kernel settings, the (first phase's) face target, the max
+    error and the shape term's threshold."""
     S = np.ascontiguousarray(job.S)
     params = sorted((name, np.asarray(v).dtype.str, np.asarray(v).tobytes())
                     for name, v in job.model.kernel_params().items())
     return (geo, S.shape, S.dtype.str, hashlib.blake2b(S.tobytes(), digest_size=16).digest(), tuple(params),
-            _first_target(job), job.options.max_cost)
+            _first_target(job), job.options.max_cost, job.options.quality_threshold)
 
 
 def _first_target(job: "Job") -> int:
@@ -382,7 +382,7 @@ def _batch_key(job: "Job"):
             job.target < len(job.geo.F) or job.err < math.inf):
         return None
     return (_model_key(model), tuple(sorted(model.kernel_params())), s.cos_max, s.min_quality,
-            s.preserve_topology, s.prune, s.schedule)
+            s.preserve_topology, s.prune, s.schedule, job.options.quality_threshold)
 
 
 def _model_key(model):

@@ -257,9 +257,15 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
                                               (area_mean * r2, e2_mean * r2), corner_values))
         if key is not None:
             states[key] = S
+    shape = getattr(method_obj, "quality_threshold", 0.0)
+    if shape and setup.scheduler == "greedy":  # its queue ranks by cost alone: said, not silently dropped
+        report["quality_threshold_off"] = "the greedy queue ranks by cost alone"
+        warnings.warn("quality_threshold is not applied: the greedy queue ranks by cost alone (the parallel "
+                      "scheduler ranks by shape too)", stacklevel=stacklevel)
+        shape = 0.0
     options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
                       max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
-                      keep_parts=not setup.prune, min_quality=setup.min_quality)
+                      keep_parts=not setup.prune, min_quality=setup.min_quality, quality_threshold=shape)
     tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(geo.V), geo.F, model,
                                                          None if corner_values is None else channel_weights > 0)
     if lk is not None:

@@ -40,6 +40,7 @@ from .parallel import Round, RoundState, Run, driver
 from .parallel.history import history_arrays, history_columns, removal_steps
 from .parallel.pairs import ring_vertices
 from .select import fits_target, gate_rank, sort_keys
+from .shape import rerank
 
 
 def batchable(model) -> bool:
@@ -143,12 +144,17 @@ class _Batch:
             return sort_keys(st.key, idx, salt, offset)
         free = sch.free_cost if self.free_v is None else np.take(self.free_v, st.E[:, 0])
         cand = valid & (st.key <= np.maximum(sch.gate * np.take(thresh, cp), free))
+        cost_key = st.key
+        if self.run.options.quality_threshold:  # the shape term, per copy as alone (`shape`)
+            st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, self.run.VQ, self.run.faces,
+                                  self.run.options.quality_threshold, starts)
         acc, bad, why, extra, locked, found = self.rnd.passes(st, key_of, cand, 0, (self.vcopy, need, cp),
                                                           np.arange(len(st.E)) - offset)
         self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
                                           minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
         n_bad = np.bincount(np.take(cp, bad), minlength=self.C)
         order = np.argsort(key_of(acc), kind="stable")
+        st.key = cost_key
         acc = acc[order]
         ca = np.take(cp, acc)
         n_sel = np.bincount(ca, minlength=self.C)

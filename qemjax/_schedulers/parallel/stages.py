@@ -20,6 +20,7 @@ from ..device import start_merge, start_price, start_step
 from ..select import fits_target, gate_rank, sort_keys
 from .pairs import ring_vertices, with_extra_pairs
 from .state import RoundState, Run, holding
+from ..shape import rerank
 
 
 class SeparateCalls:
@@ -237,10 +238,15 @@ class Round:
             return sort_keys(st.key, idx, salt)
         free = sch.free_cost if run.part_scale is None else sch.free_cost * run.part_scale[st.E[:, 0]]
         cand = valid & (st.key <= np.maximum(sch.gate * kth, free))
+        cost_key = st.key
+        if run.options.quality_threshold:  # the shape term ranks this round (`shape`)
+            st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, run.VQ, run.faces,
+                                  run.options.quality_threshold)
         acc, bad, why, extra, locked, found = self.passes(st, key_of, cand, need, None)
         self.count_rejected(why)
         n_sel = acc.size
         order = np.argsort(key_of(acc), kind="stable")
+        st.key = cost_key
         fit = fits_target(st.ecount[acc[order]] + (0 if extra is None else extra[acc[order]]), need)
         acc = acc[order[fit]]
         found = self.ordered(found, order[fit])

@@ -1,0 +1,106 @@
+"""The shape term of the parallel round's ranking (``quality_threshold``): a contraction that would leave a
+badly shaped face waits until nothing cheaper is left near it.
+
+A face's shape is q = 2·area / longest edge² (within a factor of two the sine of its smallest angle; √3/2
+for an equilateral triangle). With a threshold s > 0, a pair whose kept faces (those at its endpoints that
+do not hold both, the moved corner at the pair's placement) have a smallest q under s ranks by
+max(cost, free cost) · s / q instead of its cost, as the VCG library (MeshLab's quadric edge collapse)
+divides its priority by the smallest quality under its threshold. The free cost is the floor because pairs on
+flat regions cost about nothing, and a multiple of nothing would rank them by cost alone.
+
+A round computes the term for the cheapest pairs only (`rerank`): its N candidates under the gate and the
+other valid pairs up to the 2N-th cheapest cost. Of those, the N with the smallest shaped keys are the
+round's candidates: the round takes as many pairs as without the term (so as many rounds), and a pair the
+term lifts gives its place to a pair that costs up to twice the round's share more. Nothing is refused: the
+face target is reached as without the term. The cost itself (``max_error``, the stats, the record) stays
+the model's.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .._kernels.batching import DTYPE
+
+SPAN = 2  # the pairs a round shapes: the cheapest SPAN × its candidates (see the module docstring)
+
+
+@njit(cache=True)
+def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x):
+    """The smallest 2·area / longest² (float32) of the live faces at a or b that do not hold both, with
+    their corner a or b at x (VQ (n, ≥3) float32 positions; x (3,) float32); 1 where there are none."""
+    best = np.float32(1.0)
+    for side in range(2):
+        v = a if side == 0 else b
+        w = b if side == 0 else a
+        for i in range(off[v], off[v] + cnt[v]):
+            f = pool[i]
+            if not alive[f]:
+                continue
+            g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
+            if g0 == w or g1 == w or g2 == w:
+                continue
+            p0x, p0y, p0z = (x[0], x[1], x[2]) if g0 == v else (VQ[g0, 0], VQ[g0, 1], VQ[g0, 2])
+            p1x, p1y, p1z = (x[0], x[1], x[2]) if g1 == v else (VQ[g1, 0], VQ[g1, 1], VQ[g1, 2])
+            p2x, p2y, p2z = (x[0], x[1], x[2]) if g2 == v else (VQ[g2, 0], VQ[g2, 1], VQ[g2, 2])
+            ux, uy, uz = p1x - p0x, p1y - p0y, p1z - p0z
+            wx, wy, wz = p2x - p0x, p2y - p0y, p2z - p0z
+            ex, ey, ez = p2x - p1x, p2y - p1y, p2z - p1z
+            nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+            twice_area = np.float32(np.sqrt(nx * nx + ny * ny + nz * nz))
+            longest2 = max(ux * ux + uy * uy + uz * uz, max(wx * wx + wy * wy + wz * wz, ex * ex + ey * ey + ez * ez))
+            q = twice_area / longest2 if longest2 > 0 else np.float32(0.0)
+            if q < best:
+                best = q
+    return best
+
+
+@njit(cache=True)
+def shaped_keys(key, which, floor, E, X, VQ, F, alive, off, cnt, pool, s):
+    """A copy of the float32 keys (P,) with the shape term (module docstring) on the pairs ``which``:
+    max(key, floor) · s / q where their kept faces' smallest q is under s (q floored at s·1e-6: a face that
+    collapses ranks last, the flip test refuses it anyway). ``floor``: (1,) or one per pair."""
+    out = key.copy()
+    tiny = s * np.float32(1e-6)
+    for i in range(len(key)):
+        if not which[i]:
+            continue
+        q = kept_quality(VQ, F, alive, off, cnt, pool, E[i, 0], E[i, 1], X[i])
+        if q < s:
+            lo = floor[i if len(floor) > 1 else 0]
+            out[i] = (key[i] if key[i] >= lo else lo) * (s / (q if q > tiny else tiny))
+    return out
+
+
+def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
+    """The round's shaped keys (P,) float32 and its candidates (module docstring): per copy (pairs
+    starts[c] … starts[c+1] − 1; None: one run), the N candidates with the smallest shaped keys among the
+    candidates and the valid pairs up to the SPAN·N-th cheapest. ``free``: the free cost, a scalar or per
+    pair; ``faces``: the run's `FaceLists`. The same pairs get the same keys alone and in a batch: the
+    thresholds are order statistics of each copy's own pairs."""
+    key = np.ascontiguousarray(key, DTYPE)
+    P = len(key)
+    starts = np.array([0, P]) if starts is None else np.asarray(starts)
+    which = np.zeros(P, bool)
+    for c in range(len(starts) - 1):
+        lo, hi = int(starts[c]), int(starts[c + 1])
+        n = int(np.count_nonzero(cand[lo:hi]))
+        vk = key[lo:hi].compress(valid[lo:hi])
+        if n == 0 or not len(vk):
+            continue
+        span = min(SPAN * n, len(vk))
+        widest = np.partition(vk, span - 1)[span - 1]
+        which[lo:hi] = valid[lo:hi] & ((key[lo:hi] <= widest) | cand[lo:hi])
+    floor = np.atleast_1d(np.asarray(free, DTYPE))
+    shaped = shaped_keys(key, which, floor, E, X, VQ, faces.F, faces.alive, faces.off, faces.cnt, faces.pool,
+                         np.float32(s))
+    out = np.zeros(P, bool)
+    for c in range(len(starts) - 1):
+        lo, hi = int(starts[c]), int(starts[c + 1])
+        n = int(np.count_nonzero(cand[lo:hi]))
+        if n == 0:
+            continue
+        inside = shaped[lo:hi].compress(which[lo:hi])
+        kth = np.partition(inside, n - 1)[n - 1]
+        out[lo:hi] = which[lo:hi] & (shaped[lo:hi] <= kth)
+    return shaped, out

@@ -1,0 +1,256 @@
+"""The shape term of the parallel round's ranking (``quality_threshold``, `qemjax._schedulers.shape`): its
+kernels against float64 references on random inputs, the round's candidates it chooses, and what a run with it
+promises (the target, a valid mesh, fewer slivers, the same bits on every path and in a batch, the greedy
+queue's warning, bad values refused)."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import shapes
+from qemjax._mesh.incidence import FaceLists
+from qemjax._schedulers import shape
+from conftest import assert_valid
+from test_round_loops import _assert_same, _run
+
+
+def _quality(V, F) -> np.ndarray:
+    """2·area / longest edge² per face, float64."""
+    c = np.asarray(V, np.float64)[np.asarray(F)]
+    n = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    longest = np.max([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)], axis=0)
+    return n / longest
+
+
+def _slivers(res, degrees=10.0) -> int:
+    """Faces whose smallest angle is under ``degrees``."""
+    c = np.asarray(res.vertices, np.float64)[np.asarray(res.faces)]
+    smallest = np.full(len(c), np.inf)
+    for i in range(3):
+        u, v = c[:, (i + 1) % 3] - c[:, i], c[:, (i + 2) % 3] - c[:, i]
+        cos = (u * v).sum(1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1))
+        smallest = np.minimum(smallest, np.degrees(np.arccos(np.clip(cos, -1, 1))))
+    return int(np.count_nonzero(smallest < degrees))
+
+
+def _simplify(mesh, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return qemjax.simplify(mesh, **kw)
+
+
+def _random_case(seed: int):
+    """A jittered sphere's positions (float32), faces and face lists, its edges, and placements near them."""
+    rng = np.random.default_rng(seed)
+    V, F = shapes.bumpy_sphere(2)
+    V = (np.asarray(V) + rng.normal(scale=0.02, size=V.shape)).astype(np.float32)
+    F = np.asarray(F, np.int64)
+    lists = FaceLists(F.astype(np.int32), len(V))
+    E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1), axis=0)
+    t = rng.uniform(-0.2, 1.2, size=(len(E), 1))
+    X = (V[E[:, 0]] * (1 - t) + V[E[:, 1]] * t + rng.normal(scale=0.05, size=(len(E), 3))).astype(np.float32)
+    return V, F, lists, E.astype(np.int32), X
+
+
+def _kept_quality_reference(V, F, a, b, x) -> float:
+    """float64: the smallest quality of the faces at a or b without both, their a or b corner at x."""
+    best = 1.0
+    for f in F:
+        if (a in f) == (b in f):  # both (the pair's own faces) or neither
+            continue
+        c = np.asarray(V, np.float64)[f]
+        c[list(f).index(a if a in f else b)] = x
+        best = min(best, _quality(c, np.array([[0, 1, 2]]))[0])
+    return best
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_kept_quality_is_the_float64_reference(seed):
+    V, F, lists, E, X = _random_case(seed)
+    rng = np.random.default_rng(seed)
+    for i in rng.choice(len(E), 40, replace=False):
+        a, b = int(E[i, 0]), int(E[i, 1])
+        got = shape.kept_quality(V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, a, b, X[i])
+        np.testing.assert_allclose(got, _kept_quality_reference(V, F, a, b, X[i]), rtol=2e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("per_pair_floor", [False, True])
+def test_shaped_keys_are_the_formula(per_pair_floor):
+    V, F, lists, E, X = _random_case(3)
+    rng = np.random.default_rng(3)
+    P = len(E)
+    key = rng.exponential(1e-4, P).astype(np.float32)
+    key[rng.random(P) < 0.2] = 0.0  # flat pairs: the floor ranks them
+    which = rng.random(P) < 0.7
+    floor = (rng.uniform(1e-6, 1e-5, P) if per_pair_floor else np.array([3e-6])).astype(np.float32)
+    s = np.float32(0.5)
+    got = shape.shaped_keys(key, which, floor, E, X, V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, s)
+    q = np.array([shape.kept_quality(V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, E[i, 0], E[i, 1], X[i])
+                  for i in range(P)], np.float64)
+    lo = floor if per_pair_floor else np.full(P, floor[0])
+    want = np.where(which & (q < s), np.maximum(key, lo) * s / np.maximum(q, s * 1e-6), key)
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    assert np.all(got >= key) and np.array_equal(got[~which], key[~which])
+    assert np.count_nonzero(got != key) > P // 10  # the check can fail: many pairs are lifted
+
+
+def _round(seed, P_gate=0.1):
+    """A round's keys, valid pairs and candidates under a gate (the cheapest P_gate of the valid ones)."""
+    V, F, lists, E, X = _random_case(seed)
+    rng = np.random.default_rng(seed)
+    key = rng.exponential(1e-4, len(E)).astype(np.float32)
+    valid = rng.random(len(E)) < 0.9
+    thr = np.quantile(key[valid], P_gate)
+    return V, lists, E, X, key, valid, valid & (key <= thr)
+
+
+def test_rerank_takes_as_many_candidates_from_the_cheapest_pairs():
+    V, lists, E, X, key, valid, cand = _round(4)
+    shaped, out = shape.rerank(key, valid, cand, 1e-9, E, X, V, lists, 0.5)
+    n = np.count_nonzero(cand)
+    assert np.count_nonzero(out) == n  # (no ties among random keys)
+    assert not np.any(out & ~valid)
+    widest = np.sort(key[valid])[shape.SPAN * n - 1]
+    assert np.all(key[out] <= widest)  # from the SPAN·n cheapest valid pairs
+    assert np.any(out & ~cand) and np.any(cand & ~out)  # (it can fail:) lifted pairs gave their place
+    assert np.all(shaped[out].max() <= shaped[(key <= widest) & valid & ~out])
+
+
+def test_rerank_with_a_threshold_nothing_reaches_changes_nothing():
+    V, lists, E, X, key, valid, cand = _round(5)
+    shaped, out = shape.rerank(key, valid, cand, 1e-9, E, X, V, lists, 1e-12)
+    np.testing.assert_array_equal(shaped, key)
+    np.testing.assert_array_equal(out, cand)
+
+
+def test_rerank_per_copy_is_each_copy_alone():
+    """Two copies side by side (a batch's layout: the second copy's vertices and pairs after the first's)
+    get the keys and candidates each gets alone."""
+    V, lists, E, X, key, valid, cand = _round(6)
+    V2, lists2, E2, X2, key2, valid2, cand2 = _round(7, P_gate=0.05)
+    n1, m1 = len(V), len(lists.F)
+    Fb = np.concatenate([lists.F[: lists.alive.size][lists.alive], lists2.F[lists2.alive] + n1]).astype(np.int32)
+    Vb = np.concatenate([V, V2])
+    listsb = FaceLists(Fb, len(Vb))
+    assert m1 == np.count_nonzero(lists.alive)
+    Eb = np.concatenate([E, E2 + n1]).astype(np.int32)
+    cat = lambda a, b: np.concatenate([a, b])  # noqa: E731
+    shaped_b, out_b = shape.rerank(cat(key, key2), cat(valid, valid2), cat(cand, cand2), 1e-9, Eb, cat(X, X2), Vb,
+                                   listsb, 0.4, starts=np.array([0, len(E), len(E) + len(E2)]))
+    for (V_, l_, E_, X_, k_, v_, c_), sl in (((V, lists, E, X, key, valid, cand), slice(0, len(E))),
+                                              ((V2, lists2, E2, X2, key2, valid2, cand2), slice(len(E), None))):
+        s1, o1 = shape.rerank(k_, v_, c_, 1e-9, E_, X_, V_, l_, 0.4)
+        np.testing.assert_array_equal(shaped_b[sl], s1)
+        np.testing.assert_array_equal(out_b[sl], o1)
+
+
+@pytest.mark.parametrize("method", ["default", "classic"])
+def test_a_run_with_it_reaches_the_target_valid_with_fewer_slivers(method):
+    """The term never refuses: the exact target, a valid mesh; and it does what it is for (the faces under
+    10° and those under quality 0.2 fall, and the worst face's quality rises)."""
+    mesh = shapes.bumpy_sphere(4)
+    target = len(mesh[1]) // 20
+    off = _simplify(mesh, target_faces=target, method=method)
+    on = _simplify(mesh, target_faces=target, method=method, quality_threshold=0.5)
+    for res in (off, on):
+        assert len(res.faces) == target
+        assert_valid(res, target, *mesh)
+    assert _slivers(off) > 0
+    assert _slivers(on) < _slivers(off)
+    q_on, q_off = _quality(on.vertices, on.faces), _quality(off.vertices, off.faces)
+    assert q_on.min() > 1.5 * q_off.min()
+    assert np.mean(q_on < 0.2) < np.mean(q_off < 0.2)
+
+
+def test_the_numpy_stages_decide_as_the_compiled_loops(monkeypatch):
+    mesh = shapes.bumpy_sphere(3)
+    kw = dict(ratio=0.05, quality_threshold=0.4)
+    new, seen = _run(mesh, kw, monkeypatch, True)
+    old, seen_old = _run(mesh, kw, monkeypatch, False)
+    assert seen == [True] and seen_old == [False]
+    _assert_same(new, old)
+    assert not np.array_equal(new.faces, _run(mesh, {"ratio": 0.05}, monkeypatch, True)[0].faces)
+
+
+def test_the_compiled_glue_decides_as_the_numpy_glue(monkeypatch):
+    from qemjax._schedulers import parallel
+    from qemjax._schedulers.parallel import driver
+
+    mesh = shapes.bumpy_sphere(3)
+    kw = dict(ratio=0.05, quality_threshold=0.4, late_memoryless=0)
+    seen = []
+    choose = driver.choose
+
+    def glue_off(run, glue=True):
+        rnd = choose(run, glue=False)
+        seen.append(isinstance(rnd, parallel.GlueRound))
+        return rnd
+
+    def recording(run, glue=True):
+        rnd = choose(run, glue)
+        seen.append(isinstance(rnd, parallel.GlueRound))
+        return rnd
+    with monkeypatch.context() as m:
+        m.setattr(driver, "choose", recording)
+        new = _simplify(mesh, **kw)
+    with monkeypatch.context() as m:
+        m.setattr(driver, "choose", glue_off)
+        old = _simplify(mesh, **kw)
+    assert seen == [True, False]
+    _assert_same(new, old)
+
+
+def test_a_batch_and_a_sweep_keep_each_configs_threshold():
+    """`simplify_batch` with three thresholds (two runs would be alike but for it) gives what each
+    `simplify` gives alone, and they differ."""
+    mesh = shapes.bumpy_sphere(3)
+    configs = [dict(ratio=0.1, quality_threshold=0.5), dict(ratio=0.1), dict(ratio=0.1, quality_threshold=0.3)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        got = qemjax.simplify_batch(mesh, configs)
+    for res, cfg in zip(got, configs):
+        want = _simplify(mesh, **cfg)
+        np.testing.assert_array_equal(res.vertices, want.vertices)
+        np.testing.assert_array_equal(res.faces, want.faces)
+    assert not np.array_equal(got[0].faces, got[1].faces)
+    assert not np.array_equal(got[0].faces, got[2].faces)
+
+
+def test_the_greedy_queue_says_it_ranks_by_cost_alone():
+    mesh = shapes.bumpy_sphere(2)
+    with pytest.warns(UserWarning, match="quality_threshold is not applied: the greedy queue"):
+        on = qemjax.simplify(mesh, ratio=0.1, scheduler="greedy", quality_threshold=0.5)
+    off = _simplify(mesh, ratio=0.1, scheduler="greedy")
+    assert on.stats["quality_threshold_off"] == "the greedy queue ranks by cost alone"
+    np.testing.assert_array_equal(on.faces, off.faces)
+    np.testing.assert_array_equal(on.vertices, off.vertices)
+
+
+def test_max_distance_holds_with_it():
+    mesh = shapes.bumpy_sphere(3)
+    res = _simplify(mesh, max_distance_rel=0.01, quality_threshold=0.5)
+    assert res.stats["distance_max_rel"] <= 0.01
+    assert len(res.faces) < len(mesh[1])
+
+
+@pytest.mark.parametrize("value", [-0.1, math.sqrt(3) / 2, 1.0, float("nan"), float("inf"), True, "high"])
+def test_a_bad_threshold_is_named(value):
+    with pytest.raises(ValueError, match="quality_threshold"):
+        qemjax.simplify(shapes.bumpy_sphere(1), ratio=0.5, quality_threshold=value)
+
+
+def test_the_command_line_takes_it(tmp_path):
+    from qemjax._cli import main
+
+    src, out = tmp_path / "in.ply", tmp_path / "out.ply"
+    V, F = shapes.bumpy_sphere(2)
+    import trimesh
+    trimesh.Trimesh(V, F, process=False).export(src)
+    assert main(["simplify", str(src), str(out), "--ratio", "0.2", "--quality-threshold", "0.5", "--quiet"]) == 0
+    got = trimesh.load(out, process=False)
+    want = _simplify((V, F), ratio=0.2, quality_threshold=0.5)
+    assert len(got.faces) == len(want.faces)
