@@ -57,14 +57,19 @@ def _random_case(seed: int):
 
 
 def _kept_quality_reference(V, F, a, b, x) -> float:
-    """float64: the smallest quality of the faces at a or b without both, their a or b corner at x."""
+    """float64: the smallest quality of the faces at a or b without both, their a or b corner at x, among
+    those that end lower than they were."""
     best = 1.0
+    one = np.array([[0, 1, 2]])
     for f in F:
         if (a in f) == (b in f):  # both (the pair's own faces) or neither
             continue
         c = np.asarray(V, np.float64)[f]
+        before = _quality(c, one)[0]
         c[list(f).index(a if a in f else b)] = x
-        best = min(best, _quality(c, np.array([[0, 1, 2]]))[0])
+        q = _quality(c, one)[0]
+        if q < before:
+            best = min(best, q)
     return best
 
 

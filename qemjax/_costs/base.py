@@ -136,9 +136,9 @@ class Method(CostModel):
     area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none).
     refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._pipeline.refit`).
     quality_threshold: s in [0, √3/2), a triangle-shape term in the parallel scheduler's ranking (0: none): a
-        contraction that would leave a face with 2·area / longest edge² = q under s ranks as if it cost
-        s / q times more, so slivers form only where nothing cheaper is near (MeshLab's quality threshold;
-        `qemjax._schedulers.shape`). The cost (``max_error``, the stats) stays the model's, and nothing is
+        contraction that would make a face worse than it was, with 2·area / longest edge² = q under s, ranks
+        as if it cost s / q times more, so slivers form only where nothing cheaper is near (after MeshLab's
+        quality threshold; `qemjax._schedulers.shape`). The cost (``max_error``, the stats) stays the model's, and nothing is
         refused: the face target is reached as without it. The greedy queue ranks by cost alone (it warns).
 
     A new method is a frozen dataclass subclass of a method (or of this class) with fields of its own,

@@ -2,11 +2,14 @@
 badly shaped face waits until nothing cheaper is left near it.
 
 A face's shape is q = 2·area / longest edge² (within a factor of two the sine of its smallest angle; √3/2
-for an equilateral triangle). With a threshold s > 0, a pair whose kept faces (those at its endpoints that
-do not hold both, the moved corner at the pair's placement) have a smallest q under s ranks by
-max(cost, free cost) · s / q instead of its cost, as the VCG library (MeshLab's quadric edge collapse)
-divides its priority by the smallest quality under its threshold. The free cost is the floor because pairs on
-flat regions cost about nothing, and a multiple of nothing would rank them by cost alone.
+for an equilateral triangle). With a threshold s > 0, a pair ranks by max(cost, free cost) · s / q instead
+of its cost when q, the smallest shape among its kept faces (those at its endpoints that do not hold both,
+the moved corner at the pair's placement) that end worse than they were, is under s. The VCG library
+(MeshLab's quadric edge collapse) divides its priority by the smallest quality under its threshold alike,
+over every kept face; counting only the faces a move makes worse leaves the pairs around a face the input
+made thin as they rank, and kept the Hausdorff distance where counting them all lost it (docs/methods.md).
+The free cost is the floor because pairs on flat regions cost about nothing, and a multiple of nothing would
+rank them by cost alone.
 
 A round computes the term for the cheapest pairs only (`rerank`): its N candidates under the gate and the
 other valid pairs up to the 2N-th cheapest cost. Of those, the N with the smallest shaped keys are the
@@ -25,10 +28,25 @@ from .._kernels.batching import DTYPE
 SPAN = 2  # the pairs a round shapes: the cheapest SPAN × its candidates (see the module docstring)
 
 
+@njit(cache=True, inline="always")
+def _quality(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z):
+    """2·area / longest edge² of a triangle (float32; 0 for a point)."""
+    ux, uy, uz = p1x - p0x, p1y - p0y, p1z - p0z
+    wx, wy, wz = p2x - p0x, p2y - p0y, p2z - p0z
+    ex, ey, ez = p2x - p1x, p2y - p1y, p2z - p1z
+    nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+    twice_area = np.float32(np.sqrt(nx * nx + ny * ny + nz * nz))
+    longest2 = max(ux * ux + uy * uy + uz * uz, max(wx * wx + wy * wy + wz * wz, ex * ex + ey * ey + ez * ez))
+    return twice_area / longest2 if longest2 > 0 else np.float32(0.0)
+
+
 @njit(cache=True)
 def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x):
     """The smallest 2·area / longest² (float32) of the live faces at a or b that do not hold both, with
-    their corner a or b at x (VQ (n, ≥3) float32 positions; x (3,) float32); 1 where there are none."""
+    their corner a or b at x (VQ (n, ≥3) float32 positions; x (3,) float32), among those that end lower
+    than they were; 1 where there are none. (A face the move leaves as poor as it was, or makes better, is
+    not the contraction's doing: without that, every pair around a face the input made thin would be
+    lifted, and the run would bend around it.)"""
     best = np.float32(1.0)
     for side in range(2):
         v = a if side == 0 else b
@@ -43,14 +61,12 @@ def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x):
             p0x, p0y, p0z = (x[0], x[1], x[2]) if g0 == v else (VQ[g0, 0], VQ[g0, 1], VQ[g0, 2])
             p1x, p1y, p1z = (x[0], x[1], x[2]) if g1 == v else (VQ[g1, 0], VQ[g1, 1], VQ[g1, 2])
             p2x, p2y, p2z = (x[0], x[1], x[2]) if g2 == v else (VQ[g2, 0], VQ[g2, 1], VQ[g2, 2])
-            ux, uy, uz = p1x - p0x, p1y - p0y, p1z - p0z
-            wx, wy, wz = p2x - p0x, p2y - p0y, p2z - p0z
-            ex, ey, ez = p2x - p1x, p2y - p1y, p2z - p1z
-            nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
-            twice_area = np.float32(np.sqrt(nx * nx + ny * ny + nz * nz))
-            longest2 = max(ux * ux + uy * uy + uz * uz, max(wx * wx + wy * wy + wz * wz, ex * ex + ey * ey + ez * ez))
-            q = twice_area / longest2 if longest2 > 0 else np.float32(0.0)
-            if q < best:
+            q = _quality(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z)
+            if q >= best:
+                continue
+            before = _quality(VQ[g0, 0], VQ[g0, 1], VQ[g0, 2], VQ[g1, 0], VQ[g1, 1], VQ[g1, 2],
+                              VQ[g2, 0], VQ[g2, 1], VQ[g2, 2])
+            if q < before:
                 best = q
     return best
 
