@@ -125,9 +125,19 @@ def test_rerank_takes_as_many_candidates_from_the_cheapest_pairs():
     assert np.all(shaped[out].max() <= shaped[(key <= widest) & valid & ~out])
 
 
-def test_rerank_with_a_threshold_nothing_reaches_changes_nothing():
+@pytest.mark.parametrize("per_pair_free", [False, True])
+def test_rerank_with_a_threshold_nothing_reaches_changes_nothing(per_pair_free):
+    """Nothing lifted, the candidates are the gate's, also where each pair has its own free cost (parts of
+    several sizes: then the candidates are not the cheapest pairs, and a cut by key alone would change them)."""
     V, lists, E, X, key, valid, cand = _round(5)
-    shaped, out = shape.rerank(key, valid, cand, 1e-9, E, X, V, lists, 1e-12)
+    free = 1e-9
+    if per_pair_free:
+        rng = np.random.default_rng(5)
+        free = np.where(rng.random(len(E)) < 0.5, 3e-4, 1e-9).astype(np.float32)
+        thr = np.quantile(key[valid], 0.05)
+        cand = valid & (key <= np.maximum(thr, free))
+        assert np.any(cand & (key > np.sort(key[valid])[np.count_nonzero(cand) - 1]))  # not the cheapest
+    shaped, out = shape.rerank(key, valid, cand, free, E, X, V, lists, 1e-12)
     np.testing.assert_array_equal(shaped, key)
     np.testing.assert_array_equal(out, cand)
 
@@ -209,11 +219,22 @@ def test_the_compiled_glue_decides_as_the_numpy_glue(monkeypatch):
     _assert_same(new, old)
 
 
-def test_a_batch_and_a_sweep_keep_each_configs_threshold():
-    """`simplify_batch` with three thresholds (two runs would be alike but for it) gives what each
-    `simplify` gives alone, and they differ."""
-    mesh = shapes.bumpy_sphere(3)
-    configs = [dict(ratio=0.1, quality_threshold=0.5), dict(ratio=0.1), dict(ratio=0.1, quality_threshold=0.3)]
+def _two_parts():
+    """A sphere and a smaller, finer one beside it: two parts of different sizes (each its own free cost)."""
+    V1, F1 = shapes.bumpy_sphere(3)
+    V2, F2 = shapes.bumpy_sphere(2)
+    V2 = np.asarray(V2) * 0.3 + [3.0, 0.0, 0.0]
+    return np.concatenate([V1, V2]), np.concatenate([F1, np.asarray(F2) + len(V1)])
+
+
+@pytest.mark.parametrize("make", [lambda: shapes.bumpy_sphere(3), _two_parts], ids=["one part", "two parts"])
+def test_a_batch_runs_each_copy_as_alone(make):
+    """Copies of one batch (the same threshold, other targets and boundary weights; the batch's rounds rank
+    each copy by shape on its own pairs) give what each `simplify` gives alone; a config without the term runs
+    in a batch of its own and differs."""
+    mesh = make()
+    configs = [dict(ratio=0.1, quality_threshold=0.5), dict(ratio=0.2, quality_threshold=0.5),
+               dict(ratio=0.1, quality_threshold=0.5, boundary_weight=3.0), dict(ratio=0.1)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         got = qemjax.simplify_batch(mesh, configs)
@@ -221,8 +242,25 @@ def test_a_batch_and_a_sweep_keep_each_configs_threshold():
         want = _simplify(mesh, **cfg)
         np.testing.assert_array_equal(res.vertices, want.vertices)
         np.testing.assert_array_equal(res.faces, want.faces)
-    assert not np.array_equal(got[0].faces, got[1].faces)
-    assert not np.array_equal(got[0].faces, got[2].faces)
+    assert got[0].stats["batch"]["copies"] == 2  # (the boundary weight changes nothing on closed surfaces: one run)
+    assert not np.array_equal(got[0].faces, got[3].faces)
+
+
+def test_two_parts_on_the_compiled_loops_and_the_numpy_stages(monkeypatch):
+    kw = dict(ratio=0.05, quality_threshold=0.5, method="default")
+    new, seen = _run(_two_parts(), kw, monkeypatch, True)
+    old, seen_old = _run(_two_parts(), kw, monkeypatch, False)
+    assert seen[0] and not seen_old[0]
+    _assert_same(new, old)
+
+
+def test_the_default_method_on_the_compiled_loops_and_the_numpy_stages(monkeypatch):
+    """With the memoryless last stretch (a second run on the compiled loops or the numpy stages)."""
+    kw = dict(ratio=0.05, quality_threshold=0.6, method="default")
+    new, _ = _run(shapes.bumpy_sphere(3), kw, monkeypatch, True)
+    old, _ = _run(shapes.bumpy_sphere(3), kw, monkeypatch, False)
+    _assert_same(new, old)
+    assert new.stats["memoryless_from_faces"] > 0
 
 
 def test_the_greedy_queue_says_it_ranks_by_cost_alone():
@@ -240,6 +278,8 @@ def test_max_distance_holds_with_it():
     res = _simplify(mesh, max_distance_rel=0.01, quality_threshold=0.5)
     assert res.stats["distance_max_rel"] <= 0.01
     assert len(res.faces) < len(mesh[1])
+    without = _simplify(mesh, max_distance_rel=0.01)
+    assert len(res.faces) != len(without.faces) or not np.array_equal(res.faces, without.faces)
 
 
 @pytest.mark.parametrize("value", [-0.1, math.sqrt(3) / 2, 1.0, float("nan"), float("inf"), True, "high"])
@@ -257,5 +297,6 @@ def test_the_command_line_takes_it(tmp_path):
     trimesh.Trimesh(V, F, process=False).export(src)
     assert main(["simplify", str(src), str(out), "--ratio", "0.2", "--quality-threshold", "0.5", "--quiet"]) == 0
     got = trimesh.load(out, process=False)
-    want = _simplify((V, F), ratio=0.2, quality_threshold=0.5)
-    assert len(got.faces) == len(want.faces)
+    want = _simplify(str(src), ratio=0.2, quality_threshold=0.5)
+    np.testing.assert_array_equal(got.faces, want.faces)
+    assert not np.array_equal(got.faces, _simplify(str(src), ratio=0.2).faces)

@@ -139,7 +139,8 @@ class Method(CostModel):
         contraction that would make a face worse than it was, with 2·area / longest edge² = q under s, ranks
         as if it cost s / q times more, so slivers form only where nothing cheaper is near (after MeshLab's
         quality threshold; `qemjax._schedulers.shape`). The cost (``max_error``, the stats) stays the model's, and nothing is
-        refused: the face target is reached as without it. The greedy queue ranks by cost alone (it warns).
+        refused: the face target is reached as without it. Other schedulers than the parallel one (the greedy
+        queue) rank by cost alone, and say so.
 
     A new method is a frozen dataclass subclass of a method (or of this class) with fields of its own,
     registered with `qemjax.register_method`; nothing else needs editing.

@@ -257,11 +257,12 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
                                               (area_mean * r2, e2_mean * r2), corner_values))
         if key is not None:
             states[key] = S
-    shape = getattr(method_obj, "quality_threshold", 0.0)
-    if shape and setup.scheduler == "greedy":  # its queue ranks by cost alone: said, not silently dropped
-        report["quality_threshold_off"] = "the greedy queue ranks by cost alone"
-        warnings.warn("quality_threshold is not applied: the greedy queue ranks by cost alone (the parallel "
-                      "scheduler ranks by shape too)", stacklevel=stacklevel)
+    shape = float(np.float32(getattr(method_obj, "quality_threshold", 0.0)))  # as the rounds compare it
+    if shape and setup.scheduler != "parallel":  # said, not silently dropped
+        why = ("the greedy queue ranks by cost alone" if setup.scheduler == "greedy" else
+               f"the scheduler {setup.scheduler!r} is not the parallel one, whose rounds it ranks")
+        report["quality_threshold_off"] = why
+        warnings.warn(f"quality_threshold is not applied: {why}", stacklevel=stacklevel)
         shape = 0.0
     options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
                       max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,

@@ -148,13 +148,15 @@ class _Batch:
         if self.run.options.quality_threshold:  # the shape term, per copy as alone (`shape`)
             st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, self.run.VQ, self.run.faces,
                                   self.run.options.quality_threshold, starts)
-        acc, bad, why, extra, locked, found = self.rnd.passes(st, key_of, cand, 0, (self.vcopy, need, cp),
-                                                          np.arange(len(st.E)) - offset)
+        try:
+            acc, bad, why, extra, locked, found = self.rnd.passes(st, key_of, cand, 0, (self.vcopy, need, cp),
+                                                              np.arange(len(st.E)) - offset)
+            order = np.argsort(key_of(acc), kind="stable")
+        finally:  # the record and the next round read the costs
+            st.key = cost_key
         self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
                                           minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
         n_bad = np.bincount(np.take(cp, bad), minlength=self.C)
-        order = np.argsort(key_of(acc), kind="stable")
-        st.key = cost_key
         acc = acc[order]
         ca = np.take(cp, acc)
         n_sel = np.bincount(ca, minlength=self.C)

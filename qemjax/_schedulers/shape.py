@@ -9,7 +9,7 @@ the moved corner at the pair's placement) that end worse than they were, is unde
 over every kept face; counting only the faces a move makes worse leaves the pairs around a face the input
 made thin as they rank, and kept the Hausdorff distance where counting them all lost it (docs/methods.md).
 The free cost is the floor because pairs on flat regions cost about nothing, and a multiple of nothing would
-rank them by cost alone.
+rank them by cost alone (with ``Schedule(free_cost=0)`` such pairs are not lifted).
 
 A round computes the term for the cheapest pairs only (`rerank`): its N candidates under the gate and the
 other valid pairs up to the 2N-th cheapest cost. Of those, the N with the smallest shaped keys are the
@@ -90,8 +90,9 @@ def shaped_keys(key, which, floor, E, X, VQ, F, alive, off, cnt, pool, s):
 
 def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
     """The round's shaped keys (P,) float32 and its candidates (module docstring): per copy (pairs
-    starts[c] … starts[c+1] − 1; None: one run), the N candidates with the smallest shaped keys among the
-    candidates and the valid pairs up to the SPAN·N-th cheapest. ``free``: the free cost, a scalar or per
+    starts[c] … starts[c+1] − 1; None: one run), as many as it had: those under their free cost that the term
+    leaves as they were, then the smallest shaped keys among the other candidates and the valid pairs up to
+    the SPAN·N-th cheapest. ``free``: the free cost, a scalar or per
     pair; ``faces``: the run's `FaceLists`. The same pairs get the same keys alone and in a batch: the
     thresholds are order statistics of each copy's own pairs."""
     key = np.ascontiguousarray(key, DTYPE)
@@ -110,13 +111,15 @@ def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
     floor = np.atleast_1d(np.asarray(free, DTYPE))
     shaped = shaped_keys(key, which, floor, E, X, VQ, faces.F, faces.alive, faces.off, faces.cnt, faces.pool,
                          np.float32(s))
-    out = np.zeros(P, bool)
+    # the candidates under their own free cost that the term did not lift stay (with parts of several sizes
+    # the free cost is each part's, so they need not be the cheapest); the rest of the places go by shaped key
+    out = cand & (shaped == key) & (key <= (floor if len(floor) > 1 else floor[0]))
     for c in range(len(starts) - 1):
         lo, hi = int(starts[c]), int(starts[c + 1])
-        n = int(np.count_nonzero(cand[lo:hi]))
-        if n == 0:
+        rest = int(np.count_nonzero(cand[lo:hi])) - int(np.count_nonzero(out[lo:hi]))
+        if rest <= 0:
             continue
-        inside = shaped[lo:hi].compress(which[lo:hi])
-        kth = np.partition(inside, n - 1)[n - 1]
-        out[lo:hi] = which[lo:hi] & (shaped[lo:hi] <= kth)
+        others = which[lo:hi] & ~out[lo:hi]
+        kth = np.partition(shaped[lo:hi].compress(others), rest - 1)[rest - 1]
+        out[lo:hi] |= others & (shaped[lo:hi] <= kth)
     return shaped, out

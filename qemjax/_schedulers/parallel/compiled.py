@@ -179,12 +179,14 @@ class GlueRound(LoopRound):
             free = np.take(self.free_at, st.E[:, 0]) if len(self.free_at) else sch.free_cost
             st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, run.VQ, run.faces,
                                   run.options.quality_threshold)
-        acc, bad, why, _, locked, apex = self.passes(st, None, cand, need, None)
+        try:
+            acc, bad, why, _, locked, apex = self.passes(st, None, cand, need, None)
+            n_sel = acc.size
+            acc, apex, room = glue.order_fit(acc, apex, st.key, st.ecount, (run.rounds * 7919) & 0xFFFFFFFF,
+                                             need, run.faces.cnt, st.E)
+        finally:  # the record and the next round read the costs
+            st.key = cost_key
         self.count_rejected(why)
-        n_sel = acc.size
-        acc, apex, room = glue.order_fit(acc, apex, st.key, st.ecount, (run.rounds * 7919) & 0xFFFFFFFF,
-                                                   need, run.faces.cnt, st.E)
-        st.key = cost_key
         run.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why
         return acc, n_sel, bad.size, locked, (apex, room)

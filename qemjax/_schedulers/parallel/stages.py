@@ -242,11 +242,13 @@ class Round:
         if run.options.quality_threshold:  # the shape term ranks this round (`shape`)
             st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, run.VQ, run.faces,
                                   run.options.quality_threshold)
-        acc, bad, why, extra, locked, found = self.passes(st, key_of, cand, need, None)
+        try:
+            acc, bad, why, extra, locked, found = self.passes(st, key_of, cand, need, None)
+            order = np.argsort(key_of(acc), kind="stable")
+        finally:  # the record and the next round read the costs
+            st.key = cost_key
         self.count_rejected(why)
         n_sel = acc.size
-        order = np.argsort(key_of(acc), kind="stable")
-        st.key = cost_key
         fit = fits_target(st.ecount[acc[order]] + (0 if extra is None else extra[acc[order]]), need)
         acc = acc[order[fit]]
         found = self.ordered(found, order[fit])
