@@ -40,7 +40,7 @@ from .parallel import Round, RoundState, Run, driver
 from .parallel.history import history_arrays, history_columns, removal_steps
 from .parallel.pairs import ring_vertices
 from .select import fits_target, gate_rank, sort_keys
-from .shape import rerank
+from .shape import ranking
 
 
 def batchable(model) -> bool:
@@ -144,16 +144,10 @@ class _Batch:
             return sort_keys(st.key, idx, salt, offset)
         free = sch.free_cost if self.free_v is None else np.take(self.free_v, st.E[:, 0])
         cand = valid & (st.key <= np.maximum(sch.gate * np.take(thresh, cp), free))
-        cost_key = st.key
-        if self.run.options.quality_threshold:  # the shape term, per copy as alone (`shape`)
-            st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, self.run.VQ, self.run.faces,
-                                  self.run.options.quality_threshold, starts)
-        try:
+        with ranking(st, self.run, valid, cand, free, starts) as cand:  # (the shape term per copy, `shape`)
             acc, bad, why, extra, locked, found = self.rnd.passes(st, key_of, cand, 0, (self.vcopy, need, cp),
                                                               np.arange(len(st.E)) - offset)
             order = np.argsort(key_of(acc), kind="stable")
-        finally:  # the record and the next round read the costs
-            st.key = cost_key
         self.copy_rejected += np.bincount(np.take(cp, bad).astype(np.int64) * self.copy_rejected.shape[1] + why,
                                           minlength=self.copy_rejected.size).reshape(self.copy_rejected.shape)
         n_bad = np.bincount(np.take(cp, bad), minlength=self.C)

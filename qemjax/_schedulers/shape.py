@@ -20,6 +20,8 @@ the model's.
 """
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 from numba import njit
 
@@ -123,3 +125,19 @@ def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
         kth = np.partition(shaped[lo:hi].compress(others), rest - 1)[rest - 1]
         out[lo:hi] |= others & (shaped[lo:hi] <= kth)
     return shaped, out
+
+
+@contextlib.contextmanager
+def ranking(st, run, valid, cand, free, starts=None):
+    """The round's candidates, with ``st.key`` the keys its selection passes and their order read: with the
+    run's ``quality_threshold``, the shaped keys and the candidates `rerank` takes, else the keys and
+    candidates as they are. The cost keys are back in ``st.key`` afterwards (the record and the next round
+    read them), also when the passes fail."""
+    cost_key = st.key
+    s = run.options.quality_threshold
+    if s:
+        st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, run.VQ, run.faces, s, starts)
+    try:
+        yield cand
+    finally:
+        st.key = cost_key

@@ -17,7 +17,7 @@ from . import contraction, glue, selection
 from ..device import Priced, kept_fuses, start_step, step_one
 from .glue import FaceArrays, Known, PairArrays
 from ..select import gate_rank
-from ..shape import rerank
+from ..shape import ranking
 from .stages import Round
 from .state import RoundState, Run, holding
 
@@ -174,18 +174,14 @@ class GlueRound(LoopRound):
         if not len(self.free_at):
             thr = np.maximum(thr, sch.free_cost)
         cand = glue.under_gate(st.key, valid, thr, st.E, self.free_at)
-        cost_key = st.key
-        if run.options.quality_threshold:  # the shape term ranks this round (`shape`)
-            free = np.take(self.free_at, st.E[:, 0]) if len(self.free_at) else sch.free_cost
-            st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, run.VQ, run.faces,
-                                  run.options.quality_threshold)
-        try:
+        # per pair only where the shape term reads it (the gate above takes it per vertex)
+        free = np.take(self.free_at, st.E[:, 0]) if len(self.free_at) and run.options.quality_threshold else \
+            sch.free_cost
+        with ranking(st, run, valid, cand, free) as cand:  # (with the shape term, `shape`)
             acc, bad, why, _, locked, apex = self.passes(st, None, cand, need, None)
             n_sel = acc.size
             acc, apex, room = glue.order_fit(acc, apex, st.key, st.ecount, (run.rounds * 7919) & 0xFFFFFFFF,
                                              need, run.faces.cnt, st.E)
-        finally:  # the record and the next round read the costs
-            st.key = cost_key
         self.count_rejected(why)
         run.timer.add("select_s", time.perf_counter() - t0)
         st.bad[bad] = why

@@ -20,7 +20,7 @@ from ..device import start_merge, start_price, start_step
 from ..select import fits_target, gate_rank, sort_keys
 from .pairs import ring_vertices, with_extra_pairs
 from .state import RoundState, Run, holding
-from ..shape import rerank
+from ..shape import ranking
 
 
 class SeparateCalls:
@@ -238,15 +238,9 @@ class Round:
             return sort_keys(st.key, idx, salt)
         free = sch.free_cost if run.part_scale is None else sch.free_cost * run.part_scale[st.E[:, 0]]
         cand = valid & (st.key <= np.maximum(sch.gate * kth, free))
-        cost_key = st.key
-        if run.options.quality_threshold:  # the shape term ranks this round (`shape`)
-            st.key, cand = rerank(st.key, valid, cand, free, st.E, st.x, run.VQ, run.faces,
-                                  run.options.quality_threshold)
-        try:
+        with ranking(st, run, valid, cand, free) as cand:  # (with the shape term, `shape`)
             acc, bad, why, extra, locked, found = self.passes(st, key_of, cand, need, None)
             order = np.argsort(key_of(acc), kind="stable")
-        finally:  # the record and the next round read the costs
-            st.key = cost_key
         self.count_rejected(why)
         n_sel = acc.size
         fit = fits_target(st.ecount[acc[order]] + (0 if extra is None else extra[acc[order]]), need)
