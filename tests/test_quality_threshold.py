@@ -15,15 +15,9 @@ from qemjax import shapes
 from qemjax._mesh.incidence import FaceLists
 from qemjax._schedulers import shape
 from conftest import assert_valid
+from test_min_angle import _quality
+from test_round_glue import glue_runs
 from test_round_loops import _assert_same, _run
-
-
-def _quality(V, F) -> np.ndarray:
-    """2·area / longest edge² per face, float64."""
-    c = np.asarray(V, np.float64)[np.asarray(F)]
-    n = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
-    longest = np.max([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)], axis=0)
-    return n / longest
 
 
 def _slivers(res, degrees=10.0) -> int:
@@ -181,41 +175,10 @@ def test_a_run_with_it_reaches_the_target_valid_with_fewer_slivers(method):
     assert np.mean(q_on < 0.2) < np.mean(q_off < 0.2)
 
 
-def test_the_numpy_stages_decide_as_the_compiled_loops(monkeypatch):
-    mesh = shapes.bumpy_sphere(3)
-    kw = dict(ratio=0.05, quality_threshold=0.4)
-    new, seen = _run(mesh, kw, monkeypatch, True)
-    old, seen_old = _run(mesh, kw, monkeypatch, False)
-    assert seen == [True] and seen_old == [False]
-    _assert_same(new, old)
-    assert not np.array_equal(new.faces, _run(mesh, {"ratio": 0.05}, monkeypatch, True)[0].faces)
-
-
 def test_the_compiled_glue_decides_as_the_numpy_glue(monkeypatch):
-    from qemjax._schedulers import parallel
-    from qemjax._schedulers.parallel import driver
-
-    mesh = shapes.bumpy_sphere(3)
-    kw = dict(ratio=0.05, quality_threshold=0.4, late_memoryless=0)
-    seen = []
-    choose = driver.choose
-
-    def glue_off(run, glue=True):
-        rnd = choose(run, glue=False)
-        seen.append(isinstance(rnd, parallel.GlueRound))
-        return rnd
-
-    def recording(run, glue=True):
-        rnd = choose(run, glue)
-        seen.append(isinstance(rnd, parallel.GlueRound))
-        return rnd
-    with monkeypatch.context() as m:
-        m.setattr(driver, "choose", recording)
-        new = _simplify(mesh, **kw)
-    with monkeypatch.context() as m:
-        m.setattr(driver, "choose", glue_off)
-        old = _simplify(mesh, **kw)
-    assert seen == [True, False]
+    new, old, seen = glue_runs(shapes.bumpy_sphere(3), dict(ratio=0.05, quality_threshold=0.4, late_memoryless=0),
+                               monkeypatch)
+    assert seen == [True, True]
     _assert_same(new, old)
 
 
@@ -246,21 +209,21 @@ def test_a_batch_runs_each_copy_as_alone(make):
     assert not np.array_equal(got[0].faces, got[3].faces)
 
 
-def test_two_parts_on_the_compiled_loops_and_the_numpy_stages(monkeypatch):
-    kw = dict(ratio=0.05, quality_threshold=0.5, method="default")
-    new, seen = _run(_two_parts(), kw, monkeypatch, True)
-    old, seen_old = _run(_two_parts(), kw, monkeypatch, False)
-    assert seen[0] and not seen_old[0]
+@pytest.mark.parametrize("make, kw, runs", [
+    (lambda: shapes.bumpy_sphere(3), dict(ratio=0.05, quality_threshold=0.4), 1),
+    # the default's memoryless last stretch: a second run, on the compiled loops or the numpy stages
+    (lambda: shapes.bumpy_sphere(3), dict(ratio=0.05, quality_threshold=0.6, method="default"), 2),
+    (_two_parts, dict(ratio=0.05, quality_threshold=0.5, method="default"), 2),
+], ids=["classic", "default", "two parts"])
+def test_the_numpy_stages_decide_as_the_compiled_loops(make, kw, runs, monkeypatch):
+    new, seen = _run(make(), kw, monkeypatch, True)
+    old, seen_old = _run(make(), kw, monkeypatch, False)
+    assert seen == [True] * runs and seen_old == [False] * runs
     _assert_same(new, old)
-
-
-def test_the_default_method_on_the_compiled_loops_and_the_numpy_stages(monkeypatch):
-    """With the memoryless last stretch (a second run on the compiled loops or the numpy stages)."""
-    kw = dict(ratio=0.05, quality_threshold=0.6, method="default")
-    new, _ = _run(shapes.bumpy_sphere(3), kw, monkeypatch, True)
-    old, _ = _run(shapes.bumpy_sphere(3), kw, monkeypatch, False)
-    _assert_same(new, old)
-    assert new.stats["memoryless_from_faces"] > 0
+    without = {k: v for k, v in kw.items() if k != "quality_threshold"}
+    assert not np.array_equal(new.faces, _run(make(), without, monkeypatch, True)[0].faces)
+    if runs == 2:
+        assert new.stats["memoryless_from_faces"] > 0
 
 
 def test_the_greedy_queue_says_it_ranks_by_cost_alone():

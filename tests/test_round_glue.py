@@ -225,10 +225,9 @@ RUNS = {
 }
 
 
-@pytest.mark.parametrize("case", list(RUNS))
-def test_runs_with_the_compiled_glue_give_the_numpy_glues_result(case, monkeypatch):
-    make, kw = RUNS[case]
-    mesh = make()
+def glue_runs(mesh, kw, monkeypatch):
+    """``simplify(mesh, **kw)`` on the compiled glue and with the glue in numpy (the compiled loops with the one
+    device call): (that run, this one, per round implementation chosen: True where it is the one asked for)."""
     seen = []
     choose = driver.choose
 
@@ -249,6 +248,13 @@ def test_runs_with_the_compiled_glue_give_the_numpy_glues_result(case, monkeypat
         with monkeypatch.context() as m:
             m.setattr(driver, "choose", fast_off)
             old = qemjax.simplify(mesh, **kw)
+    return new, old, seen
+
+
+@pytest.mark.parametrize("case", list(RUNS))
+def test_runs_with_the_compiled_glue_give_the_numpy_glues_result(case, monkeypatch):
+    make, kw = RUNS[case]
+    new, old, seen = glue_runs(make(), kw, monkeypatch)
     # the default's memoryless last stretch (`_schedulers.late`) is a second run, never on the glue
     late = kw.get("method", "default") == "default" and "attributes" not in kw  # (with UVs it stays summed)
     assert seen == ([True, False] if late else [True]) * 2
