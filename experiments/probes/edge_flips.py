@@ -14,7 +14,6 @@ round to the input afterwards (`qemjax._pipeline.refit.refit`, one part). rms an
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import warnings
 from pathlib import Path
@@ -25,8 +24,8 @@ from numba import njit
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(EXPERIMENTS))
 
-from figures.rank_peers import distances  # noqa: E402
 from probes.late_memoryless import best_peers, cases  # noqa: E402
+from probes.tangential_relax import pymeshlab_slivers, print_totals, score  # noqa: E402
 
 
 @njit(cache=True)
@@ -151,11 +150,9 @@ def main() -> None:
     warnings.simplefilter("ignore")
     import qemjax
     from qemjax._pipeline.refit import refit
-    from qemjax.metrics import triangle_quality
 
     best = best_peers(Path(args.peers))
-    pml = {(r["mesh"], float(r["ratio"])): float(r["slivers"]) for r in csv.DictReader(open(args.peers))
-           if r["method"] == "pymeshlab" and r.get("slivers")}
+    pml = pymeshlab_slivers(args.peers)
     cos_max = qemjax.Topology().cos_max
     totals = {}
     for name, m, ratio, target, ref in cases(args.meshes, best):
@@ -167,18 +164,9 @@ def main() -> None:
         for dh in args.dihedral:
             G, k = flip_edges(X0, G0, dh)
             outs += [(f"flips {dh:g}", X0, G), (f"flips {dh:g}, re-fit", refit(m.V, m.F, X0, G, 1, cos_max), G)]
-        line = f"{name:16s} {ratio:5g} pml {pml[(name, ratio)]:.3f}"
-        for label, X, G in outs:
-            d = distances(m.V, m.F, X, G)
-            s = triangle_quality((X, G))["sliver_fraction"]
-            r = (d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"], s <= pml[(name, ratio)])
-            totals.setdefault(label, []).append(r)
-            line += f" | {label}: {r[0]:.3f} {r[1]:.3f} {s:.3f}"
-        print(line, flush=True)
+        print(score(m, name, ratio, ref, pml[(name, ratio)], outs, totals), flush=True)
     print()
-    for label, rr in totals.items():
-        print(f"{label}: rms <= best peer in {sum(a <= 1 for a, _, _ in rr)}/{len(rr)}; Hausdorff <= best peer in "
-              f"{sum(b <= 1 for _, b, _ in rr)}/{len(rr)}; slivers <= pymeshlab in {sum(c for _, _, c in rr)}/{len(rr)}")
+    print_totals(totals)
 
 
 if __name__ == "__main__":

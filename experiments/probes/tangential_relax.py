@@ -60,6 +60,33 @@ def relax(X, G, iters: int, alpha: float) -> np.ndarray:
     return X
 
 
+def pymeshlab_slivers(path) -> dict:
+    """{(mesh, ratio): pymeshlab's sliver fraction} of a `rank_peers.py` CSV with a ``slivers`` column."""
+    return {(r["mesh"], float(r["ratio"])): float(r["slivers"]) for r in csv.DictReader(open(path))
+            if r["method"] == "pymeshlab" and r.get("slivers")}
+
+
+def score(m, name, ratio, ref, pml: float, outs, totals: dict) -> str:
+    """One case's line: for each (label, positions, faces) of ``outs``, rms and Hausdorff over the best peer's
+    ``ref`` and the sliver fraction (at or below pymeshlab's ``pml`` counted in ``totals[label]``)."""
+    from qemjax.metrics import triangle_quality
+
+    line = f"{name:16s} {ratio:5g} pymeshlab slivers {pml:.3f}"
+    for label, X, G in outs:
+        d = distances(m.V, m.F, X, G)
+        s = triangle_quality((X, G))["sliver_fraction"]
+        r = (d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"], s <= pml)
+        totals.setdefault(label, []).append(r)
+        line += f" | {label}: rms {r[0]:.3f} H {r[1]:.3f} slivers {s:.3f}"
+    return line
+
+
+def print_totals(totals: dict) -> None:
+    for label, rr in totals.items():
+        print(f"{label}: rms <= best peer in {sum(a <= 1 for a, _, _ in rr)}/{len(rr)}; Hausdorff <= best peer in "
+              f"{sum(b <= 1 for _, b, _ in rr)}/{len(rr)}; slivers <= pymeshlab in {sum(c for _, _, c in rr)}/{len(rr)}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--iters", nargs="+", type=int, default=[3, 10])
@@ -70,11 +97,9 @@ def main() -> None:
     warnings.simplefilter("ignore")
     import qemjax
     from qemjax._pipeline.refit import refit
-    from qemjax.metrics import triangle_quality
 
     best = best_peers(Path(args.peers))
-    pml = {(r["mesh"], float(r["ratio"])): float(r["slivers"]) for r in csv.DictReader(open(args.peers))
-           if r["method"] == "pymeshlab" and r.get("slivers")}
+    pml = pymeshlab_slivers(args.peers)
     cos_max = qemjax.Topology().cos_max
     totals = {}
     for name, m, ratio, target, ref in cases(args.meshes, best):
@@ -82,22 +107,13 @@ def main() -> None:
             continue
         res = qemjax.simplify((m.V, m.F), target_faces=target, late_memoryless=0)  # the summed default
         X0, G = np.asarray(res.vertices, np.float64), np.asarray(res.faces, np.int64)
-        outs = [("default", X0)]
+        outs = [("default", X0, G)]
         for it in args.iters:
             Xr = relax(X0, G, it, args.alpha)
-            outs += [(f"relax {it}, re-fit", refit(m.V, m.F, Xr, G, 1, cos_max)), (f"relax {it}", Xr)]
-        line = f"{name:16s} {ratio:5g} pymeshlab slivers {pml[(name, ratio)]:.3f}"
-        for label, X in outs:
-            d = distances(m.V, m.F, X, G)
-            s = triangle_quality((X, G))["sliver_fraction"]
-            r = (d["rms_rel"] / ref["rms_rel"], d["hausdorff_rel"] / ref["hausdorff_rel"], s <= pml[(name, ratio)])
-            totals.setdefault(label, []).append(r)
-            line += f" | {label}: rms {r[0]:.3f} H {r[1]:.3f} slivers {s:.3f}"
-        print(line, flush=True)
+            outs += [(f"relax {it}, re-fit", refit(m.V, m.F, Xr, G, 1, cos_max), G), (f"relax {it}", Xr, G)]
+        print(score(m, name, ratio, ref, pml[(name, ratio)], outs, totals), flush=True)
     print()
-    for label, rr in totals.items():
-        print(f"{label}: rms <= best peer in {sum(a <= 1 for a, _, _ in rr)}/{len(rr)}; Hausdorff <= best peer in "
-              f"{sum(b <= 1 for _, b, _ in rr)}/{len(rr)}; slivers <= pymeshlab in {sum(c for _, _, c in rr)}/{len(rr)}")
+    print_totals(totals)
 
 
 if __name__ == "__main__":
