@@ -185,6 +185,49 @@ def test_ring_with_dead_faces():
                 assert canon <= {tuple(np.roll(f, -int(np.argmin(f)))) for f in F}
 
 
+
+def _ring_faces_numpy(fl, P, with_dead):
+    """`ring.ring_faces` in whole-array numpy from `FaceLists.touched_with_dead` (the reference)."""
+    (_, G, corner, owner, _), _, (dead, downer) = fl.touched_with_dead(P)
+    rows = np.arange(len(G))
+    rot = np.stack([G[rows, corner], G[rows, (corner + 1) % 3], G[rows, (corner + 2) % 3]], 1)
+    if with_dead and len(dead):
+        D = fl.F[dead]
+        c = np.argmax(D == P[downer, 1][:, None], axis=1)
+        r = np.arange(len(D))
+        D = np.stack([D[r, c], D[r, (c + 1) % 3], D[r, (c + 2) % 3]], 1)
+        order = np.argsort(np.concatenate([owner, downer]), kind="stable")
+        return np.concatenate([owner, downer])[order], np.concatenate([rot, D])[order].astype(np.int32)
+    return owner, rot.astype(np.int32)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ring_gather_matches_numpy(seed):
+    """The compiled ring gather (`face_passes.ring_rows`, `pad_rings`) gives the rows and padded rings
+    whole-array numpy gives, on a mesh with dead faces, pairs that share vertices and non-edge pairs."""
+    rng = np.random.default_rng(seed)
+    mesh = shapes.bumpy_sphere(2)
+    V, F, fl, E, _ = _mesh_rings(mesh)
+    fl.alive[rng.random(len(F)) < 0.1] = False
+    P = np.concatenate([E[rng.permutation(len(E))[:300]], rng.integers(0, len(V), (40, 2))])
+    for with_dead in (False, True):
+        owner, rot = ring.ring_faces(fl, P, with_dead)
+        want_owner, want_rot = _ring_faces_numpy(fl, P, with_dead)
+        np.testing.assert_array_equal(owner, want_owner)
+        np.testing.assert_array_equal(rot, want_rot)
+        assert rot.dtype == np.int32
+        counts = np.bincount(owner, minlength=len(P))
+        seen = np.zeros(len(P), int)
+        for idx, rg in ring.group_rings(owner, rot, len(P), len(V)):
+            R = rg.corners.shape[1]
+            assert np.all(counts[idx] <= R) and (R == ring.RING_MIN or np.all(counts[idx] > R // 2))
+            seen[idx] += 1
+            for k, i in enumerate(idx):
+                n = counts[i]
+                np.testing.assert_array_equal(rg.corners[k, :n], rot[owner == i])
+                assert np.all(rg.corners[k, n:] == len(V)) and rg.mask[k].sum() == n and rg.mask[k, :n].all()
+        assert np.all(seen == 1)
+
 # -- the area term (area_weight) -----------------------------------------------------------------------
 
 def test_area_change_term_matches_numpy():

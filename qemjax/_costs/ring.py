@@ -34,19 +34,11 @@ class Rings(NamedTuple):
 
 def ring_faces(faces, P: np.ndarray, with_dead: bool = False):
     """The ring faces of pairs P (K,2) (any pairs, not necessarily disjoint) from `FaceLists` ``faces``:
-    (owner pair (k,) non-decreasing, rotated corners (k,3) int32). ``with_dead``: the faces holding both
-    endpoints too, after each pair's surviving faces, rotated to start at b."""
-    (_, G, corner, owner, _), _, (dead, downer) = faces.touched_with_dead(P)
-    rows = np.arange(len(G))
-    rot = np.stack([G[rows, corner], G[rows, (corner + 1) % 3], G[rows, (corner + 2) % 3]], 1)
-    if with_dead and len(dead):
-        D = np.take(faces.F, dead, axis=0)
-        c = np.argmax(D == np.take(P[:, 1], downer)[:, None], axis=1)
-        r = np.arange(len(D))
-        D = np.stack([D[r, c], D[r, (c + 1) % 3], D[r, (c + 2) % 3]], 1)
-        order = np.argsort(np.concatenate([owner, downer]), kind="stable")
-        return np.concatenate([owner, downer])[order], np.concatenate([rot, D])[order].astype(np.int32)
-    return owner, rot.astype(np.int32)
+    (owner pair (k,) non-decreasing, rotated corners (k,3) int32): each pair's surviving faces, those at a
+    then those at b, each in the order of its vertex's face list. ``with_dead``: the faces holding both
+    endpoints too, after each pair's surviving faces, rotated to start at b. (One compiled pass:
+    `face_passes.ring_rows`.)"""
+    return faces.ring_rows(P, with_dead)
 
 
 def gather_groups(faces, P: np.ndarray, pad: int, with_dead: bool = False):
@@ -59,6 +51,8 @@ def gather_groups(faces, P: np.ndarray, pad: int, with_dead: bool = False):
 def group_rings(owner: np.ndarray, rot: np.ndarray, K: int, pad: int):
     """Rows rot (k,3) owned by items 0..K-1 (owner (k,) non-decreasing) grouped by how many rows each
     item has: yields (item indices, Rings) per ring size, smallest first; every item is in one group."""
+    from .._mesh import face_passes  # compiled loops, imported on first use (the cost models import this)
+
     counts = np.bincount(owner, minlength=K)
     start = np.cumsum(counts) - counts
     size = np.array([bucket(int(c), lo=RING_MIN) for c in np.unique(counts)]) if K else np.zeros(0, int)
@@ -66,12 +60,4 @@ def group_rings(owner: np.ndarray, rot: np.ndarray, K: int, pad: int):
         idx = np.flatnonzero((counts <= R) & (counts > R // 2 if R > RING_MIN else counts <= R))
         if idx.size == 0:
             continue
-        corners = np.full((len(idx), R, 3), pad, np.int32)
-        mask = np.zeros((len(idx), R), bool)
-        c = counts[idx]
-        which = np.repeat(np.arange(len(idx)), c)
-        slot = np.arange(len(which)) - np.repeat(np.cumsum(c) - c, c)
-        src = np.repeat(start[idx], c) + slot
-        corners[which, slot] = rot[src]
-        mask[which, slot] = True
-        yield idx, Rings(corners, mask)
+        yield idx, Rings(*face_passes.pad_rings(rot, start, counts, idx, int(R), int(pad)))

@@ -160,3 +160,62 @@ def first_step(F, step_of, faces, out):
     removed a dying face: `parallel._removal_steps`)."""
     for f in faces:
         out[f] = min(min(step_of[F[f, 0]], step_of[F[f, 1]]), step_of[F[f, 2]])
+
+
+@njit(cache=True, nogil=True)
+def ring_rows(F, alive, cnt, off, pool, ends, with_dead):
+    """`ring.ring_faces` in one pass: for pairs given by their endpoints ``ends`` (a0, b0, a1, b1, ...),
+    (owner pair (k,) int64, non-decreasing; rows (k,3) int32) of each pair's live faces at a, then at b
+    (pool order), that do not hold both, each rotated to start at its corner a or b; with ``with_dead``,
+    after them the pair's faces that hold both (found from b's side), rotated to start at b. Every face
+    visited gives at most one row, so the rows fit in the faces around the endpoints."""
+    total = 0
+    for v in ends:
+        total += cnt[v]
+    owner = np.empty(total, np.int64)
+    rows = np.empty((total, 3), np.int32)
+    dead = np.empty(total, pool.dtype)  # the current pair's dying faces, written after its kept ones
+    k = 0
+    for s in range(len(ends) // 2):
+        nd = 0
+        for side in range(2):
+            v, other = ends[2 * s + side], ends[2 * s + 1 - side]
+            for i in range(off[v], off[v] + cnt[v]):
+                f = pool[i]
+                if not alive[f]:
+                    continue
+                g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
+                if g0 == other or g1 == other or g2 == other:
+                    if side == 1:
+                        dead[nd] = f
+                        nd += 1
+                    continue
+                c = 0 if g0 == v else (1 if g1 == v else 2)
+                rows[k, 0], rows[k, 1], rows[k, 2] = F[f, c], F[f, (c + 1) % 3], F[f, (c + 2) % 3]
+                owner[k] = s
+                k += 1
+        if with_dead:
+            b = ends[2 * s + 1]
+            for j in range(nd):
+                f = dead[j]
+                c = 0 if F[f, 0] == b else (1 if F[f, 1] == b else 2)
+                rows[k, 0], rows[k, 1], rows[k, 2] = F[f, c], F[f, (c + 1) % 3], F[f, (c + 2) % 3]
+                owner[k] = s
+                k += 1
+    return owner[:k], rows[:k]
+
+
+@njit(cache=True, nogil=True)
+def pad_rings(rows, start, counts, idx, R, pad):
+    """The padded rings (`ring.Rings`) of items ``idx``: item i's ``counts[i]`` rows from ``rows[start[i]]``
+    on, then rows of ``pad`` up to R: corners (len(idx), R, 3) int32, mask (len(idx), R) bool."""
+    n = len(idx)
+    corners = np.full((n, R, 3), pad, np.int32)
+    mask = np.zeros((n, R), np.bool_)
+    for j in range(n):
+        i = idx[j]
+        s = start[i]
+        for t in range(counts[i]):
+            corners[j, t, 0], corners[j, t, 1], corners[j, t, 2] = rows[s + t, 0], rows[s + t, 1], rows[s + t, 2]
+            mask[j, t] = True
+    return corners, mask

@@ -114,6 +114,11 @@ class FaceLists:
         ends = np.ascontiguousarray(pairs).reshape(-1)
         return _jit().touched(self.F, self.alive, self.cnt, self.off, self.pool, ends)
 
+    def ring_rows(self, pairs: np.ndarray, with_dead: bool = False):
+        """The ring rows of pairs (K,2) (any pairs, not necessarily disjoint): `face_passes.ring_rows`."""
+        ends = np.ascontiguousarray(pairs).reshape(-1)
+        return _jit().ring_rows(self.F, self.alive, self.cnt, self.off, self.pool, ends, bool(with_dead))
+
     def contract_touched(self, pairs: np.ndarray, kept, dead) -> None:
         """`contract` for pairs (S,2) whose faces `touched_with_dead` found (and have not changed since),
         without looking them up again: ``kept`` = (w, f, corner) of the surviving faces, w non-decreasing
