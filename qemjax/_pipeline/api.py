@@ -198,7 +198,7 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
     writes each row as soon as it can. ``stacklevel``: where warnings point (4: at `simplify_cells`'s caller)."""
     from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
     from .. import _schedulers
-    from .._schedulers import batched, late
+    from .._schedulers import batched
     from . import stages
 
     parallel_run = _schedulers.get("parallel")
@@ -228,16 +228,16 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
                           [_first_target(j) for j in js], [j.options.max_cost for j in js], js[0].model,
                           [j.model.kernel_params() for j in js], js[0].options, [j.geo.edges[:2] for j in js],
                           [j.geo.frame.part_scale2() for j in js])
+        # each cell's own copy of its first phase (cells of one run share it), then its second phase
+        ran = _second_phases(parallel_run, [job for _, job in members], [
+            ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]]) for k in range(len(members))])
         wall = time.perf_counter() - t0 + prep * len(members)
         c2, s2 = _compilation.snapshot()
         share, comp = wall / len(members), min(s2 - s1, wall) / len(members)
         served = np.bincount(which, minlength=len(js))
         later: list = []  # the batch's re-fits, run side by side below
         for k, (i, job) in enumerate(members):
-            r = ran[which[k]] if k == firsts[which[k]] else copy.deepcopy(ran[which[k]])
-            if getattr(job.model, "switches_late", False):  # its memoryless phase, alone
-                r = late.second(parallel_run, r, job.geo.Vn, job.geo.F, job.geo.extra, max(job.target, 1),
-                                job.model, job.options, part_scale=job.geo.frame.part_scale2())
+            r = ran[k]
             info = {"size": len(members), "copies": len(js), "same_run": int(served[which[k]]), "total_s": wall,
                     "compilations": c2 - c1}
             if i in bounds:  # its re-fit and check run here, on the level the bound picks
@@ -251,6 +251,42 @@ def iter_cells(cells: list, *, errors: bool = False, stacklevel: int = 4):
         stages.refit_all(later)
         for i, _ in members:
             yield i, out[i]
+
+
+def _second_phases(parallel_run, js: list, ran: list) -> list:
+    """The outcomes ``ran`` of the jobs ``js`` (a batch's first phases, one per job) with the second phase of
+    each late run (`_schedulers.late`: its memoryless stretch) joined: those whose phases can share rounds
+    together (`batched.run`, one batch per model's kernels), the rest alone."""
+    from .._mesh import topology as topo
+    from .._schedulers import batched, late
+
+    out = list(ran)
+    nxt = {}
+    for j, job in enumerate(js):
+        if getattr(job.model, "switches_late", False):
+            p = late.prepare(ran[j], job.geo.Vn, job.geo.F, job.geo.extra, max(job.target, 1), job.model,
+                             part_scale=job.geo.frame.part_scale2())
+            if p is not None:
+                nxt[j] = p
+    groups: dict = {}
+    for j, p in nxt.items():
+        shared = len(p.extra) == 0 and p.locks is None and batched.batchable(p.model, own_refresh=True)
+        key = (_model_key(p.model), tuple(sorted(p.model.kernel_params()))) if shared else ("alone", j)
+        groups.setdefault(key, []).append(j)
+    for key, members in groups.items():
+        if len(members) == 1:
+            j = members[0]
+            out[j] = late.join(ran[j], nxt[j].run(parallel_run, js[j].options), nxt[j].faces, nxt[j].keep)
+            continue
+        ps = [nxt[j] for j in members]
+        seconds = batched.run([p.V for p in ps], [p.S for p in ps], [p.F for p in ps], [p.target for p in ps],
+                              [js[j].options.max_cost for j in members], ps[0].model,
+                              [p.model.kernel_params() for p in ps], js[members[0]].options,
+                              [topo.edges(p.F, len(p.V)) for p in ps], [p.part_scale for p in ps],
+                              normals=[p.normals for p in ps], models=[p.model for p in ps])
+        for j, p, o in zip(members, ps, seconds):
+            out[j] = late.join(ran[j], o, p.faces, p.keep)
+    return out
 
 
 def plan_cells(cells: list) -> list:

@@ -23,7 +23,8 @@ without the compiled glue), and everything a round decides globally in a single 
 Copies never share a vertex, a face or a pair, and E stays grouped by copy (rebuilt edges are sorted by
 key; updated ones only lose rows), so a copy's pairs are one slice of each round's arrays.
 Not batched (run alone by `simplify_batch`): the greedy scheduler, non-edge pairs (aggregation), models
-that refresh state or rank by weighted parts, and splitting (ESQEM).
+that refresh state (but for the memoryless second phases of late runs, each copy's rows rebuilt by its own
+model) or rank by weighted parts, and splitting (ESQEM).
 """
 from __future__ import annotations
 
@@ -43,12 +44,40 @@ from .select import fits_target, gate_rank, sort_keys
 from .shape import ranking
 
 
-def batchable(model) -> bool:
+def batchable(model, own_refresh: bool = False) -> bool:
     """Whether runs of ``model`` can share rounds: its kernels take per-pair settings
-    (`CostModel.per_pair_params`) and it neither refreshes state, ranks by weighted parts nor splits. (A
-    model that turns memoryless late, `late`, batches its first phase; its caller runs the second.)"""
-    return (model.per_pair_params and model.refresh is None and model.rank_weights is None
+    (`CostModel.per_pair_params`) and it neither ranks by weighted parts nor splits, nor refreshes state
+    unless each copy's own model rebuilds that copy's rows (``own_refresh``: the second phases of late runs,
+    `late.Second`, with `run`'s ``models``; a model that turns memoryless late batches its first phase as
+    any other)."""
+    return (model.per_pair_params and (model.refresh is None or own_refresh) and model.rank_weights is None
             and getattr(model, "split_factor", None) is None)
+
+
+class _CopyRefresh:
+    """A batch's model whose ``refresh`` rebuilds each copy's rows with that copy's own model (its area
+    power, boundary weight and the means its rows hold): the rows a copy gets alone. Everything else is
+    ``model``'s."""
+
+    def __init__(self, model, models, vcopy):
+        self._model, self._models, self._vcopy = model, models, vcopy
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    @property
+    def refresh(self):
+        return self._refresh
+
+    def _refresh(self, view, verts):
+        verts = np.asarray(verts, np.int64)
+        cp = np.take(self._vcopy, verts)
+        order, bounds = _grouped(cp, len(self._models))
+        out = np.empty((len(verts), self._model.width), DTYPE)
+        for c in np.flatnonzero(np.diff(bounds)):
+            sel = order[bounds[c]:bounds[c + 1]]
+            out[sel] = self._models[c].refresh(view, verts[sel])
+        return out
 
 
 class _Batch:
@@ -56,7 +85,8 @@ class _Batch:
     implementation (`parallel.choose` without the compiled glue: ``rnd``) with the per-copy decisions of the
     module docstring. Copy c holds vertices voff[c] … voff[c+1] − 1 and faces foff[c] … foff[c+1] − 1."""
 
-    def __init__(self, Vs, states, Fs, targets, max_costs, model, params, options: Options, edges, part_scales):
+    def __init__(self, Vs, states, Fs, targets, max_costs, model, params, options: Options, edges, part_scales,
+                 normals=None, models=None):
         C = len(states)
         self.C = C
         self.voff = np.concatenate([[0], np.cumsum([len(V) for V in Vs])]).astype(np.int64)
@@ -72,14 +102,17 @@ class _Batch:
                                           for V, ps in zip(Vs, part_scales)])
         self.vcopy = np.repeat(np.arange(C), np.diff(self.voff)).astype(np.int32)
         stacked = {k: np.stack([np.asarray(p[k]) for p in params]) for k in params[0]}
-        normals = {}  # the input normals of each mesh once (copies of one mesh share V and F)
-        for V, F in zip(Vs, Fs):
-            if (id(V), id(F)) not in normals:
-                normals[id(V), id(F)] = face_normals(np.asarray(V, DTYPE), F)
+        if normals is None:
+            seen = {}  # the input normals of each mesh once (copies of one mesh share V and F)
+            for V, F in zip(Vs, Fs):
+                if (id(V), id(F)) not in seen:
+                    seen[id(V), id(F)] = face_normals(np.asarray(V, DTYPE), F)
+            normals = [seen[id(V), id(F)] for V, F in zip(Vs, Fs)]
+        if model.refresh is not None:  # each copy's state rebuilt by its own model (its settings, its means)
+            model = _CopyRefresh(model, models, self.vcopy)
         self.run = Run(np.concatenate(Vs), np.concatenate(states), Fu, np.zeros((0, 2), np.int32),
                        int(np.sum(targets)), model, options, None, (Eu, np.concatenate([ec for _, ec in edges])),
-                       None, PerCopy(stacked, self.vcopy),
-                       normals=np.concatenate([normals[id(V), id(F)] for V, F in zip(Vs, Fs)]))
+                       None, PerCopy(stacked, self.vcopy), normals=np.concatenate(normals))
         # its copies' gates, budgets and targets are their own (`select_batch`): no compiled glue
         self.rnd: Round = driver.choose(self.run, glue=False)
         self.targets = np.asarray(targets, np.int64)
@@ -321,15 +354,18 @@ def _by_copy(entries, offsets: np.ndarray, first) -> list:
     return out
 
 
-def run(Vs, states, Fs, targets, max_costs, model, params, options: Options, edges, part_scales):
+def run(Vs, states, Fs, targets, max_costs, model, params, options: Options, edges, part_scales, *, normals=None,
+        models=None):
     """Simplify C meshes (copies of one, or several) together. Per copy: Vs (n_c,3) float32 normalised
     positions, states (n_c, width) vertex states, Fs (m_c,3) faces, targets face targets, max_costs
     internal max errors, params its `CostModel.kernel_params` (the numbers; the kernels are ``model``'s),
-    edges `topo.edges` of its faces, part_scales as `parallel.run`'s ``part_scale`` (None: one part).
-    ``options`` are shared by every copy (its ``max_cost`` unused). Returns C tuples in `parallel.run`'s
+    edges `topo.edges` of its faces, part_scales as `parallel.run`'s ``part_scale`` (None: one part),
+    normals as its ``normals`` (None: each copy's faces' at its V). ``options`` are shared by every copy (its
+    ``max_cost`` unused). A ``model`` that refreshes state (a late run's memoryless phase, `late.Second`)
+    needs ``models``, each copy's own (`batchable` with ``own_refresh``). Returns C tuples in `parallel.run`'s
     form."""
     if not len(states):
         return []
-    b = _Batch(Vs, states, Fs, targets, max_costs, model, params, options, edges, part_scales)
+    b = _Batch(Vs, states, Fs, targets, max_costs, model, params, options, edges, part_scales, normals, models)
     b.rounds()
     return b.outputs()

@@ -16,6 +16,7 @@ numbered as the input's, the states back to the summed quadrics' columns (what t
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -53,16 +54,50 @@ def run(scheduler, V, S, F, extra_pairs, target_faces, model, options, progress=
                   part_scale=part_scale, locks=locks)
 
 
+class Second(NamedTuple):
+    """The second phase's run (`prepare`): its arguments to a scheduler (positions V, states S, faces F, extra
+    pairs, target, the memoryless model, per-vertex part scales, the flip test's reference normals, locks) and
+    where its mesh sits in the first's (``faces``: the first phase's faces alive, ``keep``: its vertices)."""
+    V: np.ndarray
+    S: np.ndarray
+    F: np.ndarray
+    extra: np.ndarray
+    target: int
+    model: object
+    part_scale: np.ndarray | None
+    normals: np.ndarray
+    locks: RunLocks | None
+    faces: np.ndarray
+    keep: np.ndarray
+
+    def run(self, scheduler, options, progress=None) -> outcome.Outcome:
+        """The second phase on ``scheduler`` (a scheduler's ``run``)."""
+        kw = {} if self.locks is None else {"locks": self.locks}
+        return scheduler(self.V, self.S, self.F, self.extra, self.target, self.model, options, progress,
+                         part_scale=self.part_scale, normals=self.normals, **kw)
+
+
 def second(scheduler, first: outcome.Outcome, V, F, extra_pairs, target_faces, model, options, progress=None,
            *, part_scale=None, locks=None) -> outcome.Outcome:
-    """The second phase after ``first`` (the first phase's outcome on the run's V, F: `run`, or a batch's
-    copy), joined to it; ``first`` itself when the cost limit stopped it or it has no faces to remove. A first
-    phase held back short of its target still switches (a closed mesh stops one face above an odd target,
-    and one with a lone part may end two above it): the memoryless prices may place where the summed ones
-    could not, and the second phase reports its own stop."""
+    """The second phase after ``first`` (the first phase's outcome on the run's V, F: `run`), joined to it;
+    ``first`` itself when it has none (`prepare`)."""
+    nxt = prepare(first, V, F, extra_pairs, target_faces, model, part_scale=part_scale, locks=locks)
+    if nxt is None:
+        return first
+    return join(first, nxt.run(scheduler, options, progress), nxt.faces, nxt.keep)
+
+
+def prepare(first: outcome.Outcome, V, F, extra_pairs, target_faces, model, *, part_scale=None,
+            locks=None) -> Second | None:
+    """The second phase's run after ``first`` (the first phase's outcome on the run's V, F: `run`, or a batch's
+    copy: `_schedulers.batched` runs such phases side by side), to `join` to it; None when the cost limit
+    stopped the first or it has no faces to remove. A first phase held back short of its target still
+    switches (a closed mesh stops one face above an odd target, and one with a lone part may end two above
+    it): the memoryless prices may place where the summed ones could not, and the second phase reports its
+    own stop."""
     faces = np.flatnonzero(first.alive)
     if switch_faces(model, target_faces) is None or first.stop_reason == "max_error" or len(faces) <= target_faces:
-        return first
+        return None
     late = model.late_model()
     n = len(V)
     # the second run holds the vertices the faces left use, renumbered in order (locked ones, numbered first,
@@ -83,18 +118,16 @@ def second(scheduler, first: outcome.Outcome, V, F, extra_pairs, target_faces, m
         extra = at[kept[extra]]
         extra = np.unique(np.sort(extra[(extra >= 0).all(1)], axis=1), axis=0)
         extra = extra[extra[:, 0] != extra[:, 1]]
-    kw = {}
+    run_locks = None
     if locks is not None:  # the weights as the first phase carried them (`locks.carry`: the largest)
         w = None if locks.weights is None else np.array(locks.weights, np.float64)
         if w is not None:
             np.maximum.at(w, kept, np.asarray(locks.weights, np.float64))
             w = w[keep]
-        kw["locks"] = RunLocks(np.asarray(locks.locked)[keep], w)
+        run_locks = RunLocks(np.asarray(locks.locked)[keep], w)
     normals = face_normals(np.asarray(V, DTYPE), np.asarray(F, np.int64)[faces])
-    after = scheduler(np.ascontiguousarray(first.positions[keep]), S2, F2, extra, target_faces, late, options,
-                      progress, part_scale=None if part_scale is None else np.asarray(part_scale)[keep],
-                      normals=normals, **kw)
-    return join(first, after, faces, keep)
+    return Second(np.ascontiguousarray(first.positions[keep]), S2, F2, extra, target_faces, late,
+                  None if part_scale is None else np.asarray(part_scale)[keep], normals, run_locks, faces, keep)
 
 
 def join(first: outcome.Outcome, second: outcome.Outcome, faces: np.ndarray, keep: np.ndarray) -> outcome.Outcome:
