@@ -185,7 +185,6 @@ def test_ring_with_dead_faces():
                 assert canon <= {tuple(np.roll(f, -int(np.argmin(f)))) for f in F}
 
 
-
 def _ring_faces_numpy(fl, P, with_dead):
     """`ring.ring_faces` in whole-array numpy from `FaceLists.touched_with_dead` (the reference)."""
     (_, G, corner, owner, _), _, (dead, downer) = fl.touched_with_dead(P)
@@ -204,13 +203,15 @@ def _ring_faces_numpy(fl, P, with_dead):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_ring_gather_matches_numpy(seed):
     """The compiled ring gather (`face_passes.ring_rows`, `pad_rings`) gives the rows and padded rings
-    whole-array numpy gives, on a mesh with dead faces, pairs that share vertices and non-edge pairs."""
+    whole-array numpy gives, on a mesh with dead faces, pairs that share vertices, non-edge pairs, pairs of
+    one vertex twice, int64 and int32 pairs (a round's), and no pairs."""
     rng = np.random.default_rng(seed)
     mesh = shapes.bumpy_sphere(2)
     V, F, fl, E, _ = _mesh_rings(mesh)
     fl.alive[rng.random(len(F)) < 0.1] = False
-    P = np.concatenate([E[rng.permutation(len(E))[:300]], rng.integers(0, len(V), (40, 2))])
-    for with_dead in (False, True):
+    P = np.concatenate([E[rng.permutation(len(E))[:300]], rng.integers(0, len(V), (40, 2)),
+                        np.repeat(rng.integers(0, len(V), (5, 1)), 2, 1)])
+    for with_dead, P in ((False, P), (True, P), (True, P.astype(np.int32)), (True, P[:0])):
         owner, rot = ring.ring_faces(fl, P, with_dead)
         want_owner, want_rot = _ring_faces_numpy(fl, P, with_dead)
         np.testing.assert_array_equal(owner, want_owner)

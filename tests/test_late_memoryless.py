@@ -164,23 +164,26 @@ def test_second_phases_share_rounds_with_each_copys_own_settings(monkeypatch):
     at[used] = np.arange(len(used))
     opened = (np.asarray(V)[used], at[np.asarray(F)[cut]])
     configs = [dict(ratio=0.1), dict(ratio=0.1, area_power=0.5), dict(ratio=0.1, boundary_weight=1.0),
-               dict(ratio=0.05, late_memory_weight=0.3)]
+               dict(ratio=0.05, late_memory_weight=0.3), dict(ratio=0.1, placement="rank")]
     cells = [(m, c) for m in (sphere, opened) for c in configs]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         out = qemjax.simplify_cells(cells)
         alone = [qemjax.simplify(m, **c) for m, c in cells]
-    assert (len(cells), True) in sizes  # the second phases: one batch of every cell
+    # the second phases: one batch of every cell with optimal placement, one of the two with "rank" (its kernel)
+    assert sorted(c for c, second in sizes if second) == [2, len(cells) - 2]
     for r, a in zip(out, alone):
         assert r.stats["memoryless_from_faces"] == a.stats["memoryless_from_faces"] is not None
         assert r.vertices.tobytes() == a.vertices.tobytes() and np.array_equal(r.faces, a.faces)
+        assert r.stop_reason == a.stop_reason and r.stats["rounds"] == a.stats["rounds"]
+        assert np.array_equal(r.history.pairs, a.history.pairs) and np.array_equal(r.history.costs, a.history.costs)
     # (it can fail:) every setting matters on the open mesh (on the closed one the boundary weight cannot)
     assert len({r.vertices.tobytes() for r in out[len(configs):]}) == len(configs)
 
 
 def test_batches_share_the_first_phase_with_the_same_results():
-    """A batch runs the first phases together (copies of one run where they agree up to the switch) and each
-    second phase alone: every result is its own call's, byte for byte, whatever it is batched with."""
+    """A batch runs the first phases together (copies of one run where they agree up to the switch), then each
+    cell's second phase: every result is its own call's, byte for byte, whatever it is batched with."""
     V, F = shapes.bumpy_sphere(3)
     configs = [dict(ratio=0.1, **LATE), dict(ratio=0.1, late_memoryless=2, late_memory_weight=0.3),
                dict(ratio=0.1, late_memoryless=3), dict(ratio=0.1, late_memoryless=0), dict(ratio=0.05, **LATE),

@@ -4,11 +4,11 @@ takes as many pairs as it would without the term keep what the term is for?
 `qemjax._schedulers.shape.rerank` takes as many candidates as the round's gate on the costs admits. Once the
 cheapest pairs are the ones the term lifts round after round, they set that gate, so rounds near the target
 take a pair or two (the probe first prints the rounds of the armadillo to 10 % without the term, with it and
-with it and this gate, ``quality_threshold=0.6``). The alternative here (`rerank_ranked`) sets the gate again with the lifted pairs left aside (at most the gate ×
-the k-th cheapest pair that ranks by its cost), computes the term for the pairs that gate reaches beyond the
-pool, and gives as many places as pairs under it rank by their cost, by smallest shaped key. It is put in
-place of the package's (the round's gate rank k recorded as each round computes it) and the ranking run
-with both thresholds::
+with it and this gate, ``quality_threshold=0.6``). The alternative here (`rerank_ranked`) sets the gate
+again with the lifted pairs left aside (at most the gate × the k-th cheapest pair that ranks by its cost),
+computes the term for the pairs that gate reaches beyond the pool, and gives as many places as pairs under it
+rank by their cost, by smallest shaped key. It is put in place of the package's (the round's gate rank k
+recorded as each round computes it) and the ranking run with both thresholds::
 
     python experiments/probes/shape_gate.py    # -> results/shape_gate.{csv,txt}
 

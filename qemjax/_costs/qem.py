@@ -105,7 +105,7 @@ class QEM(Method):
     """
 
     name: ClassVar[str] = "qem"
-    per_pair_params: ClassVar[bool] = True  # memoryless runs refresh, so they are not batched anyway
+    per_pair_params: ClassVar[bool] = True  # (memoryless rows too: a batch refreshes each copy with its own model)
     memoryless_refused: ClassVar[str] = ""  # a subclass that cannot run memoryless: why (the error says it)
 
     placement: str = "optimal"

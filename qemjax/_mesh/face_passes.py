@@ -110,6 +110,25 @@ def around(alive, cnt, off, pool, verts):
     return which[:m], faces[:m]
 
 
+@njit(cache=True, inline="always")
+def _holds(g0, g1, g2, w):
+    """Whether the face with corners g0, g1, g2 holds vertex w (without a branch)."""
+    return (g0 == w) | (g1 == w) | (g2 == w)
+
+
+@njit(cache=True, inline="always")
+def _corner(g0, g1, g2, v):
+    """The corner (0, 1 or 2) of the face g0, g1, g2 that holds v: the first, where it holds v twice."""
+    return 0 if g0 == v else (1 if g1 == v else 2)
+
+
+@njit(cache=True, inline="always")
+def _rotated(rows, k, F, f, v):
+    """rows[k] = face f's corners rotated to start at its corner v (`_corner`), the orientation kept."""
+    c = _corner(F[f, 0], F[f, 1], F[f, 2], v)
+    rows[k, 0], rows[k, 1], rows[k, 2] = F[f, c], F[f, (c + 1) % 3], F[f, (c + 2) % 3]
+
+
 @njit(cache=True, nogil=True)
 def touched(F, alive, cnt, off, pool, ends):
     """`incidence.FaceLists.touched_with_dead` over the live faces around pairs given by their endpoints
@@ -140,11 +159,11 @@ def touched(F, alive, cnt, off, pool, ends):
         s, side = w >> 1, w & 1
         v, other = ends[w], ends[w ^ 1]
         g0, g1, g2 = G[i, 0], G[i, 1], G[i, 2]
-        holds = (g0 == other) | (g1 == other) | (g2 == other)
+        holds = _holds(g0, g1, g2, other)
         dead[nd] = fk[i]
         dead_owner[nd] = s
         nd += holds & (side == 1)
-        c = 0 if g0 == v else (1 if g1 == v else 2)
+        c = _corner(g0, g1, g2, v)
         fk[k], wk[k], corner[k], owner[k] = fk[i], w, c, s
         G[k, 0], G[k, 1], G[k, 2] = g0, g1, g2
         after[k, 0], after[k, 1], after[k, 2] = g0, g1, g2
@@ -184,22 +203,18 @@ def ring_rows(F, alive, cnt, off, pool, ends, with_dead):
                 f = pool[i]
                 if not alive[f]:
                     continue
-                g0, g1, g2 = F[f, 0], F[f, 1], F[f, 2]
-                if g0 == other or g1 == other or g2 == other:
+                if _holds(F[f, 0], F[f, 1], F[f, 2], other):
                     if side == 1:
                         dead[nd] = f
                         nd += 1
                     continue
-                c = 0 if g0 == v else (1 if g1 == v else 2)
-                rows[k, 0], rows[k, 1], rows[k, 2] = F[f, c], F[f, (c + 1) % 3], F[f, (c + 2) % 3]
+                _rotated(rows, k, F, f, v)
                 owner[k] = s
                 k += 1
         if with_dead:
             b = ends[2 * s + 1]
             for j in range(nd):
-                f = dead[j]
-                c = 0 if F[f, 0] == b else (1 if F[f, 1] == b else 2)
-                rows[k, 0], rows[k, 1], rows[k, 2] = F[f, c], F[f, (c + 1) % 3], F[f, (c + 2) % 3]
+                _rotated(rows, k, F, dead[j], b)
                 owner[k] = s
                 k += 1
     return owner[:k], rows[:k]

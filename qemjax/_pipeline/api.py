@@ -268,10 +268,9 @@ def _second_phases(parallel_run, js: list, ran: list) -> list:
                              part_scale=job.geo.frame.part_scale2())
             if p is not None:
                 nxt[j] = p
-    groups: dict = {}
+    groups: dict = {}  # (the batch's jobs have no locks and no extra pairs: `_batch_key`)
     for j, p in nxt.items():
-        shared = len(p.extra) == 0 and p.locks is None and batched.batchable(p.model, own_refresh=True)
-        key = (_model_key(p.model), tuple(sorted(p.model.kernel_params()))) if shared else ("alone", j)
+        key = _kernels_key(p.model) if batched.batchable(p.model, own_refresh=True) else ("alone", j)
         groups.setdefault(key, []).append(j)
     for key, members in groups.items():
         if len(members) == 1:
@@ -402,7 +401,7 @@ def _run_key(job: "Job", geo) -> tuple:
 
 def _first_target(job: "Job") -> int:
     """The face target of a batch copy's run: the job's, or for a model that turns memoryless late in the run
-    the first phase's (`_schedulers.late`; the second runs per job, after the batch)."""
+    the first phase's (`_schedulers.late`; the second phases run after the batch's first, `_second_phases`)."""
     from .._schedulers import late
 
     return late.first_target(job.model, max(job.target, 1))
@@ -417,8 +416,14 @@ def _batch_key(job: "Job"):
             not batched.batchable(model) or not (
             job.target < len(job.geo.F) or job.err < math.inf):
         return None
-    return (_model_key(model), tuple(sorted(model.kernel_params())), s.cos_max, s.min_quality,
-            s.preserve_topology, s.prune, s.schedule, job.options.quality_threshold)
+    return (_kernels_key(model), s.cos_max, s.min_quality, s.preserve_topology, s.prune, s.schedule,
+            job.options.quality_threshold)
+
+
+def _kernels_key(model):
+    """What runs of a model share in one batch: its compiled kernels and the names of their settings (the
+    values may differ per copy)."""
+    return _model_key(model), tuple(sorted(model.kernel_params()))
 
 
 def _model_key(model):

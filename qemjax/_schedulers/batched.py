@@ -109,6 +109,8 @@ class _Batch:
                     seen[id(V), id(F)] = face_normals(np.asarray(V, DTYPE), F)
             normals = [seen[id(V), id(F)] for V, F in zip(Vs, Fs)]
         if model.refresh is not None:  # each copy's state rebuilt by its own model (its settings, its means)
+            if models is None or len(models) != C:
+                raise ValueError("a batch of a model that refreshes state needs each copy's model (models=)")
             model = _CopyRefresh(model, models, self.vcopy)
         self.run = Run(np.concatenate(Vs), np.concatenate(states), Fu, np.zeros((0, 2), np.int32),
                        int(np.sum(targets)), model, options, None, (Eu, np.concatenate([ec for _, ec in edges])),
