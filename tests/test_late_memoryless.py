@@ -157,15 +157,9 @@ def test_second_phases_share_rounds_with_each_copys_own_settings(monkeypatch):
         sizes.append((len(Vs), kw.get("models") is not None))
         return real(Vs, *args, **kw)
     monkeypatch.setattr(batched, "run", counted)
-    sphere = V, F = shapes.bumpy_sphere(3)
-    cut = np.asarray(V)[np.asarray(F)].mean(1)[:, 2] < 0.5  # open: a cap cut off
-    used = np.unique(np.asarray(F)[cut])
-    at = np.full(len(V), -1)
-    at[used] = np.arange(len(used))
-    opened = (np.asarray(V)[used], at[np.asarray(F)[cut]])
     configs = [dict(ratio=0.1), dict(ratio=0.1, area_power=0.5), dict(ratio=0.1, boundary_weight=1.0),
                dict(ratio=0.05, late_memory_weight=0.3), dict(ratio=0.1, placement="rank")]
-    cells = [(m, c) for m in (sphere, opened) for c in configs]
+    cells = [(m, c) for m in (shapes.bumpy_sphere(3), holed_grid()) for c in configs]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         out = qemjax.simplify_cells(cells)
