@@ -129,6 +129,19 @@ def test_target_exact_valid_closed_and_measured(mesh, in_process):
     assert d["distance_p95"] <= r.stats["distance_p95"] <= 1.01 * d["distance_p95"]
 
 
+def test_levels_before_the_last_leave_out_the_memoryless_last_stretch(in_process):
+    from qemjax._partition.run import _level_kwargs
+
+    p = Partition()
+    assert _level_kwargs({}, p, last=False) == {"late_memoryless": 0}  # the default switches late
+    assert _level_kwargs({}, p, last=True) == {}
+    assert _level_kwargs({"method": "classic"}, p, last=False) == {"method": "classic"}  # it never switches
+    assert _level_kwargs({"late_memoryless": 3}, Partition(refit="last"), last=False) == \
+        {"late_memoryless": 0, "refit": 0}
+    settings = in_process.stats["partition"]["settings_per_level"]
+    assert settings[:-1] == [{"late_memoryless": 0}] * (len(settings) - 1) and settings[-1] == {}
+
+
 def test_quality_near_the_in_core_run(mesh, in_process):
     whole = qemjax.simplify(mesh, ratio=RATIO)
     assert in_process.stats["distance_rms"] <= 1.1 * whole.stats["distance_rms"]

@@ -323,3 +323,17 @@ def test_write_binary_ply_in_chunks(tmp_path):
     _check(path, 5000, V, F, welded=False)
     with pytest.raises(ValueError, match="outside"):
         write_binary_ply(tmp_path / "x.ply", V, F + len(V))
+
+
+def test_distinct_ids_are_numpys_unique():
+    from qemjax._partition.scatter import _distinct
+
+    rng = np.random.default_rng(3)
+    at = np.full(5000, 7, np.int64)  # whatever an earlier part left there
+    for dtype in (np.int32, np.int64):
+        for n in (0, 1, 5, 300, 6000):
+            raw = rng.integers(0, rng.integers(1, 5000), n).astype(dtype)
+            used, inverse = _distinct(raw, at)
+            want, want_inv = np.unique(raw, return_inverse=True)
+            assert used.dtype == want.dtype and np.array_equal(used, want)
+            assert np.array_equal(inverse, want_inv.ravel())

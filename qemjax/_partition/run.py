@@ -82,6 +82,31 @@ def _locks(level_dir: Path, groups: list, borders: list) -> Path:
     return path
 
 
+def _level_kwargs(kwargs: dict, p: Partition, last: bool) -> dict:
+    """A level's method settings: the run's own at the last level. A level before it stops far above the
+    run's target, so it leaves out what only a run's end is for: the memoryless last stretch (a method's
+    ``late_memoryless`` would switch at K × the group's share of the level, where summed quadrics keep the
+    input's memory best and the last level starts again from the faces left) and, with ``refit="last"``,
+    the re-fit."""
+    if last:
+        return kwargs
+    out = dict(kwargs)
+    if p.refit == "last":
+        out["refit"] = 0
+    if _switches_late(kwargs):
+        out["late_memoryless"] = 0
+    return out
+
+
+def _switches_late(kwargs: dict) -> bool:
+    """Whether the method ``kwargs`` name (as `simplify` takes them) turns memoryless for its last stretch."""
+    from .._pipeline import flat
+
+    settings = {k: v for k, v in kwargs.items() if k not in flat.KEYWORDS}
+    method = flat.apply(kwargs.get("method", "default"), kwargs.get("topology"), None, settings)[0]
+    return bool(getattr(method, "late_memoryless", 0))
+
+
 def _bar(progress: bool, total: int, desc: str):
     if not progress:
         return None
@@ -181,7 +206,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 locks = "border"
             else:
                 locks = str(_locks(level_dir, groups, borders))
-            level_kw = kwargs if last or p.refit == "all" else kwargs | {"refit": 0}
+            level_kw = _level_kwargs(kwargs, p, last)
             specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
                           out=str(level_dir / f"group_{k:05d}.npz")) for k, g in enumerate(groups)]
             cost = None
@@ -193,7 +218,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             levels.append(dict(groups=len(groups), faces_in=int(sum(g.faces for g in groups)),
                                faces_out=int(faces.sum()), target=int(sum(g.target for g in groups)),
                                locked=int(sum(s["locked"] for s in stats)), seconds=time.perf_counter() - t_level,
-                               cost=cost, stats=stats))
+                               cost=cost, stats=stats,
+                               settings={k: v for k, v in level_kw.items() if kwargs.get(k, object()) != v}))
             if last:
                 break
             borders = [pieces.borders(path) for path in paths]
@@ -252,7 +278,7 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
     part = dict(parts=len(manifest["parts"]), levels=len(levels), where=where,
                 faces_per_level=[lv["faces_out"] for lv in levels], groups_per_level=[lv["groups"] for lv in levels],
                 locked_per_level=[lv["locked"] for lv in levels], seconds_per_level=[lv["seconds"] for lv in levels],
-                cost_per_level=[lv["cost"] for lv in levels],
+                cost_per_level=[lv["cost"] for lv in levels], settings_per_level=[lv["settings"] for lv in levels],
                 locked_share=locked_share, scatter_s=t_scatter, measure_s=t_measure,
                 peak_rss_workers=max((s["peak_rss"] for s in all_stats), default=0), peak_rss_client=task.peak_rss(),
                 reused=sum(1 for s in all_stats if s.get("reused")), scratch=None if folder is None else str(folder),

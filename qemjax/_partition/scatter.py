@@ -5,8 +5,9 @@ Passes, none holding the mesh: the vertices twice (bounding box, then each verte
 twice or more (a histogram of centroid codes, refined where a bin overflows, `plan`; then each chunk's
 faces appended to its part's file, noting per vertex the first part that used it or that several did),
 then each part once (its vertices gathered, written as ``level0/part_NNNNN.npz``). What stays in memory
-across passes is per vertex: its packed cell (8 bytes), its part or 'shared' (4 bytes) and, when some
-vertices are unused, its new number (4 bytes).
+across passes is per vertex: its packed cell (8 bytes), its part or 'shared' (4 bytes), when some
+vertices are unused its new number (4 bytes), and in the last pass a scratch index (8 bytes, in place of
+the cell).
 """
 from __future__ import annotations
 
@@ -104,12 +105,23 @@ def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progr
     return owner
 
 
+def _distinct(raw: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(raw, return_inverse=True)`` for vertex ids ``raw`` into ``at`` (one scratch entry per
+    vertex of the file, any values): only the distinct ids are sorted, about a sixth of a part's corners,
+    and no pass runs over every vertex of the file (a part is small, the file is not)."""
+    at[raw] = np.arange(len(raw), dtype=at.dtype)  # the last corner of each id wins
+    used = np.sort(raw[at[raw] == np.arange(len(raw), dtype=at.dtype)])
+    at[used] = np.arange(len(used), dtype=at.dtype)
+    return used, at[raw]
+
+
 def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str) -> list:
     parts = []
+    at = np.empty(src.n_vertices, np.int64)
     for p in range(plan.parts):
         raw = np.fromfile(tmp / f"{p}.bin", index_type)
         remove(tmp / f"{p}.bin")
-        used, inverse = np.unique(raw, return_inverse=True)
+        used, inverse = _distinct(raw, at)
         gid = (used if new_id is None else new_id[used]).astype(np.int64)
         border = owner[used] == SHARED
         V = src.gather(used)
