@@ -146,6 +146,31 @@ def test_compiled_rebuild_is_the_numpy_one_bit_for_bit(seed, area_power, boundar
     assert got.tobytes() == want.tobytes()
 
 
+def test_rows_of_several_runs_in_one_pass_are_each_runs_own():
+    """`refresh_rows_each` (a batch's copies side by side) gives, for vertices of copies with different
+    weights and input means, the bytes each copy's own model's `refresh` gives its vertices."""
+    V, F = random_mesh(4)
+    rng = np.random.default_rng(7)
+    faces = FaceLists(F, len(V))
+    faces.remove(rng.choice(len(F), size=len(F) // 5, replace=False))
+    models = [QEM(memoryless=True, area_power=0.6, boundary_weight=1.0),
+              QEM(memoryless=True, area_power=1.0, boundary_weight=0.0),
+              QEM(memoryless=True, area_weighted=False, boundary_weight=100.0)]
+    copy = rng.integers(0, len(models), len(V))  # each vertex's copy
+    rows = np.zeros((len(V), 3 + ml.WIDTH), np.float32)
+    rows[:, :3] = V
+    rows[:, 3:13] = rng.random((len(V), 10))
+    rows[:, ml.MCOLS[0]:] = np.array([[0.003, 0.005], [0.002, 0.004], [0.01, 0.02]], np.float32)[copy]
+    view = MeshView(faces, rows)
+    verts = rng.permutation(len(V))[:90]
+    w = np.array([ml.weights(m) for m in models]).T
+    got = ml.refresh_rows_each(w[0][copy[verts]], w[1][copy[verts]], view, verts)
+    for c, m in enumerate(models):
+        mine = copy[verts] == c
+        assert mine.any() and got[mine].tobytes() == m.refresh(view, verts[mine]).tobytes()
+    assert ml.refresh_rows_each(w[0][:0], w[1][:0], view, verts[:0]).shape == (0, ml.WIDTH)
+
+
 def test_initial_state_is_the_default_quadrics_plus_g_and_means():
     """The memoryless start (a rebuild at every vertex, float64 on the host) agrees with the default's
     initial quadrics (the float32 kernel), as history and as current quadric, and carries g and the

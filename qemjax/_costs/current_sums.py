@@ -39,17 +39,19 @@ def _add_plane(S, s, w, x, y, z):
 
 
 @njit(cache=True, nogil=True)
-def rebuild(P, F, alive, cnt, off, pool, verts, area_power, boundary_weight, mean_area, mean_e2):
+def rebuild(P, F, alive, cnt, off, pool, verts, powers, boundary_weights, mean_areas, mean_e2s):
     """(k, 13) float64: `memoryless.current_quadrics` of ``verts`` (k,) from the live faces around each (the
-    `incidence.FaceLists` arrays F, alive, cnt, off, pool), positions P (n, 3) float64."""
+    `incidence.FaceLists` arrays F, alive, cnt, off, pool), positions P (n, 3) float64; each vertex with its
+    own weights (k,) float64 (a batch's copies each have their model's)."""
     k = len(verts)
     out = np.zeros((k, 13))
     acc = np.empty((3, 6))  # one vertex's sums: its face planes, its boundary edges (v, c1), (v, c2)
-    ma = max(mean_area, TINY)
-    me2 = max(mean_e2, TINY)
     ends = np.empty((64, 2), np.int64)  # the other corners (c1, c2) of each live face [v, c1, c2] at one vertex,
     for s in range(k):  # grown when a vertex has more faces
         v = verts[s]
+        area_power, boundary_weight = powers[s], boundary_weights[s]
+        ma = max(mean_areas[s], TINY)
+        me2 = max(mean_e2s[s], TINY)
         r = 0
         for i in range(cnt[v]):
             f = pool[off[v] + i]

@@ -51,27 +51,37 @@ GCOLS = (23, 24, 25)  # columns of g(v)
 MCOLS = (26, 27)  # columns of the input's mean face area and mean squared edge length
 
 
-def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area_power: float,
-                     boundary_weight: float, mean_area: float, mean_e2: float) -> np.ndarray:
+def current_quadrics(P: np.ndarray, faces: FaceLists, verts: np.ndarray, *, area_power,
+                     boundary_weight, mean_area, mean_e2) -> np.ndarray:
     """(k,13) float64: the quadrics (10) of ``verts`` (k,), each in its vertex's frame (so b = c = 0), from
     the live faces around it (positions P (n,3)): the plane of each face weighted by
     (area / mean_area)^area_power, and for each boundary edge at the vertex (an edge in one live face only)
     the plane through it perpendicular to that face, weighted by boundary_weight·(|e|² / mean_e2)^area_power
-    (none when boundary_weight is 0); then g(v) (3): the sum of ½(c1 − v)×(c2 − v) over those faces.
+    (none when boundary_weight is 0); then g(v) (3): the sum of ½(c1 − v)×(c2 − v) over those faces. The
+    four weights are numbers, or (k,) arrays: each vertex's own.
     Compiled (`current_sums.rebuild`; its numpy twin: tests/reference_memoryless.py)."""
     from .current_sums import rebuild  # numba, imported on first use: `qemjax --help` lists this model's fields
 
+    verts = np.ascontiguousarray(verts, np.int64)
+
+    def each(x):  # one writable signature for numbers and arrays alike
+        x = np.asarray(x, np.float64)
+        return np.require(x, requirements=("C", "W")) if x.ndim else np.full(verts.shape, x)
     return rebuild(np.ascontiguousarray(P, np.float64), faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
-                   np.ascontiguousarray(verts, np.int64), float(area_power), float(boundary_weight),
-                   float(mean_area), float(mean_e2))
+                   verts, each(area_power), each(boundary_weight), each(mean_area), each(mean_e2))
+
+
+def weights(model) -> tuple[float, float]:
+    """(area power, boundary weight) of a memoryless model's face and boundary planes."""
+    return float(model.area_power) if model.area_weighted else 0.0, float(model.boundary_weight)
 
 
 def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means, history=None) -> np.ndarray:
     """(k, WIDTH) float32 state rows of ``verts``: the history quadrics (k,10) (None: the current ones, as
     at the start), `current_quadrics` with the model's weights, then the two input means."""
     verts = np.asarray(verts, np.int64)
-    q = current_quadrics(P, faces, verts, area_power=float(model.area_power) if model.area_weighted else 0.0,
-                         boundary_weight=float(model.boundary_weight), mean_area=float(means[0]),
+    power, boundary = weights(model)
+    q = current_quadrics(P, faces, verts, area_power=power, boundary_weight=boundary, mean_area=float(means[0]),
                          mean_e2=float(means[1]))
     hist = q[:, :10] if history is None else np.asarray(history, np.float64)
     return np.concatenate([hist, q, np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))],
@@ -86,6 +96,19 @@ def refresh_rows(model, view, verts) -> np.ndarray:
         return np.zeros((0, WIDTH), DTYPE)
     means = view.rows[verts[0], MCOLS[0]:MCOLS[1] + 1]
     return state_rows(model, view.rows[:, :3], view.faces, verts, means, history=view.rows[verts, 3:CCOLS])
+
+
+def refresh_rows_each(powers, boundary_weights, view, verts) -> np.ndarray:
+    """`refresh_rows` for vertices of several runs side by side (a batch's copies), each with its own
+    weights (`weights` of its model: (k,) arrays) and the input means its row holds: one compiled pass for all
+    of them, the rows each run's own `refresh_rows` gives."""
+    verts = np.asarray(verts, np.int64)
+    if len(verts) == 0:
+        return np.zeros((0, WIDTH), DTYPE)
+    means = np.asarray(view.rows[verts, MCOLS[0]:MCOLS[1] + 1], np.float64)
+    q = current_quadrics(view.rows[:, :3], view.faces, verts, area_power=powers, boundary_weight=boundary_weights,
+                         mean_area=means[:, 0], mean_e2=means[:, 1])
+    return np.concatenate([np.asarray(view.rows[verts, 3:CCOLS], np.float64), q, means], 1).astype(DTYPE)
 
 
 # -- the kernels ---------------------------------------------------------------------------------------

@@ -32,6 +32,8 @@ import time
 
 import numpy as np
 
+from .._costs import memoryless as ml
+from .._costs.qem import QEM
 from .._mesh.arrays import face_normals, keep_rows as _keep
 from .._kernels.batching import DTYPE
 from . import outcome
@@ -61,6 +63,11 @@ class _CopyRefresh:
 
     def __init__(self, model, models, vcopy):
         self._model, self._models, self._vcopy = model, models, vcopy
+        # memoryless QEM copies (the second phases of late runs): one pass over every copy's vertices, each
+        # with its copy's weights
+        self._weights = None
+        if all(isinstance(m, QEM) and m.memoryless and type(m).refresh is QEM.refresh for m in models):
+            self._weights = np.array([ml.weights(m) for m in models], np.float64).T
 
     def __getattr__(self, name):
         return getattr(self._model, name)
@@ -72,6 +79,8 @@ class _CopyRefresh:
     def _refresh(self, view, verts):
         verts = np.asarray(verts, np.int64)
         cp = np.take(self._vcopy, verts)
+        if self._weights is not None:
+            return ml.refresh_rows_each(self._weights[0].take(cp), self._weights[1].take(cp), view, verts)
         order, bounds = _grouped(cp, len(self._models))
         out = np.empty((len(verts), self._model.width), DTYPE)
         for c in np.flatnonzero(np.diff(bounds)):
