@@ -329,8 +329,8 @@ def test_distinct_ids_are_numpys_unique():
     from qemjax._partition.scatter import _distinct
 
     rng = np.random.default_rng(3)
-    at = np.full(5000, 7, np.int64)  # whatever an earlier part left there
-    for dtype in (np.int32, np.int64):
+    for dtype in (np.int32, np.int64):  # the file's index type: ids and the scratch array alike
+        at = np.full(5000, 7, dtype)  # whatever an earlier part left there
         for n in (0, 1, 5, 300, 6000):
             raw = rng.integers(0, rng.integers(1, 5000), n).astype(dtype)
             used, inverse = _distinct(raw, at)

@@ -6,7 +6,7 @@ twice or more (a histogram of centroid codes, refined where a bin overflows, `pl
 faces appended to its part's file, noting per vertex the first part that used it or that several did),
 then each part once (its vertices gathered, written as ``level0/part_NNNNN.npz``). What stays in memory
 across passes is per vertex: its packed cell (8 bytes), its part or 'shared' (4 bytes), when some
-vertices are unused its new number (4 bytes), and in the last pass a scratch index (8 bytes, in place of
+vertices are unused its new number (4 bytes), and in the last pass a scratch index (4 bytes, in place of
 the cell).
 """
 from __future__ import annotations
@@ -117,7 +117,7 @@ def _distinct(raw: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str) -> list:
     parts = []
-    at = np.empty(src.n_vertices, np.int64)
+    at = np.empty(src.n_vertices, index_type)  # a part's corners number fewer than the file's vertices
     for p in range(plan.parts):
         raw = np.fromfile(tmp / f"{p}.bin", index_type)
         remove(tmp / f"{p}.bin")
