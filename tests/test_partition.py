@@ -132,14 +132,28 @@ def test_target_exact_valid_closed_and_measured(mesh, in_process):
 def test_levels_before_the_last_leave_out_the_memoryless_last_stretch(in_process):
     from qemjax._partition.run import _level_kwargs
 
-    p = Partition()
-    assert _level_kwargs({}, p, last=False) == {"late_memoryless": 0}  # the default switches late
-    assert _level_kwargs({}, p, last=True) == {}
-    assert _level_kwargs({"method": "classic"}, p, last=False) == {"method": "classic"}  # it never switches
-    assert _level_kwargs({"late_memoryless": 3}, Partition(refit="last"), last=False) == \
-        {"late_memoryless": 0, "refit": 0}
+    p, off = Partition(), {"late_memoryless": 0, "volume_weight": 0}  # its volume term goes with it
+    assert _level_kwargs({}, p, last=False) == (off, off)  # the default switches late
+    assert _level_kwargs({"volume_weight": 0.1}, p, last=True) == ({"volume_weight": 0.1}, {})
+    assert _level_kwargs({"method": "classic"}, p, last=False) == ({"method": "classic"}, {})  # it never does
+    assert _level_kwargs({"preset": "classic"}, p, last=False)[1] == {}
+    assert _level_kwargs({"method": "qem", "preset": "default"}, p, last=False)[1] == off
+    assert _level_kwargs({"memoryless": True, "late_memoryless": 2}, p, last=False)[1] == {}  # memoryless all along
+    assert _level_kwargs({"schedule": None}, p, last=False)[1] == off
+    kw, changed = _level_kwargs({"method.late_memoryless": 3, "method.refit": 1}, Partition(refit="last"), last=False)
+    assert kw == changed == off | {"refit": 0}  # the dotted names would have won over the flat ones
     settings = in_process.stats["partition"]["settings_per_level"]
-    assert settings[:-1] == [{"late_memoryless": 0}] * (len(settings) - 1) and settings[-1] == {}
+    assert settings[:-1] == [off] * (len(settings) - 1) and settings[-1] == {}
+
+
+def test_a_volume_term_runs_partitioned():
+    """The default's volume term needs its memoryless stretch: the levels without the stretch drop it too
+    (as an in-core run that stays summed does) instead of refusing it."""
+    m = shapes.bumpy_sphere(4)
+    r = qemjax.simplify((np.asarray(m.vertices), np.asarray(m.faces)), ratio=0.05, volume_weight=0.1,
+                        partition=Partition(part_faces=1000, workers=1))
+    assert len(r.faces) == round(0.05 * len(m.faces)) and r.stats["partition"]["levels"] >= 2
+    assert r.stats["partition"]["settings_per_level"][0] == {"late_memoryless": 0, "volume_weight": 0}
 
 
 def test_quality_near_the_in_core_run(mesh, in_process):

@@ -82,29 +82,32 @@ def _locks(level_dir: Path, groups: list, borders: list) -> Path:
     return path
 
 
-def _level_kwargs(kwargs: dict, p: Partition, last: bool) -> dict:
-    """A level's method settings: the run's own at the last level. A level before it stops far above the
-    run's target, so it leaves out what only a run's end is for: the memoryless last stretch (a method's
-    ``late_memoryless`` would switch at K × the group's share of the level, where summed quadrics keep the
-    input's memory best and the last level starts again from the faces left) and, with ``refit="last"``,
-    the re-fit."""
-    if last:
-        return kwargs
-    out = dict(kwargs)
-    if p.refit == "last":
-        out["refit"] = 0
-    if _switches_late(kwargs):
-        out["late_memoryless"] = 0
-    return out
+def _level_kwargs(kwargs: dict, p: Partition, last: bool) -> tuple[dict, dict]:
+    """A level's method settings, and what they change from the run's: the run's own at the last level. A
+    level before it stops far above the run's target, so it leaves out what only a run's end is for: the
+    memoryless last stretch (a method's ``late_memoryless`` would switch at K × the group's share of the
+    level, where summed quadrics keep the input's memory best and the last level starts again from the
+    faces left; with it its volume term, as a run that stays summed drops it) and, with
+    ``refit="last"``, the re-fit."""
+    changed = {}
+    if not last:
+        if p.refit == "last":
+            changed["refit"] = 0
+        if _switches_late(kwargs):
+            changed |= {"late_memoryless": 0, "volume_weight": 0}
+    # a setting given by its dotted name too would be applied after the flat one: only the flat one stays
+    out = {k: v for k, v in kwargs.items() if not (k.startswith("method.") and k[7:] in changed)}
+    return out | changed, changed
 
 
 def _switches_late(kwargs: dict) -> bool:
     """Whether the method ``kwargs`` name (as `simplify` takes them) turns memoryless for its last stretch."""
     from .._pipeline import flat
 
-    settings = {k: v for k, v in kwargs.items() if k not in flat.KEYWORDS}
+    settings = {k: v for k, v in kwargs.items() if k not in flat.KEYWORDS or k == "preset"}
+    settings.pop("schedule", None)  # the scheduler's, not the method's (`stages.setup`)
     method = flat.apply(kwargs.get("method", "default"), kwargs.get("topology"), None, settings)[0]
-    return bool(getattr(method, "late_memoryless", 0))
+    return bool(getattr(method, "switches_late", False))
 
 
 def _bar(progress: bool, total: int, desc: str):
@@ -177,7 +180,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
                    final_faces=p.final_faces, refit=p.refit, share=p.share, target=[target_faces, ratio],
-                   kwargs=repr(sorted(kwargs.items())))
+                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last")
         _fresh(folder, key)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -206,7 +209,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 locks = "border"
             else:
                 locks = str(_locks(level_dir, groups, borders))
-            level_kw = _level_kwargs(kwargs, p, last)
+            level_kw, changed = _level_kwargs(kwargs, p, last)
             specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
                           out=str(level_dir / f"group_{k:05d}.npz")) for k, g in enumerate(groups)]
             cost = None
@@ -219,7 +222,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                                faces_out=int(faces.sum()), target=int(sum(g.target for g in groups)),
                                locked=int(sum(s["locked"] for s in stats)), seconds=time.perf_counter() - t_level,
                                cost=cost, stats=stats,
-                               settings={k: v for k, v in level_kw.items() if kwargs.get(k, object()) != v}))
+                               settings=changed))
             if last:
                 break
             borders = [pieces.borders(path) for path in paths]

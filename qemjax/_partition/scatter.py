@@ -117,10 +117,12 @@ def _distinct(raw: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str) -> list:
     parts = []
-    at = np.empty(src.n_vertices, index_type)  # a part's corners number fewer than the file's vertices
+    at = np.empty(src.n_vertices, index_type)  # holds a corner's place in its part
     for p in range(plan.parts):
         raw = np.fromfile(tmp / f"{p}.bin", index_type)
         remove(tmp / f"{p}.bin")
+        if len(raw) > np.iinfo(at.dtype).max:  # a part of more than 2^31 corners
+            at = at.astype(np.int64)
         used, inverse = _distinct(raw, at)
         gid = (used if new_id is None else new_id[used]).astype(np.int64)
         border = owner[used] == SHARED
