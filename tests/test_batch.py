@@ -151,6 +151,11 @@ def test_batchable_models():
     assert batched.batchable(QEM()) and batched.batchable(Regularized(QEM(), 0.1))
     assert batched.batchable(AreaTerm(QEM(), 0.5))
     assert not batched.batchable(ESQEM()) and not batched.batchable(AreaDifference())
+    # a refreshing model only as a late run's second phases, each copy with its own model, and only
+    # memoryless QEM rows (the batch rebuilds them for every copy in one pass)
+    assert not batched.batchable(QEM(memoryless=True))
+    assert batched.batchable(QEM(memoryless=True), own_refresh=True)
+    assert not batched.batchable(ESQEM(), own_refresh=True)
 
 
 def two_spheres():

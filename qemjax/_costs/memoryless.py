@@ -78,37 +78,35 @@ def weights(model) -> tuple[float, float]:
 
 def state_rows(model, P: np.ndarray, faces: FaceLists, verts: np.ndarray, means, history=None) -> np.ndarray:
     """(k, WIDTH) float32 state rows of ``verts``: the history quadrics (k,10) (None: the current ones, as
-    at the start), `current_quadrics` with the model's weights, then the two input means."""
-    verts = np.asarray(verts, np.int64)
-    power, boundary = weights(model)
-    q = current_quadrics(P, faces, verts, area_power=power, boundary_weight=boundary, mean_area=float(means[0]),
-                         mean_e2=float(means[1]))
-    hist = q[:, :10] if history is None else np.asarray(history, np.float64)
-    return np.concatenate([hist, q, np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))],
-                          1).astype(DTYPE)
+    at the start), `current_quadrics` with the model's weights, then the two input means ((2,), or (k, 2):
+    each vertex's)."""
+    return _rows(*weights(model), P, faces, verts, means, history)
 
 
 def refresh_rows(model, view, verts) -> np.ndarray:
     """`CostModel.refresh` of a memoryless QEM model: the state rows of ``verts`` with the current quadric
     and g rebuilt (the history quadric and the input means are kept)."""
-    verts = np.asarray(verts, np.int64)
-    if len(verts) == 0:
-        return np.zeros((0, WIDTH), DTYPE)
-    means = view.rows[verts[0], MCOLS[0]:MCOLS[1] + 1]
-    return state_rows(model, view.rows[:, :3], view.faces, verts, means, history=view.rows[verts, 3:CCOLS])
+    return refresh_rows_each(*weights(model), view, verts)
 
 
 def refresh_rows_each(powers, boundary_weights, view, verts) -> np.ndarray:
-    """`refresh_rows` for vertices of several runs side by side (a batch's copies), each with its own
-    weights (`weights` of its model: (k,) arrays) and the input means its row holds: one compiled pass for all
-    of them, the rows each run's own `refresh_rows` gives."""
+    """`refresh_rows` with the weights given (`weights` of a model, or (k,) arrays: each vertex's, for the
+    copies of a batch side by side, one compiled pass for all of them); each row keeps the input means it
+    holds (one run's rows all hold the same)."""
     verts = np.asarray(verts, np.int64)
     if len(verts) == 0:
         return np.zeros((0, WIDTH), DTYPE)
-    means = np.asarray(view.rows[verts, MCOLS[0]:MCOLS[1] + 1], np.float64)
-    q = current_quadrics(view.rows[:, :3], view.faces, verts, area_power=powers, boundary_weight=boundary_weights,
+    return _rows(powers, boundary_weights, view.rows[:, :3], view.faces, verts,
+                 view.rows[verts, MCOLS[0]:MCOLS[1] + 1], view.rows[verts, 3:CCOLS])
+
+
+def _rows(powers, boundary_weights, P, faces, verts, means, history) -> np.ndarray:
+    verts = np.asarray(verts, np.int64)
+    means = np.broadcast_to(np.asarray(means, np.float64), (len(verts), 2))
+    q = current_quadrics(P, faces, verts, area_power=powers, boundary_weight=boundary_weights,
                          mean_area=means[:, 0], mean_e2=means[:, 1])
-    return np.concatenate([np.asarray(view.rows[verts, 3:CCOLS], np.float64), q, means], 1).astype(DTYPE)
+    hist = q[:, :10] if history is None else np.asarray(history, np.float64)
+    return np.concatenate([hist, q, means], 1).astype(DTYPE)
 
 
 # -- the kernels ---------------------------------------------------------------------------------------

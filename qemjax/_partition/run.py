@@ -101,7 +101,9 @@ def _level_kwargs(kwargs: dict, p: Partition, last: bool) -> tuple[dict, dict]:
 
 
 def _switches_late(kwargs: dict) -> bool:
-    """Whether the method ``kwargs`` name (as `simplify` takes them) turns memoryless for its last stretch."""
+    """Whether the method ``kwargs`` name (as `simplify` takes them) turns memoryless for its last stretch.
+    Resolved by `flat.apply` alone, not `stages.setup` (which builds the model): the client imports neither
+    JAX nor numba; ``schedule`` is the one keyword `stages.setup` takes out before it."""
     from .._pipeline import flat
 
     settings = {k: v for k, v in kwargs.items() if k not in flat.KEYWORDS or k == "preset"}

@@ -52,22 +52,27 @@ def batchable(model, own_refresh: bool = False) -> bool:
     unless each copy's own model rebuilds that copy's rows (``own_refresh``: the second phases of late runs,
     `late.Second`, with `run`'s ``models``; a model that turns memoryless late batches its first phase as
     any other)."""
-    return (model.per_pair_params and (model.refresh is None or own_refresh) and model.rank_weights is None
+    return (model.per_pair_params and (model.refresh is None or (own_refresh and _rebuilds_rows(model)))
+            and model.rank_weights is None
             and getattr(model, "split_factor", None) is None)
 
 
+def _rebuilds_rows(model) -> bool:
+    """Whether ``model`` refreshes state as memoryless QEM does (`memoryless.refresh_rows`): rows a batch
+    rebuilds for all its copies in one pass, each vertex with its own copy's weights (`_CopyRefresh`)."""
+    return isinstance(model, QEM) and model.memoryless and type(model).refresh is QEM.refresh
+
+
 class _CopyRefresh:
-    """A batch's model whose ``refresh`` rebuilds each copy's rows with that copy's own model (its area
-    power, boundary weight and the means its rows hold): the rows a copy gets alone. Everything else is
-    ``model``'s."""
+    """A batch's model whose ``refresh`` rebuilds each copy's rows with that copy's own model's weights (its
+    area power and boundary weight; the means its rows hold): the rows a copy gets alone, for every copy in
+    one pass. Everything else is ``model``'s."""
 
     def __init__(self, model, models, vcopy):
-        self._model, self._models, self._vcopy = model, models, vcopy
-        # memoryless QEM copies (the second phases of late runs): one pass over every copy's vertices, each
-        # with its copy's weights
-        self._weights = None
-        if all(isinstance(m, QEM) and m.memoryless and type(m).refresh is QEM.refresh for m in models):
-            self._weights = np.array([ml.weights(m) for m in models], np.float64).T
+        if not all(_rebuilds_rows(m) for m in models):
+            raise ValueError("a batch refreshes the rows of memoryless QEM models only (`batchable`)")
+        self._model, self._vcopy = model, vcopy
+        self._weights = np.array([ml.weights(m) for m in models], np.float64).T  # (2, copies)
 
     def __getattr__(self, name):
         return getattr(self._model, name)
@@ -77,16 +82,8 @@ class _CopyRefresh:
         return self._refresh
 
     def _refresh(self, view, verts):
-        verts = np.asarray(verts, np.int64)
-        cp = np.take(self._vcopy, verts)
-        if self._weights is not None:
-            return ml.refresh_rows_each(self._weights[0].take(cp), self._weights[1].take(cp), view, verts)
-        order, bounds = _grouped(cp, len(self._models))
-        out = np.empty((len(verts), self._model.width), DTYPE)
-        for c in np.flatnonzero(np.diff(bounds)):
-            sel = order[bounds[c]:bounds[c + 1]]
-            out[sel] = self._models[c].refresh(view, verts[sel])
-        return out
+        cp = np.take(self._vcopy, np.asarray(verts, np.int64))
+        return ml.refresh_rows_each(self._weights[0].take(cp), self._weights[1].take(cp), view, verts)
 
 
 class _Batch:
