@@ -2,7 +2,8 @@
 of ``V`` (k,3) float64, ``F`` (m,3) int32 into ``V`` and ``gid`` (k,) int64, the global id of each vertex
 another piece may share (-1 for a vertex no other piece can hold: a new or interior one). Level-0 parts also
 carry ``border`` (k,) bool (shared with another part); a group's output carries ``borders``, its sorted
-global ids, the only ones the next level must know."""
+global ids, the only ones the next level must know, and (a level before the last, when its method carries
+them) ``Q`` (k,10) float64, each vertex's carried quadric (`carry`)."""
 from __future__ import annotations
 
 import json
@@ -39,21 +40,35 @@ def borders(path) -> np.ndarray:
         return np.unique(gid[gid >= 0])
 
 
-def stitch(paths: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def sum_rows(Q: np.ndarray, to: np.ndarray, n: int) -> np.ndarray:
+    """(n, Q's columns): the rows of Q summed by ``to`` (in row order: the same bits on any machine)."""
+    return np.stack([np.bincount(to, weights=Q[:, j], minlength=n) for j in range(Q.shape[1])], 1)
+
+
+def quadrics(path) -> np.ndarray | None:
+    """A piece's carried quadrics ``Q``, or None when it has none."""
+    with np.load(path) as z:
+        return z["Q"] if "Q" in z.files else None
+
+
+def stitch(paths: list, carried: bool = False) -> tuple:
     """The pieces at ``paths`` as one mesh: a global id held by several pieces becomes one vertex (its first
     holder's: locked, every holder has the same bits). Returns (V, F, gid, border) with border False where
-    the pieces carry none."""
-    Vs, Fs, gids, bs, base = [], [], [], [], 0
+    the pieces carry none; with ``carried``, also Q (k,10): the pieces' carried quadrics, summed over the
+    holders of a shared vertex (each holds the planes of its own side), or None when a piece has none."""
+    Vs, Fs, gids, bs, Qs, base = [], [], [], [], [], 0
     for p in paths:
         V, F, gid, border = load(p)
         Vs.append(V)
         Fs.append(F + base)
         gids.append(gid)
         bs.append(np.zeros(len(V), bool) if border is None else border)
+        Qs.append(quadrics(p) if carried else None)
         base += len(V)
     V, F, gid, border = np.concatenate(Vs), np.concatenate(Fs), np.concatenate(gids), np.concatenate(bs)
+    Q = np.concatenate(Qs) if carried and all(q is not None for q in Qs) else None
     if len(paths) == 1:
-        return V, F, gid, border
+        return (V, F, gid, border) + ((Q,) if carried else ())
     held = np.flatnonzero(gid >= 0)
     _, first, inverse = np.unique(gid[held], return_index=True, return_inverse=True)
     to = np.arange(len(V))
@@ -62,4 +77,9 @@ def stitch(paths: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     if not np.array_equal(V[to[held]], V[held]):
         raise RuntimeError("partition: a shared vertex moved in one of its pieces (a lock was not kept)")
     new = np.cumsum(keep) - 1
-    return V[keep], new[to][F], gid[keep], border[keep]
+    out = (V[keep], new[to][F], gid[keep], border[keep])
+    if not carried:
+        return out
+    if Q is not None:  # in piece order: the same sum for any number of workers
+        Q = sum_rows(Q, new[to], int(keep.sum()))
+    return out + (Q,)

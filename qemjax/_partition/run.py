@@ -182,7 +182,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
                    final_faces=p.final_faces, refit=p.refit, share=p.share, target=[target_faces, ratio],
-                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last")
+                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried")
         _fresh(folder, key)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -213,7 +213,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 locks = str(_locks(level_dir, groups, borders))
             level_kw, changed = _level_kwargs(kwargs, p, last)
             specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
-                          out=str(level_dir / f"group_{k:05d}.npz")) for k, g in enumerate(groups)]
+                          out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last)
+                     for k, g in enumerate(groups)]
             cost = None
             if p.share == "cost" and not last and len(groups) > 1:
                 cost, specs = _common_cost(runner, specs, p, progress, f"level {len(levels) + 1} pilots")
@@ -287,7 +288,8 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                 locked_share=locked_share, scatter_s=t_scatter, measure_s=t_measure,
                 peak_rss_workers=max((s["peak_rss"] for s in all_stats), default=0), peak_rss_client=task.peak_rss(),
                 reused=sum(1 for s in all_stats if s.get("reused")), scratch=None if folder is None else str(folder),
-                format=manifest.get("format"), welded=manifest.get("welded"))
+                format=manifest.get("format"), welded=manifest.get("welded"),
+                carried=all(s.get("carried", False) for s in all_stats))
     stats = dict(faces_in=n_faces, faces_out=int(len(F)), vertices_in=int(manifest["n_vertices"]),
                  vertices_out=int(len(V)), target_faces=target, max_error_limit=None, rounds=0,
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),

@@ -51,15 +51,19 @@ def _gids_out(res, V, gid, locked) -> np.ndarray:
 def run_group(spec: dict) -> dict:
     """Simplify the pieces ``spec["inputs"]`` stitched into one mesh to ``spec["target"]`` faces, locking the
     vertices whose global ids are in ``spec["locks"]`` (a sorted ``.npy`` of this level) or, on the first
-    level, those marked ``border``; write ``spec["out"]`` and its stats beside it (``.json``)."""
+    level, those marked ``border``, starting from the quadrics the pieces carry (`carry`); write
+    ``spec["out"]`` (with its vertices' quadrics when ``spec["carry_out"]``: a level before the last) and its
+    stats beside it (``.json``)."""
     out = Path(spec["out"])
     done = _done(out)
     if done is not None:
         return done
     t0 = time.perf_counter()
     from .._pipeline.api import simplify  # JAX and numba: only in the worker
+    from .._pipeline.stages import SEED
+    from .carry import Carry
 
-    V, F, gid, border = pieces.stitch(spec["inputs"])
+    V, F, gid, border, Q = pieces.stitch(spec["inputs"], carried=True)
     if spec["locks"] == "border":
         locked = border
     elif spec["locks"] is None:
@@ -71,15 +75,19 @@ def run_group(spec: dict) -> dict:
     kw = dict(spec["kwargs"])
     if locked.any():
         kw["locked"] = locked
+    carry = kw[SEED] = Carry(V, Q)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = simplify((V, F), target_faces=int(spec["target"]), measure=False, progress=False,
                        attributes=None, **kw)
     g = _gids_out(res, V, gid, locked)
     held = np.unique(g[g >= 0])
-    pieces.save(out, V=res.vertices, F=res.faces.astype(np.int32), gid=g, borders=held)
+    Q = carry.export(res) if spec.get("carry_out") else None
+    pieces.save(out, V=res.vertices, F=res.faces.astype(np.int32), gid=g, borders=held,
+                **({} if Q is None else dict(Q=Q)))
     stats = dict(faces_in=int(len(F)), faces_out=int(len(res.faces)), target=int(spec["target"]),
                  locked=int(locked.sum()), vertices_in=int(len(V)), stop_reason=res.stop_reason,
+                 carried=carry.start is not None,
                  max_error=float(res.max_error),
                  seconds=time.perf_counter() - t0, compile_s=float(res.stats.get("compile_s") or 0.0),
                  peak_rss=peak_rss(), pid=os.getpid(),

@@ -126,6 +126,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     c0, s0 = _compilation.snapshot()
     settings = dict(settings)
     locks = _locks.pop_settings(settings)
+    seed = settings.pop(stages.SEED, None)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings, measure)
     bound = _bound.check(max_distance, max_distance_rel)
     # bad targets fail before the mesh is read
@@ -133,6 +134,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     geo = stages.geometry(mesh, setup, stacklevel=3)
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks,
                      bounded=bound is not None)
+    if seed is not None:
+        job = job._replace(S=seed(job))
     if bound is None:
         return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
     _bound.supported(job)

@@ -89,6 +89,11 @@ def _resolve_target(m: int, target_faces, ratio, max_error, bounded: bool = Fals
     return target, err
 
 
+# a setting only a partitioned run's tasks pass (`_partition.carry`): a callable, Job -> the vertex state the
+# run starts from in place of the model's own (the quadrics carried from the level before)
+SEED = "_seed"
+
+
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """A run's settings, checked and resolved before the mesh is read (`setup`): the method object and
@@ -246,15 +251,13 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         warnings.warn(f"target of {target} faces is not below the mesh's {m} faces: returning it unchanged",
                       stacklevel=stacklevel)
         target = m
-    area_mean, e2_mean, ext = geo.face_means
-    r2 = (ext / geo.frame.scale) ** 2  # from the clean-up's unit extent to the frame's
     E, ecount, be, bf = geo.edges
     key = None if states is None or attrs is not None else (
         id(geo), model.state_key(), None if feature_edges is None else feature_edges.tobytes())
     S = None if key is None else states.get(key)
     if S is None:
-        S = model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges,
-                                              (area_mean * r2, e2_mean * r2), corner_values))
+        S = model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges, frame_means(geo),
+                                              corner_values))
         if key is not None:
             states[key] = S
     shape = float(np.float32(getattr(method_obj, "quality_threshold", 0.0)))  # as the rounds compare it
@@ -272,6 +275,14 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     if lk is not None:
         report.update(lk.stats)
     return Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)
+
+
+def frame_means(geo: Geometry) -> tuple:
+    """(mean face area, mean squared edge length) of the cleaned mesh in the run's frame (what the models
+    scale their weights by: `_costs.MeshInput`)."""
+    area_mean, e2_mean, ext = geo.face_means
+    r2 = (ext / geo.frame.scale) ** 2  # from the clean-up's unit extent to the frame's
+    return area_mean * r2, e2_mean * r2
 
 
 def _late_off(method_obj, attrs, feature_edges, scheduler: str) -> str | None:

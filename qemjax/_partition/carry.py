@@ -1,0 +1,125 @@
+"""Quadrics carried from level to level of a partitioned run.
+
+An in-core run with summed quadrics prices each contraction with the planes of every input face merged into
+its two vertices: a vertex that has absorbed a sharp feature remembers it. Each group of a partitioned run is
+a run of its own, and a run builds its quadrics from the faces it reads; without carrying, every level after
+the first would start from the planes of the coarser mesh the level before left (a spike that three long
+faces hold, for one, is cheap to remove there and costly in the input). So a group's run starts from the
+quadrics its pieces carry (`Carry.__call__`, the pipeline's seed), summed where pieces share a border vertex
+(`pieces.stitch`), and writes with its output the quadric of each output vertex (`Carry.export`): the sum
+of those of the vertices the run merged into it, taken from the run's contractions in float64, each moved
+to the output vertex's position. That is the quadric the in-core run would hold there, to the rounding.
+
+Units: a carried quadric is in mesh units, centred on its vertex, its face planes weighted by area^p (mesh
+units; p the model's area power, 0 when it does not weight by area) instead of by (area / the run's mean
+face area)^p; a run divides by its own mean, as it does for the planes it builds, so the ranking within a
+run and the balance of the late memoryless stretch against the summed quadric are an in-core run's. The
+boundary planes are scaled by the mean squared edge length instead; they travel with the same factor
+(both are squared lengths: a close approximation).
+
+Level 1 starts from the parts' own quadrics without the planes along edges whose two ends are locked: those
+edges are cuts between parts, not boundaries of the input. (An input boundary that runs along a cut loses
+its planes there; its vertices are locked at that level, and in the next level the boundary is the group's
+own again.)
+
+Only the summed quadrics of `QEM` (the default, ``"classic"``) are carried; any other model's state is more
+than one quadric and its runs start from their own, as before.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _costs
+from .._costs.qem import QEM
+from .._kernels import quadrics
+from .._pipeline import stages
+from . import pieces
+
+
+def carries(model) -> bool:
+    """Whether a run of ``model`` starts from carried quadrics: QEM's summed ones."""
+    return type(model) is QEM and not model.memoryless
+
+
+def _scale(job) -> tuple[float, float]:
+    """(mesh units per frame unit, the run's (mean face area in mesh units)^p): a run's quadric times these
+    is a carried one (`to_mesh`)."""
+    geo, model = job.geo, job.model
+    s = float(geo.frame.scale)
+    p = float(model.area_power) if model.area_weighted else 0.0
+    area = float(stages.frame_means(geo)[0]) * s * s
+    return s, area ** p
+
+
+def to_mesh(Q: np.ndarray, s: float, k: float) -> np.ndarray:
+    """(n,10) quadrics of a run (frame units, weights relative to its mean face area) -> carried ones."""
+    Q = np.asarray(Q, np.float64) * k
+    Q[:, 6:9] *= s
+    Q[:, 9] *= s * s
+    return Q
+
+
+def to_run(Q: np.ndarray, s: float, k: float) -> np.ndarray:
+    """`to_mesh`'s inverse."""
+    Q = np.asarray(Q, np.float64) / k
+    Q[:, 6:9] /= s
+    Q[:, 9] /= s * s
+    return Q
+
+
+def translate(Q: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """(n,10) quadrics re-centred ``delta`` (n,3) away, float64 (`_kernels.quadrics.translate`'s algebra)."""
+    return np.stack(quadrics.translate_c(list(Q.T), list(delta.T)), 1)
+
+
+class Carry:
+    """One group's carried quadrics: ``V`` (n,3), ``Q`` (n,10) carried quadrics of the group's vertices (its
+    pieces', stitched) or None (level 1: the run's own, without the cuts' planes). Called as the pipeline's
+    seed (`stages.SEED`), it gives the run's starting state and keeps what `export` needs."""
+
+    def __init__(self, V: np.ndarray, Q: np.ndarray | None):
+        self.V, self.Q = V, Q
+        self.start = None  # carried quadrics of the cleaned input's vertices, once the run has started
+
+    def __call__(self, job) -> np.ndarray:
+        if not carries(job.model):
+            return job.S
+        lk = job.locks
+        clean = job.geo if lk is None else lk.geo  # the run's geometry is renumbered when it has locks
+        s, k = _scale(job)
+        if self.Q is None:
+            S = job.S
+            if lk is not None:  # the model's own quadrics without the planes along the cuts
+                locked = lk.locked[lk.perm]
+                E, ecount, be, bf = job.geo.edges
+                keep = ~(locked[be[:, 0]] & locked[be[:, 1]])
+                S = job.model.init_state(_costs.MeshInput(job.geo.Vn, job.geo.F, (be[keep], bf[keep]), None,
+                                                          stages.frame_means(job.geo)))
+            self.start = to_mesh(S if lk is None else S[lk.inv], s, k)
+            return S
+        vm = clean.vertex_map
+        ok = np.flatnonzero(vm >= 0)  # a welded vertex's quadric joins the one it was welded into
+        Qc = translate(self.Q[ok], clean.V[vm[ok]] - self.V[ok])
+        self.start = pieces.sum_rows(Qc, vm[ok], len(clean.V))
+        S = to_run(self.start, s, k).astype(job.S.dtype)
+        return S if lk is None else S[lk.perm]
+
+    def export(self, res) -> np.ndarray | None:
+        """(k,10) carried quadrics of ``res``'s output vertices, or None when the run did not carry."""
+        if self.start is None:
+            return None
+        n = len(res.input_vertices)
+        root = np.arange(n)
+        pairs = res.history.pairs
+        root[pairs[:, 1]] = pairs[:, 0]  # a vertex is removed once, into the vertex its pair keeps
+        while True:  # follow each chain to the vertex that survived
+            nxt = root[root]
+            if np.array_equal(nxt, root):
+                break
+            root = nxt
+        slot = np.full(n, -1)
+        slot[res.source_vertices] = np.arange(len(res.source_vertices))
+        j = slot[root]
+        ok = np.flatnonzero(j >= 0)  # vertices of dropped faces (coincident, vanishing parts) carry nowhere
+        Q = translate(self.start[ok], res.vertices[j[ok]] - res.input_vertices[ok])
+        return pieces.sum_rows(Q, j[ok], len(res.source_vertices))
