@@ -29,14 +29,53 @@ def test_unit_changes_invert_and_translation_is_exact_in_float64():
     Q = rng.normal(size=(50, 10))
     assert np.allclose(to_run(to_mesh(Q, 3.5, 0.02), 3.5, 0.02), Q, rtol=1e-14, atol=0)
     # a quadric's value at x, centred at p: the same after re-centring at p + d and evaluating at x - d
-    p, d, u = rng.normal(size=(50, 3)), rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
-
-    def value(q, x):
-        A = np.stack([q[:, [0, 1, 2]], q[:, [1, 3, 4]], q[:, [2, 4, 5]]], 1)
-        return np.einsum("ni,nij,nj->n", x, A, x) + 2 * np.einsum("ni,ni->n", q[:, 6:9], x) + q[:, 9]
-
+    d, u = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     assert np.allclose(value(translate(Q, d), u - d), value(Q, u), rtol=1e-12, atol=1e-12)
-    del p
+
+
+def value(q, x):
+    """Quadrics q (n,10) at offsets x (n,3) from their centres."""
+    A = np.stack([q[:, [0, 1, 2]], q[:, [1, 3, 4]], q[:, [2, 4, 5]]], 1)
+    return np.einsum("ni,nij,nj->n", x, A, x) + 2 * np.einsum("ni,ni->n", q[:, 6:9], x) + q[:, 9]
+
+
+@pytest.mark.parametrize("locked", [False, True])
+def test_exported_quadrics_are_the_input_planes_merged_into_each_vertex(locked):
+    """The default (face planes weighted by area^0.6, the re-fit moving the vertices after the run), on a
+    mesh far from the origin and not of unit size, carried in a unit of its own: each output vertex's carried
+    quadric, at points around it, is the float64 sum of w·(n·(x − p))² over the input faces of every input
+    vertex merged into it (w = (area in the unit²)^0.6), as an in-core run sums them."""
+    from qemjax._mesh.topology import contraction_roots
+
+    V, F = bumpy(4)
+    V = V * 7.3 + [40.0, -3.0, 12.0]
+    unit = 9.0
+    kw = {"locked": np.abs(V[:, 2] - 12.0) < 0.3} if locked else {}
+    carry = Carry(V, None, unit)
+    res = qemjax.simplify((V, F), ratio=0.1, measure=False, **kw, **{SEED: carry})
+    Q = carry.export(res)
+    assert np.any(res.vertices[np.isin(res.source_vertices, res.history.pairs[:, 0])]
+                  != V[res.source_vertices[np.isin(res.source_vertices, res.history.pairs[:, 0])]])
+    # the reference, in the carried unit
+    P = V / unit
+    e1, e2 = P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]
+    cr = np.cross(e1, e2)
+    area = 0.5 * np.linalg.norm(cr, axis=1)
+    n = cr / (2 * area)[:, None]
+    w = area ** 0.6
+    root = contraction_roots(res.history.pairs, len(V))
+    slot = np.full(len(V), -1)
+    slot[res.source_vertices] = np.arange(len(res.source_vertices))
+    rng = np.random.default_rng(2)
+    X = res.vertices / unit + rng.normal(scale=0.02, size=(len(res.vertices), 3))  # a point around each
+    want = np.zeros(len(X))
+    for c in range(3):  # each face's plane at each of its corners' output vertices
+        j = slot[root[F[:, c]]]
+        ok = j >= 0
+        want += np.bincount(j[ok], weights=w[ok] * np.einsum("ij,ij->i", n[ok], X[j[ok]] - P[F[ok, 0]]) ** 2,
+                            minlength=len(X))
+    got = value(Q, X - res.vertices / unit)
+    assert np.allclose(got, want, rtol=1e-3, atol=1e-6 * want.max())
 
 
 @pytest.mark.parametrize("locked", [False, True])
@@ -59,19 +98,22 @@ def test_exported_quadrics_are_the_ones_the_run_summed(locked):
     assert np.all(np.linalg.eigvalsh(np.stack([Q[:, [0, 1, 2]], Q[:, [1, 3, 4]], Q[:, [2, 4, 5]]], 1)) > -1e-9)
 
 
-def test_a_run_seeded_with_its_own_quadrics_starts_where_it_would():
-    """The default's quadrics, carried out of a run that contracted nothing yet and seeded back: the state
-    the scheduler starts from is the model's own, to float32 rounding."""
+@pytest.mark.parametrize("locked", [False, True])
+def test_a_run_seeded_with_its_own_quadrics_starts_where_it_would(locked):
+    """The default's starting quadrics, carried out (in a unit of their own) and seeded into a run of the same
+    mesh: the state the scheduler starts from is the model's own, to float32 rounding, in the run's
+    numbering (locked vertices first)."""
     V, F = bumpy(4)
-    first = Carry(V, None)
-    qemjax.simplify((V, F), ratio=0.5, measure=False, **{SEED: first})
+    kw = {"locked": V[:, 0] > 0.9} if locked else {}
+    first = Carry(V, None, 3.0)
+    qemjax.simplify((V, F), ratio=0.5, measure=False, **kw, **{SEED: first})
     seen = {}
 
     def seed(job):
-        seen["own"], seen["seeded"] = job.S, Carry(V, first.start)(job)
+        seen["own"], seen["seeded"] = job.S, Carry(V, first.start, 3.0)(job)
         return seen["seeded"]
 
-    res = qemjax.simplify((V, F), ratio=0.1, measure=False, **{SEED: seed})
+    res = qemjax.simplify((V, F), ratio=0.1, measure=False, **kw, **{SEED: seed})
     own = np.asarray(seen["own"], np.float64)
     assert seen["seeded"].dtype == seen["own"].dtype and len(res.faces) == int(round(0.1 * len(F)))
     assert np.allclose(seen["seeded"], own, rtol=1e-6, atol=1e-6 * np.abs(own).max())

@@ -10,17 +10,19 @@ quadrics its pieces carry (`Carry.__call__`, the pipeline's seed), summed where 
 of those of the vertices the run merged into it, taken from the run's contractions in float64, each moved
 to the output vertex's position. That is the quadric the in-core run would hold there, to the rounding.
 
-Units: a carried quadric is in mesh units, centred on its vertex, its face planes weighted by area^p (mesh
-units; p the model's area power, 0 when it does not weight by area) instead of by (area / the run's mean
-face area)^p; a run divides by its own mean, as it does for the planes it builds, so the ranking within a
-run and the balance of the late memoryless stretch against the summed quadric are an in-core run's. The
-boundary planes are scaled by the mean squared edge length instead; they travel with the same factor
-(both are squared lengths: a close approximation).
+Units: a carried quadric is centred on its vertex, in units of the whole input's largest extent (``unit``,
+the same for every group, so that the values stay near 1 at any scale the in-core path accepts), its face
+planes weighted by area^p (in those units; p the model's area power, 0 when it does not weight by area)
+instead of by (area / the run's mean face area)^p. A run divides by its own mean, as it does for the planes
+it builds, so the ranking within a run and the balance of the late memoryless stretch against the summed
+quadric are an in-core run's. The boundary planes are scaled by the mean squared edge length instead; they
+travel with the same factor (both are squared lengths: a close approximation).
 
 Level 1 starts from the parts' own quadrics without the planes along edges whose two ends are locked: those
-edges are cuts between parts, not boundaries of the input. (An input boundary that runs along a cut loses
-its planes there; its vertices are locked at that level, and in the next level the boundary is the group's
-own again.)
+edges are cuts between parts, not boundaries of the input. (An edge of the input's own boundary whose two
+ends both lie on cuts loses its boundary planes with them, for the rest of the run: the later levels start
+from the carried quadrics alone. Where a boundary crosses a cut, that is one edge or none; where it runs
+along one, a stretch of them.)
 
 Only the summed quadrics of `QEM` (the default, ``"classic"``) are carried; any other model's state is more
 than one quadric and its runs start from their own, as before.
@@ -32,6 +34,7 @@ import numpy as np
 from .. import _costs
 from .._costs.qem import QEM
 from .._kernels import quadrics
+from .._mesh import topology as topo
 from .._pipeline import stages
 from . import pieces
 
@@ -41,18 +44,19 @@ def carries(model) -> bool:
     return type(model) is QEM and not model.memoryless
 
 
-def _scale(job) -> tuple[float, float]:
-    """(mesh units per frame unit, the run's (mean face area in mesh units)^p): a run's quadric times these
-    is a carried one (`to_mesh`)."""
+def _scale(job, unit: float) -> tuple[float, float]:
+    """(carried units per frame unit, the run's (mean face area in carried units)^p): a run's quadric times
+    these is a carried one (`to_mesh`)."""
     geo, model = job.geo, job.model
-    s = float(geo.frame.scale)
+    s = float(geo.frame.scale) / unit
     p = float(model.area_power) if model.area_weighted else 0.0
     area = float(stages.frame_means(geo)[0]) * s * s
     return s, area ** p
 
 
 def to_mesh(Q: np.ndarray, s: float, k: float) -> np.ndarray:
-    """(n,10) quadrics of a run (frame units, weights relative to its mean face area) -> carried ones."""
+    """(n,10) quadrics of a run (frame units, weights relative to its mean face area) -> carried ones (units
+    of ``s`` per frame unit, weights area^p)."""
     Q = np.asarray(Q, np.float64) * k
     Q[:, 6:9] *= s
     Q[:, 9] *= s * s
@@ -73,12 +77,13 @@ def translate(Q: np.ndarray, delta: np.ndarray) -> np.ndarray:
 
 
 class Carry:
-    """One group's carried quadrics: ``V`` (n,3), ``Q`` (n,10) carried quadrics of the group's vertices (its
-    pieces', stitched) or None (level 1: the run's own, without the cuts' planes). Called as the pipeline's
-    seed (`stages.SEED`), it gives the run's starting state and keeps what `export` needs."""
+    """One group's carried quadrics: ``V`` (n,3) in mesh units, ``Q`` (n,10) carried quadrics of the group's
+    vertices (its pieces', stitched) or None (level 1: the run's own, without the cuts' planes), ``unit``
+    the carried units' length in mesh units (the input's largest extent). Called as the pipeline's seed
+    (`stages.SEED`), it gives the run's starting state and keeps what `export` needs."""
 
-    def __init__(self, V: np.ndarray, Q: np.ndarray | None):
-        self.V, self.Q = V, Q
+    def __init__(self, V: np.ndarray, Q: np.ndarray | None, unit: float = 1.0):
+        self.V, self.Q, self.unit = V, Q, float(unit)
         self.start = None  # carried quadrics of the cleaned input's vertices, once the run has started
 
     def __call__(self, job) -> np.ndarray:
@@ -86,7 +91,7 @@ class Carry:
             return job.S
         lk = job.locks
         clean = job.geo if lk is None else lk.geo  # the run's geometry is renumbered when it has locks
-        s, k = _scale(job)
+        s, k = _scale(job, self.unit)
         if self.Q is None:
             S = job.S
             if lk is not None:  # the model's own quadrics without the planes along the cuts
@@ -99,7 +104,7 @@ class Carry:
             return S
         vm = clean.vertex_map
         ok = np.flatnonzero(vm >= 0)  # a welded vertex's quadric joins the one it was welded into
-        Qc = translate(self.Q[ok], clean.V[vm[ok]] - self.V[ok])
+        Qc = translate(self.Q[ok], (clean.V[vm[ok]] - self.V[ok]) / self.unit)
         self.start = pieces.sum_rows(Qc, vm[ok], len(clean.V))
         S = to_run(self.start, s, k).astype(job.S.dtype)
         return S if lk is None else S[lk.perm]
@@ -109,17 +114,10 @@ class Carry:
         if self.start is None:
             return None
         n = len(res.input_vertices)
-        root = np.arange(n)
-        pairs = res.history.pairs
-        root[pairs[:, 1]] = pairs[:, 0]  # a vertex is removed once, into the vertex its pair keeps
-        while True:  # follow each chain to the vertex that survived
-            nxt = root[root]
-            if np.array_equal(nxt, root):
-                break
-            root = nxt
+        root = topo.contraction_roots(res.history.pairs, n)  # the vertex each one was merged into
         slot = np.full(n, -1)
         slot[res.source_vertices] = np.arange(len(res.source_vertices))
         j = slot[root]
         ok = np.flatnonzero(j >= 0)  # vertices of dropped faces (coincident, vanishing parts) carry nowhere
-        Q = translate(self.start[ok], res.vertices[j[ok]] - res.input_vertices[ok])
+        Q = translate(self.start[ok], (res.vertices[j[ok]] - res.input_vertices[ok]) / self.unit)
         return pieces.sum_rows(Q, j[ok], len(res.source_vertices))

@@ -182,7 +182,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
                    final_faces=p.final_faces, refit=p.refit, share=p.share, target=[target_faces, ratio],
-                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried")
+                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent")
         _fresh(folder, key)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -196,6 +196,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
         target = min(target, n_faces)
         paths = [str(folder / part["file"]) for part in manifest["parts"]]
+        unit = float(np.max(np.subtract(manifest["bbox"][1], manifest["bbox"][0]))) or 1.0  # `carry`'s unit
         faces = np.array([part["faces"] for part in manifest["parts"]], np.int64)
         borders = None
         levels, first = [], True
@@ -213,7 +214,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 locks = str(_locks(level_dir, groups, borders))
             level_kw, changed = _level_kwargs(kwargs, p, last)
             specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
-                          out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last)
+                          out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit)
                      for k, g in enumerate(groups)]
             cost = None
             if p.share == "cost" and not last and len(groups) > 1:

@@ -75,7 +75,7 @@ def run_group(spec: dict) -> dict:
     kw = dict(spec["kwargs"])
     if locked.any():
         kw["locked"] = locked
-    carry = kw[SEED] = Carry(V, Q)
+    carry = kw[SEED] = Carry(V, Q, spec["unit"])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = simplify((V, F), target_faces=int(spec["target"]), measure=False, progress=False,
