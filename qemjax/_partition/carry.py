@@ -82,13 +82,22 @@ class Carry:
     the carried units' length in mesh units (the input's largest extent). Called as the pipeline's seed
     (`stages.SEED`), it gives the run's starting state and keeps what `export` needs."""
 
-    def __init__(self, V: np.ndarray, Q: np.ndarray | None, unit: float = 1.0):
-        self.V, self.Q, self.unit = V, Q, float(unit)
+    def __init__(self, V: np.ndarray, Q: np.ndarray | None, unit: float = 1.0, exports: bool = True):
+        self.V, self.Q, self.unit, self.exports = V, Q, float(unit), exports
         self.start = None  # carried quadrics of the cleaned input's vertices, once the run has started
+        self.carried = False
 
     def __call__(self, job) -> np.ndarray:
+        S = self._seed(job)
+        self.Q = None  # held no longer than needed: a last level's group is the run's largest
+        if not self.exports:
+            self.start = None
+        return S
+
+    def _seed(self, job) -> np.ndarray:
         if not carries(job.model):
             return job.S
+        self.carried = True
         lk = job.locks
         clean = job.geo if lk is None else lk.geo  # the run's geometry is renumbered when it has locks
         s, k = _scale(job, self.unit)
@@ -110,7 +119,8 @@ class Carry:
         return S if lk is None else S[lk.perm]
 
     def export(self, res) -> np.ndarray | None:
-        """(k,10) carried quadrics of ``res``'s output vertices, or None when the run did not carry."""
+        """(k,10) carried quadrics of ``res``'s output vertices, or None when the run did not carry (or was
+        made with ``exports=False``)."""
         if self.start is None:
             return None
         n = len(res.input_vertices)

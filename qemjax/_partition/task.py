@@ -75,19 +75,20 @@ def run_group(spec: dict) -> dict:
     kw = dict(spec["kwargs"])
     if locked.any():
         kw["locked"] = locked
-    carry = kw[SEED] = Carry(V, Q, spec["unit"])
+    carry = kw[SEED] = Carry(V, Q, spec["unit"], exports=bool(spec.get("carry_out")))
+    Q = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = simplify((V, F), target_faces=int(spec["target"]), measure=False, progress=False,
                        attributes=None, **kw)
     g = _gids_out(res, V, gid, locked)
     held = np.unique(g[g >= 0])
-    Q = carry.export(res) if spec.get("carry_out") else None
+    Q = carry.export(res)
     pieces.save(out, V=res.vertices, F=res.faces.astype(np.int32), gid=g, borders=held,
                 **({} if Q is None else dict(Q=Q)))
     stats = dict(faces_in=int(len(F)), faces_out=int(len(res.faces)), target=int(spec["target"]),
                  locked=int(locked.sum()), vertices_in=int(len(V)), stop_reason=res.stop_reason,
-                 carried=carry.start is not None,
+                 carried=carry.carried,
                  max_error=float(res.max_error),
                  seconds=time.perf_counter() - t0, compile_s=float(res.stats.get("compile_s") or 0.0),
                  peak_rss=peak_rss(), pid=os.getpid(),
