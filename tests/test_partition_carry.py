@@ -109,8 +109,8 @@ def test_a_run_seeded_with_its_own_quadrics_starts_where_it_would(locked):
     qemjax.simplify((V, F), ratio=0.5, measure=False, **kw, **{SEED: first})
     seen = {}
 
-    def seed(job):
-        seen["own"], seen["seeded"] = job.S, Carry(V, first.start, 3.0)(job)
+    def seed(job, start):
+        seen["own"], seen["seeded"] = job.model.init_state(start), Carry(V, first.start, 3.0)(job, start)
         return seen["seeded"]
 
     res = qemjax.simplify((V, F), ratio=0.1, measure=False, **kw, **{SEED: seed})

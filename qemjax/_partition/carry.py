@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _costs
 from .._costs.qem import QEM
+from .._kernels.batching import DTYPE
 from .._kernels import quadrics
 from .._mesh import topology as topo
 from .._pipeline import stages
@@ -87,35 +87,35 @@ class Carry:
         self.start = None  # carried quadrics of the cleaned input's vertices, once the run has started
         self.carried = False
 
-    def __call__(self, job) -> np.ndarray:
-        S = self._seed(job)
+    def __call__(self, job, start) -> np.ndarray:
+        """The state ``job``'s run starts from (``start``: the `_costs.MeshInput` of the model's own)."""
+        S = self._seed(job, start)
         self.Q = None  # held no longer than needed: a last level's group is the run's largest
         if not self.exports:
             self.start = None
         return S
 
-    def _seed(self, job) -> np.ndarray:
+    def _seed(self, job, start) -> np.ndarray:
         if not carries(job.model):
-            return job.S
+            return job.model.init_state(start)
         self.carried = True
         lk = job.locks
         clean = job.geo if lk is None else lk.geo  # the run's geometry is renumbered when it has locks
         s, k = _scale(job, self.unit)
         if self.Q is None:
-            S = job.S
             if lk is not None:  # the model's own quadrics without the planes along the cuts
                 locked = lk.locked[lk.perm]
-                E, ecount, be, bf = job.geo.edges
+                be, bf = start.boundary
                 keep = ~(locked[be[:, 0]] & locked[be[:, 1]])
-                S = job.model.init_state(_costs.MeshInput(job.geo.Vn, job.geo.F, (be[keep], bf[keep]), None,
-                                                          stages.frame_means(job.geo)))
+                start = start._replace(boundary=(be[keep], bf[keep]))
+            S = job.model.init_state(start)
             self.start = to_mesh(S if lk is None else S[lk.inv], s, k)
             return S
         vm = clean.vertex_map
         ok = np.flatnonzero(vm >= 0)  # a welded vertex's quadric joins the one it was welded into
         Qc = translate(self.Q[ok], (clean.V[vm[ok]] - self.V[ok]) / self.unit)
         self.start = pieces.sum_rows(Qc, vm[ok], len(clean.V))
-        S = to_run(self.start, s, k).astype(job.S.dtype)
+        S = to_run(self.start, s, k).astype(DTYPE)
         return S if lk is None else S[lk.perm]
 
     def export(self, res) -> np.ndarray | None:

@@ -133,9 +133,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     stages._resolve_target(1, target_faces, ratio, max_error, bound is not None)
     geo = stages.geometry(mesh, setup, stacklevel=3)
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks,
-                     bounded=bound is not None)
-    if seed is not None:
-        job = job._replace(S=seed(job))
+                     bounded=bound is not None, seed=seed)
     if bound is None:
         return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
     _bound.supported(job)

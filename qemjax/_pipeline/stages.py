@@ -89,8 +89,9 @@ def _resolve_target(m: int, target_faces, ratio, max_error, bounded: bool = Fals
     return target, err
 
 
-# a setting only a partitioned run's tasks pass (`_partition.carry`): a callable, Job -> the vertex state the
-# run starts from in place of the model's own (the quadrics carried from the level before)
+# a setting only a partitioned run's tasks pass (`_partition.carry`): a callable, (the Job without its vertex
+# state, the MeshInput the model would start from) -> the vertex state the run starts from in place of the
+# model's own (the quadrics carried from the level before); the model's own is not built beside it
 SEED = "_seed"
 
 
@@ -206,11 +207,12 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
 
 
 def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
-         states: dict | None = None, locks: tuple = (None, None), bounded: bool = False) -> Job:
+         states: dict | None = None, locks: tuple = (None, None), bounded: bool = False, seed=None) -> Job:
     """The face target, the model's initial vertex state and the scheduler's options for one run.
     ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch.
     ``locks``: the user's (locked, vertex_weights) (`_locks`); with any, the run works on the geometry
-    renumbered with the locked vertices first (`_locks.Locks.geometry`)."""
+    renumbered with the locked vertices first (`_locks.Locks.geometry`). ``seed``: `SEED`'s callable, the
+    state's maker in place of the model's own."""
     lk = _locks.resolve(*locks, geo, stacklevel=stacklevel + 1)
     if lk is not None:  # a numbering of its own: no vertex state shared with a batch's other runs
         geo, states = lk.geometry(), None
@@ -252,12 +254,12 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
                       stacklevel=stacklevel)
         target = m
     E, ecount, be, bf = geo.edges
-    key = None if states is None or attrs is not None else (
+    start = _costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges, frame_means(geo), corner_values)
+    key = None if states is None or attrs is not None or seed is not None else (
         id(geo), model.state_key(), None if feature_edges is None else feature_edges.tobytes())
     S = None if key is None else states.get(key)
-    if S is None:
-        S = model.init_state(_costs.MeshInput(geo.Vn, geo.F, (be, bf), feature_edges, frame_means(geo),
-                                              corner_values))
+    if S is None and seed is None:
+        S = model.init_state(start)
         if key is not None:
             states[key] = S
     shape = float(np.float32(getattr(method_obj, "quality_threshold", 0.0)))  # as the rounds compare it
@@ -274,7 +276,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
                                                          None if corner_values is None else channel_weights > 0)
     if lk is not None:
         report.update(lk.stats)
-    return Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)
+    job = Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)
+    return job if seed is None else job._replace(S=seed(job, start))
 
 
 def frame_means(geo: Geometry) -> tuple:
