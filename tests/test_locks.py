@@ -270,6 +270,30 @@ def test_attributes_kept_with_locks(tmp_path):
         assert all(tuple(V[i]) in out for i in lk)
 
 
+@pytest.mark.parametrize("scheduler", SCHEDULERS)
+def test_locked_vertices_keep_their_uvs(tmp_path, scheduler):
+    """A locked vertex keeps its UVs as it keeps its position, bit for bit (its wedges' values are not
+    re-solved when a neighbour contracts onto it), and the other vertices' UVs do move."""
+    import trimesh as tm
+    path = [p for p in shapes.write_examples(tmp_path, subdivisions=3) if p.name == "textured.obj"][0]
+    m = tm.load(str(path), process=False)
+    V, UV = np.asarray(m.vertices), np.asarray(m.visual.uv)
+    lk = np.arange(0, len(V), 7)
+    res = qemjax.simplify(str(path), ratio=0.3, attributes="uv", locked=lk, scheduler=scheduler)
+    assert res.stop_reason == "target"
+    uvs = {}  # the UVs at each position (a vertex on a seam is split in the file: one copy per UV)
+    for p, u in zip(map(tuple, V), map(tuple, UV)):
+        uvs.setdefault(p, set()).add(u)
+    held = {tuple(V[i]): uvs[tuple(V[i])] for i in lk}
+    out = {}
+    for p, u in zip(map(tuple, res.vertices[res.wedge_vertex]), map(tuple, res.uv)):
+        out.setdefault(p, set()).add(u)
+    assert all(out[p] == held[p] for p in held)  # every locked vertex is there, with its UVs
+    inputs = {(tuple(p), tuple(u)) for p, u in zip(V, UV)}
+    moved = [(p, u) for p, us in out.items() if p not in held for u in us if (p, u) not in inputs]
+    assert len(moved) > 20
+
+
 def test_cli_reads_locks_and_weights(tmp_path, capsys):
     from qemjax import _cli
 

@@ -46,6 +46,34 @@ def test_host_solves_match_numpy_bit_for_bit(m):
         assert same_bits(wj.cost_at(VQ, a, b, v, m, W), at.solve_host(VQ[a], VQ[b], VQ[v, :3], m)[0])
 
 
+@pytest.mark.parametrize("m", [1, 2, 4])
+def test_cost_with_held_attributes(m):
+    """`attributes.cost_held_many` (a locked vertex's price: its attribute values held) against the sum
+    over the pair's faces of w·Σ_j (g_j·x + d_j − s_j)², each face's linear fields fitted through its corners
+    (`face_fields`), in float64; at the optimal values it is `solve_host`'s cost; its translation is
+    `_np_translate`'s, bit for bit."""
+    rng = np.random.default_rng(20 + m)
+    mesh = shapes.icosphere(2)
+    V, F = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
+    S = rng.uniform(-1, 1, (len(F), 3, m))
+    w = rng.uniform(0.5, 2.0, len(F))
+    rows = np.concatenate([V, at.attribute_state(V, F, S, w)], 1)
+    g, d = at.face_fields(V[F], S)
+    for a, b in F[rng.choice(len(F), 20), :2]:
+        x = V[a] + rng.normal(scale=0.05, size=3)
+        s = rng.uniform(-1, 1, m)
+        around = np.concatenate([np.flatnonzero((F == a).any(1)), np.flatnonzero((F == b).any(1))])
+        r = np.einsum("fjk,k->fj", g[around], x) + d[around] - s
+        want = float(np.sum(w[around] * np.sum(r * r, 1)))
+        cost = lambda s: at.cost_held_many(rows[[a]], rows[[b]], x[None], s[None], m)[0]  # noqa: E731
+        assert np.isclose(cost(s), want, rtol=1e-9, atol=1e-12)
+        best, s_opt = at.solve_host(rows[a], rows[b], x, m)
+        assert np.isclose(cost(s_opt), best, rtol=1e-9, atol=1e-12) and cost(s) > best
+        shift = rng.normal(size=(5, 3))
+        assert same_bits(at._translate_many(np.repeat(rows[[a], 3:], 5, 0), shift, m),
+                         np.stack([at._np_translate(rows[a, 3:], e, m) for e in shift]))
+
+
 def test_numpy_conventions():
     """`np.sum`'s pairwise order and `np.clip`'s treatment of NaN and -0.0, as the kernels repeat them."""
     rng = np.random.default_rng(0)
@@ -97,16 +125,19 @@ def _far_apart(faces, E, rng):
     return np.array(out, np.int64)
 
 
-@pytest.mark.parametrize("m,solved", [(-1, None), (2, (True, True)), (3, (True, False, True))])
-def test_tracker_matches_the_python_rule(m, solved):
+@pytest.mark.parametrize("m,solved,frozen", [(-1, None, False), (2, (True, True), False),
+                                             (3, (True, False, True), False), (2, (True, True), True)])
+def test_tracker_matches_the_python_rule(m, solved, frozen):
     """Rounds of constrain / refused / contract on a mesh with seams: the compiled Tracker and the Python
-    one (`ReferenceTracker`) give the same placements, costs, refusals, corner wedges, values and flags."""
+    one (`ReferenceTracker`) give the same placements, costs, refusals, corner wedges, values and flags;
+    ``frozen`` (locked vertices): a wedge a frozen vertex keeps never changes its value."""
     rng = np.random.default_rng(7 + m)
     k = 2 if m < 0 else m
     V, F, corners, values = seamed_sphere(rng, k)
     n = len(V)
     model = None if m < 0 else at.AttributeQEM(channels=m, weights=tuple(rng.uniform(0.1, 2.0, m)))
-    args = (corners, values, n, F, model, None if solved is None else np.array(solved))
+    lock = rng.random(n) < 0.25 if frozen else None
+    args = (corners, values, n, F, model, None if solved is None else np.array(solved), lock)
     new, ref = _wedges.Tracker(*args), ReferenceTracker(*args)
     VQ = random_rows(rng, n, max(m, 0))[:, :3 + (10 if m < 0 else 11 + 4 * m)].copy()
     VQ[:, :3] = V
@@ -165,6 +196,16 @@ def test_tracker_matches_the_python_rule(m, solved):
         VQ[P[:, 0], :3] = X
         VQ[P[:, 0], 3:] = VQ[P[:, 0], 3:] + VQ[P[:, 1], 3:]
     assert all(v > 0 for v in seen.values()), seen  # every branch of the rule was exercised
+    if frozen:  # the wedges still at the frozen vertex that held them first: their first values
+        first_vertex = np.full(len(values), -1)
+        first_vertex[np.asarray(corners).reshape(-1)] = F.reshape(-1)
+        live = np.flatnonzero(faces.alive)
+        at_now = np.full(len(values), -1)
+        at_now[new.C[live].reshape(-1)] = faces.F[live].reshape(-1)
+        kept = np.flatnonzero((at_now == first_vertex) & (at_now >= 0) & lock[np.maximum(first_vertex, 0)])
+        assert len(kept) > 10 and same_bits(new.val[kept], np.asarray(values, np.float64)[kept])
+        thawed = np.flatnonzero((at_now == first_vertex) & (at_now >= 0) & ~lock[np.maximum(first_vertex, 0)])
+        assert not same_bits(new.val[thawed], np.asarray(values, np.float64)[thawed])  # the others move
 
 
 def test_broken_seam_rule_is_an_error():

@@ -15,9 +15,10 @@ class ReferenceTracker:
     `contract` updates the corners (and, between single-wedge vertices, the kept wedge's value)."""
 
     def __init__(self, corners: np.ndarray, values: np.ndarray, n: int, F: np.ndarray, model=None,
-                 solved=None):
+                 solved=None, frozen=None):
         self.C = np.array(corners, np.int64)
         self.val = np.array(values, np.float64)
+        self.frozen = np.zeros(n, bool) if frozen is None else np.asarray(frozen, bool)  # locked: values kept
         # the model's cost at a point (attribute quadrics: `_costs.attributes`), and its optimal attributes
         # for the channels marked in ``solved`` (the rest are interpolated)
         self.cost_at = getattr(model, "cost_at", None)
@@ -105,7 +106,8 @@ class ReferenceTracker:
             val = (1 - t) * self.val[wa] + t * self.val[wbv]
             if self.attributes_at is not None:  # the attribute quadric's optimum at x
                 val = np.where(self.solved, self.attributes_at(VQ[a], VQ[b], x), val)
-            self.val[wa] = val
+            if not self.frozen[a]:
+                self.val[wa] = val
             self.C[fb, kb] = wa
             return
         x = np.asarray(x, VQ.dtype)
@@ -160,7 +162,8 @@ class ReferenceTracker:
             opt = (many(VQ[a[idx]], VQ[b[idx]], x) if many is not None else
                    np.stack([self.attributes_at(VQ[i], VQ[j], y) for i, j, y in zip(a[idx], b[idx], x)]))
             val = np.where(self.solved, opt, val)
-        self.val[wa] = val
+        thaw = ~self.frozen[a[idx]]
+        self.val[wa[thaw]] = val[thaw]
         sel = done[which_b]  # b's corners of the pairs done here now name a's wedge
         self.C[fb[sel], kb[sel]] = np.repeat(wa, np.bincount(which_b[sel], minlength=len(P))[idx])
         return done

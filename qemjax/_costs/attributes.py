@@ -217,6 +217,35 @@ def solve_host(row_a: np.ndarray, row_b: np.ndarray, x: np.ndarray, m: int):
     return max(float(cost), 0.0), s
 
 
+def _translate_many(st: np.ndarray, d: np.ndarray, m: int) -> np.ndarray:
+    """`_np_translate` of K states (K, 11 + 4m) by d (K,3) at once: the same operations in the same order,
+    elementwise (so the same bits)."""
+    a0, a1, a2, a3, a4, a5, b0, b1, b2 = (st[:, k] for k in range(9))
+    d0, d1, d2 = d[:, 0], d[:, 1], d[:, 2]
+    ad = (a0 * d0 + a1 * d1 + a2 * d2, a1 * d0 + a3 * d1 + a4 * d2, a2 * d0 + a4 * d1 + a5 * d2)
+    out = st.copy()
+    for k in range(3):
+        out[:, 6 + k] += ad[k]
+    out[:, 9] += d0 * (ad[0] + 2 * b0) + d1 * (ad[1] + 2 * b1) + d2 * (ad[2] + 2 * b2)
+    g = st[:, 11:]
+    out[:, 14::4] += g[:, 0::4] * d0[:, None] + g[:, 1::4] * d1[:, None] + g[:, 2::4] * d2[:, None]
+    return out
+
+
+def cost_held_many(rows_a: np.ndarray, rows_b: np.ndarray, X: np.ndarray, S: np.ndarray, m: int) -> np.ndarray:
+    """(K,) float64 on the host, for K pairs' rows [position, state]: the cost at X (K,3) with the (weighted)
+    attribute values held at S (K,m) instead of their optimum: Q(x, s) = c + α·|s|² − 2 Σ s_j D_j (module
+    docstring; a locked vertex's price, its values kept)."""
+    ra, rb = np.asarray(rows_a, np.float64), np.asarray(rows_b, np.float64)
+    X, S = np.asarray(X, np.float64), np.asarray(S, np.float64)
+    st = _translate_many(ra[:, 3:], X - ra[:, :3], m) + _translate_many(rb[:, 3:], X - rb[:, :3], m)
+    ss = sd = np.zeros(len(X))
+    for j in range(m):  # left to right, as `fixed_order.dot`
+        ss = ss + S[:, j] * S[:, j]
+        sd = sd + S[:, j] * st[:, 14 + 4 * j]
+    return np.maximum(st[:, 9] + st[:, 10] * ss - 2.0 * sd, 0.0)
+
+
 @dataclasses.dataclass(frozen=True)
 class AttributeQEM(QEM):
     """QEM over position × attributes (module docstring): QEM's settings, plus ``channels`` m (the number
@@ -270,6 +299,11 @@ class AttributeQEM(QEM):
 
     def cost_at(self, row_a, row_b, x) -> float:
         return solve_host(row_a, row_b, x, self.channels)[0]
+
+    def cost_held(self, rows_a, rows_b, X, S) -> np.ndarray:
+        """(K,) the costs at X (K,3) with the attributes held at S (K,m), weighted (locked kept vertices'
+        values): `cost_held_many`."""
+        return cost_held_many(rows_a, rows_b, X, S, self.channels)
 
     def attributes_at(self, row_a, row_b, x) -> np.ndarray:
         """(m,) the optimal attribute values at x, unweighted."""

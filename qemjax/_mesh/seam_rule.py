@@ -394,9 +394,10 @@ def _interpolate(VQ, val, a, b, wa, wb, t, x0, x1, x2, m, solved, weights, batch
 
 
 @njit(cache=True)
-def _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights, T, W):
+def _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights, frozen, T, W):
     """`wedges.Tracker.contract`: the corners (and values) for contracting b into a at x64 (float64; x:
-    the same in VQ's dtype). Returns False where the seam rule does not allow it (nothing changed)."""
+    the same in VQ's dtype; a ``frozen`` kept vertex keeps its wedge's value). Returns False where the seam
+    rule does not allow it (nothing changed)."""
     lb = corners(F, alive, cnt, off, pool, C, b, T[FB], T[KB], T[WB])
     first = -1
     for j in range(lb):
@@ -427,7 +428,8 @@ def _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solv
         dd += d1 * d1
         dd += d2 * d2
         t = _clip01(ud / (1e-300 if 1e-300 > dd else dd))
-        _interpolate(VQ, val, a, b, wa, wbv, t, x64[0], x64[1], x64[2], m, solved, weights, False, W)
+        if not frozen[a]:
+            _interpolate(VQ, val, a, b, wa, wbv, t, x64[0], x64[1], x64[2], m, solved, weights, False, W)
         for j in range(lb):
             C[T[FB, j], T[KB, j]] = wa
         return True
@@ -444,7 +446,7 @@ def _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solv
 
 
 @njit(cache=True)
-def contract_many(F, alive, cnt, off, pool, C, val, multi, VQ, P, X64, X, m, solved, weights):
+def contract_many(F, alive, cnt, off, pool, C, val, multi, VQ, P, X64, X, m, solved, weights, frozen):
     """`wedges.Tracker.contract_many` for vertex-disjoint pairs P (K,2) at X64 (K,3) float64 (X: the same
     in VQ's dtype): first the pairs of single-wedge vertices with live faces at both ends, in order (a's
     first face's wedge takes the value at the placement's projection, every corner of b names it), then
@@ -473,22 +475,24 @@ def contract_many(F, alive, cnt, off, pool, C, val, multi, VQ, P, X64, X, m, sol
         ud = u0 * d0 + u1 * d1 + u2 * d2
         t = _clip01(ud / (dd if dd >= 1e-300 or dd != dd else 1e-300))
         wa = T[WA, 0]
-        _interpolate(VQ, val, a, b, wa, T[WB, 0], t, X64[i, 0], X64[i, 1], X64[i, 2], m, solved, weights, True, W)
+        if not frozen[a]:
+            _interpolate(VQ, val, a, b, wa, T[WB, 0], t, X64[i, 0], X64[i, 1], X64[i, 2], m, solved, weights, True,
+                         W)
         for j in range(lb):
             C[T[FB, j], T[KB, j]] = wa
     for i in range(K):
         if not free[i]:
             if not _contract(F, alive, cnt, off, pool, C, val, multi, VQ, P[i, 0], P[i, 1], X64[i], X[i], m,
-                             solved, weights, T, W):
+                             solved, weights, frozen, T, W):
                 return i
     return -1
 
 
 @njit(cache=True)
-def contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights):
+def contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights, frozen):
     """`wedges.Tracker.contract` for one pair (b into a at x64, float64; x: the same in VQ's dtype).
     Returns False where the seam rule does not allow it (nothing changed)."""
     P = np.empty((1, 2), np.int64)
     P[0, 0], P[0, 1] = a, b
     T, W = scratch(P, cnt, max(m, val.shape[1]))
-    return _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights, T, W)
+    return _contract(F, alive, cnt, off, pool, C, val, multi, VQ, a, b, x64, x, m, solved, weights, frozen, T, W)

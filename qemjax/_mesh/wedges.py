@@ -311,9 +311,11 @@ class Tracker:
     (tests/wedges_reference.py)."""
 
     def __init__(self, corners: np.ndarray, values: np.ndarray, n: int, F: np.ndarray, model=None,
-                 solved=None):
+                 solved=None, frozen=None):
         self.C = np.array(corners, np.int64)
         self.val = np.array(values, np.float64)
+        # locked vertices (n,) bool: a contraction onto one keeps its wedge's value, as it keeps its position
+        self.frozen = np.zeros(n, np.bool_) if frozen is None else np.ascontiguousarray(frozen, np.bool_)
         # the model's cost at a point (attribute quadrics: `_costs.attributes`, m channels; else the
         # quadric error: m = -1), and its optimal attributes for the channels marked in ``solved`` (the
         # rest are interpolated)
@@ -335,6 +337,9 @@ class Tracker:
         vertex_of[self.C.reshape(-1)] = np.asarray(F).reshape(-1)
         self.multi = np.bincount(vertex_of[used], minlength=n) > 1
         self.seam_in = int(np.count_nonzero(self.multi))  # vertices on a seam in the input
+        self.wedge_in = np.zeros(n, np.int64)  # a wedge of each vertex in the input, and the input's values
+        self.wedge_in[vertex_of[used]] = used
+        self.val_in = self.val.copy() if self.frozen.any() else self.val
 
     @staticmethod
     def _lists(faces):
@@ -355,6 +360,15 @@ class Tracker:
         free, nba, nab, _, _ = J.modes(*self._lists(faces), self.C, self.multi, int(a), int(b), T)
         as_map = lambda k, v, n: None if n < 0 else dict(zip(T[k, :n].tolist(), T[v, :n].tolist()))  # noqa: E731
         return bool(free), as_map(J.KBA, J.VBA, nba), as_map(J.KAB, J.VAB, nab)
+
+    def held(self, v: int) -> np.ndarray | None:
+        """The values a frozen vertex v holds, as the attribute model weighs them ((k,): each solved channel
+        times its weight, 0 for the others), or None when v is on a seam (several wedges; its contractions
+        map wedges and change no value). A frozen vertex keeps its one wedge and that wedge's value, so its
+        values are those of the input, wherever the run is (a batch of the greedy queue included)."""
+        if self.multi[v]:
+            return None
+        return self.val_in[self.wedge_in[v]] * self.weights * self.solved
 
     def allowed(self, faces, VQ, a: int, b: int, x) -> bool:
         """The validity rule for contracting b into a at x (module docstring)."""
@@ -408,10 +422,10 @@ class Tracker:
         X64, Xv = np.asarray(X, np.float64), np.asarray(X, VQ.dtype)
         if one:
             ok = _jit().contract(*args, int(P[0, 0]), int(P[0, 1]), X64[0], Xv[0], self.m_solved,
-                                     self.solved, self.weights)
+                                 self.solved, self.weights, self.frozen)
             i = -1 if ok else 0
         else:
-            i = _jit().contract_many(*args, P, X64, Xv, self.m_solved, self.solved, self.weights)
+            i = _jit().contract_many(*args, P, X64, Xv, self.m_solved, self.solved, self.weights, self.frozen)
         if i >= 0:
             raise AssertionError(f"seam rule broken for pair ({int(P[i, 0])}, {int(P[i, 1])})")
 

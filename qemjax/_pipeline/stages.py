@@ -273,7 +273,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
                       max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
                       keep_parts=not setup.prune, min_quality=setup.min_quality, quality_threshold=shape)
     tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(geo.V), geo.F, model,
-                                                         None if corner_values is None else channel_weights > 0)
+                                                         None if corner_values is None else channel_weights > 0,
+                                                         None if lk is None else lk.run().locked)
     if lk is not None:
         report.update(lk.stats)
     job = Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)

@@ -51,10 +51,11 @@ def start_at_kept(locks: RunLocks, model, VQd, P: np.ndarray, params, faces=None
 
 
 def adjust(locks: RunLocks, weights, model, VQ, VQd, P: np.ndarray, priced, params, faces=None, pad: int = 0,
-           at=None):
+           at=None, held=None):
     """``priced`` (`common.Priced` of pairs P (K,2)) with the pairs that have a locked kept vertex priced
     there (``model.price_at_kept``; a model without it but with a host ``cost_at`` (attributes): on the
-    host) and every cost and part multiplied by the larger weight of the pair's endpoints (``weights``: the
+    host, with the kept vertex's attribute values held as the wedges keep them: ``held(a)``, the
+    `_wedges.Tracker.held` of the vertex in row a) and every cost and part multiplied by the larger weight of the pair's endpoints (``weights``: the
     run's current weights, or None). The run's numbering puts a locked endpoint first in its pair.
     ``at``: that device price, started before on the same device rows (`start_at_kept` of P), or None."""
     from .device import start_price
@@ -66,7 +67,7 @@ def adjust(locks: RunLocks, weights, model, VQ, VQd, P: np.ndarray, priced, para
         Q = P[one]
         if getattr(model, "cost_at", None) is not None:  # the attribute model: its host solve
             x[one] = VQ[Q[:, 0], :3]
-            cost[one] = [max(model.cost_at(VQ[a], VQ[b], VQ[a, :3]), 0.0) for a, b in Q.tolist()]
+            cost[one] = _cost_held(model, VQ, Q, held)
             branch[one] = 2
         else:
             at = (at or start_price(model, VQd, Q, params, faces, pad, at_kept=True))()
@@ -79,6 +80,22 @@ def adjust(locks: RunLocks, weights, model, VQ, VQd, P: np.ndarray, priced, para
         if parts.shape[0]:
             parts = (parts * w).astype(parts.dtype)
     return type(priced)(x, cost, branch, parts)
+
+
+def _cost_held(model, VQ, Q: np.ndarray, held) -> np.ndarray:
+    """(K,) the attribute model's costs of contracting pairs Q (K,2) onto their locked first vertex where it
+    stands: with its attribute values held (``held(a)``: its wedge keeps them), or at their optimum where
+    it has several wedges (``held(a)`` None) or no ``held`` is given."""
+    a, b = Q[:, 0], Q[:, 1]
+    S = [None] * len(Q) if held is None else [held(v) for v in a.tolist()]
+    out = np.empty(len(Q))
+    kept = np.array([s is not None for s in S], bool)
+    if kept.any():
+        ka, kb = a[kept], b[kept]
+        out[kept] = model.cost_held(VQ[ka], VQ[kb], VQ[ka, :3], np.stack([s for s in S if s is not None]))
+    for i in np.flatnonzero(~kept).tolist():
+        out[i] = max(model.cost_at(VQ[a[i]], VQ[b[i]], VQ[a[i], :3]), 0.0)
+    return out
 
 
 def pin(locks: RunLocks, VQ, P: np.ndarray, x: np.ndarray) -> None:

@@ -230,13 +230,19 @@ class _Compiled:
             _locks.pin(self.row_locks, self.VQ, rows, priced.x)
         return priced
 
-    def adjust(self, VQd, rows, priced):
+    def adjust(self, VQd, rows, priced, kept=None):
         """With locks, `_locks.adjust` of the prices of pairs whose two rows are ``rows`` (k,2): pairs with a
-        locked kept vertex priced there, costs and parts times the larger weight of the two rows."""
+        locked kept vertex priced there (the attribute values it holds: those of its vertex, ``kept`` (k,)
+        where its row is a scratch row, else the row's own), costs and parts times the larger weight of the
+        two rows."""
         if self.locks is None:
             return priced
+        held = None
+        if self.wedges is not None:
+            vertex = dict(zip(rows[:, 0].tolist(), (rows[:, 0] if kept is None else kept).tolist()))
+            held = lambda row: self.wedges.held(vertex[row])  # noqa: E731
         return _locks.adjust(self.row_locks, self.weights, self.model, self.VQ, VQd, rows, priced, self.params,
-                             None, self.n)
+                             None, self.n, held=held)
 
     def push(self, P, priced, l2, keys=None, raw=None):
         """Pairs P (k,2) into the queue at ``priced`` (``raw``: before the seam constraint; None: the same)."""
@@ -385,7 +391,8 @@ class _Compiled:
         self.VQ[self.scratch:self.scratch + len(rows)] = rows
         moved = self.VQ[kept, :3].copy()
         self.VQ[kept] = self.orig[:len(kept)]
-        raw = self.adjust(VQd, ids, start_price(self.model, VQd, ids, self.params, None, self.n)())
+        raw = self.adjust(VQd, ids, start_price(self.model, VQd, ids, self.params, None, self.n)(),
+                          iv[:, jit.I_PAIR] >> 32)
         priced = self.seamed(raw, ids, lambda x, cost: gw.constrain_rows(  # by the modes taken at their pushes
             self.VQ, ids, iv[:, jit.I_MODE], x, cost, int(self.wedges.m)))
         pos = self.VQ[ids.reshape(-1), :3].reshape(-1, 2, 3)

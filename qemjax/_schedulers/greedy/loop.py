@@ -70,7 +70,8 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
             d = VQ[pa[:, 0], :3] - VQ[pa[:, 1], :3]
             priced = start_price(model, VQd, pa, params, faces, n, size=SMALL if len(pa) <= SMALL else None)()
             if locks is not None:  # locked kept vertices priced where they stand, and the weights
-                priced = _locks.adjust(locks, weights, model, VQ, VQd, pa, priced, params, faces, n)
+                priced = _locks.adjust(locks, weights, model, VQ, VQd, pa, priced, params, faces, n,
+                                       held=None if wedges is None else wedges.held)
             if wedges is not None:  # pairs at seam vertices: placed at an allowed endpoint
                 priced = priced._replace(x=priced.x.copy(), cost=priced.cost.copy())
                 wedges.constrain(faces, VQ, pa, priced.x, priced.cost)  # refused ones: at the pop

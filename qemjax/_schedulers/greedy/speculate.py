@@ -351,8 +351,8 @@ def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batc
         if wed:  # the corners' wedges, before the faces relink
             TS = gw.fit(TS, max(fl[a], fl[b]))
             X64[0], X64[1], X64[2] = X[s, 0], X[s, 1], X[s, 2]
-            gw.contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, X[s], X64, m_solved, solved, weights, TS, W,
-                        VJ, ctr[C_DONE], J, ctr, C_JLEN)
+            gw.contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, X[s], X64, m_solved, solved, weights, locked,
+                        TS, W, VJ, ctr[C_DONE], J, ctr, C_JLEN)
         iv0 = ctr[C_NIV]
         nub = _contract(a, b, s, k, scratch, Step(info, A, B, D, R, buf), faces, partners, VQ, locked, queue, batch,
                         maps, wed, UB)

@@ -74,9 +74,10 @@ def seam_ok(T, alive, fs, fl, fpool, C, multi, VQ, a, b, x, TS, J, ctr, jl):
 
 
 @njit(cache=True)
-def contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, x, x64, m_solved, solved, weights, TS, W, VJ,
-             slot, J, ctr, jl):
-    """`wedges.Tracker.contract` for b into a at x (VQ's dtype; x64 the same in float64), before the faces
+def contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, x, x64, m_solved, solved, weights, frozen, TS, W,
+             VJ, slot, J, ctr, jl):
+    """`wedges.Tracker.contract` for b into a at x (VQ's dtype; x64 the same in float64; ``frozen``: the
+    locked vertices, whose wedges keep their values), before the faces
     relink, journaled: the flags of a and b, the wedge of each live corner at a and at b, and the value of
     a's wedge when it has one (the only value the update can change) in VJ[slot]. Returns False where the
     seam rule refuses it (the rules ran before: never). TS: room for fl[a], fl[b]."""
@@ -96,7 +97,8 @@ def contract(T, alive, fs, fl, fpool, C, val, multi, VQ, a, b, x, x64, m_solved,
     if one and wa >= 0:
         VJ[slot] = val[wa]
         _jw(J, ctr, jl, J_VAL, wa, slot, 0)
-    return wj._contract(T, alive, fl, fs, fpool, C, val, multi, VQ, a, b, x64, x, m_solved, solved, weights, TS, W)
+    return wj._contract(T, alive, fl, fs, fpool, C, val, multi, VQ, a, b, x64, x, m_solved, solved, weights, frozen,
+                        TS, W)
 
 
 @njit(cache=True)

@@ -157,7 +157,7 @@ class GlueRound(LoopRound):
         K = len(P)
         pr = Priced(out[:3, :K].T, out[3, :K], out[4, :K].astype(np.int8), out[5:, :K])
         at = _locks.adjust(run.locks, run.weights, run.model, run.VQ, run.VQd, P, pr, run.params, run.faces,
-                           run.pad, at=at)
+                           run.pad, at=at, held=None if run.wedges is None else run.wedges.held)
         res = np.empty((out.shape[0], K), out.dtype)
         res[:3], res[3], res[4], res[5:] = at.x.T, at.cost, at.branch, at.parts
         return res

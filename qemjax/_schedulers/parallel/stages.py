@@ -190,8 +190,9 @@ class Round:
     def locked_prices(self, pending, P):
         """``pending`` (a price of pairs P) with locked kept vertices and the weights applied (`_locks.adjust`)."""
         run = self.run
+        held = None if run.wedges is None else run.wedges.held
         return lambda: _locks.adjust(run.locks, run.weights, run.model, run.VQ, run.VQd, P, pending(),
-                                     run.params, run.faces, run.pad)
+                                     run.params, run.faces, run.pad, held=held)
 
     def candidates(self, st: RoundState, need, max_cost=None) -> np.ndarray:
         """(P,) bool: the pairs that may contract this round (not known invalid, within max_error and
