@@ -229,8 +229,10 @@ def test_what_a_partitioned_run_does_not_offer(mesh):
         qemjax.simplify(mesh, ratio=0.1, max_error=1.0, partition=True)
     with pytest.raises(ValueError, match="locked"):
         qemjax.simplify(mesh, ratio=0.1, locked=[0], partition=True)
-    with pytest.raises(ValueError, match="positions only"):
+    with pytest.raises(ValueError, match="from a mesh file"):
         qemjax.simplify(mesh, ratio=0.1, attributes="uv", partition=True)
+    with pytest.raises(ValueError, match="UVs and nothing else"):
+        qemjax.simplify(mesh, ratio=0.1, attributes="normal", partition=True)
 
 
 @pytest.mark.slow

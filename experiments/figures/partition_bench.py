@@ -12,7 +12,8 @@ speed: a shared mesh written as a binary PLY (float32, as scans are), then `qemj
 ``--repeats`` times; the medians and the ratios against meshoptimizer. quality: partitioned (2 workers) and in
 core to the same target (``--refit``, ``--share``: each `Partition.refit` and `Partition.share` value), two-way rms and Hausdorff
 (`qemjax.metrics.surface_distance`, 200,000 samples each way, relative to the diagonal) and their ratios
-(``--late every``: also with the memoryless last stretch in every level, not only the last), with
+(``--late every``: also with the memoryless last stretch in every level, not only the last; ``--reduction``:
+each `Partition.reduction` value), with
 the seconds of each run (in this process; the workers warm after the first mesh). scale: meshes made in code (`big_mesh.py`: a bumpy torus,
 binary PLY written in bands) of each size to 1 %, partitioned: seconds, microseconds per input face, peak
 memory of the client and of the largest worker. workers: one input, the output file's sha256 with each
@@ -145,8 +146,8 @@ def quality(args, folder: Path) -> None:
     from qemjax.metrics import surface_distance
 
     rows = []
-    print("| mesh | faces | re-fit | share | memoryless | rms part./in core | Hausdorff part./in core | partitioned s | in core s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| mesh | faces | re-fit | share | memoryless | reduction | rms part./in core | Hausdorff part./in core | partitioned s | in core s |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in args.meshes:
         if name.startswith("bumpy-sphere-"):  # made in code: qemjax.shapes.bumpy_sphere(N)
             from types import SimpleNamespace
@@ -158,19 +159,21 @@ def quality(args, folder: Path) -> None:
         core = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False)
         t_core = time.perf_counter() - t
         dc = surface_distance((bm.V, bm.F), (core.vertices, core.faces), n_samples=200_000)
-        for refit, share, late in itertools.product(args.refit, args.share, args.late):
+        for refit, share, late, red in itertools.product(args.refit, args.share, args.late, args.reduction):
             t = time.perf_counter()
             with _late_in(late):
                 part = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False,
                                        partition=qemjax.Partition(workers=args.workers, refit=refit, share=share,
-                                                                  **({"part_faces": args.part_faces} if args.part_faces else {})))
+                                                                  **({"part_faces": args.part_faces} if args.part_faces else {}),
+                                                                  **({"reduction": red} if red else {})))
             t_part = time.perf_counter() - t
             dp = surface_distance((bm.V, bm.F), (part.vertices, part.faces), n_samples=200_000)
             r_rms, r_h = dp["rms_rel"] / dc["rms_rel"], dp["hausdorff_rel"] / dc["hausdorff_rel"]
-            print(f"| {name} | {len(bm.F)} → {len(part.faces)} | {refit} | {share} | {late} | {r_rms:.3f} | {r_h:.3f} | "
+            print(f"| {name} | {len(bm.F)} → {len(part.faces)} | {refit} | {share} | {late} | {red or 'default'} | "
+                  f"{r_rms:.3f} | {r_h:.3f} | "
                   f"{t_part:.1f} | {t_core:.1f} |", flush=True)
             note = f"refit={refit} levels={part.stats['partition']['levels']}" + (f" share={share}" if share != "faces" else "") \
-                + (f" late={late}" if late != "last" else "")
+                + (f" late={late}" if late != "last" else "") + (f" reduction={red:g}" if red else "")
             rows += [dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="rms ratio", value=r_rms,
                           seconds=t_part, note=note),
                      dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="hausdorff ratio",
@@ -239,6 +242,8 @@ def main(argv=None):
                     help="quality: Partition(share=...) values")
     ap.add_argument("--late", nargs="+", default=["last"], choices=["last", "every"],
                     help="quality: the memoryless last stretch in the last level only (the package's) or in every level")
+    ap.add_argument("--reduction", type=float, nargs="+", default=[None],
+                    help="quality: Partition(reduction=...) values (default: the package's)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-in-core", action="store_true")
     ap.add_argument("--keep", action="store_true", help="scale: keep the generated PLY files")

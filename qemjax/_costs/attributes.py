@@ -265,7 +265,12 @@ class AttributeQEM(QEM):
             raise ValueError(f"need one weight per channel, got {len(self.weights)} for {self.channels}")
 
     def init_state(self, mesh: MeshInput) -> np.ndarray:
-        q = super().init_state(mesh).astype(np.float64)
+        return self.with_attributes(mesh, super().init_state(mesh))
+
+    def with_attributes(self, mesh: MeshInput, q: np.ndarray) -> np.ndarray:
+        """The state of position quadrics ``q`` (n,10) (QEM's, or quadrics carried from elsewhere) with the
+        attribute quadrics of ``mesh``'s faces added."""
+        q = np.asarray(q).astype(np.float64)
         V = np.asarray(mesh.V, np.float64)
         F = np.asarray(mesh.F, np.int64)
         S = np.asarray(mesh.attributes, np.float64) * np.asarray(self.weights, np.float64)

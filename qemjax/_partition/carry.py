@@ -24,13 +24,16 @@ ends both lie on cuts loses its boundary planes with them, for the rest of the r
 from the carried quadrics alone. Where a boundary crosses a cut, that is one edge or none; where it runs
 along one, a stretch of them.)
 
-Only the summed quadrics of `QEM` (the default, ``"classic"``) are carried; any other model's state is more
-than one quadric and its runs start from their own, as before.
+Only the summed quadrics of `QEM` (the default, ``"classic"``) are carried, with kept UVs too: a run that
+keeps them adds its own faces' attribute quadrics to the carried position quadrics
+(`AttributeQEM.with_attributes`), so its geometry remembers the input and its UVs follow the faces it
+reads. Any other model's state is more than one quadric and its runs start from their own, as before.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from .._costs.attributes import AttributeQEM
 from .._costs.qem import QEM
 from .._kernels.batching import DTYPE
 from .._kernels import quadrics
@@ -40,8 +43,15 @@ from . import pieces
 
 
 def carries(model) -> bool:
-    """Whether a run of ``model`` starts from carried quadrics: QEM's summed ones."""
-    return type(model) is QEM and not model.memoryless
+    """Whether a run of ``model`` starts from carried quadrics: QEM's summed ones (with attributes too)."""
+    return type(model) in (QEM, AttributeQEM) and not model.memoryless
+
+
+def _state(job, start, q: np.ndarray) -> np.ndarray:
+    """The run's starting state from its position quadrics ``q`` (n,10), in its numbering."""
+    if type(job.model) is QEM:
+        return q
+    return job.model.with_attributes(start, q)
 
 
 def _scale(job, unit: float) -> tuple[float, float]:
@@ -108,15 +118,15 @@ class Carry:
                 be, bf = start.boundary
                 keep = ~(locked[be[:, 0]] & locked[be[:, 1]])
                 start = start._replace(boundary=(be[keep], bf[keep]))
-            S = job.model.init_state(start)
-            self.start = to_mesh(S if lk is None else S[lk.inv], s, k)
-            return S
+            q = QEM.init_state(job.model, start)
+            self.start = to_mesh(q if lk is None else q[lk.inv], s, k)
+            return _state(job, start, q)
         vm = clean.vertex_map
         ok = np.flatnonzero(vm >= 0)  # a welded vertex's quadric joins the one it was welded into
         Qc = translate(self.Q[ok], (clean.V[vm[ok]] - self.V[ok]) / self.unit)
         self.start = pieces.sum_rows(Qc, vm[ok], len(clean.V))
-        S = to_run(self.start, s, k).astype(DTYPE)
-        return S if lk is None else S[lk.perm]
+        q = to_run(self.start, s, k).astype(DTYPE)
+        return _state(job, start, q if lk is None else q[lk.perm])
 
     def export(self, res) -> np.ndarray | None:
         """(k,10) carried quadrics of ``res``'s output vertices, or None when the run did not carry (or was

@@ -3,7 +3,8 @@ of ``V`` (k,3) float64, ``F`` (m,3) int32 into ``V`` and ``gid`` (k,) int64, the
 another piece may share (-1 for a vertex no other piece can hold: a new or interior one). Level-0 parts also
 carry ``border`` (k,) bool (shared with another part); a group's output carries ``borders``, its sorted
 global ids, the only ones the next level must know, and (a level before the last, when its method carries
-them) ``Q`` (k,10) float64, each vertex's carried quadric (`carry`)."""
+them) ``Q`` (k,10) float64, each vertex's carried quadric (`carry`). A run that keeps UVs gives every piece
+``UV`` (m,3,2) float64, the UVs of its triangles' corners (a vertex on a UV seam has several)."""
 from __future__ import annotations
 
 import json
@@ -49,6 +50,18 @@ def quadrics(path) -> np.ndarray | None:
     """A piece's carried quadrics ``Q``, or None when it has none."""
     with np.load(path) as z:
         return z["Q"] if "Q" in z.files else None
+
+
+def corner_uv(path) -> np.ndarray | None:
+    """A piece's corners' UVs ``UV`` (m,3,2), or None when it has none."""
+    with np.load(path) as z:
+        return z["UV"] if "UV" in z.files else None
+
+
+def stitch_uv(paths: list) -> np.ndarray | None:
+    """The corners' UVs of the pieces at ``paths`` in `stitch`'s face order, or None when any has none."""
+    UVs = [corner_uv(p) for p in paths]
+    return None if any(u is None for u in UVs) else np.concatenate(UVs)
 
 
 def stitch(paths: list, carried: bool = False) -> tuple:

@@ -174,15 +174,25 @@ def _fixed_dtype(path: Path, at: int, face: _ply.Element, order: str, index: int
     return np.dtype(fields), checks
 
 
-def dropped(h: _ply.Header) -> tuple:
-    """What a partitioned run does not carry over from this PLY: every property but x, y, z and the face
-    indices, and every element but vertices and faces, named as the header names them."""
+UV_NAMES = (("texture_u", "texture_v"), ("s", "t"), ("u", "v"), ("texture_s", "texture_t"))  # per vertex
+
+
+def uv_names(vertex: _ply.Element) -> tuple | None:
+    """The names of the vertex properties that hold UVs (the first pair of `UV_NAMES` present), or None."""
+    names = {p.name for p in vertex.props if p.count is None}
+    return next((pair for pair in UV_NAMES if set(pair) <= names), None)
+
+
+def dropped(h: _ply.Header, kept: tuple = ()) -> tuple:
+    """What a partitioned run does not carry over from this PLY: every property but x, y, z, the face
+    indices and the vertex properties ``kept``, and every element but vertices and faces, named as the
+    header names them."""
     out = []
     for e in h.elements:
         if e.name not in ("vertex", "face"):
             out.append(f"the {e.name!r} element")
             continue
-        skip = {"x", "y", "z"} if e.name == "vertex" else {e.props[_index_prop(e)].name}
+        skip = {"x", "y", "z", *kept} if e.name == "vertex" else {e.props[_index_prop(e)].name}
         names = [p.name for p in e.props if p.name not in skip]
         if names:
             out.append(f"{e.name} properties {', '.join(names)}")
@@ -201,10 +211,18 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
     names = [p.name for p in vertex.props]
     vdtype = np.dtype([(f"p{j}", order + _code(p.type)) for j, p in enumerate(vertex.props)])
     xyz = tuple(f"p{names.index(c)}" for c in "xyz")
+    uv = uv_names(vertex)
+    uv_fields = None if uv is None else tuple(f"p{names.index(c)}" for c in uv)
     if at["vertex"] + vertex.rows * vdtype.itemsize > size:
         raise Refusal(f"truncated binary PLY: the file ends inside its vertices (the header declares "
                       f"{vertex.rows} of them)")
     vblock = Block(path, at["vertex"], vdtype, vertex.rows)
+
+    def with_uv(src: Source) -> Source:
+        src.dropped = dropped(h)
+        if uv is not None:  # per-vertex UVs: read from the vertex records
+            src.uv, src.uv_fields, src.dropped_with_uv = vblock, uv_fields, dropped(h, uv)
+        return src
 
     def retriangulate() -> Source:
         out = Appender(scratch / FACES)
@@ -212,13 +230,13 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
             _stream(path, at["face"], face, _layout(face, order, index), out)
         finally:
             out.close()
-        return Source("ply", False, vblock, Block(scratch / FACES, 0, TRI, out.rows), xyz)
+        return with_uv(Source("ply", False, vblock, Block(scratch / FACES, 0, TRI, out.rows), xyz))
 
     fixed = _fixed_dtype(path, at["face"], face, order, index) if face.rows else (np.dtype(TRI), [])
     if fixed is not None:
         later = h.elements[h.elements.index(face) + 1:]
         least = sum(e.rows * sum(_ply.type_size(p.count or p.type) for p in e.props) for e in later)
         if at["face"] + face.rows * fixed[0].itemsize + least <= size:
-            return Source("ply", False, vblock, Block(path, at["face"], fixed[0], face.rows), xyz, fixed[1],
-                          retriangulate)
+            return with_uv(Source("ply", False, vblock, Block(path, at["face"], fixed[0], face.rows), xyz,
+                                  fixed[1], retriangulate))
     return retriangulate()

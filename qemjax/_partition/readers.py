@@ -57,11 +57,39 @@ def open_source(path, scratch: Path) -> Source:
     try:
         if fmt == "ply":
             h = ply.header(path)
-            src = text.read_ascii_ply(path, h, scratch) if h.format == "ascii" else ply.read_binary(path, h, scratch)
-            src.dropped = ply.dropped(h)
-            return src
+            return text.read_ascii_ply(path, h, scratch) if h.format == "ascii" else ply.read_binary(path, h, scratch)
         if fmt == "stl":
             return _stl(path, scratch)
         return text.read_obj(path, scratch)
     except Refusal as exc:
         raise ValueError(f"{name}: {exc}") from None
+
+
+def texture_of(path) -> Path | None:
+    """The texture image a mesh file names, when it exists: the first ``map_Kd`` of an OBJ's material
+    libraries (``mtllib`` lines in its first MiB), or a PLY header's ``comment TextureFile``; else None."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(1 << 20)
+    lines = head.split(b"\n")
+    if head.startswith(b"ply"):
+        for line in lines[:head[:head.find(b"end_header")].count(b"\n") + 1]:
+            words = line.split(None, 2)
+            if words[:2] == [b"comment", b"TextureFile"] and len(words) == 3:
+                image = path.parent / words[2].strip().decode("utf-8", "replace")
+                return image if image.is_file() else None
+        return None
+    for line in lines:
+        words = line.split(None, 1)
+        if words[:1] != [b"mtllib"] or len(words) < 2:
+            continue
+        lib = path.parent / words[1].strip().decode("utf-8", "replace")
+        if not lib.is_file():
+            continue
+        for entry in lib.read_bytes().split(b"\n"):
+            parts = entry.split()
+            if parts[:1] == [b"map_Kd"] and len(parts) > 1:
+                image = lib.parent / parts[-1].decode("utf-8", "replace")
+                if image.is_file():
+                    return image
+    return None

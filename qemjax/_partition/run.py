@@ -161,9 +161,10 @@ def _common_cost(runner, specs: list, p: Partition, progress, label: str):
 
 
 def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwargs: dict, progress: bool,
-                         stacklevel: int = 3):
+                         stacklevel: int = 3, uv=False):
     """`simplify` with ``partition=``: the module docstring. ``kwargs``: the method and its settings, as
-    `simplify` takes them."""
+    `simplify` takes them; ``uv``: keep a file's UVs (True, "auto": when it names a texture image, False:
+    `scatter.keeps_uv`)."""
     from .._pipeline import stages
     from .scatter import scatter
 
@@ -182,7 +183,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
                    final_faces=p.final_faces, refit=p.refit, share=p.share, target=[target_faces, ratio],
-                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent")
+                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
+                   uv=uv)
         _fresh(folder, key)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -190,7 +192,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         if manifest_path.exists():
             manifest = json.loads(manifest_path.read_text())
         else:
-            manifest = scatter(source, folder, p.part_faces)
+            manifest = scatter(source, folder, p.part_faces, uv=uv)
         t_scatter = time.perf_counter() - t0
         n_faces = int(manifest["n_faces"])
         target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
@@ -214,7 +216,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 locks = str(_locks(level_dir, groups, borders))
             level_kw, changed = _level_kwargs(kwargs, p, last)
             specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
-                          out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit)
+                          out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit,
+                          uv=bool(manifest.get("uv")))
                      for k, g in enumerate(groups)]
             cost = None
             if p.share == "cost" and not last and len(groups) > 1:
@@ -232,6 +235,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             borders = [pieces.borders(path) for path in paths]
             first = False
         V, F, gid, _ = pieces.stitch(paths)
+        UV = pieces.stitch_uv(paths) if manifest.get("uv") else None
         locked_share = float(np.mean(gid >= 0)) if len(paths) > 1 and len(gid) else 0.0
         t_measure = time.perf_counter()
         dist = {}
@@ -257,16 +261,37 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             runner.close()
         if temporary:
             shutil.rmtree(folder, ignore_errors=True)
+    if uv is True and not manifest.get("uv"):
+        warnings.warn("partition: attributes='uv', but the file does not give every triangle corner a UV (an OBJ's "
+                      "vt, a PLY's per-vertex texture_u/texture_v, s/t or u/v): the output has none",
+                      stacklevel=stacklevel)
     return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
-                   t_measure, folder if not temporary else None, kwargs, stacklevel)
+                   t_measure, folder if not temporary else None, kwargs, stacklevel, UV)
 
 
 def runner_name(p: Partition) -> str:
     return "dask" if p.client is not None else ("this process" if p.n_workers <= 1 else f"{p.n_workers} local processes")
 
 
+def _wedges(F, UV, manifest, stacklevel) -> dict:
+    """The result's wedge fields for the output's corners' UVs ``UV`` (None: none), with the material of the
+    texture the file names."""
+    if UV is None:
+        return {}
+    from .._mesh.wedges import load_texture
+
+    vertex, uv, corners = task.corner_wedges(F, UV)
+    material = None
+    if manifest.get("texture"):
+        try:
+            material = load_texture(manifest["texture"])
+        except ValueError as exc:
+            warnings.warn(f"partition: the UVs are kept without their texture: {exc}", stacklevel=stacklevel)
+    return dict(uv=uv, wedge_vertex=vertex, wedge_faces=corners, material=material)
+
+
 def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, t0, t_scatter, t_measure, folder,
-            kwargs, stacklevel):
+            kwargs, stacklevel, UV=None):
     from .._pipeline.measure import not_measured
     from .._record.result import Contractions, SimplifyResult
 
@@ -290,7 +315,7 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                 peak_rss_workers=max((s["peak_rss"] for s in all_stats), default=0), peak_rss_client=task.peak_rss(),
                 reused=sum(1 for s in all_stats if s.get("reused")), scratch=None if folder is None else str(folder),
                 format=manifest.get("format"), welded=manifest.get("welded"),
-                carried=all(s.get("carried", False) for s in all_stats))
+                carried=all(s.get("carried", False) for s in all_stats), uv=UV is not None)
     stats = dict(faces_in=n_faces, faces_out=int(len(F)), vertices_in=int(manifest["n_vertices"]),
                  vertices_out=int(len(V)), target_faces=target, max_error_limit=None, rounds=0,
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
@@ -313,4 +338,4 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                           max_error=float("nan"), source_vertices=empty, source_faces=empty,
                           input_vertices=np.zeros((0, 3)), input_faces=np.zeros((0, 3), np.int64),
                           history=Contractions(np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)),
-                          stats=stats, stop_reason=stop)
+                          stats=stats, stop_reason=stop, **_wedges(np.asarray(F, np.int64), UV, manifest, stacklevel))

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-OK, BAD_VERTEX, BAD_CORNER, ZERO_INDEX, BEFORE_FIRST, FEW_CORNERS, BAD_FACET, FEW_VALUES, BAD_INT = range(9)
+OK, BAD_VERTEX, BAD_CORNER, ZERO_INDEX, BEFORE_FIRST, FEW_CORNERS, BAD_FACET, FEW_VALUES, BAD_INT, BAD_UV = range(10)
+NO_UV = -1  # a corner without a texture coordinate number
 NL = 10
 
 
@@ -69,10 +70,10 @@ def _grow(tris, nt, extra):
 
 
 @njit(cache=True)
-def _coords(buf, i, out, no):
-    """Copies the three words from buf[i] on to out at no: (offset after them, new length), offset -1
+def _coords(buf, i, out, no, words=3):
+    """Copies the ``words`` words from buf[i] on to out at no: (offset after them, new length), offset -1
     when the line ends sooner."""
-    for _ in range(3):
+    for _ in range(words):
         i = _skip_ws(buf, i)
         j = _word_end(buf, i)
         if j == i:
@@ -83,60 +84,85 @@ def _coords(buf, i, out, no):
 
 
 @njit(cache=True)
-def _corner(buf, i):
-    """An OBJ corner word from buf[i]: (offset after it, its vertex number (negative: counted back),
-    error code)."""
-    neg = buf[i] == 45
-    k = i + 1 if neg else i
+def _number(buf, k):
+    """A whole number from buf[k], optionally negative: (offset after it, value, whether there was one)."""
+    neg = buf[k] == 45
+    if neg:
+        k += 1
     if not _digit(buf[k]):
-        return k, 0, BAD_CORNER
+        return k, 0, False
     v = 0
     while _digit(buf[k]):
         v = v * 10 + np.int64(buf[k] - 48)
         k += 1
-    while not _ws(buf[k]) and buf[k] != NL:  # the UV and normal numbers: checked, not kept
-        if not (_digit(buf[k]) or buf[k] == 47 or buf[k] == 45):
-            return k, 0, BAD_CORNER
-        k += 1
-    if v == 0:
-        return k, 0, ZERO_INDEX
-    return k, -v if neg else v, OK
+    return k, -v if neg else v, True
 
 
 @njit(cache=True)
-def _face(buf, i, tris, nt, nv):
-    """Fans the corners of an OBJ face line from buf[i] (``nv`` vertices so far) into tris at nt:
-    (offset at the line's end, triangles, new count, error code)."""
-    k, first, prev = 0, 0, 0
+def _corner(buf, i):
+    """An OBJ corner word from buf[i] (``v``, ``v/t``, ``v//n`` or ``v/t/n``): (offset after it, its vertex
+    number, its texture coordinate number or 0 when it names none (negative: counted back), error code)."""
+    k, v, ok = _number(buf, i)
+    if not ok:
+        return k, 0, 0, BAD_CORNER
+    t = 0
+    if buf[k] == 47 and buf[k + 1] != 47 and not _ws(buf[k + 1]) and buf[k + 1] != NL:  # v/t
+        k, t, ok = _number(buf, k + 1)
+        if not ok:
+            return k, 0, 0, BAD_CORNER
+        if t == 0:
+            return k, 0, 0, ZERO_INDEX
+    while not _ws(buf[k]) and buf[k] != NL:  # the normal's number: checked, not kept
+        if not (_digit(buf[k]) or buf[k] == 47 or buf[k] == 45):
+            return k, 0, 0, BAD_CORNER
+        k += 1
+    if v == 0:
+        return k, 0, 0, ZERO_INDEX
+    return k, v, t, OK
+
+
+@njit(cache=True)
+def _face(buf, i, tris, uvs, nt, nv, nvt):
+    """Fans the corners of an OBJ face line from buf[i] (``nv`` vertices and ``nvt`` texture coordinates so
+    far) into tris and their texture coordinates' numbers into uvs (`NO_UV` for none) at nt: (offset at the
+    line's end, triangles, their uvs, new count, error code)."""
+    k, first, prev, tfirst, tprev = 0, 0, 0, 0, 0
     while True:
         i = _skip_ws(buf, i)
         if buf[i] == NL:
             break
-        i, v, err = _corner(buf, i)
+        i, v, t, err = _corner(buf, i)
         if err:
-            return i, tris, nt, err
+            return i, tris, uvs, nt, err
         v = nv + v if v < 0 else v - 1
-        if v < 0:
-            return i, tris, nt, BEFORE_FIRST
+        if v < 0 or nvt + t < 0:
+            return i, tris, uvs, nt, BEFORE_FIRST
+        t = NO_UV if t == 0 else (nvt + t if t < 0 else t - 1)
         if k == 0:
-            first = v
+            first, tfirst = v, t
         elif k >= 2:
             tris = _grow(tris, nt, 1)
+            uvs = _grow(uvs, nt, 1)
             tris[nt, 0], tris[nt, 1], tris[nt, 2] = first, prev, v
+            uvs[nt, 0], uvs[nt, 1], uvs[nt, 2] = tfirst, tprev, t
             nt += 1
-        prev, k = v, k + 1
-    return i, tris, nt, FEW_CORNERS if k < 3 else OK
+        prev, tprev, k = v, t, k + 1
+    return i, tris, uvs, nt, FEW_CORNERS if k < 3 else OK
 
 
 @njit(cache=True)
-def obj(buf, nv0):
-    """OBJ: `v` lines' first three words; `f` lines' corners (the vertex number before any '/'),
-    1-based or negative (counted back from the last vertex so far, ``nv0`` before this block) made
-    0-based, fanned. Returns (coordinate bytes, vertices, triangles, error, error line)."""
+def obj(buf, nv0, nvt0):
+    """OBJ: `v` lines' first three words, `vt` lines' first two; `f` lines' corners (the vertex number
+    before any '/', and the texture coordinate's after it), 1-based or negative (counted back from the
+    last so far, ``nv0`` vertices and ``nvt0`` texture coordinates before this block) made 0-based, fanned.
+    Returns (coordinate bytes, vertices, triangles, error, error line, texture coordinate bytes, texture
+    coordinates, each triangle corner's texture coordinate number or `NO_UV`)."""
     n = len(buf)
     out = np.empty(n + 1, np.uint8)
+    uv_out = np.empty(n + 1, np.uint8)
     tris = np.empty((max(16, n // 16), 3), np.int64)
-    no, nt, nv, line, i, err = 0, 0, 0, 0, 0, OK
+    uvs = np.empty((max(16, n // 16), 3), np.int64)
+    no, nuo, nt, nv, nvt, line, i, err = 0, 0, 0, 0, 0, 0, 0, OK
     while i < n and err == OK:
         line += 1
         i = _skip_ws(buf, i)
@@ -147,12 +173,18 @@ def obj(buf, nv0):
             if i < 0:
                 err = BAD_VERTEX
                 break
+        elif j - i == 2 and buf[i] == 118 and buf[i + 1] == 116:  # vt
+            i, nuo = _coords(buf, j, uv_out, nuo, 2)
+            nvt += 1
+            if i < 0:
+                err = BAD_UV
+                break
         elif j - i == 1 and buf[i] == 102:  # f
-            i, tris, nt, err = _face(buf, j, tris, nt, nv0 + nv)
+            i, tris, uvs, nt, err = _face(buf, j, tris, uvs, nt, nv0 + nv, nvt0 + nvt)
         while buf[i] != NL:
             i += 1
         i += 1
-    return out[:no], nv, tris[:nt], err, line
+    return out[:no], nv, tris[:nt], err, line, uv_out[:nuo], nvt, uvs[:nt]
 
 
 @njit(cache=True)
@@ -208,14 +240,14 @@ def _int_word(buf, i, j):
 @njit(cache=True)
 def ply_rows(buf, pos, rows, mode, cols, kinds, index):
     """ASCII PLY rows of one element from byte ``pos``, one non-empty line each, at most ``rows``.
-    mode 0: skipped; 1: vertices, whose words at ``cols`` (x, y, z) are kept; 2: faces, walked by
+    mode 0: skipped; 1: vertices, whose words at ``cols`` (x, y, z, and u, v when kept) are kept; 2: faces, walked by
     ``kinds`` (0 a scalar, 1 a list) with the ``index`` list fanned. Returns (end offset, rows read,
     coordinate bytes, triangles, lines passed, error, error line)."""
     n = len(buf)
     out = np.empty(n + 1, np.uint8)
     tris = np.empty((max(16, n // 16) if mode == 2 else 0, 3), np.int64)
     no, nt, done, line, i = 0, 0, 0, 0, pos
-    spans = np.zeros((3, 2), np.int64)
+    spans = np.zeros((len(cols), 2), np.int64)
     while i < n and done < rows:
         line += 1
         i = _skip_ws(buf, i)
@@ -226,14 +258,14 @@ def ply_rows(buf, pos, rows, mode, cols, kinds, index):
             w = 0
             while buf[i] != NL:
                 j = _word_end(buf, i)
-                for c in range(3):
+                for c in range(len(cols)):
                     if cols[c] == w:
                         spans[c, 0], spans[c, 1] = i, j
                 w += 1
                 i = _skip_ws(buf, j)
             if w < len(kinds):
                 return i, done, out[:no], tris[:nt], line, FEW_VALUES, line
-            for c in range(3):
+            for c in range(len(cols)):
                 no = _copy(buf, spans[c, 0], spans[c, 1], out, no)
         elif mode == 2:
             for p in range(len(kinds)):

@@ -20,8 +20,8 @@ import numpy as np
 from numba import njit
 
 from .cells import Bins, Plan, codes, quantize
-from .readers import open_source
-from .source import FACES, VERTICES, Ragged, Source, remove
+from .readers import open_source, texture_of
+from .source import CORNER_UV, FACES, UV, VERTICES, Ragged, Source, remove
 from .write import replace_atomically, write_npz
 
 UNSEEN, SHARED = -1, -2  # owner values besides a part number
@@ -86,11 +86,13 @@ def _note_owner(owner, F, part):
                 owner[v] = SHARED
 
 
-def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progress) -> np.ndarray:
-    """Appends each face to its part's file (input order kept within a part); returns the owners."""
+def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progress, uv: bool) -> np.ndarray:
+    """Appends each face to its part's file (input order kept within a part), and with ``uv`` its corners'
+    UVs to the part's ``.uv`` file; returns the owners."""
     owner = np.full(src.n_vertices, UNSEEN, np.int32)
     for a, b in _spans(src.n_faces, step):
         F = src.faces(a, b)
+        C = src.corner_uvs(a, b, F) if uv else None
         part = plan.assign(codes(cells, F)).astype(np.int32)
         _note_owner(owner, F, part)
         order = np.argsort(part, kind="stable")
@@ -100,6 +102,9 @@ def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progr
         for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(order)]):
             with open(tmp / f"{sorted_part[lo]}.bin", "ab") as f:
                 f.write(F[order[lo:hi]].tobytes())
+            if uv:
+                with open(tmp / f"{sorted_part[lo]}.uv", "ab") as f:
+                    f.write(C[order[lo:hi]].tobytes())
         if progress is not None:
             progress(b, src.n_faces)
     return owner
@@ -115,7 +120,8 @@ def _distinct(raw: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return used, at[raw]
 
 
-def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str) -> list:
+def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str,
+                 uv: bool) -> list:
     parts = []
     at = np.empty(src.n_vertices, index_type)  # holds a corner's place in its part
     for p in range(plan.parts):
@@ -131,7 +137,13 @@ def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path,
         if bad.any():
             raise ValueError(f"{name}: vertex {used[bad][0]} has a coordinate that is not a finite number")
         file = f"part_{p:05d}.npz"
-        write_npz(level / file, gid=gid, V=V, F=inverse.reshape(-1, 3).astype(np.int32), border=border)
+        extra = {}
+        if uv:
+            extra["UV"] = np.fromfile(tmp / f"{p}.uv", np.float64).reshape(-1, 3, 2)
+            remove(tmp / f"{p}.uv")
+            if not np.isfinite(extra["UV"]).all():
+                raise ValueError(f"{name}: a texture coordinate is not a finite number")
+        write_npz(level / file, gid=gid, V=V, F=inverse.reshape(-1, 3).astype(np.int32), border=border, **extra)
         parts.append({"file": f"level0/{file}", "faces": len(raw) // 3, "vertices": len(used),
                       "border": int(border.sum())})
     return parts
@@ -164,7 +176,14 @@ def _read(path, scratch: Path, part_faces: int, step: int, name: str):
         return src, box, cells, _histogram(src, cells, part_faces, step, name)
 
 
-def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progress=None) -> dict:
+def keeps_uv(src: Source, uv, path) -> bool:
+    """Whether the parts carry the file's UVs: ``uv`` True (asked for by name) or "auto" (when the file
+    names a texture image, as `simplify`'s ``attributes="auto"`` keeps UVs with seams), and the file gives
+    every triangle corner one."""
+    return src.uv is not None and (uv is True or (uv == "auto" and texture_of(path) is not None))
+
+
+def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progress=None, uv=False) -> dict:
     """Reads the mesh file ``path`` (PLY, OBJ or STL) in chunks of ``chunk_faces`` faces and bins its
     triangles into spatially compact parts of at most ``part_faces`` faces, written to
     ``scratch/level0/part_NNNNN.npz`` (arrays ``gid``: sorted global vertex ids, ``V``: their float64
@@ -172,6 +191,10 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     uses the vertex), and returns the manifest (also written to ``scratch/manifest.json``): format,
     n_vertices, n_faces, bbox, welded, parts (file, faces, vertices, border for each), dropped (what the file
     holds besides positions and triangles, which the parts do not carry).
+
+    With ``uv`` (`keeps_uv`), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
+    OBJ's ``vt``, a PLY's per-vertex ``texture_u``/``s``/``u`` and their pairs), and the manifest says
+    ``uv`` and names the ``texture`` image the file names.
 
     STL and OBJ positions are welded by exact value; PLY is taken as indexed. Unused vertices are
     dropped, the others keep their order. ``progress(done_faces, total_faces)`` is called after each
@@ -187,7 +210,8 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
         src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name)
         plan = Plan.from_bins(bins, part_faces)
         index_type = np.int32 if src.n_vertices < 2**31 else np.int64
-        owner = _bin(src, cells, plan, tmp, index_type, step, progress)
+        uv = keeps_uv(src, uv, path)
+        owner = _bin(src, cells, plan, tmp, index_type, step, progress, uv)
         del cells, bins
         kept = owner != UNSEEN
         n_kept = int(np.count_nonzero(kept))
@@ -196,14 +220,16 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
             new_id = np.cumsum(kept, dtype=index_type) - 1
             lo, hi = _bounds(src, step, kept)
         del kept
-        parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name)
+        parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name, uv)
+        texture = texture_of(path) if uv else None
         manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": src.n_faces,
                     "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts,
-                    "dropped": list(src.dropped)}
+                    "dropped": list(src.dropped_with_uv if uv else src.dropped), "uv": uv,
+                    "texture": None if texture is None else str(texture)}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(scratch / "weld", ignore_errors=True)
-        for leftover in (VERTICES, FACES, "faces_raw.i64", "ids.i64"):
+        for leftover in (VERTICES, FACES, UV, CORNER_UV, "faces_raw.i64", "ids.i64"):
             remove(scratch / leftover)
 
     def write(p):

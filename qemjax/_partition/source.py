@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 
 VERTICES, FACES = "vertices.f64", "faces.i64"  # the scratch arrays of converted formats
+UV, CORNER_UV = "uv.f64", "corner_uv.i64"  # an OBJ's texture coordinates, and each triangle corner's
 XYZ = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
+UV_DTYPE = np.dtype([("u", "<f8"), ("v", "<f8")])
 TRI = np.dtype([("i", "<i8", (3,))])
 
 
@@ -72,6 +74,13 @@ class Source:
     checks: list = field(default_factory=list)
     retriangulate: object = None  # () -> Source whose faces were streamed to scratch, for `Ragged`
     dropped: tuple = ()  # what the file holds besides positions and triangles, in the file's own words
+    # UVs, when the file gives every triangle corner one: their records (fields ``uv_fields``) and either
+    # each corner's record number (``corner_uv``: an OBJ's vt) or the vertex's (None: a PLY's per-vertex
+    # UVs); ``dropped_with_uv``: what ``dropped`` is when they are kept
+    uv: Block | None = None
+    corner_uv: Block | None = None
+    uv_fields: tuple = ("u", "v")
+    dropped_with_uv: tuple = ()
 
     @property
     def n_vertices(self) -> int:
@@ -94,6 +103,16 @@ class Source:
     def gather(self, idx: np.ndarray) -> np.ndarray:
         """Positions of the vertices at sorted numbers ``idx`` as float64 (n,3)."""
         return self._positions(self.vertex.gather(idx))
+
+    def corner_uvs(self, lo: int, hi: int, F: np.ndarray) -> np.ndarray:
+        """(k,3,2) float64 UVs of the corners of triangles lo..hi (``F``: their vertices, `faces`)."""
+        idx = (F if self.corner_uv is None else self.corner_uv.read(lo, hi)["i"]).reshape(-1)
+        used, inverse = np.unique(idx, return_inverse=True)
+        r = self.uv.gather(used)
+        out = np.empty((len(used), 2), np.float64)
+        for k, name in enumerate(self.uv_fields):
+            out[:, k] = r[name]
+        return out[inverse].reshape(-1, 3, 2)
 
     def faces(self, lo: int, hi: int) -> np.ndarray:
         """Triangles lo..hi as int64 (n,3); `Ragged` when a row of a fixed-size face block is no triangle."""

@@ -48,6 +48,33 @@ def _gids_out(res, V, gid, locked) -> np.ndarray:
     return np.where(hit, gid[locked][order][at], -1)
 
 
+def corner_wedges(F: np.ndarray, UV: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The wedges of triangles F (m,3) whose corners have UVs UV (m,3,2): (each wedge's vertex (w,), its UV
+    (w,2), each corner's wedge (m,3)); one wedge per distinct UV at a vertex, in the order of (vertex, UV
+    bits; -0.0 is 0.0): the same for the same corners, whatever their order."""
+    UV = np.asarray(UV, np.float64) + 0.0
+    key = np.empty((F.size, 3), np.int64)
+    key[:, 0] = F.reshape(-1)
+    key[:, 1:] = np.ascontiguousarray(UV.reshape(-1, 2)).view(np.int64)
+    rows, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return rows[:, 0], UV.reshape(-1, 2)[first], inverse.reshape(-1).reshape(F.shape)
+
+
+def _with_uv(V: np.ndarray, F: np.ndarray, UV: np.ndarray, locked: np.ndarray, Q: np.ndarray | None):
+    """The mesh a group with UVs runs on, as OBJ files store it (a vertex per wedge, `TextureVisuals`; the
+    run welds the positions back and keeps the wedges), its locked mask, its vertices and their carried
+    quadrics (each vertex's on its first copy, zero on the others: the run's weld adds them up)."""
+    import trimesh
+
+    vertex, uv, corners = corner_wedges(F, UV)
+    mesh = trimesh.Trimesh(V[vertex], corners, visual=trimesh.visual.TextureVisuals(uv=uv), process=False)
+    if Q is not None:
+        first = np.zeros(len(vertex), bool)
+        first[np.unique(vertex, return_index=True)[1]] = True
+        Q = np.where(first[:, None], Q[vertex], 0.0)
+    return mesh, locked[vertex], V[vertex], Q
+
+
 def run_group(spec: dict) -> dict:
     """Simplify the pieces ``spec["inputs"]`` stitched into one mesh to ``spec["target"]`` faces, locking the
     vertices whose global ids are in ``spec["locks"]`` (a sorted ``.npy`` of this level) or, on the first
@@ -64,6 +91,7 @@ def run_group(spec: dict) -> dict:
     from .carry import Carry
 
     V, F, gid, border, Q = pieces.stitch(spec["inputs"], carried=True)
+    UV = pieces.stitch_uv(spec["inputs"]) if spec.get("uv") else None
     if spec["locks"] == "border":
         locked = border
     elif spec["locks"] is None:
@@ -73,19 +101,24 @@ def run_group(spec: dict) -> dict:
         at = np.minimum(np.searchsorted(locks, gid), max(len(locks) - 1, 0))
         locked = (gid >= 0) & (locks[at] == gid) if len(locks) else np.zeros(len(V), bool)
     kw = dict(spec["kwargs"])
-    if locked.any():
-        kw["locked"] = locked
-    carry = kw[SEED] = Carry(V, Q, spec["unit"], exports=bool(spec.get("carry_out")))
+    mesh, mask, Vc = (V, F), locked, V
+    if UV is not None:  # kept UVs: the run keeps the wedges, seams and all, and a locked vertex its UVs
+        mesh, mask, Vc, Q = _with_uv(V, F, UV, locked, Q)
+    if mask.any():
+        kw["locked"] = mask
+    carry = kw[SEED] = Carry(Vc, Q, spec["unit"], exports=bool(spec.get("carry_out")))
     Q = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = simplify((V, F), target_faces=int(spec["target"]), measure=False, progress=False,
-                       attributes=None, **kw)
+        res = simplify(mesh, target_faces=int(spec["target"]), measure=False, progress=False,
+                       attributes=None if UV is None else "uv", **kw)
     g = _gids_out(res, V, gid, locked)
     held = np.unique(g[g >= 0])
     Q = carry.export(res)
-    pieces.save(out, V=res.vertices, F=res.faces.astype(np.int32), gid=g, borders=held,
-                **({} if Q is None else dict(Q=Q)))
+    extra = {} if Q is None else dict(Q=Q)
+    if res.uv is not None:
+        extra["UV"] = res.uv[res.wedge_faces]
+    pieces.save(out, V=res.vertices, F=res.faces.astype(np.int32), gid=g, borders=held, **extra)
     stats = dict(faces_in=int(len(F)), faces_out=int(len(res.faces)), target=int(spec["target"]),
                  locked=int(locked.sum()), vertices_in=int(len(V)), stop_reason=res.stop_reason,
                  carried=carry.carried,

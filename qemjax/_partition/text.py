@@ -15,8 +15,9 @@ import numpy as np
 from .._io import ply as _ply
 from .._io.text import is_binary, quote
 from . import scan
-from .ply import _index_prop
-from .source import Appender, FACES, Refusal, VERTICES, remove, rows, scratch_source
+from .ply import _index_prop, dropped as _ply_dropped, uv_names
+from .source import (Appender, Block, CORNER_UV, FACES, Refusal, TRI, UV, UV_DTYPE, VERTICES, remove, rows,
+                     scratch_source)
 from .weld import Welder
 
 BLOCK = 1 << 24  # bytes of text scanned at once
@@ -30,7 +31,9 @@ _MESSAGES = {
     scan.BAD_FACET: "ends a facet that does not have 3 vertices",
     scan.FEW_VALUES: "holds too few values for a {what} row",
     scan.BAD_INT: "holds a list count or vertex number that is not a whole number",
+    scan.BAD_UV: "is a texture coordinate line without u and v",
 }
+UV_NAME = "texture coordinates (vt)"  # how a warning names an OBJ's UVs
 
 
 def blocks(path: Path, start: int = 0):
@@ -59,13 +62,13 @@ def _refuse(code: int, block: bytes, k: int, line0: int, what: str = "") -> Refu
     return Refusal(f"line {line0 + k} {_MESSAGES[code].format(what=what)}: {quote(_line(block, k))}")
 
 
-def _floats(coords: np.ndarray, count: int, block: bytes, line0: int, pick) -> np.ndarray:
-    """The (count,3) float64 coordinates in ``coords``; else a refusal naming the first line whose
+def _floats(coords: np.ndarray, count: int, block: bytes, line0: int, pick, width: int = 3) -> np.ndarray:
+    """The (count,width) float64 coordinates in ``coords``; else a refusal naming the first line whose
     coordinate words (``pick(line number in block, words)``, None for other lines) are not numbers."""
     try:
         v = np.fromstring(coords.tobytes(), np.float64, sep=" ")
-        if len(v) == 3 * count:
-            return v.reshape(count, 3)
+        if len(v) == width * count:
+            return v.reshape(count, width)
     except ValueError:
         pass
     for k, line in enumerate(block.split(b"\n"), 1):
@@ -100,35 +103,57 @@ def _finish_weld(welder: Welder, scratch: Path, fmt: str, raw: Appender | None, 
 
 
 def read_obj(path: Path, scratch: Path):
+    """The OBJ file as a welded `Source`; its UVs (`source.UV`, each triangle corner's ``vt``) when every
+    corner names one."""
     welder = Welder(scratch / "weld", os.path.getsize(path) // 16)
     raw = Appender(scratch / "faces_raw.i64")
-    nv = line0 = 0
+    uv, corner_uv = Appender(scratch / UV), Appender(scratch / CORNER_UV)
+    nv = nvt = line0 = 0
     top = (-1, 0)  # the largest vertex number a face uses, and its block's first line
-    extra = {"texture coordinates (vt)": b"vt", "normals (vn)": b"vn"}
-    seen = set()
+    top_t = (-1, 0)  # the same for texture coordinates
+    bare = False  # a corner names no texture coordinate
+    seen_vn = False
     try:
         for block in blocks(path):
-            seen.update(k for k, tag in extra.items() if k not in seen and
-                        (block.startswith(tag + b" ") or b"\n" + tag + b" " in block))
+            seen_vn = seen_vn or block.startswith(b"vn ") or b"\nvn " in block
             if line0 == 0 and is_binary(block[:1024]):
                 raise Refusal("it holds binary data, not OBJ text: the file is damaged or not an OBJ file")
-            coords, k, tris, err, at = scan.obj(np.frombuffer(block, np.uint8), nv)
+            coords, k, tris, err, at, uv_words, kt, tuv = scan.obj(np.frombuffer(block, np.uint8), nv, nvt)
             if err:
                 raise _refuse(err, block, at, line0)
             welder.add(_floats(coords, k, block, line0, lambda _, w: w[1:4] if w[:1] == [b"v"] else None))
+            if kt:
+                uv.add(_floats(uv_words, kt, block, line0, lambda _, w: w[1:3] if w[:1] == [b"vt"] else None, 2))
             raw.add(tris)
+            corner_uv.add(tuv)
             if len(tris) and tris.max() > top[0]:
                 top = (int(tris.max()), line0)
+            if len(tuv) and tuv.max() > top_t[0]:
+                top_t = (int(tuv.max()), line0)
+            bare = bare or bool(len(tuv) and tuv.min() == scan.NO_UV)
             nv += k
+            nvt += kt
             line0 += block.count(b"\n")
     finally:
         raw.close()
+        uv.close()
+        corner_uv.close()
     if top[0] >= nv:
         raise Refusal(f"a face (after line {top[1]}) uses vertex {top[0] + 1}, but the file has {nv} vertices")
+    if top_t[0] >= nvt:
+        raise Refusal(f"a face (after line {top_t[1]}) uses texture coordinate {top_t[0] + 1}, but the file has "
+                      f"{nvt} (vt lines)")
     if raw.rows == 0:
         raise Refusal("the OBJ file has no faces (no 'f' lines)")
     src = _finish_weld(welder, scratch, "obj", raw, nv)
-    src.dropped = tuple(k for k in extra if k in seen)
+    src.dropped = tuple(k for k, seen in ((UV_NAME, nvt > 0), ("normals (vn)", seen_vn)) if seen)
+    if nvt and not bare:
+        src.uv = Block(scratch / UV, 0, UV_DTYPE, nvt)
+        src.corner_uv = Block(scratch / CORNER_UV, 0, TRI, raw.rows)
+        src.dropped_with_uv = tuple(k for k in src.dropped if k != UV_NAME)
+    else:
+        remove(scratch / UV)
+        remove(scratch / CORNER_UV)
     return src
 
 
@@ -159,13 +184,13 @@ def read_binary_stl(path: Path, scratch: Path, n: int):
 
 
 def _element_args(h: _ply.Header, e: _ply.Element):
-    """(mode, x y z columns, property kinds, index list) of an ASCII element for `scan.ply_rows`."""
+    """(mode, x y z (and u v) columns, property kinds, index list) of an ASCII element for `scan.ply_rows`."""
     kinds = np.array([p.count is not None for p in e.props], np.int64)
     if e.name == "vertex":
         if kinds.any():
             raise Refusal("the PLY vertex element has list properties, which are not read")
         names = [p.name for p in e.props]
-        return 1, np.array([names.index(c) for c in "xyz"], np.int64), kinds, -1
+        return 1, np.array([names.index(c) for c in ("x", "y", "z", *(uv_names(e) or ()))], np.int64), kinds, -1
     if e.name == "face":
         return 2, np.zeros(3, np.int64), kinds, _index_prop(e)
     return 0, np.zeros(3, np.int64), kinds, -1
@@ -176,7 +201,7 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
         raise Refusal("the PLY header declares no face element")
     with open(path, "rb") as f:
         line0 = f.read(h.body).count(b"\n")
-    vertices, faces = Appender(scratch / VERTICES), Appender(scratch / FACES)
+    vertices, faces, uv = Appender(scratch / VERTICES), Appender(scratch / FACES), Appender(scratch / UV)
     todo = [(e, e.rows) for e in h.elements if e.rows]
     try:
         for block in blocks(path, h.body):
@@ -191,8 +216,10 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
                 if mode == 1:
                     first = block[:pos].count(b"\n") - lines  # lines before this call in the block
                     last = first + lines
-                    vertices.add(_floats(coords, done, block, line0, lambda k, w: [w[c] for c in cols]
-                                         if first < k <= last and w else None))
+                    rows_read = _floats(coords, done, block, line0, lambda k, w: [w[c] for c in cols]
+                                        if first < k <= last and w else None, len(cols))
+                    vertices.add(rows_read[:, :3])
+                    uv.add(rows_read[:, 3:])
                 faces.add(tris)
                 todo[0] = (e, left - done)
                 if left == done:
@@ -201,8 +228,16 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
     finally:
         vertices.close()
         faces.close()
+        uv.close()
     if todo:
         e, left = todo[0]
         raise Refusal(f"the header declares {h.declares()}, but the file ends {left} {_ply.rows_name(e)} "
                       "short: it is truncated")
-    return scratch_source(scratch, "ply", False, vertices.rows, faces.rows)
+    src = scratch_source(scratch, "ply", False, vertices.rows, faces.rows)
+    src.dropped = _ply_dropped(h)
+    kept = uv_names(h.element("vertex"))
+    if kept is None:
+        remove(scratch / UV)
+    else:  # per-vertex UVs, converted beside the positions
+        src.uv, src.dropped_with_uv = Block(scratch / UV, 0, UV_DTYPE, vertices.rows), _ply_dropped(h, kept)
+    return src

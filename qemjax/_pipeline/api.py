@@ -7,6 +7,7 @@ import dataclasses
 import hashlib
 import inspect
 import math
+import os
 import time
 import warnings
 from typing import TYPE_CHECKING, Any
@@ -104,7 +105,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     partition: a `qemjax.Partition` (or True: its defaults): a mesh too large for one process, read in chunks
         from its file, cut into parts simplified in parallel with their borders locked, regrouped level by
         level until one group meets the target (`qemjax._partition`; docs/large-meshes.md). The result holds
-        the output and its stats (``stats["partition"]``), not the input, record or history.
+        the output and its stats (``stats["partition"]``), not the input, record or history; of the
+        attributes, a file's UVs (``attributes="uv"``, or ``"auto"`` when the file names a texture image).
     settings: any field of the method, `Topology` or `Attributes` by its name (``boundary_weight=10``,
         ``flip_angle=None``, ``attribute_weights=0.1``) or dotted (``**{"method.refit": 0}``); each
         replaces that field of the object given (so ``method="accurate", refit=0`` is the preset without
@@ -152,12 +154,20 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
         raise ValueError(f"partition: expected a qemjax.Partition or True, got {type(partition).__name__}")
     if measure is not None:
         partition = dataclasses.replace(partition, measure=bool(measure))
-    if attributes not in ("auto", None):
-        raise ValueError("partition: a partitioned run keeps positions only; attributes=None")
+    if attributes in ("uv", ("uv",)):
+        uv = True
+        if not isinstance(mesh, (str, os.PathLike)):
+            raise ValueError("partition: UVs are kept from a mesh file (an OBJ's vt, a PLY's per-vertex texture "
+                             "coordinates); a mesh given as arrays or an object is read for its positions only")
+    elif attributes in ("auto", None):
+        uv = attributes == "auto" and "auto"
+    else:
+        raise ValueError("partition: a partitioned run keeps a file's UVs and nothing else of its appearance; "
+                         "attributes='uv', 'auto' (UVs that come with a texture image) or None")
     kwargs = {k: v for k, v in named.items() if v is not None} | dict(settings)
     kwargs.pop("attributes", None)
     return simplify_partitioned(mesh, target_faces=target_faces, ratio=ratio, partition=partition, kwargs=kwargs,
-                                progress=progress, stacklevel=4)
+                                progress=progress, stacklevel=4, uv=uv)
 
 
 def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> list:

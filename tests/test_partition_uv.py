@@ -1,0 +1,188 @@
+"""UVs in partitioned runs (`qemjax._partition`): read from an OBJ's ``vt`` and a PLY's per-vertex texture
+coordinates, carried through the parts with their corners, kept by each group's run (seams and all, a locked
+border vertex with its UVs), and returned as the in-core run returns them."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import qemjax
+from qemjax import Partition, shapes
+from qemjax._io import attribute_files as af
+from qemjax._partition import task
+from qemjax._partition.readers import texture_of
+
+from test_partition import closed_and_consistent
+
+RATIO = 0.1
+
+
+def spherical(P: np.ndarray) -> np.ndarray:
+    """(n,2) the longitude/latitude map of `attribute_files.spherical_uv` at points P."""
+    d = P / np.linalg.norm(P, axis=1, keepdims=True)
+    return np.stack([(np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)) % 1.0, np.arccos(np.clip(d[:, 2], -1, 1)) / np.pi], 1)
+
+
+def deviation(res) -> np.ndarray:
+    """Each wedge's UV against the map at its vertex (u across the seam: the shorter way round)."""
+    e = np.abs(res.uv - spherical(res.vertices[res.wedge_vertex]))
+    e[:, 0] = np.minimum(e[:, 0], np.abs(e[:, 0] - 1))
+    return np.hypot(e[:, 0], e[:, 1])
+
+
+@pytest.fixture(scope="module")
+def sphere_obj(tmp_path_factory):
+    """A bumpy sphere of 20,480 faces with a longitude/latitude map: one seam along a meridian."""
+    m = shapes.bumpy_sphere(5)
+    uv, corner = af.spherical_uv(m)
+    path = tmp_path_factory.mktemp("uv") / "sphere.obj"
+    af.write_obj(path, m, uv=uv, corner_uv=corner)
+    return path
+
+
+@pytest.fixture(scope="module")
+def runs(sphere_obj):
+    core = qemjax.simplify(str(sphere_obj), ratio=RATIO, attributes="uv")
+    part = qemjax.simplify(str(sphere_obj), ratio=RATIO, attributes="uv",
+                           partition=Partition(workers=1, part_faces=1000))
+    return core, part
+
+
+def test_uvs_are_kept_through_the_levels(runs):
+    """The target, a closed mesh, and UVs as good as the in-core run's; the only vertices with several
+    wedges are on the input's seam (none along the cuts: a border vertex kept its UVs in every part); the
+    position quadrics are carried from level to level."""
+    core, part = runs
+    assert part.stats["partition"]["levels"] >= 2 and part.stats["partition"]["uv"]
+    assert part.stats["partition"]["carried"]  # the position quadrics, the attributes' rebuilt per level
+    assert len(part.faces) == len(core.faces) == round(RATIO * 20480) and closed_and_consistent(part.faces)
+    assert np.array_equal(part.vertices[part.wedge_vertex][part.wedge_faces], part.vertices[part.faces])
+    assert part.stats["dropped"] == ["record"]
+    for res in (core, part):
+        wedges = np.bincount(res.wedge_vertex, minlength=len(res.vertices))
+        seam = np.flatnonzero(wedges > 1)
+        assert len(seam) > 20 and all(np.ptp(res.uv[res.wedge_vertex == v, 0]) > 0.9 for v in seam)
+    span = lambda r: np.ptp(r.uv[r.wedge_faces][:, :, 0], axis=1)  # noqa: E731
+    assert np.sum(span(part) > 0.5) == np.sum(span(core) > 0.5)  # faces at the poles only, as in core
+    d_part, d_core = deviation(part), deviation(core)
+    assert np.median(d_part) < 1.5 * np.median(d_core) < 1e-3
+    assert np.percentile(d_part, 95) < 1.5 * np.percentile(d_core, 95)
+
+
+def test_to_trimesh_and_the_command_line_write_the_uvs(runs, sphere_obj, tmp_path):
+    from qemjax import _cli
+
+    _, part = runs
+    mesh = part.to_trimesh()
+    assert len(mesh.visual.uv) == len(part.uv) and len(mesh.faces) == len(part.faces)
+    out = tmp_path / "out.obj"
+    assert _cli.main(["simplify", str(sphere_obj), str(out), "--ratio", str(RATIO), "--partition", "--workers", "1",
+                      "--part-faces", "1000", "--attributes", "uv", "--quiet"]) == 0
+    text = out.read_text()
+    assert text.count("\nvt ") == len(part.uv) and text.count("\nf ") == len(part.faces)
+
+
+@pytest.mark.slow  # starts worker processes
+def test_same_bits_with_two_workers(runs, sphere_obj):
+    _, part = runs
+    two = qemjax.simplify(str(sphere_obj), ratio=RATIO, attributes="uv", partition=Partition(workers=2, part_faces=1000))
+    for name in ("vertices", "faces", "uv", "wedge_vertex", "wedge_faces"):
+        assert np.asarray(getattr(two, name)).tobytes() == np.asarray(getattr(part, name)).tobytes(), name
+
+
+def _ply(path, V, F, uv, binary: bool, names=("texture_u", "texture_v")):
+    """A PLY with per-vertex UVs under ``names``."""
+    props = ["float x", "float y", "float z", f"float {names[0]}", f"float {names[1]}"]
+    head = ["ply", f"format {'binary_little_endian' if binary else 'ascii'} 1.0", f"element vertex {len(V)}",
+            *(f"property {p}" for p in props), f"element face {len(F)}", "property list uchar int vertex_indices",
+            "end_header"]
+    with open(path, "wb") as f:
+        f.write(("\n".join(head) + "\n").encode())
+        if binary:
+            rows = np.zeros(len(V), [("p", "<f4", (3,)), ("t", "<f4", (2,))])
+            rows["p"], rows["t"] = V, uv
+            f.write(rows.tobytes())
+            tris = np.zeros(len(F), [("n", "u1"), ("i", "<i4", (3,))])
+            tris["n"], tris["i"] = 3, F
+            f.write(tris.tobytes())
+        else:
+            f.write("".join(f"{x!r} {y!r} {z!r} {u!r} {v!r}\n" for (x, y, z), (u, v) in
+                            zip(V.tolist(), uv.tolist())).encode())
+            f.write("".join(f"3 {a} {b} {c}\n" for a, b, c in F.tolist()).encode())
+
+
+@pytest.mark.parametrize("binary,names", [(True, ("texture_u", "texture_v")), (False, ("s", "t"))])
+def test_per_vertex_uvs_of_a_ply(tmp_path, binary, names):
+    """A PLY's per-vertex UVs, here a map of the positions (u = x, v = y; no seam): the kept UVs follow the
+    map at the output's vertices, partitioned as in core (each face fits the map in its own plane, so a
+    vertex placed off the input's faces is a little off the map in both)."""
+    m = shapes.bumpy_sphere(5)
+    V = np.asarray(m.vertices, np.float32).astype(np.float64)
+    F = np.asarray(m.faces)
+    path = tmp_path / "planar.ply"
+    _ply(path, V, F, V[:, :2], binary, names)
+    res = qemjax.simplify(str(path), ratio=RATIO, attributes="uv", partition=Partition(workers=1, part_faces=1000))
+    core = qemjax.simplify(str(path), ratio=RATIO, attributes="uv")
+    assert res.stats["partition"]["uv"] and res.stats["dropped"] == ["record"]
+    assert np.bincount(res.wedge_vertex).max() == 1  # no seam in, none out
+    off = [np.linalg.norm(r.uv - r.vertices[r.wedge_vertex][:, :2], axis=1) for r in (res, core)]
+    assert np.median(off[0]) < 1.5 * np.median(off[1]) < 1e-2 and off[0].max() < 2 * off[1].max()
+
+
+def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
+    """``attributes="auto"`` (the default) keeps a file's UVs when its material names a texture image that
+    exists, and the result carries that image; without one they are dropped, and named."""
+    from PIL import Image
+
+    path = tmp_path / "textured.obj"
+    path.write_text("mtllib tex.mtl\nusemtl tex\n" + sphere_obj.read_text())
+    settings = Partition(workers=1, part_faces=4000)
+    (tmp_path / "tex.mtl").write_text("newmtl tex\nKd 1 1 1\nmap_Kd t.png\n")
+    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\)"):
+        plain = qemjax.simplify(str(path), ratio=RATIO, partition=settings)  # the image is missing
+    assert plain.uv is None and "texture coordinates (vt)" in plain.stats["dropped"]
+    Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "t.png")
+    assert texture_of(path) == tmp_path / "t.png"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = qemjax.simplify(str(path), ratio=RATIO, partition=settings)
+    assert res.uv is not None and np.asarray(res.material.image).shape[:2] == (8, 8)
+    assert res.stats["dropped"] == ["record"]
+
+
+def test_texture_file_of_a_ply(tmp_path):
+    path = tmp_path / "m.ply"
+    path.write_bytes(b"ply\nformat ascii 1.0\ncomment TextureFile skin.png\nelement vertex 0\nend_header\n")
+    assert texture_of(path) is None  # named, not there
+    (tmp_path / "skin.png").write_bytes(b"")
+    assert texture_of(path) == tmp_path / "skin.png"
+
+
+def test_corner_wedges_split_a_vertex_by_its_uvs():
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    UV = np.array([[[0, 0], [1, 0], [1, 1]], [[0.5, 0], [1, 1], [0, 1]]], float)
+    vertex, uv, corners = task.corner_wedges(F, UV)
+    assert vertex.tolist() == [0, 0, 1, 2, 3] and corners.tolist() == [[0, 2, 3], [1, 3, 4]]
+    assert np.array_equal(uv[corners], UV)
+
+
+def test_uv_input_errors(tmp_path, sphere_obj):
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n")
+    with pytest.raises(ValueError, match="uses texture coordinate 2, but the file has 1"):
+        qemjax.simplify(str(bad), ratio=0.5, attributes="uv", partition=Partition(workers=1))
+    m = shapes.bumpy_sphere(3)
+    with pytest.raises(ValueError, match="from a mesh file"):
+        qemjax.simplify((m.vertices, m.faces), ratio=0.5, attributes="uv", partition=True)
+    with pytest.raises(ValueError, match="UVs and nothing else"):
+        qemjax.simplify(str(sphere_obj), ratio=0.5, attributes="color", partition=True)
+    half = tmp_path / "half.obj"  # a face without texture coordinates: the UVs are not kept
+    lines = sphere_obj.read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith("f "))
+    lines[k] = "f " + " ".join(c.split("/")[0] for c in lines[k].split()[1:])
+    half.write_text("\n".join(lines) + "\n")
+    with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
+        res = qemjax.simplify(str(half), ratio=RATIO, attributes="uv", partition=Partition(workers=1, part_faces=4000))
+    assert res.uv is None
