@@ -131,6 +131,26 @@ def test_per_vertex_uvs_of_a_ply(tmp_path, binary, names):
     assert np.median(off[0]) < 1.5 * np.median(off[1]) < 1e-2 and off[0].max() < 2 * off[1].max()
 
 
+def test_per_corner_uvs_of_a_binary_ply(tmp_path):
+    """A binary PLY's face list ``texcoord`` (u, v of each corner, as MeshLab writes them, seams and all):
+    kept as an OBJ's vt are, the only vertices with several UVs on the input's seam."""
+    m = shapes.bumpy_sphere(5)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    uv, corner = af.spherical_uv(m)
+    head = ["ply", "format binary_little_endian 1.0", f"element vertex {len(V)}", "property float x",
+            "property float y", "property float z", f"element face {len(F)}",
+            "property list uchar int vertex_indices", "property list uchar float texcoord", "end_header"]
+    rows = np.zeros(len(F), [("n", "u1"), ("i", "<i4", (3,)), ("k", "u1"), ("t", "<f4", (6,))])
+    rows["n"], rows["i"], rows["k"], rows["t"] = 3, F, 6, uv[corner].reshape(-1, 6)
+    path = tmp_path / "seamed.ply"
+    path.write_bytes(("\n".join(head) + "\n").encode() + V.astype("<f4").tobytes() + rows.tobytes())
+    res = qemjax.simplify(str(path), ratio=RATIO, attributes="uv", partition=Partition(workers=1, part_faces=1000))
+    assert res.stats["partition"]["uv"] and res.stats["dropped"] == ["record"]
+    seam = np.flatnonzero(np.bincount(res.wedge_vertex, minlength=len(res.vertices)) > 1)
+    assert len(seam) > 20 and all(np.ptp(res.uv[res.wedge_vertex == v, 0]) > 0.9 for v in seam)
+    assert np.median(deviation(res)) < 1e-3
+
+
 def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
     """``attributes="auto"`` (the default) keeps a file's UVs when its material names a texture image that
     exists, and the result carries that image; without one they are dropped, and named."""

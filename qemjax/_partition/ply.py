@@ -183,6 +183,17 @@ def uv_names(vertex: _ply.Element) -> tuple | None:
     return next((pair for pair in UV_NAMES if set(pair) <= names), None)
 
 
+FACE_UV = "texcoord"  # a face list of each corner's u, v (as MeshLab writes them)
+
+
+def _face_uv_field(face: _ply.Element, fixed) -> str | None:
+    """The record field of the faces' ``texcoord`` list when every face holds 6 float values, else None."""
+    for j, p in enumerate(face.props):
+        if p.name == FACE_UV and p.count is not None and _code(p.type)[0] == "f" and (f"c{j}", 6) in fixed[1]:
+            return f"p{j}"
+    return None
+
+
 def dropped(h: _ply.Header, kept: tuple = ()) -> tuple:
     """What a partitioned run does not carry over from this PLY: every property but x, y, z, the face
     indices and the vertex properties ``kept``, and every element but vertices and faces, named as the
@@ -192,7 +203,7 @@ def dropped(h: _ply.Header, kept: tuple = ()) -> tuple:
         if e.name not in ("vertex", "face"):
             out.append(f"the {e.name!r} element")
             continue
-        skip = {"x", "y", "z", *kept} if e.name == "vertex" else {e.props[_index_prop(e)].name}
+        skip = {"x", "y", "z", *kept} if e.name == "vertex" else {e.props[_index_prop(e)].name, *kept}
         names = [p.name for p in e.props if p.name not in skip]
         if names:
             out.append(f"{e.name} properties {', '.join(names)}")
@@ -218,10 +229,12 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
                       f"{vertex.rows} of them)")
     vblock = Block(path, at["vertex"], vdtype, vertex.rows)
 
-    def with_uv(src: Source) -> Source:
+    def with_uv(src: Source, corner_field: str | None = None) -> Source:
         src.dropped = dropped(h)
         if uv is not None:  # per-vertex UVs: read from the vertex records
             src.uv, src.uv_fields, src.dropped_with_uv = vblock, uv_fields, dropped(h, uv)
+        elif corner_field is not None:  # a face list of 6 (u, v per corner), read from the face records
+            src.uv, src.face_uv, src.dropped_with_uv = src.face, corner_field, dropped(h, (FACE_UV,))
         return src
 
     def retriangulate() -> Source:
@@ -238,5 +251,5 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
         least = sum(e.rows * sum(_ply.type_size(p.count or p.type) for p in e.props) for e in later)
         if at["face"] + face.rows * fixed[0].itemsize + least <= size:
             return with_uv(Source("ply", False, vblock, Block(path, at["face"], fixed[0], face.rows), xyz,
-                                  fixed[1], retriangulate))
+                                  fixed[1], retriangulate), _face_uv_field(face, fixed))
     return retriangulate()

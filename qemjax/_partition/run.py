@@ -263,7 +263,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             shutil.rmtree(folder, ignore_errors=True)
     if uv is True and not manifest.get("uv"):
         warnings.warn("partition: attributes='uv', but the file does not give every triangle corner a UV (an OBJ's "
-                      "vt, a PLY's per-vertex texture_u/texture_v, s/t or u/v): the output has none",
+                      "vt, a PLY's per-vertex texture_u/texture_v, s/t or u/v, a binary PLY's texcoord lists): the "
+                      "output has none",
                       stacklevel=stacklevel)
     return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
                    t_measure, folder if not temporary else None, kwargs, stacklevel, UV)

@@ -193,8 +193,8 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     holds besides positions and triangles, which the parts do not carry).
 
     With ``uv`` (`keeps_uv`), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
-    OBJ's ``vt``, a PLY's per-vertex ``texture_u``/``s``/``u`` and their pairs), and the manifest says
-    ``uv`` and names the ``texture`` image the file names.
+    OBJ's ``vt``, a PLY's per-vertex ``texture_u``/``s``/``u`` and their pairs, a binary PLY's ``texcoord``
+    lists), and the manifest says ``uv`` and names the ``texture`` image the file names.
 
     STL and OBJ positions are welded by exact value; PLY is taken as indexed. Unused vertices are
     dropped, the others keep their order. ``progress(done_faces, total_faces)`` is called after each

@@ -76,10 +76,12 @@ class Source:
     dropped: tuple = ()  # what the file holds besides positions and triangles, in the file's own words
     # UVs, when the file gives every triangle corner one: their records (fields ``uv_fields``) and either
     # each corner's record number (``corner_uv``: an OBJ's vt) or the vertex's (None: a PLY's per-vertex
-    # UVs); ``dropped_with_uv``: what ``dropped`` is when they are kept
+    # UVs), or the face records' field of 6 values (``face_uv``: a PLY's texcoord list); ``dropped_with_uv``:
+    # what ``dropped`` is when they are kept
     uv: Block | None = None
     corner_uv: Block | None = None
     uv_fields: tuple = ("u", "v")
+    face_uv: str | None = None
     dropped_with_uv: tuple = ()
 
     @property
@@ -106,6 +108,8 @@ class Source:
 
     def corner_uvs(self, lo: int, hi: int, F: np.ndarray) -> np.ndarray:
         """(k,3,2) float64 UVs of the corners of triangles lo..hi (``F``: their vertices, `faces`)."""
+        if self.face_uv is not None:
+            return self.face.read(lo, hi)[self.face_uv].astype(np.float64).reshape(-1, 3, 2)
         idx = (F if self.corner_uv is None else self.corner_uv.read(lo, hi)["i"]).reshape(-1)
         used, inverse = np.unique(idx, return_inverse=True)
         r = self.uv.gather(used)
