@@ -206,3 +206,14 @@ def test_uv_input_errors(tmp_path, sphere_obj):
     with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
         res = qemjax.simplify(str(half), ratio=RATIO, attributes="uv", partition=Partition(workers=1, part_faces=4000))
     assert res.uv is None
+    # texture coordinates that are not u and v numbers: the file is read as before, its UVs are not kept
+    quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 1\n"
+    faces = "f 1/1/1 2/2/1 5/3/1\nf 2/2/1 3/3/1 5/1/1\nf 3/1 4/2 5/3\nf 4/1 1/2 5/3\nf 1/1 3/3 2/2\nf 1/1 4/2 3/3\n"
+    odd = tmp_path / "odd.obj"
+    odd.write_text(quad + "vt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\n" + faces)
+    assert qemjax.simplify(str(odd), target_faces=4, attributes="uv", partition=Partition(workers=1)).uv is not None
+    for vt in ("vt 0.5\nvt 0.2\nvt 0.1\n", "vt 0 0\nvt a b\nvt 1 1\n"):
+        odd.write_text(quad + vt + "vn 0 0 1\n" + faces)
+        with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
+            res = qemjax.simplify(str(odd), target_faces=4, attributes="uv", partition=Partition(workers=1))
+        assert res.uv is None and len(res.faces) == 4

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-OK, BAD_VERTEX, BAD_CORNER, ZERO_INDEX, BEFORE_FIRST, FEW_CORNERS, BAD_FACET, FEW_VALUES, BAD_INT, BAD_UV = range(10)
+OK, BAD_VERTEX, BAD_CORNER, ZERO_INDEX, BEFORE_FIRST, FEW_CORNERS, BAD_FACET, FEW_VALUES, BAD_INT = range(9)
 NO_UV = -1  # a corner without a texture coordinate number
 NL = 10
 
@@ -156,13 +156,15 @@ def obj(buf, nv0, nvt0):
     before any '/', and the texture coordinate's after it), 1-based or negative (counted back from the
     last so far, ``nv0`` vertices and ``nvt0`` texture coordinates before this block) made 0-based, fanned.
     Returns (coordinate bytes, vertices, triangles, error, error line, texture coordinate bytes, texture
-    coordinates, each triangle corner's texture coordinate number or `NO_UV`)."""
+    coordinates, each triangle corner's texture coordinate number or `NO_UV`, whether a `vt` line had
+    fewer than two values)."""
     n = len(buf)
     out = np.empty(n + 1, np.uint8)
-    uv_out = np.empty(n + 1, np.uint8)
+    uv_out = np.empty(2 * n + 4, np.uint8)  # room for "0 0 " in place of each short line
     tris = np.empty((max(16, n // 16), 3), np.int64)
     uvs = np.empty((max(16, n // 16), 3), np.int64)
     no, nuo, nt, nv, nvt, line, i, err = 0, 0, 0, 0, 0, 0, 0, OK
+    uv_short = False
     while i < n and err == OK:
         line += 1
         i = _skip_ws(buf, i)
@@ -174,17 +176,23 @@ def obj(buf, nv0, nvt0):
                 err = BAD_VERTEX
                 break
         elif j - i == 2 and buf[i] == 118 and buf[i + 1] == 116:  # vt
-            i, nuo = _coords(buf, j, uv_out, nuo, 2)
+            before = nuo
+            k, nuo = _coords(buf, j, uv_out, nuo, 2)
             nvt += 1
-            if i < 0:
-                err = BAD_UV
-                break
+            if k < 0:  # fewer than u and v (a 1-d texture): "0 0" in its place keeps the numbering
+                uv_short = True
+                nuo = before
+                for c in (48, 32, 48, 32):
+                    uv_out[nuo] = c
+                    nuo += 1
+            else:
+                i = k
         elif j - i == 1 and buf[i] == 102:  # f
             i, tris, uvs, nt, err = _face(buf, j, tris, uvs, nt, nv0 + nv, nvt0 + nvt)
         while buf[i] != NL:
             i += 1
         i += 1
-    return out[:no], nv, tris[:nt], err, line, uv_out[:nuo], nvt, uvs[:nt]
+    return out[:no], nv, tris[:nt], err, line, uv_out[:nuo], nvt, uvs[:nt], uv_short
 
 
 @njit(cache=True)

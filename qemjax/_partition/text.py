@@ -31,7 +31,6 @@ _MESSAGES = {
     scan.BAD_FACET: "ends a facet that does not have 3 vertices",
     scan.FEW_VALUES: "holds too few values for a {what} row",
     scan.BAD_INT: "holds a list count or vertex number that is not a whole number",
-    scan.BAD_UV: "is a texture coordinate line without u and v",
 }
 UV_NAME = "texture coordinates (vt)"  # how a warning names an OBJ's UVs
 
@@ -111,19 +110,23 @@ def read_obj(path: Path, scratch: Path):
     nv = nvt = line0 = 0
     top = (-1, 0)  # the largest vertex number a face uses, and its block's first line
     top_t = (-1, 0)  # the same for texture coordinates
-    bare = False  # a corner names no texture coordinate
+    bare = False  # a corner names no texture coordinate, or a vt line is not a u and a v
     seen_vn = False
     try:
         for block in blocks(path):
             seen_vn = seen_vn or block.startswith(b"vn ") or b"\nvn " in block
             if line0 == 0 and is_binary(block[:1024]):
                 raise Refusal("it holds binary data, not OBJ text: the file is damaged or not an OBJ file")
-            coords, k, tris, err, at, uv_words, kt, tuv = scan.obj(np.frombuffer(block, np.uint8), nv, nvt)
+            coords, k, tris, err, at, uv_words, kt, tuv, short = scan.obj(np.frombuffer(block, np.uint8), nv, nvt)
             if err:
                 raise _refuse(err, block, at, line0)
             welder.add(_floats(coords, k, block, line0, lambda _, w: w[1:4] if w[:1] == [b"v"] else None))
-            if kt:
-                uv.add(_floats(uv_words, kt, block, line0, lambda _, w: w[1:3] if w[:1] == [b"vt"] else None, 2))
+            bare = bare or short
+            if kt and not bare:  # UVs that cannot be read are not kept (as before, the file is read)
+                try:
+                    uv.add(_floats(uv_words, kt, block, line0, lambda _, w: w[1:3] if w[:1] == [b"vt"] else None, 2))
+                except Refusal:
+                    bare = True
             raw.add(tris)
             corner_uv.add(tuv)
             if len(tris) and tris.max() > top[0]:
