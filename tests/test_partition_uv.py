@@ -169,7 +169,10 @@ def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
         warnings.simplefilter("error")
         res = qemjax.simplify(str(path), ratio=RATIO, partition=settings)
     assert res.uv is not None and np.asarray(res.material.image).shape[:2] == (8, 8)
-    assert res.stats["dropped"] == ["record"]
+    assert res.stats["dropped"] == ["record"] and res.stats["attributes"] == ["uv"]
+    Image.new("RGB", (4, 2)).save(tmp_path / "other.png")  # texture= names the image itself, as in core
+    given = qemjax.simplify(str(sphere_obj), ratio=RATIO, texture=tmp_path / "other.png", partition=settings)
+    assert given.uv is not None and np.asarray(given.material.image).shape[:2] == (2, 4)
 
 
 def test_texture_file_of_a_ply(tmp_path):
@@ -189,10 +192,6 @@ def test_corner_wedges_split_a_vertex_by_its_uvs():
 
 
 def test_uv_input_errors(tmp_path, sphere_obj):
-    bad = tmp_path / "bad.obj"
-    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n")
-    with pytest.raises(ValueError, match="uses texture coordinate 2, but the file has 1"):
-        qemjax.simplify(str(bad), ratio=0.5, attributes="uv", partition=Partition(workers=1))
     m = shapes.bumpy_sphere(3)
     with pytest.raises(ValueError, match="from a mesh file"):
         qemjax.simplify((m.vertices, m.faces), ratio=0.5, attributes="uv", partition=True)
@@ -212,8 +211,23 @@ def test_uv_input_errors(tmp_path, sphere_obj):
     odd = tmp_path / "odd.obj"
     odd.write_text(quad + "vt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\n" + faces)
     assert qemjax.simplify(str(odd), target_faces=4, attributes="uv", partition=Partition(workers=1)).uv is not None
-    for vt in ("vt 0.5\nvt 0.2\nvt 0.1\n", "vt 0 0\nvt a b\nvt 1 1\n"):
-        odd.write_text(quad + vt + "vn 0 0 1\n" + faces)
+    # and corners naming texture coordinates the file does not have (none, the fourth, 0, before the first)
+    for vt, fix in [("", ""), ("vt 0 0\nvt 1 0\nvt 1 1\n", "f 1/4 4/2 3/3"), ("vt 0 0\nvt 1 0\nvt 1 1\n", "f 1/0 4/2 3/3"),
+                    ("vt 0 0\nvt 1 0\nvt 1 1\n", "f 1/-4 4/2 3/3"), ("vt 0.5\nvt 0.2\nvt 0.1\n", ""),
+                    ("vt 0 0\nvt a b\nvt 1 1\n", "")]:
+        odd.write_text(quad + vt + "vn 0 0 1\n" + (faces.replace("f 1/1 4/2 3/3", fix) if fix else faces))
         with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
             res = qemjax.simplify(str(odd), target_faces=4, attributes="uv", partition=Partition(workers=1))
         assert res.uv is None and len(res.faces) == 4
+    ply = tmp_path / "odd.ply"  # an ASCII PLY whose UV column is not numbers: its positions, as before
+    ply.write_text("ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
+                   "property float s\nproperty float t\nelement face 6\nproperty list uchar int vertex_indices\n"
+                   "end_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 x\n0 1 0 0 1\n0.5 0.5 1 0.5 0.5\n"
+                   "3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n3 0 2 1\n3 0 3 2\n")
+    with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
+        res = qemjax.simplify(str(ply), target_faces=4, attributes="uv", partition=Partition(workers=1))
+    assert res.uv is None and len(res.faces) == 4
+    with pytest.raises(ValueError, match="weld=False cannot keep UVs"):
+        qemjax.simplify(str(sphere_obj), ratio=0.5, attributes="uv", weld=False, partition=True)
+    with pytest.raises(ValueError, match="texture= needs UVs"):
+        qemjax.simplify(str(sphere_obj), ratio=0.5, attributes=None, texture="t.png", partition=True)

@@ -337,9 +337,10 @@ class Tracker:
         vertex_of[self.C.reshape(-1)] = np.asarray(F).reshape(-1)
         self.multi = np.bincount(vertex_of[used], minlength=n) > 1
         self.seam_in = int(np.count_nonzero(self.multi))  # vertices on a seam in the input
-        self.wedge_in = np.zeros(n, np.int64)  # a wedge of each vertex in the input, and the input's values
-        self.wedge_in[vertex_of[used]] = used
+        self.wedge_in = np.zeros(n, np.int64)  # a wedge of each vertex in the input, the input's values and
+        self.wedge_in[vertex_of[used]] = used  # seam flags (a batch of the greedy queue changes ``multi``)
         self.val_in = self.val.copy() if self.frozen.any() else self.val
+        self.multi_in = self.multi.copy()
 
     @staticmethod
     def _lists(faces):
@@ -363,10 +364,11 @@ class Tracker:
 
     def held(self, v: int) -> np.ndarray | None:
         """The values a frozen vertex v holds, as the attribute model weighs them ((k,): each solved channel
-        times its weight, 0 for the others), or None when v is on a seam (several wedges; its contractions
-        map wedges and change no value). A frozen vertex keeps its one wedge and that wedge's value, so its
-        values are those of the input, wherever the run is (a batch of the greedy queue included)."""
-        if self.multi[v]:
+        times its weight, 0 for the others), or None when v is on a seam of the input (several wedges; its
+        contractions map wedges and change no value). A frozen vertex keeps its wedge and that wedge's
+        value, so the answer depends on the input alone, wherever the run is (the same in a batch of the
+        greedy queue, whose speculation changes the seam flags, as in its one-at-a-time loop)."""
+        if self.multi_in[v]:
             return None
         return self.val_in[self.wedge_in[v]] * self.weights * self.solved
 

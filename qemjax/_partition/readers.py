@@ -40,9 +40,10 @@ def _stl(path: Path, scratch: Path) -> Source:
                   f"the file holds {size} bytes")
 
 
-def open_source(path, scratch: Path) -> Source:
-    """The mesh in ``path`` as a `Source` (text formats converted into ``scratch``); ValueError naming
-    the file and what is wrong with it."""
+def open_source(path, scratch: Path, uv: bool = False) -> Source:
+    """The mesh in ``path`` as a `Source` (text formats converted into ``scratch``), with its UVs when
+    ``uv`` and every triangle corner has one (``Source.uv``); ValueError naming the file and what is wrong
+    with it."""
     name = os.fspath(path)
     path = Path(path)
     if not path.is_file():
@@ -57,17 +58,21 @@ def open_source(path, scratch: Path) -> Source:
     try:
         if fmt == "ply":
             h = ply.header(path)
-            return text.read_ascii_ply(path, h, scratch) if h.format == "ascii" else ply.read_binary(path, h, scratch)
+            src = text.read_ascii_ply(path, h, scratch, uv) if h.format == "ascii" else ply.read_binary(path, h, scratch)
+            if not uv:
+                src.uv = None
+            return src
         if fmt == "stl":
             return _stl(path, scratch)
-        return text.read_obj(path, scratch)
+        return text.read_obj(path, scratch, uv)
     except Refusal as exc:
         raise ValueError(f"{name}: {exc}") from None
 
 
 def texture_of(path) -> Path | None:
     """The texture image a mesh file names, when it exists: the first ``map_Kd`` of an OBJ's material
-    libraries (``mtllib`` lines in its first MiB), or a PLY header's ``comment TextureFile``; else None."""
+    libraries (``mtllib`` lines in its first MiB; one image, as the UVs of a partitioned run keep one
+    material), or a PLY header's ``comment TextureFile``; else None."""
     path = Path(path)
     with open(path, "rb") as f:
         head = f.read(1 << 20)
@@ -79,11 +84,14 @@ def texture_of(path) -> Path | None:
                 image = path.parent / words[2].strip().decode("utf-8", "replace")
                 return image if image.is_file() else None
         return None
+    libs = []
     for line in lines:
         words = line.split(None, 1)
-        if words[:1] != [b"mtllib"] or len(words) < 2:
-            continue
-        lib = path.parent / words[1].strip().decode("utf-8", "replace")
+        if words[:1] == [b"mtllib"] and len(words) == 2:  # a name with spaces, or several names
+            whole = words[1].strip().decode("utf-8", "replace")
+            libs += [whole] + ([] if (path.parent / whole).is_file() else whole.split())
+    for name in libs:
+        lib = path.parent / name
         if not lib.is_file():
             continue
         for entry in lib.read_bytes().split(b"\n"):

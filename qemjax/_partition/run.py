@@ -161,10 +161,11 @@ def _common_cost(runner, specs: list, p: Partition, progress, label: str):
 
 
 def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwargs: dict, progress: bool,
-                         stacklevel: int = 3, uv=False):
+                         stacklevel: int = 3, uv=False, texture=None):
     """`simplify` with ``partition=``: the module docstring. ``kwargs``: the method and its settings, as
     `simplify` takes them; ``uv``: keep a file's UVs (True, "auto": when it names a texture image, False:
-    `scatter.keeps_uv`)."""
+    `scatter.wants_uv`); ``texture``: the image of the UVs kept (a path or a PIL image; None: the one the
+    file names)."""
     from .._pipeline import stages
     from .scatter import scatter
 
@@ -267,23 +268,25 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                       "output has none",
                       stacklevel=stacklevel)
     return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
-                   t_measure, folder if not temporary else None, kwargs, stacklevel, UV)
+                   t_measure, folder if not temporary else None, kwargs, stacklevel, UV, texture)
 
 
 def runner_name(p: Partition) -> str:
     return "dask" if p.client is not None else ("this process" if p.n_workers <= 1 else f"{p.n_workers} local processes")
 
 
-def _wedges(F, UV, manifest, stacklevel) -> dict:
-    """The result's wedge fields for the output's corners' UVs ``UV`` (None: none), with the material of the
-    texture the file names."""
+def _wedges(F, UV, manifest, stacklevel, texture=None) -> dict:
+    """The result's wedge fields for the output's corners' UVs ``UV`` (None: none), with the material of
+    ``texture`` or else of the texture the file names."""
     if UV is None:
         return {}
     from .._mesh.wedges import load_texture
 
     vertex, uv, corners = task.corner_wedges(F, UV)
     material = None
-    if manifest.get("texture"):
+    if texture is not None:
+        material = load_texture(texture)
+    elif manifest.get("texture"):
         try:
             material = load_texture(manifest["texture"])
         except ValueError as exc:
@@ -292,7 +295,7 @@ def _wedges(F, UV, manifest, stacklevel) -> dict:
 
 
 def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, t0, t_scatter, t_measure, folder,
-            kwargs, stacklevel, UV=None):
+            kwargs, stacklevel, UV=None, texture=None):
     from .._pipeline.measure import not_measured
     from .._record.result import Contractions, SimplifyResult
 
@@ -321,11 +324,15 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                  vertices_out=int(len(V)), target_faces=target, max_error_limit=None, rounds=0,
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
                  total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part,
-                 dropped=["record", *manifest.get("dropped", [])],
+                 dropped=["record", *manifest.get("dropped", [])], attributes=["uv"] if UV is not None else [],
                  **(not_measured() | dist))
     if manifest.get("dropped"):
-        warnings.warn(f"partition: the output keeps positions only; not carried over from the input: "
-                      f"{'; '.join(manifest['dropped'])}", stacklevel=stacklevel)
+        warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
+                      f"carried over from the input: {'; '.join(manifest['dropped'])}", stacklevel=stacklevel)
+    if manifest.get("uv") and UV is None:  # the file's UVs were read, a group's run did not keep them
+        why = sorted({m for s in all_stats for m in s["warnings"] if "uv" in m.lower()})
+        warnings.warn(f"partition: the UVs were read but not kept by the runs: {'; '.join(why) or 'no reason given'}",
+                      stacklevel=stacklevel)
     if locked_share > 0:
         warnings.warn(f"partition: the output is too large for one process (Partition.final_faces), so "
                       f"{100 * locked_share:.2g} % of its vertices stayed locked at part borders", stacklevel=stacklevel)
@@ -339,4 +346,5 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                           max_error=float("nan"), source_vertices=empty, source_faces=empty,
                           input_vertices=np.zeros((0, 3)), input_faces=np.zeros((0, 3), np.int64),
                           history=Contractions(np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)),
-                          stats=stats, stop_reason=stop, **_wedges(np.asarray(F, np.int64), UV, manifest, stacklevel))
+                          stats=stats, stop_reason=stop,
+                          **_wedges(np.asarray(F, np.int64), UV, manifest, stacklevel, texture))

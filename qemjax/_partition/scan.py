@@ -11,6 +11,7 @@ from numba import njit
 
 OK, BAD_VERTEX, BAD_CORNER, ZERO_INDEX, BEFORE_FIRST, FEW_CORNERS, BAD_FACET, FEW_VALUES, BAD_INT = range(9)
 NO_UV = -1  # a corner without a texture coordinate number
+BAD_UV = -(1 << 62)  # a corner whose texture coordinate number names none (0): the UVs cannot be kept
 NL = 10
 
 
@@ -101,7 +102,8 @@ def _number(buf, k):
 @njit(cache=True)
 def _corner(buf, i):
     """An OBJ corner word from buf[i] (``v``, ``v/t``, ``v//n`` or ``v/t/n``): (offset after it, its vertex
-    number, its texture coordinate number or 0 when it names none (negative: counted back), error code)."""
+    number, its texture coordinate number (negative: counted back; 0 when it names none, `BAD_UV` for
+    ``v/0``), error code)."""
     k, v, ok = _number(buf, i)
     if not ok:
         return k, 0, 0, BAD_CORNER
@@ -111,7 +113,7 @@ def _corner(buf, i):
         if not ok:
             return k, 0, 0, BAD_CORNER
         if t == 0:
-            return k, 0, 0, ZERO_INDEX
+            t = BAD_UV
     while not _ws(buf[k]) and buf[k] != NL:  # the normal's number: checked, not kept
         if not (_digit(buf[k]) or buf[k] == 47 or buf[k] == 45):
             return k, 0, 0, BAD_CORNER
@@ -124,8 +126,9 @@ def _corner(buf, i):
 @njit(cache=True)
 def _face(buf, i, tris, uvs, nt, nv, nvt):
     """Fans the corners of an OBJ face line from buf[i] (``nv`` vertices and ``nvt`` texture coordinates so
-    far) into tris and their texture coordinates' numbers into uvs (`NO_UV` for none) at nt: (offset at the
-    line's end, triangles, their uvs, new count, error code)."""
+    far) into tris and their texture coordinates' numbers into uvs at nt (`NO_UV` for none, `BAD_UV` for
+    one that names none: 0, or counted back past the first): (offset at the line's end, triangles, their
+    uvs, new count, error code)."""
     k, first, prev, tfirst, tprev = 0, 0, 0, 0, 0
     while True:
         i = _skip_ws(buf, i)
@@ -135,9 +138,12 @@ def _face(buf, i, tris, uvs, nt, nv, nvt):
         if err:
             return i, tris, uvs, nt, err
         v = nv + v if v < 0 else v - 1
-        if v < 0 or nvt + t < 0:
+        if v < 0:
             return i, tris, uvs, nt, BEFORE_FIRST
-        t = NO_UV if t == 0 else (nvt + t if t < 0 else t - 1)
+        if t == BAD_UV or nvt + t < 0:
+            t = BAD_UV
+        else:
+            t = NO_UV if t == 0 else (nvt + t if t < 0 else t - 1)
         if k == 0:
             first, tfirst = v, t
         elif k >= 2:

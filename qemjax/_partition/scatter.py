@@ -160,10 +160,11 @@ def _prepare(scratch: Path) -> tuple[Path, Path]:
     return level, tmp
 
 
-def _read(path, scratch: Path, part_faces: int, step: int, name: str):
-    """The source, its vertex cells and its code histogram; a face block that turns out to hold other
-    polygons than triangles is streamed into scratch triangles and counted again."""
-    src = open_source(path, scratch)
+def _read(path, scratch: Path, part_faces: int, step: int, name: str, uv: bool):
+    """The source (with its UVs when ``uv`` and it has them), its vertex cells and its code histogram; a
+    face block that turns out to hold other polygons than triangles is streamed into scratch triangles and
+    counted again."""
+    src = open_source(path, scratch, uv)
     if src.n_faces == 0:
         raise ValueError(f"{name}: the mesh has no faces")
     box = _bounds(src, step)
@@ -176,11 +177,10 @@ def _read(path, scratch: Path, part_faces: int, step: int, name: str):
         return src, box, cells, _histogram(src, cells, part_faces, step, name)
 
 
-def keeps_uv(src: Source, uv, path) -> bool:
-    """Whether the parts carry the file's UVs: ``uv`` True (asked for by name) or "auto" (when the file
-    names a texture image, as `simplify`'s ``attributes="auto"`` keeps UVs with seams), and the file gives
-    every triangle corner one."""
-    return src.uv is not None and (uv is True or (uv == "auto" and texture_of(path) is not None))
+def wants_uv(uv, path) -> bool:
+    """Whether to read the file's UVs: ``uv`` True (asked for by name) or "auto" when the file names a
+    texture image (as `simplify`'s ``attributes="auto"`` keeps UVs with seams)."""
+    return uv is True or (uv == "auto" and texture_of(path) is not None)
 
 
 def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progress=None, uv=False) -> dict:
@@ -192,7 +192,7 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     n_vertices, n_faces, bbox, welded, parts (file, faces, vertices, border for each), dropped (what the file
     holds besides positions and triangles, which the parts do not carry).
 
-    With ``uv`` (`keeps_uv`), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
+    With ``uv`` (`wants_uv`), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
     OBJ's ``vt``, a PLY's per-vertex ``texture_u``/``s``/``u`` and their pairs, a binary PLY's ``texcoord``
     lists), and the manifest says ``uv`` and names the ``texture`` image the file names.
 
@@ -207,10 +207,10 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     scratch.mkdir(parents=True, exist_ok=True)
     level, tmp = _prepare(scratch)
     try:
-        src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name)
+        src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name, wants_uv(uv, path))
         plan = Plan.from_bins(bins, part_faces)
         index_type = np.int32 if src.n_vertices < 2**31 else np.int64
-        uv = keeps_uv(src, uv, path)
+        uv = src.uv is not None  # asked for, and every triangle corner has one
         owner = _bin(src, cells, plan, tmp, index_type, step, progress, uv)
         del cells, bins
         kept = owner != UNSEEN

@@ -50,14 +50,14 @@ def _gids_out(res, V, gid, locked) -> np.ndarray:
 
 def corner_wedges(F: np.ndarray, UV: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The wedges of triangles F (m,3) whose corners have UVs UV (m,3,2): (each wedge's vertex (w,), its UV
-    (w,2), each corner's wedge (m,3)); one wedge per distinct UV at a vertex, in the order of (vertex, UV
-    bits; -0.0 is 0.0): the same for the same corners, whatever their order."""
-    UV = np.asarray(UV, np.float64) + 0.0
-    key = np.empty((F.size, 3), np.int64)
-    key[:, 0] = F.reshape(-1)
-    key[:, 1:] = np.ascontiguousarray(UV.reshape(-1, 2)).view(np.int64)
-    rows, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return rows[:, 0], UV.reshape(-1, 2)[first], inverse.reshape(-1).reshape(F.shape)
+    (w,2), each corner's wedge (m,3)); corners with the same vertex and equal UVs share a wedge, in the
+    order of (vertex, u, v) (`_wedges._unique_rows`, as an in-core run orders its wedges): the same for
+    the same corners, whatever their order."""
+    from .._mesh.wedges import _unique_rows
+
+    key = np.concatenate([F.reshape(-1, 1).astype(np.float64), np.asarray(UV, np.float64).reshape(-1, 2) + 0.0], 1)
+    rows, inverse = _unique_rows(key)
+    return rows[:, 0].astype(np.int64), rows[:, 1:], inverse.reshape(F.shape)
 
 
 def _with_uv(V: np.ndarray, F: np.ndarray, UV: np.ndarray, locked: np.ndarray, Q: np.ndarray | None):

@@ -101,15 +101,15 @@ def _finish_weld(welder: Welder, scratch: Path, fmt: str, raw: Appender | None, 
     return scratch_source(scratch, fmt, True, n, raw.rows)
 
 
-def read_obj(path: Path, scratch: Path):
-    """The OBJ file as a welded `Source`; its UVs (`source.UV`, each triangle corner's ``vt``) when every
-    corner names one."""
+def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
+    """The OBJ file as a welded `Source`; with ``uv_wanted``, its UVs (`source.UV`, each triangle corner's
+    ``vt``) when every corner names one (written to scratch only then)."""
     welder = Welder(scratch / "weld", os.path.getsize(path) // 16)
     raw = Appender(scratch / "faces_raw.i64")
     uv, corner_uv = Appender(scratch / UV), Appender(scratch / CORNER_UV)
     nv = nvt = line0 = 0
     top = (-1, 0)  # the largest vertex number a face uses, and its block's first line
-    top_t = (-1, 0)  # the same for texture coordinates
+    top_t = -1  # the largest texture coordinate number a face uses
     bare = False  # a corner names no texture coordinate, or a vt line is not a u and a v
     seen_vn = False
     try:
@@ -121,19 +121,20 @@ def read_obj(path: Path, scratch: Path):
             if err:
                 raise _refuse(err, block, at, line0)
             welder.add(_floats(coords, k, block, line0, lambda _, w: w[1:4] if w[:1] == [b"v"] else None))
-            bare = bare or short
+            bare = bare or short or not uv_wanted
             if kt and not bare:  # UVs that cannot be read are not kept (as before, the file is read)
                 try:
                     uv.add(_floats(uv_words, kt, block, line0, lambda _, w: w[1:3] if w[:1] == [b"vt"] else None, 2))
                 except Refusal:
                     bare = True
             raw.add(tris)
-            corner_uv.add(tuv)
+            if not bare:
+                corner_uv.add(tuv)
             if len(tris) and tris.max() > top[0]:
                 top = (int(tris.max()), line0)
-            if len(tuv) and tuv.max() > top_t[0]:
-                top_t = (int(tuv.max()), line0)
-            bare = bare or bool(len(tuv) and tuv.min() == scan.NO_UV)
+            if len(tuv):
+                top_t = max(top_t, int(tuv.max()))
+            bare = bare or bool(len(tuv) and tuv.min() < 0)  # NO_UV, BAD_UV
             nv += k
             nvt += kt
             line0 += block.count(b"\n")
@@ -143,13 +144,11 @@ def read_obj(path: Path, scratch: Path):
         corner_uv.close()
     if top[0] >= nv:
         raise Refusal(f"a face (after line {top[1]}) uses vertex {top[0] + 1}, but the file has {nv} vertices")
-    if top_t[0] >= nvt:
-        raise Refusal(f"a face (after line {top_t[1]}) uses texture coordinate {top_t[0] + 1}, but the file has "
-                      f"{nvt} (vt lines)")
     if raw.rows == 0:
         raise Refusal("the OBJ file has no faces (no 'f' lines)")
     src = _finish_weld(welder, scratch, "obj", raw, nv)
     src.dropped = tuple(k for k, seen in ((UV_NAME, nvt > 0), ("normals (vn)", seen_vn)) if seen)
+    bare = bare or top_t >= nvt  # a corner names a texture coordinate the file does not have
     if nvt and not bare:
         src.uv = Block(scratch / UV, 0, UV_DTYPE, nvt)
         src.corner_uv = Block(scratch / CORNER_UV, 0, TRI, raw.rows)
@@ -186,20 +185,25 @@ def read_binary_stl(path: Path, scratch: Path, n: int):
     return _finish_weld(welder, scratch, "stl", None, 0)
 
 
-def _element_args(h: _ply.Header, e: _ply.Element):
-    """(mode, x y z (and u v) columns, property kinds, index list) of an ASCII element for `scan.ply_rows`."""
+def _element_args(h: _ply.Header, e: _ply.Element, uv: bool = False):
+    """(mode, x y z (and with ``uv`` the UVs') columns, property kinds, index list) of an ASCII element for
+    `scan.ply_rows`."""
     kinds = np.array([p.count is not None for p in e.props], np.int64)
     if e.name == "vertex":
         if kinds.any():
             raise Refusal("the PLY vertex element has list properties, which are not read")
         names = [p.name for p in e.props]
-        return 1, np.array([names.index(c) for c in ("x", "y", "z", *(uv_names(e) or ()))], np.int64), kinds, -1
+        extra = (uv_names(e) or ()) if uv else ()
+        return 1, np.array([names.index(c) for c in ("x", "y", "z", *extra)], np.int64), kinds, -1
     if e.name == "face":
         return 2, np.zeros(3, np.int64), kinds, _index_prop(e)
     return 0, np.zeros(3, np.int64), kinds, -1
 
 
-def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
+def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = False):
+    """The ASCII PLY as a `Source`; with ``uv_wanted``, its per-vertex UVs when the vertex element has them
+    and they are numbers (else the file is read without them)."""
+    uv_wanted = uv_wanted and uv_names(h.element("vertex")) is not None if h.element("vertex") else False
     if h.element("face") is None:
         raise Refusal("the PLY header declares no face element")
     with open(path, "rb") as f:
@@ -211,7 +215,8 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
             buf, pos = np.frombuffer(block, np.uint8), 0
             while todo and pos < len(buf):
                 e, left = todo[0]
-                mode, cols, kinds, index = _element_args(h, e)
+                mode, cols, kinds, index = _element_args(h, e, uv_wanted)
+                start = pos
                 pos, done, coords, tris, lines, err, at = scan.ply_rows(buf, pos, left, mode, cols, kinds, index)
                 if err:
                     k = block[:pos].count(b"\n") + 1
@@ -219,8 +224,18 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
                 if mode == 1:
                     first = block[:pos].count(b"\n") - lines  # lines before this call in the block
                     last = first + lines
-                    rows_read = _floats(coords, done, block, line0, lambda k, w: [w[c] for c in cols]
-                                        if first < k <= last and w else None, len(cols))
+                    def pick(k, w, cols):
+                        return [w[c] for c in cols] if first < k <= last and w else None
+
+                    try:
+                        rows_read = _floats(coords, done, block, line0, lambda k, w: pick(k, w, cols), len(cols))
+                    except Refusal:
+                        if len(cols) == 3:
+                            raise
+                        uv_wanted = False  # UVs that are not numbers: the positions alone, as before
+                        xyz = cols[:3]
+                        coords = scan.ply_rows(buf, start, left, mode, xyz, kinds, index)[2]
+                        rows_read = _floats(coords, done, block, line0, lambda k, w: pick(k, w, xyz), 3)
                     vertices.add(rows_read[:, :3])
                     uv.add(rows_read[:, 3:])
                 faces.add(tris)
@@ -238,9 +253,9 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path):
                       "short: it is truncated")
     src = scratch_source(scratch, "ply", False, vertices.rows, faces.rows)
     src.dropped = _ply_dropped(h)
-    kept = uv_names(h.element("vertex"))
-    if kept is None:
+    if not uv_wanted:
         remove(scratch / UV)
     else:  # per-vertex UVs, converted beside the positions
+        kept = uv_names(h.element("vertex"))
         src.uv, src.dropped_with_uv = Block(scratch / UV, 0, UV_DTYPE, vertices.rows), _ply_dropped(h, kept)
     return src

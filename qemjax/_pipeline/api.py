@@ -166,8 +166,16 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
                          "attributes='uv', 'auto' (UVs that come with a texture image) or None")
     kwargs = {k: v for k, v in named.items() if v is not None} | dict(settings)
     kwargs.pop("attributes", None)
+    texture = kwargs.pop("texture", None)
+    if texture is not None:  # as in core: the UVs kept with this texture
+        if not uv:
+            raise ValueError("texture= needs UVs: attributes=None does not keep them")
+        uv = True
+    if uv is not False and (kwargs.get("weld") is False or getattr(kwargs.get("topology"), "weld", None) is False):
+        raise ValueError("partition: weld=False cannot keep UVs (a partitioned run keeps them by splitting each "
+                         "vertex by its UVs and welding the positions back); attributes=None keeps positions only")
     return simplify_partitioned(mesh, target_faces=target_faces, ratio=ratio, partition=partition, kwargs=kwargs,
-                                progress=progress, stacklevel=4, uv=uv)
+                                progress=progress, stacklevel=4, uv=uv, texture=texture)
 
 
 def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> list:
