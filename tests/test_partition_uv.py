@@ -85,9 +85,21 @@ def test_to_trimesh_and_the_command_line_write_the_uvs(runs, sphere_obj, tmp_pat
 
 
 @pytest.mark.slow  # starts worker processes
-def test_same_bits_with_two_workers(runs, sphere_obj):
+@pytest.mark.parametrize("where", ["local", "dask"])
+def test_same_bits_with_two_workers(runs, sphere_obj, where):
+    """Two local worker processes, or a Dask `LocalCluster` of two, give the in-process run's bytes, UVs
+    and wedges included."""
     _, part = runs
-    two = qemjax.simplify(str(sphere_obj), ratio=RATIO, attributes="uv", partition=Partition(workers=2, part_faces=1000))
+    if where == "local":
+        two = qemjax.simplify(str(sphere_obj), ratio=RATIO, attributes="uv",
+                              partition=Partition(workers=2, part_faces=1000))
+    else:
+        distributed = pytest.importorskip("dask.distributed")
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      dashboard_address=None) as cl, distributed.Client(cl) as client:
+            two = qemjax.simplify(str(sphere_obj), ratio=RATIO, attributes="uv",
+                                  partition=Partition(client=client, part_faces=1000))
+        assert two.stats["partition"]["where"] == "dask"
     for name in ("vertices", "faces", "uv", "wedge_vertex", "wedge_faces"):
         assert np.asarray(getattr(two, name)).tobytes() == np.asarray(getattr(part, name)).tobytes(), name
 
