@@ -337,9 +337,8 @@ class Tracker:
         vertex_of[self.C.reshape(-1)] = np.asarray(F).reshape(-1)
         self.multi = np.bincount(vertex_of[used], minlength=n) > 1
         self.seam_in = int(np.count_nonzero(self.multi))  # vertices on a seam in the input
-        self.wedge_in = np.zeros(n, np.int64)  # a wedge of each vertex in the input, the input's values and
-        self.wedge_in[vertex_of[used]] = used  # seam flags (a batch of the greedy queue changes ``multi``)
-        self.val_in = self.val.copy() if self.frozen.any() else self.val
+        self.wedge_in = np.zeros(n, np.int64)  # a wedge of each vertex in the input, and the input's seam
+        self.wedge_in[vertex_of[used]] = used  # flags (a batch of the greedy queue changes ``multi``)
         self.multi_in = self.multi.copy()
 
     @staticmethod
@@ -370,7 +369,7 @@ class Tracker:
         greedy queue, whose speculation changes the seam flags, as in its one-at-a-time loop)."""
         if self.multi_in[v]:
             return None
-        return self.val_in[self.wedge_in[v]] * self.weights * self.solved
+        return self.val[self.wedge_in[v]] * self.weights * self.solved  # a frozen wedge's value never changes
 
     def allowed(self, faces, VQ, a: int, b: int, x) -> bool:
         """The validity rule for contracting b into a at x (module docstring)."""

@@ -210,7 +210,9 @@ def dropped(h: _ply.Header, kept: tuple = ()) -> tuple:
     return tuple(out)
 
 
-def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
+def read_binary(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = False) -> Source:
+    """The binary PLY as a `Source`; with ``uv_wanted``, its UVs (per vertex, or the faces' ``texcoord``
+    lists when every face has one of 6 values and all are triangles)."""
     order, size = _ply.FORMATS[h.format], os.path.getsize(path)
     vertex, face = h.element("vertex"), h.element("face")
     if face is None:
@@ -231,9 +233,9 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path) -> Source:
 
     def with_uv(src: Source, corner_field: str | None = None) -> Source:
         src.dropped = dropped(h)
-        if uv is not None:  # per-vertex UVs: read from the vertex records
+        if uv_wanted and uv is not None:  # per-vertex UVs: read from the vertex records
             src.uv, src.uv_fields, src.dropped_with_uv = vblock, uv_fields, dropped(h, uv)
-        elif corner_field is not None:  # a face list of 6 (u, v per corner), read from the face records
+        elif uv_wanted and corner_field is not None:  # a face list of 6 (u, v per corner), read from the face records
             src.uv, src.face_uv, src.dropped_with_uv = src.face, corner_field, dropped(h, (FACE_UV,))
         return src
 

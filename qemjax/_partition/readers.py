@@ -58,10 +58,7 @@ def open_source(path, scratch: Path, uv: bool = False) -> Source:
     try:
         if fmt == "ply":
             h = ply.header(path)
-            src = text.read_ascii_ply(path, h, scratch, uv) if h.format == "ascii" else ply.read_binary(path, h, scratch)
-            if not uv:
-                src.uv = None
-            return src
+            return text.read_ascii_ply(path, h, scratch, uv) if h.format == "ascii" else ply.read_binary(path, h, scratch, uv)
         if fmt == "stl":
             return _stl(path, scratch)
         return text.read_obj(path, scratch, uv)

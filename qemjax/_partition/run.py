@@ -164,7 +164,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                          stacklevel: int = 3, uv=False, texture=None):
     """`simplify` with ``partition=``: the module docstring. ``kwargs``: the method and its settings, as
     `simplify` takes them; ``uv``: keep a file's UVs (True, "auto": when it names a texture image, False:
-    `scatter.wants_uv`); ``texture``: the image of the UVs kept (a path or a PIL image; None: the one the
+    `scatter.scatter`); ``texture``: the image of the UVs kept (a path or a PIL image; None: the one the
     file names)."""
     from .._pipeline import stages
     from .scatter import scatter

@@ -177,12 +177,6 @@ def _read(path, scratch: Path, part_faces: int, step: int, name: str, uv: bool):
         return src, box, cells, _histogram(src, cells, part_faces, step, name)
 
 
-def wants_uv(uv, path) -> bool:
-    """Whether to read the file's UVs: ``uv`` True (asked for by name) or "auto" when the file names a
-    texture image (as `simplify`'s ``attributes="auto"`` keeps UVs with seams)."""
-    return uv is True or (uv == "auto" and texture_of(path) is not None)
-
-
 def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progress=None, uv=False) -> dict:
     """Reads the mesh file ``path`` (PLY, OBJ or STL) in chunks of ``chunk_faces`` faces and bins its
     triangles into spatially compact parts of at most ``part_faces`` faces, written to
@@ -192,7 +186,8 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     n_vertices, n_faces, bbox, welded, parts (file, faces, vertices, border for each), dropped (what the file
     holds besides positions and triangles, which the parts do not carry).
 
-    With ``uv`` (`wants_uv`), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
+    With ``uv`` True (asked for by name) or "auto" when the file names a texture image (as `simplify`'s
+    ``attributes="auto"`` keeps UVs with seams), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
     OBJ's ``vt``, a PLY's per-vertex ``texture_u``/``s``/``u`` and their pairs, a binary PLY's ``texcoord``
     lists), and the manifest says ``uv`` and names the ``texture`` image the file names.
 
@@ -207,7 +202,8 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     scratch.mkdir(parents=True, exist_ok=True)
     level, tmp = _prepare(scratch)
     try:
-        src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name, wants_uv(uv, path))
+        texture = texture_of(path) if uv else None
+        src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name, uv is True or texture is not None)
         plan = Plan.from_bins(bins, part_faces)
         index_type = np.int32 if src.n_vertices < 2**31 else np.int64
         uv = src.uv is not None  # asked for, and every triangle corner has one
@@ -221,11 +217,10 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
             lo, hi = _bounds(src, step, kept)
         del kept
         parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name, uv)
-        texture = texture_of(path) if uv else None
         manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": src.n_faces,
                     "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts,
                     "dropped": list(src.dropped_with_uv if uv else src.dropped), "uv": uv,
-                    "texture": None if texture is None else str(texture)}
+                    "texture": None if texture is None or not uv else str(texture)}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(scratch / "weld", ignore_errors=True)

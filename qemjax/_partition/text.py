@@ -203,7 +203,8 @@ def _element_args(h: _ply.Header, e: _ply.Element, uv: bool = False):
 def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = False):
     """The ASCII PLY as a `Source`; with ``uv_wanted``, its per-vertex UVs when the vertex element has them
     and they are numbers (else the file is read without them)."""
-    uv_wanted = uv_wanted and uv_names(h.element("vertex")) is not None if h.element("vertex") else False
+    vertex = h.element("vertex")
+    uv_wanted = bool(uv_wanted and vertex is not None and uv_names(vertex))
     if h.element("face") is None:
         raise Refusal("the PLY header declares no face element")
     with open(path, "rb") as f:

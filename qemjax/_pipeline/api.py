@@ -160,7 +160,7 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
             raise ValueError("partition: UVs are kept from a mesh file (an OBJ's vt, a PLY's per-vertex texture "
                              "coordinates); a mesh given as arrays or an object is read for its positions only")
     elif attributes in ("auto", None):
-        uv = attributes == "auto" and "auto"
+        uv = "auto" if attributes == "auto" else False
     else:
         raise ValueError("partition: a partitioned run keeps a file's UVs and nothing else of its appearance; "
                          "attributes='uv', 'auto' (UVs that come with a texture image) or None")
