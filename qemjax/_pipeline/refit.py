@@ -24,7 +24,8 @@ E_dist with the connectivity fixed):
    before this round), repeated until no face turns.
 
 Steps 2-4 run ``rounds`` times (the attachment changes as the surface moves). Faces, connectivity and
-everything but the positions stay as they are.
+everything but the positions stay as they are; kept UVs follow the moves (`carry_uv`), seam vertices being
+held by the caller.
 """
 from __future__ import annotations
 
@@ -265,3 +266,46 @@ def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None, m
             Y[new] = np.where((cut[new] > HALVINGS)[:, None], X[new], 0.5 * (X[new] + Y[new]))
         X = Y
     return X
+
+
+def carry_uv(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, wedge_faces: np.ndarray, wedge_vertex: np.ndarray,
+             uv: np.ndarray) -> np.ndarray:
+    """The UVs (w,2) of a mesh whose vertices the re-fit moved from X0 to X1 (k,3), each wedge moved with its
+    vertex: by the displacement times its chart's UV gradient, the area-weighted mean over the faces the
+    wedge belongs to of each face's affine map from its plane to UV space. To first order a point keeps the
+    texture it showed: a move across the surface (most of what the re-fit does: onto the input) changes
+    nothing, a move along it slides along the map; without this the sideways part of a move would drag the
+    texture with it. A wedge whose vertex did not move keeps its UV bit for bit; one with only zero-area
+    faces too.
+    F (j,3) and wedge_faces (j,3): the faces' vertices and corner wedges; wedge_vertex (w,): each wedge's
+    vertex."""
+    X0, X1 = np.asarray(X0, np.float64), np.asarray(X1, np.float64)
+    F, WF = np.asarray(F, np.int64), np.asarray(wedge_faces, np.int64)
+    uv = np.asarray(uv, np.float64)
+    P, U = X0[F], uv[WF]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    d1, d2 = U[:, 1] - U[:, 0], U[:, 2] - U[:, 0]
+    g11, g12, g22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    det = g11 * g22 - g12 * g12  # (2·area)²
+    ok = det > 1e-12 * g11 * g22  # a usable plane: the sine at corner 0 above 1e-6 (det cancels below)
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    # the map's rows: J = [d1 d2] · (EᵀE)⁻¹Eᵀ with E = [e1 e2]; c1, c2 are the rows of (EᵀE)⁻¹Eᵀ
+    c1 = (g22 * inv)[:, None] * e1 - (g12 * inv)[:, None] * e2
+    c2 = (g11 * inv)[:, None] * e2 - (g12 * inv)[:, None] * e1
+    J = d1[:, :, None] * c1[:, None, :] + d2[:, :, None] * c2[:, None, :]  # (j,2,3)
+    area = np.where(ok, np.sqrt(np.maximum(det, 0.0)), 0.0)
+    w = len(uv)
+    sums = np.zeros((w, 6))
+    weight = np.zeros(w)
+    flat = (J * area[:, None, None]).reshape(-1, 6)
+    for k in range(3):  # each corner's wedge gathers its face's map
+        weight += np.bincount(WF[:, k], area, minlength=w)
+        for c in range(6):
+            sums[:, c] += np.bincount(WF[:, k], flat[:, c], minlength=w)
+    wv = np.asarray(wedge_vertex, np.int64)
+    move = X1[wv] - X0[wv]
+    go = np.any(move != 0, axis=1) & (weight > 0)
+    grad = sums[go].reshape(-1, 2, 3) / weight[go][:, None, None]
+    out = uv.copy()
+    out[go] = uv[go] + np.einsum("wij,wj->wi", grad, move[go])
+    return out

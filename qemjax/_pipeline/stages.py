@@ -471,11 +471,10 @@ def _split_faces(job: Job, out: outcome.Outcome, mesh: _Mesh, run_target: int, p
 
 
 class _Refit(NamedTuple):
-    """What `_refit_and_measure` did: its rounds (0: none), why it was skipped (or None), its seconds, the measured
-    distance's stats and the `RefitTask` (None: nothing to re-fit or measure)."""
+    """What `_refit_and_measure` did: its rounds (0: none), its seconds, the measured distance's stats and the
+    `RefitTask` (None: nothing to re-fit or measure)."""
 
     rounds: int
-    skipped: str | None
     seconds: float
     distance: dict
     task: Any
@@ -486,24 +485,24 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
     run here, or left to ``later`` (`finish`). Locked vertices, and with attributes the seam vertices, keep
     their positions."""
     setup = job.setup
-    rounds, skipped, seconds, task = setup.refit, None, 0.0, None
-    if rounds and appearance and appearance.get("uv") is not None:
-        # moved positions would leave their texture coordinates behind (measured by
-        # experiments/figures/refit_uv.py): with UVs kept, positions stay where the contractions put them
-        rounds, skipped = 0, "uv kept"
+    rounds, seconds, task = setup.refit, 0.0, None
     refits = bool(rounds and len(mesh.faces) < len(g.F))
     distance = _measure.not_measured()
     if refits or setup.measures:
-        held = mesh.fixed
+        held, wedges = mesh.fixed, None
         if refits and appearance:  # seam vertices (two or more wedges) stay on the input's seams
             seam = np.bincount(appearance["wedge_vertex"], minlength=len(mesh.vertices)) > 1
             held = seam if held is None else (held | seam)
+            if appearance.get("uv") is not None:  # the UVs follow the moves (`refit.carry_uv`)
+                wedges = (appearance["wedge_faces"], appearance["wedge_vertex"], appearance["uv"])
         task = RefitTask(g.V, g.F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, g.parts[1],
-                         mesh.source_faces, held, setup.measures, setup.min_quality)
+                         mesh.source_faces, held, setup.measures, setup.min_quality, wedges)
         if later is None:
-            vout, seconds, distance = task()
+            vout, seconds, distance, uv = task()
             mesh = mesh._replace(vertices=vout)
-    return mesh, _Refit(rounds, skipped, seconds, distance, task)
+            if uv is not None:
+                appearance["uv"] = uv
+    return mesh, _Refit(rounds, seconds, distance, task)
 
 
 def _stop_reason(job: Job, out: outcome.Outcome, mesh: _Mesh, nonmanifold: int, stacklevel: int) -> str:
@@ -555,8 +554,6 @@ def _stats(job: Job, out: outcome.Outcome, g: Geometry, mesh: _Mesh, refit: _Ref
         **out.counts(model.branches), model=model.describe(), **times, scale=frame.scale, parts_in=g.parts[0],
         non_manifold_edges_in=g.nonmanifold, max_error_limit=err if math.isfinite(err) else None,
         refit=refit.rounds, refit_s=refit.seconds, error_unit=model.error_unit, **refit.distance)
-    if refit.skipped:
-        stats["refit_skipped"] = refit.skipped
     if job.tracker is not None:
         stats.update(attributes=list(job.attrs.values), seam_vertices_in=job.tracker.seam_in)
     stats.update(out.stage_times)
@@ -584,21 +581,25 @@ class RefitTask(NamedTuple):
     fixed: np.ndarray | None
     measure: bool = False  # then measure the output's distance from the input (`_pipeline.measure`)
     min_quality: float = 0.0  # the quality guard (`Topology.min_angle`)
+    wedges: tuple | None = None  # kept UVs: (wedge_faces, wedge_vertex, uv), moved with the positions
 
-    def __call__(self) -> tuple[np.ndarray, float, dict]:
-        """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None)."""
+    def __call__(self) -> tuple[np.ndarray, float, dict, np.ndarray | None]:
+        """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None, the UVs moved
+        with the positions: `refit.carry_uv`, or None without ``wedges``)."""
         t = time.perf_counter()
-        X = self.X
+        X, uv = self.X, None
         sampled = []  # the input's samples, made once for the re-fit and the measured distance
         if self.rounds:
             X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
                              self.source_faces, fixed=self.fixed, sampled=sampled if self.measure else None,
                              min_quality=self.min_quality)
+            if self.wedges is not None:
+                uv = _refit.carry_uv(self.X, X, self.G, *self.wedges)
         refit_s = time.perf_counter() - t
         if not self.measure:
-            return X, refit_s, _measure.not_measured()
+            return X, refit_s, _measure.not_measured(), uv
         return X, refit_s, _measure.distance(self.V, self.F, X, self.G, sampled[0] if sampled else None,
-                                             sampled[1] if len(sampled) > 1 else None)
+                                             sampled[1] if len(sampled) > 1 else None), uv
 
 
 def refit_all(later: list) -> None:
@@ -613,8 +614,10 @@ def refit_all(later: list) -> None:
 
     def run(item):
         res, task = item
-        res.vertices, res.stats["refit_s"], distance = task()
+        res.vertices, res.stats["refit_s"], distance, uv = task()
         res.stats.update(distance)
+        if uv is not None:
+            res.uv = uv
 
     each_on_threads(run, [item for item in later if len(item[1].F) < _REFIT_ALONE])
     for item in later:

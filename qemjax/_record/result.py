@@ -177,7 +177,7 @@ class SimplifyResult:
         percentage of the input's bounding-box diagonal; `_pipeline.measure`), and the largest contraction
         cost named for what it is (``stats["error_unit"]``: a quadric error, a sum of squared distances to
         planes, for the quadric methods; a surface-area change for ``method="area"``). A re-fit the method
-        asks for but that did not run (``stats["refit_skipped"]``: UVs kept) is named beside the distance."""
+        asks for but that did not run (``stats["refit_skipped"]``: a bounded run's) is named beside the distance."""
         s = self.stats
         goals = []
         if s.get("target_faces"):
@@ -195,8 +195,7 @@ class SimplifyResult:
         if s.get("distance_two_way_max") is not None:
             dist += f", both ways max {s['distance_two_way_max']:.3g} (checked against max_distance)"
         if s.get("refit_skipped"):  # the method's re-fit did not run: say so where the distance is read
-            hint = "; attributes=None re-fits" if s["refit_skipped"] == "uv kept" else ""
-            dist += f" (re-fit skipped: {s['refit_skipped']}{hint})"
+            dist += f" (re-fit skipped: {s['refit_skipped']})"
         if s.get("partition"):  # no rounds or contraction costs of its own: its parts and levels
             p = s["partition"]
             return (f"{s['faces_in']} -> {s['faces_out']} faces (target {' or '.join(goals) or 'none'}) "
