@@ -1,6 +1,7 @@
 """The default's re-fit with UVs kept: each moved wedge's UV follows its vertex (`qemjax._pipeline.refit.carry_uv`),
-seam vertices held. Against the same run without the re-fit (``refit=0``, what textured runs did before) and
-with the re-fit's positions but the UVs left where they were:
+seam vertices held. Against the same run without the re-fit (``refit=0``, what textured runs did before),
+with the re-fit's positions but the UVs left where they were, and with the seam vertices re-fitted too (each
+wedge carried by its own chart):
 
     python experiments/figures/refit_uv.py
 
@@ -30,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import qemjax  # noqa: E402
 from qemjax import metrics  # noqa: E402
 from qemjax._io import attribute_files as af  # noqa: E402
+from qemjax._pipeline.refit import carry_uv, refit  # noqa: E402
 
 SAMPLES = 100_000
 
@@ -49,9 +51,13 @@ def rows(label: str, path: Path, ratio: float, sphere: bool = False) -> list[str
     fitted = qemjax.simplify(path, ratio=ratio, attributes="uv")
     plain = qemjax.simplify(path, ratio=ratio, attributes="uv", refit=0)
     left = dataclasses.replace(fitted, uv=plain.uv)  # the re-fit's positions, the UVs as the run left them
+    # the seam vertices fitted too, every wedge's UV carried by its own chart's gradient
+    X = refit(plain.input_vertices, plain.input_faces, plain.vertices, plain.faces, 1, 0.0, None, plain.source_faces)
+    free = dataclasses.replace(plain, vertices=X, uv=carry_uv(plain.vertices, X, plain.faces, plain.wedge_faces,
+                                                              plain.wedge_vertex, plain.uv))
     out = []
     for name, res in (("re-fit, UVs carried (default)", fitted), ("no re-fit (refit=0)", plain),
-                      ("re-fit, UVs left behind", left)):
+                      ("re-fit, UVs left behind", left), ("re-fit with the seam vertices too, UVs carried", free)):
         d = metrics.attribute_deviation(path, res, n_samples=SAMPLES)
         g = metrics.surface_distance(m, res)
         exact = exact_uv_error(res) if sphere else "—"
