@@ -35,6 +35,7 @@ import numpy as np
 from numba import njit
 
 from .._mesh.arrays import face_normals
+from .._mesh import fixed_order as _fixed
 from .._mesh.box_bounds import row_bounds
 from .._mesh.grid_nearest import nearest, slivers
 from .._mesh.pointtri import segment_closest
@@ -285,7 +286,7 @@ def carry_uv(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, wedge_faces: np.ndar
     P, U = X0[F], uv[WF]
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
     d1, d2 = U[:, 1] - U[:, 0], U[:, 2] - U[:, 0]
-    g11, g12, g22 = _dot3(e1, e1), _dot3(e1, e2), _dot3(e2, e2)
+    g11, g12, g22 = _fixed.dot(e1, e1), _fixed.dot(e1, e2), _fixed.dot(e2, e2)
     det = g11 * g22 - g12 * g12  # (2·area)²
     ok = det > 1e-12 * g11 * g22  # a usable plane: the sine at corner 0 above 1e-6 (det cancels below)
     inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
@@ -307,11 +308,6 @@ def carry_uv(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, wedge_faces: np.ndar
     go = np.any(move != 0, axis=1) & (weight > 0)
     grad = sums[go].reshape(-1, 2, 3) / weight[go][:, None, None]
     out = uv.copy()
-    out[go] = uv[go] + _dot3(grad, move[go][:, None, :])
+    out[go] = uv[go] + _fixed.dot(grad, move[go][:, None, :])
     return out
 
-
-def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Σ a[..., i]·b[..., i] over the last axis of length 3, added left to right (elementwise operations
-    only: the same bits on every CPU, which a reduction's vector loops need not give)."""
-    return (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]

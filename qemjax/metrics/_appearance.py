@@ -71,16 +71,17 @@ def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarr
                  np.asarray(c, np.float64))
 
 
-def _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, tol, size):
+def _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, tol, cs, face):
     """For samples with a deviation above ``tol``: the smallest deviation over the input faces that share a
     (welded) vertex with the nearest one and lie within twice its distance, or, for those across a seam from
     it (sharing none of its wedges, a wedge being a welded vertex with one value), within twice its distance
-    plus a tenth of ``size`` (the longest edge of the sample's own face; both +1e-9 of the extent). Near a seam the nearest input point may sit in the chart
-    across it, whose UVs are elsewhere in the texture; a point about as near on the sample's own side is the
-    fair comparison. Twice the distance alone fails where the output lies within a hair of the input (a
-    re-fitted one): the output's seam is a chord of the input's and passes beside it by a part of the
-    output's edge, however near the surfaces are; on the nearest face's side the window stays relative, so
-    a real deviation is not read away. Returns the new deviations."""
+    plus a tenth of the longest edge of the sample's own face (``face``, of the output's corners ``cs``);
+    both +1e-9 of the extent. Near a seam the nearest input point may sit in the chart across it, whose UVs
+    are elsewhere in the texture; a point about as near on the sample's own side is the fair comparison.
+    Twice the distance alone fails where the output lies within a hair of the input (a re-fitted one): the
+    output's seam is a chord of the input's and passes beside it by a part of the output's edge, however
+    near the surfaces are; on the nearest face's side the window stays relative, so a real deviation is not
+    read away. Returns the new deviations."""
     bad = np.flatnonzero(d > tol)
     if bad.size == 0:
         return d
@@ -103,7 +104,9 @@ def _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, tol, size):
         dd = np.linalg.norm(q - p, axis=1)
         near = 2 * dist[i] + 1e-9 * ext
         across = ~np.isin(wedge[cand], wedge[fo[i]]).any(axis=1)
-        ok = (dd <= near) | (across & (dd <= near + 0.1 * size[i]))
+        own = cs[face[i]]
+        size = np.linalg.norm(own - np.roll(own, 1, axis=0), axis=1).max()
+        ok = (dd <= near) | (across & (dd <= near + 0.1 * size))
         if ok.any():
             vals = np.einsum("qk,qkj->qj", wb[ok], Co[cand[ok]])
             out[i] = min(d[i], float(np.min(np.linalg.norm(vals - val_s[i], axis=1))))
@@ -118,10 +121,10 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
     ``_p95`` and ``_max`` (UV units, where the texture is the unit square; colours: Euclidean RGBA
     distance with channels in [0, 1]). ``seam_tolerant``: a sample whose nearest input point lies across
     a seam is compared with the nearest point on its own side when that is within twice the distance plus
-    a tenth of the sample's face (`_seam_tolerant`; without it a sample a hair across a UV seam reads a deviation of up to the
-    texture's width). Each mesh is what `qemjax.simplify` accepts and keeps attributes of: a path (read
-    as simplify reads it), a `trimesh.Trimesh`, or a result (`SimplifyResult`). ValueError when either
-    lacks ``kind``."""
+    a tenth of the sample's face (`_seam_tolerant`; without it a sample a hair across a UV seam reads a
+    deviation of up to the texture's width). Each mesh is what `qemjax.simplify` accepts and keeps
+    attributes of: a path (read as simplify reads it), a `trimesh.Trimesh`, or a result (`SimplifyResult`).
+    ValueError when either lacks ``kind``."""
     o, s = corner_values(original, kind), corner_values(simplified, kind)
     for mesh, vals, name in ((original, o, "original"), (simplified, s, "simplified")):
         if vals is None:
@@ -146,8 +149,7 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
     val_o = np.einsum("qk,qkj->qj", wo, Co[fo])
     d = np.linalg.norm(val_s - val_o, axis=1)
     if seam_tolerant:
-        edges = np.linalg.norm(cs[face] - np.roll(cs[face], 1, axis=1), axis=2).max(1)
-        d = _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, 0.05 if kind == "uv" else 0.1, edges)
+        d = _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, 0.05 if kind == "uv" else 0.1, cs, face)
     return {f"{kind}_dev_rms": float(np.sqrt(np.mean(d * d))), f"{kind}_dev_mean": float(d.mean()),
             f"{kind}_dev_p95": float(np.quantile(d, 0.95)), f"{kind}_dev_max": float(d.max())}
 
