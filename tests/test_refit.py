@@ -8,6 +8,7 @@ import pytest
 from conftest import assert_valid
 
 import qemjax
+from qemjax._pipeline import fit_rules as _rules
 from qemjax._pipeline import refit as _refit
 from qemjax import shapes
 from qemjax._mesh.arrays import face_normals
@@ -29,7 +30,7 @@ def test_closest_barycentric_gives_the_exact_distance():
     b[500:550] = c[500:550] = a[500:550]  # a point
     c[550:600] = a[550:600] + 0.3 * (b[550:600] - a[550:600])  # collinear corners
     c[600:650] = a[600:650] + 1.7 * (b[600:650] - a[600:650])
-    B = _refit.closest_barycentric(p, a, b, c)
+    B = _rules.closest_barycentric(p, a, b, c)
     assert np.all(B >= -1e-12) and np.allclose(B.sum(1), 1.0)
     x = B[:, :1] * a + B[:, 1:2] * b + B[:, 2:] * c
     np.testing.assert_allclose(np.linalg.norm(p - x, axis=1), point_triangle_distance(p, a, b, c),
@@ -99,7 +100,7 @@ def _reference_system(Ps, sw, X, G, f, free, lam):
     N as CSR: the off-diagonal entries that summed to exactly zero left out."""
     q = len(Ps)
     tri = G[f]
-    B = _refit.closest_barycentric(Ps, X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]]) * sw[:, None]
+    B = _rules.closest_barycentric(Ps, X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]]) * sw[:, None]
     col = np.where(free, np.cumsum(free) - 1, -1)
     k = int(free.sum())
     target = Ps * sw[:, None]

@@ -130,11 +130,14 @@ QUALITY_MAX = 3 ** 0.5 / 2  # 2·area / longest edge² of an equilateral triangl
 class Method(CostModel):
     """A cost model as a user chooses it (``simplify(method=...)``; `qemjax.QEM`, `qemjax.ESQEM`, ...): its
     fields are every setting of the method, with their defaults. Besides the model's own settings, every
-    method has four keyword-only fields that act around its cost:
+    method has five keyword-only fields that act around its cost:
 
     regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (`regularize`; 0: none).
     area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none).
     refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._pipeline.refit`).
+    polish: M ≥ 0, with a re-fit, at most M moves after it that each lower the largest sampled distance
+        between the input and the output, both ways, keeping the two-way rms within 1 % of the re-fit's
+        (`qemjax._pipeline.polish`; 0: none).
     quality_threshold: s in [0, √3/2), a triangle-shape term in the parallel scheduler's ranking (0: none): a
         contraction that would make a face worse than it was, with 2·area / longest edge² = q under s, ranks
         as if it cost s / q times more, so slivers form only where nothing cheaper is near (after MeshLab's
@@ -149,6 +152,7 @@ class Method(CostModel):
     regularize: float = dataclasses.field(default=0.0, kw_only=True)
     area_weight: float = dataclasses.field(default=0.0, kw_only=True)
     refit: int = dataclasses.field(default=0, kw_only=True)
+    polish: int = dataclasses.field(default=0, kw_only=True)
     quality_threshold: float = dataclasses.field(default=0.0, kw_only=True)
 
     def __post_init__(self):
@@ -156,6 +160,8 @@ class Method(CostModel):
         require_nonnegative(self, "regularize", "area_weight")
         if self.refit < 0:
             raise ValueError(f"refit must be an integer >= 0 (rounds), got {self.refit!r}")
+        if self.polish < 0:
+            raise ValueError(f"polish must be an integer >= 0 (moves), got {self.polish!r}")
         if not 0 <= self.quality_threshold < QUALITY_MAX:
             raise ValueError(f"quality_threshold must be in [0, {QUALITY_MAX:.3f}) (2·area / longest edge² of a "
                              f"triangle is at most √3/2, an equilateral one's), got {self.quality_threshold!r}")

@@ -27,6 +27,7 @@ from . import memoryless as ml
 from .base import MeshInput, Method, require_nonnegative
 
 PLACEMENTS = ("optimal", "rank", "endpoints")
+POLISH_MOVES = 256  # the default's minimax polish: moves at most (`_pipeline.polish`)
 
 
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,
@@ -177,10 +178,11 @@ class QEM(Method):
     def default(cls) -> "QEM":
         """What `simplify` runs when no method is given (``method="default"``): summed quadrics with face
         planes weighted by (area / mean area)^0.6, boundary planes at weight 10, then one round of
-        re-fitting the positions to the input (``refit=1``). Chosen by ranking every candidate against the
+        re-fitting the positions to the input (``refit=1``) and its minimax polish (``polish``, at most
+        POLISH_MOVES moves). Chosen by ranking every candidate against the
         peers on the benchmark meshes at 10 % and 1 % (``experiments/figures/rank_peers.py``; docs/methods.md, "QEM and
         its presets", which gives its time against `classic`'s)."""
-        return cls(area_power=0.6, boundary_weight=10.0, refit=1, late_memoryless=2.0)
+        return cls(area_power=0.6, boundary_weight=10.0, refit=1, late_memoryless=2.0, polish=POLISH_MOVES)
 
     @classmethod
     def accurate(cls) -> "QEM":

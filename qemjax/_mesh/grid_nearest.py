@@ -278,6 +278,25 @@ def _query(P, X, G, B, flat, lo, h, dims, start, faces, seed):
     return best_f, best_d2
 
 
+def grid(X: np.ndarray, G: np.ndarray) -> tuple:
+    """The search structure of the triangles G (j,3), j >= 1, over X (k,3) float64 (module docstring):
+    (boxes (j,6), slivers (j,) bool, lo (3,), h, dims (3,), start, faces), the arguments `_query` takes after
+    X and G. A caller that moves a few vertices may keep it and query with the new positions, boxes and
+    slivers: each triangle whose corners did not move is still listed in every cube it meets, so the
+    answer is exact among those (`_pipeline.polish` measures the moved ones itself)."""
+    lo, hi = used_bounds(X, G)
+    ext = np.maximum(hi - lo, 1e-300)
+    h = max(CUBE_EDGE * float(np.median(edge_lengths(X, G))), float(ext.max()) * 1e-6)
+    while True:
+        dims = np.minimum(np.floor(ext / h).astype(np.int64) + 1, 1 << 20)
+        if (int(np.prod(dims)) <= CUBES_PER_FACE * len(G) + 4096
+                and _listing(X, G, lo, h, dims) <= PAIRS_PER_FACE * len(G)):
+            break
+        h *= 1.25
+    start, faces = _build(X, G, lo, h, dims)
+    return face_boxes(X, G), slivers(X, G), lo, h, dims, start, faces  # boxes: (min xyz, max xyz)
+
+
 def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(faces (q,) int64, distances (q,) float64): for each point P (q,3), the triangle of G (j,3) over
     vertices X (k,3) nearest to it (the lowest index among equals) and its exact distance. G must not be
@@ -300,18 +319,13 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
         raise ValueError("nearest: no triangles")
     if G.min() < 0 or G.max() >= len(X):  # (the compiled loops below read X[G] unchecked)
         raise ValueError("nearest: a triangle's corner is not one of the vertices")
-    lo, hi = used_bounds(X, G)
-    ext = np.maximum(hi - lo, 1e-300)
-    h = max(CUBE_EDGE * float(np.median(edge_lengths(X, G))), float(ext.max()) * 1e-6)
-    while True:
-        dims = np.minimum(np.floor(ext / h).astype(np.int64) + 1, 1 << 20)
-        if (int(np.prod(dims)) <= CUBES_PER_FACE * len(G) + 4096
-                and _listing(X, G, lo, h, dims) <= PAIRS_PER_FACE * len(G)):
-            break
-        h *= 1.25
-    start, faces = _build(X, G, lo, h, dims)
-    B = face_boxes(X, G)  # each triangle's bounding box, (min xyz, max xyz)
-    flat = slivers(X, G)
+    return search(X, G, grid(X, G), P, seed)
+
+
+def search(X: np.ndarray, G: np.ndarray, index: tuple, P: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`nearest` of the points P (q,3) float64 with the structure ``index`` (`grid`, kept or made now) and
+    seeds (q,) or (0,) int32: the query on threads."""
+    B, flat, lo, h, dims, start, faces = index
     # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
     # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried
     # in the order of their cubes instead, the search alone is faster but whole runs are not: the points

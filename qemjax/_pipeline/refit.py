@@ -38,9 +38,9 @@ from .._mesh.arrays import face_normals
 from .._mesh import fixed_order as _fixed
 from .._mesh.box_bounds import row_bounds
 from .._mesh.grid_nearest import nearest, slivers
-from .._mesh.pointtri import segment_closest
 from .._mesh.spd_solve import solve_csr
-from .refit_system import accumulate, finish, layout, regions
+from .fit_rules import _barycentric_at, _quality, _turned
+from .refit_system import accumulate, finish, layout
 
 DAMPING = 1e-3  # λ per vertex, relative to the mean sample weight (module docstring, step 3)
 _ROWS = 32_768  # samples per block of the normal equations' assembly
@@ -108,43 +108,6 @@ def _attach(X: np.ndarray, G: np.ndarray, gpart: np.ndarray, P: np.ndarray, spar
     return f
 
 
-def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(q,3) barycentric coordinates of the point of triangle (a, b, c) nearest to p, row by row (Ericson,
-    Real-Time Collision Detection 5.1.5: vertex, edge or interior region)."""
-    q = len(p)
-    X = np.concatenate([a, b, c]).astype(np.float64, copy=False)
-    G = np.arange(3 * q).reshape(3, q).T
-    return _barycentric_at(np.asarray(p, np.float64), X, G, np.arange(q), slivers(X, G))
-
-
-def _barycentric_at(P, X, G, f, flat):
-    """`closest_barycentric` of points P on faces f of (X, G): Ericson's regions (`refit_system.regions`),
-    except on slivers (``flat``, per face of G: two corners at one point, three in a line, as
-    `_mesh.pointtri` tells them), whose regions lose all precision: there the closest point of the three
-    edges."""
-    out = np.empty((len(f), 3))
-    regions(P, X, G, f, out)
-    sliver = np.flatnonzero(flat[f])
-    if sliver.size:
-        tri = G[f[sliver]]
-        out[sliver] = _closest_on_edges(P[sliver], X[tri[:, 0]], X[tri[:, 1]], X[tri[:, 2]])
-    return out
-
-
-def _closest_on_edges(p, a, b, c):
-    """(q,3) barycentric coordinates of the closest point of the three edges of triangles (a, b, c) to p."""
-    best = np.full(len(p), np.inf)
-    out = np.zeros((len(p), 3))
-    corners = (a, b, c)
-    for i, j in ((0, 1), (0, 2), (1, 2)):
-        t, d = segment_closest(p.T, corners[i].T, (corners[j] - corners[i]).T)
-        closer = d < best
-        best[closer] = d[closer]
-        out[closer] = 0.0
-        out[closer, i], out[closer, j] = 1 - t[closer], t[closer]
-    return out
-
-
 def _system(Ps, sw, X, G, f, col, lay, lam):
     """The normal equations (N as its CSR arrays (indptr, indices, data), R (free, 3)) of the samples Ps with weights' square roots sw, attached
     to faces f of (X, G) (`refit_system`). The barycentric coordinates are found in blocks of rows."""
@@ -158,21 +121,6 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
     return finish(indptr, indices, data, lam), rhs
 
 
-def _quality(P: np.ndarray, G: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Each face's (corners G at positions P, normals n) 2·area / longest edge², |n| / longest², the shape
-    the contractions' quality guard bounds (`Topology.min_angle`)."""
-    c = P[G]
-    longest = np.max(np.stack([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)]), axis=0)
-    return np.linalg.norm(n, axis=1) / np.where(longest > 0, longest, 1.0)
-
-
-def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
-    """Faces whose normal turned by the flip angle or more (cos ≤ cos_max), or that lost all area."""
-    l0, l1 = np.linalg.norm(n0, axis=1), np.linalg.norm(n1, axis=1)
-    cos = np.einsum("ij,ij->i", n0, n1) / np.where(l0 * l1 > 0, l0 * l1, 1.0)
-    return ((l1 == 0) & (l0 > 0)) | ((l0 > 0) & (cos <= cos_max))
-
-
 def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, float]:
     """(centre (3,), unit): the centre of V's bounding box and its largest extent (no vertices: 0 and 1).
     Work in this frame keeps squared distances and areas finite at any scale (1e-100 or 1e100 mesh units).
@@ -183,7 +131,8 @@ def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, 
 
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
           part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
-          fixed: np.ndarray | None = None, sampled: list | None = None, min_quality: float = 0.0) -> np.ndarray:
+          fixed: np.ndarray | None = None, sampled: list | None = None, min_quality: float = 0.0,
+          polish: int = 0, report: dict | None = None) -> np.ndarray:
     """Positions X (k,3) of the output faces G (j,3) re-fitted to the input (V, F) in ``rounds`` rounds
     (module docstring); float64, the input's units. ``part``: a part label per input vertex and
     ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
@@ -193,7 +142,9 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     each was attached to in the last round (-1: none): the measured distance of the same run takes the
     samples (`measure.distance`) instead of making them again, and starts each search at that face.
     ``min_quality``: the quality guard (`Topology.min_angle`; 0: off): a face's move is shortened as a
-    turned face's is when it would take the face's 2·area / longest² below it and below what it was."""
+    turned face's is when it would take the face's 2·area / longest² below it and below what it was.
+    ``polish``: then at most that many moves of the minimax polish (`_pipeline.polish`), under the same
+    rules; ``report``: a dict that gets the number made as ``polish_moves``."""
     X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
@@ -201,7 +152,17 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
         return X0
     X = (X0 - centre) / unit
-    Y = _fit((V - centre) / unit, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled, min_quality)
+    Vn = (V - centre) / unit
+    kept = sampled if sampled is not None else ([] if polish > 0 else None)
+    Y = _fit(Vn, F, X, G, rounds, cos_max, part, source_faces, fixed, kept, min_quality)
+    if polish > 0 and rounds > 0 and kept:
+        from .polish import polish as _polish
+
+        ns = None if source_faces is None else face_normals(Vn, F[np.asarray(source_faces, np.int64)])
+        Y, made = _polish(Vn, F, Y, G, *kept[0], polish, cos_max, fixed, ns, min_quality,
+                          seeds=kept[1] if len(kept) > 1 else None, source_faces=source_faces)
+        if report is not None:
+            report["polish_moves"] = made
     out = Y * unit + centre
     moved = np.any(Y != X, axis=1) & np.all(np.isfinite(out), axis=1)  # the others keep X0 bit for bit
     return np.where(moved[:, None], out, X0)

@@ -11,7 +11,7 @@ compares the sums with numpy's in sample order), and it depends on no library's 
 The loops release the GIL: a batch's re-fits run side by side on threads (`stages.refit_all`).
 
 * `regions`: each sample's barycentric coordinates on its face (Ericson's regions), in numpy's arithmetic
-  (`refit.closest_barycentric` made them with einsum and np.select: the same bits, without their (q,3)
+  (`fit_rules.closest_barycentric` made them with einsum and np.select: the same bits, without their (q,3)
   temporaries);
 * `layout`: N's sparsity (a row per free output vertex, the columns of the free vertices it shares a face
   with and its own, ascending) and where each face's corner pairs sit in it;
@@ -43,7 +43,7 @@ def _finite(t):
 def regions(P, X, G, f, out):
     """out[s] = the barycentric coordinates of the point of face f[s] of (X, G) closest to P[s] (Ericson,
     Real-Time Collision Detection 5.1.5: the first of the vertex, edge and interior regions that holds).
-    Not for slivers (their regions lose all precision: `refit.closest_barycentric` measures them by their
+    Not for slivers (their regions lose all precision: `fit_rules.closest_barycentric` measures them by their
     edges). numpy's arithmetic, operation for operation: einsum's dot products sum (x0·y0 + x2·y2) + x1·y1,
     the edge parameters go through np.nan_to_num, the interior's through den = (va + vb) + vc (1 where 0)."""
     for s in range(len(f)):

@@ -123,6 +123,7 @@ class Setup:
     attributes = property(lambda self: self.attribute_options.attributes)
     texture = property(lambda self: self.attribute_options.texture)
     refit = property(lambda self: int(self.method_obj.refit))
+    polish = property(lambda self: int(getattr(self.method_obj, "polish", 0)))
 
     @property
     def measures(self) -> bool:
@@ -496,7 +497,7 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
             if appearance.get("uv") is not None:  # the UVs follow the moves (`refit.carry_uv`)
                 wedges = (appearance["wedge_faces"], appearance["wedge_vertex"], appearance["uv"])
         task = RefitTask(g.V, g.F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, g.parts[1],
-                         mesh.source_faces, held, setup.measures, setup.min_quality, wedges)
+                         mesh.source_faces, held, setup.measures, setup.min_quality, wedges, setup.polish)
         if later is None:
             vout, seconds, distance, uv = task()
             mesh = mesh._replace(vertices=vout)
@@ -582,6 +583,7 @@ class RefitTask(NamedTuple):
     measure: bool = False  # then measure the output's distance from the input (`_pipeline.measure`)
     min_quality: float = 0.0  # the quality guard (`Topology.min_angle`)
     wedges: tuple | None = None  # kept UVs: (wedge_faces, wedge_vertex, uv), moved with the positions
+    polish: int = 0  # moves of the minimax polish after the re-fit at most (`_pipeline.polish`)
 
     def __call__(self) -> tuple[np.ndarray, float, dict, np.ndarray | None]:
         """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None, the UVs moved
@@ -589,17 +591,18 @@ class RefitTask(NamedTuple):
         t = time.perf_counter()
         X, uv = self.X, None
         sampled = []  # the input's samples, made once for the re-fit and the measured distance
+        report = {}  # the polish's moves
         if self.rounds:
             X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
                              self.source_faces, fixed=self.fixed, sampled=sampled if self.measure else None,
-                             min_quality=self.min_quality)
+                             min_quality=self.min_quality, polish=self.polish, report=report)
             if self.wedges is not None:
                 uv = _refit.carry_uv(self.X, X, self.G, *self.wedges)
         refit_s = time.perf_counter() - t
         if not self.measure:
-            return X, refit_s, _measure.not_measured(), uv
+            return X, refit_s, _measure.not_measured() | report, uv
         return X, refit_s, _measure.distance(self.V, self.F, X, self.G, sampled[0] if sampled else None,
-                                             sampled[1] if len(sampled) > 1 else None), uv
+                                             sampled[1] if len(sampled) > 1 else None) | report, uv
 
 
 def refit_all(later: list) -> None:

@@ -64,8 +64,8 @@ def _missing(mesh, name: str, kind: str) -> str:
 
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(q,3) barycentric coordinates of the point of each triangle (a, b, c: (q,3)) closest to p (q,3): the
-    re-fit's (`qemjax._pipeline.refit.closest_barycentric`; segments and slivers included)."""
-    from .._pipeline.refit import closest_barycentric as exact  # numba and scipy: imported when first used
+    re-fit's (`qemjax._pipeline.fit_rules.closest_barycentric`; segments and slivers included)."""
+    from .._pipeline.fit_rules import closest_barycentric as exact  # numba and scipy: imported when first used
 
     return exact(np.asarray(p, np.float64), np.asarray(a, np.float64), np.asarray(b, np.float64),
                  np.asarray(c, np.float64))
