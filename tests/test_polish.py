@@ -106,7 +106,7 @@ def test_fixed_vertices_stay_bit_for_bit():
     report = {}
     held = _refit.refit(V, F, X, G, 1, 0.0, fixed=fixed, polish=500, report=report)
     np.testing.assert_array_equal(held[fixed], X[fixed])
-    assert report["polish_moves"] >= 0
+    assert report["polish_moves"] >= 1
 
 
 def test_the_default_polishes_and_bad_values_are_refused():
@@ -126,3 +126,15 @@ def test_polish_in_a_batch_equals_simplify():
     both = qemjax.simplify_batch((V, F), [dict(target_faces=90), dict(target_faces=90, polish=0)])
     assert np.array_equal(both[0].vertices, alone.vertices) and np.array_equal(both[0].faces, alone.faces)
     assert both[0].stats["polish_moves"] == alone.stats["polish_moves"]
+
+
+def test_the_kept_search_structure_gives_the_rebuilt_ones_answers(monkeypatch):
+    """The output's search structure is kept across moves (the moved faces measured beside it): rebuilding it
+    after every move, or never, gives the same output bit for bit."""
+    V, F = _spiky(3)
+    want = qemjax.simplify((V, F), target_faces=150)
+    assert want.stats["polish_moves"] >= 2
+    for rebuild in (0, 10**9):
+        monkeypatch.setattr(_polish, "REBUILD", rebuild)
+        got = qemjax.simplify((V, F), target_faces=150)
+        assert got.vertices.tobytes() == want.vertices.tobytes()

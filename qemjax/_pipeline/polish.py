@@ -8,20 +8,24 @@ Hausdorff distance is set by exactly those. After the re-fit, this pass repeats,
    every vertex and face centroid) to the output, and the output's (every vertex and BARY's seven points
    of every face: its edges' midpoints, its centroid, and a point toward each corner, since a coarse face
    can bulge between its corners) to the input;
-2. propose moves that bring it onto the nearest point p of the other surface: for an input sample, its
-   nearest output face's corner with the largest barycentric weight b by (p − c) / max(b, ½) (c: the
-   face's point nearest to it), or the face's three corners by p − c; for an output sample, its vertex or
-   its face's corners by p − it; each at STEPS of that length, in turn;
+2. propose moves that bring it onto the other surface: for an input sample s, its nearest output face's
+   corner with the largest barycentric weight b by (s − c) / max(b, ½) (c: the face's point nearest to s),
+   or the face's three corners by s − c; for an output sample q, its vertex or its face's corners by r − q
+   (r: the input's point nearest to q); each at STEPS of that length, in turn;
 3. take the first proposal after which the largest distance over both sets is lower than before and the
    two-way rms (the mean of both sets' area-weighted mean squares) stays within RMS_SLACK of what the
    re-fit left, and which turns no face by the flip angle, against the input face it continues, or below
    the quality guard (the re-fit's rules, `refit`), nor moves a fixed vertex; stop when none passes.
 
-Every distance compared is exact (`_mesh.grid_nearest`): the output's search structure is kept across
-moves and the faces moved since it was built are measured directly; an input sample whose nearest face
-did not move keeps its distance, an upper bound (a moved face may have come nearer), until it is the
-farthest, when it is measured again. The output's samples are measured against the input, which does not
-move. The arithmetic is the re-fit's, in its unit frame: the same bits on every CPU.
+Each input sample holds its distance to one face of the output (`_mesh.grid_nearest`'s arithmetic): its
+nearest when measured, so an upper bound of its distance once other faces move. The first pass is an
+exact search. After a move, the samples whose face moved are measured to the faces around the move (their
+own among them: still an upper bound); a sample whose bound is the largest is searched exactly again
+before anything is decided (the output's search structure is kept across moves, the faces moved since it
+was built measured directly). So the largest distance a move must beat is exact, and the rms a move is
+held to is never below the true one: the bound on it holds. The output's samples are searched exactly
+against the input, which does not move. The arithmetic is the re-fit's, in its unit frame, with sums in a
+fixed order: the same bits on every CPU.
 """
 from __future__ import annotations
 
@@ -161,9 +165,12 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
     if moves <= 0 or len(G) == 0 or len(P) == 0:
         return X, 0
     X = np.array(X, np.float64)
+    V, F = np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64)
     G = np.ascontiguousarray(G, np.int64)
     k, j = len(X), len(G)
     free = np.ones(k, bool) if fixed is None else ~np.asarray(fixed, bool)
+    if not free.any():
+        return X, 0
     # the faces at each vertex (CSR)
     order = np.argsort(G.reshape(-1), kind="stable")
     ring_start = np.searchsorted(G.reshape(-1)[order], np.arange(k + 1))
@@ -189,15 +196,10 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
         return search(V, F, into, Q, src[face])
 
     out = _Output(X, G)
-    seeds = None if seeds is None else np.asarray(seeds, np.int64)
-    if seeds is not None and len(seeds) == len(P) and seeds.min(initial=0) >= 0:
-        # the distance to the re-fit's face of each sample: an upper bound, refreshed where it is the largest
-        fa = seeds.copy()
-        d = np.sqrt(_own_d2(P, np.arange(len(P)), X, G, out.flat, fa))
-        version = np.full(len(P), -1, np.int64)
-    else:
-        fa, d = out.nearest(X, P, no_seed, np.zeros(0, np.int64))  # input samples → output
-        version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then; -1: never)
+    # input samples → output, exact (the re-fit's faces, where given, start each search)
+    seed0 = no_seed if seeds is None else np.ascontiguousarray(seeds, np.int32)
+    fa, d = out.nearest(X, P, seed0, np.zeros(0, np.int64))
+    version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then)
     used = np.unique(G)
     nb = len(BARY)
     # output samples: the used vertices, then nb points per face (row of face g: len(used) + nb·g + b)
@@ -226,8 +228,10 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
             i = int(np.argmax(d))
             if version[i] == made:
                 break
-            top = np.argpartition(d, len(d) - REFRESH)[-REFRESH:] if len(d) > REFRESH else np.arange(len(d))
-            top = np.sort(top[version[top] != made])  # the stale ones of the largest, measured at once
+            # the stale ones among the REFRESH largest, measured at once (the REFRESH-th largest value is the
+            # same whichever way a partition orders ties), and always the largest itself
+            edge = np.partition(d, len(d) - REFRESH)[len(d) - REFRESH] if len(d) > REFRESH else -np.inf
+            top = np.flatnonzero((d >= edge) & (version != made))
             f1, d1 = out.nearest(X, P[top], fa[top].astype(np.int32), np.zeros(0, np.int64))
             s_in += _wsum2(w[top], d1) - _wsum2(w[top], d[top])
             fa[top], d[top], version[top] = f1, d1, made
@@ -238,7 +242,7 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
         if side == "in":
             b = _barycentric_at(P[i:i + 1], X, G, fa[i:i + 1].astype(np.int32), out.flat)[0]
             tri = G[fa[i]]
-            delta = P[i] - b @ X[tri]
+            delta = P[i] - ((b[0] * X[tri[0]] + b[1] * X[tri[1]]) + b[2] * X[tri[2]])  # left to right: any CPU
             c = max((t for t in range(3) if free[tri[t]]), key=lambda t: b[t], default=None)
             corners = [v for v in tri if free[v]]
             for s in STEPS:
@@ -249,7 +253,7 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
         else:
             g = ga[i]
             bi = _barycentric_at(Q[i:i + 1], V, F, np.array([g], np.int32), into[1])[0]
-            delta = bi @ V[F[g]] - Q[i]
+            delta = ((bi[0] * V[F[g, 0]] + bi[1] * V[F[g, 1]]) + bi[2] * V[F[g, 2]]) - Q[i]
             verts = [used[i]] if i < len(used) else list(G[(i - len(used)) // nb])
             verts = [v for v in verts if free[v]]
             if verts:
