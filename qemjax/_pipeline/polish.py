@@ -116,8 +116,7 @@ class _Output:
 
     def build(self, X):
         self.B, self.flat, *self.rest = grid(X, self.G)
-        self.stale = np.zeros(len(self.G), bool)  # moved since the build
-        self.stale_list = np.zeros(0, np.int64)
+        self.stale_list = np.zeros(0, np.int64)  # the faces moved since the build, sorted
 
     def update(self, X, faces):
         """Boxes and slivers of ``faces`` at X (after a move)."""
@@ -125,17 +124,14 @@ class _Output:
         self.flat[faces] = slivers(X, self.G[faces])
 
     def mark(self, faces):
-        new = faces[~self.stale[faces]]
-        self.stale[new] = True
-        self.stale_list = np.sort(np.concatenate([self.stale_list, new]))
+        self.stale_list = np.union1d(self.stale_list, faces)
 
-    def nearest(self, X, P, seed, extra):
+    def nearest(self, X, P, seed):
         """Exact nearest faces and distances of P on (X, G): the kept structure, then the moved faces."""
-        if not len(self.stale_list) and not len(extra):  # nothing moved since the build: on threads
+        if not len(self.stale_list):  # nothing moved since the build: on threads
             return search(X, self.G, (self.B, self.flat, *self.rest), P, seed)
         f, d2 = _query(P, X, self.G, self.B, self.flat, *self.rest, seed)
-        faces = np.union1d(self.stale_list, extra)
-        _nearer(P, X, self.G, self.B, self.flat, faces, f, d2)
+        _nearer(P, X, self.G, self.B, self.flat, self.stale_list, f, d2)
         return f, np.sqrt(d2)
 
 
@@ -198,7 +194,7 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
     out = _Output(X, G)
     # input samples → output, exact (the re-fit's faces, where given, start each search)
     seed0 = no_seed if seeds is None else np.ascontiguousarray(seeds, np.int32)
-    fa, d = out.nearest(X, P, seed0, np.zeros(0, np.int64))
+    fa, d = out.nearest(X, P, seed0)
     version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then)
     used = np.unique(G)
     nb = len(BARY)
@@ -209,8 +205,7 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
     ga, e = to_input(Q, np.arange(len(Q)))
 
     def face_weights(Y, faces):  # each face point stands for a seventh of its face's area
-        c = Y[G[faces]]
-        n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        n = face_normals(Y, G[faces])
         return np.repeat(0.5 * np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2]) / nb, nb)
 
     qw = np.concatenate([np.zeros(len(used)), face_weights(X, np.arange(j))])
@@ -232,7 +227,7 @@ def polish(V, F, X, G, P, w, moves: int, cos_max: float, fixed=None, source_norm
             # same whichever way a partition orders ties), and always the largest itself
             edge = np.partition(d, len(d) - REFRESH)[len(d) - REFRESH] if len(d) > REFRESH else -np.inf
             top = np.flatnonzero((d >= edge) & (version != made))
-            f1, d1 = out.nearest(X, P[top], fa[top].astype(np.int32), np.zeros(0, np.int64))
+            f1, d1 = out.nearest(X, P[top], fa[top].astype(np.int32))
             s_in += _wsum2(w[top], d1) - _wsum2(w[top], d[top])
             fa[top], d[top], version[top] = f1, d1, made
         o = int(np.argmax(e))

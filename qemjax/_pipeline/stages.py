@@ -123,7 +123,7 @@ class Setup:
     attributes = property(lambda self: self.attribute_options.attributes)
     texture = property(lambda self: self.attribute_options.texture)
     refit = property(lambda self: int(self.method_obj.refit))
-    polish = property(lambda self: int(getattr(self.method_obj, "polish", 0)))
+    polish = property(lambda self: int(self.method_obj.polish))
 
     @property
     def measures(self) -> bool:
