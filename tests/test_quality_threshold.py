@@ -163,8 +163,8 @@ def test_a_run_with_it_reaches_the_target_valid_with_fewer_slivers(method):
     10° and those under quality 0.2 fall, and the worst face's quality rises)."""
     mesh = shapes.bumpy_sphere(4)
     target = len(mesh[1]) // 20
-    off = _simplify(mesh, target_faces=target, method=method)
-    on = _simplify(mesh, target_faces=target, method=method, quality_threshold=0.5)
+    off = _simplify(mesh, target_faces=target, method=method, quality_threshold=0.0, sliver_moves=0)
+    on = _simplify(mesh, target_faces=target, method=method, quality_threshold=0.5, sliver_moves=0)
     for res in (off, on):
         assert len(res.faces) == target
         assert_valid(res, target, *mesh)
@@ -220,7 +220,7 @@ def test_the_numpy_stages_decide_as_the_compiled_loops(make, kw, runs, monkeypat
     old, seen_old = _run(make(), kw, monkeypatch, False)
     assert seen == [True] * runs and seen_old == [False] * runs
     _assert_same(new, old)
-    without = {k: v for k, v in kw.items() if k != "quality_threshold"}
+    without = kw | {"quality_threshold": 0.0}
     assert not np.array_equal(new.faces, _run(make(), without, monkeypatch, True)[0].faces)
     if runs == 2:
         assert new.stats["memoryless_from_faces"] > 0
@@ -263,3 +263,14 @@ def test_the_command_line_takes_it(tmp_path):
     want = _simplify(str(src), ratio=0.2, quality_threshold=0.5)
     np.testing.assert_array_equal(got.faces, want.faces)
     assert not np.array_equal(got.faces, _simplify(str(src), ratio=0.2).faces)
+
+
+def test_the_defaults_own_threshold_is_off_under_greedy_and_said_in_the_stats():
+    """The default's shape term is the preset's, not the call's: under the greedy queue it is off, the stats
+    say so, and no warning is raised (one is when the call sets it: above)."""
+    assert qemjax.QEM.default().quality_threshold > 0
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        res = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.1, scheduler="greedy")
+    assert not [w for w in seen if "quality_threshold" in str(w.message)]
+    assert res.stats["quality_threshold_off"] == "the greedy queue ranks by cost alone"

@@ -219,12 +219,12 @@ def test_samples_attach_to_faces_of_their_own_part():
 
 
 def test_refit_zero_is_the_plain_run_and_bad_values_are_refused(bumpy):
-    """The default with refit=0, no memoryless last stretch and classic's two field values is classic (QEM(),
+    """The default with refit=0, no memoryless last stretch, no shape term and classic's two field values is classic (QEM(),
     which has neither); the default's own area_power and boundary_weight give another mesh."""
     a, b = qemjax.simplify(bumpy, ratio=0.1, method="classic"), qemjax.simplify(bumpy, ratio=0.1, refit=0)
     assert not np.array_equal(a.vertices, b.vertices)
     assert np.array_equal(a.vertices, qemjax.simplify(bumpy, ratio=0.1, area_power=1.0, boundary_weight=100.0,
-                                                      refit=0, late_memoryless=0).vertices)
+                                                      refit=0, late_memoryless=0, quality_threshold=0.0).vertices)
     for bad in (-1, 1.5, True, "3"):
         with pytest.raises(ValueError, match="refit"):
             qemjax.simplify(bumpy, ratio=0.1, refit=bad)

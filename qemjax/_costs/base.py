@@ -138,6 +138,10 @@ class Method(CostModel):
     polish: M ≥ 0, with a re-fit, at most M moves after it that each lower the largest sampled distance
         between the input and the output, both ways, keeping the two-way rms within 1 % of the re-fit's
         (`qemjax._pipeline.polish`; 0: none).
+    sliver_moves: M ≥ 0, with a re-fit, at most M moves after the polish that each take a sliver's corner
+        along the surface until the sliver's smallest angle reaches 10°, keeping every sample's distance
+        below the largest and the two-way rms within 3 % of the re-fit's (`qemjax._pipeline.slivers`; 0:
+        none).
     quality_threshold: s in [0, √3/2), a triangle-shape term in the parallel scheduler's ranking (0: none): a
         contraction that would make a face worse than it was, with 2·area / longest edge² = q under s, ranks
         as if it cost s / q times more, so slivers form only where nothing cheaper is near (after MeshLab's
@@ -153,6 +157,7 @@ class Method(CostModel):
     area_weight: float = dataclasses.field(default=0.0, kw_only=True)
     refit: int = dataclasses.field(default=0, kw_only=True)
     polish: int = dataclasses.field(default=0, kw_only=True)
+    sliver_moves: int = dataclasses.field(default=0, kw_only=True)
     quality_threshold: float = dataclasses.field(default=0.0, kw_only=True)
 
     def __post_init__(self):
@@ -162,6 +167,8 @@ class Method(CostModel):
             raise ValueError(f"refit must be an integer >= 0 (rounds), got {self.refit!r}")
         if self.polish < 0:
             raise ValueError(f"polish must be an integer >= 0 (moves), got {self.polish!r}")
+        if self.sliver_moves < 0:
+            raise ValueError(f"sliver_moves must be an integer >= 0 (moves), got {self.sliver_moves!r}")
         if not 0 <= self.quality_threshold < QUALITY_MAX:
             raise ValueError(f"quality_threshold must be in [0, {QUALITY_MAX:.3f}) (2·area / longest edge² of a "
                              f"triangle is at most √3/2, an equilateral one's), got {self.quality_threshold!r}")

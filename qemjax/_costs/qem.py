@@ -28,6 +28,8 @@ from .base import MeshInput, Method, require_nonnegative
 
 PLACEMENTS = ("optimal", "rank", "endpoints")
 POLISH_MOVES = 256  # the default's minimax polish: moves at most (`_pipeline.polish`)
+SLIVER_MOVES = 4096  # the default's sliver moves after it: moves at most (`_pipeline.slivers`)
+SHAPE_THRESHOLD = 0.3  # the default's shape term in the parallel rounds' ranking (``quality_threshold``)
 
 
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,
@@ -177,12 +179,15 @@ class QEM(Method):
     @classmethod
     def default(cls) -> "QEM":
         """What `simplify` runs when no method is given (``method="default"``): summed quadrics with face
-        planes weighted by (area / mean area)^0.6, boundary planes at weight 10, then one round of
-        re-fitting the positions to the input (``refit=1``) and its minimax polish (``polish``, at most
-        POLISH_MOVES moves). Chosen by ranking every candidate against the
+        planes weighted by (area / mean area)^0.6, boundary planes at weight 10, memoryless quadrics for
+        the last 2× of the target, the parallel rounds ranking contractions that would leave a sliver
+        behind others (``quality_threshold``), then one round of re-fitting the positions to the input
+        (``refit=1``), its minimax polish (``polish``, at most POLISH_MOVES moves) and sliver moves
+        (``sliver_moves``, at most SLIVER_MOVES). Chosen by ranking every candidate against the
         peers on the benchmark meshes at 10 % and 1 % (``experiments/figures/rank_peers.py``; docs/methods.md, "QEM and
         its presets", which gives its time against `classic`'s)."""
-        return cls(area_power=0.6, boundary_weight=10.0, refit=1, late_memoryless=2.0, polish=POLISH_MOVES)
+        return cls(area_power=0.6, boundary_weight=10.0, refit=1, late_memoryless=2.0, polish=POLISH_MOVES,
+                   quality_threshold=SHAPE_THRESHOLD, sliver_moves=SLIVER_MOVES)
 
     @classmethod
     def accurate(cls) -> "QEM":

@@ -283,7 +283,7 @@ def grid(X: np.ndarray, G: np.ndarray) -> tuple:
     (boxes (j,6), slivers (j,) bool, lo (3,), h, dims (3,), start, faces), the arguments `_query` takes after
     X and G. A caller that moves a few vertices may keep it and query with the new positions, boxes and
     slivers: each triangle whose corners did not move is still listed in every cube it meets, so the
-    answer is exact among those (`_pipeline.polish` measures the moved ones itself)."""
+    answer is exact among those (`_pipeline.moves` measures the moved ones itself)."""
     lo, hi = used_bounds(X, G)
     ext = np.maximum(hi - lo, 1e-300)
     h = max(CUBE_EDGE * float(np.median(edge_lengths(X, G))), float(ext.max()) * 1e-6)

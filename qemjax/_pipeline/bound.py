@@ -158,7 +158,8 @@ def apply(res, job, bound: Bound, stacklevel: int, caught: list) -> object:
         with warnings.catch_warnings(record=True) as w:
             warnings.simplefilter("always")
             X = _refit(V, F, lv.vertices, lv.faces, setup.refit, setup.cos_max, g.parts[1], lv.source_faces,
-                       fixed=fixed, min_quality=setup.min_quality, polish=setup.polish)
+                       fixed=fixed, min_quality=setup.min_quality, polish=setup.polish,
+                       sliver_moves=setup.sliver_moves)
         return X, chk(X, lv.faces), w
 
     # 1. bisection over the prefixes, without the re-fit: lo passes (0, the input, always), hi does not

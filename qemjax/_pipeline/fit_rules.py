@@ -1,5 +1,6 @@
-"""What the re-fit and its polish share (`refit`, `polish`): the closest point of a triangle as barycentric
-coordinates, and the rules a move of the output's vertices must keep (a face's turn, its shape)."""
+"""What the re-fit, its polish and the sliver moves share (`refit`, `polish`, `slivers`): the closest point
+of a triangle as barycentric coordinates, and the rules a move of the output's vertices must keep (a face's
+turn, its shape, what counts as a sliver)."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,6 +8,8 @@ import numpy as np
 from .._mesh.grid_nearest import slivers
 from .._mesh.pointtri import segment_closest
 from .refit_system import regions
+
+SLIVER_DEG = 10.0  # a face whose smallest angle is below this (degrees) is a sliver
 
 
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

@@ -132,7 +132,7 @@ def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, 
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
           part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
           fixed: np.ndarray | None = None, sampled: list | None = None, min_quality: float = 0.0,
-          polish: int = 0, report: dict | None = None) -> np.ndarray:
+          polish: int = 0, sliver_moves: int = 0, report: dict | None = None) -> np.ndarray:
     """Positions X (k,3) of the output faces G (j,3) re-fitted to the input (V, F) in ``rounds`` rounds
     (module docstring); float64, the input's units. ``part``: a part label per input vertex and
     ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
@@ -144,7 +144,8 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     ``min_quality``: the quality guard (`Topology.min_angle`; 0: off): a face's move is shortened as a
     turned face's is when it would take the face's 2·area / longest² below it and below what it was.
     ``polish``: then at most that many moves of the minimax polish (`_pipeline.polish`), under the same
-    rules; ``report``: a dict that gets the number made as ``polish_moves``."""
+    rules; ``sliver_moves``: then at most that many moves of slivers' corners (`_pipeline.slivers`);
+    ``report``: a dict that gets the numbers made as ``polish_moves`` and ``sliver_moves``."""
     X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
@@ -153,16 +154,21 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
         return X0
     X = (X0 - centre) / unit
     Vn = (V - centre) / unit
-    kept = sampled if sampled is not None else ([] if polish > 0 else None)
+    after = polish > 0 or sliver_moves > 0  # moves after the re-fit (`moves`), which take its samples
+    kept = sampled if sampled is not None else ([] if after else None)
     Y = _fit(Vn, F, X, G, rounds, cos_max, part, source_faces, fixed, kept, min_quality)
-    if polish > 0 and rounds > 0 and kept:
+    if after and rounds > 0 and kept:
+        from .moves import Moves
         from .polish import polish as _polish
+        from .slivers import lift_slivers
 
         ns = None if source_faces is None else face_normals(Vn, F[np.asarray(source_faces, np.int64)])
-        Y, made = _polish(Vn, F, Y, G, *kept[0], polish, cos_max, fixed, ns, min_quality,
-                          seeds=kept[1] if len(kept) > 1 else None, source_faces=source_faces)
+        m = Moves(Vn, F, Y, G, *kept[0], cos_max, fixed, ns, min_quality,
+                  seeds=kept[1] if len(kept) > 1 else None, source_faces=source_faces)
+        made = (_polish(m, polish), lift_slivers(m, sliver_moves))
+        Y = m.X
         if report is not None:
-            report["polish_moves"] = made
+            report["polish_moves"], report["sliver_moves"] = made
     out = Y * unit + centre
     moved = np.any(Y != X, axis=1) & np.all(np.isfinite(out), axis=1)  # the others keep X0 bit for bit
     return np.where(moved[:, None], out, X0)

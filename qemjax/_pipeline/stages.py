@@ -113,6 +113,7 @@ class Setup:
     progress: bool
     measure: bool | None = None  # measure the output's distance from the input (`measure`); None: with a re-fit
     late_asked: bool = False  # the call set late_memoryless itself (then a run that cannot apply it warns)
+    shape_asked: bool = False  # the call set quality_threshold itself (likewise)
 
     cos_max = property(lambda self: self.topology.cos_max)
     min_quality = property(lambda self: self.topology.min_quality)
@@ -124,6 +125,7 @@ class Setup:
     texture = property(lambda self: self.attribute_options.texture)
     refit = property(lambda self: int(self.method_obj.refit))
     polish = property(lambda self: int(self.method_obj.polish))
+    sliver_moves = property(lambda self: int(self.method_obj.sliver_moves))
 
     @property
     def measures(self) -> bool:
@@ -185,8 +187,8 @@ def setup(method, scheduler, topology, attributes, progress, settings: dict, mea
     kind_weights = _wedges.check_weights(attrs.attribute_weights)
     return Setup(method_obj, _costs.shown_name(method_obj, named), sched_name, schedule, model, topology, attrs,
                  kind_weights, _flag("progress", progress), None if measure is None else _flag("measure", measure),
-                 "late_memoryless" in settings or (not isinstance(method, str) and
-                                                   bool(getattr(method_obj, "late_memoryless", 0))))
+                 *(name in settings or (not isinstance(method, str) and bool(getattr(method_obj, name, 0)))
+                   for name in ("late_memoryless", "quality_threshold")))
 
 
 def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
@@ -268,7 +270,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         why = ("the greedy queue ranks by cost alone" if setup.scheduler == "greedy" else
                f"the scheduler {setup.scheduler!r} is not the parallel one, whose rounds it ranks")
         report["quality_threshold_off"] = why
-        warnings.warn(f"quality_threshold is not applied: {why}", stacklevel=stacklevel)
+        if setup.shape_asked:
+            warnings.warn(f"quality_threshold is not applied: {why}", stacklevel=stacklevel)
         shape = 0.0
     options = Options(cos_max=setup.cos_max, preserve_topology=setup.preserve_topology,
                       max_cost=geo.frame.error_to_internal(err), schedule=setup.schedule,
@@ -497,7 +500,8 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
             if appearance.get("uv") is not None:  # the UVs follow the moves (`refit.carry_uv`)
                 wedges = (appearance["wedge_faces"], appearance["wedge_vertex"], appearance["uv"])
         task = RefitTask(g.V, g.F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, g.parts[1],
-                         mesh.source_faces, held, setup.measures, setup.min_quality, wedges, setup.polish)
+                         mesh.source_faces, held, setup.measures, setup.min_quality, wedges, setup.polish,
+                         setup.sliver_moves)
         if later is None:
             vout, seconds, distance, uv = task()
             mesh = mesh._replace(vertices=vout)
@@ -584,6 +588,7 @@ class RefitTask(NamedTuple):
     min_quality: float = 0.0  # the quality guard (`Topology.min_angle`)
     wedges: tuple | None = None  # kept UVs: (wedge_faces, wedge_vertex, uv), moved with the positions
     polish: int = 0  # moves of the minimax polish after the re-fit at most (`_pipeline.polish`)
+    sliver_moves: int = 0  # moves of slivers' corners after the polish at most (`_pipeline.slivers`)
 
     def __call__(self) -> tuple[np.ndarray, float, dict, np.ndarray | None]:
         """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None, the UVs moved
@@ -591,11 +596,12 @@ class RefitTask(NamedTuple):
         t = time.perf_counter()
         X, uv = self.X, None
         sampled = []  # the input's samples, made once for the re-fit and the measured distance
-        report = {}  # the polish's moves
+        report = {}  # the polish's and the sliver moves' counts
         if self.rounds:
             X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
                              self.source_faces, fixed=self.fixed, sampled=sampled if self.measure else None,
-                             min_quality=self.min_quality, polish=self.polish, report=report)
+                             min_quality=self.min_quality, polish=self.polish,
+                             sliver_moves=self.sliver_moves, report=report)
             if self.wedges is not None:
                 uv = _refit.carry_uv(self.X, X, self.G, *self.wedges)
         refit_s = time.perf_counter() - t

@@ -12,9 +12,10 @@ wanted). The greedy scheduler stops at the same place, so a greedy record replay
 exactly whenever a prefix has exactly k faces (always on a closed manifold for even k; an odd k stops one
 face above, as `simplify` does); when the prefix jumps past k, `simplify` would go on to a later contraction
 that removes one face, which the record does not hold, and the replay has one face more. The parallel
-scheduler contracts in rounds; its record is in round order and, within a round, in cost order (the order
-of selection's keys), so a replay is the run's own mesh at every round boundary, and in between it takes the
-round's cheapest contractions first. A parallel run with another face target chooses differently from the
+scheduler contracts in rounds; its record is in round order and, within a round, in the order of
+selection's keys (the cost, or with ``quality_threshold``, as the default has, the shaped key), so a replay
+is the run's own mesh at every round boundary, and in between it takes the round's first-ranked
+contractions first. A parallel run with another face target chooses differently from the
 first round on (selection gates on the faces still to remove), so it is not a replay of this one.
 
 ESQEM's edge splits (``split_factor``) come after all contractions and are not in the record: a replay covers

@@ -16,7 +16,8 @@ class Contractions:
     a squared distance, equal to costs; ``"curvature"``, K(e) in 1/units²), and ``"rank"``, what selection
     ranked the pair by (esqem: Q + w·K, a squared distance); empty otherwise; rounds (k,) int64: the round
     each contraction happened in, counted from 0 (the greedy scheduler: one contraction per round). Within
-    a round, contractions are in the order selection ranked them (cost order). The faces each removed are
+    a round, contractions are in the order selection ranked them (cost order; with ``quality_threshold``, the
+    shaped keys' order). The faces each removed are
     in the result's `record` (``record.removed_at``).
     """
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._pipeline.fit_rules import SLIVER_DEG  # a face whose smallest angle is below it is a sliver
 from ._common import _DEGENERATE_REL, MeshArrays, as_mesh
 
-SLIVER_DEG = 10.0  # a face whose smallest angle is below this (degrees) is a sliver
 HISTOGRAM_EDGES_DEG = np.arange(0.0, 61.0, 5.0)  # 0, 5, ..., 60: the smallest angle of a triangle is <= 60
 
 

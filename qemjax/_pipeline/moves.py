@@ -1,0 +1,295 @@
+"""Moves of the output's vertices after the re-fit, each made only when the distance allows it: the state the
+minimax polish (`polish`) and the sliver moves (`slivers`) share.
+
+Two sets of samples are kept with their distances to the other surface: the input's (the re-fit's: every
+vertex and face centroid) to the output, and the output's (every vertex and BARY's seven points of every
+face: its edges' midpoints, its centroid, and a point toward each corner, since a coarse face can bulge
+between its corners) to the input. `Moves.attempt` makes a move (new positions of a few vertices) when
+every sample it touches ends below a bound, the two-way rms (the mean of both sets' area-weighted mean
+squares) stays within a limit, and no face breaks the re-fit's rules (turned by the flip angle, against the
+input face it continues, or below the quality guard: `refit`) or a fixed vertex moves.
+
+Each input sample holds its distance to one face of the output (`_mesh.grid_nearest`'s arithmetic): its
+nearest when measured, so an upper bound of its distance once other faces move. The first pass is an
+exact search. After a move, the samples whose face moved are measured to the faces around the move (their
+own among them: still an upper bound); `Moves.worst` searches a sample whose bound is the largest exactly
+again before it answers (the output's search structure is kept across moves, the faces moved since it was
+built measured directly). So the largest distance is exact, and the rms a move is held to is never below
+the true one: a bound on it holds. The output's samples are searched exactly against the input, which does
+not move. The arithmetic is the re-fit's, in its unit frame, with sums in a fixed order: the same bits on
+every CPU.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .._mesh.arrays import face_normals
+from .._mesh.box_bounds import face_boxes
+from .._mesh.grid_nearest import _face_d2, _gap, _query, grid, search, slivers
+from .fit_rules import _barycentric_at, _quality, _turned
+
+# the output's samples on each face, as barycentric weights (module docstring)
+BARY = np.array([[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5], [1 / 3, 1 / 3, 1 / 3],
+                 [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+REFRESH = 64  # stale input distances measured at once, the largest (`Moves.worst`)
+REBUILD = 64  # faces moved since the output's search structure was built before it is built again
+
+
+@njit(cache=True, nogil=True)
+def _wsum2(w, d):
+    """Σ w·d², left to right."""
+    s = 0.0
+    for i in range(len(d)):
+        s += w[i] * (d[i] * d[i])
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _on_faces(fa, hit):
+    """The samples whose face (``fa``) is marked in ``hit``, in order."""
+    out = np.empty(len(fa), np.int64)
+    n = 0
+    for i in range(len(fa)):
+        if hit[fa[i]]:
+            out[n] = i
+            n += 1
+    return out[:n]
+
+
+@njit(cache=True, nogil=True)
+def _nearer(P, X, G, B, flat, faces, f, d2):
+    """Lower each point's (f, d2) to its nearest among ``faces`` (the lowest index among equals), in place;
+    B: the faces' boxes (a face whose box lies farther than the best so far is passed over)."""
+    for p in range(P.shape[0]):
+        px, py, pz = P[p, 0], P[p, 1], P[p, 2]
+        for t in range(len(faces)):
+            g = faces[t]
+            bx, by, bz = _gap(px, B[g, 0], B[g, 3]), _gap(py, B[g, 1], B[g, 4]), _gap(pz, B[g, 2], B[g, 5])
+            if bx * bx + by * by + bz * bz > d2[p]:
+                continue
+            e = _face_d2(px, py, pz, X, G, flat, g)
+            if e < d2[p] or (e == d2[p] and g < f[p]):
+                f[p], d2[p] = g, e
+
+
+@njit(cache=True, nogil=True)
+def _own_d2(P, rows, X, G, flat, faces):
+    """Squared distance of each sample P[rows[t]] to its face faces[t]."""
+    out = np.empty(len(rows))
+    for t in range(len(rows)):
+        p = rows[t]
+        out[t] = _face_d2(P[p, 0], P[p, 1], P[p, 2], X, G, flat, faces[t])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _face_points(X, G, faces, W):
+    """(len(faces)·len(W), 3): the points of W's barycentric weights on each face, face by face."""
+    out = np.empty((len(faces) * W.shape[0], 3))
+    r = 0
+    for t in range(len(faces)):
+        g = faces[t]
+        for b in range(W.shape[0]):
+            for k in range(3):
+                out[r, k] = (W[b, 0] * X[G[g, 0], k] + W[b, 1] * X[G[g, 1], k]) + W[b, 2] * X[G[g, 2], k]
+            r += 1
+    return out
+
+
+class _Output:
+    """The output's search structure, kept across moves (module docstring)."""
+
+    def __init__(self, X, G):
+        self.G = G
+        self.build(X)
+
+    def build(self, X):
+        self.B, self.flat, *self.rest = grid(X, self.G)
+        self.stale_list = np.zeros(0, np.int64)  # the faces moved since the build, sorted
+
+    def update(self, X, faces):
+        """Boxes and slivers of ``faces`` at X (after a move)."""
+        self.B[faces] = face_boxes(X, self.G[faces])
+        self.flat[faces] = slivers(X, self.G[faces])
+
+    def mark(self, faces):
+        self.stale_list = np.union1d(self.stale_list, faces)
+
+    def nearest(self, X, P, seed):
+        """Exact nearest faces and distances of P on (X, G): the kept structure, then the moved faces."""
+        if not len(self.stale_list):  # nothing moved since the build: on threads
+            return search(X, self.G, (self.B, self.flat, *self.rest), P, seed)
+        f, d2 = _query(P, X, self.G, self.B, self.flat, *self.rest, seed)
+        _nearer(P, X, self.G, self.B, self.flat, self.stale_list, f, d2)
+        return f, np.sqrt(d2)
+
+
+def _refused(X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality) -> bool:
+    """Whether the faces R at X break one of the re-fit's rules (`refit`): turned by the flip angle or more
+    (or lost all area), come to point against the input face they continue, or fell below the quality
+    guard and below their shape before."""
+    n1 = face_normals(X, G[R])
+    bad = _turned(n0[R], n1, cos_max)
+    if agreed is not None:
+        bad |= agreed[R] & (np.einsum("ij,ij->i", n1, source_normals[R]) <= 0)
+    if q0 is not None:
+        q1 = _quality(X, G[R], n1)
+        bad |= (q1 < min_quality) & (q1 < q0[R])
+    return bool(bad.any())
+
+
+class Moves:
+    """The output's positions X (k,3) (a copy, moved in place) with the distances of both sample sets
+    (module docstring). V, F: the input; G (j,3): the output's faces; P (q,3), w (q,): the input's samples
+    and weights (`refit.samples`); ``cos_max``, ``min_quality``: the re-fit's rules; ``fixed`` (k,) bool:
+    vertices that stay; ``source_normals`` (j,3): the normal of the input face each output face continues
+    (None: not checked); ``seeds`` (q,): an output face near each input sample (the re-fit's last
+    attachment; -1: none) and ``source_faces`` (j,): that input face of each output face, where the
+    searches start (the same answers, found sooner). ``ok``: whether there is anything to move (some free
+    vertex, samples of weight on both sides)."""
+
+    def __init__(self, V, F, X, G, P, w, cos_max, fixed=None, source_normals=None, min_quality=0.0,
+                 seeds=None, source_faces=None):
+        self.X = X = np.array(X, np.float64)
+        self.V = V = np.ascontiguousarray(V, np.float64)
+        self.F = F = np.ascontiguousarray(F, np.int64)
+        self.G = G = np.ascontiguousarray(G, np.int64)
+        self.P, self.w = P, w
+        self.cos_max, self.min_quality, self.source_normals = cos_max, min_quality, source_normals
+        k, j = len(X), len(G)
+        self.free = np.ones(k, bool) if fixed is None else ~np.asarray(fixed, bool)
+        self.made = 0  # moves made
+        self.ok = bool(self.free.any()) and j > 0 and len(P) > 0
+        if not self.ok:
+            return
+        # the faces at each vertex (CSR)
+        order = np.argsort(G.reshape(-1), kind="stable")
+        self.ring_start = np.searchsorted(G.reshape(-1)[order], np.arange(k + 1))
+        self.ring_face = order // 3
+        self.n0 = n0 = face_normals(X, G)
+        self.q0 = _quality(X, G, n0) if min_quality > 0 else None
+        self.agreed = None if source_normals is None else np.einsum("ij,ij->i", n0, source_normals) > 0
+        self.into = grid(V, F)  # the input's structure: it never moves
+        self.no_seed = np.zeros(0, np.int32)
+        # where each output sample's search of the input starts: its face's input face (a vertex: one of its faces')
+        self.src = None if source_faces is None else np.asarray(source_faces, np.int32)
+        self.out = _Output(X, G)
+        # input samples → output, exact (the re-fit's faces, where given, start each search)
+        seed0 = self.no_seed if seeds is None else np.ascontiguousarray(seeds, np.int32)
+        self.fa, self.d = self.out.nearest(X, P, seed0)
+        self.version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then)
+        self.used = used = np.unique(G)
+        self.nb = len(BARY)
+        # output samples: the used vertices, then nb points per face (row of face g: len(used) + nb·g + b)
+        self.vrow = np.full(k, -1, np.int64)
+        self.vrow[used] = np.arange(len(used))
+        self.Q = np.concatenate([X[used], _face_points(X, G, np.arange(j), BARY)])
+        self.ga, self.e = self.to_input(self.Q, np.arange(len(self.Q)))
+        self.qw = np.concatenate([np.zeros(len(used)), self.face_weights(np.arange(j))])
+        self.sw, self.sq = _wsum2(w, np.ones(len(w))), _wsum2(self.qw, np.ones(len(self.qw)))  # left to right
+        self.s_in, self.s_out = _wsum2(w, self.d), _wsum2(self.qw, self.e)
+        self.ok = bool(self.sq > 0 and self.sw > 0)
+        self.base = self.s_in / self.sw + self.s_out / self.sq if self.ok else 0.0  # the re-fit's mean square
+        self.hit = np.zeros(j, bool)  # the faces a move touches
+
+    def limit(self, slack: float) -> float:
+        """The bound on the mean of the two mean squares for an rms at most ``slack`` above the re-fit's."""
+        return self.base * (1 + slack) ** 2
+
+    def ring(self, verts):
+        """The faces at any of ``verts``, sorted."""
+        return np.unique(np.concatenate([self.ring_face[self.ring_start[v]:self.ring_start[v + 1]] for v in verts]))
+
+    def to_input(self, Q, rows):
+        """Nearest input faces and distances of the output's samples Q, rows ``rows`` of the kept ones."""
+        if self.src is None:
+            return search(self.V, self.F, self.into, Q, self.no_seed)
+        nu = len(self.used)
+        face = np.where(rows < nu, self.ring_face[self.ring_start[self.used[np.minimum(rows, nu - 1)]]],
+                        (rows - nu) // self.nb)
+        return search(self.V, self.F, self.into, Q, self.src[face])
+
+    def onto_input(self, x):
+        """The input's point nearest to x (3,)."""
+        V, F = self.V, self.F
+        g, _ = search(V, F, self.into, x[None], self.no_seed)
+        b = _barycentric_at(x[None], V, F, g, self.into[1])[0]
+        t = F[g[0]]
+        return (b[0] * V[t[0]] + b[1] * V[t[1]]) + b[2] * V[t[2]]  # left to right: any CPU
+
+    def face_weights(self, faces):
+        """Each face point stands for a seventh of its face's area."""
+        n = face_normals(self.X, self.G[faces])
+        return np.repeat(0.5 * np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2]) / self.nb,
+                         self.nb)
+
+    def worst(self):
+        """The farthest sample: ('in', i, distance) or ('out', i, distance); stale input distances measured."""
+        d, version, fa = self.d, self.version, self.fa
+        while True:
+            i = int(np.argmax(d))
+            if version[i] == self.made:
+                break
+            # the stale ones among the REFRESH largest, measured at once (the REFRESH-th largest value is the
+            # same whichever way a partition orders ties), and always the largest itself
+            edge = np.partition(d, len(d) - REFRESH)[len(d) - REFRESH] if len(d) > REFRESH else -np.inf
+            top = np.flatnonzero((d >= edge) & (version != self.made))
+            f1, d1 = self.out.nearest(self.X, self.P[top], fa[top].astype(np.int32))
+            self.s_in += _wsum2(self.w[top], d1) - _wsum2(self.w[top], d[top])
+            fa[top], d[top], version[top] = f1, d1, self.made
+        o = int(np.argmax(self.e))
+        return ("in", i, d[i]) if d[i] >= self.e[o] else ("out", o, self.e[o])
+
+    def attempt(self, move: dict, H: float, lim: float, better=None) -> bool:
+        """Make ``move`` ({vertex: step}) when every sample it touches ends below H, the mean of the two mean
+        squares stays within ``lim``, no face breaks the re-fit's rules and, with ``better`` (a test of the
+        faces R at the moved positions), it passes; else leave everything as it was."""
+        X, G, P, w, out, d, e, qw = self.X, self.G, self.P, self.w, self.out, self.d, self.e, self.qw
+        verts = np.array(sorted(move), np.int64)
+        R = self.ring(verts)
+        old = X[verts].copy()
+        for v, dv in move.items():
+            X[v] = X[v] + dv
+        if (better is not None and not better(R)) or _refused(X, G, R, self.n0, self.cos_max, self.agreed,
+                                                                self.source_normals, self.q0, self.min_quality):
+            X[verts] = old
+            return False
+        out.update(X, R)
+        self.hit[R] = True
+        A = _on_faces(self.fa, self.hit)  # input samples whose nearest face moved
+        self.hit[R] = False
+        # their distance to the nearest face of the moved faces' neighbourhood: an upper bound (their old
+        # face is among these), exact unless a face farther out is nearer (then refreshed when it is the
+        # largest: `worst`)
+        fA = self.fa[A]
+        d2A = _own_d2(P, A, X, G, out.flat, fA)
+        far = np.flatnonzero(d2A >= H * H)
+        if len(far):
+            f1, e1 = fA[far], d2A[far]
+            _nearer(P[A[far]], X, G, out.B, out.flat, self.ring(np.unique(G[R])), f1, e1)
+            fA[far], d2A[far] = f1, e1
+        dA = np.sqrt(d2A)
+        if dA.max(initial=0.0) < H:
+            nu, nb = len(self.used), self.nb
+            rows = np.concatenate([self.vrow[verts][self.vrow[verts] >= 0],
+                                   nu + (nb * R[:, None] + np.arange(nb)).reshape(-1)])
+            nv = int(np.sum(rows < nu))
+            QR = np.concatenate([X[self.used[rows[:nv]]], _face_points(X, G, R, BARY)])
+            gR, eR = self.to_input(QR, rows)
+            wR = np.concatenate([np.zeros(nv), self.face_weights(R)])
+            s_in1 = self.s_in + (_wsum2(w[A], dA) - _wsum2(w[A], d[A]))
+            s_out1 = self.s_out + (_wsum2(wR, eR) - _wsum2(qw[rows], e[rows]))
+            sq1 = self.sq + (_wsum2(wR, np.ones(len(wR))) - _wsum2(qw[rows], np.ones(len(rows))))
+            if eR.max(initial=0.0) < H and sq1 > 0 and s_in1 / self.sw + s_out1 / sq1 <= lim:
+                self.made += 1
+                self.fa[A], d[A], self.version[A] = fA, dA, -1  # upper bounds (above)
+                self.Q[rows], self.ga[rows], e[rows], qw[rows] = QR, gR, eR, wR
+                self.s_in, self.s_out, self.sq = s_in1, s_out1, sq1
+                out.mark(R)
+                if len(out.stale_list) > REBUILD:
+                    out.build(X)
+                return True
+        X[verts] = old
+        out.update(X, R)
+        return False

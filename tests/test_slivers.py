@@ -1,0 +1,183 @@
+"""Sliver moves after the polish (a method's ``sliver_moves``, `qemjax._pipeline.slivers`): the compiled
+helpers against float64 references on random triangles; on random meshes, every run they change has fewer
+slivers, a largest distance over the polish's samples (all pairs) no larger than the polish left, a two-way
+rms within the slack of the re-fit's, the same faces and a valid mesh; fixed vertices stay; a batch gives
+simplify's bits; bad values are refused."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_valid
+from test_polish import _reference, _turn
+
+import qemjax
+from qemjax._pipeline import refit as _refit
+from qemjax._pipeline import slivers as _slivers
+from qemjax.metrics import triangle_quality
+
+
+def _angles(T):
+    """(n,3) interior angles (radians) of triangles T (n,3,3), float64."""
+    out = []
+    for k in range(3):
+        u = T[:, (k + 1) % 3] - T[:, k]
+        v = T[:, (k + 2) % 3] - T[:, k]
+        c = np.sum(u * v, 1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1))
+        out.append(np.arccos(np.clip(c, -1, 1)))
+    return np.stack(out, 1)
+
+
+def _random_triangles(n, seed):
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(3 * n, 3))
+    X[2::3] = X[0::3] + rng.uniform(0.0, 1.0, (n, 1)) * (X[1::3] - X[0::3]) + 0.05 * rng.normal(size=(n, 3))
+    return X, np.arange(3 * n).reshape(n, 3)  # thin ones among them: the third corner near the first edge
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_min_cos_is_the_smallest_angles_cosine(seed):
+    X, G = _random_triangles(500, seed)
+    got = _slivers._min_cos(X, G, np.arange(len(G)))
+    np.testing.assert_allclose(got, np.cos(_angles(X[G]).min(1)), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_apex_makes_an_equilateral_triangle_in_the_faces_plane(seed):
+    X, G = _random_triangles(200, seed)
+    for g in range(len(G)):
+        v, p, q = G[g]
+        Y = X.copy()
+        Y[v] = X[v] + _slivers._apex(X, G, g, v)
+        e = np.linalg.norm(X[q] - X[p])
+        np.testing.assert_allclose([np.linalg.norm(Y[v] - X[p]), np.linalg.norm(Y[v] - X[q])], [e, e], rtol=1e-9)
+        n = np.cross(X[p] - X[v], X[q] - X[v])
+        assert abs(np.dot(Y[v] - X[v], n)) <= 1e-9 * np.linalg.norm(n) * (1 + e)  # in the face's plane
+        # on v's side of the edge pq: the face keeps its orientation
+        assert np.dot(np.cross(X[p] - Y[v], X[q] - Y[v]), n) > 0
+
+
+def test_tangential_is_the_neighbours_mean_in_the_normals_plane():
+    rng = np.random.default_rng(5)
+    m = qemjax.shapes.bumpy_sphere(2, seed=1)
+    X, G = np.array(m.vertices, float), np.array(m.faces)
+    X += 0.01 * rng.normal(size=X.shape)
+    for v in rng.choice(len(X), 20, replace=False):
+        R = np.flatnonzero(np.any(G == v, axis=1))
+        others = G[R][G[R] != v]
+        n = np.cross(X[G[R, 1]] - X[G[R, 0]], X[G[R, 2]] - X[G[R, 0]]).sum(0)
+        n /= np.linalg.norm(n)
+        d = X[others].mean(0) - X[v]
+        np.testing.assert_allclose(_slivers._tangential(X, G, R, v), d - np.dot(d, n) * n, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_fix_step_is_the_least_step_that_reaches_the_target_angle(seed):
+    X, G = _random_triangles(300, seed)
+    for g in range(len(G)):
+        v = G[g, 0]
+        delta = _slivers._apex(X, G, g, v)
+        t = _slivers._fix_step(X, G, g, v, delta, _slivers.COS_TARGET)
+        Y = X.copy()
+        target = np.radians(_slivers.TARGET_DEG)
+        if t == 0:
+            Y[v] = X[v] + delta
+            assert _angles(Y[G[g]][None]).min() < target + 1e-9
+            continue
+        Y[v] = X[v] + t * delta
+        assert _angles(Y[G[g]][None]).min() >= target - 1e-6
+        if t > 1e-6:  # a step a little shorter stays short of the target (the angle rises along the way)
+            Y[v] = X[v] + (t - 1e-6) * delta
+            assert _angles(Y[G[g]][None]).min() <= target + 1e-6
+
+
+def _mesh(seed):
+    """Where slivers form: a torus with noise (even seeds) or a bumpy sphere (odd ones)."""
+    rng = np.random.default_rng(seed)
+    if seed % 2 == 0:
+        m = qemjax.shapes.torus()
+        return np.array(m.vertices, float) + 0.005 * rng.normal(size=(len(m.vertices), 3)), np.array(m.faces)
+    m = qemjax.shapes.bumpy_sphere(4, amplitude=0.15, seed=seed)
+    return np.array(m.vertices, float), np.array(m.faces)
+
+
+def _run(V, F, target, moves):
+    return qemjax.simplify((V, F), target_faces=target, quality_threshold=0.0, sliver_moves=moves)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("target", [150, 400])
+def test_sliver_moves_lower_the_slivers_and_keep_the_distance(seed, target):
+    V, F = _mesh(seed)
+    plain = _run(V, F, target, 0)
+    done = _run(V, F, target, 4096)
+    assert np.array_equal(done.faces, plain.faces)
+    assert_valid(done, target, V, F)
+    assert np.all(_turn(plain.vertices, done.vertices, done.faces) < 90.0)
+    s0 = triangle_quality(plain)["sliver_fraction"]
+    s1 = triangle_quality(done)["sliver_fraction"]
+    moved = np.any(done.vertices != plain.vertices, axis=1)
+    assert done.stats["sliver_moves"] >= 1 or not moved.any()
+    if moved.any():
+        assert s1 < s0
+    h0, _ = _reference(V, F, plain.vertices, plain.faces)
+    h1, r1 = _reference(V, F, done.vertices, done.faces)
+    _, r_fit = _reference(V, F, *_refit_only(V, F, target))
+    assert h1 <= h0 * (1 + 1e-9)
+    assert r1 <= r_fit * (1 + _slivers.RMS_SLACK) * (1 + 1e-9)
+
+
+def _refit_only(V, F, target):
+    r = qemjax.simplify((V, F), target_faces=target, quality_threshold=0.0, polish=0, sliver_moves=0)
+    return r.vertices, r.faces
+
+
+def test_sliver_moves_fix_most_slivers_of_random_meshes():
+    """Over noisy tori and bumpy spheres, at least half of the slivers the polish leaves are fixed."""
+    before = after = 0
+    for seed in range(4):
+        V, F = _mesh(seed)
+        for target in (150, 400):
+            before += round(triangle_quality(_run(V, F, target, 0))["sliver_fraction"] * target)
+            after += round(triangle_quality(_run(V, F, target, 4096))["sliver_fraction"] * target)
+    assert before >= 5 and after <= before / 2
+
+
+def test_fixed_vertices_stay_bit_for_bit():
+    V, F = _mesh(0)
+    r = qemjax.simplify((V, F), target_faces=400, refit=0, quality_threshold=0.0)
+    X, G = r.vertices, r.faces
+    free = _refit.refit(V, F, X, G, 1, 0.0, sliver_moves=500)
+    assert np.any(free != _refit.refit(V, F, X, G, 1, 0.0))  # the sliver moves move something here
+    fixed = np.zeros(len(X), bool)
+    fixed[np.flatnonzero(np.any(free != X, axis=1))[::2]] = True
+    report = {}
+    held = _refit.refit(V, F, X, G, 1, 0.0, fixed=fixed, sliver_moves=500, report=report)
+    np.testing.assert_array_equal(held[fixed], X[fixed])
+    assert report["polish_moves"] == 0 and report["sliver_moves"] >= 1
+
+
+def test_the_default_moves_slivers():
+    """The default (its shape term and sliver moves) leaves fewer slivers on these meshes than with both off."""
+    assert qemjax.QEM.default().sliver_moves > 0 and qemjax.QEM().sliver_moves == 0
+    on = off = 0
+    for seed in range(2):
+        V, F = _mesh(seed)
+        a = qemjax.simplify((V, F), target_faces=400)
+        b = qemjax.simplify((V, F), target_faces=400, sliver_moves=0, quality_threshold=0.0)
+        assert a.stats["sliver_moves"] >= 0 and b.stats["sliver_moves"] == 0
+        on += triangle_quality(a)["sliver_fraction"]
+        off += triangle_quality(b)["sliver_fraction"]
+    assert on < off
+
+
+def test_bad_values_are_refused_and_a_batch_equals_simplify():
+    V, F = _mesh(2)
+    for bad in (-1, 1.5, True, "3"):
+        with pytest.raises(ValueError, match="sliver_moves"):
+            qemjax.simplify((V, F), target_faces=100, sliver_moves=bad)
+    alone = qemjax.simplify((V, F), target_faces=400, sliver_moves=300, quality_threshold=0.0)
+    assert alone.stats["sliver_moves"] >= 1
+    both = qemjax.simplify_batch((V, F), [dict(target_faces=400, sliver_moves=300, quality_threshold=0.0),
+                                          dict(target_faces=400, quality_threshold=0.0)])
+    assert np.array_equal(both[0].vertices, alone.vertices) and np.array_equal(both[0].faces, alone.faces)
+    assert both[0].stats["sliver_moves"] == alone.stats["sliver_moves"]
