@@ -180,8 +180,8 @@ class QEM(Method):
     def default(cls) -> "QEM":
         """What `simplify` runs when no method is given (``method="default"``): summed quadrics with face
         planes weighted by (area / mean area)^0.6, boundary planes at weight 10, memoryless quadrics for
-        the last 2× of the target, the parallel rounds ranking contractions that would leave a sliver
-        behind others (``quality_threshold``), then one round of re-fitting the positions to the input
+        the contractions below twice the target, the parallel rounds ranking contractions that would
+        leave a sliver behind others (``quality_threshold``), then one round of re-fitting the positions to the input
         (``refit=1``), its minimax polish (``polish``, at most POLISH_MOVES moves) and sliver moves
         (``sliver_moves``, at most SLIVER_MOVES). Chosen by ranking every candidate against the
         peers on the benchmark meshes at 10 % and 1 % (``experiments/figures/rank_peers.py``; docs/methods.md, "QEM and
