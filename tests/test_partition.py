@@ -129,16 +129,21 @@ def test_target_exact_valid_closed_and_measured(mesh, in_process):
     assert d["distance_p95"] <= r.stats["distance_p95"] <= 1.01 * d["distance_p95"]
 
 
-def test_levels_before_the_last_leave_out_the_memoryless_last_stretch(in_process):
+def test_levels_before_the_last_leave_out_what_a_run_s_end_is_for(in_process):
+    """The memoryless last stretch (with its volume term) and the shape term: the default's, not classic's."""
     from qemjax._partition.run import _level_kwargs
 
-    p, off = Partition(), {"late_memoryless": 0, "volume_weight": 0}  # its volume term goes with it
-    assert _level_kwargs({}, p, last=False) == (off, off)  # the default switches late
+    p, late = Partition(), {"late_memoryless": 0, "volume_weight": 0}  # its volume term goes with it
+    shape = {"quality_threshold": 0.0}
+    off = late | shape
+    assert _level_kwargs({}, p, last=False) == (off, off)  # the default switches late and shapes its rounds
     assert _level_kwargs({"volume_weight": 0.1}, p, last=True) == ({"volume_weight": 0.1}, {})
-    assert _level_kwargs({"method": "classic"}, p, last=False) == ({"method": "classic"}, {})  # it never does
+    assert _level_kwargs({"method": "classic"}, p, last=False) == ({"method": "classic"}, {})  # it does neither
     assert _level_kwargs({"preset": "classic"}, p, last=False)[1] == {}
+    assert _level_kwargs({"preset": "classic", "quality_threshold": 0.5}, p, last=False)[1] == shape
     assert _level_kwargs({"method": "qem", "preset": "default"}, p, last=False)[1] == off
-    assert _level_kwargs({"memoryless": True, "late_memoryless": 2}, p, last=False)[1] == {}  # memoryless all along
+    assert _level_kwargs({"memoryless": True, "late_memoryless": 2}, p, last=False)[1] == shape  # memoryless all along
+    assert _level_kwargs({"quality_threshold": 0.0}, p, last=False)[1] == late
     assert _level_kwargs({"schedule": None}, p, last=False)[1] == off
     kw, changed = _level_kwargs({"method.late_memoryless": 3, "method.refit": 1}, Partition(refit="last"), last=False)
     assert kw == changed == off | {"refit": 0}  # the dotted names would have won over the flat ones
@@ -153,7 +158,8 @@ def test_a_volume_term_runs_partitioned():
     r = qemjax.simplify((np.asarray(m.vertices), np.asarray(m.faces)), ratio=0.05, volume_weight=0.1,
                         partition=Partition(part_faces=1000, workers=1))
     assert len(r.faces) == round(0.05 * len(m.faces)) and r.stats["partition"]["levels"] >= 2
-    assert r.stats["partition"]["settings_per_level"][0] == {"late_memoryless": 0, "volume_weight": 0}
+    assert r.stats["partition"]["settings_per_level"][0] == {"late_memoryless": 0, "volume_weight": 0,
+                                                             "quality_threshold": 0.0}
 
 
 def test_quality_near_the_in_core_run(mesh, in_process):

@@ -50,9 +50,9 @@ def _random_case(seed: int):
     return V, F, lists, E.astype(np.int32), X
 
 
-def _kept_quality_reference(V, F, a, b, x) -> float:
+def _kept_quality_reference(V, F, a, b, x, least) -> float:
     """float64: the smallest quality of the faces at a or b without both, their a or b corner at x, among
-    those that end lower than they were."""
+    those that end lower than they were and were at least ``least`` before."""
     best = 1.0
     one = np.array([[0, 1, 2]])
     for f in F:
@@ -62,19 +62,27 @@ def _kept_quality_reference(V, F, a, b, x) -> float:
         before = _quality(c, one)[0]
         c[list(f).index(a if a in f else b)] = x
         q = _quality(c, one)[0]
-        if q < before:
+        if q < before and before >= least:
             best = min(best, q)
     return best
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_kept_quality_is_the_float64_reference(seed):
+@pytest.mark.parametrize("least", [0.0, 0.75])
+def test_kept_quality_is_the_float64_reference(seed, least):
     V, F, lists, E, X = _random_case(seed)
     rng = np.random.default_rng(seed)
+    got, want, every = [], [], []
     for i in rng.choice(len(E), 40, replace=False):
         a, b = int(E[i, 0]), int(E[i, 1])
-        got = shape.kept_quality(V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, a, b, X[i])
-        np.testing.assert_allclose(got, _kept_quality_reference(V, F, a, b, X[i]), rtol=2e-4, atol=1e-6)
+        got.append(shape.kept_quality(V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, a, b, X[i],
+                                      np.float32(least)))
+        want.append(_kept_quality_reference(V, F, a, b, X[i], least))
+        every.append(_kept_quality_reference(V, F, a, b, X[i], 0.0))
+    np.testing.assert_allclose(got, want, rtol=2e-4, atol=1e-6)
+    assert np.count_nonzero(np.array(want) < 1) > 10  # the check can fail: many pairs have a face that counts
+    if least:  # ... and the faces under ``least`` before are left out for some
+        assert np.count_nonzero(np.array(want) != np.array(every)) > 3
 
 
 @pytest.mark.parametrize("per_pair_floor", [False, True])
@@ -88,8 +96,9 @@ def test_shaped_keys_are_the_formula(per_pair_floor):
     floor = (rng.uniform(1e-6, 1e-5, P) if per_pair_floor else np.array([3e-6])).astype(np.float32)
     s = np.float32(0.5)
     got = shape.shaped_keys(key, which, floor, E, X, V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, s)
-    q = np.array([shape.kept_quality(V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, E[i, 0], E[i, 1], X[i])
-                  for i in range(P)], np.float64)
+    least = s * np.float32(shape.NEAR_DEGENERATE)
+    q = np.array([shape.kept_quality(V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool, E[i, 0], E[i, 1], X[i],
+                                     least) for i in range(P)], np.float64)
     lo = floor if per_pair_floor else np.full(P, floor[0])
     want = np.where(which & (q < s), np.maximum(key, lo) * s / np.maximum(q, s * 1e-6), key)
     np.testing.assert_allclose(got, want, rtol=1e-6)

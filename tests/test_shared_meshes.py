@@ -28,11 +28,12 @@ def test_real_meshes_valid_at_ten_percent(name):
 
 
 def test_parallel_with_one_pair_per_round_is_greedy_on_rocker_arm():
-    """The same equivalence on a real CAD-like mesh (720 contractions)."""
+    """The same equivalence on a real CAD-like mesh (720 contractions); the default's shape term is the
+    parallel rounds' alone, so it is off here."""
     import numpy as np
 
     path = shared_mesh("rocker-arm-small.off")
     g = qemjax.simplify(path, ratio=0.1, scheduler="greedy")
-    p = qemjax.simplify(path, ratio=0.1, schedule=one_pair_per_round())
+    p = qemjax.simplify(path, ratio=0.1, schedule=one_pair_per_round(), quality_threshold=0.0)
     assert len(p.history.pairs) == len(g.history.pairs) > 500
     assert np.array_equal(np.sort(p.history.pairs, 1), np.sort(g.history.pairs, 1))

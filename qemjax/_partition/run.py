@@ -87,29 +87,33 @@ def _level_kwargs(kwargs: dict, p: Partition, last: bool) -> tuple[dict, dict]:
     level before it stops far above the run's target, so it leaves out what only a run's end is for: the
     memoryless last stretch (a method's ``late_memoryless`` would switch at K × the group's share of the
     level, where summed quadrics keep the input's memory best and the last level starts again from the
-    faces left; with it its volume term, as a run that stays summed drops it) and, with
-    ``refit="last"``, the re-fit."""
+    faces left; with it its volume term, as a run that stays summed drops it), the shape term (the slivers
+    that count are the output's; ranking a level's contractions by their shape wore away a spike that the
+    last level, seeing it through the carried quadrics, would have kept) and, with ``refit="last"``, the
+    re-fit."""
     changed = {}
     if not last:
         if p.refit == "last":
             changed["refit"] = 0
-        if _switches_late(kwargs):
+        method = _method(kwargs)
+        if getattr(method, "switches_late", False):
             changed |= {"late_memoryless": 0, "volume_weight": 0}
+        if getattr(method, "quality_threshold", 0):
+            changed["quality_threshold"] = 0.0
     # a setting given by its dotted name too would be applied after the flat one: only the flat one stays
     out = {k: v for k, v in kwargs.items() if not (k.startswith("method.") and k[7:] in changed)}
     return out | changed, changed
 
 
-def _switches_late(kwargs: dict) -> bool:
-    """Whether the method ``kwargs`` name (as `simplify` takes them) turns memoryless for its last stretch.
-    Resolved by `flat.apply` alone, not `stages.setup` (which builds the model): the client imports neither
-    JAX nor numba; ``schedule`` is the one keyword `stages.setup` takes out before it."""
+def _method(kwargs: dict):
+    """The method ``kwargs`` name (as `simplify` takes them), with their settings applied. Resolved by
+    `flat.apply` alone, not `stages.setup` (which builds the model): the client imports neither JAX nor
+    numba; ``schedule`` is the one keyword `stages.setup` takes out before it."""
     from .._pipeline import flat
 
     settings = {k: v for k, v in kwargs.items() if k not in flat.KEYWORDS or k == "preset"}
     settings.pop("schedule", None)  # the scheduler's, not the method's (`stages.setup`)
-    method = flat.apply(kwargs.get("method", "default"), kwargs.get("topology"), None, settings)[0]
-    return bool(getattr(method, "switches_late", False))
+    return flat.apply(kwargs.get("method", "default"), kwargs.get("topology"), None, settings)[0]
 
 
 def _bar(progress: bool, total: int, desc: str):

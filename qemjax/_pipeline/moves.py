@@ -84,6 +84,27 @@ def _own_d2(P, rows, X, G, flat, faces):
 
 
 @njit(cache=True, nogil=True)
+def _ring(start, face, verts):
+    """The faces at any of ``verts`` (CSR ``start``, ``face``), sorted, each once."""
+    n = 0
+    for v in verts:
+        n += start[v + 1] - start[v]
+    out = np.empty(n, np.int64)
+    r = 0
+    for v in verts:
+        for i in range(start[v], start[v + 1]):
+            out[r] = face[i]
+            r += 1
+    out.sort()
+    k = 0
+    for i in range(n):
+        if k == 0 or out[i] != out[k - 1]:
+            out[k] = out[i]
+            k += 1
+    return out[:k]
+
+
+@njit(cache=True, nogil=True)
 def _face_points(X, G, faces, W):
     """(len(faces)·len(W), 3): the points of W's barycentric weights on each face, face by face."""
     out = np.empty((len(faces) * W.shape[0], 3))
@@ -199,7 +220,7 @@ class Moves:
 
     def ring(self, verts):
         """The faces at any of ``verts``, sorted."""
-        return np.unique(np.concatenate([self.ring_face[self.ring_start[v]:self.ring_start[v + 1]] for v in verts]))
+        return _ring(self.ring_start, self.ring_face, np.asarray(verts, np.int64))
 
     def to_input(self, Q, rows):
         """Nearest input faces and distances of the output's samples Q, rows ``rows`` of the kept ones."""

@@ -74,7 +74,7 @@ def polish(m: Moves, moves: int) -> int:
         top_faces = {int(m.fa[t]) for t in top_in} | {int((t - nu) // nb) for t in top_out if t >= nu}
         top_verts = {int(m.used[t]) for t in top_out if t < nu}
         for move in _proposals(m, side, i):
-            if not (top_faces.issubset(m.ring(move).tolist()) and top_verts.issubset(move)):
+            if not (top_faces.issubset(m.ring(list(move)).tolist()) and top_verts.issubset(move)):
                 continue  # a sample at the largest distance would keep it
             if m.attempt(move, H, limit):
                 break

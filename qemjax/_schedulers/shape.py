@@ -8,6 +8,8 @@ the moved corner at the pair's placement) that end worse than they were, is unde
 (MeshLab's quadric edge collapse) divides its priority by the smallest quality under its threshold alike,
 over every kept face; counting only the faces a move makes worse leaves the pairs around a face the input
 made thin as they rank, and kept the Hausdorff distance where counting them all lost it (docs/methods.md).
+Nor do faces that were nearly degenerate already (under NEAR_DEGENERATE · s): the long faces of a spike
+are, and a spike whose every neighbouring pair waited was contracted away instead.
 The free cost is the floor because pairs on flat regions cost about nothing, and a multiple of nothing would
 rank them by cost alone (with ``Schedule(free_cost=0)`` such pairs are not lifted).
 
@@ -30,6 +32,9 @@ from numba import njit
 
 from .._kernels.batching import DTYPE
 
+# the faces under this fraction of the threshold (a smallest angle under about 1.7° at s = 0.3) lift nothing:
+# faces already nearly degenerate (a spike's, a crease strip's) are not the move's doing; `kept_quality`
+NEAR_DEGENERATE = 0.1
 SPAN = 2  # the pairs a round shapes: the cheapest SPAN × its candidates (see the module docstring)
 
 
@@ -46,12 +51,14 @@ def _quality(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z):
 
 
 @njit(cache=True)
-def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x):
+def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x, least):
     """The smallest 2·area / longest² (float32) of the live faces at a or b that do not hold both, with
     their corner a or b at x (VQ (n, ≥3) float32 positions; x (3,) float32), among those that end lower
-    than they were; 1 where there are none. (A face the move leaves as poor as it was, or makes better, is
-    not the contraction's doing: without that, every pair around a face the input made thin would be
-    lifted, and the run would bend around it.)"""
+    than they were and were at least ``least`` (float32) before; 1 where there are none. (A face the move
+    leaves as poor as it was, or makes better, is not the contraction's doing: without that, every pair
+    around a face the input made thin would be lifted, and the run would bend around it. A face that was
+    already nearly degenerate, under ``least``, is where a spike or a crease's strip is: lifting every pair at
+    it wore the spike away.)"""
     best = np.float32(1.0)
     for side in range(2):
         v = a if side == 0 else b
@@ -71,7 +78,7 @@ def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x):
                 continue
             before = _quality(VQ[g0, 0], VQ[g0, 1], VQ[g0, 2], VQ[g1, 0], VQ[g1, 1], VQ[g1, 2],
                               VQ[g2, 0], VQ[g2, 1], VQ[g2, 2])
-            if q < before:
+            if q < before and before >= least:
                 best = q
     return best
 
@@ -83,10 +90,11 @@ def shaped_keys(key, which, floor, E, X, VQ, F, alive, off, cnt, pool, s):
     collapses ranks last, the flip test refuses it anyway). ``floor``: (1,) or one per pair."""
     out = key.copy()
     tiny = s * np.float32(1e-6)
+    least = s * np.float32(NEAR_DEGENERATE)
     for i in range(len(key)):
         if not which[i]:
             continue
-        q = kept_quality(VQ, F, alive, off, cnt, pool, E[i, 0], E[i, 1], X[i])
+        q = kept_quality(VQ, F, alive, off, cnt, pool, E[i, 0], E[i, 1], X[i], least)
         if q < s:
             lo = floor[i if len(floor) > 1 else 0]
             out[i] = (key[i] if key[i] >= lo else lo) * (s / (q if q > tiny else tiny))
