@@ -131,13 +131,20 @@ def _late_in(late: str):
     before the package left it to the last level: `_partition.run._level_kwargs`), for the comparison."""
     from qemjax._partition import run
 
-    keep = run._switches_late
+    keep = run._level_kwargs
+
+    def every(kwargs, p, last):
+        kw, changed = keep(kwargs, p, last)
+        late = {"late_memoryless", "volume_weight"} & changed.keys()
+        kw = {k: v for k, v in kw.items() if k not in late} | {k: kwargs[k] for k in late if k in kwargs}
+        return kw, {k: v for k, v in changed.items() if k not in late}
+
     if late == "every":
-        run._switches_late = lambda kwargs: False
+        run._level_kwargs = every
     try:
         yield
     finally:
-        run._switches_late = keep
+        run._level_kwargs = keep
 
 
 def quality(args, folder: Path) -> None:
