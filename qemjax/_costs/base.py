@@ -139,13 +139,13 @@ class Method(CostModel):
         between the input and the output, both ways, keeping the two-way rms within 1 % of the re-fit's
         (`qemjax._pipeline.polish`; 0: none).
     sliver_moves: M ≥ 0, with a re-fit, at most M moves after the polish that each take a sliver's corner
-        along the surface until the sliver's smallest angle reaches 10°, keeping every sample's distance
-        below the largest and the two-way rms within 3 % of the re-fit's (`qemjax._pipeline.slivers`; 0:
-        none).
+        (a face under 10°) along the surface until its smallest angle clears 10°, or part of the way for a
+        later pass, keeping every sample's distance below the largest and the two-way rms within 3 % of the
+        re-fit's (`qemjax._pipeline.slivers`; 0: none).
     quality_threshold: s in [0, √3/2), a triangle-shape term in the parallel scheduler's ranking (0: none): a
         contraction that would make a face worse than it was, with 2·area / longest edge² = q under s, ranks
         as if it cost s / q times more, so slivers form only where nothing cheaper is near (after MeshLab's
-        quality threshold; `qemjax._schedulers.shape`). The cost (``max_error``, the stats) stays the model's, and nothing is
+        quality threshold; faces that were under s / 10 already do not count; `qemjax._schedulers.shape`). The cost (``max_error``, the stats) stays the model's, and nothing is
         refused: the face target is reached as without it. Other schedulers than the parallel one (the greedy
         queue) rank by cost alone, and say so.
 

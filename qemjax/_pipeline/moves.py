@@ -215,7 +215,8 @@ class Moves:
         self.hit = np.zeros(j, bool)  # the faces a move touches
 
     def limit(self, slack: float) -> float:
-        """The bound on the mean of the two mean squares for an rms at most ``slack`` above the re-fit's."""
+        """The bound on the sum of the two mean squares (twice the two-way mean square) for an rms at most
+        ``slack`` above the re-fit's."""
         return self.base * (1 + slack) ** 2
 
     def ring(self, verts):
@@ -263,8 +264,8 @@ class Moves:
         return ("in", i, d[i]) if d[i] >= self.e[o] else ("out", o, self.e[o])
 
     def attempt(self, move: dict, H: float, lim: float, better=None) -> bool:
-        """Make ``move`` ({vertex: step}) when every sample it touches ends below H, the mean of the two mean
-        squares stays within ``lim``, no face breaks the re-fit's rules and, with ``better`` (a test of the
+        """Make ``move`` ({vertex: step}) when every sample it touches ends below H, the sum of the two mean
+        squares stays within ``lim`` (`limit`), no face breaks the re-fit's rules and, with ``better`` (a test of the
         faces R at the moved positions), it passes; else leave everything as it was."""
         X, G, P, w, out, d, e, qw = self.X, self.G, self.P, self.w, self.out, self.d, self.e, self.qw
         verts = np.array(sorted(move), np.int64)
