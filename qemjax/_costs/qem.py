@@ -29,7 +29,7 @@ from .base import MeshInput, Method, require_nonnegative
 PLACEMENTS = ("optimal", "rank", "endpoints")
 POLISH_MOVES = 256  # the default's minimax polish: moves at most (`_pipeline.polish`)
 SLIVER_MOVES = 4096  # the default's sliver moves after it: moves at most (`_pipeline.slivers`)
-SHAPE_THRESHOLD = 0.3  # the default's shape term in the parallel rounds' ranking (``quality_threshold``)
+SHAPE_THRESHOLD = 0.4  # the default's shape term in the parallel rounds' ranking (``quality_threshold``)
 
 
 def initial_quadrics(V: np.ndarray, F: np.ndarray, *, area_weighted: bool, boundary_weight: float,

@@ -32,7 +32,7 @@ from numba import njit
 
 from .._kernels.batching import DTYPE
 
-# the faces under this fraction of the threshold (at s = 0.3, a smallest angle under about 2-3°) lift nothing:
+# the faces under this fraction of the threshold (at s = 0.4, a smallest angle under about 2-5°) lift nothing:
 # faces already nearly degenerate (a spike's, a crease strip's) are not the move's doing; `kept_quality`
 NEAR_DEGENERATE = 0.1
 SPAN = 2  # the pairs a round shapes: the cheapest SPAN × its candidates (see the module docstring)
