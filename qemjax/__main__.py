@@ -12,10 +12,10 @@ def main(argv=None) -> int:
 
             print(_version_line())
             return 0
-        from ._cli import main as run
+        from ._cli import leave, main as run
 
-        return run(argv)
-    except KeyboardInterrupt:
+        return leave(lambda: run(argv))
+    except KeyboardInterrupt:  # while the package was still importing
         print("qemjax: interrupted", file=sys.stderr)
         return 130
 

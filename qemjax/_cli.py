@@ -529,6 +529,7 @@ _RAISED: list = []  # non-empty once that interrupt was raised: the run is on it
 _SETTLING: list = []  # non-empty while `main` hands a last pending Ctrl-C to its handler before restoring
 _ACTIVE: list = []  # non-empty while `main` runs with `_on_sigint` installed
 _LOCK = threading.Lock()  # `_resend` against `main` leaving
+_SAID: list = []  # non-empty once `main` printed 'qemjax: interrupted' (`leave`)
 
 
 def _resend() -> None:
@@ -594,6 +595,7 @@ def main(argv=None) -> int:
     one line, and no partial output, since files are written under a temporary name and renamed)."""
     _INTERRUPTED.clear()
     _RAISED.clear()
+    _SAID.clear()
     previous = None
     try:
         # started with Ctrl-C ignored (`nohup`, `cmd &` in a script, some CI runners): it stays ignored, as
@@ -609,6 +611,7 @@ def main(argv=None) -> int:
         return code
     except KeyboardInterrupt as exc:  # a sweep's says how many rows it kept (`SweepInterrupted`)
         print(f"qemjax: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
+        _SAID.append(True)
         return 130
     finally:
         if previous is not None:
@@ -820,5 +823,16 @@ def _not_kept_names(stats: dict) -> list[str]:
     return names + (["material"] if "uv" in stats.get("not_kept_seams", []) else [])
 
 
+def leave(run) -> int:
+    """``run()``'s exit code, also when a Ctrl-C is handled only after `main` gave Python its own handler
+    back (one re-sent by `_resend` can arrive there): the run was interrupted, so 130, said once."""
+    try:
+        return run()
+    except KeyboardInterrupt:
+        if not _SAID:
+            print("qemjax: interrupted", file=sys.stderr)
+        return 130
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(leave(main))
