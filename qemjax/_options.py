@@ -189,6 +189,10 @@ class Partition:
     reduction: each level but the last keeps about 1/reduction of its faces (at least ``budget`` × target).
     final_faces: the most faces the last level's single group may read; above it the run ends with its
         groups' borders still locked (``stats["partition"]["locked_share"]``, a warning).
+    refit_input_faces: the largest input (faces) that the last level's re-fit, polish and sliver moves fit
+        the output to, rather than to the faces the levels before left (a method that re-fits: the default).
+        The worker of that level then reads every part (its memory: docs/large-meshes.md, "Tuning"). Above
+        it, or 0, they fit to the last level's own input; ``stats["partition"]["refit_to"]`` says which.
     workers: local worker processes (None: every core; 1: in this process) when no ``client`` is given.
     client: a ``dask.distributed.Client``: the tasks run on its workers (a `LocalCluster`, dask-jobqueue,
         Kubernetes: any cluster whose workers see ``scratch``).
@@ -212,6 +216,7 @@ class Partition:
     budget: float = 4.0
     reduction: float = 4.0
     final_faces: int = 4_000_000
+    refit_input_faces: int = 6_000_000
     workers: int | None = None
     client: Any = dataclasses.field(default=None, compare=False, repr=False)
     scratch: str | os.PathLike | None = None
@@ -234,6 +239,7 @@ class Partition:
         positive("budget", self.budget, float, 1)
         positive("reduction", self.reduction, float, 1.5)
         positive("final_faces", self.final_faces)
+        positive("refit_input_faces", self.refit_input_faces, least=0)
         positive("retries", self.retries, least=0)
         if self.workers is not None:
             positive("workers", self.workers)

@@ -115,27 +115,27 @@ def test_grid_nearest_is_exact_on_slivers_and_segments():
         assert np.allclose(named, d, rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize("threads,block", [(2, None), (4, None), (2, 700)])
-def test_grid_nearest_threads_and_blocks_give_the_same_bits(monkeypatch, threads, block):
+@pytest.mark.parametrize("n,block", [(2, None), (4, None), (2, 700)])
+def test_grid_nearest_threads_and_blocks_give_the_same_bits(monkeypatch, n, block):
     """One block on this thread against: a block per thread, the calling thread taking the first (2 and 4
     threads), and more blocks than threads on the pool (8 blocks of 700)."""
-    from qemjax._mesh import grid_nearest
+    from qemjax._mesh import grid_nearest, threads
 
     rng = np.random.default_rng(5)
     X, G = rng.normal(size=(500, 3)), rng.integers(0, 500, size=(800, 3))
     P = rng.normal(size=(5000, 3))
-    monkeypatch.setattr(grid_nearest, "_threads", lambda: 1)
+    monkeypatch.setattr(threads, "count", lambda: 1)
     f1, d1 = nearest(X, G, P)
     calls = []
     query = grid_nearest._query
     monkeypatch.setattr(grid_nearest, "_query", lambda *a: calls.append(threading.get_ident()) or query(*a))
-    monkeypatch.setattr(grid_nearest, "_threads", lambda: threads)
+    monkeypatch.setattr(threads, "count", lambda: n)
     monkeypatch.setattr(grid_nearest, "MIN_BLOCK", 1000)
     if block:
         monkeypatch.setattr(grid_nearest, "BLOCK", block)
     f2, d2 = nearest(X, G, P)
     assert np.array_equal(f1, f2) and np.array_equal(d1, d2)
-    assert len(calls) == (threads if block is None else 8)
+    assert len(calls) == (n if block is None else 8)
     # a block a thread: this thread queries the first one itself
     assert (threading.get_ident() in calls) == (block is None)
 

@@ -93,6 +93,8 @@ def test_partition_settings_are_checked():
         Partition(part_faces=10)
     with pytest.raises(ValueError, match="workers"):
         Partition(workers=0)
+    with pytest.raises(ValueError, match="refit_input_faces"):
+        Partition(refit_input_faces=-1)
 
 
 # --- whole runs -----------------------------------------------------------------------------------------------
@@ -162,10 +164,28 @@ def test_a_volume_term_runs_partitioned():
                                                              "quality_threshold": 0.0}
 
 
+def test_the_last_level_fits_to_the_input_itself(mesh, in_process):
+    """The last level's re-fit, polish and sliver moves fit the output to the level-0 parts, not to what the
+    levels before left: the same faces, positions nearer the input (its samples are what the re-fit fits and
+    the run measures). With ``refit_input_faces`` below the input's faces, or a run of one part, they fit to
+    the level's own input, as before."""
+    own = qemjax.simplify(mesh, ratio=RATIO, partition=Partition(part_faces=PART, workers=1, refit_input_faces=0))
+    assert in_process.stats["partition"]["refit_to"] == "input"
+    assert own.stats["partition"]["refit_to"] == "level input"
+    assert np.array_equal(own.faces, in_process.faces) and not np.array_equal(own.vertices, in_process.vertices)
+    assert in_process.stats["distance_rms"] < own.stats["distance_rms"]
+    assert in_process.stats["distance_max"] < own.stats["distance_max"]
+    small = shapes.bumpy_sphere(3)
+    one = qemjax.simplify((np.asarray(small.vertices), np.asarray(small.faces)), ratio=0.1,
+                          partition=Partition(workers=1))
+    assert one.stats["partition"]["levels"] == 1 and one.stats["partition"]["refit_to"] == "level input"
+
+
 def test_quality_near_the_in_core_run(mesh, in_process):
     whole = qemjax.simplify(mesh, ratio=RATIO)
-    assert in_process.stats["distance_rms"] <= 1.1 * whole.stats["distance_rms"]
-    assert in_process.stats["distance_max"] <= 1.5 * whole.stats["distance_max"]
+    # the issue's goals for the partitioned run (its last level fits to the input: the test above)
+    assert in_process.stats["distance_rms"] <= 1.05 * whole.stats["distance_rms"]
+    assert in_process.stats["distance_max"] <= 1.10 * whole.stats["distance_max"]
 
 
 @pytest.mark.slow  # starts worker processes

@@ -106,6 +106,27 @@ def test_shaped_keys_are_the_formula(per_pair_floor):
     assert np.count_nonzero(got != key) > P // 10  # the check can fail: many pairs are lifted
 
 
+@pytest.mark.parametrize("n", [2, 3])
+def test_shaped_keys_on_threads_are_the_same_bits(monkeypatch, n):
+    """Blocks of pairs on threads (`_mesh.threads`) against one block on this thread."""
+    from qemjax._mesh import threads
+
+    V, F, lists, E, X = _random_case(4)
+    rng = np.random.default_rng(4)
+    key = rng.exponential(1e-4, len(E)).astype(np.float32)
+    which = rng.random(len(E)) < 0.6
+    args = (key, which, np.array([3e-6], np.float32), E, X, V, lists.F, lists.alive, lists.off, lists.cnt,
+            lists.pool, np.float32(0.5))
+    one = shape.shaped_keys(*args)
+    calls = []
+    rows = shape._shape_rows
+    monkeypatch.setattr(shape, "_shape_rows", lambda *a: calls.append(len(a[2])) or rows(*a))
+    monkeypatch.setattr(threads, "count", lambda: n)
+    monkeypatch.setattr(shape, "MIN_BLOCK", 10)
+    assert np.array_equal(shape.shaped_keys(*args), one) and np.count_nonzero(one != key) > 10
+    assert len(calls) == n and sum(calls) == np.count_nonzero(which)
+
+
 def _round(seed, P_gate=0.1):
     """A round's keys, valid pairs and candidates under a gate (the cheapest P_gate of the valid ones)."""
     V, F, lists, E, X = _random_case(seed)

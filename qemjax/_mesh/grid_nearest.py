@@ -20,12 +20,10 @@ fixed order (numba fuses none): the same bits on every CPU.
 """
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 from numba import njit
 
+from . import threads
 from .box_bounds import face_boxes, used_bounds
 from .pointtri import _FLAT_REL
 
@@ -330,36 +328,13 @@ def search(X: np.ndarray, G: np.ndarray, index: tuple, P: np.ndarray, seed: np.n
     # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried
     # in the order of their cubes instead, the search alone is faster but whole runs are not: the points
     # keep their own order; docs/benchmarks.md, "Measured choices inside a run")
-    k = max(-(-len(P) // BLOCK), min(_threads(), len(P) // MIN_BLOCK), 1)
+    k = max(-(-len(P) // BLOCK), min(threads.count(), len(P) // MIN_BLOCK), 1)
     if k == 1:
         f, d2 = _query(P, X, G, B, flat, lo, h, dims, start, faces, seed)
         return f, np.sqrt(d2)
     step = -(-len(P) // k)
-    blocks = [(P[i:i + step], seed[i:i + step]) for i in range(0, len(P), step)]
 
-    def query(b):
-        return _query(b[0], X, G, B, flat, lo, h, dims, start, faces, b[1])
-    if len(blocks) <= _threads():  # a block a thread: this one takes the first, not handing it off and waiting
-        rest = [_pool().submit(query, b) for b in blocks[1:]]
-        parts = [query(blocks[0])] + [r.result() for r in rest]
-    else:
-        parts = list(_pool().map(query, blocks))
+    def query(i):
+        return _query(P[i:i + step], X, G, B, flat, lo, h, dims, start, faces, seed[i:i + step])
+    parts = threads.blocks(query, range(0, len(P), step))
     return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))
-
-
-_POOL = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    """The query's threads, made once (a new pool per call costs more than a small query)."""
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=_threads(), thread_name_prefix="qemjax-nearest")
-    return _POOL
-
-
-def _threads() -> int:
-    try:
-        return max(1, min(4, len(os.sched_getaffinity(0))))
-    except AttributeError:  # not Linux
-        return max(1, min(4, os.cpu_count() or 1))

@@ -32,19 +32,17 @@ measures itself (`nearest_triangles`).
 from __future__ import annotations
 
 import itertools
-import os
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import threads
 from .pointtri import edge_products, flat_triangles, squared_distance_cf
 
 _BLOCK = 32_768  # point-triangle pairs per kernel call (temporaries stay in cache)
 _CHUNK = 65_536  # query points per block (bounds temporary memory)
 _K_NEAREST = 16  # centroids asked of the KD-tree per point before falling back to a ball query
 _BALL_BATCH = 4_000_000  # candidates per ball-query batch (bounds memory)
-_MAX_THREADS = 4  # threads for the blocks of a grid query
 _MIN_THREAD_POINTS = 16_384  # points per thread below which a grid query stays on one thread
 _THREADED_QUERY = 16_384  # points from which a KD-tree query uses every core
 _LEAFSIZE = 16  # KD-tree leaf size (bigger builds faster, queries a little slower)
@@ -443,14 +441,14 @@ class GridIndex:
         dist = np.full(len(points), np.inf)
         face = np.zeros(len(points), dtype=np.int64)
         # Each point on its own (no order needed), blocks on threads (numpy releases the GIL in its loops).
-        n_blocks = max(-(-len(points) // _CHUNK), min(_threads(), len(points) // _MIN_THREAD_POINTS), 1)
+        n_blocks = max(-(-len(points) // _CHUNK), min(threads.count(), len(points) // _MIN_THREAD_POINTS), 1)
         bounds = np.linspace(0, len(points), n_blocks + 1).astype(np.int64)
 
         def block(i):
             a, b = bounds[i], bounds[i + 1]
             dist[a:b], face[a:b] = self._query_block(points[a:b])
 
-        each_on_threads(block, range(n_blocks))
+        threads.each(block, range(n_blocks))
         return dist, face
 
     def finish(self, points, dist, face, within: float):
@@ -485,29 +483,6 @@ class GridIndex:
         dist[has] = np.sqrt(best)
         face[has] = best_face
         return dist, face
-
-
-def _threads() -> int:
-    """Threads for work split in blocks: the cores this process may use, at most _MAX_THREADS."""
-    return max(1, min(_MAX_THREADS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                      else os.cpu_count() or 1))
-
-
-def each_on_threads(fn, items) -> None:
-    """fn(item) for each item, on up to `_threads` threads (in this thread when one suffices); also the
-    batch's re-fits (`_pipeline.stages.refit_all`)."""
-    items = list(items)
-    if len(items) <= 1 or _threads() == 1:
-        for item in items:
-            fn(item)
-        return
-    with ThreadPoolExecutor(max_workers=min(_threads(), len(items))) as pool:
-        try:
-            for _ in pool.map(fn, items):  # re-raises a block's exception here
-                pass
-        except BaseException:  # an error or Ctrl-C: the items not started are dropped, not waited for
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
 
 
 def _workers(n: int) -> int:

@@ -87,7 +87,7 @@ def run_group(spec: dict) -> dict:
         return done
     t0 = time.perf_counter()
     from .._pipeline.api import simplify  # JAX and numba: only in the worker
-    from .._pipeline.stages import SEED
+    from .._pipeline.stages import REFIT_TO, SEED
     from .carry import Carry
 
     V, F, gid, border, Q = pieces.stitch(spec["inputs"], carried=True)
@@ -107,6 +107,8 @@ def run_group(spec: dict) -> dict:
     if mask.any():
         kw["locked"] = mask
     carry = kw[SEED] = Carry(Vc, Q, spec["unit"], exports=bool(spec.get("carry_out")))
+    if spec.get("refit_to"):  # the last level fits its output to the input's parts (`run._refit_to`)
+        kw[REFIT_TO] = pieces.stitch(spec["refit_to"])[:2]
     Q = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -128,14 +128,14 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     c0, s0 = _compilation.snapshot()
     settings = dict(settings)
     locks = _locks.pop_settings(settings)
-    seed = settings.pop(stages.SEED, None)
+    seed, refit_to = settings.pop(stages.SEED, None), settings.pop(stages.REFIT_TO, None)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings, measure)
     bound = _bound.check(max_distance, max_distance_rel)
     # bad targets fail before the mesh is read
     stages._resolve_target(1, target_faces, ratio, max_error, bound is not None)
     geo = stages.geometry(mesh, setup, stacklevel=3)
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks,
-                     bounded=bound is not None, seed=seed)
+                     bounded=bound is not None, seed=seed, refit_to=refit_to)
     if bound is None:
         return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
     _bound.supported(job)

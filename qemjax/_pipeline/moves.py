@@ -46,15 +46,62 @@ def _wsum2(w, d):
 
 
 @njit(cache=True, nogil=True)
-def _on_faces(fa, hit):
-    """The samples whose face (``fa``) is marked in ``hit``, in order."""
-    out = np.empty(len(fa), np.int64)
-    n = 0
-    for i in range(len(fa)):
+def _on_faces(fa, hit, faces, start, order, extra):
+    """The samples whose face (``fa``) is among ``faces`` (marked in ``hit``), in order: those each face held
+    when the index (``start``, ``order``: the samples by face) was made, and ``extra``, the samples whose face
+    was set since, kept where their face is marked now."""
+    n = len(extra)
+    for g in faces:
+        n += start[g + 1] - start[g]
+    out = np.empty(n, np.int64)
+    k = 0
+    for g in faces:
+        for j in range(start[g], start[g + 1]):
+            i = order[j]
+            if hit[fa[i]]:
+                out[k] = i
+                k += 1
+    for i in extra:
         if hit[fa[i]]:
-            out[n] = i
-            n += 1
-    return out[:n]
+            out[k] = i
+            k += 1
+    out = out[:k]
+    out.sort()
+    m = 0
+    for j in range(k):
+        if m == 0 or out[j] != out[m - 1]:
+            out[m] = out[j]
+            m += 1
+    return out[:m]
+
+
+class _ByFace:
+    """The input samples by the output face each is measured to (``fa``), so that a move finds the samples
+    of the faces it moved without reading them all: an index made from ``fa``, and the samples whose face
+    was set since (`set`), read beside it; made again when those grow to a sixteenth of the samples."""
+
+    def __init__(self, fa, faces: int):
+        self.faces = faces
+        self.build(fa)
+
+    def build(self, fa):
+        self.order = np.argsort(fa, kind="stable")
+        self.start = np.searchsorted(fa[self.order], np.arange(self.faces + 1))
+        self.listed = np.zeros(len(fa), bool)
+        self.extra = np.zeros(0, np.int64)
+
+    def set(self, fa, rows):
+        """After fa[rows] was set."""
+        new = rows[~self.listed[rows]]
+        if len(new):
+            self.listed[new] = True
+            self.extra = np.concatenate([self.extra, new])
+            if 16 * len(self.extra) > len(fa):
+                self.build(fa)
+
+    def on(self, fa, hit, faces):
+        """The samples whose face is among ``faces`` (sorted, each marked in ``hit``), in order."""
+        return _on_faces(fa, hit, faces, self.start, self.order, self.extra)
 
 
 @njit(cache=True, nogil=True)
@@ -199,6 +246,7 @@ class Moves:
         # input samples → output, exact (the re-fit's faces, where given, start each search)
         seed0 = self.no_seed if seeds is None else np.ascontiguousarray(seeds, np.int32)
         self.fa, self.d = self.out.nearest(X, P, seed0)
+        self.by_face = _ByFace(self.fa, j)
         self.version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then)
         self.used = used = np.unique(G)
         self.nb = len(BARY)
@@ -223,20 +271,39 @@ class Moves:
         """The faces at any of ``verts``, sorted."""
         return _ring(self.ring_start, self.ring_face, np.asarray(verts, np.int64))
 
+    def row_vertex(self, rows):
+        """The output vertex each of the output's sample rows is (-1: a face's point). The rows are the used
+        vertices in order, then BARY's points of face g at len(used) + nb·g + b."""
+        nu = len(self.used)
+        rows = np.asarray(rows, np.int64)
+        return np.where(rows < nu, self.used[np.minimum(rows, nu - 1)], -1)
+
+    def row_face(self, rows):
+        """The output face whose point each of the output's sample rows is (-1: a vertex; `row_vertex`)."""
+        nu = len(self.used)
+        rows = np.asarray(rows, np.int64)
+        return np.where(rows < nu, -1, (rows - nu) // self.nb)
+
+    def rows_of(self, verts, faces):
+        """The output's sample rows of the vertices ``verts`` (those used), then of every point of ``faces``
+        (`row_vertex`)."""
+        at = self.vrow[verts]
+        points = len(self.used) + (self.nb * faces[:, None] + np.arange(self.nb)).reshape(-1)
+        return np.concatenate([at[at >= 0], points])
+
     def to_input(self, Q, rows):
         """Nearest input faces and distances of the output's samples Q, rows ``rows`` of the kept ones."""
         if self.src is None:
             return search(self.V, self.F, self.into, Q, self.no_seed)
-        nu = len(self.used)
-        face = np.where(rows < nu, self.ring_face[self.ring_start[self.used[np.minimum(rows, nu - 1)]]],
-                        (rows - nu) // self.nb)
+        v = self.row_vertex(rows)  # a vertex's search starts at the input face of one of its faces
+        face = np.where(v >= 0, self.ring_face[self.ring_start[np.maximum(v, 0)]], self.row_face(rows))
         return search(self.V, self.F, self.into, Q, self.src[face])
 
     def onto_input(self, x):
         """The input's point nearest to x (3,)."""
         V, F = self.V, self.F
         g, _ = search(V, F, self.into, x[None], self.no_seed)
-        b = _barycentric_at(x[None], V, F, g, self.into[1])[0]
+        b = _barycentric_at(x[None], V, F, g.astype(np.int32), self.into[1])[0]
         t = F[g[0]]
         return (b[0] * V[t[0]] + b[1] * V[t[1]]) + b[2] * V[t[2]]  # left to right: any CPU
 
@@ -260,16 +327,18 @@ class Moves:
             f1, d1 = self.out.nearest(self.X, self.P[top], fa[top].astype(np.int32))
             self.s_in += _wsum2(self.w[top], d1) - _wsum2(self.w[top], d[top])
             fa[top], d[top], version[top] = f1, d1, self.made
+            self.by_face.set(fa, top)
         o = int(np.argmax(self.e))
         return ("in", i, d[i]) if d[i] >= self.e[o] else ("out", o, self.e[o])
 
-    def attempt(self, move: dict, H: float, lim: float, better=None) -> bool:
+    def attempt(self, move: dict, H: float, lim: float, better=None, ring=None) -> bool:
         """Make ``move`` ({vertex: step}) when every sample it touches ends below H, the sum of the two mean
         squares stays within ``lim`` (`limit`), no face breaks the re-fit's rules and, with ``better`` (a test of the
-        faces R at the moved positions), it passes; else leave everything as it was."""
+        faces R at the moved positions), it passes; else leave everything as it was. ``ring``: the faces at the
+        moved vertices (`ring`), where the caller has them."""
         X, G, P, w, out, d, e, qw = self.X, self.G, self.P, self.w, self.out, self.d, self.e, self.qw
         verts = np.array(sorted(move), np.int64)
-        R = self.ring(verts)
+        R = self.ring(verts) if ring is None else ring
         old = X[verts].copy()
         for v, dv in move.items():
             X[v] = X[v] + dv
@@ -279,7 +348,7 @@ class Moves:
             return False
         out.update(X, R)
         self.hit[R] = True
-        A = _on_faces(self.fa, self.hit)  # input samples whose nearest face moved
+        A = self.by_face.on(self.fa, self.hit, R)  # input samples whose nearest face moved
         self.hit[R] = False
         # their distance to the nearest face of the moved faces' neighbourhood: an upper bound (their old
         # face is among these), exact unless a face farther out is nearer (then refreshed when it is the
@@ -293,11 +362,9 @@ class Moves:
             fA[far], d2A[far] = f1, e1
         dA = np.sqrt(d2A)
         if dA.max(initial=0.0) < H:
-            nu, nb = len(self.used), self.nb
-            rows = np.concatenate([self.vrow[verts][self.vrow[verts] >= 0],
-                                   nu + (nb * R[:, None] + np.arange(nb)).reshape(-1)])
-            nv = int(np.sum(rows < nu))
-            QR = np.concatenate([X[self.used[rows[:nv]]], _face_points(X, G, R, BARY)])
+            rows = self.rows_of(verts, R)
+            nv = len(rows) - self.nb * len(R)  # the moved vertices' own rows, first
+            QR = np.concatenate([X[self.row_vertex(rows[:nv])], _face_points(X, G, R, BARY)])
             gR, eR = self.to_input(QR, rows)
             wR = np.concatenate([np.zeros(nv), self.face_weights(R)])
             s_in1 = self.s_in + (_wsum2(w[A], dA) - _wsum2(w[A], d[A]))
@@ -306,6 +373,7 @@ class Moves:
             if eR.max(initial=0.0) < H and sq1 > 0 and s_in1 / self.sw + s_out1 / sq1 <= lim:
                 self.made += 1
                 self.fa[A], d[A], self.version[A] = fA, dA, -1  # upper bounds (above)
+                self.by_face.set(self.fa, A)
                 self.Q[rows], self.ga[rows], e[rows], qw[rows] = QR, gR, eR, wR
                 self.s_in, self.s_out, self.sq = s_in1, s_out1, sq1
                 out.mark(R)

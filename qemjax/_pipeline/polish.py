@@ -47,11 +47,12 @@ def _proposals(m: Moves, side: str, i: int):
             if corners:
                 yield {v: s * delta for v in corners}
     else:
-        V, F, nu = m.V, m.F, len(m.used)
+        V, F = m.V, m.F
         g = m.ga[i]
         bi = _barycentric_at(m.Q[i:i + 1], V, F, np.array([g], np.int32), m.into[1])[0]
         delta = ((bi[0] * V[F[g, 0]] + bi[1] * V[F[g, 1]]) + bi[2] * V[F[g, 2]]) - m.Q[i]
-        verts = [m.used[i]] if i < nu else list(G[(i - nu) // m.nb])
+        v = int(m.row_vertex([i])[0])
+        verts = [v] if v >= 0 else list(G[m.row_face([i])[0]])
         verts = [v for v in verts if free[v]]
         if verts:
             for s in STEPS:
@@ -63,7 +64,6 @@ def polish(m: Moves, moves: int) -> int:
     if moves <= 0 or not m.ok:
         return 0
     start, limit = m.made, m.limit(RMS_SLACK)
-    nu, nb = len(m.used), m.nb
     while m.made - start < moves:
         side, i, H = m.worst()
         if H <= 0:
@@ -71,8 +71,9 @@ def polish(m: Moves, moves: int) -> int:
         # the samples at the largest distance: a move must take every one of them below it
         top_in = np.flatnonzero(m.d >= H)
         top_out = np.flatnonzero(m.e >= H)
-        top_faces = {int(m.fa[t]) for t in top_in} | {int((t - nu) // nb) for t in top_out if t >= nu}
-        top_verts = {int(m.used[t]) for t in top_out if t < nu}
+        rf, rv = m.row_face(top_out), m.row_vertex(top_out)
+        top_faces = {int(m.fa[t]) for t in top_in} | {int(f) for f in rf[rf >= 0]}
+        top_verts = {int(v) for v in rv[rv >= 0]}
         for move in _proposals(m, side, i):
             if not (top_faces.issubset(m.ring(list(move)).tolist()) and top_verts.issubset(move)):
                 continue  # a sample at the largest distance would keep it

@@ -159,15 +159,15 @@ def _better(m: Moves, R, strict: bool):
     return better
 
 
-def _candidates(m: Moves, g: int) -> list:
+def _candidates(m: Moves, g: int) -> tuple[list, dict]:
     """(length, corner, step, strict) of the moves tried on sliver g, in order: the fixing steps, shortest
-    first, then the partial ones (module docstring)."""
+    first, then the partial ones (module docstring); and the faces at each free corner."""
     X, G = m.X, m.G
-    out = []
+    out, rings = [], {}
     for v in G[g]:
         if not m.free[v]:
             continue
-        R = m.ring([v])
+        R = rings[int(v)] = m.ring([v])
         for delta, weak in ((_apex(X, G, g, v), WEAK_STEPS[0]), (_tangential(X, G, R, v), WEAK_STEPS[1])):
             t = _fix_step(X, G, g, v, delta, COS_TARGET)
             if t > 0:
@@ -175,7 +175,7 @@ def _candidates(m: Moves, g: int) -> list:
                             int(v), t * delta, True))
             out += [(np.inf, int(v), s * delta, False) for s in weak]
     out.sort(key=lambda c: (not c[3], c[0]))  # stable: ties keep the corners' and directions' order
-    return out
+    return out, rings
 
 
 def lift_slivers(m: Moves, moves: int) -> int:
@@ -201,10 +201,10 @@ def lift_slivers(m: Moves, moves: int) -> int:
             if stamp[G[m.ring(G[g])]].max() <= tried[g]:
                 continue  # nothing around it moved since it was last tried
             tried[g] = m.made
-            for _, v, step, strict in _candidates(m, g)[:TRIES]:
-                test = _better(m, m.ring([v]), strict)
+            tries, rings = _candidates(m, g)
+            for _, v, step, strict in tries[:TRIES]:
                 x1 = m.onto_input(X[v] + step)
-                if m.attempt({v: x1 - X[v]}, H, lim, test):
+                if m.attempt({v: x1 - X[v]}, H, lim, _better(m, rings[v], strict), rings[v]):
                     stamp[v] = m.made
                     break
         if m.made == before:

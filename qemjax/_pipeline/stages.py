@@ -93,6 +93,9 @@ def _resolve_target(m: int, target_faces, ratio, max_error, bounded: bool = Fals
 # state, the MeshInput the model would start from) -> the vertex state the run starts from in place of the
 # model's own (the quadrics carried from the level before); the model's own is not built beside it
 SEED = "_seed"
+# a setting only a partitioned run's last level passes (`_partition.task`): (V, F), the surface the re-fit, its
+# polish and sliver moves fit the output to in place of the run's own input (which is the levels' output there)
+REFIT_TO = "_refit_to"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -174,6 +177,7 @@ class Job(NamedTuple):
     attrs: Any = None
     tracker: Any = None
     locks: Any = None  # `_locks.Locks` (geo is then the run's renumbered geometry), or None
+    refit_to: Any = None  # (V, F) the re-fit fits the output to instead of geo's (`REFIT_TO`), or None
 
 
 def setup(method, scheduler, topology, attributes, progress, settings: dict, measure=None) -> Setup:
@@ -210,12 +214,13 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
 
 
 def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
-         states: dict | None = None, locks: tuple = (None, None), bounded: bool = False, seed=None) -> Job:
+         states: dict | None = None, locks: tuple = (None, None), bounded: bool = False, seed=None,
+         refit_to=None) -> Job:
     """The face target, the model's initial vertex state and the scheduler's options for one run.
     ``states``: a cache of vertex states by (geometry, model `state_key`, feature edges), for a batch.
     ``locks``: the user's (locked, vertex_weights) (`_locks`); with any, the run works on the geometry
     renumbered with the locked vertices first (`_locks.Locks.geometry`). ``seed``: `SEED`'s callable, the
-    state's maker in place of the model's own."""
+    state's maker in place of the model's own; ``refit_to``: `REFIT_TO`'s surface."""
     lk = _locks.resolve(*locks, geo, stacklevel=stacklevel + 1)
     if lk is not None:  # a numbering of its own: no vertex state shared with a batch's other runs
         geo, states = lk.geometry(), None
@@ -281,7 +286,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
                                                          None if lk is None else lk.run().locked)
     if lk is not None:
         report.update(lk.stats)
-    job = Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk)
+    job = Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk, refit_to)
     return job if seed is None else job._replace(S=seed(job, start))
 
 
@@ -499,9 +504,12 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
             held = seam if held is None else (held | seam)
             if appearance.get("uv") is not None:  # the UVs follow the moves (`refit.carry_uv`)
                 wedges = (appearance["wedge_faces"], appearance["wedge_vertex"], appearance["uv"])
-        task = RefitTask(g.V, g.F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, g.parts[1],
-                         mesh.source_faces, held, setup.measures, setup.min_quality, wedges, setup.polish,
-                         setup.sliver_moves)
+        # the surface fitted to: the run's input, its parts and the input face each output face continues;
+        # or another one (`REFIT_TO`), whole
+        V, F, part, source = ((g.V, g.F, g.parts[1], mesh.source_faces) if job.refit_to is None
+                              else (*job.refit_to, None, None))
+        task = RefitTask(V, F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, part, source,
+                         held, setup.measures, setup.min_quality, wedges, setup.polish, setup.sliver_moves)
         if later is None:
             vout, seconds, distance, uv = task()
             mesh = mesh._replace(vertices=vout)
@@ -614,12 +622,12 @@ class RefitTask(NamedTuple):
 def refit_all(later: list) -> None:
     """Run the re-fits `finish` left in ``later`` and put their positions and ``refit_s`` into their results.
     Each is independent of the others (the same arithmetic as alone, bit for bit), so they run side by side
-    on threads (`nearest.each_on_threads`: one per core up to four): their compiled nearest-face search,
+    on threads (`_mesh.threads.each`: one per core up to four): their compiled nearest-face search,
     assembly (`refit_system`) and solver release the GIL, as numpy does (a batch of 64 cow re-fits: `experiments/figures/sweep_bench.py
     --grid distinct`). A
     re-fit of a large input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already
     uses the cores, and side by side the large ones would hold their memory at once."""
-    from .._mesh.nearest import each_on_threads  # lazily, as the re-fit imports it (scipy.spatial)
+    from .._mesh import threads
 
     def run(item):
         res, task = item
@@ -628,7 +636,7 @@ def refit_all(later: list) -> None:
         if uv is not None:
             res.uv = uv
 
-    each_on_threads(run, [item for item in later if len(item[1].F) < _REFIT_ALONE])
+    threads.each(run, [item for item in later if len(item[1].F) < _REFIT_ALONE])
     for item in later:
         if len(item[1].F) >= _REFIT_ALONE:
             run(item)

@@ -31,11 +31,13 @@ import numpy as np
 from numba import njit
 
 from .._kernels.batching import DTYPE
+from .._mesh import threads
 
 # the faces under this fraction of the threshold (at s = 0.4, a smallest angle under about 2-5°) lift nothing:
 # faces already nearly degenerate (a spike's, a crease strip's) are not the move's doing; `kept_quality`
 NEAR_DEGENERATE = 0.1
 SPAN = 2  # the pairs a round shapes: the cheapest SPAN × its candidates (see the module docstring)
+MIN_BLOCK = 8192  # pairs a thread shapes at least (fewer: one thread, as handing off costs more)
 
 
 @njit(cache=True, inline="always")
@@ -51,15 +53,16 @@ def _quality(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z):
 
 
 @njit(cache=True)
-def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x, least):
+def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x, least, cap=np.float32(1.0)):
     """The smallest 2·area / longest² (float32) of the live faces at a or b that do not hold both, with
     their corner a or b at x (VQ (n, ≥3) float32 positions; x (3,) float32), among those that end lower
-    than they were and were at least ``least`` (float32) before; 1 where there are none. (A face the move
+    than they were and were at least ``least`` (float32) before; ``cap`` where there are none under it (a
+    face at or over the cap is not looked at twice). (A face the move
     leaves as poor as it was, or makes better, is not the contraction's doing: without that, every pair
     around a face the input made thin would be lifted, and the run would bend around it. A face that was
     already nearly degenerate, under ``least``, is where a spike or a crease's strip is: lifting every pair at
     it wore the spike away.)"""
-    best = np.float32(1.0)
+    best = cap
     for side in range(2):
         v = a if side == 0 else b
         w = b if side == 0 else a
@@ -83,21 +86,31 @@ def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x, least):
     return best
 
 
-@njit(cache=True)
-def shaped_keys(key, which, floor, E, X, VQ, F, alive, off, cnt, pool, s):
-    """A copy of the float32 keys (P,) with the shape term (module docstring) on the pairs ``which``:
-    max(key, floor) · s / q where their kept faces' smallest q is under s (q floored at s·1e-6: a face that
-    collapses ranks last, the flip test refuses it anyway). ``floor``: (1,) or one per pair."""
-    out = key.copy()
+@njit(cache=True, nogil=True)
+def _shape_rows(out, key, rows, floor, E, X, VQ, F, alive, off, cnt, pool, s):
+    """`shaped_keys` of the pairs ``rows`` into ``out``."""
     tiny = s * np.float32(1e-6)
     least = s * np.float32(NEAR_DEGENERATE)
-    for i in range(len(key)):
-        if not which[i]:
-            continue
-        q = kept_quality(VQ, F, alive, off, cnt, pool, E[i, 0], E[i, 1], X[i], least)
+    for i in rows:
+        q = kept_quality(VQ, F, alive, off, cnt, pool, E[i, 0], E[i, 1], X[i], least, s)  # s: not lifted
         if q < s:
             lo = floor[i if len(floor) > 1 else 0]
             out[i] = (key[i] if key[i] >= lo else lo) * (s / (q if q > tiny else tiny))
+
+
+def shaped_keys(key, which, floor, E, X, VQ, F, alive, off, cnt, pool, s):
+    """A copy of the float32 keys (P,) with the shape term (module docstring) on the pairs ``which``:
+    max(key, floor) · s / q where their kept faces' smallest q is under s (q floored at s·1e-6: a face that
+    collapses ranks last, the flip test refuses it anyway). ``floor``: (1,) or one per pair. Each pair's
+    key is its own: blocks of at least MIN_BLOCK pairs run on threads, with the same bits."""
+    out = key.copy()
+    rows = np.flatnonzero(which)
+    k = max(min(threads.count(), len(rows) // MIN_BLOCK), 1)
+    step = -(-len(rows) // k) if len(rows) else 1
+
+    def block(i):
+        _shape_rows(out, key, rows[i:i + step], floor, E, X, VQ, F, alive, off, cnt, pool, s)
+    threads.blocks(block, range(0, len(rows), step))
     return out
 
 

@@ -1,0 +1,58 @@
+"""Threads for loops that release the GIL (compiled ``nogil`` loops, numpy's own): how many a process may use
+(`count`), one pool made once (`pool`), and work run on threads, item by item (`blocks`, `each`). Each item
+writes its own rows or returns its own answer, so a result is the same bits on any number of threads."""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+MAX_THREADS = 4  # threads at most: a query's blocks gain little past it and would hold their memory at once
+
+_POOL = None
+
+
+def count() -> int:
+    """The cores this process may use, at most MAX_THREADS."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(MAX_THREADS, cores))
+
+
+def pool() -> ThreadPoolExecutor:
+    """The threads `blocks` runs on, made once (a new pool per call costs more than a small query)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=count(), thread_name_prefix="qemjax")
+    return _POOL
+
+
+def blocks(fn, items) -> list:
+    """[fn(item) for item in items] on `pool`: with no more items than threads, this thread runs the first
+    itself rather than handing it off and waiting. (fn must not wait on `pool` itself.)"""
+    items = list(items)
+    if len(items) <= 1:
+        return [fn(item) for item in items]
+    if len(items) <= count():
+        rest = [pool().submit(fn, item) for item in items[1:]]
+        return [fn(items[0])] + [r.result() for r in rest]
+    return list(pool().map(fn, items))
+
+
+def each(fn, items) -> None:
+    """fn(item) for each item, on up to `count` threads of their own (in this thread when one suffices): for
+    items that use `blocks` themselves (a batch's re-fits, `_pipeline.stages.refit_all`). An error or Ctrl-C
+    drops the items not started."""
+    items = list(items)
+    if len(items) <= 1 or count() == 1:
+        for item in items:
+            fn(item)
+        return
+    with ThreadPoolExecutor(max_workers=min(count(), len(items))) as workers:
+        try:
+            for _ in workers.map(fn, items):  # re-raises an item's exception here
+                pass
+        except BaseException:
+            workers.shutdown(wait=True, cancel_futures=True)
+            raise
