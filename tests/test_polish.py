@@ -141,3 +141,24 @@ def test_the_kept_search_structure_gives_the_rebuilt_ones_answers(monkeypatch):
         monkeypatch.setattr(_moves, "REBUILD", rebuild)
         got = qemjax.simplify((V, F), **kw)
         assert got.vertices.tobytes() == want.vertices.tobytes()
+
+
+def test_samples_by_face_are_the_scan_of_every_sample():
+    """`moves._ByFace` (the index a move's samples are found by) against reading every sample, while the
+    samples' faces change, through the index's rebuilds."""
+    rng = np.random.default_rng(0)
+    faces, q = 50, 2000
+    fa = rng.integers(0, faces, q)
+    index = _moves._ByFace(fa, faces)
+    rebuilds, last = 0, 0
+    for _ in range(300):
+        rows = rng.choice(q, int(rng.integers(1, 40)), replace=False)
+        fa[rows] = rng.integers(0, faces, len(rows))
+        index.set(fa, rows)
+        rebuilds += len(index.extra) < last
+        last = len(index.extra)
+        R = np.unique(rng.integers(0, faces, int(rng.integers(1, 6))))
+        hit = np.zeros(faces, bool)
+        hit[R] = True
+        assert np.array_equal(index.on(fa, hit, R), np.flatnonzero(hit[fa]))
+    assert rebuilds >= 3 and len(index.extra) <= q // 16
