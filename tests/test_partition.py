@@ -179,6 +179,10 @@ def test_the_last_level_fits_to_the_input_itself(mesh, in_process):
     one = qemjax.simplify((np.asarray(small.vertices), np.asarray(small.faces)), ratio=0.1,
                           partition=Partition(workers=1))
     assert one.stats["partition"]["levels"] == 1 and one.stats["partition"]["refit_to"] == "level input"
+    m = shapes.bumpy_sphere(4)  # a method that does not re-fit reads no parts for it
+    classic = qemjax.simplify((np.asarray(m.vertices), np.asarray(m.faces)), ratio=0.05, method="classic",
+                              partition=Partition(part_faces=1000, workers=1))
+    assert classic.stats["partition"]["levels"] >= 2 and classic.stats["partition"]["refit_to"] == "level input"
 
 
 def test_quality_near_the_in_core_run(mesh, in_process):

@@ -328,13 +328,13 @@ def search(X: np.ndarray, G: np.ndarray, index: tuple, P: np.ndarray, seed: np.n
     # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried
     # in the order of their cubes instead, the search alone is faster but whole runs are not: the points
     # keep their own order; docs/benchmarks.md, "Measured choices inside a run")
-    k = max(-(-len(P) // BLOCK), min(threads.count(), len(P) // MIN_BLOCK), 1)
-    if k == 1:
+    cuts = threads.spans(len(P), MIN_BLOCK, BLOCK)
+    if len(cuts) <= 1:
         f, d2 = _query(P, X, G, B, flat, lo, h, dims, start, faces, seed)
         return f, np.sqrt(d2)
-    step = -(-len(P) // k)
 
-    def query(i):
-        return _query(P[i:i + step], X, G, B, flat, lo, h, dims, start, faces, seed[i:i + step])
-    parts = threads.blocks(query, range(0, len(P), step))
+    def query(cut):
+        a, b = cut
+        return _query(P[a:b], X, G, B, flat, lo, h, dims, start, faces, seed[a:b])
+    parts = threads.blocks(query, cuts)
     return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))

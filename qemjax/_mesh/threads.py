@@ -28,6 +28,14 @@ def pool() -> ThreadPoolExecutor:
     return _POOL
 
 
+def spans(n: int, least: int, most: int | None = None) -> list:
+    """[(lo, hi), ...]: n items cut into consecutive blocks of at least ``least`` items each, as many as there
+    are threads (`count`), and of at most ``most`` (None: no bound); one block when n is small."""
+    k = max(min(count(), n // least), -(-n // most) if most else 1, 1)
+    step = max(-(-n // k), 1)
+    return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
+
+
 def blocks(fn, items) -> list:
     """[fn(item) for item in items] on `pool`: with no more items than threads, this thread runs the first
     itself rather than handing it off and waiting. (fn must not wait on `pool` itself.)"""

@@ -105,12 +105,15 @@ def _level_kwargs(kwargs: dict, p: Partition, last: bool) -> tuple[dict, dict]:
     return out | changed, changed
 
 
-def _refit_to(manifest: dict, folder: Path, p: Partition, groups: list, last: bool, first: bool) -> list | None:
+def _refit_to(manifest: dict, folder: Path, p: Partition, groups: list, last: bool, first: bool,
+              refits: bool) -> list | None:
     """The level-0 parts the level's re-fit fits its output to (`stages.REFIT_TO`), or None (its own input):
-    a last level of one group after other levels, when the input has at most ``refit_input_faces`` faces.
+    a last level of one group after other levels, when the input has at most ``refit_input_faces`` faces and
+    the method re-fits (``refits``; else the parts would be read for nothing).
     Fitted to what the levels left, the polish and sliver moves keep the distance from a coarser surface
     than the input, and the partitioned run's Hausdorff distance ended above the in-core one's."""
-    if not (last and len(groups) == 1 and not first and int(manifest["n_faces"]) <= p.refit_input_faces):
+    if not (refits and last and len(groups) == 1 and not first
+            and int(manifest["n_faces"]) <= p.refit_input_faces):
         return None
     return [str(folder / part["file"]) for part in manifest["parts"]]
 
@@ -218,6 +221,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         faces = np.array([part["faces"] for part in manifest["parts"]], np.int64)
         borders = None
         levels, first = [], True
+        refits = bool(getattr(_method(kwargs), "refit", 0))
         while True:
             t_level = time.perf_counter()
             stalled = bool(levels) and levels[-1]["faces_out"] > 0.9 * levels[-1]["faces_in"]
@@ -235,7 +239,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                           out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit,
                           uv=bool(manifest.get("uv")))
                      for k, g in enumerate(groups)]
-            refit_to = _refit_to(manifest, folder, p, groups, last, first)
+            refit_to = _refit_to(manifest, folder, p, groups, last, first, refits)
             if refit_to is not None:
                 specs[0]["refit_to"] = refit_to
             cost = None
@@ -248,7 +252,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                                faces_out=int(faces.sum()), target=int(sum(g.target for g in groups)),
                                locked=int(sum(s["locked"] for s in stats)), seconds=time.perf_counter() - t_level,
                                cost=cost, stats=stats,
-                               settings=changed, refit_to=None if refit_to is None else "input"))
+                               settings=changed, refit_to="level input" if refit_to is None else "input"))
             if last:
                 break
             borders = [pieces.borders(path) for path in paths]
@@ -333,7 +337,7 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                 faces_per_level=[lv["faces_out"] for lv in levels], groups_per_level=[lv["groups"] for lv in levels],
                 locked_per_level=[lv["locked"] for lv in levels], seconds_per_level=[lv["seconds"] for lv in levels],
                 cost_per_level=[lv["cost"] for lv in levels], settings_per_level=[lv["settings"] for lv in levels],
-                refit_to=levels[-1].get("refit_to") or "level input",
+                refit_to=levels[-1]["refit_to"],
                 locked_share=locked_share, scatter_s=t_scatter, measure_s=t_measure,
                 peak_rss_workers=max((s["peak_rss"] for s in all_stats), default=0), peak_rss_client=task.peak_rss(),
                 reused=sum(1 for s in all_stats if s.get("reused")), scratch=None if folder is None else str(folder),

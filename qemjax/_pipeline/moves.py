@@ -46,6 +46,25 @@ def _wsum2(w, d):
 
 
 @njit(cache=True, nogil=True)
+def _sorted_unique(out):
+    """``out`` sorted, each value once (in place; the leading part of it)."""
+    out.sort()
+    m = 0
+    for j in range(len(out)):
+        if m == 0 or out[j] != out[m - 1]:
+            out[m] = out[j]
+            m += 1
+    return out[:m]
+
+
+def _by_key(keys, n: int):
+    """(order, start): the rows of ``keys`` (values 0 … n−1) by key, rows with equal keys in their order,
+    and where each key's rows begin in ``order`` (n + 1 entries)."""
+    order = np.argsort(keys, kind="stable")
+    return order, np.searchsorted(keys[order], np.arange(n + 1))
+
+
+@njit(cache=True, nogil=True)
 def _on_faces(fa, hit, faces, start, order, extra):
     """The samples whose face (``fa``) is among ``faces`` (marked in ``hit``), in order: those each face held
     when the index (``start``, ``order``: the samples by face) was made, and ``extra``, the samples whose face
@@ -65,14 +84,7 @@ def _on_faces(fa, hit, faces, start, order, extra):
         if hit[fa[i]]:
             out[k] = i
             k += 1
-    out = out[:k]
-    out.sort()
-    m = 0
-    for j in range(k):
-        if m == 0 or out[j] != out[m - 1]:
-            out[m] = out[j]
-            m += 1
-    return out[:m]
+    return _sorted_unique(out[:k])
 
 
 class _ByFace:
@@ -85,8 +97,7 @@ class _ByFace:
         self.build(fa)
 
     def build(self, fa):
-        self.order = np.argsort(fa, kind="stable")
-        self.start = np.searchsorted(fa[self.order], np.arange(self.faces + 1))
+        self.order, self.start = _by_key(fa, self.faces)
         self.listed = np.zeros(len(fa), bool)
         self.extra = np.zeros(0, np.int64)
 
@@ -142,13 +153,7 @@ def _ring(start, face, verts):
         for i in range(start[v], start[v + 1]):
             out[r] = face[i]
             r += 1
-    out.sort()
-    k = 0
-    for i in range(n):
-        if k == 0 or out[i] != out[k - 1]:
-            out[k] = out[i]
-            k += 1
-    return out[:k]
+    return _sorted_unique(out)
 
 
 @njit(cache=True, nogil=True)
@@ -232,8 +237,7 @@ class Moves:
         if not self.ok:
             return
         # the faces at each vertex (CSR)
-        order = np.argsort(G.reshape(-1), kind="stable")
-        self.ring_start = np.searchsorted(G.reshape(-1)[order], np.arange(k + 1))
+        order, self.ring_start = _by_key(G.reshape(-1), k)
         self.ring_face = order // 3
         self.n0 = n0 = face_normals(X, G)
         self.q0 = _quality(X, G, n0) if min_quality > 0 else None

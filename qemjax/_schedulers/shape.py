@@ -105,12 +105,10 @@ def shaped_keys(key, which, floor, E, X, VQ, F, alive, off, cnt, pool, s):
     key is its own: blocks of at least MIN_BLOCK pairs run on threads, with the same bits."""
     out = key.copy()
     rows = np.flatnonzero(which)
-    k = max(min(threads.count(), len(rows) // MIN_BLOCK), 1)
-    step = -(-len(rows) // k) if len(rows) else 1
 
-    def block(i):
-        _shape_rows(out, key, rows[i:i + step], floor, E, X, VQ, F, alive, off, cnt, pool, s)
-    threads.blocks(block, range(0, len(rows), step))
+    def block(cut):
+        _shape_rows(out, key, rows[cut[0]:cut[1]], floor, E, X, VQ, F, alive, off, cnt, pool, s)
+    threads.blocks(block, threads.spans(len(rows), MIN_BLOCK))
     return out
 
 
