@@ -1,9 +1,12 @@
-"""Old code against new code in one process: identical outputs, and wall/CPU time alternating.
+"""Old code against new code: identical outputs, and wall/CPU time alternating.
 
 The package as it was at a git revision is unpacked into a temporary folder under the name
-``qemjax_old`` (it uses relative imports only), so both versions run in the same process, in turn, on the
-same meshes; timing medians then share the machine's state. Outputs are compared by hash (vertices,
-faces, history).
+``qemjax_old`` (it uses relative imports only). Each version runs in a process of its own (`Remote`), the
+two called in turn on the same meshes, so timing medians share the machine's state. Not in one process:
+numba's dispatcher types a named tuple by its name and fields, so the second package's compiled loops that
+take named tuples (the selection's) missed the fast argument typing and were typed in Python at every call
+(about 0.3 ms a round), which made whichever version ran second look slower. Outputs are compared by hash
+(vertices, faces, history).
 
     python experiments/ab_compare.py --rev HEAD --meshes cow stanford-bunny --ratios 0.1 0.01   # outputs
     python experiments/ab_compare.py --rev HEAD --meshes armadillo-x16 --ratios 0.01 --repeats 7 --time
@@ -73,7 +76,89 @@ def load_old(rev: str, as_name: str = "qemjax_old"):
     _own_modules(tmp / as_name, as_name)
     sys.path.insert(0, str(tmp))
     pkg = importlib.import_module(as_name)
+    _rename_named_tuples(as_name)
     return pkg
+
+
+def _rename_named_tuples(as_name: str) -> None:
+    """Give the named tuple classes of the package ``as_name`` (every module imported) a name of their own.
+    numba's dispatcher types a named tuple argument by its class name and fields: with two packages in one
+    process, the second one's compiled loops that take named tuples (the selection's) missed the fast
+    argument typing and were typed in Python at every call (about 0.3 ms a round), which made whichever
+    version ran second look slower. The package's modules are imported first (some load lazily)."""
+    import pkgutil
+
+    for info in pkgutil.walk_packages(sys.modules[as_name].__path__, as_name + "."):
+        try:
+            importlib.import_module(info.name)
+        except Exception:  # noqa: BLE001 - an optional dependency missing: nothing of it runs
+            pass
+    for name, module in list(sys.modules.items()):
+        if module is None or not (name == as_name or name.startswith(as_name + ".")):
+            continue
+        for cls in vars(module).values():
+            if (isinstance(cls, type) and issubclass(cls, tuple) and hasattr(cls, "_fields")
+                    and cls.__module__ == name and not cls.__name__.startswith(as_name)):
+                cls.__name__ = cls.__qualname__ = f"{as_name}_{cls.__name__}"
+
+
+class Reply:
+    """What a `Remote` call returns: the result's vertices, faces, stats and `digest`, and the call's wall
+    and CPU seconds measured in the serving process."""
+
+    def __init__(self, res, wall_s: float, cpu_s: float):
+        self.vertices, self.faces = np.asarray(res.vertices), np.asarray(res.faces)
+        self.stats, self.digest = res.stats, digest(res)
+        self.wall_s, self.cpu_s = wall_s, cpu_s
+
+
+def _serve(conn, make, args) -> None:
+    """The serving process of `Remote`: ``make(*args)`` once, then each call timed until None arrives."""
+    import warnings
+
+    warnings.simplefilter("ignore")
+    fn = make(*args)
+    while (msg := conn.recv()) is not None:
+        call_args, call_kw = msg
+        try:
+            c0, t0 = cpu_time(), time.perf_counter()
+            res = fn(*call_args, **call_kw)
+            conn.send(Reply(res, time.perf_counter() - t0, cpu_time() - c0))
+        except Exception as exc:  # noqa: BLE001 - handed to the caller, which raises it
+            conn.send(exc)
+
+
+class Remote:
+    """A function made by ``make(*args)`` in a process of its own (spawned: nothing of this process's
+    numba or JAX state), called with pickled arguments; each call returns a `Reply`."""
+
+    def __init__(self, make, *args):
+        import multiprocessing
+
+        ctx = multiprocessing.get_context("spawn")
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(child, make, args), daemon=True)
+        self.proc.start()
+
+    def __call__(self, *args, **kw) -> Reply:
+        self.conn.send((args, kw))
+        out = self.conn.recv()
+        if isinstance(out, Exception):
+            raise out
+        return out
+
+    def close(self) -> None:
+        self.conn.send(None)
+        self.proc.join(30)
+
+
+def simplify_of(rev: str | None, as_name: str = "qemjax_old"):
+    """``simplify`` of qemjax at git revision ``rev`` (None: this checkout), for a `Remote`."""
+    if rev is None:
+        import qemjax
+
+        return qemjax.simplify
+    return load_old(rev, as_name).simplify
 
 
 def digest(res) -> str:
@@ -110,11 +195,8 @@ def main():
     warnings.simplefilter("ignore")  # above-target warnings of the mesh/ratio cases are not the point here
     import meshes as bench_meshes
 
-    old = load_old(args.rev)
-    if args.new:
-        new = load_old(args.new, "qemjax_new")
-    else:
-        import qemjax as new
+    old = Remote(simplify_of, args.rev)
+    new = Remote(simplify_of, args.new or None, "qemjax_new")
     rows = []
     for name in args.meshes:
         bm = bench_meshes.load(name)
@@ -124,16 +206,15 @@ def main():
             cpus = {"old": [], "new": []}
             hashes = {}
             kws = {"old": both_kw, "new": new_kw}
-            for tag, lib in (("old", old), ("new", new)):  # warm-up: compile both
-                lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler, **kws[tag])
+            for tag, run in (("old", old), ("new", new)):  # warm-up: compile both
+                run((V, F), ratio=ratio, scheduler=args.scheduler, **kws[tag])
             for rep in range(args.repeats):
                 order = (("old", old), ("new", new)) if rep % 2 == 0 else (("new", new), ("old", old))
-                for tag, lib in order:
-                    c0, t0 = cpu_time(), time.perf_counter()
-                    res = lib.simplify((V, F), ratio=ratio, scheduler=args.scheduler, **kws[tag])
-                    times[tag].append(time.perf_counter() - t0)
-                    cpus[tag].append(cpu_time() - c0)
-                    hashes[tag] = digest(res)
+                for tag, run in order:
+                    res = run((V, F), ratio=ratio, scheduler=args.scheduler, **kws[tag])
+                    times[tag].append(res.wall_s)
+                    cpus[tag].append(res.cpu_s)
+                    hashes[tag] = res.digest
             same = hashes["old"] == hashes["new"]
             row = dict(mesh=name, faces=len(F), ratio=ratio, scheduler=args.scheduler, rev=args.rev,
                        new=(args.new or "working tree") + "".join(f" {k}={v}" for k, v in new_kw.items()),
@@ -146,6 +227,8 @@ def main():
                 msg += (f"  wall {row['wall_old']:.3f} -> {row['wall_new']:.3f} s"
                         f"  cpu {row['cpu_old']:.3f} -> {row['cpu_new']:.3f} s  (medians of {args.repeats})")
             print(msg, flush=True)
+    old.close()
+    new.close()
     if args.out:
         import csv
 

@@ -243,3 +243,52 @@ def test_bounds_are_numpys_min_and_max(dtype):
             W = V * 10.0 ** (trial % 7 - 3)
             want = np.sqrt(np.sum((W[G[:, [1, 2, 0]]] - W[G]) ** 2, axis=2)).ravel()
             assert np.array_equal(edge_lengths(W, G), want), trial
+
+
+def test_grid_listing_is_every_cube_each_triangle_meets_in_triangle_order():
+    """`grid_nearest._build` (filled from each cube's end, no scratch) against a plain listing: for every
+    cube, the triangles whose bounding box meets it, ascending; int32 where the values fit."""
+    from qemjax._mesh import grid_nearest as gn
+
+    rng = np.random.default_rng(11)
+    X = rng.normal(size=(300, 3))
+    G = np.array([rng.choice(len(X), 3, replace=False) for _ in range(500)])
+    *_, lo, h, dims, start, faces, mark = gn.grid(X, G)
+    assert start.dtype == np.int32 and faces.dtype == np.int32 and len(mark) == len(G) + 1
+    want = [[] for _ in range(int(np.prod(dims)))]
+    for f, tri in enumerate(G):
+        a, b = X[tri].min(0), X[tri].max(0)
+        i0 = np.clip(np.floor((a - lo) / h).astype(int), 0, dims - 1)
+        i1 = np.clip(np.floor((b - lo) / h).astype(int), 0, dims - 1)
+        for i in range(i0[0], i1[0] + 1):
+            for j in range(i0[1], i1[1] + 1):
+                for k in range(i0[2], i1[2] + 1):
+                    want[(i * dims[1] + j) * dims[2] + k].append(f)
+    got = [faces[start[c]:start[c + 1]].tolist() for c in range(len(want))]
+    assert got == want and start[-1] == len(faces)
+
+
+def test_a_kept_index_answers_every_query_as_a_new_one(monkeypatch):
+    """The index's marks are made once and each query point takes stamps of its own (`grid_nearest.stamps`):
+    many queries of one index, of one point, on this thread or in blocks on threads, with and without seeds,
+    give the answers of a fresh search each time, and no two queries share a stamp."""
+    from qemjax._mesh import grid_nearest as gn
+    from qemjax._mesh import threads
+
+    rng = np.random.default_rng(12)
+    X = rng.normal(size=(400, 3))
+    G = np.array([rng.choice(len(X), 3, replace=False) for _ in range(700)])
+    index = gn.grid(X, G)
+    monkeypatch.setattr(threads, "count", lambda: 2)
+    monkeypatch.setattr(gn, "MIN_BLOCK", 100)
+    before = int(index[-1][-1])
+    for trial in range(30):
+        P = rng.normal(size=(int(rng.integers(1, 400)), 3)) * 2
+        seed = rng.integers(-1, len(G), len(P)).astype(np.int32) if trial % 2 else np.zeros(0, np.int32)
+        want_f, want_d = gn.nearest(X, G, P)
+        f, d = gn.search(X, G, index, P, seed)
+        assert np.array_equal(f, want_f) and np.array_equal(d, want_d)
+        f1, d2 = gn.query_here(X, G, index, P, seed)
+        assert np.array_equal(f1, want_f) and np.array_equal(np.sqrt(d2), want_d)
+        before, after = before + 2 * len(P), int(index[-1][-1])
+        assert after == before  # each point's stamps once, never again

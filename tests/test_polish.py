@@ -162,3 +162,57 @@ def test_samples_by_face_are_the_scan_of_every_sample():
         hit[R] = True
         assert np.array_equal(index.on(fa, hit, R), np.flatnonzero(hit[fa]))
     assert rebuilds >= 3 and len(index.extra) <= q // 16
+
+
+def _refused_reference(X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality) -> bool:
+    """The re-fit's rules as its numpy expressions (`fit_rules._turned`, `fit_rules._quality`)."""
+    from qemjax._pipeline.fit_rules import _quality, _turned
+
+    n1 = face_normals(X, G[R])
+    bad = _turned(n0[R], n1, cos_max)
+    if agreed is not None:
+        bad |= agreed[R] & (np.einsum("ij,ij->i", n1, source_normals[R]) <= 0)
+    if q0 is not None:
+        q1 = _quality(X, G[R], n1)
+        bad |= (q1 < min_quality) & (q1 < q0[R])
+    return bool(bad.any())
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_rules_answer_as_the_numpy_expressions(seed):
+    """`moves._refused` (one compiled pass) against the numpy expressions it replaced, face by face and on
+    whole rings, near every boundary: small moves of a noisy sphere's vertices (some faces turn past the
+    flip angle, some fall under the quality guard), degenerate faces, each rule alone; and
+    `moves._face_weights` against numpy's arithmetic, bit for bit."""
+    from qemjax._pipeline.fit_rules import _quality
+
+    rng = np.random.default_rng(seed)
+    m = shapes.bumpy_sphere(3, amplitude=0.2, seed=seed)
+    X0, G = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+    n0 = face_normals(X0, G)
+    src = n0 + rng.normal(0, 0.5 * np.abs(n0).max(), n0.shape)  # some faces point against their source
+    agreed = np.einsum("ij,ij->i", n0, src) > 0
+    q0 = _quality(X0, G, n0)
+    X = X0 + rng.normal(0, 0.06, X0.shape) * (rng.random((len(X0), 1)) < 0.3)
+    X[G[:5, 1]] = X[G[:5, 0]]  # faces with a corner on another: no area
+    cos_max = float(np.cos(np.radians(rng.uniform(20, 90))))
+    min_quality = float(np.quantile(q0, 0.3))
+    answers = set()
+    for rules in [(None, None, None), (agreed, src, None), (None, None, q0), (agreed, src, q0)]:
+        a, s, q = rules
+        compiled = (np.zeros(0, bool) if a is None else a, np.zeros((0, 3)) if s is None else s,
+                    np.zeros(0) if q is None else q)
+        for g in range(len(G)):
+            R = np.array([g])
+            want = _refused_reference(X, G, R, n0, cos_max, a, s, q, min_quality)
+            assert _moves._refused(X, G, R, n0, cos_max, *compiled[:2], compiled[2], min_quality) == want
+            answers.add(want)
+        for _ in range(50):
+            R = np.unique(rng.integers(0, len(G), rng.integers(1, 12)))
+            assert (_moves._refused(X, G, R, n0, cos_max, *compiled[:2], compiled[2], min_quality)
+                    == _refused_reference(X, G, R, n0, cos_max, a, s, q, min_quality))
+    assert answers == {True, False}
+    faces = rng.permutation(len(G))[:100]
+    n = face_normals(X, G[faces])
+    want = np.repeat(0.5 * np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2]) / 7, 7)
+    assert np.array_equal(_moves._face_weights(X, G, faces.astype(np.int64), 7), want)

@@ -401,7 +401,7 @@ def main(argv=None) -> int:
                           and r["status"].startswith("matched")), flush=True)
     table = ranks(rows, [v[0] for v in variants])
     print(table)
-    save_run(args.out, rows, COLUMNS, table, "rank_peers.py", argv)
+    save_run(args.out, rows, COLUMNS, table, "figures/rank_peers.py", argv)
     return 0
 
 

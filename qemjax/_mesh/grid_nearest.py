@@ -20,6 +20,8 @@ fixed order (numba fuses none): the same bits on every CPU.
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 from numba import njit
 
@@ -162,33 +164,44 @@ def edge_lengths(X, G):
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cubes(X, G, f, lo, h, dims):
+    """The cubes [i0, i1] × [j0, j1] × [k0, k1] that triangle f's bounding box meets."""
+    out = np.empty(6, np.int64)
+    for ax in range(3):
+        a = min(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+        b = max(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+        out[2 * ax], out[2 * ax + 1] = _cell_range(lo[ax], h, dims[ax], a, b)
+    return out
+
+
 @njit(cache=True, nogil=True)
-def _build(X, G, lo, h, dims):
-    """CSR (start, faces) of the triangles listed in each cube (cube id = (i·ny + j)·nz + k), in triangle order."""
+def _build(X, G, lo, h, dims, start, faces):
+    """CSR (``start``, ``faces``) of the triangles listed in each cube (cube id = (i·ny + j)·nz + k), in
+    triangle order, into the arrays given: ``start`` (cubes + 1,) zeros, ``faces`` (listings,) (`_listing`).
+    A counting sort without scratch: each cube's run is filled from its end, triangles last to first, which
+    leaves each run's start one entry up; a shift puts it back. (The cubes outnumber the triangles many times:
+    a scratch copy of ``start`` cost more memory than the listing itself.)"""
     ncell = dims[0] * dims[1] * dims[2]
-    count = np.zeros(ncell + 1, np.int64)
-    rng = np.empty((G.shape[0], 6), np.int64)
     for f in range(G.shape[0]):
-        for ax in range(3):
-            a = min(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
-            b = max(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
-            rng[f, 2 * ax], rng[f, 2 * ax + 1] = _cell_range(lo[ax], h, dims[ax], a, b)
-        for i in range(rng[f, 0], rng[f, 1] + 1):
-            for j in range(rng[f, 2], rng[f, 3] + 1):
-                for k in range(rng[f, 4], rng[f, 5] + 1):
-                    count[(i * dims[1] + j) * dims[2] + k + 1] += 1
+        r = _cubes(X, G, f, lo, h, dims)
+        for i in range(r[0], r[1] + 1):
+            for j in range(r[2], r[3] + 1):
+                for k in range(r[4], r[5] + 1):
+                    start[(i * dims[1] + j) * dims[2] + k + 1] += 1
     for c in range(ncell):
-        count[c + 1] += count[c]
-    fill = count[:-1].copy()
-    faces = np.empty(count[ncell], np.int64)
-    for f in range(G.shape[0]):
-        for i in range(rng[f, 0], rng[f, 1] + 1):
-            for j in range(rng[f, 2], rng[f, 3] + 1):
-                for k in range(rng[f, 4], rng[f, 5] + 1):
+        start[c + 1] += start[c]
+    for f in range(G.shape[0] - 1, -1, -1):  # start[c + 1]: where cube c's run ends, then where it begins
+        r = _cubes(X, G, f, lo, h, dims)
+        for i in range(r[0], r[1] + 1):
+            for j in range(r[2], r[3] + 1):
+                for k in range(r[4], r[5] + 1):
                     c = (i * dims[1] + j) * dims[2] + k
-                    faces[fill[c]] = f
-                    fill[c] += 1
-    return count, faces
+                    start[c + 1] -= 1
+                    faces[start[c + 1]] = f
+    for c in range(ncell):
+        start[c] = start[c + 1]
+    start[ncell] = len(faces)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -206,11 +219,12 @@ def _gap(x, a, b):
 
 
 @njit(cache=True, nogil=True)
-def _query(P, X, G, B, flat, lo, h, dims, start, faces, seed):
+def _query(P, X, G, B, flat, lo, h, dims, start, faces, mark, stamp0, seed):
+    """Nearest triangles and squared distances of the points P (module docstring); ``mark``: the index's
+    (`grid`), where point p marks the triangles it has measured with ``stamp0`` + p (`stamps`)."""
     q = P.shape[0]
     best_f = np.full(q, -1, np.int64)
     best_d2 = np.full(q, np.inf)
-    mark = np.full(G.shape[0], -1, np.int64)
     rmax = max(dims[0], dims[1], dims[2])
     slack = 1e-6 * h  # what a box's distance bound gives up, far above its rounding
     for p in range(q):
@@ -230,9 +244,10 @@ def _query(P, X, G, B, flat, lo, h, dims, start, faces, seed):
         wall = max(wall, 0.0)
         bf, bd2 = -1, np.inf
         lim2 = np.inf  # (best distance + slack)²: a box farther than this holds nothing as close
+        stamp = stamp0 + p
         if len(seed) and seed[p] >= 0:  # a face known to be near: the cubes and boxes beyond it are passed over
             f = seed[p]
-            mark[f] = p
+            mark[f] = stamp
             bd2 = _face_d2(px, py, pz, X, G, flat, f)
             bf = f
             lim2 = (np.sqrt(bd2) + slack) ** 2
@@ -255,9 +270,9 @@ def _query(P, X, G, B, flat, lo, h, dims, start, faces, seed):
                             continue
                         for t in range(start[cell], start[cell + 1]):
                             f = faces[t]
-                            if mark[f] == p:
+                            if mark[f] == stamp:
                                 continue
-                            mark[f] = p
+                            mark[f] = stamp
                             # the triangle's bounding box first: most listed triangles are farther
                             bx = _gap(px, B[f, 0], B[f, 3])
                             by = _gap(py, B[f, 1], B[f, 4])
@@ -278,21 +293,48 @@ def _query(P, X, G, B, flat, lo, h, dims, start, faces, seed):
 
 def grid(X: np.ndarray, G: np.ndarray) -> tuple:
     """The search structure of the triangles G (j,3), j >= 1, over X (k,3) float64 (module docstring):
-    (boxes (j,6), slivers (j,) bool, lo (3,), h, dims (3,), start, faces), the arguments `_query` takes after
-    X and G. A caller that moves a few vertices may keep it and query with the new positions, boxes and
-    slivers: each triangle whose corners did not move is still listed in every cube it meets, so the
-    answer is exact among those (`_pipeline.moves` measures the moved ones itself)."""
+    (boxes (j,6), slivers (j,) bool, lo (3,), h, dims (3,), start, faces, mark), the arguments `_query` takes
+    after X and G (start and faces int32 where their values fit; ``mark``: which point measured each triangle
+    last, and the next free stamp, `stamps`). A caller that moves a few vertices may keep it and query with
+    the new positions, boxes and slivers: each triangle whose corners did not move is still listed in every
+    cube it meets, so the answer is exact among those (`_pipeline.moves` measures the moved ones itself)."""
     lo, hi = used_bounds(X, G)
     ext = np.maximum(hi - lo, 1e-300)
     h = max(CUBE_EDGE * float(np.median(edge_lengths(X, G))), float(ext.max()) * 1e-6)
     while True:
         dims = np.minimum(np.floor(ext / h).astype(np.int64) + 1, 1 << 20)
-        if (int(np.prod(dims)) <= CUBES_PER_FACE * len(G) + 4096
-                and _listing(X, G, lo, h, dims) <= PAIRS_PER_FACE * len(G)):
-            break
+        if int(np.prod(dims)) <= CUBES_PER_FACE * len(G) + 4096:
+            listings = _listing(X, G, lo, h, dims)
+            if listings <= PAIRS_PER_FACE * len(G):
+                break
         h *= 1.25
-    start, faces = _build(X, G, lo, h, dims)
-    return face_boxes(X, G), slivers(X, G), lo, h, dims, start, faces  # boxes: (min xyz, max xyz)
+    start = np.zeros(int(np.prod(dims)) + 1, np.int32 if listings < 2**31 else np.int64)
+    faces = np.empty(listings, np.int32 if len(G) < 2**31 else np.int64)
+    _build(X, G, lo, h, dims, start, faces)
+    mark = np.full(len(G) + 1, -1, np.int64)
+    mark[-1] = 0  # the next free stamp
+    return face_boxes(X, G), slivers(X, G), lo, h, dims, start, faces, mark  # boxes: (min xyz, max xyz)
+
+
+_STAMPS = threading.Lock()
+
+
+def stamps(index: tuple, n: int) -> int:
+    """The first of n stamps no query of ``index`` (`grid`) has used: point p of a query marks the triangles
+    it has measured with its own, so the index's ``mark`` is made once, not once a query (a query of a few
+    points on a large mesh spent its time clearing it). Blocks of one query on threads take disjoint stamps:
+    where one block overwrites another's mark, a triangle is measured twice, with the same answer."""
+    mark = index[-1]
+    with _STAMPS:
+        first = int(mark[-1])
+        mark[-1] = first + n
+    return first
+
+
+def query_here(X: np.ndarray, G: np.ndarray, index: tuple, P: np.ndarray, seed: np.ndarray):
+    """(faces, squared distances) of the points P with ``index``, on this thread (`search` without its
+    blocks, for a few points)."""
+    return _query(P, X, G, *index, stamps(index, len(P)), seed)
 
 
 def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -323,18 +365,18 @@ def nearest(X: np.ndarray, G: np.ndarray, P: np.ndarray, seed: np.ndarray | None
 def search(X: np.ndarray, G: np.ndarray, index: tuple, P: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`nearest` of the points P (q,3) float64 with the structure ``index`` (`grid`, kept or made now) and
     seeds (q,) or (0,) int32: the query on threads."""
-    B, flat, lo, h, dims, start, faces = index
     # blocks of points on threads (the loop releases the GIL): at least MIN_BLOCK points each, as many as there
     # are threads, at most BLOCK each. Each point's answer is its own: any split gives the same bits (queried
     # in the order of their cubes instead, the search alone is faster but whole runs are not: the points
     # keep their own order; docs/benchmarks.md, "Measured choices inside a run")
     cuts = threads.spans(len(P), MIN_BLOCK, BLOCK)
+    first = stamps(index, len(P))
     if len(cuts) <= 1:
-        f, d2 = _query(P, X, G, B, flat, lo, h, dims, start, faces, seed)
+        f, d2 = _query(P, X, G, *index, first, seed)
         return f, np.sqrt(d2)
 
     def query(cut):
         a, b = cut
-        return _query(P[a:b], X, G, B, flat, lo, h, dims, start, faces, seed[a:b])
+        return _query(P[a:b], X, G, *index, first + a, seed[a:b])
     parts = threads.blocks(query, cuts)
     return np.concatenate([f for f, _ in parts]), np.sqrt(np.concatenate([d for _, d in parts]))

@@ -26,8 +26,8 @@ from numba import njit
 
 from .._mesh.arrays import face_normals
 from .._mesh.box_bounds import face_boxes
-from .._mesh.grid_nearest import _face_d2, _gap, _query, grid, search, slivers
-from .fit_rules import _barycentric_at, _quality, _turned
+from .._mesh.grid_nearest import _face_d2, _gap, grid, query_here, search, slivers
+from .fit_rules import _barycentric_at, _quality
 
 # the output's samples on each face, as barycentric weights (module docstring)
 BARY = np.array([[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5], [1 / 3, 1 / 3, 1 / 3],
@@ -116,9 +116,11 @@ class _ByFace:
 
 
 @njit(cache=True, nogil=True)
-def _nearer(P, X, G, B, flat, faces, f, d2):
+def _nearer(P, X, G, B, flat, faces, f, d2, stop):
     """Lower each point's (f, d2) to its nearest among ``faces`` (the lowest index among equals), in place;
-    B: the faces' boxes (a face whose box lies farther than the best so far is passed over)."""
+    B: the faces' boxes (a face whose box lies farther than the best so far is passed over). Whether every
+    point ends nearer than ``stop``: at the first that does not, it returns False, the points after it left
+    as they were (a move that fails there needs none of them)."""
     for p in range(P.shape[0]):
         px, py, pz = P[p, 0], P[p, 1], P[p, 2]
         for t in range(len(faces)):
@@ -129,6 +131,9 @@ def _nearer(P, X, G, B, flat, faces, f, d2):
             e = _face_d2(px, py, pz, X, G, flat, g)
             if e < d2[p] or (e == d2[p] and g < f[p]):
                 f[p], d2[p] = g, e
+        if np.sqrt(d2[p]) >= stop:  # the distance as `Moves.attempt` compares it
+            return False
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -193,23 +198,64 @@ class _Output:
         """Exact nearest faces and distances of P on (X, G): the kept structure, then the moved faces."""
         if not len(self.stale_list):  # nothing moved since the build: on threads
             return search(X, self.G, (self.B, self.flat, *self.rest), P, seed)
-        f, d2 = _query(P, X, self.G, self.B, self.flat, *self.rest, seed)
-        _nearer(P, X, self.G, self.B, self.flat, self.stale_list, f, d2)
+        f, d2 = query_here(X, self.G, (self.B, self.flat, *self.rest), P, seed)
+        _nearer(P, X, self.G, self.B, self.flat, self.stale_list, f, d2, np.inf)
         return f, np.sqrt(d2)
 
 
-def _refused(X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality) -> bool:
+@njit(cache=True, nogil=True)
+def _refused(X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality):
     """Whether the faces R at X break one of the re-fit's rules (`refit`): turned by the flip angle or more
-    (or lost all area), come to point against the input face they continue, or fell below the quality
-    guard and below their shape before."""
-    n1 = face_normals(X, G[R])
-    bad = _turned(n0[R], n1, cos_max)
-    if agreed is not None:
-        bad |= agreed[R] & (np.einsum("ij,ij->i", n1, source_normals[R]) <= 0)
-    if q0 is not None:
-        q1 = _quality(X, G[R], n1)
-        bad |= (q1 < min_quality) & (q1 < q0[R])
-    return bool(bad.any())
+    (or lost all area), come to point against the input face they continue (``agreed``, per face: whether
+    it pointed with it; empty: not checked), or fell below the quality guard and below their shape before
+    (``q0``; empty: not checked). The arithmetic of the re-fit's numpy expressions (`fit_rules._turned`,
+    `fit_rules._quality`): np.cross's products, norms summed left to right, einsum's three-term row products
+    as (x·x' + z·z') + y·y' (its order on every SIMD level numpy dispatches to), so the answers are the same."""
+    for t in range(len(R)):
+        g = R[t]
+        i0, i1, i2 = G[g, 0], G[g, 1], G[g, 2]
+        ux, uy, uz = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
+        wx, wy, wz = X[i2, 0] - X[i0, 0], X[i2, 1] - X[i0, 1], X[i2, 2] - X[i0, 2]
+        ax, ay, az = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        bx, by, bz = n0[g, 0], n0[g, 1], n0[g, 2]
+        l0 = np.sqrt((bx * bx + by * by) + bz * bz)
+        l1 = np.sqrt((ax * ax + ay * ay) + az * az)
+        ll = l0 * l1
+        cos = ((bx * ax + bz * az) + by * ay) / (ll if ll > 0 else 1.0)
+        if (l1 == 0 and l0 > 0) or (l0 > 0 and cos <= cos_max):
+            return True
+        if len(agreed) and agreed[g]:
+            sx, sy, sz = source_normals[g, 0], source_normals[g, 1], source_normals[g, 2]
+            if (ax * sx + az * sz) + ay * sy <= 0:
+                return True
+        if len(q0):
+            ex, ey, ez = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
+            longest = (ex * ex + ey * ey) + ez * ez
+            ex, ey, ez = X[i2, 0] - X[i1, 0], X[i2, 1] - X[i1, 1], X[i2, 2] - X[i1, 2]
+            longest = max(longest, (ex * ex + ey * ey) + ez * ez)
+            ex, ey, ez = X[i0, 0] - X[i2, 0], X[i0, 1] - X[i2, 1], X[i0, 2] - X[i2, 2]
+            longest = max(longest, (ex * ex + ey * ey) + ez * ez)
+            q1 = l1 / (longest if longest > 0 else 1.0)
+            if q1 < min_quality and q1 < q0[g]:
+                return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _face_weights(X, G, faces, nb):
+    """(len(faces)·nb,): a face point's weight, a nb-th of its face's area, each repeated nb times (numpy's
+    arithmetic: np.cross's products, the squares summed left to right)."""
+    out = np.empty(len(faces) * nb)
+    for t in range(len(faces)):
+        g = faces[t]
+        i0, i1, i2 = G[g, 0], G[g, 1], G[g, 2]
+        ux, uy, uz = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
+        wx, wy, wz = X[i2, 0] - X[i0, 0], X[i2, 1] - X[i0, 1], X[i2, 2] - X[i0, 2]
+        ax, ay, az = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        w = 0.5 * np.sqrt((ax * ax + ay * ay) + az * az) / nb
+        for b in range(nb):
+            out[t * nb + b] = w
+    return out
 
 
 class Moves:
@@ -242,23 +288,28 @@ class Moves:
         self.n0 = n0 = face_normals(X, G)
         self.q0 = _quality(X, G, n0) if min_quality > 0 else None
         self.agreed = None if source_normals is None else np.einsum("ij,ij->i", n0, source_normals) > 0
-        self.into = grid(V, F)  # the input's structure: it never moves
+        # the rules' arrays as `_refused` takes them (empty: not checked)
+        self.agreed_r = np.zeros(0, bool) if self.agreed is None else self.agreed
+        self.normals_r = np.zeros((0, 3)) if source_normals is None else np.ascontiguousarray(source_normals,
+                                                                                               np.float64)
+        self.q0_r = np.zeros(0) if self.q0 is None else self.q0
         self.no_seed = np.zeros(0, np.int32)
         # where each output sample's search of the input starts: its face's input face (a vertex: one of its faces')
         self.src = None if source_faces is None else np.asarray(source_faces, np.int32)
-        self.out = _Output(X, G)
-        # input samples → output, exact (the re-fit's faces, where given, start each search)
-        seed0 = self.no_seed if seeds is None else np.ascontiguousarray(seeds, np.int32)
-        self.fa, self.d = self.out.nearest(X, P, seed0)
-        self.by_face = _ByFace(self.fa, j)
-        self.version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then)
         self.used = used = np.unique(G)
         self.nb = len(BARY)
         # output samples: the used vertices, then nb points per face (row of face g: len(used) + nb·g + b)
         self.vrow = np.full(k, -1, np.int64)
         self.vrow[used] = np.arange(len(used))
         self.Q = np.concatenate([X[used], _face_points(X, G, np.arange(j), BARY)])
+        self.into = grid(V, F)  # the input's structure: it never moves
         self.ga, self.e = self.to_input(self.Q, np.arange(len(self.Q)))
+        self.out = _Output(X, G)
+        # input samples → output, exact (the re-fit's faces, where given, start each search)
+        seed0 = self.no_seed if seeds is None else np.ascontiguousarray(seeds, np.int32)
+        self.fa, self.d = self.out.nearest(X, P, seed0)
+        self.by_face = _ByFace(self.fa, j)
+        self.version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then)
         self.qw = np.concatenate([np.zeros(len(used)), self.face_weights(np.arange(j))])
         self.sw, self.sq = _wsum2(w, np.ones(len(w))), _wsum2(self.qw, np.ones(len(self.qw)))  # left to right
         self.s_in, self.s_out = _wsum2(w, self.d), _wsum2(self.qw, self.e)
@@ -306,16 +357,14 @@ class Moves:
     def onto_input(self, x):
         """The input's point nearest to x (3,)."""
         V, F = self.V, self.F
-        g, _ = search(V, F, self.into, x[None], self.no_seed)
+        g, _ = query_here(V, F, self.into, x[None], self.no_seed)  # `search` of one point, without its threads
         b = _barycentric_at(x[None], V, F, g.astype(np.int32), self.into[1])[0]
         t = F[g[0]]
         return (b[0] * V[t[0]] + b[1] * V[t[1]]) + b[2] * V[t[2]]  # left to right: any CPU
 
     def face_weights(self, faces):
         """Each face point stands for a seventh of its face's area."""
-        n = face_normals(self.X, self.G[faces])
-        return np.repeat(0.5 * np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2]) / self.nb,
-                         self.nb)
+        return _face_weights(self.X, self.G, np.asarray(faces, np.int64), self.nb)
 
     def worst(self):
         """The farthest sample: ('in', i, distance) or ('out', i, distance); stale input distances measured."""
@@ -346,8 +395,8 @@ class Moves:
         old = X[verts].copy()
         for v, dv in move.items():
             X[v] = X[v] + dv
-        if (better is not None and not better(R)) or _refused(X, G, R, self.n0, self.cos_max, self.agreed,
-                                                                self.source_normals, self.q0, self.min_quality):
+        if (better is not None and not better(R)) or _refused(X, G, R, self.n0, float(self.cos_max), self.agreed_r,
+                                                                self.normals_r, self.q0_r, float(self.min_quality)):
             X[verts] = old
             return False
         out.update(X, R)
@@ -360,12 +409,13 @@ class Moves:
         fA = self.fa[A]
         d2A = _own_d2(P, A, X, G, out.flat, fA)
         far = np.flatnonzero(d2A >= H * H)
+        below = True
         if len(far):
             f1, e1 = fA[far], d2A[far]
-            _nearer(P[A[far]], X, G, out.B, out.flat, self.ring(np.unique(G[R])), f1, e1)
+            below = _nearer(P[A[far]], X, G, out.B, out.flat, self.ring(np.unique(G[R])), f1, e1, H)
             fA[far], d2A[far] = f1, e1
         dA = np.sqrt(d2A)
-        if dA.max(initial=0.0) < H:
+        if below and dA.max(initial=0.0) < H:
             rows = self.rows_of(verts, R)
             nv = len(rows) - self.nb * len(R)  # the moved vertices' own rows, first
             QR = np.concatenate([X[self.row_vertex(rows[:nv])], _face_points(X, G, R, BARY)])

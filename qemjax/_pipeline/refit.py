@@ -167,6 +167,8 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
                   seeds=kept[1] if len(kept) > 1 else None, source_faces=source_faces)
         made = (_polish(m, polish), lift_slivers(m, sliver_moves))
         Y = m.X
+        if sampled is not None and len(sampled) > 1:  # seeds nearer the moved output's faces (same answers)
+            sampled[1] = m.fa
         if report is not None:
             report["polish_moves"], report["sliver_moves"] = made
     out = Y * unit + centre

@@ -144,11 +144,17 @@ def _tangential(X, G, R, v):
     return out
 
 
-def _better(m: Moves, R, strict: bool):
-    """The test a move must pass on the faces R around it (module docstring): with ``strict``, fewer slivers
-    and a smallest angle no smaller; else no more slivers and a larger smallest angle."""
-    mc0 = _min_cos(m.X, m.G, R)
-    count0, worst0 = int(np.sum(mc0 > COS_SLIVER)), mc0.max()
+def _shape_of(m: Moves, R) -> tuple[int, float]:
+    """(slivers, largest cosine of a smallest angle) of the faces R as they are."""
+    mc = _min_cos(m.X, m.G, R)
+    return int(np.sum(mc > COS_SLIVER)), mc.max()
+
+
+def _better(m: Moves, before: tuple[int, float], strict: bool):
+    """The test a move must pass on the faces R around it (module docstring), against their shape
+    ``before`` (`_shape_of`): with ``strict``, fewer slivers and a smallest angle no smaller; else no more
+    slivers and a larger smallest angle."""
+    count0, worst0 = before
 
     def better(R):
         mc1 = _min_cos(m.X, m.G, R)
@@ -202,9 +208,12 @@ def lift_slivers(m: Moves, moves: int) -> int:
                 continue  # nothing around it moved since it was last tried
             tried[g] = m.made
             tries, rings = _candidates(m, g)
+            shape = {}  # each corner's faces as they are: a move not made leaves them so, bit for bit
             for _, v, step, strict in tries[:TRIES]:
                 x1 = m.onto_input(X[v] + step)
-                if m.attempt({v: x1 - X[v]}, H, lim, _better(m, rings[v], strict), rings[v]):
+                if v not in shape:
+                    shape[v] = _shape_of(m, rings[v])
+                if m.attempt({v: x1 - X[v]}, H, lim, _better(m, shape[v], strict), rings[v]):
                     stamp[v] = m.made
                     break
         if m.made == before:
