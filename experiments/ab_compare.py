@@ -5,7 +5,7 @@ The package as it was at a git revision is unpacked into a temporary folder unde
 two called in turn on the same meshes, so timing medians share the machine's state. Not in one process:
 numba's dispatcher types a named tuple by its name and fields, so the second package's compiled loops that
 take named tuples (the selection's) missed the fast argument typing and were typed in Python at every call
-(about 0.3 ms a round), which made whichever version ran second look slower. Outputs are compared by hash
+(about 0.4 ms a round), which made whichever version ran second look slower. Outputs are compared by hash
 (vertices, faces, history).
 
     python experiments/ab_compare.py --rev HEAD --meshes cow stanford-bunny --ratios 0.1 0.01   # outputs
@@ -84,7 +84,7 @@ def _rename_named_tuples(as_name: str) -> None:
     """Give the named tuple classes of the package ``as_name`` (every module imported) a name of their own.
     numba's dispatcher types a named tuple argument by its class name and fields: with two packages in one
     process, the second one's compiled loops that take named tuples (the selection's) missed the fast
-    argument typing and were typed in Python at every call (about 0.3 ms a round), which made whichever
+    argument typing and were typed in Python at every call (about 0.4 ms a round), which made whichever
     version ran second look slower. The package's modules are imported first (some load lazily)."""
     import pkgutil
 

@@ -98,7 +98,7 @@ def test_the_installed_package_runs_the_workloads_without_compiling_or_missing_s
                          ids=["default", "greedy", "locks"])
 def test_a_warm_run_types_every_compiled_loops_arguments_without_python(monkeypatch, options):
     """A warm run finds each compiled loop's version from its arguments' type codes, in C: none goes through
-    numba's typing in Python (`Dispatcher._compile_for_args`, about 0.3 ms a call, once a round in the
+    numba's typing in Python (`Dispatcher._compile_for_args`, about 0.4 ms a call, once a round in the
     selection when a named tuple argument missed its type code)."""
     from numba.core import dispatcher
 
