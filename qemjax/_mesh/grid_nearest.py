@@ -134,18 +134,28 @@ def _cell_range(lo, h, n, a, b):
     return i0, i1
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _span(X, G, f, lo, h, dims, ax):
+    """The cubes [i0, i1] along axis ``ax`` that triangle f's bounding box meets."""
+    a = min(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+    b = max(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
+    return _cell_range(lo[ax], h, dims[ax], a, b)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cubes(X, G, f, lo, h, dims):
+    """The cubes [i0, i1] × [j0, j1] × [k0, k1] that triangle f's bounding box meets, as (i0, i1, j0, j1, k0,
+    k1)."""
+    return _span(X, G, f, lo, h, dims, 0) + _span(X, G, f, lo, h, dims, 1) + _span(X, G, f, lo, h, dims, 2)
+
+
 @njit(cache=True, nogil=True)
 def _listing(X, G, lo, h, dims):
     """(pairs count) the (triangle, cube) listings a cube side h gives."""
     total = 0
     for f in range(G.shape[0]):
-        cnt = 1
-        for ax in range(3):
-            a = min(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
-            b = max(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
-            i0, i1 = _cell_range(lo[ax], h, dims[ax], a, b)
-            cnt *= i1 - i0 + 1
-        total += cnt
+        r = _cubes(X, G, f, lo, h, dims)
+        total += (r[1] - r[0] + 1) * (r[3] - r[2] + 1) * (r[5] - r[4] + 1)
     return total
 
 
@@ -161,17 +171,6 @@ def edge_lengths(X, G):
             p, q = G[g, c], G[g, (c + 1) % 3]
             dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
             out[3 * g + c] = np.sqrt((dx * dx + dy * dy) + dz * dz)
-    return out
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _cubes(X, G, f, lo, h, dims):
-    """The cubes [i0, i1] × [j0, j1] × [k0, k1] that triangle f's bounding box meets."""
-    out = np.empty(6, np.int64)
-    for ax in range(3):
-        a = min(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
-        b = max(X[G[f, 0], ax], X[G[f, 1], ax], X[G[f, 2], ax])
-        out[2 * ax], out[2 * ax + 1] = _cell_range(lo[ax], h, dims[ax], a, b)
     return out
 
 

@@ -203,6 +203,16 @@ class _Output:
         return f, np.sqrt(d2)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _normal(X, G, g):
+    """Face g's corners and unnormalised normal (p1 − p0) × (p2 − p0), with np.cross's products
+    (`arrays.face_normals`), and its first edge p1 − p0."""
+    i0, i1, i2 = G[g, 0], G[g, 1], G[g, 2]
+    ux, uy, uz = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
+    wx, wy, wz = X[i2, 0] - X[i0, 0], X[i2, 1] - X[i0, 1], X[i2, 2] - X[i0, 2]
+    return i0, i1, i2, uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx, ux, uy, uz
+
+
 @njit(cache=True, nogil=True)
 def _refused(X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality):
     """Whether the faces R at X break one of the re-fit's rules (`refit`): turned by the flip angle or more
@@ -213,10 +223,7 @@ def _refused(X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality):
     as (x·x' + z·z') + y·y' (its order on every SIMD level numpy dispatches to), so the answers are the same."""
     for t in range(len(R)):
         g = R[t]
-        i0, i1, i2 = G[g, 0], G[g, 1], G[g, 2]
-        ux, uy, uz = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
-        wx, wy, wz = X[i2, 0] - X[i0, 0], X[i2, 1] - X[i0, 1], X[i2, 2] - X[i0, 2]
-        ax, ay, az = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        i0, i1, i2, ax, ay, az, ux, uy, uz = _normal(X, G, g)
         bx, by, bz = n0[g, 0], n0[g, 1], n0[g, 2]
         l0 = np.sqrt((bx * bx + by * by) + bz * bz)
         l1 = np.sqrt((ax * ax + ay * ay) + az * az)
@@ -229,8 +236,7 @@ def _refused(X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality):
             if (ax * sx + az * sz) + ay * sy <= 0:
                 return True
         if len(q0):
-            ex, ey, ez = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
-            longest = (ex * ex + ey * ey) + ez * ez
+            longest = (ux * ux + uy * uy) + uz * uz
             ex, ey, ez = X[i2, 0] - X[i1, 0], X[i2, 1] - X[i1, 1], X[i2, 2] - X[i1, 2]
             longest = max(longest, (ex * ex + ey * ey) + ez * ez)
             ex, ey, ez = X[i0, 0] - X[i2, 0], X[i0, 1] - X[i2, 1], X[i0, 2] - X[i2, 2]
@@ -247,11 +253,7 @@ def _face_weights(X, G, faces, nb):
     arithmetic: np.cross's products, the squares summed left to right)."""
     out = np.empty(len(faces) * nb)
     for t in range(len(faces)):
-        g = faces[t]
-        i0, i1, i2 = G[g, 0], G[g, 1], G[g, 2]
-        ux, uy, uz = X[i1, 0] - X[i0, 0], X[i1, 1] - X[i0, 1], X[i1, 2] - X[i0, 2]
-        wx, wy, wz = X[i2, 0] - X[i0, 0], X[i2, 1] - X[i0, 1], X[i2, 2] - X[i0, 2]
-        ax, ay, az = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        ax, ay, az = _normal(X, G, faces[t])[3:6]
         w = 0.5 * np.sqrt((ax * ax + ay * ay) + az * az) / nb
         for b in range(nb):
             out[t * nb + b] = w
@@ -275,7 +277,7 @@ class Moves:
         self.F = F = np.ascontiguousarray(F, np.int64)
         self.G = G = np.ascontiguousarray(G, np.int64)
         self.P, self.w = P, w
-        self.cos_max, self.min_quality, self.source_normals = cos_max, min_quality, source_normals
+        self.cos_max, self.min_quality = float(cos_max), float(min_quality)
         k, j = len(X), len(G)
         self.free = np.ones(k, bool) if fixed is None else ~np.asarray(fixed, bool)
         self.made = 0  # moves made
@@ -286,13 +288,13 @@ class Moves:
         order, self.ring_start = _by_key(G.reshape(-1), k)
         self.ring_face = order // 3
         self.n0 = n0 = face_normals(X, G)
-        self.q0 = _quality(X, G, n0) if min_quality > 0 else None
-        self.agreed = None if source_normals is None else np.einsum("ij,ij->i", n0, source_normals) > 0
         # the rules' arrays as `_refused` takes them (empty: not checked)
-        self.agreed_r = np.zeros(0, bool) if self.agreed is None else self.agreed
-        self.normals_r = np.zeros((0, 3)) if source_normals is None else np.ascontiguousarray(source_normals,
-                                                                                               np.float64)
-        self.q0_r = np.zeros(0) if self.q0 is None else self.q0
+        self.q0 = _quality(X, G, n0) if min_quality > 0 else np.zeros(0)
+        if source_normals is None:
+            self.agreed, self.source_normals = np.zeros(0, bool), np.zeros((0, 3))
+        else:
+            self.source_normals = np.ascontiguousarray(source_normals, np.float64)
+            self.agreed = np.einsum("ij,ij->i", n0, self.source_normals) > 0
         self.no_seed = np.zeros(0, np.int32)
         # where each output sample's search of the input starts: its face's input face (a vertex: one of its faces')
         self.src = None if source_faces is None else np.asarray(source_faces, np.int32)
@@ -395,8 +397,8 @@ class Moves:
         old = X[verts].copy()
         for v, dv in move.items():
             X[v] = X[v] + dv
-        if (better is not None and not better(R)) or _refused(X, G, R, self.n0, float(self.cos_max), self.agreed_r,
-                                                                self.normals_r, self.q0_r, float(self.min_quality)):
+        if (better is not None and not better(R)) or _refused(X, G, R, self.n0, self.cos_max, self.agreed,
+                                                                self.source_normals, self.q0, self.min_quality):
             X[verts] = old
             return False
         out.update(X, R)
