@@ -12,7 +12,8 @@ speed: a shared mesh written as a binary PLY (float32, as scans are), then `qemj
 ``--repeats`` times; the medians and the ratios against meshoptimizer. quality: partitioned (2 workers) and in
 core to the same target (``--refit``, ``--share``: each `Partition.refit` and `Partition.share` value), two-way rms and Hausdorff
 (`qemjax.metrics.surface_distance`, 200,000 samples each way, relative to the diagonal) and their ratios
-(``--late every``: also with the memoryless last stretch in every level, not only the last; ``--reduction``:
+(``--late every``: also with the memoryless last stretch in every level, not only the last; ``--slivers every``:
+also with the sliver moves in every level; ``--reduction``:
 each `Partition.reduction` value), with
 the seconds of each run (in this process; the workers warm after the first mesh). scale: meshes made in code (`big_mesh.py`: a bumpy torus,
 binary PLY written in bands) of each size to 1 %, partitioned: seconds, microseconds per input face, peak
@@ -126,20 +127,23 @@ def speed(args, folder: Path) -> None:
 
 
 @contextlib.contextmanager
-def _late_in(late: str):
+def _levels(late: str, slivers: str = "last"):
     """``late="every"``: every level of a partitioned run keeps the method's memoryless last stretch (as
-    before the package left it to the last level: `_partition.run._level_kwargs`), for the comparison."""
+    before the package left it to the last level: `_partition.run._level_kwargs`); ``slivers="every"``: every
+    level keeps the method's sliver moves (the same); for the comparison."""
     from qemjax._partition import run
 
     keep = run._level_kwargs
+    kept = ({"late_memoryless", "volume_weight"} if late == "every" else set()) | (
+        {"sliver_moves"} if slivers == "every" else set())
 
     def every(kwargs, p, last):
         kw, changed = keep(kwargs, p, last)
-        late = {"late_memoryless", "volume_weight"} & changed.keys()
-        kw = {k: v for k, v in kw.items() if k not in late} | {k: kwargs[k] for k in late if k in kwargs}
-        return kw, {k: v for k, v in changed.items() if k not in late}
+        back = kept & changed.keys()
+        kw = {k: v for k, v in kw.items() if k not in back} | {k: kwargs[k] for k in back if k in kwargs}
+        return kw, {k: v for k, v in changed.items() if k not in back}
 
-    if late == "every":
+    if kept:
         run._level_kwargs = every
     try:
         yield
@@ -153,8 +157,8 @@ def quality(args, folder: Path) -> None:
     from qemjax.metrics import surface_distance
 
     rows = []
-    print("| mesh | faces | re-fit | share | memoryless | reduction | rms part./in core | Hausdorff part./in core | partitioned s | in core s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| mesh | faces | re-fit | share | memoryless | sliver moves | reduction | rms part./in core | Hausdorff part./in core | partitioned s | in core s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.meshes:
         if name.startswith("bumpy-sphere-"):  # made in code: qemjax.shapes.bumpy_sphere(N)
             from types import SimpleNamespace
@@ -166,9 +170,10 @@ def quality(args, folder: Path) -> None:
         core = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False)
         t_core = time.perf_counter() - t
         dc = surface_distance((bm.V, bm.F), (core.vertices, core.faces), n_samples=200_000)
-        for refit, share, late, red in itertools.product(args.refit, args.share, args.late, args.reduction):
+        for refit, share, late, red, sl in itertools.product(args.refit, args.share, args.late, args.reduction,
+                                                             args.slivers):
             t = time.perf_counter()
-            with _late_in(late):
+            with _levels(late, sl):
                 part = qemjax.simplify((bm.V, bm.F), ratio=args.ratio, measure=False,
                                        partition=qemjax.Partition(workers=args.workers, refit=refit, share=share,
                                                                   **({"part_faces": args.part_faces} if args.part_faces else {}),
@@ -176,11 +181,12 @@ def quality(args, folder: Path) -> None:
             t_part = time.perf_counter() - t
             dp = surface_distance((bm.V, bm.F), (part.vertices, part.faces), n_samples=200_000)
             r_rms, r_h = dp["rms_rel"] / dc["rms_rel"], dp["hausdorff_rel"] / dc["hausdorff_rel"]
-            print(f"| {name} | {len(bm.F)} → {len(part.faces)} | {refit} | {share} | {late} | {red or 'default'} | "
+            print(f"| {name} | {len(bm.F)} → {len(part.faces)} | {refit} | {share} | {late} | {sl} | {red or 'default'} | "
                   f"{r_rms:.3f} | {r_h:.3f} | "
                   f"{t_part:.1f} | {t_core:.1f} |", flush=True)
             note = f"refit={refit} levels={part.stats['partition']['levels']}" + (f" share={share}" if share != "faces" else "") \
-                + (f" late={late}" if late != "last" else "") + (f" reduction={red:g}" if red else "")
+                + (f" late={late}" if late != "last" else "") + (f" reduction={red:g}" if red else "") \
+                + (f" slivers={sl}" if sl != "last" else "")
             rows += [dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="rms ratio", value=r_rms,
                           seconds=t_part, note=note),
                      dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="hausdorff ratio",
@@ -249,6 +255,8 @@ def main(argv=None):
                     help="quality: Partition(share=...) values")
     ap.add_argument("--late", nargs="+", default=["last"], choices=["last", "every"],
                     help="quality: the memoryless last stretch in the last level only (the package's) or in every level")
+    ap.add_argument("--slivers", nargs="+", default=["last"], choices=["last", "every"],
+                    help="quality: the sliver moves in the last level only (the default) or in every level")
     ap.add_argument("--reduction", type=float, nargs="+", default=[None],
                     help="quality: Partition(reduction=...) values (default: the package's)")
     ap.add_argument("--repeats", type=int, default=3)

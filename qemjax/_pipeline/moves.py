@@ -33,7 +33,11 @@ from .fit_rules import _barycentric_at, _quality
 BARY = np.array([[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5], [1 / 3, 1 / 3, 1 / 3],
                  [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 REFRESH = 64  # stale input distances measured at once, the largest (`Moves.worst`)
-REBUILD = 64  # faces moved since the output's search structure was built before it is built again
+# the output's search structure is built again once more than the larger of REBUILD and a REBUILD_SHARE-th of
+# its faces moved since: the moved faces are measured one by one at each exact search (`Moves.worst`, a few
+# hundred a run), while a build costs as much as searching every face
+REBUILD = 64
+REBUILD_SHARE = 64
 
 
 @njit(cache=True, nogil=True)
@@ -65,13 +69,17 @@ def _by_key(keys, n: int):
 
 
 @njit(cache=True, nogil=True)
-def _on_faces(fa, hit, faces, start, order, extra):
+def _on_faces(fa, hit, faces, start, order, head, link):
     """The samples whose face (``fa``) is among ``faces`` (marked in ``hit``), in order: those each face held
-    when the index (``start``, ``order``: the samples by face) was made, and ``extra``, the samples whose face
-    was set since, kept where their face is marked now."""
-    n = len(extra)
+    when the index (``start``, ``order``: the samples by face) was made, and those its chain (``head``,
+    ``link``: `_chain`) has listed since, each kept where its face is marked now."""
+    n = 0
     for g in faces:
         n += start[g + 1] - start[g]
+        j = head[g]
+        while j >= 0:
+            n += 1
+            j = link[j, 1]
     out = np.empty(n, np.int64)
     k = 0
     for g in faces:
@@ -80,39 +88,64 @@ def _on_faces(fa, hit, faces, start, order, extra):
             if hit[fa[i]]:
                 out[k] = i
                 k += 1
-    for i in extra:
-        if hit[fa[i]]:
-            out[k] = i
-            k += 1
+        j = head[g]
+        while j >= 0:
+            i = link[j, 0]
+            if hit[fa[i]]:
+                out[k] = i
+                k += 1
+            j = link[j, 1]
     return _sorted_unique(out[:k])
+
+
+@njit(cache=True, nogil=True)
+def _chain(fa, rows, listed, head, link, n):
+    """List each sample of ``rows`` whose face (``fa``) is not the one it is listed under (``listed``) in
+    its face's chain: a node (sample, next node) of ``link`` from row ``n`` on, at the chain's ``head``.
+    Returns the nodes used, or -1 when ``link`` is full (nothing listed then)."""
+    need = 0
+    for i in rows:
+        need += fa[i] != listed[i]
+    if n + need > len(link):
+        return -1
+    for i in rows:
+        g = fa[i]
+        if g != listed[i]:
+            listed[i] = g
+            link[n, 0], link[n, 1] = i, head[g]
+            head[g] = n
+            n += 1
+    return n
 
 
 class _ByFace:
     """The input samples by the output face each is measured to (``fa``), so that a move finds the samples
-    of the faces it moved without reading them all: an index made from ``fa``, and the samples whose face
-    was set since (`set`), read beside it; made again when those grow to a sixteenth of the samples."""
+    of the faces it moved without reading them all: an index made from ``fa``, and per face a chain of the
+    samples whose face was set to it since (`set`), read beside it; made again when the chains hold as many
+    nodes as there are samples."""
 
     def __init__(self, fa, faces: int):
         self.faces = faces
+        self.link = np.empty((len(fa), 2), np.int64)
         self.build(fa)
 
     def build(self, fa):
         self.order, self.start = _by_key(fa, self.faces)
-        self.listed = np.zeros(len(fa), bool)
-        self.extra = np.zeros(0, np.int64)
+        self.listed = fa.copy()  # the face each sample is listed under: in the index, or its chain's last
+        self.head = np.full(self.faces, -1, np.int64)
+        self.n = 0
 
     def set(self, fa, rows):
         """After fa[rows] was set."""
-        new = rows[~self.listed[rows]]
-        if len(new):
-            self.listed[new] = True
-            self.extra = np.concatenate([self.extra, new])
-            if 16 * len(self.extra) > len(fa):
-                self.build(fa)
+        n = _chain(fa, rows, self.listed, self.head, self.link, self.n)
+        if n < 0:
+            self.build(fa)
+        else:
+            self.n = n
 
     def on(self, fa, hit, faces):
         """The samples whose face is among ``faces`` (sorted, each marked in ``hit``), in order."""
-        return _on_faces(fa, hit, faces, self.start, self.order, self.extra)
+        return _on_faces(fa, hit, faces, self.start, self.order, self.head, self.link)
 
 
 @njit(cache=True, nogil=True)
@@ -180,26 +213,34 @@ class _Output:
 
     def __init__(self, X, G):
         self.G = G
+        self.stale = np.zeros(len(G), bool)  # the faces moved since the build
+        self.limit = max(REBUILD, len(G) // REBUILD_SHARE)
         self.build(X)
 
     def build(self, X):
         self.B, self.flat, *self.rest = grid(X, self.G)
-        self.stale_list = np.zeros(0, np.int64)  # the faces moved since the build, sorted
+        self.stale[:] = False
+        self.n_stale = 0
 
     def update(self, X, faces):
         """Boxes and slivers of ``faces`` at X (after a move)."""
         self.B[faces] = face_boxes(X, self.G[faces])
         self.flat[faces] = slivers(X, self.G[faces])
 
-    def mark(self, faces):
-        self.stale_list = np.union1d(self.stale_list, faces)
+    def mark(self, X, faces):
+        """After ``faces`` moved for good: built again when too many have (`REBUILD`)."""
+        new = faces[~self.stale[faces]]
+        self.stale[new] = True
+        self.n_stale += len(new)
+        if self.n_stale > self.limit:
+            self.build(X)
 
     def nearest(self, X, P, seed):
         """Exact nearest faces and distances of P on (X, G): the kept structure, then the moved faces."""
-        if not len(self.stale_list):  # nothing moved since the build: on threads
+        if not self.n_stale:  # nothing moved since the build: on threads
             return search(X, self.G, (self.B, self.flat, *self.rest), P, seed)
         f, d2 = query_here(X, self.G, (self.B, self.flat, *self.rest), P, seed)
-        _nearer(P, X, self.G, self.B, self.flat, self.stale_list, f, d2, np.inf)
+        _nearer(P, X, self.G, self.B, self.flat, np.flatnonzero(self.stale), f, d2, np.inf)
         return f, np.sqrt(d2)
 
 
@@ -432,9 +473,7 @@ class Moves:
                 self.by_face.set(self.fa, A)
                 self.Q[rows], self.ga[rows], e[rows], qw[rows] = QR, gR, eR, wR
                 self.s_in, self.s_out, self.sq = s_in1, s_out1, sq1
-                out.mark(R)
-                if len(out.stale_list) > REBUILD:
-                    out.build(X)
+                out.mark(X, R)
                 return True
         X[verts] = old
         out.update(X, R)
