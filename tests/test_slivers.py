@@ -2,7 +2,7 @@
 helpers against float64 references on random triangles; on random meshes, every run they change has fewer
 slivers, a largest distance over the polish's samples (all pairs) no larger than the polish left, a two-way
 rms within the slack of the re-fit's, the same faces and a valid mesh; fixed vertices stay; a batch gives
-simplify's bits; bad values are refused."""
+simplify's bits; bad values are refused; the compiled trial of a move answers as the numpy steps."""
 from __future__ import annotations
 
 import numpy as np
@@ -201,3 +201,106 @@ def test_bad_values_are_refused_and_a_batch_equals_simplify():
                                           dict(target_faces=400, quality_threshold=0.0)])
     assert np.array_equal(both[0].vertices, alone.vertices) and np.array_equal(both[0].faces, alone.faces)
     assert both[0].stats["sliver_moves"] == alone.stats["sliver_moves"]
+
+
+def _attempt_reference(m, move, H, lim, shape=None):
+    """`moves.Moves.attempt` as numpy expressions, one step after another (the compiled `_trial` stands for
+    them): the same answer and the same state after it, bit for bit."""
+    X, G, P, w, out, d, e, qw = m.X, m.G, m.P, m.w, m.out, m.d, m.e, m.qw
+    verts = np.array(sorted(move), np.int64)
+    R = m.ring(verts)
+    old = X[verts].copy()
+    for v, dv in move.items():
+        X[v] = X[v] + dv
+    if shape is not None:
+        mc = _slivers._min_cos(X, G, R)
+        count, worst = int(np.sum(mc > _slivers.COS_SLIVER)), mc.max()
+        better = (count < shape[0] and worst <= shape[1]) if shape[2] else (count <= shape[0] and worst < shape[1])
+    if (shape is not None and not better) or _moves._refused(X, G, R, m.n0, m.cos_max, m.agreed,
+                                                             m.source_normals, m.q0, m.min_quality):
+        X[verts] = old
+        return False
+    out.update(X, R)
+    m.hit[R] = True
+    A = m.by_face.on(m.fa, m.hit, R)
+    m.hit[R] = False
+    fA = m.fa[A]
+    d2A = _moves._own_d2(P, A, X, G, out.flat, fA)
+    far = np.flatnonzero(d2A >= H * H)
+    below = True
+    if len(far):
+        f1, e1 = fA[far], d2A[far]
+        below = _moves._nearer(P[A[far]], X, G, out.B, out.flat, m.ring(np.unique(G[R])), f1, e1, H)
+        fA[far], d2A[far] = f1, e1
+    dA = np.sqrt(d2A)
+    if below and dA.max(initial=0.0) < H:
+        at = m.vrow[verts]
+        rows = np.concatenate([at[at >= 0], len(m.used) + (m.nb * R[:, None] + np.arange(m.nb)).reshape(-1)])
+        nv = len(rows) - m.nb * len(R)
+        QR = np.concatenate([X[m.row_vertex(rows[:nv])], _moves._face_points(X, G, R, _moves.BARY)])
+        gR, eR = m.to_input(QR, rows)
+        wR = np.concatenate([np.zeros(nv), m.face_weights(R)])
+        s_in1 = m.s_in + (_moves._wsum2(w[A], dA) - _moves._wsum2(w[A], d[A]))
+        s_out1 = m.s_out + (_moves._wsum2(wR, eR) - _moves._wsum2(qw[rows], e[rows]))
+        sq1 = m.sq + (_moves._wsum2(wR, np.ones(len(wR))) - _moves._wsum2(qw[rows], np.ones(len(rows))))
+        if eR.max(initial=0.0) < H and sq1 > 0 and s_in1 / m.sw + s_out1 / sq1 <= lim:
+            m.made += 1
+            m.fa[A], d[A], m.version[A] = fA, dA, -1
+            m.by_face.set(m.fa, A)
+            m.Q[rows], m.ga[rows], e[rows], qw[rows] = QR, gR, eR, wR
+            m.s_in, m.s_out, m.sq = s_in1, s_out1, sq1
+            out.mark(X, R)
+            return True
+    X[verts] = old
+    out.update(X, R)
+    return False
+
+
+def _captured_moves(monkeypatch, V, F, target):
+    """The `Moves` a run's sliver moves start from."""
+    import copy
+
+    got = []
+    monkeypatch.setattr(_slivers, "lift_slivers", lambda m, moves: got.append(copy.deepcopy(m)) or 0)
+    qemjax.simplify((V, F), target_faces=target, quality_threshold=0.0)
+    return got[0]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_move_trial_answers_as_the_numpy_steps(monkeypatch, seed):
+    """`Moves.attempt` (one compiled trial, `moves._trial`) against the numpy steps it replaced: random moves
+    of one or two vertices, small and large, with and without the sliver test, accepted and refused; the
+    answer and every kept array after each move, bit for bit, through the output structure's rebuilds."""
+    import copy
+
+    V, F = _mesh(seed)
+    m = _captured_moves(monkeypatch, V, F, 200)
+    assert m.ok
+    monkeypatch.setattr(m.out, "limit", 4)  # built again every few moves
+    ref = copy.deepcopy(m)
+    rng = np.random.default_rng(seed)
+    scale = np.median(np.linalg.norm(m.X[m.G[:, 1]] - m.X[m.G[:, 0]], axis=1))
+    H = m.worst()[2]
+    ref.worst()
+    lim = m.limit(0.05)
+    answers = []
+    for _ in range(300):
+        free = np.flatnonzero(m.free)
+        verts = rng.choice(free, int(rng.integers(1, 3)), replace=False)
+        move = {int(v): rng.normal(size=3) * scale * rng.choice([0.01, 0.1, 0.5]) for v in verts}
+        shape = None
+        if rng.random() < 0.5:
+            R = m.ring(np.array(sorted(move)))
+            mc = _slivers._min_cos(m.X, m.G, R)
+            shape = (int(np.sum(mc > _slivers.COS_SLIVER)) + int(rng.integers(0, 2)), mc.max() + 0.05,
+                     bool(rng.random() < 0.5))
+        h = H * rng.choice([0.5, 1.0, 2.0])
+        want = _attempt_reference(ref, {v: s.copy() for v, s in move.items()}, h, lim, shape)
+        got = m.attempt({v: s.copy() for v, s in move.items()}, h, lim, shape)
+        answers.append(got)
+        assert got == want
+        for name in ("X", "fa", "d", "version", "Q", "ga", "e", "qw"):
+            assert getattr(m, name).tobytes() == getattr(ref, name).tobytes(), name
+        assert (m.s_in, m.s_out, m.sq, m.made) == (ref.s_in, ref.s_out, ref.sq, ref.made)
+        assert m.out.B.tobytes() == ref.out.B.tobytes() and m.out.flat.tobytes() == ref.out.flat.tobytes()
+    assert 10 <= sum(answers) <= 290  # both answers seen often

@@ -4,12 +4,14 @@ turn, its shape, what counts as a sliver)."""
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .._mesh.grid_nearest import slivers
 from .._mesh.pointtri import segment_closest
 from .refit_system import regions
 
 SLIVER_DEG = 10.0  # a face whose smallest angle is below this (degrees) is a sliver
+COS_SLIVER = float(np.cos(np.radians(SLIVER_DEG)))
 
 
 def closest_barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -62,3 +64,27 @@ def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:
     l0, l1 = np.linalg.norm(n0, axis=1), np.linalg.norm(n1, axis=1)
     cos = np.einsum("ij,ij->i", n0, n1) / np.where(l0 * l1 > 0, l0 * l1, 1.0)
     return ((l1 == 0) & (l0 > 0)) | ((l0 > 0) & (cos <= cos_max))
+
+
+@njit(cache=True, nogil=True)
+def _min_cos(X, G, faces):
+    """The largest cosine of each face's three angles (its smallest angle's); 2 for a face with a corner
+    at another."""
+    out = np.empty(len(faces))
+    for t in range(len(faces)):
+        g = faces[t]
+        best = -2.0
+        for k in range(3):
+            a, b, c = G[g, k], G[g, (k + 1) % 3], G[g, (k + 2) % 3]
+            ux, uy, uz = X[b, 0] - X[a, 0], X[b, 1] - X[a, 1], X[b, 2] - X[a, 2]
+            vx, vy, vz = X[c, 0] - X[a, 0], X[c, 1] - X[a, 1], X[c, 2] - X[a, 2]
+            nu = np.sqrt((ux * ux + uy * uy) + uz * uz)
+            nv = np.sqrt((vx * vx + vy * vy) + vz * vz)
+            if nu == 0.0 or nv == 0.0:
+                best = 2.0
+                break
+            cs = ((ux * vx + uy * vy) + uz * vz) / (nu * nv)
+            if cs > best:
+                best = cs
+        out[t] = best
+    return out

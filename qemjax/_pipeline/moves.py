@@ -26,8 +26,9 @@ from numba import njit
 
 from .._mesh.arrays import face_normals
 from .._mesh.box_bounds import face_boxes
-from .._mesh.grid_nearest import _face_d2, _gap, grid, query_here, search, slivers
-from .fit_rules import _barycentric_at, _quality
+from .._mesh.grid_nearest import _face_d2, _gap, _query, grid, query_here, search, slivers, stamps
+from .fit_rules import COS_SLIVER, _barycentric_at, _min_cos, _quality
+from .refit_system import regions
 
 # the output's samples on each face, as barycentric weights (module docstring)
 BARY = np.array([[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5], [1 / 3, 1 / 3, 1 / 3],
@@ -301,6 +302,161 @@ def _face_weights(X, G, faces, nb):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _boxes_at(X, G, R, B, flat):
+    """Boxes and slivers of the faces R at X (`_Output.update`), into B and flat."""
+    GR = np.empty((len(R), 3), np.int64)
+    for t in range(len(R)):
+        GR[t] = G[R[t]]
+    BR, fR = face_boxes(X, GR), slivers(X, GR)
+    for t in range(len(R)):
+        B[R[t]] = BR[t]
+        flat[R[t]] = fR[t]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _largest(a, least):
+    """a.max(initial=least), as numpy takes it: a NaN wins."""
+    top = least
+    for x in a:
+        if x > top or x != x:
+            top = x
+    return top
+
+
+@njit(cache=True, nogil=True)
+def _shaped_better(X, G, R, count0, worst0, strict):
+    """The sliver moves' test on the faces R at the moved positions (`Moves.attempt`)."""
+    mc = _min_cos(X, G, R)
+    count, worst = 0, _largest(mc, -np.inf)
+    for t in range(len(mc)):
+        count += mc[t] > COS_SLIVER
+    if strict:
+        return count < count0 and worst <= worst0
+    return count <= count0 and worst < worst0
+
+
+@njit(cache=True, nogil=True)
+def _trial(X, G, verts, steps, R, shaped, count0, worst0, strict, n0, cos_max, agreed, source_normals, q0,
+           min_quality, oB, oflat, P, fa, hit, start, order, head, link, H, ring_start, ring_face, vrow, nu,
+           W, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0, src, w, d, e, qw, s_in, s_out, sq, sw,
+           lim):
+    """`Moves.attempt`'s test of a move (verts moved by steps; R: the faces at them), compiled: whether
+    it passes, with what the caller keeps when it does (the touched input samples A with their faces and
+    distances, the output's sample rows with their points, faces, distances and weights, the new sums).
+    X and the output's boxes and slivers (oB, oflat) are left moved when it passes, as they were when not.
+    The arithmetic of the numpy expressions it stands for, operation for operation."""
+    old = np.empty((len(verts), 3))
+    for t in range(len(verts)):
+        for k in range(3):
+            old[t, k] = X[verts[t], k]
+            X[verts[t], k] = X[verts[t], k] + steps[t, k]
+    no_i, no_f, no_p = np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3))
+    failed = (False, no_i, no_i, no_f, no_i, no_p, no_i, no_f, no_f, 0.0, 0.0, 0.0)
+    if (shaped and not _shaped_better(X, G, R, count0, worst0, strict)) or _refused(
+            X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality):
+        for t in range(len(verts)):
+            for k in range(3):
+                X[verts[t], k] = old[t, k]
+        return failed
+    _boxes_at(X, G, R, oB, oflat)
+    for g in R:
+        hit[g] = True
+    A = _on_faces(fa, hit, R, start, order, head, link)  # input samples whose nearest face moved
+    for g in R:
+        hit[g] = False
+    # their distance to the nearest face of the moved faces' neighbourhood: an upper bound (their old face
+    # is among these), exact unless a face farther out is nearer (then refreshed when it is the largest)
+    fA = np.empty(len(A), np.int64)
+    for t in range(len(A)):
+        fA[t] = fa[A[t]]
+    d2A = _own_d2(P, A, X, G, oflat, fA)
+    far = np.flatnonzero(d2A >= H * H)
+    below = True
+    if len(far):
+        f1, e1 = fA[far], d2A[far]
+        PA = np.empty((len(far), 3))
+        for t in range(len(far)):
+            PA[t] = P[A[far[t]]]
+        corners = np.empty(3 * len(R), np.int64)
+        for t in range(len(R)):
+            for k in range(3):
+                corners[3 * t + k] = G[R[t], k]
+        below = _nearer(PA, X, G, oB, oflat, _ring(ring_start, ring_face, _sorted_unique(corners)), f1, e1, H)
+        fA[far], d2A[far] = f1, e1
+    dA = np.sqrt(d2A)
+    if below and _largest(dA, 0.0) < H:
+        nb = W.shape[0]
+        nv = 0
+        for v in verts:
+            nv += vrow[v] >= 0
+        rows = np.empty(nv + nb * len(R), np.int64)
+        QR = np.empty((len(rows), 3))
+        seed = np.empty(len(rows) if len(src) else 0, np.int32)
+        r = 0
+        for v in verts:  # the moved vertices' own rows first (those used), a vertex's search from one of its faces'
+            if vrow[v] >= 0:
+                rows[r] = vrow[v]
+                QR[r] = X[v]
+                if len(src):
+                    seed[r] = src[ring_face[ring_start[v]]]
+                r += 1
+        QR[nv:] = _face_points(X, G, R, W)
+        for t in range(len(R)):
+            for b in range(nb):
+                rows[r] = nu + nb * R[t] + b
+                if len(src):
+                    seed[r] = src[R[t]]
+                r += 1
+        # point by point (each point's answer is its own): the first at H or farther fails the move
+        gR, eR = np.empty(len(rows), np.int64), np.empty(len(rows))
+        near = True
+        for r in range(len(rows)):
+            f1, e1 = _query(QR[r:r + 1], V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0 + r,
+                            seed[r:r + 1])
+            gR[r], eR[r] = f1[0], np.sqrt(e1[0])
+            if not eR[r] < H:  # (a NaN fails too, as in numpy's max)
+                near = False
+                break
+        if near:
+            wR = np.zeros(len(rows))
+            wR[nv:] = _face_weights(X, G, R, nb)
+            wA, dOld = np.empty(len(A)), np.empty(len(A))
+            for t in range(len(A)):
+                wA[t], dOld[t] = w[A[t]], d[A[t]]
+            qwR, eOld = np.empty(len(rows)), np.empty(len(rows))
+            for t in range(len(rows)):
+                qwR[t], eOld[t] = qw[rows[t]], e[rows[t]]
+            s_in1 = s_in + (_wsum2(wA, dA) - _wsum2(wA, dOld))
+            s_out1 = s_out + (_wsum2(wR, eR) - _wsum2(qwR, eOld))
+            sq1 = sq + (_wsum2(wR, np.ones(len(wR))) - _wsum2(qwR, np.ones(len(rows))))
+            if sq1 > 0 and s_in1 / sw + s_out1 / sq1 <= lim:
+                return (True, A, fA, dA, rows, QR, gR, eR, wR, s_in1, s_out1, sq1)
+    for t in range(len(verts)):
+        for k in range(3):
+            X[verts[t], k] = old[t, k]
+    _boxes_at(X, G, R, oB, oflat)
+    return failed
+
+
+@njit(cache=True, nogil=True)
+def _onto(x, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0):
+    """(whether found, the point of the input nearest to x (3,)): its nearest face's closest point by
+    Ericson's regions (`fit_rules._barycentric_at`), summed left to right; not found where that face is a
+    sliver (measured by its edges: `Moves.onto_input`)."""
+    P = x.reshape(1, 3)
+    f, _ = _query(P, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0, np.zeros(0, np.int32))
+    out = np.zeros(3)
+    if iflat[f[0]]:
+        return False, out
+    b = np.empty((1, 3))
+    regions(P, V, F, f, b)
+    t0, t1, t2 = F[f[0], 0], F[f[0], 1], F[f[0], 2]
+    for k in range(3):
+        out[k] = (b[0, 0] * V[t0, k] + b[0, 1] * V[t1, k]) + b[0, 2] * V[t2, k]
+    return True, out
+
+
 class Moves:
     """The output's positions X (k,3) (a copy, moved in place) with the distances of both sample sets
     (module docstring). V, F: the input; G (j,3): the output's faces; P (q,3), w (q,): the input's samples
@@ -400,7 +556,11 @@ class Moves:
     def onto_input(self, x):
         """The input's point nearest to x (3,)."""
         V, F = self.V, self.F
-        g, _ = query_here(V, F, self.into, x[None], self.no_seed)  # `search` of one point, without its threads
+        x = np.ascontiguousarray(x, np.float64)
+        found, y = _onto(x, V, F, *self.into, stamps(self.into, 1))
+        if found:
+            return y
+        g, _ = query_here(V, F, self.into, x[None], self.no_seed)  # a sliver: its edges (`_barycentric_at`)
         b = _barycentric_at(x[None], V, F, g.astype(np.int32), self.into[1])[0]
         t = F[g[0]]
         return (b[0] * V[t[0]] + b[1] * V[t[1]]) + b[2] * V[t[2]]  # left to right: any CPU
@@ -427,54 +587,32 @@ class Moves:
         o = int(np.argmax(self.e))
         return ("in", i, d[i]) if d[i] >= self.e[o] else ("out", o, self.e[o])
 
-    def attempt(self, move: dict, H: float, lim: float, better=None, ring=None) -> bool:
+    def attempt(self, move: dict, H: float, lim: float, shape=None, ring=None) -> bool:
         """Make ``move`` ({vertex: step}) when every sample it touches ends below H, the sum of the two mean
-        squares stays within ``lim`` (`limit`), no face breaks the re-fit's rules and, with ``better`` (a test of the
-        faces R at the moved positions), it passes; else leave everything as it was. ``ring``: the faces at the
-        moved vertices (`ring`), where the caller has them."""
-        X, G, P, w, out, d, e, qw = self.X, self.G, self.P, self.w, self.out, self.d, self.e, self.qw
+        squares stays within ``lim`` (`limit`), no face breaks the re-fit's rules and, with ``shape``
+        (count, worst, strict: the sliver moves' test, against the faces' slivers and largest cosine of a
+        smallest angle before), the faces at the moved vertices pass it: with ``strict``, fewer slivers and
+        a smallest angle no smaller; else no more slivers and a larger smallest angle. Else leave
+        everything as it was. ``ring``: the faces at the moved vertices (`ring`), where the caller has them.
+        The test is one compiled pass (`_trial`)."""
         verts = np.array(sorted(move), np.int64)
+        steps = np.array([move[v] for v in verts.tolist()], np.float64).reshape(-1, 3)
         R = self.ring(verts) if ring is None else ring
-        old = X[verts].copy()
-        for v, dv in move.items():
-            X[v] = X[v] + dv
-        if (better is not None and not better(R)) or _refused(X, G, R, self.n0, self.cos_max, self.agreed,
-                                                                self.source_normals, self.q0, self.min_quality):
-            X[verts] = old
+        out, bf = self.out, self.by_face
+        count0, worst0, strict = (0, 0.0, False) if shape is None else shape
+        ok, A, fA, dA, rows, QR, gR, eR, wR, s_in1, s_out1, sq1 = _trial(
+            self.X, self.G, verts, steps, R, shape is not None, int(count0), float(worst0), bool(strict), self.n0,
+            self.cos_max, self.agreed, self.source_normals, self.q0, self.min_quality, out.B, out.flat, self.P,
+            self.fa, self.hit, bf.start, bf.order, bf.head, bf.link, float(H), self.ring_start, self.ring_face,
+            self.vrow, len(self.used), BARY, self.V, self.F, *self.into, stamps(self.into, len(verts) + self.nb * len(R)),
+            self.no_seed if self.src is None else self.src, self.w, self.d, self.e, self.qw, self.s_in, self.s_out,
+            self.sq, self.sw, float(lim))
+        if not ok:
             return False
-        out.update(X, R)
-        self.hit[R] = True
-        A = self.by_face.on(self.fa, self.hit, R)  # input samples whose nearest face moved
-        self.hit[R] = False
-        # their distance to the nearest face of the moved faces' neighbourhood: an upper bound (their old
-        # face is among these), exact unless a face farther out is nearer (then refreshed when it is the
-        # largest: `worst`)
-        fA = self.fa[A]
-        d2A = _own_d2(P, A, X, G, out.flat, fA)
-        far = np.flatnonzero(d2A >= H * H)
-        below = True
-        if len(far):
-            f1, e1 = fA[far], d2A[far]
-            below = _nearer(P[A[far]], X, G, out.B, out.flat, self.ring(np.unique(G[R])), f1, e1, H)
-            fA[far], d2A[far] = f1, e1
-        dA = np.sqrt(d2A)
-        if below and dA.max(initial=0.0) < H:
-            rows = self.rows_of(verts, R)
-            nv = len(rows) - self.nb * len(R)  # the moved vertices' own rows, first
-            QR = np.concatenate([X[self.row_vertex(rows[:nv])], _face_points(X, G, R, BARY)])
-            gR, eR = self.to_input(QR, rows)
-            wR = np.concatenate([np.zeros(nv), self.face_weights(R)])
-            s_in1 = self.s_in + (_wsum2(w[A], dA) - _wsum2(w[A], d[A]))
-            s_out1 = self.s_out + (_wsum2(wR, eR) - _wsum2(qw[rows], e[rows]))
-            sq1 = self.sq + (_wsum2(wR, np.ones(len(wR))) - _wsum2(qw[rows], np.ones(len(rows))))
-            if eR.max(initial=0.0) < H and sq1 > 0 and s_in1 / self.sw + s_out1 / sq1 <= lim:
-                self.made += 1
-                self.fa[A], d[A], self.version[A] = fA, dA, -1  # upper bounds (above)
-                self.by_face.set(self.fa, A)
-                self.Q[rows], self.ga[rows], e[rows], qw[rows] = QR, gR, eR, wR
-                self.s_in, self.s_out, self.sq = s_in1, s_out1, sq1
-                out.mark(X, R)
-                return True
-        X[verts] = old
-        out.update(X, R)
-        return False
+        self.made += 1
+        self.fa[A], self.d[A], self.version[A] = fA, dA, -1  # upper bounds (`_trial`)
+        bf.set(self.fa, A)
+        self.Q[rows], self.ga[rows], self.e[rows], self.qw[rows] = QR, gR, eR, wR
+        self.s_in, self.s_out, self.sq = s_in1, s_out1, sq1
+        out.mark(self.X, R)
+        return True

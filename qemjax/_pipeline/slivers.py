@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .fit_rules import SLIVER_DEG
+from .fit_rules import COS_SLIVER, SLIVER_DEG, _min_cos
 from .moves import Moves
 
 TARGET_DEG = SLIVER_DEG + 0.5  # the smallest angle a fixing step aims at: a margin for the move onto the input
@@ -36,32 +36,7 @@ RMS_SLACK = 0.03  # the two-way rms may rise this much (a fraction) over the re-
 WEAK_STEPS = ((0.125,), (0.5, 0.125))  # partial steps toward the apex and toward the neighbours' mean
 PASSES = 4  # passes over the slivers at most
 TRIES = 6  # moves tried on one sliver in one pass at most
-COS_SLIVER = float(np.cos(np.radians(SLIVER_DEG)))
 COS_TARGET = float(np.cos(np.radians(TARGET_DEG)))
-
-
-@njit(cache=True, nogil=True)
-def _min_cos(X, G, faces):
-    """The largest cosine of each face's three angles (its smallest angle's); 2 for a face with a corner
-    at another."""
-    out = np.empty(len(faces))
-    for t in range(len(faces)):
-        g = faces[t]
-        best = -2.0
-        for k in range(3):
-            a, b, c = G[g, k], G[g, (k + 1) % 3], G[g, (k + 2) % 3]
-            ux, uy, uz = X[b, 0] - X[a, 0], X[b, 1] - X[a, 1], X[b, 2] - X[a, 2]
-            vx, vy, vz = X[c, 0] - X[a, 0], X[c, 1] - X[a, 1], X[c, 2] - X[a, 2]
-            nu = np.sqrt((ux * ux + uy * uy) + uz * uz)
-            nv = np.sqrt((vx * vx + vy * vy) + vz * vz)
-            if nu == 0.0 or nv == 0.0:
-                best = 2.0
-                break
-            cs = ((ux * vx + uy * vy) + uz * vz) / (nu * nv)
-            if cs > best:
-                best = cs
-        out[t] = best
-    return out
 
 
 @njit(cache=True, nogil=True)
@@ -150,21 +125,6 @@ def _shape_of(m: Moves, R) -> tuple[int, float]:
     return int(np.sum(mc > COS_SLIVER)), mc.max()
 
 
-def _better(m: Moves, before: tuple[int, float], strict: bool):
-    """The test a move must pass on the faces R around it (module docstring), against their shape
-    ``before`` (`_shape_of`): with ``strict``, fewer slivers and a smallest angle no smaller; else no more
-    slivers and a larger smallest angle."""
-    count0, worst0 = before
-
-    def better(R):
-        mc1 = _min_cos(m.X, m.G, R)
-        count1 = int(np.sum(mc1 > COS_SLIVER))
-        if strict:
-            return count1 < count0 and mc1.max() <= worst0
-        return count1 <= count0 and mc1.max() < worst0
-    return better
-
-
 def _candidates(m: Moves, g: int) -> tuple[list, dict]:
     """(length, corner, step, strict) of the moves tried on sliver g, in order: the fixing steps, shortest
     first, then the partial ones (module docstring); and the faces at each free corner."""
@@ -213,7 +173,7 @@ def lift_slivers(m: Moves, moves: int) -> int:
                 x1 = m.onto_input(X[v] + step)
                 if v not in shape:
                     shape[v] = _shape_of(m, rings[v])
-                if m.attempt({v: x1 - X[v]}, H, lim, _better(m, shape[v], strict), rings[v]):
+                if m.attempt({v: x1 - X[v]}, H, lim, (*shape[v], strict), rings[v]):
                     stamp[v] = m.made
                     break
         if m.made == before:
