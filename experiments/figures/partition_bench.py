@@ -12,8 +12,8 @@ speed: a shared mesh written as a binary PLY (float32, as scans are), then `qemj
 ``--repeats`` times; the medians and the ratios against meshoptimizer. quality: partitioned (2 workers) and in
 core to the same target (``--refit``, ``--share``: each `Partition.refit` and `Partition.share` value), two-way rms and Hausdorff
 (`qemjax.metrics.surface_distance`, 200,000 samples each way, relative to the diagonal) and their ratios
-(``--late every``: also with the memoryless last stretch in every level, not only the last; ``--slivers every``:
-also with the sliver moves in every level; ``--reduction``:
+(``--late every``: also with the memoryless last stretch in every level, not only the last; ``--slivers last``:
+also with the sliver moves in the last level only; ``--reduction``:
 each `Partition.reduction` value), with
 the seconds of each run (in this process; the workers warm after the first mesh). scale: meshes made in code (`big_mesh.py`: a bumpy torus,
 binary PLY written in bands) of each size to 1 %, partitioned: seconds, microseconds per input face, peak
@@ -127,24 +127,27 @@ def speed(args, folder: Path) -> None:
 
 
 @contextlib.contextmanager
-def _levels(late: str, slivers: str = "last"):
+def _levels(late: str, slivers: str = "every"):
     """``late="every"``: every level of a partitioned run keeps the method's memoryless last stretch (as
-    before the package left it to the last level: `_partition.run._level_kwargs`); ``slivers="every"``: every
-    level keeps the method's sliver moves (the same); for the comparison."""
+    before the package left it to the last level: `_partition.run._level_kwargs`); ``slivers="last"``: the
+    levels before the last run without the method's sliver moves (as the shape term does; the package keeps
+    them in every level); for the comparison."""
     from qemjax._partition import run
 
     keep = run._level_kwargs
-    kept = ({"late_memoryless", "volume_weight"} if late == "every" else set()) | (
-        {"sliver_moves"} if slivers == "every" else set())
+    kept = {"late_memoryless", "volume_weight"} if late == "every" else set()
 
-    def every(kwargs, p, last):
+    def changed_levels(kwargs, p, last):
         kw, changed = keep(kwargs, p, last)
         back = kept & changed.keys()
         kw = {k: v for k, v in kw.items() if k not in back} | {k: kwargs[k] for k in back if k in kwargs}
-        return kw, {k: v for k, v in changed.items() if k not in back}
+        changed = {k: v for k, v in changed.items() if k not in back}
+        if slivers == "last" and not last and getattr(run._method(kwargs), "sliver_moves", 0):
+            kw, changed = kw | {"sliver_moves": 0}, changed | {"sliver_moves": 0}
+        return kw, changed
 
-    if kept:
-        run._level_kwargs = every
+    if kept or slivers == "last":
+        run._level_kwargs = changed_levels
     try:
         yield
     finally:
@@ -186,7 +189,7 @@ def quality(args, folder: Path) -> None:
                   f"{t_part:.1f} | {t_core:.1f} |", flush=True)
             note = f"refit={refit} levels={part.stats['partition']['levels']}" + (f" share={share}" if share != "faces" else "") \
                 + (f" late={late}" if late != "last" else "") + (f" reduction={red:g}" if red else "") \
-                + (f" slivers={sl}" if sl != "last" else "")
+                + (f" slivers={sl}" if sl != "every" else "")
             rows += [dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="rms ratio", value=r_rms,
                           seconds=t_part, note=note),
                      dict(case="quality", mesh=name, faces=len(bm.F), ratio=args.ratio, what="hausdorff ratio",
@@ -255,8 +258,8 @@ def main(argv=None):
                     help="quality: Partition(share=...) values")
     ap.add_argument("--late", nargs="+", default=["last"], choices=["last", "every"],
                     help="quality: the memoryless last stretch in the last level only (the package's) or in every level")
-    ap.add_argument("--slivers", nargs="+", default=["last"], choices=["last", "every"],
-                    help="quality: the sliver moves in the last level only (the default) or in every level")
+    ap.add_argument("--slivers", nargs="+", default=["every"], choices=["every", "last"],
+                    help="quality: the sliver moves in every level (the package's) or in the last level only")
     ap.add_argument("--reduction", type=float, nargs="+", default=[None],
                     help="quality: Partition(reduction=...) values (default: the package's)")
     ap.add_argument("--repeats", type=int, default=3)
