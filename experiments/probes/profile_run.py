@@ -4,6 +4,7 @@ the most time of their own.
 
     python experiments/probes/profile_run.py --mesh armadillo-x16 --ratio 0.01 [--top 25] [--option KEY=VALUE ...]
     python experiments/probes/profile_run.py --mesh cow fertility homer teapot --ratio 0.1 0.01   # summed over the cases
+    python experiments/probes/profile_run.py --mesh armadillo-x16 --ratio 0.01 --partition   # partitioned, in this process
 
 With several meshes and ratios, every case runs once untimed, then all of them under one profile.
 """
@@ -33,6 +34,8 @@ def main() -> None:
     ap.add_argument("--ratio", nargs="+", type=float, default=[0.01])
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--option", nargs="*", default=[], help="KEY=VALUE settings of simplify")
+    ap.add_argument("--partition", action="store_true",
+                    help="a partitioned run with its tasks in this process (Partition(workers=1))")
     args = ap.parse_args()
     import warnings
 
@@ -40,6 +43,8 @@ def main() -> None:
 
     warnings.simplefilter("ignore")
     options = {k: _value(v) for k, v in (o.split("=", 1) for o in args.option)}
+    if args.partition:
+        options["partition"] = qemjax.Partition(workers=1)
     cases = []
     for name in args.mesh:
         m = bench_meshes.load(name)
@@ -56,7 +61,9 @@ def main() -> None:
         s = res.stats
         print(f"{name} @ {r:g}: {s['faces_in']} -> {s['faces_out']} faces, {s['total_s']:.3f} s, re-fit "
               f"{s.get('refit_s') or 0.0:.3f} s, polish moves {s.get('polish_moves')}, sliver moves "
-              f"{s.get('sliver_moves')}, rounds {s.get('rounds')}")
+              f"{s.get('sliver_moves')}, rounds {s.get('rounds')}"
+              + (f", seconds per level {[round(x, 2) for x in s['partition']['seconds_per_level']]}"
+                 if "partition" in s else ""))
     pstats.Stats(profile).sort_stats("tottime").print_stats(args.top)
 
 
