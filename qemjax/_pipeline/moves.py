@@ -225,8 +225,7 @@ class _Output:
 
     def update(self, X, faces):
         """Boxes and slivers of ``faces`` at X (after a move)."""
-        self.B[faces] = face_boxes(X, self.G[faces])
-        self.flat[faces] = slivers(X, self.G[faces])
+        _boxes_at(X, self.G, faces, self.B, self.flat)
 
     def mark(self, X, faces):
         """After ``faces`` moved for good: built again when too many have (`REBUILD`)."""
@@ -337,6 +336,68 @@ def _shaped_better(X, G, R, count0, worst0, strict):
 
 
 @njit(cache=True, nogil=True)
+def _touched(X, G, R, P, fa, hit, start, order, head, link, oB, oflat, ring_start, ring_face, H):
+    """The input samples A whose nearest face is among the moved faces R, with their faces and distances
+    after the move: to their own face, and for those at H or farther, to the nearest face around R (an upper
+    bound: exact unless a face farther out is nearer, then refreshed when it is the largest, `Moves.worst`);
+    and whether every one ended below H (the search stops at the first that does not)."""
+    for g in R:
+        hit[g] = True
+    A = _on_faces(fa, hit, R, start, order, head, link)
+    for g in R:
+        hit[g] = False
+    fA = np.empty(len(A), np.int64)
+    for t in range(len(A)):
+        fA[t] = fa[A[t]]
+    d2A = _own_d2(P, A, X, G, oflat, fA)
+    far = np.flatnonzero(d2A >= H * H)
+    below = True
+    if len(far):
+        f1, e1 = fA[far], d2A[far]
+        PA = np.empty((len(far), 3))
+        for t in range(len(far)):
+            PA[t] = P[A[far[t]]]
+        corners = np.empty(3 * len(R), np.int64)
+        for t in range(len(R)):
+            for k in range(3):
+                corners[3 * t + k] = G[R[t], k]
+        below = _nearer(PA, X, G, oB, oflat, _ring(ring_start, ring_face, _sorted_unique(corners)), f1, e1, H)
+        fA[far], d2A[far] = f1, e1
+    dA = np.sqrt(d2A)
+    return below and _largest(dA, 0.0) < H, A, fA, dA
+
+
+@njit(cache=True, nogil=True)
+def _output_samples(X, G, verts, R, vrow, nu, W, src, ring_start, ring_face):
+    """The output's sample rows a move changes (the moved vertices' own, those used, then W's points of each
+    face of R: `Moves.row_vertex`), their points, where each one's search of the input starts (``src``: the
+    input face of each output face; empty: nowhere) and how many are vertices."""
+    nb = W.shape[0]
+    nv = 0
+    for v in verts:
+        nv += vrow[v] >= 0
+    rows = np.empty(nv + nb * len(R), np.int64)
+    QR = np.empty((len(rows), 3))
+    seed = np.empty(len(rows) if len(src) else 0, np.int32)
+    r = 0
+    for v in verts:  # a vertex's search starts at the input face of one of its faces
+        if vrow[v] >= 0:
+            rows[r] = vrow[v]
+            QR[r] = X[v]
+            if len(src):
+                seed[r] = src[ring_face[ring_start[v]]]
+            r += 1
+    QR[nv:] = _face_points(X, G, R, W)
+    for t in range(len(R)):
+        for b in range(nb):
+            rows[r] = nu + nb * R[t] + b
+            if len(src):
+                seed[r] = src[R[t]]
+            r += 1
+    return rows, QR, seed, nv
+
+
+@njit(cache=True, nogil=True)
 def _trial(X, G, verts, steps, R, shaped, count0, worst0, strict, n0, cos_max, agreed, source_normals, q0,
            min_quality, oB, oflat, P, fa, hit, start, order, head, link, H, ring_start, ring_face, vrow, nu,
            W, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0, src, w, d, e, qw, s_in, s_out, sq, sw,
@@ -360,55 +421,11 @@ def _trial(X, G, verts, steps, R, shaped, count0, worst0, strict, n0, cos_max, a
                 X[verts[t], k] = old[t, k]
         return failed
     _boxes_at(X, G, R, oB, oflat)
-    for g in R:
-        hit[g] = True
-    A = _on_faces(fa, hit, R, start, order, head, link)  # input samples whose nearest face moved
-    for g in R:
-        hit[g] = False
-    # their distance to the nearest face of the moved faces' neighbourhood: an upper bound (their old face
-    # is among these), exact unless a face farther out is nearer (then refreshed when it is the largest)
-    fA = np.empty(len(A), np.int64)
-    for t in range(len(A)):
-        fA[t] = fa[A[t]]
-    d2A = _own_d2(P, A, X, G, oflat, fA)
-    far = np.flatnonzero(d2A >= H * H)
-    below = True
-    if len(far):
-        f1, e1 = fA[far], d2A[far]
-        PA = np.empty((len(far), 3))
-        for t in range(len(far)):
-            PA[t] = P[A[far[t]]]
-        corners = np.empty(3 * len(R), np.int64)
-        for t in range(len(R)):
-            for k in range(3):
-                corners[3 * t + k] = G[R[t], k]
-        below = _nearer(PA, X, G, oB, oflat, _ring(ring_start, ring_face, _sorted_unique(corners)), f1, e1, H)
-        fA[far], d2A[far] = f1, e1
-    dA = np.sqrt(d2A)
-    if below and _largest(dA, 0.0) < H:
-        nb = W.shape[0]
-        nv = 0
-        for v in verts:
-            nv += vrow[v] >= 0
-        rows = np.empty(nv + nb * len(R), np.int64)
-        QR = np.empty((len(rows), 3))
-        seed = np.empty(len(rows) if len(src) else 0, np.int32)
-        r = 0
-        for v in verts:  # the moved vertices' own rows first (those used), a vertex's search from one of its faces'
-            if vrow[v] >= 0:
-                rows[r] = vrow[v]
-                QR[r] = X[v]
-                if len(src):
-                    seed[r] = src[ring_face[ring_start[v]]]
-                r += 1
-        QR[nv:] = _face_points(X, G, R, W)
-        for t in range(len(R)):
-            for b in range(nb):
-                rows[r] = nu + nb * R[t] + b
-                if len(src):
-                    seed[r] = src[R[t]]
-                r += 1
-        # point by point (each point's answer is its own): the first at H or farther fails the move
+    below, A, fA, dA = _touched(X, G, R, P, fa, hit, start, order, head, link, oB, oflat, ring_start, ring_face, H)
+    if below:
+        rows, QR, seed, nv = _output_samples(X, G, verts, R, vrow, nu, W, src, ring_start, ring_face)
+        # the output's points searched one by one (each point's answer is its own): the first at H or
+        # farther fails the move
         gR, eR = np.empty(len(rows), np.int64), np.empty(len(rows))
         near = True
         for r in range(len(rows)):
@@ -420,7 +437,7 @@ def _trial(X, G, verts, steps, R, shaped, count0, worst0, strict, n0, cos_max, a
                 break
         if near:
             wR = np.zeros(len(rows))
-            wR[nv:] = _face_weights(X, G, R, nb)
+            wR[nv:] = _face_weights(X, G, R, W.shape[0])
             wA, dOld = np.empty(len(A)), np.empty(len(A))
             for t in range(len(A)):
                 wA[t], dOld[t] = w[A[t]], d[A[t]]
@@ -537,13 +554,6 @@ class Moves:
         nu = len(self.used)
         rows = np.asarray(rows, np.int64)
         return np.where(rows < nu, -1, (rows - nu) // self.nb)
-
-    def rows_of(self, verts, faces):
-        """The output's sample rows of the vertices ``verts`` (those used), then of every point of ``faces``
-        (`row_vertex`)."""
-        at = self.vrow[verts]
-        points = len(self.used) + (self.nb * faces[:, None] + np.arange(self.nb)).reshape(-1)
-        return np.concatenate([at[at >= 0], points])
 
     def to_input(self, Q, rows):
         """Nearest input faces and distances of the output's samples Q, rows ``rows`` of the kept ones."""
