@@ -220,7 +220,7 @@ def _attempt_reference(m, move, H, lim, shape=None):
                                                              m.source_normals, m.q0, m.min_quality):
         X[verts] = old
         return False
-    out.update(X, R)
+    _moves._boxes_at(X, G, R, out.B, out.flat)
     m.hit[R] = True
     A = m.by_face.on(m.fa, m.hit, R)
     m.hit[R] = False
@@ -252,7 +252,7 @@ def _attempt_reference(m, move, H, lim, shape=None):
             out.mark(X, R)
             return True
     X[verts] = old
-    out.update(X, R)
+    _moves._boxes_at(X, G, R, out.B, out.flat)
     return False
 
 
@@ -304,3 +304,9 @@ def test_the_compiled_move_trial_answers_as_the_numpy_steps(monkeypatch, seed):
         assert (m.s_in, m.s_out, m.sq, m.made) == (ref.s_in, ref.s_out, ref.sq, ref.made)
         assert m.out.B.tobytes() == ref.out.B.tobytes() and m.out.flat.tobytes() == ref.out.flat.tobytes()
     assert 10 <= sum(answers) <= 290  # both answers seen often
+    # the input point nearest a step (`moves._onto`) against the numpy path it replaced
+    for x in m.X[rng.choice(len(m.X), 50)] + rng.normal(size=(50, 3)) * scale:
+        g, _ = _moves.query_here(m.V, m.F, m.into, x[None], m.no_seed)
+        b = _moves._barycentric_at(x[None], m.V, m.F, g.astype(np.int32), m.into[1])[0]
+        t = m.F[g[0]]
+        assert m.onto_input(x).tobytes() == ((b[0] * m.V[t[0]] + b[1] * m.V[t[1]]) + b[2] * m.V[t[2]]).tobytes()

@@ -223,12 +223,9 @@ class _Output:
         self.stale[:] = False
         self.n_stale = 0
 
-    def update(self, X, faces):
-        """Boxes and slivers of ``faces`` at X (after a move)."""
-        _boxes_at(X, self.G, faces, self.B, self.flat)
-
     def mark(self, X, faces):
-        """After ``faces`` moved for good: built again when too many have (`REBUILD`)."""
+        """After ``faces`` moved for good: built again when more than ``limit`` have (the larger of REBUILD
+        and a REBUILD_SHARE-th of the faces)."""
         new = faces[~self.stale[faces]]
         self.stale[new] = True
         self.n_stale += len(new)
@@ -303,7 +300,7 @@ def _face_weights(X, G, faces, nb):
 
 @njit(cache=True, nogil=True)
 def _boxes_at(X, G, R, B, flat):
-    """Boxes and slivers of the faces R at X (`_Output.update`), into B and flat."""
+    """Boxes and slivers of the faces R at X, into the output structure's B and flat (`_Output`)."""
     GR = np.empty((len(R), 3), np.int64)
     for t in range(len(R)):
         GR[t] = G[R[t]]
@@ -458,20 +455,20 @@ def _trial(X, G, verts, steps, R, shaped, count0, worst0, strict, n0, cos_max, a
 
 @njit(cache=True, nogil=True)
 def _onto(x, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0):
-    """(whether found, the point of the input nearest to x (3,)): its nearest face's closest point by
-    Ericson's regions (`fit_rules._barycentric_at`), summed left to right; not found where that face is a
-    sliver (measured by its edges: `Moves.onto_input`)."""
+    """(whether found, the point of the input nearest to x (3,), its face): the nearest face's closest point
+    by Ericson's regions (`fit_rules._barycentric_at`), summed left to right; not found where that face is
+    a sliver (measured by its edges: `Moves.onto_input`)."""
     P = x.reshape(1, 3)
     f, _ = _query(P, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0, np.zeros(0, np.int32))
     out = np.zeros(3)
     if iflat[f[0]]:
-        return False, out
+        return False, out, f[0]
     b = np.empty((1, 3))
     regions(P, V, F, f, b)
     t0, t1, t2 = F[f[0], 0], F[f[0], 1], F[f[0], 2]
     for k in range(3):
         out[k] = (b[0, 0] * V[t0, k] + b[0, 1] * V[t1, k]) + b[0, 2] * V[t2, k]
-    return True, out
+    return True, out, f[0]
 
 
 class Moves:
@@ -567,12 +564,11 @@ class Moves:
         """The input's point nearest to x (3,)."""
         V, F = self.V, self.F
         x = np.ascontiguousarray(x, np.float64)
-        found, y = _onto(x, V, F, *self.into, stamps(self.into, 1))
+        found, y, g = _onto(x, V, F, *self.into, stamps(self.into, 1))
         if found:
             return y
-        g, _ = query_here(V, F, self.into, x[None], self.no_seed)  # a sliver: its edges (`_barycentric_at`)
-        b = _barycentric_at(x[None], V, F, g.astype(np.int32), self.into[1])[0]
-        t = F[g[0]]
+        b = _barycentric_at(x[None], V, F, np.array([g], np.int32), self.into[1])[0]  # a sliver: by its edges
+        t = F[g]
         return (b[0] * V[t[0]] + b[1] * V[t[1]]) + b[2] * V[t[2]]  # left to right: any CPU
 
     def face_weights(self, faces):
@@ -610,11 +606,12 @@ class Moves:
         R = self.ring(verts) if ring is None else ring
         out, bf = self.out, self.by_face
         count0, worst0, strict = (0, 0.0, False) if shape is None else shape
+        first = stamps(self.into, len(verts) + self.nb * len(R))  # the input's searches: one per output row at most
         ok, A, fA, dA, rows, QR, gR, eR, wR, s_in1, s_out1, sq1 = _trial(
             self.X, self.G, verts, steps, R, shape is not None, int(count0), float(worst0), bool(strict), self.n0,
             self.cos_max, self.agreed, self.source_normals, self.q0, self.min_quality, out.B, out.flat, self.P,
             self.fa, self.hit, bf.start, bf.order, bf.head, bf.link, float(H), self.ring_start, self.ring_face,
-            self.vrow, len(self.used), BARY, self.V, self.F, *self.into, stamps(self.into, len(verts) + self.nb * len(R)),
+            self.vrow, len(self.used), BARY, self.V, self.F, *self.into, first,
             self.no_seed if self.src is None else self.src, self.w, self.d, self.e, self.qw, self.s_in, self.s_out,
             self.sq, self.sw, float(lim))
         if not ok:
