@@ -321,12 +321,19 @@ def _largest(a, least):
 
 
 @njit(cache=True, nogil=True)
-def _shaped_better(X, G, R, count0, worst0, strict):
-    """The sliver moves' test on the faces R at the moved positions (`Moves.attempt`)."""
+def shape_of(X, G, R):
+    """(slivers, largest cosine of a smallest angle) of the faces R: what the sliver moves' test compares."""
     mc = _min_cos(X, G, R)
-    count, worst = 0, _largest(mc, -np.inf)
+    count = 0
     for t in range(len(mc)):
         count += mc[t] > COS_SLIVER
+    return count, _largest(mc, -np.inf)
+
+
+@njit(cache=True, nogil=True)
+def _shaped_better(X, G, R, count0, worst0, strict):
+    """The sliver moves' test on the faces R at the moved positions (`Moves.attempt`)."""
+    count, worst = shape_of(X, G, R)
     if strict:
         return count < count0 and worst <= worst0
     return count <= count0 and worst < worst0

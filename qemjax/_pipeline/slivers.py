@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from .fit_rules import COS_SLIVER, SLIVER_DEG, _min_cos
-from .moves import Moves
+from .moves import Moves, shape_of
 
 TARGET_DEG = SLIVER_DEG + 0.5  # the smallest angle a fixing step aims at: a margin for the move onto the input
 RMS_SLACK = 0.03  # the two-way rms may rise this much (a fraction) over the re-fit's, the polish's included
@@ -119,12 +119,6 @@ def _tangential(X, G, R, v):
     return out
 
 
-def _shape_of(m: Moves, R) -> tuple[int, float]:
-    """(slivers, largest cosine of a smallest angle) of the faces R as they are."""
-    mc = _min_cos(m.X, m.G, R)
-    return int(np.sum(mc > COS_SLIVER)), mc.max()
-
-
 def _candidates(m: Moves, g: int) -> tuple[list, dict]:
     """(length, corner, step, strict) of the moves tried on sliver g, in order: the fixing steps, shortest
     first, then the partial ones (module docstring); and the faces at each free corner."""
@@ -172,7 +166,7 @@ def lift_slivers(m: Moves, moves: int) -> int:
             for _, v, step, strict in tries[:TRIES]:
                 x1 = m.onto_input(X[v] + step)
                 if v not in shape:
-                    shape[v] = _shape_of(m, rings[v])
+                    shape[v] = shape_of(X, G, rings[v])
                 if m.attempt({v: x1 - X[v]}, H, lim, (*shape[v], strict), rings[v]):
                     stamp[v] = m.made
                     break
