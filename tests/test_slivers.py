@@ -310,3 +310,82 @@ def test_the_compiled_move_trial_answers_as_the_numpy_steps(monkeypatch, seed):
         b = _moves._barycentric_at(x[None], m.V, m.F, g.astype(np.int32), m.into[1])[0]
         t = m.F[g[0]]
         assert m.onto_input(x).tobytes() == ((b[0] * m.V[t[0]] + b[1] * m.V[t[1]]) + b[2] * m.V[t[2]]).tobytes()
+
+
+def _candidates_reference(m, g):
+    """The sliver moves' candidates as Python built them before `slivers._candidates` was compiled."""
+    X, G = m.X, m.G
+    out, rings = [], {}
+    for v in G[g]:
+        if not m.free[v]:
+            continue
+        R = rings[int(v)] = m.ring([v])
+        for delta, weak in ((_slivers._apex(X, G, g, v), _slivers.WEAK_STEPS[0]),
+                            (_slivers._tangential(X, G, R, v), _slivers.WEAK_STEPS[1])):
+            t = _slivers._fix_step(X, G, g, v, delta, _slivers.COS_TARGET)
+            if t > 0:
+                out.append((t * np.sqrt((delta[0] * delta[0] + delta[1] * delta[1]) + delta[2] * delta[2]),
+                            int(v), t * delta, True))
+            out += [(np.inf, int(v), s * delta, False) for s in weak]
+    out.sort(key=lambda c: (not c[3], c[0]))
+    return out, rings
+
+
+def _lift_reference(m, moves):
+    """`slivers.lift_slivers` as a Python loop of `Moves.attempt`, one try at a time (before its tries were
+    compiled, `slivers._try_sliver`)."""
+    X, G = m.X, m.G
+    start = m.made
+    H = m.worst()[2]
+    lim = m.limit(_slivers.RMS_SLACK)
+    stamp = np.full(len(X), -1, np.int64)
+    tried = np.full(len(G), -2, np.int64)
+    for _ in range(_slivers.PASSES):
+        mc = _slivers._min_cos(X, G, np.arange(len(G)))
+        bad = np.flatnonzero(mc > _slivers.COS_SLIVER)
+        bad = bad[np.argsort(-mc[bad], kind="stable")]
+        before = m.made
+        for g in bad:
+            if m.made - start >= moves:
+                return m.made - start
+            if _slivers._min_cos(X, G, np.array([g]))[0] <= _slivers.COS_SLIVER:
+                continue
+            if stamp[G[m.ring(G[g])]].max() <= tried[g]:
+                continue
+            tried[g] = m.made
+            tries, rings = _candidates_reference(m, g)
+            for _, v, step, strict in tries[:_slivers.TRIES]:
+                x1 = m.onto_input(X[v] + step)
+                if m.attempt({v: x1 - X[v]}, H, lim, (*_moves.shape_of(X, G, rings[v]), strict), rings[v]):
+                    stamp[v] = m.made
+                    break
+        if m.made == before:
+            break
+    return m.made - start
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_sliver_tries_move_as_the_python_loop(monkeypatch, seed):
+    """`lift_slivers` (each sliver's tries compiled: `slivers._try_sliver`, its candidates `_candidates`)
+    against the Python loop of `Moves.attempt` it replaced: the same moves made, every kept array the same
+    bits, through the output structure's rebuilds; the candidates themselves alike on every sliver."""
+    import copy
+
+    lift = _slivers.lift_slivers  # before `_captured_moves` patches it
+    V, F = _mesh(seed)
+    m = _captured_moves(monkeypatch, V, F, 200)
+    assert m.ok
+    monkeypatch.setattr(m.out, "limit", 4)  # built again every few moves
+    bad = np.flatnonzero(_slivers._min_cos(m.X, m.G, np.arange(len(m.G))) > _slivers.COS_SLIVER)
+    assert len(bad) >= 1
+    for g in bad:
+        want, _ = _candidates_reference(m, g)
+        corner, step, strict = _slivers._candidates(m.X, m.G, g, m.free, m.ring_start, m.ring_face)
+        assert [(v, s) for _, v, _, s in want] == list(zip(corner.tolist(), strict.tolist()))
+        assert np.array([c[2] for c in want]).reshape(-1, 3).tobytes() == step.tobytes()
+    ref = copy.deepcopy(m)
+    made = lift(m, 10_000)
+    assert made == _lift_reference(ref, 10_000) and made >= 1
+    for name in ("X", "fa", "d", "version", "Q", "ga", "e", "qw"):
+        assert getattr(m, name).tobytes() == getattr(ref, name).tobytes(), name
+    assert (m.s_in, m.s_out, m.sq, m.made) == (ref.s_in, ref.s_out, ref.sq, ref.made)

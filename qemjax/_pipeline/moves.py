@@ -402,23 +402,30 @@ def _output_samples(X, G, verts, R, vrow, nu, W, src, ring_start, ring_face):
 
 
 @njit(cache=True, nogil=True)
-def _trial(X, G, verts, steps, R, shaped, count0, worst0, strict, n0, cos_max, agreed, source_normals, q0,
-           min_quality, oB, oflat, P, fa, hit, start, order, head, link, H, ring_start, ring_face, vrow, nu,
-           W, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0, src, w, d, e, qw, s_in, s_out, sq, sw,
-           lim):
-    """`Moves.attempt`'s test of a move (verts moved by steps; R: the faces at them), compiled: whether
-    it passes, with what the caller keeps when it does (the touched input samples A with their faces and
-    distances, the output's sample rows with their points, faces, distances and weights, the new sums).
-    X and the output's boxes and slivers (oB, oflat) are left moved when it passes, as they were when not.
-    The arithmetic of the numpy expressions it stands for, operation for operation."""
+def _failed():
+    """`_trial`'s answer for a move that fails."""
+    no_i, no_f, no_p = np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3))
+    return (False, no_i, no_i, no_f, no_i, no_p, no_i, no_f, no_f, 0.0, 0.0, 0.0)
+
+
+@njit(cache=True, nogil=True)
+def _trial(verts, steps, R, count0, worst0, strict, H, lim, stamp0, state):
+    """`Moves.attempt`'s test of a move (verts moved by steps; R: the faces at them; count0 < 0: without the
+    sliver moves' test; ``state``: the rest it reads, `Moves.state`), compiled: whether it passes, with what the caller keeps when it does (the touched
+    input samples A with their faces and distances, the output's sample rows with their points, faces,
+    distances and weights, the new sums). X and the output's boxes and slivers (oB, oflat) are left moved
+    when it passes, as they were when not. The arithmetic of the numpy expressions it stands for, operation
+    for operation."""
+    (X, G, n0, cos_max, agreed, source_normals, q0, min_quality, oB, oflat, P, fa, hit, start, order, head, link,
+     ring_start, ring_face, vrow, nu, W, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, src, w, d, e, qw,
+     s_in, s_out, sq, sw) = state
     old = np.empty((len(verts), 3))
     for t in range(len(verts)):
         for k in range(3):
             old[t, k] = X[verts[t], k]
             X[verts[t], k] = X[verts[t], k] + steps[t, k]
-    no_i, no_f, no_p = np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3))
-    failed = (False, no_i, no_i, no_f, no_i, no_p, no_i, no_f, no_f, 0.0, 0.0, 0.0)
-    if (shaped and not _shaped_better(X, G, R, count0, worst0, strict)) or _refused(
+    failed = _failed()
+    if (count0 >= 0 and not _shaped_better(X, G, R, count0, worst0, strict)) or _refused(
             X, G, R, n0, cos_max, agreed, source_normals, q0, min_quality):
         for t in range(len(verts)):
             for k in range(3):
@@ -611,22 +618,30 @@ class Moves:
         verts = np.array(sorted(move), np.int64)
         steps = np.array([move[v] for v in verts.tolist()], np.float64).reshape(-1, 3)
         R = self.ring(verts) if ring is None else ring
-        out, bf = self.out, self.by_face
-        count0, worst0, strict = (0, 0.0, False) if shape is None else shape
+        count0, worst0, strict = (-1, 0.0, False) if shape is None else shape
         first = stamps(self.into, len(verts) + self.nb * len(R))  # the input's searches: one per output row at most
-        ok, A, fA, dA, rows, QR, gR, eR, wR, s_in1, s_out1, sq1 = _trial(
-            self.X, self.G, verts, steps, R, shape is not None, int(count0), float(worst0), bool(strict), self.n0,
-            self.cos_max, self.agreed, self.source_normals, self.q0, self.min_quality, out.B, out.flat, self.P,
-            self.fa, self.hit, bf.start, bf.order, bf.head, bf.link, float(H), self.ring_start, self.ring_face,
-            self.vrow, len(self.used), BARY, self.V, self.F, *self.into, first,
-            self.no_seed if self.src is None else self.src, self.w, self.d, self.e, self.qw, self.s_in, self.s_out,
-            self.sq, self.sw, float(lim))
-        if not ok:
-            return False
+        passed = _trial(verts, steps, R, int(count0), float(worst0), bool(strict), float(H),
+                        float(lim), first, self.state())
+        if passed[0]:
+            self.commit(R, passed)
+        return bool(passed[0])
+
+    def state(self) -> tuple:
+        """What a move's compiled test (`_trial`) reads besides the move, in its order: made again after
+        each move made (the sums change; the search structures may be rebuilt)."""
+        out, bf = self.out, self.by_face
+        return (self.X, self.G, self.n0, self.cos_max, self.agreed, self.source_normals, self.q0, self.min_quality,
+                out.B, out.flat, self.P, self.fa, self.hit, bf.start, bf.order, bf.head, bf.link, self.ring_start,
+                self.ring_face, self.vrow, len(self.used), BARY, self.V, self.F, *self.into,
+                self.no_seed if self.src is None else self.src, self.w, self.d, self.e, self.qw,
+                float(self.s_in), float(self.s_out), float(self.sq), float(self.sw))
+
+    def commit(self, R, passed) -> None:
+        """Keep a move `_trial` passed (X already moved; R: the faces at the moved vertices)."""
+        _, A, fA, dA, rows, QR, gR, eR, wR, s_in1, s_out1, sq1 = passed
         self.made += 1
         self.fa[A], self.d[A], self.version[A] = fA, dA, -1  # upper bounds (`_trial`)
-        bf.set(self.fa, A)
+        self.by_face.set(self.fa, A)
         self.Q[rows], self.ga[rows], self.e[rows], self.qw[rows] = QR, gR, eR, wR
         self.s_in, self.s_out, self.sq = s_in1, s_out1, sq1
-        out.mark(self.X, R)
-        return True
+        self.out.mark(self.X, R)

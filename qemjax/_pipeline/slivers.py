@@ -29,7 +29,8 @@ import numpy as np
 from numba import njit
 
 from .fit_rules import COS_SLIVER, SLIVER_DEG, _min_cos
-from .moves import Moves, shape_of
+from .._mesh.grid_nearest import stamps
+from .moves import Moves, _failed, _onto, _ring, _trial, shape_of
 
 TARGET_DEG = SLIVER_DEG + 0.5  # the smallest angle a fixing step aims at: a margin for the move onto the input
 RMS_SLACK = 0.03  # the two-way rms may rise this much (a fraction) over the re-fit's, the polish's included
@@ -37,6 +38,7 @@ WEAK_STEPS = ((0.125,), (0.5, 0.125))  # partial steps toward the apex and towar
 PASSES = 4  # passes over the slivers at most
 TRIES = 6  # moves tried on one sliver in one pass at most
 COS_TARGET = float(np.cos(np.radians(TARGET_DEG)))
+MADE, TRIED, ON_SLIVER = 0, 1, 2  # what a sliver's compiled tries ended with (`_try_sliver`)
 
 
 @njit(cache=True, nogil=True)
@@ -119,23 +121,96 @@ def _tangential(X, G, R, v):
     return out
 
 
-def _candidates(m: Moves, g: int) -> tuple[list, dict]:
-    """(length, corner, step, strict) of the moves tried on sliver g, in order: the fixing steps, shortest
-    first, then the partial ones (module docstring); and the faces at each free corner."""
-    X, G = m.X, m.G
-    out, rings = [], {}
-    for v in G[g]:
-        if not m.free[v]:
-            continue
-        R = rings[int(v)] = m.ring([v])
-        for delta, weak in ((_apex(X, G, g, v), WEAK_STEPS[0]), (_tangential(X, G, R, v), WEAK_STEPS[1])):
-            t = _fix_step(X, G, g, v, delta, COS_TARGET)
-            if t > 0:
-                out.append((t * np.sqrt((delta[0] * delta[0] + delta[1] * delta[1]) + delta[2] * delta[2]),
-                            int(v), t * delta, True))
-            out += [(np.inf, int(v), s * delta, False) for s in weak]
-    out.sort(key=lambda c: (not c[3], c[0]))  # stable: ties keep the corners' and directions' order
-    return out, rings
+@njit(cache=True, nogil=True)
+def _add(corner, step, strict, length, n, X, G, g, v, delta, weak):
+    """Append corner v's moves along ``delta`` to the candidates from row n: its fixing step, if one
+    reaches the target, then the partial steps ``weak``; returns the next free row."""
+    t = _fix_step(X, G, g, v, delta, COS_TARGET)
+    if t > 0:
+        corner[n], strict[n] = v, True
+        length[n] = t * np.sqrt((delta[0] * delta[0] + delta[1] * delta[1]) + delta[2] * delta[2])
+        for c in range(3):
+            step[n, c] = t * delta[c]
+        n += 1
+    for s in weak:
+        corner[n] = v
+        for c in range(3):
+            step[n, c] = s * delta[c]
+        n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _candidates(X, G, g, free, ring_start, ring_face):
+    """The moves tried on sliver g, in order (module docstring): the fixing steps, shortest first, then the
+    partial ones, ties in the corners' and directions' order, as (corner, step, strict) arrays."""
+    most = 3 * (2 + len(WEAK_STEPS[0]) + len(WEAK_STEPS[1]))
+    corner = np.empty(most, np.int64)
+    step = np.empty((most, 3))
+    strict = np.zeros(most, np.bool_)
+    length = np.full(most, np.inf)
+    n = np.int64(0)  # (not the literal 0: one compiled `_add`)
+    for k in range(3):
+        v = G[g, k]
+        if free[v]:
+            apex, tangential = _apex(X, G, g, v), _tangential(X, G, _ring(ring_start, ring_face, np.array([v])), v)
+            n = _add(corner, step, strict, length, n, X, G, g, v, apex, WEAK_STEPS[0])
+            n = _add(corner, step, strict, length, n, X, G, g, v, tangential, WEAK_STEPS[1])
+    # a stable sort by (not strict, length), by insertion: the fixing steps first, shortest first
+    order = np.arange(n)
+    for i in range(1, n):
+        j, o = i, order[i]
+        while j > 0:
+            p = order[j - 1]
+            if not ((strict[o] and not strict[p]) or (strict[o] == strict[p] and length[o] < length[p])):
+                break
+            order[j] = p
+            j -= 1
+        order[j] = o
+    return corner[order], step[order], strict[order]
+
+
+@njit(cache=True, nogil=True)
+def _try_sliver(g, first, free, H, lim, stamp, state):
+    """Sliver g's moves (`_candidates`) from the ``first``-th, at most TRIES in all, each put onto the input
+    and tested (`moves._trial`, the faces at its corner as they are), compiled: (what happened: MADE, TRIED
+    (none passed) or ON_SLIVER (the input point nearest to candidate k lies on a sliver face of the input,
+    which `Moves.onto_input` measures by its edges), k, its corner, step and strictness, `_trial`'s answer).
+    ``stamp``: the first of `stamps_needed` search stamps."""
+    (X, G, n0, cos_max, agreed, source_normals, q0, min_quality, oB, oflat, P, fa, hit, start, order, head, link,
+     ring_start, ring_face, vrow, nu, W, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, src, w, d, e, qw,
+     s_in, s_out, sq, sw) = state
+    corner, step, strict = _candidates(X, G, g, free, ring_start, ring_face)
+    passed = _failed()
+    k = first
+    while k < min(TRIES, len(corner)):
+        v = corner[k]
+        x = np.empty(3)
+        for c in range(3):
+            x[c] = X[v, c] + step[k, c]
+        found, y, _ = _onto(x, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp)
+        stamp += 1
+        if not found:
+            return ON_SLIVER, k, v, step[k], strict[k], passed
+        R = _ring(ring_start, ring_face, np.array([v]))
+        count0, worst0 = shape_of(X, G, R)
+        moved = np.empty((1, 3))
+        for c in range(3):
+            moved[0, c] = y[c] - X[v, c]
+        passed = _trial(np.array([v]), moved, R, count0, worst0, strict[k], H, lim, stamp, state)
+        stamp += 1 + len(W) * len(R)
+        if passed[0]:
+            return MADE, k, v, step[k], strict[k], passed
+        k += 1
+    return TRIED, k, -1, np.zeros(3), False, passed
+
+
+def stamps_needed(m: Moves, g: int) -> int:
+    """Search stamps `_try_sliver` takes at most on sliver g: per try one for the point onto the input and one
+    per output sample the move changes."""
+    corners = m.G[g]
+    most = int((m.ring_start[corners + 1] - m.ring_start[corners]).max())
+    return TRIES * (2 + m.nb * most)
 
 
 def lift_slivers(m: Moves, moves: int) -> int:
@@ -144,8 +219,8 @@ def lift_slivers(m: Moves, moves: int) -> int:
         return 0
     X, G = m.X, m.G
     start = m.made
-    H = m.worst()[2]  # the samples' largest distance: no move takes a sample to it
-    lim = m.limit(RMS_SLACK)
+    H = float(m.worst()[2])  # the samples' largest distance: no move takes a sample to it
+    lim = float(m.limit(RMS_SLACK))
     stamp = np.full(len(X), -1, np.int64)  # the move count after each vertex's last move
     tried = np.full(len(G), -2, np.int64)  # the move count when each sliver was last tried
     for _ in range(PASSES):
@@ -161,15 +236,22 @@ def lift_slivers(m: Moves, moves: int) -> int:
             if stamp[G[m.ring(G[g])]].max() <= tried[g]:
                 continue  # nothing around it moved since it was last tried
             tried[g] = m.made
-            tries, rings = _candidates(m, g)
-            shape = {}  # each corner's faces as they are: a move not made leaves them so, bit for bit
-            for _, v, step, strict in tries[:TRIES]:
-                x1 = m.onto_input(X[v] + step)
-                if v not in shape:
-                    shape[v] = shape_of(X, G, rings[v])
-                if m.attempt({v: x1 - X[v]}, H, lim, (*shape[v], strict), rings[v]):
+            k = 0
+            while k < TRIES:
+                what, k, v, step, strict, passed = _try_sliver(
+                    int(g), k, m.free, H, lim, stamps(m.into, stamps_needed(m, g)), m.state())
+                if what == ON_SLIVER:  # this one try in Python, then on from the next
+                    R = m.ring([v])
+                    x1 = m.onto_input(X[v] + step)
+                    if m.attempt({v: x1 - X[v]}, H, lim, (*shape_of(X, G, R), bool(strict)), R):
+                        stamp[v] = m.made
+                        break
+                    k += 1
+                    continue
+                if what == MADE:
+                    m.commit(m.ring([v]), passed)
                     stamp[v] = m.made
-                    break
+                break
         if m.made == before:
             break
     return m.made - start
