@@ -218,3 +218,33 @@ def test_the_compiled_rules_answer_as_the_numpy_expressions(seed):
     n = face_normals(X, G[faces])
     want = np.repeat(0.5 * np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2]) / 7, 7)
     assert np.array_equal(_moves._face_weights(X, G, faces.astype(np.int64), 7), want)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_largest_values_kept_listed_answer_as_numpy(monkeypatch, seed):
+    """`moves._Largest` (the largest distances read from a list kept across moves) against numpy on the
+    whole array, after every change: a few entries at a time raised, lowered, tied (values from a small
+    set) and, on one seed, a NaN; through its rebuilds and prunings (LISTED made small)."""
+    from qemjax._pipeline import moves as _moves
+
+    monkeypatch.setattr(_moves, "LISTED", 16)
+    rng = np.random.default_rng(seed)
+    n = 500
+    a = rng.integers(0, 40, n).astype(float) if seed % 2 else rng.random(n)
+    top = _moves._Largest(a)
+    rebuilt = 0  # the floor moved: built again
+    for step in range(400):
+        pool = np.argsort(-np.nan_to_num(a, nan=np.inf))[:20] if step % 2 else np.arange(n)  # the largest, lowered
+        rows = rng.choice(pool, int(rng.integers(1, 6)), replace=False)
+        a[rows] = (rng.integers(0, 45, len(rows)) if seed % 2 else rng.random(len(rows)) * 1.1) * rng.choice([0.5, 1.0])
+        if seed == 3 and step == 300:
+            a[rows[0]] = np.nan
+        floor = top.floor
+        top.note(rows)
+        assert top.argmax() == int(np.argmax(a))
+        for k in (1, 5, 16):
+            assert top.kth(k) == np.partition(a, n - k)[n - k] or (np.isnan(top.kth(k)) and np.isnan(np.partition(a, n - k)[n - k]))
+        for h in (np.nanmax(a), top.kth(5), -np.inf, 0.3):
+            np.testing.assert_array_equal(top.at_least(h), np.flatnonzero(a >= h))
+        rebuilt += top.floor != floor
+    assert rebuilt >= 3 and len(top.members) <= 8 * 16 + 5

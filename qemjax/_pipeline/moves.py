@@ -34,6 +34,7 @@ from .refit_system import regions
 BARY = np.array([[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5], [1 / 3, 1 / 3, 1 / 3],
                  [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 REFRESH = 64  # stale input distances measured at once, the largest (`Moves.worst`)
+LISTED = 1024  # the largest distances of each sample set kept listed (`_Largest`): a few moves' worth
 # the output's search structure is built again once more than the larger of REBUILD and a REBUILD_SHARE-th of
 # its faces moved since: the moved faces are measured one by one at each exact search (`Moves.worst`, a few
 # hundred a run), while a build costs as much as searching every face
@@ -485,6 +486,77 @@ def _onto(x, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, stamp0):
     return True, out, f[0]
 
 
+class _Largest:
+    """The largest values of an array ``a`` that changes a few entries at a time (`note`), read without
+    scanning it: every index whose value is at least ``floor`` is listed (``members``, with values that fell
+    below since; ``listed`` marks them), so the largest value, the k-th largest and the indices at or above
+    a bound are read from the list. Made again (the LISTED-th largest value the floor) when fewer than
+    needed are at or above the floor, and pruned when it has grown to many times LISTED. Each answer is
+    numpy's on the whole array (np.argmax, np.partition, np.flatnonzero); with a NaN among the listed
+    values, the whole array is read."""
+
+    def __init__(self, a):
+        self.a = a
+        self.build()
+
+    def build(self):
+        a, n = self.a, len(self.a)
+        self.floor = np.partition(a, n - LISTED)[n - LISTED] if n > LISTED else -np.inf
+        self.members = np.flatnonzero(~(a < self.floor))  # (a NaN is listed)
+        self.listed = np.zeros(n, bool)
+        self.listed[self.members] = True
+
+    def note(self, rows):
+        """After a[rows] changed."""
+        rows = np.asarray(rows)
+        new = rows[~(self.a[rows] < self.floor) & ~self.listed[rows]]
+        if len(new):
+            new = np.unique(new)
+            self.listed[new] = True
+            self.members = np.concatenate([self.members, new])
+            if len(self.members) > 8 * LISTED:
+                keep = ~(self.a[self.members] < self.floor)
+                self.listed[self.members[~keep]] = False
+                self.members = self.members[keep]
+
+    def _above(self, need: int):
+        """The listed indices at or above the floor and their values, at least ``need`` of them (built again
+        if fewer); None when a value is NaN."""
+        for _ in range(2):
+            values = self.a[self.members]
+            if np.isnan(values).any():
+                return None
+            keep = values >= self.floor
+            if np.count_nonzero(keep) >= min(need, len(self.a)):
+                return self.members[keep], values[keep]
+            self.build()
+        raise AssertionError("a fresh list holds LISTED values at or above its floor")
+
+    def argmax(self) -> int:
+        """np.argmax(a): the first index of the largest value."""
+        got = self._above(1)
+        if got is None:
+            return int(np.argmax(self.a))
+        rows, values = got
+        return int(rows[values == values.max()].min())
+
+    def kth(self, k: int) -> float:
+        """The k-th largest value, as np.partition gives it (k ≤ LISTED, k < len(a))."""
+        got = self._above(k)
+        if got is None:
+            return np.partition(self.a, len(self.a) - k)[len(self.a) - k]
+        values = got[1]
+        return np.partition(values, len(values) - k)[len(values) - k]
+
+    def at_least(self, h: float):
+        """np.flatnonzero(a >= h)."""
+        got = self._above(1) if h >= self.floor else None
+        if got is None:
+            return np.flatnonzero(self.a >= h)
+        rows, values = got
+        return np.sort(rows[values >= h])
+
+
 class Moves:
     """The output's positions X (k,3) (a copy, moved in place) with the distances of both sample sets
     (module docstring). V, F: the input; G (j,3): the output's faces; P (q,3), w (q,): the input's samples
@@ -537,6 +609,7 @@ class Moves:
         self.fa, self.d = self.out.nearest(X, P, seed0)
         self.by_face = _ByFace(self.fa, j)
         self.version = np.zeros(len(P), np.int64)  # the move count when each d was measured (exact then)
+        self.top_d, self.top_e = _Largest(self.d), _Largest(self.e)
         self.qw = np.concatenate([np.zeros(len(used)), self.face_weights(np.arange(j))])
         self.sw, self.sq = _wsum2(w, np.ones(len(w))), _wsum2(self.qw, np.ones(len(self.qw)))  # left to right
         self.s_in, self.s_out = _wsum2(w, self.d), _wsum2(self.qw, self.e)
@@ -593,18 +666,20 @@ class Moves:
         """The farthest sample: ('in', i, distance) or ('out', i, distance); stale input distances measured."""
         d, version, fa = self.d, self.version, self.fa
         while True:
-            i = int(np.argmax(d))
+            i = self.top_d.argmax()
             if version[i] == self.made:
                 break
             # the stale ones among the REFRESH largest, measured at once (the REFRESH-th largest value is the
             # same whichever way a partition orders ties), and always the largest itself
-            edge = np.partition(d, len(d) - REFRESH)[len(d) - REFRESH] if len(d) > REFRESH else -np.inf
-            top = np.flatnonzero((d >= edge) & (version != self.made))
+            edge = self.top_d.kth(REFRESH) if len(d) > REFRESH else -np.inf
+            top = self.top_d.at_least(edge)
+            top = top[version[top] != self.made]
             f1, d1 = self.out.nearest(self.X, self.P[top], fa[top].astype(np.int32))
             self.s_in += _wsum2(self.w[top], d1) - _wsum2(self.w[top], d[top])
             fa[top], d[top], version[top] = f1, d1, self.made
+            self.top_d.note(top)
             self.by_face.set(fa, top)
-        o = int(np.argmax(self.e))
+        o = self.top_e.argmax()
         return ("in", i, d[i]) if d[i] >= self.e[o] else ("out", o, self.e[o])
 
     def attempt(self, move: dict, H: float, lim: float, shape=None, ring=None) -> bool:
@@ -642,6 +717,8 @@ class Moves:
         self.made += 1
         self.fa[A], self.d[A], self.version[A] = fA, dA, -1  # upper bounds (`_trial`)
         self.by_face.set(self.fa, A)
+        self.top_d.note(A)
         self.Q[rows], self.ga[rows], self.e[rows], self.qw[rows] = QR, gR, eR, wR
+        self.top_e.note(rows)
         self.s_in, self.s_out, self.sq = s_in1, s_out1, sq1
         self.out.mark(self.X, R)

@@ -69,8 +69,8 @@ def polish(m: Moves, moves: int) -> int:
         if H <= 0:
             break
         # the samples at the largest distance: a move must take every one of them below it
-        top_in = np.flatnonzero(m.d >= H)
-        top_out = np.flatnonzero(m.e >= H)
+        top_in = m.top_d.at_least(H)
+        top_out = m.top_e.at_least(H)
         rf, rv = m.row_face(top_out), m.row_vertex(top_out)
         top_faces = {int(m.fa[t]) for t in top_in} | {int(f) for f in rf[rf >= 0]}
         top_verts = {int(v) for v in rv[rv >= 0]}
