@@ -1,10 +1,11 @@
 """Where a warm `simplify`'s time goes, function by function: one untimed call (compiles), then one under
 cProfile; prints the run's stats (total and re-fit seconds, polish and sliver moves) and the functions with
-the most time of their own.
+the most time of their own (``--sort cumulative``: qemjax's functions with the most time under them).
 
     python experiments/probes/profile_run.py --mesh armadillo-x16 --ratio 0.01 [--top 25] [--option KEY=VALUE ...]
     python experiments/probes/profile_run.py --mesh cow fertility homer teapot --ratio 0.1 0.01   # summed over the cases
     python experiments/probes/profile_run.py --mesh armadillo-x16 --ratio 0.01 --partition   # partitioned, in this process
+    python experiments/probes/profile_run.py --mesh armadillo-x16 --ratio 0.01 --partition --sort cumulative   # by stage
 
 With several meshes and ratios, every case runs once untimed, then all of them under one profile.
 """
@@ -33,6 +34,8 @@ def main() -> None:
     ap.add_argument("--mesh", nargs="+", default=["armadillo-x16"])
     ap.add_argument("--ratio", nargs="+", type=float, default=[0.01])
     ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--sort", default="tottime", choices=["tottime", "cumulative"],
+                    help="the functions by their own time, or by the time under them (the stages' shares)")
     ap.add_argument("--option", nargs="*", default=[], help="KEY=VALUE settings of simplify")
     ap.add_argument("--partition", action="store_true",
                     help="a partitioned run with its tasks in this process (Partition(workers=1))")
@@ -64,7 +67,11 @@ def main() -> None:
               f"{s.get('sliver_moves')}, rounds {s.get('rounds')}"
               + (f", seconds per level {[round(x, 2) for x in s['partition']['seconds_per_level']]}"
                  if "partition" in s else ""))
-    pstats.Stats(profile).sort_stats("tottime").print_stats(args.top)
+    stats = pstats.Stats(profile).sort_stats(args.sort)
+    if args.sort == "cumulative":
+        stats.print_stats("qemjax", args.top)  # (a stage's share: its callers' lines are the stages)
+    else:
+        stats.print_stats(args.top)
 
 
 if __name__ == "__main__":
