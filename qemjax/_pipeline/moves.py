@@ -412,11 +412,11 @@ def _failed():
 @njit(cache=True, nogil=True)
 def _trial(verts, steps, R, count0, worst0, strict, H, lim, stamp0, state):
     """`Moves.attempt`'s test of a move (verts moved by steps; R: the faces at them; count0 < 0: without the
-    sliver moves' test; ``state``: the rest it reads, `Moves.state`), compiled: whether it passes, with what the caller keeps when it does (the touched
-    input samples A with their faces and distances, the output's sample rows with their points, faces,
-    distances and weights, the new sums). X and the output's boxes and slivers (oB, oflat) are left moved
-    when it passes, as they were when not. The arithmetic of the numpy expressions it stands for, operation
-    for operation."""
+    sliver moves' test; ``state``: the rest it reads, `Moves.state`), compiled: whether it passes, with what
+    the caller keeps when it does (the touched input samples A with their faces and distances, the output's
+    sample rows with their points, faces, distances and weights, the new sums). X and the output's boxes and
+    slivers (oB, oflat) are left moved when it passes, as they were when not. The arithmetic of the numpy
+    expressions it stands for, operation for operation."""
     (X, G, n0, cos_max, agreed, source_normals, q0, min_quality, oB, oflat, P, fa, hit, start, order, head, link,
      ring_start, ring_face, vrow, nu, W, V, F, iB, iflat, ilo, ih, idims, istart, ifaces, imark, src, w, d, e, qw,
      s_in, s_out, sq, sw) = state
