@@ -202,9 +202,10 @@ class Partition:
     retries: how often a task whose worker died is run again.
     measure: measure the distance of the output from every input vertex and face centroid, part by part.
     refit: which levels re-fit their output to their input, for a method that re-fits (the default):
-        ``"all"``, or ``"last"`` (the levels before it skip it: about a quarter less work per part; closer
-        to the input on the subdivided armadillo, farther on a bumpy sphere: docs/benchmarks.md,
-        "Partitioned runs").
+        ``"last"``, or ``"all"``. The levels before the last leave a mesh that the next level simplifies
+        again, and the last level fits the output to the input itself (``refit_input_faces``): their own
+        re-fits, polish and sliver moves took most of a level's work and did not bring the output closer
+        (docs/benchmarks.md, "Partitioned runs").
     share: how a level before the last splits its faces among its groups: ``"faces"``, in proportion to the
         faces each reads; or ``"cost"``, a common contraction cost: a few groups spread over the mesh run
         first in proportion, the median of the largest cost they reached becomes every group's
@@ -222,7 +223,7 @@ class Partition:
     scratch: str | os.PathLike | None = None
     retries: int = 2
     measure: bool = True
-    refit: str = "all"
+    refit: str = "last"
     share: str = "faces"
 
     def __post_init__(self):

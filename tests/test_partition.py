@@ -135,7 +135,7 @@ def test_levels_before_the_last_leave_out_what_a_run_s_end_is_for(in_process):
     """The memoryless last stretch (with its volume term) and the shape term: the default's, not classic's."""
     from qemjax._partition.run import _level_kwargs
 
-    p, late = Partition(), {"late_memoryless": 0, "volume_weight": 0}  # its volume term goes with it
+    p, late = Partition(refit="all"), {"late_memoryless": 0, "volume_weight": 0}  # its volume term goes with it
     shape = {"quality_threshold": 0.0}
     off = late | shape
     assert _level_kwargs({}, p, last=False) == (off, off)  # the default switches late and shapes its rounds
@@ -149,8 +149,8 @@ def test_levels_before_the_last_leave_out_what_a_run_s_end_is_for(in_process):
     assert _level_kwargs({"schedule": None}, p, last=False)[1] == off
     kw, changed = _level_kwargs({"method.late_memoryless": 3, "method.refit": 1}, Partition(refit="last"), last=False)
     assert kw == changed == off | {"refit": 0}  # the dotted names would have won over the flat ones
-    settings = in_process.stats["partition"]["settings_per_level"]
-    assert settings[:-1] == [off] * (len(settings) - 1) and settings[-1] == {}
+    settings = in_process.stats["partition"]["settings_per_level"]  # the default: only the last level re-fits
+    assert settings[:-1] == [off | {"refit": 0}] * (len(settings) - 1) and settings[-1] == {}
 
 
 def test_a_volume_term_runs_partitioned():
@@ -161,7 +161,7 @@ def test_a_volume_term_runs_partitioned():
                         partition=Partition(part_faces=1000, workers=1))
     assert len(r.faces) == round(0.05 * len(m.faces)) and r.stats["partition"]["levels"] >= 2
     assert r.stats["partition"]["settings_per_level"][0] == {"late_memoryless": 0, "volume_weight": 0,
-                                                             "quality_threshold": 0.0}
+                                                             "quality_threshold": 0.0, "refit": 0}
 
 
 def test_the_last_level_fits_to_the_input_itself(mesh, in_process):
@@ -206,6 +206,42 @@ def test_resumed_run_reuses_the_parts_written(mesh, scratch, two_workers):
     assert digest(again) == digest(two_workers)
     first = two_workers.stats["partition"]
     assert again.stats["partition"]["reused"] == sum(first["groups_per_level"]) - 2
+
+
+def test_a_worker_s_share_of_the_cores_caps_its_threads(monkeypatch):
+    from qemjax._mesh import threads
+
+    monkeypatch.setattr(threads, "_cores", lambda: 4)
+    assert threads.count() == 4
+    with threads.limited(1):
+        assert threads.count() == 1
+        with threads.limited(None):  # no share given: the one around it holds
+            assert threads.count() == 1
+    with threads.limited(2):
+        assert threads.count() == 2
+        with threads.limited(8):  # never more than the cores
+            assert threads.count() == 4
+    assert threads.count() == 4
+    # the local runner's share: one core each while every worker runs, all of them for a level's one task
+    assert [execute.share(2, n) for n in (56, 2, 1)] == [2, 2, 4]
+    assert [execute.share(4, n) for n in (14, 3, 1)] == [1, 1, 4]
+    assert execute.share(8, 8) == 1
+    running, most, lock = [0], [0], threading.Lock()
+
+    def item(i):
+        with lock:
+            running[0] += 1
+            most[0] = max(most[0], running[0])
+        time.sleep(0.01)
+        with lock:
+            running[0] -= 1
+        return i * i
+
+    for n in (1, 2):  # within a share, no more items at once than it; the answers in order
+        most[0] = 0
+        with threads.limited(n):
+            assert threads.blocks(item, range(9)) == [i * i for i in range(9)]
+        assert most[0] <= n
 
 
 def test_other_inputs_or_settings_start_afresh(tmp_path):

@@ -3,16 +3,18 @@
 writes its own rows or returns its own answer, so a result is the same bits on any number of threads."""
 from __future__ import annotations
 
+import contextlib
 import os
 from concurrent.futures import ThreadPoolExecutor
 
 MAX_THREADS = 4  # threads at most: a query's blocks gain little past it and would hold their memory at once
 
 _POOL = None
+_CAP = None  # `limited`: this process's share of the cores while others share them too
 
 
-def count() -> int:
-    """The cores this process may use, at most MAX_THREADS."""
+def _cores() -> int:
+    """The cores this process may run on, at most MAX_THREADS."""
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
@@ -20,11 +22,31 @@ def count() -> int:
     return max(1, min(MAX_THREADS, cores))
 
 
+def count() -> int:
+    """The threads work here may use: the cores this process may run on, at most MAX_THREADS, and at most
+    the share `limited` sets."""
+    return max(1, min(_cores(), _CAP)) if _CAP else _cores()
+
+
+@contextlib.contextmanager
+def limited(n: int | None):
+    """Within it, `count` is at most n (None: no change): a partition worker's share of the cores, where
+    worker processes run tasks side by side (threads beyond a share only take turns on the same cores)."""
+    global _CAP
+    old = _CAP
+    _CAP = int(n) if n else old
+    try:
+        yield
+    finally:
+        _CAP = old
+
+
 def pool() -> ThreadPoolExecutor:
-    """The threads `blocks` runs on, made once (a new pool per call costs more than a small query)."""
+    """The threads `blocks` runs on, made once (a new pool per call costs more than a small query); as many
+    as the cores, whatever `limited` says when it is made (`blocks` hands it no more items than `count`)."""
     global _POOL
     if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=count(), thread_name_prefix="qemjax")
+        _POOL = ThreadPoolExecutor(max_workers=_cores(), thread_name_prefix="qemjax")
     return _POOL
 
 
@@ -42,9 +64,14 @@ def blocks(fn, items) -> list:
     items = list(items)
     if len(items) <= 1:
         return [fn(item) for item in items]
-    if len(items) <= count():
+    n = count()
+    if n == 1:
+        return [fn(item) for item in items]
+    if len(items) <= n:
         rest = [pool().submit(fn, item) for item in items[1:]]
         return [fn(items[0])] + [r.result() for r in rest]
+    if n < _cores():  # a share (`limited`): n at a time
+        return [r for k in range(0, len(items), n) for r in blocks(fn, items[k:k + n])]
     return list(pool().map(fn, items))
 
 

@@ -11,9 +11,10 @@ import sys
 import threading
 from typing import Iterator
 
+from .._mesh import threads as _threads
+from .._options import Partition
 from . import task as _task
 from . import worker as _worker
-from .._options import Partition
 
 
 class TaskError(RuntimeError):
@@ -45,6 +46,14 @@ def _worker_env() -> dict:
     for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         env.setdefault(name, "1")
     return env
+
+
+def share(workers: int, tasks: int) -> int:
+    """The threads each of a level's ``tasks`` may use on ``workers`` local worker processes: the cores
+    (`_mesh.threads.count`) over the tasks that run at once, at least one. A level of many tasks runs one
+    thread per worker (more would only take turns on the same cores); the last level's one group gets every
+    core for its re-fit's searches."""
+    return max(1, _threads.count() // max(1, min(workers, tasks)))
 
 
 class LocalRunner(Runner):
@@ -101,8 +110,9 @@ class LocalRunner(Runner):
 
     def map(self, name, specs):
         todo, done = queue.Queue(), queue.Queue()
+        cap = share(self.workers, len(specs))
         for i, spec in enumerate(specs):
-            todo.put((i, spec, 0))
+            todo.put((i, spec | {"threads": cap}, 0))
         threads = [threading.Thread(target=self._serve, args=(k, todo, done, name), daemon=True)
                    for k in range(min(self.workers, len(specs)))]
         for t in threads:

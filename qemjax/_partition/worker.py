@@ -39,6 +39,7 @@ def main() -> None:
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)
     inp = sys.stdin.buffer
+    from .._mesh import threads
     from . import task
     # what every task needs, imported while the client is still reading the input
     from .._pipeline import api, stages  # noqa: F401
@@ -49,7 +50,9 @@ def main() -> None:
         except EOFError:
             return
         try:
-            send(out, (True, getattr(task, name)(spec)))
+            with threads.limited(spec.get("threads")):  # this task's share of the cores (`execute`)
+                result = getattr(task, name)(spec)
+            send(out, (True, result))
         except Exception as exc:  # the task's error goes back to the client, which raises it there
             send(out, (False, f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
 

@@ -1,0 +1,61 @@
+"""Where a partitioned run's time goes, level by level: one `simplify` of a shared or subdivided mesh written
+as a binary PLY (as `figures/partition_bench.py speed` reads it), from the file, with the run's
+`stats["partition"]`: seconds per level, groups and faces per level, reading and cutting the input
+(``scatter_s``), the measured distance (``measure_s``), the largest worker's memory.
+
+    python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 2
+    python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 1 --option refit=all
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules and figures/
+sys.path[:0] = [str(EXPERIMENTS), str(EXPERIMENTS / "figures")]
+
+from partition_bench import shared_ply  # noqa: E402
+
+
+def _value(text: str):
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--mesh", default="armadillo-x64")
+    ap.add_argument("--ratio", type=float, default=0.01)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--option", nargs="*", default=[], help="KEY=VALUE settings of Partition")
+    args = ap.parse_args()
+    import qemjax
+
+    warnings.simplefilter("ignore")
+    options = {k: _value(v) for k, v in (o.split("=", 1) for o in args.option)}
+    with tempfile.TemporaryDirectory() as tmp:
+        src, n = shared_ply(args.mesh, Path(tmp))
+        t = time.perf_counter()
+        res = qemjax.simplify(str(src), ratio=args.ratio,
+                              partition=qemjax.Partition(workers=args.workers, **options), progress=False)
+        total = time.perf_counter() - t
+    p = res.stats["partition"]
+    print(f"{args.mesh} ({n} faces) -> {len(res.faces)} faces, {args.workers} workers, {options or 'defaults'}: "
+          f"{total:.1f} s from the file")
+    print("| level | groups | faces out | seconds |\n|---|---|---|---|")
+    for k, (g, f, s) in enumerate(zip(p["groups_per_level"], p["faces_per_level"], p["seconds_per_level"]), 1):
+        print(f"| {k} | {g} | {f} | {s:.1f} |")
+    print(f"reading and cutting the input {p['scatter_s']:.1f} s, measured distance {p['measure_s']:.1f} s, "
+          f"largest worker {p['peak_rss_workers'] / 2**30:.2f} GiB")
+
+
+if __name__ == "__main__":
+    main()
