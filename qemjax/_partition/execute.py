@@ -36,8 +36,9 @@ class Runner:
 
 
 def _worker_env() -> dict:
-    """A worker's environment: one compute thread (the workers, not threads inside one, share the cores;
-    JAX and numba give the same bits with any thread count)."""
+    """A worker's environment: one compute thread for numba, XLA and BLAS (the workers, not threads inside
+    one, share the cores; JAX and numba give the same bits with any thread count). qemjax's own threads
+    (`_mesh.threads`) take the share each task is sent (`share`)."""
     env = dict(os.environ)
     env.setdefault("NUMBA_NUM_THREADS", "1")
     flags = env.get("XLA_FLAGS", "")
