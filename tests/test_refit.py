@@ -267,6 +267,37 @@ def test_a_batchs_refits_run_side_by_side_with_the_same_bits(bumpy, monkeypatch)
     assert all(np.array_equal(a.vertices, b.vertices) for a, b in zip(alone, again))
 
 
+@pytest.mark.parametrize("thread", [False, True])
+def test_an_input_side_made_beforehand_gives_the_same_bits(bumpy, thread):
+    """`refit.InputSide` (what a partitioned run's last level makes on a thread beside its rounds): the
+    re-fit with the polish and sliver moves, its samples and seeds equal those made inside `refit`, bit for
+    bit, with one part (a partitioned run's) and with the input's parts (the labels a plain run gives); made
+    without the moves' search structure, the moves make their own; and an error making it is raised where
+    the re-fit asks for it."""
+    V, F = (np.asarray(a) for a in bumpy)
+    r = qemjax.simplify((V, F), target_faces=60, refit=0)
+    X, G, src = r.vertices, r.faces, r.source_faces
+    cos = float(np.cos(np.radians(60.0)))
+    labels = (V[:, 0] > 0).astype(np.int32)  # two labels, as parts of the input would give
+    for part, source, moves in ((None, None, True), (labels, src, True), (labels, src, False)):
+        kw = dict(polish=8, sliver_moves=8, min_quality=0.1)
+        want_kept, got_kept = [], []
+        want = _refit.refit(V, F, X, G, 2, cos, part, source, sampled=want_kept, **kw)
+        side = _refit.InputSide(lambda: (V, F), part=part, moves=moves, thread=thread)
+        got = _refit.refit(None, None, X, G, 2, cos, part, source, sampled=got_kept, side=side, **kw)
+        assert np.array_equal(got, want) and not np.array_equal(got, X)
+        assert len(got_kept) == len(want_kept) == 2
+        for a, b in zip(got_kept[0] + (got_kept[1],), want_kept[0] + (want_kept[1],)):
+            assert np.array_equal(a, b)
+        assert (side.get().into is not None) == moves and side.get().samples is not None
+
+    def fails():
+        raise OSError("a part file went missing")
+    side = _refit.InputSide(fails, thread=thread)
+    with pytest.raises(OSError, match="went missing"):
+        _refit.refit(None, None, X, G, 1, cos, side=side)
+
+
 def test_the_record_keeps_the_contractions_positions(bumpy):
     """A replay rebuilds the contraction phase: its last level is the run without the re-fit."""
     plain = qemjax.simplify(bumpy, target_faces=200, refit=0)

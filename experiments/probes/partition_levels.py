@@ -5,15 +5,20 @@ as a binary PLY (as `figures/partition_bench.py speed` reads it), from the file,
 
     python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 2
     python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 1 --option refit=all
-"""
+    PYTHONPATH=/tmp/old python experiments/probes/partition_levels.py   # another version (a `git worktree`)
+
+It ends with a hash of the output's vertices and faces, to compare versions or worker counts."""
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
 import tempfile
 import time
 import warnings
 from pathlib import Path
+
+import numpy as np
 
 EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules and figures/
 sys.path[:0] = [str(EXPERIMENTS), str(EXPERIMENTS / "figures")]
@@ -55,6 +60,9 @@ def main() -> None:
         print(f"| {k} | {g} | {f} | {s:.1f} |")
     print(f"reading and cutting the input {p['scatter_s']:.1f} s, measured distance {p['measure_s']:.1f} s, "
           f"largest worker {p['peak_rss_workers'] / 2**30:.2f} GiB")
+    digest = hashlib.sha256(np.ascontiguousarray(res.vertices).tobytes() + np.ascontiguousarray(res.faces).tobytes())
+    print(f"output sha256 {digest.hexdigest()[:16]} (vertices and faces: the same bits from two versions, "
+          "or with other workers)")
 
 
 if __name__ == "__main__":

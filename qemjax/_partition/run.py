@@ -221,7 +221,9 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         faces = np.array([part["faces"] for part in manifest["parts"]], np.int64)
         borders = None
         levels, first = [], True
-        refits = bool(getattr(_method(kwargs), "refit", 0))
+        method = _method(kwargs)
+        refits = bool(getattr(method, "refit", 0))
+        moves = bool(getattr(method, "polish", 0) or getattr(method, "sliver_moves", 0))  # after the re-fit
         while True:
             t_level = time.perf_counter()
             stalled = bool(levels) and levels[-1]["faces_out"] > 0.9 * levels[-1]["faces_in"]
@@ -241,7 +243,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                      for k, g in enumerate(groups)]
             refit_to = _refit_to(manifest, folder, p, groups, last, first, refits)
             if refit_to is not None:
-                specs[0]["refit_to"] = refit_to
+                specs[0] |= dict(refit_to=refit_to, refit_moves=moves)
             cost = None
             if p.share == "cost" and not last and len(groups) > 1:
                 cost, specs = _common_cost(runner, specs, p, progress, f"level {len(levels) + 1} pilots")

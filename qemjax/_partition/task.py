@@ -87,9 +87,16 @@ def run_group(spec: dict) -> dict:
         return done
     t0 = time.perf_counter()
     from .._pipeline.api import simplify  # JAX and numba: only in the worker
+    from .._pipeline.refit import InputSide
     from .._pipeline.stages import REFIT_TO, SEED
     from .carry import Carry
 
+    side = None
+    if spec.get("refit_to"):  # the last level fits its output to the input's parts (`run._refit_to`): they
+        # are read, with what the re-fit makes of them alone, on a thread beside this level's own work (its
+        # rounds keep one core busy)
+        parts = spec["refit_to"]
+        side = InputSide(lambda: pieces.stitch(parts)[:2], moves=spec.get("refit_moves", True), thread=True)
     V, F, gid, border, Q = pieces.stitch(spec["inputs"], carried=True)
     UV = pieces.stitch_uv(spec["inputs"]) if spec.get("uv") else None
     if spec["locks"] == "border":
@@ -107,8 +114,8 @@ def run_group(spec: dict) -> dict:
     if mask.any():
         kw["locked"] = mask
     carry = kw[SEED] = Carry(Vc, Q, spec["unit"], exports=bool(spec.get("carry_out")))
-    if spec.get("refit_to"):  # the last level fits its output to the input's parts (`run._refit_to`)
-        kw[REFIT_TO] = pieces.stitch(spec["refit_to"])[:2]
+    if side is not None:
+        kw[REFIT_TO] = side
     Q = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -564,11 +564,12 @@ class Moves:
     vertices that stay; ``source_normals`` (j,3): the normal of the input face each output face continues
     (None: not checked); ``seeds`` (q,): an output face near each input sample (the re-fit's last
     attachment; -1: none) and ``source_faces`` (j,): that input face of each output face, where the
-    searches start (the same answers, found sooner). ``ok``: whether there is anything to move (some free
+    searches start (the same answers, found sooner); ``into``: `grid` of V and F where the caller made it
+    (`refit.InputSide`). ``ok``: whether there is anything to move (some free
     vertex, samples of weight on both sides)."""
 
     def __init__(self, V, F, X, G, P, w, cos_max, fixed=None, source_normals=None, min_quality=0.0,
-                 seeds=None, source_faces=None):
+                 seeds=None, source_faces=None, into=None):
         self.X = X = np.array(X, np.float64)
         self.V = V = np.ascontiguousarray(V, np.float64)
         self.F = F = np.ascontiguousarray(F, np.int64)
@@ -601,7 +602,7 @@ class Moves:
         self.vrow = np.full(k, -1, np.int64)
         self.vrow[used] = np.arange(len(used))
         self.Q = np.concatenate([X[used], _face_points(X, G, np.arange(j), BARY)])
-        self.into = grid(V, F)  # the input's structure: it never moves
+        self.into = grid(V, F) if into is None else into  # the input's structure: it never moves
         self.ga, self.e = self.to_input(self.Q, np.arange(len(self.Q)))
         self.out = _Output(X, G)
         # input samples → output, exact (the re-fit's faces, where given, start each search)

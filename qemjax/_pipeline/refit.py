@@ -29,7 +29,9 @@ held by the caller.
 """
 from __future__ import annotations
 
+import threading
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -37,7 +39,7 @@ from numba import njit
 from .._mesh.arrays import face_normals
 from .._mesh import fixed_order as _fixed
 from .._mesh.box_bounds import row_bounds
-from .._mesh.grid_nearest import nearest, slivers
+from .._mesh.grid_nearest import grid, nearest, slivers
 from .._mesh.spd_solve import solve_csr
 from .fit_rules import _barycentric_at, _quality, _turned
 from .refit_system import accumulate, finish, layout
@@ -121,6 +123,65 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
     return finish(indptr, indices, data, lam), rhs
 
 
+class _Prepared(NamedTuple):
+    """What `InputSide` made: the input (V float64, F int64), its unit frame (centre, unit) and positions in it
+    (Vn), its samples with their parts (`samples`; None: not made) and its search structure
+    (`_mesh.grid_nearest.grid` of Vn; None: not made)."""
+    V: np.ndarray
+    F: np.ndarray
+    centre: np.ndarray
+    unit: float
+    Vn: np.ndarray
+    samples: tuple | None
+    into: tuple | None
+
+
+class InputSide:
+    """The input's side of a re-fit: the surface fitted to and what `refit` computes of it alone (its unit
+    frame, its samples, and for the moves after the fit its search structure), made once. ``make()``
+    returns (V, F); ``part``: a part label per input vertex (None: one part), the labels the samples take.
+    With ``thread``, they are made on a thread of their own from the start, while the caller runs the
+    rounds (which keep one core busy, not two): the re-fit then finds them ready. The same values either
+    way; `refit` waits for them (`get`), and an error on the thread is raised there."""
+
+    def __init__(self, make, part=None, moves: bool = True, thread: bool = False):
+        self._make, self._part, self._moves = make, part, moves
+        self._done, self._error = None, None
+        self._thread = threading.Thread(target=self._run, name="qemjax-input-side", daemon=True) if thread else None
+        if self._thread is not None:
+            self._thread.start()
+
+    def _run(self):
+        try:
+            V, F = self._make()
+            V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+            centre, unit = unit_frame(V)
+            Vn = (V - centre) / unit
+            ok = np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))
+            part = np.zeros(len(V), np.int32) if self._part is None else np.asarray(self._part, np.int32)
+            made = samples(Vn, F, part) if ok else None
+            into = grid(np.ascontiguousarray(Vn), np.ascontiguousarray(F)) if ok and self._moves and len(F) else None
+            self._done = _Prepared(V, F, centre, unit, Vn, made, into)
+        except BaseException as e:  # noqa: BLE001 - raised again where the re-fit asks for them
+            self._error = e
+        self._make = None
+
+    def get(self) -> _Prepared:
+        """What was made (made here, now, where no thread started it)."""
+        if self._thread is not None:
+            self._thread.join()
+        elif self._done is None and self._error is None:
+            self._run()
+        if self._error is not None:
+            raise self._error
+        return self._done
+
+    @property
+    def one_part(self) -> bool:
+        """Whether the samples were labelled as one part."""
+        return self._part is None
+
+
 def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, float]:
     """(centre (3,), unit): the centre of V's bounding box and its largest extent (no vertices: 0 and 1).
     Work in this frame keeps squared distances and areas finite at any scale (1e-100 or 1e100 mesh units).
@@ -132,7 +193,8 @@ def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, 
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
           part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
           fixed: np.ndarray | None = None, sampled: list | None = None, min_quality: float = 0.0,
-          polish: int = 0, sliver_moves: int = 0, report: dict | None = None) -> np.ndarray:
+          polish: int = 0, sliver_moves: int = 0, report: dict | None = None,
+          side: InputSide | None = None) -> np.ndarray:
     """Positions X (k,3) of the output faces G (j,3) re-fitted to the input (V, F) in ``rounds`` rounds
     (module docstring); float64, the input's units. ``part``: a part label per input vertex and
     ``source_faces``: the input face each output face continues (None: one part). ``fixed`` (k,) bool:
@@ -145,18 +207,26 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     turned face's is when it would take the face's 2·area / longest² below it and below what it was.
     ``polish``: then at most that many moves of the minimax polish (`_pipeline.polish`), under the same
     rules; ``sliver_moves``: then at most that many moves of slivers' corners (`_pipeline.slivers`);
-    ``report``: a dict that gets the numbers made as ``polish_moves`` and ``sliver_moves``."""
+    ``report``: a dict that gets the numbers made as ``polish_moves`` and ``sliver_moves``. ``side``: an
+    `InputSide` of the input, whose V and F then stand for ``V`` and ``F`` (made once, perhaps already)."""
     X0 = np.array(X, np.float64)
     G = np.asarray(G, np.int64)
-    V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
-    centre, unit = unit_frame(V)
+    pre = None
+    if side is not None:
+        pre = side.get()
+        V, F, centre, unit, Vn = pre.V, pre.F, pre.centre, pre.unit, pre.Vn
+    else:
+        V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+        centre, unit = unit_frame(V)
     if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
         return X0
     X = (X0 - centre) / unit
-    Vn = (V - centre) / unit
+    if pre is None:
+        Vn = (V - centre) / unit
     after = polish > 0 or sliver_moves > 0  # moves after the re-fit (`moves`), which take its samples
     kept = sampled if sampled is not None else ([] if after else None)
-    Y = _fit(Vn, F, X, G, rounds, cos_max, part, source_faces, fixed, kept, min_quality)
+    made = None if pre is None else (pre.samples, side.one_part)
+    Y = _fit(Vn, F, X, G, rounds, cos_max, part, source_faces, fixed, kept, min_quality, made)
     if after and rounds > 0 and kept:
         from .moves import Moves
         from .polish import polish as _polish
@@ -164,7 +234,8 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
 
         ns = None if source_faces is None else face_normals(Vn, F[np.asarray(source_faces, np.int64)])
         m = Moves(Vn, F, Y, G, *kept[0], cos_max, fixed, ns, min_quality,
-                  seeds=kept[1] if len(kept) > 1 else None, source_faces=source_faces)
+                  seeds=kept[1] if len(kept) > 1 else None, source_faces=source_faces,
+                  into=None if pre is None else pre.into)
         made = (_polish(m, polish), lift_slivers(m, sliver_moves))
         Y = m.X
         if sampled is not None and len(sampled) > 1:  # seeds nearer the moved output's faces (same answers)
@@ -176,16 +247,22 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
     return np.where(moved[:, None], out, X0)
 
 
-def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None, min_quality=0.0) -> np.ndarray:
-    """`refit` in the unit frame."""
+def _fit(V, F, X, G, rounds, cos_max, part, source_faces, fixed, sampled=None, min_quality=0.0,
+         made=None) -> np.ndarray:
+    """`refit` in the unit frame. ``made``: (the input's samples, whether they were labelled as one part)
+    from an `InputSide`, taken where the fit labels them so (None: made here)."""
     src = None if source_faces is None else F[np.asarray(source_faces, np.int64)]  # each output face's input face
     ns = None if src is None else face_normals(V, src)  # its normal
-    if part is None or src is None:
+    one = part is None or src is None
+    if one:
         part, gpart = np.zeros(len(V), np.int32), np.zeros(len(G), np.int32)
     else:
         part = np.asarray(part, np.int32)  # labels of parts: fewer than the vertices
         gpart = part[src[:, 0]]
-    P, w, spart = samples(V, F, part)
+    if made is not None and made[0] is not None and made[1] == one:
+        P, w, spart = made[0]
+    else:
+        P, w, spart = samples(V, F, part)
     if sampled is not None:
         sampled.append((P, w))
     k = len(X)

@@ -177,7 +177,8 @@ class Job(NamedTuple):
     attrs: Any = None
     tracker: Any = None
     locks: Any = None  # `_locks.Locks` (geo is then the run's renumbered geometry), or None
-    refit_to: Any = None  # (V, F) the re-fit fits the output to instead of geo's (`REFIT_TO`), or None
+    refit_to: Any = None  # the surface the re-fit fits the output to instead of geo's (`REFIT_TO`): (V, F) or
+    # a `refit.InputSide`; or None
 
 
 def setup(method, scheduler, topology, attributes, progress, settings: dict, measure=None) -> Setup:
@@ -506,10 +507,14 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
                 wedges = (appearance["wedge_faces"], appearance["wedge_vertex"], appearance["uv"])
         # the surface fitted to: the run's input, its parts and the input face each output face continues;
         # or another one (`REFIT_TO`), whole
-        V, F, part, source = ((g.V, g.F, g.parts[1], mesh.source_faces) if job.refit_to is None
-                              else (*job.refit_to, None, None))
+        side = job.refit_to if isinstance(job.refit_to, _refit.InputSide) else None
+        if job.refit_to is None:
+            V, F, part, source = g.V, g.F, g.parts[1], mesh.source_faces
+        else:
+            V, F = job.refit_to if side is None else side.get()[:2]
+            part = source = None
         task = RefitTask(V, F, mesh.vertices, mesh.faces, rounds if refits else 0, setup.cos_max, part, source,
-                         held, setup.measures, setup.min_quality, wedges, setup.polish, setup.sliver_moves)
+                         held, setup.measures, setup.min_quality, wedges, setup.polish, setup.sliver_moves, side)
         if later is None:
             vout, seconds, distance, uv = task()
             mesh = mesh._replace(vertices=vout)
@@ -597,6 +602,7 @@ class RefitTask(NamedTuple):
     wedges: tuple | None = None  # kept UVs: (wedge_faces, wedge_vertex, uv), moved with the positions
     polish: int = 0  # moves of the minimax polish after the re-fit at most (`_pipeline.polish`)
     sliver_moves: int = 0  # moves of slivers' corners after the polish at most (`_pipeline.slivers`)
+    side: Any = None  # V and F's `refit.InputSide`, made beforehand (None: `refit` makes what it needs)
 
     def __call__(self) -> tuple[np.ndarray, float, dict, np.ndarray | None]:
         """(positions, re-fit seconds, the distance stats: `measure.distance`, or all None, the UVs moved
@@ -609,7 +615,7 @@ class RefitTask(NamedTuple):
             X = _refit.refit(self.V, self.F, self.X, self.G, self.rounds, self.cos_max, self.part,
                              self.source_faces, fixed=self.fixed, sampled=sampled if self.measure else None,
                              min_quality=self.min_quality, polish=self.polish,
-                             sliver_moves=self.sliver_moves, report=report)
+                             sliver_moves=self.sliver_moves, report=report, side=self.side)
             if self.wedges is not None:
                 uv = _refit.carry_uv(self.X, X, self.G, *self.wedges)
         refit_s = time.perf_counter() - t

@@ -52,7 +52,7 @@ def _quality(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z):
     return twice_area / longest2 if longest2 > 0 else np.float32(0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kept_quality(VQ, F, alive, off, cnt, pool, a, b, x, least, cap=np.float32(1.0)):
     """The smallest 2·area / longest² (float32) of the live faces at a or b that do not hold both, with
     their corner a or b at x (VQ (n, ≥3) float32 positions; x (3,) float32), among those that end lower

@@ -134,7 +134,7 @@ def _key(kbits, idx, local, salt):
     return (np.int64(kbits[idx]) << 32) | np.int64(h)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # once per selected pair: inlined, the loop passes it no bundles of arrays
 def _rules(a, b, nf, x, faces, mesh, limits, seams, locks, scratch, apex, s):
     """The rule pair (a, b) with nf faces breaks (0: none), as `parallel.StagedRound.validate` decides it in
     manifold mode: coincident faces after the contraction, then the part rule, then the link condition
