@@ -272,8 +272,8 @@ def test_an_input_side_made_beforehand_gives_the_same_bits(bumpy, thread):
     """`refit.InputSide` (what a partitioned run's last level makes on a thread beside its rounds): the
     re-fit with the polish and sliver moves, its samples and seeds equal those made inside `refit`, bit for
     bit, with one part (a partitioned run's) and with the input's parts (the labels a plain run gives); made
-    without the moves' search structure, the moves make their own; and an error making it is raised where
-    the re-fit asks for it."""
+    without the moves' search structure, the moves make their own; an input without extent leaves the
+    positions as they are; and an error making it is raised where the re-fit asks for it."""
     V, F = (np.asarray(a) for a in bumpy)
     r = qemjax.simplify((V, F), target_faces=60, refit=0)
     X, G, src = r.vertices, r.faces, r.source_faces
@@ -290,6 +290,9 @@ def test_an_input_side_made_beforehand_gives_the_same_bits(bumpy, thread):
         for a, b in zip(got_kept[0] + (got_kept[1],), want_kept[0] + (want_kept[1],)):
             assert np.array_equal(a, b)
         assert (side.get().into is not None) == moves and side.get().samples is not None
+
+    flat = _refit.InputSide(lambda: (np.zeros_like(V), F), thread=thread)  # no extent: nothing to fit to
+    assert np.array_equal(_refit.refit(None, None, X, G, 1, cos, side=flat), X)
 
     def fails():
         raise OSError("a part file went missing")

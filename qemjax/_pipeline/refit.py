@@ -156,11 +156,13 @@ class InputSide:
             V, F = self._make()
             V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
             centre, unit = unit_frame(V)
-            Vn = (V - centre) / unit
-            ok = np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))
-            part = np.zeros(len(V), np.int32) if self._part is None else np.asarray(self._part, np.int32)
-            made = samples(Vn, F, part) if ok else None
-            into = grid(np.ascontiguousarray(Vn), np.ascontiguousarray(F)) if ok and self._moves and len(F) else None
+            made = into = Vn = None
+            if np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre)):  # else `refit` fits nothing
+                Vn = (V - centre) / unit
+                part = np.zeros(len(V), np.int32) if self._part is None else np.asarray(self._part, np.int32)
+                made = samples(Vn, F, part)
+                if self._moves and len(F):
+                    into = grid(np.ascontiguousarray(Vn), np.ascontiguousarray(F))
             self._done = _Prepared(V, F, centre, unit, Vn, made, into)
         except BaseException as e:  # noqa: BLE001 - raised again where the re-fit asks for them
             self._error = e
@@ -225,8 +227,8 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
         Vn = (V - centre) / unit
     after = polish > 0 or sliver_moves > 0  # moves after the re-fit (`moves`), which take its samples
     kept = sampled if sampled is not None else ([] if after else None)
-    made = None if pre is None else (pre.samples, side.one_part)
-    Y = _fit(Vn, F, X, G, rounds, cos_max, part, source_faces, fixed, kept, min_quality, made)
+    Y = _fit(Vn, F, X, G, rounds, cos_max, part, source_faces, fixed, kept, min_quality,
+             None if pre is None else (pre.samples, side.one_part))
     if after and rounds > 0 and kept:
         from .moves import Moves
         from .polish import polish as _polish

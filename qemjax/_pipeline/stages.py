@@ -93,8 +93,9 @@ def _resolve_target(m: int, target_faces, ratio, max_error, bounded: bool = Fals
 # state, the MeshInput the model would start from) -> the vertex state the run starts from in place of the
 # model's own (the quadrics carried from the level before); the model's own is not built beside it
 SEED = "_seed"
-# a setting only a partitioned run's last level passes (`_partition.task`): (V, F), the surface the re-fit, its
-# polish and sliver moves fit the output to in place of the run's own input (which is the levels' output there)
+# a setting only a partitioned run's last level passes (`_partition.task`): the surface the re-fit, its polish
+# and sliver moves fit the output to in place of the run's own input (which is the levels' output there), as
+# (V, F) or as a `refit.InputSide` (made on a thread beside the rounds)
 REFIT_TO = "_refit_to"
 
 
