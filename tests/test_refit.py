@@ -240,7 +240,8 @@ def test_a_batchs_refits_run_side_by_side_with_the_same_bits(bumpy, monkeypatch)
     """`simplify_cells` leaves each cell's re-fit to `stages.refit_all`, which runs them on a pool of
     threads (with two or more cores): every result equals its `simplify` alone bit for bit, with its own
     ``refit_s``, and the re-fits ran off the calling thread; re-fits of large inputs run one at a time on
-    the calling thread, with the same bits."""
+    the calling thread, with the same bits. Re-fits to one input share what is made of it alone
+    (`refit.InputSide`)."""
     import os
     import threading
 
@@ -248,11 +249,13 @@ def test_a_batchs_refits_run_side_by_side_with_the_same_bits(bumpy, monkeypatch)
 
     cfgs = [dict(ratio=r) for r in (0.03, 0.05, 0.1, 0.2)] + [dict(ratio=0.05, refit=0)]
     alone = [qemjax.simplify(bumpy, **c) for c in cfgs]
-    ran_on, call = [], stages.RefitTask.__call__
+    ran_on, sides, call = [], [], stages.RefitTask.__call__
     monkeypatch.setattr(stages.RefitTask, "__call__", lambda task: (ran_on.append(threading.get_ident()),
-                                                                    call(task))[1])
+                                                                    sides.append(task.side), call(task))[2])
     together = qemjax.simplify_batch(bumpy, cfgs)
     assert together[0].stats["batch"]["size"] == 5 and len(ran_on) == 4  # refit=0: no task
+    # one input, one side: its samples and search structure made once for the four
+    assert sides[0] is not None and all(side is sides[0] for side in sides)
     for a, b in zip(alone, together):
         assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
     assert all(r.stats["refit_s"] > 0 for r in together[:4]) and together[4].stats["refit_s"] == 0

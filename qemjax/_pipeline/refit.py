@@ -141,12 +141,14 @@ class InputSide:
     frame, its samples, and for the moves after the fit its search structure), made once. ``make()``
     returns (V, F); ``part``: a part label per input vertex (None: one part), the labels the samples take.
     With ``thread``, they are made on a thread of their own from the start, while the caller runs the
-    rounds (which keep one core busy, not two): the re-fit then finds them ready. The same values either
-    way; `refit` waits for them (`get`), and an error on the thread is raised there."""
+    rounds (which keep one core busy, not two): the re-fit then finds them ready. Without, the first re-fit
+    to ask makes them (re-fits on threads may share one side: `stages.refit_all`). The same values either
+    way; `refit` waits for them (`get`), and an error making them is raised there."""
 
     def __init__(self, make, part=None, moves: bool = True, thread: bool = False):
         self._make, self._part, self._moves = make, part, moves
         self._done, self._error = None, None
+        self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._run, name="qemjax-input-side", daemon=True) if thread else None
         if self._thread is not None:
             self._thread.start()
@@ -172,8 +174,10 @@ class InputSide:
         """What was made (made here, now, where no thread started it)."""
         if self._thread is not None:
             self._thread.join()
-        elif self._done is None and self._error is None:
-            self._run()
+        else:
+            with self._lock:
+                if self._done is None and self._error is None:
+                    self._run()
         if self._error is not None:
             raise self._error
         return self._done

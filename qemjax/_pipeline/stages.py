@@ -633,8 +633,12 @@ def refit_all(later: list) -> None:
     assembly (`refit_system`) and solver release the GIL, as numpy does (a batch of 64 cow re-fits: `experiments/figures/sweep_bench.py
     --grid distinct`). A
     re-fit of a large input (``_REFIT_ALONE`` faces or more) runs by itself: its nearest search already
-    uses the cores, and side by side the large ones would hold their memory at once."""
+    uses the cores, and side by side the large ones would hold their memory at once. Re-fits to the same
+    input (a batch's cells of one mesh share its geometry) share what is made of the input alone
+    (`refit.InputSide`: its samples and search structure, made once; the first to ask counts its seconds)."""
     from .._mesh import threads
+
+    later = _shared_sides(later)
 
     def run(item):
         res, task = item
@@ -647,6 +651,26 @@ def refit_all(later: list) -> None:
     for item in later:
         if len(item[1].F) >= _REFIT_ALONE:
             run(item)
+
+
+def _shared_sides(later: list) -> list:
+    """``later``'s (result, `RefitTask`) items, those that re-fit to the same input (V, F and part labels, the
+    same arrays) given one `refit.InputSide` between them."""
+    groups: dict = {}
+    for k, (_, task) in enumerate(later):
+        if task.rounds and task.side is None:
+            groups.setdefault((id(task.V), id(task.F), id(task.part)), []).append(k)
+    out = list(later)
+    for ks in groups.values():
+        if len(ks) < 2:
+            continue
+        first = later[ks[0]][1]
+        side = _refit.InputSide(lambda V=first.V, F=first.F: (V, F), part=first.part,
+                                moves=any(later[k][1].polish or later[k][1].sliver_moves for k in ks))
+        for k in ks:
+            res, task = later[k]
+            out[k] = (res, task._replace(side=side))
+    return out
 
 
 def _above_target_message(faces: int, target: int, stop: str, blocked: dict, nonmanifold: int,
