@@ -125,8 +125,8 @@ def _system(Ps, sw, X, G, f, col, lay, lam):
 
 class _Prepared(NamedTuple):
     """What `InputSide` made: the input (V float64, F int64), its unit frame (centre, unit) and positions in it
-    (Vn), its samples with their parts (`samples`; None: not made) and its search structure
-    (`_mesh.grid_nearest.grid` of Vn; None: not made)."""
+    (Vn; None where the frame is of no use, `_in_frame`), its samples with their parts (`samples`; None: not
+    made) and its search structure (`_mesh.grid_nearest.grid` of Vn; None: not made)."""
     V: np.ndarray
     F: np.ndarray
     centre: np.ndarray
@@ -157,10 +157,9 @@ class InputSide:
         try:
             V, F = self._make()
             V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
-            centre, unit = unit_frame(V)
-            made = into = Vn = None
-            if np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre)):  # else `refit` fits nothing
-                Vn = (V - centre) / unit
+            centre, unit, Vn = _in_frame(V)
+            made = into = None
+            if Vn is not None:  # (else `refit` fits nothing)
                 part = np.zeros(len(V), np.int32) if self._part is None else np.asarray(self._part, np.int32)
                 made = samples(Vn, F, part)
                 if self._moves and len(F):
@@ -196,6 +195,15 @@ def unit_frame(V: np.ndarray, bounds: tuple | None = None) -> tuple[np.ndarray, 
     return 0.5 * (lo + hi), float(np.max(hi - lo))
 
 
+def _in_frame(V: np.ndarray) -> tuple[np.ndarray, float, np.ndarray | None]:
+    """(centre, unit, V in the unit frame): `unit_frame` and the positions in it, None where the frame is of no
+    use (no extent, or not finite: there is nothing to fit to)."""
+    centre, unit = unit_frame(V)
+    if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
+        return centre, unit, None
+    return centre, unit, (V - centre) / unit
+
+
 def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: int, cos_max: float,
           part: np.ndarray | None = None, source_faces: np.ndarray | None = None,
           fixed: np.ndarray | None = None, sampled: list | None = None, min_quality: float = 0.0,
@@ -223,12 +231,10 @@ def refit(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, rounds: in
         V, F, centre, unit, Vn = pre.V, pre.F, pre.centre, pre.unit, pre.Vn
     else:
         V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
-        centre, unit = unit_frame(V)
-    if not (np.isfinite(unit) and unit > 0 and np.all(np.isfinite(centre))):
+        centre, unit, Vn = _in_frame(V)
+    if Vn is None:
         return X0
     X = (X0 - centre) / unit
-    if pre is None:
-        Vn = (V - centre) / unit
     after = polish > 0 or sliver_moves > 0  # moves after the re-fit (`moves`), which take its samples
     kept = sampled if sampled is not None else ([] if after else None)
     Y = _fit(Vn, F, X, G, rounds, cos_max, part, source_faces, fixed, kept, min_quality,
