@@ -22,6 +22,21 @@ def test_quantiles_are_numpys_inverted_cdf_weighted_or_not(seed):
     assert quantiles(d, [1.0], w) == [d.max()]  # the top quantile is the maximum: a bound on it bounds all
 
 
+def test_stable_order_is_numpys_stable_argsort():
+    """`quantiles.stable_order` (a radix sort) against ``np.argsort(kind="stable")``: ties, zeros of both
+    signs, infinities, NaNs of both signs, subnormals, negatives, one value, none."""
+    from qemjax._mesh.quantiles import stable_order
+
+    rng = np.random.default_rng(2)
+    for n in (0, 1, 2, 1000, 70000):
+        d = rng.exponential(size=n)
+        for value, share in ((0.5, 0.2), (0.0, 0.05), (-0.0, 0.05), (np.nan, 0.02), (np.inf, 0.02),
+                             (-np.inf, 0.02), (-np.nan, 0.01), (5e-324, 0.01), (-5e-324, 0.01)):
+            d[rng.random(n) < share] = value
+        d[rng.random(n) < 0.1] *= -1
+        assert np.array_equal(stable_order(d), np.argsort(d, kind="stable"))
+
+
 def test_simplify_stats_have_weighted_percentiles_below_the_maximum():
     from qemjax._pipeline import refit
 

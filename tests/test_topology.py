@@ -210,11 +210,14 @@ def _edge_table_numpy(F, n):
 @pytest.mark.parametrize("dtype", [np.int32, np.int64])
 def test_edge_table_is_numpys(dtype):
     """The compiled `edge_table` against numpy's: edges, counts, boundary half-edges and their faces, values
-    and dtypes, on closed and open meshes, edges with three faces, repeated faces, no faces; and the
+    and dtypes, on closed and open meshes, edges with three faces, repeated faces, no faces, a fan whose
+    apex has more edges than `edge_lists.sorted_keys` sorts by insertion (and its faces shuffled); and the
     unpacked path (keys too large to pack the index) gives the same tables."""
     rng = np.random.default_rng(7)
+    fan = np.array([[0, i, i + 1] for i in range(1, 120)] + [[5, 1, 7]])
     meshes = [shapes.bumpy_sphere(2)[1], shapes.grid(9, hole=True)[1], np.zeros((0, 3), np.int64),
-              rng.integers(0, 30, size=(200, 3))]  # random triangles: edges with many faces, repeats
+              rng.integers(0, 30, size=(200, 3)),  # random triangles: edges with many faces, repeats
+              fan, rng.permutation(fan)[:, ::-1]]
     for F in meshes:
         F = F.astype(dtype)
         n = int(F.max()) + 1 if len(F) else 5  # (no faces, five vertices: the compiled path too)
@@ -331,3 +334,26 @@ def test_compiled_degrees_endpoints_and_first_steps_are_numpys(dtype):
     got = np.full(500, -1, np.int64)
     first_step(F, step_of, faces, got)
     assert np.array_equal(got, want)
+
+
+def test_repeated_rows_are_numpys_isin_of_the_sorted_repeats():
+    """`face_passes.repeated` (a hash table) against the sort it replaced in `topology.coincidence_count`:
+    values held twice and more, zero among them, none repeated, one row, no rows; and a table crowded with
+    values that fall into one slot."""
+    from qemjax._mesh.face_passes import repeated
+
+    rng = np.random.default_rng(5)
+    cases = [np.zeros(0, np.uint64), np.array([7], np.uint64), np.zeros(5, np.uint64),
+             np.arange(1000, dtype=np.uint64) << np.uint64(40)]  # every value in the same slot at first
+    for n, share in ((50, 0.0), (500, 0.1), (5000, 0.5)):
+        h = rng.integers(0, 2**63, n, dtype=np.uint64)
+        k = int(share * n)
+        h[rng.integers(0, n, k)] = h[rng.integers(0, n, k)]
+        h[:3] = 0
+        cases.append(h)
+    cases.append(np.concatenate([cases[-4], cases[-4]]))
+    for h in cases:
+        hs = np.sort(h)
+        want = np.flatnonzero(np.isin(h, hs[1:][hs[1:] == hs[:-1]]))
+        got = repeated(h)
+        assert np.array_equal(got, want) and got.dtype == np.int64

@@ -229,9 +229,10 @@ def _row_hash(U: np.ndarray) -> np.ndarray:
 
 def _maybe_repeated(h: np.ndarray) -> bool:
     """False when the hashes are all different, which proves the hashed rows are (a cheap test: one
-    numpy sort; equal hashes need an exact check)."""
-    hs = np.sort(h)
-    return bool(np.any(hs[1:] == hs[:-1]))
+    pass through a hash table, `face_passes.repeated`; equal hashes need an exact check)."""
+    from .._mesh.face_passes import repeated  # numba: imported when first used
+
+    return len(repeated(np.ascontiguousarray(h, np.uint64))) > 0
 
 
 def weld(V: np.ndarray, F: np.ndarray, with_map: bool = False):

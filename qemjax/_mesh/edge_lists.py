@@ -2,8 +2,8 @@
 
 numpy's version made the (3m,2) half-edges, their keys, the packed keys and a sorted copy: on armadillo ×16
 (4.15 M half-edges) arrays of 33-66 MB each, which glibc maps afresh and the machine faults in page by page
-on every run. Here the packed keys are written straight from the faces and sorted in place, and one pass
-over them gives the tables. The outputs are `topology.edge_table`'s, bit for bit (tests/test_topology.py).
+on every run. Here the packed keys are written straight from the faces, grouped by their smaller vertex
+and each group sorted (`sorted_keys`), and one pass over them gives the tables. The outputs are `topology.edge_table`'s, bit for bit (tests/test_topology.py).
 
 Also the vertex degrees and a mask's endpoints (`degrees`, `endpoints`: numpy's bincount and scatter,
 without their copies of the pairs).
@@ -15,15 +15,40 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def packed_keys(F, n, bits):
-    """(3m,) int64: each half-edge (F[f,c], F[f,(c+1)%3]) as (min·n + max) << bits | its index 3f + c."""
+def sorted_keys(F, n, bits):
+    """(3m,) int64, sorted: each half-edge (F[f,c], F[f,(c+1)%3]) as (min·n + max) << bits | its index 3f + c.
+    Written grouped by the smaller vertex (a counting sort), then each group sorted in place: the groups hold
+    a vertex's few edges, so this costs about two passes over the faces, where a sort of all the keys took
+    several times longer (`np.sort` on 64-bit keys is a comparison sort). The keys are distinct, so the
+    order is the one any sort gives."""
     m = F.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        for c in range(3):
+            a, b = F[f, c], F[f, (c + 1) % 3]
+            start[(a if a < b else b) + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    fill = start[:n].copy()
     out = np.empty(3 * m, np.int64)
     for f in range(m):
         for c in range(3):
             a, b = np.int64(F[f, c]), np.int64(F[f, (c + 1) % 3])
             lo, hi = (a, b) if a < b else (b, a)
-            out[3 * f + c] = ((lo * n + hi) << bits) | (3 * f + c)
+            out[fill[lo]] = ((lo * n + hi) << bits) | (3 * f + c)
+            fill[lo] += 1
+    for v in range(n):
+        s, e = start[v], start[v + 1]
+        if e - s > 32:  # a vertex of many edges (a fan's apex): no insertion sort's square
+            out[s:e] = np.sort(out[s:e])
+            continue
+        for i in range(s + 1, e):
+            x = out[i]
+            j = i - 1
+            while j >= s and out[j] > x:
+                out[j + 1] = out[j]
+                j -= 1
+            out[j + 1] = x
     return out
 
 

@@ -234,3 +234,43 @@ def pad_rings(rows, start, counts, idx, R, pad):
             corners[j, t, 0], corners[j, t, 1], corners[j, t, 2] = rows[s + t, 0], rows[s + t, 1], rows[s + t, 2]
             mask[j, t] = True
     return corners, mask
+
+
+@njit(cache=True, nogil=True)
+def repeated(h):
+    """The rows of h (n,) uint64 whose value another row holds too, ascending: ``np.flatnonzero(np.isin(h,
+    values held twice))`` from one pass through an open-addressing table, where numpy sorted the values
+    (the faces a round touches: a sort every round)."""
+    n = len(h)
+    size = 16
+    while size < 2 * n:
+        size <<= 1
+    mask = np.uint64(size - 1)
+    value = np.empty(size, np.uint64)
+    held = np.zeros(size, np.int8)  # 0: empty, 1: one row's value, 2: more
+    slot = np.empty(n, np.int64)
+    twice = 0
+    for i in range(n):
+        k = h[i]
+        j = np.int64((k ^ (k >> np.uint64(29))) & mask)
+        while held[j] and value[j] != k:
+            j = (j + 1) & (size - 1)
+        if held[j] == 0:
+            value[j] = k
+            held[j] = 1
+        elif held[j] == 1:
+            held[j] = 2
+            twice += 1
+        slot[i] = j
+    if twice == 0:
+        return np.zeros(0, np.int64)
+    count = 0
+    for i in range(n):
+        count += held[slot[i]] == 2
+    out = np.empty(count, np.int64)
+    count = 0
+    for i in range(n):
+        if held[slot[i]] == 2:
+            out[count] = i
+            count += 1
+    return out

@@ -32,6 +32,11 @@ from .pointtri import _FLAT_REL
 CUBE_EDGE = 0.5  # the cubes' side at first, times the triangles' median edge
 PAIRS_PER_FACE = 16  # (triangle, cube) listings per triangle at most, on average
 CUBES_PER_FACE = 32  # cubes per triangle at most (the grid's memory)
+# ... for a structure that few points query, set up once over many triangles (the input's, which the moves
+# after a re-fit query with the output's samples): most of its cubes are empty, and filling and summing
+# them cost more than the larger cubes' extra triangles cost those few queries
+FEW_QUERIES_CUBES_PER_FACE = 8
+MEDIAN_EDGES = 1 << 20  # the cubes' side from the median of at most about this many edges (evenly spaced)
 BLOCK = 65_536  # points per query call at most; several blocks run on threads
 MIN_BLOCK = 2_048  # ... and at least this many (a thread's hand-off costs about as much as these)
 
@@ -290,8 +295,9 @@ def _query(P, X, G, B, flat, lo, h, dims, start, faces, mark, stamp0, seed):
     return best_f, best_d2
 
 
-def grid(X: np.ndarray, G: np.ndarray) -> tuple:
-    """The search structure of the triangles G (j,3), j >= 1, over X (k,3) float64 (module docstring):
+def grid(X: np.ndarray, G: np.ndarray, cubes_per_face: int = CUBES_PER_FACE) -> tuple:
+    """The search structure of the triangles G (j,3), j >= 1, over X (k,3) float64 (module docstring), with
+    at most ``cubes_per_face`` cubes per triangle (`FEW_QUERIES_CUBES_PER_FACE` where few points will query it):
     (boxes (j,6), slivers (j,) bool, lo (3,), h, dims (3,), start, faces, mark), the arguments `_query` takes
     after X and G (start and faces int32 where their values fit; ``mark``: which point measured each triangle
     last, and the next free stamp, `stamps`). A caller that moves a few vertices may keep it and query with
@@ -299,10 +305,12 @@ def grid(X: np.ndarray, G: np.ndarray) -> tuple:
     cube it meets, so the answer is exact among those (`_pipeline.moves` measures the moved ones itself)."""
     lo, hi = used_bounds(X, G)
     ext = np.maximum(hi - lo, 1e-300)
-    h = max(CUBE_EDGE * float(np.median(edge_lengths(X, G))), float(ext.max()) * 1e-6)
+    step = max(1, 3 * len(G) // MEDIAN_EDGES)  # the cube's side only sets the search's speed, not its answers
+    some = G if step == 1 else np.ascontiguousarray(G[::step])
+    h = max(CUBE_EDGE * float(np.median(edge_lengths(X, some))), float(ext.max()) * 1e-6)
     while True:
         dims = np.minimum(np.floor(ext / h).astype(np.int64) + 1, 1 << 20)
-        if int(np.prod(dims)) <= CUBES_PER_FACE * len(G) + 4096:
+        if int(np.prod(dims)) <= cubes_per_face * len(G) + 4096:
             listings = _listing(X, G, lo, h, dims)
             if listings <= PAIRS_PER_FACE * len(G):
                 break

@@ -2,14 +2,57 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
+DIGIT = 11  # bits per pass of the radix sort
+
+
+@njit(cache=True, nogil=True)
+def stable_order(d):
+    """``np.argsort(d, kind="stable")`` of float64 values, int64: a radix sort of their bits, read as
+    integers in the values' order (-0.0 as 0.0; every NaN last, in its order), least significant digit
+    first, each pass stable; a digit every value shares is passed over. (numpy's stable sort of floats is a
+    merge sort: several times slower on the millions of samples a measured distance has.)"""
+    n = len(d)
+    top = np.uint64(0xFFFFFFFFFFFFFFFF)
+    sign = np.uint64(1) << np.uint64(63)
+    key = np.empty(n, np.uint64)
+    for i in range(n):
+        x = d[i] + 0.0
+        if x != x:
+            key[i] = top
+            continue
+        b = np.float64(x).view(np.uint64)
+        key[i] = ~b if b & sign else b | sign
+    order = np.arange(n)
+    spare = np.empty(n, np.int64)
+    buckets = 1 << DIGIT
+    mask = np.uint64(buckets - 1)
+    for shift in range(0, 64, DIGIT):
+        s = np.uint64(shift)
+        count = np.zeros(buckets + 1, np.int64)
+        for i in range(n):
+            count[((key[i] >> s) & mask) + 1] += 1
+        if n == 0 or count[((key[0] >> s) & mask) + 1] == n:
+            continue
+        for b in range(buckets):
+            count[b + 1] += count[b]
+        for i in range(n):
+            j = order[i]
+            c = (key[j] >> s) & mask
+            spare[count[c]] = j
+            count[c] += 1
+        order, spare = spare, order
+    return order
 
 
 def quantiles(d: np.ndarray, qs, weights: np.ndarray | None = None) -> list[float]:
     """The q-quantiles (0 <= q <= 1) of the values d: the smallest value with at least a fraction q of them
     (of their total weight, with ``weights``) at or below it, an observed value, never interpolated (so
     the 1.0 quantile is the maximum and a bound on it is a bound on the samples)."""
-    order = np.argsort(d, kind="stable")
-    ds = np.asarray(d, np.float64)[order]
+    ds = np.ascontiguousarray(d, np.float64)
+    order = stable_order(ds)
+    ds = ds[order]
     cw = np.cumsum(np.ones(len(ds)) if weights is None else np.asarray(weights, np.float64)[order])
     idx = np.searchsorted(cw, np.asarray(qs, np.float64) * cw[-1], side="left")
     return [float(ds[min(i, len(ds) - 1)]) for i in idx]

@@ -104,13 +104,11 @@ def edge_table(F: np.ndarray, n: int):
     """`edges` and `boundary_edges` from one sort: (E (k,2) u < v sorted, face counts (k,), boundary
     edges (B,2) as directed in their face, their face indices (B,))."""
     bits = int(3 * len(F)).bit_length()
-    if n > 0 and (n * n) < (1 << (63 - bits)):  # pack the half-edge index under the key: one fast sort
+    if n > 0 and (n * n) < (1 << (63 - bits)):  # the half-edge index packed under the key: one array of keys
         from . import edge_lists  # numba: imported when first used
 
         F = np.ascontiguousarray(F)
-        packed = edge_lists.packed_keys(F, n, bits)
-        packed.sort()  # in place: no second array of 3m keys
-        return edge_lists.tables(packed, F, n, bits)
+        return edge_lists.tables(edge_lists.sorted_keys(F, n, bits), F, n, bits)
     return _edge_table_unpacked(F, n)
 
 
@@ -265,11 +263,11 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     g *= np.uint64(0xBF58476D1CE4E5B9)
     h = g[:, 0] + g[:, 1]
     h += g[:, 2]
-    hs = np.sort(h)
-    dup_h = hs[1:][hs[1:] == hs[:-1]]
-    if dup_h.size == 0:  # the common case: no candidates at all
+    from .face_passes import repeated  # numba: imported when first used
+
+    idx = repeated(h)  # the faces whose hash another face has too
+    if idx.size == 0:  # the common case: no candidates at all
         return np.zeros(S, np.int64)
-    idx = np.flatnonzero(np.isin(h, dup_h))
     rm = coincident_removals(G.take(idx, axis=0))
     return np.bincount(owner[idx[rm]], minlength=S)
 

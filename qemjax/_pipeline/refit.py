@@ -39,7 +39,7 @@ from numba import njit
 from .._mesh.arrays import face_normals
 from .._mesh import fixed_order as _fixed
 from .._mesh.box_bounds import row_bounds
-from .._mesh.grid_nearest import grid, nearest, slivers
+from .._mesh.grid_nearest import FEW_QUERIES_CUBES_PER_FACE, grid, nearest, slivers
 from .._mesh.spd_solve import solve_csr
 from .fit_rules import _barycentric_at, _quality, _turned
 from .refit_system import accumulate, finish, layout
@@ -163,7 +163,7 @@ class InputSide:
                 part = np.zeros(len(V), np.int32) if self._part is None else np.asarray(self._part, np.int32)
                 made = samples(Vn, F, part)
                 if self._moves and len(F):
-                    into = grid(np.ascontiguousarray(Vn), np.ascontiguousarray(F))
+                    into = grid(np.ascontiguousarray(Vn), np.ascontiguousarray(F), FEW_QUERIES_CUBES_PER_FACE)
             self._done = _Prepared(V, F, centre, unit, Vn, made, into)
         except BaseException as e:  # noqa: BLE001 - raised again where the re-fit asks for them
             self._error = e
