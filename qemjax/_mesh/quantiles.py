@@ -4,15 +4,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-DIGIT = 11  # bits per pass of the radix sort
+DIGIT = 8  # bits per pass of the radix sort: 256 buckets, whose write positions stay in cache
 
 
 @njit(cache=True, nogil=True)
 def stable_order(d):
     """``np.argsort(d, kind="stable")`` of float64 values, int64: a radix sort of their bits, read as
     integers in the values' order (-0.0 as 0.0; every NaN last, in its order), least significant digit
-    first, each pass stable; a digit every value shares is passed over. (numpy's stable sort of floats is a
-    merge sort: several times slower on the millions of samples a measured distance has.)"""
+    first, each pass stable and moving the keys with their rows (so that every pass reads in order); a
+    digit every value shares is passed over. (numpy's stable sort of floats is a merge sort: several times
+    slower on the millions of samples a measured distance has.)"""
     n = len(d)
     top = np.uint64(0xFFFFFFFFFFFFFFFF)
     sign = np.uint64(1) << np.uint64(63)
@@ -25,7 +26,8 @@ def stable_order(d):
         b = np.float64(x).view(np.uint64)
         key[i] = ~b if b & sign else b | sign
     order = np.arange(n)
-    spare = np.empty(n, np.int64)
+    key2 = np.empty(n, np.uint64)
+    order2 = np.empty(n, np.int64)
     buckets = 1 << DIGIT
     mask = np.uint64(buckets - 1)
     for shift in range(0, 64, DIGIT):
@@ -38,11 +40,14 @@ def stable_order(d):
         for b in range(buckets):
             count[b + 1] += count[b]
         for i in range(n):
-            j = order[i]
-            c = (key[j] >> s) & mask
-            spare[count[c]] = j
-            count[c] += 1
-        order, spare = spare, order
+            k = key[i]
+            c = (k >> s) & mask
+            at = count[c]
+            key2[at] = k
+            order2[at] = order[i]
+            count[c] = at + 1
+        key, key2 = key2, key
+        order, order2 = order2, order
     return order
 
 
