@@ -69,19 +69,22 @@ def _by_key(keys, n):
     """(order, start): the rows of ``keys`` (values 0 … n−1) by key, rows with equal keys in their order,
     and where each key's rows begin in ``order`` (n + 1 entries), both int64: a stable argsort and a
     search of its runs, as a counting sort (the input's samples by face: millions of rows, which a
-    comparison sort took a second over)."""
-    start = np.zeros(n + 1, np.int64)
-    for i in range(len(keys)):
-        start[keys[i] + 1] += 1
-    for k in range(n):
-        start[k + 1] += start[k]
-    fill = start[:n].copy()
-    order = np.empty(len(keys), np.int64)
+    comparison sort took a second over). A key outside 0 … n−1 (a sample no face was found for) is placed
+    as the argsort places it: before the first key's rows, or after the last's."""
+    count = np.zeros(n + 3, np.int64)  # [0]: below 0, [1 + k]: key k, [n + 1]: n and over
     for i in range(len(keys)):
         k = keys[i]
-        order[fill[k]] = i
-        fill[k] += 1
-    return order, start
+        count[(0 if k < 0 else (k + 1 if k < n else n + 1)) + 1] += 1
+    for b in range(n + 2):
+        count[b + 1] += count[b]
+    order = np.empty(len(keys), np.int64)
+    fill = count[:n + 2].copy()
+    for i in range(len(keys)):
+        k = keys[i]
+        b = 0 if k < 0 else (k + 1 if k < n else n + 1)
+        order[fill[b]] = i
+        fill[b] += 1
+    return order, count[1:n + 2].copy()
 
 
 @njit(cache=True, nogil=True)
