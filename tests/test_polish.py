@@ -144,23 +144,6 @@ def test_the_kept_search_structure_gives_the_rebuilt_ones_answers(monkeypatch):
         assert got.vertices.tobytes() == want.vertices.tobytes()
 
 
-def test_rows_by_key_are_a_stable_argsort():
-    """`moves._by_key` (a counting sort) against numpy's stable argsort and a search of its runs: keys with
-    repeats, keys no row holds (at the start, inside, at the end), one key, no rows, keys out of range
-    (a sample no face was found for: -1) placed as the argsort places them."""
-    rng = np.random.default_rng(3)
-    for q, n, wild in ((1000, 40, False), (5000, 5000, False), (7, 1, False), (0, 3, False), (1000, 40, True)):
-        keys = rng.integers(0, n, q) if n > 1 else np.zeros(q, np.int64)
-        keys[(keys == 0) | (keys == n // 2) | (keys == n - 1)] = min(1, n - 1)  # keys with no rows
-        if wild:
-            keys[rng.random(q) < 0.1] = -1
-            keys[rng.random(q) < 0.05] = n + 3
-        order, start = _moves._by_key(keys, n)
-        want = np.argsort(keys, kind="stable")
-        assert np.array_equal(order, want) and order.dtype == np.int64
-        assert np.array_equal(start, np.searchsorted(keys[want], np.arange(n + 1))) and start.dtype == np.int64
-
-
 def test_samples_by_face_are_the_scan_of_every_sample():
     """`moves._ByFace` (the index a move's samples are found by) against reading every sample, while the
     samples' faces change, through the index's rebuilds (its chains full)."""

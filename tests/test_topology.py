@@ -357,3 +357,23 @@ def test_repeated_rows_are_numpys_isin_of_the_sorted_repeats():
         want = np.flatnonzero(np.isin(h, hs[1:][hs[1:] == hs[:-1]]))
         got = repeated(h)
         assert np.array_equal(got, want) and got.dtype == np.int64
+
+
+def test_rows_by_key_are_a_stable_argsort():
+    """`counting.counting_order` (the moves' samples by face, a partition's rows by file) against numpy's
+    stable argsort and a search of its runs: keys with repeats, keys no row holds (at the start, inside, at
+    the end), one key, no rows, keys out of range (a sample no face was found for: -1) placed as the argsort
+    places them."""
+    from qemjax._mesh.counting import counting_order
+
+    rng = np.random.default_rng(3)
+    for q, n, wild in ((1000, 40, False), (5000, 5000, False), (7, 1, False), (0, 3, False), (1000, 40, True)):
+        keys = rng.integers(0, n, q) if n > 1 else np.zeros(q, np.int64)
+        keys[(keys == 0) | (keys == n // 2) | (keys == n - 1)] = min(1, n - 1)  # keys with no rows
+        if wild:
+            keys[rng.random(q) < 0.1] = -1
+            keys[rng.random(q) < 0.05] = n + 3
+        order, start = counting_order(keys, n)
+        want = np.argsort(keys, kind="stable")
+        assert np.array_equal(order, want) and order.dtype == np.int64
+        assert np.array_equal(start, np.searchsorted(keys[want], np.arange(n + 1))) and start.dtype == np.int64

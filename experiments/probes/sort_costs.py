@@ -1,7 +1,7 @@
 """The sorts that left the hot paths, each against what it replaced, on one mesh (the same answers checked
 before any time is printed): the edge table's keys (`edge_lists.sorted_keys`, a counting sort by the smaller
 vertex, against numpy's sort of all the keys, the keys' making left out of its time) on the whole mesh and on a part of ``--part`` faces; the moves'
-samples by output face (`moves._by_key`, against a stable argsort and a search of its runs); the measured
+samples by output face (`counting.counting_order`, against a stable argsort and a search of its runs); the measured
 distance's stable order (`quantiles.stable_order`, a radix sort, against ``np.argsort(kind="stable")``); the
 repeated hashes of a round's faces (`face_passes.repeated`, against a sort); and the input's search grid with
 `FEW_QUERIES_CUBES_PER_FACE` against `CUBES_PER_FACE` cubes per face (its build, and the output's samples
@@ -52,7 +52,7 @@ def main() -> None:
     from qemjax._mesh import edge_lists, grid_nearest as gn
     from qemjax._mesh.face_passes import repeated
     from qemjax._mesh.quantiles import stable_order
-    from qemjax._pipeline.moves import _by_key
+    from qemjax._mesh.counting import counting_order
     from qemjax._pipeline.refit import _in_frame, samples
 
     m = meshes.load(args.mesh)
@@ -94,11 +94,11 @@ def main() -> None:
     _, keys = np.unique(cell[:, 0] * 1_000_003 ** 2 + cell[:, 1] * 1_000_003 + cell[:, 2], return_inverse=True)
     keys = keys.reshape(-1).astype(np.int64)
     k = int(keys.max()) + 1
-    _by_key(keys[:4], k)
+    counting_order(keys[:4], k)
     compare(f"samples by face, {len(P):,} samples, {k:,} faces",
             lambda: (np.argsort(keys, kind="stable"),
                      np.searchsorted(keys[np.argsort(keys, kind="stable")], np.arange(k + 1))),
-            lambda: _by_key(keys, k))
+            lambda: counting_order(keys, k))
 
     d = np.linalg.norm(P - Vn[F[np.arange(len(P)) % len(F), 0]], axis=1)  # distances of the samples' scale
     stable_order(d[:4])

@@ -3,7 +3,8 @@
 numpy's version made the (3m,2) half-edges, their keys, the packed keys and a sorted copy: on armadillo ×16
 (4.15 M half-edges) arrays of 33-66 MB each, which glibc maps afresh and the machine faults in page by page
 on every run. Here the packed keys are written straight from the faces, grouped by their smaller vertex
-and each group sorted (`sorted_keys`), and one pass over them gives the tables. The outputs are `topology.edge_table`'s, bit for bit (tests/test_topology.py).
+and each group sorted (`sorted_keys`), and one pass over them gives the tables. The outputs are
+`topology.edge_table`'s, bit for bit (tests/test_topology.py).
 
 Also the vertex degrees and a mask's endpoints (`degrees`, `endpoints`: numpy's bincount and scatter,
 without their copies of the pairs).

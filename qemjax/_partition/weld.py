@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from .._mesh.counting import counting_order
 from .source import Appender, remove
 
 BUCKET = np.dtype([("p", "<u8", (3,)), ("i", "<i8")])
@@ -48,28 +49,12 @@ def _spread(path_of, keys: np.ndarray, rows: np.ndarray, files: dict) -> None:
     one key keeping their order."""
     if len(keys) == 0:
         return
-    order, starts = _counting_order(keys.astype(np.int64), int(keys.max()) + 1)
+    order, starts = counting_order(keys.astype(np.int64), int(keys.max()) + 1)
     words = rows.view(np.uint64).reshape(len(rows), -1).take(order, axis=0)  # records are whole words
     for key in np.flatnonzero(np.diff(starts)):
         if key not in files:
             files[key] = open(path_of(key), "ab")
         files[key].write(words[starts[key]:starts[key + 1]].tobytes())
-
-
-@njit(cache=True)
-def _counting_order(keys, n):
-    """A stable order of rows by small integer keys, and where each key's rows start in it."""
-    starts = np.zeros(n + 1, np.int64)
-    for k in keys:
-        starts[k + 1] += 1
-    for k in range(n):
-        starts[k + 1] += starts[k]
-    at = starts[:-1].copy()
-    order = np.empty(len(keys), np.int64)
-    for i in range(len(keys)):
-        order[at[keys[i]]] = i
-        at[keys[i]] += 1
-    return order, starts
 
 
 def _close(files: dict) -> None:

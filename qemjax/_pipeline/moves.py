@@ -26,6 +26,7 @@ from numba import njit
 
 from .._mesh.arrays import face_normals
 from .._mesh.box_bounds import face_boxes
+from .._mesh.counting import counting_order
 from .._mesh.grid_nearest import (FEW_QUERIES_CUBES_PER_FACE, _face_d2, _gap, _query, grid, query_here, search, slivers,
                                   stamps)
 from .fit_rules import COS_SLIVER, _barycentric_at, _min_cos, _quality
@@ -62,29 +63,6 @@ def _sorted_unique(out):
             out[m] = out[j]
             m += 1
     return out[:m]
-
-
-@njit(cache=True, nogil=True)
-def _by_key(keys, n):
-    """(order, start): the rows of ``keys`` (values 0 … n−1) by key, rows with equal keys in their order,
-    and where each key's rows begin in ``order`` (n + 1 entries), both int64: a stable argsort and a
-    search of its runs, as a counting sort (the input's samples by face: millions of rows, which a
-    comparison sort took a second over). A key outside 0 … n−1 (a sample no face was found for) is placed
-    as the argsort places it: before the first key's rows, or after the last's."""
-    count = np.zeros(n + 3, np.int64)  # [0]: below 0, [1 + k]: key k, [n + 1]: n and over
-    for i in range(len(keys)):
-        k = keys[i]
-        count[(0 if k < 0 else (k + 1 if k < n else n + 1)) + 1] += 1
-    for b in range(n + 2):
-        count[b + 1] += count[b]
-    order = np.empty(len(keys), np.int64)
-    fill = count[:n + 2].copy()
-    for i in range(len(keys)):
-        k = keys[i]
-        b = 0 if k < 0 else (k + 1 if k < n else n + 1)
-        order[fill[b]] = i
-        fill[b] += 1
-    return order, count[1:n + 2].copy()
 
 
 @njit(cache=True, nogil=True)
@@ -149,7 +127,7 @@ class _ByFace:
         self.build(fa)
 
     def build(self, fa):
-        self.order, self.start = _by_key(fa, self.faces)
+        self.order, self.start = counting_order(fa, self.faces)
         self.listed = fa.copy()  # the face each sample is listed under: in the index, or its chain's last
         self.head = np.full(self.faces, -1, np.int64)
         self.n = 0
@@ -600,7 +578,7 @@ class Moves:
         if not self.ok:
             return
         # the faces at each vertex (CSR)
-        order, self.ring_start = _by_key(G.reshape(-1), k)
+        order, self.ring_start = counting_order(G.reshape(-1), k)
         self.ring_face = order // 3
         self.n0 = n0 = face_normals(X, G)
         # the rules' arrays as `_refused` takes them (empty: not checked)
