@@ -20,6 +20,17 @@ os.environ.setdefault("QEMJAX_WORKERS", "1")
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 
+# `-n auto` (pyproject's addopts) runs the suite on pytest-xdist workers, one per core up to MAX_WORKERS: each
+# worker imports JAX and holds its own compiled kernels (about 1-2 GiB at its peak), and many tests start
+# processes of their own (sweep helpers, partition workers, a Dask LocalCluster), so more workers than that
+# add memory, not speed. One core: no workers (the tests run in this process).
+MAX_WORKERS = 4
+
+
+def pytest_xdist_auto_num_workers(config):
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return 0 if cores < 2 else min(cores, MAX_WORKERS)
+
 
 def shared_mesh(name: str) -> Path:
     p = SHARED / name

@@ -597,7 +597,7 @@ def test_kernels_stay_in_bounds():
         digest.update(path.read_bytes())
     cache = Path(tempfile.gettempdir()) / f"qemjax-numba-boundscheck-{digest.hexdigest()[:16]}"
     env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(cache))
-    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(here), "-k",
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider", str(here), "-k",
                           "grows or bipyramid or grid-with-hole or two-parts or non_simple or nested or locks"],
                          cwd=here.parent.parent, env=env, capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
