@@ -3,6 +3,7 @@ tests using them skip when it is absent (a user's machine)."""
 from __future__ import annotations
 
 import os
+import signal
 import tempfile
 from pathlib import Path
 
@@ -30,6 +31,13 @@ MAX_WORKERS = 4
 def pytest_xdist_auto_num_workers(config):
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return 0 if cores < 2 else min(cores, MAX_WORKERS)
+
+
+def sigint_default() -> None:
+    """``preexec_fn`` of a child process a test sends SIGINT: SIGINT's default in the child whatever this test
+    run was started with (a CI runner, or ``cmd &`` in a script, starts it with SIGINT ignored; a child
+    inherits that, and qemjax keeps an ignored SIGINT ignored, `tests/test_first_use.py`)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def shared_mesh(name: str) -> Path:

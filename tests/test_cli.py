@@ -15,6 +15,7 @@ import trimesh
 import qemjax
 from qemjax import _cli, shapes
 import qemjax._sweep.run  # noqa: F401  (tests patch its sweep; imported whichever tests run)
+from conftest import sigint_default
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -454,7 +455,7 @@ def _interrupt(cmd, env, folder, timeout=300):
     import threading
     import time
 
-    p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=sigint_default)
     err = bytearray()
     reader = threading.Thread(target=lambda: [err.extend(b) for b in iter(lambda: p.stderr.read1(4096), b"")])
     reader.start()

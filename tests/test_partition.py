@@ -15,6 +15,7 @@ import pytest
 import qemjax
 from qemjax import Partition, shapes
 from qemjax._partition import execute, pieces, plan
+from conftest import sigint_default
 
 RATIO, PART = 0.02, 20_000
 
@@ -314,7 +315,8 @@ def test_ctrl_c_stops_the_command_and_its_workers(mesh, tmp_path):
     scratch = tmp_path / "scratch"
     proc = subprocess.Popen([sys.executable, "-m", "qemjax", "simplify", str(src), str(tmp_path / "out.ply"),
                              "--ratio", str(RATIO), "--partition", "--workers", "2", "--part-faces", str(PART),
-                             "--scratch", str(scratch), "--quiet"], stderr=subprocess.PIPE, text=True)
+                             "--scratch", str(scratch), "--quiet"], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=sigint_default)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not list((scratch / "level1").glob("*.npz")):
         time.sleep(0.05)

@@ -304,3 +304,31 @@ def test_the_defaults_own_threshold_is_off_under_greedy_and_said_in_the_stats():
         res = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.1, scheduler="greedy")
     assert not [w for w in seen if "quality_threshold" in str(w.message)]
     assert res.stats["quality_threshold_off"] == "the greedy queue ranks by cost alone"
+
+
+def test_each_copys_order_statistics_are_numpys():
+    """`segments.counts` and `segments.kth` (a batch's per-copy gates and the shape term's cuts in one
+    compiled pass) give what numpy gives copy by copy: the k-th smallest of the masked rows as np.partition
+    has it (ties, NaNs last, infinities, both zeros), copies with no rows, ranks of 0 (no value)."""
+    from qemjax._schedulers import segments
+
+    rng = np.random.default_rng(11)
+    for trial in range(200):
+        sizes = rng.integers(0, 40, rng.integers(1, 7))
+        starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        P = int(starts[-1])
+        values = rng.choice(np.array([0.0, -0.0, 1.0, 2.0, np.inf, -np.inf, np.nan, 3.5], np.float32), P)
+        values = np.where(rng.random(P) < 0.5, rng.standard_normal(P).astype(np.float32), values)
+        mask = rng.random(P) < 0.7
+        want_n = np.array([np.count_nonzero(mask[a:b]) for a, b in zip(starts[:-1], starts[1:])])
+        np.testing.assert_array_equal(segments.counts(mask, starts), want_n)
+        ks = np.array([rng.integers(0, n + 1) for n in want_n], np.int64)
+        got = segments.kth(values, mask, starts, ks)
+        for c, (a, b) in enumerate(zip(starts[:-1], starts[1:])):
+            if ks[c] < 1:
+                assert np.isnan(got[c])
+                continue
+            want = np.partition(values[a:b][mask[a:b]], ks[c] - 1)[ks[c] - 1]
+            assert got[c] == want or (np.isnan(want) and np.isnan(got[c])), (trial, c)
+        copies = np.arange(len(sizes))
+        np.testing.assert_array_equal(segments.per_row(copies, starts), np.repeat(copies, sizes))

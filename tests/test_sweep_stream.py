@@ -18,6 +18,7 @@ import pytest
 import qemjax
 import qemjax._sweep.run as sw
 from qemjax import shapes
+from conftest import sigint_default
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -189,7 +190,8 @@ def _start(folder: Path, cache: Path, *args) -> subprocess.Popen:
     env = dict(os.environ, QEMJAX_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
     env.pop("QEMJAX_NO_CACHE", None)
     return subprocess.Popen([sys.executable, "-c", SCRIPT, "sweep", str(folder / "s.toml"), "--quiet", *args],
-                            cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=sigint_default)
 
 
 def _rows(path: Path) -> list[str]:

@@ -36,7 +36,7 @@ from .._costs import memoryless as ml
 from .._costs.qem import QEM
 from .._mesh.arrays import face_normals, keep_rows as _keep
 from .._kernels.batching import DTYPE
-from . import outcome
+from . import outcome, segments
 from .._options import Options
 from .device import PerCopy
 from .parallel import Round, RoundState, Run, driver
@@ -172,12 +172,11 @@ class _Batch:
         vertices, what validation found)."""
         t0 = time.perf_counter()
         sch = self.run.options.schedule
-        thresh = np.zeros(self.C, np.float32)
-        vkeys = np.compress(valid, st.key)  # grouped by copy, as E
-        vstart = np.concatenate([[0], np.cumsum(n_valid)])
+        ks = np.zeros(self.C, np.int64)  # each active copy's gate rank among its own valid pairs
         for c in np.flatnonzero(self.active):
-            k = gate_rank(int(need[c]), int(n_valid[c]), int(starts[c + 1] - starts[c]), sch)
-            thresh[c] = np.partition(vkeys[vstart[c]:vstart[c + 1]], k - 1)[k - 1]
+            ks[c] = gate_rank(int(need[c]), int(n_valid[c]), int(starts[c + 1] - starts[c]), sch)
+        thresh = np.where(ks > 0, segments.kth(np.ascontiguousarray(st.key),
+                                               np.ascontiguousarray(valid, bool), starts, ks), 0).astype(np.float32)
         salt = self.run.rounds * 7919
         offset = np.take(starts, cp)
 

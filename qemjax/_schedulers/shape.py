@@ -32,6 +32,7 @@ from numba import njit
 
 from .._kernels.batching import DTYPE
 from .._mesh import threads
+from . import segments
 
 # the faces under this fraction of the threshold (at s = 0.4, a smallest angle under about 2-5°) lift nothing:
 # faces already nearly degenerate (a spike's, a crease strip's) are not the move's doing; `kept_quality`
@@ -121,31 +122,21 @@ def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
     thresholds are order statistics of each copy's own pairs."""
     key = np.ascontiguousarray(key, DTYPE)
     P = len(key)
-    starts = np.array([0, P]) if starts is None else np.asarray(starts)
-    which = np.zeros(P, bool)
-    for c in range(len(starts) - 1):
-        lo, hi = int(starts[c]), int(starts[c + 1])
-        n = int(np.count_nonzero(cand[lo:hi]))
-        vk = key[lo:hi].compress(valid[lo:hi])
-        if n == 0 or not len(vk):
-            continue
-        span = min(SPAN * n, len(vk))
-        widest = np.partition(vk, span - 1)[span - 1]
-        which[lo:hi] = valid[lo:hi] & ((key[lo:hi] <= widest) | cand[lo:hi])
+    starts = np.array([0, P], np.int64) if starts is None else np.asarray(starts, np.int64)
+    valid, cand = np.ascontiguousarray(valid, bool), np.ascontiguousarray(cand, bool)
+    n, n_valid = segments.counts(cand, starts), segments.counts(valid, starts)
+    span = np.where((n > 0) & (n_valid > 0), np.minimum(SPAN * n, n_valid), 0)
+    widest = segments.per_row(segments.kth(key, valid, starts, span), starts)
+    which = valid & ((key <= widest) | cand) & segments.per_row(span > 0, starts)
     floor = np.atleast_1d(np.asarray(free, DTYPE))
     shaped = shaped_keys(key, which, floor, E, X, VQ, faces.F, faces.alive, faces.off, faces.cnt, faces.pool,
                          np.float32(s))
     # the candidates under their own free cost that the term did not lift stay (with parts of several sizes
     # the free cost is each part's, so they need not be the cheapest); the rest of the places go by shaped key
     out = cand & (shaped == key) & (key <= (floor if len(floor) > 1 else floor[0]))
-    for c in range(len(starts) - 1):
-        lo, hi = int(starts[c]), int(starts[c + 1])
-        rest = int(np.count_nonzero(cand[lo:hi])) - int(np.count_nonzero(out[lo:hi]))
-        if rest <= 0:
-            continue
-        others = which[lo:hi] & ~out[lo:hi]
-        kth = np.partition(shaped[lo:hi].compress(others), rest - 1)[rest - 1]
-        out[lo:hi] |= others & (shaped[lo:hi] <= kth)
+    others = which & ~out
+    rest = n - segments.counts(out, starts)  # copies with none left: no k-th, so no row passes the test
+    out |= others & (shaped <= segments.per_row(segments.kth(shaped, others, starts, rest), starts))
     return shaped, out
 
 
