@@ -53,6 +53,9 @@ STAGES = [
     ("rounds: the rest (prices, carry, the second phases)", "_Batch.rounds batched.py"),
 ]
 
+# functions of `moves` whose share of the polish is printed (inclusive: a sample may count in several)
+POLISH_PARTS = ["Moves.attempt moves.py", "Moves.worst moves.py", "_Largest._above moves.py", "query_here grid_nearest.py"]
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -70,8 +73,8 @@ def main() -> None:
                               "-o", str(raw), "--", sys.executable, "-c", CHILD, str(path), str(args.sweeps)],
                              capture_output=True, text=True)
         print(out.stdout.strip() or out.stderr.strip()[-2000:])
-        counts = collections.Counter()
-        total = 0
+        counts, callers, inside = collections.Counter(), collections.Counter(), collections.Counter()
+        total = polished = 0
         for line in raw.read_text().splitlines():
             stack, _, n = line.rpartition(" ")
             # each frame "function (path/file.py:line)" as "function file.py"
@@ -81,10 +84,22 @@ def main() -> None:
             total += int(n)
             stage = next((name for name, key in STAGES if key in stack), "the rest of the sweep (rows, the table)")
             counts[stage] += int(n)
+            if stage == STAGES[1][0]:  # a query: the re-fit stage that asked it (unknown on a pool thread)
+                callers[next((name for name, key in STAGES[2:8] if key in stack), "(on a pool thread)")] += int(n)
+            if STAGES[3][1] in stack:  # in the polish: the parts of `moves` it spends on
+                polished += int(n)
+                for part in POLISH_PARTS:
+                    inside[part] += int(n) if part in stack else 0
     print(f"{args.mesh}, {args.sweeps} warm sweeps of 64 configurations, workers=1: {total} samples at {args.rate}/s "
           "over every thread")
     for name, _ in STAGES + [("the rest of the sweep (rows, the table)", None)]:
         print(f"  {counts[name] / max(total, 1) * 100:5.1f} %  {name}")
+    print("the queries by the stage that asked them (% of all samples; a pool thread's caller is not seen):")
+    for name, n in callers.most_common():
+        print(f"  {n / max(total, 1) * 100:5.1f} %  {name}")
+    print(f"inside the polish ({polished} samples, its queries included; % of the polish's samples):")
+    for part in POLISH_PARTS:
+        print(f"  {inside[part] / max(polished, 1) * 100:5.1f} %  {part}")
 
 
 if __name__ == "__main__":
