@@ -29,8 +29,10 @@ MAX_WORKERS = 4
 
 
 def pytest_xdist_auto_num_workers(config):
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return 0 if cores < 2 else min(cores, MAX_WORKERS)
+    from qemjax._sweep.pool import cores  # (imports no JAX)
+
+    n = cores()
+    return 0 if n < 2 else min(n, MAX_WORKERS)
 
 
 def sigint_default() -> None:

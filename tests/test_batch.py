@@ -10,7 +10,7 @@ import qemjax
 from qemjax._kernels import compilation as _compilation
 from qemjax import shapes
 from qemjax import simplify_batch, simplify_cells
-from qemjax._schedulers import batched, select
+from qemjax._schedulers import batched, segments, select
 
 MESHES = {
     "sheet": lambda: shapes.grid(10, hole=True),  # boundaries: boundary_weight matters
@@ -110,7 +110,7 @@ def test_per_copy_face_targets_and_sums_match_the_one_copy_rules():
             assert np.array_equal(take[mine], select.fits_target(removes[mine], int(need[c])))
         mask = rng.random(40) < 0.5
         starts = np.array([0, 0, 7, 7, 20, 33, 40])
-        assert np.array_equal(batched._segment_sums(mask, starts),
+        assert np.array_equal(segments.sums(mask, starts),
                               [mask[a:b].sum() for a, b in zip(starts[:-1], starts[1:])])
 
 

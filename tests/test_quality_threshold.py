@@ -307,7 +307,7 @@ def test_the_defaults_own_threshold_is_off_under_greedy_and_said_in_the_stats():
 
 
 def test_each_copys_order_statistics_are_numpys():
-    """`segments.counts` and `segments.kth` (a batch's per-copy gates and the shape term's cuts in one
+    """`segments.sums` and `segments.kth` (a batch's per-copy gates and the shape term's cuts in one
     compiled pass) give what numpy gives copy by copy: the k-th smallest of the masked rows as np.partition
     has it (ties, NaNs last, infinities, both zeros), copies with no rows, ranks of 0 (no value)."""
     from qemjax._schedulers import segments
@@ -321,7 +321,7 @@ def test_each_copys_order_statistics_are_numpys():
         values = np.where(rng.random(P) < 0.5, rng.standard_normal(P).astype(np.float32), values)
         mask = rng.random(P) < 0.7
         want_n = np.array([np.count_nonzero(mask[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        np.testing.assert_array_equal(segments.counts(mask, starts), want_n)
+        np.testing.assert_array_equal(segments.sums(mask, starts), want_n)
         ks = np.array([rng.integers(0, n + 1) for n in want_n], np.int64)
         got = segments.kth(values, mask, starts, ks)
         for c, (a, b) in enumerate(zip(starts[:-1], starts[1:])):

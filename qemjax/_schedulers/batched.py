@@ -256,7 +256,7 @@ class _Batch:
             need = counts - self.targets
             valid = self.candidates_batch(st, need, cp)
             st.key = st.cost
-            n_valid = _segment_sums(valid, starts)
+            n_valid = segments.sums(valid, starts)
             for c in np.flatnonzero(self.active & (n_valid == 0)):
                 self._end(c, st, slice(starts[c], starts[c + 1]), int(need[c]))
             if not self.active.any():
@@ -322,13 +322,6 @@ def _grouped(copy: np.ndarray, C: int) -> tuple[np.ndarray, np.ndarray]:
     return order, np.searchsorted(np.take(copy, order), np.arange(C + 1))
 
 
-def _segment_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """(C,) int64: the sum of ``values`` (integers or bools: the True entries) in each segment
-    starts[c] … starts[c+1] − 1."""
-    csum = np.concatenate([[0], np.cumsum(values, dtype=np.int64)])
-    return np.diff(np.take(csum, starts))
-
-
 def _fits_targets(ca: np.ndarray, removes: np.ndarray, need: np.ndarray, C: int) -> np.ndarray:
     """`select.fits_target` per copy: mask over accepted pairs in cost order (``ca`` their copies,
     ``removes`` the faces each removes) taking, in each copy, what fits its ``need``. A copy whose
@@ -336,7 +329,7 @@ def _fits_targets(ca: np.ndarray, removes: np.ndarray, need: np.ndarray, C: int)
     others go through `fits_target`."""
     order, bounds = _grouped(ca, C)
     r = np.take(removes, order)
-    total = _segment_sums(r, bounds)
+    total = segments.sums(r, bounds)
     take = np.ones(len(ca), bool)
     for c in np.flatnonzero(total > need):
         idx = order[bounds[c]:bounds[c + 1]]

@@ -8,17 +8,10 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True)
-def counts(mask, starts):
-    """(C,) int64: the rows of each copy where ``mask`` (P,) bool is set."""
-    C = len(starts) - 1
-    out = np.zeros(C, np.int64)
-    for c in range(C):
-        n = 0
-        for i in range(starts[c], starts[c + 1]):
-            n += mask[i]
-        out[c] = n
-    return out
+def sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(C,) int64: the sum of each copy's ``values`` (P,) (integers, or bools: the rows set)."""
+    csum = np.concatenate([[0], np.cumsum(values, dtype=np.int64)])
+    return np.diff(np.take(csum, starts))
 
 
 @njit(cache=True, nogil=True)

@@ -124,7 +124,7 @@ def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
     P = len(key)
     starts = np.array([0, P], np.int64) if starts is None else np.asarray(starts, np.int64)
     valid, cand = np.ascontiguousarray(valid, bool), np.ascontiguousarray(cand, bool)
-    n, n_valid = segments.counts(cand, starts), segments.counts(valid, starts)
+    n, n_valid = segments.sums(cand, starts), segments.sums(valid, starts)
     span = np.where((n > 0) & (n_valid > 0), np.minimum(SPAN * n, n_valid), 0)
     widest = segments.per_row(segments.kth(key, valid, starts, span), starts)
     which = valid & ((key <= widest) | cand) & segments.per_row(span > 0, starts)
@@ -135,7 +135,7 @@ def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
     # the free cost is each part's, so they need not be the cheapest); the rest of the places go by shaped key
     out = cand & (shaped == key) & (key <= (floor if len(floor) > 1 else floor[0]))
     others = which & ~out
-    rest = n - segments.counts(out, starts)  # copies with none left: no k-th, so no row passes the test
+    rest = n - segments.sums(out, starts)  # copies with none left: no k-th, so no row passes the test
     out |= others & (shaped <= segments.per_row(segments.kth(shaped, others, starts, rest), starts))
     return shaped, out
 
