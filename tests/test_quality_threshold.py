@@ -187,6 +187,59 @@ def test_rerank_per_copy_is_each_copy_alone():
         np.testing.assert_array_equal(out_b[sl], o1)
 
 
+def _rerank_reference(key, valid, cand, free, E, X, V, lists, s, starts):
+    """`shape.rerank` as numpy steps, copy by copy: the k-th smallest by np.partition, the shaping by
+    `shape.shaped_keys`."""
+    widest = np.full(len(key), np.nan, np.float32)
+    n = []
+    for a, b in zip(starts[:-1], starts[1:]):
+        nc, nv = np.count_nonzero(cand[a:b]), np.count_nonzero(valid[a:b])
+        n.append(nc)
+        if nc and nv:
+            k = min(shape.SPAN * nc, nv)
+            widest[a:b] = np.partition(key[a:b][valid[a:b]], k - 1)[k - 1]
+    which = valid & ((key <= widest) | cand)
+    floor = np.atleast_1d(np.asarray(free, np.float32))
+    shaped = shape.shaped_keys(key, which, floor, E, X, V, lists.F, lists.alive, lists.off, lists.cnt, lists.pool,
+                               np.float32(s))
+    out = cand & (shaped == key) & (key <= (floor if len(floor) > 1 else floor[0]))
+    others = which & ~out
+    for c, (a, b) in enumerate(zip(starts[:-1], starts[1:])):
+        rest = n[c] - np.count_nonzero(out[a:b])
+        if rest >= 1:
+            cut = np.partition(shaped[a:b][others[a:b]], rest - 1)[rest - 1]
+            out[a:b] |= others[a:b] & (shaped[a:b] <= cut)
+    return shaped, out
+
+
+@pytest.mark.parametrize("threaded", [False, True])
+def test_rerank_is_its_numpy_steps(monkeypatch, threaded):
+    """The compiled passes of `shape.rerank` (in one call for a round of fewer than MIN_BLOCK pairs, else
+    around the threaded shaping) give the numpy steps' keys and candidates, bit for bit: keys with many ties
+    and zeros (flat pairs at the floor), a floor per pair or one, copies without candidates or valid pairs."""
+    V, F, lists, E, X = _random_case(8)
+    if threaded:
+        monkeypatch.setattr(shape, "MIN_BLOCK", 16)
+    rng = np.random.default_rng(8)
+    P = len(E)
+    for trial in range(40):
+        key = rng.choice(rng.exponential(1e-4, 40), P).astype(np.float32)  # ties
+        key[rng.random(P) < 0.2] = 0.0
+        valid = rng.random(P) < rng.uniform(0.3, 1.0)
+        cand = valid & (key <= np.quantile(key, rng.uniform(0.0, 0.3)))
+        cuts = np.sort(rng.choice(np.arange(1, P), rng.integers(0, 4), replace=False))
+        starts = np.concatenate([[0], cuts, [P]]).astype(np.int64)
+        if trial % 5 == 0 and len(starts) > 2:  # a copy with nothing valid
+            valid[starts[0]:starts[1]] = cand[starts[0]:starts[1]] = False
+        free = (rng.uniform(0, 2e-5, P).astype(np.float32) if trial % 2 else 1e-5)
+        s = float(rng.choice([0.2, 0.4, 0.6]))
+        got = shape.rerank(key, valid, cand, free, E, X, V, lists, s, starts)
+        want = _rerank_reference(key, valid, cand, free, E, X, V, lists, s, starts)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    assert np.any(want[0] != key)  # (it can fail:) the last trial lifted some pairs
+
+
 @pytest.mark.parametrize("method", ["default", "classic"])
 def test_a_run_with_it_reaches_the_target_valid_with_fewer_slivers(method):
     """The term never refuses: the exact target, a valid mesh; and it does what it is for (the faces under

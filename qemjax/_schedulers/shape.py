@@ -32,7 +32,6 @@ from numba import njit
 
 from .._kernels.batching import DTYPE
 from .._mesh import threads
-from . import segments
 
 # the faces under this fraction of the threshold (at s = 0.4, a smallest angle under about 2-5°) lift nothing:
 # faces already nearly degenerate (a spike's, a crease strip's) are not the move's doing; `kept_quality`
@@ -119,25 +118,87 @@ def rerank(key, valid, cand, free, E, X, VQ, faces, s: float, starts=None):
     leaves as they were, then the smallest shaped keys among the other candidates and the valid pairs up to
     the SPAN·N-th cheapest. ``free``: the free cost, a scalar or per
     pair; ``faces``: the run's `FaceLists`. The same pairs get the same keys alone and in a batch: the
-    thresholds are order statistics of each copy's own pairs."""
+    thresholds are order statistics of each copy's own pairs. Two compiled passes around the shaping
+    (`_shaped_rows`, `_chosen`): a small mesh's round is a few thousand pairs, where a dozen numpy calls a
+    round cost more than the arithmetic."""
     key = np.ascontiguousarray(key, DTYPE)
-    P = len(key)
-    starts = np.array([0, P], np.int64) if starts is None else np.asarray(starts, np.int64)
+    starts = np.array([0, len(key)], np.int64) if starts is None else np.ascontiguousarray(starts, np.int64)
     valid, cand = np.ascontiguousarray(valid, bool), np.ascontiguousarray(cand, bool)
-    n, n_valid = segments.sums(cand, starts), segments.sums(valid, starts)
-    span = np.where((n > 0) & (n_valid > 0), np.minimum(SPAN * n, n_valid), 0)
-    widest = segments.per_row(segments.kth(key, valid, starts, span), starts)
-    which = valid & ((key <= widest) | cand) & segments.per_row(span > 0, starts)
     floor = np.atleast_1d(np.asarray(free, DTYPE))
-    shaped = shaped_keys(key, which, floor, E, X, VQ, faces.F, faces.alive, faces.off, faces.cnt, faces.pool,
-                         np.float32(s))
-    # the candidates under their own free cost that the term did not lift stay (with parts of several sizes
-    # the free cost is each part's, so they need not be the cheapest); the rest of the places go by shaped key
-    out = cand & (shaped == key) & (key <= (floor if len(floor) > 1 else floor[0]))
-    others = which & ~out
-    rest = n - segments.sums(out, starts)  # copies with none left: no k-th, so no row passes the test
-    out |= others & (shaped <= segments.per_row(segments.kth(shaped, others, starts, rest), starts))
-    return shaped, out
+    mesh = (E, X, VQ, faces.F, faces.alive, faces.off, faces.cnt, faces.pool, np.float32(s))
+    if len(key) < MIN_BLOCK:  # one thread shapes them all: the three steps in one call
+        return _rerank_one(key, valid, cand, starts, floor, *mesh)
+    n, which = _shaped_rows(key, valid, cand, starts)
+    shaped = shaped_keys(key, which, floor, *mesh)
+    return shaped, _chosen(key, shaped, cand, which, floor, starts, n)
+
+
+@njit(cache=True, nogil=True)
+def _rerank_one(key, valid, cand, starts, floor, E, X, VQ, F, alive, off, cnt, pool, s):
+    """`rerank`'s three steps in one compiled call, the shaping on this thread."""
+    n, which = _shaped_rows(key, valid, cand, starts)
+    shaped = key.copy()
+    _shape_rows(shaped, key, np.flatnonzero(which), floor, E, X, VQ, F, alive, off, cnt, pool, s)
+    return shaped, _chosen(key, shaped, cand, which, floor, starts, n)
+
+
+@njit(cache=True, nogil=True)
+def _kth(buf, m, k):
+    """The k-th smallest (1-based) of buf[:m], as np.partition gives it."""
+    return np.partition(buf[:m], k - 1)[k - 1]
+
+
+@njit(cache=True, nogil=True)
+def _shaped_rows(key, valid, cand, starts):
+    """(each copy's candidates (C,), the rows the term shapes (P,) bool): of each copy with candidates (n of
+    them), its valid pairs up to the min(SPAN·n, valid)-th smallest key, and its candidates."""
+    C = len(starts) - 1
+    n = np.zeros(C, np.int64)
+    which = np.zeros(len(key), np.bool_)
+    buf = np.empty(len(key), key.dtype)
+    for c in range(C):
+        nc = m = 0
+        for i in range(starts[c], starts[c + 1]):
+            nc += cand[i]
+            if valid[i]:
+                buf[m] = key[i]
+                m += 1
+        n[c] = nc
+        if nc == 0 or m == 0:
+            continue
+        widest = _kth(buf, m, min(SPAN * nc, m))
+        for i in range(starts[c], starts[c + 1]):
+            which[i] = valid[i] and (key[i] <= widest or cand[i])
+    return n, which
+
+
+@njit(cache=True, nogil=True)
+def _chosen(key, shaped, cand, which, floor, starts, n):
+    """The round's candidates (P,) bool: per copy, the candidates under their free cost (``floor``: (1,) or one
+    per pair) that the term left as they were, then of the other shaped rows the rest of its n places, by
+    the smallest shaped keys (ties at the cut all in)."""
+    P = len(key)
+    out = np.zeros(P, np.bool_)
+    buf = np.empty(P, shaped.dtype)
+    one = len(floor) == 1
+    for c in range(len(starts) - 1):
+        kept = 0
+        for i in range(starts[c], starts[c + 1]):
+            out[i] = cand[i] and shaped[i] == key[i] and key[i] <= (floor[0] if one else floor[i])
+            kept += out[i]
+        rest = n[c] - kept
+        if rest < 1:  # none left: no k-th, so no other row comes in
+            continue
+        m = 0
+        for i in range(starts[c], starts[c + 1]):
+            if which[i] and not out[i]:
+                buf[m] = shaped[i]
+                m += 1
+        cut = _kth(buf, m, rest)
+        for i in range(starts[c], starts[c + 1]):
+            if which[i] and not out[i] and shaped[i] <= cut:
+                out[i] = True
+    return out
 
 
 @contextlib.contextmanager
