@@ -108,6 +108,25 @@ def test_under_gate_is_numpys_threshold(gate, free):
         assert np.array_equal(glue.under_gate(key, valid, nan, E, free_at), ref) and not ref.any()
 
 
+def test_gate_kth_is_numpys_partition():
+    """The gate's k-th smallest valid key, the rank capped by the valid pairs, as np.partition gives it: ties,
+    zeros, infinities and NaNs (last), ranks past the valid count; a float32 once boxed as it is in
+    `LoopRound.select`."""
+    rng = np.random.default_rng(12)
+    for trial in range(300):
+        P = int(rng.integers(1, 60))
+        key = rng.choice(np.array([0.0, 1e-9, 2e-9, np.inf, np.nan, 5e-10], np.float32), P)
+        key = np.where(rng.random(P) < 0.5, (rng.random(P) * 1e-8).astype(np.float32), key)
+        valid = rng.random(P) < 0.7
+        valid[rng.integers(P)] = True
+        k = int(rng.integers(1, P + 3))
+        m = np.count_nonzero(valid)
+        want = np.partition(key.compress(valid), min(k, m) - 1)[min(k, m) - 1]
+        got = np.float32(glue.gate_kth(key, valid, k))
+        assert got == want or (np.isnan(got) and np.isnan(want)), trial
+        assert type(1.2 * got) is type(1.2 * want) is np.float32
+
+
 @pytest.mark.parametrize("need", [0, 3, 40, 10**6])
 def test_order_fit_is_sort_keys_and_fits_target(need):
     rng = np.random.default_rng(need)

@@ -1,6 +1,7 @@
-"""The round as compiled loops (`selection`, `contraction`): `LoopRound` runs the selection passes with validation and the
-contraction as two loops, between the numpy stages' update, prices and ranking; `GlueRound` compiles that
-glue too (`glue`) and sends a round's device work as one call. Both make the numpy stages'
+"""The round as compiled loops (`selection`, `contraction`): `LoopRound` runs the gate, the selection passes with
+validation, the order and the contraction as compiled passes (`glue.gate_kth`, `glue.order_fit`), between the numpy
+stages' update, prices and ranking; `GlueRound` compiles the rest of that glue too (`glue`) and sends a
+round's device work as one call. Both make the numpy stages'
 choices (`StagedRound`), bit for bit."""
 from __future__ import annotations
 
@@ -44,6 +45,9 @@ class LoopRound(Round):
         # locked vertices and the scratch of their rule (`rules.stranded_by_pass`); empty: no locks
         self.lock_rule = (selection.Locks(np.zeros(0, bool), np.zeros(0, np.int32)) if run.locks is None
                           else selection.Locks(np.ascontiguousarray(run.locks.locked, bool), np.full(n, -1, np.int32)))
+        # the free cost at each vertex's part scale, as `select` takes it per pair (empty: one part)
+        self.free_at = (np.zeros(0) if run.part_scale is None
+                        else options.schedule.free_cost * np.asarray(run.part_scale))
 
     def passes(self, st: RoundState, key_of, cand, need, groups, local=None):
         """`StagedRound.passes` as one compiled call (`selection.select_validate`; ``local``: each pair's
@@ -65,9 +69,36 @@ class LoopRound(Round):
             self.limits, self.seams, self.lock_rule, selection.Work(free, active, self.mark, keys, rows, verts))
         return acc, bad, why, None, ~free, apex
 
+    def select(self, st: RoundState, need: int, valid: np.ndarray):
+        """`Round.select` with the gate, the order and the face target as compiled passes (`glue.gate_kth`,
+        `glue.under_gate`, `glue.order_fit`), the threshold's arithmetic as numpy does it. What validation found
+        is the accepted pairs' apexes and the pool room their contraction takes."""
+        run = self.run
+        t0 = time.perf_counter()
+        sch = run.options.schedule
+        P = len(st.E)
+        kth = st.key.dtype.type(glue.gate_kth(st.key, valid, gate_rank(need, P, P, sch)))  # (numba returns a float)
+        thr = sch.gate * kth  # numpy's promotion of the two
+        if not len(self.free_at):
+            thr = np.maximum(thr, sch.free_cost)
+        cand = glue.under_gate(st.key, valid, thr, st.E, self.free_at)
+        # per pair only where the shape term reads it (the gate above takes it per vertex)
+        free = np.take(self.free_at, st.E[:, 0]) if len(self.free_at) and run.options.quality_threshold else \
+            sch.free_cost
+        with ranking(st, run, valid, cand, free) as cand:  # (with the shape term, `shape`)
+            acc, bad, why, _, locked, apex = self.passes(st, None, cand, need, None)
+            n_sel = acc.size
+            acc, apex, room = glue.order_fit(acc, apex, st.key, st.ecount, (run.rounds * 7919) & 0xFFFFFFFF,
+                                             need, run.faces.cnt, st.E)
+        self.count_rejected(why)
+        run.timer.add("select_s", time.perf_counter() - t0)
+        st.bad[bad] = why
+        return acc, n_sel, bad.size, locked, (apex, room)
+
     def ordered(self, found, order):
-        """The accepted pairs' apexes taken in ``order``."""
-        return found[order]
+        """A batch's accepted pairs' apexes taken in ``order`` (`batched`), as `select` gives what it found: the
+        pool room left to `contract_mesh`."""
+        return found[order], None
 
     def scratch(self, P: int):
         """`selection.select_validate`'s working arrays for P pairs, (≥ P,) int64, (2, ≥ P) int32 and (2, n)
@@ -81,20 +112,24 @@ class LoopRound(Round):
         return self._keys, self._rows, self._verts, self._count
 
     def contract_mesh(self, st: RoundState, acc, P, xs, touched, found):
-        """The faces, then the pairs, after the accepted pairs P (placed at xs, apexes ``found``) contract,
-        as compiled loops; the rejected pairs at ``touched`` get another chance."""
+        """The faces, then the pairs, after the accepted pairs P (placed at xs; ``found``: their apexes and the
+        pool room their contraction takes, `select`, or None: counted here) contract, as compiled loops; the
+        rejected pairs at ``touched`` get another chance."""
         run = self.run
         faces = run.faces
         a, b = P[:, 0], P[:, 1]
+        apex, room = found
         contraction.clear_bad(st.E, st.bad, touched)
         if run.wedges is not None:  # the corners' wedges, before the faces are relinked
             run.wedges.contract_many(faces, run.VQ, np.stack([a, b], 1), xs)
-        faces.reserve(int(faces.cnt.take(a).sum() + faces.cnt.take(b).sum()))  # the kept vertices' new runs
+        if room is None:
+            room = faces.cnt.take(a).sum() + faces.cnt.take(b).sum()
+        faces.reserve(int(room))  # the kept vertices' new runs
         faces.end, dead = contraction.contract_faces(a, b, faces.F, faces.alive, faces.cnt, faces.off, faces.pool,
                                                    faces.end)
         faces.count -= len(dead)
         run.tally.dead.append(dead)
-        st.edges_next = contraction.contract_edges(st.E, st.ecount, st.deg, a, b, found, run.label)
+        st.edges_next = contraction.contract_edges(st.E, st.ecount, st.deg, a, b, apex, run.label)
         put_rows(self.V3, a, xs)
 
 
@@ -108,9 +143,6 @@ class GlueRound(LoopRound):
         self.at_kept = None  # (`contract`) the next round's price at locked kept vertices, started
         self.kept_fuses = run.locks is not None and kept_fuses(run.model)  # ... in the round's device call
         self.limit = glue.bound(run.options.max_cost, DTYPE)  # as `candidates` compares it
-        # the free cost at each vertex's part scale, as `select` takes it per pair (empty: one part)
-        self.free_at = (np.zeros(0) if run.part_scale is None
-                        else run.options.schedule.free_cost * np.asarray(run.part_scale))
 
     def pairs(self, prev: RoundState | None, need: int):
         if prev is not None and prev.next_price is not None:
@@ -161,31 +193,6 @@ class GlueRound(LoopRound):
         res = np.empty((out.shape[0], K), out.dtype)
         res[:3], res[3], res[4], res[5:] = at.x.T, at.cost, at.branch, at.parts
         return res
-
-    def select(self, st: RoundState, need: int, valid: np.ndarray):
-        """`Round.select` with the gate, the order and the face target as compiled passes
-        (`glue`), the threshold's arithmetic as numpy does it. What validation found is the
-        accepted pairs' apexes and the pool room their contraction takes."""
-        run = self.run
-        t0 = time.perf_counter()
-        sch = run.options.schedule
-        k = gate_rank(need, int(np.count_nonzero(valid)), len(st.E), sch)
-        thr = sch.gate * np.partition(st.key.compress(valid), k - 1)[k - 1]
-        if not len(self.free_at):
-            thr = np.maximum(thr, sch.free_cost)
-        cand = glue.under_gate(st.key, valid, thr, st.E, self.free_at)
-        # per pair only where the shape term reads it (the gate above takes it per vertex)
-        free = np.take(self.free_at, st.E[:, 0]) if len(self.free_at) and run.options.quality_threshold else \
-            sch.free_cost
-        with ranking(st, run, valid, cand, free) as cand:  # (with the shape term, `shape`)
-            acc, bad, why, _, locked, apex = self.passes(st, None, cand, need, None)
-            n_sel = acc.size
-            acc, apex, room = glue.order_fit(acc, apex, st.key, st.ecount, (run.rounds * 7919) & 0xFFFFFFFF,
-                                             need, run.faces.cnt, st.E)
-        self.count_rejected(why)
-        run.timer.add("select_s", time.perf_counter() - t0)
-        st.bad[bad] = why
-        return acc, n_sel, bad.size, locked, (apex, room)
 
     def contract(self, st: RoundState, acc, touched, found):
         """`Round.contract` as one compiled pass (`glue.contract`), then the device call (one
