@@ -127,8 +127,8 @@ def test_contributing_states_the_test_counts():
                             *marks], cwd=ROOT, capture_output=True, text=True, timeout=600)
         return re.sub(r" in [\d.]+s.*$", "", p.stdout.strip().splitlines()[-1])
 
+    # one collection: the fast tier's line counts every test too (a second, full one took as long again)
     assert collected("-m", "not slow") == fast.group(0).strip("`")
-    assert collected() == full.group(0).strip("`")
     n_fast, n_all, n_slow = map(int, fast.groups())
     assert n_fast + n_slow == n_all == int(full.group(1))
     assert f"{n_slow} of {n_all} tests" in text and f"fast tier runs {n_fast}" in text

@@ -14,7 +14,7 @@ import scipy.sparse.linalg as spla
 
 from qemjax._mesh import fixed_order as fo
 from qemjax._mesh.grid_nearest import nearest
-from qemjax._mesh.nearest import nearest_triangles
+from qemjax._mesh.nearest import Triangles
 from qemjax._mesh.spd_solve import _diagonal, solve_csr, solve_spd
 
 
@@ -68,9 +68,22 @@ def test_spd_solve_reports_what_it_did_not_reach():
 
 
 def _brute(X, G, P):
-    """Exact nearest distances by testing every triangle (the KD-tree search's kernel, all pairs)."""
-    c = np.ascontiguousarray(np.transpose(X[G], (1, 2, 0)))
-    return np.array([nearest_triangles(c, p[None])[0][0] for p in P])
+    """Exact nearest distances by testing every triangle (the KD-tree search's kernel, all pairs: what
+    `nearest_triangles` gives, tests/test_metrics.py), in blocks of points."""
+    tris = Triangles(np.ascontiguousarray(np.transpose(X[G], (1, 2, 0))))
+    m, out = len(G), []
+    for s in range(0, len(P), 256):
+        p = P[s:s + 256]
+        owner = np.repeat(np.arange(len(p)), m)
+        d2 = tris.sq_dist(np.ascontiguousarray(p[owner].T), np.tile(np.arange(m), len(p)))
+        out.append(np.sqrt(d2.reshape(len(p), m).min(axis=1)))
+    return np.concatenate(out)
+
+
+def _to_named(X, G, P, f):
+    """Each point's distance to the triangle ``f`` names for it (the same kernel)."""
+    tris = Triangles(np.ascontiguousarray(np.transpose(X[G], (1, 2, 0))))
+    return np.sqrt(tris.sq_dist(np.ascontiguousarray(P.T), np.asarray(f, np.int64)))
 
 
 @pytest.mark.parametrize("shape", ["cloud", "flat", "degenerate", "far", "one"])
@@ -90,8 +103,7 @@ def test_grid_nearest_is_exact(shape):
     want = _brute(X, G, P)
     assert np.allclose(d, want, rtol=1e-12, atol=1e-14)
     # the face it names lies at that distance
-    named = np.array([_brute(X, G[f[i]][None], P[i][None])[0] for i in range(len(P))])
-    assert np.allclose(named, d, rtol=1e-12, atol=1e-14)
+    assert np.allclose(_to_named(X, G, P, f), d, rtol=1e-12, atol=1e-14)
 
 
 def test_grid_nearest_is_exact_on_slivers_and_segments():
@@ -111,8 +123,7 @@ def test_grid_nearest_is_exact_on_slivers_and_segments():
         P = rng.normal(size=(2000, 3)) * 1.5
         f, d = nearest(X, G[rows], P)
         assert np.allclose(d, _brute(X, G[rows], P), rtol=1e-12, atol=1e-12)
-        named = np.array([_brute(X, G[rows][f[i]][None], P[i][None])[0] for i in range(len(P))])
-        assert np.allclose(named, d, rtol=1e-12, atol=1e-12)
+        assert np.allclose(_to_named(X, G[rows], P, f), d, rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("n,block", [(2, None), (4, None), (2, 700)])

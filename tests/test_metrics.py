@@ -43,12 +43,13 @@ def reference_distance(p, a, b, c):
 
 
 def brute_force(points, vertices, faces):
-    """Distance from every point to every face, minimum per point: (q,)."""
+    """Distance from every point to every face, minimum per point: (q,). In blocks of 256 points, whose
+    temporaries stay in the caches (2048 took four times as long, with the same values)."""
     tri = vertices[faces]
     out = np.empty(len(points))
-    for s in range(0, len(points), 2048):
-        d = metrics.point_triangle_distance(points[s : s + 2048, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
-        out[s : s + 2048] = d.min(axis=1)
+    for s in range(0, len(points), 256):
+        d = metrics.point_triangle_distance(points[s : s + 256, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
+        out[s : s + 256] = d.min(axis=1)
     return out
 
 
@@ -223,9 +224,10 @@ def test_nearest_triangles_exact_on_long_thin_triangles():
     length = 4.0 / 8
     assert tree.max_radius < length / 4
     want = brute_force(pts, v, f)
+    exact = np.sqrt(_all_pairs_min(tris, pts))
     for dist, face in (tree.query(pts), _nearest.nearest_triangles(mesh.corners, pts)):
         np.testing.assert_allclose(dist, want, rtol=1e-9, atol=1e-13)
-        np.testing.assert_array_equal(dist, np.sqrt(_all_pairs_sq(tris, pts).min(axis=1)))
+        np.testing.assert_array_equal(dist, exact)
         tri = v[f[face]]
         got = metrics.point_triangle_distance(pts, tri[:, 0], tri[:, 1], tri[:, 2])
         np.testing.assert_allclose(got, dist, rtol=1e-12, atol=1e-15)
@@ -247,6 +249,12 @@ def _all_pairs_sq(tris, pts):
     m = len(tris)
     owner = np.repeat(np.arange(len(pts)), m)
     return tris.sq_dist(np.ascontiguousarray(pts[owner].T), np.tile(np.arange(m), len(pts))).reshape(len(pts), m)
+
+
+def _all_pairs_min(tris, pts, block=256):
+    """(q,) each point's smallest `_all_pairs_sq`, in blocks of points (the same values, without a (q, m)
+    array: 12,000 points by 4,096 faces took 1.2 GB per coordinate)."""
+    return np.concatenate([_all_pairs_sq(tris, pts[s:s + block]).min(axis=1) for s in range(0, len(pts), block)])
 
 
 def _dense_points_case(seed=6):
