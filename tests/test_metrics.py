@@ -48,7 +48,8 @@ def brute_force(points, vertices, faces):
     tri = vertices[faces]
     out = np.empty(len(points))
     for s in range(0, len(points), 256):
-        d = metrics.point_triangle_distance(points[s : s + 256, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
+        d = metrics.point_triangle_distance(points[s : s + 256, None], tri[None, :, 0], tri[None, :, 1],
+                                            tri[None, :, 2])
         out[s : s + 256] = d.min(axis=1)
     return out
 

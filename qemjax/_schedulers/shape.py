@@ -182,6 +182,8 @@ def _chosen(key, shaped, cand, which, floor, starts, n):
     buf = np.empty(P, shaped.dtype)
     one = len(floor) == 1
     for c in range(len(starts) - 1):
+        # the candidates under their own free cost that the term did not lift stay (with parts of several
+        # sizes the free cost is each part's, so they need not be the cheapest); the rest go by shaped key
         kept = 0
         for i in range(starts[c], starts[c + 1]):
             out[i] = cand[i] and shaped[i] == key[i] and key[i] <= (floor[0] if one else floor[i])
