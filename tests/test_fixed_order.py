@@ -16,6 +16,7 @@ from qemjax._mesh import fixed_order as fo
 from qemjax._mesh.grid_nearest import nearest
 from qemjax._mesh.nearest import Triangles
 from qemjax._mesh.spd_solve import _diagonal, solve_csr, solve_spd
+from test_metrics import _all_pairs_min
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -69,15 +70,8 @@ def test_spd_solve_reports_what_it_did_not_reach():
 
 def _brute(X, G, P):
     """Exact nearest distances by testing every triangle (the KD-tree search's kernel, all pairs: what
-    `nearest_triangles` gives, tests/test_metrics.py), in blocks of points."""
-    tris = Triangles(np.ascontiguousarray(np.transpose(X[G], (1, 2, 0))))
-    m, out = len(G), []
-    for s in range(0, len(P), 256):
-        p = P[s:s + 256]
-        owner = np.repeat(np.arange(len(p)), m)
-        d2 = tris.sq_dist(np.ascontiguousarray(p[owner].T), np.tile(np.arange(m), len(p)))
-        out.append(np.sqrt(d2.reshape(len(p), m).min(axis=1)))
-    return np.concatenate(out)
+    `nearest_triangles` gives, tests/test_metrics.py)."""
+    return np.sqrt(_all_pairs_min(Triangles(np.ascontiguousarray(np.transpose(X[G], (1, 2, 0)))), P))
 
 
 def _to_named(X, G, P, f):

@@ -108,10 +108,13 @@ def test_under_gate_is_numpys_threshold(gate, free):
         assert np.array_equal(glue.under_gate(key, valid, nan, E, free_at), ref) and not ref.any()
 
 
-def test_gate_kth_is_numpys_partition():
-    """The gate's k-th smallest valid key, the rank capped by the valid pairs, as np.partition gives it: ties,
-    zeros, infinities and NaNs (last), ranks past the valid count; a float32 once boxed as it is in
-    `LoopRound.select`."""
+def test_the_gates_kth_is_numpys_partition_as_a_float32():
+    """The gate's k-th smallest valid key as `LoopRound.select` takes it (`segments.kth`, one copy, the rank
+    capped by the valid pairs as `select.gate_rank` caps it), as np.partition gives it: ties, zeros,
+    infinities and NaNs (last), ranks past the valid count; a float32, so that gate × k-th is promoted as
+    numpy promotes it."""
+    from qemjax._schedulers import segments
+
     rng = np.random.default_rng(12)
     for trial in range(300):
         P = int(rng.integers(1, 60))
@@ -122,7 +125,7 @@ def test_gate_kth_is_numpys_partition():
         k = int(rng.integers(1, P + 3))
         m = np.count_nonzero(valid)
         want = np.partition(key.compress(valid), min(k, m) - 1)[min(k, m) - 1]
-        got = np.float32(glue.gate_kth(key, valid, k))
+        got = segments.kth(key, valid, np.array([0, P], np.int64), np.array([min(k, m)], np.int64))[0]
         assert got == want or (np.isnan(got) and np.isnan(want)), trial
         assert type(1.2 * got) is type(1.2 * want) is np.float32
 

@@ -1,7 +1,8 @@
 """Order statistics of each copy's own pairs in a batch (pairs grouped by copy: copy c holds rows
-starts[c] … starts[c+1] − 1), in one compiled pass over the rows instead of a numpy call or three per copy
-and round: a sweep's batch has tens of copies and a round a few hundred thousand pairs at most, so the
-calls, not the arithmetic, were the cost."""
+starts[c] … starts[c+1] − 1; a single run is one copy), in one compiled pass over the rows instead of a
+numpy call or three per copy and round: a sweep's batch has tens of copies and a round a few hundred
+thousand pairs at most, so the calls, not the arithmetic, were the cost. The batch's gates (`batched`), a
+single run's gate (`parallel.LoopRound.select`) and the shape term's two cuts (`shape`) take them."""
 from __future__ import annotations
 
 import numpy as np

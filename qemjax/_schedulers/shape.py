@@ -32,6 +32,7 @@ from numba import njit
 
 from .._kernels.batching import DTYPE
 from .._mesh import threads
+from . import segments
 
 # the faces under this fraction of the threshold (at s = 0.4, a smallest angle under about 2-5°) lift nothing:
 # faces already nearly degenerate (a spike's, a crease strip's) are not the move's doing; `kept_quality`
@@ -143,32 +144,26 @@ def _rerank_one(key, valid, cand, starts, floor, E, X, VQ, F, alive, off, cnt, p
 
 
 @njit(cache=True, nogil=True)
-def _kth(buf, m, k):
-    """The k-th smallest (1-based) of buf[:m], as np.partition gives it."""
-    return np.partition(buf[:m], k - 1)[k - 1]
-
-
-@njit(cache=True, nogil=True)
 def _shaped_rows(key, valid, cand, starts):
     """(each copy's candidates (C,), the rows the term shapes (P,) bool): of each copy with candidates (n of
-    them), its valid pairs up to the min(SPAN·n, valid)-th smallest key, and its candidates."""
+    them), its valid pairs up to the min(SPAN·n, valid)-th smallest key (`segments.kth`), and its candidates."""
     C = len(starts) - 1
     n = np.zeros(C, np.int64)
-    which = np.zeros(len(key), np.bool_)
-    buf = np.empty(len(key), key.dtype)
+    span = np.zeros(C, np.int64)
     for c in range(C):
         nc = m = 0
         for i in range(starts[c], starts[c + 1]):
             nc += cand[i]
-            if valid[i]:
-                buf[m] = key[i]
-                m += 1
+            m += valid[i]
         n[c] = nc
-        if nc == 0 or m == 0:
-            continue
-        widest = _kth(buf, m, min(SPAN * nc, m))
-        for i in range(starts[c], starts[c + 1]):
-            which[i] = valid[i] and (key[i] <= widest or cand[i])
+        if nc > 0 and m > 0:
+            span[c] = min(SPAN * nc, m)
+    widest = segments.kth(key, valid, starts, span)
+    which = np.zeros(len(key), np.bool_)
+    for c in range(C):
+        if span[c] > 0:
+            for i in range(starts[c], starts[c + 1]):
+                which[i] = valid[i] and (key[i] <= widest[c] or cand[i])
     return n, which
 
 
@@ -176,30 +171,27 @@ def _shaped_rows(key, valid, cand, starts):
 def _chosen(key, shaped, cand, which, floor, starts, n):
     """The round's candidates (P,) bool: per copy, the candidates under their free cost (``floor``: (1,) or one
     per pair) that the term left as they were, then of the other shaped rows the rest of its n places, by
-    the smallest shaped keys (ties at the cut all in)."""
-    P = len(key)
-    out = np.zeros(P, np.bool_)
-    buf = np.empty(P, shaped.dtype)
+    the smallest shaped keys (`segments.kth`; ties at the cut all in)."""
+    C = len(starts) - 1
+    out = np.zeros(len(key), np.bool_)
+    others = np.zeros(len(key), np.bool_)
+    rest = np.zeros(C, np.int64)
     one = len(floor) == 1
-    for c in range(len(starts) - 1):
+    for c in range(C):
         # the candidates under their own free cost that the term did not lift stay (with parts of several
         # sizes the free cost is each part's, so they need not be the cheapest); the rest go by shaped key
         kept = 0
         for i in range(starts[c], starts[c + 1]):
             out[i] = cand[i] and shaped[i] == key[i] and key[i] <= (floor[0] if one else floor[i])
             kept += out[i]
-        rest = n[c] - kept
-        if rest < 1:  # none left: no k-th, so no other row comes in
-            continue
-        m = 0
-        for i in range(starts[c], starts[c + 1]):
-            if which[i] and not out[i]:
-                buf[m] = shaped[i]
-                m += 1
-        cut = _kth(buf, m, rest)
-        for i in range(starts[c], starts[c + 1]):
-            if which[i] and not out[i] and shaped[i] <= cut:
-                out[i] = True
+            others[i] = which[i] and not out[i]
+        rest[c] = max(n[c] - kept, 0)  # none left: no k-th, so no other row comes in
+    cut = segments.kth(shaped, others, starts, rest)
+    for c in range(C):
+        if rest[c] > 0:
+            for i in range(starts[c], starts[c + 1]):
+                if others[i] and shaped[i] <= cut[c]:
+                    out[i] = True
     return out
 
 

@@ -28,7 +28,7 @@ run by `driver.choose`:
   than `select.INLINE_ROWS` rows runs on the main thread (waking the worker costs more than it overlaps).
 - `LoopRound` (`compiled`): stages 3 to 5 as compiled loops (`selection`, `contraction`) where they apply: manifold mode,
   pairs updated in place, a mesh of at most `selection.MAX_FACES` faces; a single run's gate and order as
-  compiled passes too (`glue.gate_kth`, `glue.under_gate`, `glue.order_fit`). A batch of runs (`batched`)
+  compiled passes too (`segments.kth`, `glue.under_gate`, `glue.order_fit`). A batch of runs (`batched`)
   takes it there, with its per-copy gates and budgets.
 - `GlueRound` (`compiled`): `LoopRound` with the rest of the numpy glue between the loops compiled too
   (`glue`) and the round's device work as one call: a single run whose model `device.fuses`.

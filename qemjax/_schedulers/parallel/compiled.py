@@ -1,5 +1,5 @@
 """The round as compiled loops (`selection`, `contraction`): `LoopRound` runs the gate, the selection passes with
-validation, the order and the contraction as compiled passes (`glue.gate_kth`, `glue.order_fit`), between the numpy
+validation, the order and the contraction as compiled passes (`segments.kth`, `glue.order_fit`), between the numpy
 stages' update, prices and ranking; `GlueRound` compiles the rest of that glue too (`glue`) and sends a
 round's device work as one call. Both make the numpy stages'
 choices (`StagedRound`), bit for bit."""
@@ -13,7 +13,7 @@ from ..._kernels.batching import CHUNKS, DTYPE
 from ..._kernels.flips import host_limits
 from ..._mesh.arrays import put_rows, take_rows as _take
 from .. import locks as _locks
-from .. import outcome, rules
+from .. import outcome, rules, segments
 from . import contraction, glue, selection
 from ..device import Priced, kept_fuses, start_step, step_one
 from .glue import FaceArrays, Known, PairArrays
@@ -70,15 +70,16 @@ class LoopRound(Round):
         return acc, bad, why, None, ~free, apex
 
     def select(self, st: RoundState, need: int, valid: np.ndarray):
-        """`Round.select` with the gate, the order and the face target as compiled passes (`glue.gate_kth`,
+        """`Round.select` with the gate, the order and the face target as compiled passes (`segments.kth`,
         `glue.under_gate`, `glue.order_fit`), the threshold's arithmetic as numpy does it. What validation found
         is the accepted pairs' apexes and the pool room their contraction takes."""
         run = self.run
         t0 = time.perf_counter()
         sch = run.options.schedule
         P = len(st.E)
-        kth = st.key.dtype.type(glue.gate_kth(st.key, valid, gate_rank(need, P, P, sch)))  # (numba returns a float)
-        thr = sch.gate * kth  # numpy's promotion of the two
+        k = gate_rank(need, int(np.count_nonzero(valid)), P, sch)
+        kth = segments.kth(st.key, valid, np.array([0, P], np.int64), np.array([k], np.int64))[0]
+        thr = sch.gate * kth  # numpy's promotion of the two (kth: a float32 of the key's array)
         if not len(self.free_at):
             thr = np.maximum(thr, sch.free_cost)
         cand = glue.under_gate(st.key, valid, thr, st.E, self.free_at)

@@ -4,15 +4,15 @@ its one device call, as four calls instead of dozens of numpy calls on small arr
 On a small mesh a round's own work is a few tens of µs, and the numpy calls around it (each a few µs: take,
 put, compress, bincount, ...) cost more than the work (docs/benchmarks.md; `experiments/figures/round_floor.py` measures it). These loops take the same values from the same arrays, so the golden outputs
 stay the same bits; tests/test_round_glue.py compares each with the numpy code it replaces on random
-inputs. They serve one run on the compiled path (`parallel.GlueRound`; the gate's and `order_fit` also a
+inputs. They serve one run on the compiled path (`parallel.GlueRound`; `under_gate` and `order_fit` also a
 `parallel.LoopRound`'s): a batch's gates and budgets are per copy (`batched`).
 
 * `carry`: stages 1 and 2 and the candidate test (`parallel.Round.update`, `.cost`, `.candidates`): the pairs
   that stay take their last prices and rules, the stale ones the device's new prices (with locks: as
   `locks.adjust` leaves them), pairs of two locked vertices are refused, and the boundary vertices and the
   candidates are marked;
-* `gate_kth`, `under_gate`: the round's gate (`parallel.Round.select`), the candidates at most gate × the k-th
-  cheapest valid key (or the free cost);
+* `under_gate`: the round's gate (`parallel.Round.select`), the candidates at most gate × the k-th cheapest valid key
+  (or the free cost);
 * `order_fit`: the accepted pairs in key order, cut to the face target (`select.sort_keys`,
   `select.fits_target`);
 * `contract`: the rejections cleared around the round, the faces and pairs contracted (`contraction`), the
@@ -103,20 +103,6 @@ def carry(kept, d, out, last, E, ecount, n, test, locked):
         if ok:
             nv += 1
     return x, cost, branch, parts, bad, bvert, valid, nv
-
-
-@njit(cache=True, nogil=True)
-def gate_kth(key, valid, k):
-    """The gate's k-th smallest valid key (`select.gate_rank` with every pair valid: the valid count, its
-    other bound, is taken here), the value ``np.partition(key.compress(valid), k - 1)[k - 1]`` gives."""
-    buf = np.empty(len(key), key.dtype)
-    m = 0
-    for i in range(len(key)):
-        if valid[i]:
-            buf[m] = key[i]
-            m += 1
-    k = min(k, m)
-    return np.partition(buf[:m], k - 1)[k - 1]
 
 
 @njit(cache=True, nogil=True)
