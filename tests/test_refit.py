@@ -304,6 +304,37 @@ def test_an_input_side_made_beforehand_gives_the_same_bits(bumpy, thread):
         _refit.refit(None, None, X, G, 1, cos, side=side)
 
 
+def test_a_run_makes_its_input_side_beside_its_rounds_with_the_same_bits(bumpy, monkeypatch):
+    """A run that re-fits to its own input makes what the re-fit makes of the input alone (`refit.InputSide`)
+    on a thread from the rounds' start (`stages.beside_rounds`), and its re-fit takes it: the same result
+    bit for bit, measured distance included, as with the side made inside the re-fit. Not for a run with
+    locks, nor one that does not re-fit."""
+    from qemjax._pipeline import stages
+
+    made, beside = [], stages.beside_rounds
+
+    def recording(job):
+        job = beside(job)
+        made.append(job.side)
+        return job
+    monkeypatch.setattr(stages, "beside_rounds", recording)
+    kw = dict(ratio=0.05, method="default")
+    new = qemjax.simplify(bumpy, **kw)
+    assert len(made) == 1 and made[0] is not None and made[0].get().into is not None  # moves: their index too
+    monkeypatch.setattr(stages, "beside_rounds", lambda job: (made.append(None), job)[1])
+    old = qemjax.simplify(bumpy, **kw)
+    for name in ("vertices", "faces"):
+        assert np.array_equal(getattr(new, name), getattr(old, name)), name
+    for k in ("distance_max", "distance_rms", "distance_p95", "polish_moves", "sliver_moves"):
+        assert new.stats[k] == old.stats[k], k
+    assert new.stats["polish_moves"] + new.stats["sliver_moves"] > 0
+    monkeypatch.setattr(stages, "beside_rounds", recording)
+    made.clear()
+    qemjax.simplify(bumpy, ratio=0.05, refit=0)
+    qemjax.simplify(bumpy, ratio=0.05, locked=np.arange(5))
+    assert made == [None, None]
+
+
 def test_the_record_keeps_the_contractions_positions(bumpy):
     """A replay rebuilds the contraction phase: its last level is the run without the re-fit."""
     plain = qemjax.simplify(bumpy, target_faces=200, refit=0)

@@ -236,3 +236,47 @@ def test_edge_update_on_two_threads_is_contract_edges(seed, threads, monkeypatch
         assert g.dtype == w.dtype, name
         np.testing.assert_array_equal(g, w, err_msg=name)
     assert (label == -1).all() and not want[2].all()
+
+
+@pytest.mark.parametrize("kw", [{"method": "default"}, {"method": "classic"},
+                                {"method": "classic", "preserve_topology": False}],
+                         ids=["default", "compiled-loops", "numpy-stages-rebuilt"])
+def test_a_round_that_only_rejected_selects_again_from_its_own_pairs(kw, monkeypatch):
+    """After a round whose every selected pair broke a rule, the next round selects among the same pairs
+    and prices without the rejected ones (`Round.without_rejected`) instead of updating and pricing them
+    again: the same result, bit for bit, as the full stages 1 and 2, and the pairs are made only in the
+    rounds after a contraction (a thin torus near its end: many such rounds)."""
+    mesh = shapes.torus(1.0, 0.05, 64, 8)
+    kw = {"ratio": 0.02} | kw
+    made, again = [], []
+
+    def counted(pairs):
+        def run(self, prev, need):
+            made.append(prev)
+            return pairs(self, prev, need)
+        return run
+
+    without_rejected = parallel.stages.Round.without_rejected
+
+    def shortcut(self, st, valid):
+        again.append(st)
+        return without_rejected(self, st, valid)
+
+    def full_stages(self, st, valid):  # the stages before: the same pairs rebuilt and priced again
+        again.append(st)
+        self.retry(st)
+        return None
+
+    with monkeypatch.context() as m:
+        for cls in (parallel.stages.Round, parallel.GlueRound):
+            m.setattr(cls, "pairs", counted(cls.pairs))
+        m.setattr(parallel.stages.Round, "without_rejected", shortcut)
+        new, _ = _run(mesh, kw, monkeypatch, True)
+        new_made, new_again, made[:], again[:] = len(made), len(again), [], []
+        m.setattr(parallel.stages.Round, "without_rejected", full_stages)
+        old, _ = _run(mesh, kw, monkeypatch, True)
+        old_made, old_again = len(made), len(again)
+    _assert_same(new, old)
+    assert new_again == old_again >= 3  # rounds that only rejected: the case at hand
+    assert old_made == new.stats["rounds"]  # every round made its pairs ...
+    assert new_made == old_made - new_again  # ... now every round but those after one that only rejected

@@ -137,6 +137,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks,
                      bounded=bound is not None, seed=seed, refit_to=refit_to)
     if bound is None:
+        job = stages.beside_rounds(job)
         return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
     _bound.supported(job)
     return _bound.finish(job, stages.run(job), bound, t_start, c0, s0, stacklevel=3)

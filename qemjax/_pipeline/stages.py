@@ -180,6 +180,7 @@ class Job(NamedTuple):
     locks: Any = None  # `_locks.Locks` (geo is then the run's renumbered geometry), or None
     refit_to: Any = None  # the surface the re-fit fits the output to instead of geo's (`REFIT_TO`): (V, F) or
     # a `refit.InputSide`; or None
+    side: Any = None  # geo's own `refit.InputSide`, made on a thread beside the rounds (`beside_rounds`), or None
 
 
 def setup(method, scheduler, topology, attributes, progress, settings: dict, measure=None) -> Setup:
@@ -313,6 +314,22 @@ def _late_off(method_obj, attrs, feature_edges, scheduler: str) -> str | None:
     if feature_edges is not None and len(feature_edges):
         return "feature edges are given (the memoryless quadrics do not track them)"
     return None
+
+
+def beside_rounds(job: Job) -> Job:
+    """``job`` with what its re-fit makes of the input alone (`refit.InputSide`: the samples, and for the
+    moves after the fit their search structure) made on a thread of its own from now on, for a run that
+    re-fits to its own input: its rounds keep one core busy and seldom two, so the re-fit finds them made.
+    The same values as made by the re-fit. Not for a batch (its runs share one side, `refit_all`), a run
+    with locks (its re-fit sees the input in the user's numbering, `_locks.back`), nor an input of
+    `LARGE_RUN` faces or more (its rounds' stages take the cores, and the samples would be held beside the
+    rounds' arrays)."""
+    setup, g = job.setup, job.geo
+    if not (setup.refit and job.refit_to is None and job.locks is None and job.target < len(g.F) < LARGE_RUN):
+        return job
+    side = _refit.InputSide(lambda: (g.V, g.F), part=g.parts[1], moves=bool(setup.polish or setup.sliver_moves),
+                            thread=True)
+    return job._replace(side=side)
 
 
 def unchanged(job: Job):
@@ -510,7 +527,7 @@ def _refit_and_measure(job: Job, g: Geometry, mesh: _Mesh, appearance: dict, lat
         # or another one (`REFIT_TO`), whole
         side = job.refit_to if isinstance(job.refit_to, _refit.InputSide) else None
         if job.refit_to is None:
-            V, F, part, source = g.V, g.F, g.parts[1], mesh.source_faces
+            V, F, part, source, side = g.V, g.F, g.parts[1], mesh.source_faces, job.side
         else:
             V, F = job.refit_to if side is None else side.get()[:2]
             part = source = None

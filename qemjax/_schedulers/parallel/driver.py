@@ -35,11 +35,14 @@ def choose(run: Run, glue: bool = True) -> Round:
 
 def rounds(run: Run, rnd: Round):
     """Rounds until the face target, or until no pair may contract. Returns (stop reason, blocked_by)."""
-    prev, stop, blocked = None, "target", {}
+    prev, stop, blocked, again = None, "target", {}, None
     while run.faces.count > run.target:
         run.tally.rounds += 1
         need = run.faces.count - run.target
-        st, valid = rnd.pairs(prev, need)  # stages 1 and 2: update, cost
+        if again is None:
+            st, valid = rnd.pairs(prev, need)  # stages 1 and 2: update, cost
+        else:  # after a round that only rejected: its pairs and prices, without the rejected ones
+            st, valid, again = prev, again, None
         rnd.rank(st, valid)
         if not valid.any():
             stop, blocked = rnd.stop(st, need)
@@ -47,8 +50,7 @@ def rounds(run: Run, rnd: Round):
         acc, n_sel, n_bad, locked, found = rnd.select(st, need, valid)  # stages 3 and 4: select, validate
         if acc.size == 0:
             if n_bad:  # the invalid ones are out now: select again among the rest (same pairs)
-                rnd.retry(st)
-                prev = st
+                again, prev = rnd.without_rejected(st, valid), st
                 continue
             stop, blocked = rnd.stop(st, need)
             break

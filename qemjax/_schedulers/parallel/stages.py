@@ -263,6 +263,12 @@ class Round:
         if self.run.incremental:
             st.edges_next = (st.E, st.ecount, np.ones(len(st.E), bool), st.deg, np.zeros(len(st.E), bool))
 
+    def without_rejected(self, st: RoundState, valid: np.ndarray) -> np.ndarray:
+        """The candidates of a round after one that only rejected: its own without those it rejected. Nothing
+        contracted, so the pairs, their prices, the rules known and the face budget are as they were, and
+        `pairs` would make the same state again (update, prices, candidates)."""
+        return valid & (st.bad == 0)
+
     def stop(self, st: RoundState, need: int):
         """The stop reason and what blocked the remaining pairs (`outcome.classify`)."""
         run = self.run
