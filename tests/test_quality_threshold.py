@@ -385,3 +385,37 @@ def test_each_copys_order_statistics_are_numpys():
             assert got[c] == want or (np.isnan(want) and np.isnan(got[c])), (trial, c)
         copies = np.arange(len(sizes))
         np.testing.assert_array_equal(segments.per_row(copies, starts), np.repeat(copies, sizes))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_large_copys_kth_by_radix_passes_is_numpys(seed):
+    """Copies of `segments.RADIX_FROM` rows or more take the k-th smallest by radix passes over the float32
+    bits: the value np.partition gives, over keys with heavy ties (the first and second passes' bins hold
+    many rows), both zeros, denormals, negatives, infinities and NaNs of either sign (last), ranks from the
+    first to the last, beside small copies that keep the partition."""
+    from qemjax._schedulers import segments
+
+    rng = np.random.default_rng(seed)
+    big = segments.RADIX_FROM
+    sizes = np.array([big + 17, 500, 2 * big, 0, big], np.int64)
+    starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    P = int(starts[-1])
+    special = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1e-40, -1e-40, 1.0, 1.0 + 2**-23], np.float32)
+    values = (rng.random(P) ** 4 * 1e-6).astype(np.float32)  # costs: many exponents
+    values[rng.random(P) < 0.3] = np.float32(3e-7)  # one value many times
+    pick = rng.random(P) < 0.1
+    values[pick] = rng.choice(special, int(pick.sum()))
+    values[rng.random(P) < 0.05] *= -1
+    values[rng.integers(P, size=20)] = np.array([0xFFC00001], np.uint32).view(np.float32)[0]  # a negative NaN
+    mask = rng.random(P) < 0.7
+    counts = segments.sums(mask, starts)
+    for ranks in (np.ones_like(counts), counts, np.maximum(counts // 3, 1), np.maximum(counts - 25, 1),
+                  rng.integers(1, np.maximum(counts, 1) + 1)):
+        ks = np.where(counts > 0, ranks, 0).astype(np.int64)
+        got = segments.kth(values, mask, starts, ks)
+        for c, (a, b) in enumerate(zip(starts[:-1], starts[1:])):
+            if ks[c] < 1:
+                assert np.isnan(got[c])
+                continue
+            want = np.partition(values[a:b][mask[a:b]], ks[c] - 1)[ks[c] - 1]
+            assert got[c] == want or (np.isnan(want) and np.isnan(got[c])), (c, ks[c], got[c], want)
