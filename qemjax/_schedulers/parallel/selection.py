@@ -249,14 +249,19 @@ def select_validate(pairs, passes, faces, mesh, limits, seams, locks, work):
         else:
             K[i] = NO_KEY
     # the working set: pairs with an available endpoint (ascending), and those with both (``bo``); listed
-    # without a branch (about half the pairs are in it, in no pattern a branch predictor learns)
-    k1 = nbo = 0
+    # without a branch (about half the pairs are in it, in no pattern a branch predictor learns). The
+    # candidates among ``bo`` (``cl``, ascending) are the only pairs with a key: the passes take each pair's
+    # smallest key and select from them alone, and the pairs of ``bo`` carry those minima to the neighbours
+    cl = np.empty(ncand, np.int64)
+    k1 = nbo = ncl = 0
     for i in range(P):
         pa, pb = active[E[i, 0]], active[E[i, 1]]
         one[k1] = i
         k1 += pa | pb
         bo[nbo] = i
         nbo += pa & pb
+        cl[ncl] = i
+        ncl += cand[i]
     acc = np.empty(ncand, np.int64)
     apex = np.empty((ncand, 2), np.int64)
     rej = np.empty(ncand, np.int64)
@@ -273,16 +278,14 @@ def select_validate(pairs, passes, faces, mesh, limits, seams, locks, work):
     na = nr = 0
     for p in range(max_passes):
         # each available vertex's smallest key among its pairs (m1), then among its neighbours' (m2)
-        live_any = False
+        if ncl == 0:
+            break
         for j in range(nbo):
             i = bo[j]
             u, v = E[i, 0], E[i, 1]
             m1[u] = m1[v] = m2[u] = m2[v] = NO_KEY
-            live_any |= cand[i]
-        if not live_any:
-            break
-        for j in range(nbo):
-            i = bo[j]
+        for j in range(ncl):
+            i = cl[j]
             k = K[i]
             u, v = E[i, 0], E[i, 1]
             if k < m1[u]:
@@ -298,10 +301,10 @@ def select_validate(pairs, passes, faces, mesh, limits, seams, locks, work):
             if k < m2[v]:
                 m2[v] = k
         ns = 0
-        for j in range(nbo):
-            i = bo[j]
+        for j in range(ncl):
+            i = cl[j]
             k = K[i]
-            if k != NO_KEY and k == m2[E[i, 0]] and k == m2[E[i, 1]]:
+            if k == m2[E[i, 0]] and k == m2[E[i, 1]]:
                 sel[ns] = i
                 ns += 1
         if ns == 0:
@@ -379,4 +382,11 @@ def select_validate(pairs, passes, faces, mesh, limits, seams, locks, work):
                 bo[nbo] = i
                 nbo += pa & pb
             k1 = k2
+            n2 = 0
+            for j in range(ncl):  # the candidates left in ``bo``: not rejected, both endpoints available
+                i = cl[j]
+                u, v = E[i, 0], E[i, 1]
+                cl[n2] = i
+                n2 += cand[i] & active[u] & free[u] & active[v] & free[v]
+            ncl = n2
     return acc[:na].copy(), apex[:na].copy(), rej[:nr].copy(), why[:nr].copy()
