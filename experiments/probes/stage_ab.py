@@ -3,6 +3,11 @@
 main thread's CPU time, medians of alternating warm runs, with an output hash per side.
 
     python experiments/probes/stage_ab.py --rev main --mesh cow --ratio 0.1 --repeats 15
+    python experiments/probes/stage_ab.py --rev main --mesh armadillo --set quality_threshold=0 late_memoryless=0 refit=0
+
+``--set`` gives both sides settings of `simplify` (numbers or words); the second line runs the rounds a
+partitioned run's levels before the last run (no shape term, summed quadrics, no re-fit) on a round of
+about 130,000 pairs.
 
 The main thread's CPU time (``time.thread_time``) counts the host work on the critical path and is less
 disturbed than wall time by other processes on a shared machine; kernels run on JAX's threads beside it.
@@ -24,13 +29,24 @@ import meshes as bench_meshes  # noqa: E402
 from probes.round_profile import STAGES  # noqa: E402  (the scheduler's stage timers in stats)
 
 
+def _value(text: str):
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--rev", default="main")
     p.add_argument("--mesh", default="cow")
     p.add_argument("--ratio", type=float, default=0.1)
     p.add_argument("--repeats", type=int, default=15)
+    p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="settings of simplify, both sides")
     args = p.parse_args(argv)
+    kw = {k: _value(v) for k, v in (item.split("=", 1) for item in args.set)}
     warnings.simplefilter("ignore")
     old = ab_compare.load_old(args.rev)
     import qemjax as new
@@ -38,19 +54,19 @@ def main(argv=None) -> int:
     libs = {"old": old, "new": new}
     for lib in libs.values():  # compile, then one warm run each
         for _ in range(2):
-            lib.simplify((m.V, m.F), ratio=args.ratio)
+            lib.simplify((m.V, m.F), ratio=args.ratio, **kw)
     rows = {tag: {k: [] for k in STAGES + ("run_s", "wall_s", "main_cpu_s")} for tag in libs}
     digest, rounds = {}, {}
     for r in range(args.repeats):
         for tag in (("old", "new") if r % 2 == 0 else ("new", "old")):
             t0, c0 = time.perf_counter(), time.thread_time()
-            res = libs[tag].simplify((m.V, m.F), ratio=args.ratio)
+            res = libs[tag].simplify((m.V, m.F), ratio=args.ratio, **kw)
             rows[tag]["main_cpu_s"].append(time.thread_time() - c0)
             rows[tag]["wall_s"].append(time.perf_counter() - t0)
             for k in STAGES + ("run_s",):
                 rows[tag][k].append(res.stats.get(k, 0.0))
             digest[tag], rounds[tag] = ab_compare.digest(res), res.stats["rounds"]
-    print(f"{args.mesh} -> {args.ratio:g}, {args.rev} (old) vs working tree (new), medians of {args.repeats} "
+    print(f"{args.mesh} -> {args.ratio:g}{' ' + str(kw) if kw else ''}, {args.rev} (old) vs working tree (new), medians of {args.repeats} "
           f"alternating warm runs; outputs {'identical' if digest['old'] == digest['new'] else 'DIFFERENT'} "
           f"({digest['old']} / {digest['new']}), rounds {rounds['old']} / {rounds['new']}")
     print(f"{'stage':12s} {'old ms':>8s} {'new ms':>8s} {'new/old':>8s}")
