@@ -252,7 +252,7 @@ def select_validate(pairs, passes, faces, mesh, limits, seams, locks, work):
     # without a branch (about half the pairs are in it, in no pattern a branch predictor learns). The
     # candidates among ``bo`` (``cl``, ascending) are the only pairs with a key: the passes take each pair's
     # smallest key and select from them alone, and the pairs of ``bo`` carry those minima to the neighbours
-    cl = np.empty(ncand, np.int64)
+    cl = np.empty(ncand + 1, np.int64)  # (+ 1: the listing below writes one row past the last candidate)
     k1 = nbo = ncl = 0
     for i in range(P):
         pa, pb = active[E[i, 0]], active[E[i, 1]]
