@@ -29,7 +29,9 @@ MESH_SUFFIXES = (".obj", ".off", ".ply", ".stl")
 SUBDIVIDED = {"armadillo-x16": ("armadillo", 2), "armadillo-x64": ("armadillo", 3),
               # more large inputs of other shapes, for the partitioned runs' quality
               "stanford-bunny-x16": ("stanford-bunny", 2), "fertility-x16": ("fertility", 2),
-              "rocker-arm-x16": ("rocker-arm", 2)}
+              "rocker-arm-x16": ("rocker-arm", 2),
+              # between the compiled rounds' limit and the large meshes (`probes/round_paths.py`)
+              "armadillo-x4": ("armadillo", 1), "stanford-bunny-x4": ("stanford-bunny", 1)}
 
 
 @dataclass
