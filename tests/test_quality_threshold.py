@@ -376,13 +376,7 @@ def test_each_copys_order_statistics_are_numpys():
         want_n = np.array([np.count_nonzero(mask[a:b]) for a, b in zip(starts[:-1], starts[1:])])
         np.testing.assert_array_equal(segments.sums(mask, starts), want_n)
         ks = np.array([rng.integers(0, n + 1) for n in want_n], np.int64)
-        got = segments.kth(values, mask, starts, ks)
-        for c, (a, b) in enumerate(zip(starts[:-1], starts[1:])):
-            if ks[c] < 1:
-                assert np.isnan(got[c])
-                continue
-            want = np.partition(values[a:b][mask[a:b]], ks[c] - 1)[ks[c] - 1]
-            assert got[c] == want or (np.isnan(want) and np.isnan(got[c])), (trial, c)
+        _assert_kth_is_numpys(values, mask, starts, ks, trial)
         copies = np.arange(len(sizes))
         np.testing.assert_array_equal(segments.per_row(copies, starts), np.repeat(copies, sizes))
 
@@ -412,10 +406,17 @@ def test_a_large_copys_kth_by_radix_passes_is_numpys(seed):
     for ranks in (np.ones_like(counts), counts, np.maximum(counts // 3, 1), np.maximum(counts - 25, 1),
                   rng.integers(1, np.maximum(counts, 1) + 1)):
         ks = np.where(counts > 0, ranks, 0).astype(np.int64)
-        got = segments.kth(values, mask, starts, ks)
-        for c, (a, b) in enumerate(zip(starts[:-1], starts[1:])):
-            if ks[c] < 1:
-                assert np.isnan(got[c])
-                continue
-            want = np.partition(values[a:b][mask[a:b]], ks[c] - 1)[ks[c] - 1]
-            assert got[c] == want or (np.isnan(want) and np.isnan(got[c])), (c, ks[c], got[c], want)
+        _assert_kth_is_numpys(values, mask, starts, ks, seed)
+
+
+def _assert_kth_is_numpys(values, mask, starts, ks, case):
+    """`segments.kth` of each copy is np.partition's k-th of its masked rows (NaN where the rank is 0)."""
+    from qemjax._schedulers import segments
+
+    got = segments.kth(values, mask, starts, ks)
+    for c, (a, b) in enumerate(zip(starts[:-1], starts[1:])):
+        if ks[c] < 1:
+            assert np.isnan(got[c])
+            continue
+        want = np.partition(values[a:b][mask[a:b]], ks[c] - 1)[ks[c] - 1]
+        assert got[c] == want or (np.isnan(want) and np.isnan(got[c])), (case, c, ks[c], got[c], want)

@@ -29,15 +29,6 @@ import meshes as bench_meshes  # noqa: E402
 from probes.round_profile import STAGES  # noqa: E402  (the scheduler's stage timers in stats)
 
 
-def _value(text: str):
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--rev", default="main")
@@ -46,7 +37,7 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=15)
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="settings of simplify, both sides")
     args = p.parse_args(argv)
-    kw = {k: _value(v) for k, v in (item.split("=", 1) for item in args.set)}
+    kw = {k: ab_compare._value(v) for k, v in (item.split("=", 1) for item in args.set)}  # as --new-option's
     warnings.simplefilter("ignore")
     old = ab_compare.load_old(args.rev)
     import qemjax as new
