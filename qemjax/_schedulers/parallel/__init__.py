@@ -32,9 +32,13 @@ run by `driver.choose`:
   takes it there, with its per-copy gates and budgets.
 - `GlueRound` (`compiled`): `LoopRound` with the rest of the numpy glue between the loops compiled too
   (`glue`) and the round's device work as one call: a single run whose model `device.fuses`.
-  Its rounds hand over once the device's prices are in: the first round (and one after a round that only
-  rejected) takes stages 1 and 2 as the numpy stages do (`Round.fresh`); every other round takes them in
-  one compiled pass over the device's raw prices (`GlueRound.carry`).
+  Its rounds hand over once the device's prices are in: the first round takes stages 1 and 2 as the numpy
+  stages do (`Round.fresh`); every other round after a contraction takes them in one compiled pass over the
+  device's raw prices (`GlueRound.carry`).
+
+A round after one that only rejected (nothing contracted) selects again from that round's pairs and prices
+without the rejected ones (`Round.without_rejected`), on every implementation; a batch (`batched`) updates
+and prices its pairs again (`Round.retry`), as its copies seldom all reject at once.
 
 Stages the implementations share are `stages.Round`'s; the run's state across rounds is `state.Run`. A
 round's device work (`stages.SeparateCalls` or `stages.OneCall`) is asynchronous: the pricing, the flip

@@ -137,7 +137,7 @@ class LoopRound(Round):
 class GlueRound(LoopRound):
     """`LoopRound` with its glue compiled too (`glue`) and a round's device work as one call: a
     round after one that contracted takes the device's prices straight into its pairs (`carry`); a round
-    without them (the first, or one after a round that only rejected) takes the numpy stages' `fresh`."""
+    without them (the first) takes the numpy stages' `fresh`."""
 
     def __init__(self, run: Run):
         super().__init__(run)

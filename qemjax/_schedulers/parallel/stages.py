@@ -258,7 +258,8 @@ class Round:
         t.rejected_by += np.bincount(why, minlength=len(t.rejected_by))
 
     def retry(self, st: RoundState):
-        """A round that only rejected: the same pairs again next round, the rejected ones out."""
+        """A batch's round that only rejected: the same pairs updated and priced again next round, the
+        rejected ones out (a single run takes `without_rejected`)."""
         st.changed = np.zeros(self.run.n, bool)
         if self.run.incremental:
             st.edges_next = (st.E, st.ecount, np.ones(len(st.E), bool), st.deg, np.zeros(len(st.E), bool))
