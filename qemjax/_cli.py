@@ -52,7 +52,9 @@ OPTIONS = {
                            "scheduler's ADDRESS (tcp://host:8786) runs the parts on its workers"),
     "partition": dict(help="read the input in chunks and simplify it in parts on every core (or a Dask "
                       "cluster: --scheduler ADDRESS), with their borders locked, level by level: for meshes "
-                      "larger than one process (docs/large-meshes.md)", shown="off"),
+                      "larger than one process (docs/large-meshes.md); --no-partition: in one process even "
+                      "when the mesh would need more memory than this machine has available (without either, "
+                      "such a mesh is refused before it is read)", shown="off"),
     "placement": dict(choices=lambda: _api.PLACEMENTS),
     "feature_edges": dict(metavar="FILE", help="vertex-index pairs (k,2) constrained like boundary edges, "
                           "read from FILE: .npy, or text with two integers per line (indices of the input "
@@ -266,7 +268,8 @@ def _partition_kwargs(args, kw: dict) -> None:
     if not kw.get("partition"):
         if extra or address:
             raise CliError(f"{(extra or ['--scheduler ADDRESS'])[0]} needs --partition")
-        kw.pop("partition", None)
+        if kw.get("partition") is None:  # --no-partition stays: in one process, whatever the mesh's size
+            kw.pop("partition", None)
         return
     from ._options import Partition
 

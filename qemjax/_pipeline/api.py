@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import _costs
 from . import bound as _bound
+from . import fits as _fits
 from . import locks as _locks
 from .._options import Topology
 from .._record.result import SimplifyResult
@@ -107,6 +108,9 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         level until one group meets the target (`qemjax._partition`; docs/large-meshes.md). The result holds
         the output and its stats (``stats["partition"]``), not the input, record or history; of the
         attributes, a file's UVs (``attributes="uv"``, or ``"auto"`` when the file names a texture image).
+        None (default): in this process, unless the mesh would need more memory than this machine has
+        available (`_pipeline.fits`: a ``MemoryError`` that is also a ValueError, before the mesh is read,
+        naming the way to run it partitioned); False: in this process regardless.
     settings: any field of the method, `Topology` or `Attributes` by its name (``boundary_weight=10``,
         ``flip_angle=None``, ``attribute_weights=0.1``) or dotted (``**{"method.refit": 0}``); each
         replaces that field of the object given (so ``method="accurate", refit=0`` is the preset without
@@ -131,8 +135,10 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     seed, refit_to = settings.pop(stages.SEED, None), settings.pop(stages.REFIT_TO, None)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings, measure)
     bound = _bound.check(max_distance, max_distance_rel)
-    # bad targets fail before the mesh is read
+    # bad targets fail before the mesh is read, as does a mesh too large for this process (`fits`)
     stages._resolve_target(1, target_faces, ratio, max_error, bound is not None)
+    if partition is None:
+        _fits.check(mesh)
     geo = stages.geometry(mesh, setup, stacklevel=3)
     job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks,
                      bounded=bound is not None, seed=seed, refit_to=refit_to)
