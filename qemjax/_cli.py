@@ -653,9 +653,12 @@ def _lod(args, kwargs) -> int:
     """``qemjax lod``: one run, every level written (each file under a temporary name, then renamed)."""
     from ._pipeline.lod import lod_chain
 
-    if kwargs.pop("partition", None):
+    partition = kwargs.pop("partition", None)
+    if partition:
         raise CliError("qemjax lod: --partition is offered by qemjax simplify only (a partitioned run keeps no "
                        "record to replay the levels from)")
+    if partition is False:  # --no-partition: in one process even when the mesh would not fit (`_pipeline.fits`)
+        kwargs["partition"] = False
     refused = ["--" + name.replace("_", "-") for name in LOD_REFUSED if kwargs.get(name) is not None]
     if refused:
         raise CliError(f"qemjax lod keeps positions only: its levels are replayed from contractions "

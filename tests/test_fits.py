@@ -63,6 +63,11 @@ def test_the_command_line_refuses_and_runs_with_no_partition(tmp_path, small_mac
     assert len(err.splitlines()) == 1 and not out.exists()
     assert _cli.main(["simplify", str(src), str(out), "--faces", "500", "--no-partition"]) == 0
     assert out.exists()
+    levels = tmp_path / "levels"
+    assert _cli.main(["lod", str(src), str(levels), "--ratios", "0.5", "0.2"]) == 2
+    assert "--partition" in capsys.readouterr().err and not any(levels.glob("*lod*"))
+    assert _cli.main(["lod", str(src), str(levels), "--ratios", "0.5", "0.2", "--no-partition"]) == 0
+    assert len(list(levels.glob("sphere-lod*"))) == 2
 
 
 @pytest.mark.parametrize("block", [1, 2, 5, 1 << 24])
