@@ -36,12 +36,21 @@ def concatenated(scene):
     return scene.to_geometry() if hasattr(scene, "to_geometry") else scene.dump(concatenate=True)
 
 
+def binary_stl_count(head: bytes, size: int) -> int | None:
+    """The triangles of a binary STL of ``size`` bytes whose first bytes are ``head``: the count its header
+    declares, where the file holds exactly that many records (84 bytes, then 50 per triangle); else None."""
+    if len(head) < 84:
+        return None
+    count = int.from_bytes(head[80:84], "little")
+    return count if size == 84 + 50 * count else None
+
+
 def _check_stl(data: bytes) -> bytes:
     """The data to read (ASCII STL decoded as `_io_text.decode`) after checking that an STL is ASCII
     ('solid' first) or a binary one whose size matches its triangle count."""
     n = len(data)
     count = int.from_bytes(data[80:84], "little") if n >= 84 else 0
-    if n >= 84 and n == 84 + 50 * count:
+    if binary_stl_count(data, n) is not None:
         return data
     if data.lstrip()[:5].lower() == b"solid":
         return _io_text.decode(data)[0]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from .._io.files import binary_stl_count
 from .._io.text import is_binary
 from . import ply, text
 from .source import Refusal, Source
@@ -27,7 +28,7 @@ def _stl(path: Path, scratch: Path) -> Source:
     with open(path, "rb") as f:
         head = f.read(84)
     count = int.from_bytes(head[80:84], "little") if len(head) == 84 else -1
-    if size == 84 + 50 * count:
+    if binary_stl_count(head, size) is not None:
         return text.read_binary_stl(path, scratch, count)
     if head.lstrip()[:5].lower() == b"solid" and not is_binary(head[:80]):
         return text.read_ascii_stl(path, scratch)

@@ -80,11 +80,11 @@ def file_faces(path) -> int | None:
                 face = ply.parse_header(f.read(1 << 20)).element("face")
             return None if face is None else face.rows
         if fmt == ".stl":
-            size = path.stat().st_size
+            from .._io.files import binary_stl_count
+
             with open(path, "rb") as f:
-                head = f.read(84)
-            count = int.from_bytes(head[80:84], "little") if len(head) == 84 else -1
-            return count if size == 84 + 50 * count else _count(path, (b"endfacet",))
+                count = binary_stl_count(f.read(84), path.stat().st_size)
+            return _count(path, (b"endfacet",)) if count is None else count
         if fmt == ".obj":
             return _count(path, (b"\nf ", b"\nf\t"))
         if fmt == ".off":
@@ -96,16 +96,15 @@ def file_faces(path) -> int | None:
     return None
 
 
-def faces_of(mesh: Any) -> int | None:
+def faces_of(mesh: Any, room: int) -> int | None:
     """At least how many faces ``mesh`` (what `simplify` takes) has, when that is known without reading it
-    whole; None for a file too small to matter (see `check`) or of a format not counted."""
+    whole; None for a file whose every possible face fits in ``room`` bytes, or of a format not counted."""
     if isinstance(mesh, (str, os.PathLike)):
         try:
             size = os.path.getsize(mesh)
         except OSError:
             return None  # the reader names the missing file
-        room = available()
-        if room is None or size // SMALLEST_FACE_BYTES * BYTES_PER_FACE <= room:
+        if size // SMALLEST_FACE_BYTES * BYTES_PER_FACE <= room:
             return None  # fits, whatever the file holds
         return file_faces(mesh)
     faces = mesh[1] if isinstance(mesh, tuple) and len(mesh) >= 2 else getattr(mesh, "faces", None)
@@ -117,9 +116,9 @@ def faces_of(mesh: Any) -> int | None:
 
 def check(mesh: Any) -> None:
     """Raise `TooLargeError` when the in-core run of ``mesh`` would need more memory than is available."""
-    n = faces_of(mesh)
-    room = available() if n else None
-    if not n or room is None or n * BYTES_PER_FACE <= room:
+    room = available()
+    n = None if room is None else faces_of(mesh, room)
+    if not n or n * BYTES_PER_FACE <= room:
         return
     name = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh"
     raise TooLargeError(f"{name}: {n:,} faces need about {_size(n * BYTES_PER_FACE)} in one process, and this "
