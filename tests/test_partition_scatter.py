@@ -279,6 +279,8 @@ def test_coincident_centroids_are_split_in_input_order(tmp_path):
     ("far.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "vertex 4"),
     ("nan.obj", b"v 0 0 0\nv 1 0 zz\nv 0 1 0\nf 1 2 3\n", "line 2"),
     ("cut.stl", b"\0" * 80 + (10).to_bytes(4, "little") + b"\0" * 60, "truncated binary STL"),
+    # 34 bytes: 84 + 50 × -1, the size a header-less file's count of -1 used to match
+    ("short.stl", bytes(range(1, 35)), "fewer than the 84 its header alone takes"),
     ("inf.obj", b"v 0 0 0\nv 1 0 inf\nv 0 1 0\nv nan 0 0\nf 1 2 3\n", "vertex 1 has a coordinate that is not a finite"),
     ("few.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                 b"element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1\n3 0 1 2\n",
