@@ -65,12 +65,14 @@ def qemjax_command() -> list[str]:
     return [sys.executable, "-m", "qemjax._cli"]
 
 
-def child_env(cache_dir: Path) -> dict:
-    """Child processes import this qemjax and share one compilation cache."""
+def child_env(cache_dir: Path | None = None) -> dict:
+    """Child processes import this qemjax and share one compilation cache: ``cache_dir``, or the test session's
+    (`conftest`: what the tests' own runs compiled, the children load instead of compiling again)."""
     e = dict(os.environ)
     package_root = str(Path(qemjax.__file__).resolve().parents[1])
     e["PYTHONPATH"] = os.pathsep.join([package_root] + ([e["PYTHONPATH"]] if e.get("PYTHONPATH") else []))
-    e["QEMJAX_CACHE_DIR"] = str(cache_dir)
+    if cache_dir is not None:
+        e["QEMJAX_CACHE_DIR"] = str(cache_dir)
     e.pop("JAX_COMPILATION_CACHE_DIR", None)
     return e
 

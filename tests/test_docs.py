@@ -18,8 +18,8 @@ WITH_PYTHON = [p for p in PAGES if python_blocks(p)]
 
 
 @pytest.fixture(scope="module")
-def env(tmp_path_factory):
-    return child_env(tmp_path_factory.mktemp("jax-cache"))
+def env():
+    return child_env()
 
 
 def test_every_page_is_in_the_site():

@@ -12,8 +12,8 @@ README = ROOT / "README.md"
 
 
 @pytest.fixture(scope="module")
-def env(tmp_path_factory):
-    return child_env(tmp_path_factory.mktemp("jax-cache"))
+def env():
+    return child_env()
 
 
 def test_readme_is_short_and_starts_with_the_two_commands():

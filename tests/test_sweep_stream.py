@@ -185,8 +185,9 @@ SCRIPT = ("import sys, qemjax._sweep.run as sw; sw.PIECE_RUNS = 1; from qemjax i
           "sys.exit(_cli.main(sys.argv[1:]))")
 
 
-def _start(folder: Path, cache: Path, *args) -> subprocess.Popen:
-    env = dict(os.environ, QEMJAX_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
+def _start(folder: Path, *args) -> subprocess.Popen:
+    # the tests' compilation cache (`conftest`): the command loads the kernels the tests compiled
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
     env.pop("QEMJAX_NO_CACHE", None)
     return subprocess.Popen([sys.executable, "-c", SCRIPT, "sweep", str(folder / "s.toml"), "--quiet", *args],
                             cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -218,7 +219,7 @@ def test_ctrl_c_keeps_finished_rows_and_the_rerun_resumes(tmp_path, executor):
         pytest.importorskip("distributed")
     (tmp_path / "s.toml").write_text(CONFIG + executor)
     table = tmp_path / "table.csv"
-    proc = _start(tmp_path, tmp_path / "cache")
+    proc = _start(tmp_path)
     _wait_for_rows(proc, table, 1)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
@@ -229,7 +230,7 @@ def test_ctrl_c_keeps_finished_rows_and_the_rerun_resumes(tmp_path, executor):
     assert line.startswith("qemjax: interrupted: ") and "cells finished this run, kept in" in line, err
     assert f"{len(kept)} of {N_CELLS} done in all (a rerun resumes)" in line, line
 
-    again = _start(tmp_path, tmp_path / "cache")
+    again = _start(tmp_path)
     out, err = again.communicate(timeout=600)
     assert again.returncode == 0, err
     assert f"{N_CELLS} cells (0 failed)" in out and f"{len(kept)} were already there (skipped)" in out, out
@@ -243,13 +244,13 @@ def test_ctrl_c_keeps_finished_rows_and_the_rerun_resumes(tmp_path, executor):
 def test_sigkill_loses_at_most_the_cells_in_flight(tmp_path):
     (tmp_path / "s.toml").write_text(CONFIG)
     table = tmp_path / "table.csv"
-    proc = _start(tmp_path, tmp_path / "cache")
+    proc = _start(tmp_path)
     _wait_for_rows(proc, table, 2)
     proc.kill()
     proc.communicate(timeout=60)
     kept = _rows(table)  # a whole table (written under a temporary name, then renamed): no partial row
     assert 2 <= len(kept) < N_CELLS
-    again = _start(tmp_path, tmp_path / "cache")
+    again = _start(tmp_path)
     out, err = again.communicate(timeout=600)
     assert again.returncode == 0, err
     assert f"{len(kept)} were already there (skipped)" in out, out
