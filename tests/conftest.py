@@ -38,11 +38,13 @@ def pytest_configure(config):
     (docs/contributing.md). Files already here are kept."""
     import importlib.metadata
     import shutil
+    import sysconfig
 
     repo = Path(__file__).resolve().parents[1]
-    try:
-        dist = importlib.metadata.distribution("qemjax")
-    except importlib.metadata.PackageNotFoundError:
+    # the installed distribution, not the checkout's own metadata (a build leaves qemjax.egg-info in it)
+    site = sorted({sysconfig.get_paths()[k] for k in ("purelib", "platlib")})
+    dist = next(iter(importlib.metadata.distributions(name="qemjax", path=site)), None)
+    if dist is None:
         return
     files = [f for f in dist.files or () if f.parts[0] == "qemjax"]
     built = {f: Path(f.locate()).resolve() for f in files if f.suffix in (".nbi", ".nbc")}
