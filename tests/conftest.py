@@ -29,39 +29,13 @@ MAX_WORKERS = 4
 
 
 def pytest_configure(config):
-    """The tests import the package from this checkout, whose numba cache is empty on a fresh clone: every
-    test process would compile the loops again (two workers at once on two cores, a minute or more each).
-    Where the environment also holds qemjax installed from a build of the very same sources (the README's
-    and CI's `pip install '.[test]'`, which compiles them ahead: `qemjax._ahead`), its cached loops are
-    copied beside these modules first. The same sources throughout, not module by module: numba checks an
-    entry against its own module only, so a caller cached from other sources could run an old callee
-    (docs/contributing.md). Files already here are kept."""
-    import importlib.metadata
-    import shutil
-    import sysconfig
+    """On a fresh clone beside an install of the same sources, the install's compiled loops first
+    (`built_loops`): the test processes load them instead of each compiling them."""
+    from built_loops import copy_into, installed
 
-    repo = Path(__file__).resolve().parents[1]
-    # the installed distribution, not the checkout's own metadata (a build leaves qemjax.egg-info in it)
-    site = sorted({sysconfig.get_paths()[k] for k in ("purelib", "platlib")})
-    dist = next(iter(importlib.metadata.distributions(name="qemjax", path=site)), None)
-    if dist is None:
-        return
-    files = [f for f in dist.files or () if f.parts[0] == "qemjax"]
-    built = {f: Path(f.locate()).resolve() for f in files if f.suffix in (".nbi", ".nbc")}
-    if not built or Path(dist.locate_file("qemjax")).resolve() == repo / "qemjax":
-        return  # nothing compiled ahead (an editable install), or this checkout itself
-    sources = {str(f) for f in files if f.suffix == ".py"}
-    if sources != {p.relative_to(repo).as_posix() for p in (repo / "qemjax").rglob("*.py")} or any(
-            Path(f.locate()).read_bytes() != repo.joinpath(*f.parts).read_bytes() for f in files if f.suffix == ".py"):
-        return
-    for f, src in built.items():
-        dst = repo.joinpath(*f.parts)
-        if dst.exists() or not src.is_file():
-            continue
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        tmp = dst.with_name(f"{dst.name}.{os.getpid()}.tmp")  # (workers may copy at once: each file whole)
-        shutil.copyfile(src, tmp)
-        os.replace(tmp, dst)
+    dist = installed()
+    if dist is not None:
+        copy_into(dist, Path(__file__).resolve().parents[1])
 
 
 def pytest_xdist_auto_num_workers(config):
