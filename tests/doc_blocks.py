@@ -65,14 +65,12 @@ def qemjax_command() -> list[str]:
     return [sys.executable, "-m", "qemjax._cli"]
 
 
-def child_env(cache_dir: Path | None = None) -> dict:
-    """Child processes import this qemjax and share one compilation cache: ``cache_dir``, or the test session's
-    (`conftest`: what the tests' own runs compiled, the children load instead of compiling again)."""
+def child_env() -> dict:
+    """Child processes import this qemjax and share the test session's compilation cache (`conftest`'s
+    QEMJAX_CACHE_DIR: what the tests compiled, the children load instead of compiling again)."""
     e = dict(os.environ)
     package_root = str(Path(qemjax.__file__).resolve().parents[1])
     e["PYTHONPATH"] = os.pathsep.join([package_root] + ([e["PYTHONPATH"]] if e.get("PYTHONPATH") else []))
-    if cache_dir is not None:
-        e["QEMJAX_CACHE_DIR"] = str(cache_dir)
     e.pop("JAX_COMPILATION_CACHE_DIR", None)
     return e
 
