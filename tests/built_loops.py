@@ -29,8 +29,8 @@ def copy_into(dist, repo: Path) -> int:
     Returns how many were copied."""
     files = [f for f in dist.files or () if f.parts[0] == "qemjax"]
     built = {f: Path(f.locate()).resolve() for f in files if f.suffix in (".nbi", ".nbc")}
-    if not built or Path(dist.locate_file("qemjax")).resolve() == (repo / "qemjax").resolve():
-        return 0  # nothing compiled ahead (an editable install), or this checkout itself
+    if not built:
+        return 0  # nothing compiled ahead (an editable install)
     sources = [f for f in files if f.suffix == ".py"]
     mine = {p.relative_to(repo).as_posix() for p in (repo / "qemjax").rglob("*.py")}
     if {f.as_posix() for f in sources} != mine or any(
