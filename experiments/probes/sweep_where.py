@@ -3,9 +3,10 @@ py-spy`), so that the per-call cost cProfile adds to small functions does not in
 re-fits (the fit, the polish, the sliver moves, the measured distance), the nearest-face queries under them,
 the planning of the pieces. The sweep is the cow's 64 `distinct` configurations of
 `experiments/figures/sweep_bench.py`, ``workers=1`` (this process and its threads, whose samples count
-alike), two sweeps to warm up and then ``--sweeps``; samples taken while JAX compiles or Python imports are
-left out. A sample counts for the first stage in `STAGES` its stack holds (the queries first: the re-fit's
-stages run them on threads).
+alike), two sweeps to warm up and then ``--sweeps``; samples taken while JAX compiles, traces or lowers a
+kernel or Python imports (the start, the sweeps that warm up) are left out, as are those of a thread waiting
+for work (its innermost frame a pool's or a condition's wait). A sample counts for the first stage in
+`STAGES` its stack holds (the queries first: the re-fit's stages run them on threads).
 
     python experiments/probes/sweep_where.py [--mesh cow] [--sweeps 5] [--rate 200]
 """
@@ -53,6 +54,9 @@ STAGES = [
     ("rounds: the rest (prices, carry, the second phases)", "_Batch.rounds batched.py"),
 ]
 
+# a thread's innermost frame while it waits for work (a pool thread between items, a result awaited)
+IDLE = {"_worker thread.py", "Condition.wait threading.py"}
+
 # functions of `moves` whose share of the polish is printed (inclusive: a sample may count in several)
 POLISH_PARTS = ["Moves.attempt moves.py", "Moves.worst moves.py", "_Largest._above moves.py", "query_here grid_nearest.py"]
 
@@ -77,10 +81,14 @@ def main() -> None:
         total = polished = 0
         for line in raw.read_text().splitlines():
             stack, _, n = line.rpartition(" ")
+            if not n.isdigit():
+                continue  # a frame name py-spy wrote across lines (a thread's name): no count of its own
             # each frame "function (path/file.py:line)" as "function file.py"
             stack = re.sub(r" \((?:[^;]*/)?([^/;:]+):\d+\)", r" \1", stack)
-            if "compile" in stack or "_find_and_load" in stack:
-                continue  # compiling or importing (the start, the first sweep)
+            if any(word in stack for word in ("compile", "_find_and_load", "lower_jaxpr", "trace_to_jaxpr")):
+                continue  # compiling, tracing, lowering or importing (the start, the first sweeps)
+            if stack.rsplit(";", 1)[-1] in IDLE:
+                continue  # a thread waiting for work
             total += int(n)
             stage = next((name for name, key in STAGES if key in stack), "the rest of the sweep (rows, the table)")
             counts[stage] += int(n)
