@@ -39,28 +39,25 @@ from qemjax._schedulers import late, select  # noqa: E402
 from qemjax._schedulers.parallel import compiled, stages  # noqa: E402
 
 _EXTRA = [0]  # faces from the phase's own target to the final one, added to the need the gate sees
-_GATE = select.gate_rank
+_GATE, _RUN = select.gate_rank, late.run
 
 
 def _gate_rank(need, n_valid, n_pairs, schedule):
     return _GATE(need + _EXTRA[0], n_valid, n_pairs, schedule)
 
 
-def _late_run(scheduler, V, S, F, extra_pairs, target_faces, model, options, progress=None, *, edges=None,
-              part_scale=None, wedges=None, locks=None):
-    """`late.run` with the first phase's rounds sized against ``target_faces``."""
-    if wedges is not None:
-        raise ValueError("late_memoryless keeps no attributes")
-    kw = {} if locks is None else {"locks": locks}
-    first_target = late.first_target(model, target_faces)
-    _EXTRA[0] = first_target - target_faces
-    try:
-        first = scheduler(V, S, F, extra_pairs, first_target, model, options, progress, edges=edges,
-                          part_scale=part_scale, **kw)
-    finally:
-        _EXTRA[0] = 0
-    return late.second(scheduler, first, V, F, extra_pairs, target_faces, model, options, progress,
-                       part_scale=part_scale, locks=locks)
+def _late_run(scheduler, V, S, F, extra_pairs, target_faces, model, *args, **kwargs):
+    """`late.run` with the first phase (the scheduler's first call) sized against ``target_faces``."""
+    extra, calls = late.first_target(model, target_faces) - target_faces, []
+
+    def sized(*a, **kw):
+        _EXTRA[0] = 0 if calls else extra
+        calls.append(1)
+        try:
+            return scheduler(*a, **kw)
+        finally:
+            _EXTRA[0] = 0
+    return _RUN(sized, V, S, F, extra_pairs, target_faces, model, *args, **kwargs)
 
 
 @contextlib.contextmanager
