@@ -101,8 +101,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     names = args.meshes or sorted(bench_meshes.shared_files())
-    lines = [f"# python experiments/probes/late_gate.py --repeats {args.repeats}"
-             + (f" --meshes {' '.join(names)}" if args.meshes else ""), "",
+    given = sys.argv[1:] if argv is None else list(argv)
+    lines = [" ".join(["# python experiments/probes/late_gate.py", *given]), "",
              "| case | rounds | new rounds | ms | new ms | Hausdorff new/old | rms new/old | slivers | new slivers |",
              "|---|---|---|---|---|---|---|---|---|"]
     rows = []
