@@ -260,3 +260,23 @@ def test_the_readmes_notebook_output_is_ignored_by_git():
     folder = command[command.index("--output-dir ") + len("--output-dir "):].split()[0]
     ignored = (ROOT / ".gitignore").read_text().splitlines()
     assert f"{folder}/" in ignored or folder in ignored, folder
+
+
+@pytest.mark.slow  # a fresh process
+def test_the_command_freezes_the_collector_at_its_end_only_as_the_program(tmp_path):
+    """Run as the program (its arguments from ``sys.argv``, as the ``qemjax`` command and ``python -m qemjax``
+    call it), a command ends with the garbage collector's objects frozen, so that Python's shutdown does not
+    walk them (`qemjax.__main__.exit_soon`); called with arguments from a caller's code, it leaves the
+    caller's collector as it was. Both write the same output."""
+    from qemjax import shapes
+
+    shapes.write_examples(tmp_path)
+    argv = ["simplify", str(tmp_path / "bumpy.obj"), str(tmp_path / "a.obj"), "--ratio", "0.5", "--quiet"]
+    code = (f"import gc, sys; from qemjax.__main__ import main; assert main({argv!r}) == 0; print('@@', gc.get_freeze_count()); "
+            f"sys.argv[1:] = {[a.replace('a.obj', 'b.obj') for a in argv]!r}; assert main() == 0; "
+            "print('@@', gc.get_freeze_count())")
+    p = _python(code)
+    assert p.returncode == 0, p.stderr[-2000:]
+    called, program = (int(line.split()[1]) for line in p.stdout.splitlines() if line.startswith("@@"))
+    assert called == 0 and program > 0
+    assert (tmp_path / "a.obj").read_bytes() == (tmp_path / "b.obj").read_bytes()

@@ -591,7 +591,9 @@ def test_kernels_stay_in_bounds():
 
     here = Path(__file__).resolve()
     # a cache of its own per state of the package's sources: numba checks a cached function against its own
-    # file only, so a cache kept from other sources could hold callees that were renamed or changed since
+    # file only, so a cache kept from other sources could hold callees that were renamed or changed since.
+    # (Most bounds-checked loops are not cached at all: numba declines, "uses dynamic globals", since a
+    # failed check's error refers to objects of this process; so each run of this test compiles them.)
     digest = hashlib.sha256()
     for path in sorted((here.parent.parent / "qemjax").rglob("*.py")):
         digest.update(path.read_bytes())

@@ -282,6 +282,15 @@ def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tm
     assert digest(r) == digest(in_process)
 
 
+def test_closing_the_local_runner_ends_every_worker_cleanly():
+    """Told the run is done (their input closed), the idle workers exit by themselves with code 0, side by
+    side (`worker.main` ends without Python's shutdown), rather than being killed when `close` stops waiting."""
+    runner = execute.LocalRunner(2, retries=0)
+    procs = list(runner.procs)
+    runner.close()
+    assert [p.poll() for p in procs] == [0, 0]
+
+
 @pytest.mark.slow
 def test_same_bits_on_a_dask_local_cluster(mesh, in_process):
     distributed = pytest.importorskip("dask.distributed")

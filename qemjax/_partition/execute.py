@@ -135,17 +135,20 @@ class LocalRunner(Runner):
     def close(self, cancel: bool = False):
         with self.lock:
             self.closed = True
-        for p in self.procs:
-            if p is None:
-                continue
+        live = [p for p in self.procs if p is not None]
+        for p in live:  # every worker told first, so that they exit side by side
             if cancel:
                 p.kill()
             else:
                 try:
                     p.stdin.close()
-                    p.wait(timeout=10)
                 except Exception:
                     p.kill()
+        for p in live:
+            try:
+                p.wait(timeout=10)
+            except Exception:
+                p.kill()
 
 
 class DaskRunner(Runner):

@@ -47,8 +47,12 @@ def main() -> None:
     while True:
         try:
             name, spec = receive(inp)
-        except EOFError:
-            return
+        except EOFError:  # the client is done with us and waits for our exit: every result is written and
+            # flushed, so the process ends as multiprocessing ends its children, without Python's shutdown
+            # (whose last garbage collection and module teardown, after JAX and numba, the client would wait
+            # for: docs/benchmarks.md, "A command's exit")
+            sys.stderr.flush()
+            os._exit(0)
         try:
             with threads.limited(spec.get("threads")):  # this task's share of the cores (`execute`)
                 result = getattr(task, name)(spec)
