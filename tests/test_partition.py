@@ -282,6 +282,7 @@ def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tm
     assert digest(r) == digest(in_process)
 
 
+@pytest.mark.slow  # worker processes
 def test_closing_the_local_runner_ends_every_worker_cleanly():
     """Told the run is done (their input closed), the idle workers exit by themselves with code 0, side by
     side (`worker.main` ends without Python's shutdown), rather than being killed when `close` stops waiting."""
