@@ -50,7 +50,9 @@ def main() -> None:
         except EOFError:  # the client is done with us and waits for our exit: every result is written and
             # flushed, so the process ends as multiprocessing ends its children, without Python's shutdown
             # (whose last garbage collection and module teardown, after JAX and numba, the client would wait
-            # for: docs/benchmarks.md, "A command's exit")
+            # for: docs/benchmarks.md, "A command's exit"); what libraries printed (sys.stdout, pointed at
+            # stderr above) is flushed here, as the shutdown would have
+            sys.stdout.flush()
             sys.stderr.flush()
             os._exit(0)
         try:
