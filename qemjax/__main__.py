@@ -1,13 +1,12 @@
 """``python -m qemjax`` and the ``qemjax`` command: `qemjax._cli.main`, imported inside the Ctrl-C guard, so an
 interrupt while the package is still importing is one line and exit code 130 as well; ``--version`` alone
 is answered here, before importing it."""
-import gc
 import sys
 
 
 def main(argv=None) -> int:
     """The command's exit code. Called as the program (``argv`` None: the process's own arguments), it
-    ends by freezing the garbage collector's objects (`exit_soon`)."""
+    ends by freezing the garbage collector's objects (`_cli.exit_soon`)."""
     program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
@@ -16,7 +15,7 @@ def main(argv=None) -> int:
 
             print(_version_line())
             return 0
-        from ._cli import leave, main as run
+        from ._cli import exit_soon, leave, main as run
 
         code = leave(lambda: run(argv))
         if program:
@@ -25,15 +24,6 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:  # while the package was still importing
         print("qemjax: interrupted", file=sys.stderr)
         return 130
-
-
-def exit_soon() -> None:
-    """For a process about to exit: the objects it holds are moved out of the garbage collector's reach
-    (`gc.freeze`). Python's shutdown collects garbage once more, and after JAX, numba and a run that
-    collection walks a large graph of objects for nothing: most of the time between a command's last line
-    and its exit (docs/benchmarks.md, "A command's exit"). Memory is still freed, by reference counts and
-    by the process's end."""
-    gc.freeze()
 
 
 if __name__ == "__main__":

@@ -265,9 +265,9 @@ def test_the_readmes_notebook_output_is_ignored_by_git():
 @pytest.mark.slow  # a fresh process
 def test_the_command_freezes_the_collector_at_its_end_only_as_the_program(tmp_path):
     """Run as the program (its arguments from ``sys.argv``, as the ``qemjax`` command and ``python -m qemjax``
-    call it), a command ends with the garbage collector's objects frozen, so that Python's shutdown does not
-    walk them (`qemjax.__main__.exit_soon`); called with arguments from a caller's code, it leaves the
-    caller's collector as it was. Both write the same output."""
+    call it, or as ``python -m qemjax._cli``), a command ends with the garbage collector's objects frozen, so
+    that Python's shutdown does not walk them (`qemjax._cli.exit_soon`); called with arguments from a
+    caller's code, it leaves the caller's collector as it was. All write the same output."""
     from qemjax import shapes
 
     shapes.write_examples(tmp_path)
@@ -280,3 +280,11 @@ def test_the_command_freezes_the_collector_at_its_end_only_as_the_program(tmp_pa
     called, program = (int(line.split()[1]) for line in p.stdout.splitlines() if line.startswith("@@"))
     assert called == 0 and program > 0
     assert (tmp_path / "a.obj").read_bytes() == (tmp_path / "b.obj").read_bytes()
+    # the second entry point, as `python -m qemjax._cli` runs it
+    code = (f"import gc, runpy, sys; sys.argv[:] = ['qemjax'] + {[a.replace('a.obj', 'c.obj') for a in argv]!r}\n"
+            "try:\n    runpy.run_module('qemjax._cli', run_name='__main__')\nexcept SystemExit as e:\n"
+            "    print('@@', e.code, gc.get_freeze_count())")
+    p = _python(code)
+    line = next(line for line in p.stdout.splitlines() if line.startswith("@@")).split()
+    assert line[1] == "0" and int(line[2]) > 0, p.stderr[-2000:]
+    assert (tmp_path / "c.obj").read_bytes() == (tmp_path / "a.obj").read_bytes()
