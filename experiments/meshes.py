@@ -31,7 +31,8 @@ SUBDIVIDED = {"armadillo-x16": ("armadillo", 2), "armadillo-x64": ("armadillo", 
               "stanford-bunny-x16": ("stanford-bunny", 2), "fertility-x16": ("fertility", 2),
               "rocker-arm-x16": ("rocker-arm", 2),
               # between the compiled rounds' limit and the large meshes (`probes/round_paths.py`)
-              "armadillo-x4": ("armadillo", 1), "stanford-bunny-x4": ("stanford-bunny", 1)}
+              "armadillo-x4": ("armadillo", 1), "stanford-bunny-x4": ("stanford-bunny", 1),
+              "bumpy-cube-x4": ("bumpy-cube", 1), "face-x4": ("face", 1)}
 
 
 @dataclass
