@@ -48,11 +48,11 @@ def is_grid_key(key: str) -> bool:
 
 
 BATCH_CELLS = 128  # a piece holds at most this many cells
-PIECE_FACES = 1 << 18  # a piece's distinct runs hold at most this many faces in all (a mesh larger than that:
+PIECE_FACES = 1 << 17  # a piece's distinct runs hold at most this many faces in all (a mesh larger than that:
 # a piece of its own): a few seconds of work at most, so rows reach the file and the bar as pieces finish,
-# and the union of copies is small enough for the compiled rounds (`selection.MAX_FACES`)
-PIECE_RUNS = 32  # and at most this many distinct runs: 64 configurations of the cow are 2 pieces (larger
-# pieces share more of each round; two keep both cores of a 2-core machine busy)
+# and the union of copies within the compiled rounds' size (`selection.MAX_FACES`)
+PIECE_RUNS = 16  # and at most this many distinct runs: 64 configurations of the cow are 4 pieces (larger
+# pieces share more of each round, but fewer of them leave cores idle: docs/sweeps.md, "Every core")
 PLAN_FACES = 200_000  # meshes up to this size are planned (`pieces`); a larger one's cells run one per piece (the
 # planning reads and cleans each mesh and builds its vertex states once more than the run does)
 RING_COST = 4  # a run whose model prices pairs from their faces (``regularize``) costs about this many plain ones
