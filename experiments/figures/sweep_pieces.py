@@ -2,7 +2,9 @@
 distinct runs and F faces, for each (N, F) given, alternating in one process, with the loop of `simplify`
 over the same cells for the ratio (``x loop``). Only the cut differs between the sizes (`qemjax._sweep.run`'s
 ``PIECE_RUNS`` and ``PIECE_FACES``, set in this process, which cuts the pieces); every size must give the
-same rows, bit for bit (checked). Wall and CPU seconds (this process and the helpers), medians.
+same rows, bit for bit (checked). Wall and CPU seconds (this process and the helpers), medians. A piece of
+more faces than `selection.MAX_FACES` takes the numpy stages (the same rows): the figures in docs/sweeps.md
+were measured with that limit raised to 262,144 in the package.
 
     python experiments/figures/sweep_pieces.py --grid distinct --repeats 10 --sizes 16:131072 32:262144
 """
