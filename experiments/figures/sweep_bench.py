@@ -105,6 +105,14 @@ def _helpers_cpu() -> float:
     return total
 
 
+def wait_for_helpers(limit_s: float = 120.0) -> None:
+    """Until every helper process the default sweeps started is ready (at most ``limit_s``), so that the timed
+    sweeps find them warm."""
+    t0 = time.monotonic()
+    while HELPERS.ready() < HELPERS.size() and time.monotonic() - t0 < limit_s:
+        time.sleep(0.1)
+
+
 def _clock(fn):
     """(wall, CPU) seconds of fn(): the CPU of this process and of the sweep's helper processes."""
     w, c, h = time.perf_counter(), time.process_time(), _helpers_cpu()
@@ -125,9 +133,7 @@ def bench(names: list[str], ratio: float, repeats: int, grid_name: str, pool: in
         if not qemjax.sweep(meshes, grid, [ratio], metrics=False, progress=False)["result_sha256"].equals(
                 warm["result_sha256"]):
             raise AssertionError("the default sweep (every core) differs from the one in this process")
-        t0 = time.monotonic()
-        while HELPERS.ready() < HELPERS.size() and time.monotonic() - t0 < 120:
-            time.sleep(0.1)
+        wait_for_helpers()
     targets = {n: int(warm.loc[warm["mesh"] == n, "target_faces"].iloc[0]) for n in names}
     # distinct output meshes, and distinct runs (cells that would run alike run once: `simplify_cells`)
     distinct, runs = warm["result_sha256"].nunique(), int((1 / warm["same_run"]).sum().round())

@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import time
 from pathlib import Path
 
 EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules and results/
@@ -21,7 +20,7 @@ sys.path[:0] = [str(EXPERIMENTS), str(EXPERIMENTS / "figures")]
 
 import machine  # noqa: E402
 import meshes as bench_meshes  # noqa: E402
-from sweep_bench import GRIDS, _clock  # noqa: E402
+from sweep_bench import GRIDS, _clock, wait_for_helpers  # noqa: E402
 
 import qemjax  # noqa: E402
 import qemjax._sweep.run as sweep_run  # noqa: E402
@@ -55,11 +54,9 @@ def main():
     for _ in range(3):  # warm: the kernels, then the helpers (started by the second default sweep)
         for size in sizes:
             cut(size)
-            rows[size] = one()["result_sha256"].tolist()
-            pieces[size] = int(one()["batch_size"].max())
-        t0 = time.monotonic()
-        while HELPERS.ready() < HELPERS.size() and time.monotonic() - t0 < 120:
-            time.sleep(0.1)
+            df = one()
+            rows[size], pieces[size] = df["result_sha256"].tolist(), int(df["batch_size"].max())
+        wait_for_helpers()
     if any(r != rows[args.sizes[0]] for r in rows.values()):
         raise AssertionError("the piece sizes gave different rows")
     times = {size: [] for size in [*sizes, "loop simplify"]}

@@ -39,8 +39,6 @@ with threads.limited(1):
     qemjax.sweep(cow, grid, [0.1], metrics=False, progress=False, workers=1)
     print(time.perf_counter() - t)
 """
-ONE_THREAD = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-              "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"}
 
 
 def run(n: int, copies: int) -> float:
@@ -57,9 +55,11 @@ def run_sweep(grid: str, copies: int) -> float:
     import os
     import tempfile
 
+    from qemjax._partition.execute import _worker_env  # one thread for numba, XLA and BLAS
+
     with tempfile.TemporaryDirectory() as tmp:
         flags = [os.path.join(tmp, f"warm{k}") for k in range(copies)]
-        env = {**os.environ, **ONE_THREAD}
+        env = _worker_env()
         experiments = str(Path(__file__).resolve().parents[1])
         procs = [subprocess.Popen([sys.executable, "-c", SWEEP, grid, experiments, flags[k], *flags], env=env,
                                   stdout=subprocess.PIPE, text=True) for k in range(copies)]
