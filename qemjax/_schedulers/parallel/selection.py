@@ -108,7 +108,7 @@ class Work(NamedTuple):
     verts: Any
 
 
-MAX_FACES = 1 << 17  # runs on more faces keep the numpy stages: see `fits`
+MAX_FACES = 1 << 18  # runs on more faces keep the numpy stages: see `fits`
 
 
 def fits(manifold: bool, incremental: bool, locks, faces: int) -> bool:
