@@ -117,21 +117,21 @@ def main():
     mesh = (bm.V, bm.F)
     for _ in range(2):
         qemjax.simplify(mesh, ratio=args.ratio)  # compiles, fills the caches
-    plain = []
-    for _ in range(args.runs):
-        t = time.perf_counter()
-        qemjax.simplify(mesh, ratio=args.ratio)
-        plain.append(time.perf_counter() - t)
+
+    def runs():
+        times = []
+        for _ in range(args.runs):
+            t = time.perf_counter()
+            qemjax.simplify(mesh, ratio=args.ratio)
+            times.append(time.perf_counter() - t)
+        return times
+    plain = runs()
     _Timed.on = True
-    timed = []
-    for _ in range(args.runs):
-        t = time.perf_counter()
-        qemjax.simplify(mesh, ratio=args.ratio)
-        timed.append(time.perf_counter() - t)
+    timed = runs()
     _Timed.on = False
     run_s = statistics.median(plain)
     print(f"# python experiments/probes/device_overhead.py --mesh {args.mesh} --ratio {args.ratio} --runs {args.runs} "
-          f" ({cpu_model()})")
+          f"({cpu_model()})")
     print(f"a warm run: {1e3 * run_s:.1f} ms (median of {args.runs}); with every device call waited for: "
           f"{1e3 * statistics.median(timed):.1f} ms")
     print("| kernel | calls a run | ms a run | share of the run | µs a call | µs a call alone | fusions |")
@@ -155,6 +155,7 @@ def main():
             continue
         cells = [f"{1e6 * _alone(jitted, *_resized(a, k, n), donates, 200):.0f}" for n in SIZES]
         print(f"| {name} | " + " | ".join(cells) + " |")
+
 
 if __name__ == "__main__":
     main()
