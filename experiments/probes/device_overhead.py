@@ -23,6 +23,7 @@ EXPERIMENTS = Path(__file__).resolve().parents[1]  # the shared modules
 sys.path[:0] = [str(EXPERIMENTS.parent), str(EXPERIMENTS)]
 
 import jax  # noqa: E402
+import numpy as np  # noqa: E402
 
 CALLS = collections.defaultdict(lambda: [0, 0.0])  # kernel name -> [calls, seconds to the result]
 FIRST = {}  # kernel name -> (jitted function, whether it donates, the arguments of one call as numpy arrays)
@@ -50,7 +51,6 @@ class _Timed:
         if not _Timed.on:
             return self.jitted(*args, **kwargs)
         if self.name not in FIRST:  # (before the call: it may donate its arguments)
-            import numpy as np
             FIRST[self.name] = (self.jitted, self.donates, jax.tree_util.tree_map(
                 lambda a: np.array(a) if isinstance(a, jax.Array) else a, (args, kwargs)))
         t = time.perf_counter()
@@ -66,8 +66,6 @@ jax.jit = _Timed  # before qemjax makes any of its kernels
 
 def _alone(jitted, args, kwargs, donated: bool, repeats: int) -> float:
     """Median seconds of one call with these arguments (fresh device copies where the call donates)."""
-    import numpy as np
-
     def dev():
         return jax.tree_util.tree_map(lambda a: jax.numpy.asarray(a) if isinstance(a, np.ndarray) else a, (args, kwargs))
     a, k = dev()
@@ -91,8 +89,6 @@ def _fusions(jitted, args, kwargs) -> int:
 def _resized(args, kwargs, n: int):
     """The arguments of a call on pairs (its second argument, (K,2) int) with every array of K rows cut or
     tiled to n rows; None for a call that takes no pairs there."""
-    import numpy as np
-
     if len(args) < 2 or not isinstance(args[1], np.ndarray) or args[1].ndim != 2 or args[1].shape[1] != 2:
         return None
     K = args[1].shape[0]
