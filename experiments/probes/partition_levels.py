@@ -1,7 +1,10 @@
 """Where a partitioned run's time goes, level by level: one `simplify` of a shared or subdivided mesh written
 as a binary PLY (as `figures/partition_bench.py speed` reads it), from the file, with the run's
 `stats["partition"]`: seconds per level, groups and faces per level, reading and cutting the input
-(``scatter_s``), the measured distance (``measure_s``), the largest worker's memory.
+(``scatter_s``), the measured distance (``measure_s``), the largest worker's memory; and each level's tasks
+from the files they leave in the scratch folder: their summed seconds against the level's seconds times the
+workers (the rest is a worker waiting), the median task, the longest, and the seconds they spent compiling
+(a worker's first task of a kind loads and traces its kernels).
 
     python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 2
     python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 1 --option refit=all
@@ -12,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import json
 import sys
 import tempfile
 import time
@@ -49,15 +53,23 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         src, n = shared_ply(args.mesh, Path(tmp))
         t = time.perf_counter()
-        res = qemjax.simplify(str(src), ratio=args.ratio,
-                              partition=qemjax.Partition(workers=args.workers, **options), progress=False)
+        scratch = Path(tmp) / "scratch"
+        res = qemjax.simplify(str(src), ratio=args.ratio, progress=False,
+                              partition=qemjax.Partition(workers=args.workers, scratch=str(scratch), **options))
         total = time.perf_counter() - t
+        tasks = [[json.loads(f.read_text()) for f in sorted((scratch / f"level{k}").glob("group_*.json"))]
+                 for k in range(1, len(res.stats["partition"]["seconds_per_level"]) + 1)]
     p = res.stats["partition"]
     print(f"{args.mesh} ({n} faces) -> {len(res.faces)} faces, {args.workers} workers, {options or 'defaults'}: "
           f"{total:.1f} s from the file")
-    print("| level | groups | faces out | seconds |\n|---|---|---|---|")
-    for k, (g, f, s) in enumerate(zip(p["groups_per_level"], p["faces_per_level"], p["seconds_per_level"]), 1):
-        print(f"| {k} | {g} | {f} | {s:.1f} |")
+    print("| level | groups | faces out | seconds | tasks' seconds, summed (÷ seconds × workers) | median task | "
+          "longest | compiling, summed |\n|---|---|---|---|---|---|---|---|")
+    for k, (g, f, s, ts) in enumerate(zip(p["groups_per_level"], p["faces_per_level"], p["seconds_per_level"],
+                                          tasks), 1):
+        secs = np.array([t["seconds"] for t in ts])
+        busy = secs.sum() / (s * min(args.workers, len(ts)))
+        print(f"| {k} | {g} | {f} | {s:.1f} | {secs.sum():.1f} ({busy:.2f}) | {np.median(secs):.2f} | "
+              f"{secs.max():.2f} | {sum(t['compile_s'] for t in ts):.1f} |")
     print(f"reading and cutting the input {p['scatter_s']:.1f} s, measured distance {p['measure_s']:.1f} s, "
           f"largest worker {p['peak_rss_workers'] / 2**30:.2f} GiB")
     digest = hashlib.sha256(np.ascontiguousarray(res.vertices).tobytes() + np.ascontiguousarray(res.faces).tobytes())
