@@ -3,8 +3,8 @@ as a binary PLY (as `figures/partition_bench.py speed` reads it), from the file,
 `stats["partition"]`: seconds per level, groups and faces per level, reading and cutting the input
 (``scatter_s``), the measured distance (``measure_s``), the largest worker's memory; and each level's tasks
 from the files they leave in the scratch folder: their summed seconds against the level's seconds times the
-workers (the rest is a worker waiting), the median task, the longest, and the seconds they spent compiling
-(a worker's first task of a kind loads and traces its kernels).
+workers it could use (at most its tasks; the rest is a worker waiting), the median task, the longest, and
+the seconds they spent compiling (a worker's first task of a kind loads and traces its kernels).
 
     python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 2
     python experiments/probes/partition_levels.py --mesh armadillo-x64 --workers 1 --option refit=all
