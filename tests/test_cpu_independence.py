@@ -9,9 +9,9 @@ What varies from one CPU to the next, and how each is imitated on this one:
 * XLA's instruction set (``XLA_FLAGS=--xla_cpu_max_isa=AVX2``).
 
 Each subprocess runs the same cases (the golden ones on generated meshes that cover the default's re-fit on
-both schedulers and the classic method, the cow when ../shared/meshes has it, and the default with UVs
-kept) and prints their digests; every variant must give the golden hash, and the case outside the golden
-file the same hash under every variant. `qemjax._mesh.fixed_order` says which numpy calls are avoided.
+both schedulers and the classic method, the cow when ../shared/meshes has it, the default with UVs kept,
+and the measured distances of a run and of `metrics.surface_distance`) and prints their digests; every
+variant must give the golden hash, and the two outside the golden file the same digest under every variant. `qemjax._mesh.fixed_order` says which numpy calls are avoided.
 """
 from __future__ import annotations
 
@@ -47,6 +47,14 @@ h = hashlib.sha256()
 for a in (res.vertices, res.faces, res.uv, res.wedge_faces):
     h.update(np.ascontiguousarray(a).tobytes())
 out["uv"] = h.hexdigest()[:16]
+# the measured distances, the run's and the metrics' (relative ones divide by the box's diagonal: three unlike
+# extents), to the last bit
+sphere = qemjax.shapes.bumpy_sphere(3)
+V, F = np.asarray(sphere.vertices) * np.array([3.7, 0.013, 11.1]), np.asarray(sphere.faces)
+res = qemjax.simplify((V, F), ratio=0.3)
+d = qemjax.metrics.surface_distance((V, F), res)
+values = [res.stats[k] for k in sorted(res.stats) if k.startswith("distance") and k != "distance_s"]
+out["distance"] = hashlib.sha256(json.dumps(values + [d[k] for k in sorted(d)]).encode()).hexdigest()[:16]
 print("DIGESTS " + json.dumps(out))
 """
 
@@ -94,7 +102,8 @@ def test_golden_cases_give_one_hash_under_every_imitated_cpu():
     with ThreadPoolExecutor(max_workers=2) as pool:
         got = dict(zip(variants, pool.map(_run, variants.values())))
     golden = gc.load_golden()["cases"]
-    want = {i: golden[i]["hash"] for i in CASE_IDS} | {"uv": got["as-is"]["uv"]}  # uv: the same under all
+    # uv and the measured distances: the same under all
+    want = {i: golden[i]["hash"] for i in CASE_IDS} | {k: got["as-is"][k] for k in ("uv", "distance")}
     wrong = {name: {i: h for i, h in digests.items() if h != want[i]} for name, digests in got.items()}
     wrong = {name: w for name, w in wrong.items() if w}
     assert not wrong, f"outputs differ from the golden hashes under {wrong} (variants: {variants})"

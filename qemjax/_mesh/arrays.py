@@ -12,6 +12,8 @@ cost; the scheduler makes thousands a run), with the same results.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -115,3 +117,11 @@ def release_free_memory() -> None:
             _libc = False
     if _libc:
         _libc.malloc_trim(0)
+
+
+def box_diagonal(lo, hi) -> float:
+    """The length of a bounding box's diagonal, ``hi - lo`` (3,): the squares summed left to right, the same
+    bits on every CPU. Not ``np.linalg.norm``: on a 1-D array it is BLAS's dot product, whose kernel (and so
+    its last bit) changes with the CPU, and every distance relative to the diagonal would change with it."""
+    d = (np.asarray(hi, np.float64) - np.asarray(lo, np.float64)).tolist()
+    return math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])

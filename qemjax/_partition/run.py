@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import execute, pieces, plan, task
+from .._mesh.arrays import box_diagonal
 from .._options import Partition
 
 UNSUPPORTED = ("max_error", "max_distance", "max_distance_rel", "feature_edges", "locked", "vertex_weights")
@@ -274,7 +275,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             mspecs = [dict(parts=[files[i] for i in b], final=str(final), centre=centre.tolist(), unit=unit)
                       for b in batches]
             dist = _distance(_run_level(runner, "measure_parts", mspecs, progress, "distance"),
-                             float(np.linalg.norm(hi - lo)), unit)
+                             box_diagonal(lo, hi), unit)
         t_measure = time.perf_counter() - t_measure
     except BaseException:
         if runner is not None:

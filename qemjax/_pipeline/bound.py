@@ -87,13 +87,14 @@ class Checker:
     """The two-way distance (module docstring) of meshes from the input (V, F), mesh units."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray):
+        from .._mesh.arrays import box_diagonal
         from .._mesh.box_bounds import row_bounds
         from .refit import _sample_rows, unit_frame
 
         V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
         box = row_bounds(V)
         self.centre, self.unit = unit_frame(V, box)
-        self.diagonal = float(np.sqrt(np.sum((box[1] - box[0]) ** 2)))
+        self.diagonal = box_diagonal(box[0], box[1])
         self.Vn, self.F = (V - self.centre) / self.unit, F
         # the measured distance's samples (`refit.samples`, the same arithmetic), zero weights kept, and only
         # the vertices a face uses (an unused vertex is no point of the surface)

@@ -42,6 +42,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
     the input's unit frame, weights), the same arrays as made here; ``seeds``: a face of G near each
     sample (the re-fit's last attachment), where each search starts (the same distances, found sooner:
     `grid_nearest.nearest`)."""
+    from .._mesh.arrays import box_diagonal
     from .._mesh.box_bounds import row_bounds  # numba, lazily
     from .._mesh.grid_nearest import nearest
     from .._mesh.quantiles import quantiles
@@ -52,7 +53,7 @@ def distance(V: np.ndarray, F: np.ndarray, X: np.ndarray, G: np.ndarray, sampled
     X, G = np.asarray(X, np.float64), np.asarray(G, np.int64)
     box = row_bounds(V) if len(V) else None  # (lo, hi), for the frame and the diagonal
     centre, unit = unit_frame(V, box)  # as the re-fit: squared distances stay finite at any scale
-    diag = float(np.sqrt(np.sum((box[1] - box[0]) ** 2))) if len(V) else 0.0
+    diag = box_diagonal(box[0], box[1]) if len(V) else 0.0
     if not (unit > 0 and np.isfinite(unit)) or len(V) == 0 or len(G) == 0:
         return not_measured() | dict(distance_samples=0, distance_s=time.perf_counter() - t)
     if sampled is None:

@@ -11,6 +11,8 @@ from functools import cached_property
 
 import numpy as np
 
+from .._mesh.arrays import box_diagonal
+
 # Triangles with twice-area <= _DEGENERATE_REL * (longest edge)^2 count as degenerate (numerically zero area).
 _DEGENERATE_REL = 1e-12
 
@@ -99,7 +101,7 @@ class MeshArrays:
     def bbox_diagonal(self) -> float:
         """Length of the bounding-box diagonal of the referenced vertices (mesh units)."""
         v = self.vertices[self.referenced]
-        return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+        return box_diagonal(v.min(axis=0), v.max(axis=0))
 
     @cached_property
     def edges(self) -> EdgeTable:
