@@ -9,6 +9,9 @@ faster than ``a[mask]`` when the mask is dense and irregular, and one ``np.flatn
 On the small arrays of a small mesh's rounds the cost is the call itself: the methods ``a.take(idx)`` and
 ``a.compress(mask)`` skip the Python wrappers of ``np.take`` / ``np.compress`` (most of a small call's
 cost; the scheduler makes thousands a run), with the same results.
+
+Here too is the one bounding-box diagonal every relative distance divides by (`box_diagonal`), in a fixed
+order of operations.
 """
 from __future__ import annotations
 
