@@ -11,7 +11,8 @@ What varies from one CPU to the next, and how each is imitated on this one:
 Each subprocess runs the same cases (the golden ones on generated meshes that cover the default's re-fit on
 both schedulers and the classic method, the cow when ../shared/meshes has it, the default with UVs kept,
 and the measured distances of a run and of `metrics.surface_distance`) and prints their digests; every
-variant must give the golden hash, and the two outside the golden file the same digest under every variant. `qemjax._mesh.fixed_order` says which numpy calls are avoided.
+variant must give the golden hash, and the two outside the golden file the same digest under every variant.
+`qemjax._mesh.fixed_order` says which numpy calls are avoided.
 """
 from __future__ import annotations
 

@@ -651,6 +651,7 @@ def test_the_diagonal_is_summed_left_to_right_in_every_place():
     """Every relative distance divides by the bounding box's diagonal: its squares summed left to right (no
     BLAS dot, whose kernel, and so the last bit, changes with the CPU), the same in the metrics and in the
     run's stats, on random boxes of every scale."""
+    import qemjax
     from qemjax._mesh.arrays import box_diagonal
     from qemjax.shapes import bumpy_sphere
 
@@ -666,8 +667,6 @@ def test_the_diagonal_is_summed_left_to_right_in_every_place():
     d = V.max(0) - V.min(0)
     want = math.sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2])
     assert metrics.surface_distance((V, F), (V, F), n_samples=10)["bbox_diagonal"] == want
-    import qemjax
-
     stats = qemjax.simplify((V, F), ratio=0.5).stats
     for key in ("distance_max", "distance_rms", "distance_p95"):
         assert stats[key + "_rel"] == stats[key] / want

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .arrays import sorted_triples
+from .arrays import box_diagonal, sorted_triples
 
 
 def half_edges(F: np.ndarray) -> np.ndarray:
@@ -81,7 +81,7 @@ def close_pairs(V: np.ndarray, F: np.ndarray, t: float) -> np.ndarray:
     if n_close > limit:
         raise ValueError(f"pair_threshold={t} would make {n_close} vertex pairs (over {limit}, "
                          f"{MAX_PAIRS_PER_VERTEX} per vertex); the mesh's bounding-box diagonal is "
-                         f"{np.linalg.norm(V.max(0) - V.min(0)):.4g}: choose a smaller threshold")
+                         f"{box_diagonal(V.min(0), V.max(0)):.4g}: choose a smaller threshold")
     P = np.sort(tree.query_pairs(t, output_type="ndarray").astype(np.int64), axis=1)
     n = len(V)
     E, _ = edges(F, n)
