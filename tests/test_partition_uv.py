@@ -172,7 +172,8 @@ def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
     path.write_text("mtllib tex.mtl\nusemtl tex\n" + sphere_obj.read_text())
     settings = Partition(workers=1, part_faces=4000)
     (tmp_path / "tex.mtl").write_text("newmtl tex\nKd 1 1 1\nmap_Kd t.png\n")
-    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\)"):
+    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\); attributes='uv' \(CLI: --attributes uv\) "
+                      "keeps the UVs"):
         plain = qemjax.simplify(str(path), ratio=RATIO, partition=settings)  # the image is missing
     assert plain.uv is None and "texture coordinates (vt)" in plain.stats["dropped"]
     Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "t.png")
@@ -185,6 +186,34 @@ def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
     Image.new("RGB", (4, 2)).save(tmp_path / "other.png")  # texture= names the image itself, as in core
     given = qemjax.simplify(str(sphere_obj), ratio=RATIO, texture=tmp_path / "other.png", partition=settings)
     assert given.uv is not None and np.asarray(given.material.image).shape[:2] == (2, 4)
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_uvs_left_out_by_default_are_named_with_the_way_to_keep_them(tmp_path, binary):
+    """A PLY's UVs without a texture image are not kept by default (as in core): the warning names them and
+    says how to keep them; not when they were left out by ``attributes=None``, nor for a file without UVs."""
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
+    path = tmp_path / "planar.ply"
+    _ply(path, V, F, V[:, :2], binary)
+    settings = Partition(workers=1, part_faces=1000)
+
+    def warned(source, **kw):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = qemjax.simplify(str(source), ratio=RATIO, partition=settings, **kw)
+        return res, [str(w.message) for w in caught if "not carried over" in str(w.message)]
+
+    res, said = warned(path)
+    assert res.uv is None and len(said) == 1
+    assert said[0].endswith("vertex properties texture_u, texture_v; attributes='uv' (CLI: --attributes uv) keeps the "
+                              "UVs")
+    res, said = warned(path, attributes=None)
+    assert res.uv is None and len(said) == 1 and "keeps the UVs" not in said[0]
+    other = tmp_path / "other.ply"  # the same columns under names that are not UVs
+    _ply(other, V, F, V[:, :2], binary, names=("quality", "confidence"))
+    res, said = warned(other)
+    assert res.uv is None and len(said) == 1 and said[0].endswith("vertex properties quality, confidence")
 
 
 def test_texture_file_of_a_ply(tmp_path):

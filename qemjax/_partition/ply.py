@@ -233,6 +233,7 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = Fal
 
     def with_uv(src: Source, corner_field: str | None = None) -> Source:
         src.dropped = dropped(h)
+        src.uv_in_file = uv is not None or corner_field is not None
         if uv_wanted and uv is not None:  # per-vertex UVs: read from the vertex records
             src.uv, src.uv_fields, src.dropped_with_uv = vblock, uv_fields, dropped(h, uv)
         elif uv_wanted and corner_field is not None:  # a face list of 6 (u, v per corner), read from the face records

@@ -287,6 +287,12 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             runner.close()
         if temporary:
             shutil.rmtree(folder, ignore_errors=True)
+    if manifest.get("dropped"):
+        # as the in-core run's warning, the way to keep UVs left out by default (no texture image named)
+        how = "; attributes='uv' (CLI: --attributes uv) keeps the UVs" if (uv == "auto" and manifest.get("uv_in_file")
+                                                      and not manifest.get("uv")) else ""
+        warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
+                      f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
     if uv is True and not manifest.get("uv"):
         warnings.warn("partition: attributes='uv', but the file does not give every triangle corner a UV (an OBJ's "
                       "vt, a PLY's per-vertex texture_u/texture_v, s/t or u/v, a binary PLY's texcoord lists): the "
@@ -352,9 +358,6 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                  total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part,
                  dropped=["record", *manifest.get("dropped", [])], attributes=["uv"] if UV is not None else [],
                  **(not_measured() | dist))
-    if manifest.get("dropped"):
-        warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
-                      f"carried over from the input: {'; '.join(manifest['dropped'])}", stacklevel=stacklevel)
     if manifest.get("uv") and UV is None:  # the file's UVs were read, a group's run did not keep them
         why = sorted({m for s in all_stats for m in s["warnings"] if "uv" in m.lower()})
         warnings.warn(f"partition: the UVs were read but not kept by the runs: {'; '.join(why) or 'no reason given'}",

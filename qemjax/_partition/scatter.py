@@ -220,6 +220,7 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
         manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": src.n_faces,
                     "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts,
                     "dropped": list(src.dropped_with_uv if uv else src.dropped), "uv": uv,
+                    "uv_in_file": bool(src.uv_in_file),
                     "texture": None if texture is None or not uv else str(texture)}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -83,6 +83,7 @@ class Source:
     uv_fields: tuple = ("u", "v")
     face_uv: str | None = None
     dropped_with_uv: tuple = ()
+    uv_in_file: bool = False  # the file holds UVs, asked for or not (a warning then says how to keep them)
 
     @property
     def n_vertices(self) -> int:

@@ -148,6 +148,7 @@ def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
         raise Refusal("the OBJ file has no faces (no 'f' lines)")
     src = _finish_weld(welder, scratch, "obj", raw, nv)
     src.dropped = tuple(k for k, seen in ((UV_NAME, nvt > 0), ("normals (vn)", seen_vn)) if seen)
+    src.uv_in_file = nvt > 0
     bare = bare or top_t >= nvt  # a corner names a texture coordinate the file does not have
     if nvt and not bare:
         src.uv = Block(scratch / UV, 0, UV_DTYPE, nvt)
@@ -254,6 +255,7 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = 
                       "short: it is truncated")
     src = scratch_source(scratch, "ply", False, vertices.rows, faces.rows)
     src.dropped = _ply_dropped(h)
+    src.uv_in_file = uv_names(h.element("vertex")) is not None
     if not uv_wanted:
         remove(scratch / UV)
     else:  # per-vertex UVs, converted beside the positions
