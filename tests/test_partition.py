@@ -154,6 +154,35 @@ def test_levels_before_the_last_leave_out_what_a_run_s_end_is_for(in_process):
     assert settings[:-1] == [off | {"refit": 0}] * (len(settings) - 1) and settings[-1] == {}
 
 
+def test_esqem_splits_edges_only_in_a_last_level_without_locks():
+    """ESQEM's edge splits are a run's end, and a split of an edge between two locked vertices would add a
+    vertex the neighbouring group lacks: a level before the last, or a last level of several locked groups,
+    runs without them; the last level of one group splits. The run: the exact target, no crack."""
+    from qemjax._partition.run import _level_kwargs
+
+    p, off = Partition(), {"split_factor": None}
+    assert _level_kwargs({"method": "esqem"}, p, last=False)[1] == off | {"refit": 0}
+    assert _level_kwargs({"method": "esqem"}, p, last=True, locked=True)[1] == off
+    assert _level_kwargs({"method": "esqem"}, p, last=True) == ({"method": "esqem"}, {})
+    assert _level_kwargs({"method": "esqem", "split_factor": None}, p, last=False)[1] == {"refit": 0}
+    assert _level_kwargs({"method": "classic"}, p, last=True, locked=True)[1] == {}  # it does not split
+    m = shapes.bumpy_sphere(5)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    r = qemjax.simplify((V, F), ratio=0.05, method="esqem", partition=Partition(part_faces=2000, workers=1))
+    assert len(r.faces) == round(0.05 * len(F)) and r.stop_reason == "target"
+    assert closed_and_consistent(r.faces) and len(np.unique(r.vertices, axis=0)) == len(r.vertices)
+    settings = r.stats["partition"]["settings_per_level"]
+    assert len(settings) >= 2 and settings[-1] == {} and all(s["split_factor"] is None for s in settings[:-1])
+    # the last level split: edges as even as the in-core ESQEM run's, more than without the splits
+    plain = qemjax.simplify((V, F), ratio=0.05, method="esqem", split_factor=None,
+                            partition=Partition(part_faces=2000, workers=1))
+
+    def spread(res):
+        e = np.linalg.norm(res.vertices[res.faces] - np.roll(res.vertices[res.faces], 1, axis=1), axis=2)
+        return float(e.max() / e.mean())
+    assert spread(r) < spread(plain)
+
+
 def test_a_volume_term_runs_partitioned():
     """The default's volume term needs its memoryless stretch: the levels without the stretch drop it too
     (as an in-core run that stays summed does) instead of refusing it."""
