@@ -173,7 +173,7 @@ def test_esqem_splits_edges_only_in_a_last_level_without_locks():
     assert closed_and_consistent(r.faces) and len(np.unique(r.vertices, axis=0)) == len(r.vertices)
     settings = r.stats["partition"]["settings_per_level"]
     assert len(settings) >= 2 and settings[-1] == {} and all(s["split_factor"] is None for s in settings[:-1])
-    # the last level split: edges as even as the in-core ESQEM run's, more than without the splits
+    # the last level split its long edges: its longest edge nearer the mean than without the splits
     plain = qemjax.simplify((V, F), ratio=0.05, method="esqem", split_factor=None,
                             partition=Partition(part_faces=2000, workers=1))
 

@@ -294,8 +294,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             shutil.rmtree(folder, ignore_errors=True)
     if manifest.get("dropped"):
         # as the in-core run's warning, the way to keep UVs left out by default (no texture image named)
-        how = "; attributes='uv' (CLI: --attributes uv) keeps the UVs" if (uv == "auto" and manifest.get("uv_in_file")
-                                                      and not manifest.get("uv")) else ""
+        left_out = uv == "auto" and manifest.get("uv_in_file") and not manifest.get("uv")
+        how = "; attributes='uv' (CLI: --attributes uv) keeps the UVs" if left_out else ""
         warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
                       f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
     if uv is True and not manifest.get("uv"):
