@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from typing import ClassVar
 
 import jax
@@ -290,6 +291,52 @@ def test_split_without_budget_leaves_no_long_edge():
     s = _split.split_edges(V, F, factor=4 / 3)
     assert len(s.F) > len(F)
     assert _split.added_faces(s.V, s.F, factor=s.length / _split.mean_edge_length(s.V, s.F)) == 0
+
+
+@pytest.mark.parametrize("budget", [None, 40])
+def test_split_never_splits_an_edge_between_two_locked_vertices(budget):
+    """An edge of two locked vertices is never contracted, nor split (a vertex on it would change a border
+    the caller holds); a midpoint is free, and the budget is still spent on the other edges."""
+    V, F = shapes.grid(9, hole=True)
+    V = V * [3.0, 1.0, 1.0]  # long edges along x
+    fixed = np.zeros(len(V), bool)
+    fixed[::3] = True
+    fixed[1::3] = True  # two of every three: many edges between two of them
+    free = _split.split_edges(V, F, factor=1.0, budget=budget)
+    held = _split.split_edges(V, F, factor=1.0, budget=budget, fixed=fixed)
+    assert np.any(fixed[free.edge[:, 0]] & fixed[free.edge[:, 1]])  # without the mask some are split
+    both = held.edge < len(V)
+    assert not np.any(np.all(both, 1) & np.all(fixed[np.where(both, held.edge, 0)], 1))
+    if budget is not None:
+        assert len(held.F) == len(F) + budget
+
+
+def test_esqem_with_locks_keeps_the_edges_between_locked_vertices():
+    """ESQEM's splits after the contractions leave every output edge between two locked vertices whole: the
+    run's target exact, the locked vertices in place, and no vertex added between two of them."""
+    m = shapes.bumpy_sphere(3)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    lk = np.zeros(len(V), bool)
+    lk[::16] = True
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = qemjax.simplify((V, F), ratio=0.2, method="esqem", locked=lk)
+    assert len(res.faces) == round(0.2 * len(F)) and res.stats["split"]["vertices_added"] > 0
+    out = res.vertices
+    src = np.asarray(res.source_vertices)
+    on = np.all(out == V[src], axis=1) & lk[src]  # the locked vertices, where they were
+    assert on.sum() == lk.sum()
+    E = np.unique(np.sort(np.concatenate([res.faces[:, [0, 1]], res.faces[:, [1, 2]], res.faces[:, [2, 0]]]), 1), axis=0)
+    assert np.sum(on[E[:, 0]] & on[E[:, 1]]) > 0  # edges between two locked vertices are there
+    # a split of one would leave a free vertex at the midpoint of two locked neighbours of it
+    nbrs = [set() for _ in range(len(out))]
+    for a, b in E.tolist():
+        nbrs[a].add(b)
+        nbrs[b].add(a)
+    for m_ in np.flatnonzero(~on):
+        held = sorted(v for v in nbrs[m_] if on[v])
+        assert not any(np.array_equal(0.5 * out[a] + 0.5 * out[b], out[m_]) for i, a in enumerate(held)
+                       for b in held[i + 1:])
 
 
 @pytest.mark.parametrize("scheduler", SCHEDULERS)

@@ -155,9 +155,9 @@ def test_levels_before_the_last_leave_out_what_a_run_s_end_is_for(in_process):
 
 
 def test_esqem_splits_edges_only_in_a_last_level_without_locks():
-    """ESQEM's edge splits are a run's end, and a split of an edge between two locked vertices would add a
-    vertex the neighbouring group lacks: a level before the last, or a last level of several locked groups,
-    runs without them; the last level of one group splits. The run: the exact target, no crack."""
+    """ESQEM's edge splits are a run's end, and a split's new vertex takes its first endpoint's source
+    vertex (with a locked one, its global id): a level before the last, or a last level of several locked
+    groups, runs without them; the last level of one group splits. The run: the exact target, no crack."""
     from qemjax._partition.run import _level_kwargs
 
     p, off = Partition(), {"split_factor": None}

@@ -92,9 +92,9 @@ def _level_kwargs(kwargs: dict, p: Partition, last: bool, locked: bool = False) 
     that count are the output's; ranking a level's contractions by their shape wore away a spike that the
     last level, seeing it through the carried quadrics, would have kept), ESQEM's edge splits and, with
     ``refit="last"``, the re-fit. A level whose groups lock their shared vertices (``locked``; a last level
-    of several groups too) splits no edges: a split of an edge between two of them would add a vertex the
-    neighbouring group does not have (a crack), and the new vertex takes its first endpoint's source vertex,
-    which would pass that vertex's global id to it."""
+    of several groups too) splits no edges: a split's new vertex takes its first endpoint's source vertex,
+    which would pass a locked endpoint's global id to it (an edge between two locked vertices is never
+    split, `_pipeline.split`)."""
     changed = {}
     method = _method(kwargs)
     if (locked or not last) and getattr(method, "split_factor", None) is not None:

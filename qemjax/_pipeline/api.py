@@ -99,10 +99,11 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         vertices were given (before welding; `qemjax._pipeline.locks`; docs/methods.md, "Locking vertices and
         weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
         output, and at every level of ``res.record``, exactly where they are (bit for bit); a pair with
-        one locked vertex contracts onto it, a pair of two never. ``vertex_weights``: (n,) finite, >= 0;
-        each pair's cost is multiplied by the larger weight of its two vertices (a kept vertex takes the
-        larger weight of the pair), so heavy regions keep more detail. A run the locks stop short of the
-        target ends with ``stop_reason="locked"`` and ``stats["blocked_by"]["locked"]``.
+        one locked vertex contracts onto it, a pair of two never (nor do ESQEM's splits cut their edge).
+        ``vertex_weights``: (n,) finite, >= 0; each pair's cost is multiplied by the larger weight of its
+        two vertices (a kept vertex takes the larger weight of the pair), so heavy regions keep more detail.
+        A run the locks stop short of the target ends with ``stop_reason="locked"`` and
+        ``stats["blocked_by"]["locked"]``.
     partition: a `qemjax.Partition` (or True: its defaults): a mesh too large for one process, read in chunks
         from its file, cut into parts simplified in parallel with their borders locked, regrouped level by
         level until one group meets the target (`qemjax._partition`; docs/large-meshes.md). The result holds

@@ -95,14 +95,16 @@ def _choose(rank: np.ndarray, he_edge: np.ndarray, he_face: np.ndarray, m: int) 
 
 
 def split_edges(V: np.ndarray, F: np.ndarray, factor: float, budget: int | None = None,
-                fill: bool = True) -> Split:
+                fill: bool = True, fixed: np.ndarray | None = None) -> Split:
     """Split the edges of (V (n,3), F (m,3)) longer than factor × the mean edge length (module
     docstring). ``budget``: the most faces to add (None: no limit); with ``fill``, a budget left when no
     edge is long is spent on the longest remaining edges, so exactly ``budget`` faces are added when the
-    mesh allows it."""
+    mesh allows it. ``fixed`` (n,) bool: locked vertices; an edge between two of them is never split, as it
+    is never contracted (a vertex on it would change a border the caller holds, such as a tile's seam)."""
     V = np.array(V, np.float64)
     F = np.array(F, np.int64)
     n0 = len(V)
+    fixed = np.zeros(n0, bool) if fixed is None else np.asarray(fixed, bool)
     parent = np.arange(len(F), dtype=np.int64)
     length = factor * mean_edge_length(V, F)
     new_edges = []
@@ -112,7 +114,7 @@ def split_edges(V: np.ndarray, F: np.ndarray, factor: float, budget: int | None 
         E, he_edge, he_face, he_corner = _edges(F, len(V))
         nface = np.bincount(he_edge, minlength=len(E))
         ell = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
-        cand = (nface <= left) & (filling | (ell > length))
+        cand = (nface <= left) & (filling | (ell > length)) & ~(fixed[E[:, 0]] & fixed[E[:, 1]])
         if not cand.any():
             if filling or budget is None or not fill:
                 break
@@ -132,6 +134,7 @@ def split_edges(V: np.ndarray, F: np.ndarray, factor: float, budget: int | None 
         passes += 1
         mid = len(V) + np.arange(len(idx))
         V = np.concatenate([V, 0.5 * V[E[idx, 0]] + 0.5 * V[E[idx, 1]]])
+        fixed = np.concatenate([fixed, np.zeros(len(idx), bool)])  # a midpoint is free
         new_edges.append(E[idx])
         vid = np.full(len(E), -1, np.int64)
         vid[idx] = mid
@@ -166,12 +169,12 @@ def plan(run, args, target: int, model, options, factor: float, progress=None) -
     return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s
 
 
-def apply(V, F, ids, fids, verr, factor: float, target: int):
+def apply(V, F, ids, fids, verr, factor: float, target: int, fixed: np.ndarray | None = None):
     """Split the simplified mesh (V (k,3) float64 mesh units, F (j,3)) and carry its per-vertex and
     per-face arrays along: ids (k,) source vertices (a midpoint takes its edge's first endpoint's),
     fids (j,) source faces (a half keeps its face's), verr (k,) vertex errors (a midpoint takes the larger
-    of its endpoints'). ``target``: the face target (0: none, split every long edge). Returns
-    (V, F, ids, fids, verr, stats)."""
+    of its endpoints'). ``target``: the face target (0: none, split every long edge); ``fixed`` (k,) bool:
+    the locked vertices (`split_edges`). Returns (V, F, ids, fids, verr, stats)."""
     budget = None
     if target:
         budget = max(target - len(F), 0)
@@ -179,7 +182,7 @@ def apply(V, F, ids, fids, verr, factor: float, target: int):
         closed = not np.any(np.bincount(he_edge, minlength=len(E)) == 1)
         if budget % 2 and closed:  # faces come in pairs: one above the target, like contraction's parity
             budget += 1
-    sp = split_edges(V, F, factor, budget)
+    sp = split_edges(V, F, factor, budget, fixed=fixed)
     ids, verr = list(ids), list(verr)
     for u, v in sp.edge.tolist():  # in creation order: an endpoint may be an earlier midpoint
         ids.append(ids[u])

@@ -487,9 +487,10 @@ def _split_faces(job: Job, out: outcome.Outcome, mesh: _Mesh, run_target: int, p
     """The output split (`_split.apply`): (the mesh, the outcome, the split's stats). Splitting that reached
     the target the contractions could not makes the run's stop reason ``"target"``."""
     target = job.target
-    vout, Fout, ids, fids, verr, stats = _split.apply(mesh.vertices, mesh.faces, mesh.source_vertices,
-                                                      mesh.source_faces, mesh.vertex_error, job.setup.split, target)
     fixed = mesh.fixed
+    vout, Fout, ids, fids, verr, stats = _split.apply(mesh.vertices, mesh.faces, mesh.source_vertices,
+                                                      mesh.source_faces, mesh.vertex_error, job.setup.split, target,
+                                                      fixed)
     if fixed is not None:  # the midpoints it adds are free
         fixed = np.concatenate([fixed, np.zeros(len(vout) - len(fixed), bool)])
     stats.update(planned=planned, run_target=run_target if target else None, run_stop_reason=out.stop_reason)
