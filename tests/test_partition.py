@@ -154,18 +154,16 @@ def test_levels_before_the_last_leave_out_what_a_run_s_end_is_for(in_process):
     assert settings[:-1] == [off | {"refit": 0}] * (len(settings) - 1) and settings[-1] == {}
 
 
-def test_esqem_splits_edges_only_in_a_last_level_without_locks():
-    """ESQEM's edge splits are a run's end, and a split's new vertex takes its first endpoint's source
-    vertex (with a locked one, its global id): a level before the last, or a last level of several locked
-    groups, runs without them; the last level of one group splits. The run: the exact target, no crack."""
+def test_esqem_splits_edges_in_the_last_level_only():
+    """ESQEM's edge splits are a run's end: a level before the last runs without them, the last level splits,
+    locked or not. The run: the exact target, no crack."""
     from qemjax._partition.run import _level_kwargs
 
     p, off = Partition(), {"split_factor": None}
     assert _level_kwargs({"method": "esqem"}, p, last=False)[1] == off | {"refit": 0}
-    assert _level_kwargs({"method": "esqem"}, p, last=True, locked=True)[1] == off
     assert _level_kwargs({"method": "esqem"}, p, last=True) == ({"method": "esqem"}, {})
     assert _level_kwargs({"method": "esqem", "split_factor": None}, p, last=False)[1] == {"refit": 0}
-    assert _level_kwargs({"method": "classic"}, p, last=True, locked=True)[1] == {}  # it does not split
+    assert "split_factor" not in _level_kwargs({"method": "classic"}, p, last=False)[1]  # it does not split
     m = shapes.bumpy_sphere(5)
     V, F = np.asarray(m.vertices), np.asarray(m.faces)
     r = qemjax.simplify((V, F), ratio=0.05, method="esqem", partition=Partition(part_faces=2000, workers=1))
@@ -181,6 +179,22 @@ def test_esqem_splits_edges_only_in_a_last_level_without_locks():
         e = np.linalg.norm(res.vertices[res.faces] - np.roll(res.vertices[res.faces], 1, axis=1), axis=2)
         return float(e.max() / e.mean())
     assert spread(r) < spread(plain)
+
+
+def test_esqem_splits_in_a_last_level_of_several_locked_groups():
+    """A last level of several groups (the output above ``final_faces``) keeps its borders locked and still
+    splits long edges: a split's new vertex takes its first endpoint's source vertex, locked or not, and must
+    not take that vertex's global id (the stitch would find one id at two positions: a crack, or the run
+    stopping with "a shared vertex moved")."""
+    m = shapes.bumpy_sphere(5)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    with pytest.warns(UserWarning, match="too large for one process"):
+        r = qemjax.simplify((V, F), ratio=0.05, method="esqem",
+                            partition=Partition(part_faces=2000, workers=1, final_faces=1500))
+    p = r.stats["partition"]
+    assert p["locked_share"] > 0 and p["settings_per_level"][-1] == {}
+    assert len(r.faces) == round(0.05 * len(F)) and r.stop_reason == "target"
+    assert closed_and_consistent(r.faces) and len(np.unique(r.vertices, axis=0)) == len(r.vertices)
 
 
 def test_a_volume_term_runs_partitioned():

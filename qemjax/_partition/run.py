@@ -83,7 +83,7 @@ def _locks(level_dir: Path, groups: list, borders: list) -> Path:
     return path
 
 
-def _level_kwargs(kwargs: dict, p: Partition, last: bool, locked: bool = False) -> tuple[dict, dict]:
+def _level_kwargs(kwargs: dict, p: Partition, last: bool) -> tuple[dict, dict]:
     """A level's method settings, and what they change from the run's: the run's own at the last level. A
     level before it stops far above the run's target, so it leaves out what only a run's end is for: the
     memoryless last stretch (a method's ``late_memoryless`` would switch at K × the group's share of the
@@ -91,13 +91,12 @@ def _level_kwargs(kwargs: dict, p: Partition, last: bool, locked: bool = False) 
     faces left; with it its volume term, as a run that stays summed drops it), the shape term (the slivers
     that count are the output's; ranking a level's contractions by their shape wore away a spike that the
     last level, seeing it through the carried quadrics, would have kept), ESQEM's edge splits and, with
-    ``refit="last"``, the re-fit. A level whose groups lock their shared vertices (``locked``; a last level
-    of several groups too) splits no edges: a split's new vertex takes its first endpoint's source vertex,
-    which would pass a locked endpoint's global id to it (an edge between two locked vertices is never
-    split, `_pipeline.split`)."""
+    ``refit="last"``, the re-fit. A last level of several locked groups splits as the method asks: an edge
+    between two locked vertices is never split (`_pipeline.split`), and a split's new vertex, away from the
+    source vertex it names, takes no global id (`task._gids_out`)."""
     changed = {}
     method = _method(kwargs)
-    if (locked or not last) and getattr(method, "split_factor", None) is not None:
+    if not last and getattr(method, "split_factor", None) is not None:
         changed["split_factor"] = None
     if not last:
         if p.refit == "last":
@@ -242,7 +241,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 locks = "border"
             else:
                 locks = str(_locks(level_dir, groups, borders))
-            level_kw, changed = _level_kwargs(kwargs, p, last, locked=locks is not None)
+            level_kw, changed = _level_kwargs(kwargs, p, last)
             specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
                           out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit,
                           uv=bool(manifest.get("uv")))

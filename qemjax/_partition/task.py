@@ -35,10 +35,11 @@ def _done(out: Path) -> dict | None:
 
 def _gids_out(res, V, gid, locked) -> np.ndarray:
     """Each output vertex's global id: a locked vertex keeps its own (it is where it was, bit for bit), any
-    other gets -1 (no other group holds it)."""
+    other gets -1 (no other group holds it). A vertex an ESQEM split added takes its first endpoint's source
+    vertex, locked or not: only one at that vertex's exact position is it."""
     src = np.asarray(res.source_vertices)
     if len(res.input_vertices) == len(V) and np.array_equal(res.input_vertices, V):
-        return np.where(locked[src], gid[src], -1)
+        return np.where(locked[src] & (np.asarray(res.vertices) == V[src]).all(1), gid[src], -1)
     # the run welded coincident vertices: find the locked ones by their position
     lv = np.ascontiguousarray(V[locked]).view(np.dtype((np.void, 24))).ravel()
     order = np.argsort(lv, kind="stable")
