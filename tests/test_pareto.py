@@ -35,6 +35,11 @@ def test_front_is_the_non_dominated_rows(seed):
     assert list(front.columns) == list(df.columns)
 
 
+def test_a_row_of_infinite_cost_is_on_the_front_when_nothing_beats_it():
+    df = pd.DataFrame({"faces_out": [3.0, 4.0, 5.0, 6.0], "rms_rel": [np.inf, np.inf, 2.0, 2.0]})
+    assert list(qemjax.pareto_front(df).index) == [0, 2] == brute_front(df, "faces_out", "rms_rel")
+
+
 def test_front_other_columns_and_bad_column():
     df = pd.DataFrame({"a": [1, 2, 3, 1], "b": [3.0, 1.0, 0.5, 4.0]})
     assert list(qemjax.pareto_front(df, "a", "b").index) == [0, 1, 2]

@@ -57,4 +57,24 @@ def test_the_sweeps_peer_names_are_the_peers():
     """`_sweep` names the peers without importing `qemjax.peers` (lazy); the two lists must agree."""
     from qemjax._sweep import run as _sweep
 
-    assert sorted(_sweep._PEER_NAMES) == sorted(peers.PEERS)
+    assert sorted(_sweep.PEER_NAMES) == sorted(peers.PEERS)
+
+
+def test_a_peer_cell_runs_on_the_cleaned_input_as_a_qemjax_cell_does(tmp_path):
+    """A mesh with repeated faces: a peer's cell gets the cleaned input a qemjax cell runs on, so its ratio
+    target is the same (it was taken of the raw faces, a third more here); and a config file may name a
+    peer as a method."""
+    name = next(iter(peers.available()), None)
+    if name is None:
+        pytest.skip("no peer installed")
+    V, F = qemjax.shapes.torus(n_major=24, n_minor=12)
+    doubled = (V, np.vstack([F, F[: len(F) // 3]]))
+    df = qemjax.sweep({"dup": doubled}, {"method": ["qem", name]}, [0.2], metrics=False, progress=False, workers=1)
+    assert (df["error"] == "").all()
+    assert df["faces_in"].nunique() == 1 and df["faces_in"].iloc[0] == len(F)
+    assert df["target_faces"].nunique() == 1 and df["target_faces"].iloc[0] == round(0.2 * len(F))
+    from qemjax._sweep import config as _sweep_config
+
+    cfg = tmp_path / "p.toml"
+    cfg.write_text(f'meshes = ["shapes.torus"]\ntargets = [0.5]\n[grid]\nmethod = ["qem", "{name}"]\n')
+    assert _sweep_config.load(cfg).grid["method"] == ["qem", name]

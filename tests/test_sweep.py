@@ -191,10 +191,76 @@ def test_mesh_names(tmp_path):
     ({}, [0.5, 0.5], {}, "repeat"),
     ({}, [0.5], {"out": "x.xlsx"}, "out must end in"),
     ({}, [0.5], {"executor": object()}, "executor must be"),
+    ({"boundary_weight": [1.0, 1.0]}, [0.5], {}, "grid\\['boundary_weight'\\] repeats the value 1.0"),
+    ({}, [0.5], {"out": "no/such/folder/x.csv"}, "out's folder does not exist"),
+    ({}, [0.5], {"metrics": {"samples": 100}}, "metrics: unknown keyword 'samples'"),
 ])
 def test_validation(grid, targets, kw, message):
     with pytest.raises(ValueError, match=message):
         qemjax.sweep(shapes.icosphere(1), grid, targets, progress=False, **kw)
+
+
+def test_out_that_is_a_folder(tmp_path):
+    (tmp_path / "t.csv").mkdir()
+    with pytest.raises(ValueError, match="out is a folder"):
+        qemjax.sweep(shapes.icosphere(1), {}, [0.5], progress=False, out=tmp_path / "t.csv")
+
+
+def test_a_files_attributes_reach_its_cells(tmp_path):
+    """A sweep reads a file as `simplify` does: the vertex colours of a PLY and the UVs of an OBJ that
+    names its texture are kept in its cells (its rows equal lone runs), and in a helper process too."""
+    from qemjax._io import mesh as _io
+
+    V, F = shapes.bumpy_sphere(3)
+    colours = (np.abs(V) * 255 / np.abs(V).max()).astype(np.uint8)
+    import trimesh
+
+    trimesh.Trimesh(V, F, vertex_colors=colours, process=False).export(tmp_path / "c.ply")
+    qemjax.shapes.write_examples(tmp_path)
+    from qemjax._cli import write
+
+    # an OBJ whose material names its texture image: "auto" keeps its UVs
+    write(qemjax.simplify(str(tmp_path / "textured.obj"), ratio=0.5, texture=str(tmp_path / "textured.png")),
+          str(tmp_path / "t.obj"), "obj")
+    files = {"c": str(tmp_path / "c.ply"), "t": str(tmp_path / "t.obj")}
+    alone = {k: qemjax.simplify(f, ratio=0.3) for k, f in files.items()}
+    assert alone["c"].stats["attributes"] == ["color"] and alone["t"].stats["attributes"] == ["uv"]
+    grid = {"attribute_weights": [None, 3.0]}
+    df = qemjax.sweep(files, grid, [0.3], metrics=False, progress=False, workers=1)
+    for k in files:
+        rows = df[df["mesh"] == k]
+        assert rows["result_sha256"].iloc[0] == sw.result_hash(alone[k])
+        assert rows["result_sha256"].nunique() == 2  # the weight of the kept attribute changes the run
+        heavy = qemjax.simplify(files[k], ratio=0.3, attribute_weights=3.0)
+        assert rows["result_sha256"].iloc[1] == sw.result_hash(heavy)
+    # what a helper process gets pickles, and reads as the file does
+    import pickle
+
+    for k, f in files.items():
+        got = pickle.loads(pickle.dumps(sw.load_mesh(f)))
+        assert sw.result_hash(qemjax.simplify(got, ratio=0.3)) == sw.result_hash(alone[k])
+    assert isinstance(sw.load_mesh(str(tmp_path / "bumpy.obj")), _io.Mesh)  # positions only: its arrays
+
+
+def test_a_value_of_the_wrong_type_is_that_cells_error():
+    df = qemjax.sweep({"t": shapes.torus(n_major=16, n_minor=8)}, {"attributes": [None, 3]}, [0.5],
+                      metrics=False, progress=False, workers=1)
+    assert df["error"].iloc[0] == "" and df["error"].iloc[1].startswith("ValueError: attributes must be")
+
+
+@pytest.mark.parametrize("ext", [".csv", ".parquet"])
+def test_columns_of_mixed_values_are_written_and_read_back(tmp_path, ext):
+    """A grid column that mixes kinds of value (None, a tuple, a text) is written (Parquet stores it as
+    text, as a CSV does), a resumed run finds every row, and a CSV's rows read back have no error ("")."""
+    if ext == ".parquet":
+        pytest.importorskip("pyarrow")
+    out = tmp_path / f"m{ext}"
+    grid = {"attributes": [None, ("normal",), "auto"], "attribute_weights": [None, 1.5]}
+    first = qemjax.sweep(shapes.icosphere(1), grid, [0.5], metrics=False, progress=False, out=out, workers=1)
+    again = qemjax.sweep(shapes.icosphere(1), grid, [0.5], metrics=False, progress=False, out=out, workers=1)
+    assert len(first) == 6 and again.attrs["sweep"]["skipped"] == 4  # the failed cells run again
+    assert list(again["result_sha256"].fillna("")) == list(first["result_sha256"].fillna(""))
+    assert list(again["error"] == "") == list(first["error"] == "") and (first["error"] == "").sum() == 4
 
 
 def test_out_that_is_not_a_sweep_table(tmp_path):

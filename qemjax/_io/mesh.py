@@ -99,6 +99,27 @@ def _read_trimesh(path):
     return _as_trimesh(_io_files.read(path))
 
 
+def portable(tm, V: np.ndarray, F: np.ndarray):
+    """A `trimesh.Trimesh` of ``V``, ``F`` (``tm``'s, checked) with what `prepare` may keep of ``tm``: its
+    UVs and material, vertex colours, the normals its file stored. It pickles, where a mesh trimesh read
+    does not (it keeps its file's resolver), so a sweep's helpers get what a lone `simplify` of ``tm`` reads.
+    None when ``tm`` carries none of these (its arrays are all a run reads)."""
+    import trimesh
+
+    vals, material = _wedges.from_trimesh(tm)
+    if not vals and material is None:
+        return None
+    if "uv" in vals or material is not None:
+        visual = trimesh.visual.TextureVisuals(uv=np.asarray(tm.visual.uv) if "uv" in vals else None,
+                                               material=material)
+    elif "color" in vals:
+        visual = trimesh.visual.ColorVisuals(vertex_colors=np.asarray(tm.visual.vertex_colors))
+    else:
+        visual = None
+    normals = tm._cache.cache.get("vertex_normals") if "normal" in vals else None  # as `from_trimesh` finds them
+    return trimesh.Trimesh(V, F, visual=visual, vertex_normals=normals, process=False)
+
+
 def _read(path) -> tuple[Mesh, list[str]]:
     """`load` without the warning: (Mesh, `dropped_attributes`)."""
     return _from_trimesh(_read_trimesh(path))

@@ -179,6 +179,8 @@ def select(available: dict, attributes) -> tuple[dict, list]:
     elif attributes is None or attributes is False:
         want = set()
     else:
+        if not isinstance(attributes, (str, tuple, list, set, frozenset)):
+            raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {attributes!r}")
         req = (attributes,) if isinstance(attributes, str) else tuple(attributes)
         bad = [a for a in req if a not in KINDS]
         if bad:

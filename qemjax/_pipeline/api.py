@@ -389,7 +389,7 @@ def _jobs(cells: list, errors: bool, stacklevel: int, each=None, states=None):
                 jobs.append((i, job))
             else:
                 each(i, job)
-        except ValueError as exc:
+        except (ValueError, TypeError) as exc:  # a value of the wrong type: that cell's error too
             if not errors:
                 raise
             out[i] = exc

@@ -138,7 +138,9 @@ def _meshes(value, folder: Path, fail) -> dict[str, str]:
     return named
 
 
-_CHOICES = {"method": _api.methods, "scheduler": _schedulers.names, "placement": lambda: _api.PLACEMENTS}
+# a method names qemjax's cost models or a peer simplifier (`qemjax.peers`: the cell runs that peer)
+_CHOICES = {"method": lambda: [*_api.methods(), *_sweep.PEER_NAMES], "scheduler": _schedulers.names,
+            "placement": lambda: _api.PLACEMENTS}
 
 
 def _allowed(key: str) -> set[str]:

@@ -20,9 +20,9 @@ def pareto_front(table, x: str = "faces_out", y: str = "rms_rel"):
     ok = values.notna().all(axis=1).to_numpy()
     xs, ys = values[x].to_numpy()[ok], values[y].to_numpy()[ok]
     order = np.lexsort((ys, xs))  # by x, then y
-    keep, best = [], np.inf
+    keep, best = [], None  # the smallest y kept so far (None: no row yet, so that a y of inf is kept first)
     for i in order:
-        if ys[i] < best:
+        if best is None or ys[i] < best:
             keep.append(i)
             best = ys[i]
     return table[ok].iloc[keep]

@@ -19,6 +19,7 @@ import numbers
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +72,7 @@ _SWEPT = [0.0]  # the work of this process's default sweeps so far
 SAVE_EVERY_S = 1.0  # the table is rewritten after each piece run here, and while rows come in at most this often
 RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/figures/dask_speedup.py)
-_PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
+PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
 
@@ -87,11 +88,22 @@ class Cell:
     @property
     def key(self) -> str:
         """Stable identity across runs and processes: canonical JSON of mesh, sorted parameters, target."""
-        return json.dumps([self.mesh, sorted((k, _plain(v)) for k, v in self.params), self.target])
+        return json.dumps([self.mesh, sorted((k, _plain(v)) for k, v in self.params), self.target],
+                          default=_json_value)
 
     def kwargs(self) -> dict:
         target = {"ratio": self.target} if isinstance(self.target, float) else {"target_faces": self.target}
         return {**dict(self.params), **target}
+
+
+def _json_value(value):
+    """What JSON cannot write in a grid value: numpy numbers and arrays as numbers and lists, anything else
+    (a PIL image given as ``texture``) by its repr."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return repr(value)
 
 
 def _plain(value):
@@ -123,9 +135,15 @@ def _name(value, i: int) -> str:
 
 
 def load_mesh(value):
-    """A mesh input as arrays (`_io.as_arrays`): a shape named as text is made in code."""
+    """A mesh input as `simplify` reads it, in a form that pickles (helpers and executors get it): a shape
+    named as text made in code; a file or trimesh with appearance attributes a run may keep (UVs, colours,
+    stored normals) as a trimesh of them (`_io.portable`); else its arrays (`_io.as_arrays`)."""
     spec = _shape(value)
-    return _io.as_arrays(spec.build() if spec is not None else value)
+    if spec is not None:
+        return _io.as_arrays(spec.build())
+    mesh, _, tm = _io._as_arrays(value, keep_trimesh=True)
+    kept = _io.portable(tm, *mesh) if tm is not None else None
+    return mesh if kept is None else kept
 
 
 def name_meshes(meshes) -> dict[str, Any]:
@@ -170,11 +188,15 @@ def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[s
         values = list(values) if isinstance(values, (list, tuple, range, np.ndarray)) else [values]
         if not values:
             raise ValueError(f"grid[{k!r}] is empty")
+        texts = [json.dumps(_plain(v), default=_json_value) for v in values]
+        if len(set(texts)) < len(texts):
+            twice = next(v for v, t in zip(values, texts) if texts.count(t) > 1)
+            raise ValueError(f"grid[{k!r}] repeats the value {twice!r}: two cells would be the same")
         axes.append([(k, v) for v in values])
     out, seen = [], set()
     for full in itertools.product(*axes):
         combo = _applicable(full)
-        key = json.dumps([(k, _plain(v)) for k, v in combo], default=repr)
+        key = json.dumps([(k, _plain(v)) for k, v in combo], default=_json_value)
         if key not in seen:  # crossing a method without a setting with that setting's values: once
             seen.add(key)
             out.append(combo)
@@ -189,7 +211,7 @@ def _why_collapsed(full: tuple, combo: tuple) -> str:
     gone = [k for k, _ in full if k not in dict(combo)]
     method = dict(full).get("method", dict(full).get("preset") or _costs.DEFAULT)
     label = _plain(method) if not isinstance(method, str) else method
-    if isinstance(method, str) and method in _PEER_NAMES:
+    if isinstance(method, str) and method in PEER_NAMES:
         return f"{', '.join(gone)} {'does' if len(gone) == 1 else 'do'} not apply to the peer {label!r}"
     return f"{', '.join(gone)} {'does' if len(gone) == 1 else 'do'} not apply to method {label!r}"
 
@@ -199,7 +221,7 @@ def _applicable(combo: tuple) -> tuple:
     ``method = ["qem", "esqem"]`` with ``split_factor`` gives the qem cells no split factor: "n/a" in the
     table, and one cell instead of one per value). Settings the method has, and the rest, stay."""
     params = dict(combo)
-    if isinstance(params.get("method"), str) and params["method"] in _PEER_NAMES:
+    if isinstance(params.get("method"), str) and params["method"] in PEER_NAMES:
         return (("method", params["method"]),)  # a peer: no setting of qemjax's applies
     table = _flat.options()
     try:
@@ -247,20 +269,24 @@ def result_hash(res) -> str:
 def _peer(cell: Cell) -> str | None:
     """The peer a cell's ``method`` names (`qemjax.peers.PEERS`), else None."""
     method = dict(cell.params).get("method")
-    return method if isinstance(method, str) and method in _PEER_NAMES else None
+    return method if isinstance(method, str) and method in PEER_NAMES else None
 
 
 def _simplify_cell(mesh, cell: Cell):
-    """The single dispatch point: a peer's `qemjax.peers.simplify` (the target resolved as `simplify`
-    does; the cell's other grid keys do not apply: NaN in its row), else `simplify`."""
+    """The single dispatch point: a peer's `qemjax.peers.simplify` of the cleaned input a qemjax cell runs on
+    (welded, degenerate and duplicate faces removed; the target resolved as `simplify` does; the cell's
+    other grid keys do not apply: NaN in its row), else `simplify`."""
     name = _peer(cell)
     if name is None:
         return simplify(mesh, **cell.kwargs())
     from .. import peers
 
-    m = len(mesh[1])
+    with warnings.catch_warnings():  # what the peer does not keep: its row is positions and faces
+        warnings.simplefilter("ignore")
+        clean, _ = _io.prepare(mesh, attributes=None)  # the input a qemjax cell runs on, cleaned alike
+    m = len(clean.faces)
     target = max(1, int(round(cell.target * m))) if isinstance(cell.target, float) else cell.target
-    return peers.simplify(name, mesh, target)
+    return peers.simplify(name, clean, target)
 
 
 def run_cell(mesh, cell: Cell, metrics) -> dict:
@@ -438,6 +464,19 @@ class SweepInterrupted(KeyboardInterrupt):
     prints it and exits 130). A rerun with the same ``out`` resumes."""
 
 
+def _check_metrics(metrics: dict) -> None:
+    """ValueError for a ``metrics`` keyword `qemjax.metrics.evaluate` does not take (before anything runs)."""
+    import inspect
+
+    from ..metrics import evaluate
+
+    takes = [p.name for p in inspect.signature(evaluate).parameters.values()
+             if p.kind is p.KEYWORD_ONLY and p.name != "target_faces"]  # the cell's own target
+    bad = [k for k in metrics if k not in takes]
+    if bad:
+        raise ValueError(f"metrics: unknown keyword {bad[0]!r}; metrics.evaluate takes {', '.join(takes)}")
+
+
 def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True,
           batch_size: int | None = None, workers: int | None = None):
     """Run every (mesh, grid configuration, target) cell with `qemjax.simplify`; a pandas DataFrame, one
@@ -525,6 +564,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     if workers is not None and executor is not None:
         raise ValueError("give executor= or workers=, not both (an executor's workers are its own)")
     metrics = {} if metrics is True else dict(metrics) if isinstance(metrics, dict) else False
+    if metrics:
+        _check_metrics(metrics)
     submit = None if executor is None else _submitter(executor)
     if workers is None and executor is None:
         workers = default_workers()
@@ -557,8 +598,6 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     other_keys = list(others["cell"]) if len(others) else []
 
     if collapsed:
-        import warnings
-
         why = "; ".join(f"{n} cells: {reason}" for reason, n in collapsed.items())
         warnings.warn(f"sweep: {requested} requested cells are {len(cells)} ({why}; \"n/a\" in their rows)",
                       stacklevel=2)
@@ -613,7 +652,7 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         # marked written only once written: a Ctrl-C during the write leaves them waiting, for the last save
         saved[:] = now, n
 
-    faces = {name: len(loaded[name][1]) for name in loaded}
+    faces = {name: len(loaded[name].faces) for name in loaded}
     stopped = False
     try:
         if submit is None:

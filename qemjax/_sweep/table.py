@@ -21,9 +21,36 @@ def _format(out) -> str:
     return FORMATS[ext]
 
 
+def _mixed(column) -> bool:
+    """Whether a column of objects holds values Parquet cannot store in one column type: more than one kind
+    of value (a number beside a text), or lists, tuples or dicts (``attributes``, ``attribute_weights``).
+    Such a column is stored as text, as a CSV stores it."""
+    if column.dtype != object:
+        return False
+    kinds = set()
+    for v in column:
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            continue
+        if isinstance(v, (bool, np.bool_)):
+            kinds.add("bool")
+        elif isinstance(v, (int, float, np.number)):
+            kinds.add("number")
+        elif isinstance(v, str):
+            kinds.add("str")
+        else:
+            return True
+    return len(kinds) > 1
+
+
 def _check_writable(out) -> str:
-    """The format of ``out``; ValueError when it is Parquet and pyarrow is missing (before anything runs)."""
+    """The format of ``out``; ValueError when its folder does not exist, when it is a folder, or when it is
+    Parquet and pyarrow is missing (before anything runs)."""
     fmt = _format(out)
+    path = Path(out)
+    if path.is_dir():
+        raise ValueError(f"out is a folder, not a table file: {os.fspath(out)}")
+    if not path.absolute().parent.is_dir():
+        raise ValueError(f"out's folder does not exist: {os.fspath(path.absolute().parent)}")
     if fmt == "parquet":
         try:
             import pyarrow  # noqa: F401
@@ -93,8 +120,10 @@ def read_table(out):
     if not Path(out).exists():
         return pd.DataFrame()
     if _format(out) == "csv":
-        return _typed(pd.read_csv(out, keep_default_na=False, na_values=[""],
-                                  dtype={"error": str, "cell": str}))
+        df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str})
+        if "error" in df:  # no error is "", as in the rows a sweep makes (an empty field reads as NaN)
+            df["error"] = df["error"].fillna("")
+        return _typed(df)
     _check_writable(out)
     return _typed(pd.read_parquet(out))
 
@@ -149,7 +178,7 @@ def write_table(df, out) -> None:
     else:
         df = df.copy()
         for col in df.columns:
-            if _marked(df[col]):
+            if _marked(df[col]) or _mixed(df[col]):
                 df[col] = [None if v is None or isinstance(v, float) and math.isnan(v) else as_text(v)
                            for v in df[col]]
         df.to_parquet(tmp, index=False)
