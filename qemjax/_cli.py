@@ -478,8 +478,9 @@ def _parser() -> argparse.ArgumentParser:
                    "faces one task reads (default 100000)")
     s.add_argument("--workers", type=_faces, metavar="N", help="with --partition: local worker processes (default: "
                    "every core)")
-    s.add_argument("--scratch", metavar="DIR", help="with --partition: the folder for the parts (kept; a run of "
-                   "the same input and options resumes from it); default: a temporary folder, removed at the end")
+    s.add_argument("--scratch", metavar="DIR", help="with --partition: the folder for the parts (new, empty, or "
+                   "one a partitioned run wrote; kept; a run of the same input and options resumes from it); "
+                   "default: a temporary folder, removed at the end")
     s.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0) "
                    "per input vertex (.npy or text, one number per line): each pair's cost is multiplied by "
                    "the larger weight of its vertices, so heavy regions keep more detail")

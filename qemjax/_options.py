@@ -198,7 +198,8 @@ class Partition:
         Kubernetes: any cluster whose workers see ``scratch``).
     scratch: the folder for the parts (a shared file system on a cluster). None: a temporary folder, removed
         when the run ends. A folder given is kept, and a run of the same input and settings resumes from
-        the parts already in it.
+        the parts already in it; it must be new, empty or one a partitioned run wrote (one holding other
+        files is refused: a run with other inputs or settings clears it).
     retries: how often a task whose worker died is run again.
     measure: measure the distance of the output from every input vertex and face centroid, part by part.
     refit: which levels re-fit their output to their input, for a method that re-fits (the default):

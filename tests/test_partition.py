@@ -252,6 +252,30 @@ def test_resumed_run_reuses_the_parts_written(mesh, scratch, two_workers):
     assert again.stats["partition"]["reused"] == sum(first["groups_per_level"]) - 2
 
 
+def test_a_scratch_folder_with_a_users_files_is_refused_and_left_as_it_was(tmp_path):
+    """A scratch folder is the run's: one that holds other files (a folder named like a level, a file named
+    like the run's own input) is refused before anything in it is touched; the run's own folder is reused
+    and, for other settings, cleared; an input in it under a name the run writes is refused."""
+    m = shapes.bumpy_sphere(3)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    mine = tmp_path / "mine"
+    (mine / "levels_of_detail").mkdir(parents=True)
+    (mine / "levels_of_detail" / "a.txt").write_text("x")
+    (mine / "input.ply").write_text("mine")
+    with pytest.raises(ValueError, match="holds files a partitioned run did not write \\(levels_of_detail\\)"):
+        qemjax.simplify((V, F), ratio=0.5, partition=Partition(workers=1, scratch=mine))
+    assert (mine / "levels_of_detail" / "a.txt").read_text() == "x" and (mine / "input.ply").read_text() == "mine"
+    ours = tmp_path / "ours"
+    first = qemjax.simplify((V, F), ratio=0.5, partition=Partition(workers=1, scratch=ours))
+    again = qemjax.simplify((V, F), ratio=0.5, partition=Partition(workers=1, scratch=ours))
+    other = qemjax.simplify((V, F), ratio=0.4, partition=Partition(workers=1, scratch=ours))
+    assert digest(again) == digest(first) and again.stats["partition"]["reused"] > 0
+    assert len(other.faces) == round(0.4 * len(F)) and other.stats["partition"]["reused"] == 0
+    assert (ours / "input.ply").exists()  # the arrays, as the run wrote them: a later run may rewrite it
+    with pytest.raises(ValueError, match="is in the scratch folder under a name the run writes"):
+        qemjax.simplify(str(ours / "input.ply"), ratio=0.5, partition=Partition(workers=1, scratch=ours))
+
+
 def test_a_worker_s_share_of_the_cores_caps_its_threads(monkeypatch):
     from qemjax._mesh import threads
 

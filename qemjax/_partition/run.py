@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import execute, pieces, plan, task
+from .source import CORNER_UV, FACES, UV, VERTICES
 from .._mesh.arrays import box_diagonal
 from .._options import Partition
 
@@ -50,15 +52,42 @@ def _input_key(mesh) -> str:
     return hashlib.sha256(mesh[0].tobytes() + mesh[1].tobytes()).hexdigest()
 
 
-def _fresh(folder: Path, key: dict) -> None:
-    """Remove what an earlier run with other inputs or settings left in ``folder`` (only its own files)."""
+# what a run writes in its scratch folder: level folders, the reading's work folders and these files
+_OWN_FOLDERS = re.compile(r"level\d+|tmp|weld")
+_OWN_FILES = {"manifest.json", "run.json", "stats.json", "output.npz", "input.ply", VERTICES, FACES, UV, CORNER_UV,
+              "faces_raw.i64", "ids.i64"}
+
+
+def _own(entry: Path) -> bool:
+    """Whether a scratch folder's entry is one a partitioned run writes (its atomic writes' temporary
+    files, ``.NAME.PID.tmp``, too)."""
+    if entry.is_dir():
+        return _OWN_FOLDERS.fullmatch(entry.name) is not None
+    return entry.name in _OWN_FILES or (entry.name.startswith(".") and entry.name.endswith(".tmp"))
+
+
+def _fresh(folder: Path, key: dict, source=None) -> None:
+    """Remove what an earlier run with other inputs or settings left in ``folder`` (only its own files).
+    A folder that holds anything else is refused (ValueError), before anything in it is touched: a
+    scratch folder is the run's, and a user's files beside it must not be removed with it; so is an input
+    file in it under a name the run writes."""
+    foreign = sorted(e.name for e in folder.iterdir() if not _own(e))
+    if foreign:
+        raise ValueError(f"partition: the scratch folder {folder} holds files a partitioned run did not write "
+                         f"({', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''}); give a new or empty "
+                         "folder (Partition.scratch, --scratch)")
+    if isinstance(source, (str, os.PathLike)) and Path(source).resolve().parent == folder.resolve() \
+            and _own(Path(source)):
+        raise ValueError(f"partition: the input {source} is in the scratch folder under a name the run "
+                         "writes there; move it, or give another scratch folder")
     meta = folder / "run.json"
     if meta.exists() and json.loads(meta.read_text()) == key:
         return
-    for sub in folder.glob("level*"):
-        shutil.rmtree(sub, ignore_errors=True)
-    for name in ("manifest.json", "run.json", "input.ply", "vertices.f64", "faces.i64"):
-        (folder / name).unlink(missing_ok=True)
+    for entry in folder.iterdir():
+        if entry.is_dir():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
     pieces.save_json(meta, key)
 
 
@@ -209,7 +238,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                    target=[target_faces, ratio],
                    kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
                    uv=uv)
-        _fresh(folder, key)
+        _fresh(folder, key, mesh)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
         manifest_path = folder / "manifest.json"
