@@ -324,3 +324,24 @@ def test_bad_tristrips_are_named(tmp_path):
     assert _reason(path).startswith("the PLY tristrips refer to vertex 99, but the file holds 9 vertices")
     path.write_bytes(_strip_ply(V, [[0, 1, 2, 3]], "binary_little_endian", "int", "int")[:-6])
     assert _reason(path).startswith("truncated binary PLY")
+
+
+def test_relative_indices_and_tabs_in_an_obj_are_read_as_the_format_means_them(tmp_path):
+    """An OBJ face's negative index counts back from the vertices before its line (trimesh counts from the
+    file's end: here both faces became the second triangle, one then dropped as a duplicate); words split by
+    tabs are words (trimesh read no vertex and no face). Read as the same file written plainly is."""
+    rel = tmp_path / "rel.obj"
+    rel.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf -3/-3 -2/-2 -1/-1\n"
+                   "v 5 0 0\nv 6 0 0\nv 5 1 0\nf -3 -2 -1\nf 1 -2 6\n")
+    plain = tmp_path / "plain.obj"
+    plain.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n"
+                     "v 5 0 0\nv 6 0 0\nv 5 1 0\nf 4 5 6\nf 1 5 6\n")
+    tab = tmp_path / "tab.obj"
+    tab.write_text(plain.read_text().replace(" ", "\t"))
+    want = qemjax.load(str(plain))
+    for path in (rel, tab):
+        got = qemjax.load(str(path))
+        assert np.array_equal(got.vertices, want.vertices) and np.array_equal(got.faces, want.faces)
+    assert len(want.faces) == 3
+    r = qemjax.simplify(str(rel), ratio=1.0)
+    assert len(r.faces) == 3 and r.stats["duplicate_removed"] == 0

@@ -144,6 +144,9 @@ def _prepare(fmt: str, data: bytes):
         return data, False, None
     if fmt in _TEXT:
         text, changed = _io_text.decode(data)
+        if fmt == "obj":
+            text, plain = _io_text.plain_obj(text)
+            changed = changed or plain
         if fmt == "off":
             reason = _io_text.off_header_problem(text[:4096].decode("utf-8", "replace"))
             if reason:

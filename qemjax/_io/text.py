@@ -1,12 +1,15 @@
 """Text mesh formats (OBJ, OFF, ASCII STL): decoding, and what is wrong with a file a reader failed on.
 
 `decode` turns bytes into UTF-8 whatever their encoding (UTF-8, else Latin-1, which never fails), so that
-trimesh, whose fallback for other encodings is an optional package, can read them. The ``*_problem``
+trimesh, whose fallback for other encodings is an optional package, can read them; `plain_obj` writes an
+OBJ's tabs and relative indices as trimesh reads them right. The ``*_problem``
 functions are only called once a reader failed or read nothing: they walk the text line by line (pure
 Python, slow on big files, hence not on every read) and return the first defect in words about the file
 (line numbers count from 1), or None.
 """
 from __future__ import annotations
+
+import re
 
 
 def decode(data: bytes) -> tuple[bytes, bool]:
@@ -19,6 +22,39 @@ def decode(data: bytes) -> tuple[bytes, bool]:
         return data, False
     except UnicodeDecodeError:
         return data.decode("latin-1").encode("utf-8"), True
+
+
+_RELATIVE = re.compile(rb"(?m)^[ \t]*f[ \t][^\n]*?-[0-9]")  # a face line with a relative (negative) index
+
+
+def plain_obj(data: bytes) -> tuple[bytes, bool]:
+    """(OBJ text as trimesh reads it right, whether it differs from ``data``): tabs between words as spaces
+    (trimesh reads no vertex or face of a file that separates them with tabs), and relative indices (-1:
+    the last vertex so far) as the absolute ones they mean at their line (trimesh counts them from the end of
+    the file). ``data`` itself when it has neither."""
+    changed = b"\t" in data
+    if changed:
+        data = data.replace(b"\t", b" ")
+    if not _RELATIVE.search(data):
+        return data, changed
+    lines = data.split(b"\n")
+    count = {b"v": 0, b"vt": 0, b"vn": 0}
+    kinds = (b"v", b"vt", b"vn")
+    for no, line in enumerate(lines):
+        words = line.split()
+        if not words:
+            continue
+        if words[0] in count:
+            count[words[0]] += 1
+        elif words[0] == b"f" and b"-" in line:
+            corners = []
+            for corner in words[1:]:
+                parts = corner.split(b"/")
+                corners.append(b"/".join(
+                    str(count[k] + 1 + int(p)).encode() if p.startswith(b"-") and p[1:].isdigit() else p
+                    for k, p in zip(kinds, parts)))
+            lines[no] = b"f " + b" ".join(corners)
+    return b"\n".join(lines), True
 
 
 def quote(line: str) -> str:
