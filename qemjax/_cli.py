@@ -210,6 +210,13 @@ def _faces(text: str) -> int:
     return n
 
 
+def _workers(text: str) -> int:
+    n = _parse(int, text, "a whole number of worker processes")
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"the number of workers must be at least 1, got {text}")
+    return n
+
+
 def _max_error(text: str) -> float:
     e = _parse(float, text, "a number >= 0")
     if not e >= 0:
@@ -476,7 +483,7 @@ def _parser() -> argparse.ArgumentParser:
                    "integer per line)")
     s.add_argument("--part-faces", dest="part_faces", type=_faces, metavar="K", help="with --partition: the most "
                    "faces one task reads (default 100000)")
-    s.add_argument("--workers", type=_faces, metavar="N", help="with --partition: local worker processes (default: "
+    s.add_argument("--workers", type=_workers, metavar="N", help="with --partition: local worker processes (default: "
                    "every core)")
     s.add_argument("--scratch", metavar="DIR", help="with --partition: the folder for the parts (new, empty, or "
                    "one a partitioned run wrote; kept; a run of the same input and options resumes from it); "
@@ -799,8 +806,9 @@ def attributes_note(stats: dict) -> str:
     when the input carried none."""
     parts = []
     if stats.get("attributes"):
-        seams = stats.get("seams_in", 0)
-        note = f"kept {', '.join(stats['attributes'])}: " + (_count(seams, "seam") if seams else "no seams")
+        seams = stats.get("seams_in")  # None: not counted (a partitioned run's parts are not seen whole)
+        note = f"kept {', '.join(stats['attributes'])}" + ("" if seams is None else ": " + (
+            _count(seams, "seam") if seams else "no seams"))
         if seams:
             note += (f" ({stats.get('seam_edges_in', 0)} seam edges, {stats.get('seam_vertices_in', 0)} seam "
                      "vertices) constrained like boundaries")

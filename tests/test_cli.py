@@ -693,3 +693,39 @@ def test_lod_glb_levels_side_by_side(src, tmp_path, capsys):
         assert np.allclose(mesh.vertices, level.vertices, atol=1e-6) and np.array_equal(mesh.faces, level.faces)
     stacked = chain.to_scene(spacing=0)
     assert all(np.array_equal(stacked.graph[f"lod{i}"][0], np.eye(4)) for i in range(2))
+
+
+@pytest.mark.parametrize("value, match", [("0", "the number of workers must be at least 1"),
+                                          ("abc", "a whole number of worker processes")])
+def test_workers_are_named_as_workers(src, tmp_path, capsys, value, match):
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio", "0.5", "--partition",
+                      "--workers", value, "--quiet"]) == 2
+    assert match in capsys.readouterr().err
+
+
+def test_a_partitioned_run_tells_what_it_keeps_and_drops_as_it_is(tmp_path):
+    """A partitioned run: a target at the input's faces is no early stop (no warning), one above them is
+    named as in core; an OBJ's vertex colours, which it drops, are named; the UVs it keeps are said kept
+    without a seam count it does not make (it said "no seams" of a mesh with seams)."""
+    import warnings as _w
+
+    qemjax.shapes.write_examples(tmp_path, subdivisions=3)
+    bumpy = str(tmp_path / "bumpy.obj")
+    one = qemjax.Partition(workers=1)
+    with _w.catch_warnings(record=True) as caught:
+        _w.simplefilter("always")
+        r = qemjax.simplify(bumpy, ratio=1.0, partition=one)
+    assert r.stop_reason == "unchanged" and not caught
+    with pytest.warns(UserWarning, match="target of 5000 faces is not below the mesh's 1280 faces"):
+        qemjax.simplify(bumpy, target_faces=5000, partition=one)
+    V, F = qemjax.shapes.bumpy_sphere(3)
+    (tmp_path / "vc.obj").write_text("".join(f"v {x} {y} {z} 0.5 0.25 0.125\n" for x, y, z in V)
+                                     + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F))
+    with pytest.warns(UserWarning, match=r"not carried over from the input: vertex colours \(v x y z r g b\)"):
+        qemjax.simplify(str(tmp_path / "vc.obj"), ratio=0.5, partition=one)
+    r = qemjax.simplify(str(tmp_path / "textured.obj"), ratio=0.3, attributes="uv", partition=one)
+    assert r.stats["attributes"] == ["uv"] and _cli.attributes_note(r.stats).startswith("kept uv") \
+        and "seam" not in _cli.attributes_note(r.stats)
+    alone = qemjax.simplify(str(tmp_path / "textured.obj"), ratio=0.3, attributes="uv")
+    assert "1 seam (" in _cli.attributes_note(alone.stats)
+    assert _cli.attributes_note(qemjax.simplify(qemjax.shapes.bumpy_sphere(2), ratio=0.5).stats) == ""

@@ -249,6 +249,9 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         t_scatter = time.perf_counter() - t0
         n_faces = int(manifest["n_faces"])
         target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
+        if target > n_faces:  # as an in-core run says it
+            warnings.warn(f"target of {target} faces is not below the mesh's {n_faces} faces: returning it "
+                          "unchanged", stacklevel=stacklevel)
         target = min(target, n_faces)
         paths = [str(folder / part["file"]) for part in manifest["parts"]]
         unit = float(np.max(np.subtract(manifest["bbox"][1], manifest["bbox"][0]))) or 1.0  # `carry`'s unit
@@ -398,7 +401,7 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
     if locked_share > 0:
         warnings.warn(f"partition: the output is too large for one process (Partition.final_faces), so "
                       f"{100 * locked_share:.2g} % of its vertices stayed locked at part borders", stacklevel=stacklevel)
-    if stop != "target":
+    if stop not in ("target", "unchanged"):  # "unchanged": nothing to remove (a target at the input's faces)
         warnings.warn(f"partition: stopped at {len(F)} faces, above the target {target} ({stop}: "
                       f"{'; '.join(msgs) or 'the last level could not go further'})", stacklevel=stacklevel)
     if folder is not None:  # a kept scratch folder also keeps what the run did

@@ -8,6 +8,7 @@ positions (at UV seams, or written per face).
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -101,6 +102,10 @@ def _finish_weld(welder: Welder, scratch: Path, fmt: str, raw: Appender | None, 
     return scratch_source(scratch, fmt, True, n, raw.rows)
 
 
+# a `v` line with more than three values: its vertex colour (x y z r g b), which a partitioned run drops
+_COLOURED = re.compile(rb"(?m)^v[ \t]+\S+[ \t]+\S+[ \t]+\S+[ \t]+[^\s#]")
+
+
 def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
     """The OBJ file as a welded `Source`; with ``uv_wanted``, its UVs (`source.UV`, each triangle corner's
     ``vt``) when every corner names one (written to scratch only then)."""
@@ -111,10 +116,11 @@ def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
     top = (-1, 0)  # the largest vertex number a face uses, and its block's first line
     top_t = -1  # the largest texture coordinate number a face uses
     bare = False  # a corner names no texture coordinate, or a vt line is not a u and a v
-    seen_vn = False
+    seen_vn = seen_colour = False
     try:
         for block in blocks(path):
             seen_vn = seen_vn or block.startswith(b"vn ") or b"\nvn " in block
+            seen_colour = seen_colour or _COLOURED.search(block) is not None
             if line0 == 0 and is_binary(block[:1024]):
                 raise Refusal("it holds binary data, not OBJ text: the file is damaged or not an OBJ file")
             coords, k, tris, err, at, uv_words, kt, tuv, short = scan.obj(np.frombuffer(block, np.uint8), nv, nvt)
@@ -147,7 +153,8 @@ def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
     if raw.rows == 0:
         raise Refusal("the OBJ file has no faces (no 'f' lines)")
     src = _finish_weld(welder, scratch, "obj", raw, nv)
-    src.dropped = tuple(k for k, seen in ((UV_NAME, nvt > 0), ("normals (vn)", seen_vn)) if seen)
+    src.dropped = tuple(k for k, seen in ((UV_NAME, nvt > 0), ("normals (vn)", seen_vn),
+                                          ("vertex colours (v x y z r g b)", seen_colour)) if seen)
     src.uv_in_file = nvt > 0
     bare = bare or top_t >= nvt  # a corner names a texture coordinate the file does not have
     if nvt and not bare:

@@ -258,6 +258,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         if len(seams):
             feature_edges = seams if feature_edges is None else np.concatenate([feature_edges, seams])
         report.update(seams_in=_wedges.seam_count(seams), seam_edges_in=len(seams))
+    elif attrs is not None:
+        report.update(seams_in=0, seam_edges_in=0)
     m = len(geo.F)
     target, err = _resolve_target(m, target_faces, ratio, max_error, bounded)
     if target > m:
