@@ -30,8 +30,10 @@ class Schedule:
     max_passes: selection passes per round; pass_yield: stop a round's passes once one accepts under this
         fraction of what the round took.
 
-    ``Schedule(gate=1.0, gate_fraction=1e-12, free_cost=0.0)`` takes one pair per round: the parallel
-    scheduler then reproduces the greedy queue contraction for contraction.
+    ``Schedule(gate=1.0, gate_fraction=1e-12, free_cost=0.0)`` takes one pair per round, or the pairs tied
+    with it at the cheapest cost: with a method the greedy queue runs alike (no shape term: the greedy queue
+    has none, see docs/methods.md) and no ties, the parallel scheduler then reproduces the greedy queue
+    contraction for contraction.
     """
 
     gate: float = 1.2
