@@ -201,6 +201,28 @@ def test_a_small_part_holding_a_lock_is_not_pruned(scheduler):
     assert np.array_equal(res.vertices[_row_of(res, i)], V[i])
 
 
+@pytest.mark.parametrize("scheduler", SCHEDULERS)
+@pytest.mark.parametrize("topology", [{"preserve_topology": False}, {"pair_threshold": 0.5}])
+def test_a_small_closed_part_holding_a_lock_keeps_it_in_non_manifold_mode(scheduler, topology):
+    """In non-manifold mode a contraction drops the faces it makes coincide: a small closed part folding
+    away took its locked vertex with it (its last faces dropped, not counted as the pair's). Each vertex of
+    the small part locked in turn, at three targets: it stays, where it was."""
+    big, small = shapes.bumpy_sphere(3), shapes.icosphere(1, radius=0.05)
+    V = np.vstack([np.asarray(big.vertices), np.asarray(small.vertices) + [1.5, 0.0, 0.0]])
+    F = np.vstack([np.asarray(big.faces), np.asarray(small.faces) + len(big.vertices)])
+    topo = qemjax.Topology(**topology)
+    lost = 0
+    for i in range(len(big.vertices), len(V), 3):
+        for target in (20, 60):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = qemjax.simplify((V, F), target_faces=target, scheduler=scheduler, topology=topo,
+                                      locked=[i])
+            assert len(res.faces) == target
+            lost += not (res.vertices == V[i]).all(1).any()
+    assert lost == 0
+
+
 def test_simplify_batch_takes_locks_as_simplify():
     V, F = _mesh()
     lk = _locked(len(V))

@@ -255,6 +255,12 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
     G, owner: the touched faces after contraction and their pairs, from `FaceLists.touched` (every face
     that could coincide touches the pair, because pairs are two edges apart).
     """
+    return np.bincount(owner[coincident_rows(G)], minlength=S)
+
+
+def coincident_rows(G: np.ndarray) -> np.ndarray:
+    """The rows of G (faces after a round's contractions, `coincidence_count`) that would be dropped as
+    coincident (`coincident_removals`), ascending; empty in the common case."""
     # a symmetric hash, the same for any order of the corners: each corner mixed, the three summed modulo
     # 2**64 (so any order of summing gives the same bits); all corners in each array pass, in place
     g = G.astype(np.uint64)
@@ -267,9 +273,8 @@ def coincidence_count(G: np.ndarray, owner: np.ndarray, S: int) -> np.ndarray:
 
     idx = repeated(h)  # the faces whose hash another face has too
     if idx.size == 0:  # the common case: no candidates at all
-        return np.zeros(S, np.int64)
-    rm = coincident_removals(G.take(idx, axis=0))
-    return np.bincount(owner[idx[rm]], minlength=S)
+        return idx.astype(np.int64)
+    return idx[coincident_removals(G.take(idx, axis=0))]
 
 
 def _labelled_rows(label: np.ndarray, E: np.ndarray, rows: np.ndarray | None = None):

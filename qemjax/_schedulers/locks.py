@@ -110,6 +110,13 @@ def vanishing(locks: RunLocks, P: np.ndarray, kept_faces: np.ndarray) -> np.ndar
     return (kept_faces == 0) & (np.take(locks.locked, P[:, 0]) | np.take(locks.locked, P[:, 1]))
 
 
+def drops(locks: RunLocks, G: np.ndarray, owner: np.ndarray, dropped: np.ndarray, K: int) -> np.ndarray:
+    """(K,) bool: pairs that would drop a face with a locked corner as coincident (rows ``dropped`` of the
+    faces after, G, whose pairs are ``owner``): `rules.drops_locked` for a round's pairs at once."""
+    at = dropped[np.take(locks.locked, np.take(G, dropped, axis=0)).any(1)] if len(dropped) else dropped
+    return np.bincount(np.take(owner, at), minlength=K) > 0
+
+
 def strands(locks: RunLocks, faces, P: np.ndarray, dead) -> np.ndarray:
     """(K,) bool: pairs P whose dying faces (``dead``: (faces, owner pair), `FaceLists.touched_with_dead`)
     are all the faces a locked third vertex has (an "ear" vertex of a boundary: it would leave the mesh)."""

@@ -20,8 +20,9 @@ when it would break one of them:
   remove the last faces of a connected part.
 * **seam rule** (`seam_allows`): with kept attributes, a pair at a seam vertex contracts only onto an
   endpoint whose wedges it keeps (or freely where both sides have one wedge): the seam stays sharp.
-* **lock rule** (`locked_endpoint_bare`, `stranded_by_step`, `stranded_by_pass`): a locked vertex never
-  leaves the mesh, neither as an endpoint with no face staying nor as a third corner whose faces all die.
+* **lock rule** (`locked_endpoint_bare`, `stranded_by_step`, `stranded_by_pass`, `drops_locked`): a locked
+  vertex never leaves the mesh, neither as an endpoint with no face staying nor as a third corner whose
+  faces all die; in non-manifold mode no face at a locked vertex is dropped as coincident.
 
 Other execution forms of the same rules, where a run needs them: the device kernel of the flip test
 (`_kernels.flips`, JAX) and the vectorised link condition and coincident-face rule of the parallel round's
@@ -300,6 +301,18 @@ def stranded_by_step(a, b, nd, locked, T, fl, D):
                             k += 1
                 if k >= fl[c]:
                     return True
+    return False
+
+
+@njit(cache=True)  # not inlined: the one-at-a-time loop calls it from Python too (`_ahead` lists it)
+def drops_locked(R, nr, T, locked):
+    """The lock rule in non-manifold mode: a face the contraction drops as coincident (R[:nr]) has a locked
+    corner. Those drops can take a locked vertex's last faces (a small part folding away with it), which
+    the counts before them do not see; such a contraction is refused."""
+    for i in range(nr):
+        f = R[i]
+        if locked[T[f, 0]] or locked[T[f, 1]] or locked[T[f, 2]]:
+            return True
     return False
 
 

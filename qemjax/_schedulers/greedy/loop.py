@@ -152,6 +152,9 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
         if len(drop) and (manifold or faces.count - nshared - len(drop) < target_faces):
             block((a, b), outcome.COINCIDENT if manifold else BUDGET)
             continue
+        if len(drop) and locks is not None and rules.drops_locked(drop, len(drop), faces.F, locks.locked):
+            block((a, b), outcome.LOCKED)
+            continue
         if wedges is not None:  # the corners' wedges, before the vertex moves and the faces relink
             wedges.contract(faces, VQ, a, b, x)
         # the merge runs on the device while the host relinks the faces and pairs (which read no state

@@ -33,7 +33,7 @@ from numba.typed import Dict
 
 from . import wedges as gw
 from ..outcome import LOCKED, SEAM
-from ..rules import has
+from ..rules import drops_locked, has
 from .checks import Step, rules_head, rules_tail
 
 CONTRACT, BLOCK, STOP = 0, 1, 2
@@ -312,6 +312,8 @@ def speculate(settings, locked, seams, faces, partners, VQ, N0, cnt, queue, batc
         if code < 0:
             code = rules_tail(a, b, X[s], ctr[C_FACES], settings, faces, VQ, N0, Step(info, A, B, D, R, buf),
                               common)
+        if code < 0 and info[3] and settings.has_locks and drops_locked(R, info[3], T, locked):
+            code = LOCKED
         if code >= 0:
             _journal(J, ctr, J_BLOCKED, p, -1, 0)
             blocked[p] = code

@@ -52,7 +52,8 @@ class StagedRound(Round):
         (fids, before, corner, owner, G), kept, dead = run.faces.touched_with_dead(P)
         flipped = start_flips(run.VQd, run.N0d, before, fids, corner, owner, _take(st.x, idx), len(P),
                               run.cos_max, run.min_quality)  # runs while the host tests the rest
-        gone = topo.coincidence_count(G, owner, len(P))
+        dropped = topo.coincident_rows(G)  # the faces each pair would drop as coincident (non-manifold mode)
+        gone = np.bincount(owner[dropped], minlength=len(P))
         why = np.zeros(len(P), np.int8)
         apex = None
         if run.manifold:  # link condition, no coincident faces
@@ -63,7 +64,7 @@ class StagedRound(Round):
             why[~linked] = outcome.TOPOLOGY
         if run.locks is not None:  # a locked vertex never leaves the mesh (its part's or its own last faces)
             gone_locked = _locks.vanishing(run.locks, P, np.bincount(owner, minlength=len(P))) | \
-                _locks.strands(run.locks, run.faces, P, dead)
+                _locks.strands(run.locks, run.faces, P, dead) | _locks.drops(run.locks, G, owner, dropped, len(P))
             why[(why == 0) & gone_locked] = outcome.LOCKED
         if run.wedges is not None:  # the seam rule, for the pairs still valid
             why[run.wedges.refused(run.faces, run.VQ, P, _take(st.x, idx), why == 0)] = outcome.SEAM
