@@ -152,21 +152,48 @@ def split_edges(V: np.ndarray, F: np.ndarray, factor: float, budget: int | None 
     return Split(V, F, parent, edge, length, passes)
 
 
-def added_faces(V: np.ndarray, F: np.ndarray, factor: float) -> int:
-    """How many faces splitting (V, F) without a budget would add: the planning count of the budget."""
-    return len(split_edges(V, F, factor).F) - len(F)
+def added_faces(V: np.ndarray, F: np.ndarray, factor: float, fixed: np.ndarray | None = None) -> int:
+    """How many faces splitting (V, F) without a budget would add (``fixed``: the locked vertices, whose
+    edges between two of them are not split): the planning count of the budget."""
+    return len(split_edges(V, F, factor, fixed=fixed).F) - len(F)
 
 
-def plan(run, args, target: int, model, options, factor: float, progress=None) -> tuple[int, int]:
+def plan(run, args, target: int, model, options, factor: float, progress=None,
+         fixed: np.ndarray | None = None):
     """The face target to simplify to so that splitting can bring the count back to ``target``: runs the
     scheduler ``run`` once to ``target`` on ``args`` = (V, S, F, extra pairs) (``progress``: its progress
-    callback) and subtracts the faces splitting that result would add, but keeps at least
-    (1 − MAX_SPLIT_SHARE) × target faces. Returns (the face target, the faces splitting the first result
-    would add)."""
+    callback) and subtracts the faces splitting that result would add (``fixed``: the locked vertices in
+    the run's numbering), but keeps at least (1 − MAX_SPLIT_SHARE) × target faces. Returns (the face
+    target, the faces splitting the first result would add, the first result: `fills` may fall back to it)."""
     V, S, F, extra = args
     out = run(V, S, F, extra, max(target, 1), model, options, progress)
-    s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor)
-    return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s
+    s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor, fixed)
+    return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s, out
+
+
+def fills(out, target: int, factor: float, fixed: np.ndarray | None = None) -> bool:
+    """Whether splitting the run's result ``out`` (simplified to the planned face target, `plan`) can bring
+    it back up to ``target``: always where the run reached its own target (the plan left room), else (it
+    stopped above it, blocked: by locks, say) only when its splittable edges add enough faces. Where they
+    do not, a run falls back to `plan`'s first result, at the target, unsplit."""
+    if out.stop_reason == "target":
+        return True
+    F = out.faces[out.alive]
+    if len(F) >= target:
+        return True
+    V = np.asarray(out.positions, np.float64)
+    return len(split_edges(V, F, factor, _budget(F, len(V), target), fixed=fixed).F) >= target
+
+
+def _budget(F: np.ndarray, n: int, target: int) -> int:
+    """The faces splitting (F, n vertices) may add to reach ``target``: on a closed mesh faces come in
+    pairs, so an odd count is rounded up (one above the target, like contraction's parity)."""
+    budget = max(target - len(F), 0)
+    if budget % 2:
+        E, he_edge = _edges(np.asarray(F, np.int64), n)[:2]
+        if not np.any(np.bincount(he_edge, minlength=len(E)) == 1):
+            budget += 1
+    return budget
 
 
 def apply(V, F, ids, fids, verr, factor: float, target: int, fixed: np.ndarray | None = None):
@@ -175,14 +202,7 @@ def apply(V, F, ids, fids, verr, factor: float, target: int, fixed: np.ndarray |
     fids (j,) source faces (a half keeps its face's), verr (k,) vertex errors (a midpoint takes the larger
     of its endpoints'). ``target``: the face target (0: none, split every long edge); ``fixed`` (k,) bool:
     the locked vertices (`split_edges`). Returns (V, F, ids, fids, verr, stats)."""
-    budget = None
-    if target:
-        budget = max(target - len(F), 0)
-        E, he_edge = _edges(np.asarray(F, np.int64), len(V))[:2]
-        closed = not np.any(np.bincount(he_edge, minlength=len(E)) == 1)
-        if budget % 2 and closed:  # faces come in pairs: one above the target, like contraction's parity
-            budget += 1
-    sp = split_edges(V, F, factor, budget, fixed=fixed)
+    sp = split_edges(V, F, factor, _budget(F, len(V), target) if target else None, fixed=fixed)
     ids, verr = list(ids), list(verr)
     for u, v in sp.edge.tolist():  # in creation order: an endpoint may be an earlier midpoint
         ids.append(ids[u])

@@ -378,13 +378,16 @@ def run(job: Job):
         run = functools.partial(scheduler, edges=g.edges[:2], part_scale=g.frame.part_scale2(), wedges=job.tracker,
                                 **_locks.scheduler_settings(job.locks))
         if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
-            run_target, planned = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
-                                              setup.split, progress_cb)
+            fixed = None if job.locks is None else job.locks.run().locked
+            run_target, planned, first = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
+                                                     setup.split, progress_cb, fixed)
             if bar is not None:  # the run itself goes past the target, by the faces splitting adds back
                 last = m
                 bar.reset(total=faces_to_remove(m, run_target, closed))
                 bar.set_description("simplify")
         out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
+        if planned is not None and not _split.fills(out, target, setup.split, fixed):
+            out, run_target = first, target  # blocked where splitting cannot refill: the run to the target
         if bar is not None and bar.n != bar.total and (out.stop_reason == "target" or (
                 out.stop_reason == "max_error" and not target)):
             # its goal reached (a face target, or the error bound alone, whose faces no count foresees):
@@ -487,7 +490,8 @@ def _appearance(job: Job, mesh: _Mesh) -> dict:
 
 def _split_faces(job: Job, out: outcome.Outcome, mesh: _Mesh, run_target: int, planned):
     """The output split (`_split.apply`): (the mesh, the outcome, the split's stats). Splitting that reached
-    the target the contractions could not makes the run's stop reason ``"target"``."""
+    the target the contractions could not makes the run's stop reason ``"target"``; short of it (edges
+    between locked vertices are not split), the run's own reason stays, and `_stop_reason` warns."""
     target = job.target
     fixed = mesh.fixed
     vout, Fout, ids, fids, verr, stats = _split.apply(mesh.vertices, mesh.faces, mesh.source_vertices,
@@ -496,7 +500,7 @@ def _split_faces(job: Job, out: outcome.Outcome, mesh: _Mesh, run_target: int, p
     if fixed is not None:  # the midpoints it adds are free
         fixed = np.concatenate([fixed, np.zeros(len(vout) - len(fixed), bool)])
     stats.update(planned=planned, run_target=run_target if target else None, run_stop_reason=out.stop_reason)
-    if target and len(Fout) <= target and out.stop_reason == "blocked":
+    if target and target <= len(Fout) <= target + 1 and out.stop_reason == "blocked":  # + 1: a closed mesh's parity
         out = dataclasses.replace(out, stop_reason="target")
     return _Mesh(vout, Fout, ids, fids, verr, fixed), out, stats
 
@@ -549,6 +553,10 @@ def _stop_reason(job: Job, out: outcome.Outcome, mesh: _Mesh, nonmanifold: int, 
     `Outcome.stop_above`'s, with a warning that says why (none for the parity case, whose reason is
     ``"target"``; ``stacklevel`` as this function's caller sees it)."""
     target, faces = job.target, len(mesh.faces)
+    if target and faces < target and job.setup.split is not None:  # the splits could not add faces back
+        warnings.warn(f"ESQEM's edge splits ended at {faces} faces, below the target of {target}: the "
+                      f"contractions stopped there ({out.stop_reason}), and the edges left join locked "
+                      "vertices, which are not split", stacklevel=stacklevel)
     if not (target and faces > target):
         return out.stop_reason
     closed = len(topo.boundary_edges(mesh.faces, len(mesh.vertices))[0]) == 0
