@@ -37,6 +37,7 @@ from ._pipeline import api as _api, flat as _flat
 from ._kernels import cache as _cache
 from . import _costs, _schedulers
 from ._pipeline.lod import RATIOS
+from ._io import ply as _io_ply
 
 # How the command line shows some options (choices, metavar, help beyond the docstrings, the default as
 # shown). Which options exist and their types come from `simplify`'s run keywords and from the fields of
@@ -413,7 +414,8 @@ def write(res, path: str, ext: str):
         stem = os.path.splitext(os.path.basename(path))[0]
         mesh.visual.material = mesh.visual.material.copy()  # the image is written as <stem>.png
         mesh.visual.material.name = stem
-        text, files = export_obj(mesh, include_texture=True, return_texture=True, mtl_name=f"{stem}.mtl")
+        text, files = export_obj(mesh, include_texture=True, return_texture=True, mtl_name=f"{stem}.mtl",
+                                 digits=_obj_digits(mesh.vertices))
         if res.material is None:  # trimesh writes vt lines only with a material: drop its mtl again
             text = "".join(line for line in text.splitlines(keepends=True)
                            if not line.startswith(("mtllib ", "usemtl ")))
@@ -432,7 +434,27 @@ def write(res, path: str, ext: str):
                 f.write(text)
         _atomic(path, save_obj)
         return
+    if ext in ("ply", "obj"):  # positions as precise as the result's (`_io.ply.with_double_positions`, `_obj_digits`)
+        data = mesh.export(file_type=ext, **({"digits": _obj_digits(mesh.vertices)} if ext == "obj" else {}))
+        if ext == "ply":
+            data = _io_ply.with_double_positions(data, mesh.vertices)
+
+        def save(tmp):
+            with open(tmp, "wb") as f:
+                f.write(data.encode() if isinstance(data, str) else data)
+        _atomic(path, save)
+        return
     _atomic(path, lambda tmp: mesh.export(tmp, file_type=ext))
+
+
+def _obj_digits(V) -> int:
+    """Decimals an OBJ's positions need so that rounding moves none by more than `_io.ply.WIDEN_AT` of the
+    diagonal: trimesh's 8, more for a small mesh (a model in metres of a part a micrometre wide)."""
+    V = np.asarray(V, np.float64)
+    diagonal = float(np.linalg.norm(V.max(0) - V.min(0))) if len(V) else 0.0
+    if not diagonal > 0:
+        return 8
+    return int(min(max(8, np.ceil(-np.log10(2 * _io_ply.WIDEN_AT * diagonal))), 17))
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

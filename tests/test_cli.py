@@ -729,3 +729,27 @@ def test_a_partitioned_run_tells_what_it_keeps_and_drops_as_it_is(tmp_path):
     alone = qemjax.simplify(str(tmp_path / "textured.obj"), ratio=0.3, attributes="uv")
     assert "1 seam (" in _cli.attributes_note(alone.stats)
     assert _cli.attributes_note(qemjax.simplify(qemjax.shapes.bumpy_sphere(2), ratio=0.5).stats) == ""
+
+
+@pytest.mark.parametrize("offset, radius", [((5e5, 5e6, 100.0), 10.0), ((0.0, 0.0, 0.0), 1e-6), ((0.0, 0.0, 0.0), 1.0)])
+def test_written_positions_are_as_precise_as_the_result(tmp_path, capsys, offset, radius):
+    """A PLY was written as float32 and an OBJ with 8 decimals whatever the mesh: a scan far from the origin
+    (georeferenced) or a mesh a micrometre wide came back moved by more than the simplification moved it.
+    Now no written position is farther than 1e-6 of the diagonal from the result's; an ordinary mesh is
+    written as before (float32 PLY)."""
+    import trimesh
+
+    m = trimesh.creation.icosphere(3, radius=radius)
+    V = np.asarray(m.vertices) + np.asarray(offset)
+    src = tmp_path / "in.ply"
+    trimesh.Trimesh(V, m.faces, process=False).export(src)  # float32: the input as written
+    V = np.asarray(qemjax.load(str(src)).vertices)
+    res = qemjax.simplify((V, np.asarray(m.faces)), ratio=0.1)
+    diagonal = float(np.linalg.norm(res.vertices.max(0) - res.vertices.min(0)))
+    for ext in ("ply", "obj"):
+        out = tmp_path / f"out.{ext}"
+        _cli.write(res, str(out), ext)
+        back = np.asarray(qemjax.load(str(out)).vertices)
+        assert np.abs(back - res.vertices).max() <= 1e-6 * diagonal
+    doubles = b"property double x" in (tmp_path / "out.ply").read_bytes()[:300]
+    assert doubles == (radius == 10.0)  # float32 kept where it holds the positions

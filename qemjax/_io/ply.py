@@ -220,3 +220,35 @@ def problem(h: Header, data: bytes) -> str | None:
                 return f"line {line_no} holds too few values for a {e.name} row: {quote(line)}"
         k += e.rows
     return None
+
+
+# a position written as float32 may move by up to half a float32 step of its coordinate: far from the origin
+# (a georeferenced scan) that exceeds what simplifying changed; past this share of the diagonal, doubles
+WIDEN_AT = 1e-6
+
+
+def with_double_positions(data: bytes, V: np.ndarray) -> bytes:
+    """Binary little-endian PLY bytes (trimesh's export: the vertex element first, scalar properties) with
+    its x, y, z written as doubles from ``V`` (n,3) float64, when writing them as float32 would move a vertex
+    by more than `WIDEN_AT` of the bounding-box diagonal; ``data`` itself otherwise."""
+    V = np.asarray(V, np.float64)
+    if not len(V):
+        return data
+    diagonal = float(np.linalg.norm(V.max(0) - V.min(0)))
+    if np.max(np.abs(V.astype(np.float32).astype(np.float64) - V)) <= WIDEN_AT * diagonal:
+        return data
+    h = parse_header(data)
+    vertex = h.elements[0]
+    if h.format != "binary_little_endian" or vertex.name != "vertex" or any(p.count for p in vertex.props):
+        return data  # not the layout trimesh writes: left as it is
+    old = np.dtype([(p.name, "<" + TYPES[p.type]) for p in vertex.props])
+    new = np.dtype([(p.name, "<f8" if p.name in ("x", "y", "z") else "<" + TYPES[p.type]) for p in vertex.props])
+    rows = np.frombuffer(data, old, vertex.rows, h.body)
+    out = np.empty(vertex.rows, new)
+    for name in old.names:
+        out[name] = rows[name]
+    out["x"], out["y"], out["z"] = V[:, 0], V[:, 1], V[:, 2]
+    head = data[:h.body].decode("ascii")
+    for axis in "xyz":
+        head = re.sub(rf"(?m)^property (float|float32) {axis}\s*$", f"property double {axis}", head)
+    return head.encode("ascii") + out.tobytes() + data[h.body + old.itemsize * vertex.rows:]
