@@ -424,27 +424,22 @@ def write(res, path: str, ext: str):
         for name, data in files.items():
             target = os.path.join(folder, os.path.basename(name))
 
-            def save(tmp, data=data):
-                with open(tmp, "wb") as f:
-                    f.write(data)
-            _atomic(target, save)
-
-        def save_obj(tmp):
-            with open(tmp, "w") as f:
-                f.write(text)
-        _atomic(path, save_obj)
+            _atomic(target, lambda tmp, data=data: _write_file(tmp, data))
+        _atomic(path, lambda tmp: _write_file(tmp, text))
         return
     if ext in ("ply", "obj"):  # positions as precise as the result's (`_io.ply.with_double_positions`, `_obj_digits`)
         data = mesh.export(file_type=ext, **({"digits": _obj_digits(mesh.vertices)} if ext == "obj" else {}))
         if ext == "ply":
             data = _io_ply.with_double_positions(data, mesh.vertices)
-
-        def save(tmp):
-            with open(tmp, "wb") as f:
-                f.write(data.encode() if isinstance(data, str) else data)
-        _atomic(path, save)
+        _atomic(path, lambda tmp: _write_file(tmp, data))
         return
     _atomic(path, lambda tmp: mesh.export(tmp, file_type=ext))
+
+
+def _write_file(path: str, data) -> None:
+    """Write ``data`` (bytes, or text as UTF-8) to ``path``."""
+    with open(path, "wb") as f:
+        f.write(data.encode() if isinstance(data, str) else data)
 
 
 def _obj_digits(V) -> int:
