@@ -182,7 +182,8 @@ def fills(out, target: int, factor: float, fixed: np.ndarray | None = None) -> b
     if len(F) >= target:
         return True
     V = np.asarray(out.positions, np.float64)
-    return len(split_edges(V, F, factor, _budget(F, len(V), target), fixed=fixed).F) >= target
+    # one short is the parity of splits, which add an interior edge's two faces at once
+    return len(split_edges(V, F, factor, _budget(F, len(V), target), fixed=fixed).F) >= target - 1
 
 
 def _budget(F: np.ndarray, n: int, target: int) -> int:

@@ -500,7 +500,7 @@ def _split_faces(job: Job, out: outcome.Outcome, mesh: _Mesh, run_target: int, p
     if fixed is not None:  # the midpoints it adds are free
         fixed = np.concatenate([fixed, np.zeros(len(vout) - len(fixed), bool)])
     stats.update(planned=planned, run_target=run_target if target else None, run_stop_reason=out.stop_reason)
-    if target and target <= len(Fout) <= target + 1 and out.stop_reason == "blocked":  # + 1: a closed mesh's parity
+    if target and abs(len(Fout) - target) <= 1 and out.stop_reason == "blocked":  # one off: the splits' parity
         out = dataclasses.replace(out, stop_reason="target")
     return _Mesh(vout, Fout, ids, fids, verr, fixed), out, stats
 
@@ -553,7 +553,7 @@ def _stop_reason(job: Job, out: outcome.Outcome, mesh: _Mesh, nonmanifold: int, 
     `Outcome.stop_above`'s, with a warning that says why (none for the parity case, whose reason is
     ``"target"``; ``stacklevel`` as this function's caller sees it)."""
     target, faces = job.target, len(mesh.faces)
-    if target and faces < target and job.setup.split is not None:  # the splits could not add faces back
+    if target and faces < target - 1 and job.setup.split is not None:  # the splits could not add faces back
         warnings.warn(f"ESQEM's edge splits ended at {faces} faces, below the target of {target}: the "
                       f"contractions stopped there ({out.stop_reason}), and the edges left join locked "
                       "vertices, which are not split", stacklevel=stacklevel)
