@@ -252,6 +252,21 @@ def test_resumed_run_reuses_the_parts_written(mesh, scratch, two_workers):
     assert again.stats["partition"]["reused"] == sum(first["groups_per_level"]) - 2
 
 
+def test_repeated_and_degenerate_faces_are_cleaned_as_in_core(tmp_path):
+    """A ratio counts the faces left after the clean-up, partitioned or not: repeated faces (one of them
+    flipped) and faces with a repeated vertex went into the partitioned run's count (twice the faces here)."""
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    extra = np.concatenate([F, F, F[:100, ::-1], F[:50, [0, 0, 1]]])
+    core = qemjax.simplify((V, extra), ratio=0.1)
+    for part_faces in (100_000, 1500):
+        r = qemjax.simplify((V, extra), ratio=0.1, partition=Partition(workers=1, part_faces=part_faces))
+        assert len(r.faces) == len(core.faces) == round(0.1 * len(F)) and r.stats["faces_in"] == len(F)
+        assert r.stats["duplicate_removed"] == core.stats["duplicate_removed"] == len(F) + 100
+        assert r.stats["degenerate_removed"] == core.stats["degenerate_removed"] == 50
+        assert closed_and_consistent(r.faces)
+
+
 def test_a_scratch_folder_with_a_users_files_is_refused_and_left_as_it_was(tmp_path):
     """A scratch folder is the run's: one that holds other files (a folder named like a level, a file named
     like the run's own input) is refused before anything in it is touched; the run's own folder is reused

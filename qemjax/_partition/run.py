@@ -389,6 +389,8 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                 format=manifest.get("format"), welded=manifest.get("welded"),
                 carried=all(s.get("carried", False) for s in all_stats), uv=UV is not None)
     stats = dict(faces_in=n_faces, faces_out=int(len(F)), vertices_in=int(manifest["n_vertices"]),
+                 degenerate_removed=int(manifest.get("degenerate_removed", 0)),
+                 duplicate_removed=int(manifest.get("duplicate_removed", 0)),
                  vertices_out=int(len(V)), target_faces=target, max_error_limit=None, rounds=0,
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
                  total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part,

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from .._io.mesh import clean_faces
 from .cells import Bins, Plan, codes, quantize
 from .readers import open_source, texture_of
 from .source import CORNER_UV, FACES, UV, VERTICES, Ragged, Source, remove
@@ -130,6 +131,14 @@ def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path,
         if len(raw) > np.iinfo(at.dtype).max:  # a part of more than 2^31 corners
             at = at.astype(np.int64)
         used, inverse = _distinct(raw, at)
+        # the in-core clean-up's face rules (`_io.mesh.clean_faces`): a face with a repeated vertex, and a
+        # face on the same three vertices as an earlier one of its part (a repeat lies at the same place, so
+        # in the same part), go; the counts, and the ratio's faces, are then an in-core run's
+        F, degenerate, duplicate, rows = clean_faces(inverse.reshape(-1, 3), np.arange(len(raw) // 3))
+        if degenerate or duplicate:  # a vertex only they used goes too
+            ref = np.zeros(len(used), bool)
+            ref[F.reshape(-1)] = True
+            used, F = used[ref], (np.cumsum(ref) - 1)[F]
         gid = (used if new_id is None else new_id[used]).astype(np.int64)
         border = owner[used] == SHARED
         V = src.gather(used)
@@ -139,13 +148,13 @@ def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path,
         file = f"part_{p:05d}.npz"
         extra = {}
         if uv:
-            extra["UV"] = np.fromfile(tmp / f"{p}.uv", np.float64).reshape(-1, 3, 2)
+            extra["UV"] = np.fromfile(tmp / f"{p}.uv", np.float64).reshape(-1, 3, 2)[rows]
             remove(tmp / f"{p}.uv")
             if not np.isfinite(extra["UV"]).all():
                 raise ValueError(f"{name}: a texture coordinate is not a finite number")
-        write_npz(level / file, gid=gid, V=V, F=inverse.reshape(-1, 3).astype(np.int32), border=border, **extra)
-        parts.append({"file": f"level0/{file}", "faces": len(raw) // 3, "vertices": len(used),
-                      "border": int(border.sum())})
+        write_npz(level / file, gid=gid, V=V, F=F.astype(np.int32), border=border, **extra)
+        parts.append({"file": f"level0/{file}", "faces": len(F), "vertices": len(used),
+                      "border": int(border.sum()), "degenerate_removed": degenerate, "duplicate_removed": duplicate})
     return parts
 
 
@@ -183,8 +192,10 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     ``scratch/level0/part_NNNNN.npz`` (arrays ``gid``: sorted global vertex ids, ``V``: their float64
     positions, ``F``: int32 triangles over them in input order, ``border``: whether another part also
     uses the vertex), and returns the manifest (also written to ``scratch/manifest.json``): format,
-    n_vertices, n_faces, bbox, welded, parts (file, faces, vertices, border for each), dropped (what the file
-    holds besides positions and triangles, which the parts do not carry).
+    n_vertices, n_faces (after the clean-up: faces with a repeated vertex, and repeats of a face within its
+    part, removed; their numbers as degenerate_removed and duplicate_removed), bbox, welded, parts (file,
+    faces, vertices, border and those two numbers for each), dropped (what the file holds besides positions
+    and triangles, which the parts do not carry).
 
     With ``uv`` True (asked for by name) or "auto" when the file names a texture image (as `simplify`'s
     ``attributes="auto"`` keeps UVs with seams), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
@@ -217,7 +228,9 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
             lo, hi = _bounds(src, step, kept)
         del kept
         parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name, uv)
-        manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": src.n_faces,
+        manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": sum(p["faces"] for p in parts),
+                    "degenerate_removed": sum(p["degenerate_removed"] for p in parts),
+                    "duplicate_removed": sum(p["duplicate_removed"] for p in parts),
                     "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts,
                     "dropped": list(src.dropped_with_uv if uv else src.dropped), "uv": uv,
                     "uv_in_file": bool(src.uv_in_file),
