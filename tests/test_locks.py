@@ -281,9 +281,10 @@ def test_area_price_at_kept_matches_numpy_in_float64():
 
 
 def test_attributes_kept_with_locks(tmp_path):
-    """The attribute model prices a locked pair on the host (`cost_at`); indices are the file's vertices."""
+    """The attribute model prices a locked pair on the host (`cost_at`); indices are the file's vertices
+    (its ``v`` lines)."""
     path = [p for p in shapes.write_examples(tmp_path, subdivisions=2) if p.name == "textured.obj"][0]
-    V = np.asarray(qemjax.load(str(path)).vertices)
+    V = qemjax._io.text.obj_vertices(path.read_bytes())
     lk = np.arange(0, len(V), 23)
     for scheduler in SCHEDULERS:
         res = qemjax.simplify(str(path), ratio=0.3, attributes="uv", locked=lk, scheduler=scheduler)
@@ -300,13 +301,14 @@ def test_locked_vertices_keep_their_uvs(tmp_path, scheduler):
     path = [p for p in shapes.write_examples(tmp_path, subdivisions=3) if p.name == "textured.obj"][0]
     m = tm.load(str(path), process=False)
     V, UV = np.asarray(m.vertices), np.asarray(m.visual.uv)
-    lk = np.arange(0, len(V), 7)
+    P = qemjax._io.text.obj_vertices(path.read_bytes())  # the file's vertices, which the locks count
+    lk = np.arange(0, len(P), 7)
     res = qemjax.simplify(str(path), ratio=0.3, attributes="uv", locked=lk, scheduler=scheduler)
     assert res.stop_reason == "target"
     uvs = {}  # the UVs at each position (a vertex on a seam is split in the file: one copy per UV)
     for p, u in zip(map(tuple, V), map(tuple, UV)):
         uvs.setdefault(p, set()).add(u)
-    held = {tuple(V[i]): uvs[tuple(V[i])] for i in lk}
+    held = {tuple(P[i]): uvs[tuple(P[i])] for i in lk}
     out = {}
     for p, u in zip(map(tuple, res.vertices[res.wedge_vertex]), map(tuple, res.uv)):
         out.setdefault(p, set()).add(u)
@@ -402,3 +404,35 @@ def test_the_pipeline_reaches_the_locks_through_one_module():
             elif isinstance(node, ast.ImportFrom) and node.module and "_schedulers" in node.module:
                 assert "locks" not in [a.name for a in node.names], path.name
     assert users == {"locks.py"}
+
+
+def test_an_obj_files_vertices_are_numbered_as_its_v_lines(tmp_path):
+    """Locks and weights given for an OBJ file count its ``v`` lines, as the command's help says: the reader
+    renumbers them (an unused vertex dropped, the vertices of a UV seam split), and the indices fell on other
+    vertices (a mask of the file's length was refused)."""
+    qemjax.shapes.write_examples(tmp_path, subdivisions=3)
+    text = (tmp_path / "textured.obj").read_text()
+    shifted = "".join(_shift_face(line) for line in text.splitlines(keepends=True))
+    (tmp_path / "shifted.obj").write_text("v 9 9 9\n" + shifted)  # an unused vertex first
+    for name in ("textured.obj", "shifted.obj"):
+        path = str(tmp_path / name)
+        P = qemjax._io.text.obj_vertices((tmp_path / name).read_bytes())
+        idx = np.arange(1 if name == "shifted.obj" else 0, len(P), 7)
+        mask = np.zeros(len(P), bool)
+        mask[idx] = True
+        for locked in (idx, mask):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = qemjax.simplify(path, ratio=0.2, locked=locked)
+            assert all((res.vertices == P[i]).all(1).any() for i in idx)
+        w = np.ones(len(P))
+        w[idx] = 1e6
+        assert qemjax.simplify(path, ratio=0.2, vertex_weights=w).stats["vertex_weights"]
+
+
+def _shift_face(line: str) -> str:
+    """An OBJ line with its vertex numbers one higher (a ``v`` line put first), UV numbers as they were."""
+    if not line.startswith("f "):
+        return line
+    corners = [c.split("/") for c in line.split()[1:]]
+    return "f " + " ".join("/".join([str(int(c[0]) + 1), *c[1:]]) for c in corners) + "\n"

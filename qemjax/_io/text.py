@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
+
 
 def decode(data: bytes) -> tuple[bytes, bool]:
     """(UTF-8 bytes, whether they differ from ``data``): ``data`` itself when it is ASCII or UTF-8,
@@ -55,6 +57,16 @@ def plain_obj(data: bytes) -> tuple[bytes, bool]:
                     for k, p in zip(kinds, parts)))
             lines[no] = b"f " + b" ".join(corners)
     return b"\n".join(lines), True
+
+
+_VERTEX_LINE = re.compile(rb"(?m)^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)")
+
+
+def obj_vertices(data: bytes) -> np.ndarray:
+    """(k,3) float64: the positions of an OBJ text's ``v`` lines, in file order (the numbering its faces,
+    and a user's vertex indices, use; a reader may drop unused ones and split others at UV seams)."""
+    rows = _VERTEX_LINE.findall(data)
+    return np.array(rows, dtype=np.float64).reshape(-1, 3) if rows else np.zeros((0, 3))
 
 
 def quote(line: str) -> str:

@@ -96,8 +96,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         query over one and a half times the input's faces in points; ``experiments/figures/distance_check.py``
         times it).
     locked, vertex_weights (given by name, with the settings): per-vertex constraints, numbered as the
-        vertices were given (before welding; `qemjax._pipeline.locks`; docs/methods.md, "Locking vertices and
-        weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
+        vertices were given (before welding; a file's as the file has them, an OBJ's by its ``v`` lines:
+        `qemjax._pipeline.locks`; docs/methods.md, "Locking vertices and weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
         output, and at every level of ``res.record``, exactly where they are (bit for bit); a pair with
         one locked vertex contracts onto it, a pair of two never (nor do ESQEM's splits cut their edge).
         ``vertex_weights``: (n,) finite, >= 0; each pair's cost is multiplied by the larger weight of its

@@ -133,13 +133,36 @@ def check(locked, vertex_weights, n: int) -> tuple:
     return idx, w
 
 
+def given_map(geo) -> np.ndarray:
+    """Each given vertex's index in the cleaned mesh (-1: dropped), the vertices numbered as the user gave
+    them: a mesh's as passed; an OBJ file's as its ``v`` lines (trimesh reads an OBJ's vertices in another
+    order: unused ones dropped, those at a UV seam split), matched to the cleaned vertices by position (with
+    ``weld=False``, the first of the copies at a position)."""
+    vmap = geo.vertex_map
+    if geo.source is None or not str(geo.source).lower().endswith(".obj"):
+        return vmap
+    from .._io.text import obj_vertices
+
+    with open(geo.source, "rb") as f:
+        P = obj_vertices(f.read()) + 0.0  # + 0.0: -0.0 as 0.0, as below
+    V = geo.V + 0.0
+    if len(P) == len(vmap) and np.all(vmap >= 0) and np.array_equal(V[vmap], P):
+        return vmap  # read in the file's numbering
+    key = lambda X: np.ascontiguousarray(X).view(np.dtype((np.void, 24))).ravel()  # noqa: E731
+    kv, kp = key(V), key(P)
+    order = np.argsort(kv, kind="stable")
+    at = np.clip(np.searchsorted(kv[order], kp), 0, max(len(kv) - 1, 0))
+    hit = kv[order][at] == kp if len(kv) else np.zeros(len(kp), bool)
+    return np.where(hit, order[at], -1)
+
+
 def resolve(locked, vertex_weights, geo, stacklevel: int) -> Locks | None:
     """The run's `Locks` on the cleaned `Geometry` ``geo`` (its ``vertex_map`` maps the given vertices),
     or None when nothing is locked and no weight differs from 1 (the run is then the run without them).
     Warns when locked vertices are in no face (they cannot be kept)."""
     if locked is None and vertex_weights is None:
         return None
-    vmap = geo.vertex_map
+    vmap = given_map(geo)
     n_user, n = len(vmap), len(geo.V)
     idx, w = check(locked, vertex_weights, n_user)
     clean = vmap[idx]

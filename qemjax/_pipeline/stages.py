@@ -17,6 +17,7 @@ import dataclasses
 import functools
 import math
 import numbers
+import os
 import time
 import warnings
 from typing import Any, NamedTuple
@@ -160,6 +161,7 @@ class Geometry(NamedTuple):
     nonmanifold: int
     attrs: Any = None
     vertex_map: Any = None  # (given vertices,) int64: each given vertex's index here (-1: dropped)
+    source: Any = None  # the file read (a path), or None: `_locks.given_map` numbers an OBJ's vertices as it does
 
 
 class Job(NamedTuple):
@@ -213,7 +215,7 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
         E, ecount = E.astype(np.int32), ecount.astype(np.int32)
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
     return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs,
-                    vertex_map)
+                    vertex_map, os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else None)
 
 
 def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
