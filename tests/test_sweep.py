@@ -584,3 +584,21 @@ def test_a_method_registered_here_runs_on_the_helpers(meshes, monkeypatch):
         pool.HELPERS.shutdown()
     assert (df["error"] == "").all()
     assert df["result_sha256"].iloc[1] == own_hash(qemjax.simplify(meshes["sheet"], method=ShippedQEM(), ratio=0.25))
+
+
+def test_config_and_out_mistakes_are_named(tmp_path):
+    """A YAML key that is not text, a shape that makes no mesh: one line naming it; an empty file as out:
+    a table with no rows yet."""
+    from qemjax._sweep import config as _sweep_config
+
+    pytest.importorskip("yaml")
+    cfg = tmp_path / "k.yaml"
+    cfg.write_text('meshes: ["shapes.torus"]\ntargets: [0.5]\ngrid: {3: [1]}\n')
+    with pytest.raises(ValueError, match="k.yaml: 3 is not a key a sweep config has"):
+        _sweep_config.load(cfg)
+    with pytest.raises(ValueError, match=re.escape("shapes.torus(n_major=-3): empty mesh")):
+        qemjax.sweep(["shapes.torus(n_major=-3)"], {}, [0.5], metrics=False, progress=False, workers=1)
+    out = tmp_path / "empty.csv"
+    out.write_text("")
+    df = qemjax.sweep(shapes.icosphere(1), {}, [0.5], metrics=False, progress=False, workers=1, out=out)
+    assert len(df) == 1 and len(sw.read_table(out)) == 1

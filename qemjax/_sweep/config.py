@@ -63,8 +63,22 @@ def read(path) -> dict:
             raise ValueError(f"{path.name}: not valid YAML: {' '.join(str(exc).split())}") from None
         if not isinstance(raw, dict):
             raise ValueError(f"{path.name}: the file must be a mapping of {', '.join(KEYS)}")
+        bad = _non_text_key(raw)
+        if bad is not None:
+            raise ValueError(f"{path.name}: {bad!r} is not a key a sweep config has: keys are names (text)")
         return raw
     raise ValueError(f"{path.name}: a config must be .toml, .yaml or .yml, got {ext or 'no extension'!r}")
+
+
+def _non_text_key(table: dict):
+    """The first key of ``table`` or of a table in it (``grid``, ``meshes``, ...) that is not text (YAML
+    reads ``3:`` as a number), or None."""
+    for k, v in table.items():
+        if not isinstance(k, str):
+            return k
+        if isinstance(v, dict) and (inner := _non_text_key(v)) is not None:
+            return inner
+    return None
 
 
 def load(path, out: str | None = None) -> SweepConfig:
@@ -276,7 +290,12 @@ def executor(settings: dict):
     elif "address" in settings:
         from distributed import Client
 
-        with Client(settings["address"]) as client:
+        try:
+            client = Client(settings["address"], timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise ValueError(f"executor.address: could not reach a Dask scheduler at {settings['address']} "
+                             f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
+        with client:
             yield client
     else:
         from distributed import Client, LocalCluster

@@ -140,7 +140,10 @@ def load_mesh(value):
     stored normals) as a trimesh of them (`_io.portable`); else its arrays (`_io.as_arrays`)."""
     spec = _shape(value)
     if spec is not None:
-        return _io.as_arrays(spec.build())
+        try:
+            return _io.as_arrays(spec.build())
+        except ValueError as exc:  # a shape that makes no mesh: which one
+            raise ValueError(f"{value}: {exc}") from None
     mesh, _, tm = _io._as_arrays(value, keep_trimesh=True)
     kept = _io.portable(tm, *mesh) if tm is not None else None
     return mesh if kept is None else kept

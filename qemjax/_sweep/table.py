@@ -117,7 +117,7 @@ def read_table(out):
     "n/a" columns' other values as numbers; an empty DataFrame when it does not exist."""
     import pandas as pd
 
-    if not Path(out).exists():
+    if not Path(out).exists() or Path(out).stat().st_size == 0:  # an empty file holds no rows yet
         return pd.DataFrame()
     if _format(out) == "csv":
         df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str})
@@ -132,7 +132,7 @@ def read_text(out) -> tuple[list[str], dict[str, dict]]:
     """A CSV table's header and each row's fields as the text in the file, by ``cell`` (empty when absent)."""
     import pandas as pd
 
-    if not Path(out).exists() or _format(out) != "csv":
+    if not Path(out).exists() or _format(out) != "csv" or Path(out).stat().st_size == 0:
         return [], {}
     df = pd.read_csv(out, dtype=str, keep_default_na=False)
     if "cell" not in df:
