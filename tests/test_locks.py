@@ -137,7 +137,7 @@ def test_bad_input_is_a_one_line_value_error():
         (dict(locked=[0.5, 2.0]), "integer"),
         (dict(locked=np.zeros((2, 2), np.int64)), "one-dimensional"),
         (dict(vertex_weights=np.ones(n - 2)), "one weight per input vertex"),
-        (dict(vertex_weights=-np.ones(n)), "finite and >= 0"),
+        (dict(vertex_weights=-np.ones(n)), "finite and >= 0; vertex 0 has -1.0 "),  # a number, not numpy's repr
         (dict(vertex_weights=np.full(n, np.nan)), "finite and >= 0"),
         (dict(vertex_weights=np.full(n, np.inf)), "finite and >= 0"),
         (dict(vertex_weights=["a"] * n), "numbers"),

@@ -210,6 +210,9 @@ def test_npz_round_trip_is_exact(tmp_path):
     np.savez(tmp_path / "c.npz", x=np.zeros(2))
     with pytest.raises(ValueError, match="not a qemjax record"):
         qemjax.load_record(tmp_path / "c.npz")
+    (tmp_path / "d.npz").write_text("a text file")  # numpy's words: "pickled (object) data"
+    with pytest.raises(ValueError, match="not a qemjax record .*: not an .npz archive"):
+        qemjax.load_record(tmp_path / "d.npz")
 
 
 def test_esqem_split_replays_the_contraction_phase_only():

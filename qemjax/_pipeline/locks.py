@@ -128,7 +128,7 @@ def check(locked, vertex_weights, n: int) -> tuple:
         bad = ~(np.isfinite(w) & (w >= 0))
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"vertex_weights must be finite and >= 0; vertex {i} has {w[i]!r} "
+            raise ValueError(f"vertex_weights must be finite and >= 0; vertex {i} has {float(w[i])!r} "
                              f"({int(bad.sum())} such)")
     return idx, w
 

@@ -225,6 +225,8 @@ class Record:
 
 def load_record(path) -> Record:
     """Read a record that `Record.save` (or ``res.record.save``) wrote."""
+    if not zipfile.is_zipfile(path):  # numpy would take it for a pickle and ask for allow_pickle
+        raise ValueError(f"{path} is not a qemjax record ({FORMAT}): not an .npz archive")
     with np.load(path, allow_pickle=False) as z:
         a = {k: z[k] for k in z.files}
     if str(a.get("format", "")) != FORMAT:
