@@ -94,13 +94,37 @@ def _choose(rank: np.ndarray, he_edge: np.ndarray, he_face: np.ndarray, m: int) 
         cand &= ~blocked
 
 
+def _quality(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """2·area / longest edge² of triangles (A, B, C) (k,3) each: the quality guard's measure
+    (`Topology.min_angle`), at most the sine of the smallest angle."""
+    e = np.stack([np.einsum("ij,ij->i", d, d) for d in (B - A, C - B, A - C)], 1).max(1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.linalg.norm(np.cross(B - A, C - A), axis=1) / e
+
+
+def _worsens(V, F, E, he_edge, he_face, he_corner, cand, min_quality) -> np.ndarray:
+    """(E,) bool: candidate edges whose split would leave a half below ``min_quality`` and worse than its
+    face: the quality guard of contractions, applied to the splits."""
+    hs = np.flatnonzero(cand[he_edge])
+    f, j = he_face[hs], he_corner[hs]
+    u, v, w = V[F[f, j]], V[F[f, (j + 1) % 3]], V[F[f, (j + 2) % 3]]
+    mid = 0.5 * u + 0.5 * v
+    q0 = _quality(u, v, w)
+    bad = np.zeros(len(hs), bool)
+    for q in (_quality(u, mid, w), _quality(mid, v, w)):
+        bad |= (q < min_quality) & (q < q0)
+    return np.bincount(he_edge[hs], bad, minlength=len(E)) > 0
+
+
 def split_edges(V: np.ndarray, F: np.ndarray, factor: float, budget: int | None = None,
-                fill: bool = True, fixed: np.ndarray | None = None) -> Split:
+                fill: bool = True, fixed: np.ndarray | None = None, min_quality: float = 0.0) -> Split:
     """Split the edges of (V (n,3), F (m,3)) longer than factor × the mean edge length (module
     docstring). ``budget``: the most faces to add (None: no limit); with ``fill``, a budget left when no
     edge is long is spent on the longest remaining edges, so exactly ``budget`` faces are added when the
     mesh allows it. ``fixed`` (n,) bool: locked vertices; an edge between two of them is never split, as it
-    is never contracted (a vertex on it would change a border the caller holds, such as a tile's seam)."""
+    is never contracted (a vertex on it would change a border the caller holds, such as a tile's seam).
+    ``min_quality``: the quality guard (`Topology.min_angle`, 0: off): no split leaves a half below it and
+    worse than the face it halves."""
     V = np.array(V, np.float64)
     F = np.array(F, np.int64)
     n0 = len(V)
@@ -115,6 +139,8 @@ def split_edges(V: np.ndarray, F: np.ndarray, factor: float, budget: int | None 
         nface = np.bincount(he_edge, minlength=len(E))
         ell = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
         cand = (nface <= left) & (filling | (ell > length)) & ~(fixed[E[:, 0]] & fixed[E[:, 1]])
+        if min_quality > 0 and cand.any():
+            cand &= ~_worsens(V, F, E, he_edge, he_face, he_corner, cand, min_quality)
         if not cand.any():
             if filling or budget is None or not fill:
                 break
@@ -152,14 +178,15 @@ def split_edges(V: np.ndarray, F: np.ndarray, factor: float, budget: int | None 
     return Split(V, F, parent, edge, length, passes)
 
 
-def added_faces(V: np.ndarray, F: np.ndarray, factor: float, fixed: np.ndarray | None = None) -> int:
-    """How many faces splitting (V, F) without a budget would add (``fixed``: the locked vertices, whose
-    edges between two of them are not split): the planning count of the budget."""
-    return len(split_edges(V, F, factor, fixed=fixed).F) - len(F)
+def added_faces(V: np.ndarray, F: np.ndarray, factor: float, fixed: np.ndarray | None = None,
+                min_quality: float = 0.0) -> int:
+    """How many faces splitting (V, F) without a budget would add (``fixed``, ``min_quality``: as
+    `split_edges`): the planning count of the budget."""
+    return len(split_edges(V, F, factor, fixed=fixed, min_quality=min_quality).F) - len(F)
 
 
 def plan(run, args, target: int, model, options, factor: float, progress=None,
-         fixed: np.ndarray | None = None):
+         fixed: np.ndarray | None = None, min_quality: float = 0.0):
     """The face target to simplify to so that splitting can bring the count back to ``target``: runs the
     scheduler ``run`` once to ``target`` on ``args`` = (V, S, F, extra pairs) (``progress``: its progress
     callback) and subtracts the faces splitting that result would add (``fixed``: the locked vertices in
@@ -167,11 +194,11 @@ def plan(run, args, target: int, model, options, factor: float, progress=None,
     target, the faces splitting the first result would add, the first result: `fills` may fall back to it)."""
     V, S, F, extra = args
     out = run(V, S, F, extra, max(target, 1), model, options, progress)
-    s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor, fixed)
+    s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor, fixed, min_quality)
     return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s, out
 
 
-def fills(out, target: int, factor: float, fixed: np.ndarray | None = None) -> bool:
+def fills(out, target: int, factor: float, fixed: np.ndarray | None = None, min_quality: float = 0.0) -> bool:
     """Whether splitting the run's result ``out`` (simplified to the planned face target, `plan`) can bring
     it back up to ``target``: always where the run reached its own target (the plan left room), else (it
     stopped above it, blocked: by locks, say) only when its splittable edges add enough faces. Where they
@@ -183,7 +210,8 @@ def fills(out, target: int, factor: float, fixed: np.ndarray | None = None) -> b
         return True
     V = np.asarray(out.positions, np.float64)
     # one short is the parity of splits, which add an interior edge's two faces at once
-    return len(split_edges(V, F, factor, _budget(F, len(V), target), fixed=fixed).F) >= target - 1
+    return len(split_edges(V, F, factor, _budget(F, len(V), target), fixed=fixed,
+                           min_quality=min_quality).F) >= target - 1
 
 
 def _budget(F: np.ndarray, n: int, target: int) -> int:
@@ -197,13 +225,15 @@ def _budget(F: np.ndarray, n: int, target: int) -> int:
     return budget
 
 
-def apply(V, F, ids, fids, verr, factor: float, target: int, fixed: np.ndarray | None = None):
+def apply(V, F, ids, fids, verr, factor: float, target: int, fixed: np.ndarray | None = None,
+          min_quality: float = 0.0):
     """Split the simplified mesh (V (k,3) float64 mesh units, F (j,3)) and carry its per-vertex and
     per-face arrays along: ids (k,) source vertices (a midpoint takes its edge's first endpoint's),
     fids (j,) source faces (a half keeps its face's), verr (k,) vertex errors (a midpoint takes the larger
     of its endpoints'). ``target``: the face target (0: none, split every long edge); ``fixed`` (k,) bool:
     the locked vertices (`split_edges`). Returns (V, F, ids, fids, verr, stats)."""
-    sp = split_edges(V, F, factor, _budget(F, len(V), target) if target else None, fixed=fixed)
+    sp = split_edges(V, F, factor, _budget(F, len(V), target) if target else None, fixed=fixed,
+                     min_quality=min_quality)
     ids, verr = list(ids), list(verr)
     for u, v in sp.edge.tolist():  # in creation order: an endpoint may be an earlier midpoint
         ids.append(ids[u])

@@ -382,13 +382,13 @@ def run(job: Job):
         if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
             fixed = None if job.locks is None else job.locks.run().locked
             run_target, planned, first = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
-                                                     setup.split, progress_cb, fixed)
+                                                     setup.split, progress_cb, fixed, setup.min_quality)
             if bar is not None:  # the run itself goes past the target, by the faces splitting adds back
                 last = m
                 bar.reset(total=faces_to_remove(m, run_target, closed))
                 bar.set_description("simplify")
         out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
-        if planned is not None and not _split.fills(out, target, setup.split, fixed):
+        if planned is not None and not _split.fills(out, target, setup.split, fixed, setup.min_quality):
             out, run_target = first, target  # blocked where splitting cannot refill: the run to the target
         if bar is not None and bar.n != bar.total and (out.stop_reason == "target" or (
                 out.stop_reason == "max_error" and not target)):
@@ -498,7 +498,7 @@ def _split_faces(job: Job, out: outcome.Outcome, mesh: _Mesh, run_target: int, p
     fixed = mesh.fixed
     vout, Fout, ids, fids, verr, stats = _split.apply(mesh.vertices, mesh.faces, mesh.source_vertices,
                                                       mesh.source_faces, mesh.vertex_error, job.setup.split, target,
-                                                      fixed)
+                                                      fixed, job.setup.min_quality)
     if fixed is not None:  # the midpoints it adds are free
         fixed = np.concatenate([fixed, np.zeros(len(vout) - len(fixed), bool)])
     stats.update(planned=planned, run_target=run_target if target else None, run_stop_reason=out.stop_reason)
