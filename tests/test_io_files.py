@@ -345,3 +345,32 @@ def test_relative_indices_and_tabs_in_an_obj_are_read_as_the_format_means_them(t
     assert len(want.faces) == 3
     r = qemjax.simplify(str(rel), ratio=1.0)
     assert len(r.faces) == 3 and r.stats["duplicate_removed"] == 0
+
+
+def test_a_binary_ply_of_triangles_and_quads_is_read(tmp_path):
+    """Faces of several sizes in one binary list: trimesh cannot read them (it called the file damaged); the
+    same faces as the ASCII file, which it reads, fanned from each polygon's first corner."""
+    import struct
+
+    n = 6
+    V = np.array([[x, y, 0.1 * x * y] for y in range(n) for x in range(n)], np.float64)
+    polys = []
+    for y in range(n - 1):
+        for x in range(n - 1):
+            a, b, c, d = y * n + x, y * n + x + 1, (y + 1) * n + x + 1, (y + 1) * n + x
+            polys += [[a, b, c, d]] if (x + y) % 2 else [[a, b, c], [a, c, d]]
+    head = (f"ply\nformat {{}} 1.0\nelement vertex {len(V)}\nproperty double x\nproperty double y\n"
+            f"property double z\nelement face {len(polys)}\nproperty list uchar int vertex_indices\nend_header\n")
+    body = V.astype("<f8").tobytes() + b"".join(struct.pack(f"<B{len(p)}i", len(p), *p) for p in polys)
+    (tmp_path / "b.ply").write_bytes(head.format("binary_little_endian").encode() + body)
+    (tmp_path / "a.ply").write_text(head.format("ascii") + "".join(" ".join(map(repr, v)) + "\n" for v in V.tolist())
+                                    + "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys))
+    got, want = qemjax.load(str(tmp_path / "b.ply")), qemjax.load(str(tmp_path / "a.ply"))
+
+    def triangles(F):  # each rotated to start at its smallest corner (orientation kept), in sorted order
+        F = np.asarray(F)
+        r = F.argmin(1)
+        F = np.stack([F[np.arange(len(F)), (r + k) % 3] for k in range(3)], 1)
+        return F[np.lexsort(F.T[::-1])]
+    assert np.array_equal(got.vertices, want.vertices)
+    assert np.array_equal(triangles(got.faces), triangles(want.faces)) and len(got.faces) == 2 * (n - 1) ** 2

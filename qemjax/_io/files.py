@@ -254,6 +254,12 @@ def _read(path: str, fmt: str, data: bytes):
                       "installed") from exc
     except Exception as exc:  # trimesh raises many kinds, whose words are about its code: find our own
         reason = _problem(fmt, data, header)
+        if reason is None and header is not None and header.format != "ascii" and header.element("face"):
+            try:  # polygons of several sizes in one binary list, which trimesh cannot read
+                V, F = _io_strips.read_polygons(header, data)
+                return _checked(trimesh.Trimesh(V, F, process=False), fmt, data, header)
+            except (_io_ply.PlyError, ValueError, IndexError):
+                pass
         raise BadFile(reason or f"not a valid {_name(fmt)} file: the file is damaged or truncated") from exc
     return _checked(obj, fmt, data, header)
 

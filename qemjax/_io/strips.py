@@ -1,6 +1,7 @@
 """PLY files whose faces are triangle strips (``element tristrips``, as Stanford-era range scans write
 them; trimesh reads them as a point cloud): `read_tristrips` reads the vertices and the strips (ASCII,
 binary little or big endian) and `strip_triangles` turns strips into consistently oriented triangles.
+`read_polygons` reads a binary face list of several polygon sizes, which trimesh cannot either.
 
 Raises `_io_ply.PlyError` with a reason in words about the file. Host-side numpy only.
 """
@@ -56,7 +57,7 @@ def _read_binary(h: Header, data: bytes) -> dict:
             dt = np.dtype([(p.name, type_dtype(p.type, order)) for p in e.props])
             a = np.frombuffer(data, dt, e.rows, at)
             out["vertex"] = np.stack([a[c].astype(np.float64) for c in "xyz"], 1)
-        elif e.name in ("vertex", "tristrips"):  # rows one by one (lists in them)
+        elif e.name in ("vertex", "tristrips", "face"):  # rows one by one (lists in them)
             rows, pos = [], at
             for _ in range(e.rows):
                 row = {}
@@ -88,6 +89,25 @@ def strip_triangles(strips: np.ndarray) -> np.ndarray:
     odd = (i - start[:-2]) % 2 == 1
     tris = np.stack([np.where(odd, b, a), np.where(odd, a, b), c], 1)
     return tris[ok]
+
+
+def read_polygons(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (n,3) float64, faces (m,3) int64) of a binary PLY file whose faces are polygons of any
+    sizes in one list (triangles beside quads, which trimesh cannot read), each fanned from its first
+    corner; rows of fewer than 3 corners are left out. Row by row: for the files trimesh refuses."""
+    el = h.element("face")
+    lists = [p for p in el.props if p.count is not None] if el is not None else []
+    if not lists:
+        raise PlyError("the PLY face element has no list of vertex numbers")
+    name = next((p.name for p in lists if p.name in ("vertex_indices", "vertex_index")), lists[0].name)
+    got = _read_binary(h, data)
+    V = got["vertex"]
+    if not isinstance(V, np.ndarray):  # a vertex element with list properties
+        V = np.array([[float(r[c][0]) for c in "xyz"] for r in V], np.float64)
+    tris = [np.stack([np.full(len(r[name]) - 2, r[name][0]), r[name][1:-1], r[name][2:]], 1)
+            for r in got["face"] if len(r[name]) >= 3]
+    F = np.concatenate(tris).astype(np.int64) if tris else np.zeros((0, 3), np.int64)
+    return V, F
 
 
 def read_tristrips(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray]:
