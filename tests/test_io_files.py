@@ -374,3 +374,16 @@ def test_a_binary_ply_of_triangles_and_quads_is_read(tmp_path):
         return F[np.lexsort(F.T[::-1])]
     assert np.array_equal(got.vertices, want.vertices)
     assert np.array_equal(triangles(got.faces), triangles(want.faces)) and len(got.faces) == 2 * (n - 1) ** 2
+
+
+def test_coff_colours_that_are_not_read_are_named(tmp_path):
+    """trimesh reads an OFF file's positions but not a COFF file's colours: the run says it dropped them."""
+    path = tmp_path / "c.off"
+    path.write_text("COFF\n4 4 0\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n0 1 0 0 0 255 255\n0 0 1 255 255 0 255\n"
+                    "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n")
+    with pytest.warns(UserWarning, match=r"carries vertex colours \(COFF\), which qemjax does not keep"):
+        r = qemjax.simplify(str(path), ratio=1.0)
+    assert r.stats["dropped"] == ["vertex colours (COFF)"]
+    path.write_text(path.read_text().replace("COFF", "OFF").replace(" 255 0 0 255", "").replace(" 0 255 0 255", "")
+                    .replace(" 0 0 255 255", "").replace(" 255 255 0 255", ""))
+    assert qemjax.simplify(str(path), ratio=1.0).stats["dropped"] == []

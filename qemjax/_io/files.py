@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import struct
 
 import numpy as np
@@ -279,7 +280,11 @@ def read(path) -> object:
                           "other formats trimesh reads)")
         with open(path, "rb") as f:
             data = f.read()
-        return _read(path, fmt, data)
+        obj = _read(path, fmt, data)
+        if fmt == "off" and re.match(rb"\s*[A-Z]*C[A-Z]*OFF", data) and getattr(obj, "visual", None) is not None \
+                and obj.visual.kind is None:  # trimesh reads no COFF colour: named among what is dropped
+            obj.metadata["qemjax_unread"] = ["vertex colours (COFF)"]
+        return obj
     except OSError as exc:
         raise ValueError(f"could not read {path}: {exc.strerror or 'the file cannot be opened'}") from exc
     except BadFile as exc:

@@ -45,7 +45,8 @@ def _triangulate(faces: np.ndarray) -> np.ndarray:
 
 def dropped_attributes(obj) -> list[str]:
     """What a `trimesh.Trimesh` carries besides positions and faces, which qemjax does not keep: any of
-    ``"uv"``, ``"material"``, ``"vertex_colors"``, ``"face_colors"`` (in that order)."""
+    ``"uv"``, ``"material"``, ``"vertex_colors"``, ``"face_colors"`` (in that order), then what its file
+    held that the reader could not read (``metadata["qemjax_unread"]``: a COFF file's colours)."""
     visual = getattr(obj, "visual", None)
     kind = getattr(visual, "kind", None)
     out = []
@@ -60,7 +61,7 @@ def dropped_attributes(obj) -> list[str]:
         out.append("vertex_colors")
     elif kind == "face":
         out.append("face_colors")
-    return out
+    return out + list(getattr(obj, "metadata", {}).get("qemjax_unread", []))  # what the reader could not read
 
 
 def _warn_dropped(dropped: list[str], what: str, stacklevel: int):
