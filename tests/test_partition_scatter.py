@@ -277,7 +277,7 @@ def test_coincident_centroids_are_split_in_input_order(tmp_path):
     ("m.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "unsupported format: a .off file"),
     ("nox.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float a\nend_header\n0\n", "x, y and z"),
     ("bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "line 4"),
-    ("far.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "vertex 4"),
+    ("far.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "a face uses vertex 4,"),  # no "after line 0"
     ("nan.obj", b"v 0 0 0\nv 1 0 zz\nv 0 1 0\nf 1 2 3\n", "line 2"),
     ("cut.stl", b"\0" * 80 + (10).to_bytes(4, "little") + b"\0" * 60, "truncated binary STL"),
     # 34 bytes: 84 + 50 × -1, the size a header-less file's count of -1 used to match

@@ -149,7 +149,8 @@ def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
         uv.close()
         corner_uv.close()
     if top[0] >= nv:
-        raise Refusal(f"a face (after line {top[1]}) uses vertex {top[0] + 1}, but the file has {nv} vertices")
+        where = f" (below line {top[1]})" if top[1] else ""  # the block it is in: lines are not counted per face
+        raise Refusal(f"a face{where} uses vertex {top[0] + 1}, but the file has {nv} vertices")
     if raw.rows == 0:
         raise Refusal("the OBJ file has no faces (no 'f' lines)")
     src = _finish_weld(welder, scratch, "obj", raw, nv)
