@@ -433,6 +433,12 @@ def write(res, path: str, ext: str):
             data = _io_ply.with_double_positions(data, mesh.vertices)
         _atomic(path, lambda tmp: _write_file(tmp, data))
         return
+    if ext == "gltf":  # one file, its buffers embedded: trimesh would write them beside it under fixed names
+        from trimesh.exchange.gltf import export_gltf
+
+        data = export_gltf(mesh, embed_buffers=True)["model.gltf"]
+        _atomic(path, lambda tmp: _write_file(tmp, data))
+        return
     _atomic(path, lambda tmp: mesh.export(tmp, file_type=ext))
 
 
@@ -470,6 +476,16 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+def _add_vertex_files(p: argparse.ArgumentParser) -> None:
+    """--locked and --vertex-weights: per-vertex files (`_simplify_kwargs` reads them)."""
+    p.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
+                   "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
+                   "integer per line)")
+    p.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0) "
+                   "per input vertex (.npy or text, one number per line): each pair's cost is multiplied by "
+                   "the larger weight of its vertices, so heavy regions keep more detail")
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="qemjax", description="Quadric-error mesh simplification with JAX.",
                  epilog="Errors (--max-error, the reported max error) are squared distances in the mesh's "
@@ -495,9 +511,7 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument(TARGETS["max_distance_rel"], dest="max_distance_rel", type=_distance, metavar="R",
                    help="as --max-distance, with D = R × the input's bounding-box diagonal (0.005: 0.5 %%)")
     _add_options(s)
-    s.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
-                   "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
-                   "integer per line)")
+    _add_vertex_files(s)
     s.add_argument("--part-faces", dest="part_faces", type=_faces, metavar="K", help="with --partition: the most "
                    "faces one task reads (default 100000)")
     s.add_argument("--workers", type=_workers, metavar="N", help="with --partition: local worker processes (default: "
@@ -505,12 +519,10 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--scratch", metavar="DIR", help="with --partition: the folder for the parts (new, empty, or "
                    "one a partitioned run wrote; kept; a run of the same input and options resumes from it); "
                    "default: a temporary folder, removed at the end")
-    s.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0) "
-                   "per input vertex (.npy or text, one number per line): each pair's cost is multiplied by "
-                   "the larger weight of its vertices, so heavy regions keep more detail")
     lod = sub.add_parser("lod", help="levels of detail from one run: one file per level (and a .glb, a record)")
     lod.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
-    lod.add_argument("out_dir", help="folder for the levels, NAME-lod0.EXT (finest) ... (created if absent)")
+    lod.add_argument("out_dir", help="folder for the levels, NAME-lod0.EXT ..., one per ratio in the order of "
+                     "--ratios (created if absent)")
     lod.add_argument("--ratios", type=_ratio, nargs="+", default=list(RATIOS), metavar="R",
                      help="fractions of the faces to keep, one level each "
                      f"(default: {' '.join(map(str, RATIOS))})")
@@ -521,6 +533,7 @@ def _parser() -> argparse.ArgumentParser:
     lod.add_argument("--record", action="store_true", help="also write NAME-record.npz, the progressive "
                      "record every level can be replayed from (qemjax.load_record)")
     _add_options(lod, hidden=LOD_REFUSED + ("partition",))
+    _add_vertex_files(lod)
     sw = sub.add_parser("sweep", help="a parameter sweep described in a TOML (or YAML) file; writes its table",
                         description="Run qemjax.sweep as CONFIG describes: meshes, grid, targets, out (default: "
                         "CONFIG's name with .parquet), metrics, executor. See docs/cli.md, 'Sweep config files'.")
@@ -688,6 +701,10 @@ def _lod(args, kwargs) -> int:
     if refused:
         raise CliError(f"qemjax lod keeps positions only: its levels are replayed from contractions "
                        f"({', '.join(refused)} given); use qemjax simplify --texture for a textured result")
+    moved = ["--" + name.replace("_", "-") for name in ("refit", "polish", "sliver_moves") if kwargs.get(name)]
+    if moved:  # they move a run's result, which no level file holds
+        raise CliError(f"qemjax lod writes the levels as replayed from the run's contractions, which "
+                       f"{', '.join(moved)} would not change (they move one result: qemjax simplify)")
     folder = os.path.abspath(args.out_dir)
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise CliError(f"output {args.out_dir} is a file; give a folder")

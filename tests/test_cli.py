@@ -749,3 +749,33 @@ def test_written_positions_are_as_precise_as_the_result(tmp_path, capsys, offset
         assert np.abs(back - res.vertices).max() <= 1e-6 * diagonal
     doubles = b"property double x" in (tmp_path / "out.ply").read_bytes()[:300]
     assert doubles == (radius == 10.0)  # float32 kept where it holds the positions
+
+
+def test_gltf_is_one_file_and_lod_refuses_what_moves_only_the_result(src, tmp_path, capsys):
+    """A .gltf output holds its buffers (trimesh wrote them beside it under fixed names, so the levels of
+    `qemjax lod` overwrote each other's and a user's file of that name); `--refit` and friends move one
+    result, which no level file holds, so `qemjax lod` refuses them."""
+    (tmp_path / "gltf_buffer_0.bin").write_text("MY DATA")
+    assert _cli.main(["lod", str(src), str(tmp_path), "--format", "gltf", "--ratios", "0.5", "0.1", "--quiet"]) == 0
+    chain = qemjax.lod_chain(src, ratios=[0.5, 0.1])
+    for i, level in enumerate(chain):
+        back = qemjax.load(str(tmp_path / f"in-lod{i}.gltf"))
+        assert np.array_equal(back.faces, level.faces) and np.allclose(back.vertices, level.vertices, atol=1e-6)
+    assert (tmp_path / "gltf_buffer_0.bin").read_text() == "MY DATA"
+    for flag in ("--refit", "--polish", "--sliver-moves"):
+        assert _cli.main(["lod", str(src), str(tmp_path / "x"), flag, "2", "--quiet"]) == 2
+        assert f"{flag} would not change" in capsys.readouterr().err
+
+
+def test_lod_takes_locked_vertices_as_simplify_does(tmp_path, capsys):
+    """cli.md: every option of `qemjax.simplify` is one of `qemjax lod` (--locked was not): the locked
+    vertices are in every level, where they were."""
+    qemjax.shapes.write_examples(tmp_path, subdivisions=3)
+    V = np.asarray(qemjax.load(str(tmp_path / "bumpy.obj")).vertices)
+    idx = np.arange(0, len(V), 11)
+    np.savetxt(tmp_path / "lk.txt", idx, fmt="%d")
+    assert _cli.main(["lod", str(tmp_path / "bumpy.obj"), str(tmp_path / "lods"), "--ratios", "0.5", "0.2",
+                      "--locked", str(tmp_path / "lk.txt"), "--quiet"]) == 0
+    for i in (0, 1):
+        level = np.asarray(qemjax.load(str(tmp_path / "lods" / f"bumpy-lod{i}.obj")).vertices)
+        assert all((np.abs(level - V[j]).max(1) < 1e-7).any() for j in idx)

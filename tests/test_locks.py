@@ -11,6 +11,7 @@ import trimesh
 
 import qemjax
 from qemjax import shapes
+from qemjax._io.text import obj_vertices as _obj_vertices
 from qemjax._costs import at_kept
 from qemjax._costs import area as area_model
 
@@ -284,7 +285,7 @@ def test_attributes_kept_with_locks(tmp_path):
     """The attribute model prices a locked pair on the host (`cost_at`); indices are the file's vertices
     (its ``v`` lines)."""
     path = [p for p in shapes.write_examples(tmp_path, subdivisions=2) if p.name == "textured.obj"][0]
-    V = qemjax._io.text.obj_vertices(path.read_bytes())
+    V = _obj_vertices(path.read_bytes())
     lk = np.arange(0, len(V), 23)
     for scheduler in SCHEDULERS:
         res = qemjax.simplify(str(path), ratio=0.3, attributes="uv", locked=lk, scheduler=scheduler)
@@ -301,7 +302,7 @@ def test_locked_vertices_keep_their_uvs(tmp_path, scheduler):
     path = [p for p in shapes.write_examples(tmp_path, subdivisions=3) if p.name == "textured.obj"][0]
     m = tm.load(str(path), process=False)
     V, UV = np.asarray(m.vertices), np.asarray(m.visual.uv)
-    P = qemjax._io.text.obj_vertices(path.read_bytes())  # the file's vertices, which the locks count
+    P = _obj_vertices(path.read_bytes())  # the file's vertices, which the locks count
     lk = np.arange(0, len(P), 7)
     res = qemjax.simplify(str(path), ratio=0.3, attributes="uv", locked=lk, scheduler=scheduler)
     assert res.stop_reason == "target"
@@ -416,7 +417,7 @@ def test_an_obj_files_vertices_are_numbered_as_its_v_lines(tmp_path):
     (tmp_path / "shifted.obj").write_text("v 9 9 9\n" + shifted)  # an unused vertex first
     for name in ("textured.obj", "shifted.obj"):
         path = str(tmp_path / name)
-        P = qemjax._io.text.obj_vertices((tmp_path / name).read_bytes())
+        P = _obj_vertices((tmp_path / name).read_bytes())
         idx = np.arange(1 if name == "shifted.obj" else 0, len(P), 7)
         mask = np.zeros(len(P), bool)
         mask[idx] = True

@@ -213,6 +213,16 @@ def test_npz_round_trip_is_exact(tmp_path):
     (tmp_path / "d.npz").write_text("a text file")  # numpy's words: "pickled (object) data"
     with pytest.raises(ValueError, match="not a qemjax record .*: not an .npz archive"):
         qemjax.load_record(tmp_path / "d.npz")
+    with pytest.raises(FileNotFoundError, match="no such record file"):
+        qemjax.load_record(tmp_path / "missing.npz")
+    import zipfile
+
+    with zipfile.ZipFile(tmp_path / "a.npz") as z, zipfile.ZipFile(tmp_path / "e.npz", "w") as out:
+        for name in z.namelist():
+            if name != "pairs.npy":
+                out.writestr(name, z.read(name))
+    with pytest.raises(ValueError, match="the record is incomplete \\(no 'pairs' in it\\)"):
+        qemjax.load_record(tmp_path / "e.npz")
 
 
 def test_esqem_split_replays_the_contraction_phase_only():
@@ -228,6 +238,11 @@ def test_esqem_split_replays_the_contraction_phase_only():
         res.replay(phase - 2)
     with pytest.raises(ValueError, match="split_factor=None"):
         qemjax.lod_chain(mesh, method="esqem")
+    with pytest.raises(ValueError, match="split_factor=None"):  # the method as an object too
+        qemjax.lod_chain(mesh, method=qemjax.ESQEM())
+    assert len(qemjax.lod_chain(mesh, ratios=[0.5, 0.1], method=qemjax.ESQEM(split_factor=None))) == 2
+    with pytest.raises(ValueError, match="cannot run partitioned"):  # before the run, not after it
+        qemjax.lod_chain(mesh, ratios=[0.5, 0.1], partition=True)
 
 
 def test_lod_chain_levels_and_glb(tmp_path):

@@ -99,9 +99,14 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     for key in ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel"):
         if key in options:
             raise ValueError(f"lod_chain takes its targets from ratios=, not {key}=")
-    if options.get("method") == "esqem" and options.get("split_factor", 1.0) is not None:
-        raise ValueError("lod_chain(method='esqem') needs split_factor=None: edge splits come after all "
-                         "contractions, and the levels are replayed from the contractions")
+    if options.get("partition"):
+        raise ValueError("lod_chain cannot run partitioned: a partitioned run keeps no record to replay the "
+                         "levels from")
+    method = options.get("method")
+    splits = getattr(method, "split_factor", None) is not None if not isinstance(method, str) else method == "esqem"
+    if splits and options.get("split_factor", 1.0) is not None:
+        raise ValueError("lod_chain with ESQEM needs split_factor=None (CLI: --split-factor none): edge splits "
+                         "come after all contractions, and the levels are replayed from the contractions")
     res = simplify(mesh, ratio=min(ratios), **options)
     m, last = len(res.input_faces), res.record.faces_out
     return LodChain([res.replay(max(max(1, int(round(r * m))), last)) for r in ratios], ratios, res)

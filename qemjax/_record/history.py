@@ -224,20 +224,33 @@ class Record:
 
 
 def load_record(path) -> Record:
-    """Read a record that `Record.save` (or ``res.record.save``) wrote."""
+    """Read a record that `Record.save` (or ``res.record.save``) wrote. FileNotFoundError for no file,
+    ValueError (in words) for a file that is not a whole record."""
+    import os
+
+    from .._io.mesh import MissingFileError
+
+    if not os.path.exists(path):
+        raise MissingFileError(2, "no such record file", os.fspath(path))
     if not zipfile.is_zipfile(path):  # numpy would take it for a pickle and ask for allow_pickle
         raise ValueError(f"{path} is not a qemjax record ({FORMAT}): not an .npz archive")
-    with np.load(path, allow_pickle=False) as z:
-        a = {k: z[k] for k in z.files}
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            a = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        raise ValueError(f"{path}: the record is damaged ({' '.join(str(exc).split())})") from None
     if str(a.get("format", "")) != FORMAT:
         raise ValueError(f"{path} is not a qemjax record ({FORMAT})")
-    parts = {k.split("/", 1)[1]: v for k, v in a.items() if k.startswith("parts/")}
-    many = a["frame_part"].size > 0
-    frame = Frame(a["frame_centers"], float(a["frame_scale"]), a["frame_part"] if many else None,
-                  a["frame_sizes"] if many else None)
-    history = Contractions(a["pairs"], a["positions"], a["costs"], parts, a["rounds"])
-    return Record(a["input_vertices"], a["input_faces"], history, a["removed_at"], a["coincident"], frame,
-                  str(a["scheduler"]), int(a["target_faces"]), a.get("locked"))
+    try:
+        parts = {k.split("/", 1)[1]: v for k, v in a.items() if k.startswith("parts/")}
+        many = a["frame_part"].size > 0
+        frame = Frame(a["frame_centers"], float(a["frame_scale"]), a["frame_part"] if many else None,
+                      a["frame_sizes"] if many else None)
+        history = Contractions(a["pairs"], a["positions"], a["costs"], parts, a["rounds"])
+        return Record(a["input_vertices"], a["input_faces"], history, a["removed_at"], a["coincident"], frame,
+                      str(a["scheduler"]), int(a["target_faces"]), a.get("locked"))
+    except KeyError as exc:
+        raise ValueError(f"{path}: the record is incomplete (no {exc.args[0]!r} in it)") from None
 
 
 def _internal(V: np.ndarray, verts: np.ndarray, frame: Frame) -> np.ndarray:
