@@ -280,6 +280,8 @@ def test_area_weight_and_regularize_refuse_what_they_cannot_wrap():
         qemjax.simplify(m, ratio=0.5, method="area", area_weight=1.0)
     with pytest.raises(ValueError, match="regularize cannot wrap 'area'"):
         qemjax.simplify(m, ratio=0.5, method="area", regularize=0.1)
+    with pytest.raises(ValueError, match="give area_weight or regularize, not both"):  # said it could not wrap 'qem'
+        qemjax.simplify(m, ratio=0.5, regularize=0.1, area_weight=0.1)
     with pytest.raises(ValueError, match="area_weight"):
         qemjax.simplify(m, ratio=0.5, area_weight=-1.0)
     with pytest.raises(ValueError, match="area_weight must be a number"):

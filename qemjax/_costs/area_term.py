@@ -63,7 +63,11 @@ class AreaTerm(Term):
 
     def __post_init__(self):
         require_nonnegative(self, "area_weight")
-        if self.base.parts or self.base.uses_ring or not hasattr(type(self.base), "price_kernel"):
+        if self.base.parts:  # a term added already (regularize)
+            raise ValueError(f"area_weight cannot be combined with another added term ({self.base.name!r} has "
+                             f"the cost parts {', '.join(self.base.parts)}): give area_weight or regularize, "
+                             "not both")
+        if self.base.uses_ring or not hasattr(type(self.base), "price_kernel"):
             raise ValueError(f"area_weight cannot wrap {self.base.name!r}: it adds to a pair model without "
                              "cost parts (method='qem')")
 
