@@ -287,3 +287,13 @@ def test_cli_lod_writes_levels_glb_and_record(tmp_path, capsys):
     assert len(trimesh.load(out / "sphere-lods.glb").geometry) == 2
     assert main(["lod", str(src), str(src), "--quiet", "--no-cache"]) == 2  # a file, not a folder
     assert "is a file" in capsys.readouterr().err
+
+
+def test_a_chain_flat_in_x_is_still_side_by_side():
+    """A mesh in the plane x = 0 has no x-extent: its levels were stacked at the origin."""
+    V, F = shapes.grid(8)
+    V = np.asarray(V)[:, [2, 0, 1]]  # the grid in the y-z plane
+    chain = qemjax.lod_chain((V, np.asarray(F)), ratios=[0.5, 0.2])
+    scene = chain.to_scene()
+    moves = [scene.graph[f"lod{i}"][0][0, 3] for i in range(2)]
+    assert moves[0] == 0 and moves[1] == pytest.approx(1.2 * np.ptp(V, axis=0).max())

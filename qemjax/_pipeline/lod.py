@@ -43,12 +43,14 @@ class LodChain:
         """A `trimesh.Scene` with one node per level, named ``{name}0``, ``{name}1``, … (finest first), side
         by side along x: node i is translated by i × ``spacing`` (level 0 at the origin; the geometry
         itself is the level's, unmoved). ``spacing`` None: 1.2 × the largest x-extent of the levels'
-        bounding boxes (so they do not overlap); 0: every level at the same place, as an engine picking a
-        level would place them."""
+        bounding boxes (so they do not overlap; of a mesh flat in x, its largest extent); 0: every level at
+        the same place, as an engine picking a level would place them."""
         import trimesh
 
         if spacing is None:
-            spacing = 1.2 * max((np.ptp(lv.vertices[:, 0]) for lv in self.levels if len(lv.vertices)), default=0)
+            boxes = [np.ptp(lv.vertices, axis=0) for lv in self.levels if len(lv.vertices)]
+            width = max((b[0] for b in boxes), default=0.0)
+            spacing = 1.2 * (width if width > 0 else max((b.max() for b in boxes), default=0.0))
         scene = trimesh.Scene()
         for i, level in enumerate(self.levels):
             move = np.eye(4)
