@@ -670,3 +670,32 @@ def test_the_diagonal_is_summed_left_to_right_in_every_place():
     stats = qemjax.simplify((V, F), ratio=0.5).stats
     for key in ("distance_max", "distance_rms", "distance_p95"):
         assert stats[key + "_rel"] == stats[key] / want
+
+
+def test_equilateral_faces_are_in_the_last_bin():
+    """An equilateral face's smallest angle computes as 60.000...01, past the last edge: the histogram left
+    it out (16 of an icosahedron's 20 faces counted)."""
+    from qemjax import shapes
+
+    ico = shapes.icosphere(0)
+    assert metrics.min_angle_histogram(ico)[0].sum() == len(ico.faces)
+    V = np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [1.5, 3.0 * np.sqrt(3.0) / 2.0, 0.0]])
+    counts, _ = metrics.min_angle_histogram((V, [[0, 1, 2]]))
+    assert counts.sum() == 1 and counts[-1] == 1
+
+
+def test_evaluate_without_samples_and_a_bad_target_on_a_textured_mesh():
+    """n_samples=0 (vertices only) on meshes with UVs crashed in the deviation, which needs samples: it
+    is left out; a target that is not a positive integer is named (it was int()'s words, or 2.7 taken as 2)."""
+    from qemjax import shapes
+
+    V, F = shapes.icosphere(2)
+    tm = trimesh.Trimesh(V, F, process=False, visual=trimesh.visual.TextureVisuals(uv=np.asarray(V)[:, :2]))
+    row = metrics.evaluate(tm, tm, n_samples=0)
+    assert row["hausdorff"] == 0.0 and not any(k.startswith("uv_dev") for k in row)
+    assert "uv_dev_rms" in metrics.evaluate(tm, tm, n_samples=100)
+    for bad in ("abc", float("nan"), 2.7, True, 0):
+        with pytest.raises(ValueError, match="target_faces must be a positive integer"):
+            metrics.evaluate(tm, tm, target_faces=bad, n_samples=10)
+    with pytest.raises(ValueError, match="n_samples must be a positive integer"):
+        metrics.attribute_deviation(tm, tm, n_samples=0)

@@ -265,6 +265,7 @@ def test_repeated_and_degenerate_faces_are_cleaned_as_in_core(tmp_path):
         assert r.stats["duplicate_removed"] == core.stats["duplicate_removed"] == len(F) + 100
         assert r.stats["degenerate_removed"] == core.stats["degenerate_removed"] == 50
         assert closed_and_consistent(r.faces)
+        assert r.stats["distance_s"] > 0  # the measured distance's time, as in core (it was None)
 
 
 def test_a_scratch_folder_with_a_users_files_is_refused_and_left_as_it_was(tmp_path):

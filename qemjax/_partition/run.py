@@ -313,6 +313,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             dist = _distance(_run_level(runner, "measure_parts", mspecs, progress, "distance"),
                              box_diagonal(lo, hi), unit)
         t_measure = time.perf_counter() - t_measure
+        if dist:
+            dist["distance_s"] = t_measure
     except BaseException:
         if runner is not None:
             runner.close(cancel=True)

@@ -125,6 +125,9 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
     deviation of up to the texture's width). Each mesh is what `qemjax.simplify` accepts and keeps
     attributes of: a path (read as simplify reads it), a `trimesh.Trimesh`, or a result (`SimplifyResult`).
     ValueError when either lacks ``kind``."""
+    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
+        raise ValueError(f"n_samples must be a positive integer (points sampled on the simplified surface), "
+                         f"got {n_samples!r}")
     o, s = corner_values(original, kind), corner_values(simplified, kind)
     for mesh, vals, name in ((original, o, "original"), (simplified, s, "simplified")):
         if vals is None:

@@ -44,7 +44,7 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         flipped_fraction; of the original: boundary_edges_before, non_manifold_edges_before,
         components_before, euler_before, closed_before, genus_before (genus without the non-manifold
         vertex check, which is skipped on the original for speed: NaN all the same where the count is odd);
-      appearance, only when both meshes carry it (see `attribute_deviation`): uv_dev_rms, uv_dev_mean,
+      appearance, only when both meshes carry it and n_samples > 0 (see `attribute_deviation`): uv_dev_rms, uv_dev_mean,
         uv_dev_p95, uv_dev_max (texture-space deviation, UV units) and likewise color_dev_*;
       time_s: wall-clock seconds this evaluation took.
 
@@ -81,7 +81,7 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         **flipped_faces_report(s, o, nearest),
         **{f"{k}_before": topo_o[k] for k in _TOPOLOGY_BEFORE},
     }
-    for kind in KINDS:
+    for kind in KINDS if n_samples else ():  # a deviation needs surface samples: none asked for, none made
         if corner_values(original, kind) is not None and corner_values(simplified, kind) is not None:
             row.update(attribute_deviation(original, simplified, kind=kind, n_samples=min(n_samples, 20_000),
                                            seed=seed))

@@ -40,7 +40,8 @@ def min_angle_histogram(mesh, bin_edges=HISTOGRAM_EDGES_DEG) -> tuple[np.ndarray
     edges = np.asarray(bin_edges, dtype=np.float64)
     if edges.ndim != 1 or len(edges) < 2 or not (np.diff(edges) > 0).all():
         raise ValueError(f"bin_edges must be a 1-D increasing array of at least 2 values, got {bin_edges!r}")
-    counts, _ = np.histogram(min_angles(mesh), bins=edges)
+    # a face's smallest angle is at most 60°; rounding may give 60.000...01, which the last bin would miss
+    counts, _ = np.histogram(np.minimum(min_angles(mesh), 60.0), bins=edges)
     return counts.astype(np.int64), edges
 
 

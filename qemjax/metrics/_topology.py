@@ -146,7 +146,7 @@ def flipped_faces_report(mesh: MeshArrays, original: MeshArrays, nearest: np.nda
 
 
 def target_report(faces: int, target_faces) -> dict:
-    target = int(target_faces)
-    if target <= 0:
+    if isinstance(target_faces, bool) or not isinstance(target_faces, (int, np.integer)) or target_faces <= 0:
         raise ValueError(f"target_faces must be a positive integer, got {target_faces!r}")
+    target = int(target_faces)
     return {"target_faces": target, "target_error": faces / target - 1.0}
