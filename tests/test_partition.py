@@ -266,6 +266,10 @@ def test_repeated_and_degenerate_faces_are_cleaned_as_in_core(tmp_path):
         assert r.stats["degenerate_removed"] == core.stats["degenerate_removed"] == 50
         assert closed_and_consistent(r.faces)
         assert r.stats["distance_s"] > 0  # the measured distance's time, as in core (it was None)
+    same = qemjax.simplify((V, F), ratio=1.0, partition=Partition(workers=1, part_faces=1500))
+    assert len(same.faces) == len(F)
+    # the samples at distance 0 exactly (most of an unchanged surface): a median of 0, not the maximum
+    assert same.stats["distance_p50"] == 0.0 <= same.stats["distance_max"] < 1e-12
 
 
 def test_a_scratch_folder_with_a_users_files_is_refused_and_left_as_it_was(tmp_path):

@@ -191,11 +191,12 @@ def _distance(results: list, diag: float, unit: float) -> dict:
     d_rms = float(np.sqrt(sum(r["sum_sq"] for r in results) / sum(r["weight"] for r in results)))
     hist = np.sum([np.asarray(r["hist"]) for r in results], axis=0)
     cum = np.cumsum(hist) / hist.sum()
-    edges = np.logspace(task.HIST_LO, task.HIST_HI, task.HIST_BINS + 1) * unit
+    # each slot's upper edge: 0 for the exact zeros (`task.measure_parts`), then the bins' edges
+    edges = np.concatenate([[0.0], np.logspace(task.HIST_LO, task.HIST_HI, task.HIST_BINS + 1) * unit])
     out = dict(distance_max=d_max, distance_rms=d_rms)
-    for p in PERCENTILES:  # the upper edge of the bin where the weight reaches p %: within 1 % above
+    for p in PERCENTILES:  # the upper edge of the slot where the weight reaches p %: within 1 % above
         k = int(np.searchsorted(cum, p / 100 - 1e-12))
-        out[f"distance_p{p}"] = float(min(edges[min(k, task.HIST_BINS)], d_max))
+        out[f"distance_p{p}"] = float(min(edges[min(k, task.HIST_BINS + 1)], d_max))
     out.update({f"{k}_rel": (v / diag if diag > 0 else None) for k, v in list(out.items())})
     return out | dict(distance_samples=int(sum(r["samples"] for r in results)))
 

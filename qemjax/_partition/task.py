@@ -158,7 +158,8 @@ def measure_parts(spec: dict) -> dict:
     flo, fhi = T.min(1), T.max(1)  # each output face's box, once for all the parts
     del T
     edges = np.logspace(HIST_LO, HIST_HI, HIST_BINS + 1)
-    out = dict(max=0.0, sum_sq=0.0, weight=0.0, hist=np.zeros(HIST_BINS + 1), samples=0)
+    # hist[0]: the weight at distance 0 exactly (an unchanged surface), hist[1 + i]: in bin i of ``edges``
+    out = dict(max=0.0, sum_sq=0.0, weight=0.0, hist=np.zeros(HIST_BINS + 2), samples=0)
     for part in spec["parts"]:
         V, F, _, _ = pieces.load(part)
         P, w, _ = _sample_rows((V - centre) / unit, F, np.zeros(len(V), np.int64))
@@ -177,8 +178,8 @@ def measure_parts(spec: dict) -> dict:
         out["max"] = max(out["max"], float(d.max()) * unit)
         out["sum_sq"] += float(np.sum(w * d * d)) * unit * unit
         out["weight"] += float(w.sum())
-        out["hist"] += np.bincount(np.clip(np.searchsorted(edges, d), 0, HIST_BINS), weights=w,
-                                   minlength=HIST_BINS + 1)
+        out["hist"] += np.bincount(np.where(d > 0, np.clip(np.searchsorted(edges, d), 0, HIST_BINS) + 1, 0),
+                                   weights=w, minlength=HIST_BINS + 2)
         out["samples"] += int(len(P))
     out["hist"] = out["hist"].tolist()
     return out | dict(peak_rss=peak_rss())
