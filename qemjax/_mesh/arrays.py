@@ -48,6 +48,17 @@ def any_at(mask: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return out
 
 
+def row_index(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(len(B),) int64: for each row of B (k,3) float64, the index of the first row of A (n,3) float64 with
+    the same bytes (exact positions), -1 where none has."""
+    ka = np.ascontiguousarray(A, np.float64).view(np.dtype((np.void, 24))).ravel()
+    kb = np.ascontiguousarray(B, np.float64).view(np.dtype((np.void, 24))).ravel()
+    order = np.argsort(ka, kind="stable")
+    at = np.clip(np.searchsorted(ka[order], kb), 0, max(len(ka) - 1, 0))
+    hit = ka[order][at] == kb if len(ka) else np.zeros(len(kb), bool)
+    return np.where(hit, order[at], -1)
+
+
 def sorted_triples(F: np.ndarray) -> np.ndarray:
     """np.sort(F, axis=1) for (k,3) integer rows: smallest, middle, largest by arithmetic."""
     a, b, c = F[:, 0], F[:, 1], F[:, 2]

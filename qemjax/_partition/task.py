@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from . import pieces
+from .._mesh.arrays import row_index
 
 # on histograms of the distances, the percentiles: log-spaced bins over the unit frame's extent
 HIST_LO, HIST_HI, HIST_BINS = -13.0, 1.0, 4096
@@ -41,12 +42,8 @@ def _gids_out(res, V, gid, locked) -> np.ndarray:
     if len(res.input_vertices) == len(V) and np.array_equal(res.input_vertices, V):
         return np.where(locked[src] & (np.asarray(res.vertices) == V[src]).all(1), gid[src], -1)
     # the run welded coincident vertices: find the locked ones by their position
-    lv = np.ascontiguousarray(V[locked]).view(np.dtype((np.void, 24))).ravel()
-    order = np.argsort(lv, kind="stable")
-    ov = np.ascontiguousarray(res.vertices).view(np.dtype((np.void, 24))).ravel()
-    at = np.clip(np.searchsorted(lv[order], ov), 0, max(len(lv) - 1, 0))
-    hit = (lv[order][at] == ov) if len(lv) else np.zeros(len(ov), bool)
-    return np.where(hit, gid[locked][order][at], -1)
+    at = row_index(V[locked], res.vertices)
+    return np.where(at >= 0, gid[locked][at], -1)
 
 
 def corner_wedges(F: np.ndarray, UV: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

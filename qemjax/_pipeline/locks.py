@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from .._mesh import topology as topo
+from .._mesh.arrays import row_index
 from .._mesh.units import Frame
 from .._schedulers.locks import RunLocks
 
@@ -148,12 +149,7 @@ def given_map(geo) -> np.ndarray:
     V = geo.V + 0.0
     if len(P) == len(vmap) and np.all(vmap >= 0) and np.array_equal(V[vmap], P):
         return vmap  # read in the file's numbering
-    key = lambda X: np.ascontiguousarray(X).view(np.dtype((np.void, 24))).ravel()  # noqa: E731
-    kv, kp = key(V), key(P)
-    order = np.argsort(kv, kind="stable")
-    at = np.clip(np.searchsorted(kv[order], kp), 0, max(len(kv) - 1, 0))
-    hit = kv[order][at] == kp if len(kv) else np.zeros(len(kp), bool)
-    return np.where(hit, order[at], -1)
+    return row_index(V, P)
 
 
 def resolve(locked, vertex_weights, geo, stacklevel: int) -> Locks | None:
