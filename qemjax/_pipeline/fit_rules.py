@@ -51,12 +51,18 @@ def _closest_on_edges(p, a, b, c):
     return out
 
 
-def _quality(P: np.ndarray, G: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Each face's (corners G at positions P, normals n) 2·area / longest edge², |n| / longest², the shape
-    the contractions' quality guard bounds (`Topology.min_angle`)."""
-    c = P[G]
-    longest = np.max(np.stack([((c[:, (i + 1) % 3] - c[:, i]) ** 2).sum(1) for i in range(3)]), axis=0)
+def shape(A: np.ndarray, B: np.ndarray, C: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """2·area / longest edge² of triangles with corners A, B, C (k,3) and normals n (k,3), |n| / longest²:
+    the shape the contractions' quality guard bounds (`Topology.min_angle`), at most the sine of the
+    smallest angle; 0 for a triangle whose corners are one point."""
+    longest = np.max(np.stack([((c1 - c0) ** 2).sum(1) for c0, c1 in ((A, B), (B, C), (C, A))]), axis=0)
     return np.linalg.norm(n, axis=1) / np.where(longest > 0, longest, 1.0)
+
+
+def _quality(P: np.ndarray, G: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """`shape` of each face (corners G at positions P, normals n)."""
+    c = P[G]
+    return shape(c[:, 0], c[:, 1], c[:, 2], n)
 
 
 def _turned(n0: np.ndarray, n1: np.ndarray, cos_max: float) -> np.ndarray:

@@ -28,6 +28,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .fit_rules import shape
+
 MAX_PASSES = 64  # a pass at least halves the longest edges it splits; 64 passes is far beyond any mesh
 MAX_SPLIT_SHARE = 0.5  # splitting makes at most this fraction of the final faces (see `plan`)
 
@@ -94,12 +96,8 @@ def _choose(rank: np.ndarray, he_edge: np.ndarray, he_face: np.ndarray, m: int) 
         cand &= ~blocked
 
 
-def _quality(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """2·area / longest edge² of triangles (A, B, C) (k,3) each: the quality guard's measure
-    (`Topology.min_angle`), at most the sine of the smallest angle."""
-    e = np.stack([np.einsum("ij,ij->i", d, d) for d in (B - A, C - B, A - C)], 1).max(1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.linalg.norm(np.cross(B - A, C - A), axis=1) / e
+def _shape(A, B, C):
+    return shape(A, B, C, np.cross(B - A, C - A))
 
 
 def _worsens(V, F, E, he_edge, he_face, he_corner, cand, min_quality) -> np.ndarray:
@@ -109,9 +107,9 @@ def _worsens(V, F, E, he_edge, he_face, he_corner, cand, min_quality) -> np.ndar
     f, j = he_face[hs], he_corner[hs]
     u, v, w = V[F[f, j]], V[F[f, (j + 1) % 3]], V[F[f, (j + 2) % 3]]
     mid = 0.5 * u + 0.5 * v
-    q0 = _quality(u, v, w)
+    q0 = _shape(u, v, w)
     bad = np.zeros(len(hs), bool)
-    for q in (_quality(u, mid, w), _quality(mid, v, w)):
+    for q in (_shape(u, mid, w), _shape(mid, v, w)):
         bad |= (q < min_quality) & (q < q0)
     return np.bincount(he_edge[hs], bad, minlength=len(E)) > 0
 

@@ -377,10 +377,11 @@ def run(job: Job):
             from .._schedulers import late
 
             scheduler = functools.partial(late.run, scheduler)
+        lock_settings = _locks.scheduler_settings(job.locks)
         run = functools.partial(scheduler, edges=g.edges[:2], part_scale=g.frame.part_scale2(), wedges=job.tracker,
-                                **_locks.scheduler_settings(job.locks))
+                                **lock_settings)
         if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
-            fixed = None if job.locks is None else job.locks.run().locked
+            fixed = lock_settings["locks"].locked if lock_settings else None
             run_target, planned, first = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
                                                      setup.split, progress_cb, fixed, setup.min_quality)
             if bar is not None:  # the run itself goes past the target, by the faces splitting adds back
