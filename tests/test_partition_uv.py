@@ -243,9 +243,10 @@ def test_uv_input_errors(tmp_path, sphere_obj):
     k = next(i for i, line in enumerate(lines) if line.startswith("f "))
     lines[k] = "f " + " ".join(c.split("/")[0] for c in lines[k].split()[1:])
     half.write_text("\n".join(lines) + "\n")
-    with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
-        res = qemjax.simplify(str(half), ratio=RATIO, attributes="uv", partition=Partition(workers=1, part_faces=4000))
-    assert res.uv is None
+    with pytest.raises(ValueError, match="does not give every triangle corner a UV"):  # as in core
+        qemjax.simplify(str(half), ratio=RATIO, attributes="uv", partition=Partition(workers=1, part_faces=4000))
+    with pytest.raises(ValueError, match="carries no uv"):
+        qemjax.simplify(str(half), ratio=RATIO, attributes="uv")
     # texture coordinates that are not u and v numbers: the file is read as before, its UVs are not kept
     quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 1\n"
     faces = "f 1/1/1 2/2/1 5/3/1\nf 2/2/1 3/3/1 5/1/1\nf 3/1 4/2 5/3\nf 4/1 1/2 5/3\nf 1/1 3/3 2/2\nf 1/1 4/2 3/3\n"
@@ -257,16 +258,17 @@ def test_uv_input_errors(tmp_path, sphere_obj):
                     ("vt 0 0\nvt 1 0\nvt 1 1\n", "f 1/-4 4/2 3/3"), ("vt 0.5\nvt 0.2\nvt 0.1\n", ""),
                     ("vt 0 0\nvt a b\nvt 1 1\n", "")]:
         odd.write_text(quad + vt + "vn 0 0 1\n" + (faces.replace("f 1/1 4/2 3/3", fix) if fix else faces))
-        with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
-            res = qemjax.simplify(str(odd), target_faces=4, attributes="uv", partition=Partition(workers=1))
-        assert res.uv is None and len(res.faces) == 4
+        with pytest.raises(ValueError, match="does not give every triangle corner a UV"):
+            qemjax.simplify(str(odd), target_faces=4, attributes="uv", partition=Partition(workers=1))
+        assert qemjax.simplify(str(odd), target_faces=4, partition=Partition(workers=1)).uv is None  # auto: none
     ply = tmp_path / "odd.ply"  # an ASCII PLY whose UV column is not numbers: its positions, as before
     ply.write_text("ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
                    "property float s\nproperty float t\nelement face 6\nproperty list uchar int vertex_indices\n"
                    "end_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 x\n0 1 0 0 1\n0.5 0.5 1 0.5 0.5\n"
                    "3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n3 0 2 1\n3 0 3 2\n")
-    with pytest.warns(UserWarning, match="does not give every triangle corner a UV"):
-        res = qemjax.simplify(str(ply), target_faces=4, attributes="uv", partition=Partition(workers=1))
+    with pytest.raises(ValueError, match="does not give every triangle corner a UV"):
+        qemjax.simplify(str(ply), target_faces=4, attributes="uv", partition=Partition(workers=1))
+    res = qemjax.simplify(str(ply), target_faces=4, partition=Partition(workers=1))
     assert res.uv is None and len(res.faces) == 4
     with pytest.raises(ValueError, match="weld=False cannot keep UVs"):
         qemjax.simplify(str(sphere_obj), ratio=0.5, attributes="uv", weld=False, partition=True)

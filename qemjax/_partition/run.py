@@ -248,6 +248,9 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         else:
             manifest = scatter(source, folder, p.part_faces, uv=uv)
         t_scatter = time.perf_counter() - t0
+        if uv is True and not manifest.get("uv"):  # refused, as in core, before any level runs
+            raise ValueError("attributes='uv': the file does not give every triangle corner a UV (an OBJ's vt, a "
+                             "PLY's per-vertex texture_u/texture_v, s/t or u/v, a binary PLY's texcoord lists)")
         n_faces = int(manifest["n_faces"])
         target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
         if target > n_faces:  # as an in-core run says it
@@ -332,11 +335,6 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         how = "; attributes='uv' (CLI: --attributes uv) keeps the UVs" if left_out else ""
         warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
                       f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
-    if uv is True and not manifest.get("uv"):
-        warnings.warn("partition: attributes='uv', but the file does not give every triangle corner a UV (an OBJ's "
-                      "vt, a PLY's per-vertex texture_u/texture_v, s/t or u/v, a binary PLY's texcoord lists): the "
-                      "output has none",
-                      stacklevel=stacklevel)
     return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
                    t_measure, folder if not temporary else None, kwargs, stacklevel, UV, texture)
 
