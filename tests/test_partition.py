@@ -266,6 +266,8 @@ def test_repeated_and_degenerate_faces_are_cleaned_as_in_core(tmp_path):
         assert r.stats["degenerate_removed"] == core.stats["degenerate_removed"] == 50
         assert closed_and_consistent(r.faces)
         assert r.stats["distance_s"] > 0  # the measured distance's time, as in core (it was None)
+        # the same samples as in core: a vertex on a border between parts counts once (it counted per part)
+        assert r.stats["distance_samples"] == core.stats["distance_samples"]
     same = qemjax.simplify((V, F), ratio=1.0, partition=Partition(workers=1, part_faces=1500))
     assert len(same.faces) == len(F)
     # the samples at distance 0 exactly (most of an unchanged surface): a median of 0, not the maximum

@@ -198,7 +198,8 @@ def _distance(results: list, diag: float, unit: float) -> dict:
         k = int(np.searchsorted(cum, p / 100 - 1e-12))
         out[f"distance_p{p}"] = float(min(edges[min(k, task.HIST_BINS + 1)], d_max))
     out.update({f"{k}_rel": (v / diag if diag > 0 else None) for k, v in list(out.items())})
-    return out | dict(distance_samples=int(sum(r["samples"] for r in results)))
+    shared = np.unique(np.concatenate([r["shared"] for r in results]))  # a border vertex: one sample
+    return out | dict(distance_samples=int(sum(r["samples"] for r in results)) + len(shared))
 
 
 def _common_cost(runner, specs: list, p: Partition, progress, label: str):

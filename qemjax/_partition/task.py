@@ -143,7 +143,8 @@ def measure_parts(spec: dict) -> dict:
     hold add up to its weight in the whole) from the output ``spec["final"]``, exactly: for each part the
     output is cropped to the part's box grown by a margin, and searched whole where a distance exceeds the
     margin. Returns, over the parts ``spec["parts"]``, the maximum, the weighted sum of squares, the total
-    weight and a weighted histogram."""
+    weight, a weighted histogram, the samples counted and the global ids of the vertex samples on parts'
+    borders (``shared``, not counted: the client counts each once)."""
     from .._mesh.grid_nearest import nearest
     from .._pipeline.refit import _sample_rows
 
@@ -157,10 +158,15 @@ def measure_parts(spec: dict) -> dict:
     edges = np.logspace(HIST_LO, HIST_HI, HIST_BINS + 1)
     # hist[0]: the weight at distance 0 exactly (an unchanged surface), hist[1 + i]: in bin i of ``edges``
     out = dict(max=0.0, sum_sq=0.0, weight=0.0, hist=np.zeros(HIST_BINS + 2), samples=0)
+    shared = []  # the global ids of the sampled vertices other parts also hold: counted once, by the client
     for part in spec["parts"]:
-        V, F, _, _ = pieces.load(part)
+        V, F, gid, border = pieces.load(part)
         P, w, _ = _sample_rows((V - centre) / unit, F, np.zeros(len(V), np.int64))
         keep = w > 0
+        if border is not None:
+            held = keep[:len(V)] & border
+            shared.append(gid[held])
+            out["samples"] -= int(np.count_nonzero(held))
         P, w = P[keep], w[keep]
         if not len(P):
             continue
@@ -179,4 +185,5 @@ def measure_parts(spec: dict) -> dict:
                                    weights=w, minlength=HIST_BINS + 2)
         out["samples"] += int(len(P))
     out["hist"] = out["hist"].tolist()
-    return out | dict(peak_rss=peak_rss())
+    return out | dict(shared=np.unique(np.concatenate(shared)) if shared else np.zeros(0, np.int64),
+                      peak_rss=peak_rss())
