@@ -231,6 +231,9 @@ def test_same_bytes_whatever_the_read_size(tmp_path, monkeypatch):
     lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in V.tolist()] + ["vn 0 0 1"]
     lines += ["f " + " ".join(f"{v + 1}//1" for v in quad) for quad in Q.tolist()]
     (tmp_path / "t.obj").write_text("\n".join(lines))  # no newline at the end
+    # the same, each face line continued over two (a backslash ending the first), the last one too
+    cont = [w.replace(" ", " \\\n", 2).replace(" \\\n", " ", 1) if w[:2] == "f " else w for w in lines]
+    (tmp_path / "c.obj").write_text("\r\n".join(cont[:9]) + "\r\n" + "\n".join(cont[9:]) + " \\\n")
     tm.export(tmp_path / "a.stl", file_type="stl_ascii")
     tm.export(tmp_path / "a.ply", encoding="ascii")
     rec = np.zeros(len(Q), [("n", "u1"), ("i", "<i4", (4,))])
@@ -239,7 +242,8 @@ def test_same_bytes_whatever_the_read_size(tmp_path, monkeypatch):
                        "property double x\nproperty double y\nproperty double z\n"
                        f"element face {len(Q)}\nproperty list uchar int vertex_indices\nend_header\n",
                        V, rec.tobytes())
-    for name in ("t.obj", "a.stl", "a.ply", "q.ply"):
+    first = {}
+    for name in ("t.obj", "c.obj", "a.stl", "a.ply", "q.ply"):
         seen = []
         for size in (1 << 24, 1000):
             monkeypatch.setattr(text, "BLOCK", size)
@@ -251,6 +255,8 @@ def test_same_bytes_whatever_the_read_size(tmp_path, monkeypatch):
             seen.append([(scratch / p["file"]).read_bytes() for p in manifest["parts"]])
             assert manifest["n_faces"] == len(T) and manifest["n_vertices"] == len(V), name
         assert seen[0] == seen[1], name
+        first[name] = seen[0]
+    assert first["c.obj"] == first["t.obj"]  # continued lines read as one, whatever the blocks
 
 
 def test_coincident_centroids_are_split_in_input_order(tmp_path):

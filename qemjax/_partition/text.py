@@ -36,8 +36,9 @@ _MESSAGES = {
 UV_NAME = "texture coordinates (vt)"  # how a warning names an OBJ's UVs
 
 
-def blocks(path: Path, start: int = 0):
-    """Blocks of whole lines (bytes ending with a newline) from byte ``start``."""
+def blocks(path: Path, start: int = 0, continued: bool = False):
+    """Blocks of whole lines (bytes ending with a newline) from byte ``start``; ``continued``: a line ending
+    with a backslash goes on in the next line (OBJ), so a block never ends after one."""
     with open(path, "rb") as f:
         f.seek(start)
         carry = b""
@@ -49,6 +50,8 @@ def blocks(path: Path, start: int = 0):
                 return
             data = carry + data
             cut = data.rfind(b"\n") + 1
+            while continued and cut and data.endswith((b"\\\n", b"\\\r\n"), 0, cut):
+                cut = data.rfind(b"\n", 0, cut - 1) + 1
             carry = data[cut:]
             if cut:
                 yield data[:cut]
@@ -102,6 +105,7 @@ def _finish_weld(welder: Welder, scratch: Path, fmt: str, raw: Appender | None, 
     return scratch_source(scratch, fmt, True, n, raw.rows)
 
 
+_CONTINUED = re.compile(rb"\\\r?\n")  # a backslash ending a line: it goes on in the next
 # a `v` line with more than three values: its vertex colour (x y z r g b), which a partitioned run drops
 _COLOURED = re.compile(rb"(?m)^v[ \t]+\S+[ \t]+\S+[ \t]+\S+[ \t]+[^\s#]")
 
@@ -118,7 +122,12 @@ def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
     bare = False  # a corner names no texture coordinate, or a vt line is not a u and a v
     seen_vn = seen_colour = False
     try:
-        for block in blocks(path):
+        for block in blocks(path, continued=True):
+            lines = block.count(b"\n")
+            if b"\\\n" in block or b"\\\r\n" in block:  # continued lines, joined as trimesh joins them (in
+                # core); a refusal's line number in such a block counts the joined lines as one
+                block = _CONTINUED.sub(b" ", block)
+                block += b"" if block.endswith(b"\n") else b"\n"  # the file's last line was continued
             seen_vn = seen_vn or block.startswith(b"vn ") or b"\nvn " in block
             seen_colour = seen_colour or _COLOURED.search(block) is not None
             if line0 == 0 and is_binary(block[:1024]):
@@ -143,7 +152,7 @@ def read_obj(path: Path, scratch: Path, uv_wanted: bool = False):
             bare = bare or bool(len(tuv) and tuv.min() < 0)  # NO_UV, BAD_UV
             nv += k
             nvt += kt
-            line0 += block.count(b"\n")
+            line0 += lines
     finally:
         raw.close()
         uv.close()
