@@ -213,6 +213,14 @@ def test_units_errors_in_squared_mesh_units_and_curvature_in_inverse():
     np.testing.assert_allclose(b.history.costs, 100 * a.history.costs, rtol=1e-6)
     np.testing.assert_allclose(b.history.parts["curvature"], a.history.parts["curvature"] / 100, rtol=1e-6)
     np.testing.assert_allclose(b.max_error, 100 * a.max_error, rtol=1e-6)
+    # far out in the extents a run takes ([1e-150, 1e150]): the same contractions; a weight in mesh units
+    # past float64's range is reported as inf (computing it raised OverflowError after the run)
+    for s in (2.0**260, 2.0**-250):  # about 1e78 and 1e-75, powers of two: the same bits in the unit frame
+        c = qemjax.simplify((V * s, F), target_faces=400, method="esqem")
+        assert np.array_equal(c.faces, a.faces) and np.array_equal(c.vertices, a.vertices * s)
+        curvature = [w for _, (_, w) in c.stats["reweights"]]  # 1/length²: its weight scales by length⁴
+        assert curvature == ([math.inf] * len(curvature) if s > 1 else
+                             pytest.approx([w * s**4 for _, (_, w) in a.stats["reweights"]], rel=1e-15))
 
 
 @pytest.mark.parametrize("scheduler", SCHEDULERS)

@@ -612,10 +612,20 @@ def _stats(job: Job, out: outcome.Outcome, g: Geometry, mesh: _Mesh, refit: _Ref
     if out.faces_per_round is not None:
         stats["faces_per_round"] = out.faces_per_round
     if out.reweights:  # (faces, weights of the parts in mesh units) each time they were set
-        stats["reweights"] = [(f, [float(x) * frame.scale ** (2 - u) for x, u in zip(w, model.part_units)])
+        stats["reweights"] = [(f, [_times_power(x, frame.scale, 2 - u) for x, u in zip(w, model.part_units)])
                               for f, w in out.reweights]
     stats.update({k: v for k, v in extra.items() if v is not None})
     return stats
+
+
+def _times_power(x: float, base: float, power: int) -> float:
+    """x × base**power as a float: inf where it lies past float64's range (a power that overflows raises in
+    Python, where the product would give inf), 0 for x = 0."""
+    try:
+        factor = base ** power
+    except OverflowError:
+        factor = math.inf
+    return float(x) * factor if x else 0.0
 
 
 class RefitTask(NamedTuple):
