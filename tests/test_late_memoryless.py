@@ -201,11 +201,12 @@ def test_new_weights_do_not_recompile():
     assert r.stats["compilations"] == 0, r.stats["compilations"]
 
 
-@pytest.mark.parametrize("what", ["uv", "feature_edges", "regularize"])
+@pytest.mark.parametrize("what", ["uv", "feature_edges", "regularize", "max_error"])
 def test_attributes_feature_edges_or_terms_keep_the_run_summed(what):
     """The memoryless rows carry no attribute terms, do not track feature edges, and the regularisation and
     area terms price the summed quadrics' placement: with any, the run is the summed one throughout
-    (attributes kept), the stats say why, and a call that asked for the switch is warned."""
+    (attributes kept), the stats say why, and a call that asked for the switch is warned. So is a run
+    without a face target (max_error alone), whose switch would come at a multiple of it."""
     import trimesh
 
     V, F = shapes.grid(16)
@@ -215,11 +216,13 @@ def test_attributes_feature_edges_or_terms_keep_the_run_summed(what):
         mesh = trimesh.Trimesh(V, F, process=False, visual=trimesh.visual.TextureVisuals(uv=V[:, :2].copy()))
     elif what == "feature_edges":
         kw = dict(feature_edges=np.array([[0, 1], [1, 2]]))
-    else:
+    elif what == "regularize":
         kw = dict(regularize=0.1)
+    stop = dict(max_error=1e-5) if what == "max_error" else dict(ratio=0.2)
     with pytest.warns(UserWarning, match="late_memoryless is not applied"):
-        res = qemjax.simplify(mesh, ratio=0.2, **LATE, **kw)
-    plain = qemjax.simplify(mesh, ratio=0.2, late_memoryless=0, **kw)
+        res = qemjax.simplify(mesh, **stop, **LATE, **kw)
+    plain = qemjax.simplify(mesh, **stop, late_memoryless=0, **kw)
+    assert len(res.faces) < len(F)
     assert res.vertices.tobytes() == plain.vertices.tobytes() and np.array_equal(res.faces, plain.faces)
     assert "memoryless_from_faces" not in res.stats and res.stats["late_memoryless_off"]
     assert res.stats["model"]["late_memoryless"] == 0

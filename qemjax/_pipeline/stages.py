@@ -239,7 +239,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         attrs = None
     method_obj = setup.method_obj
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
-    why = _late_off(method_obj, attrs, feature_edges, setup.scheduler)
+    why = _late_off(method_obj, attrs, feature_edges, setup.scheduler,
+                    target_faces is not None or ratio is not None or bounded)
     if why:  # the whole run on the summed quadrics, and the stats say so
         method_obj = dataclasses.replace(method_obj, late_memoryless=0.0, volume_weight=0.0)
         model = _costs.build(method_obj)
@@ -305,10 +306,13 @@ def frame_means(geo: Geometry) -> tuple:
     return area_mean * r2, e2_mean * r2
 
 
-def _late_off(method_obj, attrs, feature_edges, scheduler: str) -> str | None:
-    """Why a method that turns memoryless late (`_schedulers.late`) stays summed in this run, or None."""
+def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: bool) -> str | None:
+    """Why a method that turns memoryless late (`_schedulers.late`) stays summed in this run, or None.
+    ``face_target``: the run has one (a ratio, target_faces, or max_distance's targets)."""
     if not getattr(method_obj, "switches_late", False):
         return None
+    if not face_target:
+        return "there is no face target (max_error alone), and the switch comes at a multiple of it"
     if scheduler not in _schedulers.BUILT_IN:
         return f"the scheduler {scheduler!r} is not a built-in one (the switch runs the scheduler a second time)"
     if method_obj.regularize or method_obj.area_weight:
