@@ -306,6 +306,18 @@ def test_colour_term_lowers_colour_error():
     assert dev[1.0] < 0.9 * dev[0.0], dev
 
 
+@pytest.mark.parametrize("scheduler", ["greedy", "parallel"])
+def test_kept_colours_stay_in_the_unit_cube(scheduler):
+    """A colour placed by its quadric's optimum (the colour term) could fall just outside [0, 1] (a green of
+    -0.002 here), where `SimplifyResult.colors` promises RGBA in [0, 1]."""
+    V, F = shapes.bumpy_sphere(4)
+    rgb = np.clip(0.5 + 0.5 * V / np.abs(V).max(), 0, 1)
+    mesh = trimesh.Trimesh(V, F, vertex_colors=(np.c_[rgb, np.ones(len(V))] * 255).astype(np.uint8), process=False)
+    r = qemjax.simplify(mesh, ratio=0.1, method="classic", scheduler=scheduler, attribute_weights=1.0)
+    assert r.colors is not None and r.colors.min() >= 0.0 and r.colors.max() <= 1.0
+    assert r.colors[:, :3].min() < 0.02 and r.colors[:, :3].max() > 0.98  # the range is kept, not squeezed
+
+
 def test_attribute_model_with_rank_placement_and_terms():
     """placement='rank' and the terms (regularize, area_weight) wrap the attribute model; repeated calls
     compile nothing new (the terms take its price as a static argument: one object per shape)."""

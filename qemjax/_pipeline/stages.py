@@ -491,6 +491,8 @@ def _appearance(job: Job, mesh: _Mesh) -> dict:
     if "normal" in vals:
         nn = np.linalg.norm(vals["normal"], axis=1, keepdims=True)
         vals["normal"] = vals["normal"] / np.where(nn > 0, nn, 1.0)
+    if "color" in vals:  # a quadric's optimum may lie just outside the colour cube, as a position outside its ring
+        vals["color"] = np.clip(vals["color"], 0.0, 1.0)
     return dict(uv=vals.get("uv"), colors=vals.get("color"), normals=vals.get("normal"), wedge_faces=wf,
                 wedge_vertex=wv, material=attrs.material, input_wedge_faces=attrs.corners)
 
