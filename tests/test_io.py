@@ -88,14 +88,26 @@ def _colored(kind):
     return trimesh.Trimesh(V, F, visual=trimesh.visual.TextureVisuals(uv=uv, material=material), process=False)
 
 
-@pytest.mark.parametrize("kind,dropped", [("vertex", ["vertex_colors"]), ("face", ["face_colors"]),
-                                          ("texture", ["uv", "material"])])
-def test_dropped_attributes_warn_once_and_are_recorded(kind, dropped):
-    """attributes=None keeps positions only: what the mesh carried is named once."""
-    with pytest.warns(UserWarning, match="which qemjax does not keep") as record:
-        r = qemjax.simplify(_colored(kind), target_faces=40, attributes=None)
-    assert len(record) == 1 and ", ".join(dropped) in str(record[0].message)
-    assert r.stats["dropped"] == dropped and r.uv is None and r.colors is None
+@pytest.mark.parametrize("kind,dropped,who", [("vertex", ["vertex_colors"], "this run"),
+                                              ("face", ["face_colors"], "qemjax"),
+                                              ("texture", ["uv", "material"], "this run"),
+                                              ("normals", ["normals"], "this run")])
+def test_dropped_attributes_warn_once_and_are_recorded(kind, dropped, who):
+    """attributes=None keeps positions only: what the mesh carried is named once, stored normals too (they
+    went without a word); a kind another `attributes=` keeps is not kept by "this run", face colours by
+    qemjax at all (and asking for colours says they are per face)."""
+    mesh = _colored(kind) if kind != "normals" else trimesh.Trimesh(
+        *shapes.icosphere(1), vertex_normals=shapes.icosphere(1)[0], process=False)
+    with pytest.warns(UserWarning, match=f"{', '.join(dropped)}, which {who} does not keep") as record:
+        r = qemjax.simplify(mesh, target_faces=40, attributes=None)
+    assert len(record) == 1 and "keeps them" not in str(record[0].message)  # attributes=None: no hint
+    assert r.stats["dropped"] == dropped and r.uv is None and r.colors is None and r.normals is None
+    if kind == "normals":  # asked for other kinds: the hint names the one that keeps it
+        with pytest.warns(UserWarning, match=r"has positions and faces only .*attributes='normal' .*keeps them"):
+            assert qemjax.simplify(mesh, target_faces=40, attributes=()).stats["dropped"] == ["normals"]
+    if kind == "face":
+        with pytest.raises(ValueError, match="its colours are per face"):
+            qemjax.simplify(mesh, target_faces=40, attributes="color")
 
 
 @pytest.mark.parametrize("kind,kept", [("vertex", "colors"), ("texture", "uv")])

@@ -64,9 +64,31 @@ def dropped_attributes(obj) -> list[str]:
     return out + list(getattr(obj, "metadata", {}).get("qemjax_unread", []))  # what the reader could not read
 
 
-def _warn_dropped(dropped: list[str], what: str, stacklevel: int):
-    warnings.warn(f"{what} carries {', '.join(dropped)}, which qemjax does not keep: the result has "
-                  "positions and faces only (stats['dropped'] lists them)", stacklevel=stacklevel + 1)
+# the dropped names that `simplify(attributes=...)` can keep, and the kind that keeps each
+_KEEPS = {"uv": "uv", "vertex_colors": "color", "normals": "normal"}
+
+
+def _warn_dropped(dropped: list[str], what: str, stacklevel: int, kept=None, hint: bool = True):
+    """One warning naming what is not kept. ``kept``: for a run (`prepare`), the kinds it keeps; the warning
+    then says which `attributes=` would keep the rest (``hint``: not for a run given attributes=None, which
+    asked for positions alone: `lod_chain`'s levels, a peer's input). None: a reader of positions only
+    (`load`)."""
+    if kept is None:
+        warnings.warn(f"{what} carries {', '.join(dropped)}, which qemjax does not keep: the result has "
+                      "positions and faces only (stats['dropped'] lists them)", stacklevel=stacklevel + 1)
+        return
+    has = f"positions, faces and {', '.join(kept)}" if kept else "positions and faces only"
+    could = [d for d in dropped if d in _KEEPS or (d == "material" and "uv" in dropped)]  # a material with its UVs
+    cannot = [d for d in dropped if d not in could]
+    said = ([f"{', '.join(cannot)}, which qemjax does not keep"] if cannot else []) + (
+        [f"{', '.join(could)}, which this run does not keep"] if could else [])
+    kinds = tuple(kept) + tuple(_KEEPS[d] for d in could if d in _KEEPS)
+    how = ""
+    if hint and len(kinds) > len(kept):
+        arg = repr(kinds[0]) if len(kinds) == 1 else repr(kinds)
+        how = f"; attributes={arg} (CLI: --attributes {','.join(kinds)}) keeps them"
+    warnings.warn(f"{what} carries {' and '.join(said)}: the result has {has} (stats['dropped'] lists them){how}",
+                  stacklevel=stacklevel + 1)
 
 
 def _as_trimesh(obj):
@@ -340,7 +362,9 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     (V, F), dropped, tm = _as_arrays(mesh, keep_trimesh=True)
     notes = {}
     available, material = _wedges.from_trimesh(tm, notes) if tm is not None else ({}, None)
-    kept, _ = _wedges.select(available, attributes)
+    kept, _ = _wedges.select(available, attributes, dropped)
+    if "normal" in available and "normal" not in kept:  # stored normals: named as the other kinds are
+        dropped = dropped + ["normals"]
     if texture is not None:
         if "uv" not in kept:
             raise ValueError("texture= needs UVs: the mesh carries none (or attributes= does not keep them)")
@@ -370,7 +394,7 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
             names.add("material")
         dropped = [d for d in dropped if d not in names]
     if dropped and not report.get("not_kept_seams"):
-        _warn_dropped(dropped, name, stacklevel=stacklevel + 1)
+        _warn_dropped(dropped, name, stacklevel=stacklevel + 1, kept=list(kept), hint=attributes is not None)
     report["dropped"] = dropped
     if "normal" in kept:
         report["normals_recomputed"] = notes.get("normals_recomputed", 0)

@@ -171,9 +171,11 @@ def warn_seamed(seamed: dict, others: list, what: str, stacklevel: int):
                   f"attributes={arg} (CLI: --attributes {cli}) keeps them{also}", stacklevel=stacklevel + 1)
 
 
-def select(available: dict, attributes) -> tuple[dict, list]:
+def select(available: dict, attributes, unkept: list = ()) -> tuple[dict, list]:
     """The kinds ``attributes`` asks for among those available: 'auto' (all), None / () (none), a kind or
-    a tuple of kinds ('uv', 'color', 'normal'). Returns (kept {kind: values}, not kept [kinds])."""
+    a tuple of kinds ('uv', 'color', 'normal'). Returns (kept {kind: values}, not kept [kinds]).
+    ``unkept``: what the mesh carries that no kind keeps (`_io.mesh.dropped_attributes`), for the error
+    when a kind asked for is missing."""
     if attributes == "auto":
         want = set(available)
     elif attributes is None or attributes is False:
@@ -187,8 +189,10 @@ def select(available: dict, attributes) -> tuple[dict, list]:
             raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {bad[0]!r}")
         missing = [a for a in req if a not in available]
         if missing:
+            face = "; its colours are per face, and qemjax keeps colours per vertex" if (
+                "color" in missing and "face_colors" in unkept) else ""
             raise ValueError(f"attributes={attributes!r}: the mesh carries no {', '.join(missing)} "
-                             f"(it carries {', '.join(available) or 'none'})")
+                             f"(it carries {', '.join(available) or 'none'}){face}")
         want = set(req)
     return {k: v for k, v in available.items() if k in want}, [k for k in available if k not in want]
 
