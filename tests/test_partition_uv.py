@@ -163,6 +163,41 @@ def test_per_corner_uvs_of_a_binary_ply(tmp_path):
     assert np.median(deviation(res)) < 1e-3
 
 
+@pytest.mark.parametrize("kind", ["soup", "seams", "texcoord soup"])
+def test_a_ply_that_repeats_positions_is_welded_as_in_core(tmp_path, kind):
+    """A PLY whose vertices repeat positions (a triangle soup; a mesh split at its UV seams, per-vertex UVs;
+    a soup whose corners' UVs are texcoord lists): in core the copies are welded; partitioned they were
+    vertices of different numbers, neither shared by two parts, which the parts moved apart (a crack; the
+    last level failed). Now welded as in core: closed in, closed out, the UVs kept with their seams."""
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
+    uv, corner = af.spherical_uv(m)
+    path = tmp_path / "repeats.ply"
+    if kind == "soup":
+        _ply(path, V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3), np.zeros((3 * len(F), 2)), True)
+    elif kind == "seams":  # a vertex per (position, UV): the seam's positions twice
+        wv = np.zeros(len(uv), np.int64)
+        wv[corner] = F
+        _ply(path, V[wv], corner, uv, True)
+    else:
+        head = ["ply", "format binary_little_endian 1.0", f"element vertex {3 * len(F)}", "property float x",
+                "property float y", "property float z", f"element face {len(F)}",
+                "property list uchar int vertex_indices", "property list uchar float texcoord", "end_header"]
+        rows = np.zeros(len(F), [("n", "u1"), ("i", "<i4", (3,)), ("k", "u1"), ("t", "<f4", (6,))])
+        rows["n"], rows["i"], rows["k"], rows["t"] = 3, np.arange(3 * len(F)).reshape(-1, 3), 6, uv[corner].reshape(-1, 6)
+        path.write_bytes(("\n".join(head) + "\n").encode() + V[F].reshape(-1, 3).astype("<f4").tobytes() + rows.tobytes())
+    attributes = None if kind == "soup" else "uv"
+    core = qemjax.simplify(str(path), ratio=0.1, attributes=attributes)
+    res = qemjax.simplify(str(path), ratio=0.1, attributes=attributes, partition=Partition(workers=1, part_faces=1000))
+    assert res.stats["partition"]["welded"] and len(res.stats["partition"]["groups_per_level"]) > 1
+    assert len(res.faces) == len(core.faces) == round(0.1 * len(F)) and closed_and_consistent(res.faces)
+    assert len(res.vertices) == len(core.vertices)
+    if attributes:
+        assert res.uv is not None
+        seam = np.bincount(res.wedge_vertex, minlength=len(res.vertices)) > 1
+        assert 20 < seam.sum() < 0.2 * len(res.vertices)  # the seam, kept, and only there
+
+
 def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
     """``attributes="auto"`` (the default) keeps a file's UVs when its material names a texture image that
     exists, and the result carries that image; without one they are dropped, and named."""

@@ -51,12 +51,13 @@ def any_at(mask: np.ndarray, idx: np.ndarray) -> np.ndarray:
 def row_index(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """(len(B),) int64: for each row of B (k,3) float64, the index of the first row of A (n,3) float64 with
     the same bytes (exact positions), -1 where none has."""
+    if len(A) == 0:
+        return np.full(len(B), -1, np.int64)
     ka = np.ascontiguousarray(A, np.float64).view(np.dtype((np.void, 24))).ravel()
     kb = np.ascontiguousarray(B, np.float64).view(np.dtype((np.void, 24))).ravel()
     order = np.argsort(ka, kind="stable")
-    at = np.clip(np.searchsorted(ka[order], kb), 0, max(len(ka) - 1, 0))
-    hit = ka[order][at] == kb if len(ka) else np.zeros(len(kb), bool)
-    return np.where(hit, order[at], -1)
+    at = np.minimum(np.searchsorted(ka[order], kb), len(ka) - 1)
+    return np.where(ka[order][at] == kb, order[at], -1)
 
 
 def sorted_triples(F: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from .._io.mesh import clean_faces
+from . import indexed
 from .cells import Bins, Plan, codes, quantize
 from .readers import open_source, texture_of
 from .source import CORNER_UV, FACES, UV, VERTICES, Ragged, Source, remove
@@ -176,6 +177,8 @@ def _read(path, scratch: Path, part_faces: int, step: int, name: str, uv: bool):
     src = open_source(path, scratch, uv)
     if src.n_faces == 0:
         raise ValueError(f"{name}: the mesh has no faces")
+    if not src.welded and indexed.repeats(src, step):  # a PLY that repeats positions: welded, as in core
+        src = indexed.weld(src, scratch, step)
     box = _bounds(src, step)
     cells = _cells(src, *box, step)
     try:
@@ -202,7 +205,7 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     OBJ's ``vt``, a PLY's per-vertex ``texture_u``/``s``/``u`` and their pairs, a binary PLY's ``texcoord``
     lists), and the manifest says ``uv`` and names the ``texture`` image the file names.
 
-    STL and OBJ positions are welded by exact value; PLY is taken as indexed. Unused vertices are
+    Positions are welded by exact value (a PLY's only when some repeat: `indexed`). Unused vertices are
     dropped, the others keep their order. ``progress(done_faces, total_faces)`` is called after each
     chunk of the binning pass. The same file gives the same bytes whatever ``chunk_faces``.
     """
@@ -238,7 +241,7 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(scratch / "weld", ignore_errors=True)
-        for leftover in (VERTICES, FACES, UV, CORNER_UV, "faces_raw.i64", "ids.i64"):
+        for leftover in (VERTICES, FACES, UV, CORNER_UV, "faces_raw.i64", "ids.i64", *indexed.WELDED):
             remove(scratch / leftover)
 
     def write(p):

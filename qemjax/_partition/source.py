@@ -109,8 +109,8 @@ class Source:
 
     def corner_uvs(self, lo: int, hi: int, F: np.ndarray) -> np.ndarray:
         """(k,3,2) float64 UVs of the corners of triangles lo..hi (``F``: their vertices, `faces`)."""
-        if self.face_uv is not None:
-            return self.face.read(lo, hi)[self.face_uv].astype(np.float64).reshape(-1, 3, 2)
+        if self.face_uv is not None:  # (``uv``: the file's face records, the faces' own block until a weld)
+            return self.uv.read(lo, hi)[self.face_uv].astype(np.float64).reshape(-1, 3, 2)
         idx = (F if self.corner_uv is None else self.corner_uv.read(lo, hi)["i"]).reshape(-1)
         used, inverse = np.unique(idx, return_inverse=True)
         r = self.uv.gather(used)

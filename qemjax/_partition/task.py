@@ -43,7 +43,9 @@ def _gids_out(res, V, gid, locked) -> np.ndarray:
         return np.where(locked[src] & (np.asarray(res.vertices) == V[src]).all(1), gid[src], -1)
     # the run welded coincident vertices: find the locked ones by their position
     at = row_index(V[locked], res.vertices)
-    return np.where(at >= 0, gid[locked][at], -1)
+    out = np.full(len(at), -1, np.int64)
+    out[at >= 0] = gid[locked][at[at >= 0]]  # (a group with nothing locked: none)
+    return out
 
 
 def corner_wedges(F: np.ndarray, UV: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
