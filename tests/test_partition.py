@@ -239,6 +239,10 @@ def test_quality_near_the_in_core_run(mesh, in_process):
 @pytest.mark.slow  # starts worker processes
 def test_same_bits_on_two_local_workers(in_process, two_workers):
     assert digest(two_workers) == digest(in_process)
+    # the measured distance too: its sums went over tasks of 4 × the workers' parts, in another order
+    assert in_process.stats["partition"]["parts"] > 8
+    for key in ("distance_max", "distance_rms", "distance_p50", "distance_p95", "distance_p99", "distance_samples"):
+        assert two_workers.stats[key] == in_process.stats[key], key
     assert two_workers.stats["partition"]["where"] == "2 local processes"
 
 

@@ -53,6 +53,7 @@ def _input_key(mesh) -> str:
 
 
 # what a run writes in its scratch folder: level folders, the reading's work folders and these files
+MEASURE_TASKS = 32  # the measured distance's tasks (fewer for fewer parts): fixed, whatever the workers
 _OWN_FOLDERS = re.compile(r"level\d+|tmp|weld")
 _OWN_FILES = {"manifest.json", "run.json", "stats.json", "output.npz", "input.ply", VERTICES, FACES, UV, CORNER_UV,
               "faces_raw.i64", "ids.i64"}
@@ -312,7 +313,9 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             lo, hi = np.array(manifest["bbox"][0]), np.array(manifest["bbox"][1])
             centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
             files = [str(folder / part["file"]) for part in manifest["parts"]]
-            batches = np.array_split(np.arange(len(files)), min(len(files), 4 * runner.workers))
+            # as many tasks whatever the workers: each sums its parts in order, the client the tasks in order,
+            # so the sums (the rms, the histogram) are the same bits on 1 worker or 64
+            batches = np.array_split(np.arange(len(files)), min(len(files), MEASURE_TASKS))
             mspecs = [dict(parts=[files[i] for i in b], final=str(final), centre=centre.tolist(), unit=unit)
                       for b in batches]
             dist = _distance(_run_level(runner, "measure_parts", mspecs, progress, "distance"),
