@@ -29,7 +29,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 CASE_IDS = ["default/parallel/bumpy-sphere-3/0.1", "default/greedy/bumpy-sphere-3/0.1",
             "default/parallel/torus-32x16/0.1", "default/greedy/torus-32x16/0.1",
-            "parallel/bumpy-sphere-4/0.1", "greedy/torus-32x16/0.1", "default/cow/0.1"]
+            "parallel/bumpy-sphere-4/0.1", "greedy/torus-32x16/0.1", "default/cow/0.1", "area/greedy/cow/0.1",
+            "esqem/greedy/cow/0.1"]
 CODE = r"""
 import hashlib, json, sys, tempfile, warnings
 sys.path.insert(0, sys.argv[1])

@@ -34,6 +34,7 @@ import numpy as np
 from .._mesh import topology as topo
 from .._kernels.batching import DTYPE
 from .._kernels import kernel
+from .._kernels.fixed import cross3, tree_sum
 from .base import MeshInput, Method, require_nonnegative
 
 RING_CAP = 128  # wider rings (valence ~60 and up) take the host path
@@ -49,7 +50,7 @@ def affine_areas(pa, pb, pos, moving):
     product affine in s, a face with two (a dead face) has zero area at every s."""
     def cross_at(c):
         p = jnp.where(moving[..., None], c, pos)
-        return jnp.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        return cross3(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     u = cross_at(pa)
     return u, cross_at(pb) - u
 
@@ -59,9 +60,15 @@ def _norm(v):
     return jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
+def _area(pos, mask):
+    """The ring's area before: its faces' (R,3,3) corners, mask (R,) the live ones. Sums in a fixed order
+    (`_kernels.fixed`), so that a pair's price is the same bits on any CPU and in any batch."""
+    return 0.5 * tree_sum(jnp.where(mask, _norm(cross3(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]).T), 0.0))
+
+
 def _delta(s, uw):
     u, w, mask, before = uw
-    return before - 0.5 * jnp.sum(jnp.where(mask, _norm(u + s * w), 0.0))
+    return before - 0.5 * tree_sum(jnp.where(mask, _norm(u + s * w), 0.0))
 
 
 def _signed_delta(s, args):
@@ -75,7 +82,7 @@ def _slope(s, uw):
     v = u + s * w
     n = _norm(v)
     dot = v[0] * w[0] + v[1] * w[1] + v[2] * w[2]
-    return 0.5 * jnp.sum(jnp.where(mask & (n > 0), dot / jnp.where(n > 0, n, 1.0), 0.0))
+    return 0.5 * tree_sum(jnp.where(mask & (n > 0), dot / jnp.where(n > 0, n, 1.0), 0.0))
 
 
 def _bisect(fn, uw, lo, hi, tol):
@@ -90,9 +97,7 @@ def solve_pair(pa, pb, pos, moving, mask, lo, hi, tol):
     the allowed interval lo ≤ hi in [0, 1]. Returns (s, |ΔS(s)|, signed ΔS(s), branch): branch 0 root,
     1 peak (s*), 2 end, 3 pinned (lo == hi)."""
     u, w = affine_areas(pa, pb, pos, moving)
-    twice = jnp.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]).T
-    before = 0.5 * jnp.sum(jnp.where(mask, _norm(twice), 0.0))
-    uw = (u.T, w.T, mask, before)  # (3, R): components first
+    uw = (u.T, w.T, mask, _area(pos, mask))  # (3, R): components first
     peak = _bisect(_slope, uw, lo, hi, tol)
     d_lo, d_hi, d_peak = _delta(lo, uw), _delta(hi, uw), _delta(peak, uw)
     # ΔS rises on [lo, s*] and falls on [s*, hi]: both roots in one batched bisection (±ΔS, increasing)
@@ -257,9 +262,7 @@ def _merge(VS, pairs):
 def delta_at_kept(pa, pb, pos, moving, mask):
     """One pair: |ΔS| when both endpoints go to pa (s = 0 of the pair's family; locked vertices)."""
     u, w = affine_areas(pa, pb, pos, moving)
-    twice = jnp.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]).T
-    before = 0.5 * jnp.sum(jnp.where(mask, _norm(twice), 0.0))
-    return jnp.abs(_delta(jnp.zeros((), pa.dtype), (u.T, w.T, mask, before)))
+    return jnp.abs(_delta(jnp.zeros((), pa.dtype), (u.T, w.T, mask, _area(pos, mask))))
 
 
 @kernel

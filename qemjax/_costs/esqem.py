@@ -47,6 +47,7 @@ import numpy as np
 from .._kernels.batching import DTYPE, chunks
 from .._mesh.incidence import FaceLists
 from .._kernels import kernel, placement
+from .._kernels.fixed import cross3, dot3, norm3, tree_sum
 from . import at_kept, ring
 from .base import MeshInput, require_nonnegative
 from .qem import QEM
@@ -63,10 +64,10 @@ def vertex_curvature(pos, mask, boundary):
     are faces), boundary: whether v is on a boundary. Returns (K(v), A(v)): the angle-deficit Gaussian
     curvature (0 without area) and the area of its faces."""
     u, w = pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]
-    cr = jnp.linalg.norm(jnp.cross(u, w), axis=-1)
-    theta = jnp.arctan2(cr, jnp.sum(u * w, -1))  # the corner angle at v, in [0, π]
-    angles = jnp.sum(jnp.where(mask, theta, 0.0))
-    area = 0.5 * jnp.sum(jnp.where(mask, cr, 0.0))
+    cr = norm3(cross3(u, w))  # sums in a fixed order (`_kernels.fixed`): the same bits on any CPU
+    theta = jnp.arctan2(cr, dot3(u, w))  # the corner angle at v, in [0, π]
+    angles = tree_sum(jnp.where(mask, theta, 0.0))
+    area = 0.5 * tree_sum(jnp.where(mask, cr, 0.0))
     deficit = jnp.where(boundary, math.pi, 2.0 * math.pi) - angles
     tiny = jnp.finfo(area.dtype).tiny
     return jnp.where(area > tiny, 3.0 * deficit / jnp.maximum(area, tiny), 0.0), area
