@@ -168,6 +168,7 @@ def _add_options(p: argparse.ArgumentParser, hidden=()):
     """Every option of `_cli_options`; those in ``hidden`` are parsed but left out of the help (the
     command refuses them with its reason). Booleans are --x / --no-x; numbers that may be None take 'none'."""
     docs = _docs()
+    default_method = _costs.PRESETS["default"]()  # its settings differ from the fields' own defaults
     for name, (hint, default) in _cli_options().items():
         spec = dict(OPTIONS.get(name, {}))
         if callable(spec.get("choices")):
@@ -180,7 +181,10 @@ def _add_options(p: argparse.ArgumentParser, hidden=()):
             spec.setdefault("metavar", "N" if kind is int else "X")
         if "help" not in spec:
             spec["help"] = _doc_help(name, docs)
-        spec["help"] += f" (default: {spec.pop('shown', default)})"
+        shown = spec.pop("shown", default)
+        preset = getattr(default_method, name, shown)  # what the command runs without --method
+        also = f"; {preset} with the default method" if preset != shown and name != "method" else ""
+        spec["help"] += f" (default: {shown}{also})"
         if name in hidden:
             spec["help"] = argparse.SUPPRESS
         p.add_argument("--" + name.replace("_", "-"), dest=name, default=argparse.SUPPRESS, **spec)

@@ -177,6 +177,18 @@ def test_every_simplify_keyword_and_setting_is_reachable_or_listed():
     assert set(_cli.OPTIONS) <= set(actions), f"stale OPTIONS: {set(_cli.OPTIONS) - set(actions)}"
 
 
+def test_help_gives_the_default_methods_settings():
+    """The defaults `--help` shows are the fields' own; where the method the command runs without --method
+    sets another, the help says so (it showed QEM()'s alone: --boundary-weight 100, --refit 0)."""
+    actions = _simplify_actions()
+    default = qemjax.QEM.default()
+    for name in ("boundary_weight", "refit", "polish", "sliver_moves", "quality_threshold", "area_power",
+                 "late_memoryless"):
+        text = " ".join(actions[name].help.split())
+        assert f"; {getattr(default, name)} with the default method)" in text, (name, text)
+    assert "with the default method" not in actions["flip_angle"].help  # the same in both
+
+
 def test_options_reach_simplify(src, tmp_path, monkeypatch):
     """A command line with every option passes each one on, converted; options not given are not passed."""
     seen = []
