@@ -317,6 +317,12 @@ def test_new_numbers_do_not_recompile():
     (dict(memoryless=True, method="esqem"), "method='qem' only"),
     (dict(memoryless=True, regularize=0.5), "method='qem' only"),
     (dict(memoryless=True, feature_edges=np.array([[0, 1]])), "feature"),
+    # the placement's limits (they were taken as given: NaN sent every pair to an endpoint)
+    (dict(cond_eps=float("nan")), "cond_eps must be finite"),
+    (dict(cond_eps=-1.0), "cond_eps must be finite"),
+    (dict(placement="rank", rank_eps=float("inf")), "rank_eps must be finite"),
+    (dict(max_shift=-1.0), "max_shift must be finite"),
+    (dict(method="esqem", max_shift=float("nan")), "max_shift must be finite"),
 ])
 def test_bad_options_raise(kw, match):
     V, F = shapes.icosphere(2)

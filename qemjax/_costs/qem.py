@@ -147,7 +147,8 @@ class QEM(Method):
 
     def __post_init__(self):
         super().__post_init__()
-        require_nonnegative(self, "volume_weight", "memory_weight", "boundary_weight")
+        require_nonnegative(self, "volume_weight", "memory_weight", "boundary_weight", "cond_eps", "rank_eps",
+                            "max_shift")
         if (self.memoryless or self.late_memoryless) and self.memoryless_refused:
             which = "memoryless=True" if self.memoryless else "late_memoryless"
             raise ValueError(f"{which} works with method='qem' only ({self.memoryless_refused})")
