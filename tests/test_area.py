@@ -276,10 +276,17 @@ def test_area_weight_reorders_and_never_recompiles():
 
 def test_area_weight_and_regularize_refuse_what_they_cannot_wrap():
     m = shapes.icosphere(1)
-    with pytest.raises(ValueError, match="area_weight cannot wrap 'area'"):
+    # refused when the method is made, in words about the methods (the docs said every method had them)
+    with pytest.raises(ValueError, match="area_weight is not offered for method 'area': its price is computed "
+                       "over each pair's ring; it is for 'qem', 'line', 'probabilistic'"):
         qemjax.simplify(m, ratio=0.5, method="area", area_weight=1.0)
-    with pytest.raises(ValueError, match="regularize cannot wrap 'area'"):
-        qemjax.simplify(m, ratio=0.5, method="area", regularize=0.1)
+    with pytest.raises(ValueError, match="regularize is not offered for method 'area'"):
+        qemjax.AreaDifference(regularize=0.1)
+    for term in ("regularize", "area_weight"):
+        with pytest.raises(ValueError, match=rf"{term} is not offered for method 'esqem': its cost has parts of "
+                           r"its own \(quadric, curvature\)"):
+            qemjax.simplify(m, ratio=0.5, method="esqem", **{term: 0.1})
+    assert qemjax.simplify(m, ratio=0.5, method="line", regularize=0.1).stats["model"]["regularize"] == 0.1
     with pytest.raises(ValueError, match="give area_weight or regularize, not both"):  # said it could not wrap 'qem'
         qemjax.simplify(m, ratio=0.5, regularize=0.1, area_weight=0.1)
     with pytest.raises(ValueError, match="area_weight"):

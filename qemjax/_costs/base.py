@@ -130,10 +130,12 @@ QUALITY_MAX = 3 ** 0.5 / 2  # 2·area / longest edge² of an equilateral triangl
 class Method(CostModel):
     """A cost model as a user chooses it (``simplify(method=...)``; `qemjax.QEM`, `qemjax.ESQEM`, ...): its
     fields are every setting of the method, with their defaults. Besides the model's own settings, every
-    method has five keyword-only fields that act around its cost:
+    method has these keyword-only fields that act around its cost:
 
-    regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (`regularize`; 0: none).
-    area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none).
+    regularize: λ ≥ 0, weight of a triangle-shape term added to the cost (`regularize`; 0: none). Offered
+        for the pair models whose cost has no parts of its own (`takes_terms`: qem, line, probabilistic).
+    area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none);
+        offered as ``regularize`` is, and not with it.
     refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._pipeline.refit`).
     polish: M ≥ 0, with a re-fit, at most M moves after it that each lower the largest sampled distance
         between the input and the output, both ways, keeping the two-way rms within 1 % of the re-fit's
@@ -163,6 +165,15 @@ class Method(CostModel):
     def __post_init__(self):
         _check_types(self)
         require_nonnegative(self, "regularize", "area_weight")
+        for term in ("regularize", "area_weight"):
+            if getattr(self, term) and not takes_terms(type(self)):
+                from . import REGISTRY  # (the registry imports this module)
+
+                offered = [name for name, cls in REGISTRY.items() if takes_terms(cls)]
+                why = (f"its cost has parts of its own ({', '.join(self.parts)})" if self.parts else
+                       "its price is computed over each pair's ring")
+                raise ValueError(f"{term} is not offered for method {self.name!r}: {why}; it is for "
+                                 f"{', '.join(map(repr, offered))}")
         if self.refit < 0:
             raise ValueError(f"refit must be an integer >= 0 (rounds), got {self.refit!r}")
         if self.polish < 0:
@@ -203,6 +214,12 @@ def _hints(cls) -> tuple:
         if len(base) == 1 and base[0] in (bool, int, float, str):
             out.append((f.name, base[0], optional))
     return tuple(out)
+
+
+def takes_terms(cls) -> bool:
+    """Whether a method class takes the added terms (``regularize``, ``area_weight``: `Term`): a pair model
+    whose cost has no parts of its own (`regularize.Regularized`, `area_term.AreaTerm` wrap its price)."""
+    return not cls.parts and not cls.uses_ring and hasattr(cls, "price_kernel")
 
 
 def require_nonnegative(model, *names: str) -> None:
