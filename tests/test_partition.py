@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pytest
+import trimesh
 
 import qemjax
 from qemjax import Partition, shapes
@@ -276,6 +277,25 @@ def test_repeated_and_degenerate_faces_are_cleaned_as_in_core(tmp_path):
     assert len(same.faces) == len(F)
     # the samples at distance 0 exactly (most of an unchanged surface): a median of 0, not the maximum
     assert same.stats["distance_p50"] == 0.0 <= same.stats["distance_max"] < 1e-12
+
+
+def test_weld_false_and_scratch_paths_in_the_users_terms(tmp_path):
+    """weld=False runs partitioned on a mesh without UVs (it was refused "for UVs" under attributes='auto');
+    a scratch folder named by a file is refused in one line (it raised FileExistsError), and a missing
+    input leaves no scratch folder behind."""
+    m = shapes.bumpy_sphere(4)
+    path = tmp_path / "b.ply"
+    trimesh.Trimesh(m.vertices, m.faces, process=False).export(path)
+    r = qemjax.simplify(str(path), ratio=0.1, weld=False, partition=Partition(workers=1))
+    assert len(r.faces) == round(0.1 * len(m.faces))
+    with pytest.raises(ValueError, match="weld=False cannot keep UVs"):
+        qemjax.simplify(str(path), ratio=0.1, weld=False, attributes="uv", partition=Partition(workers=1))
+    with pytest.raises(ValueError, match=r"^partition: the scratch folder .*b\.ply is a file$"):
+        qemjax.simplify(str(path), ratio=0.1, partition=Partition(workers=1, scratch=path))
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        qemjax.simplify(str(tmp_path / "nope.ply"), ratio=0.1,
+                        partition=Partition(workers=1, scratch=tmp_path / "new" / "scratch"))
+    assert not (tmp_path / "new").exists()
 
 
 def test_a_scratch_folder_with_a_users_files_is_refused_and_left_as_it_was(tmp_path):

@@ -29,6 +29,8 @@ def _scratch(p: Partition) -> tuple[Path, bool]:
     if p.scratch is None:
         return Path(tempfile.mkdtemp(prefix="qemjax-parts-")), True
     path = Path(p.scratch)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"partition: the scratch folder {path} is a file")
     path.mkdir(parents=True, exist_ok=True)
     return path, False
 
@@ -229,12 +231,12 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
     stages._resolve_target(1, target_faces, ratio, None, False)
     p = partition
     t0 = time.perf_counter()
+    if isinstance(mesh, (str, os.PathLike)) and not Path(mesh).exists():  # before a scratch folder is made
+        from .._io.mesh import MissingFileError
+        raise MissingFileError(f"no such file: {mesh}")
     folder, temporary = _scratch(p)
     runner = None
     try:
-        if isinstance(mesh, (str, os.PathLike)) and not Path(mesh).exists():
-            from .._io.mesh import MissingFileError
-            raise MissingFileError(f"no such file: {mesh}")
         mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
                    final_faces=p.final_faces, refit_input_faces=p.refit_input_faces, refit=p.refit, share=p.share,

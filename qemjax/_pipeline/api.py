@@ -179,9 +179,12 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
         if not uv:
             raise ValueError("texture= needs UVs: attributes=None does not keep them")
         uv = True
-    if uv is not False and (kwargs.get("weld") is False or getattr(kwargs.get("topology"), "weld", None) is False):
-        raise ValueError("partition: weld=False cannot keep UVs (a partitioned run keeps them by splitting each "
-                         "vertex by its UVs and welding the positions back); attributes=None keeps positions only")
+    if kwargs.get("weld") is False or getattr(kwargs.get("topology"), "weld", None) is False:
+        if uv is True:
+            raise ValueError("partition: weld=False cannot keep UVs (a partitioned run keeps them by splitting "
+                             "each vertex by its UVs and welding the positions back); attributes=None keeps "
+                             "positions only")
+        uv = False  # 'auto' keeps none (a file's UVs are then named as not kept)
     return simplify_partitioned(mesh, target_faces=target_faces, ratio=ratio, partition=partition, kwargs=kwargs,
                                 progress=progress, stacklevel=4, uv=uv, texture=texture)
 
