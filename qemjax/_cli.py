@@ -691,6 +691,16 @@ def _main(argv: list) -> int:
             return 2
 
 
+def _lod_run(args, kwargs, folder: str, lod_chain):
+    """`_lod`'s run, in its output folder: (the chain, the level files' paths, the input's stem)."""
+    stem = os.path.splitext(os.path.basename(args.input))[0]
+    paths = [os.path.join(folder, f"{stem}-lod{i}.{args.fmt}") for i in range(len(args.ratios))]
+    check_output(paths[0])
+    if args.no_cache:  # else on from the first compilation (unless QEMJAX_NO_CACHE)
+        _cache.disable()
+    return lod_chain(args.input, ratios=args.ratios, **kwargs), paths, stem
+
+
 def _lod(args, kwargs) -> int:
     """``qemjax lod``: one run, every level written (each file under a temporary name, then renamed)."""
     from ._pipeline.lod import lod_chain
@@ -714,13 +724,14 @@ def _lod(args, kwargs) -> int:
         raise CliError(f"output {args.out_dir} is a file; give a folder")
     if not os.path.isdir(os.path.dirname(folder)):
         raise CliError(f"cannot create {args.out_dir}: folder {os.path.dirname(folder)} does not exist")
+    made = not os.path.exists(folder)
     os.makedirs(folder, exist_ok=True)
-    stem = os.path.splitext(os.path.basename(args.input))[0]
-    paths = [os.path.join(folder, f"{stem}-lod{i}.{args.fmt}") for i in range(len(args.ratios))]
-    check_output(paths[0])
-    if args.no_cache:  # else on from the first compilation (unless QEMJAX_NO_CACHE)
-        _cache.disable()
-    chain = lod_chain(args.input, ratios=args.ratios, **kwargs)
+    try:
+        chain, paths, stem = _lod_run(args, kwargs, folder, lod_chain)
+    except BaseException:
+        if made and not os.listdir(folder):  # a failed run leaves no empty folder it made
+            os.rmdir(folder)
+        raise
     for path, level, r in zip(paths, chain.levels, chain.ratios):
         write(level, path, args.fmt)
         print(f"{path}: ratio {r:g}, {len(level.faces)} faces, max error {level.max_error:.3g}")

@@ -679,6 +679,12 @@ def test_lod_refuses_texture_with_the_real_reason(tmp_path, capsys, monkeypatch)
         assert err.count("\n") == 1 and "qemjax lod keeps positions only: its levels are replayed from " \
             "contractions" in err and "use qemjax simplify --texture for a textured result" in err, err
     assert not (tmp_path / "lods").exists()
+    # a run that fails (here: no such input) leaves no folder it made; one that was there stays
+    assert _cli.main(["lod", str(tmp_path / "nope.obj"), str(tmp_path / "lods"), "--quiet"]) == 2
+    assert "not found" in capsys.readouterr().err and not (tmp_path / "lods").exists()
+    (tmp_path / "mine").mkdir()
+    assert _cli.main(["lod", str(tmp_path / "nope.obj"), str(tmp_path / "mine"), "--quiet"]) == 2
+    assert (tmp_path / "mine").is_dir()
     assert _cli.main(["lod", "--help"]) == 0
     help_text = " ".join(capsys.readouterr().out.split())
     assert "--texture" not in help_text and "--attribute" not in help_text

@@ -65,7 +65,15 @@ def test_the_command_line_refuses_and_runs_with_no_partition(tmp_path, small_mac
     assert out.exists()
     levels = tmp_path / "levels"
     assert _cli.main(["lod", str(src), str(levels), "--ratios", "0.5", "0.2"]) == 2
-    assert "--partition" in capsys.readouterr().err and not any(levels.glob("*lod*"))
+    err = capsys.readouterr().err  # not the partitioned run, which lod does not offer
+    assert "lod_chain (qemjax lod) runs in one process" in err and "run it partitioned" not in err
+    assert "--no-partition" in err and not any(levels.glob("*lod*"))
+    off = tmp_path / "sphere.off"  # a format a partitioned run does not read: not offered either
+    off.write_text(f"OFF\n{len(V)} {len(F)} 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in V)
+                   + "".join(f"3 {a} {b} {c}\n" for a, b, c in F))
+    assert _cli.main(["simplify", str(off), str(out), "--faces", "500"]) == 2
+    err = capsys.readouterr().err
+    assert "a partitioned run reads PLY, OBJ and STL files" in err and "--no-partition" in err
     assert _cli.main(["lod", str(src), str(levels), "--ratios", "0.5", "0.2", "--no-partition"]) == 0
     assert len(list(levels.glob("sphere-lod*"))) == 2
 

@@ -114,17 +114,25 @@ def faces_of(mesh: Any, room: int) -> int | None:
         return None
 
 
-def check(mesh: Any) -> None:
-    """Raise `TooLargeError` when the in-core run of ``mesh`` would need more memory than is available."""
+def check(mesh: Any, what: str | None = None) -> None:
+    """Raise `TooLargeError` when the in-core run of ``mesh`` would need more memory than is available. Its
+    advice: a partitioned run where one can read the mesh, else one process regardless; ``what``: a caller
+    that runs in one process only (``lod_chain``), named."""
     room = available()
     n = None if room is None else faces_of(mesh, room)
     if not n or n * BYTES_PER_FACE <= room:
         return
     name = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh"
+    regardless = "in one process regardless (--no-partition; partition=False)"
+    if what is not None:
+        advice = f"{what} runs in one process: run it {regardless}"
+    elif isinstance(mesh, (str, os.PathLike)) and Path(mesh).suffix.lower() not in (".ply", ".obj", ".stl"):
+        advice = f"a partitioned run reads PLY, OBJ and STL files: convert it to one, or run it {regardless}"
+    else:
+        advice = ("run it partitioned (--partition; partition=True in Python), which reads it in parts, or "
+                  + regardless)
     raise TooLargeError(f"{name}: {n:,} faces need about {_size(n * BYTES_PER_FACE)} in one process, and this "
-                        f"machine has {_size(room)} available: run it partitioned (--partition; "
-                        "partition=True in Python), which reads it in parts, or in one process regardless "
-                        "(--no-partition; partition=False)")
+                        f"machine has {_size(room)} available: {advice}")
 
 
 def _size(b: int) -> str:

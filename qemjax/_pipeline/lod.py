@@ -109,6 +109,11 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     if splits and options.get("split_factor", 1.0) is not None:
         raise ValueError("lod_chain with ESQEM needs split_factor=None (CLI: --split-factor none): edge splits "
                          "come after all contractions, and the levels are replayed from the contractions")
+    if options.get("partition") is None:  # the size check, with its advice for a chain
+        from . import fits
+
+        fits.check(mesh, what="lod_chain (qemjax lod)")
+        options["partition"] = False
     res = simplify(mesh, ratio=min(ratios), **options)
     m, last = len(res.input_faces), res.record.faces_out
     return LodChain([res.replay(max(max(1, int(round(r * m))), last)) for r in ratios], ratios, res)
