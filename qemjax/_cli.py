@@ -412,6 +412,7 @@ def write(res, path: str, ext: str):
     last); GLB packs them in. UVs that came without a material are written without one (``vt`` lines, no
     mtl, no image)."""
     mesh = res.to_trimesh()
+    _warn_format_losses(res, mesh.vertices, ext)
     if ext == "obj" and getattr(res, "uv", None) is not None:
         from trimesh.exchange.obj import export_obj
 
@@ -444,6 +445,29 @@ def write(res, path: str, ext: str):
         _atomic(path, lambda tmp: _write_file(tmp, data))
         return
     _atomic(path, lambda tmp: mesh.export(tmp, file_type=ext))
+
+
+_FORMAT_NAMES = {"gltf": "glTF"}
+
+
+def _warn_format_losses(res, V, ext: str) -> None:
+    """Warn when the format cannot hold what the result has: positions as precise as the result's (STL,
+    GLB and glTF store float32, OFF as trimesh writes it 10 decimals; PLY and OBJ widen, `write`), or its
+    kept attributes (STL and OFF store positions and faces only)."""
+    V = np.asarray(V, np.float64)
+    rounded = {"stl": lambda X: X.astype(np.float32), "glb": lambda X: X.astype(np.float32),
+               "gltf": lambda X: X.astype(np.float32), "off": lambda X: np.round(X, 10)}.get(ext)
+    if rounded is not None and len(V):
+        diagonal = float(np.linalg.norm(V.max(0) - V.min(0)))
+        moved = float(np.max(np.linalg.norm(rounded(V).astype(np.float64) - V, axis=1)))
+        if moved > _io_ply.WIDEN_AT * diagonal:
+            warnings.warn(f"{_FORMAT_NAMES.get(ext, ext.upper())} cannot hold the result's positions exactly: written, they move by up "
+                          f"to {moved:.3g} ({100 * moved / diagonal:.2g} % of the diagonal); .ply or .obj keep them",
+                          stacklevel=3)
+    kept = [k for k in ("uv", "colors", "normals") if getattr(res, k, None) is not None]
+    if kept and ext in ("stl", "off"):
+        warnings.warn(f"{_FORMAT_NAMES.get(ext, ext.upper())} stores positions and faces only: the kept {', '.join(kept)} not written "
+                      "(.obj, .ply, .glb and .gltf hold them)", stacklevel=3)
 
 
 def _write_file(path: str, data) -> None:

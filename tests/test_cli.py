@@ -5,6 +5,7 @@ import functools
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -767,6 +768,32 @@ def test_written_positions_are_as_precise_as_the_result(tmp_path, capsys, offset
         assert np.abs(back - res.vertices).max() <= 1e-6 * diagonal
     doubles = b"property double x" in (tmp_path / "out.ply").read_bytes()[:300]
     assert doubles == (radius == 10.0)  # float32 kept where it holds the positions
+    # the formats that cannot widen say what writing them costs (they said nothing), an ordinary mesh's not
+    for ext in ("stl", "glb", "gltf"):
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            _cli.write(res, str(tmp_path / f"out.{ext}"), ext)
+        back = np.asarray(qemjax.load(str(tmp_path / f"out.{ext}")).vertices)
+        moved = np.linalg.norm(back[:, None] - res.vertices[None], axis=2).min(1).max()
+        said = [str(w.message) for w in seen if "cannot hold the result's positions" in str(w.message)]
+        assert len(said) == (moved > 1e-6 * diagonal), (ext, moved, said)
+
+
+def test_formats_without_attributes_say_they_drop_the_kept_ones(tmp_path):
+    """STL and OFF hold positions and faces only: writing a result with kept colours says so (it was
+    silent while the summary said "kept color")."""
+    import trimesh
+
+    m = shapes.bumpy_sphere(3)
+    rgba = np.tile([200, 30, 30, 255], (len(m.vertices), 1)).astype(np.uint8)
+    res = qemjax.simplify(trimesh.Trimesh(m.vertices, m.faces, vertex_colors=rgba, process=False), ratio=0.2)
+    assert res.colors is not None
+    for ext in ("stl", "off"):
+        with pytest.warns(UserWarning, match=f"{ext.upper()} stores positions and faces only: the kept colors"):
+            _cli.write(res, str(tmp_path / f"out.{ext}"), ext)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _cli.write(res, str(tmp_path / "out.ply"), "ply")
 
 
 def test_gltf_is_one_file_and_lod_refuses_what_moves_only_the_result(src, tmp_path, capsys):
