@@ -215,6 +215,14 @@ def _faces(text: str) -> int:
     return n
 
 
+def _subdivisions(text: str) -> int:
+    """The demo's subdivisions: 0 to 10 (21 M faces; each one more quadruples the memory a run needs)."""
+    n = _parse(int, text, "a whole number of subdivisions")
+    if not 0 <= n <= 10:
+        raise argparse.ArgumentTypeError(f"expected 0 to 10 subdivisions (20 × 4^N faces), got {n}")
+    return n
+
+
 def _workers(text: str) -> int:
     n = _parse(int, text, "a whole number of worker processes")
     if n < 1:
@@ -573,7 +581,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="do not use the compilation cache (also: environment QEMJAX_NO_CACHE=1)")
     d = sub.add_parser("demo", help="simplify a bumpy sphere made in code (writes a file only with --out)")
     d.add_argument("--out", "--output", dest="out", metavar="PATH", help="write the result here")
-    d.add_argument("--subdivisions", type=int, default=7, help="7: 327,680 faces; 6: 81,920 (default: 7)")
+    d.add_argument("--subdivisions", type=_subdivisions, default=7,
+                   help="0 to 10: 20 × 4^N faces (7: 327,680; 10: 20,971,520) (default: 7)")
     d.add_argument("--ratio", type=_ratio, default=0.02, help="keep this fraction of the faces (default: 0.02)")
     _add_options(d)
     ex = sub.add_parser("examples", help="write small example files made in code (bumpy.obj, bumpy.ply, "

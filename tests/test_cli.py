@@ -151,6 +151,13 @@ def test_demo_writes_only_when_asked(tmp_path, capsys, monkeypatch):
         assert dst.exists() and f"-> {dst}" in capsys.readouterr().out
 
 
+def test_demo_subdivisions_are_bounded(capsys):
+    """12 subdivisions made 335 M faces in memory until the system stopped the process: refused in one line."""
+    for n in ("12", "-1"):
+        assert _cli.main(["demo", "--subdivisions", n, "--quiet"]) == 2
+        assert f"expected 0 to 10 subdivisions (20 × 4^N faces), got {n}" in capsys.readouterr().err
+
+
 def test_version(capsys):
     assert _cli.main(["--version"]) == 0
     assert capsys.readouterr().out.startswith(f"qemjax {qemjax.__version__} (jax ")
@@ -437,7 +444,7 @@ def test_sweep_example_config_is_valid(tmp_path):
     (["simplify", "IN", "OUT", "--ratio", "0.5", "--bogus"], "unrecognized arguments: --bogus"),
     (["simplify", "IN", "OUT", "--ratio", "0.5", "--faces", "3"], "not allowed with argument --ratio"),
     (["lod", "IN", "OUT", "--ratios", "x"], "argument --ratios: expected a ratio in (0, 1], got 'x'"),
-    (["demo", "--subdivisions", "x"], "argument --subdivisions: invalid int value: 'x'"),
+    (["demo", "--subdivisions", "x"], "argument --subdivisions: expected a whole number of subdivisions, got 'x'"),
     (["sweep"], "the following arguments are required: config"),
     (["frob"], "invalid choice: 'frob'"),
     (["simplify", "IN", "OUT"], "give a target"),  # a validation error after parsing: one line
