@@ -223,6 +223,13 @@ def _subdivisions(text: str) -> int:
     return n
 
 
+def _jobs(text: str) -> int:
+    n = _parse(int, text, "a whole number of processes")
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"the number of processes must be at least 1 (0: one per core), got {text}")
+    return n
+
+
 def _workers(text: str) -> int:
     n = _parse(int, text, "a whole number of worker processes")
     if n < 1:
@@ -596,7 +603,7 @@ def _parser() -> argparse.ArgumentParser:
                         description="Compile every host loop that qemjax's common runs use into numba's cache, "
                         "so that no later run spends time compiling them: for an editable install, a "
                         "NUMBA_CACHE_DIR of your own, or a container image. `pip install .` does this already.")
-    co.add_argument("--jobs", type=int, default=0, help="processes to compile in (default: one per core)")
+    co.add_argument("--jobs", type=_jobs, default=0, help="processes to compile in (default: one per core)")
     ap.commands = tuple(sub.choices)
     ap.subcommands = dict(sub.choices)
     return ap
@@ -826,7 +833,7 @@ def _run(args) -> int:
     if args.cmd == "lod":
         return _lod(args, _simplify_kwargs(args))
     if args.cmd == "simplify" and all(getattr(args, k) is None for k in TARGETS):
-        raise CliError("give a target: --faces N, --ratio R, --max-error E or --max-distance D")
+        raise CliError("give a target: --faces N, --ratio R, --max-error E, --max-distance D or --max-distance-rel R")
     out = args.output if args.cmd == "simplify" else args.out
     ext = check_output(out) if out is not None else None
     kwargs = _simplify_kwargs(args)

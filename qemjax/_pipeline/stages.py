@@ -68,7 +68,7 @@ def _resolve_target(m: int, target_faces, ratio, max_error, bounded: bool = Fals
     if sum(given) > 1:
         raise ValueError("give at most one of target_faces and ratio")
     if not any(given) and max_error is None and not bounded:
-        raise ValueError("give a target: target_faces=, ratio=, max_error= or max_distance=")
+        raise ValueError("give a target: target_faces=, ratio=, max_error=, max_distance= or max_distance_rel=")
     err = math.inf
     if max_error is not None:
         err = _real("max_error", max_error)
