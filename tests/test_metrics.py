@@ -525,6 +525,16 @@ def test_evaluate_row_is_flat_deterministic_and_accepts_mesh_kinds():
     assert all(same(a[k], b[k]) for k in scalar_row(a)), "same seed, same numbers"
     c = metrics.evaluate((v, f), (vs, fs), target_faces=80, n_samples=3000, seed=4)
     assert c["mean"] != a["mean"]
+    import tempfile  # a file's path, as attribute_deviation takes it (surface_distance and evaluate refused it)
+
+    from qemjax import load
+
+    with tempfile.TemporaryDirectory() as tmp:
+        trimesh.Trimesh(v, f, process=False).export(f"{tmp}/o.ply", encoding="ascii")
+        read = metrics.evaluate(f"{tmp}/o.ply", (vs, fs), target_faces=80, n_samples=3000, seed=3)
+        ref = metrics.evaluate(load(f"{tmp}/o.ply"), (vs, fs), target_faces=80, n_samples=3000, seed=3)
+        assert all(same(read[k], ref[k]) for k in scalar_row(ref) if k != "time_s")
+        assert metrics.surface_distance(f"{tmp}/o.ply", (vs, fs))["hausdorff"] == ref["hausdorff"]
     assert a["faces_after"] == 80 and a["target_error"] == 0 and a["genus"] == 0 and a["genus_before"] == 0
     assert a["volume_change"] < 0 and a["area_retention"] < 1 and a["flipped_faces"] == 0
     for key in ("hausdorff_rel", "rms_rel", "e_gh_rel", "min_angle_mean", "aspect_ratio_max", "components"):

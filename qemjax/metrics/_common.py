@@ -6,6 +6,7 @@ exact enough to compare simplifiers whose errors differ by less than float32 res
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -18,14 +19,19 @@ _DEGENERATE_REL = 1e-12
 
 
 def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
-    """Validate a mesh given as a `trimesh.Trimesh`, a ``(vertices, faces)`` pair, or any object with
-    ``.vertices`` and ``.faces``; return float64 vertices (n, 3) and int64 faces (m, 3).
+    """Validate a mesh given as a `trimesh.Trimesh`, a ``(vertices, faces)`` pair, any object with
+    ``.vertices`` and ``.faces``, or a file's path (read as `qemjax.load` reads it, without its warning);
+    return float64 vertices (n, 3) and int64 faces (m, 3).
 
     Raises ValueError on wrong shapes, an empty mesh, non-finite coordinates, non-integer or out-of-range
     face indices.
     """
     if isinstance(mesh, MeshArrays):
         return mesh
+    if isinstance(mesh, (str, os.PathLike)):  # as `attribute_deviation` takes it
+        from .._io.mesh import _read
+
+        mesh = _read(mesh)[0]
     if isinstance(mesh, (tuple, list)):
         if len(mesh) != 2:
             raise ValueError(f"{name}: a tuple mesh must be (vertices, faces), got {len(mesh)} items")
@@ -34,8 +40,8 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
         vertices, faces = mesh.vertices, mesh.faces
     else:
         raise ValueError(
-            f"{name}: expected a trimesh.Trimesh, a (vertices, faces) tuple or an object with .vertices and "
-            f".faces, got {type(mesh).__name__}"
+            f"{name}: expected a trimesh.Trimesh, a (vertices, faces) tuple, an object with .vertices and "
+            f".faces or a file's path, got {type(mesh).__name__}"
         )
     v = np.asarray(vertices)
     f = np.asarray(faces)

@@ -103,8 +103,8 @@ def surface_distance(original, simplified, *, n_samples: int = DEFAULT_SAMPLES, 
     surface (not to its vertices).
 
     Args:
-      original, simplified: `trimesh.Trimesh`, ``(vertices, faces)``, or objects with ``.vertices`` /
-        ``.faces``.
+      original, simplified: `trimesh.Trimesh`, ``(vertices, faces)``, objects with ``.vertices`` /
+        ``.faces``, or a file's path.
       n_samples: area-weighted samples per mesh, on top of the vertices.
       seed: seeds the sampling; equal seeds give equal results.
 

@@ -23,8 +23,8 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
     """Distances, area / volume, triangle quality and topology of a simplification, as one flat dict.
 
     Args:
-      original, simplified: `trimesh.Trimesh`, ``(vertices, faces)`` tuples, or any objects with
-        ``.vertices`` (n, 3) and ``.faces`` (m, 3) (a qemjax result has them).
+      original, simplified: `trimesh.Trimesh`, ``(vertices, faces)`` tuples, any objects with
+        ``.vertices`` (n, 3) and ``.faces`` (m, 3) (a qemjax result has them), or a file's path.
       target_faces: the face count that was asked for (optional).
       n_samples: area-weighted surface samples per mesh for the distances, on top of the vertices.
       seed: sampling seed; equal inputs and seed give equal numbers.
