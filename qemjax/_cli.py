@@ -208,33 +208,22 @@ def _ratio(text: str) -> float:
     return r
 
 
-def _faces(text: str) -> int:
-    n = _parse(int, text, "a whole number of faces")
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"the face target must be at least 1, got {text}")
-    return n
+def _whole(what: str, least: int, most: int | None, says: str):
+    """An argparse type: a whole number of ``what`` from ``least`` to ``most`` (None: no bound), else the
+    one-line error ``says``."""
+    def parse(text: str) -> int:
+        n = _parse(int, text, f"a whole number of {what}")
+        if n < least or (most is not None and n > most):
+            raise argparse.ArgumentTypeError(f"{says}, got {text}")
+        return n
+    return parse
 
 
-def _subdivisions(text: str) -> int:
-    """The demo's subdivisions: 0 to 10 (21 M faces; each one more quadruples the memory a run needs)."""
-    n = _parse(int, text, "a whole number of subdivisions")
-    if not 0 <= n <= 10:
-        raise argparse.ArgumentTypeError(f"expected 0 to 10 subdivisions (20 × 4^N faces), got {n}")
-    return n
-
-
-def _jobs(text: str) -> int:
-    n = _parse(int, text, "a whole number of processes")
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"the number of processes must be at least 1 (0: one per core), got {text}")
-    return n
-
-
-def _workers(text: str) -> int:
-    n = _parse(int, text, "a whole number of worker processes")
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"the number of workers must be at least 1, got {text}")
-    return n
+_faces = _whole("faces", 1, None, "the face target must be at least 1")
+_workers = _whole("worker processes", 1, None, "the number of workers must be at least 1")
+_jobs = _whole("processes", 0, None, "the number of processes must be 0 (one per core) or more")
+# the demo's mesh: 20 × 4^N faces (10: 21 M; each one more quadruples the memory a run needs)
+_subdivisions = _whole("subdivisions", 0, 10, "expected 0 to 10 subdivisions (20 × 4^N faces)")
 
 
 def _max_error(text: str) -> float:
