@@ -235,10 +235,13 @@ class Partition:
         if self.share not in ("faces", "cost"):
             raise ValueError(f"Partition: share must be 'faces' or 'cost', got {self.share!r}")
         def positive(name, value, kind=int, least=1):
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or value < least or \
-                    (kind is int and value != int(value)):
-                raise ValueError(f"Partition: {name} must be {'an integer' if kind is int else 'a number'} "
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value) or value < least or (kind is int and value != int(value)):
+                raise ValueError(f"Partition: {name} must be {'an integer' if kind is int else 'a finite number'} "
                                  f">= {least}, got {value!r}")
+        for name in ("part_faces", "budget", "reduction", "final_faces", "refit_input_faces", "workers", "retries"):
+            value = getattr(self, name)  # numpy numbers stored as Python's (the settings go into JSON)
+            if isinstance(value, (np.integer, np.floating)) and not isinstance(value, np.bool_):
+                object.__setattr__(self, name, value.item())
         positive("part_faces", self.part_faces, least=1000)
         positive("budget", self.budget, float, 1)
         positive("reduction", self.reduction, float, 1.5)
@@ -247,6 +250,8 @@ class Partition:
         positive("retries", self.retries, least=0)
         if self.workers is not None:
             positive("workers", self.workers)
+        if not isinstance(self.measure, (bool, np.bool_)):
+            raise ValueError(f"Partition: measure must be True or False, got {self.measure!r}")
 
     @property
     def n_workers(self) -> int:

@@ -235,16 +235,18 @@ class PeerResult:
 
 
 def simplify(name: str, mesh, target_faces: int) -> PeerResult:
-    """Simplify ``mesh`` (``(V, F)``, a `qemjax.Mesh`, trimesh or anything with ``.vertices``/``.faces``)
-    with peer ``name`` to ``target_faces`` faces (a peer may stop elsewhere: ``stats["faces_out"]``).
-    Raises ValueError for an unknown or uninstalled peer, or an empty output."""
+    """Simplify ``mesh`` (``(V, F)``, a `qemjax.Mesh`, trimesh, anything with ``.vertices``/``.faces``, or
+    a file's path) with peer ``name`` to ``target_faces`` faces (a peer may stop elsewhere:
+    ``stats["faces_out"]``). Raises ValueError for an unknown or uninstalled peer, a malformed mesh (checked
+    here: the peers' C code would crash the process on an index out of range or faces that are not
+    triangles), a target below 1, or an empty output."""
+    from .metrics._common import as_mesh
+
+    checked = as_mesh(mesh, "mesh")
+    V, F = checked.vertices, checked.faces
+    if isinstance(target_faces, bool) or not float(target_faces) >= 1 or float(target_faces) != int(target_faces):
+        raise ValueError(f"target_faces must be a whole number of at least 1, got {target_faces!r}")
     _require(name)
-    if isinstance(mesh, tuple):
-        V, F = mesh
-    else:
-        V, F = mesh.vertices, mesh.faces
-    V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F, dtype=np.int64)
     t0 = time.perf_counter()
     V2, F2, call_s = run_peer(name, V, F, int(target_faces))
     if len(F2) == 0:

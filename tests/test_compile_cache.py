@@ -56,6 +56,22 @@ def test_a_cache_folder_set_by_the_program_is_kept(tmp_path):
     assert moved[1] == f"after {tmp_path / 'elsewhere'}" and _entries(tmp_path / "elsewhere") >= 3
 
 
+def test_cache_refuses_what_is_not_a_folder_it_can_use(tmp_path):
+    """cache(0) and cache('') turned the cache on at the default folder, cache(True) failed in os.fspath's
+    words, and a folder that cannot be made returned None ("off") while the cache stayed on."""
+    import qemjax
+
+    before = qemjax.cache()
+    for bad in (0, "", True, 1.5):
+        with pytest.raises(ValueError, match="cache\\(\\) takes a folder's path, False"):
+            qemjax.cache(bad)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    with pytest.raises(ValueError, match="the folder cannot be created; the cache stays"):
+        qemjax.cache(blocker / "sub")
+    assert qemjax.cache() == before
+
+
 def test_a_sweeps_process_pool_workers_use_it(tmp_path):
     """A sweep's spawn workers import qemjax: their kernels land in the cache (the next sweep loads them)."""
     code = ("import concurrent.futures, multiprocessing, qemjax\n"

@@ -87,6 +87,16 @@ def test_registration_refuses_taken_names_and_non_methods():
     with pytest.raises(ValueError, match="frozen dataclass"):
         qemjax.register_method("thing", dict)
 
+    @dataclasses.dataclass(frozen=True)
+    class Shadow(qemjax.QEM):  # a field named like a Topology setting: refused at registration (it was
+        name = "shadow"        # taken, and every later call that named a setting failed)
+        prune: bool = False
+
+    with pytest.raises(ValueError, match="method 'shadow' has a field 'prune', which is a topology setting"):
+        qemjax.register_method(Shadow)
+    assert "shadow" not in qemjax.methods()
+    assert len(qemjax.simplify(qemjax.shapes.icosphere(2), ratio=0.5, boundary_weight=3.0).faces) == 160
+
 
 def test_a_setting_of_another_method_is_refused_by_name(ball):
     with pytest.raises(ValueError, match="curvature_weight is not a setting of method 'default'.*esqem"):

@@ -97,6 +97,13 @@ def test_partition_settings_are_checked():
         Partition(workers=0)
     with pytest.raises(ValueError, match="refit_input_faces"):
         Partition(refit_input_faces=-1)
+    # numpy numbers are numbers (refused as "not an integer"), stored as Python's; NaN, inf and a measure
+    # that is not a bool are refused (they were taken, and failed or did nothing in the run)
+    p = Partition(part_faces=np.int64(5000), workers=np.int64(2), budget=np.float32(2.0))
+    assert (p.part_faces, p.workers, p.budget) == (5000, 2, 2.0) and type(p.part_faces) is int
+    for kw in (dict(budget=float("nan")), dict(reduction=float("inf")), dict(measure="no")):
+        with pytest.raises(ValueError, match=f"Partition: {next(iter(kw))} must be"):
+            Partition(**kw)
 
 
 # --- whole runs -----------------------------------------------------------------------------------------------
@@ -273,6 +280,7 @@ def test_repeated_and_degenerate_faces_are_cleaned_as_in_core(tmp_path):
         assert r.stats["distance_s"] > 0  # the measured distance's time, as in core (it was None)
         # the same samples as in core: a vertex on a border between parts counts once (it counted per part)
         assert r.stats["distance_samples"] == core.stats["distance_samples"]
+        assert repr(r).startswith(f"SimplifyResult: {len(F)} -> {len(r.faces)} faces")  # it said 0 ->
     same = qemjax.simplify((V, F), ratio=1.0, partition=Partition(workers=1, part_faces=1500))
     assert len(same.faces) == len(F)
     # the samples at distance 0 exactly (most of an unchanged surface): a median of 0, not the maximum

@@ -78,3 +78,16 @@ def test_a_peer_cell_runs_on_the_cleaned_input_as_a_qemjax_cell_does(tmp_path):
     cfg = tmp_path / "p.toml"
     cfg.write_text(f'meshes = ["shapes.torus"]\ntargets = [0.5]\n[grid]\nmethod = ["qem", "{name}"]\n')
     assert _sweep_config.load(cfg).grid["method"] == ["qem", name]
+
+
+@pytest.mark.parametrize("name", ["meshoptimizer", "libigl", "pyfqmr"])
+def test_a_malformed_mesh_is_refused_before_a_peer_sees_it(name):
+    """An index out of range or faces that are not triangles crashed the interpreter inside meshoptimizer and
+    libigl (a segfault): refused here in words, installed or not, as is a target below 1."""
+    V, F = qemjax.shapes.icosphere(2)
+    with pytest.raises(ValueError, match=r"face indices must lie in \[0, 162\)"):
+        peers.simplify(name, (V, F + 5), 100)
+    with pytest.raises(ValueError, match=r"faces must have shape \(m, 3\)"):
+        peers.simplify(name, (V, np.c_[F, F[:, 0]]), 100)
+    with pytest.raises(ValueError, match="target_faces must be a whole number of at least 1"):
+        peers.simplify(name, (V, F), -5)

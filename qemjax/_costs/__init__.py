@@ -51,7 +51,8 @@ def methods() -> tuple[str, ...]:
 def register(name, cls: type[Method] | None = None):
     """Register a method class under ``name`` (``register(cls)`` or ``@register`` use ``cls.name``), so
     ``simplify(method=name)`` means ``cls()``; its fields become sweep keys, config keys and command-line
-    options. Refuses a name already taken and a class that is not a frozen dataclass `Method`."""
+    options. Refuses a name already taken, a class that is not a frozen dataclass `Method`, and one with a field
+    named like a `Topology` or `Attributes` setting."""
     if cls is None and isinstance(name, type):
         name, cls = name.name, name
     if not isinstance(cls, type) or not issubclass(cls, Method) or not dataclasses.is_dataclass(cls) \
@@ -61,6 +62,13 @@ def register(name, cls: type[Method] | None = None):
     if not isinstance(name, str) or not name or name in REGISTRY or name in PRESETS:
         raise ValueError(f"a method needs a new, non-empty name; got {name!r} (taken: {methods()})")
     REGISTRY[name] = cls
+    from .._pipeline.flat import options  # (it imports this module)
+
+    try:  # a field named like a run setting could not be given flat: refused now, not at every later call
+        options()
+    except ValueError:
+        del REGISTRY[name]
+        raise
     return cls
 
 

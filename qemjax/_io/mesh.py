@@ -151,9 +151,11 @@ def _read(path) -> tuple[Mesh, list[str]]:
 def load(path: str | os.PathLike) -> Mesh:
     """Read any file trimesh reads (OBJ, PLY, STL, OFF, GLB, …) as a `Mesh`.
 
-    Polygons are triangulated; vertices are kept exactly as stored (no merging, no reordering: welding is
-    a separate, explicit step of `simplify`). Only positions and faces are read: UVs, a material or
-    colours in the file are dropped, with one warning naming them.
+    Polygons are triangulated; vertices are not merged (welding is a separate, explicit step of
+    `simplify`) and keep the file's order, except an OBJ's: trimesh drops its unused ``v`` lines and splits
+    a vertex at a UV seam, so its numbering is not the file's (``simplify(path, locked=...)`` numbers an
+    OBJ's vertices by its ``v`` lines). Only positions and faces are read: UVs, a material or colours in the
+    file are dropped, with one warning naming them.
     """
     mesh, dropped = _read(path)
     if dropped:

@@ -101,8 +101,13 @@ def cache(folder=None):
     if folder is False:
         disable()
         return None
-    if folder is not None:
-        return enable(folder)
+    if folder is not None:  # a folder, by its path (the library's own callers use `enable`, which may fail quietly)
+        if not isinstance(folder, (str, os.PathLike)) or not os.fspath(folder):
+            raise ValueError(f"cache() takes a folder's path, False (off) or nothing; got {folder!r}")
+        if enable(folder) is None:
+            raise ValueError(f"cache({os.fspath(folder)!r}): the folder cannot be created; the cache stays "
+                             f"{cache() or 'off'}")
+        return os.fspath(folder)
     ensure_default()
     on = jax.config.jax_enable_compilation_cache and jax.config.jax_compilation_cache_dir
     return jax.config.jax_compilation_cache_dir if on else None

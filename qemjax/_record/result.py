@@ -111,7 +111,10 @@ class SimplifyResult:
         """A few lines (a notebook cell shows this): the counts, the method, why the run stopped and its
         key figures; the arrays are the fields (``res.vertices``, ...), every figure is in ``res.stats``."""
         s = self.stats
-        first = (f"SimplifyResult: {len(self.input_faces)} -> {len(self.faces)} faces, {len(self.input_vertices)} -> "
+        # a partitioned result holds no input arrays: its counts are in the stats
+        faces_in = len(self.input_faces) if len(self.input_faces) else s.get("faces_in", 0)
+        vertices_in = len(self.input_vertices) if len(self.input_vertices) else s.get("vertices_in", 0)
+        first = (f"SimplifyResult: {faces_in} -> {len(self.faces)} faces, {vertices_in} -> "
                  f"{len(self.vertices)} vertices, stop_reason {self.stop_reason!r}")
         if s.get("target_faces"):
             first += f" (target {s['target_faces']} faces)"
