@@ -176,8 +176,9 @@ def face_texture_colors(mesh, image=None) -> np.ndarray:
     ``material``) or a trimesh with `TextureVisuals`; ``image``: a PIL image (default: the material's)."""
     if getattr(mesh, "wedge_faces", None) is not None:
         uv, corners, material = mesh.uv, np.asarray(mesh.wedge_faces), mesh.material
-    else:
-        uv, corners, material = mesh.visual.uv, np.asarray(mesh.faces), getattr(mesh.visual, "material", None)
+    else:  # (a result without UVs has no wedges; a trimesh without them, other visuals)
+        visual = getattr(mesh, "visual", None)
+        uv, corners, material = getattr(visual, "uv", None), np.asarray(mesh.faces), getattr(visual, "material", None)
     if uv is None:
         raise ValueError("the mesh carries no UVs")
     if image is None:

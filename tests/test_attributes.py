@@ -306,6 +306,14 @@ def test_colour_term_lowers_colour_error():
     assert dev[1.0] < 0.9 * dev[0.0], dev
 
 
+def test_a_texture_given_as_an_array_is_refused_in_one_line(tmp_path):
+    """texture= takes a path or a PIL image; an array was printed whole into a 49-line error."""
+    qemjax.shapes.write_examples(tmp_path, subdivisions=2)
+    with pytest.raises(ValueError, match=r"^texture= takes an image file's path or a PIL image, got ndarray") as err:
+        qemjax.simplify(str(tmp_path / "textured.obj"), ratio=0.3, texture=np.zeros((64, 64, 3), np.uint8))
+    assert "\n" not in str(err.value)
+
+
 @pytest.mark.parametrize("scheduler", ["greedy", "parallel"])
 def test_kept_colours_stay_in_the_unit_cube(scheduler):
     """A colour placed by its quadric's optimum (the colour term) could fall just outside [0, 1] (a green of

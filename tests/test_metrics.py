@@ -541,6 +541,14 @@ def test_evaluate_row_is_flat_deterministic_and_accepts_mesh_kinds():
         assert key in a
 
 
+def test_a_bad_seed_is_named():
+    """A seed numpy refuses was refused in numpy's words (SeedSequence), or taken (1.5)."""
+    v, f = sphere(1)
+    for seed in ("x", -1, 1.5, True):
+        with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+            metrics.surface_distance((v, f), (v, f), n_samples=10, seed=seed)
+
+
 def test_evaluate_without_target_keeps_the_columns():
     v, f = sphere(1)
     row = metrics.evaluate((v, f), (v, f), n_samples=100)

@@ -71,3 +71,15 @@ def test_render_pair(tmp_path):
 def test_render_rejects_non_mesh():
     with pytest.raises(TypeError):
         render(42)
+
+
+def test_face_texture_colors_of_a_mesh_without_uvs_says_so():
+    """Its own ValueError, not an AttributeError from inside (a result without UVs, a trimesh without
+    texture visuals)."""
+    import qemjax
+    from qemjax.render import face_texture_colors
+
+    res = qemjax.simplify(qemjax.shapes.icosphere(2), ratio=0.5)
+    for mesh in (res, res.to_trimesh()):
+        with pytest.raises(ValueError, match="the mesh carries no UVs"):
+            face_texture_colors(mesh)

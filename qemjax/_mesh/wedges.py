@@ -22,6 +22,7 @@ and only for pairs that touch a seam vertex; runs without attributes never build
 from __future__ import annotations
 
 import dataclasses
+import os
 import warnings
 
 import numpy as np
@@ -292,6 +293,9 @@ def load_texture(texture):
 
     if isinstance(texture, Image.Image):
         return SimpleMaterial(image=texture)
+    if not isinstance(texture, (str, os.PathLike)):  # an array would be printed whole in the error below
+        raise ValueError(f"texture= takes an image file's path or a PIL image, got {type(texture).__name__} "
+                         "(a numpy array: PIL.Image.fromarray(array))")
     try:
         img = Image.open(texture)
         img.load()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import as_mesh
+from ._distance import _check_samples
 from .._mesh.nearest import nearest_triangles
 from ._topology import _components
 
@@ -134,7 +135,7 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
             raise ValueError(f"both meshes must carry {kind}: the {_missing(mesh, name, kind)}")
     Vs, Fs, Cs = s
     Vo, Fo, Co = o
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(_check_samples(seed, "seed"))
     cs = Vs[Fs]  # (m,3,3)
     area = np.linalg.norm(np.cross(cs[:, 1] - cs[:, 0], cs[:, 2] - cs[:, 0]), axis=1)
     cum = np.cumsum(area)

@@ -66,9 +66,11 @@ def _summary(fwd: np.ndarray, bwd: np.ndarray, diag: float) -> dict:
     }
 
 
-def _check_samples(n_samples) -> int:
+def _check_samples(n_samples, name: str = "n_samples") -> int:
+    """``n_samples`` (or the argument ``name``: a seed) as an int; ValueError naming it unless it is a whole
+    number >= 0."""
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 0:
-        raise ValueError(f"n_samples must be a non-negative integer, got {n_samples!r}")
+        raise ValueError(f"{name} must be a non-negative integer, got {n_samples!r}")
     return int(n_samples)
 
 
@@ -79,6 +81,7 @@ def two_way(o: MeshArrays, s: MeshArrays, n_samples: int, seed: int, extra_bwd=N
     also: an optional callable run meanwhile (its result is returned last). numpy and scipy release the GIL
     in their loops, so the two directions and ``also`` overlap on several cores.
     """
+    seed = _check_samples(seed, "seed")
     rng_o, rng_s = (np.random.default_rng(ss) for ss in np.random.SeedSequence(seed).spawn(2))
     pts_o = sample_points(o, n_samples, rng_o)
     pts_s = sample_points(s, n_samples, rng_s)
