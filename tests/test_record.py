@@ -272,6 +272,18 @@ def test_record_of_an_unchanged_mesh():
     assert np.array_equal(res.vertex_map, np.arange(len(res.input_vertices)))
 
 
+def test_lod_chain_takes_dotted_settings_as_simplify_does():
+    """A setting named dotted ("method.refit") is the flat one: lod_chain's own default of refit=0 overrode
+    it, and ESQEM's "method.split_factor": None was refused as missing; ratios=0.5 failed in Python's words."""
+    V, F = shapes.icosphere(3)
+    assert qemjax.lod_chain((V, F), ratios=[0.5, 0.2], **{"method.refit": 1}).result.stats["refit"] == 1
+    assert qemjax.lod_chain((V, F), ratios=[0.5, 0.2]).result.stats["refit"] == 0
+    chain = qemjax.lod_chain((V, F), ratios=[0.5, 0.2], method="esqem", **{"method.split_factor": None})
+    assert [len(level.faces) for level in chain] == [640, 256]
+    with pytest.raises(ValueError, match=r"ratios takes a list of ratios, one per level, got 0.5 \(ratios=\[0.5\]\)"):
+        qemjax.lod_chain((V, F), ratios=0.5)
+
+
 def test_cli_lod_writes_levels_glb_and_record(tmp_path, capsys):
     from qemjax._cli import main
 

@@ -91,7 +91,10 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
         raise ValueError("lod_chain keeps positions only: its levels are replayed from contractions; use "
                          "simplify(texture=...) for a textured result")
     options.setdefault("attributes", None)
-    options.setdefault("refit", 0)  # levels are replays of the contractions, which a re-fit would not reach
+    if "refit" not in options and "method.refit" not in options:  # as a setting may be named: flat or dotted
+        options["refit"] = 0  # levels are replays of the contractions, which a re-fit would not reach
+    if isinstance(ratios, (int, float, np.number)):
+        raise ValueError(f"ratios takes a list of ratios, one per level, got {ratios!r} (ratios=[{ratios!r}])")
     ratios = tuple(float(r) for r in ratios)
     if not ratios:
         raise ValueError("give at least one ratio")
@@ -106,7 +109,7 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
                          "levels from")
     method = options.get("method")
     splits = getattr(method, "split_factor", None) is not None if not isinstance(method, str) else method == "esqem"
-    if splits and options.get("split_factor", 1.0) is not None:
+    if splits and options.get("split_factor", options.get("method.split_factor", 1.0)) is not None:
         raise ValueError("lod_chain with ESQEM needs split_factor=None (CLI: --split-factor none): edge splits "
                          "come after all contractions, and the levels are replayed from the contractions")
     if options.get("partition") is None:  # the size check, with its advice for a chain
