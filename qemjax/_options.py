@@ -45,14 +45,15 @@ class Schedule:
 
     def __post_init__(self):
         for name in ("gate", "gate_fraction", "free_cost", "pass_yield"):
-            v = getattr(self, name)
+            v = _number("Schedule", name, getattr(self, name))
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"Schedule.{name} must be finite and >= 0, got {v}")
         if self.gate < 1:
             raise ValueError(f"Schedule.gate must be >= 1 (a multiple of the k-th cheapest cost), got {self.gate}")
         for name in ("tail", "max_passes"):
             v = getattr(self, name)
-            if isinstance(v, bool) or int(v) != v or v < 1:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not np.isfinite(v) or int(v) != v or v < 1:
                 raise ValueError(f"Schedule.{name} must be a positive integer, got {v!r}")
 
 

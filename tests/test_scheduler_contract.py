@@ -190,3 +190,17 @@ def test_a_parallel_run_picks_its_round_implementation_once(monkeypatch):
         qemjax.simplify(mesh, ratio=0.1, late_memoryless=0)
     assert picked == ["GlueRound", "LoopRound", "StagedRound"]
     assert issubclass(parallel.GlueRound, parallel.LoopRound)
+
+
+@pytest.mark.parametrize("kw,match", [
+    (dict(gate="2"), "Schedule.gate must be a number, got '2'"),
+    (dict(gate=None), "Schedule.gate must be a number"),
+    (dict(free_cost=[0.1]), "Schedule.free_cost must be a number"),
+    (dict(tail=None), "Schedule.tail must be a positive integer"),
+    (dict(max_passes="3"), "Schedule.max_passes must be a positive integer"),
+    (dict(tail=float("nan")), "Schedule.tail must be a positive integer"),
+])
+def test_schedule_fields_of_the_wrong_kind_are_named(kw, match):
+    """They failed in numpy's or int()'s words (ufunc 'isfinite' not supported, ...)."""
+    with pytest.raises(ValueError, match=match):
+        qemjax.Schedule(**kw)
