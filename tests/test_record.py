@@ -272,6 +272,21 @@ def test_record_of_an_unchanged_mesh():
     assert np.array_equal(res.vertex_map, np.arange(len(res.input_vertices)))
 
 
+def test_replay_and_vertex_map_check_their_arguments():
+    """contractions=2.5 was taken as 2 and True as 1, vertex_map(-1) failed in numpy's words."""
+    rec = qemjax.simplify(shapes.icosphere(2), ratio=0.5, method="classic").record
+    n = len(rec.history)
+    for bad in (2.5, -1, n + 1):
+        with pytest.raises(ValueError, match=rf"contractions must be a whole number in \[0, {n}\], got"):
+            rec.replay(contractions=bad)
+        with pytest.raises(ValueError, match=rf"contractions must be a whole number in \[0, {n}\]"):
+            rec.vertex_map(bad)
+    for kw in (dict(contractions=True), dict(ratio="0.5")):
+        with pytest.raises(ValueError, match=f"{next(iter(kw))} must be a number"):
+            rec.replay(**kw)
+    assert np.array_equal(rec.vertex_map(3), rec.replay(contractions=3).vertex_map)
+
+
 def test_lod_chain_takes_dotted_settings_as_simplify_does():
     """A setting named dotted ("method.refit") is the flat one: lod_chain's own default of refit=0 overrode
     it, and ESQEM's "method.split_factor": None was refused as missing; ratios=0.5 failed in Python's words."""

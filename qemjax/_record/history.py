@@ -140,6 +140,9 @@ class Record:
         given = [x is not None for x in (target_faces, ratio, contractions)]
         if sum(given) != 1:
             raise ValueError("give exactly one of target_faces, ratio and contractions")
+        for name, x in (("target_faces", target_faces), ("ratio", ratio), ("contractions", contractions)):
+            if x is not None and (isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.number))):
+                raise ValueError(f"{name} must be a number, got {x!r}")
         if ratio is not None:
             if not 0 < ratio <= 1:
                 raise ValueError(f"ratio must be in (0, 1] (the fraction of faces to keep), got {ratio}")
@@ -148,14 +151,19 @@ class Record:
             if int(target_faces) != target_faces or target_faces < 1:
                 raise ValueError(f"target_faces must be an integer >= 1, got {target_faces!r}")
             contractions = self.steps_for(int(target_faces))
-        if not 0 <= contractions <= len(self.history):
-            raise ValueError(f"contractions must be in [0, {len(self.history)}], got {contractions}")
-        return self._level(int(contractions))
+        return self._level(self._contractions(contractions))
+
+    def _contractions(self, j) -> int:
+        """``j`` as a count of this record's contractions; ValueError unless a whole number in range."""
+        if isinstance(j, (bool, np.bool_)) or not isinstance(j, (int, float, np.number)) or int(j) != j \
+                or not 0 <= j <= len(self.history):
+            raise ValueError(f"contractions must be a whole number in [0, {len(self.history)}], got {j!r}")
+        return int(j)
 
     def vertex_map(self, contractions: int | None = None) -> np.ndarray:
         """(n,) int64: each input vertex's vertex in the level after ``contractions`` (default: all),
         -1 for the vertices of parts that vanished."""
-        j = len(self.history) if contractions is None else contractions
+        j = len(self.history) if contractions is None else self._contractions(contractions)
         return self._level(j).vertex_map
 
     def _level(self, j: int) -> Level:
