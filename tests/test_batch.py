@@ -194,3 +194,13 @@ def test_cells_that_would_run_alike_run_once():
     sheet = shapes.grid(10, hole=True)
     on_sheet = simplify_batch(sheet, configs[:3])
     assert [r.stats["batch"]["same_run"] for r in on_sheet] == [1, 1, 1]
+
+
+def test_malformed_configs_and_cells_are_refused_in_words():
+    """A dict for configs, a list of numbers, cells without configurations: Python's own errors before."""
+    m = shapes.icosphere(2)
+    for configs in (dict(ratio=0.5), [0.5]):
+        with pytest.raises(ValueError, match="configs takes a list of dicts of simplify's keywords"):
+            qemjax.simplify_batch(m, configs)
+    with pytest.raises(ValueError, match=r"cells takes a list of \(mesh, dict of simplify's keywords\) pairs"):
+        simplify_cells([m])

@@ -192,6 +192,9 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
 def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> list:
     """`simplify` of one mesh under many configurations: ``[simplify(mesh, **c) for c in configs]``, with
     equal results, computed together (`simplify_cells`)."""
+    if isinstance(configs, dict) or not all(isinstance(c, dict) for c in configs):
+        raise ValueError("configs takes a list of dicts of simplify's keywords, one per run "
+                         "([dict(ratio=0.5), ...])")
     return simplify_cells([(mesh, c) for c in configs], errors=errors)
 
 
@@ -216,6 +219,8 @@ def simplify_cells(cells: list, *, errors: bool = False) -> list:
     errors: False: the first bad configuration raises its ValueError; True: its entry in the returned
     list is that exception instead.
     """
+    if not all(isinstance(c, (tuple, list)) and len(c) == 2 and isinstance(c[1], dict) for c in cells):
+        raise ValueError("cells takes a list of (mesh, dict of simplify's keywords) pairs")
     out = [None] * len(cells)
     for i, res in iter_cells(cells, errors=errors):  # its warnings point at our caller (checked: stacklevel 4)
         out[i] = res
