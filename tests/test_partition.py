@@ -288,22 +288,42 @@ def test_repeated_and_degenerate_faces_are_cleaned_as_in_core(tmp_path):
 
 
 def test_weld_false_and_scratch_paths_in_the_users_terms(tmp_path):
-    """weld=False runs partitioned on a mesh without UVs (it was refused "for UVs" under attributes='auto');
-    a scratch folder named by a file is refused in one line (it raised FileExistsError), and a missing
-    input leaves no scratch folder behind."""
+    """weld=False is refused partitioned for what it is (a run welds to find where parts meet: it was refused
+    "for UVs" under attributes='auto', and ignored with attributes=None); a scratch folder named by a file
+    is refused in one line (it raised FileExistsError), and a missing input leaves no scratch folder behind."""
     m = shapes.bumpy_sphere(4)
     path = tmp_path / "b.ply"
     trimesh.Trimesh(m.vertices, m.faces, process=False).export(path)
-    r = qemjax.simplify(str(path), ratio=0.1, weld=False, partition=Partition(workers=1))
-    assert len(r.faces) == round(0.1 * len(m.faces))
-    with pytest.raises(ValueError, match="weld=False cannot keep UVs"):
-        qemjax.simplify(str(path), ratio=0.1, weld=False, attributes="uv", partition=Partition(workers=1))
+    for attributes in ("auto", None, "uv"):
+        with pytest.raises(ValueError, match="partition: weld=False is not offered: a partitioned run welds"):
+            qemjax.simplify(str(path), ratio=0.1, weld=False, attributes=attributes, partition=Partition(workers=1))
     with pytest.raises(ValueError, match=r"^partition: the scratch folder .*b\.ply is a file$"):
         qemjax.simplify(str(path), ratio=0.1, partition=Partition(workers=1, scratch=path))
     with pytest.raises(FileNotFoundError, match="no such file"):
         qemjax.simplify(str(tmp_path / "nope.ply"), ratio=0.1,
                         partition=Partition(workers=1, scratch=tmp_path / "new" / "scratch"))
     assert not (tmp_path / "new").exists()
+
+
+def test_ctrl_c_while_the_workers_leave_still_removes_the_temporary_folder(tmp_path, monkeypatch):
+    """An interrupt inside the runner's close (the workers leaving) skipped the removal of the run's
+    temporary folder: a large scan's parts stayed in /tmp."""
+    import tempfile
+
+    from qemjax._partition import execute
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    real = execute.LocalRunner.close
+
+    def close(self, cancel=False):
+        real(self, cancel)
+        if not cancel:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(execute.LocalRunner, "close", close)
+    with pytest.raises(KeyboardInterrupt):
+        qemjax.simplify(shapes.bumpy_sphere(4), ratio=0.1, partition=Partition(workers=2, part_faces=2000))
+    assert not list(tmp_path.glob("qemjax-parts-*"))
 
 
 def test_a_scratch_folder_with_a_users_files_is_refused_and_left_as_it_was(tmp_path):

@@ -305,7 +305,7 @@ def test_uv_input_errors(tmp_path, sphere_obj):
         qemjax.simplify(str(ply), target_faces=4, attributes="uv", partition=Partition(workers=1))
     res = qemjax.simplify(str(ply), target_faces=4, partition=Partition(workers=1))
     assert res.uv is None and len(res.faces) == 4
-    with pytest.raises(ValueError, match="weld=False cannot keep UVs"):
+    with pytest.raises(ValueError, match="weld=False is not offered"):
         qemjax.simplify(str(sphere_obj), ratio=0.5, attributes="uv", weld=False, partition=True)
     with pytest.raises(ValueError, match="texture= needs UVs"):
         qemjax.simplify(str(sphere_obj), ratio=0.5, attributes=None, texture="t.png", partition=True)

@@ -331,10 +331,12 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             runner = None
         raise
     finally:
-        if runner is not None:
-            runner.close()
-        if temporary:
-            shutil.rmtree(folder, ignore_errors=True)
+        try:
+            if runner is not None:
+                runner.close()
+        finally:  # a Ctrl-C while the workers leave still removes the temporary folder
+            if temporary:
+                shutil.rmtree(folder, ignore_errors=True)
     if manifest.get("dropped"):
         # as the in-core run's warning, the way to keep UVs left out by default (no texture image named)
         left_out = uv == "auto" and manifest.get("uv_in_file") and not manifest.get("uv")

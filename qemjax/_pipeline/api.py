@@ -180,11 +180,9 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
             raise ValueError("texture= needs UVs: attributes=None does not keep them")
         uv = True
     if kwargs.get("weld") is False or getattr(kwargs.get("topology"), "weld", None) is False:
-        if uv is True:
-            raise ValueError("partition: weld=False cannot keep UVs (a partitioned run keeps them by splitting "
-                             "each vertex by its UVs and welding the positions back); attributes=None keeps "
-                             "positions only")
-        uv = False  # 'auto' keeps none (a file's UVs are then named as not kept)
+        raise ValueError("partition: weld=False is not offered: a partitioned run welds the file's coincident "
+                         "vertices to find where its parts meet (and keeps UVs by welding the positions back); "
+                         "run it in core (partition=False, --no-partition) to keep them apart")
     return simplify_partitioned(mesh, target_faces=target_faces, ratio=ratio, partition=partition, kwargs=kwargs,
                                 progress=progress, stacklevel=4, uv=uv, texture=texture)
 
