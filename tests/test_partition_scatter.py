@@ -206,6 +206,12 @@ def test_stl_soup_is_welded(tmp_path, ascii_):
     manifest, _, _ = _check(path, 2500, P, np.arange(len(P)).reshape(-1, 3), welded=True, chunk_faces=3001)
     assert manifest["format"] == "stl" and manifest["welded"]
     assert manifest["n_vertices"] == len(trimesh.load(path).vertices)
+    if ascii_:  # its keywords in capitals (as some CAD exporters write them): the same parts (it had "no facets")
+        upper = tmp_path / "u.stl"
+        upper.write_text(path.read_text().upper())
+        again = scatter(upper, tmp_path / "u", 2500, chunk_faces=3001)
+        assert [(tmp_path / "u" / p["file"]).read_bytes() for p in again["parts"]] == \
+            [(tmp_path / "s.stl.parts" / p["file"]).read_bytes() for p in manifest["parts"]]
 
 
 def test_same_bytes_whatever_the_chunk(tmp_path):

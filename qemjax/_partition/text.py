@@ -181,6 +181,7 @@ def read_ascii_stl(path: Path, scratch: Path):
     welder = Welder(scratch / "weld", os.path.getsize(path) // 40)
     pending = line0 = 0
     for block in blocks(path):
+        block = block.lower()  # keywords in any case (some exporters write SOLID, FACET, VERTEX), as in core
         coords, k, _, pending, err, at = scan.stl(np.frombuffer(block, np.uint8), pending)
         if err:
             raise _refuse(err, block, at, line0)
