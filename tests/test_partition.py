@@ -305,6 +305,29 @@ def test_weld_false_and_scratch_paths_in_the_users_terms(tmp_path):
     assert not (tmp_path / "new").exists()
 
 
+def test_a_resumed_run_sees_a_replaced_file(tmp_path):
+    """The resume key was the file's path, size and time: another scan of the same size copied over it with
+    its time kept (cp -p) was given the old scan's result."""
+    import os
+
+    m = shapes.bumpy_sphere(4)
+    path, other = tmp_path / "scan.ply", tmp_path / "other.ply"
+    trimesh.Trimesh(m.vertices, m.faces, process=False).export(path)
+    settings = Partition(workers=1, part_faces=2000, scratch=tmp_path / "scratch")
+    first = qemjax.simplify(str(path), ratio=0.1, partition=settings)
+    st = path.stat()
+    trimesh.Trimesh(m.vertices * 3.0, m.faces, process=False).export(other)
+    os.replace(other, path)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert path.stat().st_size == st.st_size
+    again = qemjax.simplify(str(path), ratio=0.1, partition=settings)
+    assert again.stats["partition"]["reused"] == 0
+    np.testing.assert_allclose(np.ptp(again.vertices, 0), 3 * np.ptp(first.vertices, 0), rtol=0.05)
+    assert np.array_equal(again.vertices, qemjax.simplify(str(path), ratio=0.1, partition=Partition(
+        workers=1, part_faces=2000)).vertices)
+    assert qemjax.simplify(str(path), ratio=0.1, partition=settings).stats["partition"]["reused"] > 0
+
+
 def test_ctrl_c_while_the_workers_leave_still_removes_the_temporary_folder(tmp_path, monkeypatch):
     """An interrupt inside the runner's close (the workers leaving) skipped the removal of the run's
     temporary folder: a large scan's parts stayed in /tmp."""

@@ -163,6 +163,25 @@ def test_per_corner_uvs_of_a_binary_ply(tmp_path):
     assert np.median(deviation(res)) < 1e-3
 
 
+def test_a_resumed_run_sees_the_texture_image_that_appeared(tmp_path):
+    """attributes="auto" keeps a file's UVs when the image it names exists: a run resumed from one made before
+    the image existed reused its parts without UVs (the key held "auto", not what it found)."""
+    from PIL import Image
+
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
+    path = tmp_path / "tex.ply"
+    _ply(path, V, F, V[:, :2] * 0.5 + 0.5, True)
+    data = path.read_bytes()
+    path.write_bytes(data.replace(b"format binary_little_endian 1.0\n",
+                                  b"format binary_little_endian 1.0\ncomment TextureFile t.png\n", 1))
+    settings = Partition(workers=1, part_faces=2000, scratch=tmp_path / "scratch")
+    assert qemjax.simplify(str(path), ratio=0.1, partition=settings).uv is None  # no image yet
+    Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "t.png")
+    resumed = qemjax.simplify(str(path), ratio=0.1, partition=settings)
+    assert resumed.uv is not None and resumed.stats["partition"]["reused"] == 0
+
+
 @pytest.mark.parametrize("kind", ["soup", "seams", "texcoord soup"])
 def test_a_ply_that_repeats_positions_is_welded_as_in_core(tmp_path, kind):
     """A PLY whose vertices repeat positions (a triangle soup; a mesh split at its UV seams, per-vertex UVs;

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import execute, pieces, plan, task
+from .readers import texture_of
 from .source import CORNER_UV, FACES, UV, VERTICES
 from .._mesh.arrays import box_diagonal
 from .._options import Partition
@@ -46,11 +47,22 @@ def _arrays(mesh):
 
 
 def _input_key(mesh) -> str:
-    """What identifies the input for a resumed run: a file by its path, size and time; arrays (`_arrays`)
-    by a hash."""
+    """What identifies the input for a resumed run: a file by its path, size, time and a hash of its first
+    and last MiB (another scan of the same size copied with its time kept, ``cp -p``, is another input), and
+    the texture image it names (``attributes="auto"`` keeps UVs when one exists); arrays (`_arrays`) by a
+    hash."""
     if isinstance(mesh, (str, os.PathLike)):
-        st = Path(mesh).stat()
-        return f"{Path(mesh).resolve()}:{st.st_size}:{st.st_mtime_ns}"
+        path = Path(mesh)
+        st = path.stat()
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            h.update(f.read(1 << 20))
+            if st.st_size > 1 << 20:
+                f.seek(max(st.st_size - (1 << 20), 1 << 20))
+                h.update(f.read())
+        image = texture_of(path)
+        seen = f":{image}:{image.stat().st_mtime_ns}" if image is not None else ""
+        return f"{path.resolve()}:{st.st_size}:{st.st_mtime_ns}:{h.hexdigest()[:16]}{seen}"
     return hashlib.sha256(mesh[0].tobytes() + mesh[1].tobytes()).hexdigest()
 
 
