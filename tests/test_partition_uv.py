@@ -163,6 +163,20 @@ def test_per_corner_uvs_of_a_binary_ply(tmp_path):
     assert np.median(deviation(res)) < 1e-3
 
 
+def test_the_texture_image_is_the_used_materials(tmp_path):
+    """texture_of took the first map_Kd of any material whose file exists, though the faces use another
+    (a wrong image came back), and the last word of a map_Kd with options or a name with spaces."""
+    from PIL import Image
+
+    obj = tmp_path / "m.obj"
+    obj.write_text("mtllib lib.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl mat\nf 1/1 2/2 3/3\n")
+    (tmp_path / "lib.mtl").write_text("newmtl other\nmap_Kd other.png\n\nnewmtl mat\nmap_Kd -s 1 1 1 my tex.png\n")
+    Image.new("RGB", (4, 4)).save(tmp_path / "other.png")
+    assert texture_of(obj) is None  # the used material's image does not exist: none, not another's
+    Image.new("RGB", (4, 4)).save(tmp_path / "my tex.png")
+    assert texture_of(obj) == tmp_path / "my tex.png"
+
+
 def test_a_resumed_run_sees_the_texture_image_that_appeared(tmp_path):
     """attributes="auto" keeps a file's UVs when the image it names exists: a run resumed from one made before
     the image existed reused its parts without UVs (the key held "auto", not what it found)."""

@@ -68,9 +68,10 @@ def open_source(path, scratch: Path, uv: bool = False) -> Source:
 
 
 def texture_of(path) -> Path | None:
-    """The texture image a mesh file names, when it exists: the first ``map_Kd`` of an OBJ's material
-    libraries (``mtllib`` lines in its first MiB; one image, as the UVs of a partitioned run keep one
-    material), or a PLY header's ``comment TextureFile``; else None."""
+    """The texture image a mesh file names, when it exists: the ``map_Kd`` of the material an OBJ's faces use
+    (its first ``usemtl``; without one, the first ``map_Kd``) in its material libraries (``mtllib`` and
+    ``usemtl`` lines in its first MiB; one image, as the UVs of a partitioned run keep one material), or a
+    PLY header's ``comment TextureFile``; else None."""
     path = Path(path)
     with open(path, "rb") as f:
         head = f.read(1 << 20)
@@ -82,20 +83,37 @@ def texture_of(path) -> Path | None:
                 image = path.parent / words[2].strip().decode("utf-8", "replace")
                 return image if image.is_file() else None
         return None
-    libs = []
+    libs, used = [], None
     for line in lines:
         words = line.split(None, 1)
         if words[:1] == [b"mtllib"] and len(words) == 2:  # a name with spaces, or several names
             whole = words[1].strip().decode("utf-8", "replace")
             libs += [whole] + ([] if (path.parent / whole).is_file() else whole.split())
+        elif words[:1] == [b"usemtl"] and len(words) == 2 and used is None:  # the material the faces use
+            used = words[1].strip()
     for name in libs:
         lib = path.parent / name
         if not lib.is_file():
             continue
+        current = None
         for entry in lib.read_bytes().split(b"\n"):
             parts = entry.split()
-            if parts[:1] == [b"map_Kd"] and len(parts) > 1:
-                image = lib.parent / parts[-1].decode("utf-8", "replace")
-                if image.is_file():
-                    return image
+            if parts[:1] == [b"newmtl"]:
+                current = b" ".join(parts[1:])
+            elif parts[:1] == [b"map_Kd"] and len(parts) > 1 and (used is None or current == used):
+                image = lib.parent / _map_file(parts[1:]).decode("utf-8", "replace")
+                return image if image.is_file() else None  # the used material's image, or none (as in core)
     return None
+
+
+# a texture map's options and how many values each takes (the MTL format's), before its file's name
+_MAP_OPTIONS = {b"-blendu": 1, b"-blendv": 1, b"-bm": 1, b"-boost": 1, b"-cc": 1, b"-clamp": 1, b"-imfchan": 1,
+                b"-mm": 2, b"-o": 3, b"-s": 3, b"-t": 3, b"-texres": 1, b"-type": 1}
+
+
+def _map_file(words: list) -> bytes:
+    """The file a ``map_Kd`` line names: its words after the options (a name may hold spaces)."""
+    i = 0
+    while i < len(words) and words[i] in _MAP_OPTIONS:
+        i += 1 + _MAP_OPTIONS[words[i]]
+    return b" ".join(words[i:])
