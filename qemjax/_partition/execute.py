@@ -149,6 +149,8 @@ class LocalRunner(Runner):
                 p.wait(timeout=10)
             except Exception:
                 p.kill()
+            if p.stdout is not None:  # its pipe (unclosed, it warned ResourceWarning at exit)
+                p.stdout.close()
 
 
 class DaskRunner(Runner):
