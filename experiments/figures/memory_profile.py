@@ -113,7 +113,7 @@ def main(argv=None):
         prof.wrap(stages, attr)
     prof.wrap(refit, "refit", "refit")
     prof.wrap(measure, "distance", "measure")
-    for attr in ("samples", "_attach", "_system", "solve_spd"):  # measure imports samples at call time
+    for attr in ("samples", "_attach", "_system", "solve_csr"):  # measure imports samples at call time
         prof.wrap(refit, attr, "refit." + attr.strip("_"))
     from qemjax._mesh import grid_nearest
     prof.wrap(grid_nearest, "nearest", "nearest (measure)")  # refit's own name is wrapped by "refit.attach"

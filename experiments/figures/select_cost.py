@@ -41,7 +41,7 @@ def _rules_loop():
 
     @njit(cache=False)
     def loop(sel, pairs, faces, mesh, limits, seams, mark):
-        E, ecount, X, cnt = pairs.E, pairs.ecount, pairs.X, faces.cnt
+        E, ecount, X, cnt = pairs.E, pairs.ecount, pairs.X, faces.count
         width = 64
         for i in sel:
             width = max(width, 4 * (cnt[E[i, 0]] + cnt[E[i, 1]]))

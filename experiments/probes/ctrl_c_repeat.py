@@ -26,6 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "experiments"))
+sys.path.insert(0, str(ROOT / "tests"))  # test_sweep_stream imports conftest as pytest would
 from ab_compare import package_at  # noqa: E402
 from tests.test_sweep_stream import CONFIG, EXECUTORS, N_CELLS, SCRIPT, _rows, _wait_for_rows  # noqa: E402
 

@@ -55,7 +55,7 @@ def levels(V, F, point, ratio, diag) -> None:
 def main(argv=None) -> int:
     import meshes
     import qemjax
-    from partition_bench import _late_in
+    from partition_bench import _levels
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--meshes", nargs="+", default=["armadillo-x16", "stanford-bunny-x16"])
@@ -69,7 +69,7 @@ def main(argv=None) -> int:
         diag = float(np.linalg.norm(V.max(0) - V.min(0)))
         runs = {"in core": qemjax.simplify((V, F), ratio=args.ratio, measure=False)}
         for late in ("last", "every"):
-            with _late_in(late):
+            with _levels(late):
                 runs[f"partitioned, late={late}"] = qemjax.simplify(
                     (V, F), ratio=args.ratio, measure=False, partition=qemjax.Partition(workers=2))
         print(f"## {name} ({len(F)} faces -> {args.ratio:g}), diagonal {diag:.4g}")

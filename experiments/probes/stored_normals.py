@@ -27,8 +27,18 @@ OUT = ROOT / "experiments" / "results"
 
 def writers():
     """`qemjax._io.attribute_files` of this checkout, without importing this checkout's qemjax."""
+    import importlib.util
+
+    def by_path(name: str, rel: str):
+        spec = importlib.util.spec_from_file_location(name, ROOT / "qemjax" / rel)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    fixed_order = by_path("fixed_order", "_mesh/fixed_order.py")  # numpy only: loaded by path too
     src = (ROOT / "qemjax" / "_io/attribute_files.py").read_text().replace("from .mesh import Mesh", "Mesh = tuple")
-    ns: dict = {}
+    src = src.replace("from .._mesh import fixed_order", "")
+    ns: dict = {"__name__": "attribute_files", "fixed_order": fixed_order}
     exec(compile(src, "_io/attribute_files.py", "exec"), ns)
     return ns
 
