@@ -263,3 +263,12 @@ class Partition:
             return len(os.sched_getaffinity(0))
         except AttributeError:  # not on Linux
             return os.cpu_count() or 1
+
+
+def run_setting_group(name: str) -> str | None:
+    """"topology" or "attributes" when ``name`` is a field of `Topology` or `Attributes` (a run setting, which
+    a method's field of that name would shadow where settings are given flat: `_pipeline.flat`), else None."""
+    for group, cls in (("topology", Topology), ("attributes", Attributes)):
+        if name in {f.name for f in dataclasses.fields(cls) if f.init}:
+            return group
+    return None

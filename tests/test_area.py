@@ -278,7 +278,7 @@ def test_area_weight_and_regularize_refuse_what_they_cannot_wrap():
     m = shapes.icosphere(1)
     # refused when the method is made, in words about the methods (the docs said every method had them)
     with pytest.raises(ValueError, match="area_weight is not offered for method 'area': its price is computed "
-                       "over each pair's ring; it is for 'qem', 'line', 'probabilistic'"):
+                       "over each pair's ring; it is for the pair models without parts: 'qem', 'line', 'probabilistic'"):
         qemjax.simplify(m, ratio=0.5, method="area", area_weight=1.0)
     with pytest.raises(ValueError, match="regularize is not offered for method 'area'"):
         qemjax.AreaDifference(regularize=0.1)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 
+from .._options import run_setting_group
+
 from .base import CostModel as CostModel
 from .base import MeshInput as MeshInput
 from .base import MeshView as MeshView
@@ -61,14 +63,11 @@ def register(name, cls: type[Method] | None = None):
                          f"got {cls!r}")
     if not isinstance(name, str) or not name or name in REGISTRY or name in PRESETS:
         raise ValueError(f"a method needs a new, non-empty name; got {name!r} (taken: {methods()})")
+    for f in dataclasses.fields(cls):  # a field named like a run setting could not be given flat
+        group = run_setting_group(f.name) if f.init else None
+        if group:
+            raise ValueError(f"method {name!r} has a field {f.name!r}, which is a {group} setting")
     REGISTRY[name] = cls
-    from .._pipeline.flat import options  # (it imports this module)
-
-    try:  # a field named like a run setting could not be given flat: refused now, not at every later call
-        options()
-    except ValueError:
-        del REGISTRY[name]
-        raise
     return cls
 
 

@@ -167,13 +167,10 @@ class Method(CostModel):
         require_nonnegative(self, "regularize", "area_weight")
         for term in ("regularize", "area_weight"):
             if getattr(self, term) and not takes_terms(type(self)):
-                from . import REGISTRY  # (the registry imports this module)
-
-                offered = [name for name, cls in REGISTRY.items() if takes_terms(cls)]
                 why = (f"its cost has parts of its own ({', '.join(self.parts)})" if self.parts else
                        "its price is computed over each pair's ring")
-                raise ValueError(f"{term} is not offered for method {self.name!r}: {why}; it is for "
-                                 f"{', '.join(map(repr, offered))}")
+                raise ValueError(f"{term} is not offered for method {self.name!r}: {why}; it is for the pair "
+                                 "models without parts: 'qem', 'line', 'probabilistic'")
         if self.refit < 0:
             raise ValueError(f"refit must be an integer >= 0 (rounds), got {self.refit!r}")
         if self.polish < 0:

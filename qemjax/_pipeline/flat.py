@@ -51,15 +51,13 @@ def _options(registry: tuple) -> dict[str, Option]:
     for group, cls in GROUPS.items():
         for f, hint in _fields(cls):
             out[f.name] = Option(f.name, group, hint, f.default)
-    for name, cls in registry:
+    for name, cls in registry:  # (`_costs.register` refuses a field that shadows a run setting)
         for f, hint in _fields(cls):
             old = out.get(f.name)
             if old is None:
                 out[f.name] = Option(f.name, "method", hint, f.default, (name,))
-            elif old.group == "method":
+            else:
                 out[f.name] = dataclasses.replace(old, owners=old.owners + (name,))
-            else:  # a method field that shadows a run setting could not be given flat
-                raise ValueError(f"method {name!r} has a field {f.name!r}, which is a {old.group} setting")
     return out
 
 
