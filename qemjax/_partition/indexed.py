@@ -3,7 +3,8 @@
 A PLY lists its vertices once each, usually; a triangle soup, or a mesh split at its UV seams, repeats a
 position under several numbers. In core the copies are one vertex (``weld=True``); across parts they
 would be vertices of different numbers, neither marked as shared, so the parts' runs would move them
-apart: a crack. So the positions are first checked for repeats, 8 bytes a vertex (their hashes, sorted),
+apart: a crack. So the positions are first checked for repeats, 8 bytes a vertex (their hashes, the
+Welder's `weld.hash_rows`, sorted),
 and only a file that has some is welded (`weld.Welder`, bounded memory) and its faces renumbered.
 """
 from __future__ import annotations
@@ -14,23 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from .source import TRI, XYZ, Appender, Block, Ragged, Source, remove, rows
-from .weld import Welder
+from .weld import Welder, hash_rows
 
 # the welded positions and renumbered triangles (a text file's own scratch arrays may be the ones read here)
 WELDED = ("vertices_welded.f64", "faces_welded.i64")
-
-
-def _mix(h: np.ndarray) -> np.ndarray:
-    """splitmix64's finaliser: every input bit reaches every output bit (positions read from float32 have
-    29 zero bits at the bottom, which a weaker mix would leave colliding)."""
-    with np.errstate(over="ignore"):
-        h = (h ^ (h >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        h = (h ^ (h >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return h ^ (h >> np.uint64(31))
-
-
-def _hashes(bits: np.ndarray) -> np.ndarray:
-    return _mix(_mix(_mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
 
 
 def repeats(src: Source, step: int) -> bool:
@@ -39,7 +27,8 @@ def repeats(src: Source, step: int) -> bool:
     n = src.n_vertices
     h = np.empty(n, np.uint64)
     for lo in range(0, n, step):
-        h[lo:lo + min(step, n - lo)] = _hashes(np.ascontiguousarray(src.vertices(lo, lo + step)).view(np.uint64).reshape(-1, 3))
+        bits = np.ascontiguousarray(src.vertices(lo, lo + step)).view(np.uint64).reshape(-1, 3)
+        h[lo:lo + len(bits)] = hash_rows(bits)
     s = np.sort(h)
     twice = np.unique(s[1:][s[1:] == s[:-1]])
     if not len(twice):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import execute, pieces, plan, task
+from . import execute, indexed, pieces, plan, task
 from .readers import texture_of
 from .source import CORNER_UV, FACES, UV, VERTICES
 from .._mesh.arrays import box_diagonal
@@ -66,11 +66,11 @@ def _input_key(mesh) -> str:
     return hashlib.sha256(mesh[0].tobytes() + mesh[1].tobytes()).hexdigest()
 
 
-# what a run writes in its scratch folder: level folders, the reading's work folders and these files
 MEASURE_TASKS = 32  # the measured distance's tasks (fewer for fewer parts): fixed, whatever the workers
+# what a run writes in its scratch folder: level folders, the reading's work folders and these files
 _OWN_FOLDERS = re.compile(r"level\d+|tmp|weld")
 _OWN_FILES = {"manifest.json", "run.json", "stats.json", "output.npz", "input.ply", VERTICES, FACES, UV, CORNER_UV,
-              "faces_raw.i64", "ids.i64"}
+              "faces_raw.i64", "ids.i64", *indexed.WELDED}
 
 
 def _own(entry: Path) -> bool:

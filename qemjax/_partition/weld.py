@@ -33,15 +33,18 @@ _BUCKET_ROWS = 1 << 21
 _MAX_FILES = 256
 
 
-def _hash(bits: np.ndarray) -> np.ndarray:
-    """A 64-bit mix of the three words of each row (splitmix64's finaliser over a combination)."""
+def _mix(h: np.ndarray) -> np.ndarray:
+    """splitmix64's finaliser: every input bit reaches every output bit (positions read from float32 have
+    29 zero bits at the bottom, which a weaker mix leaves colliding)."""
     with np.errstate(over="ignore"):
-        h = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15) ^ bits[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F) \
-            ^ bits[:, 2] * np.uint64(0x165667B19E3779F9)
-        h ^= h >> np.uint64(31)
-        h *= np.uint64(0xBF58476D1CE4E5B9)
-        h ^= h >> np.uint64(29)
-    return h
+        h = (h ^ (h >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        h = (h ^ (h >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return h ^ (h >> np.uint64(31))
+
+
+def hash_rows(bits: np.ndarray) -> np.ndarray:
+    """A 64-bit hash of each row of three words (a position's bits): the words mixed in one after another."""
+    return _mix(_mix(_mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
 
 
 def _spread(path_of, keys: np.ndarray, rows: np.ndarray, files: dict) -> None:
@@ -80,7 +83,7 @@ class Welder:
         bits = np.ascontiguousarray(positions, np.float64).view(np.uint64).reshape(-1, 3)
         rows = np.empty(len(bits), BUCKET)
         rows["p"], rows["i"] = bits, np.arange(self.count, self.count + len(bits))
-        bucket = (_hash(bits) >> np.uint64(32)) * np.uint64(self.buckets) >> np.uint64(32)
+        bucket = (hash_rows(bits) >> np.uint64(32)) * np.uint64(self.buckets) >> np.uint64(32)
         _spread(lambda b: self._path("bucket", b), bucket, rows, self._files)
         self.count += len(bits)
 
