@@ -223,10 +223,10 @@ def available() -> list[str]:
     return out
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(eq=False)  # arrays: `==` is identity (an elementwise == has no one truth value)
 class PeerResult:
     """A peer's output: ``vertices`` (n, 3) float64, ``faces`` (m, 3) int64, ``stop_reason`` and ``stats``
-    (see the module docstring)."""
+    (see the module docstring). Compares and hashes by identity (``a == b`` is ``a is b``)."""
 
     vertices: np.ndarray
     faces: np.ndarray

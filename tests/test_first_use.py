@@ -90,6 +90,20 @@ def test_reprs_are_a_few_lines_of_counts(ball):
     assert repr(res.history).startswith(f"Contractions({len(res.history)} contractions")
 
 
+def test_results_compare_by_identity(ball):
+    """`==` between two results (or their records, levels, histories, chains) raised numpy's "truth value of
+    an array is ambiguous": they compare and hash by identity."""
+    res, again = qemjax.simplify(ball, ratio=0.5), qemjax.simplify(ball, ratio=0.5)
+    chain = qemjax.lod_chain(ball, ratios=(0.5, 0.25))
+    pairs = [(res, again), (res.history, again.history), (res.record, again.record),
+             (res.replay(200), again.replay(200)), (chain, qemjax.lod_chain(ball, ratios=(0.5, 0.25))),
+             (chain[0], chain[1])]
+    for a, b in pairs:
+        assert a == a and not a != a and a != b and not a == b, type(a).__name__
+        assert len({a, a, b}) == 2 and hash(a) == hash(a), type(a).__name__
+    assert res in [again, res] and res not in [again]
+
+
 # -- a misspelt setting ---------------------------------------------------------------------------------
 
 def test_a_misspelt_setting_suggests_the_close_name(ball):

@@ -68,6 +68,18 @@ def test_unreferenced_vertices_dropped():
     assert rep["unreferenced_removed"] == 1 and len(V3) == len(V)
 
 
+def test_meshes_compare_by_identity():
+    """A `Mesh` is a named tuple of arrays: its tuple `==` compared the arrays elementwise and raised ("truth
+    value of an array is ambiguous"), and it could not be hashed. It compares and hashes by identity, and still
+    unpacks as a tuple."""
+    a, b = shapes.icosphere(1), shapes.icosphere(1)
+    assert a == a and a != b and not a == b and not a != a
+    assert a != (a.vertices, a.faces) and (a.vertices, a.faces) != a  # not a plain tuple, whatever its arrays
+    assert len({a, b, a}) == 2 and hash(a) == hash(a)
+    V, F = a
+    assert V is a.vertices and F is a.faces and a[1] is F
+
+
 def test_accepts_trimesh_and_objects():
     V, F = shapes.icosphere(2)
     tm = trimesh.Trimesh(V, F, process=False)

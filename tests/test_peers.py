@@ -32,6 +32,13 @@ def test_peer_in_a_sweep_beside_qemjax(name):
     assert F.min() >= 0 and F.max() < len(res.vertices) and len(res.faces) == peer["faces_out"]
 
 
+def test_peer_results_compare_by_identity():
+    """A `PeerResult` holds arrays: `==` raised numpy's "truth value of an array is ambiguous"."""
+    V, F = qemjax.shapes.icosphere(1)
+    a, b = peers.PeerResult(V, F, {}), peers.PeerResult(V.copy(), F.copy(), {})
+    assert a == a and a != b and len({a, b, a}) == 2
+
+
 def test_missing_peer_is_a_one_line_error_naming_the_extra(monkeypatch):
     real = builtins.__import__
 

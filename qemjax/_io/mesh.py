@@ -20,10 +20,23 @@ from .._mesh.arrays import face_stats, column_bounds, sorted_triples
 
 
 class Mesh(NamedTuple):
-    """A triangle mesh as arrays: vertices (n,3) float64, faces (m,3) int64."""
+    """A triangle mesh as arrays: vertices (n,3) float64, faces (m,3) int64 (``V, F = mesh`` unpacks it).
+
+    Compares and hashes by identity (``a == b`` is ``a is b``), as `qemjax.SimplifyResult` does; compare
+    the arrays with ``np.array_equal``."""
 
     vertices: np.ndarray
     faces: np.ndarray
+
+    # a tuple's == compares its arrays elementwise, whose result has no one truth value (it raised), and
+    # its hash hashes them (unhashable): identity, as the other objects holding arrays
+    def __eq__(self, other):  # False, not NotImplemented, for a plain tuple: its == would compare the arrays
+        return self is other
+
+    def __ne__(self, other):
+        return self is not other
+
+    __hash__ = object.__hash__
 
 
 class MissingFileError(FileNotFoundError, ValueError):

@@ -14,11 +14,11 @@ from .._record.result import SimplifyResult
 RATIOS = (0.5, 0.25, 0.1, 0.01)
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(eq=False)  # levels of arrays: `==` is identity, as for `Level`
 class LodChain:
     """Levels of one mesh from one run: ``levels[i]`` (a `qemjax.Level`) keeps ``ratios[i]`` of the
     faces; ``result`` is the run itself (`SimplifyResult`, at the smallest ratio), whose record the
-    levels are replayed from."""
+    levels are replayed from. Compares and hashes by identity (``a == b`` is ``a is b``)."""
 
     levels: list[Level]
     ratios: tuple[float, ...]

@@ -43,7 +43,7 @@ FORMAT = "qemjax-record-1"  # written into every .npz; `load_record` refuses oth
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed time stamps: the same record gives the same bytes
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(eq=False)  # arrays: `==` is identity (an elementwise == has no one truth value)
 class Level:
     """One level of a record: the mesh after its first ``contractions`` contractions.
 
@@ -51,7 +51,8 @@ class Level:
     output; source_vertices (k,) / source_faces (j,) int64: the input vertex each vertex grew from and the
     input face each face continues; vertex_map (n,) int64: each input vertex's vertex here (-1: its part
     vanished); max_error: the largest cost among the contractions used (the cost model's measure, e.g. the quadric error, mesh units²; 0
-    for none); round: the round of the last contraction used (-1 for none)."""
+    for none); round: the round of the last contraction used (-1 for none). Compares and hashes by
+    identity (``a == b`` is ``a is b``); compare the arrays with ``np.array_equal``."""
 
     vertices: np.ndarray
     faces: np.ndarray
@@ -73,7 +74,7 @@ class Level:
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(eq=False)  # arrays: `==` is identity, as for `Level`
 class Record:
     """What one run did, enough to rebuild every level (see the module docstring).
 
@@ -84,7 +85,8 @@ class Record:
     after that contraction (non-manifold mode; `_topology.coincident_removals`, lower face index first)
     rather than collapsing; frame: the internal unit frame (`_units.Frame`), used where `simplify` keeps
     rounded positions (faces of exactly zero area); scheduler: the scheduler that ran; target_faces: the
-    face target the contractions ran to (0: none)."""
+    face target the contractions ran to (0: none). Compares and hashes by identity (``a == b`` is
+    ``a is b``)."""
 
     input_vertices: np.ndarray
     input_faces: np.ndarray

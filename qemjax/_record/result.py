@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(eq=False)  # arrays: `==` is identity (an elementwise == has no one truth value)
 class Contractions:
     """Record of the contractions in the order they happened, in the cleaned input's vertex ids.
 
@@ -19,6 +19,8 @@ class Contractions:
     a round, contractions are in the order selection ranked them (cost order; with ``quality_threshold``, the
     shaped keys' order). The faces each removed are
     in the result's `record` (``record.removed_at``).
+
+    Compares and hashes by identity (``a == b`` is ``a is b``); compare the arrays with ``np.array_equal``.
     """
 
     pairs: np.ndarray
@@ -36,7 +38,7 @@ class Contractions:
         return f"Contractions({len(self)} contractions{rounds}{parts})"
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(eq=False)  # arrays: `==` is identity, as for `Contractions`
 class SimplifyResult:
     """A simplified mesh and what it cost.
 
@@ -85,6 +87,8 @@ class SimplifyResult:
     wedge_vertex[wedge_faces[i, k]]); material: the trimesh material of the UVs (with its texture image)
     or None; input_wedge_faces (m,3): the cleaned input's corner wedges (its own ids; for
     `qemjax.metrics.seam_report`). `to_trimesh` splits vertices by wedge, as OBJ, glTF and trimesh store them.
+
+    Compares and hashes by identity (``a == b`` is ``a is b``); compare the arrays with ``np.array_equal``.
     """
 
     vertices: np.ndarray
