@@ -22,16 +22,39 @@ from ._mesh import fixed_order
 SHAPES = ("bumpy_sphere", "icosphere", "torus", "cube", "grid")  # the generators a spec may name
 
 
+# the least of each count a generator takes: fewer made an empty mesh, or faces on the same vertices
+_LEAST = {"icosphere": {"subdivisions": 0}, "bumpy_sphere": {"subdivisions": 0}, "cube": {"subdivisions": 0},
+          "torus": {"n_major": 3, "n_minor": 3}, "grid": {"n": 1}, "double_cone": {"n": 3}}
+
+
+def _counts(shape: str, args: dict, text: str | None = None) -> None:
+    """ValueError naming ``shapes.shape``'s argument (after ``text``, the spec as written, when given) unless
+    each count in ``args`` is an integer at least its `_LEAST` (a grid with a hole: 3, the hole being its
+    middle third)."""
+    hole = bool(args.get("hole", False))
+    for name, least in _LEAST[shape].items():
+        if name not in args:
+            continue
+        value, why = args[name], ""
+        if hole and name == "n":
+            least, why = 3, " with hole=True"
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < least:
+            raise ValueError(f"{text or 'shapes.' + shape}: {name} must be an integer >= {least}{why}, got {value!r}")
+
+
 def icosphere(subdivisions: int = 3, radius: float = 1.0) -> Mesh:
-    """Geodesic sphere with 20·4^subdivisions faces."""
+    """Geodesic sphere with 20·4^subdivisions faces (subdivisions >= 0)."""
     import trimesh
 
+    _counts("icosphere", dict(subdivisions=subdivisions))
     m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
     return Mesh(np.asarray(m.vertices, float), np.asarray(m.faces, np.int64))
 
 
 def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 48, n_minor: int = 24) -> Mesh:
-    """Closed genus-1 torus with 2·n_major·n_minor faces."""
+    """Closed genus-1 torus with 2·n_major·n_minor faces (n_major, n_minor >= 3: segments around the ring and
+    around the tube)."""
+    _counts("torus", dict(n_major=n_major, n_minor=n_minor))
     u, v = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
     a, b = 2 * np.pi * u / n_major, 2 * np.pi * v / n_minor
     cos, sin = fixed_order.cos, fixed_order.sin  # the C library's: the same mesh on every CPU
@@ -49,7 +72,9 @@ def grid(n: int = 20, size: float = 1.0, hole: bool = False) -> Mesh:
     """Flat open square [0,size]² in the z=0 plane, n×n cells of two triangles, normals +z.
 
     hole=True removes the cells of the middle third, leaving a square hole (a second boundary loop).
+    n >= 1; with hole=True, n >= 3 (fewer cells have no middle third to remove with a border left).
     """
+    _counts("grid", dict(n=n, hole=hole))
     x = np.linspace(0.0, size, n + 1)
     X, Y = np.meshgrid(x, x, indexing="ij")
     V = np.stack([X.reshape(-1), Y.reshape(-1), np.zeros(X.size)], 1)
@@ -69,9 +94,11 @@ def grid(n: int = 20, size: float = 1.0, hole: bool = False) -> Mesh:
 
 
 def cube(subdivisions: int = 2) -> Mesh:
-    """Closed unit cube (sharp creases and corners), each face split by midpoint subdivision."""
+    """Closed unit cube (sharp creases and corners), each face split by midpoint subdivision (subdivisions
+    >= 0: 12·4^subdivisions faces)."""
     import trimesh
 
+    _counts("cube", dict(subdivisions=subdivisions))
     m = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     V, F = np.asarray(m.vertices), np.asarray(m.faces)
     for _ in range(subdivisions):
@@ -81,7 +108,8 @@ def cube(subdivisions: int = 2) -> Mesh:
 
 def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) -> Mesh:
     """Icosphere whose radius varies with a few smooth random bumps: detail worth simplifying.
-    subdivisions=6 gives 81,920 faces, 7 gives 327,680."""
+    subdivisions=6 gives 81,920 faces, 7 gives 327,680 (subdivisions >= 0)."""
+    _counts("bumpy_sphere", dict(subdivisions=subdivisions))
     V, F = icosphere(subdivisions)
     rng = np.random.default_rng(seed)
     dirs = rng.normal(size=(12, 3))
@@ -95,7 +123,8 @@ def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) 
 
 def double_cone(n: int = 500, radius: float = 1.0, height: float = 1.0) -> Mesh:
     """Closed double cone: a ring of n vertices in the z=0 plane and two apexes at z=±height, each apex
-    joined to every ring vertex (valence n), 2n faces. A fan-triangulated cap taken to the extreme."""
+    joined to every ring vertex (valence n), 2n faces (n >= 3). A fan-triangulated cap taken to the extreme."""
+    _counts("double_cone", dict(n=n))
     t = 2 * np.pi * np.arange(n) / n
     V = np.concatenate([np.stack([radius * fixed_order.cos(t), radius * fixed_order.sin(t), np.zeros(n)], 1),
                         [[0.0, 0.0, height], [0.0, 0.0, -height]]])
@@ -185,6 +214,7 @@ def parse_spec(value) -> ShapeSpec:
               isinstance(v, (int, float)) and not isinstance(v, bool) if isinstance(default, float) else True)
         if not ok:
             raise ValueError(f"{text}: {k} must be {type(default).__name__}, got {v!r}")
+    _counts(name, kwargs, text)  # as the generator would, before a sweep starts
     return ShapeSpec(name, tuple((k, kwargs[k]) for k in params if k in kwargs))
 
 

@@ -348,6 +348,36 @@ def test_shapes_named_as_text():
             shapes.parse_spec(bad)
 
 
+@pytest.mark.parametrize("make, message", [
+    (lambda: shapes.torus(n_major=0), "shapes.torus: n_major must be an integer >= 3, got 0"),
+    (lambda: shapes.torus(n_minor=2), "shapes.torus: n_minor must be an integer >= 3, got 2"),
+    (lambda: shapes.torus(n_major=12.0), "shapes.torus: n_major must be an integer >= 3, got 12.0"),
+    (lambda: shapes.grid(0), "shapes.grid: n must be an integer >= 1, got 0"),
+    (lambda: shapes.grid(-2), "shapes.grid: n must be an integer >= 1, got -2"),
+    (lambda: shapes.grid(2, hole=True), "shapes.grid: n must be an integer >= 3 with hole=True, got 2"),
+    (lambda: shapes.icosphere(-1), "shapes.icosphere: subdivisions must be an integer >= 0, got -1"),
+    (lambda: shapes.bumpy_sphere(-1), "shapes.bumpy_sphere: subdivisions must be an integer >= 0, got -1"),
+    (lambda: shapes.cube(-1), "shapes.cube: subdivisions must be an integer >= 0, got -1"),
+    (lambda: shapes.double_cone(2), "shapes.double_cone: n must be an integer >= 3, got 2"),
+    (lambda: shapes.parse_spec("shapes.torus(n_minor=1)"),
+     "shapes.torus(n_minor=1): n_minor must be an integer >= 3, got 1"),
+    (lambda: shapes.parse_spec({"shape": "grid", "n": 1, "hole": True}), "shapes.grid: n must be an integer >= 3"),
+])
+def test_shapes_refuse_counts_that_make_empty_or_repeated_faces(make, message):
+    """0 or negative segments made an empty torus or grid, a negative subdivision quietly the level-0 mesh, two
+    segments a torus or double cone of faces on the same vertices, a grid of 2 with a hole no faces at all."""
+    with pytest.raises(ValueError, match="^" + re.escape(message)) as err:
+        make()
+    assert "\n" not in str(err.value)
+
+
+def test_the_smallest_counts_make_meshes_of_distinct_faces():
+    for mesh in (shapes.torus(n_major=3, n_minor=3), shapes.grid(1), shapes.grid(3, hole=True),
+                 shapes.icosphere(0), shapes.cube(0), shapes.double_cone(3), shapes.torus(n_major=np.int64(3))):
+        F = np.sort(mesh.faces, axis=1)
+        assert len(F) and len(np.unique(F, axis=0)) == len(F) and (F[:, :-1] < F[:, 1:]).all()
+
+
 def test_sweep_takes_shapes_named_as_text():
     df = qemjax.sweep(["shapes.icosphere(subdivisions=2)", "shapes.torus(n_major=12, n_minor=6)"], {}, [0.5],
                       metrics=False, progress=False)
@@ -596,7 +626,7 @@ def test_config_and_out_mistakes_are_named(tmp_path):
     cfg.write_text('meshes: ["shapes.torus"]\ntargets: [0.5]\ngrid: {3: [1]}\n')
     with pytest.raises(ValueError, match="k.yaml: 3 is not a key a sweep config has"):
         _sweep_config.load(cfg)
-    with pytest.raises(ValueError, match=re.escape("shapes.torus(n_major=-3): empty mesh")):
+    with pytest.raises(ValueError, match=re.escape("shapes.torus(n_major=-3): n_major must be an integer >= 3")):
         qemjax.sweep(["shapes.torus(n_major=-3)"], {}, [0.5], metrics=False, progress=False, workers=1)
     out = tmp_path / "empty.csv"
     out.write_text("")
