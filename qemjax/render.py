@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._io.mesh import _triangulate
+
 __all__ = ["face_texture_colors", "render", "render_pair"]
 
 DEFAULT_VIEW = (20.0, -60.0)  # (elevation, azimuth) in degrees, matplotlib's convention
@@ -37,15 +39,25 @@ def _pyplot():
 
 
 def _as_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices (n, 3) float64, faces (m, 3) int64) from a trimesh, a (V, F) pair or a .vertices/.faces object."""
+    """(vertices (n, 3) float64, faces (m, k) int64, k >= 3: triangles, quads or other polygons) from a
+    trimesh, a (V, F) pair or a .vertices/.faces object; ValueError naming a shape that is neither."""
     if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
         V, F = mesh.vertices, mesh.faces
     elif isinstance(mesh, (tuple, list)) and len(mesh) == 2:
         V, F = mesh
     else:
         raise TypeError(f"expected a mesh, a (vertices, faces) pair, or .vertices/.faces; got {type(mesh)!r}")
-    V = np.asarray(V, dtype=np.float64).reshape(-1, 3)
-    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    V, F = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
+    if V.ndim == 1 and V.size % 3 == 0:  # flat x, y, z triples
+        V = V.reshape(-1, 3)
+    if F.ndim == 1 and F.size % 3 == 0:  # flat triangles
+        F = F.reshape(-1, 3)
+    # a reshape to (-1, 3) of anything else cut quads and (n, 2) points into rows that are not faces
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"render: vertices must be (n, 3), got shape {V.shape}")
+    if F.ndim != 2 or F.shape[1] < 3:
+        raise ValueError(f"render: faces must be (m, 3) triangles or (m, k) polygons with k >= 3 corners, "
+                         f"got shape {F.shape}")
     return V, F
 
 
@@ -98,7 +110,8 @@ def render(
     """Draw ``mesh`` with flat shading; returns the matplotlib 3-D Axes.
 
     Args:
-        mesh: trimesh.Trimesh, (vertices, faces) pair, or object with ``.vertices`` and ``.faces``.
+        mesh: trimesh.Trimesh, (vertices, faces) pair, or object with ``.vertices`` and ``.faces``. Faces are
+            (m, 3) triangles, or (m, k) quads or other polygons (k >= 3), drawn as a fan of triangles each.
         ax: a 3-D Axes to draw into (``projection="3d"``); a new figure is made when None.
         view: (elevation, azimuth) in degrees. The light comes from the camera, a little above and left.
         color: RGB base colour (0..1), or one per face (m, 3) (e.g. a texture sampled at each face's
@@ -112,6 +125,10 @@ def render(
     """
     plt, Poly3DCollection = _pyplot()
     V, F = _as_arrays(mesh)
+    sides = F.shape[1]
+    polygons = len(F)
+    if sides > 3:  # quads and other polygons: a fan of triangles each, drawn and shaded as its own face
+        F = _triangulate(F)
     V = _rotate_up(V, up)
     created = ax is None
     if created:
@@ -126,8 +143,9 @@ def render(
     eye = _view_direction(view)
     base = np.asarray(color, dtype=np.float64)
     if base.ndim == 2:
-        if base.shape[0] != len(F):
-            raise ValueError(f"color: {base.shape[0]} per-face colours for {len(F)} faces")
+        if base.shape[0] != polygons:
+            raise ValueError(f"color: {base.shape[0]} per-face colours for {polygons} faces")
+        base = np.repeat(base, sides - 2, axis=0)  # one per triangle of each face's fan
         tris, normals, base = _thin(tris, normals, eye, max_faces, base[:, :3])
     else:
         tris, normals = _thin(tris, normals, eye, max_faces)

@@ -83,3 +83,42 @@ def test_face_texture_colors_of_a_mesh_without_uvs_says_so():
     for mesh in (res, res.to_trimesh()):
         with pytest.raises(ValueError, match="the mesh carries no UVs"):
             face_texture_colors(mesh)
+
+
+def _quad_cube():
+    V = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+    Q = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]])
+    return V, Q
+
+
+def test_render_draws_quads_as_two_triangles_each():
+    """(m, 4) faces were reshaped to (-1, 3): 3 quads became 4 triangles of other corners, 1 quad an error
+    from numpy. Each polygon is drawn as a fan of triangles, its per-face colour on each."""
+    import matplotlib.pyplot as plt
+
+    V, Q = _quad_cube()
+    for faces in (Q, Q[:3], Q[:1]):
+        colors = np.linspace(0.2, 0.8, 3 * len(faces)).reshape(-1, 3)
+        ax = render((V, faces), color=colors, up="z")
+        ax.figure.canvas.draw()  # a 3-D collection's paths are its projected polygons, made when drawn
+        (collection,) = ax.collections
+        drawn = {tuple(map(tuple, np.round(p.vertices[:3], 6))) for p in collection.get_paths()}
+        assert len(collection.get_paths()) == 2 * len(faces)
+        plt.close(ax.figure)
+        ax = render((V, np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])), color=np.repeat(colors, 2, 0),
+                    up="z")
+        ax.figure.canvas.draw()
+        (want,) = ax.collections
+        assert drawn == {tuple(map(tuple, np.round(p.vertices[:3], 6))) for p in want.get_paths()}
+        plt.close(ax.figure)
+    with pytest.raises(ValueError, match=r"^color: 5 per-face colours for 6 faces$"):
+        render((V, Q), color=np.zeros((5, 3)))
+
+
+@pytest.mark.parametrize("mesh, message", [
+    ((np.zeros((4, 3)), np.array([[0, 1]])), r"^render: faces must be \(m, 3\) triangles or \(m, k\) polygons"),
+    ((np.zeros((4, 2)), np.array([[0, 1, 2]])), r"^render: vertices must be \(n, 3\), got shape \(4, 2\)$"),
+])
+def test_render_refuses_what_is_not_a_mesh_by_its_shape(mesh, message):
+    with pytest.raises(ValueError, match=message):
+        render(mesh)
