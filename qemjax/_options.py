@@ -12,9 +12,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
 from typing import Any
 
 import numpy as np
+
+from ._mesh.wedges import KINDS, check_weights
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,22 +139,88 @@ class Topology:
         return 0.0 if self.min_angle is None else math.sin(math.radians(self.min_angle))
 
 
-@dataclasses.dataclass(frozen=True)
+class _Weights(dict):
+    """A read-only {kind: weight}: `Attributes` keeps its own copy of a mapping given, so that it stays what
+    was checked and can be hashed."""
+
+    def _refuse(self, *args, **kwargs):
+        raise TypeError("Attributes.attribute_weights cannot be changed: dataclasses.replace(attributes, "
+                        "attribute_weights={...}) makes another")
+
+    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = __ior__ = _refuse
+
+    def __hash__(self):
+        return hash(frozenset(self.items()))
+
+    def __reduce__(self):  # pickles (a sweep's workers) without the refused __setitem__
+        return (type(self), (dict(self),))
+
+
+def _is_image(x) -> bool:
+    """Whether ``x`` is a PIL image (PIL not imported: it cannot be one, and is not imported to say so)."""
+    image = sys.modules.get("PIL.Image")
+    return image is not None and isinstance(x, image.Image)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
 class Attributes:
     """Which appearance attributes a run carries through, and how they weigh (``simplify(attributes=...)``;
     docs/attributes.md).
 
     ``attributes``: ``'auto'`` (each kind the input carries without seams, and UVs with seams when the material names a
         texture image or ``texture`` is given; another seamed kind only when named),
-        ``'uv'``, ``'color'``, ``'normal'``, a tuple of these, or None (positions only).
-    ``attribute_weights``: w ≥ 0, one number for every kind or {kind: w}; None: the measured defaults
-        (``qemjax._mesh.wedges.DEFAULT_WEIGHTS``).
+        ``'uv'``, ``'color'``, ``'normal'``, a tuple of these (a list or set is kept as a tuple), or None
+        (positions only).
+    ``attribute_weights``: w ≥ 0, one number for every kind or {kind: w} (kept as a read-only copy); None:
+        the measured defaults (``qemjax._mesh.wedges.DEFAULT_WEIGHTS``).
     ``texture``: a path or PIL image: the texture of the UVs (for a file that names no material).
+
+    Frozen data, checked when made (ValueError naming the field): equal settings compare equal and hash
+    alike; a texture given as an image compares by identity (a path, by its text).
     """
 
     attributes: object = "auto"
     attribute_weights: object = None
     texture: object = None
+
+    def __post_init__(self):
+        a = self.attributes
+        if isinstance(a, (list, tuple, set, frozenset)):
+            bad = [k for k in a if not isinstance(k, str) or k not in KINDS]
+            if bad:
+                raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {bad[0]!r}")
+            # a set has no order of its own: the kinds' order; a list or tuple as given
+            a = tuple(k for k in KINDS if k in a) if isinstance(a, (set, frozenset)) else tuple(a)
+            object.__setattr__(self, "attributes", a)
+        elif not (a is None or a is False or (isinstance(a, str) and (a == "auto" or a in KINDS))):
+            raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {a!r}")
+        w = self.attribute_weights
+        if w is not None:
+            if not isinstance(w, dict) and hasattr(w, "keys"):  # another mapping: read as a dict
+                w = dict(w)
+            if not isinstance(w, (dict, int, float, np.integer, np.floating)) or isinstance(w, (bool, np.bool_)):
+                raise ValueError(f"attribute_weights takes one number w >= 0 for every kind or {{kind: w}}, "
+                                 f"got {type(w).__name__} {w!r}")
+            check_weights(w)  # ValueError naming the kind or the weight
+            if isinstance(w, dict):
+                object.__setattr__(self, "attribute_weights", _Weights(w))
+        t = self.texture
+        if not (t is None or isinstance(t, (str, os.PathLike)) or _is_image(t)):
+            raise ValueError(f"texture= takes an image file's path or a PIL image, got {type(t).__name__}"
+                             + (" (a numpy array: PIL.Image.fromarray(array))" if isinstance(t, np.ndarray) else ""))
+
+    def _key(self) -> tuple:
+        t = self.texture  # an image compares by identity (PIL's == compares pixels, and it has no hash)
+        return (self.attributes, self.attribute_weights,
+                t if t is None else os.fspath(t) if isinstance(t, (str, os.PathLike)) else ("image", id(t)))
+
+    def __eq__(self, other):
+        if other.__class__ is not self.__class__:
+            return NotImplemented
+        return self is other or self._key() == other._key()
+
+    def __hash__(self):
+        return hash(self._key())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -253,6 +322,8 @@ class Partition:
             positive("workers", self.workers)
         if not isinstance(self.measure, (bool, np.bool_)):
             raise ValueError(f"Partition: measure must be True or False, got {self.measure!r}")
+        if not (self.scratch is None or isinstance(self.scratch, (str, os.PathLike))):
+            raise ValueError(f"Partition: scratch must be a folder's path or None, got {type(self.scratch).__name__}")
 
     @property
     def n_workers(self) -> int:

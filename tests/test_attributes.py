@@ -172,6 +172,44 @@ def test_attribute_options_are_checked(tmp_path):
     assert r.uv is None and r.stats["dropped"] == ["uv"]
 
 
+def test_attribute_settings_are_frozen_data_checked_when_made():
+    """`Attributes` is frozen data: it could not be hashed with weights given as a dict, and took a list, a
+    bad kind, weights of the wrong type or a texture that is no image unchecked (they failed later, inside the
+    run, or never)."""
+    import pickle
+
+    from PIL import Image
+
+    a = qemjax.Attributes("uv", {"uv": 0.5})
+    assert a == qemjax.Attributes("uv", {"uv": 0.5}) and hash(a) == hash(qemjax.Attributes("uv", {"uv": 0.5}))
+    assert a != qemjax.Attributes("uv", {"uv": 0.6}) and a != qemjax.Attributes("color", {"uv": 0.5})
+    assert len({a, qemjax.Attributes("uv", {"uv": 0.5}), qemjax.Attributes()}) == 2
+    assert pickle.loads(pickle.dumps(a)) == a and dataclasses.replace(a, texture="t.png").texture == "t.png"
+    weights = {"uv": 0.5}
+    b = qemjax.Attributes("uv", weights)
+    weights["uv"] = 2.0  # the caller's dict, changed after: not the settings
+    assert b.attribute_weights == {"uv": 0.5} and b == a
+    with pytest.raises(TypeError, match="cannot be changed"):
+        b.attribute_weights["uv"] = 3.0
+    assert qemjax.Attributes(["uv", "color"]).attributes == ("uv", "color")  # a list is a tuple, hashable
+    assert qemjax.Attributes({"normal", "uv"}).attributes == ("uv", "normal")
+    assert hash(qemjax.Attributes(["uv"], 0.2)) == hash(qemjax.Attributes(("uv",), 0.2))
+    image = Image.new("RGB", (2, 2))
+    c = qemjax.Attributes("uv", texture=image)
+    assert c == c and c != qemjax.Attributes("uv", texture=Image.new("RGB", (2, 2))) and hash(c) == hash(c)
+    for kw, message in [(dict(attributes="uvs"), "attributes must be 'auto', None, or kinds from"),
+                        (dict(attributes=["uv", "colour"]), "attributes must be .* got 'colour'$"),
+                        (dict(attributes=3), "attributes must be .* got 3$"),
+                        (dict(attribute_weights=[0.5]), r"^attribute_weights takes one number w >= 0 for every "
+                                                        r"kind or \{kind: w\}, got list \[0.5\]$"),
+                        (dict(attribute_weights={"uvs": 1.0}), "attribute_weights: unknown kind 'uvs'"),
+                        (dict(attribute_weights=-1.0), "attribute_weights must be finite numbers >= 0"),
+                        (dict(texture=["t.png"]), "^texture= takes an image file's path or a PIL image, got list$")]:
+        with pytest.raises(ValueError, match=message) as err:
+            qemjax.Attributes(**kw)
+        assert "\n" not in str(err.value)
+
+
 def test_seams_hold_a_mesh_above_its_target():
     """Six charts cannot go below their seam skeleton: the run stops above a tiny target with a warning
     that names the seams and suggests attributes=None."""

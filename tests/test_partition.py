@@ -106,6 +106,13 @@ def test_partition_settings_are_checked():
             Partition(**kw)
 
 
+def test_partition_settings_hash_and_refuse_a_scratch_that_is_no_path():
+    """A list given as scratch was taken, and made the frozen settings unhashable."""
+    assert hash(Partition(scratch="parts")) == hash(Partition(scratch="parts")) and len({Partition(), Partition()}) == 1
+    with pytest.raises(ValueError, match=r"^Partition: scratch must be a folder's path or None, got list$"):
+        Partition(scratch=["parts"])
+
+
 # --- whole runs -----------------------------------------------------------------------------------------------
 def closed_and_consistent(F: np.ndarray) -> bool:
     """Every directed edge once and its reverse once: closed (no crack), manifold, consistently oriented."""
