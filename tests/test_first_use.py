@@ -119,6 +119,32 @@ def test_a_misspelt_setting_suggests_the_close_name(ball):
         qemjax.simplify_batch(ball, [dict(ratoi=0.1)])
 
 
+def test_a_misspelt_dotted_setting_is_a_type_error_as_a_flat_one_is(ball):
+    """A dotted typo ("method.boundry_weight") was a ValueError without a hint where the flat typo is a TypeError
+    with one; "topology.flip_angel" named no close name either."""
+    for key, message in [("method.boundry_weight", "unknown method setting 'method.boundry_weight'; did you mean "
+                                                   "'method.boundary_weight'?"),
+                         ("topology.flip_angel", "unknown topology setting 'topology.flip_angel'; did you mean "
+                                                 "'topology.flip_angle'?"),
+                         ("attributes.textur", "unknown attributes setting 'attributes.textur'; did you mean "
+                                               "'attributes.texture'?"),
+                         ("method.flip_angle", "unknown method setting 'method.flip_angle'; did you mean "
+                                               "'topology.flip_angle'?"),
+                         ("topolgy.flip_angle", "unknown setting 'topolgy.flip_angle'; did you mean "
+                                                "'topology.flip_angle'?")]:
+        with pytest.raises(TypeError) as err:
+            qemjax.simplify(ball, ratio=0.5, **{key: 1.0})
+        assert str(err.value) == message
+    with pytest.raises(TypeError, match=r"^unknown method setting 'method.xyzzy' \(method 'default' has no such"):
+        qemjax.simplify(ball, ratio=0.5, **{"method.xyzzy": 1})
+    with pytest.raises(TypeError, match=r"^unknown topology setting 'topology.xyzzy'; qemjax.Topology has \["):
+        qemjax.simplify(ball, ratio=0.5, **{"topology.xyzzy": 1})
+    # another method's setting stays a ValueError that names the method, flat or dotted
+    for key in ("curvature_weight", "method.curvature_weight"):
+        with pytest.raises(ValueError, match=r"^curvature_weight is not a setting of method 'default' "):
+            qemjax.simplify(ball, ratio=0.5, **{key: 0.5})
+
+
 def test_a_misspelt_grid_key_suggests_the_close_name(ball):
     with pytest.raises(ValueError, match=r"^unknown grid keys \['boundry_weight'\]; did you mean 'boundary_weight'\?;"):
         qemjax.sweep({"ball": ball}, {"boundry_weight": [1.0]}, [0.5], metrics=False, progress=False)

@@ -82,7 +82,9 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
     """(method object, `Topology`, `Attributes`) for a call's ``method``, ``topology``, ``attributes`` and
     its settings given by flat or dotted name (``flat``; ``preset=NAME`` picks the named method). A setting
     given by name replaces the object's field, so ``method="accurate", refit=0`` is the accurate preset
-    without its re-fit. TypeError for an unknown name; ValueError for a setting the method does not have."""
+    without its re-fit. TypeError for an unknown name, flat or dotted (``topology.flip_angel``, or
+    ``method.X`` where no method has a field X), as Python's for an unknown keyword; ValueError for a setting
+    of another method."""
     given: dict[str, dict] = {"method": {}, "topology": {}, "attributes": {}}
     flat = dict(flat)
     preset = flat.pop("preset", None)
@@ -102,6 +104,19 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
             raise ValueError(f"unknown preset {preset!r}; choose from {tuple(_costs.PRESETS)}")
         method = preset
     m = _costs.resolve(method)
+    for group in given:  # a dotted name no object has: unknown, as a flat one is (only dotted ones get here)
+        fields = field_names(group, m)
+        unknown = [k for k in given[group] if k not in fields and not (
+            group == "method" and k in table and table[k].group == "method")]  # another method's: below
+        if unknown:
+            key = f"{group}.{unknown[0]}"
+            # matched by the field alone (the group's prefix would make every name of the group look close);
+            # the groups' fields are distinct, so each names one dotted name
+            full = {n.partition(".")[2]: n for n in dotted_names(m)}
+            hint = did_you_mean(unknown[0], full, show=lambda f: repr(full[f])) or (
+                f"; qemjax.{GROUPS[group].__name__} has {list(fields)}" if group in GROUPS
+                else f" (method {_costs.shown_name(m, method)!r} has no such field)")
+            raise TypeError(f"unknown {group} setting {key!r}{hint}")
     if given["method"]:
         names = {f.name for f in dataclasses.fields(m)}
         foreign = sorted(set(given["method"]) - names)
@@ -111,11 +126,6 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
                                        + (f" (it is one of {', '.join(owners[k])})" if owners[k] else "")
                                        for k in foreign))
         m = dataclasses.replace(m, **given["method"])
-    for group, cls in GROUPS.items():
-        unknown = sorted(set(given[group]) - set(field_names(group)))
-        if unknown:
-            raise TypeError(f"unknown {group} setting(s) {unknown}; qemjax.{cls.__name__} has "
-                            f"{list(field_names(group))}")
     if topology is None:
         topology = Topology()
     elif not isinstance(topology, Topology):
@@ -147,11 +157,21 @@ def did_you_mean(key: str, names, show=repr) -> str:
 
 
 def unknown_setting(key: str, table: dict | None = None) -> str:
-    """One line for a keyword that names nothing: the close names first (``did you mean 'ratio'?``)."""
-    names = list(KEYWORDS) + sorted(options() if table is None else table)
+    """One line for a keyword that names nothing: the close names first (``did you mean 'ratio'?``), among
+    the keywords and the settings' flat names (and, for a dotted ``key``, the dotted ones)."""
+    table = options() if table is None else table
+    names = list(KEYWORDS) + sorted(table) + (dotted_names() if "." in key else [])
     hint = did_you_mean(key, names) or \
         " (help(qemjax.simplify) lists the keywords; a method's settings are its fields, qemjax.QEM(...))"
     return f"unknown setting {key!r}{hint}"
+
+
+def dotted_names(method=None) -> list[str]:
+    """``topology.X`` and ``attributes.X`` for each field, and ``method.X`` for the fields of ``method`` (None:
+    of every registered method)."""
+    fields = field_names("method", method) if method is not None else \
+        [k for k, o in options().items() if o.group == "method"]
+    return [f"method.{f}" for f in fields] + [f"{g}.{f}" for g in GROUPS for f in field_names(g)]
 
 
 def field_names(group: str, obj=None) -> tuple[str, ...]:
