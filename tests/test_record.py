@@ -299,6 +299,25 @@ def test_lod_chain_takes_dotted_settings_as_simplify_does():
         qemjax.lod_chain((V, F), ratios=0.5)
 
 
+def test_lod_chains_did_you_mean_names_only_what_it_takes():
+    """lod_chain(ratioss=...) suggested 'ratio', which lod_chain refuses; an unknown keyword is refused before
+    the run, its hint among lod_chain's own keywords."""
+    mesh = shapes.icosphere(1)
+    with pytest.raises(TypeError) as err:
+        qemjax.lod_chain(mesh, ratioss=[0.5])
+    assert str(err.value) == "unknown setting 'ratioss'; did you mean 'ratios'?"
+    with pytest.raises(TypeError, match=r"^unknown setting 'rati'; did you mean 'ratios'\?$"):
+        qemjax.lod_chain(mesh, rati=0.5)
+    for key in ("target_face", "max_eror", "textur"):  # close to refused ones only: no suggestion of them
+        with pytest.raises(TypeError, match=rf"^unknown setting '{key}' \(help\(qemjax.lod_chain\) lists"):
+            qemjax.lod_chain(mesh, **{key: 1})
+    with pytest.raises(TypeError, match=r"^unknown setting 'boundry_weight'; did you mean 'boundary_weight'\?$"):
+        qemjax.lod_chain(mesh, boundry_weight=1.0)
+    with pytest.raises(TypeError, match=r"^unknown method setting 'method.boundry_weight'; did you mean "
+                                        r"'method.boundary_weight'\?$"):
+        qemjax.lod_chain(mesh, **{"method.boundry_weight": 1.0})
+
+
 def test_cli_lod_writes_levels_glb_and_record(tmp_path, capsys):
     from qemjax._cli import main
 

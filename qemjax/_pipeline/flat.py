@@ -156,13 +156,14 @@ def did_you_mean(key: str, names, show=repr) -> str:
     return f"; did you mean {' or '.join(map(show, close))}?" if close else ""
 
 
-def unknown_setting(key: str, table: dict | None = None) -> str:
+def unknown_setting(key: str, table: dict | None = None, keywords=KEYWORDS, refused=(), who="simplify") -> str:
     """One line for a keyword that names nothing: the close names first (``did you mean 'ratio'?``), among
-    the keywords and the settings' flat names (and, for a dotted ``key``, the dotted ones)."""
+    ``who``'s ``keywords`` and the settings' flat names (and, for a dotted ``key``, the dotted ones), leaving
+    out the ``refused`` ones (`lod_chain` takes no ``ratio``, so it suggests none)."""
     table = options() if table is None else table
-    names = list(KEYWORDS) + sorted(table) + (dotted_names() if "." in key else [])
-    hint = did_you_mean(key, names) or \
-        " (help(qemjax.simplify) lists the keywords; a method's settings are its fields, qemjax.QEM(...))"
+    names = list(keywords) + sorted(table) + (dotted_names() if "." in key else [])
+    hint = did_you_mean(key, [n for n in names if n not in refused]) or \
+        f" (help(qemjax.{who}) lists the keywords; a method's settings are its fields, qemjax.QEM(...))"
     return f"unknown setting {key!r}{hint}"
 
 

@@ -7,11 +7,13 @@ from typing import Any
 
 import numpy as np
 
+from . import flat as _flat
 from .api import simplify
 from .._record.history import Level
 from .._record.result import SimplifyResult
 
 RATIOS = (0.5, 0.25, 0.1, 0.01)
+REFUSED = ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel")  # targets: ratios= sets them
 
 
 @dataclasses.dataclass(eq=False)  # levels of arrays: `==` is identity, as for `Level`
@@ -85,8 +87,14 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
 
     Levels carry positions and faces only: the record replays contractions, not the wedges of appearance
     attributes, so ``attributes`` defaults to None here (what the input carries is named in a warning)
-    and ``texture`` is refused.
+    and ``texture`` is refused. An unknown keyword is a TypeError whose hint names only what lod_chain takes
+    (``ratioss`` suggests ``ratios``, never the refused ``ratio``).
     """
+    table = _flat.options()
+    for key in options:  # a dotted name: simplify's check, whose hints are dotted names lod_chain takes too
+        if "." not in key and not key.startswith("_") and key not in _flat.KEYWORDS and key not in table:
+            raise TypeError(_flat.unknown_setting(key, table, ("ratios", *_flat.KEYWORDS), (*REFUSED, "texture"),
+                                                  who="lod_chain"))
     if options.get("texture") is not None:
         raise ValueError("lod_chain keeps positions only: its levels are replayed from contractions; use "
                          "simplify(texture=...) for a textured result")
@@ -101,7 +109,7 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     for r in ratios:
         if not 0 < r <= 1:
             raise ValueError(f"ratios must be in (0, 1] (the fraction of faces to keep), got {r}")
-    for key in ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel"):
+    for key in REFUSED:
         if key in options:
             raise ValueError(f"lod_chain takes its targets from ratios=, not {key}=")
     if options.get("partition"):
