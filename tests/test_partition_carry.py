@@ -1,7 +1,8 @@
 """Quadrics carried from level to level of a partitioned run (`qemjax._partition.carry`): a run's exported
 quadrics are the ones its scheduler summed, a run seeded with its own quadrics starts where it would have,
-welded and shared vertices add their quadrics, the cuts between parts carry no boundary planes, and a
-partitioned run keeps a sharp spike that only the input's planes hold (as the in-core run does)."""
+welded and shared vertices add their quadrics, the cuts between parts carry no boundary planes while the
+input's own boundary along a cut keeps its planes, and a partitioned run keeps a sharp spike that only the
+input's planes hold (as the in-core run does)."""
 from __future__ import annotations
 
 import numpy as np
@@ -149,6 +150,83 @@ def test_the_cuts_between_parts_carry_no_boundary_planes():
     assert np.all(trace(cut.start)[edge & ends] < trace(own.start)[edge & ends] * 0.6)
     # inside, and along the other border (not locked), the run's own quadrics
     assert np.allclose(cut.start[~edge], own.start[~edge], rtol=1e-6)
+
+
+def test_the_input_s_own_boundary_along_a_cut_keeps_its_planes():
+    """The grid's border at the smallest x locked, as a cut is, but named as the input's own boundary
+    (``boundary``, as `scatter` finds it): its vertices keep their boundary planes, the other cut's lose them."""
+    g = shapes.grid(12)
+    V, F = np.asarray(g.vertices, np.float64), np.asarray(g.faces, np.int64)
+    low, high = np.isclose(V[:, 0], V[:, 0].min()), np.isclose(V[:, 0], V[:, 0].max())
+    column = np.flatnonzero(low)[np.argsort(V[low, 1])]
+    own, cut = Carry(V, None), Carry(V, None, boundary=np.stack([column[:-1], column[1:]], 1))
+    qemjax.simplify((V, F), ratio=0.9, method="classic", measure=False, **{SEED: own})
+    qemjax.simplify((V, F), ratio=0.9, method="classic", measure=False, locked=low | high, **{SEED: cut})
+    trace = lambda Q: Q[:, 0] + Q[:, 3] + Q[:, 5]  # noqa: E731
+    ends = np.isclose(V[:, 1], V[:, 1].min()) | np.isclose(V[:, 1], V[:, 1].max())
+    assert np.allclose(cut.start[low], own.start[low], rtol=1e-6)
+    assert np.all(trace(cut.start)[high & ~ends] < trace(own.start)[high & ~ends] * 0.05)
+
+
+def open_tubes(k=4, around=48, along=10, seed=0):
+    """``k`` open tubes (no caps) in random places and directions, each with a long first strip of faces
+    and a bulge: a mesh of many open pieces, as the teapot's spout, whose border runs along the cuts between
+    parts of 1,000 faces."""
+    rng = np.random.default_rng(seed)
+    Vs, Fs = [], []
+    t = np.linspace(0, 2 * np.pi, around, endpoint=False)
+    i, j = np.meshgrid(np.arange(along), np.arange(around), indexing="ij")
+    a0, a1 = i * around + j, i * around + (j + 1) % around
+    faces = np.concatenate([np.stack([a0, a1, a1 + around], -1).reshape(-1, 3),
+                            np.stack([a0, a1 + around, a0 + around], -1).reshape(-1, 3)])
+    for _ in range(k):
+        length, radius, centre, axis = rng.uniform(1, 2), rng.uniform(0.2, 0.5), rng.uniform(-2, 2, 3), rng.normal(size=3)
+        z = np.concatenate([[0.0], np.linspace(0.3 * length, length, along)])
+        axis /= np.linalg.norm(axis)
+        u = np.cross(axis, [0.3, 0.5, 0.8])
+        u /= np.linalg.norm(u)
+        w = np.cross(axis, u)
+        r = radius * (1 + 0.3 * np.sin(3 * z / length))
+        ring = np.cos(t)[None, :, None] * u + np.sin(t)[None, :, None] * w
+        Vs.append((centre + z[:, None, None] * axis + r[:, None, None] * ring).reshape(-1, 3))
+        Fs.append(faces + sum(len(v) for v in Vs[:-1]))
+    return np.concatenate(Vs), np.concatenate(Fs)
+
+
+def test_scatter_finds_the_input_s_boundary_edges_along_the_cuts(tmp_path):
+    """`scatter.borders_on_cuts`: the edges of one face of the whole input whose two ends several parts use,
+    neither a cut (two faces, in two parts) nor an edge inside a part."""
+    from qemjax._partition.scatter import scatter
+    from qemjax._partition.write import write_binary_ply
+
+    V, F = open_tubes()
+    write_binary_ply(tmp_path / "tubes.ply", V, F)
+    manifest = scatter(tmp_path / "tubes.ply", tmp_path / "parts", 1000)
+    shared = np.zeros(len(V), bool)
+    for part in manifest["parts"]:
+        _, _, gid, border = pieces.load(tmp_path / "parts" / part["file"])
+        shared[gid[border]] = True
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    edges, count = np.unique(E, axis=0, return_counts=True)
+    want = edges[(count == 1) & shared[edges[:, 0]] & shared[edges[:, 1]]]
+    got = np.load(tmp_path / "parts" / manifest["borders_on_cuts"])["E"]
+    assert len(want) > 0 and np.array_equal(got, want)
+
+
+def test_a_border_along_the_cuts_is_kept_as_in_core(tmp_path):
+    """Open tubes cut into parts of 1,000 faces: their borders run along the cuts, where level 1 locks both
+    ends of an edge. Level 1 keeps the planes of those edges that are the input's boundary (the cuts' own go),
+    so the last level, which sees them only through the carried quadrics, keeps the borders where the
+    in-core run does (without them, the partitioned run's Hausdorff distance was several times the
+    in-core one's)."""
+    V, F = open_tubes()
+    core = qemjax.simplify((V, F), ratio=0.1, progress=False)
+    part = qemjax.simplify((V, F), ratio=0.1, progress=False,
+                           partition=Partition(part_faces=1000, workers=1, scratch=tmp_path / "parts"))
+    assert part.stats["partition"]["levels"] >= 2 and part.stats["partition"]["carried"]
+    h_core, h_part = core.stats["distance_max_rel"], part.stats["distance_max_rel"]
+    assert h_part < 1.5 * h_core, (h_part, h_core)
+    assert len(np.load(tmp_path / "parts" / "level0" / "borders_on_cuts.npz")["E"]) > 0
 
 
 def test_stitch_adds_the_quadrics_of_a_shared_vertex(tmp_path):

@@ -15,6 +15,7 @@ from qemjax._partition import task
 from qemjax._partition.readers import texture_of
 
 from test_partition import closed_and_consistent
+from test_partition_carry import open_tubes
 
 RATIO = 0.1
 
@@ -290,6 +291,26 @@ def test_texture_file_of_a_ply(tmp_path):
     assert texture_of(path) is None  # named, not there
     (tmp_path / "skin.png").write_bytes(b"")
     assert texture_of(path) == tmp_path / "skin.png"
+
+
+def test_a_border_along_the_cuts_is_kept_with_uvs(tmp_path):
+    """With kept UVs a group runs on a vertex per wedge: the input's boundary edges along the cuts keep their
+    planes there too (named by their vertices' first wedges), and the partitioned run's Hausdorff distance
+    stays near the in-core one's (`test_partition_carry.test_a_border_along_the_cuts_is_kept_as_in_core`)."""
+    around, rings = 48, 11
+    V, F = open_tubes(around=around, along=rings - 1)
+    j, ring = np.arange(len(V)) % around, np.arange(len(V)) // around % rings
+    u = j[F].astype(float)
+    u[(u.max(1) - u.min(1) > around / 2)[:, None] & (u < around / 2)] += around  # across the seam: u > 1
+    uv = np.stack([u / around, ring[F] / (rings - 1)], -1).reshape(-1, 2)
+    path = tmp_path / "tubes.obj"
+    af.write_obj(path, (V, F), uv=uv, corner_uv=np.arange(3 * len(F)).reshape(-1, 3))
+    core = qemjax.simplify(str(path), ratio=RATIO, attributes="uv", progress=False)
+    part = qemjax.simplify(str(path), ratio=RATIO, attributes="uv", progress=False,
+                           partition=Partition(workers=1, part_faces=1000))
+    assert part.stats["partition"]["uv"] and part.stats["partition"]["levels"] >= 2
+    h_core, h_part = core.stats["distance_max_rel"], part.stats["distance_max_rel"]
+    assert h_part < 1.5 * h_core, (h_part, h_core)
 
 
 def test_corner_wedges_split_a_vertex_by_its_uvs():

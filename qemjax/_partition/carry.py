@@ -19,10 +19,12 @@ quadric are an in-core run's. The boundary planes are scaled by the mean squared
 travel with the same factor (both are squared lengths: a close approximation).
 
 Level 1 starts from the parts' own quadrics without the planes along edges whose two ends are locked: those
-edges are cuts between parts, not boundaries of the input. (An edge of the input's own boundary whose two
-ends both lie on cuts loses its boundary planes with them, for the rest of the run: the later levels start
-from the carried quadrics alone. Where a boundary crosses a cut, that is one edge or none; where it runs
-along one, a stretch of them.)
+edges are cuts between parts, not boundaries of the input. A part alone cannot tell them from an edge of
+the input's own boundary whose two ends both lie on cuts (where a boundary runs along a cut, a stretch of
+them: a strip of long faces at an open end that the cut zigzags through); `scatter` finds those edges over
+the whole input (`scatter.borders_on_cuts`) and they keep their planes (``boundary``). Had they lost them,
+the later levels, which start from the carried quadrics alone, would price that border as free to move and
+the last level would pull it in.
 
 Only the summed quadrics of `QEM` (the default, ``"classic"``) are carried, with kept UVs too: a run that
 keeps them adds its own faces' attribute quadrics to the carried position quadrics
@@ -89,11 +91,15 @@ def translate(Q: np.ndarray, delta: np.ndarray) -> np.ndarray:
 class Carry:
     """One group's carried quadrics: ``V`` (n,3) in mesh units, ``Q`` (n,10) carried quadrics of the group's
     vertices (its pieces', stitched) or None (level 1: the run's own, without the cuts' planes), ``unit``
-    the carried units' length in mesh units (the input's largest extent). Called as the pipeline's seed
+    the carried units' length in mesh units (the input's largest extent), ``boundary`` (k,2) or None: edges
+    of the input's own boundary whose two ends are locked, in ``V``'s numbering (level 1: they keep their
+    planes, the other edges between locked vertices are cuts). Called as the pipeline's seed
     (`stages.SEED`), it gives the run's starting state and keeps what `export` needs."""
 
-    def __init__(self, V: np.ndarray, Q: np.ndarray | None, unit: float = 1.0, exports: bool = True):
+    def __init__(self, V: np.ndarray, Q: np.ndarray | None, unit: float = 1.0, exports: bool = True,
+                 boundary: np.ndarray | None = None):
         self.V, self.Q, self.unit, self.exports = V, Q, float(unit), exports
+        self.boundary = boundary
         self.start = None  # carried quadrics of the cleaned input's vertices, once the run has started
         self.carried = False
 
@@ -116,7 +122,7 @@ class Carry:
             if lk is not None:  # the model's own quadrics without the planes along the cuts
                 locked = lk.locked[lk.perm]
                 be, bf = start.boundary
-                keep = ~(locked[be[:, 0]] & locked[be[:, 1]])
+                keep = ~(locked[be[:, 0]] & locked[be[:, 1]]) | self._input_boundary(lk, clean, be)
                 start = start._replace(boundary=(be[keep], bf[keep]))
             q = QEM.init_state(job.model, start)
             self.start = to_mesh(q if lk is None else q[lk.inv], s, k)
@@ -127,6 +133,19 @@ class Carry:
         self.start = pieces.sum_rows(Qc, vm[ok], len(clean.V))
         q = to_run(self.start, s, k).astype(DTYPE)
         return _state(job, start, q if lk is None else q[lk.perm])
+
+    def _input_boundary(self, lk, clean, be: np.ndarray) -> np.ndarray:
+        """Which of the run's boundary edges ``be`` (its numbering) are among ``boundary``: edges of the
+        input's own boundary whose two ends lie on cuts."""
+        if self.boundary is None or not len(self.boundary) or not len(be):
+            return np.zeros(len(be), bool)
+        vm = clean.vertex_map
+        E = vm[self.boundary]
+        E = lk.inv[E[(E >= 0).all(1)]]
+        n = np.int64(len(clean.V))
+        key = np.sort(be, axis=1).astype(np.int64)
+        E = np.sort(E, axis=1)
+        return np.isin(key[:, 0] * n + key[:, 1], E[:, 0] * n + E[:, 1])
 
     def export(self, res) -> np.ndarray | None:
         """(k,10) carried quadrics of ``res``'s output vertices, or None when the run did not carry (or was

@@ -254,6 +254,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                    final_faces=p.final_faces, refit_input_faces=p.refit_input_faces, refit=p.refit, share=p.share,
                    target=[target_faces, ratio],
                    kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
+                   borders="the input's kept along the cuts",
                    uv=uv)
         _fresh(folder, key, mesh)
         source = _as_file(mesh, folder)
@@ -298,6 +299,9 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                           out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit,
                           uv=bool(manifest.get("uv")))
                      for k, g in enumerate(groups)]
+            if locks == "border" and manifest.get("borders_on_cuts"):  # they keep their planes (`carry`)
+                for spec in specs:
+                    spec["borders_on_cuts"] = str(folder / manifest["borders_on_cuts"])
             refit_to = _refit_to(manifest, folder, p, groups, last, first, refits)
             if refit_to is not None:
                 specs[0] |= dict(refit_to=refit_to, refit_moves=moves)

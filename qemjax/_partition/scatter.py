@@ -4,10 +4,11 @@ parts on disk (`scatter`).
 Passes, none holding the mesh: the vertices twice (bounding box, then each vertex's cell), the faces
 twice or more (a histogram of centroid codes, refined where a bin overflows, `plan`; then each chunk's
 faces appended to its part's file, noting per vertex the first part that used it or that several did),
-then each part once (its vertices gathered, written as ``level0/part_NNNNN.npz``). What stays in memory
-across passes is per vertex: its packed cell (8 bytes), its part or 'shared' (4 bytes), when some
-vertices are unused its new number (4 bytes), and in the last pass a scratch index (4 bytes, in place of
-the cell).
+then each part once (its vertices gathered, written as ``level0/part_NNNNN.npz``; the edges between two
+shared vertices noted, from which the input's boundary edges along the cuts are written once all parts
+are: `borders_on_cuts`). What stays in memory across passes is per vertex: its packed cell (8 bytes), its
+part or 'shared' (4 bytes), when some vertices are unused its new number (4 bytes), and in the last pass a
+scratch index (4 bytes, in place of the cell) and the edges between shared vertices (the cuts' size).
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from .source import CORNER_UV, FACES, UV, VERTICES, Ragged, Source, remove
 from .write import replace_atomically, write_npz
 
 UNSEEN, SHARED = -1, -2  # owner values besides a part number
+BORDERS_ON_CUTS = "borders_on_cuts.npz"  # in level0/: `borders_on_cuts`, array ``E``
 
 
 def _spans(n: int, step: int):
@@ -122,9 +124,38 @@ def _distinct(raw: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return used, at[raw]
 
 
+def _shared_edges(F: np.ndarray, gid: np.ndarray, border: np.ndarray) -> np.ndarray:
+    """(k,2) the global ids of the edges of a part's faces F whose two ends other parts also use, one row
+    per face that has the edge, smaller id first."""
+    on = border[F]
+    out = []
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        both = on[:, i] & on[:, j]
+        a, b = gid[F[both, i]], gid[F[both, j]]
+        out.append(np.stack([np.minimum(a, b), np.maximum(a, b)], 1))
+    return np.concatenate(out)
+
+
+def borders_on_cuts(shared: list, n: int) -> np.ndarray:
+    """(k,2) sorted rows of the global ids (below ``n``) of the input's boundary edges whose two ends lie on
+    cuts, from the parts' `_shared_edges`: the edges one face of the whole input has. A part's run cannot
+    tell them from the cuts, which are its boundary too (`carry`)."""
+    rows = np.concatenate(shared) if shared else np.zeros((0, 2), np.int64)
+    if n > 3_000_000_000:  # a * n + b would not fit in 63 bits
+        uniq, count = np.unique(rows, axis=0, return_counts=True)
+        return uniq[count == 1].astype(np.int64)
+    key = np.sort(rows[:, 0] * np.int64(n) + rows[:, 1])  # one integer per edge: a fast sort
+    alone = np.ones(len(key), bool)
+    alone[1:] &= key[1:] != key[:-1]
+    alone[:-1] &= key[:-1] != key[1:]
+    key = key[alone]
+    return np.stack([key // n, key % n], 1).astype(np.int64)
+
+
 def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str,
-                 uv: bool) -> list:
-    parts = []
+                 uv: bool) -> tuple[list, np.ndarray]:
+    """The parts, written (`scatter`), and `borders_on_cuts`."""
+    parts, shared = [], []
     at = np.empty(src.n_vertices, index_type)  # holds a corner's place in its part
     for p in range(plan.parts):
         raw = np.fromfile(tmp / f"{p}.bin", index_type)
@@ -142,6 +173,7 @@ def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path,
             used, F = used[ref], (np.cumsum(ref) - 1)[F]
         gid = (used if new_id is None else new_id[used]).astype(np.int64)
         border = owner[used] == SHARED
+        shared.append(_shared_edges(F, gid, border))
         V = src.gather(used)
         bad = ~np.isfinite(V).all(1)
         if bad.any():
@@ -156,7 +188,7 @@ def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path,
         write_npz(level / file, gid=gid, V=V, F=F.astype(np.int32), border=border, **extra)
         parts.append({"file": f"level0/{file}", "faces": len(F), "vertices": len(used),
                       "border": int(border.sum()), "degenerate_removed": degenerate, "duplicate_removed": duplicate})
-    return parts
+    return parts, borders_on_cuts(shared, src.n_vertices)
 
 
 def _prepare(scratch: Path) -> tuple[Path, Path]:
@@ -164,6 +196,7 @@ def _prepare(scratch: Path) -> tuple[Path, Path]:
     remove(scratch / "manifest.json")  # a failed run leaves no manifest of an earlier one's parts
     for old in level.glob("part_*.npz") if level.exists() else ():
         old.unlink()
+    remove(level / BORDERS_ON_CUTS)
     shutil.rmtree(tmp, ignore_errors=True)
     level.mkdir(parents=True, exist_ok=True)
     tmp.mkdir()
@@ -198,7 +231,8 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     n_vertices, n_faces (after the clean-up: faces with a repeated vertex, and repeats of a face within its
     part, removed; their numbers as degenerate_removed and duplicate_removed), bbox, welded, parts (file,
     faces, vertices, border and those two numbers for each), dropped (what the file holds besides positions
-    and triangles, which the parts do not carry).
+    and triangles, which the parts do not carry), borders_on_cuts (the file, in level0/, of the input's
+    boundary edges whose two ends other parts also use, as global id pairs ``E``: `borders_on_cuts`).
 
     With ``uv`` True (asked for by name) or "auto" when the file names a texture image (as `simplify`'s
     ``attributes="auto"`` keeps UVs with seams), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
@@ -230,14 +264,16 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
             new_id = np.cumsum(kept, dtype=index_type) - 1
             lo, hi = _bounds(src, step, kept)
         del kept
-        parts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name, uv)
+        parts, on_cuts = _write_parts(src, plan, owner, new_id, tmp, level, index_type, name, uv)
+        write_npz(level / BORDERS_ON_CUTS, E=on_cuts)
         manifest = {"format": src.format, "n_vertices": n_kept, "n_faces": sum(p["faces"] for p in parts),
                     "degenerate_removed": sum(p["degenerate_removed"] for p in parts),
                     "duplicate_removed": sum(p["duplicate_removed"] for p in parts),
                     "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts,
                     "dropped": list(src.dropped_with_uv if uv else src.dropped), "uv": uv,
                     "uv_in_file": bool(src.uv_in_file),
-                    "texture": None if texture is None or not uv else str(texture)}
+                    "texture": None if texture is None or not uv else str(texture),
+                    "borders_on_cuts": f"level0/{BORDERS_ON_CUTS}"}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(scratch / "weld", ignore_errors=True)

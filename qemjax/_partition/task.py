@@ -60,19 +60,31 @@ def corner_wedges(F: np.ndarray, UV: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return rows[:, 0].astype(np.int64), rows[:, 1:], inverse.reshape(F.shape)
 
 
+def _local_edges(E: np.ndarray, gid: np.ndarray) -> np.ndarray:
+    """The rows of ``E`` (k,2), global ids, whose two ends this piece holds, as its vertex indices."""
+    if not len(gid):
+        return np.zeros((0, 2), np.int64)
+    order = np.argsort(gid, kind="stable")
+    ids = gid[order]
+    at = np.minimum(np.searchsorted(ids, E), len(ids) - 1)
+    return order[at[(ids[at] == E).all(1)]]
+
+
 def _with_uv(V: np.ndarray, F: np.ndarray, UV: np.ndarray, locked: np.ndarray, Q: np.ndarray | None):
     """The mesh a group with UVs runs on, as OBJ files store it (a vertex per wedge, `TextureVisuals`; the
     run welds the positions back and keeps the wedges), its locked mask, its vertices and their carried
-    quadrics (each vertex's on its first copy, zero on the others: the run's weld adds them up)."""
+    quadrics (each vertex's on its first copy, zero on the others: the run's weld adds them up) and each
+    vertex's first copy."""
     import trimesh
 
     vertex, uv, corners = corner_wedges(F, UV)
     mesh = trimesh.Trimesh(V[vertex], corners, visual=trimesh.visual.TextureVisuals(uv=uv), process=False)
+    used, at = np.unique(vertex, return_index=True)
+    first = np.full(len(V), -1, np.int64)
+    first[used] = at
     if Q is not None:
-        first = np.zeros(len(vertex), bool)
-        first[np.unique(vertex, return_index=True)[1]] = True
-        Q = np.where(first[:, None], Q[vertex], 0.0)
-    return mesh, locked[vertex], V[vertex], Q
+        Q = np.where((first[vertex] == np.arange(len(vertex)))[:, None], Q[vertex], 0.0)
+    return mesh, locked[vertex], V[vertex], Q, first
 
 
 def run_group(spec: dict) -> dict:
@@ -99,8 +111,12 @@ def run_group(spec: dict) -> dict:
         side = InputSide(lambda: pieces.stitch(parts)[:2], moves=spec.get("refit_moves", True), thread=True)
     V, F, gid, border, Q = pieces.stitch(spec["inputs"], carried=True)
     UV = pieces.stitch_uv(spec["inputs"]) if spec.get("uv") else None
+    keep_edges = None
     if spec["locks"] == "border":
         locked = border
+        if spec.get("borders_on_cuts"):
+            with np.load(spec["borders_on_cuts"]) as z:
+                keep_edges = _local_edges(z["E"], gid)
     elif spec["locks"] is None:
         locked = np.zeros(len(V), bool)
     else:
@@ -110,10 +126,12 @@ def run_group(spec: dict) -> dict:
     kw = dict(spec["kwargs"])
     mesh, mask, Vc = (V, F), locked, V
     if UV is not None:  # kept UVs: the run keeps the wedges, seams and all, and a locked vertex its UVs
-        mesh, mask, Vc, Q = _with_uv(V, F, UV, locked, Q)
+        mesh, mask, Vc, Q, first = _with_uv(V, F, UV, locked, Q)
+        if keep_edges is not None:
+            keep_edges = first[keep_edges]
     if mask.any():
         kw["locked"] = mask
-    carry = kw[SEED] = Carry(Vc, Q, spec["unit"], exports=bool(spec.get("carry_out")))
+    carry = kw[SEED] = Carry(Vc, Q, spec["unit"], exports=bool(spec.get("carry_out")), boundary=keep_edges)
     if side is not None:
         kw[REFIT_TO] = side
     Q = None
