@@ -72,6 +72,23 @@ def test_levels_reduce_until_one_group_meets_the_target():
     assert [sum(g.target for g in lv) for lv in levels][:2] == [1_375_000, 343_750]
 
 
+def test_a_level_that_ends_a_few_faces_over_the_band_is_followed_by_the_last():
+    """A level aimed at the edge of the band where the next level is the last ends a few faces over it (its
+    groups' locked borders hold them): the next is still the last, not one more locked level (a teapot cut
+    into parts of 1,000-1,500 faces, at 5 %: about twice the in-core Hausdorff distance;
+    `experiments/probes/small_parts.py`)."""
+    p = Partition(part_faces=1_000)
+    target = 316
+    edge = plan.NEAR * p.budget * target  # 1580: total / reduction lands on the band's edge
+    groups, last = plan.level(np.full(8, int(edge * p.reduction) // 8), target, p, first=True)
+    assert not last and sum(g.target for g in groups) == edge
+    groups, last = plan.level(np.array([g.target + (g.members[0] == 0) for g in groups]), target, p, first=False)
+    assert last and len(groups) == 1 and groups[0].target == target
+    # well over the band (more than the overshoot): another locked level first
+    groups, last = plan.level(np.full(8, int(edge * 1.1) // 8), target, p, first=False)
+    assert not last
+
+
 def test_a_level_too_large_for_one_process_ends_with_locked_groups():
     p = Partition(part_faces=10_000, final_faces=50_000)
     groups, last = plan.level(np.full(20, 10_000), 60_000, p, first=False)

@@ -8,6 +8,11 @@ import numpy as np
 
 from .._options import Partition
 
+# a level whose pieces hold at most NEAR × budget × target faces is the last: another would remove little and
+# lock the same borders again. A level before it that aimed at that edge ends a few faces over it (its groups'
+# locked borders hold them): up to OVERSHOOT more still count as within
+NEAR, OVERSHOOT = 1.25, 0.02
+
 
 class Group(NamedTuple):
     """One task of a level: the pieces it reads (indices into the previous level's outputs, consecutive in
@@ -50,12 +55,14 @@ def level(faces: np.ndarray, target: int, p: Partition, first: bool, stalled: bo
     group, nothing locked, run to ``target``; or, when that group would read more than ``final_faces``, the
     groups of at most ``part_faces`` run to their shares of ``target`` with their borders locked. The first
     level runs each part alone. Any other level keeps ``max(faces / reduction, budget * target)`` faces in
-    all, shared in proportion to the groups' faces. ``stalled``: the level before removed almost nothing (its
+    all, shared in proportion to the groups' faces. The last level comes when the pieces hold at most
+    NEAR × budget × target faces, or OVERSHOOT more: one more locked level for the few faces a level's locked
+    borders held over its aim cost the quality of a locked level (`test_partition`). ``stalled``: the level before removed almost nothing (its
     groups' locked borders held their faces): the next is the last."""
     faces = np.asarray(faces, np.int64)
     total = int(faces.sum())
-    # within a quarter of the budget: another level would remove little and lock the same borders again
-    near = total <= p.part_faces or total <= 1.25 * p.budget * target or len(faces) == 1 or stalled
+    band = NEAR * (1 + OVERSHOOT) * p.budget * target
+    near = total <= p.part_faces or total <= band or len(faces) == 1 or stalled
     if total <= p.final_faces and near:
         return [Group(tuple(range(len(faces))), total, min(target, total))], True
     members = [(i,) for i in range(len(faces))] if first else consecutive(faces, p.part_faces)
