@@ -132,9 +132,11 @@ def load(name: str) -> BenchMesh:
 
 
 if __name__ == "__main__":
-    import sys
+    import argparse
 
-    for n in sys.argv[1:] or names():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("names", nargs="*", help="meshes to load and describe (default: every shared mesh)")
+    for n in ap.parse_args().names or names():
         m = load(n)
         raw = "" if m.V_raw is None else f"  (raw V {len(m.V_raw)})"
         print(f"{n:20s} V {m.n_vertices:8d}  F {m.n_faces:8d}{raw}")

@@ -10,6 +10,7 @@ its UV centroid).
 """
 from __future__ import annotations
 
+import argparse
 import ctypes
 import sys
 import time
@@ -126,7 +127,8 @@ def baked_colours(orig, image):
     return trimesh.Trimesh(Vw, inv[orig.faces], vertex_colors=rgba, process=False)
 
 
-def main():
+def main(argv=None):
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     OUT.mkdir(parents=True, exist_ok=True)
     path = SPOT / "spot.obj"
     image = Image.open(SPOT / "spot_texture.png")

@@ -18,6 +18,7 @@ and prints the Markdown table the README and docs/benchmarks.md show.
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import re
 from pathlib import Path
@@ -128,7 +129,8 @@ def plot_bumpy(plt):
     plt.close(fig)
 
 
-def main():
+def main(argv=None):
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -17,6 +17,7 @@ worse.
 """
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import sys
 import tempfile
@@ -66,7 +67,8 @@ def rows(label: str, path: Path, ratio: float, sphere: bool = False) -> list[str
     return out
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     warnings.simplefilter("ignore")
     folder = Path(tempfile.mkdtemp())
     qemjax.shapes.write_examples(folder, subdivisions=3)

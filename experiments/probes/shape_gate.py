@@ -17,6 +17,7 @@ recorded as each round computes it) and the ranking run with both thresholds::
 """
 from __future__ import annotations
 
+import argparse
 import contextlib
 import sys
 from pathlib import Path
@@ -110,7 +111,8 @@ def _rounds(mesh, **kw) -> int:
         return int(qemjax.simplify(mesh, ratio=0.1, measure=False, **kw).stats["rounds"])
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     import meshes as bench_meshes
     from figures import rank_peers
 
