@@ -38,3 +38,28 @@ def test_help_prints_the_docstring_and_exits(script):
     first = (EXPERIMENTS / script).read_text().split('"""')[1].split()[:3]
     assert " ".join(first) in " ".join(run.stdout.split())
 
+
+def test_a_quick_run_leaves_the_cited_results_alone(monkeypatch):
+    """The default run (and the docs' command) writes the results file the docs cite; a run with other
+    options writes another unless ``--out`` names one."""
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    from figures import bench_peers, line_quadrics, probabilistic_quadrics
+
+    results = EXPERIMENTS / "results"
+    assert bench_peers.parse_args([]).out == results / "peers.csv"
+    assert bench_peers.parse_args(["--meshes", "cow", "--append"]).out == results / "peers.csv"
+    assert bench_peers.parse_args(["--meshes", "cow"]).out == results / "peers_custom.csv"
+    assert bench_peers.machine_path(results / "peers_custom.csv") == results / "peers_custom_machine.md"
+    assert bench_peers.parse_args(["--meshes", "cow", "--out", "x.csv"]).out == Path("x.csv")
+
+    cited = ["--repeats", "1", "--weights", "0.0001", "0.001", "0.01", "0.05"]  # docs/papers.md's command
+    for argv in ([], cited):
+        assert line_quadrics.parse_args(argv).out == results / "line_quadrics.md"
+    assert line_quadrics.parse_args(["--meshes", "cow"]).out == results / "line_quadrics_custom.md"
+    assert line_quadrics.parse_args(["--ratios", "0.1", "--out", "t.md"]).out == Path("t.md")
+
+    cited = ["--repeats", "3", "--sigmas", "0.01:0", "0.03:0", "0.1:0", "0.3:0", "0.03:1", "0.1:1"]
+    for argv in ([], cited):
+        assert probabilistic_quadrics.parse_args(argv).out == results / "probabilistic_quadrics.md"
+    assert (probabilistic_quadrics.parse_args(["--meshes", "cow", "--repeats", "1"]).out
+            == results / "probabilistic_quadrics_custom.md")

@@ -19,6 +19,11 @@ Examples::
     python experiments/figures/bench_peers.py --meshes armadillo-x16 --ratios 0.01 --append
 
 A method that fails records ``status=error`` and its message; the run goes on.
+
+Where it writes, without ``--out``: the default run and ``--append`` runs (which replace only the rows they
+make) write ``experiments/results/peers.csv``, the table docs/benchmarks.md cites, and ``machine.md`` beside
+it; any other run (fewer meshes, ratios or methods, ...) writes ``peers_custom.csv`` and
+``peers_custom_machine.md``, so that a quick run leaves the cited files alone.
 """
 
 from __future__ import annotations
@@ -219,8 +224,20 @@ def parse_args(argv=None):
     p.add_argument("--no-plots", action="store_true", help="do not redraw the figures afterwards")
     p.add_argument("--append", action="store_true",
                    help="merge into an existing --out CSV (rows with the same mesh/ratio/method are replaced)")
-    p.add_argument("--out", type=Path, default=RESULTS / "peers.csv")
-    return p.parse_args(argv)
+    p.add_argument("--out", type=Path,
+                   help="the CSV (default: results/peers.csv for the default run and --append runs, else "
+                        "results/peers_custom.csv)")
+    args = p.parse_args(argv)
+    if args.out is None:
+        default = {k: v for k, v in vars(p.parse_args([])).items() if k not in ("out", "no_plots")}
+        options = {k: v for k, v in vars(args).items() if k not in ("out", "no_plots")}
+        args.out = RESULTS / ("peers.csv" if args.append or options == default else "peers_custom.csv")
+    return args
+
+
+def machine_path(out: Path) -> Path:
+    """The machine report beside ``out``: ``machine.md`` beside the cited peers.csv, else ``<out>_machine.md``."""
+    return out.parent / ("machine.md" if out == RESULTS / "peers.csv" else out.stem + "_machine.md")
 
 
 def main(argv=None) -> int:
@@ -235,7 +252,7 @@ def main(argv=None) -> int:
         return 1
 
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    (args.out.parent / "machine.md").write_text(machine_report())
+    machine_path(args.out).write_text(machine_report())
 
     previous = None
     if args.append and args.out.exists():
@@ -303,7 +320,7 @@ def main(argv=None) -> int:
     df = save()
     print()
     print(summary_table(df))
-    print(f"\nwrote {args.out} and {args.out.parent / 'machine.md'}")
+    print(f"\nwrote {args.out} and {machine_path(args.out)}")
     if not args.no_plots:  # one command regenerates the table and the figures
         from figures import plot_results
 
