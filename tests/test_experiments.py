@@ -63,3 +63,14 @@ def test_a_quick_run_leaves_the_cited_results_alone(monkeypatch):
         assert probabilistic_quadrics.parse_args(argv).out == results / "probabilistic_quadrics.md"
     assert (probabilistic_quadrics.parse_args(["--meshes", "cow", "--repeats", "1"]).out
             == results / "probabilistic_quadrics_custom.md")
+
+
+def test_results_name_the_scripts_that_are_there():
+    """The commands that the results files' headers (and command columns) name are scripts that exist: the
+    scripts moved to figures/ and probes/, and a stale path leaves a command that does not run."""
+    import re
+
+    named = {(f.name, m) for f in (EXPERIMENTS / "results").iterdir() if f.suffix in (".txt", ".md", ".csv")
+             for m in re.findall(r"(?<![/\w])experiments/[a-z0-9_/]+\.py\b", f.read_text())}
+    assert len(named) > 50
+    assert not sorted(f"{f}: {m}" for f, m in named if not (ROOT / m).is_file())
