@@ -74,3 +74,26 @@ def test_results_name_the_scripts_that_are_there():
              for m in re.findall(r"(?<![/\w])experiments/[a-z0-9_/]+\.py\b", f.read_text())}
     assert len(named) > 50
     assert not sorted(f"{f}: {m}" for f, m in named if not (ROOT / m).is_file())
+
+
+def test_nearest_order_loads_an_old_module_that_imports_its_siblings(monkeypatch, tmp_path):
+    """probes/nearest_order.py --rev loads an old grid_nearest.py outside its package: its relative imports
+    (``from . import threads`` since threads.py exists) are made absolute, whatever they name."""
+    import importlib.util
+
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "probes"))
+    import nearest_order
+
+    source = (ROOT / "qemjax" / "_mesh" / "grid_nearest.py").read_text()
+    assert "from . import" in source or "from .pointtri import" in source
+    fixed = nearest_order.absolute_imports(source, "qemjax._mesh")
+    assert "from qemjax._mesh import threads" in fixed
+    assert "from qemjax._mesh.pointtri import" in fixed
+    assert nearest_order.absolute_imports("from .. import io\n    from ..x.y import z\n", "qemjax._mesh") == (
+        "from qemjax import io\n    from qemjax.x.y import z\n")
+    file = tmp_path / "grid_nearest_copy.py"
+    file.write_text(fixed)
+    spec = importlib.util.spec_from_file_location("grid_nearest_copy", file)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert callable(module.nearest)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import re
 import statistics
 import sys
 import time
@@ -24,10 +25,22 @@ import meshes as bench_meshes  # noqa: E402
 from ab_compare import package_at  # noqa: E402
 
 
+def absolute_imports(source: str, package: str) -> str:
+    """``source`` with its relative imports (``from . import threads``, ``from .pointtri import ...``) made
+    absolute from ``package`` (the module's own, e.g. ``qemjax._mesh``), so that a module loaded outside its
+    package imports the working tree's siblings."""
+    def absolute(m):
+        parts = package.split(".")
+        base = ".".join(parts[:len(parts) - (len(m.group(2)) - 1)])
+        return f"{m.group(1)}from {base}{'.' + m.group(3) if m.group(3) else ''} import"
+
+    return re.sub(r"^(\s*)from (\.+)([\w.]*) import", absolute, source, flags=re.M)
+
+
 def module_at(rev: str, path: str, name: str):
     """The module at ``path`` in git revision ``rev``, loaded as ``name`` (its imports: the working tree's)."""
     file = package_at(rev) / path
-    file.write_text(file.read_text().replace("from .pointtri import", "from qemjax._mesh.pointtri import"))
+    file.write_text(absolute_imports(file.read_text(), ".".join(Path(path).parent.parts)))
     spec = importlib.util.spec_from_file_location(name, file)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
