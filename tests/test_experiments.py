@@ -97,3 +97,14 @@ def test_nearest_order_loads_an_old_module_that_imports_its_siblings(monkeypatch
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert callable(module.nearest)
+
+
+@pytest.mark.slow
+def test_last_level_runs_a_run_of_one_level():
+    """probes/last_level.py on a mesh small enough for one level: its last level's input is the parts."""
+    if not (ROOT.parent / "shared" / "meshes" / "cow.obj").is_file():
+        pytest.skip("the shared meshes are not beside the project")
+    run = subprocess.run([sys.executable, str(EXPERIMENTS / "probes" / "last_level.py"), "--mesh", "cow",
+                          "--ratio", "0.1", "--repeats", "1"], capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "| first |" in run.stdout

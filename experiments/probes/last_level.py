@@ -75,8 +75,13 @@ def main() -> None:
               f"{', '.join(f'{s:.1f}' for s in p['seconds_per_level'])} s, refit to the {p['refit_to']}")
         manifest = json.loads((scratch / "manifest.json").read_text())
         unit = float(np.max(np.subtract(manifest["bbox"][1], manifest["bbox"][0])))
-        inputs = sorted(str(f) for f in (scratch / f"level{levels - 1}").glob("group_*.npz"))
+        if p["groups_per_level"][-1] != 1:
+            sys.exit(f"last_level: the last level of {args.mesh} -> {args.ratio:g} has "
+                     f"{p['groups_per_level'][-1]} groups; this probe runs a last level of one group")
         parts = [str(scratch / part["file"]) for part in manifest["parts"]]
+        # the last level's input: what the level before it wrote, or the parts themselves on a run of one level
+        inputs = parts if levels == 1 else sorted(str(f) for f in
+                                                  (scratch / f"level{levels - 1}").glob("group_*.npz"))
         out = Path(tmp) / "last.npz"
         spec = dict(inputs=inputs, locks=None, target=len(res.faces), kwargs={}, out=str(out), carry_out=False,
                     unit=unit, uv=False, refit_to=parts if p["refit_to"] == "input" else None, refit_moves=True)
