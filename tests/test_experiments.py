@@ -99,6 +99,54 @@ def test_nearest_order_loads_an_old_module_that_imports_its_siblings(monkeypatch
     assert callable(module.nearest)
 
 
+class _Parsed(Exception):
+    """Raised in place of running a script once its command line is parsed."""
+
+
+def _parse(module, argv, monkeypatch):
+    """The namespace that ``module.main(argv)`` parses from ``argv`` (argparse exits on a bad command)."""
+    import argparse
+
+    parse = argparse.ArgumentParser.parse_args
+
+    def stop(self, args=None, namespace=None):
+        raise _Parsed(parse(self, args, namespace))
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop)
+    with pytest.raises(_Parsed) as parsed:
+        module.main(argv)
+    return parsed.value.args[0]
+
+
+def _documented(script: str) -> list[list[str]]:
+    """The arguments of every command that the script's docstring and the pages show for ``script``."""
+    import re
+    import shlex
+
+    texts = [(EXPERIMENTS / script).read_text().split('"""')[1].replace("\\\n", " ")]
+    texts += [p.read_text().replace("\n", " ") for p in [*(ROOT / "docs").glob("*.md"), EXPERIMENTS / "README.md"]]
+    name = re.escape(f"experiments/{script}")
+    found = [m for t in texts for m in re.findall(rf"python {name}((?: +--?[\w-]+(?: +[^\s`-][^\s`]*)*)*)", t)]
+    return [shlex.split(m) for m in found]
+
+
+@pytest.mark.parametrize("script", ["figures/greedy_sensitivity.py", "probes/refit_probe.py",
+                                    "figures/gap_stages.py"])
+def test_documented_commands_parse(script, monkeypatch):
+    """The commands that a script's docstring and the docs show for it have every option it requires, and
+    only options it has."""
+    import importlib
+
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    module = importlib.import_module(script[:-3].replace("/", "."))
+    commands = _documented(script)
+    assert commands
+    for argv in commands:
+        _parse(module, argv, monkeypatch)
+    if script == "figures/gap_stages.py":  # its docstring tells of --goals
+        assert _parse(module, ["--goals", "cow:10"], monkeypatch).goals == ["cow:10"]
+
+
 @pytest.mark.slow
 def test_last_level_runs_a_run_of_one_level():
     """probes/last_level.py on a mesh small enough for one level: its last level's input is the parts."""

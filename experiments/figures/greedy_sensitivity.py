@@ -30,7 +30,9 @@ def rms_after(V, F, Vin, target, scheduler):
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--meshes", nargs="+", required=True)
+    p.add_argument("--meshes", nargs="+", default=["bumpy-cube", "face", "rocker-arm", "spot", "beetle", "suzanne",
+                                                    "rocker-arm-small", "cow", "fertility"],
+                   help="default: the meshes of results/greedy_sensitivity.md")
     p.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
     p.add_argument("--seeds", type=int, default=4)
     p.add_argument("--jitter", type=float, default=1e-6)

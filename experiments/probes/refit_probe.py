@@ -11,7 +11,7 @@ positions move; faces stay. Variants use `rank_peers.py --variant` syntax; ``+fi
 (``fitN=k``) is not a simplify option, so this script takes ``--iters`` and ``--damping`` and reports every
 variant with and without the fit::
 
-    python experiments/probes/refit_probe.py --meshes suzanne --targets 10 12 14 --variant base --variant accurate:preset=accurate
+    python experiments/probes/refit_probe.py --meshes suzanne --targets 10 12 14 --variant base --variant accurate:preset=accurate --out experiments/results/refit_probe_suzanne
 
 The committed results (``results/refit_probe_*``) ran at 354c1da, before ``simplify(refit=)`` existed:
 their ``preset=accurate`` had no re-fit. The preset now re-fits itself, so to repeat them name its options
