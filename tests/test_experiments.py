@@ -156,3 +156,34 @@ def test_last_level_runs_a_run_of_one_level():
                           "--ratio", "0.1", "--repeats", "1"], capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "| first |" in run.stdout
+
+
+def _methods_page() -> str:
+    return " ".join((ROOT / "docs" / "methods.md").read_text().split())
+
+
+def _results(name: str) -> str:
+    return (EXPERIMENTS / "results" / name).read_text()
+
+
+def test_preset_times_say_what_they_divide_by():
+    """The preset table's time column: the default's and classic's from rank_default_final.txt (over classic),
+    accurate's from rank_default_choice.txt, whose times divide by that run's default, as its cell says."""
+    page = (ROOT / "docs" / "methods.md").read_text()
+    final, choice = _results("rank_default_final.txt"), _results("rank_default_choice.txt")
+    assert "| time / classic (median) |" in final and "| time / default (median) |" in choice
+    head = next(line for line in page.splitlines() if line.startswith("| preset |"))
+    assert "over classic's" in head
+
+    def cell(row):
+        return next(line for line in page.splitlines() if line.startswith(row)).split("|")[5].strip()
+
+    def summary(text, variant):  # the variant's median time in the file's summary table
+        lines = text.splitlines()
+        head = next(line.split("|") for line in lines if line.startswith("| variant |") and "(median)" in line)
+        column = next(i for i, c in enumerate(head) if "(median)" in c)
+        return next(line for line in lines if line.startswith(f"| {variant} |")).split("|")[column].strip()
+
+    assert cell('| `"default"`') == summary(final, "default")
+    accurate = cell('| `"accurate"`')
+    assert accurate.startswith(summary(choice, "accurate") + " ") and "default" in accurate
