@@ -166,6 +166,20 @@ def _results(name: str) -> str:
     return (EXPERIMENTS / "results" / name).read_text()
 
 
+def test_refit_rounds_sentence_is_the_files():
+    """docs/methods.md's re-fit rounds and Hausdorff counts are the variants rank_refit_rounds.txt has."""
+    import re
+
+    counts = {int(n): int(k) for n, k in re.findall(r"^acc_refit(\d+): .*Hausdorff <= best peer in (\d+)/34",
+                                                    _results("rank_refit_rounds.txt"), re.M)}
+    said = re.search(r"with ([\d, and]+) rounds .*? fall ([\d, ]+) of 34 \(`experiments/results/rank_refit_rounds",
+                     _methods_page())
+    assert said, "the sentence on re-fit rounds is gone"
+    rounds = [int(x) for x in re.findall(r"\d+", said.group(1))]
+    assert rounds == sorted(counts)
+    assert [int(x) for x in re.findall(r"\d+", said.group(2))] == [counts[n] for n in rounds]
+
+
 def test_preset_times_say_what_they_divide_by():
     """The preset table's time column: the default's and classic's from rank_default_final.txt (over classic),
     accurate's from rank_default_choice.txt, whose times divide by that run's default, as its cell says."""
