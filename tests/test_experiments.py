@@ -201,3 +201,42 @@ def test_preset_times_say_what_they_divide_by():
     assert cell('| `"default"`') == summary(final, "default")
     accurate = cell('| `"accurate"`')
     assert accurate.startswith(summary(choice, "accurate") + " ") and "default" in accurate
+
+
+def test_refit_uv_figures_are_the_files():
+    """docs/methods.md's re-fit-with-UVs figures come from results/refit_uv.md: the rms the re-fit saves
+    against refit=0 (lowest and highest of the five cases) and spot at 2 % with the seam vertices fitted too."""
+    import re
+
+    rows = {}
+    for line in _results("refit_uv.md").splitlines():
+        cells = [c.strip() for c in line.split("|")[1:-1]]
+        if len(cells) == 9 and cells[1][:1].isdigit():
+            rows[(cells[0], cells[1], cells[2])] = float(cells[7])
+    cases = {(m, q) for m, q, _ in rows}
+    saved = [100 * (1 - rows[(m, q, "re-fit, UVs carried (default)")] / rows[(m, q, "no re-fit (refit=0)")])
+             for m, q in cases]
+    page = _methods_page()
+    low, high = map(int, re.search(r"lowers the geometric rms by (\d+)–(\d+) % against `refit=0`", page).groups())
+    assert (low, high) == (round(min(saved)), round(max(saved)))
+    seams, default = (rows[("spot", "0.02", run)] for run in ("re-fit with the seam vertices too, UVs carried",
+                                                                "re-fit, UVs carried (default)"))
+    assert f"spot at 2 %: {seams:.2g} against {default:.3g} of the diagonal" in page
+
+
+@pytest.mark.slow
+def test_refit_uv_rows_come_back(monkeypatch, tmp_path):
+    """results/refit_uv.md's rows of the textured example (made in code) are what refit_uv.py makes now."""
+    import warnings
+
+    import qemjax
+
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    from figures import refit_uv
+
+    qemjax.shapes.write_examples(tmp_path, subdivisions=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        made = refit_uv.rows("textured example", tmp_path / "textured.obj", 0.25)
+    kept = _results("refit_uv.md").splitlines()
+    assert [line for line in made if line not in kept] == []
