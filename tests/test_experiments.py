@@ -240,3 +240,21 @@ def test_refit_uv_rows_come_back(monkeypatch, tmp_path):
         made = refit_uv.rows("textured example", tmp_path / "textured.obj", 0.25)
     kept = _results("refit_uv.md").splitlines()
     assert [line for line in made if line not in kept] == []
+
+
+@pytest.mark.slow
+def test_locks_weights_cap_shares_come_back(monkeypatch):
+    """results/locks_weights.md's cap rows of the bumpy sphere with the parallel scheduler are what
+    locks_weights.py makes now, and docs/methods.md's cap shares are theirs."""
+    import re
+
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    from figures import locks_weights
+
+    sphere = locks_weights.meshes()["bumpy-sphere-5"]
+    made: list[str] = []
+    locks_weights.weights("bumpy-sphere-5", sphere, 0.05, made, schedulers=("parallel",))
+    assert [line for line in made if line not in _results("locks_weights.md").splitlines()] == []
+    share = {w: float(line.split("|")[5].strip(" %")) for line in made for w in [line.split("|")[3].strip()]}
+    said = re.search(r"give it (\d+) % / (\d+) % of the output's vertices \((\d+) % without", _methods_page())
+    assert [int(x) for x in said.groups()] == [round(share[w]) for w in ("10", "100", "1")]

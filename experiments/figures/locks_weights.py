@@ -81,11 +81,11 @@ def local_error(mesh, res, region):
     return [(float(np.sqrt(np.mean(d[m] ** 2))) / diag, float(d[m].max()) / diag) for m in (region, ~region)]
 
 
-def weights(name, mesh, ratio, out):
+def weights(name, mesh, ratio, out, schedulers=("parallel", "greedy")):
     V = mesh[0]
     lo, hi = V.min(0), V.max(0)
     region = V[:, 0] > 0.5 * (lo[0] + hi[0]) + 0.25 * (hi[0] - lo[0])
-    for scheduler in ("parallel", "greedy"):
+    for scheduler in schedulers:
         for w in (1.0, 10.0, 100.0):
             res, _ = run(mesh, ratio=ratio, scheduler=scheduler,
                          vertex_weights=None if w == 1.0 else np.where(region, w, 1.0))
