@@ -258,3 +258,24 @@ def test_locks_weights_cap_shares_come_back(monkeypatch):
     share = {w: float(line.split("|")[5].strip(" %")) for line in made for w in [line.split("|")[3].strip()]}
     said = re.search(r"give it (\d+) % / (\d+) % of the output's vertices \((\d+) % without", _methods_page())
     assert [int(x) for x in said.groups()] == [round(share[w]) for w in ("10", "100", "1")]
+
+
+def test_regularize_table_is_the_files():
+    """docs/methods.md's regularisation table is results/regularize_sweep.txt's summary, and both name the
+    method the sweep ran (the script's --method)."""
+    import re
+
+    text = _results("regularize_sweep.txt")
+    command = re.match(r"# (python experiments/figures/regularize_sweep\.py.*)", text)
+    assert command and "--method " in command.group(1)
+    method = command.group(1).split("--method ")[1].split()[0]
+    page = (ROOT / "docs" / "methods.md").read_text()
+    assert f"`{command.group(1)}`" in " ".join(page.split())
+    assert f"with the {method} method" in " ".join(page.split())
+    summary = {(r, m): (s, q) for r, m, s, q in re.findall(r"^\| ([\d.]+) \| ([^|]+?) \| ([\d.]+) \| ([\d.]+) \|",
+                                                          text, re.M)}
+    rows = re.findall(r"^\| (\d+) % \| ([^|]+?) \| ([\d.]+) \| ([\d.]+) \|$", page, re.M)
+    assert len(rows) >= 5
+    for ratio, label, slivers, rms in rows:
+        name = {"pymeshlab (quality threshold 0.3)": "pymeshlab"}.get(label, label.replace("λ = ", "qemjax λ="))
+        assert summary[(f"{int(ratio) / 100:g}", name)] == (slivers, rms), (ratio, label)

@@ -1,11 +1,13 @@
 """Sliver fraction and rms against the regularisation weight λ (``simplify(regularize=λ)``), next to peers.
 
-Every shared mesh at each ratio: qemjax (parallel) at each λ, pymeshlab (its quality threshold at the
+Every shared mesh at each ratio: qemjax (parallel, ``--method``: ``classic`` by default, the method of the
+table in docs/methods.md) at each λ, pymeshlab (its quality threshold at the
 default 0.3 and at 1.0) and meshoptimizer, all measured by `qemjax.metrics.evaluate` (sliver: smallest angle
 under 10°; rms two-way, relative to the bounding-box diagonal). Prints per-λ summaries and writes
 ``results/regularize_sweep.csv``.
 
     python experiments/figures/regularize_sweep.py                       # all shared meshes, 10 % and 1 %
+    python experiments/figures/regularize_sweep.py --method default      # the package's default method
     python experiments/figures/regularize_sweep.py --meshes cow --ratios 0.1 --lambdas 0 0.1
 
 meshoptimizer's ``Regularize`` flag (1 << 4 in meshoptimizer.h) is not in the Python binding installed here
@@ -37,13 +39,15 @@ def pymeshlab_quality(V, F, target, thr):
     return peers.compact(out.vertex_matrix(), out.face_matrix())
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--meshes", nargs="*", default=None)
     ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
     ap.add_argument("--lambdas", nargs="+", type=float, default=[0.0, 0.03, 0.1, 0.3, 1.0])
+    ap.add_argument("--method", default="classic",
+                    help="qemjax's method (default: classic, the method of docs/methods.md's table)")
     ap.add_argument("--out", default=str(EXPERIMENTS / "results" / "regularize_sweep.csv"))
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     import pandas as pd
 
     import meshes as bench
@@ -61,14 +65,15 @@ def main():
             for lam in args.lambdas:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    r = qemjax.simplify((V, F), target_faces=target, regularize=lam)
+                    r = qemjax.simplify((V, F), target_faces=target, method=args.method, regularize=lam)
                 runs[f"qemjax λ={lam:g}"] = (r.vertices, r.faces, lam)
             runs["pymeshlab"] = (*pymeshlab_quality(V, F, target, 0.3), np.nan)
             runs["pymeshlab qualitythr=1"] = (*pymeshlab_quality(V, F, target, 1.0), np.nan)
             runs["meshoptimizer"] = (*peers.simplify_meshoptimizer(V, F, target), np.nan)
             for method, (V2, F2, lam) in runs.items():
                 e = metrics.evaluate((V, F), (V2, F2), target_faces=target)
-                rows.append(dict(mesh=name, ratio=ratio, method=method, regularize=lam, faces=len(F2),
+                rows.append(dict(mesh=name, ratio=ratio, method=method, qemjax_method=args.method,
+                                 regularize=lam, faces=len(F2),
                                  sliver_fraction=e["sliver_fraction"], min_angle_mean=e["min_angle_mean"],
                                  rms_rel=e["rms_rel"], hausdorff_rel=e["hausdorff_rel"]))
             print(name, ratio, " ".join(f"{r['method']}: {r['sliver_fraction']:.3f}/{r['rms_rel']:.2e}"
