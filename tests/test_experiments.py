@@ -279,3 +279,22 @@ def test_regularize_table_is_the_files():
     for ratio, label, slivers, rms in rows:
         name = {"pymeshlab (quality threshold 0.3)": "pymeshlab"}.get(label, label.replace("λ = ", "qemjax λ="))
         assert summary[(f"{int(ratio) / 100:g}", name)] == (slivers, rms), (ratio, label)
+
+
+@pytest.mark.slow
+def test_distance_check_row_comes_back(tmp_path):
+    """results/distance_check.txt's cow row (the largest cost, the measured and the reference distances, not
+    the times) is what distance_check.py measures now."""
+    if not (ROOT.parent / "shared" / "meshes" / "cow.obj").is_file():
+        pytest.skip("the shared meshes are not beside the project")
+    out = tmp_path / "distance_check.txt"
+    run = subprocess.run([sys.executable, str(EXPERIMENTS / "figures" / "distance_check.py"), "--meshes", "cow",
+                          "--ratios", "0.1", "--repeats", "1", "--out", str(out)], capture_output=True, text=True,
+                         timeout=600, cwd=ROOT)
+    assert run.returncode == 0, run.stderr[-2000:]
+
+    def distances(text):
+        return next(line.split("|")[0].split() for line in text.splitlines() if line.startswith("cow 0.1"))
+
+    assert distances(out.read_text()) == distances(_results("distance_check.txt"))
+    assert out.read_text().startswith("# python experiments/figures/distance_check.py --meshes cow")

@@ -78,7 +78,8 @@ def main(argv=None) -> int:
     text = "\n".join(lines)
     print(text)
     if args.out:
-        args.out.write_text("# python experiments/figures/distance_check.py " + " ".join(sys.argv[1:]) + "\n" + text + "\n")
+        command = " ".join(sys.argv[1:] if argv is None else argv)
+        args.out.write_text(f"# python experiments/figures/distance_check.py {command}\n{text}\n")
     return 0
 
 
