@@ -43,7 +43,7 @@ def test_a_quick_run_leaves_the_cited_results_alone(monkeypatch):
     """The default run (and the docs' command) writes the results file the docs cite; a run with other
     options writes another unless ``--out`` names one."""
     monkeypatch.syspath_prepend(str(EXPERIMENTS))
-    from figures import bench_peers, line_quadrics, probabilistic_quadrics
+    from figures import bench_peers, line_quadrics, probabilistic_quadrics, regularize_sweep
 
     results = EXPERIMENTS / "results"
     assert bench_peers.parse_args([]).out == results / "peers.csv"
@@ -63,6 +63,11 @@ def test_a_quick_run_leaves_the_cited_results_alone(monkeypatch):
         assert probabilistic_quadrics.parse_args(argv).out == results / "probabilistic_quadrics.md"
     assert (probabilistic_quadrics.parse_args(["--meshes", "cow", "--repeats", "1"]).out
             == results / "probabilistic_quadrics_custom.md")
+
+    for argv in ([], ["--method", "classic"]):  # docs/methods.md's command
+        assert regularize_sweep.parse_args(argv).out == results / "regularize_sweep.csv"
+    assert regularize_sweep.parse_args(["--meshes", "cow"]).out == results / "regularize_sweep_custom.csv"
+    assert regularize_sweep.parse_args(["--meshes", "cow", "--out", "r.csv"]).out == "r.csv"
 
 
 def test_results_name_the_scripts_that_are_there():

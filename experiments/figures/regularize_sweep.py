@@ -4,7 +4,8 @@ Every shared mesh at each ratio: qemjax (parallel, ``--method``: ``classic`` by 
 table in docs/methods.md) at each λ, pymeshlab (its quality threshold at the
 default 0.3 and at 1.0) and meshoptimizer, all measured by `qemjax.metrics.evaluate` (sliver: smallest angle
 under 10°; rms two-way, relative to the bounding-box diagonal). Prints per-λ summaries and writes
-``results/regularize_sweep.csv``.
+``results/regularize_sweep.csv`` (the file docs/methods.md cites) when every option has its default; any
+other run writes ``regularize_sweep_custom.csv`` beside it unless ``--out`` names a file.
 
     python experiments/figures/regularize_sweep.py                       # all shared meshes, 10 % and 1 %
     python experiments/figures/regularize_sweep.py --method default      # the package's default method
@@ -39,15 +40,24 @@ def pymeshlab_quality(V, F, target, thr):
     return peers.compact(out.vertex_matrix(), out.face_matrix())
 
 
-def main(argv=None):
+def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--meshes", nargs="*", default=None)
     ap.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.01])
     ap.add_argument("--lambdas", nargs="+", type=float, default=[0.0, 0.03, 0.1, 0.3, 1.0])
     ap.add_argument("--method", default="classic",
                     help="qemjax's method (default: classic, the method of docs/methods.md's table)")
-    ap.add_argument("--out", default=str(EXPERIMENTS / "results" / "regularize_sweep.csv"))
+    ap.add_argument("--out", default=None, help="the CSV to write (default: results/regularize_sweep.csv with the "
+                                                "default options, else results/regularize_sweep_custom.csv)")
     args = ap.parse_args(argv)
+    from figures.line_quadrics import out_path
+
+    args.out = args.out or out_path(ap, args, "regularize_sweep.csv")
+    return args
+
+
+def main(argv=None):
+    args = parse_args(argv)
     import pandas as pd
 
     import meshes as bench
