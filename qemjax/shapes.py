@@ -25,12 +25,17 @@ SHAPES = ("bumpy_sphere", "icosphere", "torus", "cube", "grid")  # the generator
 # the least of each count a generator takes: fewer made an empty mesh, or faces on the same vertices
 _LEAST = {"icosphere": {"subdivisions": 0}, "bumpy_sphere": {"subdivisions": 0}, "cube": {"subdivisions": 0},
           "torus": {"n_major": 3, "n_minor": 3}, "grid": {"n": 1}, "double_cone": {"n": 3}}
+# the lengths a generator takes, each a finite number > 0: zero made every vertex one point, a negative one
+# turned the faces inside out
+_LENGTHS = {"icosphere": ("radius",), "torus": ("major", "minor"), "grid": ("size",),
+            "double_cone": ("radius", "height")}
 
 
 def _counts(shape: str, args: dict, text: str | None = None) -> None:
     """ValueError naming ``shapes.shape``'s argument (after ``text``, the spec as written, when given) unless
     each count in ``args`` is an integer at least its `_LEAST` (a grid with a hole: 3, the hole being its
-    middle third)."""
+    middle third) and each length (`_LENGTHS`) a finite number > 0 (a torus's minor radius under its major
+    one: else its tube passes through the axis)."""
     hole = bool(args.get("hole", False))
     for name, least in _LEAST[shape].items():
         if name not in args:
@@ -40,13 +45,25 @@ def _counts(shape: str, args: dict, text: str | None = None) -> None:
             least, why = 3, " with hole=True"
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < least:
             raise ValueError(f"{text or 'shapes.' + shape}: {name} must be an integer >= {least}{why}, got {value!r}")
+    for name in _LENGTHS.get(shape, ()):
+        if name not in args:
+            continue
+        value = args[name]
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(value) or value <= 0:
+            raise ValueError(f"{text or 'shapes.' + shape}: {name} must be a number > 0, got {value!r}")
+    if shape == "torus":  # (a spec's args are those it gives: the others, the generator's defaults)
+        given = {k: p.default for k, p in inspect.signature(torus).parameters.items()} | args
+        if given["minor"] >= given["major"]:
+            raise ValueError(f"{text or 'shapes.torus'}: minor must be less than major (the tube's radius under "
+                             f"the ring's), got minor={given['minor']!r}, major={given['major']!r}")
 
 
 def icosphere(subdivisions: int = 3, radius: float = 1.0) -> Mesh:
     """Geodesic sphere with 20·4^subdivisions faces (subdivisions >= 0)."""
     import trimesh
 
-    _counts("icosphere", dict(subdivisions=subdivisions))
+    _counts("icosphere", dict(subdivisions=subdivisions, radius=radius))
     m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
     return Mesh(np.asarray(m.vertices, float), np.asarray(m.faces, np.int64))
 
@@ -54,7 +71,7 @@ def icosphere(subdivisions: int = 3, radius: float = 1.0) -> Mesh:
 def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 48, n_minor: int = 24) -> Mesh:
     """Closed genus-1 torus with 2·n_major·n_minor faces (n_major, n_minor >= 3: segments around the ring and
     around the tube)."""
-    _counts("torus", dict(n_major=n_major, n_minor=n_minor))
+    _counts("torus", dict(n_major=n_major, n_minor=n_minor, major=major, minor=minor))
     u, v = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
     a, b = 2 * np.pi * u / n_major, 2 * np.pi * v / n_minor
     cos, sin = fixed_order.cos, fixed_order.sin  # the C library's: the same mesh on every CPU
@@ -74,7 +91,7 @@ def grid(n: int = 20, size: float = 1.0, hole: bool = False) -> Mesh:
     hole=True removes the cells of the middle third, leaving a square hole (a second boundary loop).
     n >= 1; with hole=True, n >= 3 (fewer cells have no middle third to remove with a border left).
     """
-    _counts("grid", dict(n=n, hole=hole))
+    _counts("grid", dict(n=n, hole=hole, size=size))
     x = np.linspace(0.0, size, n + 1)
     X, Y = np.meshgrid(x, x, indexing="ij")
     V = np.stack([X.reshape(-1), Y.reshape(-1), np.zeros(X.size)], 1)
@@ -124,7 +141,7 @@ def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) 
 def double_cone(n: int = 500, radius: float = 1.0, height: float = 1.0) -> Mesh:
     """Closed double cone: a ring of n vertices in the z=0 plane and two apexes at z=±height, each apex
     joined to every ring vertex (valence n), 2n faces (n >= 3). A fan-triangulated cap taken to the extreme."""
-    _counts("double_cone", dict(n=n))
+    _counts("double_cone", dict(n=n, radius=radius, height=height))
     t = 2 * np.pi * np.arange(n) / n
     V = np.concatenate([np.stack([radius * fixed_order.cos(t), radius * fixed_order.sin(t), np.zeros(n)], 1),
                         [[0.0, 0.0, height], [0.0, 0.0, -height]]])

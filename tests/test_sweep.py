@@ -362,6 +362,13 @@ def test_shapes_named_as_text():
     (lambda: shapes.parse_spec("shapes.torus(n_minor=1)"),
      "shapes.torus(n_minor=1): n_minor must be an integer >= 3, got 1"),
     (lambda: shapes.parse_spec({"shape": "grid", "n": 1, "hole": True}), "shapes.grid: n must be an integer >= 3"),
+    # lengths: zero made every vertex one point, a negative one turned the faces inside out
+    (lambda: shapes.icosphere(2, radius=0), "shapes.icosphere: radius must be a number > 0, got 0"),
+    (lambda: shapes.grid(4, size=-1.0), "shapes.grid: size must be a number > 0, got -1.0"),
+    (lambda: shapes.double_cone(8, height=float("nan")), "shapes.double_cone: height must be a number > 0, got nan"),
+    (lambda: shapes.torus(minor=0.0), "shapes.torus: minor must be a number > 0, got 0.0"),
+    (lambda: shapes.torus(major=1.0, minor=1.5), "shapes.torus: minor must be less than major"),
+    (lambda: shapes.parse_spec("shapes.torus(major=0.2)"), "shapes.torus(major=0.2): minor must be less than major"),
 ])
 def test_shapes_refuse_counts_that_make_empty_or_repeated_faces(make, message):
     """0 or negative segments made an empty torus or grid, a negative subdivision quietly the level-0 mesh, two
