@@ -697,8 +697,10 @@ def test_lod_refuses_texture_with_the_real_reason(tmp_path, capsys, monkeypatch)
     help_text = " ".join(capsys.readouterr().out.split())
     assert "--texture" not in help_text and "--attribute" not in help_text
     assert "side by side along x" in help_text
-    with pytest.raises(ValueError, match="lod_chain keeps positions only"):
-        qemjax.lod_chain(shapes.icosphere(2), texture=str(tmp_path / "t.png"))
+    for texture in ({"texture": str(tmp_path / "t.png")}, {"attributes.texture": str(tmp_path / "t.png")},
+                    {"attributes": qemjax.Attributes("uv", texture=str(tmp_path / "t.png"))}):  # every way to give one
+        with pytest.raises(ValueError, match="lod_chain keeps positions only"):
+            qemjax.lod_chain(shapes.icosphere(2), **texture)
 
 
 def test_lod_glb_levels_side_by_side(src, tmp_path, capsys):

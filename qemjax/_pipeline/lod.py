@@ -95,7 +95,9 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
         if "." not in key and not key.startswith("_") and key not in _flat.KEYWORDS and key not in table:
             raise TypeError(_flat.unknown_setting(key, table, ("ratios", *_flat.KEYWORDS), (*REFUSED, "texture"),
                                                   who="lod_chain"))
-    if options.get("texture") is not None:
+    given = options.get("attributes")
+    if any(t is not None for t in (options.get("texture"), options.get("attributes.texture"),
+                                   getattr(given, "texture", None))):  # as a texture may be given
         raise ValueError("lod_chain keeps positions only: its levels are replayed from contractions; use "
                          "simplify(texture=...) for a textured result")
     options.setdefault("attributes", None)
