@@ -173,6 +173,11 @@ def test_indices_refer_to_the_vertices_as_given():
     with pytest.warns(UserWarning, match="no face"):
         res = qemjax.simplify((extra, soup_F), ratio=0.2, locked=given)
     assert res.stats["locked_unreferenced"] == 1 and res.stats["locked"] == len(lk)
+    # only unreferenced ones: the run is the run without locks, and the stats the warning names are there
+    with pytest.warns(UserWarning, match=r"stats\['locked_unreferenced'\]"):
+        alone = qemjax.simplify((extra, soup_F), ratio=0.2, locked=[len(extra) - 1])
+    assert (alone.stats["locked_in"], alone.stats["locked"], alone.stats["locked_unreferenced"]) == (1, 0, 1)
+    assert np.array_equal(alone.faces, qemjax.simplify((extra, soup_F), ratio=0.2).faces)
     out = {tuple(r) for r in res.vertices.tolist()}
     assert all(tuple(V[i]) in out for i in lk)
     # weights: a welded vertex takes the largest of its copies' weights
@@ -180,7 +185,7 @@ def test_indices_refer_to_the_vertices_as_given():
     w[[copy_of[i] for i in lk]] = 0.0  # one copy light, the others 1: the vertex keeps weight 1
     res = qemjax.simplify((extra, soup_F), ratio=0.2, vertex_weights=w)
     ref = qemjax.simplify((extra, soup_F), ratio=0.2)
-    assert "vertex_weights" not in res.stats and np.array_equal(res.vertices, ref.vertices)
+    assert res.stats["vertex_weights"] is False and np.array_equal(res.vertices, ref.vertices)
     w = np.ones(len(extra))
     w[:-1][np.isin(F.reshape(-1), lk)] = 0.0  # every copy light
     res = qemjax.simplify((extra, soup_F), ratio=0.2, vertex_weights=w)

@@ -152,10 +152,12 @@ def given_map(geo) -> np.ndarray:
     return row_index(V, P)
 
 
-def resolve(locked, vertex_weights, geo, stacklevel: int) -> Locks | None:
+def resolve(locked, vertex_weights, geo, stacklevel: int, stats: dict | None = None) -> Locks | None:
     """The run's `Locks` on the cleaned `Geometry` ``geo`` (its ``vertex_map`` maps the given vertices),
     or None when nothing is locked and no weight differs from 1 (the run is then the run without them).
-    Warns when locked vertices are in no face (they cannot be kept)."""
+    Warns when locked vertices are in no face (they cannot be kept). ``stats``: a dict that gets the lock
+    stats (`Locks.stats`) whenever locks or weights were given, also when none is left to keep (all
+    unreferenced: the warning points the user to them)."""
     if locked is None and vertex_weights is None:
         return None
     vmap = given_map(geo)
@@ -176,14 +178,16 @@ def resolve(locked, vertex_weights, geo, stacklevel: int) -> Locks | None:
         np.maximum.at(weights, vmap[keep], w[keep])  # welded copies: the largest of their weights
         if np.all(weights == 1.0):
             weights = None
+    given = {"locked_in": int(len(idx)), "locked": int(mask.sum()), "locked_unreferenced": gone,
+             "vertex_weights": weights is not None}
+    if stats is not None:
+        stats.update(given)
     if not mask.any() and weights is None:
         return None
     perm = np.concatenate([np.flatnonzero(mask), np.flatnonzero(~mask)])
     inv = np.empty(n, np.int64)
     inv[perm] = np.arange(n)
-    stats = {"locked_in": int(len(idx)), "locked": int(mask.sum()), "locked_unreferenced": gone,
-             "vertex_weights": weights is not None}
-    return Locks(mask, weights, perm, inv, geo, stats)
+    return Locks(mask, weights, perm, inv, geo, given)
 
 
 def scheduler_settings(locks: Locks | None) -> dict:

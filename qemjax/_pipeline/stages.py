@@ -226,7 +226,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     ``locks``: the user's (locked, vertex_weights) (`_locks`); with any, the run works on the geometry
     renumbered with the locked vertices first (`_locks.Locks.geometry`). ``seed``: `SEED`'s callable, the
     state's maker in place of the model's own; ``refit_to``: `REFIT_TO`'s surface."""
-    lk = _locks.resolve(*locks, geo, stacklevel=stacklevel + 1)
+    lock_stats = {}  # also when every locked vertex is unreferenced (the run is then without locks)
+    lk = _locks.resolve(*locks, geo, stacklevel=stacklevel + 1, stats=lock_stats)
     if lk is not None:  # a numbering of its own: no vertex state shared with a batch's other runs
         geo, states = lk.geometry(), None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
@@ -292,8 +293,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     tracker = None if attrs is None else _wedges.Tracker(attrs.corners, attrs.matrix(), len(geo.V), geo.F, model,
                                                          None if corner_values is None else channel_weights > 0,
                                                          None if lk is None else lk.run().locked)
-    if lk is not None:
-        report.update(lk.stats)
+    report.update(lock_stats)
     job = Job(setup, geo, target, err, S, options, model, report, attrs, tracker, lk, refit_to)
     return job if seed is None else job._replace(S=seed(job, start))
 
