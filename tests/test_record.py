@@ -343,3 +343,19 @@ def test_a_chain_flat_in_x_is_still_side_by_side():
     scene = chain.to_scene()
     moves = [scene.graph[f"lod{i}"][0][0, 3] for i in range(2)]
     assert moves[0] == 0 and moves[1] == pytest.approx(1.2 * np.ptp(V, axis=0).max())
+
+
+def test_the_warnings_of_lod_chain_and_a_partitioned_run_point_at_the_callers_line(tmp_path):
+    """As simplify's own: a warning names the user's file and line, not qemjax's (lod_chain calls simplify; the
+    partitioned run's closing warnings are issued two calls deeper than its first ones)."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])  # a tetrahedron: 4 faces is as far as it goes
+    path = tmp_path / "tetra.ply"
+    trimesh.Trimesh(V, F, process=False).export(path)
+    for call in (lambda: qemjax.lod_chain((V, F), ratios=[0.5, 0.25]),
+                 lambda: qemjax.simplify(str(path), target_faces=1, partition=qemjax.Partition(workers=1)),
+                 lambda: qemjax.simplify((V, F), target_faces=1)):
+        with warnings.catch_warnings(record=True) as got:
+            warnings.simplefilter("always")
+            call()
+        assert got and {w.filename for w in got} == {__file__}, [(w.filename, str(w.message)[:60]) for w in got]

@@ -360,7 +360,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
                       f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
     return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
-                   t_measure, folder if not temporary else None, kwargs, stacklevel, UV, texture)
+                   t_measure, folder if not temporary else None, kwargs, stacklevel + 1, UV, texture)
 
 
 def runner_name(p: Partition) -> str:
@@ -439,4 +439,4 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                           input_vertices=np.zeros((0, 3)), input_faces=np.zeros((0, 3), np.int64),
                           history=Contractions(np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0)),
                           stats=stats, stop_reason=stop,
-                          **_wedges(np.asarray(F, np.int64), UV, manifest, stacklevel, texture))
+                          **_wedges(np.asarray(F, np.int64), UV, manifest, stacklevel + 1, texture))

@@ -25,6 +25,9 @@ if TYPE_CHECKING:  # annotations only: stages is imported where a run needs it (
     from .stages import Job
 
 PLACEMENTS = _costs.qem.PLACEMENTS
+# a setting only qemjax's own callers of `simplify` pass (`lod_chain`): how many of their frames stand between
+# the user's call and simplify, so that the run's warnings point at the user's line
+CALLER = "_caller_frames"
 
 
 def methods() -> tuple[str, ...]:
@@ -125,13 +128,14 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     from .._kernels import compilation as _compilation  # the run's modules, here: importing qemjax stays light
     from . import stages
 
+    settings = dict(settings)
+    up = 3 + settings.pop(CALLER, 0)  # the warnings' stacklevel in the stages: the user's line
     if partition is not None and partition is not False:
         return _partitioned(mesh, target_faces, ratio, partition, progress, measure, attributes, settings,
                             dict(max_error=max_error, max_distance=max_distance, max_distance_rel=max_distance_rel,
                                  method=method, scheduler=scheduler, topology=topology, feature_edges=feature_edges))
     t_start = time.perf_counter()
     c0, s0 = _compilation.snapshot()
-    settings = dict(settings)
     locks = _locks.pop_settings(settings)
     seed, refit_to = settings.pop(stages.SEED, None), settings.pop(stages.REFIT_TO, None)
     setup = stages.setup(method, scheduler, topology, attributes, progress, settings, measure)
@@ -140,14 +144,14 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
     stages._resolve_target(1, target_faces, ratio, max_error, bound is not None)
     if partition is None:
         _fits.check(mesh)
-    geo = stages.geometry(mesh, setup, stacklevel=3)
-    job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=3, locks=locks,
+    geo = stages.geometry(mesh, setup, stacklevel=up)
+    job = stages.job(setup, geo, feature_edges, target_faces, ratio, max_error, stacklevel=up, locks=locks,
                      bounded=bound is not None, seed=seed, refit_to=refit_to)
     if bound is None:
         job = stages.beside_rounds(job)
-        return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=3)
+        return stages.finish(job, stages.run(job), t_start, c0, s0, stacklevel=up)
     _bound.supported(job)
-    return _bound.finish(job, stages.run(job), bound, t_start, c0, s0, stacklevel=3)
+    return _bound.finish(job, stages.run(job), bound, t_start, c0, s0, stacklevel=up)
 
 
 

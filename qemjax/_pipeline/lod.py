@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from . import flat as _flat
-from .api import simplify
+from .api import CALLER, simplify
 from .._record.history import Level
 from .._record.result import SimplifyResult
 
@@ -127,6 +127,6 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
 
         fits.check(mesh, what="lod_chain (qemjax lod)")
         options["partition"] = False
-    res = simplify(mesh, ratio=min(ratios), **options)
+    res = simplify(mesh, ratio=min(ratios), **options, **{CALLER: 1})  # warnings: at our caller
     m, last = len(res.input_faces), res.record.faces_out
     return LodChain([res.replay(max(max(1, int(round(r * m))), last)) for r in ratios], ratios, res)
