@@ -3,6 +3,7 @@ the problem, or a valid output (indices in range, no degenerate or duplicate fac
 no face turned against the input face it continues; the target met or the result valid above it)."""
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -60,6 +61,8 @@ ERRORS = [
     ("bool faces", (np.eye(3), np.array([[True, False, True]])), {}, "integers"),
     ("ragged faces", (V1, [[0, 1, 2], [0, 2, 3, 4]]), {}, r"faces must be a rectangular array.*\[3, 4\]"),
     ("ragged vertices", ([[0.0, 0, 0], [1, 0], [0, 1, 0]], [[0, 1, 2]]), {}, "vertices must be a rectangular"),
+    ("object faces not numbers", (np.eye(3), np.array([[0, 1, None]], object)), {},
+     r"faces must be an array of numbers, got values that are not numbers \(dtype object\)"),
     ("1-D faces", (np.eye(3), np.array([0, 1, 2])), {}, r"shape \(m, 3\)"),
     ("edges, not faces", (np.eye(3), np.array([[0, 1], [1, 2]])), {}, r"shape \(m, 3\)"),
     ("2-D vertices", (np.zeros((3, 2)), [[0, 1, 2]]), {}, r"shape \(n, 3\)"),
@@ -168,6 +171,20 @@ def test_a_bad_mesh_file_is_named_in_the_error(tmp_path):
     assert str(err.value) == f"{path}: vertices contain NaN or inf coordinates (1 vertices, first: 2)"
 
 
+def test_a_mesh_that_float32_collapses_is_named_with_the_reason(tmp_path):
+    """A centimetre sphere a kilometre from the origin, stored as float32 (as every STL is): its vertices fall
+    on a few points, are welded, and no face is left; the error names the file and says why."""
+    V, F = shapes.icosphere(3)
+    far = (np.asarray(V) * 1e-2 + 1e6).astype(np.float32)
+    path = tmp_path / "far.stl"
+    trimesh.Trimesh(far, F, process=False).export(path)
+    for mesh, where in ((path, f"{path}: "), ((far, F), "")):
+        with pytest.raises(ValueError, match="^" + re.escape(where) + r"empty mesh: every face is degenerate "
+                           r"\(a corner repeated\); 1280 faces had three distinct vertices before .* welded: the "
+                           r"coordinates lack the precision"):
+            qemjax.simplify(mesh, ratio=0.5)
+
+
 def _with_outlier(V, F, far, referenced):
     """V, F plus a triangle at distance ``far``: part of the mesh, or its vertices left unreferenced."""
     tri = np.array([[far, 0, 0], [far + 1, 0, 0], [far, 1, 0]])
@@ -262,6 +279,8 @@ def reference():
     pytest.param(lambda V, F: (V[::1], F[:, :]), id="views"),
     pytest.param(lambda V, F: trimesh.Trimesh(V, F, process=False), id="trimesh"),
     pytest.param(lambda V, F: qemjax.Mesh(V, F), id="Mesh"),
+    # numbers held as Python objects (pandas' .values of mixed columns): read as the numbers they are
+    pytest.param(lambda V, F: (V.astype(object), F.astype(object)), id="object arrays of numbers"),
 ])
 def test_input_containers_give_the_same_result(reference, convert):
     r = qemjax.simplify(convert(V1, F1), target_faces=30)

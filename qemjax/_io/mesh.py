@@ -177,16 +177,24 @@ def load(path: str | os.PathLike) -> Mesh:
 
 
 def _array(name: str, x) -> np.ndarray:
-    """np.asarray(x); a ValueError naming ``name`` for a ragged nested list."""
+    """np.asarray(x); a ValueError naming ``name`` for a ragged nested list. An array of Python numbers
+    (dtype object, as pandas' ``.values`` of mixed columns gives) is read as the numbers it holds."""
     try:
         a = np.asarray(x)
     except (ValueError, TypeError):
         a = None
+    if a is not None and a.dtype == object:
+        try:
+            a = np.array(a.tolist())  # rows of numbers: a numeric array; rows of other lengths: still object
+        except (ValueError, TypeError):
+            a = None
     if a is None or a.dtype == object:
         try:
             lengths = sorted({len(row) for row in x})
         except TypeError:
             lengths = "of different lengths"
+        if isinstance(lengths, list) and len(lengths) == 1:
+            raise ValueError(f"{name} must be an array of numbers, got values that are not numbers (dtype object)")
         raise ValueError(f"{name} must be a rectangular array, got a ragged list (rows of lengths {lengths}); "
                          "give faces as an (m, 3) array, or polygons with the same number of corners")
     return a
@@ -419,7 +427,13 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     else:
         F, report["degenerate_removed"], report["duplicate_removed"] = clean_faces(F)
     if len(F) == 0:
-        raise ValueError("empty mesh: every face is degenerate")
+        a, b, c = F0.T  # the faces as given: with three distinct vertices, welding made them degenerate
+        whole = int(np.count_nonzero((a != b) & (b != c) & (a != c)))
+        why = (f"; {whole} faces had three distinct vertices before the vertices at the same position were welded: "
+               "the coordinates lack the precision for the detail (float32, as STL stores them, keeps about 7 "
+               "digits, so detail far from the origin falls on one point)" if whole and report["welded"] else "")
+        where = f"{name}: " if name != "the mesh" else ""
+        raise ValueError(f"{where}empty mesh: every face is degenerate (a corner repeated){why}")
     # faces with exactly collinear corners would survive untouched into the output: drop them; the same
     # pass gives the means that scale the quadric weights, at unit extent (divided by the bounding box's
     # largest side, so no scale underflows; an overflowing extent is refused by name in `_units`)
