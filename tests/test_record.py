@@ -297,6 +297,9 @@ def test_lod_chain_takes_dotted_settings_as_simplify_does():
     assert [len(level.faces) for level in chain] == [640, 256]
     with pytest.raises(ValueError, match=r"ratios takes a list of ratios, one per level, got 0.5 \(ratios=\[0.5\]\)"):
         qemjax.lod_chain((V, F), ratios=0.5)
+    for bad in (None, ["a"], [0.5, {}]):  # Python's words before ('NoneType' object is not iterable)
+        with pytest.raises(ValueError, match=r"^ratios takes a list of ratios in \(0, 1\], one per level, got "):
+            qemjax.lod_chain((V, F), ratios=bad)
 
 
 def test_lod_chains_did_you_mean_names_only_what_it_takes():

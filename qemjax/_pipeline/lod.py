@@ -105,7 +105,10 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
         options["refit"] = 0  # levels are replays of the contractions, which a re-fit would not reach
     if isinstance(ratios, (int, float, np.number)):
         raise ValueError(f"ratios takes a list of ratios, one per level, got {ratios!r} (ratios=[{ratios!r}])")
-    ratios = tuple(float(r) for r in ratios)
+    try:
+        ratios = tuple(float(r) for r in ratios)
+    except (TypeError, ValueError):
+        raise ValueError(f"ratios takes a list of ratios in (0, 1], one per level, got {ratios!r}") from None
     if not ratios:
         raise ValueError("give at least one ratio")
     for r in ratios:
