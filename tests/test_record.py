@@ -362,3 +362,5 @@ def test_the_warnings_of_lod_chain_and_a_partitioned_run_point_at_the_callers_li
             warnings.simplefilter("always")
             call()
         assert got and {w.filename for w in got} == {__file__}, [(w.filename, str(w.message)[:60]) for w in got]
+        # the partitioned run's warning gives the last level's reason once, not its "stopped at ..." again
+        assert all(str(w.message).count("stopped at") == 1 for w in got)

@@ -402,7 +402,8 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
         stop = final[0]["stop_reason"]
     else:
         stop = "target" if len(F) <= target else "locked"
-    msgs = sorted({m for s in final for m in s["warnings"]})
+    # the groups' reasons, without their own "stopped at N faces, above the target of T: " (the run's warning says it)
+    msgs = sorted({re.sub(r"^stopped at \d+ faces, above the target of \d+: ", "", m) for s in final for m in s["warnings"]})
     part = dict(parts=len(manifest["parts"]), levels=len(levels), where=where,
                 faces_per_level=[lv["faces_out"] for lv in levels], groups_per_level=[lv["groups"] for lv in levels],
                 locked_per_level=[lv["locked"] for lv in levels], seconds_per_level=[lv["seconds"] for lv in levels],
