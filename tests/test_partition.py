@@ -4,6 +4,7 @@ two-process Dask `LocalCluster`: the exact target, a valid closed mesh with no c
 same bits everywhere, a resumed run and a run whose worker is killed."""
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import threading
 import time
@@ -72,20 +73,30 @@ def test_levels_reduce_until_one_group_meets_the_target():
     assert [sum(g.target for g in lv) for lv in levels][:2] == [1_375_000, 343_750]
 
 
-def test_a_level_that_ends_a_few_faces_over_the_band_is_followed_by_the_last():
-    """A level aimed at the edge of the band where the next level is the last ends a few faces over it (its
-    groups' locked borders hold them): the next is still the last, not one more locked level (a teapot cut
-    into parts of 1,000-1,500 faces, at 5 %: about twice the in-core Hausdorff distance;
-    `experiments/probes/small_parts.py`)."""
+def test_a_level_aimed_within_the_band_is_followed_by_the_last():
+    """Whether the next level is the last goes by what the level before aimed at, not by what it kept: a
+    level aimed at the edge of the band ends a few faces over it (its groups' locked borders hold them), and
+    one more locked level for those wore the surface (a teapot cut into parts of 1,000-1,500 faces, at 5 %:
+    about twice the in-core Hausdorff distance; `experiments/probes/small_parts.py`)."""
     p = Partition(part_faces=1_000)
-    target = 316
-    edge = plan.NEAR * p.budget * target  # 1580: total / reduction lands on the band's edge
-    groups, last = plan.level(np.full(8, int(edge * p.reduction) // 8), target, p, first=True)
-    assert not last and sum(g.target for g in groups) == edge
-    groups, last = plan.level(np.array([g.target + (g.members[0] == 0) for g in groups]), target, p, first=False)
-    assert last and len(groups) == 1 and groups[0].target == target
-    # well over the band (more than the overshoot): another locked level first
-    groups, last = plan.level(np.full(8, int(edge * 1.1) // 8), target, p, first=False)
+    for target in (316, 4903):  # the band's edge at 1,580 faces; and one a few faces off a round aim
+        edge = plan.NEAR * p.budget * target
+        total = int(edge * p.reduction)  # faces / reduction: the band's edge
+        n = -(-total // 1000)
+        parts = np.full(n, total // n)
+        parts[: total - parts.sum()] += 1
+        groups, last = plan.level(parts, target, p, first=True)
+        aimed = sum(g.target for g in groups)
+        assert not last and aimed <= edge
+        for over in (0, 1, 6, 100):  # what the locked borders held over the aim, up to a level's worth
+            kept = np.array([g.target for g in groups])
+            kept[0] += over
+            nxt, last = plan.level(kept, target, p, first=False, aimed=aimed)
+            assert last and len(nxt) == 1 and nxt[0].target == target
+            # without the aim (a resumed plan of old, or a first level), the kept faces decide
+            assert plan.level(kept, target, p, first=False)[1] == (kept.sum() <= edge)
+    # a level aimed above the band: another locked level first, whatever it kept
+    groups, last = plan.level(np.full(8, 1000), 316, p, first=False, aimed=2000)
     assert not last
 
 
@@ -327,6 +338,23 @@ def test_weld_false_and_scratch_paths_in_the_users_terms(tmp_path):
         qemjax.simplify(str(tmp_path / "nope.ply"), ratio=0.1,
                         partition=Partition(workers=1, scratch=tmp_path / "new" / "scratch"))
     assert not (tmp_path / "new").exists()
+
+
+def test_a_resumed_run_reruns_a_task_its_plan_changed(tmp_path, monkeypatch):
+    """A task's output is reused only for the task that wrote it: a scratch folder from a run planned otherwise
+    (another version's rule for the last level) held a level's file of the same name written by a locked
+    group, and the resumed run took it as its one group's output (a piece of the mesh, with open edges)."""
+    mesh = shapes.bumpy_sphere(5)
+    settings = Partition(part_faces=1000, workers=1, measure=False, scratch=tmp_path / "scratch")
+    monkeypatch.setattr(plan, "NEAR", 1.3)  # another plan: level 2 the last, one group (the run's has three)
+    old = qemjax.simplify(mesh, target_faces=1010, partition=settings)
+    monkeypatch.undo()
+    again = qemjax.simplify(mesh, target_faces=1010, partition=settings)
+    fresh = qemjax.simplify(mesh, target_faces=1010, partition=dataclasses.replace(settings, scratch=None))
+    assert len(old.stats["partition"]["faces_per_level"]) != len(fresh.stats["partition"]["faces_per_level"])
+    assert again.stats["partition"]["faces_per_level"] == fresh.stats["partition"]["faces_per_level"]
+    assert np.array_equal(again.faces, fresh.faces) and np.array_equal(again.vertices, fresh.vertices)
+    assert again.stats["partition"]["reused"] > 0  # level 1 is the same tasks: reused
 
 
 def test_a_resumed_run_sees_a_replaced_file(tmp_path):

@@ -8,10 +8,7 @@ import numpy as np
 
 from .._options import Partition
 
-# a level whose pieces hold at most NEAR × budget × target faces is the last: another would remove little and
-# lock the same borders again. A level before it that aimed at that edge ends a few faces over it (its groups'
-# locked borders hold them): up to OVERSHOOT more still count as within
-NEAR, OVERSHOOT = 1.25, 0.02
+NEAR = 1.25  # × budget × target: the band of a level before the last (`level`)
 
 
 class Group(NamedTuple):
@@ -50,19 +47,25 @@ def consecutive(faces: np.ndarray, limit: int) -> list[tuple]:
     return groups
 
 
-def level(faces: np.ndarray, target: int, p: Partition, first: bool, stalled: bool = False) -> tuple[list[Group], bool]:
+def level(faces: np.ndarray, target: int, p: Partition, first: bool, stalled: bool = False,
+          aimed: int | None = None) -> tuple[list[Group], bool]:
     """The next level's groups for pieces of ``faces`` faces (Hilbert order), and whether it is the last: one
     group, nothing locked, run to ``target``; or, when that group would read more than ``final_faces``, the
     groups of at most ``part_faces`` run to their shares of ``target`` with their borders locked. The first
     level runs each part alone. Any other level keeps ``max(faces / reduction, budget * target)`` faces in
-    all, shared in proportion to the groups' faces. The last level comes when the pieces hold at most
-    NEAR × budget × target faces, or OVERSHOOT more: one more locked level for the few faces a level's locked
-    borders held over its aim cost the quality of a locked level (`test_partition`). ``stalled``: the level before removed almost nothing (its
-    groups' locked borders held their faces): the next is the last."""
+    all, shared in proportion to the groups' faces.
+
+    The next level is the last once the pieces hold at most NEAR × budget × target faces, or the level before
+    aimed at no more (``aimed``: the faces it was to keep): another locked level would remove little and lock
+    the same borders again. Which it is goes by the aim, not by what the level kept, which its groups' locked
+    borders may hold a few faces over (one more locked level for those cost the quality of a locked level:
+    `test_partition`). ``stalled``: the level before removed almost nothing (its groups' locked borders held
+    their faces): the next is the last."""
     faces = np.asarray(faces, np.int64)
     total = int(faces.sum())
-    band = NEAR * (1 + OVERSHOOT) * p.budget * target
-    near = total <= p.part_faces or total <= band or len(faces) == 1 or stalled
+    band = NEAR * p.budget * target
+    near = total <= p.part_faces or total <= band or (aimed is not None and aimed <= band) or len(faces) == 1 \
+        or stalled
     if total <= p.final_faces and near:
         return [Group(tuple(range(len(faces))), total, min(target, total))], True
     members = [(i,) for i in range(len(faces))] if first else consecutive(faces, p.part_faces)

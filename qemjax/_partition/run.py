@@ -254,7 +254,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                    final_faces=p.final_faces, refit_input_faces=p.refit_input_faces, refit=p.refit, share=p.share,
                    target=[target_faces, ratio],
                    kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
-                   borders="the input's kept along the cuts",
+                   borders="the input's kept along the cuts", last="after a level aimed within the band",
                    uv=uv)
         _fresh(folder, key, mesh)
         source = _as_file(mesh, folder)
@@ -285,7 +285,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         while True:
             t_level = time.perf_counter()
             stalled = bool(levels) and levels[-1]["faces_out"] > 0.9 * levels[-1]["faces_in"]
-            groups, last = plan.level(faces, target, p, first, stalled)
+            groups, last = plan.level(faces, target, p, first, stalled, levels[-1]["target"] if levels else None)
             level_dir = folder / f"level{len(levels) + 1}"
             level_dir.mkdir(exist_ok=True)
             if len(groups) == 1:

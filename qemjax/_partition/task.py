@@ -5,6 +5,7 @@ all), so a task run twice (a retry, a resumed run) gives the same file. Importin
 and numba are imported by the tasks)."""
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import resource
@@ -26,11 +27,19 @@ def peak_rss() -> int:
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
-def _done(out: Path) -> dict | None:
-    """The stats of a task whose output is already written (a retry or a resumed run), else None."""
+def _task_key(spec: dict) -> str:
+    """What a task is (its inputs, locks, target, settings, ...), as text a resumed run compares."""
+    return hashlib.sha256(repr(sorted(spec.items())).encode()).hexdigest()
+
+
+def _done(out: Path, spec: dict) -> dict | None:
+    """The stats of a task whose output is already written (a retry or a resumed run), else None: also when
+    a file of that name is there from another task (a resumed run planned otherwise: another version)."""
     meta = out.with_suffix(".json")
     if out.exists() and meta.exists():
-        return json.loads(meta.read_text()) | {"reused": True}
+        stats = json.loads(meta.read_text())
+        if stats.get("task") == _task_key(spec):
+            return stats | {"reused": True}
     return None
 
 
@@ -94,7 +103,7 @@ def run_group(spec: dict) -> dict:
     ``spec["out"]`` (with its vertices' quadrics when ``spec["carry_out"]``: a level before the last) and its
     stats beside it (``.json``)."""
     out = Path(spec["out"])
-    done = _done(out)
+    done = _done(out, spec)
     if done is not None:
         return done
     t0 = time.perf_counter()
@@ -152,7 +161,7 @@ def run_group(spec: dict) -> dict:
                  max_error=float(res.max_error),
                  seconds=time.perf_counter() - t0, compile_s=float(res.stats.get("compile_s") or 0.0),
                  peak_rss=peak_rss(), pid=os.getpid(),
-                 warnings=sorted({str(w.message) for w in caught}))
+                 warnings=sorted({str(w.message) for w in caught}), task=_task_key(spec))
     pieces.save_json(out.with_suffix(".json"), stats)
     return stats
 
