@@ -319,6 +319,9 @@ def test_lod_chains_did_you_mean_names_only_what_it_takes():
     with pytest.raises(TypeError, match=r"^unknown method setting 'method.boundry_weight'; did you mean "
                                         r"'method.boundary_weight'\?$"):
         qemjax.lod_chain(mesh, **{"method.boundry_weight": 1.0})
+    # what simplify takes, lod_chain passes on (schedule= was refused as unknown by this check)
+    chain = qemjax.lod_chain(mesh, ratios=[0.5], schedule=qemjax.Schedule(), measure=False)
+    assert len(chain.levels[0].faces) == 40
 
 
 def test_cli_lod_writes_levels_glb_and_record(tmp_path, capsys):

@@ -92,7 +92,8 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     """
     table = _flat.options()
     for key in options:  # a dotted name: simplify's check, whose hints are dotted names lod_chain takes too
-        if "." not in key and not key.startswith("_") and key not in _flat.KEYWORDS and key not in table:
+        if "." not in key and not key.startswith("_") and key not in _flat.KEYWORDS and key not in table \
+                and key not in _flat.RUN_TYPES:  # (``schedule=``: simplify's too)
             raise TypeError(_flat.unknown_setting(key, table, ("ratios", *_flat.KEYWORDS), (*REFUSED, "texture"),
                                                   who="lod_chain"))
     given = options.get("attributes")
