@@ -12,12 +12,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import sys
 from typing import Any
 
 import numpy as np
 
-from ._mesh.wedges import KINDS, check_weights
+from ._mesh.wedges import KINDS, check_kinds, check_texture, check_weights
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,12 +155,6 @@ class _Weights(dict):
         return (type(self), (dict(self),))
 
 
-def _is_image(x) -> bool:
-    """Whether ``x`` is a PIL image (PIL not imported: it cannot be one, and is not imported to say so)."""
-    image = sys.modules.get("PIL.Image")
-    return image is not None and isinstance(x, image.Image)
-
-
 @dataclasses.dataclass(frozen=True, eq=False)
 class Attributes:
     """Which appearance attributes a run carries through, and how they weigh (``simplify(attributes=...)``;
@@ -185,15 +178,11 @@ class Attributes:
 
     def __post_init__(self):
         a = self.attributes
+        check_kinds(a)
         if isinstance(a, (list, tuple, set, frozenset)):
-            bad = [k for k in a if not isinstance(k, str) or k not in KINDS]
-            if bad:
-                raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {bad[0]!r}")
             # a set has no order of its own: the kinds' order; a list or tuple as given
             a = tuple(k for k in KINDS if k in a) if isinstance(a, (set, frozenset)) else tuple(a)
             object.__setattr__(self, "attributes", a)
-        elif not (a is None or a is False or (isinstance(a, str) and (a == "auto" or a in KINDS))):
-            raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {a!r}")
         w = self.attribute_weights
         if w is not None:
             if not isinstance(w, dict) and hasattr(w, "keys"):  # another mapping: read as a dict
@@ -204,10 +193,7 @@ class Attributes:
             check_weights(w)  # ValueError naming the kind or the weight
             if isinstance(w, dict):
                 object.__setattr__(self, "attribute_weights", _Weights(w))
-        t = self.texture
-        if not (t is None or isinstance(t, (str, os.PathLike)) or _is_image(t)):
-            raise ValueError(f"texture= takes an image file's path or a PIL image, got {type(t).__name__}"
-                             + (" (a numpy array: PIL.Image.fromarray(array))" if isinstance(t, np.ndarray) else ""))
+        check_texture(self.texture)
 
     def _key(self) -> tuple:
         t = self.texture  # an image compares by identity (PIL's == compares pixels, and it has no hash)

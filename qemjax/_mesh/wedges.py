@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 import warnings
 
 import numpy as np
@@ -182,12 +183,8 @@ def select(available: dict, attributes, unkept: list = ()) -> tuple[dict, list]:
     elif attributes is None or attributes is False:
         want = set()
     else:
-        if not isinstance(attributes, (str, tuple, list, set, frozenset)):
-            raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {attributes!r}")
+        check_kinds(attributes)
         req = (attributes,) if isinstance(attributes, str) else tuple(attributes)
-        bad = [a for a in req if a not in KINDS]
-        if bad:
-            raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {bad[0]!r}")
         missing = [a for a in req if a not in available]
         if missing:
             face = "; its colours are per face, and qemjax keeps colours per vertex" if (
@@ -286,6 +283,33 @@ def channel_weights(attrs: Attributes, kind_weights: dict) -> np.ndarray:
     return np.concatenate([np.full(SIZES[k], kind_weights[k]) for k in KINDS if k in attrs.values])
 
 
+def check_kinds(attributes) -> None:
+    """ValueError unless ``attributes`` is 'auto', None (or False), a kind of `KINDS` or a tuple, list or set
+    of them (naming the first that is not one)."""
+    if attributes is None or attributes is False or (isinstance(attributes, str) and attributes == "auto"):
+        return
+    if not isinstance(attributes, (str, tuple, list, set, frozenset)):
+        raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {attributes!r}")
+    bad = [k for k in ((attributes,) if isinstance(attributes, str) else attributes)
+           if not isinstance(k, str) or k not in KINDS]
+    if bad:
+        raise ValueError(f"attributes must be 'auto', None, or kinds from {KINDS}; got {bad[0]!r}")
+
+
+def is_image(x) -> bool:
+    """Whether ``x`` is a PIL image (PIL not imported: it cannot be one, and is not imported to say so)."""
+    image = sys.modules.get("PIL.Image")
+    return image is not None and isinstance(x, image.Image)
+
+
+def check_texture(texture) -> None:
+    """ValueError unless ``texture`` is None, an image file's path or a PIL image."""
+    if texture is None or isinstance(texture, (str, os.PathLike)) or is_image(texture):
+        return
+    raise ValueError(f"texture= takes an image file's path or a PIL image, got {type(texture).__name__}"
+                     + (" (a numpy array: PIL.Image.fromarray(array))" if isinstance(texture, np.ndarray) else ""))
+
+
 def load_texture(texture):
     """A trimesh SimpleMaterial holding ``texture`` (a path or a PIL image); ValueError naming the file."""
     from PIL import Image
@@ -293,9 +317,7 @@ def load_texture(texture):
 
     if isinstance(texture, Image.Image):
         return SimpleMaterial(image=texture)
-    if not isinstance(texture, (str, os.PathLike)):  # an array would be printed whole in the error below
-        raise ValueError(f"texture= takes an image file's path or a PIL image, got {type(texture).__name__} "
-                         "(a numpy array: PIL.Image.fromarray(array))")
+    check_texture(texture)  # (an array would be printed whole in the error below)
     try:
         img = Image.open(texture)
         img.load()
