@@ -91,6 +91,12 @@ def _quad_cube():
     return V, Q
 
 
+def _drawn(collection) -> set:
+    """The (projected corners, face colour) of each polygon a drawn 3-D collection holds."""
+    return {(tuple(map(tuple, np.round(p.vertices[:3], 6))), tuple(np.round(c, 6)))
+            for p, c in zip(collection.get_paths(), collection.get_facecolors())}
+
+
 def test_render_draws_quads_as_two_triangles_each():
     """(m, 4) faces were reshaped to (-1, 3): 3 quads became 4 triangles of other corners, 1 quad an error
     from numpy. Each polygon is drawn as a fan of triangles, its per-face colour on each."""
@@ -102,14 +108,15 @@ def test_render_draws_quads_as_two_triangles_each():
         ax = render((V, faces), color=colors, up="z")
         ax.figure.canvas.draw()  # a 3-D collection's paths are its projected polygons, made when drawn
         (collection,) = ax.collections
-        drawn = {tuple(map(tuple, np.round(p.vertices[:3], 6))) for p in collection.get_paths()}
         assert len(collection.get_paths()) == 2 * len(faces)
+        drawn = _drawn(collection)
         plt.close(ax.figure)
-        ax = render((V, np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])), color=np.repeat(colors, 2, 0),
-                    up="z")
+        # each quad's two triangles, each in its quad's colour, drawn alike (a colour of another face fails)
+        tris = np.stack([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]], 1).reshape(-1, 3)
+        ax = render((V, tris), color=np.repeat(colors, 2, 0), up="z")
         ax.figure.canvas.draw()
         (want,) = ax.collections
-        assert drawn == {tuple(map(tuple, np.round(p.vertices[:3], 6))) for p in want.get_paths()}
+        assert drawn == _drawn(want) and len(drawn) == 2 * len(faces)
         plt.close(ax.figure)
     with pytest.raises(ValueError, match=r"^color: 5 per-face colours for 6 faces$"):
         render((V, Q), color=np.zeros((5, 3)))
