@@ -4,17 +4,19 @@ both schedulers (validity, boundaries, max_error, determinism, no recompilation 
 from __future__ import annotations
 
 import hashlib
+import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import area_reference
 from conftest import assert_valid, shared_mesh
 
 import qemjax
 from qemjax._kernels import compilation as _compilation
 from qemjax import _costs, metrics, shapes
-from qemjax._costs import area, area_term, ring
+from qemjax._costs import area, area_host, area_term, ring
 from qemjax._schedulers import device
 from qemjax._mesh.incidence import FaceLists
 
@@ -162,6 +164,94 @@ def test_float32_kernel_on_a_mesh_matches_float64_and_the_wide_ring_path():
             assert out[3, k] <= np.abs(d).min() + 1e-6 * ring_area
             assert host[3, k] <= np.abs(d).min() + 1e-6 * scale  # float64, returned as float32
             np.testing.assert_allclose(out[:3, k], host[:3, k], atol=1e-3 * np.linalg.norm(pb - pa))
+
+
+def same_bits(x, y) -> bool:
+    """Equal arrays, bit for bit (NaN equal to itself, -0.0 not equal to 0.0)."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    return x.shape == y.shape and np.array_equal(x.view(np.int64), y.view(np.int64))
+
+
+def _wide_batch(rng, K, R):
+    """K pairs with rings of R rows as `area.solve_host` takes them: faces at a or b and dead ones, rows of
+    padding among them, pairs without faces (a batch's padding), pairs at one point, pinned ones, rings
+    whose areas overflow."""
+    pa, pb = rng.normal(size=(K, 3)), rng.normal(size=(K, 3))
+    pa[rng.random(K) < 0.1] = pb[0]
+    pb[rng.random(K) < 0.1] = pb[0]
+    pos = rng.normal(size=(K, R, 3, 3)) * 10.0 ** rng.integers(-3, 3, size=(K, 1, 1, 1))
+    huge = (rng.random((K, 1, 1, 1)) < 0.1) & (rng.random((K, R, 3, 3)) < 0.15)
+    pos[huge] *= 1e160  # areas past float64's range: ΔS at ±inf or NaN
+    moving = np.zeros((K, R, 3), bool)
+    moving[:, :, 0] = True
+    moving[:, :, 1] = rng.random((K, R)) < 0.05  # a dead face: both corners move
+    fan = rng.random(K) < 0.5  # a fan around a: each face's far edge on a sphere about it, ΔS changes sign
+    pos[fan, :, 0] = pa[fan, None]
+    mask = np.where(rng.random((K, 1)) < 0.5, np.arange(R) < rng.integers(1, R + 1, size=(K, 1)),
+                    rng.random((K, R)) < 0.8)
+    mask[rng.random(K) < 0.25] = False
+    flags = rng.random((K, 2)) < 0.2
+    lo = np.where(flags[:, 1] & ~flags[:, 0], 1.0, 0.0)
+    hi = np.where(flags[:, 0] & ~flags[:, 1], 0.0, 1.0)
+    return pa, pb, pos, moving, mask, lo, hi
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_wide_ring_solve_is_the_numpy_solve_bit_for_bit(seed):
+    """The wide rings' compiled solve (`area_host`) against the float64 numpy solve it replaced
+    (tests/area_reference.py) on random batches, across the widths where numpy's pairwise sums change
+    shape (8, 128, and the halving above): the same bits."""
+    rng = np.random.default_rng(seed)
+    for R in (1, 7, 8, 9, 17, 128, 129, 136, 200, 256, 257, 300, 513):
+        batch = _wide_batch(rng, int(rng.integers(1, 24)), R)
+        with np.errstate(all="ignore"):  # the overflowing rings
+            got, want = area.solve_host(*batch), area_reference.solve_host(*batch)
+        assert all(same_bits(g, w) for g, w in zip(got, want)), R
+    for n in list(range(0, 300)) + [1000, 1031, 4100]:
+        v = rng.normal(size=n + 1) * 10.0 ** rng.integers(-6, 6, size=n + 1)
+        assert same_bits(area_host.numpy_sum(v, n), np.sum(v[:n])), n
+
+
+def test_wide_ring_price_on_a_mesh_is_the_numpy_price_bit_for_bit():
+    """`_price_host` on the double cone's rings (two apexes of valence 150, rings over RING_CAP), in a
+    batch padded with pairs without faces as the schedulers pad one: the rows the numpy path gave."""
+    V, F, fl, E, VS = _mesh_rings(shapes.double_cone(150))
+    VS[: len(V), 3] = np.random.default_rng(0).random(len(V)) < 0.2  # boundary flags: some pinned pairs
+    wide = 0
+    for idx, rg in ring.gather_groups(fl, E, len(V), with_dead=True):
+        P = np.concatenate([E[idx], np.full((7, 2), len(V))]).astype(np.int32)
+        corners = np.concatenate([rg.corners, np.full((7,) + rg.corners.shape[1:], len(V), np.int32)])
+        mask = np.concatenate([rg.mask, np.zeros((7, rg.mask.shape[1]), bool)])
+        wide += rg.mask.shape[1] > area.RING_CAP
+        assert same_bits(area._price_host(VS, P, corners, mask), area_reference.price_host(VS, P, corners, mask))
+    assert wide
+
+
+def test_wide_ring_price_runs_its_bisections_compiled():
+    """The regression: the wide-ring path priced a batch by numpy passes over (pairs, ring, 3) arrays, one
+    set per bisection step (about 190 evaluations of ΔS or its slope a pair), which took minutes on a
+    400-face double cone. Its Python-level calls per batch are now a few dozen, whatever the batch and the
+    steps; and a batch of another size compiles nothing new."""
+    rng = np.random.default_rng(3)
+
+    def calls(batch):
+        n = [0]
+
+        def count(frame, event, arg):
+            n[0] += event in ("call", "c_call")
+        sys.setprofile(count)
+        try:
+            area.solve_host(*batch)
+        finally:
+            sys.setprofile(None)
+        return n[0]
+    with np.errstate(all="ignore"):  # the overflowing rings
+        area.solve_host(*_wide_batch(rng, 8, 160))  # compiled (or loaded) here
+        before = _compilation.numba_compiles()
+        counts = [calls(_wide_batch(rng, K, R)) for K, R in ((5, 150), (64, 300))]
+    assert max(counts) < 200, counts  # the numpy solve: over 4000 for either
+    assert _compilation.numba_compiles() == before
+    assert area_host.solve.signatures and area_host.affine.signatures
 
 
 def test_ring_with_dead_faces():

@@ -53,6 +53,8 @@ def run_all(demo: bool = True) -> None:
             trimesh.Trimesh(tm.vertices, tm.faces, process=False).export("ascii.ply", encoding="ascii")
             qemjax.simplify("bumpy.stl", ratio=0.1, partition=part)
             qemjax.simplify("ascii.ply", ratio=0.1, partition=part)
+            # vertices of high valence: the area method's rings wider than its kernels take (`area_host`)
+            qemjax.simplify(shapes.double_cone(150), target_faces=200, method="area", progress=False)
             # each method and scheduler, open and closed meshes, locks, modes
             meshes = [shapes.bumpy_sphere(3), shapes.grid(24, hole=True), shapes.torus(n_major=24, n_minor=12)]
             for mesh in meshes:

@@ -20,8 +20,8 @@ affine in s, u_f + s·w_f, and the rebuilt area G(s) = ½ Σ |u_f + s·w_f| is c
 Boundaries: a vertex on a boundary or feature edge (``boundary_weight`` > 0) stays on it: a pair with one
 such endpoint contracts to it ([lo, hi] = that end, branch "pinned"); two such endpoints may meet anywhere
 between them. Rings come padded from `ring.gather_groups`, dead faces included (``ring_dead``); a ring
-wider than RING_CAP is solved on the host in float64 by the same steps (`solve_host`) instead of
-compiling and padding ever wider kernels.
+wider than RING_CAP is solved on the host in float64 by the same steps (`solve_host`, compiled loops in
+`area_host`) instead of compiling and padding ever wider kernels.
 """
 from __future__ import annotations
 
@@ -138,69 +138,51 @@ def _price(VS, pairs, params, corners, mask):
     return jnp.concatenate([x.T, cost[None], branch[None].astype(cost.dtype)], 0)
 
 
-# -- the host path (wide rings) and reference -----------------------------------------------------------
-
-def _host_delta(s, u, w, mask, before):
-    """ΔS at s (K, m) for float64 arrays u, w (K,R,3), mask (K,R), before (K,)."""
-    v = u[:, None] + s[..., None, None] * w[:, None]
-    return before[:, None] - 0.5 * np.sum(np.where(mask[:, None], np.linalg.norm(v, axis=-1), 0.0), -1)
-
-
-def _host_bisect(f, lo, hi, steps=60):
-    """Roots of non-decreasing f (K,) -> (K,) on [lo, hi] (K,), by plain bisection."""
-    lo, hi = lo.copy(), hi.copy()
-    for _ in range(steps):
-        mid = 0.5 * (lo + hi)
-        up = f(mid) >= 0
-        hi, lo = np.where(up, mid, hi), np.where(up, lo, mid)
-    return 0.5 * (lo + hi)
-
+# -- the host path (wide rings) ------------------------------------------------------------------------
 
 def solve_host(pa, pb, pos, moving, mask, lo, hi):
-    """`solve_pair` for K pairs in float64 numpy (the same steps, batched on the host): arrays with a
-    leading K axis. Returns (s, |ΔS|, ΔS, branch) (K,)."""
-    p0 = np.where(moving[..., None], pa[:, None, None], pos)
-    p1 = np.where(moving[..., None], pb[:, None, None], pos)
-    cr = lambda p: np.cross(p[:, :, 1] - p[:, :, 0], p[:, :, 2] - p[:, :, 0])  # noqa: E731
-    u = cr(p0)
-    w = cr(p1) - u
-    before = 0.5 * np.sum(np.where(mask, np.linalg.norm(cr(pos), axis=-1), 0.0), -1)
+    """`solve_pair` for K pairs in float64 on the host (the same steps; compiled loops, `area_host`):
+    arrays with a leading K axis. Returns (s, |ΔS|, ΔS, branch) (K,)."""
+    from . import area_host  # compiled loops, imported on first use (only wide rings take this path)
 
-    def delta(s):
-        return _host_delta(s[:, None], u, w, mask, before)[:, 0]
-
-    def slope(s):
-        v = u + s[:, None, None] * w
-        n = np.linalg.norm(v, axis=-1)
-        ok = mask & (n > 0)
-        return 0.5 * np.sum(np.where(ok, np.sum(v * w, -1) / np.where(ok, n, 1.0), 0.0), -1)
-
-    peak = np.clip(_host_bisect(slope, lo, hi), lo, hi)
-    d_lo, d_hi, d_peak = delta(lo), delta(hi), delta(peak)
-    left = np.clip(_host_bisect(delta, lo, peak), lo, peak)
-    right = np.clip(_host_bisect(lambda s: -delta(s), peak, hi), peak, hi)
-    s = np.stack([left, right, peak, lo, hi], 1)
-    d = _host_delta(s, u, w, mask, before)
-    ok = np.concatenate([np.stack([(d_lo <= 0) & (d_peak >= 0), (d_hi <= 0) & (d_peak >= 0)], 1),
-                         np.ones((len(s), 3), bool)], 1)
-    k = np.argmin(np.where(ok, np.abs(d), np.inf), 1)
-    r = np.arange(len(s))
-    branch = np.where(lo == hi, 3, np.array([0, 0, 1, 2, 2])[k])
-    return s[r, k], np.abs(d[r, k]), d[r, k], branch
+    K = len(lo)
+    out = np.empty(K), np.empty(K), np.empty(K), np.empty(K, np.int64)
+    f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
+    # a pair with no faces (a batch's padding) has ΔS = 0 at every s whatever its ring holds: solved with an
+    # empty ring, the same steps on the same values, without passes over the ring's width
+    mask = np.asarray(mask)
+    live = mask.any(-1)
+    for rows, width in ((live, pos.shape[1]), (~live, 0)):
+        if rows.any():
+            m = np.ascontiguousarray(mask[rows, :width], np.bool_)
+            u, w, before = area_host.affine(f64(pa[rows]), f64(pb[rows]), f64(pos[rows, :width]),
+                                            np.ascontiguousarray(moving[rows, :width], np.bool_), m)
+            part = [np.empty(rows.sum(), a.dtype) for a in out]
+            area_host.solve(u, w, m, before, f64(lo[rows]), f64(hi[rows]), *part)
+            for a, b in zip(out, part):
+                a[rows] = b
+    return out
 
 
 def _price_host(VS, pairs, corners, mask):
     """The kernel's output for pairs with rings wider than RING_CAP, computed on the host in float64."""
     VS = np.asarray(VS, np.float64)
     pairs = np.asarray(pairs, np.int64)
-    keep = np.asarray(mask).any(0)  # drop the columns no pair uses
-    corners, mask = np.asarray(corners)[:, keep], np.asarray(mask)[:, keep]
-    pos = VS[np.minimum(corners, len(VS) - 1), :3]
-    moving = (corners == pairs[:, 0, None, None]) | (corners == pairs[:, 1, None, None])
+    mask = np.asarray(mask)
+    keep = mask.any(0)  # drop the columns no pair uses
+    live = mask.any(1)  # and gather no ring for a pair without faces (padding: see `solve_host`)
+    corners, mask = np.asarray(corners)[live][:, keep], mask[live][:, keep]
     pa, pb = VS[pairs[:, 0], :3], VS[pairs[:, 1], :3]
     fa, fb = VS[pairs[:, 0], 3] > 0.5, VS[pairs[:, 1], 3] > 0.5
     lo, hi = np.where(fb & ~fa, 1.0, 0.0), np.where(fa & ~fb, 0.0, 1.0)
-    s, cost, _, branch = solve_host(pa, pb, pos, moving, mask, lo, hi)
+    s, cost, branch = np.empty(len(pairs)), np.empty(len(pairs)), np.empty(len(pairs), np.int64)
+    pos = VS[np.minimum(corners, len(VS) - 1), :3]
+    moving = (corners == pairs[live, 0, None, None]) | (corners == pairs[live, 1, None, None])
+    s[live], cost[live], _, branch[live] = solve_host(pa[live], pb[live], pos, moving, mask, lo[live], hi[live])
+    n = int((~live).sum())
+    s[~live], cost[~live], _, branch[~live] = solve_host(
+        pa[~live], pb[~live], np.zeros((n, 0, 3, 3)), np.zeros((n, 0, 3), bool), np.zeros((n, 0), bool),
+        lo[~live], hi[~live])
     x = pa + s[:, None] * (pb - pa)
     return np.concatenate([x.T, cost[None], branch[None]], 0).astype(DTYPE)
 
