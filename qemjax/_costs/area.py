@@ -146,21 +146,11 @@ def solve_host(pa, pb, pos, moving, mask, lo, hi):
     from . import area_host  # compiled loops, imported on first use (only wide rings take this path)
 
     K = len(lo)
-    out = np.empty(K), np.empty(K), np.empty(K), np.empty(K, np.int64)
     f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
-    # a pair with no faces (a batch's padding) has ΔS = 0 at every s whatever its ring holds: solved with an
-    # empty ring, the same steps on the same values, without passes over the ring's width
-    mask = np.asarray(mask)
-    live = mask.any(-1)
-    for rows, width in ((live, pos.shape[1]), (~live, 0)):
-        if rows.any():
-            m = np.ascontiguousarray(mask[rows, :width], np.bool_)
-            u, w, before = area_host.affine(f64(pa[rows]), f64(pb[rows]), f64(pos[rows, :width]),
-                                            np.ascontiguousarray(moving[rows, :width], np.bool_), m)
-            part = [np.empty(rows.sum(), a.dtype) for a in out]
-            area_host.solve(u, w, m, before, f64(lo[rows]), f64(hi[rows]), *part)
-            for a, b in zip(out, part):
-                a[rows] = b
+    mask = np.ascontiguousarray(mask, np.bool_)
+    u, w, before = area_host.affine(f64(pa), f64(pb), f64(pos), np.ascontiguousarray(moving, np.bool_), mask)
+    out = np.empty(K), np.empty(K), np.empty(K), np.empty(K, np.int64)
+    area_host.solve(u, w, mask, before, f64(lo), f64(hi), *out)
     return out
 
 
@@ -170,7 +160,9 @@ def _price_host(VS, pairs, corners, mask):
     pairs = np.asarray(pairs, np.int64)
     mask = np.asarray(mask)
     keep = mask.any(0)  # drop the columns no pair uses
-    live = mask.any(1)  # and gather no ring for a pair without faces (padding: see `solve_host`)
+    # a pair with no faces (a batch's padding) has ΔS = 0 at every s whatever its ring holds: it is solved
+    # with an empty ring, the same steps on the same values, without gathering a ring or passing over it
+    live = mask.any(1)
     corners, mask = np.asarray(corners)[live][:, keep], mask[live][:, keep]
     pa, pb = VS[pairs[:, 0], :3], VS[pairs[:, 1], :3]
     fa, fb = VS[pairs[:, 0], 3] > 0.5, VS[pairs[:, 1], 3] > 0.5
