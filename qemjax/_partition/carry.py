@@ -142,10 +142,8 @@ class Carry:
         vm = clean.vertex_map
         E = vm[self.boundary]
         E = lk.inv[E[(E >= 0).all(1)]]
-        n = np.int64(len(clean.V))
-        key = np.sort(be, axis=1).astype(np.int64)
-        E = np.sort(E, axis=1)
-        return np.isin(key[:, 0] * n + key[:, 1], E[:, 0] * n + E[:, 1])
+        n = len(clean.V)
+        return np.isin(topo.edge_keys(be[:, 0], be[:, 1], n), topo.edge_keys(E[:, 0], E[:, 1], n))
 
     def export(self, res) -> np.ndarray | None:
         """(k,10) carried quadrics of ``res``'s output vertices, or None when the run did not carry (or was

@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from .._io.mesh import clean_faces
+from .._mesh import topology
 from . import indexed
 from .cells import Bins, Plan, codes, quantize
 from .readers import open_source, texture_of
@@ -144,12 +145,8 @@ def borders_on_cuts(shared: list, n: int) -> np.ndarray:
     if n > 3_000_000_000:  # a * n + b would not fit in 63 bits
         uniq, count = np.unique(rows, axis=0, return_counts=True)
         return uniq[count == 1].astype(np.int64)
-    key = np.sort(rows[:, 0] * np.int64(n) + rows[:, 1])  # one integer per edge: a fast sort
-    alone = np.ones(len(key), bool)
-    alone[1:] &= key[1:] != key[:-1]
-    alone[:-1] &= key[:-1] != key[1:]
-    key = key[alone]
-    return np.stack([key // n, key % n], 1).astype(np.int64)
+    key, count = topology.unique_counts(topology.edge_keys(rows[:, 0], rows[:, 1], n))  # a fast sort
+    return topology.key_pairs(key[count == 1], n, np.int64)
 
 
 def _write_parts(src: Source, plan: Plan, owner, new_id, tmp: Path, level: Path, index_type, name: str,
