@@ -254,7 +254,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                    final_faces=p.final_faces, refit_input_faces=p.refit_input_faces, refit=p.refit, share=p.share,
                    target=[target_faces, ratio],
                    kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
-                   borders="the input's kept along the cuts", last="after a level aimed within the band",
+                   borders="the input's kept along the cuts",
                    uv=uv)
         _fresh(folder, key, mesh)
         source = _as_file(mesh, folder)
