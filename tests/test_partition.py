@@ -172,7 +172,40 @@ def test_target_exact_valid_closed_and_measured(mesh, in_process):
     d = distance(V, F, r.vertices, r.faces)
     assert r.stats["distance_max"] == pytest.approx(d["distance_max"], rel=1e-6)
     assert r.stats["distance_rms"] == pytest.approx(d["distance_rms"], rel=1e-6)
-    assert d["distance_p95"] <= r.stats["distance_p95"] <= 1.01 * d["distance_p95"]
+    for q in (50, 95, 99):  # exact: the last level measured with the re-fit's samples (the test below)
+        assert r.stats[f"distance_p{q}"] == pytest.approx(d[f"distance_p{q}"], rel=1e-9)
+    assert r.stats["distance_samples"] == d["distance_samples"]
+    assert r.stats["distance_max_rel"] == pytest.approx(d["distance_max_rel"], rel=1e-12)
+
+
+def test_a_last_level_fitted_to_the_input_measures_there(mesh, monkeypatch):
+    """The last level that fits its output to the input's parts measures the distance with the samples and
+    nearest faces of its re-fit: the client reads the parts no second time (`task.measure_parts`, which reads
+    them all, runs only where the last level did not fit to them: the percentiles then come from histograms)."""
+    from qemjax._partition import task
+    from qemjax._pipeline.measure import distance
+
+    def refused(spec):
+        raise AssertionError("the parts were read again to measure")
+
+    monkeypatch.setattr(task, "measure_parts", refused)
+    m = shapes.bumpy_sphere(5)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    r = qemjax.simplify((V, F), ratio=0.05, partition=Partition(part_faces=2000, workers=1))
+    part = r.stats["partition"]
+    assert part["levels"] >= 2 and part["refit_to"] == "input"
+    d = distance(V, F, r.vertices, r.faces)
+    for key in ("distance_max", "distance_rms", "distance_p50", "distance_p95", "distance_p99"):
+        assert r.stats[key] == pytest.approx(d[key], rel=1e-9), key
+    assert r.stats["distance_samples"] == d["distance_samples"]
+    assert part["measure_s"] == r.stats["distance_s"] > 0
+    monkeypatch.undo()
+    own = qemjax.simplify((V, F), ratio=0.05, partition=Partition(part_faces=2000, workers=1, refit_input_faces=0))
+    assert own.stats["partition"]["refit_to"] == "level input"  # measured part by part, as before
+    assert own.stats["distance_max"] == pytest.approx(distance(V, F, own.vertices, own.faces)["distance_max"], rel=1e-9)
+    off = qemjax.simplify((V, F), ratio=0.05, partition=Partition(part_faces=2000, workers=1, measure=False))
+    assert off.stats["distance_max"] is None and np.array_equal(off.faces, r.faces)
+    assert np.array_equal(off.vertices, r.vertices)  # measuring moves nothing
 
 
 def test_levels_before_the_last_leave_out_what_a_run_s_end_is_for(in_process):

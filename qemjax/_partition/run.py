@@ -212,9 +212,16 @@ def _distance(results: list, diag: float, unit: float) -> dict:
     for p in PERCENTILES:  # the upper edge of the slot where the weight reaches p %: within 1 % above
         k = int(np.searchsorted(cum, p / 100 - 1e-12))
         out[f"distance_p{p}"] = float(min(edges[min(k, task.HIST_BINS + 1)], d_max))
-    out.update({f"{k}_rel": (v / diag if diag > 0 else None) for k, v in list(out.items())})
     shared = np.unique(np.concatenate([r["shared"] for r in results]))  # a border vertex: one sample
-    return out | dict(distance_samples=int(sum(r["samples"] for r in results)) + len(shared))
+    return _relative(out | dict(distance_samples=int(sum(r["samples"] for r in results)) + len(shared)), diag)
+
+
+def _relative(dist: dict, diag: float) -> dict:
+    """The measured-distance stats with their ``_rel`` forms: each distance over the input's diagonal (the
+    manifest's box, however the distances were measured)."""
+    rel = {f"{k}_rel": (v / diag if diag > 0 else None) for k, v in dist.items()
+           if k.startswith("distance_") and k not in ("distance_samples", "distance_s")}
+    return dist | rel
 
 
 def _common_cost(runner, specs: list, p: Partition, progress, label: str):
@@ -303,8 +310,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                 for spec in specs:
                     spec["borders_on_cuts"] = str(folder / manifest["borders_on_cuts"])
             refit_to = _refit_to(manifest, folder, p, groups, last, first, refits)
-            if refit_to is not None:
-                specs[0] |= dict(refit_to=refit_to, refit_moves=moves)
+            if refit_to is not None:  # (measured there too, with the re-fit's samples: `task.run_group`)
+                specs[0] |= dict(refit_to=refit_to, refit_moves=moves, measure=p.measure)
             cost = None
             if p.share == "cost" and not last and len(groups) > 1:
                 cost, specs = _common_cost(runner, specs, p, progress, f"level {len(levels) + 1} pilots")
@@ -323,12 +330,17 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         V, F, gid, _ = pieces.stitch(paths)
         UV = pieces.stitch_uv(paths) if manifest.get("uv") else None
         locked_share = float(np.mean(gid >= 0)) if len(paths) > 1 and len(gid) else 0.0
-        t_measure = time.perf_counter()
-        dist = {}
-        if p.measure and len(F):
+        dist, t_measure = {}, time.perf_counter()
+        lo, hi = np.array(manifest["bbox"][0]), np.array(manifest["bbox"][1])
+        # the last level's own measure, where it fitted to the input (`task.run_group`): taken as it is
+        measured = levels[-1]["stats"][0].get("distance") if len(levels[-1]["stats"]) == 1 else None
+        if not (p.measure and len(F)):
+            pass
+        elif measured is not None and measured["distance_max"] is not None:
+            dist = _relative(measured, box_diagonal(lo, hi))
+        else:
             final = folder / "output.npz"
             pieces.save(final, V=V, F=F.astype(np.int32), gid=gid)
-            lo, hi = np.array(manifest["bbox"][0]), np.array(manifest["bbox"][1])
             centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
             files = [str(folder / part["file"]) for part in manifest["parts"]]
             # as many tasks whatever the workers: each sums its parts in order, the client the tasks in order,
@@ -338,9 +350,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                       for b in batches]
             dist = _distance(_run_level(runner, "measure_parts", mspecs, progress, "distance"),
                              box_diagonal(lo, hi), unit)
-        t_measure = time.perf_counter() - t_measure
-        if dist:
-            dist["distance_s"] = t_measure
+            dist["distance_s"] = time.perf_counter() - t_measure
+        t_measure = dist.get("distance_s", 0.0)
     except BaseException:
         if runner is not None:
             runner.close(cancel=True)

@@ -101,7 +101,10 @@ def run_group(spec: dict) -> dict:
     vertices whose global ids are in ``spec["locks"]`` (a sorted ``.npy`` of this level) or, on the first
     level, those marked ``border``, starting from the quadrics the pieces carry (`carry`); write
     ``spec["out"]`` (with its vertices' quadrics when ``spec["carry_out"]``: a level before the last) and its
-    stats beside it (``.json``)."""
+    stats beside it (``.json``). ``spec["measure"]``: a last level that fits its output to the input's parts
+    (``spec["refit_to"]``) also measures the output's distance from them, with the samples and nearest faces
+    its re-fit found (``stats["distance"]``): the client then reads the parts no second time
+    (`measure_parts`)."""
     out = Path(spec["out"])
     done = _done(out, spec)
     if done is not None:
@@ -146,7 +149,7 @@ def run_group(spec: dict) -> dict:
     Q = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = simplify(mesh, target_faces=int(spec["target"]), measure=False, progress=False,
+        res = simplify(mesh, target_faces=int(spec["target"]), measure=bool(spec.get("measure")), progress=False,
                        attributes=None if UV is None else "uv", **kw)
     g = _gids_out(res, V, gid, locked)
     held = np.unique(g[g >= 0])
@@ -162,6 +165,9 @@ def run_group(spec: dict) -> dict:
                  seconds=time.perf_counter() - t0, compile_s=float(res.stats.get("compile_s") or 0.0),
                  peak_rss=peak_rss(), pid=os.getpid(),
                  warnings=sorted({str(w.message) for w in caught}), task=_task_key(spec))
+    if spec.get("measure"):  # measured against the surface the re-fit fitted to: the input's parts
+        from .._pipeline.measure import KEYS
+        stats["distance"] = {k: res.stats[k] for k in KEYS if not k.endswith("_rel")}  # the client's diagonal: `run`
     pieces.save_json(out.with_suffix(".json"), stats)
     return stats
 
