@@ -68,6 +68,19 @@ def test_unreferenced_vertices_dropped():
     assert rep["unreferenced_removed"] == 1 and len(V3) == len(V)
 
 
+def test_non_finite_unreferenced_vertices_dropped_as_others():
+    """NaN or inf in a vertex no face uses is accepted and dropped; the clean-up's face means (taken at unit
+    extent) are those of the mesh without it, not of a box made NaN or infinite by it."""
+    V, F = shapes.icosphere(1)
+    V = np.asarray(V) * 3.1 + 0.7
+    (V3, F3), rep = _io.prepare((np.concatenate([[[np.nan, 0, 0], [0, np.inf, 0]], V]), F + 2))
+    (_, _), alone = _io.prepare((V, F))
+    assert rep["unreferenced_removed"] == 2 and np.array_equal(V3, V) and np.array_equal(F3, F)
+    assert rep["vertex_map"].tolist() == [-1, -1, *range(len(V))]
+    assert rep["face_means"] == alone["face_means"]
+    assert np.isnan(_io.as_arrays((np.concatenate([V, [[np.nan, 0, 0]]]), F)).vertices[-1, 0])
+
+
 def test_meshes_compare_by_identity():
     """A `Mesh` is a named tuple of arrays: its tuple `==` compared the arrays elementwise and raised ("truth
     value of an array is ambiguous"), and it could not be hashed. It compares and hashes by identity, and still

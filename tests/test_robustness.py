@@ -303,6 +303,21 @@ def test_unreferenced_outlier_changes_nothing(reference):
     assert np.array_equal(r.faces, reference.faces) and np.array_equal(r.vertices, reference.vertices)
 
 
+def test_non_finite_unused_vertices_are_dropped_not_refused(reference):
+    """A vertex no face uses is dropped whatever its coordinates: NaN or inf there is junk, not an error (a
+    used one is refused: the corpus above); the result is the mesh's without it, in and out of core."""
+    junk = np.array([[np.nan, 0, 0], [np.inf, 1, 2], [0, -np.inf, np.nan]])
+    r = qemjax.simplify((np.r_[V1, junk], F1), target_faces=30)
+    assert r.stats["unreferenced_removed"] == 3
+    assert np.array_equal(r.faces, reference.faces) and np.array_equal(r.vertices, reference.vertices)
+    part = qemjax.Partition(part_faces=1000, workers=1)
+    alone = qemjax.simplify((V1, F1), target_faces=30, partition=part)
+    first = qemjax.simplify((np.r_[junk[:1], V1], F1 + 1), target_faces=30, partition=part)
+    assert np.array_equal(first.faces, alone.faces) and np.array_equal(first.vertices, alone.vertices)
+    with pytest.raises(ValueError, match=r"NaN or inf coordinates \(1 vertices, first: 0\)"):
+        qemjax.simplify((np.r_[junk[:1], V1], F1), target_faces=30)
+
+
 # -- parts, non-manifold input, precision (the issue "Robustness, determinism and the rough edges") ------
 
 def _lone_triangle_beside(V, F, offset=3.0):

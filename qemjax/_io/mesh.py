@@ -243,9 +243,6 @@ def _checked(V, F) -> tuple[np.ndarray, np.ndarray]:
     if not np.issubdtype(V.dtype, np.number) or np.iscomplexobj(V):
         raise ValueError(f"vertices must be real numbers, got dtype {V.dtype}")
     V = np.ascontiguousarray(V, np.float64)
-    if not np.all(np.isfinite(V)):
-        bad = np.flatnonzero(~np.all(np.isfinite(V), axis=1))
-        raise ValueError(f"vertices contain NaN or inf coordinates ({bad.size} vertices, first: {bad[0]})")
     if not np.issubdtype(F.dtype, np.integer):
         if np.issubdtype(F.dtype, np.floating) and np.all(np.isfinite(F)) and np.all(F == np.round(F)):
             F = F.astype(np.int64)
@@ -258,6 +255,13 @@ def _checked(V, F) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = F.min(), F.max()
     if lo < 0 or hi >= V.shape[0]:
         raise ValueError(f"face indices out of range: found [{lo}, {hi}] for {V.shape[0]} vertices")
+    finite = np.isfinite(V).all(axis=1)
+    if not finite.all():  # only a vertex a face uses must be finite: unused ones are dropped by `prepare`
+        used = np.zeros(len(V), bool)
+        used[F.reshape(-1)] = True
+        bad = np.flatnonzero(used & ~finite)
+        if bad.size:
+            raise ValueError(f"vertices contain NaN or inf coordinates ({bad.size} vertices, first: {bad[0]})")
     return V, F
 
 
@@ -438,6 +442,8 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     # pass gives the means that scale the quadric weights, at unit extent (divided by the bounding box's
     # largest side, so no scale underflows; an overflowing extent is refused by name in `_units`)
     lo, hi = column_bounds(V)
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):  # unused non-finite vertices (`_checked`): the
+        lo, hi = column_bounds(V[np.isfinite(V).all(axis=1)])  # box of the others, as if they were not given
     with np.errstate(over="ignore"):
         ext = float(np.max(hi - lo))
     scaled = np.isfinite(ext) and ext > 0
