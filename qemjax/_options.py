@@ -254,10 +254,11 @@ class Partition:
     workers: local worker processes (None: every core; 1: in this process) when no ``client`` is given.
     client: a ``dask.distributed.Client``: the tasks run on its workers (a `LocalCluster`, dask-jobqueue,
         Kubernetes: any cluster whose workers see ``scratch``).
-    scratch: the folder for the parts (a shared file system on a cluster). None: a temporary folder, removed
-        when the run ends. A folder given is kept, and a run of the same input and settings resumes from
-        the parts already in it; it must be new, empty or one a partitioned run wrote (one holding other
-        files is refused: a run with other inputs or settings clears it).
+    scratch: the folder for the parts (a shared file system on a cluster; a `pathlib.Path` is kept as its str,
+        so the same folder given either way is the same settings). None: a temporary folder, removed when the
+        run ends. A folder given is kept, and a run of the same input and settings resumes from the parts
+        already in it; it must be new, empty or one a partitioned run wrote (one holding other files is
+        refused: a run with other inputs or settings clears it).
     retries: how often a task whose worker died is run again.
     measure: measure the distance of the output from every input vertex and face centroid, part by part.
     refit: which levels re-fit their output to their input, for a method that re-fits (the default):
@@ -310,6 +311,11 @@ class Partition:
             raise ValueError(f"Partition: measure must be True or False, got {self.measure!r}")
         if not (self.scratch is None or isinstance(self.scratch, (str, os.PathLike))):
             raise ValueError(f"Partition: scratch must be a folder's path or None, got {type(self.scratch).__name__}")
+        if self.scratch is not None:  # stored as a str: the same folder given as a str or a Path is equal settings
+            folder = os.fspath(self.scratch)
+            if not isinstance(folder, str):
+                raise ValueError(f"Partition: scratch must be a folder's path as text, got {type(folder).__name__}")
+            object.__setattr__(self, "scratch", folder)
 
     @property
     def n_workers(self) -> int:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import pathlib
 import threading
 import time
 import warnings
@@ -139,6 +140,14 @@ def test_partition_settings_hash_and_refuse_a_scratch_that_is_no_path():
     assert hash(Partition(scratch="parts")) == hash(Partition(scratch="parts")) and len({Partition(), Partition()}) == 1
     with pytest.raises(ValueError, match=r"^Partition: scratch must be a folder's path or None, got list$"):
         Partition(scratch=["parts"])
+
+
+def test_partition_settings_of_one_folder_given_as_str_or_path_are_equal():
+    """Frozen settings compare by value: the same folder as a str and as a Path made unequal settings (with
+    unequal hashes); the folder is kept as its str."""
+    a, b = Partition(scratch="parts"), Partition(scratch=pathlib.Path("parts"))
+    assert a == b and hash(a) == hash(b) and b.scratch == "parts" and type(b.scratch) is str
+    assert Partition(scratch=None).scratch is None
 
 
 # --- whole runs -----------------------------------------------------------------------------------------------
