@@ -78,19 +78,20 @@ def _view_direction(view) -> np.ndarray:
     return np.array([np.cos(elev) * np.cos(azim), np.cos(elev) * np.sin(azim), np.sin(elev)])
 
 
-def _thin(tris: np.ndarray, normals: np.ndarray, eye: np.ndarray, max_faces: int, colors=None):
-    """Drop back faces, then keep a seeded random subset, until at most ``max_faces`` remain (per-face
-    ``colors`` (m,3), when given, are thinned alike and returned third)."""
-    if len(tris) <= max_faces:
+def _thin(tris: np.ndarray, normals: np.ndarray, eye: np.ndarray, max_faces: int, colors=None, per: int = 1):
+    """Drop back faces, then keep a seeded random subset, until at most ``max_faces`` faces remain. A face is
+    one as given: its ``per`` triangles (consecutive rows of ``tris``, a polygon's fan) are kept or dropped
+    together, and it faces the camera when one of them does. Per-triangle ``colors`` (t,3), when given, are
+    thinned alike and returned third."""
+    faces = len(tris) // per
+    if faces <= max_faces:
         return (tris, normals) if colors is None else (tris, normals, colors)
-    front = normals @ eye > 0
-    tris, normals = tris[front], normals[front]
-    colors = None if colors is None else colors[front]
-    if len(tris) > max_faces:
-        keep = np.sort(np.random.default_rng(0).choice(len(tris), size=max_faces, replace=False))
-        tris, normals = tris[keep], normals[keep]
-        colors = None if colors is None else colors[keep]
-    return (tris, normals) if colors is None else (tris, normals, colors)
+    kept = np.flatnonzero((normals @ eye > 0).reshape(faces, per).any(axis=1))
+    if len(kept) > max_faces:
+        kept = kept[np.sort(np.random.default_rng(0).choice(len(kept), size=max_faces, replace=False))]
+    rows = (kept[:, None] * per + np.arange(per)).reshape(-1)
+    tris, normals = tris[rows], normals[rows]
+    return (tris, normals) if colors is None else (tris, normals, colors[rows])
 
 
 def render(
@@ -120,7 +121,8 @@ def render(
         edges: also draw the triangle edges (useful on small, simplified meshes).
         path: when given, the figure is saved there; a figure made here is then closed.
         up: the mesh's up axis ("y" for most scanned / OBJ models, "z" for CAD), shown vertically.
-        max_faces: display cap; larger meshes are thinned as the module docstring explains.
+        max_faces: display cap on the faces as given (a polygon counts once, and is drawn or left out with
+            all its triangles); meshes with more are thinned as the module docstring explains.
         title: optional Axes title.
     """
     plt, Poly3DCollection = _pyplot()
@@ -146,9 +148,9 @@ def render(
         if base.shape[0] != polygons:
             raise ValueError(f"color: {base.shape[0]} per-face colours for {polygons} faces")
         base = np.repeat(base, sides - 2, axis=0)  # one per triangle of each face's fan
-        tris, normals, base = _thin(tris, normals, eye, max_faces, base[:, :3])
+        tris, normals, base = _thin(tris, normals, eye, max_faces, base[:, :3], per=sides - 2)
     else:
-        tris, normals = _thin(tris, normals, eye, max_faces)
+        tris, normals = _thin(tris, normals, eye, max_faces, per=sides - 2)
         base = base[None, :3]
 
     # light from the camera, tilted up and to the left so that silhouettes and creases read

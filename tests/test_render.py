@@ -122,6 +122,26 @@ def test_render_draws_quads_as_two_triangles_each():
         render((V, Q), color=np.zeros((5, 3)))
 
 
+def test_render_max_faces_counts_the_faces_given():
+    """``max_faces`` is a cap on the faces as given: it counted a polygon's triangles, so a quad mesh of
+    ``max_faces`` quads was thinned to half its area, and thinning split quads. A quad is drawn or left out
+    with both its triangles, each in its colour."""
+    import matplotlib.pyplot as plt
+
+    n = 6
+    V = np.array([[x, y, 0.0] for y in range(n + 1) for x in range(n + 1)])
+    Q = np.array([[i + j * (n + 1), i + 1 + j * (n + 1), i + 1 + (j + 1) * (n + 1), i + (j + 1) * (n + 1)]
+                  for j in range(n) for i in range(n)])
+    colors = np.stack([np.linspace(0.1, 0.9, len(Q)), np.full(len(Q), 0.5), np.full(len(Q), 0.5)], 1)
+    for cap, drawn in ((len(Q), len(Q)), (len(Q) - 1, len(Q) - 1), (5, 5)):
+        ax = render((V, Q), color=colors, up="z", view=(90, 0), max_faces=cap)
+        (collection,) = ax.collections
+        reds = np.round(collection.get_facecolors()[:, 0], 9)
+        plt.close(ax.figure)
+        _, counts = np.unique(reds, return_counts=True)
+        assert len(reds) == 2 * drawn and len(counts) == drawn and (counts == 2).all()
+
+
 @pytest.mark.parametrize("mesh, message", [
     ((np.zeros((4, 3)), np.array([[0, 1]])), r"^render: faces must be \(m, 3\) triangles or \(m, k\) polygons"),
     ((np.zeros((4, 2)), np.array([[0, 1, 2]])), r"^render: vertices must be \(n, 3\), got shape \(4, 2\)$"),
