@@ -665,6 +665,22 @@ def test_attribute_deviation_takes_what_simplify_takes(examples):
         metrics.attribute_deviation(examples / "bumpy.obj", res)
 
 
+@pytest.mark.parametrize("scale", [2.0 ** -300, 1e100])
+def test_attribute_deviation_at_extreme_scales_is_that_at_scale_one(examples, scale):
+    """Its samples are placed by area, a cross product's length, which was 0 or inf beyond about 1e±77 mesh
+    units; it measures in the frame of the other metrics (`test_metrics_at_extreme_scales_are_those_at_scale_one`)."""
+    import qemjax
+
+    path = examples / "textured.obj"
+    out = qemjax.simplify(path, ratio=0.25, texture=examples / "textured.png", progress=False).to_trimesh()
+    given = trimesh.load(path, process=False)
+    base = metrics.attribute_deviation(given, out, n_samples=2000)
+    for mesh in (given, out):
+        mesh.vertices = np.asarray(mesh.vertices) * scale
+    row = metrics.attribute_deviation(given, out, n_samples=2000)
+    assert row == base if math.frexp(scale)[0] == 0.5 else row == pytest.approx(base, rel=1e-6)
+
+
 def test_the_diagonal_is_summed_left_to_right_in_every_place():
     """Every relative distance divides by the bounding box's diagonal: its squares summed left to right (no
     BLAS dot, whose kernel, and so the last bit, changes with the CPU), the same in the metrics and in the
@@ -688,6 +704,48 @@ def test_the_diagonal_is_summed_left_to_right_in_every_place():
     stats = qemjax.simplify((V, F), ratio=0.5).stats
     for key in ("distance_max", "distance_rms", "distance_p95"):
         assert stats[key + "_rel"] == stats[key] / want
+
+
+_LENGTHS = {"hausdorff", "mean", "rms", "p50", "p95", "p99", "hausdorff_fwd", "hausdorff_bwd", "mean_fwd",
+            "mean_bwd", "bbox_diagonal"}
+
+
+def _power(key: str) -> int:
+    """The power of the mesh's length unit a metric is in (0: a ratio, an angle or a count)."""
+    key = key.split(".")[-1]
+    return 1 if key in _LENGTHS else 2 if key in ("e_gh", "area_before", "area_after") else \
+        3 if key in ("volume_before", "volume_after") else 0
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -300, 2.0 ** 300, 1e-100, 1e100])
+def test_metrics_at_extreme_scales_are_those_at_scale_one(scale):
+    """Squared distances, areas (a cross product's squared length) and the products of normals that find
+    flipped faces left float64's range beyond about 1e±77 mesh units: areas of 0 or inf, angles of 0, NaN
+    ratios, samples only at the vertices, no flipped face. The metrics measure in a frame of the mesh's
+    size, scaled by a power of two, and report in mesh units: a power-of-two scale gives exactly the values
+    at scale 1 times the scale (to the power of the value's unit), another the same within rounding."""
+    centre = (0.3, -0.2, 0.1)
+    o, s = sphere(3, center=centre), sphere(1, center=centre)
+    s[1][:5] = s[1][:5, ::-1]  # five flipped faces
+
+    def measure(k):
+        O, S = (o[0] * k, o[1]), (s[0] * k, s[1])
+        row = {"ev." + a: b for a, b in scalar_row(metrics.evaluate(O, S, n_samples=2000)).items()}
+        for name, part in (("sd", metrics.surface_distance(O, S, n_samples=2000)), ("av", metrics.area_volume(O, S)),
+                           ("tq", metrics.triangle_quality(S)), ("tr", metrics.topology_report(S, original=O))):
+            row.update({f"{name}.{a}": b for a, b in part.items()})
+        row["histogram"] = tuple(metrics.min_angle_histogram(S)[0])
+        return row
+
+    base, row = measure(1.0), measure(scale)
+    assert base["ev.flipped_faces"] == base["tr.flipped_faces"] == 5 and base["ev.area_retention"] < 1
+    exact = math.frexp(scale)[0] == 0.5
+    for key, value in base.items():
+        if isinstance(value, float) and not math.isnan(value):
+            want = value * scale ** _power(key)
+            assert row[key] == want if exact else row[key] == pytest.approx(want, rel=1e-9), key
+        else:
+            assert same(row[key], value), key
 
 
 def test_equilateral_faces_are_in_the_last_bin():

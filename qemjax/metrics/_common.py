@@ -6,6 +6,7 @@ exact enough to compare simplifiers whose errors differ by less than float32 res
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from functools import cached_property
@@ -65,6 +66,42 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     if f.min() < 0 or f.max() >= len(v):
         raise ValueError(f"{name}: face indices must lie in [0, {len(v)}), got [{f.min()}, {f.max()}]")
     return MeshArrays(v, f)
+
+
+def frame_exponent(V: np.ndarray) -> int:
+    """k, the binary exponent of the largest side of V's bounding box (0 for no extent, or none float64
+    holds): V·2^-k has its largest side in [0.5, 1)."""
+    if len(V) == 0:
+        return 0
+    with np.errstate(over="ignore", invalid="ignore"):
+        side = float(np.max(V.max(axis=0) - V.min(axis=0)))
+    return math.frexp(side)[1] if math.isfinite(side) and side > 0 else 0
+
+
+def in_frame(first: MeshArrays, *others: MeshArrays) -> tuple[int, list]:
+    """(k, the meshes with their positions times 2^-k), k the `frame_exponent` of ``first``'s referenced
+    vertices. The metrics measure there, where the extent is about 1, so that squared distances, areas and
+    products of normals (a length to the fourth) stay within float64's range at any scale (1e-100 or 1e100
+    mesh units, as the simplifier's unit frame does), and report lengths in mesh units times 2^k (areas
+    2^2k, volumes 2^3k). Scaling by a power of two is exact, and so is the arithmetic on the scaled values
+    barring underflow: at ordinary scales the results are the bits measured in mesh units. k is 0 (the
+    meshes as given) where a scaled position would not be finite (a tiny mesh far from the origin)."""
+    meshes = [first, *others]
+    k = frame_exponent(first.vertices[first.referenced])
+    if k == 0:
+        return 0, meshes
+    with np.errstate(over="ignore", under="ignore"):
+        scaled = [MeshArrays(np.ldexp(m.vertices, -k), m.faces) for m in meshes]
+    if not all(np.isfinite(m.vertices).all() for m in scaled):
+        return 0, meshes
+    return k, scaled
+
+
+def to_mesh_units(value: float, power: int, k: int) -> float:
+    """A value measured in the frame of `in_frame` (a length to ``power``) in mesh units: value·2^(power·k),
+    inf or 0 where float64 cannot hold it."""
+    with np.errstate(over="ignore", under="ignore"):
+        return float(np.ldexp(value, power * k))
 
 
 @dataclass(frozen=True, eq=False)

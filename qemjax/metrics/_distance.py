@@ -6,7 +6,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ._common import MeshArrays, as_mesh
+from ._common import MeshArrays, as_mesh, in_frame, to_mesh_units
 from .._mesh.nearest import nearest_triangles
 from .._mesh.quantiles import quantiles
 
@@ -39,7 +39,9 @@ def nearest_faces(mesh: MeshArrays, points: np.ndarray) -> np.ndarray:
 PERCENTILES = (50, 95, 99)
 
 
-def _summary(fwd: np.ndarray, bwd: np.ndarray, diag: float) -> dict:
+def _summary(fwd: np.ndarray, bwd: np.ndarray, diag: float, k: int = 0) -> dict:
+    """The distances' summary, measured in the frame of `_common.in_frame` with exponent ``k``: lengths
+    reported in mesh units, relative values as measured."""
     both = np.concatenate([fwd, bwd])
     e_gh = float(np.mean(both * both))
     out = {
@@ -58,11 +60,11 @@ def _summary(fwd: np.ndarray, bwd: np.ndarray, diag: float) -> dict:
         scale = diag * diag if key == "e_gh" else diag
         rel[key + "_rel"] = value / scale if scale > 0 else float("nan")
     return {
-        **out,
+        **{key: to_mesh_units(value, 2 if key == "e_gh" else 1, k) for key, value in out.items()},
         **rel,
         "n_points_fwd": len(fwd),
         "n_points_bwd": len(bwd),
-        "bbox_diagonal": diag,
+        "bbox_diagonal": to_mesh_units(diag, 1, k),
     }
 
 
@@ -119,7 +121,6 @@ def surface_distance(original, simplified, *, n_samples: int = DEFAULT_SAMPLES, 
       hausdorff_fwd / _bwd, mean_fwd / _bwd: one-sided values.
       n_points_fwd, n_points_bwd (ints), bbox_diagonal.
     """
-    o = as_mesh(original, "original")
-    s = as_mesh(simplified, "simplified")
+    k, (o, s) = in_frame(as_mesh(original, "original"), as_mesh(simplified, "simplified"))
     fwd, bwd, _, _ = two_way(o, s, _check_samples(n_samples), seed)
-    return _summary(fwd, bwd, o.bbox_diagonal)
+    return _summary(fwd, bwd, o.bbox_diagonal, k)

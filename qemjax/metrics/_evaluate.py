@@ -5,9 +5,9 @@ from __future__ import annotations
 import time
 
 from ._appearance import KINDS, attribute_deviation, corner_values
-from ._common import as_mesh
+from ._common import as_mesh, in_frame
 from ._distance import DEFAULT_SAMPLES, _check_samples, _summary, two_way
-from ._quality import area_volume, triangle_quality
+from ._quality import _area_volume, triangle_quality
 from ._topology import (
     face_centroids,
     flipped_faces_report,
@@ -52,8 +52,7 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
       ValueError: malformed meshes (shapes, empty, non-finite values, bad indices) or arguments.
     """
     t0 = time.perf_counter()
-    o = as_mesh(original, "original")
-    s = as_mesh(simplified, "simplified")
+    k, (o, s) = in_frame(as_mesh(original, "original"), as_mesh(simplified, "simplified"))
     n_samples = _check_samples(n_samples)
     if target_faces is None:  # same columns in every row
         target = {"target_faces": float("nan"), "target_error": float("nan")}
@@ -61,7 +60,7 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         target = target_report(len(s.faces), target_faces)
 
     def host_side():  # everything else, while the distance threads run
-        return topology_report(s), topology_report(o, fans=False), area_volume(o, s), triangle_quality(s)
+        return topology_report(s), topology_report(o, fans=False), _area_volume(k, [o, s]), triangle_quality(s)
 
     fwd, bwd, nearest, (topo_s, topo_o, area, quality) = two_way(
         o, s, n_samples, seed, extra_bwd=face_centroids(s), also=host_side
@@ -74,7 +73,7 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         "vertices_after": len(s.vertices),
         "face_ratio": len(s.faces) / len(o.faces),
         **target,
-        **_summary(fwd, bwd, o.bbox_diagonal),
+        **_summary(fwd, bwd, o.bbox_diagonal, k),
         **area,
         **quality,
         **{k: v for k, v in topo_s.items() if k not in ("vertices", "faces")},

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._pipeline.fit_rules import SLIVER_DEG  # a face whose smallest angle is below it is a sliver
-from ._common import _DEGENERATE_REL, MeshArrays, as_mesh
+from ._common import _DEGENERATE_REL, MeshArrays, as_mesh, in_frame, to_mesh_units
 
 HISTOGRAM_EDGES_DEG = np.arange(0.0, 61.0, 5.0)  # 0, 5, ..., 60: the smallest angle of a triangle is <= 60
 
@@ -24,7 +24,7 @@ def _angles_deg(mesh: MeshArrays) -> np.ndarray:
 
 def min_angles(mesh) -> np.ndarray:
     """(m,) float64 smallest interior angle of each face, degrees (0 for degenerate faces)."""
-    return _angles_deg(as_mesh(mesh)).min(axis=1)
+    return _angles_deg(in_frame(as_mesh(mesh))[1][0]).min(axis=1)
 
 
 def min_angle_histogram(mesh, bin_edges=HISTOGRAM_EDGES_DEG) -> tuple[np.ndarray, np.ndarray]:
@@ -56,7 +56,7 @@ def triangle_quality(mesh) -> dict:
         perimeter). Over non-degenerate faces; NaN when there are none.
       degenerate_faces: faces with (numerically) zero area, twice-area <= 1e-12 * longest edge^2 (int).
     """
-    m = as_mesh(mesh)
+    m = in_frame(as_mesh(mesh))[1][0]  # its values are ratios: the same in any frame
     angles = _angles_deg(m).min(axis=1)
     c = m.corners
     lengths = np.sqrt(np.stack([((c[1] - c[0]) ** 2).sum(0), ((c[2] - c[1]) ** 2).sum(0), ((c[0] - c[2]) ** 2).sum(0)]))
@@ -102,18 +102,23 @@ def area_volume(original, simplified) -> dict:
         (some edge not in exactly two faces, or faces not consistently oriented).
       volume_change: volume_after / volume_before - 1 (dimensionless), NaN unless both meshes are closed.
     """
-    o = as_mesh(original, "original")
-    s = as_mesh(simplified, "simplified")
+    return _area_volume(*in_frame(as_mesh(original, "original"), as_mesh(simplified, "simplified")))
+
+
+def _area_volume(k: int, meshes: list) -> dict:
+    """`area_volume` of the original and simplified meshes measured in the frame of `_common.in_frame`
+    with exponent k."""
+    o, s = meshes
     area_o, area_s = surface_area(o), surface_area(s)
     vol_o, vol_s = signed_volume(o), signed_volume(s)
     with np.errstate(divide="ignore", invalid="ignore"):
         retention = np.float64(area_s) / area_o
         change = np.float64(vol_s) / vol_o - 1.0
     return {
-        "area_before": area_o,
-        "area_after": area_s,
+        "area_before": to_mesh_units(area_o, 2, k),
+        "area_after": to_mesh_units(area_s, 2, k),
         "area_retention": float(retention),
-        "volume_before": vol_o,
-        "volume_after": vol_s,
+        "volume_before": to_mesh_units(vol_o, 3, k),
+        "volume_after": to_mesh_units(vol_s, 3, k),
         "volume_change": float(change),
     }

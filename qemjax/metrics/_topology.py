@@ -6,7 +6,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ._common import MeshArrays, as_mesh
+from ._common import MeshArrays, as_mesh, in_frame
 from ._distance import nearest_faces
 
 
@@ -126,8 +126,8 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
         "genus": twice_genus // 2 if genus_defined else float("nan"),  # an int: a count of handles
     }
     if original is not None:
-        o = as_mesh(original, "original")
-        out.update(flipped_faces_report(m, o, nearest_faces(o, face_centroids(m))))
+        _, (o, f) = in_frame(as_mesh(original, "original"), m)  # normals' products are lengths to the fourth
+        out.update(flipped_faces_report(f, o, nearest_faces(o, face_centroids(f))))
     if target_faces is not None:
         out.update(target_report(F, target_faces))
     return out
