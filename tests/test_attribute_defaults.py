@@ -26,6 +26,12 @@ def run(path, **kw):
     return res, [str(w.message) for w in caught]
 
 
+def last_stretch_only(warned, kind):
+    """Whether the only warning is the one saying that keeping ``kind`` turns off the default's memoryless last
+    stretch (what keeping attributes costs the geometry, within the rule)."""
+    return len(warned) == 1 and warned[0].startswith(f"keeping {kind} turns off the default method's memoryless")
+
+
 def rms(orig, res):
     return metrics.surface_distance(orig, res, n_samples=4000)["rms_rel"]
 
@@ -58,7 +64,7 @@ def test_stored_normals_cost_no_geometry(tmp_path, kind):
     af.write_ply(path, mesh, normals=N)
     res, warned = run(path, ratio=0.1)
     base, _ = run(path, ratio=0.1, attributes=None)
-    assert res.stats["attributes"] == ["normal"] and not warned
+    assert res.stats["attributes"] == ["normal"] and last_stretch_only(warned, "normal")
     assert len(res.faces) == len(base.faces)
     np.testing.assert_allclose(np.linalg.norm(res.normals, axis=1), 1.0, rtol=1e-6)
     assert rms(mesh, res) <= RMS_LIMIT * rms(mesh, base)
@@ -165,13 +171,14 @@ def _with_texture(path, image):
 
 def test_uv_seams_are_kept_when_the_file_names_a_texture(tmp_path):
     """A file whose material names a texture image keeps its UVs and the texture by default, seams and
-    all, without a warning; the same file without the image leaves them out (with the warning)."""
+    all, with only the warning that they turn off the default's memoryless last stretch; the same file without
+    the image leaves them out (with the warning)."""
     path = _seamed_uv_obj(tmp_path)
     plain, warned_plain = run(path, ratio=0.2)
     assert plain.uv is None and any("attributes='uv'" in w for w in warned_plain)
     _with_texture(path, "t.png")
     res, warned = run(path, ratio=0.2)
-    assert not warned, warned
+    assert last_stretch_only(warned, "uv"), warned
     assert res.uv is not None and res.material is not None and res.stats["dropped"] == []
     assert res.stats["attributes"] == ["uv"] and res.stats["seam_vertices_in"] > 0
     assert np.asarray(res.material.image).shape[:2] == (8, 8)
@@ -181,7 +188,7 @@ def test_uv_seams_are_kept_when_the_file_names_a_texture(tmp_path):
     assert none.uv is None and any("uv" in w for w in warned_none)
     res.to_trimesh().export(tmp_path / "uv.glb")  # a glTF base colour texture counts too
     glb, warned_glb = run(tmp_path / "uv.glb", ratio=0.5)
-    assert glb.uv is not None and glb.material is not None and not warned_glb, warned_glb
+    assert glb.uv is not None and glb.material is not None and last_stretch_only(warned_glb, "uv"), warned_glb
 
 
 def test_smooth_colours_are_kept(tmp_path):
@@ -190,7 +197,7 @@ def test_smooth_colours_are_kept(tmp_path):
     af.write_ply(path, mesh, colors=af.smooth_colors(mesh))
     res, warned = run(path, ratio=0.2)
     base, _ = run(path, ratio=0.2, attributes=None)
-    assert res.stats["attributes"] == ["color"] and not warned
+    assert res.stats["attributes"] == ["color"] and last_stretch_only(warned, "color")
     assert rms(mesh, res) <= RMS_LIMIT * rms(mesh, base)
 
 

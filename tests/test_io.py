@@ -137,11 +137,11 @@ def test_dropped_attributes_warn_once_and_are_recorded(kind, dropped, who):
 
 @pytest.mark.parametrize("kind,kept", [("vertex", "colors"), ("texture", "uv")])
 def test_attributes_kept_by_default(kind, kept):
-    """By default UVs (with their material) and vertex colours are kept, without a warning; face colours
-    are still dropped with one."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+    """By default UVs (with their material) and vertex colours are kept, with one warning: the one saying that
+    they turn off the default's memoryless last stretch; face colours are still dropped with one."""
+    with pytest.warns(UserWarning) as said:
         r = qemjax.simplify(_colored(kind), target_faces=40)
+    assert [str(w.message).split(" turns off")[0] for w in said] == [f"keeping {kept.rstrip('s')}"]
     assert getattr(r, kept) is not None and r.stats["dropped"] == []
     if kind == "texture":
         assert np.array_equal(r.material.diffuse, [200, 10, 10, 255])
@@ -187,7 +187,6 @@ def test_spot_uvs_are_reported():
     with pytest.warns(UserWarning, match="uv not kept by default .*attributes='uv'") as record:
         r = qemjax.simplify(p, ratio=0.5)
     assert len(record) == 1 and r.stats["dropped"] == ["uv"] and r.uv is None
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        r = qemjax.simplify(p, ratio=0.5, attributes="uv")
-    assert r.stats["dropped"] == [] and r.uv is not None and r.material is None
+    with pytest.warns(UserWarning, match="keeping uv turns off the default method's memoryless") as record:
+        r = qemjax.simplify(p, ratio=0.5, attributes="uv")  # nothing dropped: the only warning is that one
+    assert len(record) == 1 and r.stats["dropped"] == [] and r.uv is not None and r.material is None

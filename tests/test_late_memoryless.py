@@ -231,6 +231,31 @@ def test_attributes_feature_edges_or_terms_keep_the_run_summed(what):
         assert res.stats["attributes"] == ["uv"] and res.uv is not None
 
 
+def test_the_default_says_when_kept_attributes_turn_its_last_stretch_off():
+    """The default method's memoryless last stretch has no attribute terms: a default run that keeps UVs stays
+    on the summed quadrics, and says so in the stats and a warning that names the kept kinds and the way back
+    to the default's geometry (it was said in the stats alone). Without attributes it switches and says
+    nothing; a call that turned the stretch off itself is not warned, nor is one without a face target."""
+    import trimesh
+
+    V, F = shapes.bumpy_sphere(3)
+    uv = trimesh.Trimesh(V, F, process=False, visual=trimesh.visual.TextureVisuals(uv=V[:, :2] * 0.5 + 0.5))
+    with pytest.warns(UserWarning, match=r"^keeping uv turns off the default method's memoryless last "
+                                         r"stretch .*attributes=None \(CLI: --attributes none\)$") as said:
+        res = qemjax.simplify(uv, ratio=0.1, attributes="uv")
+    assert len([w for w in said if "last stretch" in str(w.message)]) == 1
+    assert res.uv is not None and res.stats["attributes"] == ["uv"]
+    assert "attributes are kept" in res.stats["late_memoryless_off"] and "memoryless_from_faces" not in res.stats
+    assert_valid(res, len(F) // 10, V, F)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plain = qemjax.simplify((V, F), ratio=0.1)
+        summed = qemjax.simplify(uv, ratio=0.1, attributes="uv", late_memoryless=0)
+        qemjax.simplify(uv, max_error=1e-4, attributes="uv")
+    assert plain.stats["memoryless_from_faces"] and "late_memoryless_off" not in plain.stats
+    assert "late_memoryless_off" not in summed.stats and summed.uv is not None
+
+
 @pytest.mark.parametrize("kw,match", [
     (dict(late_memoryless=0.5), "late_memoryless must be 0"),
     (dict(late_memoryless=-1), "late_memoryless must be finite"),

@@ -249,6 +249,10 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         if setup.late_asked:
             warnings.warn(f"late_memoryless is not applied: {why}; the run uses the summed quadrics throughout",
                           stacklevel=stacklevel)
+        elif why == ATTRIBUTES_KEPT:  # the default's geometry changes with attributes alone: said, not silent
+            warnings.warn(f"keeping {', '.join(attrs.values)} turns off the default method's memoryless last "
+                          "stretch (late_memoryless: it does not carry attributes): the geometry may be less accurate "
+                          "than with attributes=None (CLI: --attributes none)", stacklevel=stacklevel)
     corner_values = channel_weights = None
     if attrs is not None:
         channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
@@ -306,6 +310,9 @@ def frame_means(geo: Geometry) -> tuple:
     return area_mean * r2, e2_mean * r2
 
 
+ATTRIBUTES_KEPT = "attributes are kept (the memoryless quadrics have no attribute terms)"  # a `_late_off` reason
+
+
 def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: bool) -> str | None:
     """Why a method that turns memoryless late (`_schedulers.late`) stays summed in this run, or None.
     ``face_target``: the run has one (a ratio, target_faces, or max_distance's targets)."""
@@ -318,7 +325,7 @@ def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: boo
     if method_obj.regularize or method_obj.area_weight:
         return "regularize or area_weight is set (its term prices the summed quadrics' placement)"
     if attrs is not None:
-        return "attributes are kept (the memoryless quadrics have no attribute terms)"
+        return ATTRIBUTES_KEPT
     if feature_edges is not None and len(feature_edges):
         return "feature edges are given (the memoryless quadrics do not track them)"
     return None
