@@ -234,7 +234,9 @@ def test_a_ply_that_repeats_positions_is_welded_as_in_core(tmp_path, kind):
 
 def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
     """``attributes="auto"`` (the default) keeps a file's UVs when its material names a texture image that
-    exists, and the result carries that image; without one they are dropped, and named."""
+    exists, and the result carries that image; without one they are dropped, and named. Kept, they turn off
+    the default's memoryless last stretch in the last level's runs: said once, as in core, in a warning and
+    the stats (a worker's warning, it was in neither)."""
     from PIL import Image
 
     path = tmp_path / "textured.obj"
@@ -247,9 +249,10 @@ def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
     assert plain.uv is None and "texture coordinates (vt)" in plain.stats["dropped"]
     Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "t.png")
     assert texture_of(path) == tmp_path / "t.png"
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+    with pytest.warns(UserWarning) as said:
         res = qemjax.simplify(str(path), ratio=RATIO, partition=settings)
+    assert [str(w.message).split(" turns off")[0] for w in said] == ["keeping uv"]
+    assert "attributes are kept" in res.stats["late_memoryless_off"]
     assert res.uv is not None and np.asarray(res.material.image).shape[:2] == (8, 8)
     assert res.stats["dropped"] == ["record"] and res.stats["attributes"] == ["uv"]
     Image.new("RGB", (4, 2)).save(tmp_path / "other.png")  # texture= names the image itself, as in core

@@ -413,8 +413,14 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
         stop = final[0]["stop_reason"]
     else:
         stop = "target" if len(F) <= target else "locked"
+    # the last level's runs that kept UVs turned off the default's memoryless last stretch (`stages.job`): said
+    # once, as an in-core run says it, and not as a reason for stopping
+    from .._pipeline.stages import ATTRIBUTES_KEPT, STRETCH_OFF
+
+    stretch = sorted({m for s in final for m in s["warnings"] if STRETCH_OFF in m})
     # the groups' reasons, without their own "stopped at N faces, above the target of T: " (the run's warning says it)
-    msgs = sorted({re.sub(r"^stopped at \d+ faces, above the target of \d+: ", "", m) for s in final for m in s["warnings"]})
+    msgs = sorted({re.sub(r"^stopped at \d+ faces, above the target of \d+: ", "", m) for s in final
+                   for m in s["warnings"] if STRETCH_OFF not in m})
     part = dict(parts=len(manifest["parts"]), levels=len(levels), where=where,
                 faces_per_level=[lv["faces_out"] for lv in levels], groups_per_level=[lv["groups"] for lv in levels],
                 locked_per_level=[lv["locked"] for lv in levels], seconds_per_level=[lv["seconds"] for lv in levels],
@@ -432,11 +438,13 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
                  total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part,
                  dropped=["record", *manifest.get("dropped", [])], attributes=["uv"] if UV is not None else [],
-                 **(not_measured() | dist))
+                 **({"late_memoryless_off": ATTRIBUTES_KEPT} if stretch else {}), **(not_measured() | dist))
     if manifest.get("uv") and UV is None:  # the file's UVs were read, a group's run did not keep them
         why = sorted({m for s in all_stats for m in s["warnings"] if "uv" in m.lower()})
         warnings.warn(f"partition: the UVs were read but not kept by the runs: {'; '.join(why) or 'no reason given'}",
                       stacklevel=stacklevel)
+    if stretch:
+        warnings.warn(stretch[0], stacklevel=stacklevel)
     if locked_share > 0:
         warnings.warn(f"partition: the output is too large for one process (Partition.final_faces), so "
                       f"{100 * locked_share:.2g} % of its vertices stayed locked at part borders", stacklevel=stacklevel)

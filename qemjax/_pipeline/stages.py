@@ -250,9 +250,9 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
             warnings.warn(f"late_memoryless is not applied: {why}; the run uses the summed quadrics throughout",
                           stacklevel=stacklevel)
         elif why == ATTRIBUTES_KEPT:  # the default's geometry changes with attributes alone: said, not silent
-            warnings.warn(f"keeping {', '.join(attrs.values)} turns off the default method's memoryless last "
-                          "stretch (late_memoryless: it does not carry attributes): the geometry may be less accurate "
-                          "than with attributes=None (CLI: --attributes none)", stacklevel=stacklevel)
+            warnings.warn(f"keeping {', '.join(attrs.values)} {STRETCH_OFF} (late_memoryless: it does not carry "
+                          "attributes): the geometry may be less accurate than with attributes=None (CLI: "
+                          "--attributes none)", stacklevel=stacklevel)
     corner_values = channel_weights = None
     if attrs is not None:
         channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
@@ -311,6 +311,7 @@ def frame_means(geo: Geometry) -> tuple:
 
 
 ATTRIBUTES_KEPT = "attributes are kept (the memoryless quadrics have no attribute terms)"  # a `_late_off` reason
+STRETCH_OFF = "turns off the default method's memoryless last stretch"  # in the warning `job` gives for it
 
 
 def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: bool) -> str | None:
