@@ -626,6 +626,29 @@ def test_what_a_file_holds_besides_positions_is_named_when_dropped(tmp_path):
         assert qemjax.simplify(plain, ratio=0.2, partition=settings).stats["dropped"] == ["record"]
 
 
+@pytest.mark.parametrize("kind", ["little", "big", "ascii"])
+def test_a_ply_whose_vertices_have_a_list_property_runs_partitioned(tmp_path, kind):
+    """A PLY whose vertex element has a list property (read in core) runs partitioned: the same bits as the
+    same mesh without it, the list named among what is dropped."""
+    from test_partition_scatter import _ply_with_vertex_list
+
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
+    uv = (V[:, :2] * 0.5 + 0.5).astype(np.float32)
+    settings = Partition(part_faces=1000, workers=1)
+    out = []
+    for with_list in (False, True):
+        path = tmp_path / f"{with_list}.ply"
+        _ply_with_vertex_list(path, V, F, uv, kind, with_list)
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            res = qemjax.simplify(path, ratio=0.2, attributes="uv", partition=settings)
+        assert [str(w.message).endswith("input: vertex properties ids") for w in seen] == [True] * with_list
+        assert res.stats["dropped"] == ["record", *(["vertex properties ids"] if with_list else [])]
+        out.append((digest(res), res.uv.tobytes()))
+    assert out[0] == out[1]
+
+
 def test_a_common_cost_share_meets_the_target_and_spreads_the_pilots():
     assert plan.pilots(3) == [0, 1, 2]
     assert plan.pilots(100) == [0, 14, 28, 42, 57, 71, 85, 99]

@@ -125,6 +125,59 @@ def test_binary_ply_with_other_properties(tmp_path, order):
     assert sum(np.prod(np.ptp(p["V"], 0)) for p in parts) < 0.3 * len(parts) * volume
 
 
+def _ply_with_vertex_list(path, V, F, uv, kind: str, with_list: bool):
+    """A PLY (``kind``: "<", ">" or "ascii") whose vertex element has, when ``with_list``, a list property of
+    several lengths (0 to 4) between x and y; per-vertex UVs after z."""
+    lengths = np.arange(len(V)) % 5
+    props = ["float x", *(["list uchar int ids"] if with_list else []), "double y", "float z", "float texture_u",
+             "float texture_v"]
+    head = ["ply", f"format {dict(a='ascii', l='binary_little_endian', b='binary_big_endian')[kind[0]]} 1.0",
+            f"element vertex {len(V)}", *(f"property {p}" for p in props), f"element face {len(F)}",
+            "property list uchar int vertex_indices", "end_header", ""]
+    with open(path, "wb") as f:
+        f.write("\n".join(head).encode())
+        if kind == "ascii":
+            for (x, y, z), (u, v), n in zip(V.tolist(), uv.tolist(), lengths):
+                ids = f" {n}" + "".join(f" {7 * k - 3}" for k in range(n)) if with_list else ""
+                f.write(f"{x!r}{ids} {y!r} {z!r} {u!r} {v!r}\n".encode())
+            f.write("".join(f"3 {a} {b} {c}\n" for a, b, c in F.tolist()).encode())
+            return
+        o = "<" if kind[0] == "l" else ">"
+        rest = np.zeros(len(V), [("y", o + "f8"), ("z", o + "f4"), ("t", o + "f4", (2,))])
+        rest["y"], rest["z"], rest["t"] = V[:, 1], V[:, 2], uv
+        for k in range(len(V)):
+            f.write(np.array(V[k, 0], o + "f4").tobytes())
+            if with_list:
+                f.write(bytes([lengths[k]]) + np.arange(lengths[k], dtype=o + "i4").tobytes())
+            f.write(rest[k].tobytes())
+        tris = np.zeros(len(F), [("n", "u1"), ("i", o + "i4", (3,))])
+        tris["n"], tris["i"] = 3, F
+        f.write(tris.tobytes())
+
+
+@pytest.mark.parametrize("kind", ["little", "big", "ascii"])
+def test_a_vertex_list_property_is_skipped(tmp_path, monkeypatch, kind):
+    """A list property of the vertex element (rows of several lengths) is stepped over, in binary PLY of
+    either byte order (its other properties streamed to fixed records, in reads that cut rows) and ASCII:
+    the parts, with the UVs after it, are those of the same file without it, and the list is named as
+    dropped."""
+    from qemjax._partition import ply
+
+    monkeypatch.setattr(ply, "_STREAM_BYTES", 1000)
+    V, F = shapes.icosphere(3)
+    V = V.astype(np.float32).astype(np.float64)
+    uv = (V[:, :2] * 0.5 + 0.5).astype(np.float32)
+    got = []
+    for with_list in (False, True):
+        path = tmp_path / f"{with_list}.ply"
+        _ply_with_vertex_list(path, V, F, uv, kind, with_list)
+        manifest, _, scratch = _check(path, 300, V, F, welded=False, uv=True)
+        assert manifest["uv"] and (manifest["dropped"] == ["vertex properties ids"]) == with_list
+        got.append([(scratch / p["file"]).read_bytes() for p in manifest["parts"]])
+        assert sorted(q.name for q in scratch.iterdir()) == ["level0", "manifest.json"]
+    assert got[0] == got[1] and len(got[0]) > 2
+
+
 def test_polygons_are_fanned(tmp_path):
     """Binary PLY of quads and triangles (streamed, not mapped: from the start when the first face is a
     quad, else once a quad is met), ASCII PLY with an extra element."""

@@ -13,7 +13,7 @@ from numba import njit
 
 from .._io import ply as _ply
 from .scan import _grow
-from .source import FACES, TRI, Appender, Block, Refusal, Source
+from .source import FACES, PACKED, TRI, Appender, Block, Refusal, Source
 
 INDEX_NAMES = ("vertex_indices", "vertex_index")
 _INTS = {"i1", "u1", "i2", "u2", "i4", "u4"}
@@ -106,8 +106,49 @@ def _walk(buf, rows, kinds, sizes, csizes, csigned, index, isigned, big):
     return pos, done, tris[:nt], -1
 
 
-def _stream(path: Path, at: int, e: _ply.Element, layout, out: Appender | None) -> int:
-    """Reads element ``e``'s rows from byte ``at`` (triangles to ``out`` when given); its end offset."""
+@njit(cache=True)
+def _pack(buf, rows, kinds, sizes, csizes, csigned, big, width):
+    """Whole rows of an element with list properties from the start of ``buf`` (at most ``rows``): (bytes
+    used, rows read, the bytes of each row's scalar properties, ``width`` a row, a negative count's row or
+    -1). The lists are skipped."""
+    n = len(buf)
+    least = 0  # the shortest row: its scalars and its lists' counts
+    for j in range(len(kinds)):
+        least += sizes[j] if kinds[j] == 0 else csizes[j]
+    out = np.empty(min(rows, n // max(least, 1) + 1) * width, np.uint8)
+    pos, done = 0, 0
+    while done < rows:
+        p, o, fits = pos, done * width, True
+        for j in range(len(kinds)):
+            if kinds[j] == 0:
+                if p + sizes[j] > n:
+                    fits = False
+                    break
+                for k in range(sizes[j]):
+                    out[o + k] = buf[p + k]
+                o += sizes[j]
+                p += sizes[j]
+                continue
+            if p + csizes[j] > n:
+                fits = False
+                break
+            c = _int(buf, p, csizes[j], csigned[j], big)
+            p += csizes[j]
+            if c < 0:
+                return pos, done, out[:done * width], done
+            if p + c * sizes[j] > n:
+                fits = False
+                break
+            p += c * sizes[j]
+        if not fits:
+            break
+        pos, done = p, done + 1
+    return pos, done, out[:done * width], -1
+
+
+def _stream(path: Path, at: int, e: _ply.Element, layout, out: Appender | None, walk=_walk) -> int:
+    """Reads element ``e``'s rows from byte ``at`` (what ``walk`` makes of them, `_walk`'s triangles or
+    `_pack`'s records, to ``out`` when given); its end offset."""
     left, big_row = e.rows, 0
     with open(path, "rb") as f:
         f.seek(at)
@@ -115,7 +156,7 @@ def _stream(path: Path, at: int, e: _ply.Element, layout, out: Appender | None) 
         while left:
             data = f.read(max(_STREAM_BYTES, 2 * big_row))
             buf = np.frombuffer(carry + data, np.uint8)
-            used, done, tris, bad = _walk(buf, left, *layout)
+            used, done, tris, bad = walk(buf, left, *layout)
             if bad >= 0:
                 raise Refusal(f"the PLY {e.name} data holds a list with a negative count: the file is damaged")
             if done == 0 and not data:
@@ -217,19 +258,27 @@ def read_binary(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = Fal
     vertex, face = h.element("vertex"), h.element("face")
     if face is None:
         raise Refusal("the PLY header declares no face element")
-    if any(p.count is not None for p in vertex.props):
-        raise Refusal("the PLY vertex element has list properties, which are not read")
     index = _index_prop(face)
     at = _offsets(path, h, order, size)
-    names = [p.name for p in vertex.props]
-    vdtype = np.dtype([(f"p{j}", order + _code(p.type)) for j, p in enumerate(vertex.props)])
+    names = [p.name if p.count is None else None for p in vertex.props]  # a list is no x, y, z or UV
+    vdtype = np.dtype([(f"p{j}", order + _code(p.type)) for j, p in enumerate(vertex.props) if p.count is None])
     xyz = tuple(f"p{names.index(c)}" for c in "xyz")
     uv = uv_names(vertex)
     uv_fields = None if uv is None else tuple(f"p{names.index(c)}" for c in uv)
-    if at["vertex"] + vertex.rows * vdtype.itemsize > size:
-        raise Refusal(f"truncated binary PLY: the file ends inside its vertices (the header declares "
-                      f"{vertex.rows} of them)")
-    vblock = Block(path, at["vertex"], vdtype, vertex.rows)
+    if len(vdtype) < len(vertex.props):  # rows of several lengths: their scalars streamed to fixed records
+        kinds, sizes, csizes, csigned = _layout(vertex, order)[:4]
+        out = Appender(scratch / PACKED)
+        try:
+            _stream(path, at["vertex"], vertex, (kinds, sizes, csizes, csigned, order == ">", vdtype.itemsize),
+                    out, _pack)
+        finally:
+            out.close()
+        vblock = Block(scratch / PACKED, 0, vdtype, vertex.rows)
+    else:
+        if at["vertex"] + vertex.rows * vdtype.itemsize > size:
+            raise Refusal(f"truncated binary PLY: the file ends inside its vertices (the header declares "
+                          f"{vertex.rows} of them)")
+        vblock = Block(path, at["vertex"], vdtype, vertex.rows)
 
     def with_uv(src: Source, corner_field: str | None = None) -> Source:
         src.dropped = dropped(h)

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import execute, indexed, pieces, plan, task
 from .readers import texture_of
-from .source import CORNER_UV, FACES, UV, VERTICES
+from .source import CORNER_UV, FACES, PACKED, UV, VERTICES
 from .._mesh.arrays import box_diagonal
 from .._options import Partition
 
@@ -70,7 +70,7 @@ MEASURE_TASKS = 32  # the measured distance's tasks (fewer for fewer parts): fix
 # what a run writes in its scratch folder: level folders, the reading's work folders and these files
 _OWN_FOLDERS = re.compile(r"level\d+|tmp|weld")
 _OWN_FILES = {"manifest.json", "run.json", "stats.json", "output.npz", "input.ply", VERTICES, FACES, UV, CORNER_UV,
-              "faces_raw.i64", "ids.i64", *indexed.WELDED}
+              PACKED, "faces_raw.i64", "ids.i64", *indexed.WELDED}
 
 
 def _own(entry: Path) -> bool:

@@ -254,9 +254,9 @@ def _int_word(buf, i, j):
 @njit(cache=True)
 def ply_rows(buf, pos, rows, mode, cols, kinds, index):
     """ASCII PLY rows of one element from byte ``pos``, one non-empty line each, at most ``rows``.
-    mode 0: skipped; 1: vertices, whose words at ``cols`` (x, y, z, and u, v when kept) are kept; 2: faces, walked by
-    ``kinds`` (0 a scalar, 1 a list) with the ``index`` list fanned. Returns (end offset, rows read,
-    coordinate bytes, triangles, lines passed, error, error line)."""
+    mode 0: skipped; 1: vertices, whose properties at ``cols`` (x, y, z, and u, v when kept) are kept; 2:
+    faces; both walked by ``kinds`` (0 a scalar, 1 a list: a vertex's skipped, a face's ``index`` list
+    fanned). Returns (end offset, rows read, coordinate bytes, triangles, lines passed, error, error line)."""
     n = len(buf)
     out = np.empty(n + 1, np.uint8)
     tris = np.empty((max(16, n // 16) if mode == 2 else 0, 3), np.int64)
@@ -269,16 +269,24 @@ def ply_rows(buf, pos, rows, mode, cols, kinds, index):
             i += 1
             continue
         if mode == 1:
-            w = 0
-            while buf[i] != NL:
+            for p in range(len(kinds)):
                 j = _word_end(buf, i)
-                for c in range(len(cols)):
-                    if cols[c] == w:
-                        spans[c, 0], spans[c, 1] = i, j
-                w += 1
+                if j == i:
+                    return i, done, out[:no], tris[:nt], line, FEW_VALUES, line
+                if kinds[p] == 1:  # a list: its count, and that many words skipped
+                    count, ok = _int_word(buf, i, j)
+                    if not ok or count < 0:
+                        return i, done, out[:no], tris[:nt], line, BAD_INT, line
+                    for _ in range(count):
+                        i = _skip_ws(buf, j)
+                        j = _word_end(buf, i)
+                        if j == i:
+                            return i, done, out[:no], tris[:nt], line, FEW_VALUES, line
+                else:
+                    for c in range(len(cols)):
+                        if cols[c] == p:
+                            spans[c, 0], spans[c, 1] = i, j
                 i = _skip_ws(buf, j)
-            if w < len(kinds):
-                return i, done, out[:no], tris[:nt], line, FEW_VALUES, line
             for c in range(len(cols)):
                 no = _copy(buf, spans[c, 0], spans[c, 1], out, no)
         elif mode == 2:

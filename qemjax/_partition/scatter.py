@@ -25,7 +25,7 @@ from .._mesh import topology
 from . import indexed
 from .cells import Bins, Plan, codes, quantize
 from .readers import open_source, texture_of
-from .source import CORNER_UV, FACES, UV, VERTICES, Ragged, Source, remove
+from .source import CORNER_UV, FACES, PACKED, UV, VERTICES, Ragged, Source, remove
 from .write import replace_atomically, write_npz
 
 UNSEEN, SHARED = -1, -2  # owner values besides a part number
@@ -274,7 +274,7 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(scratch / "weld", ignore_errors=True)
-        for leftover in (VERTICES, FACES, UV, CORNER_UV, "faces_raw.i64", "ids.i64", *indexed.WELDED):
+        for leftover in (VERTICES, FACES, UV, CORNER_UV, PACKED, "faces_raw.i64", "ids.i64", *indexed.WELDED):
             remove(scratch / leftover)
 
     def write(p):

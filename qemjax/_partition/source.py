@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 VERTICES, FACES = "vertices.f64", "faces.i64"  # the scratch arrays of converted formats
+PACKED = "vertex_records.bin"  # a binary PLY's vertex scalars, when its vertex element also has lists
 UV, CORNER_UV = "uv.f64", "corner_uv.i64"  # an OBJ's texture coordinates, and each triangle corner's
 XYZ = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
 UV_DTYPE = np.dtype([("u", "<f8"), ("v", "<f8")])

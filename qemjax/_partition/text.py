@@ -209,14 +209,27 @@ def _element_args(h: _ply.Header, e: _ply.Element, uv: bool = False):
     `scan.ply_rows`."""
     kinds = np.array([p.count is not None for p in e.props], np.int64)
     if e.name == "vertex":
-        if kinds.any():
-            raise Refusal("the PLY vertex element has list properties, which are not read")
-        names = [p.name for p in e.props]
+        names = [p.name if p.count is None else None for p in e.props]  # a list is no x, y, z or UV
         extra = (uv_names(e) or ()) if uv else ()
         return 1, np.array([names.index(c) for c in ("x", "y", "z", *extra)], np.int64), kinds, -1
     if e.name == "face":
         return 2, np.zeros(3, np.int64), kinds, _index_prop(e)
     return 0, np.zeros(3, np.int64), kinds, -1
+
+
+def _scalar_words(words: list, kinds: np.ndarray, cols) -> list:
+    """Where the properties ``cols`` of an ASCII PLY row are among its ``words`` (a list property is its
+    count and that many words); those past the row's end or behind a count that is not one, left out."""
+    at, w = [], 0
+    for kind in kinds:
+        at.append(w)
+        if kind:
+            try:
+                w += int(words[w])
+            except (IndexError, ValueError):
+                break
+        w += 1
+    return [at[c] for c in cols if c < len(at) and at[c] < len(words)]
 
 
 def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = False):
@@ -245,7 +258,7 @@ def read_ascii_ply(path: Path, h: _ply.Header, scratch: Path, uv_wanted: bool = 
                     first = block[:pos].count(b"\n") - lines  # lines before this call in the block
                     last = first + lines
                     def pick(k, w, cols):
-                        return [w[c] for c in cols] if first < k <= last and w else None
+                        return [w[c] for c in _scalar_words(w, kinds, cols)] if first < k <= last and w else None
 
                     try:
                         rows_read = _floats(coords, done, block, line0, lambda k, w: pick(k, w, cols), len(cols))
