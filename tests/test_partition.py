@@ -617,8 +617,11 @@ def test_what_a_file_holds_besides_positions_is_named_when_dropped(tmp_path):
         res = qemjax.simplify(ply, ratio=0.2, partition=settings)
     assert res.stats["dropped"] == ["record", "vertex properties nx, red", "face properties quality"]
     with pytest.warns(UserWarning, match=r"texture coordinates \(vt\)"):
-        res = qemjax.simplify(obj, ratio=0.2, partition=settings)
+        res = qemjax.simplify(obj, ratio=0.2, partition=settings, attributes=None)
     assert res.stats["dropped"] == ["record", "texture coordinates (vt)"]
+    with warnings.catch_warnings():  # one UV for every corner: no seam, kept by default (as in core)
+        warnings.simplefilter("error")
+        assert qemjax.simplify(obj, ratio=0.2, partition=settings).stats["dropped"] == ["record"]
     plain = tmp_path / "plain.obj"
     plain.write_text("\n".join(l for l in lines if not l.startswith("vt")).replace("/1", "") + "\n")
     with warnings.catch_warnings():

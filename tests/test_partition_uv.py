@@ -179,14 +179,17 @@ def test_the_texture_image_is_the_used_materials(tmp_path):
 
 
 def test_a_resumed_run_sees_the_texture_image_that_appeared(tmp_path):
-    """attributes="auto" keeps a file's UVs when the image it names exists: a run resumed from one made before
-    the image existed reused its parts without UVs (the key held "auto", not what it found)."""
+    """attributes="auto" keeps a file's UVs with seams when the image it names exists: a run resumed from one
+    made before the image existed reused its parts without UVs (the key held "auto", not what it found)."""
     from PIL import Image
 
     m = shapes.bumpy_sphere(4)
     V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
+    uv, corner = af.spherical_uv(m)
+    wv = np.zeros(len(uv), np.int64)
+    wv[corner] = F
     path = tmp_path / "tex.ply"
-    _ply(path, V, F, V[:, :2] * 0.5 + 0.5, True)
+    _ply(path, V[wv], corner, uv, True)  # a vertex per (position, UV): the seam's positions twice
     data = path.read_bytes()
     path.write_bytes(data.replace(b"format binary_little_endian 1.0\n",
                                   b"format binary_little_endian 1.0\ncomment TextureFile t.png\n", 1))
@@ -233,18 +236,18 @@ def test_a_ply_that_repeats_positions_is_welded_as_in_core(tmp_path, kind):
 
 
 def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
-    """``attributes="auto"`` (the default) keeps a file's UVs when its material names a texture image that
-    exists, and the result carries that image; without one they are dropped, and named. Kept, they turn off
-    the default's memoryless last stretch in the last level's runs: said once, as in core, in a warning and
-    the stats (a worker's warning, it was in neither)."""
+    """``attributes="auto"`` (the default) keeps a file's UVs with seams when its material names a texture
+    image that exists, and the result carries that image; without one they are dropped, and named. Kept, they
+    turn off the default's memoryless last stretch in the last level's runs: said once, as in core, in a
+    warning and the stats (a worker's warning, it was in neither)."""
     from PIL import Image
 
     path = tmp_path / "textured.obj"
     path.write_text("mtllib tex.mtl\nusemtl tex\n" + sphere_obj.read_text())
     settings = Partition(workers=1, part_faces=4000)
     (tmp_path / "tex.mtl").write_text("newmtl tex\nKd 1 1 1\nmap_Kd t.png\n")
-    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\); attributes='uv' \(CLI: --attributes uv\) "
-                      "keeps the UVs"):
+    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\), not kept by default for their seams "
+                      r"\(\d+ seam vertices.*\); attributes='uv' \(CLI: --attributes uv\) keeps the UVs"):
         plain = qemjax.simplify(str(path), ratio=RATIO, partition=settings)  # the image is missing
     assert plain.uv is None and "texture coordinates (vt)" in plain.stats["dropped"]
     Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "t.png")
@@ -261,9 +264,10 @@ def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
 
 
 @pytest.mark.parametrize("binary", [True, False])
-def test_uvs_left_out_by_default_are_named_with_the_way_to_keep_them(tmp_path, binary):
-    """A PLY's UVs without a texture image are not kept by default (as in core): the warning names them and
-    says how to keep them; not when they were left out by ``attributes=None``, nor for a file without UVs."""
+def test_a_ply_s_uvs_without_seams_are_kept_by_default(tmp_path, binary):
+    """A PLY's per-vertex UVs without a texture image and without seams are kept by default, as in core
+    (they were left out without an image); with ``attributes=None`` they are named as dropped, without the
+    way to keep them; columns under names that are not UVs are not read as UVs."""
     m = shapes.bumpy_sphere(4)
     V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
     path = tmp_path / "planar.ply"
@@ -277,15 +281,72 @@ def test_uvs_left_out_by_default_are_named_with_the_way_to_keep_them(tmp_path, b
         return res, [str(w.message) for w in caught if "not carried over" in str(w.message)]
 
     res, said = warned(path)
-    assert res.uv is None and len(said) == 1
-    assert said[0].endswith("vertex properties texture_u, texture_v; attributes='uv' (CLI: --attributes uv) keeps the "
-                              "UVs")
+    assert res.uv is not None and not said and res.stats["dropped"] == ["record"]
+    assert qemjax.simplify(str(path), ratio=RATIO).uv is not None  # in core
     res, said = warned(path, attributes=None)
     assert res.uv is None and len(said) == 1 and "keeps the UVs" not in said[0]
+    assert said[0].endswith("vertex properties texture_u, texture_v")
     other = tmp_path / "other.ply"  # the same columns under names that are not UVs
     _ply(other, V, F, V[:, :2], binary, names=("quality", "confidence"))
     res, said = warned(other)
     assert res.uv is None and len(said) == 1 and said[0].endswith("vertex properties quality, confidence")
+
+
+def _core_seams(path) -> int:
+    """How many seam vertices an in-core run with ``attributes="auto"`` names for the file's UVs (0: kept)."""
+    import re
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = qemjax.simplify(str(path), ratio=RATIO)
+    found = [re.search(r"uv: (\d+) seam vertices", str(w.message)) for w in caught]
+    counts = [int(f.group(1)) for f in found if f]
+    assert (res.uv is None) == bool(counts)
+    return counts[0] if counts else 0
+
+
+def test_auto_decides_on_an_obj_s_uvs_as_in_core(tmp_path, sphere_obj):
+    """``attributes="auto"`` on an OBJ with UVs and no texture image keeps them when they have no seam (each
+    ``v`` its own ``vt``) and leaves them out when they have one (the sphere's meridian), as an in-core run
+    does: the same seam vertices counted, named in the warning and in ``stats["not_kept_seams"]``."""
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    seamless = tmp_path / "planar.obj"
+    seamless.write_text("".join(f"v {x!r} {y!r} {z!r}\nvt {x!r} {y!r}\n" for x, y, z in V.tolist())
+                        + "".join(f"f {a}/{a} {b}/{b} {c}/{c}\n" for a, b, c in (F + 1).tolist()))
+    settings = Partition(workers=1, part_faces=1000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = qemjax.simplify(str(seamless), ratio=RATIO, partition=settings)
+    assert _core_seams(seamless) == 0
+    assert res.uv is not None and res.stats["dropped"] == ["record"] and res.stats["attributes"] == ["uv"]
+    assert len(res.stats["partition"]["groups_per_level"]) > 1 and "not_kept_seams" not in res.stats
+    assert np.abs(res.uv - res.vertices[res.wedge_vertex][:, :2]).max() < 0.05  # the map, u = x, v = y
+    seams = _core_seams(sphere_obj)
+    assert seams > 20
+    with pytest.warns(UserWarning, match=rf"texture coordinates \(vt\), not kept by default for their seams "
+                      rf"\({seams} seam vertices"):
+        res = qemjax.simplify(str(sphere_obj), ratio=RATIO, partition=settings)
+    assert res.uv is None and res.stats["not_kept_seams"] == ["uv"]
+    assert res.stats["dropped"] == ["record", "texture coordinates (vt)"]
+
+
+def test_a_folder_cut_when_auto_needed_a_texture_is_not_resumed(tmp_path):
+    """A scratch folder an earlier version cut under ``attributes="auto"`` (which kept UVs only with a texture
+    image) holds parts without the UVs "auto" now keeps: its key differs, so the run starts afresh."""
+    import json
+
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
+    path = tmp_path / "planar.ply"
+    _ply(path, V, F, V[:, :2], True)
+    settings = Partition(workers=1, part_faces=2000, scratch=tmp_path / "scratch")
+    assert qemjax.simplify(str(path), ratio=RATIO, partition=settings).uv is not None
+    meta, manifest = tmp_path / "scratch" / "run.json", tmp_path / "scratch" / "manifest.json"
+    meta.write_text(json.dumps(json.loads(meta.read_text()) | {"uv": "auto"}))  # as the earlier version wrote
+    manifest.write_text(json.dumps(json.loads(manifest.read_text()) | {"uv": False}))  # and what it decided
+    res = qemjax.simplify(str(path), ratio=RATIO, partition=settings)
+    assert res.uv is not None and res.stats["partition"]["reused"] == 0
 
 
 def test_texture_file_of_a_ply(tmp_path):

@@ -238,9 +238,9 @@ def _common_cost(runner, specs: list, p: Partition, progress, label: str):
 def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwargs: dict, progress: bool,
                          stacklevel: int = 3, uv=False, texture=None):
     """`simplify` with ``partition=``: the module docstring. ``kwargs``: the method and its settings, as
-    `simplify` takes them; ``uv``: keep a file's UVs (True, "auto": when it names a texture image, False:
-    `scatter.scatter`); ``texture``: the image of the UVs kept (a path or a PIL image; None: the one the
-    file names)."""
+    `simplify` takes them; ``uv``: keep a file's UVs (True, "auto": as in core, when it names a texture
+    image or they have no seams, False: `scatter.scatter`); ``texture``: the image of the UVs kept (a path
+    or a PIL image; None: the one the file names)."""
     from .._pipeline import stages
     from .scatter import scatter
 
@@ -262,7 +262,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                    target=[target_faces, ratio],
                    kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
                    borders="the input's kept along the cuts",
-                   uv=uv)
+                   uv="auto: without seams, or with a texture image" if uv == "auto" else uv)
         _fresh(folder, key, mesh)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -365,9 +365,12 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             if temporary:
                 shutil.rmtree(folder, ignore_errors=True)
     if manifest.get("dropped"):
-        # as the in-core run's warning, the way to keep UVs left out by default (no texture image named)
+        # as the in-core run's warning, the way to keep UVs left out by default (seams, no texture image named)
         left_out = uv == "auto" and manifest.get("uv_in_file") and not manifest.get("uv")
-        how = "; attributes='uv' (CLI: --attributes uv) keeps the UVs" if left_out else ""
+        seams = manifest.get("uv_seam_vertices", 0)
+        why = (f", not kept by default for their seams ({seams} seam vertices, which hold their vertices in place: "
+               "docs/attributes.md)") if left_out and seams else ""
+        how = f"{why}; attributes='uv' (CLI: --attributes uv) keeps the UVs" if left_out else ""
         warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
                       f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
     return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
@@ -438,7 +441,9 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
                  total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part,
                  dropped=["record", *manifest.get("dropped", [])], attributes=["uv"] if UV is not None else [],
-                 **({"late_memoryless_off": ATTRIBUTES_KEPT} if stretch else {}), **(not_measured() | dist))
+                 **({"late_memoryless_off": ATTRIBUTES_KEPT} if stretch else {}),
+                 **({"not_kept_seams": ["uv"]} if manifest.get("uv_seam_vertices") else {}),
+                 **(not_measured() | dist))
     if manifest.get("uv") and UV is None:  # the file's UVs were read, a group's run did not keep them
         why = sorted({m for s in all_stats for m in s["warnings"] if "uv" in m.lower()})
         warnings.warn(f"partition: the UVs were read but not kept by the runs: {'; '.join(why) or 'no reason given'}",

@@ -91,13 +91,36 @@ def _note_owner(owner, F, part):
                 owner[v] = SHARED
 
 
-def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progress, uv: bool) -> np.ndarray:
+@njit(cache=True)
+def _note_uv(first, state, F, C):
+    """Records the UVs C (k,3,2) of the corners of faces F: a vertex's first corner's in ``first``, and in
+    ``state`` 1 once seen, 2 once a corner differs from its first (a seam vertex; a NaN differs from
+    itself, as in `_wedges.seam_vertex_count`)."""
+    for f in range(len(F)):
+        for c in range(3):
+            v = F[f, c]
+            if state[v] == 0:
+                state[v] = 1
+                first[v, 0], first[v, 1] = C[f, c, 0], C[f, c, 1]
+            if first[v, 0] != C[f, c, 0] or first[v, 1] != C[f, c, 1]:
+                state[v] = 2
+
+
+def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progress, uv: bool,
+         seams: bool = False) -> tuple[np.ndarray, int, bool]:
     """Appends each face to its part's file (input order kept within a part), and with ``uv`` its corners'
-    UVs to the part's ``.uv`` file; returns the owners."""
+    UVs to the part's ``.uv`` file; returns the owners, with ``seams`` how many vertices have corners of
+    different UVs (else 0), and whether every UV read is a finite number."""
     owner = np.full(src.n_vertices, UNSEEN, np.int32)
+    finite = True
+    if seams:
+        first, state = np.empty((src.n_vertices, 2), np.float64), np.zeros(src.n_vertices, np.int8)
     for a, b in _spans(src.n_faces, step):
         F = src.faces(a, b)
         C = src.corner_uvs(a, b, F) if uv else None
+        if seams:
+            _note_uv(first, state, F, C)
+        finite = finite and (C is None or bool(np.isfinite(C).all()))
         part = plan.assign(codes(cells, F)).astype(np.int32)
         _note_owner(owner, F, part)
         order = np.argsort(part, kind="stable")
@@ -112,7 +135,7 @@ def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progr
                     f.write(C[order[lo:hi]].tobytes())
         if progress is not None:
             progress(b, src.n_faces)
-    return owner
+    return owner, int(np.count_nonzero(state == 2)) if seams else 0, finite
 
 
 def _distinct(raw: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -231,10 +254,14 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     and triangles, which the parts do not carry), borders_on_cuts (the file, in level0/, of the input's
     boundary edges whose two ends other parts also use, as global id pairs ``E``: `borders_on_cuts`).
 
-    With ``uv`` True (asked for by name) or "auto" when the file names a texture image (as `simplify`'s
-    ``attributes="auto"`` keeps UVs with seams), each part also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an
-    OBJ's ``vt``, a PLY's per-vertex ``texture_u``/``s``/``u`` and their pairs, a binary PLY's ``texcoord``
-    lists), and the manifest says ``uv`` and names the ``texture`` image the file names.
+    With ``uv`` True (asked for by name) or "auto" (as `simplify`'s ``attributes="auto"`` keeps them: when
+    the file names a texture image, or else when no vertex has corners of different UVs, a seam), each part
+    also holds ``UV`` (m,3,2) float64, its triangles' corners' UVs (an OBJ's ``vt``, a PLY's per-vertex
+    ``texture_u``/``s``/``u`` and their pairs, a binary PLY's ``texcoord`` lists), and the manifest says
+    ``uv`` and names the ``texture`` image the file names; UVs left out by "auto" for their seams, how many
+    vertices are on them (``uv_seam_vertices``). Finding the seams holds each vertex's first UV in the
+    binning pass (17 bytes a vertex), only when the corners' UVs can differ at a vertex (an OBJ's, a
+    ``texcoord`` list's, or per-vertex UVs at repeated positions).
 
     Positions are welded by exact value (a PLY's only when some repeat: `indexed`). Unused vertices are
     dropped, the others keep their order. ``progress(done_faces, total_faces)`` is called after each
@@ -248,11 +275,17 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
     level, tmp = _prepare(scratch)
     try:
         texture = texture_of(path) if uv else None
-        src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name, uv is True or texture is not None)
+        auto = uv == "auto" and texture is None  # kept when they have no seam, as in core
+        src, (lo, hi), cells, bins = _read(path, scratch, part_faces, step, name, bool(uv))
         plan = Plan.from_bins(bins, part_faces)
         index_type = np.int32 if src.n_vertices < 2**31 else np.int64
         uv = src.uv is not None  # asked for, and every triangle corner has one
-        owner = _bin(src, cells, plan, tmp, index_type, step, progress, uv)
+        # a vertex's corners can have different UVs only where they are not read from the vertex itself
+        seams = auto and uv and (src.corner_uv is not None or src.face_uv is not None)
+        owner, seam_vertices, finite = _bin(src, cells, plan, tmp, index_type, step, progress, uv, seams)
+        # UVs found only by "auto" that are not numbers are left out, as they were before it looked for
+        # them; asked for, they are refused (`_write_parts`)
+        uv = uv and not seam_vertices and (finite or not auto)
         del cells, bins
         kept = owner != UNSEEN
         n_kept = int(np.count_nonzero(kept))
@@ -268,7 +301,7 @@ def scatter(path, scratch, part_faces: int, *, chunk_faces: int = 1 << 21, progr
                     "duplicate_removed": sum(p["duplicate_removed"] for p in parts),
                     "bbox": [lo.tolist(), hi.tolist()], "welded": src.welded, "parts": parts,
                     "dropped": list(src.dropped_with_uv if uv else src.dropped), "uv": uv,
-                    "uv_in_file": bool(src.uv_in_file),
+                    "uv_in_file": bool(src.uv_in_file), "uv_seam_vertices": seam_vertices,
                     "texture": None if texture is None or not uv else str(texture),
                     "borders_on_cuts": f"level0/{BORDERS_ON_CUTS}"}
     finally:

@@ -111,7 +111,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         from its file, cut into parts simplified in parallel with their borders locked, regrouped level by
         level until one group meets the target (`qemjax._partition`; docs/large-meshes.md). The result holds
         the output and its stats (``stats["partition"]``), not the input, record or history; of the
-        attributes, a file's UVs (``attributes="uv"``, or ``"auto"`` when the file names a texture image).
+        attributes, a file's UVs (``attributes="uv"``, or ``"auto"`` as in core: without seams, or when the file
+        names a texture image).
         None (default): in this process, unless the mesh would need more memory than this machine has
         available (`_pipeline.fits`: a ``MemoryError`` that is also a ValueError, before the mesh is read,
         naming the way to run it partitioned); False: in this process regardless.
@@ -175,7 +176,7 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
         uv = "auto" if attributes == "auto" else False
     else:
         raise ValueError("partition: a partitioned run keeps a file's UVs and nothing else of its appearance; "
-                         "attributes='uv', 'auto' (UVs that come with a texture image) or None")
+                         "attributes='uv', 'auto' (UVs without seams, or with a texture image) or None")
     kwargs = {k: v for k, v in named.items() if v is not None} | dict(settings)
     kwargs.pop("attributes", None)
     texture = kwargs.pop("texture", None)
