@@ -436,6 +436,45 @@ def test_an_obj_files_vertices_are_numbered_as_its_v_lines(tmp_path):
         assert qemjax.simplify(path, ratio=0.2, vertex_weights=w).stats["vertex_weights"]
 
 
+def test_an_obj_file_is_read_for_its_numbering_once_per_geometry(tmp_path, monkeypatch):
+    """`given_map` reads an OBJ file's ``v`` lines once for a geometry, however many runs lock vertices on
+    it (each config of a batch read the file again), and gives the same map as read afresh."""
+    import qemjax._io.text as io_text
+    from qemjax._pipeline import locks as _locks, stages
+
+    qemjax.shapes.write_examples(tmp_path, subdivisions=2)
+    text = (tmp_path / "textured.obj").read_text()
+    path = tmp_path / "shifted.obj"  # an unused vertex first: the file's numbering is not the reader's
+    path.write_text("v 9 9 9\n" + "".join(_shift_face(line) for line in text.splitlines(keepends=True)))
+    reads = []
+
+    def counted(data):
+        reads.append(len(data))
+        return _obj_vertices(data)
+
+    monkeypatch.setattr(io_text, "obj_vertices", counted)
+    setup = stages.setup("default", "parallel", None, "auto", False, {})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        geo = stages.geometry(str(path), setup, stacklevel=1)
+    first = _locks.given_map(geo)
+    assert _locks.given_map(geo) is first and len(reads) == 1
+    afresh = _locks.given_map(geo._replace(given=None))
+    assert len(reads) == 2 and np.array_equal(first, afresh) and first[0] == -1
+    P = _obj_vertices(path.read_bytes())
+    assert np.array_equal(geo.V[first[1:]], P[1:])
+    reads.clear()
+    lk = np.arange(1, len(P), 9)
+    cfgs = [dict(ratio=0.3, locked=lk), dict(ratio=0.2, locked=lk), dict(ratio=0.2, vertex_weights=np.ones(len(P)))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        batch = qemjax.simplify_batch(str(path), cfgs)
+        assert len(reads) == 1
+        for cfg, res in zip(cfgs, batch):
+            one = qemjax.simplify(str(path), **cfg)
+            assert np.array_equal(res.vertices, one.vertices) and np.array_equal(res.faces, one.faces)
+
+
 def _shift_face(line: str) -> str:
     """An OBJ line with its vertex numbers one higher (a ``v`` line put first), UV numbers as they were."""
     if not line.startswith("f "):

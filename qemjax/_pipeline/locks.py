@@ -138,18 +138,25 @@ def given_map(geo) -> np.ndarray:
     """Each given vertex's index in the cleaned mesh (-1: dropped), the vertices numbered as the user gave
     them: a mesh's as passed; an OBJ file's as its ``v`` lines (trimesh reads an OBJ's vertices in another
     order: unused ones dropped, those at a UV seam split), matched to the cleaned vertices by position (with
-    ``weld=False``, the first of the copies at a position)."""
+    ``weld=False``, the first of the copies at a position). An OBJ's is found once per geometry (kept in
+    ``geo.given``): every run of a batch on it would read the file again."""
     vmap = geo.vertex_map
     if geo.source is None or not str(geo.source).lower().endswith(".obj"):
         return vmap
+    if geo.given is not None and "map" in geo.given:
+        return geo.given["map"]
     from .._io.text import obj_vertices
 
     with open(geo.source, "rb") as f:
         P = obj_vertices(f.read()) + 0.0  # + 0.0: -0.0 as 0.0, as below
     V = geo.V + 0.0
     if len(P) == len(vmap) and np.all(vmap >= 0) and np.array_equal(V[vmap], P):
-        return vmap  # read in the file's numbering
-    return row_index(V, P)
+        found = vmap  # read in the file's numbering
+    else:
+        found = row_index(V, P)
+    if geo.given is not None:
+        geo.given["map"] = found
+    return found
 
 
 def resolve(locked, vertex_weights, geo, stacklevel: int, stats: dict | None = None) -> Locks | None:

@@ -162,6 +162,7 @@ class Geometry(NamedTuple):
     attrs: Any = None
     vertex_map: Any = None  # (given vertices,) int64: each given vertex's index here (-1: dropped)
     source: Any = None  # the file read (a path), or None: `_locks.given_map` numbers an OBJ's vertices as it does
+    given: Any = None  # `_locks.given_map`'s own dict: an OBJ's numbering, read from the file once for all runs
 
 
 class Job(NamedTuple):
@@ -215,7 +216,7 @@ def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
         E, ecount = E.astype(np.int32), ecount.astype(np.int32)
     nonmanifold = int(np.count_nonzero(ecount > 2))  # edges of three or more faces in the input
     return Geometry(V, F, report, face_means, extra, parts, Vn, frame, (E, ecount, be, bf), nonmanifold, attrs,
-                    vertex_map, os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else None)
+                    vertex_map, os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else None, {})
 
 
 def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_error, stacklevel: int,
