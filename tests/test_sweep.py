@@ -417,6 +417,25 @@ def test_config_file_with_shapes(tmp_path):
 
 
 
+def test_config_texture_paths_are_relative_to_the_config(tmp_path, monkeypatch):
+    """A grid's texture image is a path relative to the config's folder, as its meshes are, whatever the
+    working folder; a missing one is named before anything runs."""
+    from qemjax._sweep import config as _sweep_config
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "tex.png").write_bytes(b"not read here")
+    cfg = tmp_path / "sub" / "s.toml"
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "t.csv"\n'
+                   '[grid]\nattributes = ["uv"]\ntexture = ["tex.png", "none"]\n')
+    monkeypatch.chdir(tmp_path)
+    config = _sweep_config.load(cfg)
+    assert config.grid["texture"] == [str(tmp_path / "sub" / "tex.png"), None]
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\n[grid]\n"attributes.texture" = ["nope.png"]\n')
+    with pytest.raises(FileNotFoundError, match=re.escape("s.toml: grid.attributes.texture: texture image not "
+                                                          f"found: {tmp_path / 'sub' / 'nope.png'}")):
+        _sweep_config.load(cfg)
+
+
 def test_config_grid_takes_integers_and_untyped_keywords(tmp_path):
     """`grid.refit = [0, 1]` (an int keyword) and `grid.attributes = ["auto", "none"]` (a keyword without
     an annotation) are read as the Python sweep takes them, and run (issue 31's two config failures)."""

@@ -3,8 +3,8 @@
 Everything is checked before any mesh is simplified or any worker started: unknown keys, missing files,
 unknown shapes, wrong types and bad targets raise ValueError with one line naming the file and the key
 (a missing file `MissingFileError`: a FileNotFoundError too).
-Relative paths (meshes, out) are relative to the config file's folder; a mesh may also be a shape made in
-code (``"shapes.torus"``, ``"shapes.bumpy_sphere(subdivisions=4)"`` or ``{shape = "torus", n_major = 32}``). See docs/cli.md, "Sweep config files".
+Relative paths (meshes, out, the texture images a grid names) are relative to the config file's folder; a
+mesh may also be a shape made in code (``"shapes.torus"``, ``"shapes.bumpy_sphere(subdivisions=4)"`` or ``{shape = "torus", n_major = 32}``). See docs/cli.md, "Sweep config files".
 """
 from __future__ import annotations
 
@@ -101,7 +101,7 @@ def load(path, out: str | None = None) -> SweepConfig:
             fail(f"'{key}' is missing")
     folder = path.resolve().parent
     meshes = _meshes(raw["meshes"], folder, fail)
-    grid = _grid(raw.get("grid", {}), fail)
+    grid = _grid_paths(_grid(raw.get("grid", {}), fail), folder, fail)
     try:
         _sweep.expand_grid(grid)
         targets = _sweep.check_targets(raw["targets"])
@@ -215,6 +215,27 @@ def _grid(value, fail) -> dict[str, list]:
         if not values:
             fail(f"grid.{key} is empty")
         grid[key] = [_check_value(key, v, fail) for v in values]
+    return grid
+
+
+PATH_KEYS = ("texture", "attributes.texture")  # grid keys whose text values name files
+
+
+def _grid_paths(grid: dict, folder: Path, fail) -> dict:
+    """The grid with the texture images it names as paths relative to the config's folder, as its meshes are
+    (a missing one fails before anything runs, as a missing mesh does)."""
+    for key in PATH_KEYS:
+        if key not in grid:
+            continue
+        values = []
+        for v in grid[key]:
+            if isinstance(v, str):
+                path = os.fspath(folder / v)
+                if not Path(path).is_file():
+                    fail(f"grid.{key}: texture image not found", missing=path)
+                v = path
+            values.append(v)
+        grid[key] = values
     return grid
 
 
