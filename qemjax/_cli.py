@@ -68,6 +68,8 @@ OPTIONS = {
     "split_factor": dict(metavar="B", help="with --method esqem, split edges longer than B × the "
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),
+    "tol": dict(help="with --method area, the bisection's tolerance on the new vertex's place along the pair "
+                "(a fraction of the pair's length)"),
     "attributes": dict(metavar="KINDS", help="appearance attributes to keep, seams held: 'auto' "
                        "(the kinds the input carries without seams; UVs too when the file names a texture image or "
                        "with --texture), 'none', or a comma "
@@ -131,8 +133,8 @@ def _doc_help(name: str, doc: str | None = None) -> str:
         return ""
     text = " ".join(m.group(1).split()).replace("``", "")
     depth = 0
-    for i, ch in enumerate(text):  # cut at the first full stop outside parentheses
-        depth += (ch == "(") - (ch == ")")
+    for i, ch in enumerate(text):  # cut at the first full stop outside brackets: an interval such as
+        depth += (ch in "([") - (ch in ")]")  # [0, √3/2) closes with the other kind
         if ch == "." and depth == 0 and (i + 1 == len(text) or text[i + 1] == " "):
             text = text[:i]
             break

@@ -197,6 +197,16 @@ def test_help_gives_the_default_methods_settings():
     assert "with the default method" not in actions["flip_angle"].help  # the same in both
 
 
+def test_help_is_the_first_sentence_of_each_setting():
+    """Each option's help is its setting's first sentence: a half-open interval, s in [0, √3/2), ended the
+    sentence count's brackets one short, and --quality-threshold's help ran on through the whole entry;
+    --tol, whose docstring has no entry of its own, had none."""
+    actions = _simplify_actions()
+    text = " ".join(actions["quality_threshold"].help.split())
+    assert text.startswith("s in [0, √3/2), a triangle-shape term") and "The cost" not in text, text
+    assert "bisection" in actions["tol"].help
+
+
 def test_options_reach_simplify(src, tmp_path, monkeypatch):
     """A command line with every option passes each one on, converted; options not given are not passed."""
     seen = []
