@@ -177,6 +177,13 @@ def test_mesh_names(tmp_path):
     assert list(sw.name_meshes({"a": m})) == ["a"]
     assert list(sw.name_meshes("x/cow.obj")) == ["cow"]
     assert list(sw.name_meshes(["x/cow.obj", "y/bunny.ply"])) == ["cow", "bunny"]
+    # a tuple of two meshes is two meshes, not one (vertices, faces) pair: it was read as one, and every cell
+    # failed on vertices "of rows of lengths [162, 320]"
+    t = shapes.torus(n_major=8, n_minor=4)
+    for pair in ((m, t), ((m.vertices, m.faces), (t.vertices, t.faces)), ("x/cow.obj", "y/bunny.ply")):
+        named = sw.name_meshes(pair)
+        assert len(named) == 2 and list(named.values()) == list(pair)
+    assert list(sw.name_meshes((m.vertices.tolist(), m.faces.tolist()))) == ["mesh0"]
 
 
 @pytest.mark.parametrize("grid, targets, kw, message", [

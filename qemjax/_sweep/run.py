@@ -160,7 +160,7 @@ def name_meshes(meshes) -> dict[str, Any]:
             _shape(v)  # an unknown shape fails here, before anything runs
     else:
         single = isinstance(meshes, (str, os.PathLike)) or hasattr(meshes, "vertices") or (
-            isinstance(meshes, tuple) and len(meshes) == 2 and not isinstance(meshes[0], (str, os.PathLike)))
+            isinstance(meshes, tuple) and len(meshes) == 2 and _coordinates(meshes[0]))
         items = [meshes] if single else list(meshes)
         names = [_name(m, i) for i, m in enumerate(items)]
         if len(set(names)) != len(names):
@@ -170,6 +170,18 @@ def name_meshes(meshes) -> dict[str, Any]:
     if not named:
         raise ValueError("meshes is empty")
     return named
+
+
+def _coordinates(value) -> bool:
+    """Whether ``value`` reads as a table of numbers, the vertices of a ``(vertices, faces)`` pair; a pair of
+    meshes (two `Mesh` objects, two ``(V, F)`` pairs, two paths) holds meshes there instead."""
+    if isinstance(value, (str, os.PathLike)) or hasattr(value, "vertices"):
+        return False
+    try:
+        a = np.asarray(value)
+    except (ValueError, TypeError):  # ragged: a (V, F) pair's two arrays
+        return False
+    return a.ndim == 2 and a.dtype.kind in "biuf"
 
 
 def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[str, Any], ...]]:
