@@ -97,7 +97,8 @@ def simplify_fast_simplification(V, F, target_faces, *, timings=None):
 
     points = np.ascontiguousarray(V, dtype=np.float64)
     triangles = np.ascontiguousarray(F, dtype=np.int32)
-    reduction = 1.0 - float(target_faces) / max(len(triangles), 1)
+    # a target at or above the faces there are keeps them all (a negative reduction is refused by the package)
+    reduction = max(0.0, 1.0 - float(target_faces) / max(len(triangles), 1))
     with _Clock(timings):
         V2, F2 = fast_simplification.simplify(points, triangles, target_reduction=reduction)
     return compact(V2, F2)
@@ -247,11 +248,12 @@ def simplify(name: str, mesh, target_faces: int) -> PeerResult:
     if isinstance(target_faces, bool) or not float(target_faces) >= 1 or float(target_faces) != int(target_faces):
         raise ValueError(f"target_faces must be a whole number of at least 1, got {target_faces!r}")
     _require(name)
+    target = min(int(target_faces), len(F))  # as `qemjax.simplify` takes a target above the faces there are
     t0 = time.perf_counter()
-    V2, F2, call_s = run_peer(name, V, F, int(target_faces))
+    V2, F2, call_s = run_peer(name, V, F, target)
     if len(F2) == 0:
-        raise ValueError(f"peer {name!r} returned an empty mesh (target {int(target_faces)} of {len(F)} faces)")
-    stats = {"faces_in": int(len(F)), "faces_out": int(len(F2)), "target_faces": int(target_faces),
+        raise ValueError(f"peer {name!r} returned an empty mesh (target {target} of {len(F)} faces)")
+    stats = {"faces_in": int(len(F)), "faces_out": int(len(F2)), "target_faces": target,
              "rounds": float("nan"), "compile_s": 0.0, "run_s": call_s, "total_s": call_s,
              "wall_s": time.perf_counter() - t0}
     return PeerResult(V2, F2, stats)

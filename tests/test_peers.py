@@ -98,3 +98,19 @@ def test_a_malformed_mesh_is_refused_before_a_peer_sees_it(name):
         peers.simplify(name, (V, np.c_[F, F[:, 0]]), 100)
     with pytest.raises(ValueError, match="target_faces must be a whole number of at least 1"):
         peers.simplify(name, (V, F), -5)
+
+
+@pytest.mark.parametrize("name", list(peers.PEERS))
+def test_a_target_above_the_faces_is_the_whole_mesh_as_for_qemjax(name):
+    """A target at or above the input's faces: fast-simplification raised its own "target_reduction must be
+    between 0 and 1" for it, and every peer's row reported the target asked for where qemjax's reports the
+    faces there are (`simplify` returns the mesh unchanged): the same target_faces (and target_error) now."""
+    pytest.importorskip(peers._MODULES[name])
+    V, F = qemjax.shapes.icosphere(2)
+    res = peers.simplify(name, (V, F), 10 * len(F))
+    assert res.stats["target_faces"] == len(F) and 0 < len(res.faces) <= len(F)
+    if name == "fast-simplification":
+        assert len(res.faces) == len(F)
+        V2, F2 = peers.simplify_fast_simplification(V, F, 10 * len(F))
+        assert len(F2) == len(F)
+
