@@ -1,6 +1,8 @@
 """The multiresolution record: replay to any face count, the vertex map, LOD chains, the .npz form."""
 from __future__ import annotations
 
+import dataclasses
+import typing
 import warnings
 
 import numpy as np
@@ -241,6 +243,22 @@ def test_esqem_split_replays_the_contraction_phase_only():
     with pytest.raises(ValueError, match="split_factor=None"):  # the method as an object too
         qemjax.lod_chain(mesh, method=qemjax.ESQEM())
     assert len(qemjax.lod_chain(mesh, ratios=[0.5, 0.1], method=qemjax.ESQEM(split_factor=None))) == 2
+    # the method as simplify resolves it: a split factor given beside an object without one, and a registered
+    # subclass of ESQEM by its name, split after the contractions too (the chain's last level was then not
+    # its result, and nothing said so)
+    with pytest.raises(ValueError, match="split_factor=None"):
+        qemjax.lod_chain(mesh, method=qemjax.ESQEM(split_factor=None), split_factor=1.5)
+
+    @dataclasses.dataclass(frozen=True)
+    class Curved(qemjax.ESQEM):
+        name: typing.ClassVar[str] = "curved_for_lod"
+
+    qemjax.register_method(Curved)
+    try:
+        with pytest.raises(ValueError, match="split_factor=None"):
+            qemjax.lod_chain(mesh, method="curved_for_lod")
+    finally:
+        del qemjax._costs.REGISTRY["curved_for_lod"]
     with pytest.raises(ValueError, match="cannot run partitioned"):  # before the run, not after it
         qemjax.lod_chain(mesh, ratios=[0.5, 0.1], partition=True)
 

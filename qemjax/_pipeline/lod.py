@@ -68,6 +68,25 @@ class LodChain:
             f.write(data)
 
 
+def _splits(options: dict) -> bool:
+    """Whether the run that ``options`` describe splits edges after its contractions (ESQEM's ``split_factor``): the
+    method as `simplify` resolves it (by name, a registered subclass's too, or as an object), then a
+    ``split_factor`` given flat or dotted. False for a method without the field (simplify names the mistake)."""
+    from .. import _costs
+
+    try:
+        method = _costs.resolve(options.get("method", options.get("preset") or _costs.DEFAULT))
+    except ValueError:  # simplify reports the bad method
+        return False
+    if not hasattr(method, "split_factor"):
+        return False
+    split = method.split_factor
+    for key in ("split_factor", "method.split_factor"):
+        if key in options:
+            split = options[key]
+    return split is not None
+
+
 def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     """One simplification run down to the smallest of ``ratios`` (each in (0, 1], the fraction of faces to
     keep; any order, levels come back in the order given), and every level replayed from its record
@@ -121,9 +140,7 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
     if options.get("partition"):
         raise ValueError("lod_chain cannot run partitioned: a partitioned run keeps no record to replay the "
                          "levels from")
-    method = options.get("method")
-    splits = getattr(method, "split_factor", None) is not None if not isinstance(method, str) else method == "esqem"
-    if splits and options.get("split_factor", options.get("method.split_factor", 1.0)) is not None:
+    if _splits(options):
         raise ValueError("lod_chain with ESQEM needs split_factor=None (CLI: --split-factor none): edge splits "
                          "come after all contractions, and the levels are replayed from the contractions")
     if options.get("partition") is None:  # the size check, with its advice for a chain
