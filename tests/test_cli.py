@@ -356,6 +356,8 @@ def _boom(*args, **kwargs):
      "takes no workers"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5]\n[executor]\nthreads = 2', "unknown executor key 'threads'"),
     ('meshes = ["sheet.ply"]\ntargets = [0.5\n', "not valid TOML"),
+    ('meshes = ["shapes.torus(n_major=8)", "shapes.torus"]\ntargets = [0.5]',  # not "pass a dict", Python's
+     "meshes: two meshes have the same name 'torus': name each in a table, [meshes] torus_a = "),
 ])
 def test_sweep_command_bad_config(sweep_dir, monkeypatch, capsys, text, match):
     monkeypatch.setattr(qemjax._sweep.run, "sweep", _boom)

@@ -139,6 +139,11 @@ def _meshes(value, folder: Path, fail) -> dict[str, str]:
         value = [value]
     if isinstance(value, list):
         paths = [_mesh(v, folder, fail) for v in value]  # its errors name the config already (`fail`)
+        names = [_sweep._name(p, i) for i, p in enumerate(paths)]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:  # named by stem or shape: a config names them in a table (the Python API: a dict)
+            fail(f"meshes: two meshes have the same name {twice[0]!r}: name each in a table, "
+                 f"[meshes] {twice[0]}_a = \"...\", {twice[0]}_b = \"...\"")
         try:
             named = _sweep.name_meshes(paths)
         except ValueError as exc:
