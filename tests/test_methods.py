@@ -3,6 +3,7 @@ the settings' names and types (the command line, config files and sweeps are gen
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import ClassVar
 
 import numpy as np
@@ -96,6 +97,17 @@ def test_registration_refuses_taken_names_and_non_methods():
         qemjax.register_method(Shadow)
     assert "shadow" not in qemjax.methods()
     assert len(qemjax.simplify(qemjax.shapes.icosphere(2), ratio=0.5, boundary_weight=3.0).faces) == 160
+
+
+@pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan])
+def test_a_count_setting_that_is_no_whole_number_is_named(value):
+    """refit, polish and sliver_moves given inf or NaN: Python's OverflowError ("cannot convert float infinity
+    to integer", not even a ValueError) or its NaN message, without the setting's name."""
+    for name in ("refit", "polish", "sliver_moves"):
+        with pytest.raises(ValueError, match=f"^{name} must be a whole number, got"):
+            qemjax.QEM(**{name: value})
+    with pytest.raises(ValueError, match="^refit must be a whole number"):
+        qemjax.simplify(qemjax.shapes.icosphere(1), ratio=0.5, refit=value)
 
 
 def test_a_setting_of_another_method_is_refused_by_name(ball):

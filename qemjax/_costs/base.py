@@ -241,7 +241,7 @@ def _check_types(method) -> None:
         elif kind in (int, float):
             if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)):
                 raise ValueError(f"{name} must be a number, got {x!r}")
-            if kind is int and float(x) != int(x):
+            if kind is int and not (np.isfinite(x) and float(x) == int(x)):  # NaN, inf: no whole number
                 raise ValueError(f"{name} must be a whole number, got {x!r}")
             object.__setattr__(method, name, kind(x))
         elif not isinstance(x, str):
