@@ -201,10 +201,19 @@ def test_mesh_names(tmp_path):
     ({"boundary_weight": [1.0, 1.0]}, [0.5], {}, "grid\\['boundary_weight'\\] repeats the value 1.0"),
     ({}, [0.5], {"out": "no/such/folder/x.csv"}, "out's folder does not exist"),
     ({}, [0.5], {"metrics": {"samples": 100}}, "metrics: unknown keyword 'samples'"),
+    ({}, [0.5], {"metrics": {"seed": -1}}, "metrics: seed must be a non-negative integer, got -1"),
+    ({}, [0.5], {"metrics": {"n_samples": 2.5}}, "metrics: n_samples must be a non-negative integer, got 2.5"),
 ])
-def test_validation(grid, targets, kw, message):
+def test_validation(grid, targets, kw, message, monkeypatch):
+    """Each mistake is named before any cell runs (a bad metrics value was found by the first cell's
+    evaluation, after its run, and named without 'metrics')."""
+    def boom(*args, **kwargs):
+        raise AssertionError("a cell ran")
+    monkeypatch.setattr(sw, "iter_rows", boom)
+    monkeypatch.setattr(sw, "run_cells", boom)
     with pytest.raises(ValueError, match=message):
-        qemjax.sweep(shapes.icosphere(1), grid, targets, progress=False, **kw)
+        qemjax.sweep(shapes.icosphere(1), grid, targets, progress=False,
+                     **(kw if "executor" in kw else {"workers": 1, **kw}))
 
 
 def test_out_that_is_a_folder(tmp_path):

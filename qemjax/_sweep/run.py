@@ -480,7 +480,8 @@ class SweepInterrupted(KeyboardInterrupt):
 
 
 def _check_metrics(metrics: dict) -> None:
-    """ValueError for a ``metrics`` keyword `qemjax.metrics.evaluate` does not take (before anything runs)."""
+    """ValueError for a ``metrics`` keyword `qemjax.metrics.evaluate` does not take, or a bad value of one
+    (before anything runs)."""
     import inspect
 
     from ..metrics import evaluate
@@ -490,6 +491,14 @@ def _check_metrics(metrics: dict) -> None:
     bad = [k for k in metrics if k not in takes]
     if bad:
         raise ValueError(f"metrics: unknown keyword {bad[0]!r}; metrics.evaluate takes {', '.join(takes)}")
+    from ..metrics._distance import _check_samples
+
+    for k in ("n_samples", "seed"):  # their values too: else the first cells' runs would be lost to the error
+        if k in metrics:
+            try:
+                _check_samples(metrics[k], k)
+            except ValueError as exc:
+                raise ValueError(f"metrics: {exc}") from None
 
 
 def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None, progress: bool = True,
