@@ -397,6 +397,20 @@ def test_a_misspelt_option_suggests_the_close_one(src, tmp_path, capsys, monkeyp
     assert "--attributes" not in capsys.readouterr().err
 
 
+def test_what_max_distance_cannot_keep_is_named_as_an_option(src, tmp_path, capsys):
+    """--max-distance with ESQEM's splits or with attributes kept: the error names the options that turn them
+    off (it named simplify's keywords alone, split_factor=None and attributes=None)."""
+    out = str(tmp_path / "o.ply")
+    assert _cli.main(["simplify", str(src), out, "--method", "esqem", "--max-distance-rel", "0.01", "--quiet"]) == 2
+    assert "(CLI: --split-factor none)" in capsys.readouterr().err
+    V, F = shapes.bumpy_sphere(2)
+    colours = np.random.default_rng(0).integers(0, 255, (len(V), 4)).astype(np.uint8)
+    trimesh.Trimesh(V, F, vertex_colors=colours, process=False).export(tmp_path / "c.ply")
+    assert _cli.main(["simplify", str(tmp_path / "c.ply"), out, "--max-distance-rel", "0.01", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "(CLI: --attributes none; kept: color)" in err and err.count("\n") == 1, err
+
+
 def test_a_file_with_nan_coordinates_is_named(tmp_path, capsys):
     path = tmp_path / "nan.obj"
     path.write_text("v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n")

@@ -67,12 +67,12 @@ def check(max_distance, max_distance_rel) -> Bound | None:
 def supported(job) -> None:
     """ValueError for what a bounded run cannot do: the record replays positions and faces only."""
     if job.setup.split is not None:
-        raise ValueError("max_distance needs split_factor=None with this method: edge splits come after all "
-                         "contractions, and the bound picks a level of the contractions")
+        raise ValueError("max_distance needs split_factor=None (CLI: --split-factor none) with this method: edge "
+                         "splits come after all contractions, and the bound picks a level of the contractions")
     if job.tracker is not None:
         raise ValueError("max_distance keeps positions only (the levels it checks are replayed from the "
-                         f"contractions, without attributes): pass attributes=None (kept: "
-                         f"{', '.join(job.attrs.values)})")
+                         f"contractions, without attributes): pass attributes=None (CLI: --attributes none; "
+                         f"kept: {', '.join(job.attrs.values)})")
 
 
 def without_refit(job):
