@@ -184,6 +184,7 @@ def test_mesh_names(tmp_path):
         named = sw.name_meshes(pair)
         assert len(named) == 2 and list(named.values()) == list(pair)
     assert list(sw.name_meshes((m.vertices.tolist(), m.faces.tolist()))) == ["mesh0"]
+    assert list(sw.name_meshes((m.vertices.astype(object), m.faces))) == ["mesh0"]  # pandas' .values of a table
 
 
 @pytest.mark.parametrize("grid, targets, kw, message", [

@@ -181,7 +181,7 @@ def _coordinates(value) -> bool:
         a = np.asarray(value)
     except (ValueError, TypeError):  # ragged: a (V, F) pair's two arrays
         return False
-    return a.ndim == 2 and a.dtype.kind in "biuf"
+    return a.ndim == 2 and (a.dtype.kind in "biuf" or a.dtype == object)  # numbers held as objects: pandas' .values
 
 
 def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[str, Any], ...]]:
