@@ -201,6 +201,9 @@ def test_every_field_round_trips_through_the_cli_and_a_config_file(name, tmp_pat
         cfg = tmp_path / f"{owner}.toml"
         cfg.write_text(f'meshes = ["shapes.torus"]\ntargets = [0.5]\n[grid]\nmethod = ["{owner}"]\n'
                        f'{name} = [{_toml(v)}]\n')
+        if name == "texture":  # a file, relative to the config's folder (as its meshes are), that must exist
+            (tmp_path / v).write_bytes(b"")
+            v = str(tmp_path / v)
         grid = _sweep_config.load(cfg).grid
         assert grid[name] == [v] and type(grid[name][0]) is type(v), (name, owner, grid[name])
     assert ran
