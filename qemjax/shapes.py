@@ -232,7 +232,31 @@ def parse_spec(value) -> ShapeSpec:
         if not ok:
             raise ValueError(f"{text}: {k} must be {type(default).__name__}, got {v!r}")
     _counts(name, kwargs, text)  # as the generator would, before a sweep starts
+    _fits(name, {k: p.default for k, p in params.items()} | kwargs, text)
     return ShapeSpec(name, tuple((k, kwargs[k]) for k in params if k in kwargs))
+
+
+def _faces(name: str, args: dict) -> int:
+    """The faces shape ``name`` makes with ``args`` (every argument given: the spec's over the defaults)."""
+    if name in ("icosphere", "bumpy_sphere", "cube"):
+        return (20 if name != "cube" else 12) * 4 ** args["subdivisions"]
+    if name == "torus":
+        return 2 * args["n_major"] * args["n_minor"]
+    n = args["n"]  # grid: n × n cells of two faces, less the middle third's with a hole
+    return 2 * (n * n - ((n - 2 * (n // 3)) ** 2 if args["hole"] else 0))
+
+
+def _fits(name: str, args: dict, text: str) -> None:
+    """ValueError, before the shape is made, for one whose run would need more memory than this machine has
+    available (`_pipeline.fits`): a sweep or config file naming it would otherwise be killed by the system
+    while making it, without a word."""
+    from ._pipeline import fits
+
+    room = fits.available()
+    faces = _faces(name, args)
+    if room is not None and faces * fits.BYTES_PER_FACE > room:
+        raise ValueError(f"{text}: {faces:,} faces need about {fits._size(faces * fits.BYTES_PER_FACE)} in one "
+                         f"process, and this machine has {fits._size(room)} available: ask for a smaller shape")
 
 
 # -- example files ------------------------------------------------------------------------------------

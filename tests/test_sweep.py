@@ -345,6 +345,27 @@ def test_parquet_without_pyarrow_names_the_extra(monkeypatch, tmp_path):
 
 # ---- meshes named as shapes made in code ---------------------------------------------------------------
 
+def test_a_shape_too_large_to_run_is_refused_before_it_is_made(monkeypatch, tmp_path):
+    """A shape named with counts whose run would not fit (shapes.torus(n_major=100000000)) was made all the
+    same when the sweep loaded its meshes, and the system killed the process, without a word: it is refused
+    when named, in the words of a file too large (`_pipeline.fits`)."""
+    from qemjax._pipeline import fits
+    from qemjax._sweep import config as _sweep_config
+
+    monkeypatch.setattr(fits, "available", lambda: 1 << 30)  # 1 GiB: 2,097,152 faces at most
+    assert shapes.parse_spec("shapes.torus(n_major=2048, n_minor=512)").name == "torus"  # 2,097,152 faces
+    message = "shapes.torus(n_major=2049, n_minor=512): 2,098,176 faces need about 1.0 GiB in one process, and " \
+              "this machine has 1.0 GiB available: ask for a smaller shape"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        shapes.parse_spec("shapes.torus(n_major=2049, n_minor=512)")
+    with pytest.raises(ValueError, match="shapes.icosphere.subdivisions=9.: 5,242,880 faces"):
+        qemjax.sweep(["shapes.icosphere(subdivisions=9)"], {}, [0.5], progress=False)
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('targets = [0.5]\n[meshes]\nbig = {shape = "grid", n = 1100}\n')
+    with pytest.raises(ValueError, match=re.escape("s.toml: meshes: shapes.grid: 2,420,000 faces need")):
+        _sweep_config.load(cfg)
+
+
 def test_shapes_named_as_text():
     spec = shapes.parse_spec("shapes.bumpy_sphere(subdivisions=2, amplitude=0.05)")
     assert spec == shapes.ShapeSpec("bumpy_sphere", (("subdivisions", 2), ("amplitude", 0.05)))
