@@ -250,7 +250,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         if setup.late_asked:
             warnings.warn(f"late_memoryless is not applied: {why}; the run uses the summed quadrics throughout",
                           stacklevel=stacklevel)
-        elif why == ATTRIBUTES_KEPT:  # the default's geometry changes with attributes alone: said, not silent
+        elif why == ATTRIBUTES_KEPT and not bounded:  # the default's geometry changes with attributes alone:
+            # said, not silent (a bounded run refuses kept attributes instead: `bound.supported`)
             warnings.warn(f"keeping {', '.join(attrs.values)} {STRETCH_OFF} (late_memoryless: it does not carry "
                           "attributes): the geometry may be less accurate than with attributes=None (CLI: "
                           "--attributes none)", stacklevel=stacklevel)
