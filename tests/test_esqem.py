@@ -103,6 +103,28 @@ def test_boundary_vertices_use_pi():
     np.testing.assert_allclose(deficit[~corner], 0, atol=1e-5)
 
 
+def test_a_few_vertices_at_a_wide_ring_are_computed_in_a_small_piece(monkeypatch):
+    """The regression: a greedy contraction next to an apex of valence 200 refreshes a handful of vertices,
+    and the apexes' ring group was padded to a piece of 256 vertices of 256 faces each, every contraction
+    (most of the run's time). A group of few vertices now goes in a piece of `FEW`, with the same bits as
+    the vertices computed among all the others (larger pieces)."""
+    V, F = shapes.double_cone(200)
+    faces = FaceLists(F, len(V))
+    everyone = esqem.curvature_at(faces, V, np.arange(len(V)))
+    shapes_seen = []
+    rows = esqem.curvature_rows
+
+    def spy(pos, mask, boundary):
+        shapes_seen.append(pos.shape[:2])
+        return rows(pos, mask, boundary)
+    monkeypatch.setattr(esqem, "curvature_rows", spy)
+    few = np.array([0, 1, 2, len(V) - 1, len(V) - 2])  # both apexes (the last two) and three rim vertices
+    got = esqem.curvature_at(faces, V, few)
+    assert np.array_equal(got.view(np.int32), everyone[few].view(np.int32))
+    assert max(R for _, R in shapes_seen) >= 200  # the apexes' ring
+    assert all(k <= 16 for k, _ in shapes_seen), shapes_seen  # (`FEW` pieces)
+
+
 # -- refresh: the state after every round is the state recomputed from scratch ----------------------------
 
 CHECKED = []

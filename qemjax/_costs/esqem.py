@@ -57,6 +57,9 @@ CURVATURE_WEIGHT = 0.01  # a: the mean curvature term is 1 % of the mean quadric
 SPLIT_FACTOR = 4.0 / 3.0  # b: split edges longer than b × the mean edge length (the paper's 4/3)
 REWEIGHT_STEP = 0.05  # recompute Q̄, K̄ when the face count has fallen by this fraction since the last time
 KCOL, ACOL = 13, 14  # columns of K(v) and A(v) in a vertex row [position (3), quadric (10), K, A]
+FEW = 16  # a ring group of at most this many vertices goes in one piece of this shape, not the smallest of
+# `batching.CHUNKS`: a greedy contraction refreshes a few vertices, and at a vertex of valence in the hundreds
+# a piece padded to hundreds of vertices was mostly padding rings of that width, every contraction
 
 
 def vertex_curvature(pos, mask, boundary):
@@ -136,7 +139,8 @@ def ring_corners(faces: FaceLists, verts: np.ndarray):
 def curvature_at(faces: FaceLists, P: np.ndarray, verts: np.ndarray) -> np.ndarray:
     """(k,2) float32 [K(v), A(v)] at ``verts`` (k,) from the live faces and positions P (n,3): the faces
     are gathered on the host into padded rings (grouped by size, `ring.group_rings`) and one batched
-    kernel computes the angles and areas (fixed chunk shapes: a handful of compilations per run)."""
+    kernel computes the angles and areas (fixed chunk shapes, `FEW` for a group of few vertices: a handful
+    of compilations per run)."""
     verts = np.asarray(verts, np.int64)
     out = np.zeros((len(verts), 2), DTYPE)
     if len(verts) == 0:
@@ -146,7 +150,9 @@ def curvature_at(faces: FaceLists, P: np.ndarray, verts: np.ndarray) -> np.ndarr
     pending = []
     for idx, rg in ring.group_rings(owner, rot, len(verts), 0):
         pos = np.take(P, rg.corners.reshape(-1), axis=0).reshape(rg.corners.shape + (3,))
-        for (s, pp), (_, mm), (_, bb) in zip(chunks(pos), chunks(rg.mask), chunks(boundary[idx])):
+        size = FEW if len(idx) <= FEW else None  # (one vertex's K, A do not depend on the piece's shape)
+        for (s, pp), (_, mm), (_, bb) in zip(chunks(pos, size=size), chunks(rg.mask, size=size),
+                                             chunks(boundary[idx], size=size)):
             pending.append((idx[s:s + len(pp)], curvature_rows(pp, mm, bb)))
     for sel, o in pending:
         out[sel] = np.asarray(o).T[: len(sel)]
