@@ -1,7 +1,8 @@
 """Methods on a mesh with two vertices of high valence (`shapes.double_cone`, a fan-triangulated cap taken to
-the extreme), in both schedulers: seconds, compile seconds and the output's hash; with ``--rev``, the package
-at that git revision runs each case right after the working tree's (same process, same machine state), and
-the hashes say whether the outputs are the same bits.
+the extreme), in both schedulers: seconds, the process's CPU seconds (all its threads: less moved than the
+wall clock by other processes on a shared machine), compile seconds and the output's hash; with ``--rev``,
+the package at that git revision runs each case right after the working tree's (same process, same machine
+state), and the hashes say whether the outputs are the same bits.
 
     python experiments/probes/area_valence.py                                  # area, valences 100 and 200
     python experiments/probes/area_valence.py 200 --rev main                   # old against new
@@ -43,13 +44,13 @@ def main():
         for method in args.methods:
             for scheduler in args.schedulers:
                 for label, pkg in versions:
-                    t = time.perf_counter()
+                    t, c = time.perf_counter(), time.process_time()
                     r = pkg.simplify((m.vertices, m.faces), target_faces=args.target, method=method,
                                      scheduler=scheduler)
-                    s = time.perf_counter() - t
+                    s, c = time.perf_counter() - t, time.process_time() - c
                     h = hashlib.sha256(r.vertices.tobytes() + r.faces.tobytes()).hexdigest()[:12]
                     print(f"{label:8s} double_cone({n}) {len(m.faces)} -> {len(r.faces)} faces, {method} {scheduler}: "
-                          f"{s:.1f} s (compile {r.stats['compile_s']:.2f} s) {h}", flush=True)
+                          f"{s:.1f} s (cpu {c:.1f} s, compile {r.stats['compile_s']:.2f} s) {h}", flush=True)
 
 
 if __name__ == "__main__":
