@@ -227,6 +227,29 @@ def test_wide_ring_price_on_a_mesh_is_the_numpy_price_bit_for_bit():
     assert wide
 
 
+def test_wide_ring_price_reads_the_corners_in_the_compiled_loop():
+    """The regression: `_price_host` gathered each batch's ring corners into (pairs, ring, 3, 3) float64
+    arrays (and which corners move, (pairs, ring, 3)) before the compiled loop read them: about a fifth of
+    its time at a vertex of valence 200, re-priced after every contraction around it. The loop now reads
+    the corners from VS by id; what the price allocates stays under that one array's size."""
+    import tracemalloc
+
+    V, F, fl, E, VS = _mesh_rings(shapes.double_cone(200))
+    idx, rg = max(ring.gather_groups(fl, E, len(V), with_dead=True), key=lambda g: g[1].mask.shape[1])
+    P = E[idx].astype(np.int32)
+    K, R = rg.mask.shape
+    assert R > area.RING_CAP and K > 100
+    want = area._price_host(VS, P, rg.corners, rg.mask)  # (compiled or loaded here)
+    tracemalloc.start()
+    try:
+        got = area._price_host(VS, P, rg.corners, rg.mask)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert same_bits(got, want)
+    assert peak < K * R * 3 * 3 * 8, (peak, K * R * 3 * 3 * 8)
+
+
 def test_wide_ring_price_runs_its_bisections_compiled():
     """The regression: the wide-ring path priced a batch by numpy passes over (pairs, ring, 3) arrays, one
     set per bisection step (about 190 evaluations of ΔS or its slope a pair), which took minutes on a

@@ -155,26 +155,29 @@ def solve_host(pa, pb, pos, moving, mask, lo, hi):
 
 
 def _price_host(VS, pairs, corners, mask):
-    """The kernel's output for pairs with rings wider than RING_CAP, computed on the host in float64."""
-    VS = np.asarray(VS, np.float64)
-    pairs = np.asarray(pairs, np.int64)
-    mask = np.asarray(mask)
-    keep = mask.any(0)  # drop the columns no pair uses
+    """The kernel's output for pairs with rings wider than RING_CAP, computed on the host in float64: the
+    rings' corners are read from VS by the compiled loop (`area_host.affine_rings`), not gathered into
+    (pairs, ring, 3, 3) arrays first."""
+    from . import area_host  # compiled loops, imported on first use (only wide rings take this path)
+
+    VS = np.asarray(VS)
+    P = np.ascontiguousarray(VS[:, :3], np.float64)
+    pairs = np.ascontiguousarray(pairs, np.int64)
+    corners = np.ascontiguousarray(corners, np.int32)
+    mask = np.ascontiguousarray(mask, np.bool_)
+    cols = np.flatnonzero(mask.any(0))  # drop the columns no pair uses
     # a pair with no faces (a batch's padding) has ΔS = 0 at every s whatever its ring holds: it is solved
-    # with an empty ring, the same steps on the same values, without gathering a ring or passing over it
+    # with an empty ring, the same steps on the same values, without reading a ring or passing over it
     live = mask.any(1)
-    corners, mask = np.asarray(corners)[live][:, keep], mask[live][:, keep]
-    pa, pb = VS[pairs[:, 0], :3], VS[pairs[:, 1], :3]
     fa, fb = VS[pairs[:, 0], 3] > 0.5, VS[pairs[:, 1], 3] > 0.5
     lo, hi = np.where(fb & ~fa, 1.0, 0.0), np.where(fa & ~fb, 0.0, 1.0)
     s, cost, branch = np.empty(len(pairs)), np.empty(len(pairs)), np.empty(len(pairs), np.int64)
-    pos = VS[np.minimum(corners, len(VS) - 1), :3]
-    moving = (corners == pairs[live, 0, None, None]) | (corners == pairs[live, 1, None, None])
-    s[live], cost[live], _, branch[live] = solve_host(pa[live], pb[live], pos, moving, mask, lo[live], hi[live])
-    n = int((~live).sum())
-    s[~live], cost[~live], _, branch[~live] = solve_host(
-        pa[~live], pb[~live], np.zeros((n, 0, 3, 3)), np.zeros((n, 0, 3), bool), np.zeros((n, 0), bool),
-        lo[~live], hi[~live])
+    for rows, used in ((np.flatnonzero(live), cols), (np.flatnonzero(~live), cols[:0])):
+        u, w, before, sub = area_host.affine_rings(P, pairs, corners, mask, rows, used)
+        out = np.empty(len(rows)), np.empty(len(rows)), np.empty(len(rows)), np.empty(len(rows), np.int64)
+        area_host.solve(u, w, sub, before, lo[rows], hi[rows], *out)
+        s[rows], cost[rows], branch[rows] = out[0], out[1], out[3]
+    pa, pb = P[pairs[:, 0]], P[pairs[:, 1]]
     x = pa + s[:, None] * (pb - pa)
     return np.concatenate([x.T, cost[None], branch[None]], 0).astype(DTYPE)
 

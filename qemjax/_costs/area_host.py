@@ -95,6 +95,22 @@ def _cross(p):
 
 
 @njit(cache=True)
+def _affine_face(p0, p1, u, w, k, j):
+    """Row j of pair k's u, w (K,3,R) from the face's corners with the moving ones at pa (p0) and at pb (p1)."""
+    u0, u1, u2 = _cross(p0)
+    q0, q1, q2 = _cross(p1)
+    u[k, 0, j], u[k, 1, j], u[k, 2, j] = u0, u1, u2
+    w[k, 0, j], w[k, 1, j], w[k, 2, j] = q0 - u0, q1 - u1, q2 - u2
+
+
+@njit(cache=True)
+def _norm_cross(p):
+    """|(p1 − p0) × (p2 − p0)|, twice the face's area, as `np.linalg.norm` adds its entries."""
+    e0, e1, e2 = _cross(p)
+    return np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+
+
+@njit(cache=True)
 def affine(pa, pb, pos, moving, mask):
     """`area.affine_areas` and `area._area` in float64 for K pairs: pa, pb (K,3), their rings' corners pos
     (K,R,3,3) with moving (K,R,3), mask (K,R). Returns u, w (K,3,R) (components first) and the rings'
@@ -113,17 +129,47 @@ def affine(pa, pb, pos, moving, mask):
                     p = pos[k, j, c, x]
                     p0[c, x] = pa[k, x] if moving[k, j, c] else p
                     p1[c, x] = pb[k, x] if moving[k, j, c] else p
-            u0, u1, u2 = _cross(p0)
-            q0, q1, q2 = _cross(p1)
-            u[k, 0, j], u[k, 1, j], u[k, 2, j] = u0, u1, u2
-            w[k, 0, j], w[k, 1, j], w[k, 2, j] = q0 - u0, q1 - u1, q2 - u2
-            if mask[k, j]:
-                e0, e1, e2 = _cross(pos[k, j])
-                buf[j] = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-            else:
-                buf[j] = 0.0
+            _affine_face(p0, p1, u, w, k, j)
+            buf[j] = _norm_cross(pos[k, j]) if mask[k, j] else 0.0
         before[k] = 0.5 * numpy_sum(buf, R)
     return u, w, before
+
+
+@njit(cache=True)
+def affine_rings(P, pairs, corners, mask, rows, cols):
+    """`affine` of the pairs ``rows`` (k,) of a batch, on the ring columns ``cols`` (c,) only, with the rings
+    given as vertex ids: positions P (n,3), pairs (K,2), corners (K,R,3) (an id past P's end reads its last
+    row), mask (K,R). The same values as `affine` of pa, pb = P[pairs[rows]], pos = the corners' positions,
+    moving = the corners at either endpoint, without forming those (k,c,3,3) arrays. Returns u, w (k,3,c),
+    the areas before (k,) and the mask (k,c) of those rows and columns."""
+    k_, c_ = len(rows), len(cols)
+    last = P.shape[0] - 1
+    u = np.empty((k_, 3, c_))
+    w = np.empty((k_, 3, c_))
+    before = np.empty(k_)
+    sub = np.empty((k_, c_), np.bool_)
+    buf = np.empty(max(c_, 1))
+    p = np.empty((3, 3))
+    p0 = np.empty((3, 3))
+    p1 = np.empty((3, 3))
+    for k in range(k_):
+        r = rows[k]
+        a, b = pairs[r, 0], pairs[r, 1]
+        for j in range(c_):
+            col = cols[j]
+            for c in range(3):
+                v = corners[r, col, c]
+                mv = v == a or v == b
+                v = min(v, last)
+                for x in range(3):
+                    p[c, x] = P[v, x]
+                    p0[c, x] = P[a, x] if mv else p[c, x]
+                    p1[c, x] = P[b, x] if mv else p[c, x]
+            _affine_face(p0, p1, u, w, k, j)
+            sub[k, j] = mask[r, col]
+            buf[j] = _norm_cross(p) if sub[k, j] else 0.0
+        before[k] = 0.5 * numpy_sum(buf, c_)
+    return u, w, before, sub
 
 
 @njit(cache=True)
