@@ -103,6 +103,47 @@ def test_limit_bites(tmp_path):
     assert info["stop"] == "target"
 
 
+def test_queue_push_makes_one_call_per_pair():
+    """The regression: `Queue.push` copied each entry's two rows and scrambled its tie, took its stamp and
+    unblocked it by a call each, about six Python-level calls per pair; a vertex of valence 400 pushes its
+    400 pairs after every contraction around it (method="esqem" greedy on shapes.double_cone(400): a
+    quarter of the run). The rows, ties and stamps are now taken for the whole push at once: per pair, the
+    heap push alone. The entries are those of one pair at a time (`tie`, the rows, the stamps in order)."""
+    import heapq
+    import sys
+    from types import SimpleNamespace
+
+    from qemjax._schedulers.greedy.queue import Queue, tie
+
+    rng = np.random.default_rng(1)
+    k = 400
+    pairs = [(int(a), 100_000 + i) for i, a in enumerate(rng.integers(0, 2**31, k))]
+    priced = SimpleNamespace(x=rng.normal(size=(k, 3)).astype(np.float32), cost=rng.random(k).astype(np.float32),
+                             branch=rng.integers(0, 3, k).astype(np.int8), parts=rng.random((2, k)).astype(np.float32))
+    l2 = rng.random(k)
+    q = Queue()
+    q.push(pairs[:3], priced, l2)  # (a first push: the stamps go on from it)
+    q.blocked[pairs[5]] = 2
+    calls = [0]
+
+    def count(frame, event, arg):
+        calls[0] += event in ("call", "c_call")
+    sys.setprofile(count)
+    try:
+        q.push(pairs, priced, l2)
+    finally:
+        sys.setprofile(None)
+    assert calls[0] < k + 100, calls[0]  # about 6 k before
+    assert not q.blocked
+    for i, (a, b) in enumerate(pairs):
+        x, br, c, p = q.entry((a, b))
+        assert x.dtype == p.dtype == np.float32 and np.array_equal(x, priced.x[i]) and np.array_equal(p, priced.parts[:, i])
+        assert (br, c) == (int(priced.branch[i]), float(priced.cost[i])) and q.stamp[(a, b)] == 4 + i
+    live = sorted(e for e in q.heap if q.stamp[(e[3], e[4])] == e[5])
+    assert live == sorted((float(priced.cost[i]), float(l2[i]), tie(a, b), a, b, 4 + i) for i, (a, b) in enumerate(pairs))
+    assert heapq.heappop(q.heap)[5] in (1, 2, 3, 4 + int(np.argmin(priced.cost)))  # a heap of them all
+
+
 def test_queue_stays_as_long_as_its_pairs():
     """The one-at-a-time queue (`queue.Queue`, memoryless and ring-support models): re-pushing the same
     pairs many times (a high-valence vertex re-prices its pairs at every contraction around it) leaves the
@@ -131,8 +172,8 @@ def test_queue_stays_as_long_as_its_pairs():
         ref.blocked[sub[0]] = 1
         q.compact()
         assert len(q.heap) <= 2 * len(q.stamp) + 1024
-        x = q.placed[sub[-1]][0]
-        assert x.base is None or x.base.size == 3, "an entry's row is a view of its pushed block"
+        x = q.entry(sub[-1])[0]
+        assert x.dtype == np.float32 and (x.base is None or x.base.size == 3), "an entry's row is a view of its block"
     assert len(q.heap) < len(ref.heap) / 2  # compacted (the reference's heap holds every push)
 
     def pops(queue):

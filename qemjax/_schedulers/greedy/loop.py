@@ -116,7 +116,7 @@ def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, pairs: np.ndarray, target_f
         key, l2, tie, a, b, s = heapq.heappop(q.heap)
         if q.stamp.get((a, b)) != s or (a, b) in q.blocked:
             continue
-        x, br, cost, parts, _ = q.placed[(a, b)]
+        x, br, cost, parts = q.entry((a, b))
         if ranked and cost > options.max_cost:  # ranked by more than the cost: others may still fit
             block((a, b), BUDGET)
             continue

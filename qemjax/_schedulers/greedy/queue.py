@@ -21,6 +21,13 @@ def tie(a: int, b: int) -> int:
     return ((a * 0x9E3779B1) ^ (b * 0x85EBCA77)) & 0xFFFFFFFF
 
 
+def ties(P: np.ndarray) -> list:
+    """`tie` of each pair P (k,2) of non-negative ids below 2³², as Python ints: the products taken modulo
+    2⁶⁴ keep the low 32 bits that `tie` keeps."""
+    P = np.asarray(P, np.uint64).reshape(-1, 2)
+    return (((P[:, 0] * np.uint64(0x9E3779B1)) ^ (P[:, 1] * np.uint64(0x85EBCA77))) & np.uint64(0xFFFFFFFF)).tolist()
+
+
 class Queue:
     """The priority queue of pairs with lazy deletion: an entry is current while its stamp is.
 
@@ -49,16 +56,36 @@ class Queue:
         return (cost + weighted_sum(parts, self.weights)).astype(np.float32).tolist()
 
     def push(self, pairs, priced, length2):
-        # each entry's own copies of its rows: a view would keep the whole pushed block alive while one of
-        # its pairs stays current (a vertex of valence d re-prices d pairs per contraction: d² rows)
+        """Enter pairs (a list of (a, b)) with their `Priced` rows and squared lengths (k,). Each entry holds
+        its own row (x and parts as Python floats, with their dtypes: `entry` gives the arrays back): a view
+        would keep the whole pushed block alive while one of its pairs stays current (a vertex of valence d
+        re-prices d pairs per contraction: d² rows), and a copy per row cost a call each. A vertex of
+        valence d pushes its d pairs after every contraction around it, so the per-pair work is done for
+        all of them at once (`ties`, ``tolist``, the stamps): per pair only the entries are written."""
+        k = len(pairs)
+        if k == 0:
+            return
         X, parts_t = np.asarray(priced.x), np.asarray(priced.parts).T
         keys = self._keys(priced.cost, parts_t)
-        branch = np.asarray(priced.branch).tolist()
-        for k, ((a, b), c, l2, key) in enumerate(zip(pairs, priced.cost.tolist(), length2.tolist(), keys)):
-            s = self.stamp[(a, b)] = next(self.stamps)
-            self.placed[(a, b)] = (X[k].copy(), branch[k], c, parts_t[k].copy(), l2)
-            self.blocked.pop((a, b), None)
-            heapq.heappush(self.heap, (key, l2, tie(a, b), a, b, s))
+        dtypes = (X.dtype, parts_t.dtype)
+        first = next(self.stamps)
+        if k > 1:  # the counter moves past the k stamps taken here
+            self.stamps = itertools.count(first + k)
+        stamp, placed, heap, heappush = self.stamp, self.placed, self.heap, heapq.heappush
+        for pair in self.blocked.keys() & set(pairs):
+            del self.blocked[pair]
+        for (a, b), x, br, c, p, l2, key, t, s in zip(pairs, X.tolist(), np.asarray(priced.branch).tolist(),
+                                                      np.asarray(priced.cost).tolist(), parts_t.tolist(),
+                                                      length2.tolist(), keys, ties(pairs), range(first, first + k)):
+            stamp[(a, b)] = s
+            placed[(a, b)] = (x, br, c, p, l2, dtypes)
+            heappush(heap, (key, l2, t, a, b, s))
+
+    def entry(self, pair):
+        """The placed pair's (x (3,), branch, cost, parts (p,)), x and parts as the arrays they were pushed
+        as (their rows' dtypes)."""
+        x, br, c, p, _, (xt, pt) = self.placed[pair]
+        return np.array(x, xt), br, c, np.array(p, pt)
 
     def reweigh(self, weights):
         """New ranking weights: every current, unblocked entry is ranked again (the heap is rebuilt)."""
