@@ -252,12 +252,31 @@ def _read_feature_edges(path: str) -> np.ndarray:
 
 
 def _read_vector(path: str, kind, flag: str) -> np.ndarray:
-    """(k,) values from a .npy file or a text file of one value per line (``kind``: the text's type)."""
+    """(k,) values from a .npy file or a text file of one value per line (``kind``: the text's type); an
+    empty text file is no values (numpy's warning about it is left out: the run's checks name the file)."""
     try:
-        a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=kind, ndmin=1)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "loadtxt: input contained no data")
+            a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=kind, ndmin=1)
     except (OSError, ValueError) as exc:
         raise CliError(f"could not read {flag} from {path}: {exc}") from None
-    return a.reshape(-1) if a.ndim == 2 and 1 in a.shape else a
+    a = a.reshape(-1) if a.ndim == 2 and 1 in a.shape else a
+    if a.ndim != 1:
+        raise CliError(f"{flag} {path}: expected a flat list of values (in text, one a line), got an "
+                       f"array of shape {a.shape}")
+    return a
+
+
+def _name_vertex_files(args, exc: ValueError) -> str:
+    """``exc``'s message, a check of ``locked`` or ``vertex_weights`` (`_pipeline.locks`, run once the
+    input is read) given in the user's terms: the option and its file, not the keyword."""
+    text = str(exc)
+    for name in ("locked", "vertex_weights"):
+        path = getattr(args, name, None)
+        m = re.match(rf"{name}(?::\s*|\s+)(.*)", text, re.S) if path is not None else None
+        if m:
+            return f"--{name.replace('_', '-')} {path}: {m.group(1)}"
+    return text
 
 
 def _number_or_none(flag: str, text: str):
@@ -718,7 +737,7 @@ def _main(argv: list) -> int:
         try:
             return _run(args)
         except ValueError as exc:
-            print(f"qemjax: error: {exc}", file=sys.stderr)
+            print(f"qemjax: error: {_name_vertex_files(args, exc)}", file=sys.stderr)
             return 2
 
 

@@ -859,3 +859,26 @@ def test_lod_takes_locked_vertices_as_simplify_does(tmp_path, capsys):
     for i in (0, 1):
         level = np.asarray(qemjax.load(str(tmp_path / "lods" / f"bumpy-lod{i}.obj")).vertices)
         assert all((np.abs(level - V[j]).max(1) < 1e-7).any() for j in idx)
+
+
+def test_vertex_file_errors_name_the_option_and_the_file(src, tmp_path, capsys):
+    """--locked and --vertex-weights files that do not fit said `locked must be one-dimensional` (simplify's
+    keyword, not the option or its file), and an empty text file gave numpy's warning: each is one line
+    naming the option and the file; an empty --locked file locks nothing, without a warning."""
+    np.savetxt(tmp_path / "pairs.txt", np.arange(78).reshape(39, 2), fmt="%d")
+    (tmp_path / "empty.txt").write_text("")
+    np.save(tmp_path / "half.npy", np.array([0.5, 1.0]))
+    np.savetxt(tmp_path / "three.txt", [1.0, 2.0, 3.0])
+    out = str(tmp_path / "o.obj")
+    for flag, name, says in (("--locked", "pairs.txt", "expected a flat list of values"),
+                             ("--vertex-weights", "pairs.txt", "expected a flat list of values"),
+                             ("--vertex-weights", "empty.txt", "needs one weight per input vertex (642), got 0"),
+                             ("--vertex-weights", "three.txt", "needs one weight per input vertex (642), got 3"),
+                             ("--locked", "half.npy", "must be a boolean mask or integer vertex indices")):
+        for cmd in (["simplify", str(src), out, "--ratio", "0.5"], ["lod", str(src), str(tmp_path / "lods")]):
+            assert _cli.main([*cmd, flag, str(tmp_path / name), "--quiet"]) == 2
+            err = capsys.readouterr().err
+            assert err.startswith(f"qemjax: error: {flag} {tmp_path / name}: {says}") and err.count("\n") == 1, err
+    assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--locked", str(tmp_path / "empty.txt"),
+                      "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
