@@ -61,10 +61,12 @@ OPTIONS = {
                           "read from FILE: .npy, or text with two integers per line (indices of the input "
                           "after welding and dropping unused vertices)", shown="none"),
     "preserve_topology": dict(shown="on; off with --pair-threshold > 0"),
+    "measure": dict(shown="on when the method re-fits, as the default method does; else off"),
     "flip_angle": dict(metavar="DEG", help="forbid contractions that turn a face's normal by DEG "
                        "degrees or more; 'none' allows flips"),
     "min_angle": dict(metavar="DEG", help="refuse contractions that leave a face they move with a "
-                      "smallest angle under about DEG degrees, unless the face was worse before; default off"),
+                      "smallest angle under about DEG degrees, unless the face was worse before; 'none': off",
+                      shown="none"),
     "split_factor": dict(metavar="B", help="with --method esqem, split edges longer than B × the "
                          "mean edge length after simplifying (the face target still holds); 'none' disables",
                          shown="4/3"),

@@ -197,6 +197,17 @@ def test_help_gives_the_default_methods_settings():
     assert "with the default method" not in actions["flip_angle"].help  # the same in both
 
 
+def test_help_says_what_an_unset_default_does():
+    """--measure's help ended `(default: None)` and --min-angle's `default off (default: None)`: Python's
+    None, not what the command does without them (measure when the method re-fits; no angle floor)."""
+    for name, parser in _cli._parser().subcommands.items():
+        for action in parser._actions:
+            assert "(default: None)" not in (action.help or ""), (name, action.dest, action.help)
+    actions = _simplify_actions()
+    assert "(default: on when the method re-fits" in " ".join(actions["measure"].help.split())
+    assert " ".join(actions["min_angle"].help.split()).endswith("'none': off (default: none)")
+
+
 def test_help_is_the_first_sentence_of_each_setting():
     """Each option's help is its setting's first sentence: a half-open interval, s in [0, √3/2), ended the
     sentence count's brackets one short, and --quality-threshold's help ran on through the whole entry;
