@@ -480,7 +480,7 @@ _FORMAT_NAMES = {"gltf": "glTF"}
 def _warn_format_losses(res, V, ext: str) -> None:
     """Warn when the format cannot hold what the result has: positions as precise as the result's (STL,
     GLB and glTF store float32, OFF as trimesh writes it 10 decimals; PLY and OBJ widen, `write`), or its
-    kept attributes (STL and OFF store positions and faces only)."""
+    kept attributes (STL and OFF store positions and faces only; PLY, UVs without their texture image)."""
     V = np.asarray(V, np.float64)
     rounded = {"stl": lambda X: X.astype(np.float32), "glb": lambda X: X.astype(np.float32),
                "gltf": lambda X: X.astype(np.float32), "off": lambda X: np.round(X, 10)}.get(ext)
@@ -495,6 +495,12 @@ def _warn_format_losses(res, V, ext: str) -> None:
     if kept and ext in ("stl", "off"):
         warnings.warn(f"{_FORMAT_NAMES.get(ext, ext.upper())} stores positions and faces only: the kept {', '.join(kept)} not written "
                       "(.obj, .ply, .glb and .gltf hold them)", stacklevel=3)
+    if ext == "ply" and getattr(res, "uv", None) is not None:
+        from ._mesh.wedges import names_texture
+
+        if names_texture(getattr(res, "material", None)):
+            warnings.warn("PLY holds the UVs (as s, t) but not their texture image: the image is not written "
+                          "(.obj writes it beside the file, .glb and .gltf pack it in)", stacklevel=3)
 
 
 def _write_file(path: str, data) -> None:

@@ -715,6 +715,23 @@ def test_uvs_without_material_get_no_made_up_image(tmp_path, capsys):
     assert "images" not in gltf and "TEXCOORD_0" in gltf["meshes"][0]["primitives"][0]["attributes"]
 
 
+def test_ply_output_says_it_leaves_the_texture_image_out(tmp_path, capsys):
+    """--texture IMAGE with a .ply output wrote the UVs (s, t) and no image, without a word (an OBJ gets it
+    beside, a GLB packs it): a warning says so; UVs without an image have none to leave out."""
+    from PIL import Image
+
+    src = _uv_grid_obj(tmp_path / "grid.obj")
+    Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "t.png")
+    keep = ["--ratio", "0.5", "--quiet", "--attributes", "uv"]
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.ply"), *keep, "--texture", str(tmp_path / "t.png")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "texture image" in line]
+    assert said == ["qemjax: warning: PLY holds the UVs (as s, t) but not their texture image: the image is not "
+                    "written (.obj writes it beside the file, .glb and .gltf pack it in)"], said
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.obj", "o.ply", "t.png"]
+    assert _cli.main(["simplify", str(src), str(tmp_path / "o.ply"), *keep]) == 0
+    assert "texture image" not in capsys.readouterr().err
+
+
 def test_lod_refuses_texture_with_the_real_reason(tmp_path, capsys, monkeypatch):
     src = _uv_grid_obj(tmp_path / "grid.obj")  # it does carry UVs: the reason is the levels'
     _no_simplify(monkeypatch)
