@@ -474,6 +474,26 @@ def test_config_texture_paths_are_relative_to_the_config(tmp_path, monkeypatch):
         _sweep_config.load(cfg)
 
 
+def test_config_metrics_take_what_evaluate_takes(tmp_path):
+    """A config's metrics.n_samples had to be >= 1 while qemjax.sweep and metrics.evaluate take 0 (the
+    distances at the vertices alone, no attribute deviation): a config takes 0 too, and refuses what they
+    refuse."""
+    from qemjax._sweep import config as _sweep_config
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('meshes = ["shapes.icosphere(subdivisions=2)"]\ntargets = [0.5]\nout = "t.csv"\n'
+                   '[metrics]\nn_samples = 0\nseed = 0\n')
+    config = _sweep_config.load(cfg)
+    assert config.metrics == {"n_samples": 0, "seed": 0}
+    df = qemjax.sweep(config.meshes, {}, config.targets, metrics=config.metrics, progress=False)
+    assert df["error"].fillna("").eq("").all() and df["hausdorff"].notna().all()
+    for k in ("n_samples", "seed"):
+        cfg.write_text('meshes = ["shapes.icosphere(subdivisions=2)"]\ntargets = [0.5]\n'
+                       f'[metrics]\n{k} = -1\n')
+        with pytest.raises(ValueError, match=rf"metrics.{k} must be an integer >= 0, got -1"):
+            _sweep_config.load(cfg)
+
+
 def test_config_grid_takes_integers_and_untyped_keywords(tmp_path):
     """`grid.refit = [0, 1]` (an int keyword) and `grid.attributes = ["auto", "none"]` (a keyword without
     an annotation) are read as the Python sweep takes them, and run (issue 31's two config failures)."""

@@ -253,8 +253,8 @@ def _metrics(value, fail) -> bool | dict:
         if k not in METRICS_KEYS:
             fail(f"unknown metrics key {k!r}{_flat.did_you_mean(k, METRICS_KEYS)}; metrics may set "
                  f"{', '.join(METRICS_KEYS)}")
-        if isinstance(v, bool) or not isinstance(v, int) or v < (1 if k == "n_samples" else 0):
-            fail(f"metrics.{k} must be an integer >= {1 if k == 'n_samples' else 0}, got {v!r}")
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:  # n_samples = 0: distances at the vertices
+            fail(f"metrics.{k} must be an integer >= 0, got {v!r}")  # alone, as qemjax.sweep and evaluate take it
     return dict(value)
 
 
