@@ -46,3 +46,13 @@ def test_front_other_columns_and_bad_column():
     assert list(qemjax.pareto_front(df, "b", "a").index) == [2, 1, 0]
     with pytest.raises(ValueError, match="no column 'rms'"):
         qemjax.pareto_front(df, "a", "rms")
+
+
+def test_a_cost_that_is_not_a_number_is_named():
+    """A column holding "n/a" failed in pandas' words (could not convert string to float): the error names
+    the column, the row and the value; missing values (None, NaN) still leave their rows out."""
+    df = pd.DataFrame({"faces_out": [10, 20, 30, 40], "rms_rel": [0.1, "n/a", 0.05, 0.2]}, index=list("abcd"))
+    with pytest.raises(ValueError, match=r"^pareto_front: column 'rms_rel' holds 'n/a' in row 'b', not a number"):
+        qemjax.pareto_front(df)
+    df.loc["b", "rms_rel"] = None
+    assert list(qemjax.pareto_front(df).index) == ["a", "c"] == brute_front(df.astype(float), "faces_out", "rms_rel")
