@@ -309,6 +309,12 @@ class Partition:
             positive("workers", self.workers)
         if not isinstance(self.measure, (bool, np.bool_)):
             raise ValueError(f"Partition: measure must be True or False, got {self.measure!r}")
+        # what the run calls on a client (`_partition.execute.DaskRunner`), looked for without importing dask:
+        # anything else failed only once the input was cut, in the library's words
+        if self.client is not None and not all(callable(getattr(self.client, m, None))
+                                               for m in ("submit", "scheduler_info", "cancel")):
+            raise ValueError(f"Partition: client must be a dask.distributed Client, or None for local processes; "
+                             f"got {type(self.client).__name__}")
         if not (self.scratch is None or isinstance(self.scratch, (str, os.PathLike))):
             raise ValueError(f"Partition: scratch must be a folder's path or None, got {type(self.scratch).__name__}")
         if self.scratch is not None:  # stored as a str: the same folder given as a str or a Path is equal settings

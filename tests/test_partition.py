@@ -135,6 +135,26 @@ def test_partition_settings_are_checked():
             Partition(**kw)
 
 
+def test_partition_refuses_a_client_that_is_no_dask_client():
+    """Partition(client=float('nan')) (or any object) was taken, to fail once the run had cut the input: it
+    is refused at once, in one line, without importing dask (a client-like object is taken)."""
+    import sys
+
+    for bad in (float("nan"), "tcp://host:8786", object()):
+        with pytest.raises(ValueError, match=r"^Partition: client must be a dask.distributed Client, or None "
+                                             rf"for local processes; got {type(bad).__name__}$"):
+            Partition(client=bad)
+
+    class LikeAClient:
+        def submit(self, *a, **k): ...
+        def scheduler_info(self): ...
+        def cancel(self, *a, **k): ...
+
+    loaded = "distributed" in sys.modules
+    assert Partition(client=LikeAClient()).client is not None and Partition(client=None).client is None
+    assert ("distributed" in sys.modules) == loaded
+
+
 def test_partition_settings_hash_and_refuse_a_scratch_that_is_no_path():
     """A list given as scratch was taken, and made the frozen settings unhashable."""
     assert hash(Partition(scratch="parts")) == hash(Partition(scratch="parts")) and len({Partition(), Partition()}) == 1
