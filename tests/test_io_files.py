@@ -6,6 +6,7 @@ import contextlib
 import re
 import signal
 import struct
+import warnings
 
 import numpy as np
 import pytest
@@ -387,3 +388,30 @@ def test_coff_colours_that_are_not_read_are_named(tmp_path):
     path.write_text(path.read_text().replace("COFF", "OFF").replace(" 255 0 0 255", "").replace(" 0 255 0 255", "")
                     .replace(" 0 0 255 255", "").replace(" 255 255 0 255", ""))
     assert qemjax.simplify(str(path), ratio=1.0).stats["dropped"] == []
+
+
+@pytest.mark.parametrize("kind", ["little", "big", "ascii"])
+def test_a_vertex_list_property_is_named_in_core(tmp_path, kind):
+    """An in-core run of a PLY whose vertex element has a list property dropped it without a word
+    (stats["dropped"] empty) while a partitioned run names it: it is named as there, with the warning of
+    what a run does not keep. trimesh reads an ASCII file's other properties (its UVs are kept); a binary
+    file with lists of several lengths, which trimesh refuses, is read for positions and faces alone, and
+    what that leaves out (the UVs' properties too) is named."""
+    from test_partition_scatter import _ply_with_vertex_list
+
+    m = qemjax.shapes.bumpy_sphere(2)
+    V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
+    uv = (V[:, :2] * 0.5 + 0.5).astype(np.float32)
+    for with_list in (False, True):
+        path = tmp_path / f"{with_list}.ply"
+        _ply_with_vertex_list(path, V, F, uv, kind, with_list)
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            res = qemjax.simplify(str(path), ratio=0.5)
+        said = [str(w.message) for w in seen if "memoryless" not in str(w.message)]
+        names = "ids" if kind == "ascii" else "ids, texture_u, texture_v"
+        assert res.stats["dropped"] == ([f"vertex properties {names}"] if with_list else [])
+        has = "positions, faces and uv" if kind == "ascii" else "positions and faces only"
+        assert said == ([f"{path} carries vertex properties {names}, which qemjax does not keep: the result has "
+                         f"{has} (stats['dropped'] lists them)"] if with_list else []), said
+        assert (res.uv is not None) == (kind == "ascii" or not with_list)

@@ -233,10 +233,18 @@ def _checked(obj, fmt: str, data: bytes, header):
     return obj
 
 
-def _read(path: str, fmt: str, data: bytes):
-    """`read` of the file's bytes ``data``; BadFile with a reason."""
+def _positions_only(V, F, header):
+    """A `trimesh.Trimesh` of a PLY read for its positions and faces alone (`_io_strips`), naming what that
+    read leaves out (``metadata["qemjax_unread"]``: `dropped_attributes`)."""
     import trimesh
 
+    obj = trimesh.Trimesh(V, F, process=False)
+    obj.metadata["qemjax_unread"] = _io_ply.unread(header, positions_only=True)
+    return obj
+
+
+def _read(path: str, fmt: str, data: bytes):
+    """`read` of the file's bytes ``data``; BadFile with a reason."""
     if not data:
         raise BadFile("the file is empty")
     text, changed, header = _prepare(fmt, data)
@@ -245,7 +253,7 @@ def _read(path: str, fmt: str, data: bytes):
             V, F = _io_strips.read_tristrips(header, data)
         except _io_ply.PlyError as exc:
             raise BadFile(str(exc)) from None
-        return _checked(trimesh.Trimesh(V, F, process=False), fmt, data, header)
+        return _checked(_positions_only(V, F, header), fmt, data, header)
     try:
         obj = _trimesh(path, fmt, text, changed)
     except ImportError as exc:  # an optional package trimesh needs for this format
@@ -258,7 +266,7 @@ def _read(path: str, fmt: str, data: bytes):
         if reason is None and header is not None and header.format != "ascii" and header.element("face"):
             try:  # polygons of several sizes in one binary list, which trimesh cannot read
                 V, F = _io_strips.read_polygons(header, data)
-                return _checked(trimesh.Trimesh(V, F, process=False), fmt, data, header)
+                return _checked(_positions_only(V, F, header), fmt, data, header)
             except (_io_ply.PlyError, ValueError, IndexError):
                 pass
         raise BadFile(reason or f"not a valid {_name(fmt)} file: the file is damaged or truncated") from exc
@@ -284,6 +292,8 @@ def read(path) -> object:
         if fmt == "off" and re.match(rb"\s*[A-Z]*C[A-Z]*OFF", data) and getattr(obj, "visual", None) is not None \
                 and obj.visual.kind is None:  # trimesh reads no COFF colour: named among what is dropped
             obj.metadata["qemjax_unread"] = ["vertex colours (COFF)"]
+        if fmt == "ply" and "qemjax_unread" not in obj.metadata:  # what trimesh steps over without a word
+            obj.metadata["qemjax_unread"] = _io_ply.unread(_io_ply.parse_header(data), positions_only=False)
         return obj
     except OSError as exc:
         raise ValueError(f"could not read {path}: {exc.strerror or 'the file cannot be opened'}") from exc

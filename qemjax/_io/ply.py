@@ -111,6 +111,27 @@ def parse_header(data: bytes) -> Header:
     return Header(fmt, elements, end.end())
 
 
+def unread(h: Header, positions_only: bool) -> list[str]:
+    """What an in-core read of this PLY steps over, named as a partitioned run names it (``"vertex
+    properties ids"``): trimesh reads scalar properties by name and steps over a vertex list property; a
+    file read for positions and faces alone (``positions_only``: `_io_strips`, for what trimesh refuses)
+    loses every vertex property but x, y, z, and every face property but its vertex numbers."""
+    vertex, face = h.element("vertex"), h.element("face")
+    if not positions_only:
+        names = [p.name for p in vertex.props if p.count is not None]
+        return [f"vertex properties {', '.join(names)}"] if names else []
+    out = []
+    names = [p.name for p in vertex.props if p.name not in ("x", "y", "z")]
+    if names:
+        out.append(f"vertex properties {', '.join(names)}")
+    lists = [p.name for p in face.props if p.count is not None] if face is not None else []
+    index = next((n for n in lists if n in ("vertex_indices", "vertex_index")), lists[0] if lists else None)
+    names = [p.name for p in face.props if p.name != index] if face is not None else []
+    if names:
+        out.append(f"face properties {', '.join(names)}")
+    return out
+
+
 def type_size(t: str) -> int:
     return int(TYPES[t][1])
 
