@@ -775,3 +775,29 @@ def test_evaluate_without_samples_and_a_bad_target_on_a_textured_mesh():
             metrics.evaluate(tm, tm, target_faces=bad, n_samples=10)
     with pytest.raises(ValueError, match="n_samples must be a positive integer"):
         metrics.attribute_deviation(tm, tm, n_samples=0)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e100])
+def test_unused_non_finite_vertices_are_not_measured(scale):
+    """The metrics refused a mesh with NaN or inf in a vertex no face uses (simplify drops such a vertex):
+    they measure it as the mesh without that vertex, bit for bit (vertex counts still count it, as they count
+    every vertex given); NaN in a vertex a face uses is still refused."""
+    from qemjax import shapes
+
+    m, s = shapes.bumpy_sphere(2), shapes.icosphere(1)
+    V, F = np.asarray(m.vertices) * scale, np.asarray(m.faces)
+    J = np.vstack([V[:10], [[np.nan] * 3, [np.inf, 0.0, 0.0]], V[10:]])
+    FJ = np.where(F >= 10, F + 2, F)
+    S = (np.asarray(s.vertices) * scale, np.asarray(s.faces))
+    SJ = (np.vstack([S[0], [[0.0, -np.inf, np.nan]]]), S[1])
+    a, b = metrics.evaluate((V, F), S, n_samples=500), metrics.evaluate((J, FJ), SJ, n_samples=500)
+    assert (b["vertices_before"], b["vertices_after"]) == (a["vertices_before"] + 2, a["vertices_after"] + 1)
+    differ = [k for k in a if k not in ("time_s", "vertices_before", "vertices_after")
+              and not (a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]))]
+    assert differ == [], [(k, a[k], b[k]) for k in differ]
+    assert metrics.area_volume((V, F), S) == metrics.area_volume((J, FJ), SJ)
+    assert metrics.surface_distance((V, F), S, n_samples=200) == metrics.surface_distance((J, FJ), SJ, n_samples=200)
+    assert metrics.triangle_quality((V, F)) == metrics.triangle_quality((J, FJ))
+    J[FJ[0, 0]] = np.nan
+    with pytest.raises(ValueError, match=r"^original: vertices contain NaN or infinite values$"):
+        metrics.evaluate((J, FJ), S)

@@ -24,8 +24,10 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     ``.vertices`` and ``.faces``, or a file's path (read as `qemjax.load` reads it, without its warning);
     return float64 vertices (n, 3) and int64 faces (m, 3).
 
-    Raises ValueError on wrong shapes, an empty mesh, non-finite coordinates, non-integer or out-of-range
-    face indices.
+    Raises ValueError on wrong shapes, an empty mesh, non-finite coordinates of a vertex a face uses,
+    non-integer or out-of-range face indices. A vertex no face uses may hold NaN or inf (`simplify` drops
+    it): its position is replaced by that of a vertex a face uses, on which no measure of the surface
+    depends (counts of vertices still count it).
     """
     if isinstance(mesh, MeshArrays):
         return mesh
@@ -55,8 +57,6 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     if not np.issubdtype(v.dtype, np.number) or np.iscomplexobj(v):
         raise ValueError(f"{name}: vertices must be real numbers, got dtype {v.dtype}")
     v = np.ascontiguousarray(v, dtype=np.float64)
-    if not np.isfinite(v).all():
-        raise ValueError(f"{name}: vertices contain NaN or infinite values")
     integral = np.issubdtype(f.dtype, np.integer) or (
         np.issubdtype(f.dtype, np.floating) and np.isfinite(f).all() and (f == np.round(f)).all()
     )
@@ -65,6 +65,17 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     f = np.ascontiguousarray(f, dtype=np.int64)
     if f.min() < 0 or f.max() >= len(v):
         raise ValueError(f"{name}: face indices must lie in [0, {len(v)}), got [{f.min()}, {f.max()}]")
+    finite = np.isfinite(v).all(axis=1)
+    if not finite.all():
+        used = np.zeros(len(v), dtype=bool)
+        used[f.ravel()] = True
+        if (used & ~finite).any():
+            raise ValueError(f"{name}: vertices contain NaN or infinite values")
+        # an unused vertex's junk (simplify drops it) is no part of the surface: it takes the place of a
+        # vertex a face uses, so that what reads every vertex (signed_volume's mean, in_frame's check of the
+        # scaled positions) reads finite values near the mesh
+        v = v.copy()
+        v[~finite] = v[f[0, 0]]
     return MeshArrays(v, f)
 
 
