@@ -245,12 +245,15 @@ def _distance(text: str) -> float:
 
 
 def _read_feature_edges(path: str) -> np.ndarray:
-    """(k,2) int64 vertex pairs from a .npy file or a text file of two integers per line."""
+    """(k,2) int64 vertex pairs from a .npy file or a text file of two integers per line (an empty text
+    file: none, without numpy's warning about it)."""
     try:
-        a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=np.int64, ndmin=2)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "loadtxt: input contained no data")
+            a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=np.int64, ndmin=2)
     except (OSError, ValueError) as exc:
         raise CliError(f"could not read feature edges from {path}: {exc}") from None
-    return a
+    return np.zeros((0, 2), np.int64) if a.size == 0 and not path.endswith(".npy") else a
 
 
 def _read_vector(path: str, kind, flag: str) -> np.ndarray:
@@ -270,10 +273,10 @@ def _read_vector(path: str, kind, flag: str) -> np.ndarray:
 
 
 def _name_vertex_files(args, exc: ValueError) -> str:
-    """``exc``'s message, a check of ``locked`` or ``vertex_weights`` (`_pipeline.locks`, run once the
-    input is read) given in the user's terms: the option and its file, not the keyword."""
+    """``exc``'s message, a check of ``locked``, ``vertex_weights`` (`_pipeline.locks`) or ``feature_edges``
+    (run once the input is read) given in the user's terms: the option and its file, not the keyword."""
     text = str(exc)
-    for name in ("locked", "vertex_weights"):
+    for name in ("locked", "vertex_weights", "feature_edges"):
         path = getattr(args, name, None)
         m = re.match(rf"{name}(?::\s*|\s+)(.*)", text, re.S) if path is not None else None
         if m:

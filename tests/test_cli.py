@@ -910,3 +910,21 @@ def test_vertex_file_errors_name_the_option_and_the_file(src, tmp_path, capsys):
     assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--locked", str(tmp_path / "empty.txt"),
                       "--quiet"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_feature_edge_file_errors_name_the_option_and_the_file(src, tmp_path, capsys):
+    """As --locked's: a --feature-edges file that did not fit said `feature_edges must have shape (k, 2)`
+    (the keyword, without the file), and an empty text file gave numpy's warning; an empty file is no edges."""
+    np.savetxt(tmp_path / "triples.txt", np.arange(9).reshape(3, 3), fmt="%d")
+    np.savetxt(tmp_path / "far.txt", [[0, 10 ** 6]], fmt="%d")
+    (tmp_path / "empty.txt").write_text("")
+    out = str(tmp_path / "o.obj")
+    for name, says in (("triples.txt", "must have shape (k, 2) (pairs of vertex indices), got (3, 3)"),
+                       ("far.txt", "indices out of range")):
+        assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--feature-edges", str(tmp_path / name),
+                          "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"qemjax: error: --feature-edges {tmp_path / name}: {says}") and err.count("\n") == 1, err
+    assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--feature-edges", str(tmp_path / "empty.txt"),
+                      "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
