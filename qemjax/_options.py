@@ -260,7 +260,8 @@ class Partition:
         already in it; it must be new, empty or one a partitioned run wrote (one holding other files is
         refused: a run with other inputs or settings clears it).
     retries: how often a task whose worker died is run again.
-    measure: measure the distance of the output from every input vertex and face centroid, part by part.
+    measure: measure the distance of the output from every input vertex and face centroid: in the last
+        level's task where it fitted to the input (``refit_input_faces``), else part by part.
     refit: which levels re-fit their output to their input, for a method that re-fits (the default):
         ``"last"``, or ``"all"``. The levels before the last leave a mesh that the next level simplifies
         again, and the last level fits the output to the input itself (``refit_input_faces``): their own

@@ -1,7 +1,8 @@
 """A partitioned run, as the client drives it: cut the input into parts (`scatter`), then level by level
 plan the groups (`plan.level`), write the level's locks, run the groups (`task.run_group`) on the runner
-(`execute`), until the last level; then measure the output against every part (`task.measure_parts`) and
-build the result. The client reads only the pieces' border ids and the output, never the whole input."""
+(`execute`), until the last level; then measure the output (in the last level's task where it fitted to the
+input, `task.run_group`; else against every part, `task.measure_parts`) and build the result. The client
+reads only the pieces' border ids and the output, never the whole input."""
 from __future__ import annotations
 
 import hashlib
