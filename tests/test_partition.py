@@ -419,6 +419,27 @@ def test_a_resumed_run_reruns_a_task_its_plan_changed(tmp_path, monkeypatch):
     assert again.stats["partition"]["reused"] > 0  # level 1 is the same tasks: reused
 
 
+def test_a_resumed_run_that_now_measures_reuses_the_last_level(tmp_path):
+    """Whether the last level's task measures moves nothing, so it is no part of the task's key: a run
+    resumed with measure=True from a folder cut with measure=False (or by a version whose last level did not
+    measure) ran its last level again; it reuses it now, and the parts measure it."""
+    from qemjax._pipeline.measure import distance
+
+    m = shapes.bumpy_sphere(5)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    settings = Partition(part_faces=2000, workers=1, measure=False, scratch=tmp_path / "scratch")
+    off = qemjax.simplify((V, F), ratio=0.05, partition=settings)
+    assert off.stats["distance_max"] is None and off.stats["partition"]["refit_to"] == "input"
+    on = qemjax.simplify((V, F), ratio=0.05, partition=dataclasses.replace(settings, measure=True))
+    assert on.stats["partition"]["reused"] == sum(off.stats["partition"]["groups_per_level"])
+    assert np.array_equal(on.faces, off.faces) and np.array_equal(on.vertices, off.vertices)
+    d = distance(V, F, on.vertices, on.faces)
+    assert on.stats["distance_max"] == pytest.approx(d["distance_max"], rel=1e-9)
+    again = qemjax.simplify((V, F), ratio=0.05, partition=settings)  # and back: nothing measured
+    assert again.stats["partition"]["reused"] == on.stats["partition"]["reused"]
+    assert again.stats["distance_max"] is None
+
+
 def test_a_resumed_run_sees_a_replaced_file(tmp_path):
     """The resume key was the file's path, size and time: another scan of the same size copied over it with
     its time kept (cp -p) was given the old scan's result."""

@@ -28,8 +28,12 @@ def peak_rss() -> int:
 
 
 def _task_key(spec: dict) -> str:
-    """What a task is (its inputs, locks, target, settings, ...), as text a resumed run compares."""
-    return hashlib.sha256(repr(sorted(spec.items())).encode()).hexdigest()
+    """What a task is (its inputs, locks, target, settings, ...), as text a resumed run compares. Not whether
+    it measures (``measure``): that moves nothing, and a run resumed with another `Partition.measure` (or
+    from a folder cut before the last level measured) reuses the output, measured by the parts where its
+    stats have no distance (`run`)."""
+    what = {k: v for k, v in spec.items() if k != "measure"}
+    return hashlib.sha256(repr(sorted(what.items())).encode()).hexdigest()
 
 
 def _done(out: Path, spec: dict) -> dict | None:
