@@ -170,8 +170,10 @@ def render(
     )
     ax.add_collection3d(collection)
 
-    if len(V):
-        lo, hi = V.min(axis=0), V.max(axis=0)
+    shown = V[np.unique(F)] if len(F) else V  # the vertices drawn: an unused one (junk a mesh may carry,
+    shown = shown[np.isfinite(shown).all(axis=1)]  # NaN even, which simplify drops) does not set the view
+    if len(shown):
+        lo, hi = shown.min(axis=0), shown.max(axis=0)
         center, half = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-12)
         ax.set_xlim(center[0] - half, center[0] + half)
         ax.set_ylim(center[1] - half, center[1] + half)

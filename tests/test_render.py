@@ -149,3 +149,18 @@ def test_render_max_faces_counts_the_faces_given():
 def test_render_refuses_what_is_not_a_mesh_by_its_shape(mesh, message):
     with pytest.raises(ValueError, match=message):
         render(mesh)
+
+
+def test_render_frames_the_vertices_drawn():
+    """The view is set by the vertices the faces use: junk in an unused vertex (NaN, which simplify drops, or
+    a point far away) made matplotlib refuse NaN axis limits, or shrank the mesh to a dot."""
+    import matplotlib.pyplot as plt
+
+    V, Q = _quad_cube()
+    ax = render((V, Q), up="z")
+    want = (ax.get_xlim(), ax.get_ylim(), ax.get_zlim())
+    plt.close(ax.figure)
+    for junk in ([np.nan, 0.0, 0.0], [1e6, -1e6, 1e6]):
+        ax = render((np.vstack([V, junk]), Q), up="z")
+        assert (ax.get_xlim(), ax.get_ylim(), ax.get_zlim()) == want
+        plt.close(ax.figure)
