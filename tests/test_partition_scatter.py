@@ -405,3 +405,29 @@ def test_distinct_ids_are_numpys_unique():
             want, want_inv = np.unique(raw, return_inverse=True)
             assert used.dtype == want.dtype and np.array_equal(used, want)
             assert np.array_equal(inverse, want_inv.ravel())
+
+
+def test_the_list_walkers_stop_at_a_cut_row_and_name_a_damaged_one():
+    """Both compiled walkers of binary list rows (`_walk`: faces, fanned; `_pack`: vertex scalars, lists
+    skipped) read whole rows only: a row whose list runs past the bytes read is left for the next read,
+    and a negative count is reported with its row."""
+    from qemjax._partition import ply
+
+    # rows of (list int8 count, int32 items; float32 scalar), little endian
+    kinds, sizes = np.array([1, 0]), np.array([4, 4])
+    csizes, csigned = np.array([1, 0]), np.array([1, 0])
+
+    def row(items, scalar):
+        return bytes([len(items) & 0xFF]) + np.asarray(items, "<i4").tobytes() + np.float32(scalar).tobytes()
+
+    whole = row([0, 1, 2, 3], 1.5) + row([4, 5, 6], 2.5)
+    buf = np.frombuffer(whole + row([7, 8, 9], 3.5)[:6], np.uint8)  # the third row cut in its list
+    used, done, tris, bad = ply._walk(buf, 3, kinds, sizes, csizes, csigned, 0, True, False)
+    assert (used, done, bad) == (len(whole), 2, -1)
+    assert tris.tolist() == [[0, 1, 2], [0, 2, 3], [4, 5, 6]]
+    used, done, packed, bad = ply._pack(buf, 3, kinds, sizes, csizes, csigned, False, 4)
+    assert (used, done, bad) == (len(whole), 2, -1)
+    assert np.frombuffer(packed.tobytes(), "<f4").tolist() == [1.5, 2.5]
+    damaged = np.frombuffer(whole + bytes([0xFF]) + np.float32(0).tobytes(), np.uint8)  # a count of -1
+    assert ply._walk(damaged, 3, kinds, sizes, csizes, csigned, 0, True, False)[1:4:2] == (2, 2)
+    assert ply._pack(damaged, 3, kinds, sizes, csizes, csigned, False, 4)[1:4:2] == (2, 2)

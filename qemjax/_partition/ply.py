@@ -66,6 +66,25 @@ def _int(buf, p, size, signed, big):
     return v
 
 
+CUT, DAMAGED = -1, -2  # `_list_at`'s counts for a list that runs past the read, and a negative count
+
+
+@njit(cache=True)
+def _list_at(buf, p, csize, csigned, size, big):
+    """The list property at byte ``p`` of ``buf``: (its first item's byte, its count), or the count CUT where
+    its count or items run past the end of ``buf`` (the row goes on in the next read), DAMAGED where the
+    count is negative."""
+    if p + csize > len(buf):
+        return p, CUT
+    c = _int(buf, p, csize, csigned, big)
+    p += csize
+    if c < 0:
+        return p, DAMAGED
+    if p + c * size > len(buf):
+        return p, CUT
+    return p, c
+
+
 @njit(cache=True)
 def _walk(buf, rows, kinds, sizes, csizes, csigned, index, isigned, big):
     """Whole rows of a list element from the start of ``buf`` (at most ``rows``): (bytes used, rows
@@ -79,14 +98,10 @@ def _walk(buf, rows, kinds, sizes, csizes, csigned, index, isigned, big):
             if kinds[j] == 0:
                 p += sizes[j]
                 continue
-            if p + csizes[j] > n:
-                fits = False
-                break
-            c = _int(buf, p, csizes[j], csigned[j], big)
-            p += csizes[j]
-            if c < 0:
+            p, c = _list_at(buf, p, csizes[j], csigned[j], sizes[j], big)
+            if c == DAMAGED:
                 return pos, done, tris[:nt], done
-            if p + c * sizes[j] > n:
+            if c == CUT:
                 fits = False
                 break
             if j == index and c >= 3:
@@ -129,14 +144,10 @@ def _pack(buf, rows, kinds, sizes, csizes, csigned, big, width):
                 o += sizes[j]
                 p += sizes[j]
                 continue
-            if p + csizes[j] > n:
-                fits = False
-                break
-            c = _int(buf, p, csizes[j], csigned[j], big)
-            p += csizes[j]
-            if c < 0:
+            p, c = _list_at(buf, p, csizes[j], csigned[j], sizes[j], big)
+            if c == DAMAGED:
                 return pos, done, out[:done * width], done
-            if p + c * sizes[j] > n:
+            if c == CUT:
                 fits = False
                 break
             p += c * sizes[j]
