@@ -256,6 +256,24 @@ def test_the_default_says_when_kept_attributes_turn_its_last_stretch_off():
     assert "late_memoryless_off" not in summed.stats and summed.uv is not None
 
 
+def test_the_default_says_when_feature_edges_turn_its_last_stretch_off():
+    """Feature edges given by the user keep a default run on the summed quadrics (the memoryless ones do not
+    track them): said in a warning, as kept attributes are (it was said in the stats alone); none given (an
+    empty list), the run switches and says nothing."""
+    V, F = shapes.bumpy_sphere(3)
+    with pytest.warns(UserWarning, match=r"^giving feature edges turns off the default method's memoryless "
+                                         r"last stretch") as said:
+        res = qemjax.simplify((V, F), ratio=0.1, feature_edges=F[:20, :2])
+    assert len([w for w in said if "last stretch" in str(w.message)]) == 1
+    assert "feature edges" in res.stats["late_memoryless_off"] and "memoryless_from_faces" not in res.stats
+    assert_valid(res, len(F) // 10, V, F)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        none = qemjax.simplify((V, F), ratio=0.1, feature_edges=np.zeros((0, 2), int))
+        asked = qemjax.simplify((V, F), ratio=0.1, feature_edges=F[:20, :2], late_memoryless=0)
+    assert none.stats["memoryless_from_faces"] and "late_memoryless_off" not in asked.stats
+
+
 @pytest.mark.parametrize("kw,match", [
     (dict(late_memoryless=0.5), "late_memoryless must be 0"),
     (dict(late_memoryless=-1), "late_memoryless must be finite"),

@@ -255,6 +255,9 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
             warnings.warn(f"keeping {', '.join(attrs.values)} {STRETCH_OFF} (late_memoryless: it does not carry "
                           "attributes): the geometry may be less accurate than with attributes=None (CLI: "
                           "--attributes none)", stacklevel=stacklevel)
+        elif why == FEATURES_GIVEN:  # as with attributes: what came with the input changes the default's run
+            warnings.warn(f"giving feature edges {STRETCH_OFF} (late_memoryless: it does not track them): the run "
+                          "stays on the summed quadrics throughout", stacklevel=stacklevel)
     corner_values = channel_weights = None
     if attrs is not None:
         channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
@@ -312,7 +315,8 @@ def frame_means(geo: Geometry) -> tuple:
     return area_mean * r2, e2_mean * r2
 
 
-ATTRIBUTES_KEPT = "attributes are kept (the memoryless quadrics have no attribute terms)"  # a `_late_off` reason
+ATTRIBUTES_KEPT = "attributes are kept (the memoryless quadrics have no attribute terms)"  # `_late_off` reasons
+FEATURES_GIVEN = "feature edges are given (the memoryless quadrics do not track them)"  # that come with the input
 STRETCH_OFF = "turns off the default method's memoryless last stretch"  # in the warning `job` gives for it
 
 
@@ -330,7 +334,7 @@ def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: boo
     if attrs is not None:
         return ATTRIBUTES_KEPT
     if feature_edges is not None and len(feature_edges):
-        return "feature edges are given (the memoryless quadrics do not track them)"
+        return FEATURES_GIVEN
     return None
 
 
