@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import as_mesh, frame_exponent
+from ._common import as_mesh, scaled
 from ._distance import _check_samples
 from .._mesh.nearest import nearest_triangles
 from ._topology import _components
@@ -114,17 +114,6 @@ def _seam_tolerant(Vo, Fo, Co, pts, dist, fo, val_s, d, tol, cs, face):
     return out
 
 
-def _in_frame(Vs: np.ndarray, Vo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Both meshes' positions in the original's frame of `_common.in_frame` (areas and squared distances in
-    float64's range at any scale; the deviations are in the attributes' units, whatever the frame)."""
-    k = frame_exponent(Vo)
-    if k == 0:
-        return Vs, Vo
-    with np.errstate(over="ignore", under="ignore"):
-        scaled = np.ldexp(Vs, -k), np.ldexp(Vo, -k)
-    return scaled if all(np.isfinite(v).all() for v in scaled) else (Vs, Vo)
-
-
 def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: int = 20_000,
                         seed: int = 0, seam_tolerant: bool = True) -> dict:
     """Texture-space (or colour) deviation of a simplification: sample points uniformly (by area) on the
@@ -146,7 +135,9 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
             raise ValueError(f"both meshes must carry {kind}: the {_missing(mesh, name, kind)}")
     Vs, Fs, Cs = s
     Vo, Fo, Co = o
-    Vs, Vo = _in_frame(np.asarray(Vs, np.float64), np.asarray(Vo, np.float64))
+    # both in the original's frame (`_common.in_frame`): areas and squared distances in float64's range at any
+    # scale; the deviations are in the attributes' units, whatever the frame
+    _, (Vs, Vo) = scaled(np.asarray(Vo, np.float64), np.asarray(Vs, np.float64), np.asarray(Vo, np.float64))
     rng = np.random.default_rng(_check_samples(seed, "seed"))
     cs = Vs[Fs]  # (m,3,3)
     area = np.linalg.norm(np.cross(cs[:, 1] - cs[:, 0], cs[:, 2] - cs[:, 0]), axis=1)

@@ -89,23 +89,31 @@ def frame_exponent(V: np.ndarray) -> int:
     return math.frexp(side)[1] if math.isfinite(side) and side > 0 else 0
 
 
+def scaled(reference: np.ndarray, *Vs: np.ndarray) -> tuple[int, list]:
+    """(k, the positions Vs times 2^-k), k the `frame_exponent` of the positions ``reference``; k is 0 and Vs
+    are as given where a scaled position would not be finite (a tiny mesh far from the origin)."""
+    k = frame_exponent(reference)
+    if k == 0:
+        return 0, list(Vs)
+    with np.errstate(over="ignore", under="ignore"):
+        out = [np.ldexp(V, -k) for V in Vs]
+    if not all(np.isfinite(V).all() for V in out):
+        return 0, list(Vs)
+    return k, out
+
+
 def in_frame(first: MeshArrays, *others: MeshArrays) -> tuple[int, list]:
     """(k, the meshes with their positions times 2^-k), k the `frame_exponent` of ``first``'s referenced
-    vertices. The metrics measure there, where the extent is about 1, so that squared distances, areas and
-    products of normals (a length to the fourth) stay within float64's range at any scale (1e-100 or 1e100
-    mesh units, as the simplifier's unit frame does), and report lengths in mesh units times 2^k (areas
-    2^2k, volumes 2^3k). Scaling by a power of two is exact, and so is the arithmetic on the scaled values
-    barring underflow: at ordinary scales the results are the bits measured in mesh units. k is 0 (the
-    meshes as given) where a scaled position would not be finite (a tiny mesh far from the origin)."""
+    vertices (`scaled`). The metrics measure there, where the extent is about 1, so that squared distances,
+    areas and products of normals (a length to the fourth) stay within float64's range at any scale (1e-100
+    or 1e100 mesh units, as the simplifier's unit frame does), and report lengths in mesh units times 2^k
+    (areas 2^2k, volumes 2^3k). Scaling by a power of two is exact, and so is the arithmetic on the scaled
+    values barring underflow: at ordinary scales the results are the bits measured in mesh units."""
     meshes = [first, *others]
-    k = frame_exponent(first.vertices[first.referenced])
+    k, Vs = scaled(first.vertices[first.referenced], *(m.vertices for m in meshes))
     if k == 0:
         return 0, meshes
-    with np.errstate(over="ignore", under="ignore"):
-        scaled = [MeshArrays(np.ldexp(m.vertices, -k), m.faces) for m in meshes]
-    if not all(np.isfinite(m.vertices).all() for m in scaled):
-        return 0, meshes
-    return k, scaled
+    return k, [MeshArrays(V, m.faces) for V, m in zip(Vs, meshes)]
 
 
 def to_mesh_units(value: float, power: int, k: int) -> float:
