@@ -16,7 +16,7 @@ import numpy as np
 
 from . import files as _io_files
 from .._mesh import wedges as _wedges
-from .._mesh.arrays import face_stats, column_bounds, sorted_triples
+from .._mesh.arrays import face_stats, column_bounds, nonfinite, sorted_triples
 
 
 class Mesh(NamedTuple):
@@ -255,13 +255,9 @@ def _checked(V, F) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = F.min(), F.max()
     if lo < 0 or hi >= V.shape[0]:
         raise ValueError(f"face indices out of range: found [{lo}, {hi}] for {V.shape[0]} vertices")
-    finite = np.isfinite(V).all(axis=1)
-    if not finite.all():  # only a vertex a face uses must be finite: unused ones are dropped by `prepare`
-        used = np.zeros(len(V), bool)
-        used[F.reshape(-1)] = True
-        bad = np.flatnonzero(used & ~finite)
-        if bad.size:
-            raise ValueError(f"vertices contain NaN or inf coordinates ({bad.size} vertices, first: {bad[0]})")
+    bad = nonfinite(V, F)[1]  # (unused ones are dropped by `prepare`)
+    if bad.size:
+        raise ValueError(f"vertices contain NaN or inf coordinates ({bad.size} vertices, first: {bad[0]})")
     return V, F
 
 

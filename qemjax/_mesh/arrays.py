@@ -48,6 +48,17 @@ def any_at(mask: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return out
 
 
+def nonfinite(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the vertices of V (n,3) that are not finite, bool (n,); those of them a face of F uses, indices): the
+    input rule that only a vertex a face uses must be finite (an unused one is junk a run drops)."""
+    bad = ~np.isfinite(V).all(axis=1)
+    if not bad.any():  # the usual case: no mask of the used ones
+        return bad, np.zeros(0, np.int64)
+    used = np.zeros(len(V), bool)
+    used[F.reshape(-1)] = True
+    return bad, np.flatnonzero(used & bad)
+
+
 def row_index(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """(len(B),) int64: for each row of B (k,3) float64, the index of the first row of A (n,3) float64 with
     the same bytes (exact positions), -1 where none has."""

@@ -13,7 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .._mesh.arrays import box_diagonal
+from .._mesh.arrays import box_diagonal, nonfinite
 
 # Triangles with twice-area <= _DEGENERATE_REL * (longest edge)^2 count as degenerate (numerically zero area).
 _DEGENERATE_REL = 1e-12
@@ -65,17 +65,15 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     f = np.ascontiguousarray(f, dtype=np.int64)
     if f.min() < 0 or f.max() >= len(v):
         raise ValueError(f"{name}: face indices must lie in [0, {len(v)}), got [{f.min()}, {f.max()}]")
-    finite = np.isfinite(v).all(axis=1)
-    if not finite.all():
-        used = np.zeros(len(v), dtype=bool)
-        used[f.ravel()] = True
-        if (used & ~finite).any():
-            raise ValueError(f"{name}: vertices contain NaN or infinite values")
+    bad, used = nonfinite(v, f)
+    if used.size:
+        raise ValueError(f"{name}: vertices contain NaN or infinite values")
+    if bad.any():
         # an unused vertex's junk (simplify drops it) is no part of the surface: it takes the place of a
         # vertex a face uses, so that what reads every vertex (signed_volume's mean, in_frame's check of the
         # scaled positions) reads finite values near the mesh
         v = v.copy()
-        v[~finite] = v[f[0, 0]]
+        v[bad] = v[f[0, 0]]
     return MeshArrays(v, f)
 
 
