@@ -252,11 +252,9 @@ def _fits(name: str, args: dict, text: str) -> None:
     while making it, without a word."""
     from ._pipeline import fits
 
-    room = fits.available()
-    faces = _faces(name, args)
-    if room is not None and faces * fits.BYTES_PER_FACE > room:
-        raise ValueError(f"{text}: {faces:,} faces need about {fits._size(faces * fits.BYTES_PER_FACE)} in one "
-                         f"process, and this machine has {fits._size(room)} available: ask for a smaller shape")
+    short = fits.shortfall(_faces(name, args), fits.available())
+    if short is not None:
+        raise ValueError(f"{text}: {short}: ask for a smaller shape")
 
 
 # -- example files ------------------------------------------------------------------------------------

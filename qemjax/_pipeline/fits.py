@@ -119,8 +119,8 @@ def check(mesh: Any, what: str | None = None) -> None:
     advice: a partitioned run where one can read the mesh, else one process regardless; ``what``: a caller
     that runs in one process only (``lod_chain``), named."""
     room = available()
-    n = None if room is None else faces_of(mesh, room)
-    if not n or n * BYTES_PER_FACE <= room:
+    short = shortfall(None if room is None else faces_of(mesh, room), room)
+    if short is None:
         return
     name = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "the mesh"
     regardless = "in one process regardless (--no-partition; partition=False)"
@@ -131,8 +131,16 @@ def check(mesh: Any, what: str | None = None) -> None:
     else:
         advice = ("run it partitioned (--partition; partition=True in Python), which reads it in parts, or "
                   + regardless)
-    raise TooLargeError(f"{name}: {n:,} faces need about {_size(n * BYTES_PER_FACE)} in one process, and this "
-                        f"machine has {_size(room)} available: {advice}")
+    raise TooLargeError(f"{name}: {short}: {advice}")
+
+
+def shortfall(n: int | None, room: int | None) -> str | None:
+    """What an in-core run of ``n`` faces lacks, in words, when it would need more than ``room`` bytes (the
+    memory `available`); None when it fits, or either is unknown."""
+    if room is None or not n or n * BYTES_PER_FACE <= room:
+        return None
+    return (f"{n:,} faces need about {_size(n * BYTES_PER_FACE)} in one process, and this machine has "
+            f"{_size(room)} available")
 
 
 def _size(b: int) -> str:
