@@ -245,7 +245,9 @@ def simplify(name: str, mesh, target_faces: int) -> PeerResult:
 
     checked = as_mesh(mesh, "mesh")
     V, F = checked.vertices, checked.faces
-    if isinstance(target_faces, bool) or not float(target_faces) >= 1 or float(target_faces) != int(target_faces):
+    # a number only (inf, None or text raised float's or int's own error)
+    if isinstance(target_faces, bool) or not isinstance(target_faces, (int, float, np.integer, np.floating)) \
+            or not 1 <= target_faces < float("inf") or target_faces != int(target_faces):
         raise ValueError(f"target_faces must be a whole number of at least 1, got {target_faces!r}")
     _require(name)
     target = min(int(target_faces), len(F))  # as `qemjax.simplify` takes a target above the faces there are

@@ -114,3 +114,12 @@ def test_a_target_above_the_faces_is_the_whole_mesh_as_for_qemjax(name):
         V2, F2 = peers.simplify_fast_simplification(V, F, 10 * len(F))
         assert len(F2) == len(F)
 
+
+
+@pytest.mark.parametrize("target", [float("inf"), float("nan"), None, "abc", "10", 2.5, True, [10]])
+def test_a_target_that_is_not_a_whole_number_is_refused_in_words(target):
+    """An infinite, missing or text target raised float's or int's own error ("cannot convert float infinity
+    to integer", "float() argument must be ..."), and a numeric string was taken as a number."""
+    V, F = qemjax.shapes.icosphere(2)
+    with pytest.raises(ValueError, match="^target_faces must be a whole number of at least 1, got "):
+        peers.simplify("meshoptimizer", (V, F), target)
