@@ -47,7 +47,12 @@ def _as_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
         V, F = mesh
     else:
         raise TypeError(f"expected a mesh, a (vertices, faces) pair, or .vertices/.faces; got {type(mesh)!r}")
-    V, F = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
+    V, F = np.asarray(V, dtype=np.float64), np.asarray(F)
+    # indices as given: a cast to int64 cut 2.7 to 2, and numpy's indexing wrapped -1 round to the last vertex
+    if F.size and not (np.issubdtype(F.dtype, np.integer) or (np.issubdtype(F.dtype, np.floating)
+                                                              and np.isfinite(F).all() and (F == np.round(F)).all())):
+        raise ValueError(f"render: faces must hold integer vertex indices, got dtype {F.dtype}")
+    F = F.astype(np.int64)
     if V.ndim == 1 and V.size % 3 == 0:  # flat x, y, z triples
         V = V.reshape(-1, 3)
     if F.ndim == 1 and F.size % 3 == 0:  # flat triangles
@@ -58,6 +63,8 @@ def _as_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
     if F.ndim != 2 or F.shape[1] < 3:
         raise ValueError(f"render: faces must be (m, 3) triangles or (m, k) polygons with k >= 3 corners, "
                          f"got shape {F.shape}")
+    if F.size and (F.min() < 0 or F.max() >= len(V)):
+        raise ValueError(f"render: face indices must lie in [0, {len(V)}), got [{F.min()}, {F.max()}]")
     return V, F
 
 

@@ -164,3 +164,16 @@ def test_render_frames_the_vertices_drawn():
         ax = render((np.vstack([V, junk]), Q), up="z")
         assert (ax.get_xlim(), ax.get_ylim(), ax.get_zlim()) == want
         plt.close(ax.figure)
+
+
+@pytest.mark.parametrize("faces, message", [
+    (np.array([[0, 1, 7]]), r"^render: face indices must lie in \[0, 4\), got \[0, 7\]$"),
+    (np.array([[0, 1, -1]]), r"^render: face indices must lie in \[0, 4\), got \[-1, 1\]$"),
+    (np.array([[0, 1, 2.7]]), r"^render: faces must hold integer vertex indices, got dtype float64$"),
+])
+def test_render_refuses_faces_that_name_no_vertex(faces, message):
+    """An index past the vertices raised numpy's IndexError; a negative one was drawn as the last vertex (numpy's
+    indexing wraps it) and 2.7 as vertex 2 (the cast to int64 cut it), without a word."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    with pytest.raises(ValueError, match=message):
+        render((V, faces))
