@@ -79,6 +79,18 @@ def _rotate_up(V: np.ndarray, up: str) -> np.ndarray:
     raise ValueError(f"up must be 'x', 'y' or 'z', got {up!r}")
 
 
+def _check_view(view) -> tuple[float, float]:
+    """``view`` as (elevation, azimuth) floats; ValueError in render's words unless it is two finite numbers
+    (a short tuple raised IndexError deep in the drawing)."""
+    try:
+        elev, azim = (float(x) for x in view)
+    except (TypeError, ValueError):
+        elev = azim = float("nan")
+    if not (np.isfinite(elev) and np.isfinite(azim)):
+        raise ValueError(f"render: view must be (elevation, azimuth) in degrees, got {view!r}")
+    return elev, azim
+
+
 def _view_direction(view) -> np.ndarray:
     """Unit vector from the scene towards the camera for matplotlib's (elev, azim) in degrees."""
     elev, azim = np.radians(view[0]), np.radians(view[1])
@@ -134,6 +146,9 @@ def render(
     """
     plt, Poly3DCollection = _pyplot()
     V, F = _as_arrays(mesh)
+    view = _check_view(view)
+    if isinstance(max_faces, bool) or not isinstance(max_faces, (int, np.integer)) or max_faces < 0:
+        raise ValueError(f"render: max_faces must be a whole number >= 0, got {max_faces!r}")
     sides = F.shape[1]
     polygons = len(F)
     if sides > 3:  # quads and other polygons: a fan of triangles each, drawn and shaded as its own face

@@ -177,3 +177,17 @@ def test_render_refuses_faces_that_name_no_vertex(faces, message):
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
     with pytest.raises(ValueError, match=message):
         render((V, faces))
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(view=(10,)), r"^render: view must be \(elevation, azimuth\) in degrees, got \(10,\)$"),
+    (dict(view=(10, "east")), r"^render: view must be \(elevation, azimuth\) in degrees"),
+    (dict(view=(float("nan"), 0)), r"^render: view must be \(elevation, azimuth\) in degrees"),
+    (dict(max_faces=-1), r"^render: max_faces must be a whole number >= 0, got -1$"),
+    (dict(max_faces=2.5), r"^render: max_faces must be a whole number >= 0, got 2.5$"),
+])
+def test_render_refuses_a_view_or_cap_it_cannot_use(kwargs, message):
+    """A one-number view raised IndexError, a text azimuth numpy's ufunc error, a negative max_faces numpy's
+    'negative dimensions are not allowed' (on a mesh above the cap): each is now one line naming it."""
+    with pytest.raises(ValueError, match=message):
+        render(_icosphere(), **{"max_faces": 10, **kwargs})
