@@ -335,6 +335,13 @@ class Partition:
             return os.cpu_count() or 1
 
 
+# `simplify`'s keywords besides the settings (tests/test_first_use.py checks them against its signature): a
+# method's field of one of these names could be given neither flat nor on the command line (`_costs.register`)
+KEYWORDS = ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel", "method", "scheduler",
+            "topology", "attributes", "feature_edges", "progress", "measure", "partition", "locked", "vertex_weights",
+            "preset")
+
+
 def run_setting_group(name: str) -> str | None:
     """"topology" or "attributes" when ``name`` is a field of `Topology` or `Attributes` (a run setting, which
     a method's field of that name would shadow where settings are given flat: `_pipeline.flat`), else None."""

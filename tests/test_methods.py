@@ -99,6 +99,19 @@ def test_registration_refuses_taken_names_and_non_methods():
     assert len(qemjax.simplify(qemjax.shapes.icosphere(2), ratio=0.5, boundary_weight=3.0).faces) == 160
 
 
+@pytest.mark.parametrize("field", ["ratio", "target_faces", "measure", "method"])
+def test_registration_refuses_a_field_named_like_a_simplify_keyword(field):
+    """A method with a field named like one of simplify's own keywords was registered: the field could never be
+    given flat (``simplify(ratio=...)`` is the target), and the command line's parser then failed on every
+    call in that process (argparse: "conflicting option string: --ratio")."""
+    cls = dataclasses.make_dataclass("Clash", [(field, float, 1.0)], bases=(qemjax.QEM,), frozen=True,
+                                     namespace={"name": "clash"})
+    with pytest.raises(ValueError, match=f"^method 'clash' has a field '{field}', which is one of simplify's own"):
+        qemjax.register_method(cls)
+    assert "clash" not in qemjax.methods()
+    assert _cli.main(["simplify", "--help"]) == 0  # the command line still parses
+
+
 @pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan])
 def test_a_count_setting_that_is_no_whole_number_is_named(value):
     """refit, polish and sliver_moves given inf or NaN: Python's OverflowError ("cannot convert float infinity

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from .._options import run_setting_group
+from .._options import KEYWORDS, run_setting_group
 
 from .base import CostModel as CostModel
 from .base import MeshInput as MeshInput
@@ -54,7 +54,8 @@ def register(name, cls: type[Method] | None = None):
     """Register a method class under ``name`` (``register(cls)`` or ``@register`` use ``cls.name``), so
     ``simplify(method=name)`` means ``cls()``; its fields become sweep keys, config keys and command-line
     options. Refuses a name already taken, a class that is not a frozen dataclass `Method`, and one with a field
-    named like a `Topology` or `Attributes` setting."""
+    named like a `Topology` or `Attributes` setting or like one of `simplify`'s own keywords (``ratio``,
+    ``measure``, ...)."""
     if cls is None and isinstance(name, type):
         name, cls = name.name, name
     if not isinstance(cls, type) or not issubclass(cls, Method) or not dataclasses.is_dataclass(cls) \
@@ -67,6 +68,8 @@ def register(name, cls: type[Method] | None = None):
         group = run_setting_group(f.name) if f.init else None
         if group:
             raise ValueError(f"method {name!r} has a field {f.name!r}, which is a {group} setting")
+        if f.init and f.name in KEYWORDS:  # `simplify(ratio=...)` is the target, and the CLI's --ratio clashed
+            raise ValueError(f"method {name!r} has a field {f.name!r}, which is one of simplify's own keywords")
     REGISTRY[name] = cls
     return cls
 

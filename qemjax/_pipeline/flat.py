@@ -16,6 +16,7 @@ import typing
 from typing import Any
 
 from .. import _costs, _schedulers
+from .._options import KEYWORDS as KEYWORDS  # `simplify`'s keywords besides the settings
 from .._options import Attributes, Schedule, Topology
 
 GROUPS = {"topology": Topology, "attributes": Attributes}  # and "method": the registered classes
@@ -137,12 +138,6 @@ def apply(method, topology, attributes, flat: dict) -> tuple:
     if given["attributes"]:
         attributes = dataclasses.replace(attributes, **given["attributes"])
     return m, topology, attributes
-
-
-# `simplify`'s keywords besides the settings (tests/test_first_use.py checks them against its signature)
-KEYWORDS = ("target_faces", "ratio", "max_error", "max_distance", "max_distance_rel", "method", "scheduler",
-            "topology", "attributes", "feature_edges", "progress", "measure", "partition", "locked", "vertex_weights",
-            "preset")
 
 
 def did_you_mean(key: str, names, show=repr) -> str:
