@@ -110,6 +110,21 @@ def test_point_triangle_distance_matches_reference():
     np.testing.assert_allclose(metrics.point_triangle_distance(p, a, b, c, squared=True), got**2, rtol=1e-12)
 
 
+@pytest.mark.parametrize("power", [-600, -530, 530, 600])
+def test_point_triangle_distance_at_extreme_scales_is_that_at_scale_one(power):
+    """At 2^±530 (about 1e±160) the squared lengths inside overflowed to inf (distances came back NaN) or
+    underflowed (0 for 1e-200): measured where the largest coordinate is about 1, as the metrics measure, each
+    distance is that at scale one times the scale, bit for bit."""
+    rng = np.random.default_rng(2)
+    a, b, c = random_triangles(rng, 2000)
+    p = rng.normal(size=(2000, 3)) * 2
+    want = metrics.point_triangle_distance(p, a, b, c)
+    scaled = [np.ldexp(x, power) for x in (p, a, b, c)]
+    with np.errstate(all="raise"):  # no overflow or NaN on the way
+        got = metrics.point_triangle_distance(*scaled)
+    np.testing.assert_array_equal(got, np.ldexp(want, power))
+
+
 def test_point_triangle_distance_against_dense_sampling():
     rng = np.random.default_rng(1)
     a, b, c = rng.normal(size=(3, 50, 3))

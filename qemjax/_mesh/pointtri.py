@@ -6,6 +6,8 @@ the barycentric coordinates of the closest point; the distance is the length of 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 # A triangle whose twice-area is below this fraction of its longest edge squared (width below ~1e-8 of its
@@ -38,6 +40,12 @@ def point_triangle_distance(points, a, b, c, *, squared: bool = False) -> np.nda
             raise ValueError(f"point_triangle_distance: {name} must have shape (..., 3), got {x.shape}")
         if not np.isfinite(x).all():
             raise ValueError(f"point_triangle_distance: {name} contains NaN or infinite values")
+    # measured where the largest coordinate is about 1, as the metrics measure (`metrics._common.in_frame`): a
+    # power of two scales exactly, where squared lengths of 1e160 overflowed (NaN) and of 1e-160 underflowed
+    top = max(float(np.abs(x).max(initial=0.0)) for x in arrays)
+    k = math.frexp(top)[1] if top > 0 else 0
+    if k:
+        arrays = [np.ldexp(x, -k) for x in arrays]
     try:
         arrays = np.broadcast_arrays(*arrays)
     except ValueError as err:
@@ -49,7 +57,11 @@ def point_triangle_distance(points, a, b, c, *, squared: bool = False) -> np.nda
     for s in range(0, len(d2), _BLOCK):  # blocks keep the temporaries in cache
         blk = slice(s, s + _BLOCK)
         d2[blk] = squared_distance_cf(p[:, blk], a_[:, blk], ab[:, blk], ac[:, blk])
-    return (d2 if squared else np.sqrt(d2)).reshape(shape)
+    out = d2 if squared else np.sqrt(d2)
+    if k:  # back in the inputs' units: inf or 0 where float64 cannot hold the value
+        with np.errstate(over="ignore", under="ignore"):
+            out = np.ldexp(out, 2 * k if squared else k)
+    return out.reshape(shape)
 
 
 def _dot(x, y):
