@@ -23,19 +23,22 @@ SHAPES = ("bumpy_sphere", "icosphere", "torus", "cube", "grid")  # the generator
 
 
 # the least of each count a generator takes: fewer made an empty mesh, or faces on the same vertices
-_LEAST = {"icosphere": {"subdivisions": 0}, "bumpy_sphere": {"subdivisions": 0}, "cube": {"subdivisions": 0},
+_LEAST = {"icosphere": {"subdivisions": 0}, "bumpy_sphere": {"subdivisions": 0, "seed": 0}, "cube": {"subdivisions": 0},
           "torus": {"n_major": 3, "n_minor": 3}, "grid": {"n": 1}, "double_cone": {"n": 3}}
 # the lengths a generator takes, each a finite number > 0: zero made every vertex one point, a negative one
 # turned the faces inside out
 _LENGTHS = {"icosphere": ("radius",), "torus": ("major", "minor"), "grid": ("size",),
             "double_cone": ("radius", "height")}
+# the numbers a generator takes that may be 0 or negative, each finite (NaN or inf made NaN vertices): a
+# bumpy sphere's amplitude (0: a plain sphere; a negative one bumps inward)
+_FINITE = {"bumpy_sphere": ("amplitude",)}
 
 
 def _counts(shape: str, args: dict, text: str | None = None) -> None:
     """ValueError naming ``shapes.shape``'s argument (after ``text``, the spec as written, when given) unless
     each count in ``args`` is an integer at least its `_LEAST` (a grid with a hole: 3, the hole being its
     middle third) and each length (`_LENGTHS`) a finite number > 0 (a torus's minor radius under its major
-    one: else its tube passes through the axis)."""
+    one: else its tube passes through the axis), and each of `_FINITE` a finite number."""
     hole = bool(args.get("hole", False))
     for name, least in _LEAST[shape].items():
         if name not in args:
@@ -52,6 +55,13 @@ def _counts(shape: str, args: dict, text: str | None = None) -> None:
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
                 or not np.isfinite(value) or value <= 0:
             raise ValueError(f"{text or 'shapes.' + shape}: {name} must be a number > 0, got {value!r}")
+    for name in _FINITE.get(shape, ()):
+        if name not in args:
+            continue
+        value = args[name]
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(value):
+            raise ValueError(f"{text or 'shapes.' + shape}: {name} must be a finite number, got {value!r}")
     if shape == "torus":  # (a spec's args are those it gives: the others, the generator's defaults)
         given = {k: p.default for k, p in inspect.signature(torus).parameters.items()} | args
         if given["minor"] >= given["major"]:
@@ -126,7 +136,7 @@ def cube(subdivisions: int = 2) -> Mesh:
 def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) -> Mesh:
     """Icosphere whose radius varies with a few smooth random bumps: detail worth simplifying.
     subdivisions=6 gives 81,920 faces, 7 gives 327,680 (subdivisions >= 0)."""
-    _counts("bumpy_sphere", dict(subdivisions=subdivisions))
+    _counts("bumpy_sphere", dict(subdivisions=subdivisions, amplitude=amplitude, seed=seed))
     V, F = icosphere(subdivisions)
     rng = np.random.default_rng(seed)
     dirs = rng.normal(size=(12, 3))

@@ -407,6 +407,13 @@ def test_shapes_named_as_text():
     (lambda: shapes.torus(minor=0.0), "shapes.torus: minor must be a number > 0, got 0.0"),
     (lambda: shapes.torus(major=1.0, minor=1.5), "shapes.torus: minor must be less than major"),
     (lambda: shapes.parse_spec("shapes.torus(major=0.2)"), "shapes.torus(major=0.2): minor must be less than major"),
+    # a bumpy sphere's seed raised numpy's own errors, and a NaN or infinite amplitude made NaN vertices
+    (lambda: shapes.bumpy_sphere(1, seed=-1), "shapes.bumpy_sphere: seed must be an integer >= 0, got -1"),
+    (lambda: shapes.bumpy_sphere(1, seed=1.5), "shapes.bumpy_sphere: seed must be an integer >= 0, got 1.5"),
+    (lambda: shapes.bumpy_sphere(1, amplitude=float("nan")),
+     "shapes.bumpy_sphere: amplitude must be a finite number, got nan"),
+    (lambda: shapes.parse_spec("shapes.bumpy_sphere(amplitude=1e999)"),
+     "shapes.bumpy_sphere(amplitude=1e999): amplitude must be a finite number, got inf"),
 ])
 def test_shapes_refuse_counts_that_make_empty_or_repeated_faces(make, message):
     """0 or negative segments made an empty torus or grid, a negative subdivision quietly the level-0 mesh, two
