@@ -816,3 +816,20 @@ def test_unused_non_finite_vertices_are_not_measured(scale):
     J[FJ[0, 0]] = np.nan
     with pytest.raises(ValueError, match=r"^original: vertices contain NaN or infinite values$"):
         metrics.evaluate((J, FJ), S)
+
+
+def test_a_trimesh_scene_is_measured_as_simplify_takes_it():
+    """`trimesh.load` of a glTF gives a Scene, which simplify (and attribute_deviation) take, concatenated: the
+    other metrics and `peers.simplify` refused it ("expected a trimesh.Trimesh, ... got Scene")."""
+    from qemjax import peers
+
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    scene = trimesh.Scene([mesh])
+    simplified = (mesh.vertices[:], mesh.faces[::2])
+    np.testing.assert_equal(metrics.evaluate(scene, simplified, n_samples=500) | {"time_s": 0},
+                            metrics.evaluate(mesh, simplified, n_samples=500) | {"time_s": 0})  # NaN == NaN
+    np.testing.assert_equal(metrics.topology_report(scene), metrics.topology_report(mesh))
+    if "meshoptimizer" in peers.available():
+        assert len(peers.simplify("meshoptimizer", scene, 100).faces) == 100
+    with pytest.raises(ValueError, match="^original: expected a triangle mesh, got a point cloud"):
+        metrics.surface_distance(trimesh.PointCloud(mesh.vertices), simplified)

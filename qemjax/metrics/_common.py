@@ -20,9 +20,9 @@ _DEGENERATE_REL = 1e-12
 
 
 def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
-    """Validate a mesh given as a `trimesh.Trimesh`, a ``(vertices, faces)`` pair, any object with
-    ``.vertices`` and ``.faces``, or a file's path (read as `qemjax.load` reads it, without its warning);
-    return float64 vertices (n, 3) and int64 faces (m, 3).
+    """Validate a mesh given as a `trimesh.Trimesh` (or a `trimesh.Scene`, concatenated), a ``(vertices,
+    faces)`` pair, any object with ``.vertices`` and ``.faces``, or a file's path (read as `qemjax.load`
+    reads it, without its warning); return float64 vertices (n, 3) and int64 faces (m, 3).
 
     Raises ValueError on wrong shapes, an empty mesh, non-finite coordinates of a vertex a face uses,
     non-integer or out-of-range face indices. A vertex no face uses may hold NaN or inf (`simplify` drops
@@ -35,6 +35,13 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
         from .._io.mesh import _read
 
         mesh = _read(mesh)[0]
+    elif type(mesh).__module__.startswith("trimesh"):  # a Scene (a glTF's), concatenated as simplify takes it
+        from .._io.mesh import _as_trimesh
+
+        try:
+            mesh = _as_trimesh(mesh)
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
     if isinstance(mesh, (tuple, list)):
         if len(mesh) != 2:
             raise ValueError(f"{name}: a tuple mesh must be (vertices, faces), got {len(mesh)} items")
