@@ -833,3 +833,15 @@ def test_a_trimesh_scene_is_measured_as_simplify_takes_it():
         assert len(peers.simplify("meshoptimizer", scene, 100).faces) == 100
     with pytest.raises(ValueError, match="^original: expected a triangle mesh, got a point cloud"):
         metrics.surface_distance(trimesh.PointCloud(mesh.vertices), simplified)
+
+
+@pytest.mark.parametrize("mesh, message", [
+    (([[0, 0, 0], [1, 0], [0, 1, 0]], [[0, 1, 2]]), "^original: vertices must be a rectangular array, got a ragged"),
+    (([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 1]]), "^original: faces must be a rectangular array, got a"),
+])
+def test_a_ragged_list_is_refused_naming_the_mesh(mesh, message):
+    """numpy's "setting an array element with a sequence. The requested array has an inhomogeneous shape ..."
+    named neither the mesh nor its vertices or faces."""
+    tri = (np.eye(3), np.array([[0, 1, 2]]))
+    with pytest.raises(ValueError, match=message):
+        metrics.surface_distance(mesh, tri)

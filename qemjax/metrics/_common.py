@@ -53,8 +53,7 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
             f"{name}: expected a trimesh.Trimesh, a (vertices, faces) tuple, an object with .vertices and "
             f".faces or a file's path, got {type(mesh).__name__}"
         )
-    v = np.asarray(vertices)
-    f = np.asarray(faces)
+    v, f = _rectangular(name, "vertices", vertices), _rectangular(name, "faces", faces)
     if v.ndim != 2 or v.shape[1] != 3:
         raise ValueError(f"{name}: vertices must have shape (n, 3), got {v.shape}")
     if f.ndim != 2 or f.shape[1] != 3:
@@ -82,6 +81,15 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
         v = v.copy()
         v[bad] = v[f[0, 0]]
     return MeshArrays(v, f)
+
+
+def _rectangular(name: str, what: str, x) -> np.ndarray:
+    """np.asarray(x); ValueError naming the mesh and ``what`` for a ragged nested list (numpy's own message
+    named neither)."""
+    try:
+        return np.asarray(x)
+    except (ValueError, TypeError):
+        raise ValueError(f"{name}: {what} must be a rectangular array, got a ragged list") from None
 
 
 def frame_exponent(V: np.ndarray) -> int:
