@@ -845,3 +845,22 @@ def test_a_ragged_list_is_refused_naming_the_mesh(mesh, message):
     tri = (np.eye(3), np.array([[0, 1, 2]]))
     with pytest.raises(ValueError, match=message):
         metrics.surface_distance(mesh, tri)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(eps=float("nan")), r"^eps must be a finite number >= 0 \(UV units\), got nan$"),
+    (dict(eps=-1e-3), r"^eps must be a finite number >= 0 \(UV units\), got -0.001$"),
+    (dict(chunk=0), r"^chunk must be a whole number >= 1, got 0$"),
+    (dict(chunk=-4), r"^chunk must be a whole number >= 1, got -4$"),
+    (dict(chunk=64.0), r"^chunk must be a whole number >= 1, got 64.0$"),
+])
+def test_uv_chart_integrity_refuses_eps_and_chunk_it_cannot_use(kwargs, message):
+    """eps=NaN placed no point in any input triangle, so every face read as spanning a seam, without a word;
+    chunk=0 raised range's 'arg 3 must not be zero', a negative one set.intersection's TypeError."""
+    from qemjax import shapes
+
+    V, F = shapes.grid(4)
+    tm = trimesh.Trimesh(V, F, visual=trimesh.visual.TextureVisuals(uv=V[:, :2]), process=False)
+    assert metrics.uv_chart_integrity(tm, tm)["faces_spanning"] == 0
+    with pytest.raises(ValueError, match=message):
+        metrics.uv_chart_integrity(tm, tm, **kwargs)

@@ -215,6 +215,12 @@ def uv_chart_integrity(original, simplified, *, eps: float = 1e-6, chunk: int = 
     ``eps`` slack); a face whose four points share no input chart spans a seam (or left the atlas).
     Returns charts_in, charts_out (output faces joined across edges whose corners share UVs),
     faces_spanning (count) and spanning_fraction."""
+    # a NaN eps found no point in any triangle (every face "spanning"); a chunk below 1 raised range's errors
+    if isinstance(eps, bool) or not isinstance(eps, (int, float, np.integer, np.floating)) \
+            or not 0 <= eps < float("inf"):
+        raise ValueError(f"eps must be a finite number >= 0 (UV units), got {eps!r}")
+    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+        raise ValueError(f"chunk must be a whole number >= 1, got {chunk!r}")
     if corner_values(original, "uv") is None or corner_values(simplified, "uv") is None:
         raise ValueError("both meshes must carry UVs")
     _, cin, Cin = _uv_charts_of_mesh(original)
