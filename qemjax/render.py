@@ -240,14 +240,19 @@ def face_texture_colors(mesh, image=None) -> np.ndarray:
 def render_pair(before, after, path=None, *, titles=None, figsize=(10, 5), dpi: int = 120, **kwargs):
     """Draw two meshes side by side (titled with their face counts); returns the Figure.
 
-    ``kwargs`` go to :func:`render` (view, color, edges, up, max_faces). When ``path`` is given the figure is
-    saved there and closed.
+    ``kwargs`` go to :func:`render` (view, color, edges, up, max_faces); ``titles`` and ``colors`` (per-face
+    colours, as `render`'s ``color``) take two, (before, after). When ``path`` is given the figure is saved
+    there and closed.
     """
     plt, _ = _pyplot()
     meshes = [_as_arrays(before), _as_arrays(after)]
     colors = kwargs.pop("colors", None)  # optional (before, after) per-face colours
     if titles is None:
         titles = [f"before: {len(meshes[0][1]):,} faces", f"after: {len(meshes[1][1]):,} faces"]
+    # one each: zip stopped at the shorter, so a single title drew the first mesh alone, without a word
+    for name, value in (("titles", titles), ("colors", colors)):
+        if value is not None and (isinstance(value, str) or len(value) != 2):
+            raise ValueError(f"render_pair: {name} takes two, one for each mesh (before, after), got {value!r}")
     fig = plt.figure(figsize=figsize, dpi=dpi)
     for i, (mesh, title) in enumerate(zip(meshes, titles)):
         ax = fig.add_subplot(1, 2, i + 1, projection="3d")

@@ -191,3 +191,13 @@ def test_render_refuses_a_view_or_cap_it_cannot_use(kwargs, message):
     'negative dimensions are not allowed' (on a mesh above the cap): each is now one line naming it."""
     with pytest.raises(ValueError, match=message):
         render(_icosphere(), **{"max_faces": 10, **kwargs})
+
+
+@pytest.mark.parametrize("kwargs, name", [(dict(titles=["only"]), "titles"), (dict(titles="ab"), "titles"),
+                                          (dict(titles=["a", "b", "c"]), "titles"),
+                                          (dict(colors=[(1.0, 0.0, 0.0)]), "colors")])
+def test_render_pair_takes_two_titles_and_colors(kwargs, name):
+    """One title drew the first mesh alone (zip stopped at the shorter), without a word; a string of two
+    letters was taken as two titles."""
+    with pytest.raises(ValueError, match=f"^render_pair: {name} takes two, one for each mesh"):
+        render_pair(_icosphere(), _icosphere(), **kwargs)
