@@ -91,6 +91,26 @@ def _check_view(view) -> tuple[float, float]:
     return elev, azim
 
 
+def _base_color(color) -> np.ndarray:
+    """``color`` as float64 RGB(A): a matplotlib colour name ("red", "#4477aa"), 3 or 4 numbers, or (m, 3|4)
+    per face; ValueError in render's words for anything else (None or a name raised numpy's errors)."""
+    if isinstance(color, str):
+        from matplotlib.colors import to_rgb
+
+        try:
+            return np.asarray(to_rgb(color), dtype=np.float64)
+        except ValueError:
+            raise ValueError(f"render: color {color!r} is not a colour matplotlib knows") from None
+    try:
+        base = np.asarray(color, dtype=np.float64)
+    except (TypeError, ValueError):
+        base = None
+    if base is None or base.ndim not in (1, 2) or base.shape[-1] not in (3, 4):
+        raise ValueError(f"render: color must be RGB (3 numbers in 0..1), a colour name or one per face (m, 3), "
+                         f"got {color!r}")
+    return base
+
+
 def _view_direction(view) -> np.ndarray:
     """Unit vector from the scene towards the camera for matplotlib's (elev, azim) in degrees."""
     elev, azim = np.radians(view[0]), np.radians(view[1])
@@ -134,9 +154,9 @@ def render(
             (m, 3) triangles, or (m, k) quads or other polygons (k >= 3), drawn as a fan of triangles each.
         ax: a 3-D Axes to draw into (``projection="3d"``); a new figure is made when None.
         view: (elevation, azimuth) in degrees. The light comes from the camera, a little above and left.
-        color: RGB base colour (0..1), or one per face (m, 3) (e.g. a texture sampled at each face's
-            UVs: `face_texture_colors`), scaled by Lambert shading ``AMBIENT + (1 - AMBIENT) * |n . l|``
-            (two-sided, so meshes with mixed orientation still look lit).
+        color: RGB base colour (0..1) or a matplotlib colour name ("red"), or one per face (m, 3) (e.g. a
+            texture sampled at each face's UVs: `face_texture_colors`), scaled by Lambert shading
+            ``AMBIENT + (1 - AMBIENT) * |n . l|`` (two-sided, so meshes with mixed orientation still look lit).
         edges: also draw the triangle edges (useful on small, simplified meshes).
         path: when given, the figure is saved there; a figure made here is then closed.
         up: the mesh's up axis ("y" for most scanned / OBJ models, "z" for CAD), shown vertically.
@@ -165,7 +185,7 @@ def render(
     normals = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
 
     eye = _view_direction(view)
-    base = np.asarray(color, dtype=np.float64)
+    base = _base_color(color)
     if base.ndim == 2:
         if base.shape[0] != polygons:
             raise ValueError(f"color: {base.shape[0]} per-face colours for {polygons} faces")

@@ -201,3 +201,20 @@ def test_render_pair_takes_two_titles_and_colors(kwargs, name):
     letters was taken as two titles."""
     with pytest.raises(ValueError, match=f"^render_pair: {name} takes two, one for each mesh"):
         render_pair(_icosphere(), _icosphere(), **kwargs)
+
+
+def test_render_takes_a_colour_name_and_refuses_what_is_no_colour():
+    """color="red" raised numpy's "could not convert string to float", None an IndexError: a matplotlib
+    colour name is now the colour it names, and what is no colour is refused in render's words."""
+    import matplotlib.pyplot as plt
+
+    shown = []
+    for color in ("red", (1.0, 0.0, 0.0)):
+        ax = render(_icosphere(), color=color)
+        shown.append(ax.collections[0].get_facecolors())
+        plt.close(ax.figure)
+    np.testing.assert_array_equal(shown[0], shown[1])
+    for bad, message in ((None, "color must be RGB"), ((1.0, 0.0), "color must be RGB"),
+                         ("reddish", "color 'reddish' is not a colour matplotlib knows")):
+        with pytest.raises(ValueError, match=f"^render: {message}"):
+            render(_icosphere(), color=bad)
