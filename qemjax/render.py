@@ -1,8 +1,9 @@
 """Quick pictures of triangle meshes with matplotlib (an optional dependency: ``pip install matplotlib``).
 
 ``render(mesh)`` draws one mesh with flat Lambert shading; ``render_pair(before, after)`` draws two side by
-side with their face counts. A mesh is a ``trimesh.Trimesh``, a ``(vertices, faces)`` pair, or any object
-with ``.vertices`` and ``.faces`` (e.g. the result of ``qemjax.simplify``).
+side with their face counts. A mesh is a ``trimesh.Trimesh`` (or a ``trimesh.Scene``, its meshes
+concatenated), a ``(vertices, faces)`` pair, or any object with ``.vertices`` and ``.faces`` (e.g. the result
+of ``qemjax.simplify``).
 
 This is a convenience for notebooks and reports, not a renderer: matplotlib sorts polygons by depth (painter's
 algorithm), which costs time per face and gets some overlaps wrong. To keep it quick, meshes with more than
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._io.mesh import _triangulate
+from ._io.mesh import _as_trimesh, _triangulate
 
 __all__ = ["face_texture_colors", "render", "render_pair"]
 
@@ -41,6 +42,8 @@ def _pyplot():
 def _as_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3) float64, faces (m, k) int64, k >= 3: triangles, quads or other polygons) from a
     trimesh, a (V, F) pair or a .vertices/.faces object; ValueError naming a shape that is neither."""
+    if type(mesh).__module__.startswith("trimesh"):  # a Scene (a glTF's), concatenated as simplify takes it
+        mesh = _as_trimesh(mesh)
     if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
         V, F = mesh.vertices, mesh.faces
     elif isinstance(mesh, (tuple, list)) and len(mesh) == 2:

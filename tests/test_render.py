@@ -218,3 +218,13 @@ def test_render_takes_a_colour_name_and_refuses_what_is_no_colour():
                          ("reddish", "color 'reddish' is not a colour matplotlib knows")):
         with pytest.raises(ValueError, match=f"^render: {message}"):
             render(_icosphere(), color=bad)
+
+
+def test_render_draws_a_trimesh_scene():
+    """`trimesh.load` of a glTF gives a Scene, which simplify and the metrics take (concatenated): render
+    refused it ("expected a mesh, ... got Scene")."""
+    import matplotlib.pyplot as plt
+
+    ax = render(trimesh.Scene([_icosphere()]))
+    assert len(ax.collections[0].get_facecolors()) == 320
+    plt.close(ax.figure)
