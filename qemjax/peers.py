@@ -52,6 +52,15 @@ def compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return V[used], inverse.reshape(-1, 3).astype(np.int64)
 
 
+def _valid(V, F) -> tuple[np.ndarray, np.ndarray]:
+    """(V, F) checked as `simplify` checks a mesh (`metrics._common.as_mesh`): the peers' C code crashed the
+    interpreter on an index out of range or faces that are not triangles, so every adapter checks first."""
+    from .metrics._common import as_mesh
+
+    checked = as_mesh((V, F), "mesh")
+    return checked.vertices, checked.faces
+
+
 class _Clock:
     """Context manager that writes the elapsed wall time into ``timings["call_s"]``."""
 
@@ -75,6 +84,7 @@ def simplify_meshoptimizer(V, F, target_faces, *, timings=None):
     at the target (or when no collapse is left). Options are the defaults (borders may only slide along
     themselves; no vertex locking).
     """
+    V, F = _valid(V, F)
     import meshoptimizer
 
     indices = np.ascontiguousarray(np.asarray(F).reshape(-1), dtype=np.uint32)
@@ -93,6 +103,7 @@ def simplify_meshoptimizer(V, F, target_faces, *, timings=None):
 
 def simplify_fast_simplification(V, F, target_faces, *, timings=None):
     """fast-simplification (a wrapper of Fast-Quadric-Mesh-Simplification), via ``target_reduction``."""
+    V, F = _valid(V, F)
     import fast_simplification
 
     points = np.ascontiguousarray(V, dtype=np.float64)
@@ -106,6 +117,7 @@ def simplify_fast_simplification(V, F, target_faces, *, timings=None):
 
 def simplify_pyfqmr(V, F, target_faces, *, timings=None):
     """pyfqmr (another Fast-Quadric-Mesh-Simplification wrapper), aggressiveness 7, borders preserved."""
+    V, F = _valid(V, F)
     import pyfqmr
 
     simplifier = pyfqmr.Simplify()
@@ -120,6 +132,7 @@ def simplify_pyfqmr(V, F, target_faces, *, timings=None):
 
 def simplify_pymeshlab(V, F, target_faces, *, timings=None):
     """MeshLab's quadric edge collapse (Garland-Heckbert), optimal placement, normal flips prevented."""
+    V, F = _valid(V, F)
     import pymeshlab
 
     meshset = pymeshlab.MeshSet()
@@ -143,6 +156,7 @@ def simplify_libigl(V, F, target_faces, *, timings=None):
     Depending on the libigl version it returns ``(U, G, J, I)`` or ``(ok, U, G, J, I)``: the first two 2-D
     arrays are taken as the vertices and faces.
     """
+    V, F = _valid(V, F)
     import igl
 
     Vf = np.asfortranarray(V, dtype=np.float64)
@@ -186,8 +200,8 @@ def _warmup_mesh() -> tuple[np.ndarray, np.ndarray]:
 
 def run_peer(name: str, V, F, target_faces: int, *, warmup: bool = True):
     """Run peer ``name``; returns ``(V2, F2, call_s)`` with ``call_s`` the time of the simplification call."""
+    _require(name)  # an unknown name: the ValueError naming the peers, not PEERS' KeyError
     fn = PEERS[name]
-    _require(name)
     if warmup and name not in _warmed:
         Vw, Fw = _warmup_mesh()
         fn(Vw, Fw, len(Fw) // 4)

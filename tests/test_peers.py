@@ -123,3 +123,30 @@ def test_a_target_that_is_not_a_whole_number_is_refused_in_words(target):
     V, F = qemjax.shapes.icosphere(2)
     with pytest.raises(ValueError, match="^target_faces must be a whole number of at least 1, got "):
         peers.simplify("meshoptimizer", (V, F), target)
+
+
+@pytest.mark.parametrize("name", ["meshoptimizer", "libigl"])
+def test_the_public_adapters_check_the_mesh_as_simplify_does(name):
+    """`run_peer` and the adapters (`simplify_meshoptimizer`, ...) are public too, and handed faces out of range
+    to the peer's C code, which crashed the interpreter (a segfault); `run_peer` of an unknown name raised
+    PEERS' KeyError. Run in a child process, so that a crash is a failure here, not the end of the session."""
+    import subprocess
+    import sys
+
+    pytest.importorskip(peers._MODULES[name])
+    adapter = "simplify_" + name.replace("-", "_")
+    code = f"""
+import qemjax
+from qemjax import peers
+V, F = qemjax.shapes.icosphere(2)
+for call in (lambda: peers.run_peer({name!r}, V, F + 5, 100), lambda: peers.{adapter}(V, F + 5, 100),
+             lambda: peers.run_peer("meshopt", V, F, 100)):
+    try:
+        call()
+    except ValueError as exc:
+        print(str(exc).splitlines()[0])
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.splitlines() == ["mesh: face indices must lie in [0, 162), got [5, 166]"] * 2 + [
+        f"unknown peer 'meshopt'; peers are {list(peers.PEERS)}"]
