@@ -99,6 +99,20 @@ def test_registration_refuses_taken_names_and_non_methods():
     assert len(qemjax.simplify(qemjax.shapes.icosphere(2), ratio=0.5, boundary_weight=3.0).faces) == 160
 
 
+def test_a_method_that_computes_no_cost_is_refused_by_name():
+    """`qemjax.Method` itself, or a subclass of it that adds fields but no cost, ran until the cleaned mesh
+    asked for its state and failed on a bare NotImplementedError (no message at all)."""
+    @dataclasses.dataclass(frozen=True)
+    class Bare(qemjax.Method):
+        name: ClassVar[str] = "bare"
+        weight: float = 1.0
+
+    for method in (qemjax.Method(), qemjax.Method, Bare(weight=2.0)):
+        with pytest.raises(ValueError, match=r"^method (Method|Bare) computes no cost: it does not implement "
+                                             r"init_state, price, merge \(subclass qemjax.QEM"):
+            qemjax.simplify(shapes.icosphere(1), ratio=0.5, method=method)
+
+
 @pytest.mark.parametrize("field", ["ratio", "target_faces", "measure", "method"])
 def test_registration_refuses_a_field_named_like_a_simplify_keyword(field):
     """A method with a field named like one of simplify's own keywords was registered: the field could never be

@@ -75,18 +75,24 @@ def register(name, cls: type[Method] | None = None):
 
 
 def resolve(method) -> Method:
-    """The method object for ``method``: a name of `methods` (its defaults) or a method object (as is)."""
-    if isinstance(method, Method):
-        return method
-    if isinstance(method, str):
-        if method in REGISTRY:
-            return REGISTRY[method]()
-        if method in PRESETS:
-            return PRESETS[method]()
-    if isinstance(method, type) and issubclass(method, Method):
-        return method()
-    raise ValueError(f"unknown method {method!r}; choose from {methods()} or pass a method object "
-                     "such as qemjax.QEM(...)")
+    """The method object for ``method``: a name of `methods` (its defaults) or a method object (as is).
+    ValueError for a method that computes no cost (`Method` itself, or a subclass of it that does not
+    implement ``init_state``, ``price`` and ``merge``): the run failed on a bare NotImplementedError."""
+    if isinstance(method, str) and method in REGISTRY:
+        method = REGISTRY[method]()
+    elif isinstance(method, str) and method in PRESETS:
+        method = PRESETS[method]()
+    elif isinstance(method, type) and issubclass(method, Method):
+        method = method()
+    if not isinstance(method, Method):
+        raise ValueError(f"unknown method {method!r}; choose from {methods()} or pass a method object "
+                         "such as qemjax.QEM(...)")
+    missing = [f for f in ("init_state", "price", "merge") if getattr(type(method), f) is getattr(CostModel, f)]
+    if missing:
+        raise ValueError(f"method {type(method).__name__} computes no cost: it does not implement "
+                         f"{', '.join(missing)} (subclass qemjax.QEM, or another method, to add settings to its "
+                         "cost)")
+    return method
 
 
 def name_of(method: Method) -> str:
