@@ -240,7 +240,8 @@ def render(
 def face_texture_colors(mesh, image=None) -> np.ndarray:
     """(m, 3) RGB in [0, 1] per face: the texture sampled (nearest texel) at each face's UV centroid, for
     `render`'s per-face ``color``. ``mesh``: a qemjax result with UVs (``uv``, ``wedge_faces``,
-    ``material``) or a trimesh with `TextureVisuals`; ``image``: a PIL image (default: the material's)."""
+    ``material``) or a trimesh with `TextureVisuals`; ``image``: a PIL image, an image file's path or an
+    (h, w, 3) array (default: the material's)."""
     if getattr(mesh, "wedge_faces", None) is not None:
         uv, corners, material = mesh.uv, np.asarray(mesh.wedge_faces), mesh.material
     else:  # (a result without UVs has no wedges; a trimesh without them, other visuals)
@@ -252,12 +253,33 @@ def face_texture_colors(mesh, image=None) -> np.ndarray:
         image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
     if image is None:
         raise ValueError("no texture image: give image=")
-    tex = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+    tex = _texels(image)
     h, w = tex.shape[:2]
     c = np.asarray(uv, np.float64)[corners].mean(axis=1)
     x = np.clip((c[:, 0] % 1.0) * w, 0, w - 1).astype(int)
     y = np.clip((1.0 - c[:, 1] % 1.0) * h, 0, h - 1).astype(int)  # v points up, image rows down
     return tex[y, x]
+
+
+def _texels(image) -> np.ndarray:
+    """(h, w, 3) RGB in [0, 1] of a PIL image, an image file's path, or an (h, w, 3|4) array (integers 0..255,
+    or floats 0..1); ValueError for anything else (a path or an array raised AttributeError: no .convert)."""
+    import os
+
+    if isinstance(image, (str, os.PathLike)):
+        from PIL import Image
+
+        with Image.open(image) as opened:
+            image = opened.convert("RGB")
+    if hasattr(image, "convert"):
+        return np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+    tex = np.asarray(image)
+    if tex.ndim != 3 or tex.shape[2] not in (3, 4) or not (np.issubdtype(tex.dtype, np.integer)
+                                                           or np.issubdtype(tex.dtype, np.floating)):
+        raise ValueError(f"image must be a PIL image, an image file's path or an (h, w, 3) array of RGB values, "
+                         f"got {type(image).__name__} {getattr(tex, 'shape', '')}")
+    scale = 255.0 if np.issubdtype(tex.dtype, np.integer) else 1.0
+    return tex[..., :3].astype(np.float64) / scale
 
 
 def render_pair(before, after, path=None, *, titles=None, figsize=(10, 5), dpi: int = 120, **kwargs):

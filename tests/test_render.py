@@ -228,3 +228,23 @@ def test_render_draws_a_trimesh_scene():
     ax = render(trimesh.Scene([_icosphere()]))
     assert len(ax.collections[0].get_facecolors()) == 320
     plt.close(ax.figure)
+
+
+def test_face_texture_colors_takes_an_image_as_a_path_or_an_array(tmp_path):
+    """A path or an array as ``image`` raised AttributeError ("'str' object has no attribute 'convert'"): they
+    give the texels the PIL image gives, and what is no image is refused in words."""
+    from PIL import Image
+
+    from qemjax.render import face_texture_colors
+
+    rng = np.random.default_rng(0)
+    pixels = rng.integers(0, 256, (8, 16, 3), dtype=np.uint8)
+    Image.fromarray(pixels).save(tmp_path / "t.png")
+    sphere = _icosphere()
+    uv = rng.random((len(sphere.vertices), 2))
+    mesh = trimesh.Trimesh(sphere.vertices, sphere.faces, visual=trimesh.visual.TextureVisuals(uv=uv), process=False)
+    want = face_texture_colors(mesh, Image.fromarray(pixels))
+    for image in (tmp_path / "t.png", str(tmp_path / "t.png"), pixels, pixels / 255.0):
+        np.testing.assert_array_equal(face_texture_colors(mesh, image), want)
+    with pytest.raises(ValueError, match="^image must be a PIL image, an image file's path or an"):
+        face_texture_colors(mesh, np.zeros((8, 16)))
