@@ -864,3 +864,21 @@ def test_uv_chart_integrity_refuses_eps_and_chunk_it_cannot_use(kwargs, message)
     assert metrics.uv_chart_integrity(tm, tm)["faces_spanning"] == 0
     with pytest.raises(ValueError, match=message):
         metrics.uv_chart_integrity(tm, tm, **kwargs)
+
+
+def test_a_face_that_repeats_a_vertex_is_one_face_on_its_edge():
+    """A face (a, a, b) runs along its one edge both ways: both half-edges were counted, so the edge was "in two
+    faces", and a lone such face read as a closed surface of genus 0 with a volume; beside a closed mesh, on
+    one of its edges, it made that edge one of four faces. It is one face there, one fan at its vertex."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    for face in ([0, 0, 1], [0, 1, 1], [0, 1, 0]):
+        t = metrics.topology_report((V, np.array([face])))
+        assert (t["edges"], t["boundary_edges"], t["closed"], t["non_manifold_vertices"]) == (1, 1, False, 0)
+        assert math.isnan(t["genus"])
+        assert math.isnan(metrics.area_volume((V, np.array([face])), (V, [face]))["volume_before"])
+    tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    t = metrics.topology_report((V, np.vstack([tet, [[0, 0, 1]]])))
+    assert (t["edges"], t["non_manifold_edges"], t["boundary_edges"]) == (6, 1, 0)
+    assert metrics._common.as_mesh((V, np.vstack([tet, [[0, 0, 1]]]))).edges.count.max() == 3
+    assert metrics.topology_report((V, tet)) == {**t, "faces": 4, "euler": 2, "closed": True, "genus": 0,
+                                                 "non_manifold_edges": 0, "non_manifold_vertices": 0}

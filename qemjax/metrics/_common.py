@@ -188,6 +188,7 @@ class EdgeTable:
     """Undirected edges of a triangle mesh and how its half-edges attach to them.
 
     Half-edge h = 3 * face + k runs from faces[face, k] to faces[face, (k + 1) % 3].
+    A face that repeats a vertex, (a, a, b), has one half-edge on its edge (the first that runs a -> b or b -> a).
 
     lo, hi:     (E,) int64 endpoints of each undirected edge, lo < hi. Half-edges from a vertex to itself
                 (faces that repeat a vertex) belong to no edge.
@@ -211,8 +212,14 @@ class EdgeTable:
         lo = np.minimum(a, b)
         hi = np.maximum(a, b)
         key = lo * np.int64(n_vertices) + hi
-        # Half-edges of faces that repeat a vertex (a == b) join no edge.
-        proper = np.flatnonzero(a != b)
+        # Half-edges of faces that repeat a vertex (a == b) join no edge, and such a face (a, a, b) runs along
+        # its one edge both ways: it is one face on it, its first half-edge there (counted twice, a lone
+        # degenerate face read as a closed surface)
+        ok = (a != b).reshape(-1, 3)
+        repeats = ~ok.all(axis=1)
+        if repeats.any():
+            ok[repeats] &= np.cumsum(ok[repeats], axis=1) == 1
+        proper = np.flatnonzero(ok.ravel())
         bits_h = max(len(a).bit_length(), 1)
         if int(key.max(initial=0)).bit_length() + bits_h <= 63:
             # Sort (key, half-edge) packed in one int64: a plain sort is several times faster than argsort.

@@ -46,7 +46,10 @@ def _fans_per_vertex(mesh: MeshArrays) -> np.ndarray:
     lo_1, hi_1 = corner(h1, e.forward[h1]), corner(h1, ~e.forward[h1])
     lo_2, hi_2 = corner(h2, e.forward[h2]), corner(h2, ~e.forward[h2])
     n_corners = 3 * len(f)
-    n_fans, label = _components(n_corners, np.concatenate([lo_1, hi_1]), np.concatenate([lo_2, hi_2]))
+    # a face that repeats a vertex has two corners there, one fan (not a pinch)
+    same = np.flatnonzero((f == np.roll(f, -1, axis=1)).ravel())  # corner 3·face + k, whose next is that vertex
+    after = 3 * (same // 3) + (same % 3 + 1) % 3
+    n_fans, label = _components(n_corners, np.concatenate([lo_1, hi_1, same]), np.concatenate([lo_2, hi_2, after]))
     fan_vertex = np.empty(n_fans, dtype=np.int64)
     fan_vertex[label] = f.ravel()
     return np.bincount(fan_vertex, minlength=len(mesh.vertices))
