@@ -191,6 +191,22 @@ def test_uv_seams_are_kept_when_the_file_names_a_texture(tmp_path):
     assert glb.uv is not None and glb.material is not None and last_stretch_only(warned_glb, "uv"), warned_glb
 
 
+def test_the_seams_warning_does_not_name_the_textured_uvs_it_keeps(tmp_path):
+    """A file with a texture and hard normal edges: 'auto' keeps the UVs and their material, and leaves the
+    creased normals out; the one warning names the normals and not the UVs or the material, which the
+    result has (it said "also not kept: uv, material")."""
+    mesh = shapes.bumpy_sphere(3)
+    uv, cuv = af.spherical_uv(mesh)
+    path = tmp_path / "uvn.obj"
+    af.write_obj(path, mesh, uv=uv, corner_uv=cuv, corner_normals=af.crease_normals(mesh, angle=5.0))
+    _with_texture(path, "t.png")
+    res, warned = run(path, ratio=0.2)
+    assert res.uv is not None and res.material is not None and res.stats["not_kept_seams"] == ["normal"]
+    assert res.stats["dropped"] == ["normals"]
+    seams = [w for w in warned if "not kept by default" in w]
+    assert len(seams) == 1 and "also not kept" not in seams[0], seams
+
+
 def test_smooth_colours_are_kept(tmp_path):
     mesh = shapes.bumpy_sphere(3)
     path = tmp_path / "c.ply"

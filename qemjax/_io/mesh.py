@@ -370,6 +370,14 @@ def drop_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndar
 _KEPT_NAMES = {"uv": ("uv",), "color": ("vertex_colors",)}
 
 
+def _kept_names(kept: dict, material) -> set:
+    """The names `dropped_attributes` gives to what the kinds ``kept`` keep (the material with the UVs)."""
+    names = {n for k in kept for n in _KEPT_NAMES.get(k, ())}
+    if "uv" in kept and material is not None:
+        names.add("material")
+    return names
+
+
 def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attributes=None,
             texture=None) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
@@ -407,14 +415,13 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
             kept = {k: v for k, v in kept.items() if k not in seamed}
             extra = ["material"] if "uv" in seamed and material is not None else []
             names = [_wedges.DROPPED_NAME[k] for k in seamed] + extra
-            others = [d for d in dropped if d not in names]
+            # the kinds still kept (and their material) are not among the others the warning names
+            others = [d for d in dropped if d not in names and d not in _kept_names(kept, material)]
             dropped = others + names
             _wedges.warn_seamed(seamed, others, name, stacklevel=stacklevel + 1)
             report["not_kept_seams"] = list(seamed)
     if kept:
-        names = {n for k in kept for n in _KEPT_NAMES.get(k, ())}
-        if "uv" in kept and material is not None:
-            names.add("material")
+        names = _kept_names(kept, material)
         dropped = [d for d in dropped if d not in names]
     if dropped and not report.get("not_kept_seams"):
         _warn_dropped(dropped, name, stacklevel=stacklevel + 1, kept=list(kept), hint=attributes is not None)
