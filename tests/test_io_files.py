@@ -390,6 +390,33 @@ def test_coff_colours_that_are_not_read_are_named(tmp_path):
     assert qemjax.simplify(str(path), ratio=1.0).stats["dropped"] == []
 
 
+def test_ply_colours_beside_uvs_are_named(tmp_path):
+    """trimesh reads a PLY with UVs (s, t) and colours (red, green, blue) as UVs alone: the colours were
+    dropped without a word (stats["dropped"] empty). They are named among what is dropped, with the
+    warning; the same file without the UVs keeps its colours as before."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+    def write(path, uv):
+        props = ["x", "y", "z"] + (["s", "t"] if uv else []) + ["red", "green", "blue"]
+        rows = [" ".join(f"{x:g}" for x in v) + (f" {v[0]:g} {v[1]:g}" if uv else "") + f" {40 * i} 9 200"
+                for i, v in enumerate(V)]
+        head = (["ply", "format ascii 1.0", f"element vertex {len(V)}"]
+                + [f"property {'uchar' if p in ('red', 'green', 'blue') else 'float'} {p}" for p in props]
+                + [f"element face {len(F)}", "property list uchar int vertex_indices", "end_header"])
+        path.write_text("\n".join(head + rows + [f"3 {a} {b} {c}" for a, b, c in F]) + "\n")
+
+    path = tmp_path / "uvc.ply"
+    write(path, uv=True)
+    with pytest.warns(UserWarning, match=r"carries vertex colours \(beside the UVs, which are read instead\)"):
+        res = qemjax.simplify(str(path), ratio=1.0)
+    assert res.uv is not None and res.colors is None
+    assert res.stats["dropped"] == ["vertex colours (beside the UVs, which are read instead)"]
+    write(path, uv=False)
+    res = qemjax.simplify(str(path), ratio=1.0)
+    assert res.colors is not None and res.stats["dropped"] == []
+
+
 @pytest.mark.parametrize("kind", ["little", "big", "ascii"])
 def test_a_vertex_list_property_is_named_in_core(tmp_path, kind):
     """An in-core run of a PLY whose vertex element has a list property dropped it without a word

@@ -293,7 +293,11 @@ def read(path) -> object:
                 and obj.visual.kind is None:  # trimesh reads no COFF colour: named among what is dropped
             obj.metadata["qemjax_unread"] = ["vertex colours (COFF)"]
         if fmt == "ply" and "qemjax_unread" not in obj.metadata:  # what trimesh steps over without a word
-            obj.metadata["qemjax_unread"] = _io_ply.unread(_io_ply.parse_header(data), positions_only=False)
+            header = _io_ply.parse_header(data)
+            unread = _io_ply.unread(header, positions_only=False)
+            if getattr(getattr(obj, "visual", None), "kind", None) == "texture":
+                unread += _io_ply.colours_beside_uv(header)
+            obj.metadata["qemjax_unread"] = unread
         return obj
     except OSError as exc:
         raise ValueError(f"could not read {path}: {exc.strerror or 'the file cannot be opened'}") from exc

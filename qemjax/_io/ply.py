@@ -132,6 +132,17 @@ def unread(h: Header, positions_only: bool) -> list[str]:
     return out
 
 
+def colours_beside_uv(h: Header) -> list[str]:
+    """The colours of a PLY that trimesh reads as UVs: its mesh holds one visual, the UVs, and lets the
+    vertex and face colours (``red``, ``green``, ``blue``: what it reads as colours) go."""
+    out = []
+    for name in ("vertex", "face"):
+        e = h.element(name)
+        if e is not None and len({"red", "green", "blue"} & {p.name for p in e.props}) == 3:
+            out.append(f"{name} colours (beside the UVs, which are read instead)")
+    return out
+
+
 def type_size(t: str) -> int:
     return int(TYPES[t][1])
 
