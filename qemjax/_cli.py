@@ -483,7 +483,8 @@ _FORMAT_NAMES = {"gltf": "glTF"}
 def _warn_format_losses(res, V, ext: str) -> None:
     """Warn when the format cannot hold what the result has: positions as precise as the result's (STL,
     GLB and glTF store float32, OFF as trimesh writes it 10 decimals; PLY and OBJ widen, `write`), or its
-    kept attributes (STL and OFF store positions and faces only; PLY, UVs without their texture image)."""
+    kept attributes (STL and OFF store positions and faces only; PLY, UVs without their texture image; OBJ,
+    colours without their alpha)."""
     V = np.asarray(V, np.float64)
     rounded = {"stl": lambda X: X.astype(np.float32), "glb": lambda X: X.astype(np.float32),
                "gltf": lambda X: X.astype(np.float32), "off": lambda X: np.round(X, 10)}.get(ext)
@@ -498,6 +499,10 @@ def _warn_format_losses(res, V, ext: str) -> None:
     if kept and ext in ("stl", "off"):
         warnings.warn(f"{_FORMAT_NAMES.get(ext, ext.upper())} stores positions and faces only: the kept {', '.join(kept)} not written "
                       "(.obj, .ply, .glb and .gltf hold them)", stacklevel=3)
+    colors = getattr(res, "colors", None)
+    if ext == "obj" and colors is not None and len(colors) and (colors[:, 3] < 1).any():
+        warnings.warn(f"OBJ stores vertex colours as RGB: their alpha (below 1 at {int((colors[:, 3] < 1).sum())} "
+                      "vertices) is not written (.ply, .glb and .gltf hold it)", stacklevel=3)
     if ext == "ply" and getattr(res, "uv", None) is not None:
         from ._mesh.wedges import names_texture
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import subprocess
 import sys
 import warnings
@@ -730,6 +731,26 @@ def test_ply_output_says_it_leaves_the_texture_image_out(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.obj", "o.ply", "t.png"]
     assert _cli.main(["simplify", str(src), str(tmp_path / "o.ply"), *keep]) == 0
     assert "texture image" not in capsys.readouterr().err
+
+
+def test_obj_output_says_it_leaves_the_colours_alpha_out(tmp_path, capsys):
+    """Kept vertex colours with alpha below 1 written as OBJ lost the alpha (OBJ's `v x y z r g b`) without
+    a word, while STL, OFF and a PLY's texture image are named: a warning says so; PLY keeps the alpha,
+    and opaque colours have none to lose."""
+    mesh = qemjax.shapes.bumpy_sphere(1)
+    rgba = np.full((len(mesh.vertices), 4), 255, np.uint8)
+    rgba[:, 0] = np.arange(len(rgba)) % 256
+    for alpha, name in ((128, "see.ply"), (255, "solid.ply")):
+        rgba[:, 3] = alpha
+        trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=rgba, process=False).export(tmp_path / name)
+    for src, out, warned in (("see.ply", "o.obj", True), ("see.ply", "o.ply", False), ("solid.ply", "o.obj", False)):
+        assert _cli.main(["simplify", str(tmp_path / src), str(tmp_path / out), "--ratio", "0.5", "--quiet"]) == 0
+        said = [line for line in capsys.readouterr().err.splitlines() if "alpha" in line]
+        assert len(said) == warned and all(re.fullmatch(
+            r"qemjax: warning: OBJ stores vertex colours as RGB: their alpha \(below 1 at \d+ vertices\) is not "
+            r"written \(\.ply, \.glb and \.gltf hold it\)", line) for line in said), said
+    back = qemjax.simplify(tmp_path / "o.ply", ratio=1.0)
+    assert np.allclose(back.colors[:, 3], 128 / 255)
 
 
 def test_lod_refuses_texture_with_the_real_reason(tmp_path, capsys, monkeypatch):
