@@ -354,6 +354,18 @@ def test_separate_triangles_are_not_deleted_and_the_warning_names_prune():
     assert len(p.faces) == 20 and p.stop_reason == "target"
 
 
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_a_tetrahedron_held_by_the_face_budget_says_so_in_non_manifold_mode(scheduler):
+    """Non-manifold mode, a tetrahedron to 1 face: every edge contraction drops all four faces (two
+    collapse, the other two coincide and cancel), more than the target allows. blocked_by counted no pair
+    and the warning said "pairs held back by no pairs left"; the six are counted as held by the face budget."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    with pytest.warns(UserWarning, match=r"\(pairs held back by face_budget: 6\)$"):
+        r = qemjax.simplify((V, F), target_faces=1, preserve_topology=False, scheduler=scheduler)
+    assert len(r.faces) == 4 and r.stop_reason == "blocked" and r.stats["blocked_by"]["face_budget"] == 6
+
+
 def _book(pages=3, n=8):
     """``pages`` flat grids sharing one edge line (the spine): edges there have ``pages`` faces."""
     Vs, Fs, off = [], [], 0

@@ -49,7 +49,9 @@ def classify(faces_left: int, target: int, bad: np.ndarray, removes: np.ndarray,
         return "target", {}
     live = manifold_ok & (bad == 0)
     blocked = count_reasons(bad[manifold_ok])
-    blocked["face_budget"] = int(np.sum(live & (removes > need)))
+    # a valid pair that fits and costs little enough was held back by the budget too: in non-manifold mode the
+    # faces it makes coincide go with it (a tetrahedron's edge takes all four), which ``removes`` leaves out
+    blocked["face_budget"] = int(np.sum(live & ((removes > need) | ~over_cost)))
     blocked["max_error"] = int(np.sum(live & (removes <= need) & over_cost))
     blocked["non_manifold"] = int(np.sum(~manifold_ok))
     if blocked["max_error"]:
