@@ -366,6 +366,21 @@ def test_a_tetrahedron_held_by_the_face_budget_says_so_in_non_manifold_mode(sche
     assert len(r.faces) == 4 and r.stop_reason == "blocked" and r.stats["blocked_by"]["face_budget"] == 6
 
 
+def test_the_warning_offers_preserve_topology_false_only_when_topology_held_pairs():
+    """A run the flip test alone stops (flip_angle=1 on a sphere) was told "preserve_topology=False may reach
+    further", which lifts no flip; the hint comes only when the topology rules held pairs back."""
+    V, F = shapes.bumpy_sphere(2)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        r = qemjax.simplify((V, F), target_faces=4, flip_angle=1.0)
+    said = [str(w.message) for w in seen if str(w.message).startswith("stopped at")]
+    assert r.stop_reason == "blocked" and r.stats["blocked_by"]["flip"] > 0
+    assert r.stats["blocked_by"]["topology"] == 0 == r.stats["blocked_by"]["coincident"]
+    assert len(said) == 1 and "preserve_topology" not in said[0], said
+    with pytest.warns(UserWarning, match=r"topology: \d+.*preserve_topology=False may reach further"):
+        qemjax.simplify((V, F), target_faces=1)
+
+
 def _book(pages=3, n=8):
     """``pages`` flat grids sharing one edge line (the spine): edges there have ``pages`` faces."""
     Vs, Fs, off = [], [], 0

@@ -747,7 +747,7 @@ def _above_target_message(faces: int, target: int, stop: str, blocked: dict, non
                     "never contracts: preserve_topology=False may reach the target")
         elif blocked.get("vanishing_part"):
             hint = "; separate parts keep their last faces: prune=True lets small parts vanish"
-        else:
+        elif blocked.get("topology") or blocked.get("coincident"):  # the rules that mode lifts, and only those
             hint = "; preserve_topology=False may reach further (genus and boundaries may then change)"
     if blocked.get("locked"):
         hint += ("; locked vertices hold pairs back (pairs of two locked vertices never contract): lock fewer "
