@@ -244,6 +244,15 @@ def _distance(text: str) -> float:
     return d
 
 
+def _load_error(exc: Exception, form: str) -> str:
+    """numpy's reason a vertex file could not be read, in the user's terms: a file that is not text (nor a
+    .npy) said so in the words of Python's decoder, and a ragged one came with advice about numpy's own
+    arguments (``usecols``), which the user does not pass."""
+    if isinstance(exc, UnicodeDecodeError):
+        return f"it is not text: expected a .npy file or text with {form}"
+    return re.sub(r";\s*use `usecols`.*$", "", str(exc), flags=re.S)
+
+
 def _read_feature_edges(path: str) -> np.ndarray:
     """(k,2) int64 vertex pairs from a .npy file or a text file of two integers per line (an empty text
     file: none, without numpy's warning about it)."""
@@ -252,7 +261,7 @@ def _read_feature_edges(path: str) -> np.ndarray:
             warnings.filterwarnings("ignore", "loadtxt: input contained no data")
             a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=np.int64, ndmin=2)
     except (OSError, ValueError) as exc:
-        raise CliError(f"could not read feature edges from {path}: {exc}") from None
+        raise CliError(f"could not read feature edges from {path}: {_load_error(exc, 'two integers per line')}") from None
     return np.zeros((0, 2), np.int64) if a.size == 0 and not path.endswith(".npy") else a
 
 
@@ -264,7 +273,8 @@ def _read_vector(path: str, kind, flag: str) -> np.ndarray:
             warnings.filterwarnings("ignore", "loadtxt: input contained no data")
             a = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=kind, ndmin=1)
     except (OSError, ValueError) as exc:
-        raise CliError(f"could not read {flag} from {path}: {exc}") from None
+        form = "one integer per line" if np.issubdtype(kind, np.integer) else "one number per line"
+        raise CliError(f"could not read {flag} from {path}: {_load_error(exc, form)}") from None
     a = a.reshape(-1) if a.ndim == 2 and 1 in a.shape else a
     if a.ndim != 1:
         raise CliError(f"{flag} {path}: expected a flat list of values (in text, one a line), got an "

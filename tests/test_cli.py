@@ -264,6 +264,28 @@ def test_bad_feature_edge_file(src, tmp_path, capsys):
     assert "could not read feature edges" in capsys.readouterr().err
 
 
+def test_vertex_files_that_cannot_be_read_are_refused_in_the_users_terms(src, tmp_path, capsys):
+    """A binary file given as text was refused in the words of Python's decoder ("'utf-8' codec can't decode
+    byte 0x89"), a ragged one with numpy's advice to "use `usecols`", an argument of numpy's the user never
+    passes: the file's form is named instead, and the advice left out."""
+    image = tmp_path / "t.png"
+    image.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    ragged = tmp_path / "feat.txt"
+    ragged.write_text("0 1\n2\n")
+    for flag, path, said in (
+            ("--feature-edges", image, "could not read feature edges from {}: it is not text: expected a .npy file "
+                                       "or text with two integers per line"),
+            ("--locked", image, "could not read --locked from {}: it is not text: expected a .npy file or text "
+                                "with one integer per line"),
+            ("--vertex-weights", image, "could not read --vertex-weights from {}: it is not text: expected a .npy "
+                                        "file or text with one number per line"),
+            ("--feature-edges", ragged, "could not read feature edges from {}: the number of columns changed from "
+                                        "2 to 1 at row 2")):
+        assert _cli.main(["simplify", str(src), str(tmp_path / "o.obj"), "--ratio", "0.5", flag, str(path)]) == 2
+        err = capsys.readouterr().err
+        assert err.splitlines()[0] == "qemjax: error: " + said.format(path), err
+
+
 def test_simplify_sets_no_global_jax_options(src):
     """Only importing qemjax touches JAX's options (the compilation cache: tests/test_compile_cache.py)."""
     import jax
