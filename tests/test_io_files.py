@@ -417,6 +417,25 @@ def test_ply_colours_beside_uvs_are_named(tmp_path):
     assert res.colors is not None and res.stats["dropped"] == []
 
 
+def test_obj_colours_beside_uvs_are_named(tmp_path):
+    """trimesh reads an OBJ whose v lines carry colours (x y z r g b) and whose faces name vt lines as UVs
+    alone: the colours went without a word. They are named among what is dropped, with the warning; the
+    same file without the vt lines keeps its colours."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]) + 1
+    coloured = [f"v {x:g} {y:g} {z:g} {i / 4:g} 0.5 0.2" for i, (x, y, z) in enumerate(V)]
+    path = tmp_path / "uvc.obj"
+    path.write_text("\n".join(coloured + [f"vt {x:g} {y:g}" for x, y, _ in V]
+                              + ["f " + " ".join(f"{a}/{a}" for a in f) for f in F]) + "\n")
+    with pytest.warns(UserWarning, match=r"carries vertex colours \(beside the UVs, which are read instead\)"):
+        res = qemjax.simplify(str(path), ratio=1.0)
+    assert res.uv is not None and res.colors is None
+    assert res.stats["dropped"] == ["vertex colours (beside the UVs, which are read instead)"]
+    path.write_text("\n".join(coloured + ["f " + " ".join(map(str, f)) for f in F]) + "\n")
+    res = qemjax.simplify(str(path), ratio=1.0)
+    assert res.colors is not None and res.stats["dropped"] == []
+
+
 @pytest.mark.parametrize("kind", ["little", "big", "ascii"])
 def test_a_vertex_list_property_is_named_in_core(tmp_path, kind):
     """An in-core run of a PLY whose vertex element has a list property dropped it without a word

@@ -292,6 +292,9 @@ def read(path) -> object:
         if fmt == "off" and re.match(rb"\s*[A-Z]*C[A-Z]*OFF", data) and getattr(obj, "visual", None) is not None \
                 and obj.visual.kind is None:  # trimesh reads no COFF colour: named among what is dropped
             obj.metadata["qemjax_unread"] = ["vertex colours (COFF)"]
+        if fmt == "obj" and getattr(getattr(obj, "visual", None), "kind", None) == "texture" \
+                and _io_text.obj_has_colours(data):  # trimesh keeps the UVs and lets the colours go
+            obj.metadata.setdefault("qemjax_unread", []).append(f"vertex colours {_io_ply.BESIDE_UV}")
         if fmt == "ply" and "qemjax_unread" not in obj.metadata:  # what trimesh steps over without a word
             header = _io_ply.parse_header(data)
             unread = _io_ply.unread(header, positions_only=False)

@@ -132,6 +132,9 @@ def unread(h: Header, positions_only: bool) -> list[str]:
     return out
 
 
+BESIDE_UV = "(beside the UVs, which are read instead)"  # how colours trimesh lets go for the UVs are named
+
+
 def colours_beside_uv(h: Header) -> list[str]:
     """The colours of a PLY that trimesh reads as UVs: its mesh holds one visual, the UVs, and lets the
     vertex and face colours (``red``, ``green``, ``blue``: what it reads as colours) go."""
@@ -139,7 +142,7 @@ def colours_beside_uv(h: Header) -> list[str]:
     for name in ("vertex", "face"):
         e = h.element(name)
         if e is not None and len({"red", "green", "blue"} & {p.name for p in e.props}) == 3:
-            out.append(f"{name} colours (beside the UVs, which are read instead)")
+            out.append(f"{name} colours {BESIDE_UV}")
     return out
 
 

@@ -69,6 +69,14 @@ def obj_vertices(data: bytes) -> np.ndarray:
     return np.array(rows, dtype=np.float64).reshape(-1, 3) if rows else np.zeros((0, 3))
 
 
+_COLOURED_VERTEX = re.compile(rb"(?m)^[ \t]*v(?:[ \t]+\S+){6}")  # x y z r g b: a colour after the position
+
+
+def obj_has_colours(data: bytes) -> bool:
+    """Whether an OBJ text's ``v`` lines carry vertex colours (six or seven numbers, as trimesh reads them)."""
+    return _COLOURED_VERTEX.search(data) is not None
+
+
 def quote(line: str) -> str:
     """A line of a file, stripped, at most 40 characters, unprintable ones as '?', in quotes."""
     line = "".join(c if c.isprintable() else "?" for c in line.strip())
