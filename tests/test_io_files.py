@@ -436,6 +436,25 @@ def test_obj_colours_beside_uvs_are_named(tmp_path):
     assert res.colors is not None and res.stats["dropped"] == []
 
 
+def test_gltf_colours_beside_uvs_are_named(tmp_path):
+    """A GLB with COLOR_0 beside TEXCOORD_0: trimesh keeps the colours aside (visual.vertex_attributes) and
+    joining the scene's parts lets them go, so they went without a word. They are named among what is
+    dropped, for the file, its scene and its mesh alike."""
+    m = shapes.bumpy_sphere(1)
+    V = np.asarray(m.vertices)
+    mesh = trimesh.Trimesh(V, m.faces, process=False)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=V[:, :2] * 0.5 + 0.5)
+    mesh.visual.vertex_attributes["color"] = (np.c_[V * 0.5 + 0.5, np.ones(len(V))] * 255).astype(np.uint8)
+    path = tmp_path / "uvc.glb"
+    mesh.export(path)
+    scene = trimesh.load(path, process=False)
+    for given in (str(path), scene, next(iter(scene.geometry.values()))):
+        with pytest.warns(UserWarning, match=r"carries vertex colours \(beside the UVs, which are read instead\)"):
+            res = qemjax.simplify(given, ratio=1.0)
+        assert res.uv is not None
+        assert res.stats["dropped"] == ["vertex colours (beside the UVs, which are read instead)"]
+
+
 @pytest.mark.parametrize("kind", ["little", "big", "ascii"])
 def test_a_vertex_list_property_is_named_in_core(tmp_path, kind):
     """An in-core run of a PLY whose vertex element has a list property dropped it without a word

@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import files as _io_files
+from . import files as _io_files, ply as _io_ply
 from .._mesh import wedges as _wedges
 from .._mesh.arrays import face_stats, column_bounds, nonfinite, sorted_triples
 
@@ -70,11 +70,22 @@ def dropped_attributes(obj) -> list[str]:
         material = getattr(visual, "material", None)
         if material is not None and not _wedges.is_placeholder(material):
             out.append("material")
+        if colours_beside_uv(obj):
+            out.append(f"vertex colours {_io_ply.BESIDE_UV}")
     elif kind == "vertex":
         out.append("vertex_colors")
     elif kind == "face":
         out.append("face_colors")
-    return out + list(getattr(obj, "metadata", {}).get("qemjax_unread", []))  # what the reader could not read
+    unread = getattr(obj, "metadata", {}).get("qemjax_unread", [])  # what the reader could not read
+    return out + [u for u in unread if u not in out]
+
+
+def colours_beside_uv(obj) -> bool:
+    """Whether a mesh with UVs also holds vertex colours (a glTF's COLOR_0 beside its TEXCOORD_0), which
+    trimesh keeps aside (``visual.vertex_attributes["color"]``) and qemjax does not read."""
+    visual = getattr(obj, "visual", None)
+    extra = getattr(visual, "vertex_attributes", None)
+    return getattr(visual, "kind", None) == "texture" and extra is not None and "color" in list(extra.keys())
 
 
 # the dropped names that `simplify(attributes=...)` can keep, and the kind that keeps each
@@ -110,7 +121,10 @@ def _as_trimesh(obj):
     import trimesh
 
     if isinstance(obj, trimesh.Scene):
+        beside = any(colours_beside_uv(g) for g in obj.geometry.values())
         obj = _io_files.concatenated(obj)
+        if beside and isinstance(obj, trimesh.Trimesh):  # joining the parts lets them go: named as dropped
+            obj.metadata.setdefault("qemjax_unread", []).append(f"vertex colours {_io_ply.BESIDE_UV}")
     if isinstance(obj, trimesh.PointCloud):
         raise ValueError(f"expected a triangle mesh, got a point cloud ({len(obj.vertices)} points)")
     if not isinstance(obj, trimesh.Trimesh):
