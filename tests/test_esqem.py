@@ -456,3 +456,47 @@ def test_esqem_splits_keep_the_quality_guard(scheduler):
     q = np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1) / np.max(
         [((P[:, (i + 1) % 3] - P[:, i]) ** 2).sum(1) for i in range(3)], axis=0)
     assert q.min() >= np.sin(np.radians(20)) * (1 - 1e-9)  # the guard's measure, at most the smallest angle's sine
+
+
+def _twice(*args, **kw):
+    """The greedy scheduler behind a signature without ``replan``: the split plan then runs it twice from
+    the input (what every run did before the queue went on from its first result)."""
+    from qemjax._schedulers import greedy
+    return greedy.run(*args, **kw)
+
+
+@pytest.mark.parametrize("make,kw,runs", [
+    (lambda: shapes.bumpy_sphere(3), dict(target_faces=500), 1),
+    (lambda: shapes.bumpy_sphere(3), dict(target_faces=301), 2),  # a closed mesh's last pair held at 302 faces
+    (lambda: shapes.grid(14, hole=True), dict(target_faces=151), 2),
+    (lambda: shapes.bumpy_sphere(3, seed=1), dict(target_faces=160, locked=np.arange(0, 640, 10)), 1),
+    (lambda: shapes.bumpy_sphere(3), dict(target_faces=300, max_error=1e-5), 2),
+], ids=["closed", "closed-odd", "open-odd", "locks", "max-error"])
+def test_the_split_plan_goes_on_from_its_first_run(monkeypatch, make, kw, runs):
+    """The split plan's first run (to the target) is the start of its second (to the target less the faces
+    splitting adds) when nothing in it depended on the target: the greedy queue goes on from there instead
+    of contracting the input again down to the target. Where it cannot (a pair held back by the face budget,
+    a run stopped above it), it runs again. The same outputs as two runs from the input, bit for bit."""
+    from qemjax._schedulers import greedy
+    from qemjax._schedulers.greedy import loop
+
+    V, F = make()
+    run = loop.run
+    calls = []
+
+    def counted(*a, **k):
+        calls.append(1)
+        return run(*a, **k)
+
+    monkeypatch.setattr(loop, "run", counted)
+    new = qemjax.simplify((V, F), method="esqem", scheduler="greedy", **kw)
+    assert len(calls) == runs  # one pass of the queue where it went on
+    monkeypatch.setitem(qemjax._schedulers._REGISTRY, "greedy", _twice)
+    old = qemjax.simplify((V, F), method="esqem", scheduler="greedy", **kw)
+    assert greedy.run is not _twice and len(calls) == runs + 2
+    for name in ("vertices", "faces", "vertex_error", "source_vertices", "source_faces"):
+        np.testing.assert_array_equal(getattr(new, name), getattr(old, name))
+    np.testing.assert_array_equal(new.history.pairs, old.history.pairs)
+    np.testing.assert_array_equal(new.history.costs, old.history.costs)
+    assert new.stop_reason == old.stop_reason and new.stats["split"] == old.stats["split"]
+    assert new.stats["rounds"] == old.stats["rounds"]

@@ -8,11 +8,13 @@ host side compiled (`qemjax._schedulers.greedy.batches`). The others here re-pri
 calls and a few hundred host operations per contraction.
 
 Time per contraction = median warm wall time of ``qemjax.simplify`` / ``res.stats["contractions"]``. ESQEM
-with its default ``split_factor`` simplifies twice (`qemjax._pipeline.split.plan`: once to the target to
-count the faces splitting would add, then to the reduced target) while its stats count the second run's
-contractions only, so its figure is about twice its queue's; ``esqem(split_factor=None)`` runs the queue
-once. With ``--rev REV`` the package at that git revision runs the same cases in the same process,
-alternating with this checkout's, and the output hashes say whether both give the same bits.
+with its default ``split_factor`` simplifies past the target (`qemjax._pipeline.split.plan`: to the target
+to count the faces splitting would add, then on to the reduced target). The greedy queue goes on from its
+first result where nothing on the way depended on the target, else it runs again from the input while its
+stats count the second run's contractions only (then the figure is about twice its queue's);
+``esqem(split_factor=None)`` runs the queue once. With ``--rev REV`` the package at that git revision runs
+the same cases in the same process, alternating with this checkout's, and the output hashes say whether
+both give the same bits.
 
     python experiments/figures/greedy_ring_cost.py                      # bumpy sphere (5,120 faces), cow, fandisk
     python experiments/figures/greedy_ring_cost.py --meshes bumpy --repeats 3 --rev 9aab674

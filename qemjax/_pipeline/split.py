@@ -12,18 +12,20 @@ spent.
 
 Budget. With a face target T, the result must have exactly T faces (the paper's Table 1 gives ESQEM and
 QEM the same counts), but how many faces splitting adds is known only on a simplified mesh. So `plan`
-simplifies to T first, counts the faces its splitting would add (s), and the caller simplifies the input
-again to T − s, but never below T/2 (MAX_SPLIT_SHARE: QEM's anisotropic output has many long edges,
-about 20 % of the Cow's, so s reaches 60-70 % of T; without the floor the contraction would have to go
-to a third of the target, and a mesh of many small parts could be simplified to a single face and then
-split back up); `split_edges` then spends exactly the budget T − (faces left): the long edges longest
-first (some stay unsplit when the floor holds), and if the budget is not spent when none is left, the
-longest remaining edges, until the count is T. A closed mesh gains
-faces in pairs, so an odd budget on a closed mesh is rounded up (`apply`): the result ends one face above
-T, the documented parity case of face targets. Without a face target, every long edge is split.
+simplifies to T first, counts the faces its splitting would add (s), and simplifies further to T − s (the
+greedy queue goes on from T where it can; else the input is simplified again), but never below T/2
+(MAX_SPLIT_SHARE: QEM's anisotropic output has many long edges, about 20 % of the Cow's, so s reaches
+60-70 % of T; without the floor the contraction would have to go to a third of the target, and a mesh of
+many small parts could be simplified to a single face and then split back up); `split_edges` then spends
+exactly the budget T − (faces left): the long edges longest first (some stay unsplit when the floor
+holds), and if the budget is not spent when none is left, the longest remaining edges, until the count is
+T. A closed mesh gains faces in pairs, so an odd budget on a closed mesh is rounded up (`apply`): the
+result ends one face above T, the documented parity case of face targets. Without a face target, every
+long edge is split.
 """
 from __future__ import annotations
 
+import inspect
 from typing import NamedTuple
 
 import numpy as np
@@ -184,16 +186,33 @@ def added_faces(V: np.ndarray, F: np.ndarray, factor: float, fixed: np.ndarray |
 
 
 def plan(run, args, target: int, model, options, factor: float, progress=None,
-         fixed: np.ndarray | None = None, min_quality: float = 0.0):
-    """The face target to simplify to so that splitting can bring the count back to ``target``: runs the
-    scheduler ``run`` once to ``target`` on ``args`` = (V, S, F, extra pairs) (``progress``: its progress
-    callback) and subtracts the faces splitting that result would add (``fixed``: the locked vertices in
-    the run's numbering), but keeps at least (1 − MAX_SPLIT_SHARE) × target faces. Returns (the face
-    target, the faces splitting the first result would add, the first result: `fills` may fall back to it)."""
+         fixed: np.ndarray | None = None, min_quality: float = 0.0, planned=None):
+    """Runs the scheduler ``run`` on ``args`` = (V, S, F, extra pairs) (``progress``: its progress callback)
+    to the face target from which splitting can bring the count back to ``target``: first to ``target``,
+    to count the faces splitting that result would add (``fixed``: the locked vertices in the run's
+    numbering), then to ``target`` less those, but to at least (1 − MAX_SPLIT_SHARE) × target faces.
+    ``planned``: called with that face target before the run goes to it. A scheduler that takes ``replan``
+    (`greedy.run`) goes on from the first result where it can, instead of running again from the input.
+    Returns (the outcome, the face target, the faces splitting the first result would add, the first
+    result: `fills` may fall back to it)."""
     V, S, F, extra = args
-    out = run(V, S, F, extra, max(target, 1), model, options, progress)
-    s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor, fixed, min_quality)
-    return max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1), s, out
+    first = []
+
+    def replan(out):
+        s = added_faces(np.asarray(out.positions, np.float64), out.faces[out.alive], factor, fixed, min_quality)
+        lower = max(target - s, int(np.ceil((1.0 - MAX_SPLIT_SHARE) * target)), 1)
+        first.append((out, s, lower))
+        if planned is not None:
+            planned(lower)
+        return lower
+
+    if "replan" in inspect.signature(run).parameters:
+        out = run(V, S, F, extra, max(target, 1), model, options, progress, replan=replan)
+    else:
+        lower = replan(run(V, S, F, extra, max(target, 1), model, options, progress))
+        out = run(V, S, F, extra, lower, model, options, progress)
+    (out1, s, lower), = first
+    return out, lower, s, out1
 
 
 def fills(out, target: int, factor: float, fixed: np.ndarray | None = None, min_quality: float = 0.0) -> bool:

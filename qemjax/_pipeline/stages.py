@@ -400,13 +400,18 @@ def run(job: Job):
                                 **lock_settings)
         if setup.split is not None and target:  # simplify further by what splitting will add (`_split.plan`)
             fixed = lock_settings["locks"].locked if lock_settings else None
-            run_target, planned, first = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
-                                                     setup.split, progress_cb, fixed, setup.min_quality)
-            if bar is not None:  # the run itself goes past the target, by the faces splitting adds back
-                last = m
-                bar.reset(total=faces_to_remove(m, run_target, closed))
-                bar.set_description("simplify")
-        out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
+
+            def new_bar(lower):  # the run itself goes past the target, by the faces splitting adds back
+                nonlocal last
+                if bar is not None:
+                    last = m
+                    bar.reset(total=faces_to_remove(m, lower, closed))
+                    bar.set_description("simplify")
+
+            out, run_target, planned, first = _split.plan(run, (g.Vn, job.S, g.F, g.extra), target, model, options,
+                                                          setup.split, progress_cb, fixed, setup.min_quality, new_bar)
+        else:
+            out = run(g.Vn, job.S, g.F, g.extra, max(run_target, 1), model, options, progress_cb)
         if planned is not None and not _split.fills(out, target, setup.split, fixed, setup.min_quality):
             out, run_target = first, target  # blocked where splitting cannot refill: the run to the target
         if bar is not None and bar.n != bar.total and (out.stop_reason == "target" or (

@@ -16,7 +16,10 @@ target, the cost model (`qemjax._costs`: it prices and merges), the rules every 
 progress callback (faces left), the seam tracker of kept attributes (or None) and, when the caller has
 them, the edge table and the per-part scale. It returns an `outcome.Outcome` (positions, states, faces,
 alive mask, history, stop reason, blocked_by and counts; built by the scheduler, read by `stages.finish`
-through its fields and its `output`, `stop_above` and `counts`). A new scheduler is one module with such a ``run`` and one `register` call; `simplify(scheduler=NAME)`
+through its fields and its `output`, `stop_above` and `counts`). A scheduler may also take ``replan``, a
+function that is given the outcome at the target and returns a lower one to go on to (`greedy.run`): ESQEM's
+split plan (`_pipeline.split.plan`) passes it where the scheduler takes it, else runs the scheduler twice.
+A new scheduler is one module with such a ``run`` and one `register` call; `simplify(scheduler=NAME)`
 then runs it.
 """
 from __future__ import annotations

@@ -35,16 +35,25 @@ def _compiled():
 
 
 def run(V: np.ndarray, S: np.ndarray, F: np.ndarray, extra_pairs: np.ndarray, target_faces: int, model,
-        options: Options, progress=None, wedges=None, edges=None, part_scale=None, locks=None, normals=None):
+        options: Options, progress=None, wedges=None, edges=None, part_scale=None, locks=None, normals=None,
+        replan=None):
     """Simplify, with Python's garbage collector paused (`common.gc_paused`). V (n,3) float32 normalised
     positions, S (n, model.width) the model's vertex state, F (m,3) int64, extra_pairs (k,2) non-edge pairs
     that may also contract (aggregation). Returns the `outcome.Outcome` (``wedges``: as in `parallel.run`;
     ``edges`` and ``part_scale``, which the parallel scheduler uses, are not needed by the queue;
-    ``locks``: a `locks.RunLocks` or None, and ``normals``, the flip test's reference normals, as there)."""
+    ``locks``: a `locks.RunLocks` or None, and ``normals``, the flip test's reference normals, as there).
+
+    ``replan``: None, or a function that is given the outcome at ``target_faces`` and returns a lower face
+    target: the run then goes on to it and returns the outcome there, the same as a run started with that
+    target (ESQEM's split plan, `_pipeline.split.plan`). The one-at-a-time queue goes on from where it
+    stopped when it can (`loop.run`), saving a second run's contractions down to the first target."""
     with gc_paused():
         E, _ = topo.edges(F, len(V))
         pairs = np.concatenate([E, np.sort(np.asarray(extra_pairs, np.int64).reshape(-1, 2), axis=1)])
         compiled = _compiled()
         if compiled is not None and compiled.eligible(model):  # the same run, in verified batches
-            return compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks, wedges, normals)
-        return loop.run(V, S, F, pairs, target_faces, model, options, progress, wedges, locks, normals)
+            out = compiled.run(V, S, F, pairs, target_faces, model, options, progress, locks, wedges, normals)
+            if replan is None:
+                return out
+            return compiled.run(V, S, F, pairs, replan(out), model, options, progress, locks, wedges, normals)
+        return loop.run(V, S, F, pairs, target_faces, model, options, progress, wedges, locks, normals, replan)
