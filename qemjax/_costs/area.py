@@ -188,7 +188,10 @@ def _price_host(VS, pairs, corners, mask):
 class AreaDifference(Method):
     """Minimum surface-area difference (see the module). State: one flag per vertex, 1 on a boundary or
     feature edge (when ``boundary_weight`` > 0), else 0; merged by max. ``tol``: the bisection's
-    tolerance on s. `vertex_error` is 0: the method measures areas, not distances to the input."""
+    tolerance on s in the compiled kernel; a pair of a wide ring (`RING_CAP`, the host path) bisects until
+    its float64 interval stops shrinking, within any ``tol``, so ``tol`` does not change its answer (a
+    stopping rule of its own there would move the default's bits). `vertex_error` is 0: the method measures
+    areas, not distances to the input."""
 
     name: ClassVar[str] = "area"
     width: ClassVar[int] = 1
