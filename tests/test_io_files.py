@@ -480,3 +480,73 @@ def test_a_vertex_list_property_is_named_in_core(tmp_path, kind):
         assert said == ([f"{path} carries vertex properties {names}, which qemjax does not keep: the result has "
                          f"{has} (stats['dropped'] lists them)"] if with_list else []), said
         assert (res.uv is not None) == (kind == "ascii" or not with_list)
+
+
+def _ply_with_columns(path, V, F, columns: dict, fmt: str):
+    """A PLY of ``fmt`` ("ascii" or "binary_little_endian") whose vertices hold x, y, z and then ``columns``
+    ({name: (n,) values}, written as floats)."""
+    cols = {"x": V[:, 0], "y": V[:, 1], "z": V[:, 2], **columns}
+    head = ["ply", f"format {fmt} 1.0", f"element vertex {len(V)}", *(f"property float {c}" for c in cols),
+            f"element face {len(F)}", "property list uchar int vertex_indices", "end_header", ""]
+    rows = np.zeros(len(V), [(c, "<f4") for c in cols])
+    for c, values in cols.items():
+        rows[c] = values
+    with open(path, "wb") as f:
+        f.write("\n".join(head).encode())
+        if fmt == "ascii":
+            f.write("".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows.tolist()).encode())
+            f.write("".join(f"3 {a} {b} {c}\n" for a, b, c in F.tolist()).encode())
+            return
+        tris = np.zeros(len(F), [("n", "u1"), ("i", "<i4", (3,))])
+        tris["n"], tris["i"] = 3, F
+        f.write(rows.tobytes() + tris.tobytes())
+
+
+@pytest.mark.parametrize("fmt", ["binary_little_endian", "ascii"])
+def test_unread_vertex_properties_are_named_in_core_as_a_partitioned_run_names_them(tmp_path, fmt):
+    """trimesh steps over a PLY's vertex properties it has no use for (a scanner's quality, confidence) and
+    an in-core run said nothing of them, where a partitioned run names them: one warning names them, in the
+    partitioned run's words, and not what the in-core reader does read (normals, colours, UVs under the
+    names it reads them by). Colours beside UVs are not read (a textured mesh has no vertex colours): named.
+    A file of positions alone gives no warning."""
+    V, F = shapes.icosphere(2)
+    V = V.astype(np.float32).astype(np.float64)
+    n = len(V)
+    normals = {"nx": V[:, 0], "ny": V[:, 1], "nz": V[:, 2]}
+    colours = {"red": np.full(n, 200.0), "green": np.full(n, 100.0), "blue": np.full(n, 50.0)}
+    scanner = {"quality": np.arange(n, dtype=np.float64), "confidence": np.ones(n)}
+
+    def run(columns, **kw):
+        path = tmp_path / f"{len(columns)}.ply"
+        _ply_with_columns(path, V, F, columns, fmt)
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            res = qemjax.simplify(str(path), ratio=0.5, **kw)
+            qemjax.load(path)
+        said = [str(w.message) for w in seen if "memoryless" not in str(w.message)]
+        return res, said, str(path)
+
+    res, said, path = run({**normals, **colours, **scanner})
+    assert res.stats["dropped"] == ["vertex properties quality, confidence"]
+    assert res.normals is not None and res.colors is not None
+    assert said == [f"{path} carries vertex properties quality, confidence, which qemjax does not keep: the "
+                    "result has positions, faces and color, normal (stats['dropped'] lists them)",
+                    f"{path} carries vertex_colors, vertex properties quality, confidence, which qemjax does not "
+                    "keep: the result has positions and faces only (stats['dropped'] lists them)"], said  # load
+    res, said, path = run({"s": V[:, 0], "t": V[:, 1], **colours, "quality": V[:, 2]})
+    assert res.uv is not None and res.stats["dropped"] == ["vertex properties red, green, blue, quality"]
+    res, said, path = run({"u": V[:, 0], "v": V[:, 1], "texture_s": V[:, 0], "texture_t": V[:, 1]})
+    assert res.uv is not None and res.stats["dropped"] == ["vertex properties texture_s, texture_t"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        path = tmp_path / "plain.ply"
+        _ply_with_columns(path, V, F, {}, fmt)
+        assert qemjax.simplify(str(path), ratio=0.5).stats["dropped"] == []
+        qemjax.load(path)
+    res, said, path = run(scanner)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        parted = qemjax.simplify(path, ratio=0.5, partition=qemjax.Partition(part_faces=1000, workers=1))
+    item = "vertex properties quality, confidence"
+    assert res.stats["dropped"] == [item] and parted.stats["dropped"] == ["record", item]
+    assert [s.endswith(f"input: {item}") for s in (str(w.message) for w in seen)].count(True) == 1

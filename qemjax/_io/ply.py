@@ -111,24 +111,52 @@ def parse_header(data: bytes) -> Header:
     return Header(fmt, elements, end.end())
 
 
+def named(element: str, names) -> str:
+    """'vertex properties quality, confidence': how a run names the properties ``names`` of ``element`` that
+    it does not keep (in core and partitioned alike, so both say the same of one file)."""
+    return f"{element} properties {', '.join(names)}"
+
+
+# what trimesh's PLY reader makes of a vertex besides x, y, z (the vertex properties a mesh read in core can
+# carry on): normals when all three are there, the first UV pair it looks for (unless the faces hold their own
+# UVs), and colours (three or four of these) when it found no UVs: a textured mesh has no vertex colours
+_NORMALS = ("nx", "ny", "nz")
+_UVS = (("texture_u", "texture_v"), ("u", "v"), ("s", "t"))
+_COLOURS = ("red", "green", "blue", "alpha")
+
+
+def _read_by_trimesh(vertex: Element, face: Element | None) -> set:
+    """The vertex properties trimesh reads (`_NORMALS`, `_UVS`, `_COLOURS`), x, y, z among them."""
+    scalars = {p.name for p in vertex.props if p.count is None}
+    used = {"x", "y", "z"} | (set(_NORMALS) if set(_NORMALS) <= scalars else set())
+    face_uv = face is not None and any(p.name == "texcoord" and p.count is not None for p in face.props)
+    uv = () if face_uv else next((pair for pair in _UVS if set(pair) <= scalars), ())
+    colours = scalars & set(_COLOURS)
+    if len(colours) >= 3 and not uv and not face_uv:
+        used |= colours
+    return used | set(uv)
+
+
 def unread(h: Header, positions_only: bool) -> list[str]:
     """What an in-core read of this PLY steps over, named as a partitioned run names it (``"vertex
-    properties ids"``): trimesh reads scalar properties by name and steps over a vertex list property; a
-    file read for positions and faces alone (``positions_only``: `_io_strips`, for what trimesh refuses)
-    loses every vertex property but x, y, z, and every face property but its vertex numbers."""
+    properties quality, ids"``, `named`): trimesh reads positions, normals, UVs and colours by their names
+    (`_read_by_trimesh`) and steps over the other vertex properties; a file read for positions and faces
+    alone (``positions_only``: `_io_strips`, for what trimesh refuses) loses every vertex property but x, y,
+    z, and every face property but its vertex numbers."""
     vertex, face = h.element("vertex"), h.element("face")
     if not positions_only:
-        names = [p.name for p in vertex.props if p.count is not None]
-        return [f"vertex properties {', '.join(names)}"] if names else []
+        used = _read_by_trimesh(vertex, face)
+        names = [p.name for p in vertex.props if p.name not in used or p.count is not None]
+        return [named("vertex", names)] if names else []
     out = []
     names = [p.name for p in vertex.props if p.name not in ("x", "y", "z")]
     if names:
-        out.append(f"vertex properties {', '.join(names)}")
+        out.append(named("vertex", names))
     lists = [p.name for p in face.props if p.count is not None] if face is not None else []
     index = next((n for n in lists if n in ("vertex_indices", "vertex_index")), lists[0] if lists else None)
     names = [p.name for p in face.props if p.name != index] if face is not None else []
     if names:
-        out.append(f"face properties {', '.join(names)}")
+        out.append(named("face", names))
     return out
 
 

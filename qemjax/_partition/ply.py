@@ -258,7 +258,7 @@ def dropped(h: _ply.Header, kept: tuple = ()) -> tuple:
         skip = {"x", "y", "z", *kept} if e.name == "vertex" else {e.props[_index_prop(e)].name, *kept}
         names = [p.name for p in e.props if p.name not in skip]
         if names:
-            out.append(f"{e.name} properties {', '.join(names)}")
+            out.append(_ply.named(e.name, names))
     return tuple(out)
 
 
