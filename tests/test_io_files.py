@@ -550,3 +550,26 @@ def test_unread_vertex_properties_are_named_in_core_as_a_partitioned_run_names_t
     item = "vertex properties quality, confidence"
     assert res.stats["dropped"] == [item] and parted.stats["dropped"] == ["record", item]
     assert [s.endswith(f"input: {item}") for s in (str(w.message) for w in seen)].count(True) == 1
+
+
+def test_the_names_of_a_face_list_of_vertex_numbers_have_one_home():
+    """The names a face's list of vertex numbers goes by (vertex_indices, vertex_index) were written in the
+    in-core reader (twice: `unread`, `read_polygons`) and the partitioned one: they live in `_io.ply`
+    (`INDEX_NAMES`, `index_list`), which the others use, and no other module names them both."""
+    from pathlib import Path
+
+    from qemjax._io import ply
+    from qemjax._partition import ply as parted
+
+    def face(*props):
+        return ply.Element("face", 1, [ply.Property(*p) for p in props])
+
+    for name in ply.INDEX_NAMES:
+        f = face(("flags", "uchar"), ("texcoord", "float", "uchar"), (name, "int", "uchar"))
+        assert ply.index_list(f).name == name and parted._index_prop(f) == 2
+    assert ply.index_list(face(("flags", "uchar"), ("corners", "int", "uchar"))).name == "corners"  # the one list
+    assert ply.index_list(face(("flags", "uchar"))) is None
+    package = Path(qemjax.__file__).parent
+    both = [str(p.relative_to(package)) for p in package.rglob("*.py")
+            if "vertex_index\"" in p.read_text() and "\"vertex_indices\"" in p.read_text()]
+    assert both == ["_io/ply.py"], both

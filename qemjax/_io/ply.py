@@ -111,6 +111,16 @@ def parse_header(data: bytes) -> Header:
     return Header(fmt, elements, end.end())
 
 
+INDEX_NAMES = ("vertex_indices", "vertex_index")  # a face's list of vertex numbers, as exporters name it
+
+
+def index_list(face: Element) -> Property | None:
+    """The list of vertex numbers of a face element: its first list named as in `INDEX_NAMES`, else its first
+    list (None without one)."""
+    lists = [p for p in face.props if p.count is not None]
+    return next((p for p in lists if p.name in INDEX_NAMES), lists[0] if lists else None)
+
+
 def named(element: str, names) -> str:
     """'vertex properties quality, confidence': how a run names the properties ``names`` of ``element`` that
     it does not keep (in core and partitioned alike, so both say the same of one file)."""
@@ -152,9 +162,8 @@ def unread(h: Header, positions_only: bool) -> list[str]:
     names = [p.name for p in vertex.props if p.name not in ("x", "y", "z")]
     if names:
         out.append(named("vertex", names))
-    lists = [p.name for p in face.props if p.count is not None] if face is not None else []
-    index = next((n for n in lists if n in ("vertex_indices", "vertex_index")), lists[0] if lists else None)
-    names = [p.name for p in face.props if p.name != index] if face is not None else []
+    index = index_list(face) if face is not None else None
+    names = [p.name for p in face.props if p is not index] if face is not None else []
     if names:
         out.append(named("face", names))
     return out

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .ply import FORMATS, TYPES, Header, PlyError, element_bytes, rows_name, type_dtype, type_size
+from .ply import FORMATS, TYPES, Header, PlyError, element_bytes, index_list, rows_name, type_dtype, type_size
 
 
 def _read_ascii(h: Header, data: bytes) -> dict:
@@ -96,10 +96,10 @@ def read_polygons(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray]:
     sizes in one list (triangles beside quads, which trimesh cannot read), each fanned from its first
     corner; rows of fewer than 3 corners are left out. Row by row: for the files trimesh refuses."""
     el = h.element("face")
-    lists = [p for p in el.props if p.count is not None] if el is not None else []
-    if not lists:
+    index = index_list(el) if el is not None else None
+    if index is None:
         raise PlyError("the PLY face element has no list of vertex numbers")
-    name = next((p.name for p in lists if p.name in ("vertex_indices", "vertex_index")), lists[0].name)
+    name = index.name
     got = _read_binary(h, data)
     V = got["vertex"]
     if not isinstance(V, np.ndarray):  # a vertex element with list properties

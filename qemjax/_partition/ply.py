@@ -15,7 +15,6 @@ from .._io import ply as _ply
 from .scan import _grow
 from .source import FACES, PACKED, TRI, Appender, Block, Refusal, Source
 
-INDEX_NAMES = ("vertex_indices", "vertex_index")
 _INTS = {"i1", "u1", "i2", "u2", "i4", "u4"}
 _STREAM_BYTES = 1 << 24
 
@@ -35,7 +34,7 @@ def _code(t: str) -> str:
 
 def _index_prop(face: _ply.Element) -> int:
     for j, p in enumerate(face.props):
-        if p.name in INDEX_NAMES and p.count is not None:
+        if p.name in _ply.INDEX_NAMES and p.count is not None:
             if _code(p.count) not in _INTS or _code(p.type) not in _INTS:
                 raise Refusal(f"the PLY face list {p.name!r} is not made of integers ({p.count} {p.type})")
             return j
