@@ -460,13 +460,14 @@ def test_a_vertex_list_property_is_named_in_core(tmp_path, kind):
     """An in-core run of a PLY whose vertex element has a list property dropped it without a word
     (stats["dropped"] empty) while a partitioned run names it: it is named as there, with the warning of
     what a run does not keep. trimesh reads an ASCII file's other properties (its UVs are kept); a binary
-    file with lists of several lengths, which trimesh refuses, is read for positions and faces alone, and
-    what that leaves out (the UVs' properties too) is named."""
+    file with lists of several lengths, which trimesh refuses, is read without the lists as trimesh reads
+    the plain file (its UVs are kept too): the same result as without the list."""
     from test_partition_scatter import _ply_with_vertex_list
 
     m = qemjax.shapes.bumpy_sphere(2)
     V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces)
     uv = (V[:, :2] * 0.5 + 0.5).astype(np.float32)
+    out = []
     for with_list in (False, True):
         path = tmp_path / f"{with_list}.ply"
         _ply_with_vertex_list(path, V, F, uv, kind, with_list)
@@ -474,12 +475,11 @@ def test_a_vertex_list_property_is_named_in_core(tmp_path, kind):
             warnings.simplefilter("always")
             res = qemjax.simplify(str(path), ratio=0.5)
         said = [str(w.message) for w in seen if "memoryless" not in str(w.message)]
-        names = "ids" if kind == "ascii" else "ids, texture_u, texture_v"
-        assert res.stats["dropped"] == ([f"vertex properties {names}"] if with_list else [])
-        has = "positions, faces and uv" if kind == "ascii" else "positions and faces only"
-        assert said == ([f"{path} carries vertex properties {names}, which qemjax does not keep: the result has "
-                         f"{has} (stats['dropped'] lists them)"] if with_list else []), said
-        assert (res.uv is not None) == (kind == "ascii" or not with_list)
+        assert res.stats["dropped"] == (["vertex properties ids"] if with_list else [])
+        assert said == ([f"{path} carries vertex properties ids, which qemjax does not keep: the result has "
+                         "positions, faces and uv (stats['dropped'] lists them)"] if with_list else []), said
+        out.append((res.vertices.tobytes(), res.faces.tobytes(), res.uv.tobytes()))
+    assert out[0] == out[1]
 
 
 def _ply_with_columns(path, V, F, columns: dict, fmt: str):
@@ -534,7 +534,8 @@ def test_unread_vertex_properties_are_named_in_core_as_a_partitioned_run_names_t
                     f"{path} carries vertex_colors, vertex properties quality, confidence, which qemjax does not "
                     "keep: the result has positions and faces only (stats['dropped'] lists them)"], said  # load
     res, said, path = run({"s": V[:, 0], "t": V[:, 1], **colours, "quality": V[:, 2]})
-    assert res.uv is not None and res.stats["dropped"] == ["vertex properties red, green, blue, quality"]
+    assert res.uv is not None and res.stats["dropped"] == [  # the colours named once, as let go for the UVs
+        "vertex properties quality", "vertex colours (beside the UVs, which are read instead)"]
     res, said, path = run({"u": V[:, 0], "v": V[:, 1], "texture_s": V[:, 0], "texture_t": V[:, 1]})
     assert res.uv is not None and res.stats["dropped"] == ["vertex properties texture_s, texture_t"]
     with warnings.catch_warnings():
@@ -573,3 +574,75 @@ def test_the_names_of_a_face_list_of_vertex_numbers_have_one_home():
     both = [str(p.relative_to(package)) for p in package.rglob("*.py")
             if "vertex_index\"" in p.read_text() and "\"vertex_indices\"" in p.read_text()]
     assert both == ["_io/ply.py"], both
+
+
+def _attribute_ply(V, columns: dict, faces: list, element: str = "face", fmt: str = "binary_little_endian") -> bytes:
+    """A PLY whose vertices hold x, y, z (float) and ``columns`` ({name: (n,) values}: uchar for colours,
+    float otherwise), with ``faces`` (rows of vertex numbers, any lengths) as element ``element``."""
+    types = {c: "u1" if c in ("red", "green", "blue", "alpha") else "<f4" for c in columns}
+    rows = np.zeros(len(V), [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), *types.items()])
+    rows["x"], rows["y"], rows["z"] = V.T
+    for c, values in columns.items():
+        rows[c] = values
+    head = ["ply", f"format {fmt} 1.0", f"element vertex {len(V)}",
+            *(f"property {'uchar' if types.get(c) == 'u1' else 'float'} {c}" for c in rows.dtype.names),
+            f"element {element} {len(faces)}", "property list int int vertex_indices", "end_header", ""]
+    if fmt == "ascii":
+        body = "".join(" ".join(repr(v) for v in row) + "\n" for row in rows.tolist())
+        body += "".join(f"{len(f)} " + " ".join(map(str, f)) + "\n" for f in faces)
+        return "\n".join(head).encode() + body.encode()
+    return "\n".join(head).encode() + rows.tobytes() + b"".join(struct.pack(f"<i{len(f)}i", len(f), *f) for f in faces)
+
+
+def test_a_ply_trimesh_cannot_read_keeps_its_vertex_attributes(tmp_path):
+    """A binary PLY whose face list mixes triangles and quads, or whose faces are triangle strips, was read
+    for positions and faces alone (its normals, colours and UVs named as dropped): it is read as trimesh
+    reads the same mesh written as a plain triangle PLY (the polygons fanned, the strips cut, in the same
+    order), with the same attributes and the same simplified result; a property it does not read (quality) is
+    still named."""
+    m = shapes.bumpy_sphere(2)
+    V, F = np.asarray(m.vertices, np.float32).astype(np.float64), np.asarray(m.faces).tolist()
+    n = len(V)
+    normals = {f"n{c}": V[:, k] / np.linalg.norm(V, axis=1) for k, c in enumerate("xyz")}
+    colours = {"red": np.full(n, 200), "green": np.arange(n) % 256, "blue": np.full(n, 50)}
+    uv = {"texture_u": V[:, 0] * 0.5 + 0.5, "texture_v": V[:, 1] * 0.5 + 0.5}
+    quality = {"quality": np.arange(n, dtype=np.float64)}
+    a, b, c = F[0]  # faces 0 and the one across its edge (c, a) as one quad, fanned back into both
+    k = next(k for k, t in enumerate(F) if k and any((t[r], t[(r + 1) % 3]) == (a, c) for r in range(3)))
+    d = next(x for x in F[k] if x not in (a, c))
+    polygons = [[a, b, c, d], *F[1:k], *F[k + 1:]]
+    fanned = [[a, b, c], [a, c, d], *F[1:k], *F[k + 1:]]
+    grid_V, grid_F = shapes.grid(5)
+    strips = _stripify(grid_F)
+    seq = _joined(strips)
+    cut = _io_strips.strip_triangles(np.array(seq)).tolist()
+    gn = len(grid_V)
+    grid = {"nx": np.zeros(gn), "ny": np.zeros(gn), "nz": np.ones(gn), "red": np.arange(gn) * 9 % 256,
+            "green": np.full(gn, 7), "blue": np.full(gn, 9), "confidence": np.ones(gn)}
+    cases = [(V, {**normals, **colours, **quality}, polygons, fanned, "face", "binary_little_endian"),
+             (V, {**uv, **colours, **quality}, polygons, fanned, "face", "binary_little_endian"),
+             (grid_V, grid, [seq], cut, "tristrips", "binary_little_endian"),
+             (grid_V, grid, [seq], cut, "tristrips", "ascii")]
+    for i, (P, columns, faces, triangles, element, fmt) in enumerate(cases):
+        odd, plain = tmp_path / f"odd{i}.ply", tmp_path / f"plain{i}.ply"
+        odd.write_bytes(_attribute_ply(P, columns, faces, element, fmt))
+        plain.write_bytes(_attribute_ply(P, columns, triangles, "face", fmt))
+        runs = []
+        for path in (odd, plain):
+            with warnings.catch_warnings(record=True) as seen:
+                warnings.simplefilter("always")
+                got = qemjax.load(path)
+                res = qemjax.simplify(str(path), ratio=0.5)
+            said = sorted(str(w.message).replace(str(path), "PATH") for w in seen)
+            runs.append((got, res, said))
+        (got, res, said), (want, wanted, told) = runs
+        assert np.array_equal(got.vertices, want.vertices) and np.array_equal(got.faces, want.faces)
+        assert said == told and any("vertex properties" in s for s in said), (said, told)
+        assert res.stats["dropped"] == wanted.stats["dropped"]
+        assert res.stats["dropped"][-1] in ("vertex properties quality", "vertex properties confidence",
+                                            "vertex colours (beside the UVs, which are read instead)")
+        for name in ("vertices", "faces", "uv", "colors", "normals"):
+            x, y = getattr(res, name), getattr(wanted, name)
+            assert (x is None) == (y is None) and (x is None or np.array_equal(x, y)), (i, name)
+        kept = [k for k in ("uv", "colors", "normals") if getattr(res, k) is not None]
+        assert kept == (["uv"] if i == 1 else ["colors", "normals"]), (i, kept)

@@ -233,14 +233,25 @@ def _checked(obj, fmt: str, data: bytes, header):
     return obj
 
 
-def _positions_only(V, F, header):
-    """A `trimesh.Trimesh` of a PLY read for its positions and faces alone (`_io_strips`), naming what that
-    read leaves out (``metadata["qemjax_unread"]``: `dropped_attributes`)."""
+def _fallback(path: str, h, text: bytes, V, F, vertices):
+    """A `trimesh.Trimesh` of a PLY that trimesh cannot read itself (`_io_strips`): its positions and faces,
+    and the vertex attributes trimesh reads (normals, colours, UVs: `_io_ply.read_by_trimesh`) as trimesh reads
+    them from the same mesh in a plain triangle PLY (`_io_ply.triangle_ply`); what it leaves out is named
+    (``metadata["qemjax_unread"]``: `dropped_attributes`). No faces, or faces that name no vertex: left to
+    `_checked` to name."""
     import trimesh
 
     obj = trimesh.Trimesh(V, F, process=False)
-    obj.metadata["qemjax_unread"] = _io_ply.unread(header, positions_only=True)
+    attributes = _io_ply.read_by_trimesh(h.element("vertex"), None) - {"x", "y", "z"}
+    if attributes and len(F) and F.min() >= 0 and F.max() < len(V):
+        obj = _trimesh(path, "ply", _io_ply.triangle_ply(h, text, V, F, vertices), True)
+    obj.metadata["qemjax_unread"] = _io_ply.unread(h, fallback=True, textured=_textured(obj))
     return obj
+
+
+def _textured(obj) -> bool:
+    """Whether trimesh read UVs into the mesh (its one visual: colours beside them are let go)."""
+    return getattr(getattr(obj, "visual", None), "kind", None) == "texture"
 
 
 def _read(path: str, fmt: str, data: bytes):
@@ -250,10 +261,10 @@ def _read(path: str, fmt: str, data: bytes):
     text, changed, header = _prepare(fmt, data)
     if header is not None and header.element("tristrips") and not header.element("face"):
         try:
-            V, F = _io_strips.read_tristrips(header, data)
+            V, F, vertices = _io_strips.read_tristrips(header, data)
         except _io_ply.PlyError as exc:
             raise BadFile(str(exc)) from None
-        return _checked(_positions_only(V, F, header), fmt, data, header)
+        return _checked(_fallback(path, header, text, V, F, vertices), fmt, data, header)
     try:
         obj = _trimesh(path, fmt, text, changed)
     except ImportError as exc:  # an optional package trimesh needs for this format
@@ -265,8 +276,8 @@ def _read(path: str, fmt: str, data: bytes):
         reason = _problem(fmt, data, header)
         if reason is None and header is not None and header.format != "ascii" and header.element("face"):
             try:  # polygons of several sizes in one binary list, which trimesh cannot read
-                V, F = _io_strips.read_polygons(header, data)
-                return _checked(_positions_only(V, F, header), fmt, data, header)
+                V, F, vertices = _io_strips.read_polygons(header, data)
+                return _checked(_fallback(path, header, text, V, F, vertices), fmt, data, header)
             except (_io_ply.PlyError, ValueError, IndexError):
                 pass
         raise BadFile(reason or f"not a valid {_name(fmt)} file: the file is damaged or truncated") from exc
@@ -292,15 +303,11 @@ def read(path) -> object:
         if fmt == "off" and re.match(rb"\s*[A-Z]*C[A-Z]*OFF", data) and getattr(obj, "visual", None) is not None \
                 and obj.visual.kind is None:  # trimesh reads no COFF colour: named among what is dropped
             obj.metadata["qemjax_unread"] = ["vertex colours (COFF)"]
-        if fmt == "obj" and getattr(getattr(obj, "visual", None), "kind", None) == "texture" \
-                and _io_text.obj_has_colours(data):  # trimesh keeps the UVs and lets the colours go
+        if fmt == "obj" and _textured(obj) and _io_text.obj_has_colours(data):  # trimesh lets them go for the UVs
             obj.metadata.setdefault("qemjax_unread", []).append(f"vertex colours {_io_ply.BESIDE_UV}")
         if fmt == "ply" and "qemjax_unread" not in obj.metadata:  # what trimesh steps over without a word
-            header = _io_ply.parse_header(data)
-            unread = _io_ply.unread(header, positions_only=False)
-            if getattr(getattr(obj, "visual", None), "kind", None) == "texture":
-                unread += _io_ply.colours_beside_uv(header)
-            obj.metadata["qemjax_unread"] = unread
+            obj.metadata["qemjax_unread"] = _io_ply.unread(_io_ply.parse_header(data), fallback=False,
+                                                           textured=_textured(obj))
         return obj
     except OSError as exc:
         raise ValueError(f"could not read {path}: {exc.strerror or 'the file cannot be opened'}") from exc

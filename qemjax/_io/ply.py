@@ -135,7 +135,7 @@ _UVS = (("texture_u", "texture_v"), ("u", "v"), ("s", "t"))
 _COLOURS = ("red", "green", "blue", "alpha")
 
 
-def _read_by_trimesh(vertex: Element, face: Element | None) -> set:
+def read_by_trimesh(vertex: Element, face: Element | None) -> set:
     """The vertex properties trimesh reads (`_NORMALS`, `_UVS`, `_COLOURS`), x, y, z among them."""
     scalars = {p.name for p in vertex.props if p.count is None}
     used = {"x", "y", "z"} | (set(_NORMALS) if set(_NORMALS) <= scalars else set())
@@ -147,26 +147,26 @@ def _read_by_trimesh(vertex: Element, face: Element | None) -> set:
     return used | set(uv)
 
 
-def unread(h: Header, positions_only: bool) -> list[str]:
+def unread(h: Header, fallback: bool, textured: bool = False) -> list[str]:
     """What an in-core read of this PLY steps over, named as a partitioned run names it (``"vertex
     properties quality, ids"``, `named`): trimesh reads positions, normals, UVs and colours by their names
-    (`_read_by_trimesh`) and steps over the other vertex properties; a file read for positions and faces
-    alone (``positions_only``: `_io_strips`, for what trimesh refuses) loses every vertex property but x, y,
-    z, and every face property but its vertex numbers."""
+    (`read_by_trimesh`) and steps over the other vertex properties. A file trimesh cannot read (``fallback``:
+    `_io_strips`, then `triangle_ply`) also loses every face property but its vertex numbers, and the
+    vertices' UVs are read even beside the faces' ``texcoord`` lists. ``textured``: trimesh read the file's
+    UVs, so its colours are named once, as let go for them (`colours_beside_uv`)."""
     vertex, face = h.element("vertex"), h.element("face")
-    if not positions_only:
-        used = _read_by_trimesh(vertex, face)
-        names = [p.name for p in vertex.props if p.name not in used or p.count is not None]
-        return [named("vertex", names)] if names else []
-    out = []
-    names = [p.name for p in vertex.props if p.name not in ("x", "y", "z")]
-    if names:
-        out.append(named("vertex", names))
-    index = index_list(face) if face is not None else None
-    names = [p.name for p in face.props if p is not index] if face is not None else []
+    used = read_by_trimesh(vertex, None if fallback else face)
+    beside = colours_beside_uv(h) if textured else []
+    names = [p.name for p in vertex.props if (p.name not in used and not (beside and p.name in _COLOURS))
+             or p.count is not None]
+    out = [named("vertex", names)] if names else []
+    index = index_list(face) if fallback and face is not None else None
+    names = [p.name for p in face.props if p is not index] if fallback and face is not None else []
+    if beside:
+        names = [n for n in names if n not in _COLOURS]
     if names:
         out.append(named("face", names))
-    return out
+    return out + beside
 
 
 BESIDE_UV = "(beside the UVs, which are read instead)"  # how colours trimesh lets go for the UVs are named
@@ -292,6 +292,32 @@ def problem(h: Header, data: bytes) -> str | None:
                 return f"line {line_no} holds too few values for a {e.name} row: {quote(line)}"
         k += e.rows
     return None
+
+
+_TYPE_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint",
+               "f4": "float", "f8": "double"}
+
+
+def triangle_ply(h: Header, text: bytes, V: np.ndarray, F: np.ndarray, vertices: np.ndarray) -> bytes:
+    """A binary PLY of triangles ``F`` (m,3) whose vertices hold positions ``V`` (n,3) as doubles and the
+    other scalar properties of ``vertices`` (records, `_io_strips`) as the file ``text`` declares them, with
+    its comments (a ``TextureFile``): a file trimesh cannot read (polygons of several sizes, triangle strips)
+    as the plain one whose attributes it reads."""
+    head = text[:text.find(b"\nend_header")].split(b"\n")
+    comments = [line.rstrip(b"\r") for line in head if line.split()[:1] == [b"comment"]]
+    vertex = h.element("vertex")
+    props = [(p.name, "<f8" if p.name in ("x", "y", "z") else "<" + TYPES[p.type]) for p in vertex.props
+             if p.count is None]
+    rows = np.zeros(len(V), props)
+    for name in rows.dtype.names:
+        rows[name] = vertices[name]
+    rows["x"], rows["y"], rows["z"] = V[:, 0], V[:, 1], V[:, 2]
+    tris = np.zeros(len(F), [("n", "u1"), ("i", "<i4", (3,))])
+    tris["n"], tris["i"] = 3, F
+    lines = [b"ply", b"format binary_little_endian 1.0", *comments, f"element vertex {len(V)}".encode(),
+            *(f"property {_TYPE_NAMES[t[1:]]} {name}".encode() for name, t in props),
+            f"element face {len(F)}".encode(), b"property list uchar int vertex_indices", b"end_header", b""]
+    return b"\n".join(lines) + rows.tobytes() + tris.tobytes()
 
 
 # a position written as float32 may move by up to half a float32 step of its coordinate: far from the origin

@@ -1,7 +1,8 @@
 """PLY files whose faces are triangle strips (``element tristrips``, as Stanford-era range scans write
 them; trimesh reads them as a point cloud): `read_tristrips` reads the vertices and the strips (ASCII,
 binary little or big endian) and `strip_triangles` turns strips into consistently oriented triangles.
-`read_polygons` reads a binary face list of several polygon sizes, which trimesh cannot either.
+`read_polygons` reads a binary face list of several polygon sizes, which trimesh cannot either. Both give
+the vertices' other properties too, for `_io_ply.triangle_ply`.
 
 Raises `_io_ply.PlyError` with a reason in words about the file. Host-side numpy only.
 """
@@ -9,11 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .ply import FORMATS, TYPES, Header, PlyError, element_bytes, index_list, rows_name, type_dtype, type_size
+from .ply import FORMATS, TYPES, Element, Header, PlyError, element_bytes, index_list, rows_name, type_dtype, type_size
 
 
 def _read_ascii(h: Header, data: bytes) -> dict:
-    """{element name: [row dicts]} (vertex: an (n,3) float64 array instead) of ASCII data."""
+    """{element name: [row dicts]} (vertex: its records instead, when it has no list property) of ASCII
+    data."""
     words = data[h.body:].split()
     out, i = {}, 0
     for e in h.elements:
@@ -28,7 +30,8 @@ def _read_ascii(h: Header, data: bytes) -> dict:
                     a = np.array(block, np.float64).reshape(e.rows, k)
                 except ValueError:
                     raise PlyError("the PLY vertex data holds something that is not a number") from None
-                out["vertex"] = a[:, [[p.name for p in e.props].index(c) for c in "xyz"]]
+                out["vertex"] = _records(e, [a[:, j] for j in range(k)])
+                out["positions"] = a[:, [[p.name for p in e.props].index(c) for c in "xyz"]]  # as written
             continue
         rows = []
         for _ in range(e.rows):
@@ -49,14 +52,14 @@ def _read_ascii(h: Header, data: bytes) -> dict:
 
 
 def _read_binary(h: Header, data: bytes) -> dict:
-    """{element name: [row dicts]} (vertex: an (n,3) float64 array instead) of binary data."""
+    """{element name: [row dicts]} (vertex: its records instead, when it has no list property) of binary
+    data."""
     order, at, out = FORMATS[h.format], h.body, {}
     for e in h.elements:
         size = element_bytes(e, data, at, order)
         if e.name == "vertex" and all(p.count is None for p in e.props):
             dt = np.dtype([(p.name, type_dtype(p.type, order)) for p in e.props])
-            a = np.frombuffer(data, dt, e.rows, at)
-            out["vertex"] = np.stack([a[c].astype(np.float64) for c in "xyz"], 1)
+            out["vertex"] = np.frombuffer(data, dt, e.rows, at)
         elif e.name in ("vertex", "tristrips", "face"):  # rows one by one (lists in them)
             rows, pos = [], at
             for _ in range(e.rows):
@@ -72,6 +75,29 @@ def _read_binary(h: Header, data: bytes) -> dict:
             out[e.name] = rows
         at += size
     return out
+
+
+def _records(e: Element, columns: list) -> np.ndarray:
+    """Records of ``e``'s scalar properties under their names and declared types, from ``columns`` (one
+    array of values a scalar property)."""
+    scalars = [p for p in e.props if p.count is None]
+    out = np.zeros(len(columns[0]), [(p.name, TYPES[p.type]) for p in scalars])
+    with np.errstate(invalid="ignore", over="ignore"):  # a number its type cannot hold: as trimesh casts it
+        for p, values in zip(scalars, columns):
+            out[p.name] = values
+    return out
+
+
+def _vertices(h: Header, got: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (n,3) float64, records of the vertices' scalar properties) of what `_read_ascii` or
+    `_read_binary` read. An ASCII file's positions are its numbers as written, whatever their declared type."""
+    rows = got["vertex"]
+    if isinstance(rows, np.ndarray):
+        V = got["positions"] if "positions" in got else np.stack([rows[c].astype(np.float64) for c in "xyz"], 1)
+        return V, rows
+    e = h.element("vertex")  # rows read one by one (a vertex element with a list property)
+    V = np.array([[float(r[c][0]) for c in "xyz"] for r in rows], np.float64)
+    return V, _records(e, [np.array([float(r[p.name][0]) for r in rows]) for p in e.props if p.count is None])
 
 
 def strip_triangles(strips: np.ndarray) -> np.ndarray:
@@ -91,37 +117,35 @@ def strip_triangles(strips: np.ndarray) -> np.ndarray:
     return tris[ok]
 
 
-def read_polygons(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices (n,3) float64, faces (m,3) int64) of a binary PLY file whose faces are polygons of any
-    sizes in one list (triangles beside quads, which trimesh cannot read), each fanned from its first
-    corner; rows of fewer than 3 corners are left out. Row by row: for the files trimesh refuses."""
+def read_polygons(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices (n,3) float64, faces (m,3) int64, the vertices' records: `_vertices`) of a binary PLY file
+    whose faces are polygons of any sizes in one list (triangles beside quads, which trimesh cannot read),
+    each fanned from its first corner; rows of fewer than 3 corners are left out. Row by row: for the files
+    trimesh refuses."""
     el = h.element("face")
     index = index_list(el) if el is not None else None
     if index is None:
         raise PlyError("the PLY face element has no list of vertex numbers")
     name = index.name
     got = _read_binary(h, data)
-    V = got["vertex"]
-    if not isinstance(V, np.ndarray):  # a vertex element with list properties
-        V = np.array([[float(r[c][0]) for c in "xyz"] for r in V], np.float64)
     tris = [np.stack([np.full(len(r[name]) - 2, r[name][0]), r[name][1:-1], r[name][2:]], 1)
             for r in got["face"] if len(r[name]) >= 3]
     F = np.concatenate(tris).astype(np.int64) if tris else np.zeros((0, 3), np.int64)
-    return V, F
+    V, vertices = _vertices(h, got)
+    return V, F, vertices
 
 
-def read_tristrips(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices (n,3) float64, faces (m,3) int64) of a PLY file with an ``element tristrips`` (its first
-    list property holds vertex numbers; each row is a strip sequence; -1, or an unsigned type's largest
-    value, restarts a strip). Vertex properties other than x, y, z are stepped over."""
+def read_tristrips(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices (n,3) float64, faces (m,3) int64, the vertices' records: `_vertices`) of a PLY file with an
+    ``element tristrips`` (its first list property holds vertex numbers; each row is a strip sequence; -1,
+    or an unsigned type's largest value, restarts a strip)."""
     el = h.element("tristrips")
     lists = [p for p in el.props if p.count is not None]
     if not lists:
         raise PlyError("the PLY tristrips element has no list of vertex numbers")
     got = _read_ascii(h, data) if h.format == "ascii" else _read_binary(h, data)
-    V = got["vertex"]
-    if not isinstance(V, np.ndarray):  # a vertex element with list properties
-        V = np.array([[float(r[c][0]) for c in "xyz"] for r in V], np.float64)
+    V, vertices = _vertices(h, got)
+    n = len(V)
     parts = []
     try:
         for row in got["tristrips"]:
@@ -134,8 +158,8 @@ def read_tristrips(h: Header, data: bytes) -> tuple[np.ndarray, np.ndarray]:
     s = s.astype(np.int64)
     if TYPES[lists[0].type][0] == "u":  # unsigned numbers write the restart -1 as their largest value
         s[s == 2 ** (8 * type_size(lists[0].type)) - 1] = -1
-    bad = s[(s < -1) | (s >= len(V))]
+    bad = s[(s < -1) | (s >= n)]
     if len(bad):
-        raise PlyError(f"the PLY tristrips refer to vertex {bad[0]}, but the file holds {len(V)} vertices "
-                       f"(numbered 0 to {len(V) - 1}; -1 restarts a strip)")
-    return V, strip_triangles(s)
+        raise PlyError(f"the PLY tristrips refer to vertex {bad[0]}, but the file holds {n} vertices "
+                       f"(numbered 0 to {n - 1}; -1 restarts a strip)")
+    return V, strip_triangles(s), vertices
