@@ -331,6 +331,46 @@ def test_auto_decides_on_an_obj_s_uvs_as_in_core(tmp_path, sphere_obj):
     assert res.stats["dropped"] == ["record", "texture coordinates (vt)"]
 
 
+def test_auto_writes_no_uvs_to_the_parts_once_it_found_a_seam(tmp_path, sphere_obj, monkeypatch):
+    """``attributes="auto"`` without a texture leaves seamed UVs out, which it knows only when the binning
+    pass meets a seam: it wrote every chunk's UVs to the parts' scratch files all the same, to discard them.
+    It writes none from the chunk where it finds the first seam on; the parts and the manifest are the same
+    bits as without the UVs (but for the seam count) and whatever the chunks."""
+    from qemjax._partition import scatter
+
+    m = shapes.bumpy_sphere(5)
+    uv, corner = af.spherical_uv(m)
+    C = uv[corner].reshape(-1, 2)  # each corner's UV, in face order
+    flat = np.asarray(m.faces).reshape(-1)
+    _, first = np.unique(flat, return_index=True)
+    seam_chunk = int(np.flatnonzero((C != C[first[flat]]).any(1))[0]) // 3 // 2000  # where the first seam is
+    chunks = -(-len(m.faces) // 2000)
+    assert seam_chunk < chunks - 1  # chunks after it: UVs that were written to be dropped
+    real_open, at, written = open, [0], []
+
+    def spy(path, *args, **kwargs):
+        if str(path).endswith(".uv"):
+            written.append(at[0])
+        return real_open(path, *args, **kwargs)
+
+    def progress(done, total):
+        at[0] += 1
+
+    monkeypatch.setattr(scatter, "open", spy, raising=False)
+    manifest = scatter.scatter(sphere_obj, tmp_path / "auto", 1000, chunk_faces=2000, progress=progress, uv="auto")
+    monkeypatch.undo()
+    assert at[0] == chunks and not manifest["uv"] and manifest["uv_seam_vertices"] > 20
+    assert written and max(written) < seam_chunk  # before the seam's chunk only (none when it is the first)
+    plain = scatter.scatter(sphere_obj, tmp_path / "plain", 1000, chunk_faces=2000)
+    whole = scatter.scatter(sphere_obj, tmp_path / "whole", 1000, uv="auto")
+    assert whole == manifest == {**plain, "uv_seam_vertices": manifest["uv_seam_vertices"]}
+    for part in manifest["parts"]:
+        got = [np.load(tmp_path / run / part["file"]) for run in ("auto", "plain", "whole")]
+        assert sorted(got[0].files) == ["F", "V", "border", "gid"]
+        assert all(sorted(g.files) == sorted(got[0].files) for g in got)
+        assert all(np.array_equal(g[k], got[0][k]) for g in got for k in got[0].files)
+
+
 def test_a_folder_cut_when_auto_needed_a_texture_is_not_resumed(tmp_path):
     """A scratch folder an earlier version cut under ``attributes="auto"`` (which kept UVs only with a texture
     image) holds parts without the UVs "auto" now keeps: its key differs, so the run starts afresh."""

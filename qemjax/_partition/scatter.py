@@ -95,7 +95,8 @@ def _note_owner(owner, F, part):
 def _note_uv(first, state, F, C):
     """Records the UVs C (k,3,2) of the corners of faces F: a vertex's first corner's in ``first``, and in
     ``state`` 1 once seen, 2 once a corner differs from its first (a seam vertex; a NaN differs from
-    itself, as in `_wedges.seam_vertex_count`)."""
+    itself, as in `_wedges.seam_vertex_count`). Whether these faces hold a seam vertex."""
+    seam = False
     for f in range(len(F)):
         for c in range(3):
             v = F[f, c]
@@ -104,22 +105,27 @@ def _note_uv(first, state, F, C):
                 first[v, 0], first[v, 1] = C[f, c, 0], C[f, c, 1]
             if first[v, 0] != C[f, c, 0] or first[v, 1] != C[f, c, 1]:
                 state[v] = 2
+                seam = True
+    return seam
 
 
 def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progress, uv: bool,
          seams: bool = False) -> tuple[np.ndarray, int, bool]:
     """Appends each face to its part's file (input order kept within a part), and with ``uv`` its corners'
     UVs to the part's ``.uv`` file; returns the owners, with ``seams`` how many vertices have corners of
-    different UVs (else 0), and whether every UV read is a finite number."""
+    different UVs (else 0: with ``seams``, the UVs are written only while none is found, as a seam leaves
+    them out), and whether every UV read is a finite number."""
     owner = np.full(src.n_vertices, UNSEEN, np.int32)
-    finite = True
+    finite, write_uv = True, uv
     if seams:
         first, state = np.empty((src.n_vertices, 2), np.float64), np.zeros(src.n_vertices, np.int8)
     for a, b in _spans(src.n_faces, step):
         F = src.faces(a, b)
         C = src.corner_uvs(a, b, F) if uv else None
-        if seams:
-            _note_uv(first, state, F, C)
+        if seams and _note_uv(first, state, F, C) and write_uv:  # a seam: the parts will not take the UVs
+            write_uv = False  # (still read, to count the seam vertices)
+            for written in tmp.glob("*.uv"):
+                remove(written)
         finite = finite and (C is None or bool(np.isfinite(C).all()))
         part = plan.assign(codes(cells, F)).astype(np.int32)
         _note_owner(owner, F, part)
@@ -130,7 +136,7 @@ def _bin(src: Source, cells, plan: Plan, tmp: Path, index_type, step: int, progr
         for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(order)]):
             with open(tmp / f"{sorted_part[lo]}.bin", "ab") as f:
                 f.write(F[order[lo:hi]].tobytes())
-            if uv:
+            if write_uv:
                 with open(tmp / f"{sorted_part[lo]}.uv", "ab") as f:
                     f.write(C[order[lo:hi]].tobytes())
         if progress is not None:
