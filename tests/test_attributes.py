@@ -368,9 +368,12 @@ def test_attribute_model_with_rank_placement_and_terms():
     compile nothing new (the terms take its price as a static argument: one object per shape)."""
     mesh, _ = atlas_sphere(2)
     for kw in (dict(placement="rank"), dict(regularize=0.1), dict(area_weight=10.0)):
-        r = qemjax.simplify(mesh, ratio=0.3, attributes="uv", **kw)
+        said = f"setting {next(iter(kw))}" if "placement" not in kw else "keeping uv"  # the stretch off: why
+        with pytest.warns(UserWarning, match=f"^{said} turns off the default method's memoryless"):
+            r = qemjax.simplify(mesh, ratio=0.3, attributes="uv", **kw)
+            again = qemjax.simplify(mesh, ratio=0.3, attributes="uv", **kw)
         assert r.uv is not None and metrics.seam_report(r)["mixed_charts"] == 0
-        assert qemjax.simplify(mesh, ratio=0.3, attributes="uv", **kw).stats["compilations"] == 0, kw
+        assert again.stats["compilations"] == 0, kw
 
 
 def test_seam_edges_are_the_chart_borders():

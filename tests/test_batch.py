@@ -123,10 +123,12 @@ def test_results_of_a_batch_are_independent_of_its_company():
 
 def test_new_settings_in_a_batch_compile_nothing():
     mesh = shapes.icosphere(3)
-    simplify_batch(mesh, [dict(ratio=0.2, regularize=0.1, boundary_weight=1.0), dict(ratio=0.3, regularize=0.2)])
+    with pytest.warns(UserWarning, match="setting regularize turns off the default method's memoryless"):
+        simplify_batch(mesh, [dict(ratio=0.2, regularize=0.1, boundary_weight=1.0), dict(ratio=0.3, regularize=0.2)])
     c0, _ = _compilation.snapshot()
-    out = simplify_batch(mesh, [dict(ratio=0.2, regularize=0.7, boundary_weight=9.0),
-                                dict(ratio=0.3, regularize=0.05)])
+    with pytest.warns(UserWarning, match="setting regularize turns off the default method's memoryless"):
+        out = simplify_batch(mesh, [dict(ratio=0.2, regularize=0.7, boundary_weight=9.0),
+                                    dict(ratio=0.3, regularize=0.05)])
     assert _compilation.snapshot()[0] == c0
     assert out[0].stats["batch"]["size"] == 2
 

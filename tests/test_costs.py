@@ -199,8 +199,9 @@ def test_regularize_reduces_slivers_and_does_not_recompile():
     mesh = shapes.bumpy_sphere(4)
     plain = dict(quality_threshold=0.0, sliver_moves=0)  # the default's other sliver remedies off
     base = qemjax.simplify(mesh, ratio=0.05, **plain)
-    r1 = qemjax.simplify(mesh, ratio=0.05, regularize=0.1, **plain)
-    r2 = qemjax.simplify(mesh, ratio=0.05, regularize=0.3, **plain)
+    with pytest.warns(UserWarning, match="setting regularize turns off the default method's memoryless"):
+        r1 = qemjax.simplify(mesh, ratio=0.05, regularize=0.1, **plain)
+        r2 = qemjax.simplify(mesh, ratio=0.05, regularize=0.3, **plain)
     assert_valid(r1, len(base.faces), mesh.vertices, mesh.faces)
     assert r1.stats["model"]["regularize"] == 0.1
     assert _sliver_fraction(r2) < _sliver_fraction(base)
@@ -212,9 +213,10 @@ def test_ring_support_parallel_one_pair_per_round_is_greedy(seed):
     """With a ring term, both schedulers must re-cost the pairs in the 1-ring of each new vertex: gated to
     one pair per round, the parallel scheduler then makes greedy's contractions in greedy's order."""
     mesh = shapes.bumpy_sphere(2, seed=seed)
-    g = qemjax.simplify(mesh, target_faces=60, scheduler="greedy", regularize=0.2)
-    p = qemjax.simplify(mesh, target_faces=60, schedule=one_pair_per_round(), regularize=0.2,
-                        quality_threshold=0.0)  # the shape term is the parallel rounds' alone
+    with pytest.warns(UserWarning, match="setting regularize turns off the default method's memoryless"):
+        g = qemjax.simplify(mesh, target_faces=60, scheduler="greedy", regularize=0.2)
+        p = qemjax.simplify(mesh, target_faces=60, schedule=one_pair_per_round(), regularize=0.2,
+                            quality_threshold=0.0)  # the shape term is the parallel rounds' alone
     assert len(p.history.pairs) == len(g.history.pairs)
     assert np.array_equal(np.sort(p.history.pairs, 1), np.sort(g.history.pairs, 1))
     np.testing.assert_allclose(p.history.costs, g.history.costs, rtol=1e-4, atol=1e-10)

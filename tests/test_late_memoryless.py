@@ -274,6 +274,51 @@ def test_the_default_says_when_feature_edges_turn_its_last_stretch_off():
     assert none.stats["memoryless_from_faces"] and "late_memoryless_off" not in asked.stats
 
 
+@pytest.mark.parametrize("what", ["regularize", "area_weight", "scheduler"])
+def test_the_default_says_when_a_setting_turns_its_last_stretch_off(what, tmp_path):
+    """regularize, area_weight and a scheduler registered from outside keep a default run on the summed
+    quadrics: said in a warning that names the setting and the way back to the default's geometry, as kept
+    attributes are (it was said in the stats alone), and in a partitioned run's stats as that reason. A call
+    that set late_memoryless itself gets its own warning alone; a bounded run (max_distance) keeps to the stats."""
+    from qemjax import _schedulers
+
+    V, F = shapes.bumpy_sphere(3)
+    kw = {"regularize": dict(regularize=0.1), "area_weight": dict(area_weight=0.1),
+          "scheduler": dict(scheduler="outside")}[what]
+    match = {"regularize": r"^setting regularize .* than with regularize=0 \(CLI: --regularize 0\)$",
+             "area_weight": r"^setting area_weight .* than with area_weight=0 \(CLI: --area-weight 0\)$",
+             "scheduler": r"^scheduler='outside' .*: the default's geometry needs scheduler='parallel' or 'greedy'$"}
+    _schedulers.register("outside", _schedulers.get("parallel"))
+    try:
+        with pytest.warns(UserWarning, match=match[what].replace(".*", "turns off the default method's "
+                                                                      "memoryless last stretch .*")) as said:
+            res = qemjax.simplify((V, F), ratio=0.1, **kw)
+        assert len([w for w in said if "last stretch" in str(w.message)]) == 1
+        reason = res.stats["late_memoryless_off"]
+        assert ("not a built-in" if what == "scheduler" else f"{what} is set") in reason
+        assert "memoryless_from_faces" not in res.stats
+        with pytest.warns(UserWarning) as asked:
+            qemjax.simplify((V, F), ratio=0.1, late_memoryless=2, **kw)
+        assert [str(w.message).split(":")[0] for w in asked] == ["late_memoryless is not applied"]
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            summed = qemjax.simplify((V, F), ratio=0.1, late_memoryless=0, **kw)
+            bounded = qemjax.simplify((V, F), max_distance=1e-3, **kw)
+        assert np.array_equal(res.faces, summed.faces) and res.vertices.tobytes() == summed.vertices.tobytes()
+        assert bounded.stats["late_memoryless_off"] == reason
+        if what == "regularize":  # a partitioned run's last level: its runs' own reason, not "attributes are kept"
+            import trimesh
+
+            path = tmp_path / "bumpy.ply"
+            trimesh.Trimesh(V, F, process=False).export(path)
+            with pytest.warns(UserWarning, match=match[what].split(" .*")[0]):
+                part = qemjax.simplify(str(path), ratio=0.1, partition=qemjax.Partition(workers=1, part_faces=2000),
+                                       **kw)
+            assert part.stats["late_memoryless_off"] == reason
+    finally:
+        del _schedulers._REGISTRY["outside"]
+
+
 @pytest.mark.parametrize("kw,match", [
     (dict(late_memoryless=0.5), "late_memoryless must be 0"),
     (dict(late_memoryless=-1), "late_memoryless must be finite"),

@@ -103,7 +103,7 @@ class QEM(Method):
         late_memory_weight·Q_summed (and ``volume_weight``). No effect with ``memoryless=True`` (memoryless
         throughout). The run stays summed without a face target (``max_error`` alone), with kept attributes
         or feature edges, with ``regularize`` or ``area_weight``, and on a scheduler registered from outside
-        (stats["late_memoryless_off"] says why; kept attributes turning the default's stretch off warn too).
+        (stats["late_memoryless_off"] says why; a default run that one of these turns it off for warns too).
     late_memory_weight: μ ≥ 0 of the late phase (1: the summed quadric at full weight).
     """
 

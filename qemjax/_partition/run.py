@@ -417,11 +417,13 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
         stop = final[0]["stop_reason"]
     else:
         stop = "target" if len(F) <= target else "locked"
-    # the last level's runs that kept UVs turned off the default's memoryless last stretch (`stages.job`): said
-    # once, as an in-core run says it, and not as a reason for stopping
+    # the last level's runs that kept UVs (or were given a setting that does) turned off the default's memoryless
+    # last stretch (`stages.job`): said once, as an in-core run says it, and not as a reason for stopping; the
+    # reason is the runs' own (a task kept before they gave it: its UVs, the one reason such a run then warned)
     from .._pipeline.stages import ATTRIBUTES_KEPT, STRETCH_OFF
 
     stretch = sorted({m for s in final for m in s["warnings"] if STRETCH_OFF in m})
+    off = next((s["late_memoryless_off"] for s in final if s.get("late_memoryless_off")), ATTRIBUTES_KEPT)
     # the groups' reasons, without their own "stopped at N faces, above the target of T: " (the run's warning says it)
     msgs = sorted({re.sub(r"^stopped at \d+ faces, above the target of \d+: ", "", m) for s in final
                    for m in s["warnings"] if STRETCH_OFF not in m})
@@ -442,7 +444,7 @@ def _result(V, F, target, n_faces, manifest, levels, dist, locked_share, where, 
                  method=str(kwargs.get("method", "default")), scheduler=str(kwargs.get("scheduler", "parallel")),
                  total_s=total, compile_s=compile_s, run_s=total - compile_s, partition=part,
                  dropped=["record", *manifest.get("dropped", [])], attributes=["uv"] if UV is not None else [],
-                 **({"late_memoryless_off": ATTRIBUTES_KEPT} if stretch else {}),
+                 **({"late_memoryless_off": off} if stretch else {}),
                  **({"not_kept_seams": ["uv"]} if manifest.get("uv_seam_vertices") else {}),
                  **(not_measured() | dist))
     if manifest.get("uv") and UV is None:  # the file's UVs were read, a group's run did not keep them

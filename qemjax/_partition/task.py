@@ -169,6 +169,8 @@ def run_group(spec: dict) -> dict:
                  seconds=time.perf_counter() - t0, compile_s=float(res.stats.get("compile_s") or 0.0),
                  peak_rss=peak_rss(), pid=os.getpid(),
                  warnings=sorted({str(w.message) for w in caught}), task=_task_key(spec))
+    if res.stats.get("late_memoryless_off"):  # why the run stayed summed (the run's stats say it, `run._result`)
+        stats["late_memoryless_off"] = res.stats["late_memoryless_off"]
     if spec.get("measure"):  # measured against the surface the re-fit fitted to: the input's parts
         from .._pipeline.measure import KEYS
         stats["distance"] = {k: res.stats[k] for k in KEYS if not k.endswith("_rel")}  # the client's diagonal: `run`

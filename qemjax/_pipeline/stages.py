@@ -241,23 +241,20 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         attrs = None
     method_obj = setup.method_obj
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
-    why = _late_off(method_obj, attrs, feature_edges, setup.scheduler,
+    off = _late_off(method_obj, attrs, feature_edges, setup.scheduler,
                     target_faces is not None or ratio is not None or bounded)
-    if why:  # the whole run on the summed quadrics, and the stats say so
+    if off:  # the whole run on the summed quadrics, and the stats say so
+        why, said = off
         method_obj = dataclasses.replace(method_obj, late_memoryless=0.0, volume_weight=0.0)
         model = _costs.build(method_obj)
         report["late_memoryless_off"] = why
         if setup.late_asked:
             warnings.warn(f"late_memoryless is not applied: {why}; the run uses the summed quadrics throughout",
                           stacklevel=stacklevel)
-        elif why == ATTRIBUTES_KEPT and not bounded:  # the default's geometry changes with attributes alone:
-            # said, not silent (a bounded run refuses kept attributes instead: `bound.supported`)
-            warnings.warn(f"keeping {', '.join(attrs.values)} {STRETCH_OFF} (late_memoryless: it does not carry "
-                          "attributes): the geometry may be less accurate than with attributes=None (CLI: "
-                          "--attributes none)", stacklevel=stacklevel)
-        elif why == FEATURES_GIVEN:  # as with attributes: what came with the input changes the default's run
-            warnings.warn(f"giving feature edges {STRETCH_OFF} (late_memoryless: it does not track them): the run "
-                          "stays on the summed quadrics throughout", stacklevel=stacklevel)
+        elif said and (not bounded or why == FEATURES_GIVEN):  # a setting or an input alone changes the
+            # default's geometry: said, not silent. A bounded run says it in the stats alone (it refuses kept
+            # attributes, `bound.supported`, and returns the level its distance picks), feature edges aside
+            warnings.warn(said, stacklevel=stacklevel)
     corner_values = channel_weights = None
     if attrs is not None:
         channel_weights = _wedges.channel_weights(attrs, setup.kind_weights)
@@ -318,23 +315,38 @@ def frame_means(geo: Geometry) -> tuple:
 ATTRIBUTES_KEPT = "attributes are kept (the memoryless quadrics have no attribute terms)"  # `_late_off` reasons
 FEATURES_GIVEN = "feature edges are given (the memoryless quadrics do not track them)"  # that come with the input
 STRETCH_OFF = "turns off the default method's memoryless last stretch"  # in the warning `job` gives for it
+LESS_ACCURATE = "the geometry may be less accurate than with"  # that warning's way back to the default's
 
 
-def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: bool) -> str | None:
-    """Why a method that turns memoryless late (`_schedulers.late`) stays summed in this run, or None.
+def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: bool) -> tuple | None:
+    """Why a method that turns memoryless late (`_schedulers.late`) stays summed in this run, and the
+    warning that says so to a call that did not set ``late_memoryless`` itself (what the call set or gave,
+    `STRETCH_OFF`, why, and how to get the default's geometry back; None: no warning); None when it switches.
     ``face_target``: the run has one (a ratio, target_faces, or max_distance's targets)."""
     if not getattr(method_obj, "switches_late", False):
         return None
+
+    def said(what: str, why: str, back: str) -> str:
+        return f"{what} {STRETCH_OFF} (late_memoryless: {why}): {back}"
+
     if not face_target:
-        return "there is no face target (max_error alone), and the switch comes at a multiple of it"
+        return "there is no face target (max_error alone), and the switch comes at a multiple of it", None
     if scheduler not in _schedulers.BUILT_IN:
-        return f"the scheduler {scheduler!r} is not a built-in one (the switch runs the scheduler a second time)"
-    if method_obj.regularize or method_obj.area_weight:
-        return "regularize or area_weight is set (its term prices the summed quadrics' placement)"
+        built_in = " or ".join(map(repr, _schedulers.BUILT_IN))
+        return (f"the scheduler {scheduler!r} is not a built-in one (the switch runs the scheduler a second time)",
+                said(f"scheduler={scheduler!r}", "it runs a built-in scheduler a second time",
+                     f"the default's geometry needs scheduler={built_in}"))
+    term = "regularize" if method_obj.regularize else "area_weight" if method_obj.area_weight else None
+    if term:  # (the two are never set together: `_costs.area_term`)
+        return (f"{term} is set (its term prices the summed quadrics' placement)",
+                said(f"setting {term}", "its term prices the summed quadrics' placement",
+                     f"{LESS_ACCURATE} {term}=0 (CLI: --{term.replace('_', '-')} 0)"))
     if attrs is not None:
-        return ATTRIBUTES_KEPT
+        return ATTRIBUTES_KEPT, said(f"keeping {', '.join(attrs.values)}", "it does not carry attributes",
+                                     f"{LESS_ACCURATE} attributes=None (CLI: --attributes none)")
     if feature_edges is not None and len(feature_edges):
-        return FEATURES_GIVEN
+        return FEATURES_GIVEN, said("giving feature edges", "it does not track them",
+                                    "the run stays on the summed quadrics throughout")
     return None
 
 
