@@ -481,3 +481,25 @@ def _shift_face(line: str) -> str:
         return line
     corners = [c.split("/") for c in line.split()[1:]]
     return "f " + " ".join("/".join([str(int(c[0]) + 1), *c[1:]]) for c in corners) + "\n"
+
+
+@pytest.mark.parametrize("scheduler", ["parallel", "greedy"])
+def test_rounds_that_contract_nothing_are_counted_apart(scheduler):
+    """On a grid with most vertices locked, some parallel rounds contract nothing (their picks all refused,
+    or, last, nothing left to contract), and stats['rounds'] counted them with the rest with nothing apart.
+    It still counts the rounds run; stats['rounds_contracting'] counts those that contracted something: the
+    history's rounds, one entry each in faces_per_round, and the same after max_distance cuts the run short.
+    The greedy queue's rounds are its contractions, each contracting."""
+    V, F = shapes.grid(12)
+    locked = np.flatnonzero(np.random.default_rng(0).random(len(V)) < 0.95)
+    res = qemjax.simplify((V, F), ratio=0.1, locked=locked, scheduler=scheduler)
+    s = res.stats
+    assert res.stop_reason == "locked" and s["rounds_contracting"] == len(np.unique(res.history.rounds)) > 0
+    if scheduler == "parallel":
+        assert s["rounds_contracting"] == len(s["faces_per_round"]) < s["rounds"]
+    else:
+        assert s["rounds_contracting"] == s["rounds"] == s["contractions"] == len(res.history)
+    V, F = shapes.bumpy_sphere(3)
+    cut = qemjax.simplify((V, F), ratio=0.05, max_distance_rel=2e-3, scheduler=scheduler)
+    assert cut.stop_reason == "max_distance"
+    assert cut.stats["rounds_contracting"] == len(np.unique(cut.history.rounds)) <= cut.stats["rounds"]

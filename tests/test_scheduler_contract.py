@@ -143,8 +143,9 @@ def test_the_run_reports_its_counts_in_the_stats(monkeypatch):
     seen = _capture(monkeypatch, "parallel")
     res = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.1, late_memoryless=0)  # one run (`test_late_memoryless`)
     counts = seen[0][0].counts(("a", "b", "c", "d")[:len(seen[0][0].branches)])
-    assert list(counts) == ["contractions", "rejected", "rounds", "branches", "rejected_by", "blocked_by"]
-    for k in ("contractions", "rejected", "rounds", "rejected_by", "blocked_by"):
+    assert list(counts) == ["contractions", "rejected", "rounds", "rounds_contracting", "branches", "rejected_by",
+                            "blocked_by"]
+    for k in ("contractions", "rejected", "rounds", "rounds_contracting", "rejected_by", "blocked_by"):
         assert res.stats[k] == counts[k]
     assert list(res.stats["branches"].values()) == list(counts["branches"].values())
 

@@ -26,6 +26,7 @@ import warnings
 import numpy as np
 
 from .._record.result import Contractions
+from .._schedulers import outcome
 
 # the comparison's allowance for rounding, times the input's largest extent: the distances are found in the
 # input's unit frame (`refit.unit_frame`) and scaled back, which an independent float64 recomputation in
@@ -215,6 +216,7 @@ def apply(res, job, bound: Bound, stacklevel: int, caught: list) -> object:
     rounds = rec.history.rounds
     if j < J and rounds is not None and len(rounds) == J:
         s["rounds"] = int(rounds[j - 1]) + 1 if j else 0
+        s["rounds_contracting"] = outcome.contracting_rounds(rounds[:j])
         if isinstance(s.get("faces_per_round"), list):
             s["faces_per_round"] = s["faces_per_round"][:s["rounds"]]
     s.update(faces_out=len(best.faces), vertices_out=len(X), contractions=j, refit=refit_rounds,

@@ -57,7 +57,9 @@ class SimplifyResult:
     than the run reached was returned: fewer would lie farther from the input than ``simplify(max_distance=)``
     allows), ``"blocked"`` (no valid contraction left:
     ``stats["blocked_by"]`` counts the pairs each rule held back) or ``"unchanged"`` (nothing to remove);
-    stats: counts and timings (``compile_s`` is every compilation inside this call: JAX's tracing and
+    stats: counts and timings (``rounds``: the scheduler's rounds run, those that contracted nothing
+    included, the greedy queue's being its contractions; ``rounds_contracting``: those that contracted
+    something, one entry each in ``faces_per_round``; ``compile_s`` is every compilation inside this call: JAX's tracing and
     compiling, and numba's compiling of a host loop its cache did not have; ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
     times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``
     and ``faces_per_round``), ``refit`` (re-fit rounds run) and ``refit_s`` (their seconds; a batch runs

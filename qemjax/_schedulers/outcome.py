@@ -122,7 +122,8 @@ class Outcome:
     their last); faces (m,3) int64: the input faces re-linked; alive (m,) bool: the survivors; history:
     the contractions (`History`); stop_reason: one of STOPS; blocked_by: what held back the pairs left
     (`classify`; empty when the target was met); rejected_by: pairs refused during the run, per rule
-    (`count_reasons`); rejected: how many refusals; rounds: rounds (parallel) or contractions (greedy);
+    (`count_reasons`); rejected: how many refusals; rounds: rounds run (parallel: those that contracted
+    nothing too, `contracting_rounds`) or contractions (greedy);
     worst_cost: the largest cost of a contraction taken (the limit is ``Options.max_cost``); branches:
     contractions per placement branch (the model's ``branches``); stage_times: seconds per stage
     (``*_s``); faces_per_round, parts (k, p+1): the cost parts and the ranking key of each contraction
@@ -182,9 +183,11 @@ class Outcome:
         return "locked" if stop == "blocked" and hold_back(self.blocked_by) else stop
 
     def counts(self, branch_names) -> dict:
-        """The run's counts for the result's stats: contractions, refusals, rounds, contractions per
-        placement branch (by the model's ``branch_names``), refusals and blocked pairs per rule."""
+        """The run's counts for the result's stats: contractions, refusals, rounds (run) and those of them
+        that contracted something (`contracting_rounds`), contractions per placement branch (by the
+        model's ``branch_names``), refusals and blocked pairs per rule."""
         return dict(contractions=self.contractions, rejected=self.rejected, rounds=self.rounds,
+                    rounds_contracting=contracting_rounds(self.history_rounds if self.contractions else ()),
                     branches={name: int(c) for name, c in zip(branch_names, self.branches)},
                     rejected_by=self.rejected_by, blocked_by=self.blocked_by)
 
@@ -193,6 +196,13 @@ class Outcome:
         """The outcome of a run with nothing to remove."""
         return cls(positions, states, faces, np.ones(len(faces), bool), History.empty(), "unchanged", {},
                    count_reasons(np.zeros(0, np.int8)), branches=np.zeros(branches, int))
+
+
+def contracting_rounds(history_rounds) -> int | None:
+    """How many rounds contracted something, from each contraction's round (None: a scheduler that does not
+    give them). A round may contract nothing: one that only refused its picks selects again among the rest,
+    and a run that stops blocked ends with one that found nothing to contract; ``rounds`` counts those too."""
+    return None if history_rounds is None else int(len(np.unique(history_rounds)))
 
 
 def stage_times(timer: dict) -> dict:
