@@ -34,11 +34,20 @@ _LENGTHS = {"icosphere": ("radius",), "torus": ("major", "minor"), "grid": ("siz
 _FINITE = {"bumpy_sphere": ("amplitude",)}
 
 
+# the fewest bytes a face any generator takes while it makes its mesh: the mesh returned (three int64 indices
+# a face, and about half a vertex of three float64: 36) and its faces once more as they are built (24)
+MAKE_BYTES_PER_FACE = 60
+# a shape that needs less is made without reading the memory available (which takes longer than making a small
+# one): no machine that runs this package has less to spare
+_CHECKED_FROM = 1 << 28
+
+
 def _counts(shape: str, args: dict, text: str | None = None) -> None:
     """ValueError naming ``shapes.shape``'s argument (after ``text``, the spec as written, when given) unless
     each count in ``args`` is an integer at least its `_LEAST` (a grid with a hole: 3, the hole being its
     middle third) and each length (`_LENGTHS`) a finite number > 0 (a torus's minor radius under its major
-    one: else its tube passes through the axis), and each of `_FINITE` a finite number."""
+    one: else its tube passes through the axis), and each of `_FINITE` a finite number. Without ``text`` (a
+    generator called directly, with every argument), also one for a shape too large to make here (`_room`)."""
     hole = bool(args.get("hole", False))
     for name, least in _LEAST[shape].items():
         if name not in args:
@@ -67,6 +76,23 @@ def _counts(shape: str, args: dict, text: str | None = None) -> None:
         if given["minor"] >= given["major"]:
             raise ValueError(f"{text or 'shapes.torus'}: minor must be less than major (the tube's radius under "
                              f"the ring's), got minor={given['minor']!r}, major={given['major']!r}")
+    if text is None:
+        _room(shape, args)
+
+
+def _room(shape: str, args: dict) -> None:
+    """ValueError, before a generator called directly makes anything, for a shape whose making would need more
+    memory than this machine has available, in the words of a sweep's shape too large to run (`_fits`): the
+    system would otherwise kill the process while making it, without a word."""
+    n = _faces(shape, args)
+    if n * MAKE_BYTES_PER_FACE < _CHECKED_FROM:
+        return
+    from ._pipeline import fits
+
+    short = fits.shortfall(n, fits.available(), MAKE_BYTES_PER_FACE)
+    if short is not None:
+        counts = ", ".join(f"{k}={args[k]!r}" for k in _LEAST[shape])
+        raise ValueError(f"shapes.{shape}({counts}): {short}: ask for a smaller shape")
 
 
 def icosphere(subdivisions: int = 3, radius: float = 1.0) -> Mesh:
@@ -247,11 +273,12 @@ def parse_spec(value) -> ShapeSpec:
 
 
 def _faces(name: str, args: dict) -> int:
-    """The faces shape ``name`` makes with ``args`` (every argument given: the spec's over the defaults)."""
+    """The faces shape ``name`` makes with ``args`` (every argument given: the spec's over the defaults); at
+    most those of 64 subdivisions (more than any machine holds, and a count that still prints)."""
     if name in ("icosphere", "bumpy_sphere", "cube"):
-        return (20 if name != "cube" else 12) * 4 ** args["subdivisions"]
-    if name == "torus":
-        return 2 * args["n_major"] * args["n_minor"]
+        return (20 if name != "cube" else 12) * 4 ** min(args["subdivisions"], 64)
+    if name in ("torus", "double_cone"):
+        return 2 * (args["n_major"] * args["n_minor"] if name == "torus" else args["n"])
     n = args["n"]  # grid: n × n cells of two faces, less the middle third's with a hole
     return 2 * (n * n - ((n - 2 * (n // 3)) ** 2 if args["hole"] else 0))
 

@@ -366,6 +366,32 @@ def test_a_shape_too_large_to_run_is_refused_before_it_is_made(monkeypatch, tmp_
         _sweep_config.load(cfg)
 
 
+@pytest.mark.parametrize("make,text", [
+    (lambda: shapes.torus(n_major=300_000, n_minor=300_000), "shapes.torus(n_major=300000, n_minor=300000)"),
+    (lambda: shapes.grid(300_000), "shapes.grid(n=300000)"),
+    (lambda: shapes.icosphere(18), "shapes.icosphere(subdivisions=18)"),
+    (lambda: shapes.bumpy_sphere(18), "shapes.bumpy_sphere(subdivisions=18)"),
+    (lambda: shapes.cube(19), "shapes.cube(subdivisions=19)"),
+    (lambda: shapes.double_cone(10**11), "shapes.double_cone(n=100000000000)"),
+])
+def test_a_shape_too_large_to_make_is_refused_when_called_directly(make, text, monkeypatch):
+    """A generator called directly with counts whose mesh would need terabytes (here 10 TiB or more) went on
+    to make it, and the system killed the process: only a shape named in a sweep was checked. It is refused
+    before anything is made, in the sweep's words; a small shape does not read the memory available."""
+    from qemjax._pipeline import fits
+
+    monkeypatch.setattr(fits, "available", lambda: 1 << 30)
+    with pytest.raises(ValueError, match=re.escape(text) + r": [\d,]+ faces need about \d+\.\d GiB in one "
+                                         r"process, and this machine has 1\.0 GiB available: ask for a smaller shape$"):
+        make()
+    monkeypatch.setattr(fits, "available", lambda: 1 << 60)  # where they would fit: not refused
+    assert shapes._room("torus", dict(n_major=300_000, n_minor=300_000)) is None
+    monkeypatch.setattr(fits, "available", lambda: pytest.fail("a small shape read the memory available"))
+    for small in (shapes.torus(), shapes.grid(), shapes.icosphere(4), shapes.bumpy_sphere(4), shapes.cube(5),
+                  shapes.double_cone()):
+        assert len(small.faces)
+
+
 def test_shapes_named_as_text():
     spec = shapes.parse_spec("shapes.bumpy_sphere(subdivisions=2, amplitude=0.05)")
     assert spec == shapes.ShapeSpec("bumpy_sphere", (("subdivisions", 2), ("amplitude", 0.05)))

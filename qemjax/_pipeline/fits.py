@@ -134,12 +134,13 @@ def check(mesh: Any, what: str | None = None) -> None:
     raise TooLargeError(f"{name}: {short}: {advice}")
 
 
-def shortfall(n: int | None, room: int | None) -> str | None:
+def shortfall(n: int | None, room: int | None, per_face: int = BYTES_PER_FACE) -> str | None:
     """What an in-core run of ``n`` faces lacks, in words, when it would need more than ``room`` bytes (the
-    memory `available`); None when it fits, or either is unknown."""
-    if room is None or not n or n * BYTES_PER_FACE <= room:
+    memory `available`); None when it fits, or either is unknown. ``per_face``: the bytes a face takes in
+    what is done with them (`shapes` making a mesh: less than a run)."""
+    if room is None or not n or n * per_face <= room:
         return None
-    return (f"{n:,} faces need about {_size(n * BYTES_PER_FACE)} in one process, and this machine has "
+    return (f"{n:,} faces need about {_size(n * per_face)} in one process, and this machine has "
             f"{_size(room)} available")
 
 
