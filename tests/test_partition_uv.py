@@ -246,8 +246,8 @@ def test_auto_keeps_uvs_that_come_with_a_texture(sphere_obj, tmp_path):
     path.write_text("mtllib tex.mtl\nusemtl tex\n" + sphere_obj.read_text())
     settings = Partition(workers=1, part_faces=4000)
     (tmp_path / "tex.mtl").write_text("newmtl tex\nKd 1 1 1\nmap_Kd t.png\n")
-    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\), not kept by default for their seams "
-                      r"\(\d+ seam vertices.*\); attributes='uv' \(CLI: --attributes uv\) keeps the UVs"):
+    with pytest.warns(UserWarning, match=r"texture coordinates \(vt\); uv not kept by default \(uv: \d+ seam "
+                      r"vertices\): seams hold .*; attributes='uv' \(CLI: --attributes uv\) keeps them$"):
         plain = qemjax.simplify(str(path), ratio=RATIO, partition=settings)  # the image is missing
     assert plain.uv is None and "texture coordinates (vt)" in plain.stats["dropped"]
     Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "t.png")
@@ -324,9 +324,17 @@ def test_auto_decides_on_an_obj_s_uvs_as_in_core(tmp_path, sphere_obj):
     assert np.abs(res.uv - res.vertices[res.wedge_vertex][:, :2]).max() < 0.05  # the map, u = x, v = y
     seams = _core_seams(sphere_obj)
     assert seams > 20
-    with pytest.warns(UserWarning, match=rf"texture coordinates \(vt\), not kept by default for their seams "
-                      rf"\({seams} seam vertices"):
+    with pytest.warns(UserWarning) as said:
         res = qemjax.simplify(str(sphere_obj), ratio=RATIO, partition=settings)
+    with pytest.warns(UserWarning) as in_core:  # the same sentence, from one place (`_wedges.seamed_left_out`)
+        qemjax.simplify(str(sphere_obj), ratio=RATIO)
+    core = [str(w.message) for w in in_core if "not kept by default" in str(w.message)]
+    assert core == [f"{sphere_obj}: uv not kept by default (uv: {seams} seam vertices): seams hold their vertices "
+                    "in place, which costs geometry and time (docs/attributes.md); attributes='uv' (CLI: "
+                    "--attributes uv) keeps them"]
+    assert [str(w.message) for w in said if "not kept by default" in str(w.message)] == [
+        "partition: the output keeps positions only; not carried over from the input: texture coordinates (vt); "
+        + core[0].split(": ", 1)[1]]
     assert res.uv is None and res.stats["not_kept_seams"] == ["uv"]
     assert res.stats["dropped"] == ["record", "texture coordinates (vt)"]
 

@@ -163,14 +163,19 @@ def seam_vertex_count(values: np.ndarray, F: np.ndarray, F_src: np.ndarray) -> i
 
 def warn_seamed(seamed: dict, others: list, what: str, stacklevel: int):
     """One warning: the kinds in ``seamed`` ({kind: seam vertices}) are not kept by attributes='auto'."""
+    also = f"; also not kept: {', '.join(others)}" if others else ""
+    warnings.warn(f"{what}: {seamed_left_out(seamed)}{also}", stacklevel=stacklevel + 1)
+
+
+def seamed_left_out(seamed: dict) -> str:
+    """What an in-core run (`warn_seamed`) and a partitioned one (`_partition.run`) say of the kinds in
+    ``seamed`` ({kind: seam vertices}) that attributes='auto' does not keep: which, why, and how to keep them."""
     kinds = tuple(seamed)
     arg = repr(kinds[0]) if len(kinds) == 1 else repr(kinds)
-    cli = ",".join(kinds)
     seams = ", ".join(f"{k}: {c} seam vertices" for k, c in seamed.items())
-    also = f"; also not kept: {', '.join(others)}" if others else ""
-    warnings.warn(f"{what}: {', '.join(kinds)} not kept by default ({seams}): seams hold their vertices in "
-                  f"place, which costs geometry and time (docs/attributes.md); "
-                  f"attributes={arg} (CLI: --attributes {cli}) keeps them{also}", stacklevel=stacklevel + 1)
+    return (f"{', '.join(kinds)} not kept by default ({seams}): seams hold their vertices in place, which costs "
+            f"geometry and time (docs/attributes.md); attributes={arg} (CLI: --attributes {','.join(kinds)}) "
+            "keeps them")
 
 
 def select(available: dict, attributes, unkept: list = ()) -> tuple[dict, list]:

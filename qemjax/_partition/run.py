@@ -21,6 +21,7 @@ from . import execute, indexed, pieces, plan, task
 from .readers import texture_of
 from .source import CORNER_UV, FACES, PACKED, UV, VERTICES
 from .._mesh.arrays import box_diagonal
+from .._mesh.wedges import seamed_left_out
 from .._options import Partition
 
 UNSUPPORTED = ("max_error", "max_distance", "max_distance_rel", "feature_edges", "locked", "vertex_weights")
@@ -366,12 +367,12 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             if temporary:
                 shutil.rmtree(folder, ignore_errors=True)
     if manifest.get("dropped"):
-        # as the in-core run's warning, the way to keep UVs left out by default (seams, no texture image named)
+        # the way to keep UVs left out by default: for their seams in the in-core run's words (`_wedges`), else
+        # the option alone
         left_out = uv == "auto" and manifest.get("uv_in_file") and not manifest.get("uv")
         seams = manifest.get("uv_seam_vertices", 0)
-        why = (f", not kept by default for their seams ({seams} seam vertices, which hold their vertices in place: "
-               "docs/attributes.md)") if left_out and seams else ""
-        how = f"{why}; attributes='uv' (CLI: --attributes uv) keeps the UVs" if left_out else ""
+        how = "" if not left_out else f"; {seamed_left_out({'uv': seams})}" if seams else \
+            "; attributes='uv' (CLI: --attributes uv) keeps the UVs"
         warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
                       f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
     return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
