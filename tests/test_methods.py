@@ -99,6 +99,18 @@ def test_registration_refuses_taken_names_and_non_methods():
     assert len(qemjax.simplify(qemjax.shapes.icosphere(2), ratio=0.5, boundary_weight=3.0).faces) == 160
 
 
+def test_registering_a_name_without_its_class_says_how():
+    """``@qemjax.register_method("x")`` over a class (a decorator with a name, which register is not) said "a
+    method must be a frozen dataclass subclass of qemjax.QEM ..., got None", about a class that is one."""
+    with pytest.raises(ValueError, match=r"^register_method\('damped2'\) needs the class: "
+                                         r"register_method\('damped2', cls\), or @register_method over a class"):
+        @qemjax.register_method("damped2")
+        @dataclasses.dataclass(frozen=True)
+        class Damped2(qemjax.QEM):
+            damp: float = 0.1
+    assert "damped2" not in qemjax.methods()
+
+
 def test_a_method_that_computes_no_cost_is_refused_by_name():
     """`qemjax.Method` itself, or a subclass of it that adds fields but no cost, ran until the cleaned mesh
     asked for its state and failed on a bare NotImplementedError (no message at all)."""

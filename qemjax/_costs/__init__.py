@@ -58,6 +58,9 @@ def register(name, cls: type[Method] | None = None):
     ``measure``, ...)."""
     if cls is None and isinstance(name, type):
         name, cls = name.name, name
+    if cls is None and isinstance(name, str):  # ``@register("x")`` over a class: it said "got None"
+        raise ValueError(f"register_method({name!r}) needs the class: register_method({name!r}, cls), or "
+                         "@register_method over a class whose name (a ClassVar) is the method's name")
     if not isinstance(cls, type) or not issubclass(cls, Method) or not dataclasses.is_dataclass(cls) \
             or not cls.__dataclass_params__.frozen:
         raise ValueError(f"a method must be a frozen dataclass subclass of qemjax.QEM (or another method), "
