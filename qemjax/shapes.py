@@ -91,7 +91,7 @@ def _room(shape: str, args: dict) -> None:
 
     short = fits.shortfall(n, fits.available(), MAKE_BYTES_PER_FACE)
     if short is not None:
-        counts = ", ".join(f"{k}={args[k]!r}" for k in _LEAST[shape])
+        counts = ", ".join(f"{k}={args[k]!r}" for k in _LEAST[shape] if k != "seed")  # those that set the size
         raise ValueError(f"shapes.{shape}({counts}): {short}: ask for a smaller shape")
 
 
