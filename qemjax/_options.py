@@ -79,8 +79,9 @@ class Topology:
         manifold's genus and boundary loops). None (default): True when pair_threshold is 0, else False.
         With False, contractions may create non-manifold edges, and coincident faces are dropped
         (opposite ones cancel, so small parts can vanish), as in Garland & Heckbert's paper.
-    prune: with preserve_topology, let small separate parts vanish (their last faces may contract away);
-        False (default): every part keeps at least one face.
+    prune: with preserve_topology, let small separate open parts vanish (their last faces may contract away;
+        a closed part stops at four faces, a tetrahedron, whose edges the link condition never contracts:
+        preserve_topology=False lets it go); False (default): every part keeps at least one face.
     pair_threshold: t in mesh units; besides edges, any two vertices within distance t may contract
         (Garland–Heckbert's aggregation: separate parts can join). 0 = edge contraction only.
     flip_angle: forbid a contraction that turns any surviving face's normal by this many degrees or more

@@ -381,6 +381,22 @@ def test_the_warning_offers_preserve_topology_false_only_when_topology_held_pair
         qemjax.simplify((V, F), target_faces=1)
 
 
+def test_prune_lets_open_parts_vanish_and_says_closed_ones_stay():
+    """Topology's prune said it lets small separate parts vanish; a closed part never does in manifold mode
+    (it stops at a tetrahedron, whose edges the link condition keeps), which it now says, naming
+    preserve_topology=False, which lets it go."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    V2, F2 = np.r_[V, V + [5.0, 0, 0]], np.r_[F, F + 4]
+    with pytest.warns(UserWarning, match="preserve_topology=False may reach further"):
+        kept = qemjax.simplify((V2, F2), target_faces=4, prune=True)
+    assert len(kept.faces) == 8 and kept.stop_reason == "blocked"
+    gone = qemjax.simplify((V2, F2), target_faces=4, preserve_topology=False)
+    assert len(gone.faces) == 4 and gone.stop_reason == "target"
+    prune = qemjax.Topology.__doc__.split("prune:")[1].split("pair_threshold:")[0]
+    assert "open parts" in prune and "closed part stops" in prune and "preserve_topology=False" in prune
+
+
 def _book(pages=3, n=8):
     """``pages`` flat grids sharing one edge line (the spine): edges there have ``pages`` faces."""
     Vs, Fs, off = [], [], 0
