@@ -560,7 +560,7 @@ def _add_vertex_files(p: argparse.ArgumentParser) -> None:
     p.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
                    "input's vertices as the file has them (.npy of indices or a boolean mask, or text with one "
                    "integer per line)")
-    p.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0) "
+    p.add_argument("--vertex-weights", dest="vertex_weights", metavar="FILE", help="one weight (finite, >= 0, at most 1e30) "
                    "per input vertex (.npy or text, one number per line): each pair's cost is multiplied by "
                    "the larger weight of its vertices, so heavy regions keep more detail")
 

@@ -503,3 +503,19 @@ def test_rounds_that_contract_nothing_are_counted_apart(scheduler):
     cut = qemjax.simplify((V, F), ratio=0.05, max_distance_rel=2e-3, scheduler=scheduler)
     assert cut.stop_reason == "max_distance"
     assert cut.stats["rounds_contracting"] == len(np.unique(cut.history.rounds)) <= cut.stats["rounds"]
+
+
+def test_weights_too_large_for_the_costs_are_refused():
+    """A weight of 1e300 (or the largest float, for "never") overflowed the single-precision costs it
+    multiplies: numpy's "overflow encountered in cast" warnings by the hundred, and every such pair tied at
+    infinity. Weights above 1e30 are refused in one line; 1e30 itself runs without a warning."""
+    V, F = shapes.bumpy_sphere(2)
+    n = len(V)
+    w = np.ones(n)
+    w[:5] = 1e300
+    with pytest.raises(ValueError, match=r"^vertex_weights must be at most 1e\+30 .*; vertex 0 has 1e\+300 \(5 such\)$"):
+        qemjax.simplify((V, F), ratio=0.5, vertex_weights=w)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = qemjax.simplify((V, F), ratio=0.5, vertex_weights=np.full(n, 1e30), measure=False)
+    assert len(res.faces) == len(F) // 2 and np.isfinite(res.max_error)

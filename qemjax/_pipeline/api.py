@@ -103,7 +103,7 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         `qemjax._pipeline.locks`; docs/methods.md, "Locking vertices and weighting importance"). ``locked``: a boolean mask (n,) or integer indices of vertices that stay in the
         output, and at every level of ``res.record``, exactly where they are (bit for bit); a pair with
         one locked vertex contracts onto it, a pair of two never (nor do ESQEM's splits cut their edge).
-        ``vertex_weights``: (n,) finite, >= 0; each pair's cost is multiplied by the larger weight of its
+        ``vertex_weights``: (n,) finite, >= 0, at most 1e30; each pair's cost is multiplied by the larger weight of its
         two vertices (a kept vertex takes the larger weight of the pair), so heavy regions keep more detail.
         A run the locks stop short of the target ends with ``stop_reason="locked"`` and
         ``stats["blocked_by"]["locked"]``.

@@ -36,6 +36,9 @@ from .._mesh.units import Frame
 from .._schedulers.locks import RunLocks
 
 KEYS = ("locked", "vertex_weights")  # the per-vertex settings `simplify` takes through its **settings
+# the largest weight taken: the schedulers multiply the pairs' single-precision costs by the weights, and
+# a weight near float32's range would overflow them to infinity, where every such pair ties
+MAX_WEIGHT = 1e30
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,6 +134,12 @@ def check(locked, vertex_weights, n: int) -> tuple:
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"vertex_weights must be finite and >= 0; vertex {i} has {float(w[i])!r} "
                              f"({int(bad.sum())} such)")
+        big = w > MAX_WEIGHT
+        if big.any():
+            i = int(np.flatnonzero(big)[0])
+            raise ValueError(f"vertex_weights must be at most {MAX_WEIGHT:g} (they multiply costs held in single "
+                             "precision, which would overflow; only their ratios rank the pairs: divide them all by "
+                             f"one number); vertex {i} has {float(w[i])!r} ({int(big.sum())} such)")
     return idx, w
 
 
