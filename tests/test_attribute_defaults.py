@@ -4,6 +4,7 @@ seams are kept only when asked for. One test per row of the issue's table, on ge
 bunny skips when ../shared/meshes is absent)."""
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -205,6 +206,23 @@ def test_the_seams_warning_does_not_name_the_textured_uvs_it_keeps(tmp_path):
     assert res.stats["dropped"] == ["normals"]
     seams = [w for w in warned if "not kept by default" in w]
     assert len(seams) == 1 and "also not kept" not in seams[0], seams
+
+
+@pytest.mark.parametrize("method", ["esqem", "accurate", "area"])
+def test_a_method_that_drops_attributes_is_not_said_to_keep_them(tmp_path, method):
+    """A method that keeps no attributes, on a file with a texture and hard normal edges: the cleaning's
+    warning said "the result has positions, faces and uv" (or "attributes='normal' keeps them"), then the
+    method's said it has positions and faces only. Every warning now says what the result has."""
+    mesh = shapes.bumpy_sphere(3)
+    uv, cuv = af.spherical_uv(mesh)
+    path = tmp_path / "uvn.obj"
+    af.write_obj(path, mesh, uv=uv, corner_uv=cuv, corner_normals=af.crease_normals(mesh, angle=5.0))
+    _with_texture(path, "t.png")
+    res, warned = run(path, ratio=0.2, method=method)
+    assert res.uv is None and res.normals is None
+    assert sorted(res.stats["dropped"]) == ["material", "normals", "uv"] and "not_kept_seams" not in res.stats
+    assert warned and all("the result has positions and faces only" in w for w in warned), warned
+    assert not any(re.search(r"attributes=[(']", w) for w in warned), warned  # no kind this method keeps
 
 
 def test_smooth_colours_are_kept(tmp_path):

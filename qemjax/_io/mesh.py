@@ -393,7 +393,7 @@ def _kept_names(kept: dict, material) -> set:
 
 
 def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attributes=None,
-            texture=None) -> tuple[Mesh, dict]:
+            texture=None, keeps: bool = True) -> tuple[Mesh, dict]:
     """Validate and clean a mesh for simplification; returns (Mesh, report) where report counts
     ``welded``, ``degenerate_removed``, ``duplicate_removed``, ``zero_area_removed`` (exactly collinear
     corners), ``unreferenced_removed``, gives ``vertex_map`` (each given vertex's index in the cleaned
@@ -402,7 +402,9 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
 
     attributes: which appearance attributes to keep (`_wedges.select`: 'auto', None, a kind or a tuple);
     kept ones come as ``report["attributes"]``, an `_wedges.Attributes` aligned with the cleaned faces
-    (None when nothing is kept). texture: a path or PIL image to use as the material's texture."""
+    (None when nothing is kept). texture: a path or PIL image to use as the material's texture. ``keeps``:
+    False when the run's method drops every attribute (its caller warns of the kept ones): the warning of
+    what else is dropped then says the result has positions and faces only, and names no way to keep it."""
 
     (V, F), dropped, tm = _as_arrays(mesh, keep_trimesh=True)
     notes = {}
@@ -432,13 +434,15 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
             # the kinds still kept (and their material) are not among the others the warning names
             others = [d for d in dropped if d not in names and d not in _kept_names(kept, material)]
             dropped = others + names
-            _wedges.warn_seamed(seamed, others, name, stacklevel=stacklevel + 1)
-            report["not_kept_seams"] = list(seamed)
+            if keeps:  # (a method that keeps none drops them for that, not for their seams)
+                _wedges.warn_seamed(seamed, others, name, stacklevel=stacklevel + 1)
+                report["not_kept_seams"] = list(seamed)
     if kept:
         names = _kept_names(kept, material)
         dropped = [d for d in dropped if d not in names]
     if dropped and not report.get("not_kept_seams"):
-        _warn_dropped(dropped, name, stacklevel=stacklevel + 1, kept=list(kept), hint=attributes is not None)
+        _warn_dropped(dropped, name, stacklevel=stacklevel + 1, kept=list(kept) if keeps else [],
+                      hint=attributes is not None and keeps)
     report["dropped"] = dropped
     if "normal" in kept:
         report["normals_recomputed"] = notes.get("normals_recomputed", 0)

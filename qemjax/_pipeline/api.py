@@ -387,7 +387,8 @@ def _jobs(cells: list, errors: bool, stacklevel: int, each=None, states=None):
                 raise ValueError(f"simplify_batch: {exc}") from None
             bound = _bound.check(kw["max_distance"], kw["max_distance_rel"])
             stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"], bound is not None)
-            gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
+            gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture),
+                  setup.keeps_attributes)  # (what the cleaning's warning says the result has)
             if gk not in geos:
                 geos[gk] = stages.geometry(mesh, setup, stacklevel=stacklevel)
             job = stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],

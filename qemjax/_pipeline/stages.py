@@ -141,6 +141,13 @@ class Setup:
     def split(self):
         return getattr(self.model, "split_factor", None)  # None: the method does not split
 
+    @property
+    def keeps_attributes(self) -> bool:
+        """Whether the run's method carries appearance attributes (QEM, without splits or memoryless
+        quadrics); another drops them (`job`: one warning)."""
+        return (_costs.name_of(self.method_obj) == "qem" and self.split is None
+                and not getattr(self.model, "memoryless", False))
+
 
 class Geometry(NamedTuple):
     """The cleaned mesh and what depends on it alone (shared by every run of one mesh with the same
@@ -204,7 +211,7 @@ def setup(method, scheduler, topology, attributes, progress, settings: dict, mea
 def geometry(mesh, setup: Setup, stacklevel: int) -> Geometry:
     """Read and clean ``mesh`` and compute what depends on the mesh alone (`Geometry`)."""
     (V, F), report = _io.prepare(mesh, weld_vertices=setup.weld, stacklevel=stacklevel,
-                                 attributes=setup.attributes, texture=setup.texture)
+                                 attributes=setup.attributes, texture=setup.texture, keeps=setup.keeps_attributes)
     face_means = report.pop("face_means")
     attrs = report.pop("attributes")
     vertex_map = report.pop("vertex_map")
@@ -233,7 +240,7 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         geo, states = lk.geometry(), None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
     memoryless = getattr(model, "memoryless", False)
-    if attrs is not None and (_costs.name_of(setup.method_obj) != "qem" or setup.split is not None or memoryless):
+    if attrs is not None and not setup.keeps_attributes:
         warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
         what = "memoryless=True" if memoryless else f"method={setup.method!r}"
         _wedges.warn_unsupported(warn, what, stacklevel=stacklevel)
