@@ -225,6 +225,18 @@ def test_a_method_that_drops_attributes_is_not_said_to_keep_them(tmp_path, metho
     assert not any(re.search(r"attributes=[(']", w) for w in warned), warned  # no kind this method keeps
 
 
+def test_a_method_that_drops_kept_kinds_names_them_as_the_cleaning_does(tmp_path):
+    """stats["dropped"] names what a run leaves out as "vertex_colors" and "normals"; the kinds a method
+    that keeps no attributes dropped came as "color" and "normal", so a check for "vertex_colors" missed them."""
+    mesh = shapes.bumpy_sphere(2)
+    path = tmp_path / "cn.ply"
+    af.write_ply(path, mesh, normals=af.vertex_normals(mesh), colors=af.smooth_colors(mesh))
+    res, _ = run(path, ratio=0.5, method="esqem")
+    assert res.colors is None and sorted(res.stats["dropped"]) == ["normals", "vertex_colors"]
+    kept, _ = run(path, ratio=0.5, attributes="color")
+    assert kept.colors is not None and kept.stats["dropped"] == ["normals"]
+
+
 def test_smooth_colours_are_kept(tmp_path):
     mesh = shapes.bumpy_sphere(3)
     path = tmp_path / "c.ply"

@@ -244,7 +244,8 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
         warn = list(attrs.values) + (["material"] if attrs.material is not None else [])
         what = "memoryless=True" if memoryless else f"method={setup.method!r}"
         _wedges.warn_unsupported(warn, what, stacklevel=stacklevel)
-        report["dropped"] = report["dropped"] + warn
+        # named in stats["dropped"] as the cleaning names what it drops ("vertex_colors", "normals")
+        report["dropped"] = report["dropped"] + [_wedges.DROPPED_NAME.get(k, k) for k in warn]
         attrs = None
     method_obj = setup.method_obj
     feature_edges = _io.check_feature_edges(feature_edges, len(geo.V))
