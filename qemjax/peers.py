@@ -53,11 +53,12 @@ def compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _valid(V, F) -> tuple[np.ndarray, np.ndarray]:
-    """(V, F) checked as `simplify` checks a mesh (`metrics._common.as_mesh`): the peers' C code crashed the
-    interpreter on an index out of range or faces that are not triangles, so every adapter checks first."""
+    """(V, F) checked as `simplify` checks a mesh (`metrics._common.as_mesh`), polygons refused: the peers' C
+    code crashed the interpreter on an index out of range or faces that are not triangles, so every adapter
+    checks first."""
     from .metrics._common import as_mesh
 
-    checked = as_mesh((V, F), "mesh")
+    checked = as_mesh((V, F), "mesh", polygons=False)
     return checked.vertices, checked.faces
 
 
@@ -257,7 +258,7 @@ def simplify(name: str, mesh, target_faces: int) -> PeerResult:
     triangles), a target below 1, or an empty output."""
     from .metrics._common import as_mesh
 
-    checked = as_mesh(mesh, "mesh")
+    checked = as_mesh(mesh, "mesh", polygons=False)
     V, F = checked.vertices, checked.faces
     # a number only (inf, None or text raised float's or int's own error)
     if isinstance(target_faces, bool) or not isinstance(target_faces, (int, float, np.integer, np.floating)) \

@@ -882,3 +882,36 @@ def test_a_face_that_repeats_a_vertex_is_one_face_on_its_edge():
     assert metrics._common.as_mesh((V, np.vstack([tet, [[0, 0, 1]]]))).edges.count.max() == 3
     assert metrics.topology_report((V, tet)) == {**t, "faces": 4, "euler": 2, "closed": True, "genus": 0,
                                                  "non_manifold_edges": 0, "non_manifold_vertices": 0}
+
+
+def quad_torus(nu=16, nv=8):
+    """A torus of nu-by-nv quads, (V, (m, 4) faces)."""
+    u, v = np.meshgrid(np.arange(nu) * 2 * np.pi / nu, np.arange(nv) * 2 * np.pi / nv, indexing="ij")
+    V = np.stack([(2 + np.cos(v)) * np.cos(u), (2 + np.cos(v)) * np.sin(u), np.sin(v)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+
+    def at(a, b):
+        return (a % nu) * nv + b % nv
+
+    return V, np.stack([at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)], -1).reshape(-1, 4)
+
+
+def test_polygon_faces_are_measured_as_simplify_triangulates_them():
+    """simplify takes polygons (it fan-triangulates them), and the metrics refused them ("faces must have shape
+    (m, 3)"), so evaluate(quads, simplify(quads)) failed: they take them now, as the triangles simplify ran on."""
+    import qemjax
+    from qemjax._io.mesh import as_arrays
+
+    V, Q = quad_torus()
+    tris = as_arrays((V, Q)).faces  # simplify's triangles of these quads
+    res = qemjax.simplify((V, Q), ratio=0.5, progress=False)
+    row, same_row = (metrics.evaluate(m, res, n_samples=500) for m in ((V, Q), (V, tris)))
+    assert row["faces_before"] == 2 * len(Q) and row["genus_before"] == 1
+    assert row.keys() == same_row.keys() and all(same(row[k], same_row[k]) for k in scalar_row(row))
+    assert metrics.topology_report((V, Q)) == metrics.topology_report((V, tris))
+    assert metrics.triangle_quality((V, Q.tolist())) == metrics.triangle_quality((V, tris))
+    pentagon = np.array([[0, 1, 2, 3, 4]])
+    ring = np.c_[np.cos(np.arange(5) * 1.2566), np.sin(np.arange(5) * 1.2566), np.zeros(5)]
+    assert metrics.topology_report((ring, pentagon))["faces"] == 3
+    with pytest.raises(ValueError, match=r"^mesh: faces must have shape \(m, 3\) \(or \(m, k>=3\) polygons\), got \(5, 2\)$"):
+        metrics.topology_report((ring, [[0, 1]] * 5))

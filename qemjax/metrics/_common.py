@@ -13,16 +13,19 @@ from functools import cached_property
 
 import numpy as np
 
+from .._io.mesh import _triangulate
 from .._mesh.arrays import box_diagonal, nonfinite
 
 # Triangles with twice-area <= _DEGENERATE_REL * (longest edge)^2 count as degenerate (numerically zero area).
 _DEGENERATE_REL = 1e-12
 
 
-def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
+def as_mesh(mesh, name: str = "mesh", polygons: bool = True) -> MeshArrays:
     """Validate a mesh given as a `trimesh.Trimesh` (or a `trimesh.Scene`, concatenated), a ``(vertices,
     faces)`` pair, any object with ``.vertices`` and ``.faces``, or a file's path (read as `qemjax.load`
-    reads it, without its warning); return float64 vertices (n, 3) and int64 faces (m, 3).
+    reads it, without its warning); return float64 vertices (n, 3) and int64 faces (m, 3). Polygon faces
+    (m, k > 3) are fan-triangulated as `simplify` triangulates them; ``polygons=False`` refuses them (the
+    peers take triangles only).
 
     Raises ValueError on wrong shapes, an empty mesh, non-finite coordinates of a vertex a face uses,
     non-integer or out-of-range face indices. A vertex no face uses may hold NaN or inf (`simplify` drops
@@ -56,8 +59,9 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     v, f = _rectangular(name, "vertices", vertices), _rectangular(name, "faces", faces)
     if v.ndim != 2 or v.shape[1] != 3:
         raise ValueError(f"{name}: vertices must have shape (n, 3), got {v.shape}")
-    if f.ndim != 2 or f.shape[1] != 3:
-        raise ValueError(f"{name}: faces must have shape (m, 3), got {f.shape}")
+    if f.ndim != 2 or f.shape[1] < 3 or (f.shape[1] != 3 and not polygons):
+        polygonal = " (or (m, k>=3) polygons)" if polygons else " (triangles only)"
+        raise ValueError(f"{name}: faces must have shape (m, 3){polygonal}, got {f.shape}")
     if len(v) == 0 or len(f) == 0:
         raise ValueError(f"{name}: empty mesh ({len(v)} vertices, {len(f)} faces)")
     if not np.issubdtype(v.dtype, np.number) or np.iscomplexobj(v):
@@ -68,7 +72,8 @@ def as_mesh(mesh, name: str = "mesh") -> MeshArrays:
     )
     if not integral:
         raise ValueError(f"{name}: faces must hold integer vertex indices, got dtype {f.dtype}")
-    f = np.ascontiguousarray(f, dtype=np.int64)
+    # triangles as simplify makes them of polygons, so that a result is measured against the input it ran on
+    f = np.ascontiguousarray(_triangulate(f.astype(np.int64, copy=False)))
     if f.min() < 0 or f.max() >= len(v):
         raise ValueError(f"{name}: face indices must lie in [0, {len(v)}), got [{f.min()}, {f.max()}]")
     bad, used = nonfinite(v, f)
