@@ -915,3 +915,12 @@ def test_polygon_faces_are_measured_as_simplify_triangulates_them():
     assert metrics.topology_report((ring, pentagon))["faces"] == 3
     with pytest.raises(ValueError, match=r"^mesh: faces must have shape \(m, 3\) \(or \(m, k>=3\) polygons\), got \(5, 2\)$"):
         metrics.topology_report((ring, [[0, 1]] * 5))
+
+
+@pytest.mark.parametrize("bin_edges", ["abc", [[0, 5], [10]], None, np.linspace(0, 60, 200)[::-1].reshape(20, 10)])
+def test_min_angle_histogram_refuses_bin_edges_it_cannot_read_in_one_line(bin_edges):
+    """Text (or a ragged list) raised numpy's "could not convert string to float: 'abc'", naming no argument;
+    an array numpy prints on several lines gave a message of as many."""
+    with pytest.raises(ValueError, match="^bin_edges must be a 1-D increasing array of at least 2 values, got ") as e:
+        metrics.min_angle_histogram(sphere(1), bin_edges=bin_edges)
+    assert "\n" not in str(e.value)

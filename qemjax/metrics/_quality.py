@@ -37,9 +37,14 @@ def min_angle_histogram(mesh, bin_edges=HISTOGRAM_EDGES_DEG) -> tuple[np.ndarray
       counts (k,) int64 and bin_edges (k + 1,) float64 (degrees); counts sum to the number of faces when
       the edges span [0, 60].
     """
-    edges = np.asarray(bin_edges, dtype=np.float64)
+    got = " ".join(repr(bin_edges).split())  # one line, also for an array numpy prints on several
+    said = f"bin_edges must be a 1-D increasing array of at least 2 values, got {got}"
+    try:  # text or a ragged list raised numpy's own conversion error, naming no argument
+        edges = np.asarray(bin_edges, dtype=np.float64)
+    except (ValueError, TypeError):
+        raise ValueError(said) from None
     if edges.ndim != 1 or len(edges) < 2 or not (np.diff(edges) > 0).all():
-        raise ValueError(f"bin_edges must be a 1-D increasing array of at least 2 values, got {bin_edges!r}")
+        raise ValueError(said)
     # a face's smallest angle is at most 60°; rounding may give 60.000...01, which the last bin would miss
     counts, _ = np.histogram(np.minimum(min_angles(mesh), 60.0), bins=edges)
     return counts.astype(np.int64), edges
