@@ -924,3 +924,20 @@ def test_min_angle_histogram_refuses_bin_edges_it_cannot_read_in_one_line(bin_ed
     with pytest.raises(ValueError, match="^bin_edges must be a 1-D increasing array of at least 2 values, got ") as e:
         metrics.min_angle_histogram(sphere(1), bin_edges=bin_edges)
     assert "\n" not in str(e.value)
+
+
+def test_charts_refuses_faces_it_cannot_read_in_the_user_s_terms():
+    """charts read three columns of (m, 4) faces and let the fourth go without a word; wedge_faces of another
+    shape gave numpy's "operands could not be broadcast together"; fractional indices were truncated."""
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    W = np.array([[0, 1, 2], [0, 2, 4]])  # the same wedges at both ends of their edge 0-2: one chart
+    assert metrics.charts(F, W).tolist() == metrics.charts(F.tolist(), W.astype(float)).tolist() == [0, 0]
+    assert metrics.charts(F, np.array([[0, 1, 2], [5, 2, 4]])).tolist() == [0, 1]
+    for faces, wedges, says in (
+            (np.c_[F, F[:, :1]], np.c_[W, W[:, :1]], r"faces must have shape \(m, 3\) .*, got \(2, 4\)"),
+            (F, W[:1], r"wedge_faces must have the shape of faces \(2, 3\) .*, got \(1, 3\)"),
+            (F, W.T, r"wedge_faces must have the shape of faces \(2, 3\) .*, got \(3, 2\)"),
+            (F + 0.5, W, "faces must hold integer indices, got dtype float64"),
+            (F, [[0, 1], [2]], "wedge_faces must be a rectangular array of vertex indices, got a ragged list")):
+        with pytest.raises(ValueError, match="^" + says + "$"):
+            metrics.charts(faces, wedges)

@@ -163,8 +163,16 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
 
 def charts(faces: np.ndarray, wedge_faces: np.ndarray) -> np.ndarray:
     """(m,) int64 chart id of each face: faces are in one chart when they share an edge whose two
-    endpoints have the same wedges in both (so a UV seam or colour discontinuity separates charts)."""
-    F, W = np.asarray(faces, np.int64), np.asarray(wedge_faces, np.int64)
+    endpoints have the same wedges in both (so a UV seam or colour discontinuity separates charts).
+    ``faces`` and ``wedge_faces``: (m, 3) integer arrays, corner for corner (a result's ``faces`` and
+    ``wedge_faces``)."""
+    F, W = _index_array("faces", faces), _index_array("wedge_faces", wedge_faces)
+    # a 4th column was read past, and shapes that differ gave numpy's broadcast error
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise ValueError(f"faces must have shape (m, 3) (triangles: a result's faces), got {F.shape}")
+    if W.shape != F.shape:
+        raise ValueError(f"wedge_faces must have the shape of faces {F.shape} (a wedge per face corner), "
+                         f"got {W.shape}")
     m = len(F)
     k0, k1 = [0, 1, 2], [1, 2, 0]
     u, v = F[:, k0].reshape(-1), F[:, k1].reshape(-1)
@@ -180,6 +188,19 @@ def charts(faces: np.ndarray, wedge_faces: np.ndarray) -> np.ndarray:
     same = inv[order][1:] == inv[order][:-1]
     i, j = fid[order][1:][same], fid[order][:-1][same]
     return _components(m, i, j)[1].astype(np.int64)
+
+
+def _index_array(name: str, x) -> np.ndarray:
+    """x as int64; ValueError naming ``name`` for what does not hold whole numbers."""
+    try:
+        a = np.asarray(x)
+    except (ValueError, TypeError):
+        raise ValueError(f"{name} must be a rectangular array of vertex indices, got a ragged list") from None
+    whole = np.issubdtype(a.dtype, np.integer) or (
+        np.issubdtype(a.dtype, np.floating) and np.isfinite(a).all() and (a == np.round(a)).all())
+    if not whole:
+        raise ValueError(f"{name} must hold integer indices, got dtype {a.dtype}")
+    return a.astype(np.int64, copy=False)
 
 
 def seam_report(result, input_wedge_faces: np.ndarray | None = None) -> dict:
