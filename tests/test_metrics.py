@@ -941,3 +941,20 @@ def test_charts_refuses_faces_it_cannot_read_in_the_user_s_terms():
             (F, [[0, 1], [2]], "wedge_faces must be a rectangular array of vertex indices, got a ragged list")):
         with pytest.raises(ValueError, match="^" + says + "$"):
             metrics.charts(faces, wedges)
+
+
+def test_a_face_on_no_edge_is_no_closed_surface():
+    """A face (a, a, a) has no edge, so no edge was "not in two faces": a mesh of such faces read as closed,
+    genus 0, with a volume of 0, where it has no surface at all; beside a closed tetrahedron it kept it
+    "closed". A face on no edge keeps a mesh from being closed; meshes without one read as before."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [2, 2, 2]], float)
+    tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    for F in ([[0, 0, 0]], [[0, 0, 0], [1, 1, 1]], np.vstack([tet, [[4, 4, 4]]]), np.vstack([tet, [[0, 0, 0]]])):
+        t = metrics.topology_report((V, F))
+        assert not t["closed"] and math.isnan(t["genus"]), F
+        assert t["boundary_edges"] == 0 and t["edges"] == (6 if len(F) > 2 else 0)
+        assert math.isnan(metrics.area_volume((V, F), (V, F))["volume_before"])
+        assert math.isnan(metrics.evaluate((V, tet), (V, F), n_samples=10)["genus"])
+    t = metrics.topology_report((V, tet))
+    assert t["closed"] and t["genus"] == 0
+    assert metrics.area_volume((V, tet), (V, tet))["volume_before"] == pytest.approx(1 / 6)

@@ -201,6 +201,7 @@ class EdgeTable:
     order:      (<= 3m,) int64 half-edge ids sorted by edge; edge e owns order[start[e] : start[e] + count[e]].
     start:      (E,) int64.
     forward:    (3m,) bool, per half-edge: True when it runs lo -> hi.
+    points:     number of faces on no edge, (a, a, a): a point, no surface.
     """
 
     lo: np.ndarray
@@ -209,6 +210,7 @@ class EdgeTable:
     order: np.ndarray
     start: np.ndarray
     forward: np.ndarray
+    points: int = 0
 
     @staticmethod
     def build(faces: np.ndarray, n_vertices: int) -> EdgeTable:
@@ -239,7 +241,8 @@ class EdgeTable:
         start = np.flatnonzero(first)
         count = np.diff(np.append(start, len(sorted_key)))
         head = order[start]
-        return EdgeTable(lo[head], hi[head], count, order, start, a < b)
+        points = int((~ok.any(axis=1)).sum()) if repeats.any() else 0
+        return EdgeTable(lo[head], hi[head], count, order, start, a < b, points)
 
     @cached_property
     def manifold_pairs(self) -> tuple[np.ndarray, np.ndarray]:
@@ -249,8 +252,9 @@ class EdgeTable:
 
     @cached_property
     def watertight(self) -> bool:
-        """Every edge is shared by exactly two faces."""
-        return bool((self.count == 2).all())
+        """Every edge is shared by exactly two faces, and every face lies on an edge: a face (a, a, a) bounds
+        nothing and has no surface, so a mesh with one (or of nothing else) is not closed."""
+        return bool((self.count == 2).all()) and self.points == 0
 
     @cached_property
     def consistent(self) -> bool:

@@ -104,7 +104,7 @@ def area_volume(original, simplified) -> dict:
     Returns:
       area_before, area_after: total areas (mesh units squared). area_retention: area_after / area_before.
       volume_before, volume_after: enclosed volumes (mesh units cubed), NaN for a mesh that is not closed
-        (some edge not in exactly two faces, or faces not consistently oriented).
+        (some edge not in exactly two faces, a face on no edge, or faces not consistently oriented).
       volume_change: volume_after / volume_before - 1 (dimensionless), NaN unless both meshes are closed.
     """
     return _area_volume(*in_frame(as_mesh(original, "original"), as_mesh(simplified, "simplified")))

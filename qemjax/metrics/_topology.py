@@ -92,7 +92,8 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
         edges (pinch / "bowtie" vertices, and the endpoints of non-manifold edges).
       components: connected components of faces, two faces being connected when they share a vertex.
       euler: V - E + F, with V the vertices referenced by faces.
-      closed: bool, every edge in exactly two faces. orientable: bool, faces can be oriented consistently.
+      closed: bool, every edge in exactly two faces, and every face on an edge (a face (a, a, a) is a point,
+        no surface: a mesh with one is not closed, nor one whose faces are all such). orientable: bool, faces can be oriented consistently.
       genus: int, sum over components of g = (2 - chi_c) / 2, i.e. (2 * components - euler) / 2, defined
         for closed, orientable meshes without non-manifold vertices; NaN (a float) otherwise.
       flipped_faces / flipped_fraction (with ``original``): faces whose normal points against the normal of
