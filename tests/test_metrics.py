@@ -958,3 +958,33 @@ def test_a_face_on_no_edge_is_no_closed_surface():
     t = metrics.topology_report((V, tet))
     assert t["closed"] and t["genus"] == 0
     assert metrics.area_volume((V, tet), (V, tet))["volume_before"] == pytest.approx(1 / 6)
+
+
+def test_a_mesh_split_at_uv_seams_has_the_topology_of_its_surface(examples):
+    """res.to_trimesh() of a textured result has its vertices split along the UV seams (as trimesh loads a
+    textured OBJ): evaluate read 6 components, hundreds of boundary edges and no genus where evaluate(path, res)
+    read one closed sphere, and the textured input read so too (components_before 6). A trimesh or file that
+    carries UVs (colours, normals) is measured with its coincident vertices joined, as simplify welds them; the
+    distances take the mesh as given, and arrays with coincident vertices are measured as given."""
+    import qemjax
+
+    path = examples / "textured.obj"
+    with pytest.warns(UserWarning):
+        res = qemjax.simplify(path, ratio=0.25, texture=examples / "textured.png", progress=False)
+    tm = res.to_trimesh()
+    assert len(tm.vertices) > len(res.vertices)  # split at the seams
+    assert metrics.topology_report(tm) == metrics.topology_report(res)
+    keys = ["edges", "boundary_edges", "non_manifold_edges", "non_manifold_vertices", "components", "euler",
+            "closed", "orientable", "genus", "volume_after", "volume_change", "flipped_faces",
+            *(f"{k}_before" for k in ("boundary_edges", "components", "euler", "closed", "genus"))]
+    by_res, by_trimesh = (metrics.evaluate(path, s, n_samples=500) for s in (res, tm))
+    assert by_trimesh["components"] == by_trimesh["components_before"] == 1
+    assert by_trimesh["genus"] == by_trimesh["genus_before"] == 0 and by_trimesh["boundary_edges"] == 0
+    assert {k: by_trimesh[k] for k in keys} == pytest.approx({k: by_res[k] for k in keys}, rel=1e-12)
+    split = (np.asarray(tm.vertices), np.asarray(tm.faces))  # the same arrays, no UVs: measured as given
+    assert metrics.topology_report(split)["components"] > 1
+    assert metrics.topology_report(trimesh.Trimesh(*split, process=False))["components"] > 1
+    as_arrays = metrics.evaluate(trimesh.load(path, process=False), split, n_samples=500)
+    for k in ("hausdorff", "mean", "rms", "p95", "hausdorff_fwd", "mean_bwd", "area_after", "min_angle_mean"):
+        assert by_trimesh[k] == as_arrays[k], k
+    assert math.isnan(as_arrays["genus"]) and as_arrays["genus_before"] == 0

@@ -25,7 +25,8 @@ def as_mesh(mesh, name: str = "mesh", polygons: bool = True) -> MeshArrays:
     faces)`` pair, any object with ``.vertices`` and ``.faces``, or a file's path (read as `qemjax.load`
     reads it, without its warning); return float64 vertices (n, 3) and int64 faces (m, 3). Polygon faces
     (m, k > 3) are fan-triangulated as `simplify` triangulates them; ``polygons=False`` refuses them (the
-    peers take triangles only).
+    peers take triangles only). A trimesh or file carrying per-vertex UVs, colours or normals comes marked
+    ``seams``: its topology reads `MeshArrays.welded`.
 
     Raises ValueError on wrong shapes, an empty mesh, non-finite coordinates of a vertex a face uses,
     non-integer or out-of-range face indices. A vertex no face uses may hold NaN or inf (`simplify` drops
@@ -34,17 +35,22 @@ def as_mesh(mesh, name: str = "mesh", polygons: bool = True) -> MeshArrays:
     """
     if isinstance(mesh, MeshArrays):
         return mesh
+    seams = False
     if isinstance(mesh, (str, os.PathLike)):  # as `attribute_deviation` takes it
-        from .._io.mesh import _read
+        from .._io.mesh import _read_trimesh
 
-        mesh = _read(mesh)[0]
-    elif type(mesh).__module__.startswith("trimesh"):  # a Scene (a glTF's), concatenated as simplify takes it
+        mesh = _read_trimesh(mesh)
+    if type(mesh).__module__.startswith("trimesh"):  # a Scene (a glTF's), concatenated as simplify takes it
         from .._io.mesh import _as_trimesh
+        from .._mesh.wedges import from_trimesh
 
         try:
             mesh = _as_trimesh(mesh)
         except ValueError as exc:
             raise ValueError(f"{name}: {exc}") from None
+        # per-vertex UVs, colours or normals, as simplify reads them: trimesh splits the vertices where they
+        # differ (a textured file, a textured result's to_trimesh), which is no cut in the surface
+        seams = bool(from_trimesh(mesh)[0])
     if isinstance(mesh, (tuple, list)):
         if len(mesh) != 2:
             raise ValueError(f"{name}: a tuple mesh must be (vertices, faces), got {len(mesh)} items")
@@ -85,7 +91,7 @@ def as_mesh(mesh, name: str = "mesh", polygons: bool = True) -> MeshArrays:
         # scaled positions) reads finite values near the mesh
         v = v.copy()
         v[bad] = v[f[0, 0]]
-    return MeshArrays(v, f)
+    return MeshArrays(v, f, seams)
 
 
 def _rectangular(name: str, what: str, x) -> np.ndarray:
@@ -131,7 +137,7 @@ def in_frame(first: MeshArrays, *others: MeshArrays) -> tuple[int, list]:
     k, Vs = scaled(first.vertices[first.referenced], *(m.vertices for m in meshes))
     if k == 0:
         return 0, meshes
-    return k, [MeshArrays(V, m.faces) for V, m in zip(Vs, meshes)]
+    return k, [MeshArrays(V, m.faces, m.seams) for V, m in zip(Vs, meshes)]
 
 
 def to_mesh_units(value: float, power: int, k: int) -> float:
@@ -145,11 +151,25 @@ def to_mesh_units(value: float, power: int, k: int) -> float:
 class MeshArrays:
     """A validated mesh, with derived arrays computed once on first use.
 
-    vertices: (n, 3) float64; faces: (m, 3) int64. Lengths are in the mesh's own units.
+    vertices: (n, 3) float64; faces: (m, 3) int64. Lengths are in the mesh's own units. seams: the vertices
+    are split where per-vertex attributes differ (a trimesh or file carrying UVs, colours or normals), so
+    the connectivity is that of `welded`.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
+    seams: bool = False
+
+    @cached_property
+    def welded(self) -> MeshArrays:
+        """The mesh whose connectivity the topology measures: with ``seams``, exactly coincident vertices
+        joined (as `simplify` welds them), so that a seam is no border; otherwise this mesh."""
+        if not self.seams:
+            return self
+        from .._io.mesh import weld
+
+        V, F, merged = weld(self.vertices, self.faces)
+        return MeshArrays(V, F) if merged else self
 
     @cached_property
     def corners(self) -> np.ndarray:

@@ -39,7 +39,9 @@ def evaluate(original, simplified, *, target_faces: int | None = None, n_samples
         volume_after, volume_change;
       quality of the simplified mesh (see `triangle_quality`): min_angle_min, min_angle_mean,
         sliver_fraction, aspect_ratio_mean, aspect_ratio_max, degenerate_faces;
-      topology of the simplified mesh (see `topology_report`): edges, boundary_edges, non_manifold_edges,
+      topology of the simplified mesh (see `topology_report`: a trimesh or file split at UV, colour or
+        normal seams is measured with its coincident vertices joined, so ``res`` and ``res.to_trimesh()``
+        read alike; the distances, vertex counts and quality take it as given): edges, boundary_edges, non_manifold_edges,
         non_manifold_vertices, components, euler, closed, orientable, genus, flipped_faces,
         flipped_fraction; of the original: boundary_edges_before, non_manifold_edges_before,
         components_before, euler_before, closed_before, genus_before (genus without the non-manifold

@@ -89,7 +89,7 @@ def surface_area(mesh: MeshArrays) -> float:
 def signed_volume(mesh: MeshArrays) -> float:
     """Enclosed volume (mesh units cubed) by the divergence theorem, positive for outward-facing normals;
     NaN unless the mesh is closed (every edge in two faces, traversed in opposite directions)."""
-    if not mesh.edges.closed:
+    if not mesh.welded.edges.closed:  # split at UV seams, a closed surface all the same
         return float("nan")
     # Sum of (a - r) . ((b - a) x (c - a)) / 6 over faces: a cone from r over each face. r = the mean vertex
     # keeps precision for meshes far from the origin (a closed surface's volume does not depend on r).

@@ -79,7 +79,10 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
 
     Args:
       mesh: `trimesh.Trimesh`, ``(vertices, faces)``, or any object with ``.vertices`` (n, 3) and
-        ``.faces`` (m, 3).
+        ``.faces`` (m, 3). A trimesh (or file) carrying UVs, colours or normals has its vertices split
+        where they differ (as trimesh loads them, and as `SimplifyResult.to_trimesh` gives them): its
+        topology is measured with exactly coincident vertices joined, as `simplify` welds them, so that a
+        seam is no border (the counts below are then of the joined mesh). Other meshes are measured as given.
       original: optional mesh this one was simplified from; adds ``flipped_faces`` and ``flipped_fraction``.
       target_faces: optional face count that was asked for; adds ``target_faces`` and ``target_error``.
       fans: count non-manifold vertices (one graph pass over all corners; skip it on huge meshes when not
@@ -101,7 +104,8 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
         Zero-area faces are never counted. Fraction of ``faces``.
       target_faces / target_error (with ``target_faces``): target, and faces / target - 1.
     """
-    m = as_mesh(mesh)
+    given = as_mesh(mesh)
+    m = given.welded  # a trimesh split at its UV (colour, normal) seams: one surface, as simplify reads it
     e = m.edges
     n_components, _ = _vertex_components(m)
     V = int(m.referenced.sum())
@@ -130,7 +134,7 @@ def topology_report(mesh, *, original=None, target_faces: int | None = None, fan
         "genus": twice_genus // 2 if genus_defined else float("nan"),  # an int: a count of handles
     }
     if original is not None:
-        _, (o, f) = in_frame(as_mesh(original, "original"), m)  # normals' products are lengths to the fourth
+        _, (o, f) = in_frame(as_mesh(original, "original"), given)  # normals' products: lengths to the fourth
         out.update(flipped_faces_report(f, o, nearest_faces(o, face_centroids(f))))
     if target_faces is not None:
         out.update(target_report(F, target_faces))
