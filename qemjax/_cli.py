@@ -446,11 +446,13 @@ def _atomic(path: str, save) -> None:
             os.remove(tmp)
 
 
-def write(res, path: str, ext: str):
+def write(res, path: str, ext: str, exact: bool = False):
     """Export ``res`` to ``path`` as ``ext`` (atomically: `_atomic`). A result with UVs written as OBJ also
     gets its material file (``<stem>.mtl``) and texture image beside it (each written atomically, the OBJ
     last); GLB packs them in. UVs that came without a material are written without one (``vt`` lines, no
-    mtl, no image)."""
+    mtl, no image). ``exact``: an OBJ or PLY holds the positions bit for bit (a run with locked vertices,
+    which stay exactly where they are: `_exact_obj`, doubles in a PLY), not merely as precisely as the
+    result's detail needs."""
     mesh = res.to_trimesh()
     _warn_format_losses(res, mesh.vertices, ext)
     if ext == "obj" and getattr(res, "uv", None) is not None:
@@ -465,6 +467,8 @@ def write(res, path: str, ext: str):
             text = "".join(line for line in text.splitlines(keepends=True)
                            if not line.startswith(("mtllib ", "usemtl ")))
             files = {}
+        if exact:
+            text = _exact_obj(text, mesh.vertices)
         folder = os.path.dirname(os.path.abspath(path))
         for name, data in files.items():
             target = os.path.join(folder, os.path.basename(name))
@@ -475,7 +479,9 @@ def write(res, path: str, ext: str):
     if ext in ("ply", "obj"):  # positions as precise as the result's (`_io.ply.with_double_positions`, `_obj_digits`)
         data = mesh.export(file_type=ext, **({"digits": _obj_digits(mesh.vertices)} if ext == "obj" else {}))
         if ext == "ply":
-            data = _io_ply.with_double_positions(data, mesh.vertices)
+            data = _io_ply.with_double_positions(data, mesh.vertices, always=exact)
+        elif exact:
+            data = _exact_obj(data, mesh.vertices)
         _atomic(path, lambda tmp: _write_file(tmp, data))
         return
     if ext == "gltf":  # one file, its buffers embedded: trimesh would write them beside it under fixed names
@@ -525,6 +531,19 @@ def _write_file(path: str, data) -> None:
     """Write ``data`` (bytes, or text as UTF-8) to ``path``."""
     with open(path, "wb") as f:
         f.write(data.encode() if isinstance(data, str) else data)
+
+
+def _exact_obj(text: str, V) -> str:
+    """OBJ text whose ``v`` lines give x, y, z as the shortest decimals that read back as ``V``'s float64
+    values (trimesh writes a fixed count of decimals, which rounds); the rest of each line (colours) kept.
+    The text as it is where its ``v`` lines are not one per row of V."""
+    lines = text.split("\n")
+    at = [i for i, line in enumerate(lines) if line.startswith("v ")]
+    if len(at) != len(V):
+        return text
+    for i, row in zip(at, np.asarray(V, np.float64).tolist()):
+        lines[i] = " ".join(["v", *map(repr, row), *lines[i].split()[4:]])
+    return "\n".join(lines)
 
 
 def _obj_digits(V) -> int:
@@ -809,7 +828,7 @@ def _lod(args, kwargs) -> int:
             os.rmdir(folder)
         raise
     for path, level, r in zip(paths, chain.levels, chain.ratios):
-        write(level, path, args.fmt)
+        write(level, path, args.fmt, exact=kwargs.get("locked") is not None)
         print(f"{path}: ratio {r:g}, {len(level.faces)} faces, max error {level.max_error:.3g}")
     extra = []
     if args.glb:
@@ -885,7 +904,7 @@ def _run(args) -> int:
         res = _api.simplify(mesh, **kwargs)
         name = f"bumpy sphere ({len(mesh.faces)} faces)"
     if out is not None:
-        write(res, out, ext)
+        write(res, out, ext, exact=kwargs.get("locked") is not None)
     where = f" -> {out}" if out is not None else " (not written; --out PATH saves it)"
     print(f"{name}: {res.summary()}{where}")
     _print_details(res, "the ratio" if getattr(args, "ratio", None) else None)

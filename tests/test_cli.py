@@ -932,6 +932,36 @@ def test_lod_takes_locked_vertices_as_simplify_does(tmp_path, capsys):
         assert all((np.abs(level - V[j]).max(1) < 1e-7).any() for j in idx)
 
 
+@pytest.mark.parametrize("fmt", ["obj", "ply"])
+def test_locked_vertices_are_written_bit_for_bit(tmp_path, fmt):
+    """--locked: the vertices "stay exactly where they are", in the file too. An OBJ was written with a fixed
+    count of decimals and a PLY in float32 where that moved no vertex far, so positions with more digits
+    than those came back rounded (the result held them exactly). With locks, OBJ and PLY hold them bit for
+    bit, in simplify's and lod's files; without, the files are as before."""
+    V, F = qemjax.shapes.bumpy_sphere(3)
+    src = tmp_path / "in.obj"  # 12 decimals: more than OBJ's 8 or float32 hold
+    src.write_text("".join(f"v {x:.12f} {y:.12f} {z:.12f}\n" for x, y, z in V * 1.234567891234 + 0.1)
+                   + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F))
+    V = np.asarray(qemjax.load(str(src)).vertices)  # what the run reads
+    assert not np.array_equal(V.astype(np.float32).astype(np.float64), V)
+    idx = np.arange(0, len(V), 7)
+    np.savetxt(tmp_path / "lk.txt", idx, fmt="%d")
+    out = tmp_path / f"out.{fmt}"
+    for locked in (False, True):
+        extra = ["--locked", str(tmp_path / "lk.txt")] if locked else []
+        assert _cli.main(["simplify", str(src), str(out), "--ratio", "0.3", "--quiet", *extra]) == 0
+        got = {tuple(row) for row in np.asarray(qemjax.load(str(out)).vertices).tolist()}
+        exact = all(tuple(V[j].tolist()) in got for j in idx)
+        assert exact == locked, (fmt, locked)
+        if locked:
+            res = qemjax.simplify(str(src), ratio=0.3, locked=idx)
+            assert got == {tuple(row) for row in res.vertices.tolist()}  # every position, as the result holds it
+    assert _cli.main(["lod", str(src), str(tmp_path / "lods"), "--ratios", "0.5", "--format", fmt, "--locked",
+                      str(tmp_path / "lk.txt"), "--quiet"]) == 0
+    level = {tuple(row) for row in np.asarray(qemjax.load(str(tmp_path / "lods" / f"in-lod0.{fmt}")).vertices).tolist()}
+    assert all(tuple(V[j].tolist()) in level for j in idx)
+
+
 def test_vertex_file_errors_name_the_option_and_the_file(src, tmp_path, capsys):
     """--locked and --vertex-weights files that do not fit said `locked must be one-dimensional` (simplify's
     keyword, not the option or its file), and an empty text file gave numpy's warning: each is one line

@@ -325,15 +325,17 @@ def triangle_ply(h: Header, text: bytes, V: np.ndarray, F: np.ndarray, vertices:
 WIDEN_AT = 1e-6
 
 
-def with_double_positions(data: bytes, V: np.ndarray) -> bytes:
+def with_double_positions(data: bytes, V: np.ndarray, always: bool = False) -> bytes:
     """Binary little-endian PLY bytes (trimesh's export: the vertex element first, scalar properties) with
     its x, y, z written as doubles from ``V`` (n,3) float64, when writing them as float32 would move a vertex
-    by more than `WIDEN_AT` of the bounding-box diagonal; ``data`` itself otherwise."""
+    by more than `WIDEN_AT` of the bounding-box diagonal, or would move any at all with ``always`` (positions
+    that must stay exactly as they are: locked vertices); ``data`` itself otherwise."""
     V = np.asarray(V, np.float64)
     if not len(V):
         return data
     diagonal = float(np.linalg.norm(V.max(0) - V.min(0)))
-    if np.max(np.abs(V.astype(np.float32).astype(np.float64) - V)) <= WIDEN_AT * diagonal:
+    moved = np.max(np.abs(V.astype(np.float32).astype(np.float64) - V))
+    if moved <= (0.0 if always else WIDEN_AT * diagonal):
         return data
     h = parse_header(data)
     vertex = h.elements[0]
