@@ -199,8 +199,33 @@ def _warmup_mesh() -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(sphere.vertices, dtype=np.float64), np.asarray(sphere.faces, dtype=np.int64)
 
 
+# the extents and offsets a peer computes in as given; outside them it gets the mesh in a frame of its own
+# (`_frame`): their squared lengths and quadrics, in float32 or float64, overflowed, underflowed or lost the
+# detail to the offset (meshoptimizer, fast-simplification and pyfqmr returned the input unchanged at 1e40)
+_EXTENT = (2.0 ** -30, 2.0 ** 30)
+_OFFSET = 2.0 ** 16  # a centre this many extents from the origin
+
+
+def _frame(V: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(centre (3,), scale) that take V into a frame a peer computes in, the scale a power of two; None for a
+    mesh of ordinary extent near the origin (what every peer was measured on: run as it is, the same bits)."""
+    V = np.asarray(V, np.float64)
+    if not len(V) or not np.all(np.isfinite(V)):
+        return None
+    lo, hi = V.min(0), V.max(0)
+    extent = float(np.max(hi - lo))
+    if not extent > 0:
+        return None
+    centre = 0.5 * (lo + hi)
+    if _EXTENT[0] <= extent <= _EXTENT[1] and float(np.max(np.abs(centre))) <= _OFFSET * extent:
+        return None
+    return centre, float(2.0 ** np.round(np.log2(extent)))
+
+
 def run_peer(name: str, V, F, target_faces: int, *, warmup: bool = True):
-    """Run peer ``name``; returns ``(V2, F2, call_s)`` with ``call_s`` the time of the simplification call."""
+    """Run peer ``name``; returns ``(V2, F2, call_s)`` with ``call_s`` the time of the simplification call.
+    A mesh far from the extents and offsets peers compute in (`_frame`) runs centred and scaled by a power of
+    two, and its output is taken back to the input's units."""
     _require(name)  # an unknown name: the ValueError naming the peers, not PEERS' KeyError
     fn = PEERS[name]
     if warmup and name not in _warmed:
@@ -208,7 +233,13 @@ def run_peer(name: str, V, F, target_faces: int, *, warmup: bool = True):
         fn(Vw, Fw, len(Fw) // 4)
         _warmed.add(name)
     timings: dict = {}
-    V2, F2 = fn(V, F, int(target_faces), timings=timings)
+    frame = _frame(V)
+    if frame is None:
+        V2, F2 = fn(V, F, int(target_faces), timings=timings)
+    else:
+        centre, scale = frame
+        V2, F2 = fn((np.asarray(V, np.float64) - centre) / scale, F, int(target_faces), timings=timings)
+        V2 = np.asarray(V2, np.float64) * scale + centre
     return V2, F2, timings["call_s"]
 
 

@@ -116,6 +116,26 @@ def test_a_target_above_the_faces_is_the_whole_mesh_as_for_qemjax(name):
 
 
 
+@pytest.mark.parametrize("name", list(peers.PEERS))
+def test_a_peer_runs_a_mesh_far_from_its_range_in_a_frame_of_its_own(name):
+    """At 1e40 mesh units meshoptimizer, fast-simplification and pyfqmr returned the input unchanged (their
+    squared lengths overflowed), at 1e-40 they lost detail, and libigl's error was many times worse 1e8 units
+    from the origin: such a mesh runs centred and scaled by a power of two, its output taken back to the
+    input's units; a mesh of ordinary extent runs as it is (the same bits as the adapter's own call)."""
+    pytest.importorskip(peers._MODULES[name])
+    V, F = qemjax.shapes.icosphere(3)
+    plain = peers.simplify(name, (V, F), 100)
+    V2, F2 = peers.PEERS[name](V, F, 100)
+    assert np.array_equal(plain.vertices, V2) and np.array_equal(plain.faces, F2)
+    ref = evaluate((V, F), plain, n_samples=4000)["hausdorff_rel"]
+    for scale, offset in ((1e40, 0.0), (1e-40, 0.0), (1.0, 1e8)):
+        W = V * scale + offset
+        res = peers.simplify(name, (W, F), 100)
+        assert len(res.faces) <= 110, (scale, offset, len(res.faces))
+        assert np.all(np.abs(res.vertices - offset) <= 1.1 * scale)  # in the input's units, about the sphere
+        assert evaluate((W, F), res, n_samples=4000)["hausdorff_rel"] < 2 * ref, (scale, offset)
+
+
 @pytest.mark.parametrize("target", [float("inf"), float("nan"), None, "abc", "10", 2.5, True, [10]])
 def test_a_target_that_is_not_a_whole_number_is_refused_in_words(target):
     """An infinite, missing or text target raised float's or int's own error ("cannot convert float infinity
