@@ -705,3 +705,20 @@ def test_a_common_cost_share_meets_the_target_and_spreads_the_pilots():
     assert costs[0] > 0 and costs[-1] is None  # the levels before the last share one cost; the last none
     with pytest.raises(ValueError, match="share must be"):
         Partition(share="area")
+
+
+def test_the_docs_name_every_key_of_a_partitioned_result_s_stats(in_process):
+    """docs/large-meshes.md, "What a partitioned result holds", names every key of ``stats`` and of
+    ``stats["partition"]`` (it named neither ``rounds_contracting`` nor ``scratch``, ``format`` or ``welded``)."""
+    import re
+
+    page = (pathlib.Path(__file__).parent.parent / "docs" / "large-meshes.md").read_text()
+    section = page.split("## What a partitioned result holds")[1].split("\n## ")[0]
+    names = set(re.findall(r"`([a-z_0-9]+)`", section)) | set(re.findall(r'`stats\["([a-z_0-9]+)"\]', section))
+    names |= {f"distance_{p}" for p in re.findall(r"`distance_(p\d+(?:/p\d+)*)`", section)[0].split("/")}
+
+    def named(key):
+        return key in names or (key.endswith("_rel") and key[:-4] in names)
+
+    assert [k for k in in_process.stats if not named(k)] == []
+    assert [k for k in in_process.stats["partition"] if not named(k)] == []
