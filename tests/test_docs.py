@@ -132,3 +132,33 @@ def test_contributing_states_the_test_counts():
     n_fast, n_all, n_slow = map(int, fast.groups())
     assert n_fast + n_slow == n_all == int(full.group(1))
     assert f"{n_slow} of {n_all} tests" in text and f"fast tier runs {n_fast}" in text
+
+
+# keys a run sets only in some cases the small runs below do not reach, and where they are set
+CONDITIONAL_KEYS = {"refit_skipped": "_pipeline/bound.py", "partition": "_partition/run.py",
+                    "not_kept_seams": "_partition/run.py"}
+
+
+def test_the_stats_keys_the_pages_name_exist():
+    """Every ``stats["KEY"]`` the pages and the README name is a key some run sets (docs/schedulers.md named a
+    ``stats["blocked"]`` that no run has: the pairs a rule refused are in ``rejected_by`` and ``blocked_by``)."""
+    import re
+    import warnings
+
+    import numpy as np
+
+    named = {}
+    for page in PAGES + [ROOT / "README.md"]:
+        for key in re.findall(r'stats\["([a-z_0-9]+)"\]', page.read_text()):
+            named.setdefault(key, page.name)
+    m = qemjax.shapes.bumpy_sphere(2)
+    keys = set()
+    for kw in (dict(ratio=0.2), dict(max_error=1e-3, scheduler="greedy"), dict(ratio=0.2, method="esqem"),
+               dict(max_distance_rel=0.05), dict(ratio=0.2, method="classic", locked=np.arange(4), min_angle=5)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # what these runs warn of is tested where it is made
+            keys |= set(qemjax.simplify(m, **kw).stats)
+    for key, where in CONDITIONAL_KEYS.items():
+        assert f'"{key}"' in (ROOT / "qemjax" / where).read_text() or f"{key}=" in (ROOT / "qemjax" / where).read_text()
+    unknown = {k: p for k, p in named.items() if k not in keys | set(CONDITIONAL_KEYS)}
+    assert unknown == {}
