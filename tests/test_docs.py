@@ -134,23 +134,19 @@ def test_contributing_states_the_test_counts():
     assert f"{n_slow} of {n_all} tests" in text and f"fast tier runs {n_fast}" in text
 
 
+
 # keys a run sets only in some cases the small runs below do not reach, and where they are set
 CONDITIONAL_KEYS = {"refit_skipped": "_pipeline/bound.py", "partition": "_partition/run.py",
                     "not_kept_seams": "_partition/run.py"}
 
 
-def test_the_stats_keys_the_pages_name_exist():
-    """Every ``stats["KEY"]`` the pages and the README name is a key some run sets (docs/schedulers.md named a
-    ``stats["blocked"]`` that no run has: the pairs a rule refused are in ``rejected_by`` and ``blocked_by``)."""
-    import re
+@pytest.fixture(scope="module")
+def stats_keys() -> set:
+    """The stats keys of five small runs that between them set every key but `CONDITIONAL_KEYS`'."""
     import warnings
 
     import numpy as np
 
-    named = {}
-    for page in PAGES + [ROOT / "README.md"]:
-        for key in re.findall(r'stats\["([a-z_0-9]+)"\]', page.read_text()):
-            named.setdefault(key, page.name)
     m = qemjax.shapes.bumpy_sphere(2)
     keys = set()
     for kw in (dict(ratio=0.2), dict(max_error=1e-3, scheduler="greedy"), dict(ratio=0.2, method="esqem"),
@@ -159,6 +155,34 @@ def test_the_stats_keys_the_pages_name_exist():
             warnings.simplefilter("ignore")  # what these runs warn of is tested where it is made
             keys |= set(qemjax.simplify(m, **kw).stats)
     for key, where in CONDITIONAL_KEYS.items():
-        assert f'"{key}"' in (ROOT / "qemjax" / where).read_text() or f"{key}=" in (ROOT / "qemjax" / where).read_text()
-    unknown = {k: p for k, p in named.items() if k not in keys | set(CONDITIONAL_KEYS)}
-    assert unknown == {}
+        code = (ROOT / "qemjax" / where).read_text()
+        assert f'"{key}"' in code or f"{key}=" in code, key
+    return keys | set(CONDITIONAL_KEYS)
+
+
+def test_the_stats_keys_the_pages_name_exist(stats_keys):
+    """Every ``stats["KEY"]`` the pages and the README name is a key some run sets (docs/schedulers.md named a
+    ``stats["blocked"]`` that no run has: the pairs a rule refused are in ``rejected_by`` and ``blocked_by``)."""
+    import re
+
+    named = {}
+    for page in PAGES + [ROOT / "README.md"]:
+        for key in re.findall(r'stats\["([a-z_0-9]+)"\]', page.read_text()):
+            named.setdefault(key, page.name)
+    assert {k: p for k, p in named.items() if k not in stats_keys} == {}
+
+
+def test_the_result_s_docstring_names_every_stats_key_and_stop_reason(stats_keys):
+    """`SimplifyResult`'s docstring, the reference for ``res.stats`` and ``res.stop_reason``, names every key
+    the runs set and every reason (it named neither ``late_memoryless_off`` nor ``memoryless_from_faces``,
+    nor the stop reason ``"locked"``)."""
+    import re
+
+    from qemjax._schedulers.outcome import STOPS
+
+    doc = qemjax.SimplifyResult.__doc__
+    named = set(re.findall(r"``([a-z_0-9]+)``", doc)) | set(re.findall(r'stats\["([a-z_0-9]+)"\]', doc))
+    named |= {f"distance{k}" for k in named if k.startswith("_p")}  # ``distance_p50`` / ``_p95`` / ``_p99``
+    named |= {f"{k}_rel" for k in named}  # "each also as ``*_rel``"
+    assert sorted(k for k in stats_keys - {"partition", "not_kept_seams"} if k not in named) == []
+    assert [s for s in STOPS + ("max_distance",) if f'``"{s}"``' not in doc] == []

@@ -56,12 +56,14 @@ class SimplifyResult:
     above an odd target on a closed mesh), ``"max_error"``, ``"max_distance"`` (a level with more faces
     than the run reached was returned: fewer would lie farther from the input than ``simplify(max_distance=)``
     allows), ``"blocked"`` (no valid contraction left:
-    ``stats["blocked_by"]`` counts the pairs each rule held back) or ``"unchanged"`` (nothing to remove);
+    ``stats["blocked_by"]`` counts the pairs each rule held back), ``"locked"`` (the vertices given as
+    ``locked`` held back the pairs left: ``stats["blocked_by"]["locked"]``) or ``"unchanged"`` (nothing to
+    remove);
     stats: counts and timings (``rounds``: the scheduler's rounds run, those that contracted nothing
     included, the greedy queue's being its contractions; ``rounds_contracting``: those that contracted
     something, one entry each in ``faces_per_round``; ``compile_s`` is every compilation inside this call: JAX's tracing and
     compiling, and numba's compiling of a host loop its cache did not have; ``run_s`` the rest, ``total_s`` both; the parallel scheduler adds its stage
-    times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s``), ``contract_s``
+    times ``topology_s``, ``kernels_s``, ``select_s`` (which includes ``validity_s`` where a round validates in its numpy stages), ``contract_s``
     and ``faces_per_round``), ``refit`` (re-fit rounds run) and ``refit_s`` (their seconds; a batch runs
     its cells' re-fits side by side on threads, each timed on its own), the targets (``target_faces``, 0 for
     none; ``max_error_limit``, a squared distance in input units, None for none) and ``dropped``: what
@@ -81,6 +83,21 @@ class SimplifyResult:
     With ``locked=`` / ``vertex_weights=`` (`qemjax._pipeline.locks`): ``locked_in`` (the vertices given),
     ``locked`` (the cleaned vertices they are), ``locked_unreferenced`` (given ones no face uses: not
     kept) and ``vertex_weights`` (whether any weight differs from 1).
+    Also: ``method``, ``scheduler`` and ``model`` (the cost model's settings, {field: value}); ``faces_in``,
+    ``faces_out``, ``vertices_in``, ``vertices_out``; the clean-up's counts (``welded``,
+    ``degenerate_removed``, ``zero_area_removed``, ``duplicate_removed``, ``unreferenced_removed``), the
+    input's ``parts_in`` (connected parts) and ``non_manifold_edges_in``; ``close_pairs`` (the pairs
+    ``pair_threshold`` adds); ``scale`` (the power of two the run's unit frame divides by);
+    ``compilations`` (JAX's, in this call); ``contractions``, ``rejected`` and ``rejected_by`` (the
+    refusals over the run, per rule), ``branches`` (contractions per placement branch); with a re-fit that
+    moves, ``polish_moves`` and ``sliver_moves``; ESQEM's ``reweights`` (the face count and the ranking
+    weights each time they were set) and ``split`` (its edge splits); a batched run's ``batch`` (its size,
+    copies, ``same_run``, ``total_s``, ``compilations``); for a method that turns memoryless late (the
+    default), ``memoryless_from_faces`` (the face count at the switch; None: it did not switch) and, where
+    the run stayed on the summed quadrics throughout, ``late_memoryless_off`` (why: no face target,
+    ``max_error`` alone; a scheduler registered from outside; ``regularize`` or ``area_weight`` set; kept
+    attributes; feature edges given); ``quality_threshold_off`` (why the shape term did not apply: a scheduler other than the parallel one); a
+    bounded run's ``refit_skipped`` (why its re-fitted positions were not returned).
 
     Appearance attributes (``simplify(attributes=...)``; None when the input carries none or they were not
     kept) are per wedge, a distinct attribute value at a vertex (a vertex on a UV seam has one per chart):
