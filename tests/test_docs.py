@@ -186,3 +186,28 @@ def test_the_result_s_docstring_names_every_stats_key_and_stop_reason(stats_keys
     named |= {f"{k}_rel" for k in named}  # "each also as ``*_rel``"
     assert sorted(k for k in stats_keys - {"partition", "not_kept_seams"} if k not in named) == []
     assert [s for s in STOPS + ("max_distance",) if f'``"{s}"``' not in doc] == []
+
+
+def test_why_a_run_stopped_names_every_reason_and_rule():
+    """docs/methods.md, "Why a run stopped", names every stop reason (it left out ``"max_distance"``) and
+    every rule ``stats["rejected_by"]`` and ``stats["blocked_by"]`` count (it named four of nine)."""
+    import numpy as np
+
+    from qemjax._schedulers import outcome
+
+    page = (DOCS / "methods.md").read_text()
+    paragraph = page.split("**Why a run stopped.**")[1].split("\n\n")[0]
+    assert [s for s in outcome.STOPS + ("max_distance",) if f'`"{s}"`' not in paragraph] == []
+    none = np.zeros(0, bool)
+    rules = [*outcome.REJECT.values(), *outcome.classify(2, 0, np.zeros(0, np.int8), np.zeros(0), none, none)[1]]
+    assert [r for r in dict.fromkeys(rules) if f"`{r}`" not in paragraph] == []
+
+
+def test_the_late_switch_s_reasons_are_all_on_the_methods_page():
+    """docs/methods.md says each case in which ``stats["late_memoryless_off"]`` is set (`stages._late_off`):
+    it named four of the five, not a run without a face target."""
+    page = (DOCS / "methods.md").read_text()
+    paragraph = next(p for p in page.split("\n\n") if 'stats["late_memoryless_off"]' in p)
+    cases = ("without a face target (`max_error` alone)", "registered from outside", "`regularize`",
+             "`area_weight`", "attributes kept", "`feature_edges`")
+    assert [c for c in cases if c not in paragraph] == []
