@@ -643,15 +643,16 @@ def _parser() -> argparse.ArgumentParser:
                     help="do not use the compilation cache (also: environment QEMJAX_NO_CACHE=1)")
     d = sub.add_parser("demo", help="simplify a bumpy sphere made in code (writes a file only with --out)")
     d.add_argument("--out", "--output", dest="out", metavar="PATH", help="write the result here")
-    d.add_argument("--subdivisions", type=_subdivisions, default=7,
+    d.add_argument("--subdivisions", type=_subdivisions, default=7, metavar="N",
                    help="0 to 10: 20 × 4^N faces (7: 327,680; 10: 20,971,520) (default: 7)")
     d.add_argument("--ratio", type=_ratio, default=0.02, help="keep this fraction of the faces (default: 0.02)")
     _add_options(d)
     ex = sub.add_parser("examples", help="write small example files made in code (bumpy.obj, bumpy.ply, "
-                        "creases.txt, textured.obj, textured.png)",
+                        "creases.txt, textured.obj, textured.png, sweep_example.toml)",
                         description="Write the example files the README uses, made in code: a bumpy sphere "
-                        "(bumpy.obj, bumpy.ply), feature edges on it (creases.txt), and a UV-mapped copy with "
-                        "6 charts (textured.obj, no mtllib) and its texture (textured.png).")
+                        "(bumpy.obj, bumpy.ply), feature edges on it (creases.txt), a UV-mapped copy with "
+                        "6 charts (textured.obj, no mtllib) and its texture (textured.png), and a sweep of "
+                        "bumpy.obj and a torus (sweep_example.toml: qemjax sweep sweep_example.toml).")
     ex.add_argument("folder", nargs="?", default=".", help="where to write them (created if absent; default: .)")
     co = sub.add_parser("compile", help="compile the host loops ahead into numba's cache (an install from a "
                         "wheel or `pip install .` has them already)",

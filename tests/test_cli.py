@@ -494,6 +494,25 @@ def test_sweep_example_config_is_valid(tmp_path):
     assert config.out == str(tmp_path / "sweep_example.csv")
 
 
+
+def test_examples_help_names_every_file_it_writes(tmp_path, capsys):
+    """`qemjax examples --help` and `qemjax --help` name every file `qemjax examples` writes (they left out
+    sweep_example.toml)."""
+    assert _cli.main(["examples", str(tmp_path)]) == 0
+    for argv in (["examples", "--help"], ["--help"]):
+        assert _cli.main(argv) == 0
+        text = " ".join(capsys.readouterr().out.split())
+        assert [p.name for p in sorted(tmp_path.iterdir()) if p.name not in text] == []
+
+
+
+def test_demo_help_names_the_subdivisions_as_its_text_does(capsys):
+    """`qemjax demo --help` shows ``--subdivisions N``, the N its text counts with (it showed SUBDIVISIONS)."""
+    assert _cli.main(["demo", "--help"]) == 0
+    text = capsys.readouterr().out
+    assert "--subdivisions N " in text and "20 × 4^N faces" in " ".join(text.split())
+
+
 # ---- rough edges: one-line errors, Ctrl-C, units, clean-up and attributes in the summary, lod -------
 
 @pytest.mark.parametrize("argv,match", [
