@@ -211,3 +211,16 @@ def test_the_late_switch_s_reasons_are_all_on_the_methods_page():
     cases = ("without a face target (`max_error` alone)", "registered from outside", "`regularize`",
              "`area_weight`", "attributes kept", "`feature_edges`")
     assert [c for c in cases if c not in paragraph] == []
+
+
+def test_getting_started_names_every_example_file_and_shape(tmp_path):
+    """docs/getting-started.md, "The example files", names every file `write_examples` writes and every mesh
+    generator of `qemjax.shapes` (it left out sweep_example.toml and double_cone)."""
+    import inspect
+
+    section = (DOCS / "getting-started.md").read_text().split("## The example files")[1].split("\n## ")[0]
+    written = [p.name for p in qemjax.shapes.write_examples(tmp_path)]
+    assert [n for n in written if f"`{n}`" not in section] == []
+    makers = [n for n, f in vars(qemjax.shapes).items() if inspect.isfunction(f) and not n.startswith("_")
+              and f.__module__ == "qemjax.shapes" and inspect.signature(f).return_annotation in ("Mesh",)]
+    assert len(makers) >= 6 and [n for n in makers if f"`{n}`" not in section] == []
