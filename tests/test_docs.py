@@ -224,3 +224,17 @@ def test_getting_started_names_every_example_file_and_shape(tmp_path):
     makers = [n for n, f in vars(qemjax.shapes).items() if inspect.isfunction(f) and not n.startswith("_")
               and f.__module__ == "qemjax.shapes" and inspect.signature(f).return_annotation in ("Mesh",)]
     assert len(makers) >= 6 and [n for n in makers if f"`{n}`" not in section] == []
+
+
+def test_the_pages_and_simplify_name_every_field_every_method_has():
+    """docs/methods.md ("Settings as objects") and `simplify`'s docstring name every field of
+    `qemjax.Method`, which every method has (they left out ``sliver_moves`` and ``quality_threshold``, and
+    the docstring ``polish`` too)."""
+    import dataclasses
+
+    fields = [f.name for f in dataclasses.fields(qemjax.Method)]
+    page = (DOCS / "methods.md").read_text()
+    sentence = page.split("every method also has")[1].split(")\n")[0]
+    assert [f for f in fields if f"`{f}`" not in sentence] == []
+    doc = qemjax.simplify.__doc__.split("every method also has")[1].split("(`_costs.base.Method`)")[0]
+    assert [f for f in fields if f"``{f}``" not in doc] == []

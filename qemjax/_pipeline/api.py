@@ -71,7 +71,8 @@ def simplify(mesh: Any, *, target_faces: int | None = None, ratio: float | None 
         its name (`qemjax.methods()`: ``'qem'``, ``'esqem'``, ``'area'``, ``'line'``, ``'probabilistic'``,
         the presets ``'default'`` (`qemjax.QEM.default`: what runs when no method is given), ``'classic'``
         (``QEM()``, the default until 0.2) and ``'accurate'``), which means the object with its defaults. Each class's docstring lists its
-        settings; every method also has ``regularize``, ``area_weight`` and ``refit`` (`_costs.base.Method`).
+        settings; every method also has ``regularize``, ``area_weight``, ``refit``, ``polish``, ``sliver_moves`` and
+        ``quality_threshold`` (`_costs.base.Method`).
     scheduler: ``'parallel'`` (default): rounds of many non-interacting contractions chosen by an
         independent-set rule; a `qemjax.Schedule`: the parallel scheduler with those tunables;
         ``'greedy'``: the paper's priority queue, one contraction at a time.
