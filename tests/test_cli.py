@@ -1020,3 +1020,11 @@ def test_feature_edge_file_errors_name_the_option_and_the_file(src, tmp_path, ca
     assert _cli.main(["simplify", str(src), out, "--ratio", "0.5", "--feature-edges", str(tmp_path / "empty.txt"),
                       "--quiet"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_the_count_options_help_counts_with_its_metavar(capsys):
+    """``--polish N`` and ``--sliver-moves N`` say "N ≥ 0 ... at most N moves" (they said M)."""
+    assert _cli.main(["simplify", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for option in ("--polish N", "--sliver-moves N"):
+        assert f"{option} N ≥ 0, with a re-fit, at most N moves" in text, option

@@ -137,10 +137,10 @@ class Method(CostModel):
     area_weight: λ ≥ 0, weight of the squared surface-area change added to the cost (`area_term`; 0: none);
         offered as ``regularize`` is, and not with it.
     refit: N ≥ 0 rounds of re-fitting the output's positions to the input after simplifying (`qemjax._pipeline.refit`).
-    polish: M ≥ 0, with a re-fit, at most M moves after it that each lower the largest sampled distance
+    polish: N ≥ 0, with a re-fit, at most N moves after it that each lower the largest sampled distance
         between the input and the output, both ways, keeping the two-way rms within 1 % of the re-fit's
         (`qemjax._pipeline.polish`; 0: none).
-    sliver_moves: M ≥ 0, with a re-fit, at most M moves after the polish that each take a sliver's corner
+    sliver_moves: N ≥ 0, with a re-fit, at most N moves after the polish that each take a sliver's corner
         (a face under 10°) along the surface until its smallest angle clears 10°, or part of the way for a
         later pass, keeping every sample's distance below the largest and the two-way rms within 3 % of the
         re-fit's (`qemjax._pipeline.slivers`; 0: none).
