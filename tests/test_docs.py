@@ -238,3 +238,17 @@ def test_the_pages_and_simplify_name_every_field_every_method_has():
     assert [f for f in fields if f"`{f}`" not in sentence] == []
     doc = qemjax.simplify.__doc__.split("every method also has")[1].split("(`_costs.base.Method`)")[0]
     assert [f for f in fields if f"``{f}``" not in doc] == []
+
+
+def test_the_level_s_fields_are_all_named_where_replay_is_described():
+    """docs/record.md and `SimplifyResult.replay`'s docstring list every field of the `Level` it returns (they
+    left out ``contractions`` and ``round``)."""
+    import dataclasses
+    import re
+
+    fields = [f.name for f in dataclasses.fields(qemjax.Level)]
+    page = (DOCS / "record.md").read_text()
+    docstring = qemjax.SimplifyResult.replay.__doc__
+    for text in (page.split("returns a `Level` (")[1], docstring.split("`qemjax.Level` (")[1]):
+        listed = set(re.findall(r"[a-z_]+", text.split("):")[0].split(").")[0]))
+        assert [f for f in fields if f not in listed] == []

@@ -166,7 +166,8 @@ class SimplifyResult:
                contractions: int | None = None):
         """The mesh at ``target_faces`` faces (or ``ratio`` × the input's, or after the first
         ``contractions`` contractions) rebuilt from the record of this run, without simplifying again:
-        a `qemjax.Level` (vertices, faces, source_vertices, source_faces, vertex_map, max_error). Greedy:
+        a `qemjax.Level` (vertices, faces, source_vertices, source_faces, vertex_map, contractions, max_error,
+    round). Greedy:
         equal to ``simplify(target_faces=k, scheduler="greedy")`` when a prefix of the run has k faces;
         parallel: the run's own mesh at round boundaries, the round's cheapest contractions first in
         between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record.history`."""
