@@ -271,3 +271,22 @@ def test_the_api_reference_covers_every_public_name():
     public += ["icosphere", "torus", "grid", "cube", "bumpy_sphere", "double_cone"]
     assert "`qemjax.register_method` is:\n\n::: qemjax._costs.register" in page
     assert [n for n in public if n not in entries] == []
+
+
+def test_the_cache_s_docstring_says_when_and_where_it_turns_on():
+    """`qemjax.cache`'s docstring said importing qemjax turns the cache on, at ``$QEMJAX_CACHE_DIR`` or
+    ``~/.cache``: the first compilation does (importing qemjax starts no JAX), and ``$XDG_CACHE_HOME`` comes
+    before ``~/.cache`` (`qemjax._kernels.cache.default_dir`, docs/getting-started.md)."""
+    import os
+
+    from qemjax._kernels import cache as _cache
+
+    doc = " ".join(qemjax.cache.__doc__.split())
+    assert "importing qemjax" not in doc and "first compilation turns it on" in doc
+    assert "``$QEMJAX_CACHE_DIR``, else ``$XDG_CACHE_HOME/qemjax/jax``, else ``~/.cache/qemjax/jax``" in doc
+    page = " ".join((DOCS / "getting-started.md").read_text().split())
+    assert "`$QEMJAX_CACHE_DIR`, else `$XDG_CACHE_HOME/qemjax/jax`, else `~/.cache/qemjax/jax`" in page
+    with pytest.MonkeyPatch.context() as mp:
+        mp.delenv("QEMJAX_CACHE_DIR", raising=False)
+        mp.setenv("XDG_CACHE_HOME", "/xdg")
+        assert _cache.default_dir() == os.path.join("/xdg", "qemjax", "jax")

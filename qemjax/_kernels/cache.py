@@ -91,8 +91,9 @@ def ensure_default() -> None:
 
 
 def cache(folder=None):
-    """JAX's persistent compilation cache for qemjax's kernels (on by default: importing qemjax turns it on
-    at ``$QEMJAX_CACHE_DIR`` or ``~/.cache/qemjax/jax``; ``QEMJAX_NO_CACHE=1`` opts out).
+    """JAX's persistent compilation cache for qemjax's kernels (on by default: qemjax's first compilation
+    turns it on at ``$QEMJAX_CACHE_DIR``, else ``$XDG_CACHE_HOME/qemjax/jax``, else ``~/.cache/qemjax/jax``;
+    ``QEMJAX_NO_CACHE=1`` opts out, and a cache folder already set for JAX is used as it is).
     ``cache()``: the folder in use, or None when off. ``cache(folder)``: use that folder. ``cache(False)``:
     off. Compiled kernels load from it in later processes (a sweep's workers, the next script), so each
     size class of mesh compiles once per machine instead of once per process."""
