@@ -290,3 +290,28 @@ def test_the_cache_s_docstring_says_when_and_where_it_turns_on():
         mp.delenv("QEMJAX_CACHE_DIR", raising=False)
         mp.setenv("XDG_CACHE_HOME", "/xdg")
         assert _cache.default_dir() == os.path.join("/xdg", "qemjax", "jax")
+
+
+def test_the_metrics_page_names_every_value_evaluate_returns(tmp_path):
+    """docs/metrics.md, "`evaluate`", names every key `metrics.evaluate` returns, UVs kept (it left out the
+    sample counts, ``bbox_diagonal``, the areas and volumes before and after, ``flipped_fraction`` and the
+    appearance deviations)."""
+    import re
+    import warnings
+
+    page = (DOCS / "metrics.md").read_text()
+    section = page.split("## `evaluate`")[1].split("\n## ")[0]
+    distances = page.split("## Two-way sampled distances")[1].split("\n## ")[0]  # "the distances above"
+    named = set(re.findall(r"`([a-z_0-9]+)`", section + distances))
+    before = re.search(r"input's (.*?) as `\*_before`", section, re.S).group(1)
+    named |= {f"{k}_before" for k in re.findall(r"`([a-z_]+)`", before)}
+    named |= {f"color_dev_{k[len('uv_dev_'):]}" for k in named if k.startswith("uv_dev_")}
+    qemjax.shapes.write_examples(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = qemjax.simplify(tmp_path / "textured.obj", ratio=0.3, method="classic", attributes="uv")
+    row = qemjax.metrics.evaluate(tmp_path / "textured.obj", res, n_samples=200)
+    assert any(k.startswith("uv_dev_") for k in row)
+    assert [k for k in row if k not in named and not (k.endswith("_rel") and k[:-4] in named)
+            and not k.endswith(("_fwd", "_bwd", "_fwd_rel", "_bwd_rel"))] == []
+    assert "`*_fwd` from the input to the result, `*_bwd` back" in " ".join(distances.split())
