@@ -166,6 +166,7 @@ def render(
         max_faces: display cap on the faces as given (a polygon counts once, and is drawn or left out with
             all its triangles); meshes with more are thinned as the module docstring explains.
         title: optional Axes title.
+        figsize, dpi: the size (inches) and resolution of a figure made here (not used with ``ax``).
     """
     plt, Poly3DCollection = _pyplot()
     V, F = _as_arrays(mesh)
@@ -287,7 +288,7 @@ def render_pair(before, after, path=None, *, titles=None, figsize=(10, 5), dpi: 
 
     ``kwargs`` go to :func:`render` (view, color, edges, up, max_faces); ``titles`` and ``colors`` (per-face
     colours, as `render`'s ``color``) take two, (before, after). When ``path`` is given the figure is saved
-    there and closed.
+    there and closed. ``figsize``, ``dpi``: the figure's size (inches) and resolution.
     """
     plt, _ = _pyplot()
     meshes = [_as_arrays(before), _as_arrays(after)]

@@ -96,7 +96,7 @@ def _room(shape: str, args: dict) -> None:
 
 
 def icosphere(subdivisions: int = 3, radius: float = 1.0) -> Mesh:
-    """Geodesic sphere with 20·4^subdivisions faces (subdivisions >= 0)."""
+    """Geodesic sphere of the given ``radius`` with 20·4^subdivisions faces (subdivisions >= 0)."""
     import trimesh
 
     _counts("icosphere", dict(subdivisions=subdivisions, radius=radius))
@@ -161,7 +161,8 @@ def cube(subdivisions: int = 2) -> Mesh:
 
 def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) -> Mesh:
     """Icosphere whose radius varies with a few smooth random bumps: detail worth simplifying.
-    subdivisions=6 gives 81,920 faces, 7 gives 327,680 (subdivisions >= 0)."""
+    subdivisions=6 gives 81,920 faces, 7 gives 327,680 (subdivisions >= 0). ``amplitude``: the bumps' height
+    relative to the unit radius; ``seed``: which bumps (the same seed gives the same mesh on every CPU)."""
     _counts("bumpy_sphere", dict(subdivisions=subdivisions, amplitude=amplitude, seed=seed))
     V, F = icosphere(subdivisions)
     rng = np.random.default_rng(seed)
@@ -175,7 +176,7 @@ def bumpy_sphere(subdivisions: int = 6, amplitude: float = 0.08, seed: int = 0) 
 
 
 def double_cone(n: int = 500, radius: float = 1.0, height: float = 1.0) -> Mesh:
-    """Closed double cone: a ring of n vertices in the z=0 plane and two apexes at z=±height, each apex
+    """Closed double cone: a ring of n vertices of the given ``radius`` in the z=0 plane and two apexes at z=±height, each apex
     joined to every ring vertex (valence n), 2n faces (n >= 3). A fan-triangulated cap taken to the extreme."""
     _counts("double_cone", dict(n=n, radius=radius, height=height))
     t = 2 * np.pi * np.arange(n) / n

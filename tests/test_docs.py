@@ -315,3 +315,26 @@ def test_the_metrics_page_names_every_value_evaluate_returns(tmp_path):
     assert [k for k in row if k not in named and not (k.endswith("_rel") and k[:-4] in named)
             and not k.endswith(("_fwd", "_bwd", "_fwd_rel", "_bwd_rel"))] == []
     assert "`*_fwd` from the input to the result, `*_bwd` back" in " ".join(distances.split())
+
+
+def test_every_parameter_of_the_public_functions_is_documented():
+    """The docstring of each public function names each of its parameters (`simplify_batch` named no
+    ``errors``, `render.render` and `render.render_pair` no ``figsize`` or ``dpi``, `metrics.attribute_deviation`
+    no ``n_samples`` or ``seed``, and `charts`, `seam_report`, `uv_chart_integrity`, `shapes.icosphere`,
+    `bumpy_sphere` and `double_cone` one or two each)."""
+    import inspect
+
+    functions = [getattr(qemjax, n) for n in qemjax.__all__ if inspect.isfunction(getattr(qemjax, n))]
+    for module in (qemjax.metrics, qemjax.render, qemjax.shapes):
+        functions += [f for n, f in vars(module).items() if inspect.isfunction(f) and not n.startswith("_")
+                      and f.__module__.startswith("qemjax") and (n in getattr(module, "__all__", [n]))]
+    functions += [qemjax.peers.simplify, qemjax.peers.available]
+    left_out = {}
+    plain = ("path", "mesh", "original", "simplified", "value")  # what each of these is goes without saying
+    for f in functions:
+        doc = f.__doc__ or ""
+        missing = [p for p, spec in inspect.signature(f).parameters.items()
+                   if spec.kind not in (spec.VAR_POSITIONAL, spec.VAR_KEYWORD) and p not in doc + " ".join(plain)]
+        if missing:
+            left_out[f"{f.__module__}.{f.__qualname__}"] = missing
+    assert left_out == {}

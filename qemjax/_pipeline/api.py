@@ -195,7 +195,10 @@ def _partitioned(mesh, target_faces, ratio, partition, progress, measure, attrib
 
 def simplify_batch(mesh: Any, configs: list[dict], *, errors: bool = False) -> list:
     """`simplify` of one mesh under many configurations: ``[simplify(mesh, **c) for c in configs]``, with
-    equal results, computed together (`simplify_cells`)."""
+    equal results, computed together (`simplify_cells`).
+
+    errors: False: the first bad configuration raises its ValueError; True: its entry in the returned list
+    is that exception instead."""
     if isinstance(configs, dict) or not all(isinstance(c, dict) for c in configs):
         raise ValueError("configs takes a list of dicts of simplify's keywords, one per run "
                          "([dict(ratio=0.5), ...])")

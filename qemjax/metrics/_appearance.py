@@ -125,7 +125,8 @@ def attribute_deviation(original, simplified, *, kind: str = "uv", n_samples: in
     a tenth of the sample's face (`_seam_tolerant`; without it a sample a hair across a UV seam reads a
     deviation of up to the texture's width). Each mesh is what `qemjax.simplify` accepts and keeps
     attributes of: a path (read as simplify reads it), a `trimesh.Trimesh`, or a result (`SimplifyResult`).
-    ValueError when either lacks ``kind``."""
+    ``n_samples``: the points sampled on the simplified surface; ``seed``: their seed (equal inputs and seed
+    give equal numbers). ValueError when either lacks ``kind``."""
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
         raise ValueError(f"n_samples must be a positive integer (points sampled on the simplified surface), "
                          f"got {n_samples!r}")
@@ -207,7 +208,8 @@ def seam_report(result, input_wedge_faces: np.ndarray | None = None) -> dict:
     """Whether a qemjax result kept its UV / colour charts: each output face continues an input face
     (``source_faces``); an output chart whose faces come from two or more input charts has a face that
     spans a seam. Returns charts_in, charts_out, mixed_charts (output charts spanning input charts:
-    0 means the seams held) and seam_faces_out (faces in those charts)."""
+    0 means the seams held) and seam_faces_out (faces in those charts). ``input_wedge_faces``: the cleaned
+    input's corner wedges, when ``result`` does not carry them (a qemjax result does)."""
     wf_in = getattr(result, "input_wedge_faces", None) if input_wedge_faces is None else input_wedge_faces
     if result.wedge_faces is None or wf_in is None:
         raise ValueError("seam_report needs a result with attributes (wedge_faces and input_wedge_faces)")
@@ -235,7 +237,8 @@ def uv_chart_integrity(original, simplified, *, eps: float = 1e-6, chunk: int = 
     UVs and its UV centroid are located in the original's UV atlas (the input triangle containing each, with
     ``eps`` slack); a face whose four points share no input chart spans a seam (or left the atlas).
     Returns charts_in, charts_out (output faces joined across edges whose corners share UVs),
-    faces_spanning (count) and spanning_fraction."""
+    faces_spanning (count) and spanning_fraction. ``original``, ``simplified``: meshes with UVs (as
+    `attribute_deviation` takes them); ``chunk``: output points tested against the atlas at a time (memory)."""
     # a NaN eps found no point in any triangle (every face "spanning"); a chunk below 1 raised range's errors
     if isinstance(eps, bool) or not isinstance(eps, (int, float, np.integer, np.floating)) \
             or not 0 <= eps < float("inf"):
