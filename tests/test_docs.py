@@ -338,3 +338,23 @@ def test_every_parameter_of_the_public_functions_is_documented():
         if missing:
             left_out[f"{f.__module__}.{f.__qualname__}"] = missing
     assert left_out == {}
+
+
+def test_the_design_s_layer_table_names_every_package():
+    """docs/design.md's table of layers names every package and module of `tests/test_layout.py`'s layers
+    (it had no row for ``_partition`` or ``_ahead``) and every run setting of ``_options.py`` (not
+    ``Partition``)."""
+    import dataclasses
+
+    from qemjax import _options
+    from test_layout import LAYERS
+
+    page = (DOCS / "design.md").read_text()
+    table = page.split("## The layers")[1].split("\n## ")[0]
+    rows = [line.split("|")[1] for line in table.splitlines() if line.startswith("| `qemjax/")]
+    paths = " ".join(rows)
+    assert [layer for layer in LAYERS if f"qemjax/{layer}" not in paths and f"`{layer}.py`" not in paths
+            and f"{layer}.py" not in paths] == []
+    options = next(r for r in table.splitlines() if r.startswith("| `qemjax/_options.py`"))
+    settings = [n for n, c in vars(_options).items() if dataclasses.is_dataclass(c) and n in dir(qemjax)]
+    assert len(settings) == 4 and [n for n in settings if f"`{n}`" not in options] == []
