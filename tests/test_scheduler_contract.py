@@ -111,6 +111,40 @@ def test_a_scheduler_registered_from_outside_runs_through_simplify():
         qemjax.simplify(shapes.icosphere(1), ratio=0.5, scheduler="idle")
 
 
+def test_a_scheduler_without_locks_is_refused_a_call_with_locks_in_words():
+    """A scheduler written to the contract's other keywords, without ``locks``, is refused a call with
+    ``locked=`` or ``vertex_weights=`` before it runs, in one line that names it and the way out (it raised
+    Python's "got an unexpected keyword argument 'locks'" from inside the run); the same call without them
+    runs, and one whose run takes ``locks=`` gets them."""
+    got = []
+
+    def plain(V, S, F, extra_pairs, target_faces, model, options, progress=None, *, wedges=None, edges=None,
+              part_scale=None):
+        got.append("plain")
+        return _schedulers.get("parallel")(V, S, F, extra_pairs, target_faces, model, options, progress,
+                                           wedges=wedges, edges=edges, part_scale=part_scale)
+
+    def with_locks(*args, locks=None, **kwargs):
+        got.append(locks is not None)
+        return _schedulers.get("parallel")(*args, locks=locks, **kwargs)
+
+    _schedulers.register("plain", plain)
+    _schedulers.register("with_locks", with_locks)
+    try:
+        m = shapes.icosphere(2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the default's last stretch is off on an outside scheduler
+            assert len(qemjax.simplify(m, ratio=0.5, method="classic", scheduler="plain").faces) == 160
+            for kw in (dict(locked=[0, 1]), dict(vertex_weights=np.full(len(m.vertices), 2.0))):
+                with pytest.raises(ValueError, match=r"^scheduler='plain' takes no locks .*locked= and "
+                                                      r"vertex_weights= cannot run on it"):
+                    qemjax.simplify(m, ratio=0.5, method="classic", scheduler="plain", **kw)
+            res = qemjax.simplify(m, ratio=0.5, method="classic", scheduler="with_locks", locked=[0, 1])
+        assert got == ["plain", True] and res.stats["locked"] == 2
+    finally:
+        del _schedulers._REGISTRY["plain"], _schedulers._REGISTRY["with_locks"]
+
+
 def test_the_outcome_gives_its_surviving_mesh():
     """`Outcome.output`: the live faces, numbered into the vertices they use, and both their run ids."""
     V = np.arange(18, dtype=np.float32).reshape(6, 3)

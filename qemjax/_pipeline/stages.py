@@ -236,6 +236,10 @@ def job(setup: Setup, geo: Geometry, feature_edges, target_faces, ratio, max_err
     state's maker in place of the model's own; ``refit_to``: `REFIT_TO`'s surface."""
     lock_stats = {}  # also when every locked vertex is unreferenced (the run is then without locks)
     lk = _locks.resolve(*locks, geo, stacklevel=stacklevel + 1, stats=lock_stats)
+    if lk is not None and not _takes_locks(setup.scheduler):  # before it runs, in the call's words
+        raise ValueError(f"scheduler={setup.scheduler!r} takes no locks (its run has no locks= keyword), so "
+                         "locked= and vertex_weights= cannot run on it: use scheduler='parallel' or 'greedy', "
+                         "or give its run a locks= keyword (docs/design.md, 'The scheduler contract')")
     if lk is not None:  # a numbering of its own: no vertex state shared with a batch's other runs
         geo, states = lk.geometry(), None
     model, report, attrs = setup.model, dict(geo.report), geo.attrs
@@ -356,6 +360,20 @@ def _late_off(method_obj, attrs, feature_edges, scheduler: str, face_target: boo
         return FEATURES_GIVEN, said("giving feature edges", "it does not track them",
                                     "the run stays on the summed quadrics throughout")
     return None
+
+
+def _takes_locks(name: str) -> bool:
+    """Whether the scheduler ``name`` takes the run's locks (a ``locks=`` keyword, or ``**kwargs``): the
+    built-in ones do; one registered from outside may keep the contract without them."""
+    import inspect
+
+    if name in _schedulers.BUILT_IN:
+        return True
+    try:
+        params = inspect.signature(_schedulers.get(name)).parameters.values()
+    except (TypeError, ValueError):  # no signature to read: let the call say what it takes
+        return True
+    return any(p.name == "locks" or p.kind is p.VAR_KEYWORD for p in params)
 
 
 def beside_rounds(job: Job) -> Job:

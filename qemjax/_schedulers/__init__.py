@@ -7,14 +7,15 @@ reference). `batched` runs many parallel runs as one disjoint union.
 **The contract.** A scheduler is a function ::
 
     run(V, S, F, extra_pairs, target_faces, model, options, progress=None, *, wedges=None, edges=None,
-        part_scale=None) -> outcome.Outcome
+        part_scale=None, locks=None) -> outcome.Outcome
 
 given the cleaned mesh in normalised units (V (n,3) float32 positions at unit extent, S (n, width) the
 cost model's vertex state, F (m,3) int64 faces), extra non-edge pairs that may contract (k,2), the face
 target, the cost model (`qemjax._costs`: it prices and merges), the rules every scheduler applies
 (`qemjax._options.Options`: flip angle, topology mode, the cost limit ``max_cost``, the parallel `Schedule`), a
 progress callback (faces left), the seam tracker of kept attributes (or None) and, when the caller has
-them, the edge table and the per-part scale. It returns an `outcome.Outcome` (positions, states, faces,
+them, the edge table and the per-part scale; ``locks`` (`locks.RunLocks`) only with a call's ``locked=`` or
+``vertex_weights=`` (a scheduler without that keyword, or ``**kwargs``, is refused such a call). It returns an `outcome.Outcome` (positions, states, faces,
 alive mask, history, stop reason, blocked_by and counts; built by the scheduler, read by `stages.finish`
 through its fields and its `output`, `stop_above` and `counts`). A scheduler may also take ``replan``, a
 function that is given the outcome at the target and returns a lower one to go on to (`greedy.run`): ESQEM's
