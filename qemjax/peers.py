@@ -206,10 +206,12 @@ _EXTENT = (2.0 ** -30, 2.0 ** 30)
 _OFFSET = 2.0 ** 16  # a centre this many extents from the origin
 
 
-def _frame(V: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """(centre (3,), scale) that take V into a frame a peer computes in, the scale a power of two; None for a
-    mesh of ordinary extent near the origin (what every peer was measured on: run as it is, the same bits)."""
-    V = np.asarray(V, np.float64)
+def _frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(centre (3,), scale) that take the vertices the faces F use into a frame a peer computes in, the scale
+    a power of two; None for a mesh of ordinary extent near the origin (what every peer was measured on: run
+    as it is, the same bits). A vertex no face uses is not measured: one far away would shrink the mesh."""
+    F = np.asarray(F)
+    V = np.asarray(V, np.float64)[np.unique(F)] if F.size else np.zeros((0, 3))
     if not len(V) or not np.all(np.isfinite(V)):
         return None
     lo, hi = V.min(0), V.max(0)
@@ -233,7 +235,7 @@ def run_peer(name: str, V, F, target_faces: int, *, warmup: bool = True):
         fn(Vw, Fw, len(Fw) // 4)
         _warmed.add(name)
     timings: dict = {}
-    frame = _frame(V)
+    frame = _frame(V, F)
     if frame is None:
         V2, F2 = fn(V, F, int(target_faces), timings=timings)
     else:

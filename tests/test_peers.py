@@ -134,6 +134,10 @@ def test_a_peer_runs_a_mesh_far_from_its_range_in_a_frame_of_its_own(name):
         assert len(res.faces) <= 110, (scale, offset, len(res.faces))
         assert np.all(np.abs(res.vertices - offset) <= 1.1 * scale)  # in the input's units, about the sphere
         assert evaluate((W, F), res, n_samples=4000)["hausdorff_rel"] < 2 * ref, (scale, offset)
+    # a vertex no face uses, far away, sets no frame: the mesh runs as it is
+    Vfar = np.vstack([V, [[1e10, 0.0, 0.0]]])
+    far, (V2, F2) = peers.simplify(name, (Vfar, F), 100), peers.PEERS[name](Vfar, F, 100)
+    assert np.array_equal(far.vertices, V2) and np.array_equal(far.faces, F2)
 
 
 @pytest.mark.parametrize("target", [float("inf"), float("nan"), None, "abc", "10", 2.5, True, [10]])
