@@ -145,6 +145,38 @@ def test_a_scheduler_without_locks_is_refused_a_call_with_locks_in_words():
         del _schedulers._REGISTRY["plain"], _schedulers._REGISTRY["with_locks"]
 
 
+def test_a_scheduler_that_takes_replan_and_does_not_call_it_is_run_again():
+    """ESQEM's split plan hands ``replan`` to a scheduler that takes it (the contract: it may). One that takes
+    it and runs to its target without calling it got Python's "not enough values to unpack" from the plan;
+    it is now run a second time from the input, as a scheduler without the keyword is (the same mesh). One
+    that calls it twice is refused in one line naming it."""
+    parallel = _schedulers.get("parallel")
+
+    def ignores(*args, replan=None, **kwargs):
+        return parallel(*args, **kwargs)
+
+    def twice(*args, replan=None, **kwargs):
+        out = parallel(*args, **kwargs)
+        replan(out)
+        replan(out)
+        return out
+
+    _schedulers.register("ignores", ignores)
+    _schedulers.register("twice", twice)
+    try:
+        m = shapes.icosphere(3)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = qemjax.simplify(m, ratio=0.3, method="esqem", scheduler="ignores")
+            ref = qemjax.simplify(m, ratio=0.3, method="esqem", scheduler="parallel")
+            assert np.array_equal(res.faces, ref.faces) and res.vertices.tobytes() == ref.vertices.tobytes()
+            with pytest.raises(ValueError, match=r"^scheduler 'twice' called replan 2 times: a scheduler that "
+                                                  r"takes replan calls it once"):
+                qemjax.simplify(m, ratio=0.3, method="esqem", scheduler="twice")
+    finally:
+        del _schedulers._REGISTRY["ignores"], _schedulers._REGISTRY["twice"]
+
+
 def test_the_outcome_gives_its_surviving_mesh():
     """`Outcome.output`: the live faces, numbered into the vertices they use, and both their run ids."""
     V = np.arange(18, dtype=np.float32).reshape(6, 3)
