@@ -37,7 +37,7 @@ from ._pipeline import api as _api, flat as _flat
 from ._kernels import cache as _cache
 from . import _costs, _schedulers
 from ._pipeline.lod import RATIOS
-from ._io import ply as _io_ply
+from ._io import ply as _io_ply, texture as _io_texture
 
 # How the command line shows some options (choices, metavar, help beyond the docstrings, the default as
 # shown). Which options exist and their types come from `simplify`'s run keywords and from the fields of
@@ -455,12 +455,17 @@ def write(res, path: str, ext: str, exact: bool = False):
     result's detail needs."""
     mesh = res.to_trimesh()
     _warn_format_losses(res, mesh.vertices, ext)
+    material = getattr(mesh.visual, "material", None)
+    copied = _io_texture.verbatim(material)  # a JPEG texture as read, not encoded again (a copy: res untouched)
+    if copied is not material:
+        mesh.visual.material = copied
     if ext == "obj" and getattr(res, "uv", None) is not None:
         from trimesh.exchange.obj import export_obj
 
         stem = os.path.splitext(os.path.basename(path))[0]
-        mesh.visual.material = mesh.visual.material.copy()  # the image is written as <stem>.png
-        mesh.visual.material.name = stem
+        if copied is material:
+            mesh.visual.material = mesh.visual.material.copy()
+        mesh.visual.material.name = stem  # the image is written as <stem>.<its format>
         text, files = export_obj(mesh, include_texture=True, return_texture=True, mtl_name=f"{stem}.mtl",
                                  digits=_obj_digits(mesh.vertices))
         if res.material is None:  # trimesh writes vt lines only with a material: drop its mtl again

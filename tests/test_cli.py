@@ -774,6 +774,45 @@ def test_ply_output_says_it_leaves_the_texture_image_out(tmp_path, capsys):
     assert "texture image" not in capsys.readouterr().err
 
 
+def test_a_jpeg_texture_is_written_as_it_was_read(tmp_path):
+    """A JPEG texture (the input's map_Kd, or --texture) came back encoded again by trimesh at its default
+    quality (pixels moved by tens of levels), beside an OBJ and packed in a GLB, though simplification
+    never changes it: the file's own bytes are written now. A PNG is written as before."""
+    import json
+    import struct
+
+    from PIL import Image
+
+    pixels = np.random.default_rng(3).integers(0, 256, (16, 16, 3), dtype=np.uint8)
+    Image.fromarray(pixels).save(tmp_path / "t.jpg", quality=90)
+    Image.fromarray(pixels).save(tmp_path / "t.png")
+    jpeg = (tmp_path / "t.jpg").read_bytes()
+    (tmp_path / "m.mtl").write_text("newmtl m\nmap_Kd t.jpg\n")
+    src = _uv_grid_obj(tmp_path / "grid.obj", material="m.mtl")
+    plain = _uv_grid_obj(tmp_path / "plain.obj")
+    keep = ["--ratio", "0.5", "--quiet", "--attributes", "uv"]
+    partition = ["--partition", "--workers", "1"]
+    for n, (given, texture) in enumerate([(src, []), (plain, ["--texture", str(tmp_path / "t.jpg")]),
+                                          (src, partition), (plain, [*partition, "--texture", str(tmp_path / "t.jpg")])]):
+        out = tmp_path / f"out{n}"
+        out.mkdir()
+        assert _cli.main(["simplify", str(given), str(out / "o.obj"), *keep, *texture]) == 0
+        assert _cli.main(["simplify", str(given), str(out / "o.glb"), *keep, *texture]) == 0
+        assert "map_Kd o.jpeg" in (out / "o.mtl").read_text()
+        assert (out / "o.jpeg").read_bytes() == jpeg
+        data = (out / "o.glb").read_bytes()
+        gltf = json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
+        view = gltf["bufferViews"][gltf["images"][0]["bufferView"]]
+        binary = data[28 + struct.unpack("<I", data[12:16])[0]:]
+        assert gltf["images"][0]["mimeType"] == "image/jpeg"
+        stored = binary[view.get("byteOffset", 0):view.get("byteOffset", 0) + view["byteLength"]]
+        assert stored.rstrip(b"\0") == jpeg  # trimesh pads each view to 4 bytes
+    out = tmp_path / "out_png"
+    out.mkdir()
+    assert _cli.main(["simplify", str(plain), str(out / "o.obj"), *keep, "--texture", str(tmp_path / "t.png")]) == 0
+    assert np.array_equal(np.asarray(Image.open(out / "o.png")), pixels)
+
+
 def test_obj_output_says_it_leaves_the_colours_alpha_out(tmp_path, capsys):
     """Kept vertex colours with alpha below 1 written as OBJ lost the alpha (OBJ's `v x y z r g b`) without
     a word, while STL, OFF and a PLY's texture image are named: a warning says so; PLY keeps the alpha,

@@ -18,7 +18,7 @@ import struct
 
 import numpy as np
 
-from . import ply as _io_ply, strips as _io_strips, text as _io_text
+from . import ply as _io_ply, strips as _io_strips, text as _io_text, texture as _io_texture
 
 _NAMES = {"obj": "OBJ", "ply": "PLY", "stl": "STL", "off": "OFF", "glb": "GLB", "gltf": "glTF"}
 _TEXT = ("obj", "off", "gltf")  # formats that are text through and through
@@ -206,6 +206,7 @@ def _trimesh(path: str, fmt: str, data: bytes, changed: bool):
     if not isinstance(obj, (trimesh.Trimesh, trimesh.PointCloud)) and not (
             isinstance(obj, trimesh.Scene) and not obj.geometry):
         obj = load(force="mesh")
+    _io_texture.remember_read(obj)  # before anything loads its texture's pixels (PIL then drops the stream)
     return obj
 
 

@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import files as _io_files, ply as _io_ply
+from . import files as _io_files, ply as _io_ply, texture as _io_texture
 from .._mesh import wedges as _wedges
 from .._mesh.arrays import face_stats, column_bounds, nonfinite, sorted_triples
 
@@ -415,7 +415,7 @@ def prepare(mesh: Any, *, weld_vertices: bool = True, stacklevel: int = 1, attri
     if texture is not None:
         if "uv" not in kept:
             raise ValueError("texture= needs UVs: the mesh carries none (or attributes= does not keep them)")
-        material = _wedges.load_texture(texture)
+        material = _io_texture.load(texture)  # a file's bytes kept: written back as they are
     report = {"welded": 0}
     F0 = F
     vmap = np.arange(len(V))  # each input vertex's index in the cleaned mesh (-1: dropped)

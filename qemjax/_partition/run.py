@@ -388,7 +388,7 @@ def _wedges(F, UV, manifest, stacklevel, texture=None) -> dict:
     ``texture`` or else of the texture the file names."""
     if UV is None:
         return {}
-    from .._mesh.wedges import load_texture
+    from .._io.texture import load as load_texture  # the file's bytes kept, written back as they are
 
     vertex, uv, corners = task.corner_wedges(F, UV)
     material = None
