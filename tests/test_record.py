@@ -385,3 +385,36 @@ def test_the_warnings_of_lod_chain_and_a_partitioned_run_point_at_the_callers_li
         assert got and {w.filename for w in got} == {__file__}, [(w.filename, str(w.message)[:60]) for w in got]
         # the partitioned run's warning gives the last level's reason once, not its "stopped at ..." again
         assert all(str(w.message).count("stopped at") == 1 for w in got)
+
+
+def test_replay_of_a_run_that_kept_attributes_says_they_are_not_replayed():
+    """res.replay of a run that kept UVs or colours gave a level of positions and faces without a word: it
+    warns once per call, naming them; a run without attributes replays silently, and lod_chain (whose
+    levels are documented as positions only) does not warn per level."""
+    V, F = shapes.grid(12)
+    V = V.copy()
+    V[:, 2] = 0.05 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
+    textured = trimesh.Trimesh(V, F, process=False, visual=trimesh.visual.TextureVisuals(uv=V[:, :2] * 0.5))
+    colored = trimesh.Trimesh(V, F, process=False, vertex_colors=np.c_[V[:, :2] * 100 + 50, np.full((len(V), 2), 255)])
+    for mesh, kind, name in ((textured, "uv", "uv"), (colored, "color", "colors")):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = qemjax.simplify(mesh, ratio=0.3, attributes=kind)
+        assert getattr(res, name) is not None
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            level = res.replay(ratio=0.6)
+        assert [str(w.message) for w in caught] == [
+            f"replay gives positions and faces only: the run's {name} is not replayed (the record holds the "
+            "contractions, not the attributes' wedges)"] and caught[0].filename == __file__
+        assert not hasattr(level, name)
+    plain = qemjax.simplify(shapes.bumpy_sphere(2), ratio=0.3)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plain.replay(ratio=0.6)
+        chain = qemjax.lod_chain(shapes.bumpy_sphere(2), [0.6, 0.3])
+    assert not caught and len(chain.levels) == 2
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        qemjax.lod_chain(textured, [0.6, 0.3], attributes="uv")
+    assert not [w for w in caught if "replay" in str(w.message)]

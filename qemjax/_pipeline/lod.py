@@ -150,4 +150,5 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
         options["partition"] = False
     res = simplify(mesh, ratio=min(ratios), **options, **{CALLER: 1})  # warnings: at our caller
     m, last = len(res.input_faces), res.record.faces_out
-    return LodChain([res.replay(max(max(1, int(round(r * m))), last)) for r in ratios], ratios, res)
+    # the record's own replay: levels carry positions only, as said above (res.replay warns of kept attributes)
+    return LodChain([res.record.replay(max(max(1, int(round(r * m))), last)) for r in ratios], ratios, res)

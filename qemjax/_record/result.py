@@ -170,8 +170,19 @@ class SimplifyResult:
     round). Greedy:
         equal to ``simplify(target_faces=k, scheduler="greedy")`` when a prefix of the run has k faces;
         parallel: the run's own mesh at round boundaries, the round's cheapest contractions first in
-        between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record.history`."""
-        return self._record().replay(target_faces, ratio=ratio, contractions=contractions)
+        between. Covers the contraction phase only (not ESQEM's edge splits). See `qemjax._record.history`.
+        A level has positions and faces only: the record holds the contractions, not the wedges of the
+        run's appearance attributes, so a run that kept UVs, colours or normals warns (once per call) that
+        they are not replayed."""
+        level = self._record().replay(target_faces, ratio=ratio, contractions=contractions)
+        kept = [name for name in ("uv", "colors", "normals") if getattr(self, name) is not None]
+        if kept:  # a level without them would otherwise pass for the textured or coloured mesh
+            import warnings
+
+            warnings.warn(f"replay gives positions and faces only: the run's {', '.join(kept)} "
+                          f"{'is' if len(kept) == 1 else 'are'} not replayed (the record holds the contractions, "
+                          "not the attributes' wedges)", stacklevel=2)
+        return level
 
     def _record(self):
         if self.record is None:
