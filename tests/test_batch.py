@@ -206,3 +206,31 @@ def test_malformed_configs_and_cells_are_refused_in_words():
             qemjax.simplify_batch(m, configs)
     with pytest.raises(ValueError, match=r"cells takes a list of \(mesh, dict of simplify's keywords\) pairs"):
         simplify_cells([m])
+
+
+def test_a_mesh_without_attributes_is_cleaned_once_for_methods_that_keep_them_and_not(monkeypatch):
+    """A batch cleans a mesh apart for the cells whose method keeps attributes and those whose method keeps
+    none (the cleaning's warning says what the result has). A mesh that carries none was cleaned twice
+    alike; it is cleaned once now. One with UVs is still cleaned for each, and each cell gets what a
+    single call gives."""
+    import trimesh
+
+    from qemjax._pipeline import stages
+
+    made = []
+    geometry = stages.geometry
+    monkeypatch.setattr(stages, "geometry", lambda *a, **k: made.append(1) or geometry(*a, **k))
+    cells = [dict(ratio=0.5), dict(ratio=0.5, method="esqem"), dict(ratio=0.3, method="accurate")]
+    V, F = shapes.icosphere(3)
+    got = simplify_batch((V, F), cells)
+    assert len(made) == 1
+    for cfg, res in zip(cells, got):
+        one = qemjax.simplify((V, F), **cfg)
+        assert np.array_equal(res.faces, one.faces) and res.vertices.tobytes() == one.vertices.tobytes()
+    made.clear()
+    uv = trimesh.Trimesh(V, F, process=False, visual=trimesh.visual.TextureVisuals(uv=V[:, :2] * 0.5 + 0.5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        got = simplify_batch(uv, cells[:2])
+        assert len(made) == 2
+        assert got[0].uv is not None and got[1].uv is None and got[1].stats["dropped"] == ["uv"]

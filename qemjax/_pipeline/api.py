@@ -391,10 +391,13 @@ def _jobs(cells: list, errors: bool, stacklevel: int, each=None, states=None):
                 raise ValueError(f"simplify_batch: {exc}") from None
             bound = _bound.check(kw["max_distance"], kw["max_distance_rel"])
             stages._resolve_target(1, kw["target_faces"], kw["ratio"], kw["max_error"], bound is not None)
-            gk = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture),
-                  setup.keeps_attributes)  # (what the cleaning's warning says the result has)
+            base = (id(mesh), setup.weld, setup.pair_threshold, repr(setup.attributes), id(setup.texture))
+            gk = base + (setup.keeps_attributes,)  # (what the cleaning's warning says the result has)
             if gk not in geos:
-                geos[gk] = stages.geometry(mesh, setup, stacklevel=stacklevel)
+                other = geos.get(base + (not setup.keeps_attributes,))
+                # a mesh that carries no attributes is cleaned alike whether its method keeps them or not
+                plain = other is not None and other.attrs is None and not other.report.get("dropped")
+                geos[gk] = other if plain else stages.geometry(mesh, setup, stacklevel=stacklevel)
             job = stages.job(setup, geos[gk], kw["feature_edges"], kw["target_faces"], kw["ratio"],
                              kw["max_error"], stacklevel=stacklevel, states=states, locks=locks,
                              bounded=bound is not None)
