@@ -200,8 +200,8 @@ def _warmup_mesh() -> tuple[np.ndarray, np.ndarray]:
 
 
 # the extents and offsets a peer computes in as given; outside them it gets the mesh in a frame of its own
-# (`_frame`): their squared lengths and quadrics, in float32 or float64, overflowed, underflowed or lost the
-# detail to the offset (meshoptimizer, fast-simplification and pyfqmr returned the input unchanged at 1e40)
+# (`_frame`): their squared lengths and quadrics, in float32 or float64, would overflow, underflow or lose the
+# detail to the offset (some peers then return the input unchanged)
 _EXTENT = (2.0 ** -30, 2.0 ** 30)
 _OFFSET = 2.0 ** 16  # a centre this many extents from the origin
 
@@ -210,9 +210,11 @@ def _frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, float] | None:
     """(centre (3,), scale) that take the vertices the faces F use into a frame a peer computes in, the scale
     a power of two; None for a mesh of ordinary extent near the origin (what every peer was measured on: run
     as it is, the same bits). A vertex no face uses is not measured: one far away would shrink the mesh."""
-    F = np.asarray(F)
-    V = np.asarray(V, np.float64)[np.unique(F)] if F.size else np.zeros((0, 3))
-    if not len(V) or not np.all(np.isfinite(V)):
+    F, V = np.asarray(F), np.asarray(V, np.float64)
+    if not F.size or not np.issubdtype(F.dtype, np.integer) or V.ndim != 2 or F.min() < 0 or F.max() >= len(V):
+        return None  # (the adapter refuses such a mesh in its own words)
+    V = V[np.unique(F)]
+    if not np.all(np.isfinite(V)):
         return None
     lo, hi = V.min(0), V.max(0)
     extent = float(np.max(hi - lo))

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._io.mesh import _as_trimesh, _triangulate
+from ._mesh.arrays import whole_numbers
 
 __all__ = ["face_texture_colors", "render", "render_pair"]
 
@@ -51,9 +52,8 @@ def _as_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
     else:
         raise TypeError(f"expected a mesh, a (vertices, faces) pair, or .vertices/.faces; got {type(mesh)!r}")
     V, F = np.asarray(V, dtype=np.float64), np.asarray(F)
-    # indices as given: a cast to int64 cut 2.7 to 2, and numpy's indexing wrapped -1 round to the last vertex
-    if F.size and not (np.issubdtype(F.dtype, np.integer) or (np.issubdtype(F.dtype, np.floating)
-                                                              and np.isfinite(F).all() and (F == np.round(F)).all())):
+    # indices as given: a cast to int64 would cut 2.7 to 2, and numpy's indexing would wrap -1 to the last vertex
+    if F.size and not whole_numbers(F):
         raise ValueError(f"render: faces must hold integer vertex indices, got dtype {F.dtype}")
     F = F.astype(np.int64)
     if V.ndim == 1 and V.size % 3 == 0:  # flat x, y, z triples

@@ -48,6 +48,13 @@ def any_at(mask: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return out
 
 
+def whole_numbers(a: np.ndarray) -> bool:
+    """Whether ``a`` holds whole numbers only (integers, or finite floats without a fraction): indices given
+    as floats are taken as such, and a cast would cut 2.7 to 2."""
+    return bool(np.issubdtype(a.dtype, np.integer) or (
+        np.issubdtype(a.dtype, np.floating) and np.isfinite(a).all() and (a == np.round(a)).all()))
+
+
 def nonfinite(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the vertices of V (n,3) that are not finite, bool (n,); those of them a face of F uses, indices): the
     input rule that only a vertex a face uses must be finite (an unused one is junk a run drops)."""

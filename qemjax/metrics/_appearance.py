@@ -11,6 +11,7 @@ import numpy as np
 
 from ._common import as_mesh, scaled
 from ._distance import _check_samples
+from .._mesh.arrays import whole_numbers
 from .._mesh.nearest import nearest_triangles
 from ._topology import _components
 
@@ -168,7 +169,7 @@ def charts(faces: np.ndarray, wedge_faces: np.ndarray) -> np.ndarray:
     ``faces`` and ``wedge_faces``: (m, 3) integer arrays, corner for corner (a result's ``faces`` and
     ``wedge_faces``)."""
     F, W = _index_array("faces", faces), _index_array("wedge_faces", wedge_faces)
-    # a 4th column was read past, and shapes that differ gave numpy's broadcast error
+    # else a 4th column would be read past, and shapes that differ would give numpy's broadcast error
     if F.ndim != 2 or F.shape[1] != 3:
         raise ValueError(f"faces must have shape (m, 3) (triangles: a result's faces), got {F.shape}")
     if W.shape != F.shape:
@@ -197,9 +198,7 @@ def _index_array(name: str, x) -> np.ndarray:
         a = np.asarray(x)
     except (ValueError, TypeError):
         raise ValueError(f"{name} must be a rectangular array of vertex indices, got a ragged list") from None
-    whole = np.issubdtype(a.dtype, np.integer) or (
-        np.issubdtype(a.dtype, np.floating) and np.isfinite(a).all() and (a == np.round(a)).all())
-    if not whole:
+    if not whole_numbers(a):
         raise ValueError(f"{name} must hold integer indices, got dtype {a.dtype}")
     return a.astype(np.int64, copy=False)
 
@@ -239,7 +238,7 @@ def uv_chart_integrity(original, simplified, *, eps: float = 1e-6, chunk: int = 
     Returns charts_in, charts_out (output faces joined across edges whose corners share UVs),
     faces_spanning (count) and spanning_fraction. ``original``, ``simplified``: meshes with UVs (as
     `attribute_deviation` takes them); ``chunk``: output points tested against the atlas at a time (memory)."""
-    # a NaN eps found no point in any triangle (every face "spanning"); a chunk below 1 raised range's errors
+    # a NaN eps would find no point in any triangle (every face "spanning"); a chunk below 1, range's errors
     if isinstance(eps, bool) or not isinstance(eps, (int, float, np.integer, np.floating)) \
             or not 0 <= eps < float("inf"):
         raise ValueError(f"eps must be a finite number >= 0 (UV units), got {eps!r}")

@@ -14,7 +14,7 @@ from functools import cached_property
 import numpy as np
 
 from .._io.mesh import _triangulate
-from .._mesh.arrays import box_diagonal, nonfinite
+from .._mesh.arrays import box_diagonal, nonfinite, whole_numbers
 
 # Triangles with twice-area <= _DEGENERATE_REL * (longest edge)^2 count as degenerate (numerically zero area).
 _DEGENERATE_REL = 1e-12
@@ -73,10 +73,7 @@ def as_mesh(mesh, name: str = "mesh", polygons: bool = True) -> MeshArrays:
     if not np.issubdtype(v.dtype, np.number) or np.iscomplexobj(v):
         raise ValueError(f"{name}: vertices must be real numbers, got dtype {v.dtype}")
     v = np.ascontiguousarray(v, dtype=np.float64)
-    integral = np.issubdtype(f.dtype, np.integer) or (
-        np.issubdtype(f.dtype, np.floating) and np.isfinite(f).all() and (f == np.round(f)).all()
-    )
-    if not integral:
+    if not whole_numbers(f):
         raise ValueError(f"{name}: faces must hold integer vertex indices, got dtype {f.dtype}")
     # triangles as simplify makes them of polygons, so that a result is measured against the input it ran on
     f = np.ascontiguousarray(_triangulate(f.astype(np.int64, copy=False)))
