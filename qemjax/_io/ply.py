@@ -294,8 +294,7 @@ def problem(h: Header, data: bytes) -> str | None:
     return None
 
 
-_TYPE_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint",
-               "f4": "float", "f8": "double"}
+_TYPE_NAMES = {code: name for name, code in reversed(TYPES.items())}  # the first name of each: "char", "float"
 
 
 def triangle_ply(h: Header, text: bytes, V: np.ndarray, F: np.ndarray, vertices: np.ndarray) -> bytes:
