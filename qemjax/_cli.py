@@ -49,8 +49,9 @@ OPTIONS = {
                         "(--boundary-weight, --curvature-weight, ...): each given one replaces that field"),
     "scheduler": dict(type=lambda text: _scheduler_arg(text), metavar="{" + ",".join(_schedulers.names()) + "}",
                       help="'parallel': rounds of many non-interacting contractions; 'greedy': the "
-                           "paper's priority queue, one contraction at a time; with --partition, a Dask "
-                           "scheduler's ADDRESS (tcp://host:8786) runs the parts on its workers"),
+                           "paper's priority queue, one contraction at a time",
+                      partitioned="; with --partition, a Dask scheduler's ADDRESS (tcp://host:8786) runs the "
+                                  "parts on its workers"),
     "partition": dict(help="read the input in chunks and simplify it in parts on every core (or a Dask "
                       "cluster: --scheduler ADDRESS), with their borders locked, level by level: for meshes "
                       "larger than one process (docs/large-meshes.md); --no-partition: in one process even "
@@ -185,10 +186,13 @@ def _add_options(p: argparse.ArgumentParser, hidden=()):
             spec.setdefault("metavar", "N" if kind is int else "X")
         if "help" not in spec:
             spec["help"] = _doc_help(name, docs)
+        partitioned = spec.pop("partitioned", "")  # what the option does with --partition, where it is offered
+        spec["help"] += "" if "partition" in hidden else partitioned
         shown = spec.pop("shown", default)
         preset = getattr(default_method, name, shown)  # what the command runs without --method
         also = f"; {preset} with the default method" if preset != shown and name != "method" else ""
-        spec["help"] += f" (default: {shown}{also})"
+        if "(default)" not in spec["help"]:  # (a docstring's own "False (default): ..." says it already)
+            spec["help"] += f" (default: {shown}{also})"
         if name in hidden:
             spec["help"] = argparse.SUPPRESS
         p.add_argument("--" + name.replace("_", "-"), dest=name, default=argparse.SUPPRESS, **spec)

@@ -1,6 +1,7 @@
 """The command line, called in-process through `main` (one test runs it as a fresh process)."""
 from __future__ import annotations
 
+import argparse
 import functools
 import os
 import re
@@ -207,6 +208,19 @@ def test_help_says_what_an_unset_default_does():
     actions = _simplify_actions()
     assert "(default: on when the method re-fits" in " ".join(actions["measure"].help.split())
     assert " ".join(actions["min_angle"].help.split()).endswith("'none': off (default: none)")
+
+
+def test_help_says_each_default_once_and_offers_only_what_the_command_has():
+    """--prune's help said its default twice ("False (default): ... (default: False)": its docstring's and
+    the one added to every option), and `qemjax lod --help`'s --scheduler told of --partition, which lod
+    does not offer: every option's help names its default at most once, and lod's mention no --partition."""
+    for name, parser in _cli._parser().subcommands.items():
+        for action in parser._actions:
+            text = " ".join((action.help or "").split())
+            assert text.count("(default") <= 1, (name, action.dest, text)
+            if name == "lod" and action.help != argparse.SUPPRESS:
+                assert "--partition" not in text, (action.dest, text)
+    assert "--partition" in " ".join(_simplify_actions()["scheduler"].help.split())
 
 
 def test_help_is_the_first_sentence_of_each_setting():
