@@ -583,6 +583,17 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+def _add_partition_settings(p: argparse.ArgumentParser) -> None:
+    """--part-faces, --workers and --scratch: `Partition`'s settings, for a command that offers --partition."""
+    p.add_argument("--part-faces", dest="part_faces", type=_faces, metavar="K", help="with --partition: the most "
+                   "faces one task reads (default 100000)")
+    p.add_argument("--workers", type=_workers, metavar="N", help="with --partition: local worker processes (default: "
+                   "every core)")
+    p.add_argument("--scratch", metavar="DIR", help="with --partition: the folder for the parts (new, empty, or "
+                   "one a partitioned run wrote; kept; a run of the same input and options resumes from it); "
+                   "default: a temporary folder, removed at the end")
+
+
 def _add_vertex_files(p: argparse.ArgumentParser) -> None:
     """--locked and --vertex-weights: per-vertex files (`_simplify_kwargs` reads them)."""
     p.add_argument("--locked", metavar="FILE", help="vertices that stay exactly where they are: indices of the "
@@ -619,13 +630,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="as --max-distance, with D = R × the input's bounding-box diagonal (0.005: 0.5 %%)")
     _add_options(s)
     _add_vertex_files(s)
-    s.add_argument("--part-faces", dest="part_faces", type=_faces, metavar="K", help="with --partition: the most "
-                   "faces one task reads (default 100000)")
-    s.add_argument("--workers", type=_workers, metavar="N", help="with --partition: local worker processes (default: "
-                   "every core)")
-    s.add_argument("--scratch", metavar="DIR", help="with --partition: the folder for the parts (new, empty, or "
-                   "one a partitioned run wrote; kept; a run of the same input and options resumes from it); "
-                   "default: a temporary folder, removed at the end")
+    _add_partition_settings(s)
     lod = sub.add_parser("lod", help="levels of detail from one run: one file per level (and a .glb, a record)")
     lod.add_argument("input", help="any format trimesh reads (.obj, .ply, .stl, .off, .glb, ...)")
     lod.add_argument("out_dir", help="folder for the levels, NAME-lod0.EXT ..., one per ratio in the order of "
@@ -656,6 +661,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="0 to 10: 20 × 4^N faces (7: 327,680; 10: 20,971,520) (default: 7)")
     d.add_argument("--ratio", type=_ratio, default=0.02, help="keep this fraction of the faces (default: 0.02)")
     _add_options(d)
+    _add_partition_settings(d)
     ex = sub.add_parser("examples", help="write small example files made in code (bumpy.obj, bumpy.ply, "
                         "creases.txt, textured.obj, textured.png, sweep_example.toml)",
                         description="Write the example files the README uses, made in code: a bumpy sphere "

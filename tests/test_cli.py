@@ -1081,3 +1081,12 @@ def test_the_count_options_help_counts_with_its_metavar(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for option in ("--polish N", "--sliver-moves N"):
         assert f"{option} N ≥ 0, with a re-fit, at most N moves" in text, option
+
+
+def test_demo_takes_the_partition_settings_it_offers_partition_with(capsys):
+    """`qemjax demo` offered --partition but not --part-faces, --workers or --scratch: `demo --workers 1`
+    answered "did you mean --rank-eps?". They are the settings simplify's --partition takes."""
+    assert _cli.main(["demo", "--subdivisions", "4", "--ratio", "0.1", "--partition", "--part-faces", "1000",
+                      "--workers", "1", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"partitioned: ([2-9]|\d\d+) parts", out), out
