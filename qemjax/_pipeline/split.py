@@ -206,16 +206,14 @@ def plan(run, args, target: int, model, options, factor: float, progress=None,
             planned(lower)
         return lower
 
-    out = None
-    if "replan" in inspect.signature(run).parameters:
-        out = run(V, S, F, extra, max(target, 1), model, options, progress, replan=replan)
+    takes = "replan" in inspect.signature(run).parameters
+    out = run(V, S, F, extra, max(target, 1), model, options, progress, **({"replan": replan} if takes else {}))
     if len(first) > 1:
         name = getattr(getattr(run, "func", run), "__name__", "?")  # (a partial of it, with the run's keywords)
         raise ValueError(f"scheduler {name!r} called replan {len(first)} times: a "
                          "scheduler that takes replan calls it once, at its first target")
-    if not first:  # the scheduler runs to the target it is given: a second run, from the input
-        lower = replan(out if out is not None else run(V, S, F, extra, max(target, 1), model, options, progress))
-        out = run(V, S, F, extra, lower, model, options, progress)
+    if not first:  # the scheduler ran to the target it was given: a second run, from the input
+        out = run(V, S, F, extra, replan(out), model, options, progress)
     (out1, s, lower), = first
     return out, lower, s, out1
 
