@@ -210,12 +210,7 @@ def _frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, float] | None:
     """(centre (3,), scale) that take the vertices the faces F use into a frame a peer computes in, the scale
     a power of two; None for a mesh of ordinary extent near the origin (what every peer was measured on: run
     as it is, the same bits). A vertex no face uses is not measured: one far away would shrink the mesh."""
-    F, V = np.asarray(F), np.asarray(V, np.float64)
-    if not F.size or not np.issubdtype(F.dtype, np.integer) or V.ndim != 2 or F.min() < 0 or F.max() >= len(V):
-        return None  # (the adapter refuses such a mesh in its own words)
-    V = V[np.unique(F)]
-    if not np.all(np.isfinite(V)):
-        return None
+    V = V[np.unique(F)]  # (a mesh `_valid` passed: faces in range, the vertices they use finite)
     lo, hi = V.min(0), V.max(0)
     extent = float(np.max(hi - lo))
     if not extent > 0:
@@ -231,6 +226,7 @@ def run_peer(name: str, V, F, target_faces: int, *, warmup: bool = True):
     A mesh far from the extents and offsets peers compute in (`_frame`) runs centred and scaled by a power of
     two, and its output is taken back to the input's units."""
     _require(name)  # an unknown name: the ValueError naming the peers, not PEERS' KeyError
+    V, F = _valid(V, F)  # (as the adapter would, before the frame reads the faces)
     fn = PEERS[name]
     if warmup and name not in _warmed:
         Vw, Fw = _warmup_mesh()
@@ -242,7 +238,7 @@ def run_peer(name: str, V, F, target_faces: int, *, warmup: bool = True):
         V2, F2 = fn(V, F, int(target_faces), timings=timings)
     else:
         centre, scale = frame
-        V2, F2 = fn((np.asarray(V, np.float64) - centre) / scale, F, int(target_faces), timings=timings)
+        V2, F2 = fn((V - centre) / scale, F, int(target_faces), timings=timings)
         V2 = np.asarray(V2, np.float64) * scale + centre
     return V2, F2, timings["call_s"]
 
