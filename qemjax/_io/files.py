@@ -305,7 +305,7 @@ def read(path) -> object:
                 and obj.visual.kind is None:  # trimesh reads no COFF colour: named among what is dropped
             obj.metadata["qemjax_unread"] = ["vertex colours (COFF)"]
         if fmt == "obj" and _textured(obj) and _io_text.obj_has_colours(data):  # trimesh lets them go for the UVs
-            obj.metadata.setdefault("qemjax_unread", []).append(f"vertex colours {_io_ply.BESIDE_UV}")
+            obj.metadata.setdefault("qemjax_unread", []).append(_io_ply.beside_uv())
         if fmt == "ply" and "qemjax_unread" not in obj.metadata:  # what trimesh steps over without a word
             obj.metadata["qemjax_unread"] = _io_ply.unread(_io_ply.parse_header(data), fallback=False,
                                                            textured=_textured(obj))

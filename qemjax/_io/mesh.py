@@ -71,7 +71,7 @@ def dropped_attributes(obj) -> list[str]:
         if material is not None and not _wedges.is_placeholder(material):
             out.append("material")
         if colours_beside_uv(obj):
-            out.append(f"vertex colours {_io_ply.BESIDE_UV}")
+            out.append(_io_ply.beside_uv())
     elif kind == "vertex":
         out.append("vertex_colors")
     elif kind == "face":
@@ -124,7 +124,7 @@ def _as_trimesh(obj):
         beside = any(colours_beside_uv(g) for g in obj.geometry.values())
         obj = _io_files.concatenated(obj)
         if beside and isinstance(obj, trimesh.Trimesh):  # joining the parts lets them go: named as dropped
-            obj.metadata.setdefault("qemjax_unread", []).append(f"vertex colours {_io_ply.BESIDE_UV}")
+            obj.metadata.setdefault("qemjax_unread", []).append(_io_ply.beside_uv())
     if isinstance(obj, trimesh.PointCloud):
         raise ValueError(f"expected a triangle mesh, got a point cloud ({len(obj.vertices)} points)")
     if not isinstance(obj, trimesh.Trimesh):

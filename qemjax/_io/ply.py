@@ -169,7 +169,9 @@ def unread(h: Header, fallback: bool, textured: bool = False) -> list[str]:
     return out + beside
 
 
-BESIDE_UV = "(beside the UVs, which are read instead)"  # how colours trimesh lets go for the UVs are named
+def beside_uv(element: str = "vertex") -> str:
+    """How the colours of ``element`` that trimesh lets go for the UVs are named among what is dropped."""
+    return f"{element} colours (beside the UVs, which are read instead)"
 
 
 def colours_beside_uv(h: Header) -> list[str]:
@@ -179,7 +181,7 @@ def colours_beside_uv(h: Header) -> list[str]:
     for name in ("vertex", "face"):
         e = h.element(name)
         if e is not None and len({"red", "green", "blue"} & {p.name for p in e.props}) == 3:
-            out.append(f"{name} colours {BESIDE_UV}")
+            out.append(beside_uv(name))
     return out
 
 
