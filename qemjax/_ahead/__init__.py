@@ -154,8 +154,8 @@ def compile_all(manifest: dict | None = None, *, bare: bool = False, log=None) -
 
 def compile_ahead(jobs: int = 0, *, build: bool = False) -> dict:
     """`compile_all` in ``jobs`` processes (0: one per core), each compiling its share of the functions,
-    then a last pass here that compiles what they left out and counts. Two processes that compile one shared
-    helper can each save its cache index, one losing the other's entry: the last pass compiles it again."""
+    then a last pass here that compiles what they left out and counts (the processes' saves of one shared
+    helper take turns: `qemjax._mesh.compiled`)."""
     t0 = time.perf_counter()
     jobs = jobs or os.cpu_count() or 1
     if jobs > 1:

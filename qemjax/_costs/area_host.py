@@ -16,7 +16,8 @@ and a side's root is bisected only where the side has one (elsewhere it weighs +
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._mesh.compiled import njit
 
 STEPS = 60  # halvings of each bisection (the float64 interval stops changing before this, most often)
 

@@ -10,7 +10,8 @@ vector code pairs them: the bits differed in the test), so colours and normals k
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._mesh.compiled import njit
 
 MAX_CHANNELS = 2  # UVs (and one channel): with more, einsum's order is its own (module docstring)
 

@@ -12,7 +12,8 @@ second in the rotated face, then of those that come third, added to each other i
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._mesh.compiled import njit
 
 TINY = np.finfo(np.float64).tiny
 

@@ -10,7 +10,8 @@ compares them with numpy on random rows full of ties between 0.0 and -0.0.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, nogil=True, inline="always")

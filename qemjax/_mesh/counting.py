@@ -3,7 +3,8 @@ to place, where a comparison sort of millions of rows took a second (numba)."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, nogil=True, inline="always")

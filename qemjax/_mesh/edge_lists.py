@@ -12,7 +12,8 @@ without their copies of the pairs).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, nogil=True)

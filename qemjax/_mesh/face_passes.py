@@ -3,7 +3,8 @@ expressions they replace, without their dozen (m,) temporaries (`arrays.face_sta
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, nogil=True)

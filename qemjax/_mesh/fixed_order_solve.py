@@ -5,7 +5,8 @@ attributes (`_costs.attributes.face_fields`), where numpy's per-step calls over 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, error_model="numpy")  # a singular system gives inf/nan, as numpy's division does

@@ -23,10 +23,10 @@ from __future__ import annotations
 import threading
 
 import numpy as np
-from numba import njit
 
 from . import threads
 from .box_bounds import face_boxes, used_bounds
+from .compiled import njit
 from .pointtri import _FLAT_REL
 
 CUBE_EDGE = 0.5  # the cubes' side at first, times the triangles' median edge

@@ -5,7 +5,8 @@ scipy's."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, inline="always")

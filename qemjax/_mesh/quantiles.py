@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 DIGIT = 8  # bits per pass of the radix sort: 256 buckets, whose write positions stay in cache
 

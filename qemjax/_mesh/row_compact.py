@@ -8,7 +8,8 @@ in writes no new array of that size (tests/test_arrays.py compares it with numpy
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, nogil=True)

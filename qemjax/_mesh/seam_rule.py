@@ -20,7 +20,8 @@ nothing."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .compiled import njit
 
 # the count `one_to_one` gives for a map that is not one to one (keeping that endpoint is refused)
 _ONE_TO_ONE_FAILS = -1

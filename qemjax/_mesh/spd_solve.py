@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
+
+from .compiled import njit
 
 
 @njit(cache=True, nogil=True)

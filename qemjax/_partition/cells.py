@@ -15,7 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from .._mesh.compiled import njit
 
 BITS = 21
 _MASK = (1 << BITS) - 1

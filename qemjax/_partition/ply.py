@@ -9,9 +9,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 
 from .._io import ply as _ply
+from .._mesh.compiled import njit
 from .scan import _grow
 from .source import FACES, PACKED, TRI, Appender, Block, Refusal, Source
 

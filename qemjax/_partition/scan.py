@@ -7,7 +7,8 @@ Lines end at '\\n'; spaces, tabs and '\\r' separate words.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._mesh.compiled import njit
 
 OK, BAD_VERTEX, BAD_CORNER, ZERO_INDEX, BEFORE_FIRST, FEW_CORNERS, BAD_FACET, FEW_VALUES, BAD_INT = range(9)
 NO_UV = -1  # a corner without a texture coordinate number

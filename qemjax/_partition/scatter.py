@@ -18,11 +18,11 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 
 from .._io.mesh import clean_faces
 from .._mesh import topology
 from . import indexed
+from .._mesh.compiled import njit
 from .cells import Bins, Plan, codes, quantize
 from .readers import open_source, texture_of
 from .source import CORNER_UV, FACES, PACKED, UV, VERTICES, Ragged, Source, remove

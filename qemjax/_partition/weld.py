@@ -20,8 +20,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 
+from .._mesh.compiled import njit
 from .._mesh.counting import counting_order
 from .source import Appender, remove
 

@@ -4,8 +4,8 @@ turn, its shape, what counts as a sliver)."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from .._mesh.compiled import njit
 from .._mesh.grid_nearest import slivers
 from .._mesh.pointtri import segment_closest
 from .refit_system import regions

@@ -22,10 +22,10 @@ every CPU.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .._mesh.arrays import face_normals
 from .._mesh.box_bounds import face_boxes
+from .._mesh.compiled import njit
 from .._mesh.counting import counting_order
 from .._mesh.grid_nearest import (FEW_QUERIES_CUBES_PER_FACE, _face_d2, _gap, _query, grid, query_here, search, slivers,
                                   stamps)

@@ -34,11 +34,11 @@ import warnings
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from .._mesh.arrays import face_normals
 from .._mesh import fixed_order as _fixed
 from .._mesh.box_bounds import row_bounds
+from .._mesh.compiled import njit
 from .._mesh.grid_nearest import FEW_QUERIES_CUBES_PER_FACE, grid, nearest, slivers
 from .._mesh.spd_solve import solve_csr
 from .fit_rules import _barycentric_at, _quality, _turned

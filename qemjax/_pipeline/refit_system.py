@@ -22,8 +22,8 @@ The loops release the GIL: a batch's re-fits run side by side on threads (`stage
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from .._mesh.compiled import njit
 
 _HUGE = 1.7976931348623157e308  # np.nan_to_num's stand-in for an infinity
 SHORT_ROW = 48  # rows of N's layout up to this long are sorted by insertion, longer ones by numpy's sort

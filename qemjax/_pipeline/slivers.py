@@ -26,8 +26,8 @@ change: only positions do.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from .._mesh.compiled import njit
 from .fit_rules import COS_SLIVER, SLIVER_DEG, _min_cos
 from .._mesh.grid_nearest import stamps
 from .moves import Moves, _failed, _onto, _ring, _trial, shape_of

@@ -37,9 +37,9 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
 
 from .._mesh import seam_rule
+from .._mesh.compiled import njit
 
 
 class Faces(NamedTuple):

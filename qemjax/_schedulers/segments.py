@@ -6,7 +6,8 @@ single run's gate (`parallel.LoopRound.select`) and the shape term's two cuts (`
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._mesh.compiled import njit
 
 
 def sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:

@@ -28,11 +28,11 @@ from __future__ import annotations
 import contextlib
 
 import numpy as np
-from numba import njit
 
 from .._kernels.batching import DTYPE
 from .._mesh import threads
 from . import segments
+from .._mesh.compiled import njit
 
 # the faces under this fraction of the threshold (at s = 0.4, a smallest angle under about 2-5°) lift nothing:
 # faces already nearly degenerate (a spike's, a crease strip's) are not the move's doing; `kept_quality`

@@ -11,9 +11,8 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
-from numba import njit
-
 from .. import rules as rule
+from ..._mesh.compiled import njit
 from ..outcome import BUDGET, COINCIDENT, FLIP, LOCKED, PART, TOPOLOGY
 
 

@@ -28,10 +28,11 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.typed import Dict
 
 from . import wedges as gw
+from ..._mesh.compiled import njit
 from ..outcome import LOCKED, SEAM
 from ..rules import drops_locked, has
 from .checks import Step, rules_head, rules_tail

@@ -23,9 +23,9 @@ Journal rows (``J``, as `speculate` writes them: kind, index, old, old): `J_MULT
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..._mesh import seam_rule as wj
+from ..._mesh.compiled import njit
 from ..rules import seam_allows
 
 J_MULTI, J_WC, J_VAL = 8, 9, 10  # journal kinds (after `speculate`'s)

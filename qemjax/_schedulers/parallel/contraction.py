@@ -9,7 +9,8 @@ compares them on random meshes.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..._mesh.compiled import njit
 
 
 @njit(cache=True)

@@ -24,8 +24,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from ..._mesh.compiled import njit
 from ..outcome import LOCKED
 from .contraction import clear_bad, contract_edges, contract_faces
 from .selection import _key

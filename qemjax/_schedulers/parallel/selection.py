@@ -22,10 +22,10 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..._mesh import seam_rule
 from .. import rules as rule
+from ..._mesh.compiled import njit
 from ..outcome import COINCIDENT, FLIP, LOCKED, PART, SEAM, TOPOLOGY
 
 NO_KEY = np.iinfo(np.int64).max
