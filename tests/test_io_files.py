@@ -553,6 +553,32 @@ def test_unread_vertex_properties_are_named_in_core_as_a_partitioned_run_names_t
     assert [s.endswith(f"input: {item}") for s in (str(w.message) for w in seen)].count(True) == 1
 
 
+def test_unread_face_properties_and_elements_are_named_in_core_as_a_partitioned_run_names_them(tmp_path):
+    """trimesh reads a face's vertex numbers, colours and UV lists and steps over its other properties (a
+    scanner's per-face quality, flags) and every element besides vertices and faces (edges): an in-core run
+    dropped them without a word, where a partitioned run names them. Both name them now, in the same words."""
+    V, F = shapes.icosphere(2)
+    head = ["ply", "format ascii 1.0", f"element vertex {len(V)}", "property double x", "property double y",
+            "property double z", f"element face {len(F)}", "property list uchar int vertex_indices",
+            "property float quality", "property uchar flags", "element edge 1", "property int vertex1",
+            "property int vertex2", "end_header"]
+    path = tmp_path / "faces.ply"
+    path.write_text("\n".join(head + [" ".join(map(repr, v)) for v in V.tolist()]
+                              + [f"3 {a} {b} {c} {i * 0.5} 1" for i, (a, b, c) in enumerate(F.tolist())] + ["0 1", ""]))
+    items = ["face properties quality, flags", "the 'edge' element"]
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        res = qemjax.simplify(str(path), ratio=0.5)
+    assert res.stats["dropped"] == items
+    assert [str(w.message) for w in seen if "carries" in str(w.message)] == [
+        f"{path} carries {', '.join(items)}, which qemjax does not keep: the result has positions and faces only "
+        "(stats['dropped'] lists them)"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        parted = qemjax.simplify(str(path), ratio=0.5, partition=qemjax.Partition(part_faces=1000, workers=1))
+    assert parted.stats["dropped"] == ["record", *items]
+
+
 def test_the_names_of_a_face_list_of_vertex_numbers_have_one_home():
     """The names a face's list of vertex numbers goes by (vertex_indices, vertex_index) were written in the
     in-core reader (twice: `unread`, `read_polygons`) and the partitioned one: they live in `_io.ply`

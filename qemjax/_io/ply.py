@@ -149,24 +149,40 @@ def read_by_trimesh(vertex: Element, face: Element | None) -> set:
 
 def unread(h: Header, fallback: bool, textured: bool = False) -> list[str]:
     """What an in-core read of this PLY steps over, named as a partitioned run names it (``"vertex
-    properties quality, ids"``, `named`): trimesh reads positions, normals, UVs and colours by their names
-    (`read_by_trimesh`) and steps over the other vertex properties. A file trimesh cannot read (``fallback``:
-    `_io_strips`, then `triangle_ply`) also loses every face property but its vertex numbers, and the
-    vertices' UVs are read even beside the faces' ``texcoord`` lists. ``textured``: trimesh read the file's
-    UVs, so its colours are named once, as let go for them (`colours_beside_uv`)."""
+    properties quality, ids"``, `named`; `other_element`): trimesh reads positions, normals, UVs and colours
+    by their names (`read_by_trimesh`), and of the faces their vertex numbers, colours and ``texcoord``
+    lists; it steps over the other properties and every other element. A file trimesh cannot read
+    (``fallback``: `_io_strips`, then `triangle_ply`) also loses every face property but its vertex numbers,
+    and the vertices' UVs are read even beside the faces' ``texcoord`` lists. ``textured``: trimesh read the
+    file's UVs, so its colours are named once, as let go for them (`colours_beside_uv`)."""
     vertex, face = h.element("vertex"), h.element("face")
     used = read_by_trimesh(vertex, None if fallback else face)
     beside = colours_beside_uv(h) if textured else []
     names = [p.name for p in vertex.props if (p.name not in used and not (beside and p.name in _COLOURS))
              or p.count is not None]
     out = [named("vertex", names)] if names else []
-    index = index_list(face) if fallback and face is not None else None
-    names = [p.name for p in face.props if p is not index] if fallback and face is not None else []
+    index = index_list(face) if face is not None else None
+    read = set() if fallback or face is None else _read_of_face(face)
+    names = [p.name for p in face.props if p is not index and p.name not in read] if face is not None else []
     if beside:
         names = [n for n in names if n not in _COLOURS]
     if names:
         out.append(named("face", names))
-    return out + beside
+    return out + [other_element(e.name) for e in h.elements if e.name not in ("vertex", "face")] + beside
+
+
+def _read_of_face(face: Element) -> set:
+    """The face properties trimesh reads besides the vertex numbers: colours (three or four of them; a
+    mesh's face colours, which the cleaning names where qemjax does not keep them) and ``texcoord`` lists."""
+    colours = {p.name for p in face.props if p.count is None} & set(_COLOURS)
+    return (colours if len(colours) >= 3 else set()) | {p.name for p in face.props
+                                                        if p.name == "texcoord" and p.count is not None}
+
+
+def other_element(name: str) -> str:
+    """How a run names an element of a PLY besides its vertices and faces (edges, a scanner's ``range_grid``),
+    which it does not read."""
+    return f"the {name!r} element"
 
 
 def beside_uv(element: str = "vertex") -> str:

@@ -252,7 +252,7 @@ def dropped(h: _ply.Header, kept: tuple = ()) -> tuple:
     out = []
     for e in h.elements:
         if e.name not in ("vertex", "face"):
-            out.append(f"the {e.name!r} element")
+            out.append(_ply.other_element(e.name))
             continue
         skip = {"x", "y", "z", *kept} if e.name == "vertex" else {e.props[_index_prop(e)].name, *kept}
         names = [p.name for p in e.props if p.name not in skip]
