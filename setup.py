@@ -24,6 +24,8 @@ class BuildWithLoops(build_py):
         done = subprocess.run([sys.executable, "-m", "qemjax._ahead", "--build"], env=env, cwd=str(lib))
         if done.returncode:  # the install still works: numba then compiles on first use
             print("qemjax: compiling ahead failed; the first run will compile instead", flush=True)
+        for lock in list(lib.glob("qemjax/**/__pycache__/*.nbi.lock")):
+            lock.unlink()  # the compiling processes' turns (`qemjax._mesh.compiled`): made again where needed
 
 
 setup(cmdclass={"build_py": BuildWithLoops})
