@@ -45,6 +45,14 @@ if meet:
 
     caching.IndexDataCacheFile._save_index = waiting
 
+if os.environ.get("QEMJAX_TEST_NO_LOCKS"):  # a file system that refuses locks
+    import errno, fcntl
+
+    def refused(fd, op):
+        raise OSError(errno.ENOLCK, "no locks available")
+
+    fcntl.flock = refused
+
 import probe
 value = {"int": 1, "float": 1.5}[sys.argv[1]]
 print(probe.plus_one(value), probe.plus_one.stats.cache_hits and 1 or 0)
@@ -114,6 +122,13 @@ def test_an_entry_compiled_for_other_types_is_compiled_again(probe):
         done = _run(probe, kind, env)
         assert done.returncode == 0 and done.stdout.split() == want.split(), (done.stdout, done.stderr[-2000:])
     assert _entries(probe) == [(("float64",), ("float64",)), (("int64",), ("int64",))]  # and saved over
+
+
+def test_a_file_system_without_locks_caches_as_numba_does(probe):
+    env = dict(_env(probe), QEMJAX_TEST_NO_LOCKS="1")
+    for want in ("2 0", "2 1"):  # compiled and saved, then loaded
+        done = _run(probe, "int", env)
+        assert done.returncode == 0 and done.stdout.split() == want.split(), done.stderr[-2000:]
 
 
 def test_every_compiled_loop_uses_the_locked_cache():

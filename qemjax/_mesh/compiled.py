@@ -11,8 +11,8 @@ argument types, and crashes. Here each function's saves hold an exclusive lock o
 entry whose data was compiled for another signature (a cache made before this, or by a process that does
 not lock) is treated as missing: numba compiles it again and the save writes it over.
 
-Where files cannot be locked (no ``fcntl``, as on Windows, or a read-only cache folder) the cache works as
-numba's own.
+Where files cannot be locked (no ``fcntl``, as on Windows, a read-only cache folder, a file system without
+locks) the cache works as numba's own.
 """
 from __future__ import annotations
 
@@ -38,7 +38,10 @@ def _locked(index_path: str, exclusive: bool):
             fd = None
     try:
         if fd is not None:
-            fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+            except OSError:  # a file system without locks (some network and FUSE ones): as numba's own
+                pass
         yield
     finally:
         if fd is not None:
