@@ -389,8 +389,8 @@ def test_the_warnings_of_lod_chain_and_a_partitioned_run_point_at_the_callers_li
 
 def test_replay_of_a_run_that_kept_attributes_says_they_are_not_replayed():
     """res.replay of a run that kept UVs or colours gave a level of positions and faces without a word: it
-    warns once per call, naming them; a run without attributes replays silently, and lod_chain (whose
-    levels are documented as positions only) does not warn per level."""
+    warns once per call, naming them; a run without attributes replays silently, and lod_chain given
+    attributes to keep warns once for its levels, not once per level."""
     V, F = shapes.grid(12)
     V = V.copy()
     V[:, 2] = 0.05 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
@@ -417,4 +417,8 @@ def test_replay_of_a_run_that_kept_attributes_says_they_are_not_replayed():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         qemjax.lod_chain(textured, [0.6, 0.3], attributes="uv")
-    assert not [w for w in caught if "replay" in str(w.message)]
+    # its levels lack the UVs asked for: said once for the chain (it said nothing), not once per level
+    said = [w for w in caught if "not replayed" in str(w.message)]
+    assert [str(w.message) for w in said] == [
+        "lod_chain's levels have positions and faces only: the run's uv is not replayed (the record holds the "
+        "contractions, not the attributes' wedges); chain.result keeps them"] and said[0].filename == __file__

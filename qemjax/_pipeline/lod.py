@@ -3,6 +3,7 @@ scene or as separate files."""
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from typing import Any
 
 import numpy as np
@@ -150,5 +151,9 @@ def lod_chain(mesh: Any, ratios=RATIOS, **options) -> LodChain:
         options["partition"] = False
     res = simplify(mesh, ratio=min(ratios), **options, **{CALLER: 1})  # warnings: at our caller
     m, last = len(res.input_faces), res.record.faces_out
-    # the record's own replay: levels carry positions only, as said above (res.replay warns of kept attributes)
+    unreplayed = res._unreplayed()
+    if unreplayed:  # attributes asked for: the levels would pass for textured or coloured meshes
+        warnings.warn(f"lod_chain's levels have positions and faces only: {unreplayed}; chain.result keeps them",
+                      stacklevel=2)
+    # the record's own replay (res.replay would warn again for each level)
     return LodChain([res.record.replay(max(max(1, int(round(r * m))), last)) for r in ratios], ratios, res)

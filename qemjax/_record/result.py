@@ -175,14 +175,21 @@ class SimplifyResult:
         run's appearance attributes, so a run that kept UVs, colours or normals warns (once per call) that
         they are not replayed."""
         level = self._record().replay(target_faces, ratio=ratio, contractions=contractions)
-        kept = [name for name in ("uv", "colors", "normals") if getattr(self, name) is not None]
-        if kept:  # a level without them would otherwise pass for the textured or coloured mesh
+        unreplayed = self._unreplayed()
+        if unreplayed:  # a level without them would otherwise pass for the textured or coloured mesh
             import warnings
 
-            warnings.warn(f"replay gives positions and faces only: the run's {', '.join(kept)} "
-                          f"{'is' if len(kept) == 1 else 'are'} not replayed (the record holds the contractions, "
-                          "not the attributes' wedges)", stacklevel=2)
+            warnings.warn(f"replay gives positions and faces only: {unreplayed}", stacklevel=2)
         return level
+
+    def _unreplayed(self) -> str | None:
+        """What a replay of this run leaves out, in words (``"the run's uv is not replayed (...)"``), or None
+        where the run kept no appearance attributes."""
+        kept = [name for name in ("uv", "colors", "normals") if getattr(self, name) is not None]
+        if not kept:
+            return None
+        return (f"the run's {', '.join(kept)} {'is' if len(kept) == 1 else 'are'} not replayed (the record holds "
+                "the contractions, not the attributes' wedges)")
 
     def _record(self):
         if self.record is None:
