@@ -168,7 +168,8 @@ def unread(h: Header, fallback: bool, textured: bool = False) -> list[str]:
         names = [n for n in names if n not in _COLOURS]
     if names:
         out.append(named("face", names))
-    return out + [other_element(e.name) for e in h.elements if e.name not in ("vertex", "face")] + beside
+    elements = ("vertex", "face", "tristrips") if fallback else ("vertex", "face")  # (strips: `_io.strips`)
+    return out + [other_element(e.name) for e in h.elements if e.name not in elements] + beside
 
 
 def _read_of_face(face: Element) -> set:
