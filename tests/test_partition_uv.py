@@ -144,6 +144,34 @@ def test_per_vertex_uvs_of_a_ply(tmp_path, binary, names):
     assert np.median(off[0]) < 1.5 * np.median(off[1]) < 1e-2 and off[0].max() < 2 * off[1].max()
 
 
+@pytest.mark.parametrize("present", [("u", "s"), ("texture_u", "u", "s"), ("s",), ("texture_s", "s")])
+def test_a_ply_with_several_uv_pairs_gives_the_uvs_an_in_core_read_takes(tmp_path, present):
+    """A PLY whose vertices hold more than one pair of UV names (u, v beside s, t) gave a partitioned run one
+    pair and an in-core run (trimesh's reader) another: the partitioned reader now tries them in trimesh's
+    order, so a file gives the same UVs either way."""
+    import trimesh
+
+    from qemjax._io import ply as io_ply
+    from qemjax._partition import ply as part_ply
+
+    pairs = {"u": ("u", "v"), "s": ("s", "t"), "texture_u": ("texture_u", "texture_v"),
+             "texture_s": ("texture_s", "texture_t")}
+    V, F = shapes.icosphere(1)
+    names = [n for key in present for n in pairs[key]]
+    columns = {n: V[:, 0] + k for k, n in enumerate(names)}  # each name its own values
+    head = ["ply", "format ascii 1.0", f"element vertex {len(V)}", "property double x", "property double y",
+            "property double z", *[f"property double {n}" for n in names], f"element face {len(F)}",
+            "property list uchar int vertex_indices", "end_header"]
+    rows = np.c_[V, np.stack([columns[n] for n in names], 1)]
+    path = tmp_path / "uv.ply"
+    path.write_text("\n".join(head + [" ".join(map(repr, r)) for r in rows.tolist()]
+                              + [f"3 {a} {b} {c}" for a, b, c in F.tolist()] + [""]))
+    uv = trimesh.load(path, process=False).visual.uv
+    taken = next(pair for pair in pairs.values() if pair[0] in names and np.array_equal(uv[:, 0], columns[pair[0]]))
+    header = io_ply.parse_header(path.read_bytes())
+    assert part_ply.uv_names(header.element("vertex")) == taken
+
+
 def test_per_corner_uvs_of_a_binary_ply(tmp_path):
     """A binary PLY's face list ``texcoord`` (u, v of each corner, as MeshLab writes them, seams and all):
     kept as an OBJ's vt are, the only vertices with several UVs on the input's seam."""

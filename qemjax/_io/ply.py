@@ -131,16 +131,16 @@ def named(element: str, names) -> str:
 # carry on): normals when all three are there, the first UV pair it looks for (unless the faces hold their own
 # UVs), and colours (three or four of these) when it found no UVs: a textured mesh has no vertex colours
 _NORMALS = ("nx", "ny", "nz")
-_UVS = (("texture_u", "texture_v"), ("u", "v"), ("s", "t"))
+TRIMESH_UVS = (("texture_u", "texture_v"), ("u", "v"), ("s", "t"))  # in the order trimesh tries them
 _COLOURS = ("red", "green", "blue", "alpha")
 
 
 def read_by_trimesh(vertex: Element, face: Element | None) -> set:
-    """The vertex properties trimesh reads (`_NORMALS`, `_UVS`, `_COLOURS`), x, y, z among them."""
+    """The vertex properties trimesh reads (`_NORMALS`, `TRIMESH_UVS`, `_COLOURS`), x, y, z among them."""
     scalars = {p.name for p in vertex.props if p.count is None}
     used = {"x", "y", "z"} | (set(_NORMALS) if set(_NORMALS) <= scalars else set())
     face_uv = face is not None and any(p.name == "texcoord" and p.count is not None for p in face.props)
-    uv = () if face_uv else next((pair for pair in _UVS if set(pair) <= scalars), ())
+    uv = () if face_uv else next((pair for pair in TRIMESH_UVS if set(pair) <= scalars), ())
     colours = scalars & set(_COLOURS)
     if len(colours) >= 3 and not uv and not face_uv:
         used |= colours

@@ -225,7 +225,9 @@ def _fixed_dtype(path: Path, at: int, face: _ply.Element, order: str, index: int
     return np.dtype(fields), checks
 
 
-UV_NAMES = (("texture_u", "texture_v"), ("s", "t"), ("u", "v"), ("texture_s", "texture_t"))  # per vertex
+# per vertex: those an in-core read takes, in its order (so a file gives the same UVs either way), then one
+# more pair trimesh does not read (an in-core run names it among what it drops)
+UV_NAMES = (*_ply.TRIMESH_UVS, ("texture_s", "texture_t"))
 
 
 def uv_names(vertex: _ply.Element) -> tuple | None:
