@@ -45,6 +45,20 @@ if meet:
 
     caching.IndexDataCacheFile._save_index = waiting
 
+if os.environ.get("QEMJAX_TEST_DIE_AT_SECOND_WRITE"):  # killed between the entry's two files
+    writes = []
+
+    def dying(write):
+        def wrapped(self, *args):
+            writes.append(write.__name__)
+            if len(writes) == 2:
+                os._exit(3)
+            return write(self, *args)
+        return wrapped
+
+    caching.IndexDataCacheFile._save_index = dying(caching.IndexDataCacheFile._save_index)
+    caching.IndexDataCacheFile._save_data = dying(caching.IndexDataCacheFile._save_data)
+
 if os.environ.get("QEMJAX_TEST_NO_LOCKS"):  # a file system that refuses locks
     import errno, fcntl
 
@@ -122,6 +136,17 @@ def test_an_entry_compiled_for_other_types_is_compiled_again(probe):
         done = _run(probe, kind, env)
         assert done.returncode == 0 and done.stdout.split() == want.split(), (done.stdout, done.stderr[-2000:])
     assert _entries(probe) == [(("float64",), ("float64",)), (("int64",), ("int64",))]  # and saved over
+
+
+def test_a_process_killed_while_saving_leaves_no_entry_of_older_code(probe):
+    """numba wrote the index before the data it names: a process killed between the two, after the source
+    changed, left the new entry naming the file of the old code, which the next process ran."""
+    env = _env(probe)
+    assert _run(probe, "int", env).stdout.split() == ["2", "0"]
+    (probe / "probe.py").write_text(textwrap.dedent(MODULE).replace("x + 1", "x + 2"))
+    assert _run(probe, "int", dict(env, QEMJAX_TEST_DIE_AT_SECOND_WRITE="1")).returncode == 3
+    done = _run(probe, "int", env)
+    assert done.returncode == 0 and done.stdout.split()[0] == "3", (done.stdout, done.stderr[-2000:])
 
 
 def test_a_file_system_without_locks_caches_as_numba_does(probe):

@@ -7,9 +7,10 @@ signature it reads the index, takes the first unused number, writes the index, t
 read the same index and take the same number: one index entry is lost, and the other can point at the code
 compiled for the other signature. Every later process that loads that entry runs code built for other
 argument types, and crashes. Here each function's saves hold an exclusive lock on a file beside its index
-(reading the index afresh under it), and loads a shared one, so that no process reads a half-made entry; an
-entry whose data was compiled for another signature (a cache made before this, or by a process that does
-not lock) is treated as missing: numba compiles it again and the save writes it over.
+(reading the index afresh under it, and writing the data before the index that names it), and loads a shared
+one, so that no process reads a half-made entry; an entry whose data was compiled for another signature (a
+cache made before this, or by a process that does not lock) is treated as missing: numba compiles it again
+and the save writes it over.
 
 Where files cannot be locked (no ``fcntl``, as on Windows, a read-only cache folder, a file system without
 locks) the cache works as numba's own.
@@ -17,6 +18,7 @@ locks) the cache works as numba's own.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 
 import numba
@@ -61,8 +63,18 @@ class LockedCacheFile(IndexDataCacheFile):
     one; an entry compiled for other types than its key's loads as missing."""
 
     def save(self, key, data):
+        # numba's own save, with the data written before the index that names it: a process killed between
+        # the two leaves an entry nobody reads, never one that names a file of older code
         with _locked(self._index_path, exclusive=True):
-            super().save(key, data)
+            overloads = self._load_index()
+            name = overloads.get(key)
+            if name is None:
+                taken = set(overloads.values())
+                name = next(self._data_name(i) for i in itertools.count(1) if self._data_name(i) not in taken)
+            self._save_data(name, data)
+            if overloads.get(key) != name:
+                overloads[key] = name
+                self._save_index(overloads)
 
     def load(self, key):
         with _locked(self._index_path, exclusive=False):
