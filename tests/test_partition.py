@@ -722,3 +722,30 @@ def test_the_docs_name_every_key_of_a_partitioned_result_s_stats(in_process):
 
     assert [k for k in in_process.stats if not named(k)] == []
     assert [k for k in in_process.stats["partition"] if not named(k)] == []
+
+
+def test_an_input_cut_short_by_ctrl_c_is_written_again_when_resumed(tmp_path, monkeypatch):
+    """Arrays are written to the scratch folder as ``input.ply`` whole or not at all: a Ctrl-C while they were
+    written left a file cut short (its header still counting no faces), which every resumed run took as its
+    input ("input.ply: the mesh has no faces")."""
+    from qemjax._partition import write
+
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    settings = Partition(workers=1, part_faces=1000, measure=False, scratch=tmp_path / "scratch")
+    real = write.write_binary_ply
+
+    def interrupted(path, vertices, faces, **kw):
+        def chunks():  # Ctrl-C once the vertices and a few faces are written
+            yield faces[:100]
+            raise KeyboardInterrupt
+        return real(path, vertices, chunks(), **kw)
+
+    monkeypatch.setattr(write, "write_binary_ply", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        qemjax.simplify((V, F), ratio=0.1, partition=settings)
+    monkeypatch.undo()
+    assert not [p.name for p in (tmp_path / "scratch").iterdir() if "input" in p.name]  # nor its temporary file
+    again = qemjax.simplify((V, F), ratio=0.1, partition=settings)
+    fresh = qemjax.simplify((V, F), ratio=0.1, partition=dataclasses.replace(settings, scratch=None))
+    assert again.stats["faces_in"] == len(F) and digest(again) == digest(fresh)

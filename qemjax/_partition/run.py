@@ -109,14 +109,15 @@ def _fresh(folder: Path, key: dict, source=None) -> None:
 
 
 def _as_file(mesh, folder: Path) -> Path:
-    """A path as given; arrays (`_arrays`) written to the scratch folder as a binary PLY."""
+    """A path as given; arrays (`_arrays`) written to the scratch folder as a binary PLY, whole or not at all:
+    a resumed run takes the file it finds, and one cut short by Ctrl-C would be its input."""
     if isinstance(mesh, (str, os.PathLike)):
         return Path(mesh)
-    from .write import write_binary_ply
+    from .write import replace_atomically, write_binary_ply
 
     path = folder / "input.ply"
     if not path.exists():
-        write_binary_ply(path, *mesh)
+        replace_atomically(path, lambda tmp: write_binary_ply(tmp, *mesh))
     return path
 
 
