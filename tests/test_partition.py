@@ -749,3 +749,37 @@ def test_an_input_cut_short_by_ctrl_c_is_written_again_when_resumed(tmp_path, mo
     again = qemjax.simplify((V, F), ratio=0.1, partition=settings)
     fresh = qemjax.simplify((V, F), ratio=0.1, partition=dataclasses.replace(settings, scratch=None))
     assert again.stats["faces_in"] == len(F) and digest(again) == digest(fresh)
+
+
+def test_a_second_run_in_a_scratch_folder_in_use_is_refused(tmp_path, monkeypatch):
+    """Two runs in one scratch folder at once (the same command started twice, two threads of a script) each
+    cleared or overwrote the other's parts and levels as it went: the second is refused in one line while the
+    first holds the folder, and the first ends as it would alone; once it has ended, the folder is free."""
+    from qemjax._partition import scatter
+
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    settings = Partition(workers=1, part_faces=1000, measure=False, scratch=tmp_path / "scratch")
+    inside, go, real = threading.Event(), threading.Event(), scatter.scatter
+
+    def held(*args, **kw):  # the first run waits here, in the folder, until the second has tried
+        if not inside.is_set():
+            inside.set()
+            go.wait(60)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(scatter, "scatter", held)
+    out = {}
+    first = threading.Thread(target=lambda: out.update(res=qemjax.simplify((V, F), ratio=0.1, partition=settings)))
+    first.start()
+    try:
+        assert inside.wait(60)
+        with pytest.raises(ValueError, match=r"^partition: the scratch folder .*scratch is in use by another run"):
+            qemjax.simplify((V, F), ratio=0.2, partition=settings)
+    finally:
+        go.set()
+        first.join()
+    fresh = qemjax.simplify((V, F), ratio=0.1, partition=dataclasses.replace(settings, scratch=None))
+    assert digest(out["res"]) == digest(fresh)
+    again = qemjax.simplify((V, F), ratio=0.1, partition=settings)
+    assert digest(again) == digest(fresh) and again.stats["partition"]["reused"] > 0

@@ -17,6 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+
 from . import execute, indexed, pieces, plan, task
 from .readers import texture_of
 from .source import CORNER_UV, FACES, PACKED, UV, VERTICES
@@ -71,7 +76,8 @@ def _input_key(mesh) -> str:
 MEASURE_TASKS = 32  # the measured distance's tasks (fewer for fewer parts): fixed, whatever the workers
 # what a run writes in its scratch folder: level folders, the reading's work folders and these files
 _OWN_FOLDERS = re.compile(r"level\d+|tmp|weld")
-_OWN_FILES = {"manifest.json", "run.json", "stats.json", "output.npz", "input.ply", VERTICES, FACES, UV, CORNER_UV,
+LOCK = "run.lock"  # held by the run using the folder (`_claim`)
+_OWN_FILES = {LOCK, "manifest.json", "run.json", "stats.json", "output.npz", "input.ply", VERTICES, FACES, UV, CORNER_UV,
               PACKED, "faces_raw.i64", "ids.i64", *indexed.WELDED}
 
 
@@ -83,11 +89,10 @@ def _own(entry: Path) -> bool:
     return entry.name in _OWN_FILES or (entry.name.startswith(".") and entry.name.endswith(".tmp"))
 
 
-def _fresh(folder: Path, key: dict, source=None) -> None:
-    """Remove what an earlier run with other inputs or settings left in ``folder`` (only its own files).
-    A folder that holds anything else is refused (ValueError), before anything in it is touched: a
-    scratch folder is the run's, and a user's files beside it must not be removed with it; so is an input
-    file in it under a name the run writes."""
+def _refuse_foreign(folder: Path, source=None) -> None:
+    """ValueError when ``folder`` holds anything a partitioned run does not write (a scratch folder is the
+    run's, and a user's files beside it must not be removed with it), or the input ``source`` under a name
+    the run writes."""
     foreign = sorted(e.name for e in folder.iterdir() if not _own(e))
     if foreign:
         raise ValueError(f"partition: the scratch folder {folder} holds files a partitioned run did not write "
@@ -97,10 +102,42 @@ def _fresh(folder: Path, key: dict, source=None) -> None:
             and _own(Path(source)):
         raise ValueError(f"partition: the input {source} is in the scratch folder under a name the run "
                          "writes there; move it, or give another scratch folder")
+
+
+def _claim(folder: Path) -> int | None:
+    """Hold ``folder`` for this run (an exclusive lock on its `LOCK` file, released when the returned
+    descriptor is closed), or ValueError when another run holds it: two runs in one folder would each clear
+    or overwrite the other's pieces and levels as it goes. None where files cannot be locked (no ``fcntl``,
+    a file system without locks): the folder is then used unguarded, as before."""
+    if fcntl is None:  # pragma: no cover - Windows
+        return None
+    try:
+        fd = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise ValueError(f"partition: the scratch folder {folder} is in use by another run; wait until it "
+                         "ends, or give another folder (Partition.scratch, --scratch)") from None
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def _fresh(folder: Path, key: dict, source=None) -> None:
+    """Remove what an earlier run with other inputs or settings left in ``folder`` (only its own files, and
+    not the lock this run holds, `_claim`). A folder that holds anything else is refused (ValueError,
+    `_refuse_foreign`), before anything in it is touched."""
+    _refuse_foreign(folder, source)
     meta = folder / "run.json"
     if meta.exists() and json.loads(meta.read_text()) == key:
         return
     for entry in folder.iterdir():
+        if entry.name == LOCK:
+            continue
         if entry.is_dir():
             shutil.rmtree(entry, ignore_errors=True)
         else:
@@ -257,7 +294,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         from .._io.mesh import MissingFileError
         raise MissingFileError(f"no such file: {mesh}")
     folder, temporary = _scratch(p)
-    runner = None
+    runner = claim = None
     try:
         mesh = _arrays(mesh)
         key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
@@ -266,6 +303,9 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                    kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
                    borders="the input's kept along the cuts",
                    uv="auto: without seams, or with a texture image" if uv == "auto" else uv)
+        if not temporary:  # (a temporary folder is this run's alone)
+            _refuse_foreign(folder, mesh)  # before a lock file is made in a user's folder
+            claim = _claim(folder)
         _fresh(folder, key, mesh)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
@@ -356,6 +396,9 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             dist["distance_s"] = time.perf_counter() - t_measure
         t_measure = dist.get("distance_s", 0.0)
     except BaseException:
+        if claim is not None:  # (else held until the result's stats are written in the folder)
+            os.close(claim)
+            claim = None
         if runner is not None:
             runner.close(cancel=True)
             runner = None
@@ -367,17 +410,21 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         finally:  # a Ctrl-C while the workers leave still removes the temporary folder
             if temporary:
                 shutil.rmtree(folder, ignore_errors=True)
-    if manifest.get("dropped"):
-        # the way to keep UVs left out by default: for their seams in the in-core run's words (`_wedges`), else
-        # the option alone
-        left_out = uv == "auto" and manifest.get("uv_in_file") and not manifest.get("uv")
-        seams = manifest.get("uv_seam_vertices", 0)
-        how = "" if not left_out else f"; {seamed_left_out({'uv': seams})}" if seams else \
-            "; attributes='uv' (CLI: --attributes uv) keeps the UVs"
-        warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
-                      f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
-    return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
-                   t_measure, folder if not temporary else None, kwargs, stacklevel + 1, UV, texture)
+    try:
+        if manifest.get("dropped"):
+            # the way to keep UVs left out by default: for their seams in the in-core run's words (`_wedges`), else
+            # the option alone
+            left_out = uv == "auto" and manifest.get("uv_in_file") and not manifest.get("uv")
+            seams = manifest.get("uv_seam_vertices", 0)
+            how = "" if not left_out else f"; {seamed_left_out({'uv': seams})}" if seams else \
+                "; attributes='uv' (CLI: --attributes uv) keeps the UVs"
+            warnings.warn(f"partition: the output keeps positions{' and UVs' if UV is not None else ''} only; not "
+                          f"carried over from the input: {'; '.join(manifest['dropped'])}{how}", stacklevel=stacklevel)
+        return _result(V, F, target, n_faces, manifest, levels, dist, locked_share, runner_name(p), t0, t_scatter,
+                       t_measure, folder if not temporary else None, kwargs, stacklevel + 1, UV, texture)
+    finally:
+        if claim is not None:
+            os.close(claim)
 
 
 def runner_name(p: Partition) -> str:
