@@ -749,3 +749,41 @@ def test_config_and_out_mistakes_are_named(tmp_path):
     out.write_text("")
     df = qemjax.sweep(shapes.icosphere(1), {}, [0.5], metrics=False, progress=False, workers=1, out=out)
     assert len(df) == 1 and len(sw.read_table(out)) == 1
+
+
+def test_a_second_sweep_writing_the_same_table_is_refused(meshes, tmp_path, monkeypatch):
+    """Two sweeps given one ``out`` at once (a script started twice, two threads) each wrote back only the rows
+    it had read and run itself, through the same temporary file: the rows of the one that wrote first were
+    lost. The second is refused in one line while the first runs; the first writes every row, and no file is
+    left beside the table."""
+    import threading
+
+    out = tmp_path / "s.csv"
+    inside, go, real = threading.Event(), threading.Event(), sw.load_mesh
+
+    def held(value):  # the first sweep waits here, its table read, until the second has tried
+        if not inside.is_set():
+            inside.set()
+            go.wait(60)
+        return real(value)
+
+    monkeypatch.setattr(sw, "load_mesh", held)
+    done = {}
+    first = threading.Thread(target=lambda: done.update(df=qemjax.sweep(
+        {"sphere": meshes["sphere"]}, {"scheduler": ["parallel"]}, [0.5], metrics=False, out=out, progress=False,
+        workers=1)))
+    first.start()
+    try:
+        assert inside.wait(60)
+        with pytest.raises(ValueError, match=r"^out .*s\.csv is being written by another sweep"):
+            qemjax.sweep({"sheet": meshes["sheet"]}, {"scheduler": ["parallel"]}, [0.5], metrics=False, out=out,
+                         progress=False, workers=1)
+    finally:
+        go.set()
+        first.join()
+    assert list(sw.read_table(out)["cell"]) == list(done["df"]["cell"])
+    assert [p.name for p in tmp_path.iterdir()] == ["s.csv"]
+    # once it has ended, the table is free again: the next sweep adds its rows to it
+    qemjax.sweep({"sheet": meshes["sheet"]}, {"scheduler": ["parallel"]}, [0.5], metrics=False, out=out,
+                 progress=False, workers=1)
+    assert len(sw.read_table(out)) == 2 and [p.name for p in tmp_path.iterdir()] == ["s.csv"]

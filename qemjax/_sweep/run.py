@@ -32,7 +32,7 @@ from .._costs.base import Method
 from .._pipeline.api import iter_cells, simplify
 from .._options import Attributes, Schedule, Topology
 from .table import (FORMATS, NOT_APPLICABLE, _check_writable, _format, _typed, as_text,  # noqa: F401
-                    read_table, read_text, target_column, write_table, write_text)
+                    holding, read_table, read_text, target_column, write_table, write_text)
 
 # a grid varies the run keywords of `simplify` and every setting by its flat or dotted name
 # (`_flat.grid_keys`); not the target (that is `targets`), progress (the sweep's own) or feature edges
@@ -540,7 +540,8 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         `SAVE_EVERY_S`; on an executor as tasks end, at most every `SAVE_EVERY_S` and within it of a row
         coming in. Rows in row order (the rows of other grids already in the file first). Cells whose key
         is already there without an error are not run again (an interrupted sweep resumes; a CSV's rows
-        already there are written back as the same text); rows of other cells in the file are kept. Ctrl-C
+        already there are written back as the same text); rows of other cells in the file are kept. One sweep
+        at a time writes it: another sweep given the same ``out`` meanwhile is refused (ValueError). Ctrl-C
         writes every finished row and raises `SweepInterrupted` (a KeyboardInterrupt) saying how many.
     progress: a tqdm bar counting cells, moving as each cell's row is final; a line saying how many cells
         were already in ``out`` (skipped) and a warning about collapsed cells.
@@ -573,8 +574,6 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     or a bad ``out``/``executor``/``workers``. ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``,
     ``collapsed`` (reason → cells).
     """
-    import pandas as pd
-
     collapsed: dict = {}
     configs, targets = expand_grid(grid, collapsed), check_targets(targets)
     if out is not None:
@@ -604,6 +603,16 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     per_config = len(named) * len(targets)
     collapsed = {why: n * per_config for why, n in collapsed.items()}
     requested = len(cells) + sum(collapsed.values())
+    with holding(out):  # (None: no table, nothing to hold)
+        return _sweep_into(out, named, grid, configs, cells, keys, collapsed, requested, metrics, executor, submit,
+                           workers, auto, progress, batch_size)
+
+
+def _sweep_into(out, named, grid, configs, cells, keys, collapsed, requested, metrics, executor, submit, workers,
+                auto, progress, batch_size):
+    """`sweep`, its arguments checked, from reading ``out`` on: while this sweep holds it (`table.holding`),
+    so that no other sweep reads it or writes it meanwhile."""
+    import pandas as pd
 
     table = read_table(out) if out is not None else pd.DataFrame()
     rows = {}
