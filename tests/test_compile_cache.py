@@ -89,3 +89,52 @@ def test_a_sweeps_process_pool_workers_use_it(tmp_path):
                           timeout=300)
     assert done.returncode == 0 and done.stdout.strip() == "True", done.stderr
     assert _entries(tmp_path / "cache") >= 3
+
+
+# a small kernel compiled with qemjax's cache at argv[1]; argv[2] "full": the disk fills once 256 bytes of a file
+# are written (a process killed while writing an entry leaves the same); prints the cache hits
+CUT = """
+import resource, sys, warnings
+warnings.simplefilter("always")
+import jax, jax.numpy as jnp, qemjax
+hits = []
+jax.monitoring.register_event_listener(lambda name, **kw: hits.append(name) if name.endswith("cache_hits") else None)
+qemjax.cache(sys.argv[1])
+if sys.argv[2] == "full":
+    resource.setrlimit(resource.RLIMIT_FSIZE, (256, resource.RLIM_INFINITY))
+print(jax.jit(lambda x: x * 2 + 1)(jnp.arange(3.0)), len(hits))
+"""
+
+
+def test_an_entry_cut_short_is_never_read_and_is_written_again(tmp_path):
+    """JAX wrote an entry in place and never over one that is there: an entry cut short (a full disk here; a
+    process killed while writing it, or read while another was writing it) was read by every later process,
+    which warned "Error reading persistent compilation cache entry" and compiled again, for good. An entry is
+    now written whole or not at all, and one that is not whole (left by an older version) is written again."""
+    cache = tmp_path / "cache"
+    env = {k: v for k, v in os.environ.items() if k not in ("QEMJAX_NO_CACHE", "JAX_COMPILATION_CACHE_DIR")}
+    env["PYTHONPATH"] = str(ROOT)
+
+    def run(mode):
+        done = subprocess.run([sys.executable, "-c", CUT, str(cache), mode], env=env, capture_output=True, text=True,
+                              timeout=300)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.split("]")[-1].strip(), done.stderr
+
+    def entries():
+        return {p.name: p.stat().st_size for p in cache.iterdir()}
+
+    run("full")  # (its writes failed: JAX warns so)
+    assert all(size > 256 for size in entries().values())  # no entry, or a whole one: none cut short
+    hits, err = run("ok")
+    assert "Error reading" not in err and len(entries()) >= 1
+    whole = entries()
+    hits, err = run("ok")
+    assert "Error" not in err and int(hits) >= 1 and entries() == whole  # read from the cache
+    for name in whole:  # an entry an older version cut short
+        with open(cache / name, "r+b") as f:
+            f.truncate(256)
+    hits, err = run("ok")
+    assert "Error reading" not in err and entries() == whole  # compiled again, its entry written again whole
+    hits, err = run("ok")
+    assert "Error" not in err and int(hits) >= 1

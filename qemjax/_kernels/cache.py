@@ -7,10 +7,18 @@ on (`ensure_default`: importing qemjax itself does not start JAX) unless
 ``QEMJAX_NO_CACHE`` is set (to anything but "" or "0") or JAX's own cache folder is already set (by the
 program or ``JAX_COMPILATION_CACHE_DIR``: then that one is used, untouched). ``qemjax.cache(False)`` turns
 it off in a running process, ``qemjax.cache(folder)`` points it elsewhere; ``qemjax ... --no-cache`` too.
+
+JAX writes a cache entry in place (no temporary file, no lock unless the cache has a size limit), and never
+over an entry that is there: an entry cut short (a process killed or a disk filled while writing it, or read
+while another process was still writing it) was read by every later process, warned "Error reading persistent
+compilation cache entry" and compiled again, for good. In a folder qemjax sets (`enable`), an entry is written
+under a temporary name and renamed once whole (`_WholeEntries`), and one that is not whole reads as missing and
+is written again.
 """
 from __future__ import annotations
 
 import os
+import threading
 
 _OWN: list = []  # the folder enable() set, when it did
 _DECIDED: list = []  # non-empty once the cache was set up, turned off, or left to the program's setting
@@ -44,10 +52,69 @@ def enable(path: str | None = None) -> str | None:
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # JAX's default skips quick compilations: ours are
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)  # no size limit, no overrides
+    _whole_entries()
     _reset()
     _OWN[:] = [path]
     _DECIDED[:] = [True]
     return path
+
+
+def _whole(value: bytes) -> bool:
+    """Whether a cache entry's bytes are a whole compressed stream (one cut short does not decompress)."""
+    from jax._src.compilation_cache import decompress_executable
+
+    try:
+        decompress_executable(value)
+    except Exception:  # noqa: BLE001 - zlib's or zstd's error for a stream cut short
+        return False
+    return True
+
+
+def _whole_entries() -> None:
+    """JAX's file caches made from now on read and write whole entries (`_WholeEntries`); nothing where this
+    JAX has no such class to take after (the cache is then JAX's own)."""
+    try:
+        from jax._src import compilation_cache, lru_cache
+    except ImportError:  # pragma: no cover - another JAX
+        return
+    base = getattr(compilation_cache, "LRUCache", None)
+    if base is None or getattr(base, "whole_entries", False) or not hasattr(lru_cache, "_CACHE_SUFFIX"):
+        return
+
+    class _WholeEntries(base):
+        """JAX's cache of files, whose entries are written whole or not at all (a temporary file of this
+        process and thread, renamed), where JAX wrote them in place; an entry that is not whole reads as
+        missing and is removed, so that the fresh compilation's entry takes its place."""
+
+        whole_entries = True
+
+        def _entry(self, key):
+            return self.path / f"{key}{lru_cache._CACHE_SUFFIX}"
+
+        def get(self, key):
+            value = super().get(key)
+            if value is None or _whole(value):
+                return value
+            try:
+                os.unlink(self._entry(key))
+            except OSError:
+                pass
+            return None
+
+        def put(self, key, value):
+            path = self._entry(key)
+            # a cache with a size limit writes under JAX's own lock; another file system, JAX's own way
+            if self.eviction_enabled or not lru_cache._is_local_filesystem(str(self.path)) or path.exists():
+                return super().put(key, value)
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+            try:
+                tmp.write_bytes(value)
+                os.replace(tmp, path)
+            finally:
+                if tmp.exists():
+                    tmp.unlink()
+
+    compilation_cache.LRUCache = _WholeEntries
 
 
 def disable() -> None:
