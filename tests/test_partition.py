@@ -783,3 +783,20 @@ def test_a_second_run_in_a_scratch_folder_in_use_is_refused(tmp_path, monkeypatc
     assert digest(out["res"]) == digest(fresh)
     again = qemjax.simplify((V, F), ratio=0.1, partition=settings)
     assert digest(again) == digest(fresh) and again.stats["partition"]["reused"] > 0
+
+
+def test_a_resumed_run_removes_the_temporary_files_of_killed_writers(tmp_path):
+    """A process killed while it wrote a piece (a worker stopped at Ctrl-C, or by the system for its memory)
+    leaves its temporary file (``.NAME.PID.tmp``) in a kept scratch folder: a resumed run kept them for good.
+    It now removes them, and reuses what was written whole."""
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    settings = Partition(workers=1, part_faces=1000, measure=False, scratch=tmp_path / "scratch")
+    first = qemjax.simplify((V, F), ratio=0.1, partition=settings)
+    left = [tmp_path / "scratch" / "level1" / ".group_00000.npz.4242.tmp", tmp_path / "scratch" / ".input.ply.4242.tmp",
+            tmp_path / "scratch" / "level0" / ".part_00001.npz.4242.tmp"]
+    for path in left:
+        path.write_bytes(b"cut short")
+    again = qemjax.simplify((V, F), ratio=0.1, partition=settings)
+    assert digest(again) == digest(first) and again.stats["partition"]["reused"] > 0
+    assert not [p for p in left if p.exists()]

@@ -127,6 +127,14 @@ def _claim(folder: Path) -> int | None:
     return fd
 
 
+def _drop_temporaries(folder: Path) -> None:
+    """Remove the temporary files of atomic writes (`write.replace_atomically`: ``.NAME.PID.tmp``) in a folder
+    this run holds (`_claim`) and in its level folders: a process killed while writing (a worker stopped by
+    Ctrl-C, or by the system for its memory) could not remove its own, and a resumed run would keep them."""
+    for tmp in [*folder.glob(".*.tmp"), *folder.glob("level*/.*.tmp")]:
+        tmp.unlink(missing_ok=True)
+
+
 def _fresh(folder: Path, key: dict, source=None) -> None:
     """Remove what an earlier run with other inputs or settings left in ``folder`` (only its own files, and
     not the lock this run holds, `_claim`). A folder that holds anything else is refused (ValueError,
@@ -307,6 +315,8 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             _refuse_foreign(folder, mesh)  # before a lock file is made in a user's folder
             claim = _claim(folder)
         _fresh(folder, key, mesh)
+        if claim is not None:
+            _drop_temporaries(folder)
         source = _as_file(mesh, folder)
         runner = execute.open_runner(p)
         manifest_path = folder / "manifest.json"
