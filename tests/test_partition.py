@@ -783,6 +783,7 @@ def test_a_second_run_in_a_scratch_folder_in_use_is_refused(tmp_path, monkeypatc
     assert digest(out["res"]) == digest(fresh)
     again = qemjax.simplify((V, F), ratio=0.1, partition=settings)
     assert digest(again) == digest(fresh) and again.stats["partition"]["reused"] > 0
+    assert not (tmp_path / "scratch" / "run.lock").exists()  # let go, and removed
 
 
 def test_a_resumed_run_removes_the_temporary_files_of_killed_writers(tmp_path):

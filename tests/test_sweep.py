@@ -6,6 +6,7 @@ import csv
 import hashlib
 import importlib.util
 import multiprocessing
+import os
 import re
 
 import numpy as np
@@ -787,3 +788,23 @@ def test_a_second_sweep_writing_the_same_table_is_refused(meshes, tmp_path, monk
     qemjax.sweep({"sheet": meshes["sheet"]}, {"scheduler": ["parallel"]}, [0.5], metrics=False, out=out,
                  progress=False, workers=1)
     assert len(sw.read_table(out)) == 2 and [p.name for p in tmp_path.iterdir()] == ["s.csv"]
+
+
+def test_a_lock_a_forked_worker_inherited_does_not_hold_the_table(tmp_path):
+    """A worker forked while a sweep held its table (a fork-based executor) keeps the lock it inherited for
+    its own life: the lock file is removed as the sweep lets go, so the next sweep takes a new one."""
+    from qemjax._io import held
+
+    path = tmp_path / ".s.csv.lock"
+    fd = held.take(path, "busy")
+    inherited = os.dup(fd)  # what a forked process holds: the same lock
+    try:
+        with pytest.raises(ValueError, match="^busy$"):
+            held.take(path, "busy")
+        held.release(path, fd)
+        again = held.take(path, "busy")
+        assert again is not None and path.exists()
+        held.release(path, again)
+        assert not path.exists()
+    finally:
+        os.close(inherited)

@@ -17,14 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-try:
-    import fcntl
-except ImportError:  # pragma: no cover - Windows
-    fcntl = None
-
 from . import execute, indexed, pieces, plan, task
 from .readers import texture_of
 from .source import CORNER_UV, FACES, PACKED, UV, VERTICES
+from .._io import held as _held
 from .._mesh.arrays import box_diagonal
 from .._mesh.wedges import seamed_left_out
 from .._options import Partition
@@ -105,26 +101,15 @@ def _refuse_foreign(folder: Path, source=None) -> None:
 
 
 def _claim(folder: Path) -> int | None:
-    """Hold ``folder`` for this run (an exclusive lock on its `LOCK` file, released when the returned
-    descriptor is closed), or ValueError when another run holds it: two runs in one folder would each clear
-    or overwrite the other's pieces and levels as it goes. None where files cannot be locked (no ``fcntl``,
-    a file system without locks): the folder is then used unguarded, as before."""
-    if fcntl is None:  # pragma: no cover - Windows
-        return None
-    try:
-        fd = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT, 0o666)
-    except OSError:
-        return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise ValueError(f"partition: the scratch folder {folder} is in use by another run; wait until it "
-                         "ends, or give another folder (Partition.scratch, --scratch)") from None
-    except OSError:
-        os.close(fd)
-        return None
-    return fd
+    """Hold ``folder`` for this run (`_io.held`: a lock on its `LOCK` file, until `_let_go`), or ValueError
+    when another run holds it: two runs in one folder would each clear or overwrite the other's pieces and
+    levels as it goes. None where files cannot be locked: the folder is then used unguarded, as before."""
+    return _held.take(folder / LOCK, f"partition: the scratch folder {folder} is in use by another run; wait "
+                                    "until it ends, or give another folder (Partition.scratch, --scratch)")
+
+
+def _let_go(folder: Path, claim: int | None) -> None:
+    _held.release(folder / LOCK, claim)
 
 
 def _drop_temporaries(folder: Path) -> None:
@@ -407,7 +392,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         t_measure = dist.get("distance_s", 0.0)
     except BaseException:
         if claim is not None:  # (else held until the result's stats are written in the folder)
-            os.close(claim)
+            _let_go(folder, claim)
             claim = None
         if runner is not None:
             runner.close(cancel=True)
@@ -434,7 +419,7 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
                        t_measure, folder if not temporary else None, kwargs, stacklevel + 1, UV, texture)
     finally:
         if claim is not None:
-            os.close(claim)
+            _let_go(folder, claim)
 
 
 def runner_name(p: Partition) -> str:

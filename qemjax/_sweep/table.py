@@ -11,10 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-try:
-    import fcntl
-except ImportError:  # pragma: no cover - Windows
-    fcntl = None
+from .._io import held
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
 NOT_APPLICABLE = "n/a"  # a grid key the cell's method does not have (empty / NaN stays "None")
@@ -157,46 +154,20 @@ def as_text(value) -> str:
 
 @contextlib.contextmanager
 def holding(out):
-    """Within it, this sweep alone reads and writes the table ``out`` (an exclusive lock on a hidden file
+    """Within it, this sweep alone reads and writes the table ``out`` (`_io.held`: a lock on a hidden file
     beside it, ``.NAME.lock``, removed as it ends); ValueError at once when another sweep holds it. Two
     sweeps writing one table each wrote back only the rows it had read and run itself (the other's were
-    lost), through the same temporary file. None (no table), or where files cannot be locked (no ``fcntl``,
-    a file system without locks): nothing is held, as before."""
-    fd = _lock(Path(out).with_name(f".{Path(out).name}.lock"), out) if out is not None and fcntl else None
+    lost), through the same temporary file. None: no table, nothing held."""
+    if out is None:
+        yield
+        return
+    path = Path(out).with_name(f".{Path(out).name}.lock")
+    fd = held.take(path, f"out {os.fspath(out)} is being written by another sweep; wait until it ends, or "
+                         "give another out")
     try:
         yield
     finally:
-        if fd is not None:
-            try:  # removed while held: a sweep that opened it meanwhile sees it is gone (`_lock`)
-                os.unlink(Path(out).with_name(f".{Path(out).name}.lock"))
-            except OSError:
-                pass
-            os.close(fd)  # (closing releases the lock)
-
-
-def _lock(path: Path, out) -> int | None:
-    """A descriptor of ``path`` locked exclusively (`holding`), or None where it cannot be locked."""
-    while True:
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-        except OSError:
-            return None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise ValueError(f"out {os.fspath(out)} is being written by another sweep; wait until it ends, "
-                             "or give another out") from None
-        except OSError:
-            os.close(fd)
-            return None
-        try:
-            same = os.path.samestat(os.fstat(fd), os.stat(path))
-        except OSError:  # removed by the sweep that held it, after this one opened it
-            same = False
-        if same:
-            return fd
-        os.close(fd)  # a lock on a file its holder removed as it ended: take the one there now
+        held.release(path, fd)
 
 
 def _fsynced_replace(tmp: Path, out) -> None:
