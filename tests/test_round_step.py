@@ -155,3 +155,35 @@ def test_models_that_read_more_than_the_pair_are_not_fused():
     assert not device.fuses(build(resolve("area")))
     assert not device.fuses(build(qemjax.QEM(memoryless=True)))
     assert not device.fuses(build(qemjax.QEM(regularize=0.1)))
+
+
+@pytest.mark.parametrize("kw", [{"ratio": 0.05, "memoryless": True}, {"ratio": 0.02, "method": "default"}])
+def test_a_refreshing_model_writes_its_device_rows_once_a_round(kw, monkeypatch):
+    """A model that refreshes state (memoryless QEM; the default's memoryless last stretch) writes a round's
+    device rows once: the refreshed rows of the kept vertices' rings, the kept vertices among them. The
+    result is that of writing the kept vertices' merged rows first as well."""
+    mesh = shapes.bumpy_sphere(4)
+    writes = []
+
+    def counted(A, idx, rows, size=4096):
+        writes.append(len(idx))
+        return set_rows(A, idx, rows, size=size)
+
+    with monkeypatch.context() as m:
+        m.setattr(stages, "set_rows", counted)
+        new = _simplify(mesh, **kw)
+    rounds = new.stats["faces_per_round"]
+    switch = new.stats.get("memoryless_from_faces")
+    refreshing = len(rounds) if switch is None else sum(f < switch for f in rounds)
+    assert refreshing >= 2 and len(writes) == refreshing
+
+    def both(self, rnd, st, a, P, xs, merged):  # the kept vertices' rows written as well, then the rings'
+        run = rnd.run
+        rows = np.concatenate([xs, merged()], 1)
+        stages.put_rows(run.VQ, a, rows)
+        run.VQd = set_rows(run.VQd, a, rows, size=run.merge_chunk)
+
+    with monkeypatch.context() as m:
+        m.setattr(stages.SeparateCalls, "finish", both)
+        old = _simplify(mesh, **kw)
+    _assert_same(new, old)

@@ -25,7 +25,10 @@ from ..shape import ranking
 
 class SeparateCalls:
     """A round's device work as separate calls: the merge starts with the contraction, the kept vertices' rows
-    are written once it is in, and the next round prices its stale pairs in its own stage 2."""
+    are written once it is in, and the next round prices its stale pairs in its own stage 2. With a model that
+    refreshes state, the host rows alone: `Round.contract` writes the refreshed rows of the kept vertices' rings
+    to the device next, and every kept vertex is in its ring (`pairs.ring_vertices`), so a device write here
+    would be overwritten before anything reads it (a device call a round for nothing)."""
 
     def begin(self, run: Run, P, xs):
         return start_merge(run.model, run.VQd, P, xs, run.params, size=run.merge_chunk)
@@ -34,7 +37,8 @@ class SeparateCalls:
         run = rnd.run
         rows = np.concatenate([xs, merged()], 1)  # the kept vertices' new [position, state]
         put_rows(run.VQ, a, rows)
-        run.VQd = set_rows(run.VQd, a, rows, size=run.merge_chunk)
+        if run.model.refresh is None:
+            run.VQd = set_rows(run.VQd, a, rows, size=run.merge_chunk)
 
 
 class OneCall:
