@@ -187,3 +187,29 @@ def test_a_refreshing_model_writes_its_device_rows_once_a_round(kw, monkeypatch)
         m.setattr(stages.SeparateCalls, "finish", both)
         old = _simplify(mesh, **kw)
     _assert_same(new, old)
+
+
+@pytest.mark.parametrize("kw", [{"ratio": 0.05, "memoryless": True}, {"ratio": 0.02, "method": "default"}])
+def test_a_round_prices_its_stale_pairs_on_their_own_in_one_call(kw, monkeypatch):
+    """A round that prices its stale pairs in a call of their own (a model that does not fuse: memoryless QEM,
+    the default's memoryless last stretch) sends more than a smallest piece's worth, up to a middle piece's,
+    as one piece of a fused round's price shape (`stages.one_piece`) rather than up to eight of the smallest:
+    the result of those pieces."""
+    from qemjax._kernels.batching import CHUNKS, piece_sizes
+    mesh = shapes.bumpy_sphere(4)
+    calls = []
+    price = stages.start_price
+
+    def spy(model, VSd, P, params, faces=None, pad=0, at_kept=False, size=None):
+        calls.append((len(P), 1 if size else len(piece_sizes(len(P)))))
+        return price(model, VSd, P, params, faces, pad, at_kept, size)
+
+    with monkeypatch.context() as m:
+        m.setattr(stages, "start_price", spy)
+        new = _simplify(mesh, **kw)
+    between = [pieces for k, pieces in calls if CHUNKS[0] < k <= CHUNKS[1]]
+    assert between and all(p == 1 for p in between)
+    with monkeypatch.context() as m:
+        m.setattr(stages, "one_piece", lambda run, k: None)
+        old = _simplify(mesh, **kw)
+    _assert_same(new, old)

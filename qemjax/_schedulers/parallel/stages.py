@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from ..._costs import MeshView
-from ..._kernels.batching import DTYPE, set_rows
+from ..._kernels.batching import CHUNKS, DTYPE, set_rows
 from ..._mesh import row_compact
 from ..._mesh import topology as topo
 from ..._mesh.arrays import any_at, keep_rows as _keep, put_rows, take_rows as _take
@@ -21,6 +21,17 @@ from ..select import fits_target, gate_rank, sort_keys
 from .pairs import ring_vertices, with_extra_pairs
 from .state import RoundState, Run, holding
 from ..shape import ranking
+
+
+def one_piece(run: Run, k: int) -> int | None:
+    """The shape of the one piece a round prices its k stale pairs (the first round: every pair) in, in a call
+    of their own (`device.start_price`'s ``size``), or None for `chunks`' shapes. More than a smallest piece
+    holds and at most a middle one: the smallest shape of a fused round's price that holds them (`STEP_PRICE`,
+    `holding`), one call instead of up to eight calls of the smallest. Each pair's price is its own, whatever
+    the piece: the same values. A ring model's pieces follow its ring groups (`device.start_price`)."""
+    if run.model.uses_ring or not CHUNKS[0] < k <= CHUNKS[1]:
+        return None
+    return holding(run.price_sizes, k)
 
 
 class SeparateCalls:
@@ -139,7 +150,8 @@ class Round:
         vertices marked."""
         run = self.run
         if prev is None:
-            d, pending = None, run.first or start_price(run.model, run.VQd, st.E, run.params, run.faces, run.pad)
+            d, pending = None, run.first or start_price(run.model, run.VQd, st.E, run.params, run.faces, run.pad,
+                                                        size=one_piece(run, len(st.E)))
             run.first = None
             st.bad = np.zeros(len(st.E), np.int8)
             if run.locks is not None:
@@ -150,7 +162,8 @@ class Round:
                 prev.next_price = None
             else:
                 d = np.flatnonzero(stale)
-                pending = start_price(run.model, run.VQd, _take(st.E, d), run.params, run.faces, run.pad)
+                pending = start_price(run.model, run.VQd, _take(st.E, d), run.params, run.faces, run.pad,
+                                      size=one_piece(run, len(d)))
             if run.locks is not None:
                 pending = self.locked_prices(pending, _take(st.E, d))
             st.bad = follow(prev.bad)  # found invalid, and their neighbourhood has not changed since
