@@ -305,6 +305,22 @@ def test_replay_and_vertex_map_check_their_arguments():
     assert np.array_equal(rec.vertex_map(3), rec.replay(contractions=3).vertex_map)
 
 
+@pytest.mark.parametrize("bad", [float("inf"), float("nan"), -float("inf")])
+def test_replay_refuses_infinities_and_nans_in_its_words(bad):
+    """replay(target_faces=inf) and replay(contractions=inf) raised OverflowError ("cannot convert float
+    infinity to integer") and a NaN Python's ValueError ("cannot convert float NaN to integer"), where every
+    other bad count is refused in the argument's name."""
+    rec = qemjax.simplify(shapes.icosphere(2), ratio=0.5, method="classic").record
+    n = len(rec.history)
+    with pytest.raises(ValueError, match=rf"^contractions must be a whole number in \[0, {n}\], got -?(inf|nan)$"):
+        rec.replay(contractions=bad)
+    with pytest.raises(ValueError, match=rf"^contractions must be a whole number in \[0, {n}\], got -?(inf|nan)$"):
+        rec.vertex_map(bad)
+    with pytest.raises(ValueError, match=r"^target_faces must be an integer >= 1, got -?(inf|nan)$"):
+        rec.replay(target_faces=bad)
+    assert rec.replay(target_faces=np.int64(10**6)).contractions == 0  # an integer type is whole as it is
+
+
 def test_lod_chain_takes_dotted_settings_as_simplify_does():
     """A setting named dotted ("method.refit") is the flat one: lod_chain's own default of refit=0 overrode
     it, and ESQEM's "method.split_factor": None was refused as missing; ratios=0.5 failed in Python's words."""

@@ -150,14 +150,14 @@ class Record:
                 raise ValueError(f"ratio must be in (0, 1] (the fraction of faces to keep), got {ratio}")
             target_faces = max(1, int(round(ratio * len(self.input_faces))))
         if target_faces is not None:
-            if int(target_faces) != target_faces or target_faces < 1:
+            if not _whole(target_faces) or target_faces < 1:
                 raise ValueError(f"target_faces must be an integer >= 1, got {target_faces!r}")
             contractions = self.steps_for(int(target_faces))
         return self._level(self._contractions(contractions))
 
     def _contractions(self, j) -> int:
         """``j`` as a count of this record's contractions; ValueError unless a whole number in range."""
-        if isinstance(j, (bool, np.bool_)) or not isinstance(j, (int, float, np.number)) or int(j) != j \
+        if isinstance(j, (bool, np.bool_)) or not isinstance(j, (int, float, np.number)) or not _whole(j) \
                 or not 0 <= j <= len(self.history):
             raise ValueError(f"contractions must be a whole number in [0, {len(self.history)}], got {j!r}")
         return int(j)
@@ -261,6 +261,11 @@ def load_record(path) -> Record:
                       str(a["scheduler"]), int(a["target_faces"]), a.get("locked"))
     except KeyError as exc:
         raise ValueError(f"{path}: the record is incomplete (no {exc.args[0]!r} in it)") from None
+
+
+def _whole(x) -> bool:
+    """Whether the number x is a whole number (int() of an infinity or a NaN raises in Python's words)."""
+    return isinstance(x, (int, np.integer)) or (bool(np.isfinite(x)) and int(x) == x)
 
 
 def _internal(V: np.ndarray, verts: np.ndarray, frame: Frame) -> np.ndarray:
