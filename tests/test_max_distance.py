@@ -200,3 +200,31 @@ def test_sweep_key():
             warnings.simplefilter("ignore")
             alone = qemjax.simplify(meshes["sphere"], ratio=0.1, max_distance_rel=rel)
         assert row["faces_out"] == len(alone.faces)
+
+
+def test_a_cut_run_counts_its_rounds_faces_as_its_own():
+    """Where the bound cut a parallel run short, faces_per_round was the run's list cut at stats['rounds'], the
+    rounds run: a round that contracted nothing has no entry, so after one the list kept an entry of a round
+    past the cut (one more than rounds_contracting), and a cut inside a round kept that round's whole count,
+    below the faces returned. Each entry is now the count after a round of the level returned, its last the
+    level's own."""
+    V, F = shapes.grid(12)
+    V = V.copy()
+    V[:, 2] = 0.05 * np.sin(5 * V[:, 0]) * np.cos(4 * V[:, 1])
+    locked = np.flatnonzero(np.random.default_rng(0).random(len(V)) < 0.3)  # rounds that contract nothing
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        full = qemjax.simplify((V, F), ratio=0.05, locked=locked, method="classic")
+        cuts = [qemjax.simplify((V, F), ratio=0.05, locked=locked, method="classic", max_distance_rel=rel)
+                for rel in (0.005, 0.02, 0.03, 0.05)]
+    assert full.stats["rounds_contracting"] < full.stats["rounds"]
+    idle = 0
+    for res in cuts:
+        s = res.stats
+        assert res.stop_reason == "max_distance"
+        assert len(s["faces_per_round"]) == s["rounds_contracting"] == len(np.unique(res.history.rounds))
+        assert s["faces_per_round"][-1] == s["faces_out"] == len(res.faces)
+        # the rounds the cut kept whole have the run's own counts
+        assert s["faces_per_round"][:-1] == full.stats["faces_per_round"][:len(s["faces_per_round"]) - 1]
+        idle += s["rounds"] > s["rounds_contracting"]
+    assert idle  # a cut past a round that contracted nothing, the case that kept an entry too many

@@ -218,7 +218,11 @@ def apply(res, job, bound: Bound, stacklevel: int, caught: list) -> object:
         s["rounds"] = int(rounds[j - 1]) + 1 if j else 0
         s["rounds_contracting"] = outcome.contracting_rounds(rounds[:j])
         if isinstance(s.get("faces_per_round"), list):
-            s["faces_per_round"] = s["faces_per_round"][:s["rounds"]]
+            # one entry per round that contracted something (rounds that contracted nothing have none, so
+            # the rounds run are no count of them), from the record: the count after each such round's last
+            # contraction in the prefix, the level's own for a round the cut ends inside
+            last = np.flatnonzero(np.diff(rounds[:j]) != 0).tolist() + [j - 1] if j else []
+            s["faces_per_round"] = [int(counts[k + 1]) for k in last]
     s.update(faces_out=len(best.faces), vertices_out=len(X), contractions=j, refit=refit_rounds,
              max_distance=limit, max_distance_rel=(limit / chk.diagonal if chk.diagonal > 0 else None),
              distance_two_way_max=d_best,
