@@ -121,6 +121,8 @@ class _Parser(argparse.ArgumentParser):
         wrong = next((a.split("=", 1)[0] for a in extras if a.startswith("--")), None)
         if wrong is None:
             return ""
+        if getattr(args, "cmd", None) == "lod" and wrong in TARGETS.values():  # lod_chain's refusal, not a near
+            return f"; qemjax lod takes its targets from --ratios, not {wrong}"  # name (--max-shift for one)
         parser = (self.subcommands or {}).get(getattr(args, "cmd", None), self)
         options = [o for action in parser._actions if action.help is not argparse.SUPPRESS
                    for o in action.option_strings if o.startswith("--")]

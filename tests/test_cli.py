@@ -445,6 +445,17 @@ def test_a_misspelt_option_suggests_the_close_one(src, tmp_path, capsys, monkeyp
     assert "--attributes" not in capsys.readouterr().err
 
 
+def test_lod_refuses_simplify_targets_as_lod_chain_does(src, tmp_path, capsys, monkeypatch):
+    """qemjax lod --max-distance 0.1 answered "did you mean --max-shift?", an option of another meaning, and
+    --faces or --max-error nothing: lod_chain's own refusal says where the levels' targets come from."""
+    _no_simplify(monkeypatch)
+    for flag in ("--max-distance", "--max-distance-rel", "--faces", "--max-error"):
+        assert _cli.main(["lod", str(src), str(tmp_path / "lods"), flag, "0.1"]) == 2
+        assert capsys.readouterr().err == (f"qemjax: error: unrecognized arguments: {flag} 0.1; qemjax lod takes "
+                                           f"its targets from --ratios, not {flag}\nsee 'qemjax lod --help'\n")
+    assert not (tmp_path / "lods").exists()
+
+
 def test_what_max_distance_cannot_keep_is_named_as_an_option(src, tmp_path, capsys):
     """--max-distance with ESQEM's splits or with attributes kept: the error names the options that turn them
     off (it named simplify's keywords alone, split_factor=None and attributes=None)."""
