@@ -88,6 +88,9 @@ def _check(res, D):
     assert len(res.faces) == s["faces_out"] and len(res.history) == s["contractions"]
     assert res.record.faces_out == len(res.faces)
     assert np.array_equal(res.replay(contractions=len(res.history)).faces, res.faces)
+    per_round = s.get("faces_per_round")  # the parallel scheduler's: the returned level's rounds, cut or not
+    if isinstance(per_round, list):
+        assert len(per_round) == s["rounds_contracting"] and per_round[-1:] in ([], [len(res.faces)])
 
 
 @SETTINGS
