@@ -438,3 +438,32 @@ def test_replay_of_a_run_that_kept_attributes_says_they_are_not_replayed():
     assert [str(w.message) for w in said] == [
         "lod_chain's levels have positions and faces only: the run's uv is not replayed (the record holds the "
         "contractions, not the attributes' wedges); chain.result keeps them"] and said[0].filename == __file__
+
+
+def test_a_scheduler_that_gives_no_rounds_replays(monkeypatch, tmp_path):
+    """The scheduler contract lets an Outcome leave history_rounds None (a scheduler registered from
+    outside need not count rounds): the record then holds no rounds, and every level but the input's read
+    the round of its last contraction from them, an IndexError out of replay, vertex_map, lod_chain and
+    max_distance alike. Such a level's round is -1, as for the input."""
+    from qemjax import _schedulers
+
+    def plain(*args, **kwargs):
+        return dataclasses.replace(_schedulers.get("parallel")(*args, **kwargs), history_rounds=None)
+
+    monkeypatch.setitem(_schedulers._REGISTRY, "no_rounds", plain)
+    m = shapes.icosphere(2)
+    res = qemjax.simplify(m, ratio=0.2, method="classic", scheduler="no_rounds")
+    want = qemjax.simplify(m, ratio=0.2, method="classic")
+    assert len(res.history.rounds) == 0 and np.array_equal(res.faces, want.faces)
+    level = res.replay(contractions=5)
+    assert level.round == -1 and np.array_equal(level.faces, want.replay(contractions=5).faces)
+    assert np.array_equal(res.vertex_map, want.vertex_map)
+    res.record.save(tmp_path / "r.npz")
+    assert np.array_equal(qemjax.load_record(tmp_path / "r.npz").replay(contractions=7).faces,
+                          want.replay(contractions=7).faces)
+    chain = qemjax.lod_chain(m, ratios=[0.5, 0.2], method="classic", scheduler="no_rounds")
+    assert [len(lv.faces) for lv in chain] == [160, 64]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bounded = qemjax.simplify(m, max_distance_rel=0.01, method="classic", scheduler="no_rounds")
+    assert bounded.stats["distance_two_way_max"] <= bounded.stats["max_distance"]

@@ -198,11 +198,11 @@ class Record:
                 w = w[~self.locked[ids[w]]]
             verts[w] = self.frame.positions_to_mesh(_internal(V[ids[w]], ids[w], self.frame), ids[w])
         costs = self.history.costs[:j]
-        rounds = self.history.rounds
+        rounds = self.history.rounds  # empty from a scheduler that gives no rounds (the contract lets it)
         return Level(vertices=verts, faces=faces, source_vertices=ids.astype(np.int64),
                      source_faces=fids.astype(np.int64), vertex_map=index[root],
                      contractions=j, max_error=float(costs.max()) if j else 0.0,
-                     round=int(rounds[j - 1]) if j and rounds is not None else -1)
+                     round=int(rounds[j - 1]) if j and rounds is not None and len(rounds) >= j else -1)
 
     # -- progressive form --------------------------------------------------------------------------
     def arrays(self) -> dict:
