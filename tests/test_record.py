@@ -467,3 +467,32 @@ def test_a_scheduler_that_gives_no_rounds_replays(monkeypatch, tmp_path):
         warnings.simplefilter("ignore")
         bounded = qemjax.simplify(m, max_distance_rel=0.01, method="classic", scheduler="no_rounds")
     assert bounded.stats["distance_two_way_max"] <= bounded.stats["max_distance"]
+
+
+@pytest.mark.parametrize("shape, kw", [(shapes.icosphere(2), dict(ratio=0.2)),
+                                       (shapes.cube(2), dict(target_faces=4, preserve_topology=False,
+                                                             flip_angle=None))])  # coincident faces go
+def test_a_scheduler_that_does_not_say_which_faces_went_replays(monkeypatch, shape, kw):
+    """The scheduler contract lets an Outcome leave removed_at and coincident None, and the record then
+    took every face for a survivor: each level re-linked all the input's faces, collapsed ones included
+    (the last level 256 degenerate faces where the result has 64), and max_distance returned such a level
+    as its result. They are found from the contractions, as the built-in schedulers record them."""
+    from qemjax import _schedulers
+
+    def silent(*args, **kwargs):
+        out = _schedulers.get("parallel")(*args, **kwargs)
+        return dataclasses.replace(out, removed_at=None, coincident=None)
+
+    monkeypatch.setitem(_schedulers._REGISTRY, "silent", silent)
+    res = qemjax.simplify(shape, method="classic", scheduler="silent", **kw)
+    own = qemjax.simplify(shape, method="classic", **kw)
+    assert np.array_equal(res.faces, own.faces)
+    assert np.array_equal(res.record.removed_at, own.record.removed_at)
+    assert np.array_equal(res.record.coincident, own.record.coincident)
+    for j in range(len(res.history) + 1):
+        same_mesh(res.replay(contractions=j), own.replay(contractions=j))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bounded = qemjax.simplify(shape, method="classic", scheduler="silent", max_distance_rel=0.05)
+        alone = qemjax.simplify(shape, method="classic", max_distance_rel=0.05)
+    assert np.array_equal(bounded.faces, alone.faces) and np.array_equal(bounded.vertices, alone.vertices)

@@ -38,7 +38,7 @@ from .._mesh import units as _units
 from .._mesh import wedges as _wedges
 from .._mesh.arrays import face_normals, release_free_memory
 from .._options import Attributes, Options, Schedule, Topology
-from .._record.history import Record
+from .._record.history import Record, removals
 from .._record.result import Contractions, SimplifyResult
 from .._kernels.batching import DTYPE
 from .._schedulers import outcome
@@ -481,6 +481,10 @@ def finish(job: Job, ran, t_start: float, c0, s0, stacklevel: int, batch: dict |
     if len(job.geo.F) >= LARGE_RUN:  # the rounds' freed arrays, back to the system before the re-fit's
         release_free_memory()
     out, g, locked = _locks.back(job.locks, out, job.geo)
+    if out.removed_at is None and out.contractions:  # a scheduler that does not say which contraction removed
+        # each face (the contract lets it): found from its contractions, so that its record replays its output
+        removed_at, coincident = removals(g.F, out.history.pairs, out.alive)
+        out = dataclasses.replace(out, removed_at=removed_at, coincident=coincident)
     mesh = _output(out, g, job.model, locked)
     appearance = _appearance(job, mesh)
     split_stats = None

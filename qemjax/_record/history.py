@@ -263,6 +263,45 @@ def load_record(path) -> Record:
         raise ValueError(f"{path}: the record is incomplete (no {exc.args[0]!r} in it)") from None
 
 
+def removals(F: np.ndarray, pairs: np.ndarray, alive: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(removed_at (m,) int64, coincident (m,) bool) of the faces F (m,3) under the contractions ``pairs``
+    (k,2) (kept, removed), for a scheduler whose outcome does not give them (the contract lets it leave them
+    None), so that its record replays its own output. A face goes at the first contraction after which two
+    of its corners are one vertex; of the faces the run dropped (``alive`` False) that never collapse, as
+    coincident by `topology.coincident_removals`, the rule the built-in schedulers apply, at the first
+    contraction after which it drops them; any left, at the last contraction. One pass over the
+    contractions, each looking at the faces around the vertex it keeps."""
+    F = np.asarray(F, np.int64)
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    m = len(F)
+    n = int(max(F.max(initial=-1), pairs.max(initial=-1))) + 1
+    removed_at, coincident = np.full(m, -1, np.int64), np.zeros(m, bool)
+    root = np.arange(n, dtype=np.int64)
+    members: dict = {}
+    around: list = [[] for _ in range(n)]  # the faces around each vertex's class, those removed pruned lazily
+    for f, corners in enumerate(F.tolist()):
+        for v in set(corners):
+            around[v].append(f)
+    for k, (a, b) in enumerate(pairs.tolist()):
+        ra, rb = int(root[a]), int(root[b])
+        if ra == rb:
+            continue
+        moved = members.pop(rb, [rb])
+        root[moved] = ra
+        members.setdefault(ra, [ra]).extend(moved)
+        faces = np.array(sorted({f for f in around[ra] + around[rb] if removed_at[f] < 0}), np.int64)
+        around[rb] = []
+        G = root[F[faces]]
+        flat = (G[:, 0] == G[:, 1]) | (G[:, 1] == G[:, 2]) | (G[:, 0] == G[:, 2])
+        removed_at[faces[flat]] = k
+        rest = faces[~flat]
+        drop = rest[topo.coincident_removals(G[~flat]) & ~alive[rest]]
+        removed_at[drop], coincident[drop] = k, True
+        around[ra] = [f for f in rest.tolist() if removed_at[f] < 0]
+    removed_at[(removed_at < 0) & ~alive] = len(pairs) - 1
+    return removed_at, coincident
+
+
 def _whole(x) -> bool:
     """Whether the number x is a whole number (int() of an infinity or a NaN raises in Python's words)."""
     return isinstance(x, (int, np.integer)) or (bool(np.isfinite(x)) and int(x) == x)
