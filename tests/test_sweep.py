@@ -126,6 +126,27 @@ def test_failed_cells_have_an_error_and_rerun(meshes, tmp_path):
     assert len(sw.read_table(out)) == 2 and len(again) == 2
 
 
+@pytest.mark.parametrize("ext", [".csv", ".parquet"])
+def test_a_mesh_changed_under_its_name_is_not_resumed(tmp_path, ext):
+    """A resumed sweep whose mesh is another under the same name (a file edited, a shape made finer) refuses,
+    naming the mesh and the file: its old rows would stand for the new mesh (all cells skipped), or sit
+    beside the new mesh's rows. The same mesh again resumes."""
+    if ext == ".parquet":
+        pytest.importorskip("pyarrow")
+    out = tmp_path / f"s{ext}"
+    qemjax.sweep({"ball": shapes.icosphere(1)}, {}, [0.5], metrics=False, out=out, progress=False, workers=1)
+    before = out.read_bytes()
+    for targets in ([0.5], [0.5, 0.25]):  # every cell in the file, or some of them
+        with pytest.raises(ValueError, match=r"holds rows of mesh 'ball' computed from another mesh"):
+            qemjax.sweep({"ball": shapes.icosphere(2)}, {}, targets, metrics=False, out=out, progress=False,
+                         workers=1)
+        assert out.read_bytes() == before  # left as it was
+    again = qemjax.sweep({"ball": shapes.icosphere(1)}, {}, [0.5, 0.25], metrics=False, out=out, progress=False,
+                         workers=1)
+    assert again.attrs["sweep"]["skipped"] == 1 and again["mesh_sha256"].nunique() == 1
+    assert again["mesh_sha256"].iloc[0] == sw.mesh_hash(sw.load_mesh(shapes.icosphere(1)))
+
+
 def test_metrics_columns(meshes):
     m = meshes["sphere"]
     df = qemjax.sweep({"sphere": m}, {"method": ["qem"]}, [0.5], metrics={"n_samples": 1000}, progress=False)

@@ -73,6 +73,7 @@ SAVE_EVERY_S = 1.0  # the table is rewritten after each piece run here, and whil
 RETRIES = 3  # an executor task that is lost (a worker died) is submitted again this many times, then run here
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/figures/dask_speedup.py)
 PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
+MESH_HASH = "mesh_sha256"  # the column of each row's input mesh fingerprint (`mesh_hash`)
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
 
@@ -279,6 +280,24 @@ def result_hash(res) -> str:
     h = hashlib.sha256(np.ascontiguousarray(res.vertices, np.float64).tobytes())
     h.update(np.ascontiguousarray(res.faces, np.int64).tobytes())
     return h.hexdigest()
+
+
+def mesh_hash(mesh) -> str:
+    """A mesh input's fingerprint (`result_hash` of the vertices and faces `load_mesh` gives): a table's
+    ``mesh_sha256``, which a resumed sweep checks its meshes against."""
+    return result_hash(mesh)
+
+
+def _stored_meshes(table) -> dict[str, set]:
+    """mesh name → the fingerprints (``mesh_sha256``) a sweep table's rows hold for it; tables written before
+    the column existed hold none."""
+    if not len(table) or MESH_HASH not in table:
+        return {}
+    out: dict[str, set] = {}
+    for name, value in zip(table["mesh"], table[MESH_HASH]):
+        if isinstance(value, str) and value:
+            out.setdefault(str(name), set()).add(value)
+    return out
 
 
 def _peer(cell: Cell) -> str | None:
@@ -569,10 +588,11 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     batch, or its own ``total_s``), ``share_s`` (apportioned: ``batch_wall_s / batch_size`` plus its own
     re-fit and distance measurement, or its own ``total_s``); then the metrics (`qemjax.metrics.evaluate`'s columns, its ``time_s``
     as ``metrics_s``: the evaluation's own wall time); ``cell_s`` = ``share_s`` + ``metrics_s`` (the
-    cell's time in the sweep, apportioned when batched). Rows come in cell order (mesh, then grid, last key
-    fastest, then target), however the cells finished. Raises ValueError for unknown grid keys, bad targets
-    or a bad ``out``/``executor``/``workers``. ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``,
-    ``collapsed`` (reason → cells).
+    cell's time in the sweep, apportioned when batched); ``mesh_sha256`` (`mesh_hash`: of the input's
+    vertices and faces as read). Rows come in cell order (mesh, then grid, last key fastest, then target),
+    however the cells finished. Raises ValueError for unknown grid keys, bad targets, a bad
+    ``out``/``executor``/``workers``, or an ``out`` holding rows of a mesh that changed under its name.
+    ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``, ``collapsed`` (reason → cells).
     """
     collapsed: dict = {}
     configs, targets = expand_grid(grid, collapsed), check_targets(targets)
@@ -626,7 +646,17 @@ def _sweep_into(out, named, grid, configs, cells, keys, collapsed, requested, me
     texts = {k: t for k, t in texts.items() if k in rows or k not in set(keys)}
     todo = [c for c in cells if c.key not in rows]
     skipped = len(cells) - len(todo)
-    loaded = {name: load_mesh(named[name]) for name in dict.fromkeys(c.mesh for c in todo)}
+    stored = _stored_meshes(table)
+    # the meshes to run, and those whose rows the file holds: a mesh changed under its name must not have
+    # its old rows kept beside (or instead of) new ones
+    loaded = {name: load_mesh(named[name]) for name in dict.fromkeys(
+        [*(c.mesh for c in todo), *(name for name in named if name in stored)])}
+    fingerprints = {name: mesh_hash(mesh) for name, mesh in loaded.items()}
+    for name in named:
+        if name in stored and stored[name] != {fingerprints[name]}:
+            raise ValueError(f"{os.fspath(out)} holds rows of mesh {name!r} computed from another mesh (its "
+                             f"vertices or faces differ from the {name!r} given now): give another out=, or "
+                             "remove the file to start again")
     others = table[~table["cell"].isin(set(keys))] if len(table) else table  # rows of other grids: kept
     other_keys = list(others["cell"]) if len(others) else []
 
@@ -652,6 +682,7 @@ def _sweep_into(out, named, grid, configs, cells, keys, collapsed, requested, me
     def complete(r):
         for k in grid:  # a grid key the cell does not have: its method has no such setting
             r.setdefault(k, NOT_APPLICABLE)
+        r[MESH_HASH] = fingerprints[r["mesh"]]  # what a resume checks the mesh against
         return r
 
     def finish(batch_rows):
@@ -832,7 +863,8 @@ def _run_on(executor, submit, work, loaded, metrics, finish, save) -> None:
     never later than that after a row came in). A task whose future fails (not a cell: a cell's error is
     its row) was lost, e.g. its worker died: submitted again with the mesh arrays
     themselves, up to `RETRIES` times, then run here. Ctrl-C cancels the tasks not started."""
-    shipped = _ship(executor, loaded)
+    shipped = _ship(executor, {c.mesh: loaded[c.mesh] for b in work for c in b})  # not the meshes loaded only
+    # to check a resumed table's rows against
     pending = {submit(run_cells, [(shipped[c.mesh], c) for c in b], metrics): (b, 0) for b in work}
     due = None  # seconds until waiting rows must be written; None: none waiting
     try:

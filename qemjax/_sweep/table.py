@@ -123,7 +123,8 @@ def read_table(out):
     if not Path(out).exists() or Path(out).stat().st_size == 0:  # an empty file holds no rows yet
         return pd.DataFrame()
     if _format(out) == "csv":
-        df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str})
+        df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str,
+                                                                                 "mesh_sha256": str})
         if "error" in df:  # no error is "", as in the rows a sweep makes (an empty field reads as NaN)
             df["error"] = df["error"].fillna("")
         return _typed(df)
