@@ -829,3 +829,17 @@ def test_a_lock_a_forked_worker_inherited_does_not_hold_the_table(tmp_path):
         assert not path.exists()
     finally:
         os.close(inherited)
+
+
+def test_repeated_targets_are_named_by_a_config_check(tmp_path):
+    """A target given twice is refused when the config is checked, naming the file and the value (it was
+    refused only once the sweep started, in words that named neither); sweep names the value too."""
+    from qemjax._sweep import config as _sweep_config
+
+    cfg = tmp_path / "twice.toml"
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5, 100, 0.5]\nout = "t.csv"\n')
+    with pytest.raises(ValueError, match=re.escape("twice.toml: targets repeat the value 0.5")):
+        _sweep_config.load(cfg)
+    with pytest.raises(ValueError, match="targets repeat the value 100"):
+        qemjax.sweep(shapes.icosphere(1), {}, [100, 0.5, 100], metrics=False, progress=False, workers=1)
+    assert sw.check_targets([0.5, 100]) == [0.5, 100]

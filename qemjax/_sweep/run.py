@@ -256,7 +256,7 @@ def _applicable(combo: tuple) -> tuple:
 
 
 def check_targets(targets) -> list[float | int]:
-    """Ratios (floats in (0, 1)) and face counts (ints ≥ 1); a single number is one target."""
+    """Ratios (floats in (0, 1)) and face counts (ints ≥ 1), none twice; a single number is one target."""
     targets = list(targets) if isinstance(targets, (list, tuple, range, np.ndarray)) else [targets]
     if not targets:
         raise ValueError("targets is empty")
@@ -272,6 +272,8 @@ def check_targets(targets) -> list[float | int]:
             raise ValueError(f"bad target {t!r}: a ratio must be a float in (0, 1) (face counts are ints)")
         else:
             out.append(float(t))
+        if out[-1] in out[:-1]:  # here, so that a config file's check names it (and the file) before any run
+            raise ValueError(f"targets repeat the value {out[-1]!r}: two cells would be the same")
     return out
 
 
