@@ -843,3 +843,21 @@ def test_repeated_targets_are_named_by_a_config_check(tmp_path):
     with pytest.raises(ValueError, match="targets repeat the value 100"):
         qemjax.sweep(shapes.icosphere(1), {}, [100, 0.5, 100], metrics=False, progress=False, workers=1)
     assert sw.check_targets([0.5, 100]) == [0.5, 100]
+
+
+@pytest.mark.parametrize("name, data, why", [
+    ("bytes.csv", bytes(range(128, 256)) * 4, "it is not text"),
+    ("ragged.csv", b"cell,mesh\na,b\n1,2,3,4\n", "Expected 2 fields in line 3, saw 4"),
+    ("text.parquet", b"not a table\n", "it is not a Parquet file"),
+])
+def test_an_out_that_cannot_be_read_back_is_named(tmp_path, name, data, why):
+    """A file at out that is no table (binary in a .csv, ragged rows, text in a .parquet): one line naming
+    it, before anything runs, not the reader's own words (a decoder's byte position, pandas' C tokenizer,
+    Parquet's footer) naming nothing; the file is left as it was."""
+    if name.endswith(".parquet"):
+        pytest.importorskip("pyarrow")
+    out = tmp_path / name
+    out.write_bytes(data)
+    with pytest.raises(ValueError, match=re.escape(f"{out} exists but is not a sweep table ({why})")):
+        qemjax.sweep(shapes.icosphere(1), {}, [0.5], metrics=False, progress=False, workers=1, out=out)
+    assert out.read_bytes() == data

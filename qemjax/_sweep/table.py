@@ -123,13 +123,33 @@ def read_table(out):
     if not Path(out).exists() or Path(out).stat().st_size == 0:  # an empty file holds no rows yet
         return pd.DataFrame()
     if _format(out) == "csv":
-        df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str,
-                                                                                 "mesh_sha256": str})
+        try:
+            df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str,
+                                                                                     "mesh_sha256": str})
+        except ValueError as exc:
+            raise _unreadable(out, exc) from None
         if "error" in df:  # no error is "", as in the rows a sweep makes (an empty field reads as NaN)
             df["error"] = df["error"].fillna("")
         return _typed(df)
     _check_writable(out)
-    return _typed(pd.read_parquet(out))
+    try:
+        return _typed(pd.read_parquet(out))
+    except ValueError as exc:  # pyarrow's ArrowInvalid is one
+        raise _unreadable(out, exc) from None
+
+
+def _unreadable(out, exc: ValueError) -> ValueError:
+    """The one-line error for a file at ``out`` that cannot be read back as a table (a sweep would resume
+    it): the file named, and why in a few words rather than the reader's own (a decoder's byte position,
+    pandas' C tokenizer, Parquet's footer)."""
+    text = " ".join(str(exc).split())
+    if isinstance(exc, UnicodeDecodeError):
+        why = "it is not text"
+    elif "magic bytes" in text:
+        why = "it is not a Parquet file"
+    else:
+        why = text.replace("Error tokenizing data. C error: ", "")
+    return ValueError(f"{os.fspath(out)} exists but is not a sweep table ({why}): give another out, or remove it")
 
 
 def read_text(out) -> tuple[list[str], dict[str, dict]]:
@@ -138,7 +158,10 @@ def read_text(out) -> tuple[list[str], dict[str, dict]]:
 
     if not Path(out).exists() or _format(out) != "csv" or Path(out).stat().st_size == 0:
         return [], {}
-    df = pd.read_csv(out, dtype=str, keep_default_na=False)
+    try:
+        df = pd.read_csv(out, dtype=str, keep_default_na=False)
+    except ValueError as exc:
+        raise _unreadable(out, exc) from None
     if "cell" not in df:
         return list(df.columns), {}
     return list(df.columns), {r["cell"]: r for r in df.to_dict("records")}
