@@ -861,3 +861,32 @@ def test_an_out_that_cannot_be_read_back_is_named(tmp_path, name, data, why):
     with pytest.raises(ValueError, match=re.escape(f"{out} exists but is not a sweep table ({why})")):
         qemjax.sweep(shapes.icosphere(1), {}, [0.5], metrics=False, progress=False, workers=1, out=out)
     assert out.read_bytes() == data
+
+
+@pytest.mark.parametrize("ext", [".csv", ".parquet"])
+def test_a_sweep_resumed_with_other_metrics_refuses(tmp_path, ext):
+    """The metrics are no part of a cell's key: a sweep resumed with other metrics (none before, or other
+    samples) skipped the cells in the file and returned their rows beside rows measured otherwise (NaN
+    metrics, or another sampling), silently. It refuses, naming the file and both settings; the same
+    settings, however written (True and the defaults spelt out), resume."""
+    if ext == ".parquet":
+        pytest.importorskip("pyarrow")
+    out = tmp_path / f"s{ext}"
+    mesh = {"ball": shapes.icosphere(1)}
+    qemjax.sweep(mesh, {}, [0.5], metrics=False, out=out, progress=False, workers=1)
+    before = out.read_bytes()
+    with pytest.raises(ValueError, match=re.escape(f"{out} holds rows measured with metrics none (metrics=False), "
+                                                   "where this sweep asks for n_samples=50, seed=0")):
+        qemjax.sweep(mesh, {}, [0.5, 0.25], metrics={"n_samples": 50}, out=out, progress=False, workers=1)
+    assert out.read_bytes() == before
+    out.unlink()
+    qemjax.sweep(mesh, {}, [0.5], metrics={"n_samples": 50}, out=out, progress=False, workers=1)
+    with pytest.raises(ValueError, match="measured with metrics n_samples=50, seed=0, where this sweep asks for "
+                                         "n_samples=60, seed=0"):
+        qemjax.sweep(mesh, {}, [0.5, 0.25], metrics={"n_samples": 60}, out=out, progress=False, workers=1)
+    with pytest.raises(ValueError, match="where this sweep asks for none"):
+        qemjax.sweep(mesh, {}, [0.5], metrics=False, out=out, progress=False, workers=1)
+    again = qemjax.sweep(mesh, {}, [0.5, 0.25], metrics={"seed": 0, "n_samples": 50}, out=out, progress=False,
+                         workers=1)
+    assert again.attrs["sweep"]["skipped"] == 1 and again["metrics_settings"].nunique() == 1
+    assert sw.metrics_settings({}) == sw.metrics_settings({"n_samples": 100_000, "seed": 0})

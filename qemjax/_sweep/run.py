@@ -74,6 +74,7 @@ RETRIES = 3  # an executor task that is lost (a worker died) is submitted again 
 EXECUTOR_BATCH = 1  # cells per task on an executor, by default: one (balances the workers best: experiments/figures/dask_speedup.py)
 PEER_NAMES = ("meshoptimizer", "pymeshlab", "fast-simplification", "libigl", "pyfqmr")  # = qemjax.peers.PEERS
 MESH_HASH = "mesh_sha256"  # the column of each row's input mesh fingerprint (`mesh_hash`)
+METRICS_SETTINGS = "metrics_settings"  # the column of what each row's metrics were measured with
 _FIRST = ("cell", "mesh")  # leading columns; then the grid keys, "target", results, metrics
 
 
@@ -500,6 +501,31 @@ class SweepInterrupted(KeyboardInterrupt):
     prints it and exits 130). A rerun with the same ``out`` resumes."""
 
 
+def metrics_settings(metrics) -> str:
+    """What a row's metrics were measured with, as its ``metrics_settings`` text: ``"false"`` for none, else
+    the JSON of every keyword `qemjax.metrics.evaluate` took (``metrics``' own and the defaults, sorted), so
+    ``True`` and ``{"n_samples": 100000}`` are alike. A resumed sweep checks its rows against it."""
+    import inspect
+
+    from ..metrics import evaluate
+
+    if metrics is False:
+        return "false"
+    taken = {p.name: p.default for p in inspect.signature(evaluate).parameters.values()
+             if p.kind is p.KEYWORD_ONLY and p.name != "target_faces"}
+    return json.dumps({**taken, **metrics}, sort_keys=True, default=_json_value)
+
+
+def _metrics_words(settings: str) -> str:
+    """`metrics_settings`' text for an error line: ``none (metrics=False)``, or ``n_samples=100, seed=0``."""
+    if settings == "false":
+        return "none (metrics=False)"
+    try:
+        return ", ".join(f"{k}={v!r}" for k, v in json.loads(settings).items())
+    except (ValueError, AttributeError):  # a file's text that is no JSON table: as it is
+        return settings
+
+
 def _check_metrics(metrics: dict) -> None:
     """ValueError for a ``metrics`` keyword `qemjax.metrics.evaluate` does not take, or a bad value of one
     (before anything runs)."""
@@ -591,9 +617,10 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
     re-fit and distance measurement, or its own ``total_s``); then the metrics (`qemjax.metrics.evaluate`'s columns, its ``time_s``
     as ``metrics_s``: the evaluation's own wall time); ``cell_s`` = ``share_s`` + ``metrics_s`` (the
     cell's time in the sweep, apportioned when batched); ``mesh_sha256`` (`mesh_hash`: of the input's
-    vertices and faces as read). Rows come in cell order (mesh, then grid, last key fastest, then target),
-    however the cells finished. Raises ValueError for unknown grid keys, bad targets, a bad
-    ``out``/``executor``/``workers``, or an ``out`` holding rows of a mesh that changed under its name.
+    vertices and faces as read), ``metrics_settings`` (`metrics_settings`: what its metrics were measured
+    with). Rows come in cell order (mesh, then grid, last key fastest, then target), however the cells
+    finished. Raises ValueError for unknown grid keys, bad targets, a bad ``out``/``executor``/``workers``,
+    or an ``out`` holding rows of a mesh that changed under its name or measured with other metrics.
     ``df.attrs["sweep"]``: ``requested``, ``cells``, ``skipped``, ``ran``, ``collapsed`` (reason → cells).
     """
     collapsed: dict = {}
@@ -659,6 +686,12 @@ def _sweep_into(out, named, grid, configs, cells, keys, collapsed, requested, me
             raise ValueError(f"{os.fspath(out)} holds rows of mesh {name!r} computed from another mesh (its "
                              f"vertices or faces differ from the {name!r} given now): give another out=, or "
                              "remove the file to start again")
+    measured = metrics_settings(metrics)
+    stored_metrics = {v for r in rows.values() if isinstance(v := r.get(METRICS_SETTINGS), str) and v}
+    if stored_metrics - {measured}:  # the rows kept would have been measured otherwise than the new ones
+        raise ValueError(f"{os.fspath(out)} holds rows measured with metrics "
+                         f"{_metrics_words(sorted(stored_metrics - {measured})[0])}, where this sweep asks for "
+                         f"{_metrics_words(measured)}: give another out=, or the same metrics")
     others = table[~table["cell"].isin(set(keys))] if len(table) else table  # rows of other grids: kept
     other_keys = list(others["cell"]) if len(others) else []
 
@@ -685,6 +718,7 @@ def _sweep_into(out, named, grid, configs, cells, keys, collapsed, requested, me
         for k in grid:  # a grid key the cell does not have: its method has no such setting
             r.setdefault(k, NOT_APPLICABLE)
         r[MESH_HASH] = fingerprints[r["mesh"]]  # what a resume checks the mesh against
+        r[METRICS_SETTINGS] = measured  # and the metrics
         return r
 
     def finish(batch_rows):

@@ -14,6 +14,7 @@ import numpy as np
 from .._io import held
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv"}
+TEXT_COLUMNS = dict.fromkeys(("error", "cell", "mesh_sha256", "metrics_settings"), str)  # read as text
 NOT_APPLICABLE = "n/a"  # a grid key the cell's method does not have (empty / NaN stays "None")
 
 
@@ -124,8 +125,7 @@ def read_table(out):
         return pd.DataFrame()
     if _format(out) == "csv":
         try:
-            df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype={"error": str, "cell": str,
-                                                                                     "mesh_sha256": str})
+            df = pd.read_csv(out, keep_default_na=False, na_values=[""], dtype=TEXT_COLUMNS)
         except ValueError as exc:
             raise _unreadable(out, exc) from None
         if "error" in df:  # no error is "", as in the rows a sweep makes (an empty field reads as NaN)
