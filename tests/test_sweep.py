@@ -890,3 +890,21 @@ def test_a_sweep_resumed_with_other_metrics_refuses(tmp_path, ext):
                          workers=1)
     assert again.attrs["sweep"]["skipped"] == 1 and again["metrics_settings"].nunique() == 1
     assert sw.metrics_settings({}) == sw.metrics_settings({"n_samples": 100_000, "seed": 0})
+
+
+def test_a_schedule_in_a_config_is_refused_without_pointing_at_fields_it_has_not(tmp_path):
+    """A config cannot give a Schedule, nor vary its fields by name (grid."schedule.gate" is no grid key): the
+    refusal sent the user to vary "its fields by name" with two Topology fields as the examples; it points at
+    qemjax.sweep from Python alone. Topology's refusal still names its fields."""
+    from qemjax._sweep import config as _sweep_config
+
+    assert not sw.is_grid_key("schedule.gate") and sw.is_grid_key("topology.weld")
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "s.csv"\n[grid]\nschedule = ["fast"]\n')
+    with pytest.raises(ValueError) as err:
+        _sweep_config.load(cfg)
+    assert str(err.value) == ('s.toml: grid.schedule: a Schedule cannot be given in a config file; use '
+                              'qemjax.sweep from Python (grid={"schedule": [qemjax.Schedule(...), ...]})')
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "s.csv"\n[grid]\ntopology = ["x"]\n')
+    with pytest.raises(ValueError, match=re.escape('vary its fields by name (grid.flip_angle, grid."topology.weld")')):
+        _sweep_config.load(cfg)

@@ -182,7 +182,10 @@ def _check_value(key: str, v, fail):
         return tuple(v) if isinstance(v, list) else v
     if (v is None or isinstance(v, str) and v.strip().lower() == "none") and "None" in allowed:
         return None  # YAML's null, or "none" (TOML has no null)
-    if "Schedule" in allowed or "Topology" in allowed:
+    if "Schedule" in allowed:  # its fields are no grid keys either
+        fail(f"grid.{key}: a Schedule cannot be given in a config file; use qemjax.sweep from Python "
+             f"(grid={{\"{key}\": [qemjax.Schedule(...), ...]}})")
+    if "Topology" in allowed:
         fail(f"grid.{key}: a {key} object cannot be given in a config file; vary its fields by name "
              f"(grid.flip_angle, grid.\"topology.weld\") or use qemjax.sweep from Python")
     if "any" in allowed:
