@@ -908,3 +908,17 @@ def test_a_schedule_in_a_config_is_refused_without_pointing_at_fields_it_has_not
     cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "s.csv"\n[grid]\ntopology = ["x"]\n')
     with pytest.raises(ValueError, match=re.escape('vary its fields by name (grid.flip_angle, grid."topology.weld")')):
         _sweep_config.load(cfg)
+
+
+def test_a_config_with_an_unknown_preset_is_refused_before_it_runs(tmp_path):
+    """grid.preset names a method configuration (as grid.method may): an unknown one stops the config's check,
+    naming the file, the key and the presets, as an unknown method does; it ran, each cell failing."""
+    from qemjax._sweep import config as _sweep_config
+
+    cfg = tmp_path / "p.toml"
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "p.csv"\n[grid]\npreset = ["classic", "fast"]\n')
+    with pytest.raises(ValueError, match=re.escape("p.toml: grid.preset: unknown value 'fast'; one of default, "
+                                                   "classic, accurate")):
+        _sweep_config.load(cfg)
+    cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "p.csv"\n[grid]\npreset = ["classic", "accurate"]\n')
+    assert _sweep_config.load(cfg).grid == {"preset": ["classic", "accurate"]}

@@ -19,7 +19,7 @@ from typing import Any
 
 from .._io.mesh import MissingFileError
 from .._pipeline import api as _api, flat as _flat
-from .. import _schedulers, shapes
+from .. import _costs, _schedulers, shapes
 from . import run as _sweep
 
 KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
@@ -157,9 +157,10 @@ def _meshes(value, folder: Path, fail) -> dict[str, str]:
     return named
 
 
-# a method names qemjax's cost models or a peer simplifier (`qemjax.peers`: the cell runs that peer)
+# a method names qemjax's cost models or a peer simplifier (`qemjax.peers`: the cell runs that peer); a
+# preset, one of the named method configurations
 _CHOICES = {"method": lambda: [*_api.methods(), *_sweep.PEER_NAMES], "scheduler": _schedulers.names,
-            "placement": lambda: _api.PLACEMENTS}
+            "placement": lambda: _api.PLACEMENTS, "preset": lambda: list(_costs.PRESETS)}
 
 
 def _allowed(key: str) -> set[str]:
