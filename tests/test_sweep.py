@@ -922,3 +922,15 @@ def test_a_config_with_an_unknown_preset_is_refused_before_it_runs(tmp_path):
         _sweep_config.load(cfg)
     cfg.write_text('meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "p.csv"\n[grid]\npreset = ["classic", "accurate"]\n')
     assert _sweep_config.load(cfg).grid == {"preset": ["classic", "accurate"]}
+
+
+def test_a_grid_value_given_twice_as_int_and_float_is_refused():
+    """1 and 1.0 set the same boundary weight: the grid ran them as two cells (their keys' JSON differs),
+    two rows of one configuration. Refused as any repeated value is; distinct values and bools stay."""
+    with pytest.raises(ValueError, match=re.escape("grid['boundary_weight'] repeats the value 1: two cells")):
+        qemjax.sweep(shapes.icosphere(1), {"boundary_weight": [1, 2.0, 1.0]}, [0.5], metrics=False,
+                     progress=False, workers=1)
+    with pytest.raises(ValueError, match="repeats the value 0.5"):
+        sw.expand_grid({"regularize": [0.5, np.float64(0.5)]})
+    assert len(sw.expand_grid({"boundary_weight": [1, 2.0, np.float32(0.1), 0.1]})) == 4
+    assert len(sw.expand_grid({"measure": [True, False]})) == 2

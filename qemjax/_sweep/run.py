@@ -205,7 +205,7 @@ def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[s
         values = list(values) if isinstance(values, (list, tuple, range, np.ndarray)) else [values]
         if not values:
             raise ValueError(f"grid[{k!r}] is empty")
-        texts = [json.dumps(_plain(v), default=_json_value) for v in values]
+        texts = [_value_text(v) for v in values]
         if len(set(texts)) < len(texts):
             twice = next(v for v, t in zip(values, texts) if texts.count(t) > 1)
             raise ValueError(f"grid[{k!r}] repeats the value {twice!r}: two cells would be the same")
@@ -221,6 +221,15 @@ def expand_grid(grid: dict, collapsed: dict | None = None) -> list[tuple[tuple[s
             why = _why_collapsed(full, combo)
             collapsed[why] = collapsed.get(why, 0) + 1
     return out
+
+
+def _value_text(value) -> str:
+    """A grid value's text for spotting a value given twice: its JSON, a number by its value (``1`` and ``1.0``
+    set the same; a bool is no number here)."""
+    value = _plain(value)
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        value = float(value)
+    return json.dumps(value, default=_json_value)
 
 
 def _why_collapsed(full: tuple, combo: tuple) -> str:
