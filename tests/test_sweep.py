@@ -934,3 +934,20 @@ def test_a_grid_value_given_twice_as_int_and_float_is_refused():
         sw.expand_grid({"regularize": [0.5, np.float64(0.5)]})
     assert len(sw.expand_grid({"boundary_weight": [1, 2.0, np.float32(0.1), 0.1]})) == 4
     assert len(sw.expand_grid({"measure": [True, False]})) == 2
+
+
+@pytest.mark.parametrize("metrics", [None, "n_samples=100", 1, ["n_samples"]])
+def test_metrics_that_are_neither_a_bool_nor_keywords_are_refused(metrics):
+    """metrics takes True, False or evaluate's keywords: anything else (None, a text, a number) was read as
+    False, a sweep without metrics and without a word. Refused before anything runs; numpy's bools are bools."""
+    with pytest.raises(ValueError, match=re.escape(f"metrics must be True, False or a dict of "
+                                                   f"qemjax.metrics.evaluate's keywords ({{'n_samples': 10_000}}), "
+                                                   f"got {metrics!r}")):
+        qemjax.sweep(shapes.icosphere(1), {}, [0.5], metrics=metrics, progress=False, workers=1)
+
+
+def test_numpys_bools_are_metrics_bools():
+    ball = shapes.icosphere(1)
+    assert "rms_rel" not in qemjax.sweep(ball, {}, [0.5], metrics=np.False_, progress=False, workers=1)
+    df = qemjax.sweep(ball, {}, [0.5], metrics=np.True_, progress=False, workers=1)
+    assert df["rms_rel"].notna().all() and df["metrics_settings"].item() == sw.metrics_settings({})

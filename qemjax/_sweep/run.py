@@ -644,7 +644,13 @@ def sweep(meshes, grid: dict, targets, *, metrics=True, executor=None, out=None,
         raise ValueError(f"workers must be an int >= 1 or None, got {workers!r}")
     if workers is not None and executor is not None:
         raise ValueError("give executor= or workers=, not both (an executor's workers are its own)")
-    metrics = {} if metrics is True else dict(metrics) if isinstance(metrics, dict) else False
+    if isinstance(metrics, (bool, np.bool_)):
+        metrics = {} if metrics else False
+    elif isinstance(metrics, dict):
+        metrics = dict(metrics)
+    else:  # None, a number or a text was read as False: no metrics, without a word
+        raise ValueError(f"metrics must be True, False or a dict of qemjax.metrics.evaluate's keywords "
+                         f"({{'n_samples': 10_000}}), got {metrics!r}")
     if metrics:
         _check_metrics(metrics)
     submit = None if executor is None else _submitter(executor)
