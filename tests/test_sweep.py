@@ -8,6 +8,7 @@ import importlib.util
 import multiprocessing
 import os
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -951,3 +952,40 @@ def test_numpys_bools_are_metrics_bools():
     assert "rms_rel" not in qemjax.sweep(ball, {}, [0.5], metrics=np.False_, progress=False, workers=1)
     df = qemjax.sweep(ball, {}, [0.5], metrics=np.True_, progress=False, workers=1)
     assert df["rms_rel"].notna().all() and df["metrics_settings"].item() == sw.metrics_settings({})
+
+
+def _folders_that_take_no_file(tmp_path):
+    """Folders that exist but take no new file: /proc/self (Linux, even for root) and a read-only folder
+    (where permissions hold: not for root)."""
+    out = []
+    if Path("/proc/self").is_dir():
+        out.append(Path("/proc/self"))
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    if not os.access(locked, os.W_OK):
+        out.append(locked)
+    if not out:
+        pytest.skip("no folder here refuses new files")
+    return out
+
+
+def test_an_out_whose_folder_takes_no_file_is_refused_before_anything_runs(tmp_path, monkeypatch):
+    """The out's folder existing was checked, not that it takes the table's temporary file: the cells ran,
+    then the first write failed with pandas' traceback (qemjax sweep: exit code 1). Refused before any cell
+    runs, one line naming out, in qemjax.sweep and in a config's check."""
+    from qemjax._sweep import config as _sweep_config
+
+    def no_cell_may_run(items, metrics):
+        pytest.fail(f"a cell ran: {items[0][1].key}")
+
+    monkeypatch.setattr(sw, "iter_rows", no_cell_may_run)
+    for folder in _folders_that_take_no_file(tmp_path):
+        out = folder / "s.csv"
+        with pytest.raises(ValueError, match=re.escape(f"cannot write {out}: its folder takes no new file (")):
+            qemjax.sweep(shapes.icosphere(1), {}, [0.5], metrics=False, progress=False, workers=1, out=out)
+        cfg = tmp_path / "c.toml"
+        cfg.write_text(f'meshes = ["shapes.torus"]\ntargets = [0.5]\nout = "{out}"\n')
+        with pytest.raises(ValueError, match=re.escape(f"c.toml: cannot write {out}: its folder takes no new file")):
+            _sweep_config.load(cfg)
+    assert os.listdir(tmp_path / "locked") == []

@@ -20,7 +20,7 @@ from typing import Any
 from .._io.mesh import MissingFileError
 from .._pipeline import api as _api, flat as _flat
 from .. import _costs, _schedulers, shapes
-from . import run as _sweep
+from . import run as _sweep, table as _table
 
 KEYS = ("meshes", "grid", "targets", "out", "metrics", "executor")
 EXECUTOR_KEYS = ("workers", "scheduler", "address")
@@ -298,6 +298,10 @@ def _check_out(out: str, fail):
     folder = Path(out).resolve().parent
     if not folder.is_dir():
         fail(f"cannot write {out}: folder {folder} does not exist")
+    try:
+        _table.check_folder_takes_files(out)
+    except ValueError as exc:
+        fail(str(exc))
     if fmt == "parquet":
         try:
             import pyarrow  # noqa: F401

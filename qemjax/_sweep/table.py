@@ -47,8 +47,9 @@ def _mixed(column) -> bool:
 
 
 def _check_writable(out) -> str:
-    """The format of ``out``; ValueError when its folder does not exist, when it is a folder, or when it is
-    Parquet and pyarrow is missing (before anything runs)."""
+    """The format of ``out``; ValueError when its folder does not exist, when it is a folder, when it is
+    Parquet and pyarrow is missing, or when its folder takes no new file (`check_folder_takes_files`; the table
+    is written under a temporary name there): before anything runs."""
     fmt = _format(out)
     path = Path(out)
     if path.is_dir():
@@ -56,12 +57,31 @@ def _check_writable(out) -> str:
     if not path.absolute().parent.is_dir():
         raise ValueError(f"out's folder does not exist: {os.fspath(path.absolute().parent)}")
     if fmt == "parquet":
-        try:
-            import pyarrow  # noqa: F401
-        except ImportError:
-            raise ValueError(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), "
-                             "or give a .csv out") from None
+        _need_pyarrow(out)
+    check_folder_takes_files(out)
     return fmt
+
+
+def _need_pyarrow(out) -> None:
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        raise ValueError(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), "
+                         "or give a .csv out") from None
+
+
+def check_folder_takes_files(out) -> None:
+    """ValueError naming ``out`` when its (existing) folder takes no new file, read-only or not a real folder:
+    found by making and removing an empty file beside it, as the table's temporary file will be, rather than
+    after the first cells ran, when the first write of the table would fail."""
+    probe = Path(out).absolute().with_name(f".{Path(out).name}.probe-{os.getpid()}")
+    try:
+        with open(probe, "xb"):
+            pass
+        os.remove(probe)
+    except OSError as exc:
+        raise ValueError(f"cannot write {os.fspath(out)}: its folder takes no new file "
+                         f"({exc.strerror or exc})") from None
 
 
 def target_column(values):
@@ -131,7 +151,7 @@ def read_table(out):
         if "error" in df:  # no error is "", as in the rows a sweep makes (an empty field reads as NaN)
             df["error"] = df["error"].fillna("")
         return _typed(df)
-    _check_writable(out)
+    _need_pyarrow(out)
     try:
         return _typed(pd.read_parquet(out))
     except ValueError as exc:  # pyarrow's ArrowInvalid is one
