@@ -584,11 +584,24 @@ def test_a_killed_worker_does_not_lose_the_run(mesh, in_process, monkeypatch, tm
 @pytest.mark.slow  # worker processes
 def test_closing_the_local_runner_ends_every_worker_cleanly():
     """Told the run is done (their input closed), the idle workers exit by themselves with code 0, side by
-    side (`worker.main` ends without Python's shutdown), rather than being killed when `close` stops waiting."""
+    side (`worker.main` ends without Python's shutdown), rather than being killed when `close` stops waiting.
+    (Closed as soon as they start, they are still importing: on a loaded machine that can outlast `close`'s
+    wait, which is not what this checks.)"""
     runner = execute.LocalRunner(2, retries=0)
+    runner.CLOSE_WAIT_S = 300
     procs = list(runner.procs)
     runner.close()
     assert [p.poll() for p in procs] == [0, 0]
+
+
+def test_a_worker_close_kills_is_reaped():
+    """A worker that does not exit within `close`'s wait is killed, and reaped: it polled as running after
+    `close` returned (a zombie until collected)."""
+    runner = execute.LocalRunner(1, retries=0)
+    runner.CLOSE_WAIT_S = 0.01  # still importing: killed
+    procs = list(runner.procs)
+    runner.close()
+    assert procs[0].poll() is not None
 
 
 @pytest.mark.slow

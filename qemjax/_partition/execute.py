@@ -62,6 +62,8 @@ class LocalRunner(Runner):
     fed by a thread of this process. A worker that dies (killed, out of memory) is started again and its
     task run again, up to ``retries`` times per task."""
 
+    CLOSE_WAIT_S = 10  # how long `close` waits for a worker to exit before killing it
+
     def __init__(self, workers: int, retries: int):
         self.workers, self.retries = workers, retries
         self.name = f"{workers} local worker processes"
@@ -146,9 +148,10 @@ class LocalRunner(Runner):
                     p.kill()
         for p in live:
             try:
-                p.wait(timeout=10)
+                p.wait(timeout=self.CLOSE_WAIT_S)
             except Exception:
                 p.kill()
+                p.wait()  # reaped: else it polls as running, and stays a zombie until collected
             if p.stdout is not None:  # its pipe (unclosed, it warned ResourceWarning at exit)
                 p.stdout.close()
 
