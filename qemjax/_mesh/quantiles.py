@@ -18,24 +18,28 @@ def stable_order(d):
     n = len(d)
     top = np.uint64(0xFFFFFFFFFFFFFFFF)
     sign = np.uint64(1) << np.uint64(63)
+    buckets = 1 << DIGIT
+    mask = np.uint64(buckets - 1)
+    passes = 64 // DIGIT
+    # every pass's bucket sizes from one read of the keys: a pass moves the keys, not their digits' counts
+    counts = np.zeros((passes, buckets + 1), np.int64)
     key = np.empty(n, np.uint64)
     for i in range(n):
         x = d[i] + 0.0
         if x != x:
-            key[i] = top
-            continue
-        b = np.float64(x).view(np.uint64)
-        key[i] = ~b if b & sign else b | sign
+            k = top
+        else:
+            b = np.float64(x).view(np.uint64)
+            k = ~b if b & sign else b | sign
+        key[i] = k
+        for p in range(passes):
+            counts[p, ((k >> np.uint64(p * DIGIT)) & mask) + 1] += 1
     order = np.arange(n)
     key2 = np.empty(n, np.uint64)
     order2 = np.empty(n, np.int64)
-    buckets = 1 << DIGIT
-    mask = np.uint64(buckets - 1)
-    for shift in range(0, 64, DIGIT):
-        s = np.uint64(shift)
-        count = np.zeros(buckets + 1, np.int64)
-        for i in range(n):
-            count[((key[i] >> s) & mask) + 1] += 1
+    for p in range(passes):
+        s = np.uint64(p * DIGIT)
+        count = counts[p]
         if n == 0 or count[((key[0] >> s) & mask) + 1] == n:
             continue
         for b in range(buckets):
@@ -57,8 +61,26 @@ def quantiles(d: np.ndarray, qs, weights: np.ndarray | None = None) -> list[floa
     (of their total weight, with ``weights``) at or below it, an observed value, never interpolated (so
     the 1.0 quantile is the maximum and a bound on it is a bound on the samples)."""
     ds = np.ascontiguousarray(d, np.float64)
-    order = stable_order(ds)
-    ds = ds[order]
-    cw = np.cumsum(np.ones(len(ds)) if weights is None else np.asarray(weights, np.float64)[order])
+    w = np.zeros(0) if weights is None else np.ascontiguousarray(weights, np.float64)
+    if weights is not None and len(w) < len(ds):
+        raise ValueError(f"quantiles: {len(ds)} values but {len(w)} weights")
+    ds, cw = sorted_sums(ds, stable_order(ds), w)
     idx = np.searchsorted(cw, np.asarray(qs, np.float64) * cw[-1], side="left")
     return [float(ds[min(i, len(ds) - 1)]) for i in idx]
+
+
+@njit(cache=True, nogil=True)
+def sorted_sums(d, order, w):
+    """(d[order], np.cumsum(w[order])) in one pass, without the gathered weights (``w`` empty: every weight
+    1): the cumulative sum runs left to right, as numpy's does, so the same bits."""
+    n = len(order)
+    ds = np.empty(n)
+    cw = np.empty(n)
+    acc = 0.0
+    for i in range(n):
+        j = order[i]
+        ds[i] = d[j]
+        x = w[j] if len(w) else 1.0
+        acc = x if i == 0 else acc + x
+        cw[i] = acc
+    return ds, cw
