@@ -117,7 +117,40 @@ def test_stitch_merges_shared_ids_and_refuses_a_moved_one(tmp_path):
     pieces.save(b, V=V[[4, 0, 3]], F=np.array([[0, 1, 2]], np.int32), gid=np.array([11, 10, -1]))
     with pytest.raises(RuntimeError, match="moved"):
         pieces.stitch([a, b])
+    # ids saved narrower come back as they were saved (the stitch reads them as int64 for itself only)
+    a, b = tmp_path / "a32.npz", tmp_path / "b32.npz"
+    pieces.save(a, V=V[[0, 1, 2]], F=np.array([[0, 1, 2]], np.int32), gid=np.array([10, 11, -1], np.int32))
+    pieces.save(b, V=V[[1, 0, 3]], F=np.array([[0, 1, 2]], np.int32), gid=np.array([11, 10, -1], np.int32))
+    gid = pieces.stitch([a, b])[2]
+    assert gid.dtype == np.int32 and list(gid) == [10, 11, -1, -1]
 
+
+def test_stitch_loops_are_the_numpy_expressions_they_replace():
+    """`holders` (a table of the ids, one pass over the faces) gives the arrays of the sort `stitch` made
+    before: the first holder of each id, the faces renumbered, the positions check (a NaN on a shared
+    vertex is refused, as np.array_equal refused it); ids too sparse for a table are sorted as before."""
+    from qemjax._partition import holders
+
+    rng = np.random.default_rng(4)
+    for n, top in ((0, 1), (1, 1), (500, 300), (500, 10**12)):
+        gid = np.where(rng.random(n) < 0.3, -1, rng.integers(0, top, n))
+        held = np.flatnonzero(gid >= 0)
+        _, first, inverse = np.unique(gid[held], return_index=True, return_inverse=True)
+        ref = np.arange(n)
+        ref[held] = held[first][inverse]
+        to = pieces._first_holders(gid, holders.first_holders)
+        assert to.dtype == ref.dtype and np.array_equal(to, ref)
+        keep = to == np.arange(n)
+        new = np.cumsum(keep) - 1
+        F = rng.integers(0, max(n, 1), (40, 3)) if n else np.zeros((0, 3), np.int64)
+        got = holders.renumbered(F, to, new)
+        assert got.dtype == np.int64 and np.array_equal(got, new[to][F])
+        V = rng.random((n, 3))
+        V[held] = V[ref[held]]
+        assert holders.same_positions(V, to, gid) == np.array_equal(V[to[held]], V[held]) is True
+        if len(held):
+            V[held[0], 1] = np.nan  # a first holder: not equal to itself
+            assert holders.same_positions(V, to, gid) is np.array_equal(V[to[held]], V[held]) is False
 
 def test_partition_settings_are_checked():
     with pytest.raises(ValueError, match="part_faces"):
