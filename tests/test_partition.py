@@ -847,3 +847,61 @@ def test_a_resumed_run_removes_the_temporary_files_of_killed_writers(tmp_path):
     again = qemjax.simplify((V, F), ratio=0.1, partition=settings)
     assert digest(again) == digest(first) and again.stats["partition"]["reused"] > 0
     assert not [p for p in left if p.exists()]
+
+
+class _ClosingRunner(execute.Runner):
+    """A one-process runner that notes, as it is closed, whether another run could claim the scratch folder
+    (``None`` not closed yet) and then raises ``fail`` if given (a Ctrl-C while the workers leave)."""
+
+    def __init__(self, folder, fail=None):
+        self.folder, self.fail, self.free_while_closing = folder, fail, None
+
+    def close(self, cancel: bool = False) -> None:
+        from qemjax._partition import run
+
+        try:
+            run._let_go(self.folder, run._claim(self.folder))
+            self.free_while_closing = True
+        except ValueError:
+            self.free_while_closing = False
+        if self.fail is not None:
+            raise self.fail
+
+
+def test_a_failed_run_holds_its_scratch_folder_until_its_workers_are_stopped(tmp_path, monkeypatch):
+    """A run that fails (an error, a Ctrl-C) stops its workers (`Runner.close(cancel=True)`), which may still
+    be writing pieces in the scratch folder: the folder stays held until they are stopped, so that no other
+    run takes it meanwhile; then it is let go."""
+    from qemjax._partition import scatter
+
+    m = shapes.bumpy_sphere(4)
+    folder = tmp_path / "scratch"
+    runner = _ClosingRunner(folder)
+    monkeypatch.setattr(execute, "open_runner", lambda p: runner)
+
+    def broken(*args, **kw):
+        raise RuntimeError("a worker's failure")
+
+    monkeypatch.setattr(scatter, "scatter", broken)
+    with pytest.raises(RuntimeError, match="a worker's failure"):
+        qemjax.simplify((np.asarray(m.vertices), np.asarray(m.faces)), ratio=0.5,
+                        partition=Partition(workers=1, part_faces=1000, measure=False, scratch=folder))
+    assert runner.free_while_closing is False
+    assert not (folder / "run.lock").exists()
+
+
+def test_a_ctrl_c_while_the_workers_leave_lets_the_scratch_folder_go(tmp_path, monkeypatch):
+    """A Ctrl-C while a finished run's workers leave (`Runner.close`) raised out of the run before it let go of
+    its scratch folder: the lock stayed held by this process (a notebook's kernel) for its life, and every
+    later run in the folder was refused as if another run held it."""
+    m = shapes.bumpy_sphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    folder = tmp_path / "scratch"
+    settings = Partition(workers=1, part_faces=1000, measure=False, scratch=folder)
+    monkeypatch.setattr(execute, "open_runner", lambda p: _ClosingRunner(folder, KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
+        qemjax.simplify((V, F), ratio=0.5, partition=settings)
+    monkeypatch.undo()
+    again = qemjax.simplify((V, F), ratio=0.5, partition=settings)
+    assert again.stats["partition"]["reused"] > 0
+    assert not (folder / "run.lock").exists()

@@ -391,17 +391,24 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
             dist["distance_s"] = time.perf_counter() - t_measure
         t_measure = dist.get("distance_s", 0.0)
     except BaseException:
-        if claim is not None:  # (else held until the result's stats are written in the folder)
-            _let_go(folder, claim)
-            claim = None
-        if runner is not None:
-            runner.close(cancel=True)
-            runner = None
+        try:
+            if runner is not None:
+                runner.close(cancel=True)
+                runner = None
+        finally:  # let go only once the workers, which may be writing in the folder, are stopped
+            if claim is not None:  # (else held until the result's stats are written in the folder)
+                _let_go(folder, claim)
+                claim = None
         raise
     finally:
         try:
             if runner is not None:
                 runner.close()
+        except BaseException:  # a Ctrl-C while the workers leave: the run ends here, and lets the folder go
+            if claim is not None:
+                _let_go(folder, claim)
+                claim = None
+            raise
         finally:  # a Ctrl-C while the workers leave still removes the temporary folder
             if temporary:
                 shutil.rmtree(folder, ignore_errors=True)
