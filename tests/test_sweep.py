@@ -989,3 +989,26 @@ def test_an_out_whose_folder_takes_no_file_is_refused_before_anything_runs(tmp_p
         with pytest.raises(ValueError, match=re.escape(f"c.toml: cannot write {out}: its folder takes no new file")):
             _sweep_config.load(cfg)
     assert os.listdir(tmp_path / "locked") == []
+
+
+def test_a_table_on_a_file_system_without_locks_leaves_no_lock_file(meshes, tmp_path, monkeypatch):
+    """Where the file system refuses locks (flock's ENOLCK on some network and FUSE file systems) nothing is
+    held, as documented; but the lock file `take` made was kept, so every sweep left a hidden ``.NAME.lock``
+    beside its table for good. It is removed when it cannot be locked."""
+    import errno
+
+    from qemjax._io import held
+
+    class NoLocks:
+        LOCK_EX, LOCK_NB = 2, 4
+
+        @staticmethod
+        def flock(fd, how):
+            raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(held, "fcntl", NoLocks)
+    assert held.take(tmp_path / ".x.lock", "busy") is None and not (tmp_path / ".x.lock").exists()
+    out = tmp_path / "s.csv"
+    qemjax.sweep({"sphere": meshes["sphere"]}, {"scheduler": ["parallel"]}, [0.5], metrics=False, out=out,
+                 progress=False, workers=1)
+    assert [p.name for p in tmp_path.iterdir()] == ["s.csv"]

@@ -4,7 +4,8 @@ the lock file and lets go. The file is removed while held, so that a process for
 executor's worker), which keeps the lock it inherited, holds a file nobody takes again; a run that opened
 the file before it was removed sees it is gone and takes the one there now.
 
-Where files cannot be locked (no ``fcntl``, as on Windows, or a file system without locks) nothing is held.
+Where files cannot be locked (no ``fcntl``, as on Windows, or a file system without locks) nothing is held,
+and no lock file is left.
 """
 from __future__ import annotations
 
@@ -32,8 +33,12 @@ def take(path: Path, busy: str) -> int | None:
         except BlockingIOError:
             os.close(fd)
             raise ValueError(busy) from None
-        except OSError:
+        except OSError:  # a file system without locks: nobody can hold it, so the file made for it goes too
             os.close(fd)
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
             return None
         try:
             same = os.path.samestat(os.fstat(fd), os.stat(path))
