@@ -864,6 +864,25 @@ def test_an_out_that_cannot_be_read_back_is_named(tmp_path, name, data, why):
     assert out.read_bytes() == data
 
 
+@pytest.mark.parametrize("cut", ["footer", "length"])
+def test_a_damaged_parquet_out_is_named_as_no_table(tmp_path, cut):
+    """A Parquet file at out whose magic bytes are right but whose footer is damaged (zeroed) or whose length
+    is not the footer's (cut short) is no table either: pyarrow raises an OSError for the first ("Couldn't
+    deserialize thrift"), which passed through in its words, and for the second named the file twice in its
+    own. Both are the one line of a file that is no table; the file is left as it was."""
+    pd = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    out = tmp_path / "s.parquet"
+    pd.DataFrame({"cell": ["a" * 20] * 200, "x": range(200)}).to_parquet(out)
+    whole = out.read_bytes()
+    data = whole[:4] + bytes(len(whole) - 12) + whole[-8:] if cut == "footer" else whole[:len(whole) // 2] + whole[-8:]
+    out.write_bytes(data)
+    with pytest.raises(ValueError, match=re.escape(f"{out} exists but is not a sweep table (it is not a whole "
+                                                   "Parquet file: cut short or damaged)")):
+        qemjax.sweep(shapes.icosphere(1), {}, [0.5], metrics=False, progress=False, workers=1, out=out)
+    assert out.read_bytes() == data
+
+
 @pytest.mark.parametrize("ext", [".csv", ".parquet"])
 def test_a_sweep_resumed_with_other_metrics_refuses(tmp_path, ext):
     """The metrics are no part of a cell's key: a sweep resumed with other metrics (none before, or other

@@ -156,9 +156,13 @@ def read_table(out):
         return _typed(pd.read_parquet(out))
     except ValueError as exc:  # pyarrow's ArrowInvalid is one
         raise _unreadable(out, exc) from None
+    except OSError as exc:  # a damaged footer; an error of the system's own (errno: permissions) stays as it is
+        if exc.errno is not None:
+            raise
+        raise _unreadable(out, exc) from None
 
 
-def _unreadable(out, exc: ValueError) -> ValueError:
+def _unreadable(out, exc: Exception) -> ValueError:
     """The one-line error for a file at ``out`` that cannot be read back as a table (a sweep would resume
     it): the file named, and why in a few words rather than the reader's own (a decoder's byte position,
     pandas' C tokenizer, Parquet's footer)."""
@@ -167,6 +171,8 @@ def _unreadable(out, exc: ValueError) -> ValueError:
         why = "it is not text"
     elif "magic bytes" in text:
         why = "it is not a Parquet file"
+    elif text.startswith("Could not open Parquet input source"):  # its beginning and end are a Parquet file's
+        why = "it is not a whole Parquet file: cut short or damaged"
     else:
         why = text.replace("Error tokenizing data. C error: ", "")
     return ValueError(f"{os.fspath(out)} exists but is not a sweep table ({why}): give another out, or remove it")
