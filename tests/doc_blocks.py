@@ -130,7 +130,7 @@ def run_commands(path: Path, folder: Path, env: dict, skip=()) -> None:
 
 DEV_LOG = [
     (r"\.\./shared|shared meshes", "a development folder"),
-    (r"\bissue \d+|#\d{2,}\b", "an issue number"),
+    (r"\bissues? \d+|#\d{2,}\b", "an issue number"),
     (r"--rev [0-9a-f]{6,}|\b(?=[0-9a-f]*\d)(?=[0-9a-f]*[a-f])[0-9a-f]{7,12}\b", "a git revision"),
 ]
 

@@ -2,8 +2,8 @@
 once, as a process pool, Dask workers, the test runner's workers or the package build's compiling slices do.
 
 numba's cache keeps, per function, an index (signature -> data file) beside numbered data files. To save a new
-signature it reads the index, takes the first unused number, writes the index, then the data, with no lock
-(numba issues 4807 and 10128). Two processes that compile two signatures of one function at the same moment
+signature it reads the index, takes the first unused number, writes the index, then the data, with no lock.
+Two processes that compile two signatures of one function at the same moment
 read the same index and take the same number: one index entry is lost, and the other can point at the code
 compiled for the other signature. Every later process that loads that entry runs code built for other
 argument types, and crashes. Here each function's saves hold an exclusive lock on a file beside its index
