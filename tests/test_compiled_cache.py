@@ -182,3 +182,42 @@ def test_the_loops_of_a_run_have_the_locked_cache():
     assert len(found) > 50
     plain = [k for k, d in found.items() if type(d._cache._cache_file) is not LockedCacheFile]
     assert not plain, plain
+
+
+SIGNED = """
+from qemjax._mesh.compiled import njit
+
+@njit("f8(f8)", cache=True)
+def signed(x):
+    return x + 1.0
+
+def given(x):
+    return x + 2.0
+
+given = njit(given, cache=True)
+"""
+
+
+def test_a_function_given_a_signature_or_given_as_an_argument_has_the_locked_cache(tmp_path, monkeypatch):
+    """njit takes numba's arguments: with a signature, numba compiles it as it decorates, so the entry was saved
+    by numba's own cache, unlocked, before the locked one took its place; and njit(f, cache=True) returned a
+    decorator instead of the compiled function. Both are compiled functions with the locked cache, and the
+    signature's entry is saved under its lock (the lock file beside the index)."""
+    import importlib
+
+    import numba
+
+    from qemjax._mesh.compiled import LockedCacheFile
+
+    (tmp_path / "signed_probe.py").write_text(SIGNED)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    module = importlib.import_module("signed_probe")
+    try:
+        for f in (module.signed, module.given):
+            assert isinstance(f, numba.core.dispatcher.Dispatcher)
+            assert type(f._cache._cache_file) is LockedCacheFile
+        assert module.signed(1.0) == 2.0 and module.given(1.0) == 3.0
+        assert glob.glob(str(tmp_path / "__pycache__" / "signed_probe.signed-*.nbi.lock"))
+        assert not module.signed._can_compile  # numba's own: only the signature given
+    finally:
+        sys.modules.pop("signed_probe", None)
