@@ -184,12 +184,8 @@ def test_the_loops_of_a_run_have_the_locked_cache():
     assert not plain, plain
 
 
-SIGNED = """
+GIVEN = """
 from qemjax._mesh.compiled import njit
-
-@njit("f8(f8)", cache=True)
-def signed(x):
-    return x + 1.0
 
 def given(x):
     return x + 2.0
@@ -198,26 +194,25 @@ given = njit(given, cache=True)
 """
 
 
-def test_a_function_given_a_signature_or_given_as_an_argument_has_the_locked_cache(tmp_path, monkeypatch):
-    """njit takes numba's arguments: with a signature, numba compiles it as it decorates, so the entry was saved
-    by numba's own cache, unlocked, before the locked one took its place; and njit(f, cache=True) returned a
-    decorator instead of the compiled function. Both are compiled functions with the locked cache, and the
-    signature's entry is saved under its lock (the lock file beside the index)."""
+def test_a_function_given_as_an_argument_has_the_locked_cache_and_signatures_are_refused(tmp_path, monkeypatch):
+    """njit(f, cache=True) returned a decorator instead of the compiled function; it is the compiled function,
+    with the locked cache. Signatures, which numba compiles and saves with its own unlocked cache as it
+    decorates, are refused in one line."""
     import importlib
 
     import numba
 
-    from qemjax._mesh.compiled import LockedCacheFile
+    from qemjax._mesh.compiled import LockedCacheFile, njit
 
-    (tmp_path / "signed_probe.py").write_text(SIGNED)
+    (tmp_path / "given_probe.py").write_text(GIVEN)
     monkeypatch.syspath_prepend(str(tmp_path))
-    module = importlib.import_module("signed_probe")
+    module = importlib.import_module("given_probe")
     try:
-        for f in (module.signed, module.given):
-            assert isinstance(f, numba.core.dispatcher.Dispatcher)
-            assert type(f._cache._cache_file) is LockedCacheFile
-        assert module.signed(1.0) == 2.0 and module.given(1.0) == 3.0
-        assert glob.glob(str(tmp_path / "__pycache__" / "signed_probe.signed-*.nbi.lock"))
-        assert not module.signed._can_compile  # numba's own: only the signature given
+        assert isinstance(module.given, numba.core.dispatcher.Dispatcher)
+        assert type(module.given._cache._cache_file) is LockedCacheFile
+        assert module.given(1.0) == 3.0
     finally:
-        sys.modules.pop("signed_probe", None)
+        sys.modules.pop("given_probe", None)
+    for args, kw in ((("f8(f8)",), {"cache": True}), ((), {"signature_or_function": "f8(f8)"})):
+        with pytest.raises(TypeError, match="give it no signatures"):
+            njit(*args, **kw)

@@ -91,23 +91,13 @@ def _safe(dispatcher):
 
 
 def njit(*args, **options):
-    """``numba.njit`` (the same arguments: bare, called, or given the function) with the cache of
-    `LockedCacheFile`. Signatures given compile once it is in place: numba compiles them as it decorates, and
-    would save them with its own cache."""
+    """``numba.njit`` (the same options, bare, called, or given the function) with the cache of
+    `LockedCacheFile`. No signatures: numba compiles them as it decorates, before the locked cache is in place,
+    and would save them with its own."""
     if args and callable(args[0]):
         return _safe(numba.njit(*args, **options))
-    sigs, rest = (args[0], args[1:]) if args else (options.pop("signature_or_function", None), ())
-    decorate = numba.njit(None, *rest, **options)
-
-    def wrap(f):
-        dispatcher = _safe(decorate(f))
-        if sigs is not None:  # as numba's own jit does with them
-            from numba.core import typeinfer
-
-            with typeinfer.register_dispatcher(dispatcher):
-                for sig in sigs if isinstance(sigs, list) else [sigs]:
-                    dispatcher.compile(sig)
-                dispatcher.disable_compile()
-        return dispatcher
-
-    return wrap
+    if args or options.get("signature_or_function") is not None:
+        raise TypeError("qemjax's njit compiles on first use: give it no signatures (numba would compile and "
+                        "save them as it decorates, with its own unlocked cache)")
+    decorate = numba.njit(**options)
+    return lambda f: _safe(decorate(f))
