@@ -288,131 +288,121 @@ def simplify_partitioned(mesh, *, target_faces, ratio, partition: Partition, kwa
         raise MissingFileError(f"no such file: {mesh}")
     folder, temporary = _scratch(p)
     runner = claim = None
-    try:
-        mesh = _arrays(mesh)
-        key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
-                   final_faces=p.final_faces, refit_input_faces=p.refit_input_faces, refit=p.refit, share=p.share,
-                   target=[target_faces, ratio],
-                   kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
-                   borders="the input's kept along the cuts",
-                   uv="auto: without seams, or with a texture image" if uv == "auto" else uv)
-        if not temporary:  # (a temporary folder is this run's alone)
-            _refuse_foreign(folder, mesh)  # before a lock file is made in a user's folder
-            claim = _claim(folder)
-        _fresh(folder, key, mesh)
-        if claim is not None:
-            _drop_temporaries(folder)
-        source = _as_file(mesh, folder)
-        runner = execute.open_runner(p)
-        manifest_path = folder / "manifest.json"
-        if manifest_path.exists():
-            manifest = json.loads(manifest_path.read_text())
-        else:
-            manifest = scatter(source, folder, p.part_faces, uv=uv)
-        t_scatter = time.perf_counter() - t0
-        if uv is True and not manifest.get("uv"):  # refused, as in core, before any level runs
-            raise ValueError("attributes='uv': the file does not give every triangle corner a UV (an OBJ's vt, a "
-                             "PLY's per-vertex texture_u/texture_v, s/t or u/v, a binary PLY's texcoord lists)")
-        n_faces = int(manifest["n_faces"])
-        target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
-        if target > n_faces:  # as an in-core run says it
-            warnings.warn(f"target of {target} faces is not below the mesh's {n_faces} faces: returning it "
-                          "unchanged", stacklevel=stacklevel)
-        target = min(target, n_faces)
-        paths = [str(folder / part["file"]) for part in manifest["parts"]]
-        unit = float(np.max(np.subtract(manifest["bbox"][1], manifest["bbox"][0]))) or 1.0  # `carry`'s unit
-        faces = np.array([part["faces"] for part in manifest["parts"]], np.int64)
-        borders = None
-        levels, first = [], True
-        method = _method(kwargs)
-        refits = bool(getattr(method, "refit", 0))
-        moves = bool(getattr(method, "polish", 0) or getattr(method, "sliver_moves", 0))  # after the re-fit
-        while True:
-            t_level = time.perf_counter()
-            stalled = bool(levels) and levels[-1]["faces_out"] > 0.9 * levels[-1]["faces_in"]
-            groups, last = plan.level(faces, target, p, first, stalled, levels[-1]["target"] if levels else None)
-            level_dir = folder / f"level{len(levels) + 1}"
-            level_dir.mkdir(exist_ok=True)
-            if len(groups) == 1:
-                locks = None
-            elif first:
-                locks = "border"
-            else:
-                locks = str(_locks(level_dir, groups, borders))
-            level_kw, changed = _level_kwargs(kwargs, p, last)
-            specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
-                          out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit,
-                          uv=bool(manifest.get("uv")))
-                     for k, g in enumerate(groups)]
-            if locks == "border" and manifest.get("borders_on_cuts"):  # they keep their planes (`carry`)
-                for spec in specs:
-                    spec["borders_on_cuts"] = str(folder / manifest["borders_on_cuts"])
-            refit_to = _refit_to(manifest, folder, p, groups, last, first, refits)
-            if refit_to is not None:  # (measured there too, with the re-fit's samples: `task.run_group`)
-                specs[0] |= dict(refit_to=refit_to, refit_moves=moves, measure=p.measure)
-            cost = None
-            if p.share == "cost" and not last and len(groups) > 1:
-                cost, specs = _common_cost(runner, specs, p, progress, f"level {len(levels) + 1} pilots")
-            stats = _run_level(runner, "run_group", specs, progress, f"level {len(levels) + 1}")
-            paths = [s["out"] for s in specs]
-            faces = np.array([s["faces_out"] for s in stats], np.int64)
-            levels.append(dict(groups=len(groups), faces_in=int(sum(g.faces for g in groups)),
-                               faces_out=int(faces.sum()), target=int(sum(g.target for g in groups)),
-                               locked=int(sum(s["locked"] for s in stats)), seconds=time.perf_counter() - t_level,
-                               cost=cost, stats=stats,
-                               settings=changed, refit_to="level input" if refit_to is None else "input"))
-            if last:
-                break
-            borders = [pieces.borders(path) for path in paths]
-            first = False
-        V, F, gid, _ = pieces.stitch(paths)
-        UV = pieces.stitch_uv(paths) if manifest.get("uv") else None
-        locked_share = float(np.mean(gid >= 0)) if len(paths) > 1 and len(gid) else 0.0
-        dist, t_measure = {}, time.perf_counter()
-        lo, hi = np.array(manifest["bbox"][0]), np.array(manifest["bbox"][1])
-        # the last level's own measure, where it fitted to the input (`task.run_group`): taken as it is
-        measured = levels[-1]["stats"][0].get("distance") if len(levels[-1]["stats"]) == 1 else None
-        if not (p.measure and len(F)):
-            pass
-        elif measured is not None and measured["distance_max"] is not None:
-            dist = _relative(measured, box_diagonal(lo, hi))
-        else:
-            final = folder / "output.npz"
-            pieces.save(final, V=V, F=F.astype(np.int32), gid=gid)
-            centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
-            files = [str(folder / part["file"]) for part in manifest["parts"]]
-            # as many tasks whatever the workers: each sums its parts in order, the client the tasks in order,
-            # so the sums (the rms, the histogram) are the same bits on 1 worker or 64
-            batches = np.array_split(np.arange(len(files)), min(len(files), MEASURE_TASKS))
-            mspecs = [dict(parts=[files[i] for i in b], final=str(final), centre=centre.tolist(), unit=unit)
-                      for b in batches]
-            dist = _distance(_run_level(runner, "measure_parts", mspecs, progress, "distance"),
-                             box_diagonal(lo, hi), unit)
-            dist["distance_s"] = time.perf_counter() - t_measure
-        t_measure = dist.get("distance_s", 0.0)
-    except BaseException:
+    try:  # the scratch folder is held (`_claim`) until the workers are stopped and the stats written
         try:
+            mesh = _arrays(mesh)
+            key = dict(input=_input_key(mesh), part_faces=p.part_faces, budget=p.budget, reduction=p.reduction,
+                       final_faces=p.final_faces, refit_input_faces=p.refit_input_faces, refit=p.refit, share=p.share,
+                       target=[target_faces, ratio],
+                       kwargs=repr(sorted(kwargs.items())), levels="summed before the last", quadrics="carried, in the input's extent",
+                       borders="the input's kept along the cuts",
+                       uv="auto: without seams, or with a texture image" if uv == "auto" else uv)
+            if not temporary:  # (a temporary folder is this run's alone)
+                _refuse_foreign(folder, mesh)  # before a lock file is made in a user's folder
+                claim = _claim(folder)
+            _fresh(folder, key, mesh)
+            if claim is not None:
+                _drop_temporaries(folder)
+            source = _as_file(mesh, folder)
+            runner = execute.open_runner(p)
+            manifest_path = folder / "manifest.json"
+            if manifest_path.exists():
+                manifest = json.loads(manifest_path.read_text())
+            else:
+                manifest = scatter(source, folder, p.part_faces, uv=uv)
+            t_scatter = time.perf_counter() - t0
+            if uv is True and not manifest.get("uv"):  # refused, as in core, before any level runs
+                raise ValueError("attributes='uv': the file does not give every triangle corner a UV (an OBJ's vt, a "
+                                 "PLY's per-vertex texture_u/texture_v, s/t or u/v, a binary PLY's texcoord lists)")
+            n_faces = int(manifest["n_faces"])
+            target = int(target_faces) if target_faces is not None else max(int(round(ratio * n_faces)), 1)
+            if target > n_faces:  # as an in-core run says it
+                warnings.warn(f"target of {target} faces is not below the mesh's {n_faces} faces: returning it "
+                              "unchanged", stacklevel=stacklevel)
+            target = min(target, n_faces)
+            paths = [str(folder / part["file"]) for part in manifest["parts"]]
+            unit = float(np.max(np.subtract(manifest["bbox"][1], manifest["bbox"][0]))) or 1.0  # `carry`'s unit
+            faces = np.array([part["faces"] for part in manifest["parts"]], np.int64)
+            borders = None
+            levels, first = [], True
+            method = _method(kwargs)
+            refits = bool(getattr(method, "refit", 0))
+            moves = bool(getattr(method, "polish", 0) or getattr(method, "sliver_moves", 0))  # after the re-fit
+            while True:
+                t_level = time.perf_counter()
+                stalled = bool(levels) and levels[-1]["faces_out"] > 0.9 * levels[-1]["faces_in"]
+                groups, last = plan.level(faces, target, p, first, stalled, levels[-1]["target"] if levels else None)
+                level_dir = folder / f"level{len(levels) + 1}"
+                level_dir.mkdir(exist_ok=True)
+                if len(groups) == 1:
+                    locks = None
+                elif first:
+                    locks = "border"
+                else:
+                    locks = str(_locks(level_dir, groups, borders))
+                level_kw, changed = _level_kwargs(kwargs, p, last)
+                specs = [dict(inputs=[paths[i] for i in g.members], locks=locks, target=g.target, kwargs=level_kw,
+                              out=str(level_dir / f"group_{k:05d}.npz"), carry_out=not last, unit=unit,
+                              uv=bool(manifest.get("uv")))
+                         for k, g in enumerate(groups)]
+                if locks == "border" and manifest.get("borders_on_cuts"):  # they keep their planes (`carry`)
+                    for spec in specs:
+                        spec["borders_on_cuts"] = str(folder / manifest["borders_on_cuts"])
+                refit_to = _refit_to(manifest, folder, p, groups, last, first, refits)
+                if refit_to is not None:  # (measured there too, with the re-fit's samples: `task.run_group`)
+                    specs[0] |= dict(refit_to=refit_to, refit_moves=moves, measure=p.measure)
+                cost = None
+                if p.share == "cost" and not last and len(groups) > 1:
+                    cost, specs = _common_cost(runner, specs, p, progress, f"level {len(levels) + 1} pilots")
+                stats = _run_level(runner, "run_group", specs, progress, f"level {len(levels) + 1}")
+                paths = [s["out"] for s in specs]
+                faces = np.array([s["faces_out"] for s in stats], np.int64)
+                levels.append(dict(groups=len(groups), faces_in=int(sum(g.faces for g in groups)),
+                                   faces_out=int(faces.sum()), target=int(sum(g.target for g in groups)),
+                                   locked=int(sum(s["locked"] for s in stats)), seconds=time.perf_counter() - t_level,
+                                   cost=cost, stats=stats,
+                                   settings=changed, refit_to="level input" if refit_to is None else "input"))
+                if last:
+                    break
+                borders = [pieces.borders(path) for path in paths]
+                first = False
+            V, F, gid, _ = pieces.stitch(paths)
+            UV = pieces.stitch_uv(paths) if manifest.get("uv") else None
+            locked_share = float(np.mean(gid >= 0)) if len(paths) > 1 and len(gid) else 0.0
+            dist, t_measure = {}, time.perf_counter()
+            lo, hi = np.array(manifest["bbox"][0]), np.array(manifest["bbox"][1])
+            # the last level's own measure, where it fitted to the input (`task.run_group`): taken as it is
+            measured = levels[-1]["stats"][0].get("distance") if len(levels[-1]["stats"]) == 1 else None
+            if not (p.measure and len(F)):
+                pass
+            elif measured is not None and measured["distance_max"] is not None:
+                dist = _relative(measured, box_diagonal(lo, hi))
+            else:
+                final = folder / "output.npz"
+                pieces.save(final, V=V, F=F.astype(np.int32), gid=gid)
+                centre, unit = 0.5 * (lo + hi), float(np.max(hi - lo))
+                files = [str(folder / part["file"]) for part in manifest["parts"]]
+                # as many tasks whatever the workers: each sums its parts in order, the client the tasks in order,
+                # so the sums (the rms, the histogram) are the same bits on 1 worker or 64
+                batches = np.array_split(np.arange(len(files)), min(len(files), MEASURE_TASKS))
+                mspecs = [dict(parts=[files[i] for i in b], final=str(final), centre=centre.tolist(), unit=unit)
+                          for b in batches]
+                dist = _distance(_run_level(runner, "measure_parts", mspecs, progress, "distance"),
+                                 box_diagonal(lo, hi), unit)
+                dist["distance_s"] = time.perf_counter() - t_measure
+            t_measure = dist.get("distance_s", 0.0)
+        except BaseException:
             if runner is not None:
                 runner.close(cancel=True)
                 runner = None
-        finally:  # let go only once the workers, which may be writing in the folder, are stopped
-            if claim is not None:  # (else held until the result's stats are written in the folder)
-                _let_go(folder, claim)
-                claim = None
-        raise
-    finally:
-        try:
-            if runner is not None:
-                runner.close()
-        except BaseException:  # a Ctrl-C while the workers leave: the run ends here, and lets the folder go
-            if claim is not None:
-                _let_go(folder, claim)
-                claim = None
             raise
-        finally:  # a Ctrl-C while the workers leave still removes the temporary folder
-            if temporary:
-                shutil.rmtree(folder, ignore_errors=True)
-    try:
+        finally:
+            try:
+                if runner is not None:
+                    runner.close()
+            finally:  # a Ctrl-C while the workers leave still removes the temporary folder
+                if temporary:
+                    shutil.rmtree(folder, ignore_errors=True)
         if manifest.get("dropped"):
             # the way to keep UVs left out by default: for their seams in the in-core run's words (`_wedges`), else
             # the option alone
