@@ -64,13 +64,15 @@ def stitch_uv(paths: list) -> np.ndarray | None:
     return None if any(u is None for u in UVs) else np.concatenate(UVs)
 
 
-def _first_holders(gid: np.ndarray, table) -> np.ndarray:
-    """Each vertex's first holder of its global id (`holders.first_holders`, ``table``): by a table of the
-    ids where they are as dense as a run's are (ids of the input's vertices), else by sorting them."""
+def _first_holders(gid: np.ndarray) -> np.ndarray:
+    """Each vertex's first holder of its global id: by a table of the ids (`holders.first_holders`) where they
+    are as dense as a run's are (ids of the input's vertices), else by sorting them."""
+    from .holders import first_holders  # numba: only where pieces are stitched
+
     held = np.flatnonzero(gid >= 0)
     size = int(gid.max()) + 1 if len(held) else 0
     if size <= 4 * len(gid) + 1024:
-        return table(gid, size)
+        return first_holders(gid, size)
     _, first, inverse = np.unique(gid[held], return_index=True, return_inverse=True)
     to = np.arange(len(gid))
     to[held] = held[first][inverse]
@@ -95,10 +97,10 @@ def stitch(paths: list, carried: bool = False) -> tuple:
     Q = np.concatenate(Qs) if carried and all(q is not None for q in Qs) else None
     if len(paths) == 1:
         return (V, F, gid, border) + ((Q,) if carried else ())
-    from .holders import first_holders, renumbered, same_positions  # numba: only where pieces are stitched
+    from .holders import renumbered, same_positions  # numba: only where pieces are stitched
 
     ids = np.ascontiguousarray(gid, np.int64)  # (the pieces' ids are; ``gid`` is returned as it is)
-    to = _first_holders(ids, first_holders)  # every holder of a global id -> its first holder
+    to = _first_holders(ids)  # every holder of a global id -> its first holder
     keep = to == np.arange(len(V))
     if not same_positions(V, to, ids):
         raise RuntimeError("partition: a shared vertex moved in one of its pieces (a lock was not kept)")
