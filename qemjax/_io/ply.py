@@ -139,12 +139,23 @@ def read_by_trimesh(vertex: Element, face: Element | None) -> set:
     """The vertex properties trimesh reads (`_NORMALS`, `TRIMESH_UVS`, `_COLOURS`), x, y, z among them."""
     scalars = {p.name for p in vertex.props if p.count is None}
     used = {"x", "y", "z"} | (set(_NORMALS) if set(_NORMALS) <= scalars else set())
-    face_uv = face is not None and any(p.name == "texcoord" and p.count is not None for p in face.props)
+    face_uv = bool(_uv_lists(face))
     uv = () if face_uv else next((pair for pair in TRIMESH_UVS if set(pair) <= scalars), ())
-    colours = scalars & set(_COLOURS)
-    if len(colours) >= 3 and not uv and not face_uv:
-        used |= colours
+    if not uv and not face_uv:
+        used |= _colours(vertex)
     return used | set(uv)
+
+
+def _colours(e: Element) -> set:
+    """The properties of element ``e`` that trimesh reads as its colours: three or four of `_COLOURS`, else
+    none."""
+    found = {p.name for p in e.props if p.count is None} & set(_COLOURS)
+    return found if len(found) >= 3 else set()
+
+
+def _uv_lists(face: Element | None) -> set:
+    """The face's ``texcoord`` lists (each corner's UV), which trimesh reads, by name."""
+    return set() if face is None else {p.name for p in face.props if p.name == "texcoord" and p.count is not None}
 
 
 def unread(h: Header, fallback: bool, textured: bool = False) -> list[str]:
@@ -173,11 +184,9 @@ def unread(h: Header, fallback: bool, textured: bool = False) -> list[str]:
 
 
 def _read_of_face(face: Element) -> set:
-    """The face properties trimesh reads besides the vertex numbers: colours (three or four of them; a
-    mesh's face colours, which the cleaning names where qemjax does not keep them) and ``texcoord`` lists."""
-    colours = {p.name for p in face.props if p.count is None} & set(_COLOURS)
-    return (colours if len(colours) >= 3 else set()) | {p.name for p in face.props
-                                                        if p.name == "texcoord" and p.count is not None}
+    """The face properties trimesh reads besides the vertex numbers: colours (a mesh's face colours, which the
+    cleaning names where qemjax does not keep them) and ``texcoord`` lists."""
+    return _colours(face) | _uv_lists(face)
 
 
 def other_element(name: str) -> str:
