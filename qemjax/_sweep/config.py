@@ -291,22 +291,12 @@ def _executor(value, fail) -> dict:
 
 
 def _check_out(out: str, fail):
+    """The sweep's own checks of ``out`` (`table._check_writable`: its format, its folder, pyarrow for
+    Parquet), named with the config file."""
     try:
-        fmt = _sweep._format(out)
+        _table._check_writable(out)
     except ValueError as exc:
         fail(str(exc))
-    folder = Path(out).resolve().parent
-    if not folder.is_dir():
-        fail(f"cannot write {out}: folder {folder} does not exist")
-    try:
-        _table.check_folder_takes_files(out)
-    except ValueError as exc:
-        fail(str(exc))
-    if fmt == "parquet":
-        try:
-            import pyarrow  # noqa: F401
-        except ImportError:
-            fail(f"writing {Path(out).name} needs pyarrow (pip install 'qemjax[sweep]'), or give a .csv out")
 
 
 def local(settings: dict) -> bool:
