@@ -18,7 +18,8 @@ is written again.
 from __future__ import annotations
 
 import os
-import threading
+
+from .._io.atomic import replace_atomically
 
 _OWN: list = []  # the folder enable() set, when it did
 _DECIDED: list = []  # non-empty once the cache was set up, turned off, or left to the program's setting
@@ -106,13 +107,7 @@ def _whole_entries() -> None:
             # a cache with a size limit writes under JAX's own lock; another file system, JAX's own way
             if self.eviction_enabled or not lru_cache._is_local_filesystem(str(self.path)) or path.exists():
                 return super().put(key, value)
-            tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-            try:
-                tmp.write_bytes(value)
-                os.replace(tmp, path)
-            finally:
-                if tmp.exists():
-                    tmp.unlink()
+            replace_atomically(path, lambda tmp: tmp.write_bytes(value))
 
     compilation_cache.LRUCache = _WholeEntries
 

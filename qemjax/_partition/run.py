@@ -79,7 +79,7 @@ _OWN_FILES = {LOCK, "manifest.json", "run.json", "stats.json", "output.npz", "in
 
 def _own(entry: Path) -> bool:
     """Whether a scratch folder's entry is one a partitioned run writes (its atomic writes' temporary
-    files, ``.NAME.PID.tmp``, too)."""
+    files, ``.NAME.PID.THREAD.tmp``, too)."""
     if entry.is_dir():
         return _OWN_FOLDERS.fullmatch(entry.name) is not None
     return entry.name in _OWN_FILES or (entry.name.startswith(".") and entry.name.endswith(".tmp"))
@@ -113,9 +113,10 @@ def _let_go(folder: Path, claim: int | None) -> None:
 
 
 def _drop_temporaries(folder: Path) -> None:
-    """Remove the temporary files of atomic writes (`write.replace_atomically`: ``.NAME.PID.tmp``) in a folder
-    this run holds (`_claim`) and in its level folders: a process killed while writing (a worker stopped by
-    Ctrl-C, or by the system for its memory) could not remove its own, and a resumed run would keep them."""
+    """Remove the temporary files of atomic writes (`_io.atomic.replace_atomically`: ``.NAME.PID.THREAD.tmp``)
+    in a folder this run holds (`_claim`) and in its level folders: a process killed while writing (a worker
+    stopped by Ctrl-C, or by the system for its memory) could not remove its own, and a resumed run would
+    keep them."""
     for tmp in [*folder.glob(".*.tmp"), *folder.glob("level*/.*.tmp")]:
         tmp.unlink(missing_ok=True)
 

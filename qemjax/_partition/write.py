@@ -3,26 +3,14 @@ atomically) and `write_binary_ply` (a triangle mesh written in chunks, for large
 from __future__ import annotations
 
 import itertools
-import os
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from .._io.atomic import replace_atomically
+
 _EPOCH = (1980, 1, 1, 0, 0, 0)  # zip's earliest date: entries carry no time of writing
-
-
-def replace_atomically(path: Path, write) -> None:
-    """Calls ``write(tmp_path)`` then renames the temporary file onto ``path``: readers see the old
-    file or the whole new one, never a part."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def write_npz(path: Path, **arrays) -> None:
